@@ -1,0 +1,40 @@
+"""G-buffer: one primary hit per camera pixel, once per scene/camera.
+
+Rays go through pixel centres. Normals are oriented toward the camera (the visible side),
+so "faces the light" means the side the camera sees is lit.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+
+@dataclass
+class GBuffer:
+    width: int
+    height: int
+    si: object            # mi.SurfaceInteraction3f of every pixel (for robust spawns)
+    p: object             # mi.Point3f
+    n: object             # geometric normal, toward the camera
+    ns: object            # shading normal, toward the camera
+    shape: object         # mi.UInt32 index into scene.shapes(); 0xFFFFFFFF on a miss
+    hit: np.ndarray       # bool per pixel
+    ms: float = 0.0
+
+
+def cast(scene, sensor, width: int, height: int) -> GBuffer:
+    idx = dr.arange(mi.UInt32, width * height)
+    x, y = mi.Float(idx % width) + 0.5, mi.Float(idx // width) + 0.5
+    ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(x / width, y / height), mi.Point2f(0.5, 0.5))
+    pi = scene.ray_intersect_preliminary(ray, coherent=True)
+    si = pi.compute_surface_interaction(ray)
+    toward_cam = -ray.d
+    n = mi.Vector3f(si.n) * dr.sign(dr.dot(si.n, toward_cam))
+    ns = mi.Vector3f(si.sh_frame.n) * dr.sign(dr.dot(si.sh_frame.n, toward_cam))
+    valid = si.is_valid()
+    shape = dr.select(valid, pi.shape_index, 0xFFFFFFFF)
+    dr.eval(si, n, ns, shape)
+    return GBuffer(width, height, si, mi.Point3f(si.p), n, ns, shape, valid.numpy().astype(bool))

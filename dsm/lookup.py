@@ -1,0 +1,96 @@
+"""Scheme lookup: receivers, taps, parameters as opaque values, the nearest filter.
+
+A :class:`Receiver` holds what a scheme may read about the shaded points (position,
+geometric normal, depth and map position in the view, texel world size there); a
+:class:`Tap` what it may read about one texel (its centre, layers, attributes). Scheme
+parameters become opaque Dr.Jit values, so a sweep over values reuses one compiled kernel.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from types import SimpleNamespace
+
+import drjit as dr
+import mitsuba as mi
+
+from .config import Length
+
+
+@dataclass
+class Receiver:
+    view: object
+    p: object            # mi.Point3f, world
+    n: object            # geometric normal (the visible side), world
+    to_light: object     # unit vector toward the light
+    d: object            # depth in the view's metric
+    u: object            # map position, texel units
+    v: object
+    texel_world: object  # world width of one texel at the receiver
+    scene_scale: object  # the scene's bounding-box diagonal (opaque scalar)
+
+    @staticmethod
+    def make(view, p, n, scene_scale: float) -> "Receiver":
+        u, v = view.project(p)
+        return Receiver(view, p, n, view.to_light(p), view.depth(p), u, v, view.texel_world(p),
+                        dr.opaque(mi.Float, scene_scale))
+
+    def moved(self, p2) -> "Receiver":
+        """The same receiver looked up from another point (normal offset)."""
+        u, v = self.view.project(p2)
+        return dataclasses.replace(self, p=p2, d=self.view.depth(p2), u=u, v=v)
+
+
+@dataclass
+class Tap:
+    view: object
+    idx: object          # mi.UInt32 texel index
+    cu: object           # texel centre, texel units
+    cv: object
+    z1: object
+    shape: object
+    slope: object = None
+
+    def depth_on_plane(self, p0, n):
+        """Depth where the light ray through this texel's centre meets the plane (p0, n)."""
+        return self.view.depth_on_plane(self.cu, self.cv, p0, n)
+
+
+def nearest_tap(rx: Receiver, smap) -> Tap:
+    view = smap.view
+    R1 = mi.Int32(view.R_u) - 1
+    i = dr.clip(mi.Int32(dr.floor(rx.u)), 0, R1)
+    j = dr.clip(mi.Int32(dr.floor(rx.v)), 0, R1)
+    idx = mi.UInt32(j) * view.R_u + mi.UInt32(i)
+    slope = dr.gather(mi.Float, smap.slope, idx) if smap.slope is not None else None
+    return Tap(view, idx, mi.Float(i) + 0.5, mi.Float(j) + 0.5, dr.gather(mi.Float, smap.z1, idx),
+               dr.gather(mi.UInt32, smap.shape, idx), slope)
+
+
+def resolve(params, rx: Receiver):
+    """Scheme parameters as opaque Dr.Jit values in world units (per receiver for texels)."""
+    out = {}
+    for f in dataclasses.fields(params):
+        val = getattr(params, f.name)
+        if isinstance(val, Length):
+            k = dr.opaque(mi.Float, val.value)
+            if val.unit == "texel":
+                out[f.name] = k * rx.texel_world
+            elif val.unit == "range":
+                out[f.name] = k * dr.opaque(mi.Float, rx.view.depth_range)
+            else:
+                out[f.name] = k
+        elif isinstance(val, (int, float)):
+            out[f.name] = dr.opaque(mi.Float, float(val))
+        else:
+            out[f.name] = val
+    return SimpleNamespace(**out)
+
+
+def visibility(scheme, params, rx: Receiver, smap):
+    """(V in [0, 1] per receiver, shape index of the texel used) for one scheme."""
+    prm = resolve(params, rx)
+    if hasattr(scheme, "shift"):
+        rx = scheme.shift(rx, prm)
+    tap = nearest_tap(rx, smap)
+    return dr.select(scheme.lit(rx, tap, prm), mi.Float(1.0), mi.Float(0.0)), tap.shape

@@ -1,0 +1,56 @@
+"""Metrics: shadow-map visibility V against exact visibility V*, per receiver.
+
+| acne (false shadow)          | V* = 1 and V < 0.5; ``self`` when the texel's first hit is on the
+|                              | receiver's own shape, ``edge`` otherwise (aliasing at shadow edges)
+| peter-panning (false light)  | V* = 0 and V >= 0.5, with the distance to the true occluder
+| acne_rate                    | n_acne / n_gt_lit
+| peterpan_rate                | n_peterpan / n_gt_shadowed
+| error_rate                   | (n_acne + n_peterpan) / n_receivers
+| mean_abs_error               | mean |V - V*| over receivers
+
+A rate whose denominator is zero is 0 (its count columns show why); nothing here is NaN.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+# Classes of the error image, in the order of CLASS_COLORS.
+OUTSIDE, LIT, SHADOW, ACNE, PETERPAN = range(5)
+CLASS_NAMES = ("not a receiver", "correct lit", "correct shadow", "acne", "peter-panning")
+CLASS_COLORS = np.array([[0, 0, 0], [235, 225, 190], [70, 80, 110], [230, 40, 40], [40, 170, 255]], np.uint8)
+
+
+def _rate(num, den) -> float:
+    return float(num) / float(den) if den else 0.0
+
+
+def compute(v: np.ndarray, v_star: np.ndarray, rx_shape: np.ndarray, tap_shape: np.ndarray,
+            occluder_dist: np.ndarray) -> dict:
+    """All metrics of one case from per-receiver arrays."""
+    v = np.asarray(v, np.float64)
+    v_star = np.asarray(v_star, bool)
+    shadowed_v = v < 0.5
+    acne = v_star & shadowed_v
+    peter = ~v_star & ~shadowed_v
+    acne_self = acne & (tap_shape == rx_shape)
+    n = int(v.size)
+    n_lit, n_shadow = int(v_star.sum()), int((~v_star).sum())
+    n_acne, n_peter = int(acne.sum()), int(peter.sum())
+    dist = occluder_dist[peter]
+    dist = dist[np.isfinite(dist)]
+    return {
+        "n_receivers": n, "n_gt_lit": n_lit, "n_gt_shadowed": n_shadow,
+        "n_acne": n_acne, "n_acne_self": int(acne_self.sum()), "n_acne_edge": int(n_acne - acne_self.sum()),
+        "n_peterpan": n_peter,
+        "acne_rate": _rate(n_acne, n_lit), "peterpan_rate": _rate(n_peter, n_shadow),
+        "error_rate": _rate(n_acne + n_peter, n),
+        "mean_abs_error": float(np.abs(v - v_star).mean()) if n else 0.0,
+        "peterpan_dist_median": float(np.median(dist)) if dist.size else 0.0,
+    }
+
+
+def classify(v, v_star) -> np.ndarray:
+    """Per-receiver class (LIT, SHADOW, ACNE, PETERPAN)."""
+    v_star = np.asarray(v_star, bool)
+    lit = np.asarray(v) >= 0.5
+    return np.where(v_star, np.where(lit, LIT, ACNE), np.where(lit, PETERPAN, SHADOW)).astype(np.uint8)

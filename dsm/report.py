@@ -1,0 +1,206 @@
+"""Report: metrics.csv (written row by row), table.md, images/, plots/, run.json."""
+from __future__ import annotations
+
+import csv
+import dataclasses
+import platform
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from . import metrics
+
+COLUMNS = [
+    "case", "scene", "light", "view", "scheme", "preset", "params", "resolution", "filter", "format",
+    "n_pixels", "n_excluded_nohit", "n_excluded_backfacing", "n_excluded_outside",
+    "n_receivers", "n_gt_lit", "n_gt_shadowed", "n_acne", "n_acne_self", "n_acne_edge", "n_peterpan",
+    "acne_rate", "peterpan_rate", "error_rate", "mean_abs_error", "peterpan_dist_median", "texel_size",
+    "build_ms", "build_compile_ms", "lookup_ms", "lookup_compile_ms", "lookup_kernels_compiled", "reference_ms",
+    "sweep_key", "sweep_value",
+]
+
+
+class CsvWriter:
+    """Appends one row per finished case, flushing each, so a crash loses nothing done."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        with open(path, "w", newline="") as fh:
+            csv.writer(fh).writerow(COLUMNS)
+
+    def write(self, row: dict):
+        with open(self.path, "a", newline="") as fh:
+            csv.writer(fh).writerow([_fmt(row.get(c, "")) for c in COLUMNS])
+
+
+def _fmt(x):
+    return f"{x:.6g}" if isinstance(x, float) else x
+
+
+def read_csv(path) -> list[dict]:
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def progress(total: int, enabled: bool):
+    from tqdm import tqdm
+    return tqdm(total=total, unit="case", disable=not enabled or not sys.stderr.isatty(), dynamic_ncols=True)
+
+
+def sweep_of(spec, all_specs) -> tuple[str, float]:
+    """The parameter a scheme's sweep varies (or its first one) and this case's value of it."""
+    fields = [f.name for f in dataclasses.fields(spec.params)]
+    if not fields:
+        return "", 0.0
+    siblings = [s.params for s in all_specs if s.name == spec.name and s.preset is None]
+    key = next((k for k in fields if len({getattr(p, k) for p in siblings}) > 1), fields[0])
+    val = getattr(spec.params, key)
+    unit = getattr(val, "unit", "")
+    return (f"{key} [{unit}]" if unit else key), float(getattr(val, "value", val))
+
+
+# ------------------------------------------------------------------ images
+
+def write_case_images(folder: Path, case: str, classes: np.ndarray, gb, setup, v: np.ndarray):
+    """The error image (one colour per class) and the shadow-mapped render of one case."""
+    import matplotlib.pyplot as plt
+    plt.imsave(folder / f"{case}_error.png", metrics.CLASS_COLORS[classes])
+    # Lambert under the light with the map's visibility, ambient elsewhere.
+    shade = np.zeros(gb.width * gb.height)
+    shade[gb.hit] = 0.12
+    n = np.stack([c.numpy() for c in (setup.n.x, setup.n.y, setup.n.z)], 1)
+    to_light = _to_light_np(setup, n.shape[0])
+    shade[setup.pixels] = 0.12 + 0.88 * np.clip((n * to_light).sum(1), 0, 1) * v
+    plt.imsave(folder / f"{case}_shadow.png", shade.reshape(gb.height, gb.width), cmap="gray", vmin=0, vmax=1)
+
+
+def _to_light_np(setup, count):
+    light = setup.light
+    if light.type == "directional":
+        d = -np.asarray(light.direction, float)
+        return np.broadcast_to(d / np.linalg.norm(d), (count, 3))
+    p = np.stack([c.numpy() for c in (setup.p.x, setup.p.y, setup.p.z)], 1)
+    d = np.asarray(light.position, float) - p
+    return d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
+
+
+# ------------------------------------------------------------------ table
+
+TABLE_COLUMNS = [("scene", "scene"), ("light", "light"), ("resolution", "R"), ("scheme", "scheme"),
+                 ("params", "params"), ("acne_rate", "acne"), ("n_acne_self", "self"), ("n_acne_edge", "edge"),
+                 ("peterpan_rate", "peter-pan"), ("peterpan_dist_median", "pp dist"), ("error_rate", "error"),
+                 ("build_ms", "build ms"), ("lookup_ms", "lookup ms"), ("reference_ms", "ref ms")]
+
+
+def legend_md() -> str:
+    items = [f"{name}: rgb{tuple(int(c) for c in col)}" for name, col in zip(metrics.CLASS_NAMES, metrics.CLASS_COLORS)]
+    return "Error images (`images/<case>_error.png`): " + "; ".join(items) + "."
+
+
+def write_table(path: Path, rows: list, cfg, status=None):
+    lines = [f"# {cfg.name}", "", f"Config: `{cfg.source}`. {len(rows)} cases. Rates: acne = n_acne / n_gt_lit, "
+             "peter-pan = n_peterpan / n_gt_shadowed, error = (acne + peter-pan) / receivers; "
+             "self/edge: acne counts on the receiver's own shape / at another shape's edge; pp dist: median "
+             "distance from a peter-panned receiver to its true occluder (world units). Times are warm medians.",
+             "", legend_md(), "",
+             "| case | " + " | ".join(h for _, h in TABLE_COLUMNS) + " |",
+             "|---" * (len(TABLE_COLUMNS) + 1) + "|"]
+    for r in rows:
+        cells = [r["case"]] + [_cell(r.get(k)) for k, _ in TABLE_COLUMNS]
+        lines.append("| " + " | ".join(map(str, cells)) + " |")
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _cell(x):
+    if isinstance(x, float):
+        return f"{x:.4f}" if abs(x) < 10 else f"{x:.1f}"
+    return x
+
+
+# ------------------------------------------------------------------ plots
+
+def write_plots(folder: Path, rows: list):
+    """Error rates against the swept parameter and against resolution, per scene and light."""
+    if not rows:
+        return
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    folder.mkdir(exist_ok=True)
+    groups = {}
+    for r in rows:
+        groups.setdefault((r["scene"], r["light"]), []).append(r)
+    for gi, ((scene, light), rs) in enumerate(sorted(groups.items())):
+        tag = _slug(f"{scene}_{light}")
+        rmax = max(r["resolution"] for r in rs)
+        fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+        for scheme in sorted({r["scheme"] for r in rs}):
+            pts = sorted((r["sweep_value"], r["acne_rate"], r["peterpan_rate"], r["sweep_key"]) for r in rs
+                         if r["scheme"] == scheme and r["resolution"] == rmax and not r["preset"])
+            if not pts:
+                continue
+            x = [p[0] for p in pts]
+            lab = f"{scheme} ({pts[0][3]})" if pts[0][3] else scheme
+            axes[0].plot(x, [p[1] for p in pts], "o-", label=lab)
+            axes[1].plot(x, [p[2] for p in pts], "o-", label=lab)
+        for ax, what in zip(axes, ("acne rate", "peter-panning rate")):
+            ax.set_xlabel("swept parameter value (its unit in the legend)")
+            ax.set_ylabel(what)
+            ax.set_title(f"{scene}, light {light}, R={rmax}")
+        axes[0].legend(fontsize=7)
+        fig.tight_layout()
+        fig.savefig(folder / f"vs_bias_{tag}.png", dpi=90)
+        plt.close(fig)
+
+        fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+        for key in sorted({(r["scheme"], r["params"]) for r in rs}):
+            pts = sorted((r["resolution"], r["acne_rate"], r["peterpan_rate"]) for r in rs
+                         if (r["scheme"], r["params"]) == key)
+            if len(pts) < 2:
+                continue
+            for ax, k in zip(axes, (1, 2)):
+                ax.plot([p[0] for p in pts], [p[k] for p in pts], ".-", lw=0.8, label=f"{key[0]} {key[1]}")
+        for ax, what in zip(axes, ("acne rate", "peter-panning rate")):
+            ax.set_xscale("log", base=2)
+            ax.set_xlabel("map resolution R (R x R texels)")
+            ax.set_ylabel(what)
+            ax.set_title(f"{scene}, light {light}")
+        axes[0].legend(fontsize=6)
+        fig.tight_layout()
+        fig.savefig(folder / f"vs_resolution_{tag}.png", dpi=90)
+        plt.close(fig)
+
+
+def _slug(s: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_" else "_" for c in s)
+
+
+# ------------------------------------------------------------------ run.json
+
+def git_commit() -> str:
+    try:
+        here = Path(__file__).resolve().parent
+        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, timeout=5)
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=here,
+                               capture_output=True, text=True, timeout=5).stdout.strip()
+        return out.stdout.strip() + ("+dirty" if dirty else "") if out.returncode == 0 else "unknown"
+    except Exception:
+        return "unknown"
+
+
+def run_info(cfg, variant, rays, status) -> dict:
+    import drjit as dr
+    import mitsuba as mi
+    from .env import llvm_version
+    failed = [s for s in status if s["status"] != "ok"]
+    return {
+        "experiment": cfg.name, "config_file": cfg.source, "config": cfg.raw,
+        "versions": {"python": platform.python_version(), "mitsuba": mi.__version__, "drjit": dr.__version__,
+                     "libllvm": ".".join(map(str, llvm_version() or ())) or "unavailable",
+                     "dsm_git_commit": git_commit()},
+        "variant": variant, "threads": dr.thread_count(), "timing_repeats": cfg.timing_repeats,
+        "rays": dict(rays), "n_cases_ok": sum(1 for s in status if s["status"] == "ok" and s["what"].startswith("case")),
+        "n_failed": len(failed), "status": status,
+    }

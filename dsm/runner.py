@@ -1,0 +1,252 @@
+"""The runner: config -> shared work -> cases -> results folder.
+
+Shared work is done once: the G-buffer per scene/camera, the receivers and exact reference
+per scene/light, one map per light/resolution with only the attributes the named schemes
+need. Each case (scheme instance on a map) is a lookup, metrics, an error image and a row of
+metrics.csv. A failing case or map is recorded in run.json and the others still run; rows
+are written as they finish, so nothing done is lost.
+"""
+from __future__ import annotations
+
+import json
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from . import config as cfgmod
+from . import env, gbuffer, metrics, reference, report, scenes, schemes, shadowmap, timing
+from .lookup import Receiver, visibility
+from .views import OrthographicView, PerspectiveView
+
+
+@dataclass
+class LightSetup:
+    """Receivers and exact visibility of one scene from one light."""
+    label: str
+    light: object                 # LightSpec
+    pixels: np.ndarray            # pixel index of each receiver
+    p: object                     # receiver positions (mi.Point3f), normals, shapes
+    n: object
+    shape: np.ndarray
+    v_star: np.ndarray
+    occluder_dist: np.ndarray
+    exclusions: dict
+    reference_ms: float
+    si: object = None
+
+
+@dataclass
+class Results:
+    """What a run produced: the rows of metrics.csv, run.json's content and the images."""
+    out: Path
+    rows: list
+    run: dict
+    images: dict = field(default_factory=dict)   # case id -> class image (H, W) uint8
+
+    def where(self, **kw) -> "Results":
+        rows = [r for r in self.rows if all(r.get(k) == v for k, v in kw.items())]
+        return Results(self.out, rows, self.run, {r["case"]: self.images.get(r["case"]) for r in rows})
+
+    def column(self, name) -> np.ndarray:
+        return np.array([r[name] for r in self.rows])
+
+    def __getattr__(self, name):
+        if name in report.COLUMNS:
+            return self.column(name)
+        raise AttributeError(name)
+
+    def __len__(self):
+        return len(self.rows)
+
+
+def make_view(light, R, receivers_world, bbox):
+    if light.type == "directional":
+        return OrthographicView(light.direction, receivers_world, bbox, R)
+    if light.type == "spot":
+        axis = light.direction if light.direction is not None else np.subtract(light.target, light.position)
+        return PerspectiveView(light.position, axis, light.cutoff, bbox, R)
+    raise ValueError(f"light type {light.type!r} has no view in this version")
+
+
+def needs_of(scheme_specs) -> set:
+    out = set()
+    for s in scheme_specs:
+        out |= set(schemes.get(s.name).NEEDS)
+    return out
+
+
+class Runner:
+    def __init__(self, config: cfgmod.Config, out: Path, variant: str | None = None, progress: bool = True,
+                 keep_images: bool = True):
+        self.cfg = config
+        self.out = Path(out)
+        self.variant = env.use_variant(variant or config.variant)
+        self.progress = progress
+        self.keep_images = keep_images
+        self.rays = {"gbuffer": 0, "reference": 0, "map_first": 0}
+        self.status = []
+        self.rows = []
+        self.images = {}
+        self.case_no = 0
+
+    # ------------------------------------------------------------ top level
+    def run(self) -> Results:
+        timing.enable_history()
+        self.out.mkdir(parents=True, exist_ok=True)
+        (self.out / "images").mkdir(exist_ok=True)
+        self.csv = report.CsvWriter(self.out / "metrics.csv")
+        bar = report.progress(total=self._estimate_cases(), enabled=self.progress)
+        for spec in self.cfg.scenes:
+            try:
+                sd = scenes.load(spec, self.cfg.camera_resolution)
+            except Exception as e:
+                self._fail(f"scene {spec.label}", e)
+                continue
+            self._run_scene(sd, bar)
+            self._write_run_json()
+        bar.close()
+        self._write_run_json()
+        report.write_table(self.out / "table.md", self.rows, self.cfg)
+        report.write_plots(self.out / "plots", self.rows)
+        return Results(self.out, self.rows, self._run_json(), self.images)
+
+    def _estimate_cases(self):
+        m = self.cfg.map
+        return (len(self.cfg.scenes) * len(self.cfg.lights) * len(m.resolution) * len(m.filter) * len(m.format)
+                * len(self.cfg.schemes))
+
+    def _fail(self, what, exc):
+        self.status.append({"what": what, "status": "failed", "error": f"{type(exc).__name__}: {exc}",
+                            "traceback": traceback.format_exc(limit=6)})
+
+    # ------------------------------------------------------------ per scene
+    def _run_scene(self, sd, bar):
+        W, H = (int(x) for x in sd.sensor.film().size())
+        gb, t = timing.measure(lambda: _gbuffer_arrays(sd, W, H), 0)
+        gb = gb[-1]
+        self.rays["gbuffer"] += W * H
+        lights = sd.lights_for(self.cfg.lights)
+        if not lights:
+            self._fail(f"scene {sd.label}", ValueError(
+                "the scene has no usable point/spot/directional emitter and the config names no [[light]]"))
+            return
+        for li, light in enumerate(lights):
+            label = f"{li}:{light.type}"
+            try:
+                setup = self._light_setup(sd, gb, light, label)
+            except Exception as e:
+                self._fail(f"scene {sd.label} light {label}", e)
+                continue
+            for R in self.cfg.map.resolution:
+                self._run_map(sd, gb, setup, R, bar)
+
+    def _light_setup(self, sd, gb, light, label) -> LightSetup:
+        p_all, n_all = gb.p, gb.n
+        probe = make_view(light, 1, np.zeros((1, 3)), sd.bbox)
+        to_light = probe.to_light(p_all)
+        facing = (dr.dot(n_all, to_light) > 0).numpy().astype(bool)
+        inside = probe.inside(p_all).numpy().astype(bool) if light.type != "directional" else np.ones_like(facing)
+        hit = gb.hit
+        mask = hit & facing & inside
+        pixels = np.flatnonzero(mask).astype(np.uint32)
+        idx = mi.UInt32(pixels)
+        si = dr.gather(mi.SurfaceInteraction3f, gb.si, idx)
+        p = dr.gather(mi.Point3f, gb.p, idx)
+        n = dr.gather(mi.Vector3f, gb.n, idx)
+        (vis, dist), t = timing.measure(lambda: reference.visibility(sd.scene, si, light), self.cfg.timing_repeats)
+        self.rays["reference"] += len(pixels) * (1 + self.cfg.timing_repeats)
+        dr.eval(p, n)
+        return LightSetup(label, light, pixels, p, n, gb.shape.numpy()[pixels], vis.numpy().astype(bool),
+                          dist.numpy(), {"n_pixels": int(mask.size), "n_excluded_nohit": int((~hit).sum()),
+                                         "n_excluded_backfacing": int((hit & ~facing).sum()),
+                                         "n_excluded_outside": int((hit & facing & ~inside).sum())},
+                          t.ms, si)
+
+    # ------------------------------------------------------------ per map
+    def _run_map(self, sd, gb, setup, R, bar):
+        specs = self.cfg.schemes
+        try:
+            view = make_view(setup.light, R, _points_np(setup.p), sd.bbox)
+            needs = needs_of(specs)
+            smap, bt = timing.measure(lambda: _map_arrays(sd.scene, view, needs), self.cfg.timing_repeats)
+            smap = smap[-1]
+            self.rays["map_first"] += R * R * (1 + self.cfg.timing_repeats)
+            rx = Receiver.make(view, setup.p, setup.n, sd.diagonal)
+            dr.eval(rx.d, rx.u, rx.v, rx.texel_world, rx.to_light)
+        except Exception as e:
+            self._fail(f"scene {sd.label} light {setup.label} map {R}", e)
+            bar.update(len(specs) * len(self.cfg.map.filter) * len(self.cfg.map.format))
+            return
+        for spec in specs:
+            for filt in self.cfg.map.filter:
+                for fmt in self.cfg.map.format:
+                    self._run_case(sd, gb, setup, view, smap, bt, rx, spec, filt, fmt)
+                    bar.update(1)
+
+    def _run_case(self, sd, gb, setup, view, smap, bt, rx, spec, filt, fmt):
+        self.case_no += 1
+        case = f"{self.case_no:04d}"
+        meta = {"case": case, "scene": sd.label, "light": setup.label, "view": view.kind, "scheme": spec.name,
+                "preset": spec.preset or "", "params": spec.label, "resolution": view.resolution,
+                "filter": filt, "format": fmt}
+        try:
+            module = schemes.get(spec.name)
+            (v, tap_shape), lt = timing.measure(lambda: visibility(module, spec.params, rx, smap),
+                                                self.cfg.timing_repeats)
+            v_np, tap_np = v.numpy(), tap_shape.numpy()
+            m = metrics.compute(v_np, setup.v_star, setup.shape, tap_np, setup.occluder_dist)
+            texel = float(np.median(rx.texel_world.numpy())) if len(setup.pixels) else 0.0
+            sweep_key, sweep_value = report.sweep_of(spec, self.cfg.schemes)
+            row = {**meta, **setup.exclusions, **m, "texel_size": texel,
+                   "build_ms": bt.ms, "build_compile_ms": bt.compile_ms,
+                   "lookup_ms": lt.ms, "lookup_compile_ms": lt.compile_ms, "lookup_kernels_compiled": lt.cache_misses,
+                   "reference_ms": setup.reference_ms, "sweep_key": sweep_key, "sweep_value": sweep_value}
+            classes = np.zeros(gb.width * gb.height, np.uint8)
+            classes[setup.pixels] = metrics.classify(v_np, setup.v_star)
+            classes = classes.reshape(gb.height, gb.width)
+            report.write_case_images(self.out / "images", case, classes, gb, setup, v_np)
+            if self.keep_images:
+                self.images[case] = classes
+            self.rows.append(row)
+            self.csv.write(row)
+            self.status.append({"what": f"case {case}", **{k: meta[k] for k in ("scene", "light", "scheme", "params",
+                                                                                 "resolution")}, "status": "ok"})
+        except Exception as e:
+            self._fail(f"case {case} ({sd.label}, {setup.label}, {spec.name} {spec.label}, R={view.resolution})", e)
+
+    # ------------------------------------------------------------ run.json
+    def _run_json(self):
+        return report.run_info(self.cfg, self.variant, self.rays, self.status)
+
+    def _write_run_json(self):
+        (self.out / "run.json").write_text(json.dumps(self._run_json(), indent=2, default=str))
+
+
+def _points_np(p) -> np.ndarray:
+    return np.stack([np.asarray(c, np.float64) for c in (p.x.numpy(), p.y.numpy(), p.z.numpy())], axis=1)
+
+
+def _gbuffer_arrays(sd, W, H):
+    gb = gbuffer.cast(sd.scene, sd.sensor, W, H)
+    return (gb.p, gb.n, gb.shape, gb)
+
+
+def _map_arrays(scene, view, needs):
+    smap = shadowmap.build(scene, view, needs)
+    return (*shadowmap.arrays(smap), smap)
+
+
+def run(config, out=None, variant=None, progress=False) -> Results:
+    """Run an experiment (a Config, a dict or a path to a TOML file) and return its Results."""
+    if isinstance(config, (str, Path)):
+        config = cfgmod.load(config)
+    elif isinstance(config, dict):
+        config = cfgmod.parse(config)
+    if out is None:
+        import tempfile
+        out = Path(tempfile.mkdtemp(prefix=f"dsm-{config.name}-"))
+    return Runner(config, Path(out), variant, progress).run()

@@ -1,0 +1,33 @@
+"""Bias schemes: one module each, listed explicitly.
+
+Each module has ``NAME``, ``SOURCE``, ``NEEDS`` (the map attributes it reads), a frozen
+``Params`` dataclass with defaults and units, ``lit(rx, tap, params) -> Bool`` over Dr.Jit
+arrays and, for schemes that move the lookup point, ``shift(rx, params) -> Receiver``.
+"""
+import dataclasses
+
+from . import adaptive, constant, none, normal_angle, normal_offset, receiver_plane, slope_scaled
+from ..config import Length
+
+REGISTRY = (none, constant, slope_scaled, normal_angle, normal_offset, receiver_plane, adaptive)
+
+# Engine presets: a named engine's default bias, measurable beside every scheme.
+PRESETS = {
+    # Bevy's DirectionalLight: shadow_depth_bias 0.02 (world), shadow_normal_bias 1.8 (texels)
+    "bevy": ("normal_offset", {"offset": Length(1.8, "texel"), "bias": Length(0.02, "world")}),
+    # three.js LightShadow: bias 0, normalBias 0
+    "three": ("normal_offset", {"offset": Length(0.0, "world"), "bias": Length(0.0, "world")}),
+    # seed 003's Metal call: setDepthBias(1, slopeScale: 3, clamp: 1/128)
+    "metal_api": ("slope_scaled", {}),
+}
+
+
+def get(name: str):
+    for s in REGISTRY:
+        if s.NAME == name:
+            return s
+    raise KeyError(f"unknown scheme {name!r} (valid: {', '.join(s.NAME for s in REGISTRY)})")
+
+
+def describe_params(params) -> str:
+    return " ".join(f"{f.name}={getattr(params, f.name)}" for f in dataclasses.fields(params))

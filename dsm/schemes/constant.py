@@ -1,0 +1,24 @@
+"""Constant depth bias (Williams 1978).
+
+Lit when ``d <= z1 + bias``. One number for the whole map: too small leaves acne on surfaces
+steep to the light, too large detaches shadows from their casters (peter-panning) once it
+exceeds the gap between caster and receiver.
+
+Parameters: ``bias`` (length, default ``"1 texel"``).
+"""
+from dataclasses import dataclass, field
+
+from ..config import Length
+
+NAME = "constant"
+SOURCE = "Williams 1978"
+NEEDS = frozenset()
+
+
+@dataclass(frozen=True)
+class Params:
+    bias: Length = field(default=Length(1.0, "texel"), metadata={"doc": "depth offset added to z1"})
+
+
+def lit(rx, tap, p):
+    return rx.d <= tap.z1 + p.bias

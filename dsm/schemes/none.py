@@ -1,0 +1,21 @@
+"""No bias (Williams 1978): the plain two-pass shadow test.
+
+Lit when the receiver's depth is at most the first layer's depth, ``d <= z1``. Acne is
+expected wherever the depth of a texel's centre differs from the receiver's own: on a plane
+tilted against the light about half of its receivers fall below their texel's sample.
+Kept as the baseline every other scheme is measured against.
+"""
+from dataclasses import dataclass
+
+NAME = "none"
+SOURCE = "Williams 1978"
+NEEDS = frozenset()
+
+
+@dataclass(frozen=True)
+class Params:
+    pass
+
+
+def lit(rx, tap, p):
+    return rx.d <= tap.z1

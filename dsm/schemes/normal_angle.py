@@ -1,0 +1,30 @@
+"""Normal-angle bias (Gautron 2013; seed 003).
+
+Lit when ``d <= z1 + min(max, bias * tan(theta))``, ``theta`` the angle between the
+receiver's geometric normal and the direction to the light. ``tan(theta)`` is the receiver's
+own depth slope per unit of lateral distance, so ``bias`` in texels is the half-width of the
+depth error a texel can cause. Grazing receivers hit ``max``.
+
+Parameters: ``bias`` (length, default ``"1 texel"``), ``max`` (length, default ``"8 texel"``).
+"""
+from dataclasses import dataclass, field
+
+import drjit as dr
+
+from ..config import Length
+
+NAME = "normal_angle"
+SOURCE = "Gautron 2013; seed 003"
+NEEDS = frozenset()
+
+
+@dataclass(frozen=True)
+class Params:
+    bias: Length = field(default=Length(1.0, "texel"), metadata={"doc": "scale of tan(theta)"})
+    max: Length = field(default=Length(8.0, "texel"), metadata={"doc": "largest bias"})
+
+
+def lit(rx, tap, p):
+    cos_t = dr.clip(dr.dot(rx.n, rx.to_light), 0.0, 1.0)
+    tan_t = dr.safe_sqrt(1.0 - cos_t * cos_t) / cos_t   # receivers have cos_t > 0
+    return rx.d <= tap.z1 + dr.minimum(p.max, p.bias * tan_t)

@@ -1,0 +1,30 @@
+"""Normal-offset shadows (three.js ``normalBias``, Bevy, Godot, Unity).
+
+The lookup point moves along the receiver's geometric normal by ``offset`` before it is
+projected into the map; then ``d' <= z1(p') + bias``. Because the offset is lateral as well
+as in depth, it removes acne without pushing the shadow off its contact as far as an
+equal depth bias, but it shifts and shrinks shadows by up to ``offset`` sideways.
+
+Parameters: ``offset`` (length, default ``"1 texel"``), ``bias`` (length, default ``0``).
+"""
+from dataclasses import dataclass, field
+
+from ..config import Length
+
+NAME = "normal_offset"
+SOURCE = "three.js, Bevy, Godot, Unity (normal bias)"
+NEEDS = frozenset()
+
+
+@dataclass(frozen=True)
+class Params:
+    offset: Length = field(default=Length(1.0, "texel"), metadata={"doc": "move along the normal"})
+    bias: Length = field(default=Length(0.0, "world"), metadata={"doc": "depth offset added to z1"})
+
+
+def shift(rx, p):
+    return rx.moved(rx.p + rx.n * p.offset)
+
+
+def lit(rx, tap, p):
+    return rx.d <= tap.z1 + p.bias

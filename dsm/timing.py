@@ -1,0 +1,51 @@
+"""Clocks around Dr.Jit work: warm medians, with JIT compile time reported apart.
+
+Each measured function returns the arrays it computes; they are evaluated and the thread
+synchronized (``dr.sync_thread()``) before every clock read. The first call is cold and its
+compile time is read from Dr.Jit's kernel history (code generation + backend); the reported
+time is the median of ``repeats`` warm calls after it.
+"""
+from __future__ import annotations
+
+import statistics
+import time
+from dataclasses import dataclass
+
+import drjit as dr
+
+
+@dataclass
+class Timing:
+    ms: float            # median of warm runs
+    compile_ms: float    # JIT code generation + LLVM backend in the cold run
+    cold_ms: float       # the first run, compile included
+    kernels: int         # kernels launched by one cold run
+    cache_misses: int    # of those, how many were compiled (not found in Dr.Jit's caches)
+
+
+def enable_history():
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+
+
+def _run(fn):
+    dr.sync_thread()
+    t0 = time.perf_counter()
+    out = fn()
+    dr.eval(*[x for x in out if dr.is_array_v(x) or hasattr(type(x), "DRJIT_STRUCT")])
+    dr.sync_thread()
+    return out, (time.perf_counter() - t0) * 1e3
+
+
+def measure(fn, repeats: int = 3):
+    """Call ``fn`` (returning a tuple of arrays) cold once and warm ``repeats`` times."""
+    dr.kernel_history_clear()
+    out, cold = _run(fn)
+    hist = [k for k in dr.kernel_history() if k.get("type") == dr.KernelType.JIT]
+    compile_ms = sum(k.get("codegen_time", 0.0) + k.get("backend_time", 0.0) for k in hist)
+    misses = sum(1 for k in hist if not k.get("cache_hit", False))
+    warm = []
+    for _ in range(repeats):
+        out, ms = _run(fn)
+        warm.append(ms)
+    dr.kernel_history_clear()
+    return out, Timing(statistics.median(warm) if warm else cold, compile_ms, cold, len(hist), misses)
