@@ -291,6 +291,12 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     _check_keys(tim, ("repeats",), source, "timing")
     repeats = _number(tim.get("repeats", 3), source, "timing.repeats", integer=True, minimum=1, maximum=100)
 
+    if all(l.type == "scene" for l in lights):
+        for i, sc in enumerate(scenes):
+            if sc.file is not None and sc.file.suffix.lower() == ".xml" and not scenes_mod.xml_has_usable_emitter(sc.file):
+                raise ConfigError(source, "light", f"scene {sc.file} has no spot or directional emitter and the "
+                                  "config names no [[light]]; add one", ("directional", "spot"))
+
     return Config(name=name, source=source, seed=seed, variant=variant, camera_resolution=camera_resolution,
                   scenes=tuple(scenes), lights=tuple(lights), map=mapspec, schemes=tuple(schemes),
                   timing_repeats=repeats, raw=raw)

@@ -149,7 +149,8 @@ def write_plots(folder: Path, rows: list):
             ax.set_xlabel("swept parameter value (its unit in the legend)")
             ax.set_ylabel(what)
             ax.set_title(f"{scene}, light {light}, R={rmax}")
-        axes[0].legend(fontsize=7)
+        if axes[0].get_legend_handles_labels()[0]:
+            axes[0].legend(fontsize=7)
         fig.tight_layout()
         fig.savefig(folder / f"vs_bias_{tag}.png", dpi=90)
         plt.close(fig)
@@ -167,7 +168,8 @@ def write_plots(folder: Path, rows: list):
             ax.set_xlabel("map resolution R (R x R texels)")
             ax.set_ylabel(what)
             ax.set_title(f"{scene}, light {light}")
-        axes[0].legend(fontsize=6)
+        if axes[0].get_legend_handles_labels()[0]:
+            axes[0].legend(fontsize=6)
         fig.tight_layout()
         fig.savefig(folder / f"vs_resolution_{tag}.png", dpi=90)
         plt.close(fig)

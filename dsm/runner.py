@@ -157,7 +157,7 @@ class Runner:
         si = dr.gather(mi.SurfaceInteraction3f, gb.si, idx)
         p = dr.gather(mi.Point3f, gb.p, idx)
         n = dr.gather(mi.Vector3f, gb.n, idx)
-        (vis, dist), t = timing.measure(lambda: reference.visibility(sd.scene, si, light), self.cfg.timing_repeats)
+        (vis, dist), t = timing.measure(lambda: reference.visibility(sd.scene, si, light, reference.scene_magnitude(sd.bbox)), self.cfg.timing_repeats)
         self.rays["reference"] += len(pixels) * (1 + self.cfg.timing_repeats)
         dr.eval(p, n)
         return LightSetup(label, light, pixels, p, n, gb.shape.numpy()[pixels], vis.numpy().astype(bool),

@@ -98,6 +98,23 @@ def parse_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]
     return [SceneSpec(file=path, params=p, label=_label(path.stem, p, FileParams())) for p in specs]
 
 
+def xml_has_usable_emitter(path: Path) -> bool:
+    """Whether a Mitsuba XML file (or a file it includes) declares a spot or directional emitter."""
+    import xml.etree.ElementTree as ET
+    try:
+        root = ET.parse(path).getroot()
+    except (ET.ParseError, OSError):
+        return True          # let Mitsuba report the file's own problem when it loads it
+    for el in root.iter():
+        if el.tag == "emitter" and el.get("type") in ("spot", "directional"):
+            return True
+        if el.tag == "include" and el.get("filename"):
+            inc = (path.parent / el.get("filename"))
+            if inc.suffix == ".xml" and inc.is_file() and xml_has_usable_emitter(inc):
+                return True
+    return False
+
+
 def _check_builtin(p, source, where):
     if isinstance(p, PlaneParams) and not p.tilt < 90:
         raise ConfigError(source, f"{where}.tilt", f"must be below 90 degrees, got {p.tilt}")
@@ -163,7 +180,9 @@ def make_mesh(name: str, verts: np.ndarray, faces: np.ndarray):
 
 def look_at_sensor(origin, target, up, fov, width, height):
     import mitsuba as mi
-    return {"type": "perspective", "fov": fov,
+    dist = float(np.linalg.norm(np.subtract(origin, target)))
+    # clip planes follow the scene's scale (Mitsuba's default near clip is 0.01 world units)
+    return {"type": "perspective", "fov": fov, "near_clip": dist * 1e-3, "far_clip": dist * 1e3,
             "to_world": mi.ScalarTransform4f().look_at(origin=list(map(float, origin)),
                                                        target=list(map(float, target)),
                                                        up=list(map(float, up))),
