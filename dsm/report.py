@@ -70,9 +70,10 @@ def write_case_images(folder: Path, case: str, classes: np.ndarray, gb, setup, v
     # Lambert under the light with the map's visibility, ambient elsewhere.
     shade = np.zeros(gb.width * gb.height)
     shade[gb.hit] = 0.12
-    n = np.stack([c.numpy() for c in (setup.n.x, setup.n.y, setup.n.z)], 1)
-    to_light = _to_light_np(setup, n.shape[0])
-    shade[setup.pixels] = 0.12 + 0.88 * np.clip((n * to_light).sum(1), 0, 1) * v
+    if setup.n is not None:
+        n = np.stack([c.numpy() for c in (setup.n.x, setup.n.y, setup.n.z)], 1)
+        to_light = _to_light_np(setup, n.shape[0])
+        shade[setup.pixels] = 0.12 + 0.88 * np.clip((n * to_light).sum(1), 0, 1) * v
     plt.imsave(folder / f"{case}_shadow.png", shade.reshape(gb.height, gb.width), cmap="gray", vmin=0, vmax=1)
 
 

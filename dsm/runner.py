@@ -153,30 +153,39 @@ class Runner:
         hit = gb.hit
         mask = hit & facing & inside
         pixels = np.flatnonzero(mask).astype(np.uint32)
+        exclusions = {"n_pixels": int(mask.size), "n_excluded_nohit": int((~hit).sum()),
+                                         "n_excluded_backfacing": int((hit & ~facing).sum()),
+                                         "n_excluded_outside": int((hit & facing & ~inside).sum())}
+        if len(pixels) == 0:      # nothing faces this light: rows of zeros, no zero-sized kernels
+            empty = np.zeros(0)
+            return LightSetup(label, light, pixels, None, None, empty.astype(np.uint32), empty.astype(bool),
+                              empty, exclusions, 0.0)
         idx = mi.UInt32(pixels)
         si = dr.gather(mi.SurfaceInteraction3f, gb.si, idx)
         p = dr.gather(mi.Point3f, gb.p, idx)
         n = dr.gather(mi.Vector3f, gb.n, idx)
-        (vis, dist), t = timing.measure(lambda: reference.visibility(sd.scene, si, light, reference.scene_magnitude(sd.bbox)), self.cfg.timing_repeats)
+        magnitude = reference.scene_magnitude(sd.bbox)
+        (vis, dist), t = timing.measure(lambda: reference.visibility(sd.scene, si, light, magnitude),
+                                        self.cfg.timing_repeats)
         self.rays["reference"] += len(pixels) * (1 + self.cfg.timing_repeats)
         dr.eval(p, n)
         return LightSetup(label, light, pixels, p, n, gb.shape.numpy()[pixels], vis.numpy().astype(bool),
-                          dist.numpy(), {"n_pixels": int(mask.size), "n_excluded_nohit": int((~hit).sum()),
-                                         "n_excluded_backfacing": int((hit & ~facing).sum()),
-                                         "n_excluded_outside": int((hit & facing & ~inside).sum())},
-                          t.ms, si)
+                          dist.numpy(), exclusions, t.ms, si)
 
     # ------------------------------------------------------------ per map
     def _run_map(self, sd, gb, setup, R, bar):
         specs = self.cfg.schemes
         try:
-            view = make_view(setup.light, R, _points_np(setup.p), sd.bbox)
+            view = make_view(setup.light, R, _points_np(setup.p) if setup.p is not None else np.zeros((0, 3)),
+                             sd.bbox)
             needs = needs_of(specs)
             smap, bt = timing.measure(lambda: _map_arrays(sd.scene, view, needs), self.cfg.timing_repeats)
             smap = smap[-1]
             self.rays["map_first"] += R * R * (1 + self.cfg.timing_repeats)
-            rx = Receiver.make(view, setup.p, setup.n, sd.diagonal)
-            dr.eval(rx.d, rx.u, rx.v, rx.texel_world, rx.to_light)
+            rx = None
+            if setup.p is not None:
+                rx = Receiver.make(view, setup.p, setup.n, sd.diagonal)
+                dr.eval(rx.d, rx.u, rx.v, rx.texel_world, rx.to_light)
         except Exception as e:
             self._fail(f"scene {sd.label} light {setup.label} map {R}", e)
             bar.update(len(specs) * len(self.cfg.map.filter) * len(self.cfg.map.format))
@@ -195,11 +204,14 @@ class Runner:
                 "filter": filt, "format": fmt}
         try:
             module = schemes.get(spec.name)
-            (v, tap_shape), lt = timing.measure(lambda: visibility(module, spec.params, rx, smap),
-                                                self.cfg.timing_repeats)
-            v_np, tap_np = v.numpy(), tap_shape.numpy()
+            if rx is None:
+                v_np, tap_np, lt = np.zeros(0), np.zeros(0, np.uint32), timing.Timing(0.0, 0.0, 0.0, 0, 0)
+            else:
+                (v, tap_shape), lt = timing.measure(lambda: visibility(module, spec.params, rx, smap),
+                                                    self.cfg.timing_repeats)
+                v_np, tap_np = v.numpy(), tap_shape.numpy()
             m = metrics.compute(v_np, setup.v_star, setup.shape, tap_np, setup.occluder_dist)
-            texel = float(np.median(rx.texel_world.numpy())) if len(setup.pixels) else 0.0
+            texel = float(np.median(rx.texel_world.numpy())) if rx is not None else 0.0
             sweep_key, sweep_value = report.sweep_of(spec, self.cfg.schemes)
             row = {**meta, **setup.exclusions, **m, "texel_size": texel,
                    "build_ms": bt.ms, "build_compile_ms": bt.compile_ms,

@@ -191,7 +191,7 @@ def look_at_sensor(origin, target, up, fov, width, height):
 
 def _normalize(v):
     v = np.asarray(v, float)
-    return tuple(v / np.linalg.norm(v))
+    return tuple(float(c) for c in v / np.linalg.norm(v))
 
 
 # ---------------------------------------------------------------- built-in scenes
@@ -316,11 +316,15 @@ def _load_xml(spec, width):
 def _resized_sensor(sensor, width, height):
     import mitsuba as mi
     params = mi.traverse(sensor)
-    d = {"type": "perspective", "to_world": sensor.world_transform(),
+    m = np.array(sensor.world_transform().matrix.numpy(), float).reshape(4, 4)
+    d = {"type": "perspective", "to_world": mi.ScalarTransform4f(m),
          "film": {"type": "hdrfilm", "width": int(width), "height": int(height)}}
     if "x_fov" in params:
         d["fov"] = float(params["x_fov"][0])
         d["fov_axis"] = "x"
+    for k in ("near_clip", "far_clip"):
+        if k in params:
+            d[k] = float(np.ravel(params[k])[0])
     return mi.load_dict(d)
 
 
@@ -338,7 +342,7 @@ def emitter_to_light(e):
         axis = np.array(tf @ mi.Vector3f(0, 0, 1), float).ravel()
         params = mi.traverse(e)
         cutoff = float(params["cutoff_angle"][0]) if "cutoff_angle" in params else 20.0
-        return LightSpec("spot", position=tuple(pos), direction=_normalize(axis), cutoff=cutoff, label="spot")
+        return LightSpec("spot", position=tuple(float(c) for c in pos), direction=_normalize(axis), cutoff=cutoff, label="spot")
     return None
 
 

@@ -1,0 +1,91 @@
+"""Bad input: a clear error naming the file, the key and the valid choices, before any work."""
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from dsm import config
+from dsm.config import ConfigError, Length
+
+GOOD = """
+[experiment]
+name = "t"
+[[scene]]
+builtin = "plane"
+[[scheme]]
+name = "constant"
+bias = ["1 texel", 0.01]
+"""
+
+BAD = [
+    # (replacement config text, key expected in the message, a valid choice expected in it)
+    (GOOD + "\n[bogus]\nx = 1\n", "bogus", "scheme"),
+    (GOOD.replace('name = "constant"', 'name = "constnat"'), "scheme[0].name", "slope_scaled"),
+    (GOOD.replace('builtin = "plane"', 'builtin = "plnae"'), "scene[0].builtin", "plane_box"),
+    (GOOD.replace('"1 texel"', '"1 texle"'), "scheme[0].bias", "texel"),
+    (GOOD.replace('"1 texel"', 'true'), "scheme[0].bias", None),
+    (GOOD.replace('bias = ["1 texel", 0.01]', 'bais = 0.1'), "scheme[0].bais", "bias"),
+    (GOOD + '\n[map]\nresolution = "big"\n', "map.resolution", None),
+    (GOOD + '\n[map]\nfilter = "gaussian"\n', "map.filter", "nearest"),
+    (GOOD + '\n[[light]]\ntype = "area"\n', "light[0].type", "directional"),
+    (GOOD + '\n[[light]]\ntype = "directional"\ndirection = [0, 0]\n', "light[0].direction", None),
+    (GOOD.replace('builtin = "plane"', 'builtin = "plane"\ntilt = "steep"'), "scene[0].tilt", None),
+    (GOOD.replace('[[scene]]\nbuiltin = "plane"', '[[scene]]\nfile = "missing.ply"'), "scene[0].file", None),
+]
+
+
+@pytest.mark.parametrize("text,key,choice", BAD)
+def test_bad_config_names_file_key_and_choices(tmp_path, text, key, choice):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as e:
+        config.load(path)
+    msg = str(e.value)
+    assert str(path) in msg and key in msg, msg
+    if choice:
+        assert choice in msg, msg
+
+
+def test_good_config_sweeps(tmp_path):
+    path = tmp_path / "good.toml"
+    path.write_text(GOOD + '\n[map]\nresolution = [64, 128]\n')
+    cfg = config.load(path)
+    assert [s.params.bias for s in cfg.schemes] == [Length(1.0, "texel"), Length(0.01, "world")]
+    assert cfg.map.resolution == (64, 128)
+
+
+def test_xml_without_usable_emitter_and_no_light(tmp_path):
+    xml = tmp_path / "area.xml"
+    xml.write_text('<scene version="3.0.0"><sensor type="perspective"/>'
+                   '<shape type="rectangle"><emitter type="area"/></shape></scene>')
+    path = tmp_path / "x.toml"
+    path.write_text(f'[[scene]]\nfile = "{xml}"\n[[scheme]]\nname = "none"\n')
+    with pytest.raises(ConfigError) as e:
+        config.load(path)
+    assert "no spot or directional emitter" in str(e.value) and "[[light]]" in str(e.value)
+    # with a light it is fine
+    path.write_text(f'[[scene]]\nfile = "{xml}"\n[[light]]\ntype = "directional"\ndirection = [0, 0, -1]\n'
+                    '[[scheme]]\nname = "none"\n')
+    assert config.load(path).lights[0].type == "directional"
+
+
+def test_length_parsing():
+    assert Length.parse("2 texel") == Length(2.0, "texel")
+    assert Length.parse("0.5 texels") == Length(0.5, "texel")
+    assert Length.parse(3) == Length(3.0, "world")
+    assert str(Length(2.0, "texel")) == "2 texel"
+    with pytest.raises(ConfigError):
+        Length.parse("nan texel")
+
+
+def test_cli_prints_config_error_without_traceback(tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text(BAD[1][0])
+    p = subprocess.run([sys.executable, "-m", "dsm.cli", "run", str(path), "--out", str(tmp_path / "o")],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2
+    assert "Traceback" not in p.stderr
+    lines = [l for l in p.stderr.splitlines() if l.strip()]
+    assert 1 <= len(lines) <= 2 and "scheme[0].name" in lines[0] and "valid:" in lines[0]
+    assert not (tmp_path / "o").exists()          # nothing started
