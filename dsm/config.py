@@ -157,6 +157,7 @@ class SceneSpec:
     file: Path | None = None
     params: Any = None          # builtin: its parameter dataclass; file: FileSceneParams
     label: str = ""
+    closed: tuple = ()          # (shape name, closed) overrides of detected closedness
 
 
 @dataclass(frozen=True)

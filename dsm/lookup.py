@@ -50,6 +50,7 @@ class Tap:
     z1: object
     shape: object
     slope: object = None
+    z2: object = None
 
     def depth_on_plane(self, p0, n):
         """Depth where the light ray through this texel's centre meets the plane (p0, n)."""
@@ -63,8 +64,9 @@ def nearest_tap(rx: Receiver, smap) -> Tap:
     j = dr.clip(mi.Int32(dr.floor(rx.v)), 0, R1)
     idx = mi.UInt32(j) * view.R_u + mi.UInt32(i)
     slope = dr.gather(mi.Float, smap.slope, idx) if smap.slope is not None else None
+    z2 = dr.gather(mi.Float, smap.z2, idx) if smap.z2 is not None else None
     return Tap(view, idx, mi.Float(i) + 0.5, mi.Float(j) + 0.5, dr.gather(mi.Float, smap.z1, idx),
-               dr.gather(mi.UInt32, smap.shape, idx), slope)
+               dr.gather(mi.UInt32, smap.shape, idx), slope, z2)
 
 
 def resolve(params, rx: Receiver):

@@ -13,7 +13,7 @@ import numpy as np
 from . import metrics
 
 COLUMNS = [
-    "case", "scene", "light", "view", "scheme", "preset", "params", "resolution", "filter", "format",
+    "case", "scene", "light", "view", "scheme", "preset", "params", "culling", "resolution", "filter", "format",
     "n_pixels", "n_excluded_nohit", "n_excluded_backfacing", "n_excluded_outside",
     "n_receivers", "n_gt_lit", "n_gt_shadowed", "n_acne", "n_acne_self", "n_acne_edge", "n_peterpan",
     "acne_rate", "peterpan_rate", "error_rate", "mean_abs_error", "peterpan_dist_median", "texel_size",
@@ -50,8 +50,9 @@ def progress(total: int, enabled: bool):
 
 
 def sweep_of(spec, all_specs) -> tuple[str, float]:
-    """The parameter a scheme's sweep varies (or its first one) and this case's value of it."""
-    fields = [f.name for f in dataclasses.fields(spec.params)]
+    """The numeric parameter a scheme's sweep varies (or its first one) and this case's value of it."""
+    fields = [f.name for f in dataclasses.fields(spec.params)
+              if isinstance(getattr(spec.params, f.name), (int, float)) or hasattr(getattr(spec.params, f.name), "unit")]
     if not fields:
         return "", 0.0
     siblings = [s.params for s in all_specs if s.name == spec.name and s.preset is None]

@@ -87,7 +87,8 @@ class Runner:
         self.variant = env.use_variant(variant or config.variant)
         self.progress = progress
         self.keep_images = keep_images
-        self.rays = {"gbuffer": 0, "reference": 0, "map_first": 0}
+        self.rays = {"gbuffer": 0, "reference": 0, "map_first": 0, "map_second": 0}
+        self.scene_info = []
         self.status = []
         self.rows = []
         self.images = {}
@@ -167,7 +168,7 @@ class Runner:
         magnitude = reference.scene_magnitude(sd.bbox)
         (vis, dist), t = timing.measure(lambda: reference.visibility(sd.scene, si, light, magnitude),
                                         self.cfg.timing_repeats)
-        self.rays["reference"] += len(pixels) * (1 + self.cfg.timing_repeats)
+        self.rays["reference"] += len(pixels)
         dr.eval(p, n)
         return LightSetup(label, light, pixels, p, n, gb.shape.numpy()[pixels], vis.numpy().astype(bool),
                           dist.numpy(), exclusions, t.ms, si)
@@ -175,31 +176,74 @@ class Runner:
     # ------------------------------------------------------------ per map
     def _run_map(self, sd, gb, setup, R, bar):
         specs = self.cfg.schemes
+        per_case = len(self.cfg.map.filter) * len(self.cfg.map.format)
         try:
             view = make_view(setup.light, R, _points_np(setup.p) if setup.p is not None else np.zeros((0, 3)),
                              sd.bbox)
-            needs = needs_of(specs)
-            smap, bt = timing.measure(lambda: _map_arrays(sd.scene, view, needs), self.cfg.timing_repeats)
-            smap = smap[-1]
-            self.rays["map_first"] += R * R * (1 + self.cfg.timing_repeats)
             rx = None
             if setup.p is not None:
                 rx = Receiver.make(view, setup.p, setup.n, sd.diagonal)
                 dr.eval(rx.d, rx.u, rx.v, rx.texel_world, rx.to_light)
         except Exception as e:
             self._fail(f"scene {sd.label} light {setup.label} map {R}", e)
-            bar.update(len(specs) * len(self.cfg.map.filter) * len(self.cfg.map.format))
+            bar.update(len(specs) * per_case)
             return
+        # one map per culling choice, with the union of what its schemes need
+        groups = {}
         for spec in specs:
-            for filt in self.cfg.map.filter:
-                for fmt in self.cfg.map.format:
-                    self._run_case(sd, gb, setup, view, smap, bt, rx, spec, filt, fmt)
-                    bar.update(1)
+            groups.setdefault(schemes.culling_of(spec.params), []).append(spec)
+        for culling, group in groups.items():
+            try:
+                modes = None
+                if culling != "none":
+                    modes = shadowmap.cull_modes_for(culling, self._closed(sd))
+                needs = needs_of(group)
+                smap, bt = timing.measure(lambda: _map_arrays(sd.scene, view, needs, culling, modes),
+                                          self.cfg.timing_repeats)
+                smap = smap[-1]
+                for k, v in smap.rays.items():
+                    self.rays[k] = self.rays.get(k, 0) + v
+                if smap.unfinished:
+                    self.status.append({"what": f"map {sd.label} {setup.label} R={R} culling={culling}",
+                                        "status": "warning", "error": f"{smap.unfinished} texels still searching "
+                                        f"after {shadowmap.MAX_STEPS} surfaces"})
+            except Exception as e:
+                self._fail(f"scene {sd.label} light {setup.label} map {R} culling {culling}", e)
+                bar.update(len(group) * per_case)
+                continue
+            build_times = {frozenset(needs): bt}
+            for spec in group:
+                own = frozenset(schemes.get(spec.name).NEEDS)
+                if own not in build_times:
+                    # time the build of exactly what this scheme needs (the data comes from the shared map)
+                    _, build_times[own] = timing.measure(
+                        lambda: _map_arrays(sd.scene, view, own, culling, modes), self.cfg.timing_repeats)
+                bt = build_times[own]
+                for filt in self.cfg.map.filter:
+                    for fmt in self.cfg.map.format:
+                        self._run_case(sd, gb, setup, view, smap, bt, rx, spec, filt, fmt)
+                        bar.update(1)
+
+    def _closed(self, sd):
+        if sd.closed is None:
+            from .closedness import shape_closedness
+            over = dict(sd.closed_override)
+            sd.closed, sd.closed_reason = [], []
+            for name, shape in zip(sd.shape_names, sd.scene.shapes()):
+                closed, why = shape_closedness(shape)
+                if name in over:
+                    closed, why = over[name], f"set by the config (detected: {why})"
+                sd.closed.append(closed)
+                sd.closed_reason.append(why)
+            self.scene_info.append({"scene": sd.label, "shapes": [
+                {"name": n, "closed": c, "why": w} for n, c, w in zip(sd.shape_names, sd.closed, sd.closed_reason)]})
+        return sd.closed
 
     def _run_case(self, sd, gb, setup, view, smap, bt, rx, spec, filt, fmt):
         self.case_no += 1
         case = f"{self.case_no:04d}"
         meta = {"case": case, "scene": sd.label, "light": setup.label, "view": view.kind, "scheme": spec.name,
+                "culling": smap.culling,
                 "preset": spec.preset or "", "params": spec.label, "resolution": view.resolution,
                 "filter": filt, "format": fmt}
         try:
@@ -232,7 +276,9 @@ class Runner:
 
     # ------------------------------------------------------------ run.json
     def _run_json(self):
-        return report.run_info(self.cfg, self.variant, self.rays, self.status)
+        info = report.run_info(self.cfg, self.variant, self.rays, self.status)
+        info["scenes"] = self.scene_info
+        return info
 
     def _write_run_json(self):
         (self.out / "run.json").write_text(json.dumps(self._run_json(), indent=2, default=str))
@@ -247,8 +293,8 @@ def _gbuffer_arrays(sd, W, H):
     return (gb.p, gb.n, gb.shape, gb)
 
 
-def _map_arrays(scene, view, needs):
-    smap = shadowmap.build(scene, view, needs)
+def _map_arrays(scene, view, needs, culling="none", modes=None):
+    smap = shadowmap.build(scene, view, needs, culling, modes)
     return (*shadowmap.arrays(smap), smap)
 
 

@@ -34,7 +34,7 @@ class PlaneBoxParams:
 
 @dataclass(frozen=True)
 class LShapeParams:
-    """Seed 000, figure 5: a closed L-shaped solid on the ground, light from (nearly) right above."""
+    """Seed 000, figure 5: a closed L-shaped solid above the ground, light from right above."""
     scale: float = field(default=1.0, metadata={"min": 1e-30})
 
 
@@ -78,10 +78,11 @@ def parse_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]
         name = t["builtin"]
         if not isinstance(name, str) or name not in BUILTINS:
             raise ConfigError(source, f"{where}.builtin", f"unknown scene {name!r}", list(BUILTINS))
-        specs = sweep_params(BUILTINS[name], t, source, where, skip=("builtin",))
+        specs = sweep_params(BUILTINS[name], t, source, where, skip=("builtin", "closed"))
         for p in specs:
             _check_builtin(p, source, where)
-        return [SceneSpec(builtin=name, params=p, label=_label(name, p)) for p in specs]
+        closed = _closed_override(t, source, where)
+        return [SceneSpec(builtin=name, params=p, label=_label(name, p), closed=closed) for p in specs]
     raw = t["file"]
     if not isinstance(raw, str):
         raise ConfigError(source, f"{where}.file", f"expected a path string, got {raw!r}")
@@ -92,10 +93,19 @@ def parse_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]
         raise ConfigError(source, f"{where}.file", f"unsupported file type {path.suffix!r}", FILE_SUFFIXES)
     if not path.is_file():
         raise ConfigError(source, f"{where}.file", f"no such file: {path}")
-    specs = sweep_params(FileParams, t, source, where, skip=("file",))
+    specs = sweep_params(FileParams, t, source, where, skip=("file", "closed"))
+    closed = _closed_override(t, source, where)
     if path.suffix.lower() == ".xml" and any(p != FileParams() for p in specs):
         raise ConfigError(source, where, "an XML scene takes no scale/up/ground keys", ("file",))
-    return [SceneSpec(file=path, params=p, label=_label(path.stem, p, FileParams())) for p in specs]
+    return [SceneSpec(file=path, params=p, label=_label(path.stem, p, FileParams()), closed=closed) for p in specs]
+
+
+def _closed_override(t, source, where) -> tuple:
+    """``closed = { shape_name = true, ... }``: override detected closedness per shape."""
+    raw = t.get("closed", {})
+    if not isinstance(raw, dict) or not all(isinstance(v, bool) for v in raw.values()):
+        raise ConfigError(source, f"{where}.closed", "expected a table of shape name = true/false")
+    return tuple(sorted(raw.items()))
 
 
 def xml_has_usable_emitter(path: Path) -> bool:
@@ -218,9 +228,10 @@ def builtin_geometry(name: str, p):
         shapes = {"ground": _ground(), "box": box([-0.5, -0.5, 0.0], [0.5, 0.5, 1.0])}
         return shapes, ((5.0, -7.0, 6.0), (0, 0, 0.3)), LightSpec("directional", direction=_normalize([-0.4, -0.3, -1]))
     if name == "l_shape":
-        profile = [(-1, 0), (1, 0), (1, 0.5), (-0.5, 0.5), (-0.5, 2.0), (-1, 2.0)]
-        shapes = {"ground": _ground(), "l_shape": prism(profile, -1.0, 1.0, fan_center=3)}
-        return shapes, ((4.0, -6.0, 5.0), (0, 0, 0.6)), LightSpec("directional", direction=_normalize([-0.2, 0.05, -1]))
+        # seed 000, figure 5: an L above the ground, its vertical arm on the right, light from right above
+        profile = [(-1, 0.5), (1, 0.5), (1, 2.0), (0.7, 2.0), (0.7, 0.8), (-1, 0.8)]
+        shapes = {"ground": _ground(), "l_shape": prism(profile, -0.8, 0.8, fan_center=4)}
+        return shapes, ((-2.0, -6.0, 5.0), (0, 0, 0.7)), LightSpec("directional", direction=_normalize([-0.35, 0.05, -1]))
     if name == "floating_plate":
         shapes = {"ground": _ground(), "plate": quad([0, 0, p.gap], [0.75, 0, 0], [0, 0.75, 0])}
         return shapes, ((3.0, -5.0, 4.0), (0, 0, 0)), LightSpec("directional", direction=_normalize([0.2, 0.1, -1]))
@@ -251,6 +262,9 @@ class SceneData:
     bbox: tuple                    # (min, max) numpy
     scale: float                   # multiplies the config's light positions
     notes: list = field(default_factory=list)
+    closed_override: tuple = ()    # (shape name, closed) pairs from the config
+    closed: list = None            # per shape, computed when a culling choice needs it
+    closed_reason: list = None
 
     @property
     def diagonal(self) -> float:
@@ -278,10 +292,13 @@ def load(spec: SceneSpec, camera_resolution) -> SceneData:
             d[name] = make_mesh(name, v * s, f)
         d["sensor"] = look_at_sensor(np.multiply(cam_o, s), np.multiply(cam_t, s), (0, 0, 1), 40, w, h)
         scene = mi.load_dict(d, optimize=False)
-        return _finish(spec.label, scene, [light], s)
-    if spec.file.suffix.lower() == ".xml":
-        return _load_xml(spec, w)
-    return _load_mesh_file(spec, w, h)
+        data = _finish(spec.label, scene, [light], s)
+    elif spec.file.suffix.lower() == ".xml":
+        data = _load_xml(spec, w)
+    else:
+        data = _load_mesh_file(spec, w, h)
+    data.closed_override = spec.closed
+    return data
 
 
 def _finish(label, scene, own_lights, scale, notes=()):

@@ -6,10 +6,12 @@ arrays and, for schemes that move the lookup point, ``shift(rx, params) -> Recei
 """
 import dataclasses
 
-from . import adaptive, constant, none, normal_angle, normal_offset, receiver_plane, slope_scaled
+from . import (adaptive, constant, dual, midpoint, none, normal_angle, normal_offset, receiver_plane,
+               second_depth, slope_scaled)
 from ..config import Length
 
-REGISTRY = (none, constant, slope_scaled, normal_angle, normal_offset, receiver_plane, adaptive)
+REGISTRY = (none, constant, slope_scaled, normal_angle, normal_offset, receiver_plane, adaptive, midpoint, dual,
+            second_depth)
 
 # Engine presets: a named engine's default bias, measurable beside every scheme.
 PRESETS = {
@@ -31,3 +33,8 @@ def get(name: str):
 
 def describe_params(params) -> str:
     return " ".join(f"{f.name}={getattr(params, f.name)}" for f in dataclasses.fields(params))
+
+
+def culling_of(params) -> str:
+    """The map culling a scheme instance asks for (``none`` for schemes without the parameter)."""
+    return getattr(params, "culling", "none")

@@ -1,0 +1,51 @@
+"""Closed or open: whether a mesh bounds a solid, so back-face culling may apply to it.
+
+A mesh is closed when, after welding vertices that share a position, every edge is shared by
+exactly two triangles that traverse it in opposite directions (a consistently wound,
+manifold surface without boundary). Anything else is open, with the reason reported:
+boundary edges, non-manifold edges (three or more triangles, or duplicated triangles) or
+inconsistent winding. Seed 000 culls back faces of closed meshes only.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def closedness(verts: np.ndarray, faces: np.ndarray) -> tuple[bool, str]:
+    verts = np.asarray(verts, np.float64).reshape(-1, 3)
+    faces = np.asarray(faces, np.int64).reshape(-1, 3)
+    if len(faces) == 0:
+        return False, "no triangles"
+    _, weld = np.unique(verts, axis=0, return_inverse=True)
+    f = weld.ravel()[faces]
+    degenerate = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2])
+    f = f[~degenerate]
+    directed = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    undirected = np.sort(directed, axis=1)
+    _, counts = np.unique(undirected, axis=0, return_counts=True)
+    boundary, nonmanifold = int((counts == 1).sum()), int((counts > 2).sum())
+    _, dcounts = np.unique(directed, axis=0, return_counts=True)
+    same_direction = int((dcounts > 1).sum())
+    problems = []
+    if boundary:
+        problems.append(f"{boundary} boundary edges")
+    if nonmanifold:
+        problems.append(f"{nonmanifold} non-manifold edges")
+    if same_direction:
+        problems.append(f"{same_direction} edges with inconsistent winding")
+    if int(degenerate.sum()):
+        problems.append(f"{int(degenerate.sum())} degenerate triangles (ignored)")
+    closed = not (boundary or nonmanifold or same_direction)
+    return closed, "closed" if closed and not problems else "; ".join(problems) or "closed"
+
+
+def shape_closedness(shape) -> tuple[bool, str]:
+    """Closedness of a Mitsuba shape: meshes by their edges, analytic shapes by kind."""
+    import mitsuba as mi
+    if shape.is_mesh():
+        params = mi.traverse(shape)
+        return closedness(np.array(params["vertex_positions"]), np.array(params["faces"]))
+    kind = type(shape).__name__.lower()
+    if "sphere" in kind:
+        return True, "analytic sphere"
+    return False, f"analytic {kind} (treated as open)"

@@ -1,0 +1,31 @@
+"""Dual depth layers (Weiskopf & Ertl 2003; seed 000).
+
+Lit when ``d <= z1 + min((z2 - z1) / 2, z_offset)``: the midpoint where caster and receiver
+are close, a constant offset where the second surface is far away (which removes midpoint's
+self-unshadowing). With back-face culling of closed meshes (``back_closed``, as the paper
+recommends, open surfaces unculled) the second surface behind a silhouette is no longer the
+object's own back face, which removes midpoint's self-shadowing at silhouettes.
+
+Parameters: ``z_offset`` (length, default ``"4 texel"``), ``culling`` (none | back | front |
+back_closed, default back_closed).
+"""
+from dataclasses import dataclass, field
+
+import drjit as dr
+
+from ..config import Length
+
+NAME = "dual"
+SOURCE = "Weiskopf & Ertl 2003; seed 000"
+NEEDS = frozenset({"z2"})
+CULLING = ("none", "back", "front", "back_closed")
+
+
+@dataclass(frozen=True)
+class Params:
+    z_offset: Length = field(default=Length(4.0, "texel"), metadata={"doc": "largest bias"})
+    culling: str = field(default="back_closed", metadata={"doc": "map culling per shape", "choices": CULLING})
+
+
+def lit(rx, tap, p):
+    return rx.d <= tap.z1 + dr.minimum(0.5 * (tap.z2 - tap.z1), p.z_offset)

@@ -1,0 +1,25 @@
+"""Midpoint shadow maps (Woo 1992; seed 000).
+
+Lit when ``d <= (z1 + z2) / 2``: the comparison surface lies halfway between the first and
+second surfaces along the texel's ray, so a lit surface passes by half the thickness of
+whatever lies behind it. Failure modes (seed 000, figures 2 and 4): self-shadowing near
+silhouettes, where front and back faces are close; with back-face culling, self-unshadowing
+where a far background or the far plane drags the midpoint beyond the receiver.
+
+Parameters: ``culling`` (none | back | front | back_closed, default none).
+"""
+from dataclasses import dataclass, field
+
+NAME = "midpoint"
+SOURCE = "Woo 1992; seed 000"
+NEEDS = frozenset({"z2"})
+CULLING = ("none", "back", "front", "back_closed")
+
+
+@dataclass(frozen=True)
+class Params:
+    culling: str = field(default="none", metadata={"doc": "map culling per shape", "choices": CULLING})
+
+
+def lit(rx, tap, p):
+    return rx.d <= 0.5 * (tap.z1 + tap.z2)

@@ -1,0 +1,29 @@
+"""Second-depth shadow maps (Wang & Molnar 1994).
+
+The map stores the first surface facing away from the light (front faces culled), so a lit
+front face is compared with its own object's far side and needs no bias. Lit when
+``d <= z_back + bias``. Wang & Molnar assume closed objects: with ``front_closed`` (the
+default) front faces are culled on closed meshes only and open surfaces stay in the map as
+they are, since culling an open one-sided plate would delete it.
+Failure modes: thin closed objects (little depth between front and back) and open surfaces.
+
+Parameters: ``bias`` (length, default 0), ``culling`` (front | front_closed, default front_closed).
+"""
+from dataclasses import dataclass, field
+
+from ..config import Length
+
+NAME = "second_depth"
+SOURCE = "Wang & Molnar 1994"
+NEEDS = frozenset()
+CULLING = ("front", "front_closed")
+
+
+@dataclass(frozen=True)
+class Params:
+    bias: Length = field(default=Length(0.0, "world"), metadata={"doc": "depth offset added to the stored depth"})
+    culling: str = field(default="front_closed", metadata={"doc": "map culling per shape", "choices": CULLING})
+
+
+def lit(rx, tap, p):
+    return rx.d <= tap.z1 + p.bias
