@@ -175,7 +175,7 @@ def prism(profile_xz, y0, y1, fan_center: int):
     for i in range(n):
         j = (i + 1) % n
         faces += [[i, j, n + j], [i, n + j, n + i]]
-    return verts, np.array(faces)
+    return verts, np.array(faces)[:, ::-1]   # outward: a counter-clockwise (x, z) profile winds inward
 
 
 def make_mesh(name: str, verts: np.ndarray, faces: np.ndarray):

@@ -1,0 +1,28 @@
+"""Every experiment in experiments/ and the built-in default runs at tiny resolution (no skip list)."""
+import dataclasses
+from pathlib import Path
+
+import pytest
+
+import dsm
+from conftest import MESHES, ROOT
+from dsm import config
+from dsm.cli import DEFAULT_CONFIG
+
+FILES = sorted((ROOT / "experiments").glob("*.toml")) + [DEFAULT_CONFIG]
+
+
+@pytest.mark.parametrize("path", FILES, ids=lambda p: p.name)
+def test_experiment_runs_tiny(path, tmp_path):
+    try:
+        cfg = config.load(path)
+    except config.ConfigError as e:
+        if "no such file" in str(e) and not MESHES.exists():
+            pytest.skip(f"{path.name} needs ../shared/meshes, which is absent: {e}")
+        raise
+    tiny = dataclasses.replace(cfg, camera_resolution=(48, 48), timing_repeats=1,
+                               map=dataclasses.replace(cfg.map, resolution=(32,)))
+    res = dsm.run(tiny, out=tmp_path / "out")
+    assert res.run["n_failed"] == 0, res.run["status"]
+    assert len(res.rows) >= len(cfg.schemes)
+    assert (tmp_path / "out" / "table.md").is_file()
