@@ -23,6 +23,12 @@ def _parser():
     r.add_argument("--threads", type=int, help="Dr.Jit worker threads")
     r.add_argument("--force", action="store_true", help="write into a non-empty --out folder")
     sub.add_parser("schemes", help="list bias schemes, their parameters, defaults and sources")
+    b = sub.add_parser("bench", help="benchmark: map build against a bare ray cast, lookup cost per scheme")
+    b.add_argument("--out", default="bench", help="folder for bench.md and bench.json (default: bench/)")
+    b.add_argument("--resolutions", default="256,512,1024,2048", help="comma-separated map resolutions")
+    b.add_argument("--repeats", type=int, default=5)
+    b.add_argument("--meshes", help="folder of the real test meshes (default: ../shared/meshes)")
+    b.add_argument("--variant", choices=cfgmod.VARIANTS)
     return ap
 
 
@@ -30,6 +36,19 @@ def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     if args.cmd == "schemes":
         print(schemes_text())
+        return 0
+    if args.cmd == "bench":
+        from .bench import run_bench
+        try:
+            res = [int(x) for x in args.resolutions.split(",")]
+            run_bench(Path(args.out), res, args.repeats, args.meshes, args.variant)
+        except SetupError as e:
+            print(f"dsm: setup error: {e}", file=sys.stderr)
+            return 3
+        except ValueError:
+            print(f"dsm: --resolutions: expected integers like 256,1024, got {args.resolutions!r}", file=sys.stderr)
+            return 2
+        print((Path(args.out) / "bench.md").read_text())
         return 0
     try:
         cfg = cfgmod.load(args.config or DEFAULT_CONFIG)
