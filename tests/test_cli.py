@@ -44,3 +44,22 @@ def test_schemes_command_lists_every_scheme():
     for s in REGISTRY:
         assert s.NAME in p.stdout and s.SOURCE in p.stdout
     assert "bias = 1 texel" in p.stdout
+
+
+def test_a_failing_case_is_recorded_and_the_rest_still_run(tmp_path, monkeypatch):
+    import dsm
+    from dsm.schemes import normal_angle
+
+    def broken(rx, tap, p):
+        raise RuntimeError("deliberately broken for this test")
+    monkeypatch.setattr(normal_angle, "lit", broken)
+    cfg = {"scene": [{"builtin": "plane"}], "camera": {"resolution": [32, 32]}, "map": {"resolution": 32},
+           "scheme": [{"name": "none"}, {"name": "normal_angle"}, {"name": "constant"}], "timing": {"repeats": 1}}
+    res = dsm.run(cfg, out=tmp_path / "o")
+    assert [r["scheme"] for r in res.rows] == ["none", "constant"]
+    failed = [s for s in res.run["status"] if s["status"] == "failed"]
+    assert len(failed) == 1 and "deliberately broken" in failed[0]["error"]
+    saved = json.loads((tmp_path / "o" / "run.json").read_text())
+    assert saved["n_failed"] == 1
+    with open(tmp_path / "o" / "metrics.csv", newline="") as fh:
+        assert len(list(csv.DictReader(fh))) == 2
