@@ -14,11 +14,11 @@ from dataclasses import dataclass, field
 import drjit as dr
 
 from ..config import Length
+from ..shadowmap import CULLINGS as CULLING
 
 NAME = "dual"
 SOURCE = "Weiskopf & Ertl 2003; seed 000"
 NEEDS = frozenset({"z2"})
-CULLING = ("none", "back", "front", "back_closed")
 
 
 @dataclass(frozen=True)

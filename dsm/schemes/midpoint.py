@@ -10,10 +10,11 @@ Parameters: ``culling`` (none | back | front | back_closed, default none).
 """
 from dataclasses import dataclass, field
 
+from ..shadowmap import CULLINGS as CULLING
+
 NAME = "midpoint"
 SOURCE = "Woo 1992; seed 000"
 NEEDS = frozenset({"z2"})
-CULLING = ("none", "back", "front", "back_closed")
 
 
 @dataclass(frozen=True)
