@@ -89,6 +89,7 @@ class Runner:
         self.keep_images = keep_images
         self.rays = {"gbuffer": 0, "reference": 0, "map_first": 0, "map_second": 0}
         self.scene_info = []
+        self.gbuffer_ms = {}
         self.status = []
         self.rows = []
         self.images = {}
@@ -129,6 +130,8 @@ class Runner:
         W, H = (int(x) for x in sd.sensor.film().size())
         gb, t = timing.measure(lambda: _gbuffer_arrays(sd, W, H), 0)
         gb = gb[-1]
+        gb.ms = t.ms
+        self.gbuffer_ms[sd.label] = t.ms
         self.rays["gbuffer"] += W * H
         lights = sd.lights_for(self.cfg.lights)
         if not lights:
@@ -278,6 +281,7 @@ class Runner:
     def _run_json(self):
         info = report.run_info(self.cfg, self.variant, self.rays, self.status)
         info["scenes"] = self.scene_info
+        info["gbuffer_ms"] = self.gbuffer_ms     # one cold pass per scene (compile included)
         return info
 
     def _write_run_json(self):
