@@ -177,6 +177,13 @@ class MapSpec:
     filter: tuple = ("nearest",)
     format: tuple = ("float32",)
     view: tuple = ("dual_paraboloid",)
+    texels: tuple = ()          # equal-memory sweeps: total texels per view, R = round(sqrt(texels / faces))
+
+    def resolutions_for(self, faces: int) -> tuple:
+        """Per-face resolutions of a view with ``faces`` faces (from ``texels`` when given)."""
+        if not self.texels:
+            return self.resolution
+        return tuple(max(1, round((t / faces) ** 0.5)) for t in self.texels)
 
 
 @dataclass(frozen=True)
@@ -263,7 +270,12 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
         lights = [LightSpec("scene", label="scene")]
 
     m = _table(raw, "map", source)
-    _check_keys(m, ("resolution", "filter", "format", "view"), source, "map")
+    _check_keys(m, ("resolution", "texels", "filter", "format", "view"), source, "map")
+    if "resolution" in m and "texels" in m:
+        raise ConfigError(source, "map", "give either resolution (per face) or texels (total per view), not both",
+                          ("resolution", "texels"))
+    texels = tuple(_number(r, source, "map.texels", integer=True, minimum=1, maximum=6 * 16384 ** 2)
+                   for r in _as_list(m.get("texels", [])))
     resolutions = tuple(_number(r, source, "map.resolution", integer=True, minimum=1, maximum=16384)
                         for r in _as_list(m.get("resolution", 512)))
     filters = tuple(_choice(f, source, "map.filter", FILTERS) for f in _as_list(m.get("filter", "nearest")))
@@ -279,7 +291,7 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     for f in formats:
         if f != "float32":
             raise ConfigError(source, "map.format", f"format {f!r} is not available in this version", ("float32",))
-    mapspec = MapSpec(resolutions, filters, formats, views)
+    mapspec = MapSpec(resolutions, filters, formats, views, texels)
 
     scheme_tables = _array_of_tables(raw, "scheme", source)
     if not scheme_tables:
@@ -295,8 +307,8 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     if all(l.type == "scene" for l in lights):
         for i, sc in enumerate(scenes):
             if sc.file is not None and sc.file.suffix.lower() == ".xml" and not scenes_mod.xml_has_usable_emitter(sc.file):
-                raise ConfigError(source, "light", f"scene {sc.file} has no spot or directional emitter and the "
-                                  "config names no [[light]]; add one", ("directional", "spot"))
+                raise ConfigError(source, "light", f"scene {sc.file} has no point, spot or directional emitter and "
+                                  "the config names no [[light]]; add one", ("directional", "spot", "point"))
 
     return Config(name=name, source=source, seed=seed, variant=variant, camera_resolution=camera_resolution,
                   scenes=tuple(scenes), lights=tuple(lights), map=mapspec, schemes=tuple(schemes),
@@ -325,7 +337,7 @@ def _parse_light(t: dict, source: str, where: str) -> LightSpec:
         raise ConfigError(source, f"{where}.type", "missing", LIGHT_TYPES)
     allowed = {"scene": ("type",), "directional": ("type", "direction"),
                "spot": ("type", "position", "target", "direction", "cutoff"),
-               "point": ("type", "position")}[kind]
+               "point": ("type", "position", "direction")}[kind]
     _check_keys(t, allowed, source, where)
     if kind == "scene":
         return LightSpec("scene", label="scene")
@@ -335,8 +347,12 @@ def _parse_light(t: dict, source: str, where: str) -> LightSpec:
         d = _vec3(t["direction"], source, f"{where}.direction", nonzero=True)
         return LightSpec("directional", direction=d, label="directional")
     if kind == "point":
-        raise ConfigError(source, f"{where}.type", "point lights need paraboloid, dual-paraboloid or cube "
-                          "views, which this version does not have yet", ("scene", "directional", "spot"))
+        if "position" not in t:
+            raise ConfigError(source, f"{where}.position", "a point light needs a position")
+        pos = _vec3(t["position"], source, f"{where}.position")
+        # main direction: the paraboloid's axis (its hemisphere), the dual paraboloid's front map
+        d = _vec3(t.get("direction", [0.0, 0.0, -1.0]), source, f"{where}.direction", nonzero=True)
+        return LightSpec("point", position=pos, direction=d, label="point")
     if "position" not in t:
         raise ConfigError(source, f"{where}.position", "a spot light needs a position")
     pos = _vec3(t["position"], source, f"{where}.position")

@@ -26,25 +26,27 @@ class Receiver:
     d: object            # depth in the view's metric
     u: object            # map position, texel units
     v: object
+    face: object         # mi.UInt32, the view's face (map) the receiver falls in
     texel_world: object  # world width of one texel at the receiver
     scene_scale: object  # the scene's bounding-box diagonal (opaque scalar)
 
     @staticmethod
     def make(view, p, n, scene_scale: float) -> "Receiver":
-        u, v = view.project(p)
-        return Receiver(view, p, n, view.to_light(p), view.depth(p), u, v, view.texel_world(p),
+        u, v, face = view.project(p)
+        return Receiver(view, p, n, view.to_light(p), view.depth(p), u, v, face, view.texel_world(p),
                         dr.opaque(mi.Float, scene_scale))
 
     def moved(self, p2) -> "Receiver":
         """The same receiver looked up from another point (normal offset)."""
-        u, v = self.view.project(p2)
-        return dataclasses.replace(self, p=p2, d=self.view.depth(p2), u=u, v=v)
+        u, v, face = self.view.project(p2)
+        return dataclasses.replace(self, p=p2, d=self.view.depth(p2), u=u, v=v, face=face)
 
 
 @dataclass
 class Tap:
     view: object
     idx: object          # mi.UInt32 texel index
+    face: object
     cu: object           # texel centre, texel units
     cv: object
     z1: object
@@ -54,7 +56,7 @@ class Tap:
 
     def depth_on_plane(self, p0, n):
         """Depth where the light ray through this texel's centre meets the plane (p0, n)."""
-        return self.view.depth_on_plane(self.cu, self.cv, p0, n)
+        return self.view.depth_on_plane(self.cu, self.cv, p0, n, self.face)
 
 
 def nearest_tap(rx: Receiver, smap) -> Tap:
@@ -62,10 +64,10 @@ def nearest_tap(rx: Receiver, smap) -> Tap:
     R1 = mi.Int32(view.R_u) - 1
     i = dr.clip(mi.Int32(dr.floor(rx.u)), 0, R1)
     j = dr.clip(mi.Int32(dr.floor(rx.v)), 0, R1)
-    idx = mi.UInt32(j) * view.R_u + mi.UInt32(i)
+    idx = (rx.face * view.R_u + mi.UInt32(j)) * view.R_u + mi.UInt32(i)
     slope = dr.gather(mi.Float, smap.slope, idx) if smap.slope is not None else None
     z2 = dr.gather(mi.Float, smap.z2, idx) if smap.z2 is not None else None
-    return Tap(view, idx, mi.Float(i) + 0.5, mi.Float(j) + 0.5, dr.gather(mi.Float, smap.z1, idx),
+    return Tap(view, idx, rx.face, mi.Float(i) + 0.5, mi.Float(j) + 0.5, dr.gather(mi.Float, smap.z1, idx),
                dr.gather(mi.UInt32, smap.shape, idx), slope, z2)
 
 

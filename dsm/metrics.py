@@ -7,6 +7,8 @@
 | peterpan_rate                | n_peterpan / n_gt_shadowed
 | error_rate                   | (n_acne + n_peterpan) / n_receivers
 | mean_abs_error               | mean |V - V*| over receivers
+| seam_error_rate              | error rate of receivers within SEAM_TEXELS of a seam between
+|                              | faces (cube edges, paraboloid rim); off_seam_error_rate: the rest
 
 A rate whose denominator is zero is 0 (its count columns show why); nothing here is NaN.
 """
@@ -20,13 +22,16 @@ CLASS_NAMES = ("not a receiver", "correct lit", "correct shadow", "acne", "peter
 CLASS_COLORS = np.array([[0, 0, 0], [235, 225, 190], [70, 80, 110], [230, 40, 40], [40, 170, 255]], np.uint8)
 
 
+SEAM_TEXELS = 3.0
+
+
 def _rate(num, den) -> float:
     return float(num) / float(den) if den else 0.0
 
 
 def compute(v: np.ndarray, v_star: np.ndarray, rx_shape: np.ndarray, tap_shape: np.ndarray,
-            occluder_dist: np.ndarray) -> dict:
-    """All metrics of one case from per-receiver arrays."""
+            occluder_dist: np.ndarray, seam_dist: np.ndarray | None = None) -> dict:
+    """All metrics of one case from per-receiver arrays (``seam_dist``: texels to a face seam)."""
     v = np.asarray(v, np.float64)
     v_star = np.asarray(v_star, bool)
     shadowed_v = v < 0.5
@@ -38,6 +43,8 @@ def compute(v: np.ndarray, v_star: np.ndarray, rx_shape: np.ndarray, tap_shape: 
     n_acne, n_peter = int(acne.sum()), int(peter.sum())
     dist = occluder_dist[peter]
     dist = dist[np.isfinite(dist)]
+    err = acne | peter
+    near = np.zeros(n, bool) if seam_dist is None else np.asarray(seam_dist) < SEAM_TEXELS
     return {
         "n_receivers": n, "n_gt_lit": n_lit, "n_gt_shadowed": n_shadow,
         "n_acne": n_acne, "n_acne_self": int(acne_self.sum()), "n_acne_edge": int(n_acne - acne_self.sum()),
@@ -46,6 +53,8 @@ def compute(v: np.ndarray, v_star: np.ndarray, rx_shape: np.ndarray, tap_shape: 
         "error_rate": _rate(n_acne + n_peter, n),
         "mean_abs_error": float(np.abs(v - v_star).mean()) if n else 0.0,
         "peterpan_dist_median": float(np.median(dist)) if dist.size else 0.0,
+        "n_seam": int(near.sum()), "seam_error_rate": _rate((err & near).sum(), near.sum()),
+        "off_seam_error_rate": _rate((err & ~near).sum(), (~near).sum()),
     }
 
 

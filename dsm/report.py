@@ -13,10 +13,11 @@ import numpy as np
 from . import metrics
 
 COLUMNS = [
-    "case", "scene", "light", "view", "scheme", "preset", "params", "culling", "resolution", "filter", "format",
+    "case", "scene", "light", "view", "scheme", "preset", "params", "culling", "resolution", "total_texels", "filter", "format",
     "n_pixels", "n_excluded_nohit", "n_excluded_backfacing", "n_excluded_outside",
     "n_receivers", "n_gt_lit", "n_gt_shadowed", "n_acne", "n_acne_self", "n_acne_edge", "n_peterpan",
-    "acne_rate", "peterpan_rate", "error_rate", "mean_abs_error", "peterpan_dist_median", "texel_size",
+    "acne_rate", "peterpan_rate", "error_rate", "mean_abs_error", "peterpan_dist_median",
+    "n_seam", "seam_error_rate", "off_seam_error_rate", "texel_size",
     "build_ms", "build_compile_ms", "lookup_ms", "lookup_compile_ms", "lookup_kernels_compiled", "reference_ms",
     "sweep_key", "sweep_value",
 ]
@@ -123,58 +124,68 @@ def _cell(x):
 
 # ------------------------------------------------------------------ plots
 
-def write_plots(folder: Path, rows: list):
-    """Error rates against the swept parameter and against resolution, per scene and light."""
-    if not rows:
-        return
+def _panels(path, series: dict, xlabel: str, ylabels: tuple, title: str, xlog: bool = False, style="o-"):
+    """One figure with a panel per y quantity; ``series``: label -> [(x, y0, y1, ...)]."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    series = {k: sorted(v) for k, v in series.items() if v}
+    if not series:
+        return
+    fig, axes = plt.subplots(1, len(ylabels), figsize=(5.5 * len(ylabels), 4))
+    for label, pts in series.items():
+        for k, ax in enumerate(axes, start=1):
+            ax.plot([p[0] for p in pts], [p[k] for p in pts], style, lw=0.9, label=label)
+    for ax, what in zip(axes, ylabels):
+        if xlog:
+            ax.set_xscale("log", base=2)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(what)
+        ax.set_title(title, fontsize=9)
+    axes[0].legend(fontsize=6)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def write_plots(folder: Path, rows: list):
+    """Per scene and light: error rates against the swept parameter and against resolution
+    (per view), and, where a light was mapped with several views, error against the total
+    texel count of each view (the equal-memory comparison)."""
+    if not rows:
+        return
     folder.mkdir(exist_ok=True)
     groups = {}
     for r in rows:
         groups.setdefault((r["scene"], r["light"]), []).append(r)
-    for gi, ((scene, light), rs) in enumerate(sorted(groups.items())):
-        tag = _slug(f"{scene}_{light}")
-        rmax = max(r["resolution"] for r in rs)
-        fig, axes = plt.subplots(1, 2, figsize=(11, 4))
-        for scheme in sorted({r["scheme"] for r in rs}):
-            pts = sorted((r["sweep_value"], r["acne_rate"], r["peterpan_rate"], r["sweep_key"]) for r in rs
-                         if r["scheme"] == scheme and r["resolution"] == rmax and not r["preset"])
-            if not pts:
-                continue
-            x = [p[0] for p in pts]
-            lab = f"{scheme} ({pts[0][3]})" if pts[0][3] else scheme
-            axes[0].plot(x, [p[1] for p in pts], "o-", label=lab)
-            axes[1].plot(x, [p[2] for p in pts], "o-", label=lab)
-        for ax, what in zip(axes, ("acne rate", "peter-panning rate")):
-            ax.set_xlabel("swept parameter value (its unit in the legend)")
-            ax.set_ylabel(what)
-            ax.set_title(f"{scene}, light {light}, R={rmax}")
-        if axes[0].get_legend_handles_labels()[0]:
-            axes[0].legend(fontsize=7)
-        fig.tight_layout()
-        fig.savefig(folder / f"vs_bias_{tag}.png", dpi=90)
-        plt.close(fig)
-
-        fig, axes = plt.subplots(1, 2, figsize=(11, 4))
-        for key in sorted({(r["scheme"], r["params"]) for r in rs}):
-            pts = sorted((r["resolution"], r["acne_rate"], r["peterpan_rate"]) for r in rs
-                         if (r["scheme"], r["params"]) == key)
-            if len(pts) < 2:
-                continue
-            for ax, k in zip(axes, (1, 2)):
-                ax.plot([p[0] for p in pts], [p[k] for p in pts], ".-", lw=0.8, label=f"{key[0]} {key[1]}")
-        for ax, what in zip(axes, ("acne rate", "peter-panning rate")):
-            ax.set_xscale("log", base=2)
-            ax.set_xlabel("map resolution R (R x R texels)")
-            ax.set_ylabel(what)
-            ax.set_title(f"{scene}, light {light}")
-        if axes[0].get_legend_handles_labels()[0]:
-            axes[0].legend(fontsize=6)
-        fig.tight_layout()
-        fig.savefig(folder / f"vs_resolution_{tag}.png", dpi=90)
-        plt.close(fig)
+    rates = ("acne rate", "peter-panning rate")
+    for (scene, light), rs in sorted(groups.items()):
+        views = sorted({r["view"] for r in rs})
+        for view in views:
+            vr = [r for r in rs if r["view"] == view]
+            tag = _slug(f"{scene}_{light}" + (f"_{view}" if len(views) > 1 else ""))
+            rmax = max(r["resolution"] for r in vr)
+            bias = {}
+            for r in vr:
+                if r["resolution"] == rmax and not r["preset"]:
+                    lab = f"{r['scheme']} ({r['sweep_key']})" if r["sweep_key"] else r["scheme"]
+                    bias.setdefault(lab, []).append((r["sweep_value"], r["acne_rate"], r["peterpan_rate"]))
+            _panels(folder / f"vs_bias_{tag}.png", {k: v for k, v in bias.items()},
+                    "swept parameter value (its unit in the legend)", rates, f"{scene}, light {light}, {view}, R={rmax}")
+            res = {}
+            for r in vr:
+                res.setdefault(f"{r['scheme']} {r['params']}", []).append(
+                    (r["resolution"], r["acne_rate"], r["peterpan_rate"]))
+            _panels(folder / f"vs_resolution_{tag}.png", {k: v for k, v in res.items() if len(v) > 1},
+                    "map resolution R (R x R texels per face)", rates, f"{scene}, light {light}, {view}", True, ".-")
+        if len(views) > 1:
+            tex = {}
+            for r in rs:
+                tex.setdefault(f"{r['view']}: {r['scheme']} {r['params']}", []).append(
+                    (r["total_texels"], r["error_rate"], r["seam_error_rate"]))
+            _panels(folder / f"vs_texels_{_slug(f'{scene}_{light}')}.png", tex, "total texels of the view (all faces)",
+                    ("error rate", f"error rate within {metrics.SEAM_TEXELS:g} texels of a seam"),
+                    f"{scene}, light {light}: views at equal memory", True, ".-")
 
 
 def _slug(s: str) -> str:

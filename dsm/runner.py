@@ -20,7 +20,7 @@ import numpy as np
 from . import config as cfgmod
 from . import env, gbuffer, metrics, reference, report, scenes, schemes, shadowmap, timing
 from .lookup import Receiver, visibility
-from .views import OrthographicView, PerspectiveView
+from .views import CubeView, OrthographicView, ParaboloidView, PerspectiveView
 
 
 @dataclass
@@ -37,6 +37,21 @@ class LightSetup:
     exclusions: dict
     reference_ms: float
     si: object = None
+
+    def subset(self, keep: np.ndarray) -> "LightSetup":
+        """The receivers ``keep`` selects; the others count as outside the view's domain."""
+        if keep.all():
+            return self
+        ex = dict(self.exclusions)
+        ex["n_excluded_outside"] += int((~keep).sum())
+        if not keep.any():
+            return LightSetup(self.label, self.light, self.pixels[keep], None, None, self.shape[keep],
+                              self.v_star[keep], self.occluder_dist[keep], ex, self.reference_ms)
+        idx = mi.UInt32(np.flatnonzero(keep).astype(np.uint32))
+        p, n = dr.gather(mi.Point3f, self.p, idx), dr.gather(mi.Vector3f, self.n, idx)
+        dr.eval(p, n)
+        return LightSetup(self.label, self.light, self.pixels[keep], p, n, self.shape[keep], self.v_star[keep],
+                          self.occluder_dist[keep], ex, self.reference_ms)
 
 
 @dataclass
@@ -63,13 +78,28 @@ class Results:
         return len(self.rows)
 
 
-def make_view(light, R, receivers_world, bbox):
+VIEW_FACES = {"orthographic": 1, "perspective": 1, "paraboloid": 1, "dual_paraboloid": 2, "cube": 6}
+
+
+def views_for(light, point_views) -> tuple:
+    """The view kinds a light gets: its own for directional and spot, the config's for points."""
+    return {"directional": ("orthographic",), "spot": ("perspective",)}.get(light.type, tuple(point_views))
+
+
+def make_view(light, R, receivers_world, bbox, kind=None):
     if light.type == "directional":
         return OrthographicView(light.direction, receivers_world, bbox, R)
     if light.type == "spot":
         axis = light.direction if light.direction is not None else np.subtract(light.target, light.position)
         return PerspectiveView(light.position, axis, light.cutoff, bbox, R)
-    raise ValueError(f"light type {light.type!r} has no view in this version")
+    if light.type == "point":
+        axis = light.direction if light.direction is not None else (0.0, 0.0, -1.0)
+        if kind in ("paraboloid", "dual_paraboloid"):
+            return ParaboloidView(light.position, axis, bbox, R, dual=kind == "dual_paraboloid")
+        if kind == "cube":
+            return CubeView(light.position, bbox, R)
+        raise ValueError(f"unknown point-light view {kind!r} (valid: paraboloid, dual_paraboloid, cube)")
+    raise ValueError(f"light type {light.type!r} has no view")
 
 
 def needs_of(scheme_specs) -> set:
@@ -118,8 +148,8 @@ class Runner:
 
     def _estimate_cases(self):
         m = self.cfg.map
-        return (len(self.cfg.scenes) * len(self.cfg.lights) * len(m.resolution) * len(m.filter) * len(m.format)
-                * len(self.cfg.schemes))
+        views = sum(len(m.view) if l.type == "point" else 1 for l in self.cfg.lights)
+        return len(self.cfg.scenes) * views * len(m.texels or m.resolution) * len(m.filter) * len(m.format) * len(self.cfg.schemes)
 
     def _fail(self, what, exc):
         self.status.append({"what": what, "status": "failed", "error": f"{type(exc).__name__}: {exc}",
@@ -145,12 +175,13 @@ class Runner:
             except Exception as e:
                 self._fail(f"scene {sd.label} light {label}", e)
                 continue
-            for R in self.cfg.map.resolution:
-                self._run_map(sd, gb, setup, R, bar)
+            for kind in views_for(light, self.cfg.map.view):
+                for R in self.cfg.map.resolutions_for(VIEW_FACES[kind]):
+                    self._run_map(sd, gb, setup, kind, R, bar)
 
     def _light_setup(self, sd, gb, light, label) -> LightSetup:
         p_all, n_all = gb.p, gb.n
-        probe = make_view(light, 1, np.zeros((1, 3)), sd.bbox)
+        probe = make_view(light, 1, np.zeros((1, 3)), sd.bbox, "cube")   # a point light lights every direction
         to_light = probe.to_light(p_all)
         facing = (dr.dot(n_all, to_light) > 0).numpy().astype(bool)
         inside = probe.inside(p_all).numpy().astype(bool) if light.type != "directional" else np.ones_like(facing)
@@ -177,18 +208,22 @@ class Runner:
                           dist.numpy(), exclusions, t.ms, si)
 
     # ------------------------------------------------------------ per map
-    def _run_map(self, sd, gb, setup, R, bar):
+    def _run_map(self, sd, gb, setup, kind, R, bar):
         specs = self.cfg.schemes
         per_case = len(self.cfg.map.filter) * len(self.cfg.map.format)
         try:
             view = make_view(setup.light, R, _points_np(setup.p) if setup.p is not None else np.zeros((0, 3)),
-                             sd.bbox)
-            rx = None
+                             sd.bbox, kind)
+            rx = seam = None
             if setup.p is not None:
+                setup = setup.subset(view.inside(setup.p).numpy().astype(bool))   # a single paraboloid: its hemisphere
+            if setup.p is not None and len(setup.pixels):
                 rx = Receiver.make(view, setup.p, setup.n, sd.diagonal)
-                dr.eval(rx.d, rx.u, rx.v, rx.texel_world, rx.to_light)
+                seam = view.seam_distance(rx.u, rx.v, rx.face)
+                dr.eval(rx.d, rx.u, rx.v, rx.face, rx.texel_world, rx.to_light, seam)
+                seam = seam.numpy()
         except Exception as e:
-            self._fail(f"scene {sd.label} light {setup.label} map {R}", e)
+            self._fail(f"scene {sd.label} light {setup.label} view {kind} map {R}", e)
             bar.update(len(specs) * per_case)
             return
         # one map per culling choice, with the union of what its schemes need
@@ -224,7 +259,7 @@ class Runner:
                 bt = build_times[own]
                 for filt in self.cfg.map.filter:
                     for fmt in self.cfg.map.format:
-                        self._run_case(sd, gb, setup, view, smap, bt, rx, spec, filt, fmt)
+                        self._run_case(sd, gb, setup, view, smap, bt, rx, seam, spec, filt, fmt)
                         bar.update(1)
 
     def _closed(self, sd):
@@ -242,12 +277,13 @@ class Runner:
                 {"name": n, "closed": c, "why": w} for n, c, w in zip(sd.shape_names, sd.closed, sd.closed_reason)]})
         return sd.closed
 
-    def _run_case(self, sd, gb, setup, view, smap, bt, rx, spec, filt, fmt):
+    def _run_case(self, sd, gb, setup, view, smap, bt, rx, seam, spec, filt, fmt):
         self.case_no += 1
         case = f"{self.case_no:04d}"
         meta = {"case": case, "scene": sd.label, "light": setup.label, "view": view.kind, "scheme": spec.name,
                 "culling": smap.culling,
                 "preset": spec.preset or "", "params": spec.label, "resolution": view.resolution,
+                "total_texels": view.n_texels,
                 "filter": filt, "format": fmt}
         try:
             module = schemes.get(spec.name)
@@ -257,7 +293,7 @@ class Runner:
                 (v, tap_shape), lt = timing.measure(lambda: visibility(module, spec.params, rx, smap),
                                                     self.cfg.timing_repeats)
                 v_np, tap_np = v.numpy(), tap_shape.numpy()
-            m = metrics.compute(v_np, setup.v_star, setup.shape, tap_np, setup.occluder_dist)
+            m = metrics.compute(v_np, setup.v_star, setup.shape, tap_np, setup.occluder_dist, seam)
             texel = float(np.median(rx.texel_world.numpy())) if rx is not None else 0.0
             sweep_key, sweep_value = report.sweep_of(spec, self.cfg.schemes)
             row = {**meta, **setup.exclusions, **m, "texel_size": texel,

@@ -53,6 +53,12 @@ class GrazingParams:
 
 
 @dataclass(frozen=True)
+class RoomParams:
+    """Seed 001, figure 3: a closed 6 x 6 x 3 room (walls facing in) with objects around a point light."""
+    scale: float = field(default=1.0, metadata={"min": 1e-30})
+
+
+@dataclass(frozen=True)
 class FileParams:
     """A scene file. Meshes (OBJ/PLY) get a ground under them, a default camera and light."""
     scale: float = field(default=1.0, metadata={"min": 1e-30})
@@ -66,6 +72,7 @@ BUILTINS = {
     "l_shape": LShapeParams,
     "floating_plate": FloatingPlateParams,
     "grazing": GrazingParams,
+    "room": RoomParams,
 }
 FILE_SUFFIXES = (".xml", ".obj", ".ply")
 
@@ -109,14 +116,14 @@ def _closed_override(t, source, where) -> tuple:
 
 
 def xml_has_usable_emitter(path: Path) -> bool:
-    """Whether a Mitsuba XML file (or a file it includes) declares a spot or directional emitter."""
+    """Whether a Mitsuba XML file (or a file it includes) declares a point, spot or directional emitter."""
     import xml.etree.ElementTree as ET
     try:
         root = ET.parse(path).getroot()
     except (ET.ParseError, OSError):
         return True          # let Mitsuba report the file's own problem when it loads it
     for el in root.iter():
-        if el.tag == "emitter" and el.get("type") in ("spot", "directional"):
+        if el.tag == "emitter" and el.get("type") in ("point", "spot", "directional"):
             return True
         if el.tag == "include" and el.get("filename"):
             inc = (path.parent / el.get("filename"))
@@ -239,6 +246,17 @@ def builtin_geometry(name: str, p):
         t = math.radians(p.angle)
         shapes = {"ground": _ground(), "box": box([-2.3, -0.3, 0.0], [-1.7, 0.3, 0.6])}
         return shapes, ((0.0, -3.0, 8.0), (0, 0, 0)), LightSpec("directional", direction=(math.sin(t), 0.0, -math.cos(t)))
+    if name == "room":
+        walls, wf = box([-3, -3, 0], [3, 3, 3])
+        profile = [(-0.4, 0.0), (0.4, 0.0), (0.4, 0.3), (0.0, 1.0), (-0.4, 0.3)]     # a house-shaped prism
+        shapes = {"room": (walls, wf[:, ::-1]),                     # closed, facing in
+                  "cube": box([0.9, 0.6, 0.0], [1.7, 1.4, 0.8]),
+                  "pillar": box([-1.9, -1.6, 0.0], [-1.4, -1.1, 2.2]),
+                  "house": prism(profile, -2.2, -1.4, fan_center=2),
+                  "shelf": quad([-0.6, 1.2, 1.1], [0.6, 0, 0], [0, 0.35, 0])}      # open, floating
+        shapes["house"] = (shapes["house"][0] + [-0.2, 0.0, 0.0], shapes["house"][1])
+        light = LightSpec("point", position=(0.2, 0.1, 1.8), direction=(0.0, 0.0, -1.0), label="point")
+        return shapes, ((2.8, -2.8, 2.7), (-0.6, 0.6, 0.4), 75.0), light
     raise KeyError(name)
 
 
@@ -285,14 +303,14 @@ def load(spec: SceneSpec, camera_resolution) -> SceneData:
     w, h = camera_resolution
     if spec.builtin:
         p = spec.params
-        shapes, (cam_o, cam_t), light = builtin_geometry(spec.builtin, p)
+        shapes, (cam_o, cam_t, *fov), light = builtin_geometry(spec.builtin, p)
         s = p.scale
         d = {"type": "scene"}
         for name, (v, f) in shapes.items():
             d[name] = make_mesh(name, v * s, f)
-        d["sensor"] = look_at_sensor(np.multiply(cam_o, s), np.multiply(cam_t, s), (0, 0, 1), 40, w, h)
+        d["sensor"] = look_at_sensor(np.multiply(cam_o, s), np.multiply(cam_t, s), (0, 0, 1), (fov or [40])[0], w, h)
         scene = mi.load_dict(d, optimize=False)
-        data = _finish(spec.label, scene, [light], s)
+        data = _finish(spec.label, scene, [_scale_light(light, s)], s)
     elif spec.file.suffix.lower() == ".xml":
         data = _load_xml(spec, w)
     else:
@@ -318,7 +336,7 @@ def _load_xml(spec, width):
     for e in scene.emitters():
         light = emitter_to_light(e)
         if light is None:
-            notes.append(f"emitter {type(e).__name__} ignored (not a spot or directional light)")
+            notes.append(f"emitter {type(e).__name__} ignored (not a point, spot or directional light)")
         else:
             lights.append(light)
     # Re-create the sensor at the requested width, keeping its aspect ratio and transform.
@@ -360,6 +378,9 @@ def emitter_to_light(e):
         params = mi.traverse(e)
         cutoff = float(params["cutoff_angle"][0]) if "cutoff_angle" in params else 20.0
         return LightSpec("spot", position=tuple(float(c) for c in pos), direction=_normalize(axis), cutoff=cutoff, label="spot")
+    if mi.has_flag(e.flags(), mi.EmitterFlags.DeltaPosition) and "point" in kind + text:
+        pos = np.array(e.world_transform() @ mi.Point3f(0, 0, 0), float).ravel()
+        return LightSpec("point", position=tuple(float(c) for c in pos), direction=(0.0, 0.0, -1.0), label="point")
     return None
 
 

@@ -30,7 +30,7 @@ MAX_STEPS = 64             # surfaces stepped over per texel before giving up (r
 @dataclass
 class ShadowMap:
     view: object
-    z1: object                  # mi.Float, R*R, row-major (j * R + i)
+    z1: object                  # mi.Float, faces*R*R, (face * R + j) * R + i
     shape: object               # mi.UInt32, shape index of the first hit, 0xFFFFFFFF on a miss
     slope: object = None        # mi.Float or None
     z2: object = None           # mi.Float or None
@@ -45,22 +45,19 @@ class ShadowMap:
 
 def first_layer(scene, view):
     """(z1, shape index, preliminary hit, rays) for every texel of ``view``."""
-    R = view.resolution
-    rays = view.texel_rays(0, R * R)
+    rays = view.texel_rays(0, view.n_texels)
     pi = scene.ray_intersect_preliminary(rays, coherent=True)
     valid = pi.is_valid()
-    z1 = dr.select(valid, view.depth(rays.o) + pi.t * dr.dot(rays.d, view.ez), view.far)
+    z1 = dr.select(valid, view.ray_depth(rays.o, rays.d, pi.t), view.far)
     shape = dr.select(valid, pi.shape_index, 0xFFFFFFFF)
     return z1, shape, pi, rays
 
 
 def plane_slope(view, p, n, z1, valid):
     """m per texel: |depth change| to the next texel in u and in v on the caster's plane (p, n)."""
-    R = view.resolution
-    idx = dr.arange(mi.UInt32, R * R)
-    cu, cv = mi.Float(idx % view.R_u) + 0.5, mi.Float(idx // view.R_u) + 0.5
-    du = dr.abs(view.depth_on_plane(cu + 1.0, cv, p, n) - z1)
-    dv = dr.abs(view.depth_on_plane(cu, cv + 1.0, p, n) - z1)
+    face, cu, cv = view.texel_coords(dr.arange(mi.UInt32, view.n_texels))
+    du = dr.abs(view.depth_on_plane(cu + 1.0, cv, p, n, face) - z1)
+    dv = dr.abs(view.depth_on_plane(cu, cv + 1.0, p, n, face) - z1)
     return dr.select(valid, dr.maximum(du, dv), 0.0)
 
 
@@ -73,8 +70,7 @@ def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool
 
     Returns (z1, shape1, slope or None, z2 or None, rays by kind, unfinished texels).
     """
-    R = view.resolution
-    n = R * R
+    n = view.n_texels
     ray = view.texel_rays(0, n)
     modes = mi.UInt32(np.asarray(cull_modes, np.uint32))
     need = 2 if want_z2 else 1
@@ -122,7 +118,6 @@ def build(scene, view, needs, culling: str = "none", cull_modes=None) -> ShadowM
     unknown = set(needs) - set(LAYERS)
     if unknown:
         raise ValueError(f"unknown map attributes {sorted(unknown)} (valid: {', '.join(LAYERS)})")
-    R = view.resolution
     culls = cull_modes is not None and np.any(np.asarray(cull_modes) != CULL_NONE)
     if not culls and "z2" not in needs:
         z1, shape, pi, rays = first_layer(scene, view)
@@ -130,7 +125,7 @@ def build(scene, view, needs, culling: str = "none", cull_modes=None) -> ShadowM
         if "slope" in needs:
             si = pi.compute_surface_interaction(rays, ray_flags=mi.RayFlags.Minimal)
             slope = plane_slope(view, si.p, si.n, z1, pi.is_valid())
-        return ShadowMap(view, z1, shape, slope, rays={"map_first": R * R}, culling=culling)
+        return ShadowMap(view, z1, shape, slope, rays={"map_first": view.n_texels}, culling=culling)
     modes = cull_modes if cull_modes is not None else np.zeros(len(scene.shapes()), np.uint32)
     z1, shape, slope, z2, rays, unfinished = layered(scene, view, modes, "z2" in needs, "slope" in needs)
     return ShadowMap(view, z1, shape, slope, rays=rays, z2=z2, culling=culling, unfinished=unfinished)

@@ -10,6 +10,17 @@ extent, resolution) are opaque Dr.Jit values, so one kernel serves every map of 
   depth range to the whole scene's bounds (every possible caster), as seed 002 recommends.
 - ``PerspectiveView`` (spot light): rays from the light position, depth is the distance
   along the light's axis; the square map covers the cone.
+- Point lights (seed 001): ``ParaboloidView`` (one hemisphere around a main direction, or
+  two back to back, the map chosen by the sign of z in light space) and ``CubeView`` (six
+  90-degree faces on the world axes). Depth is the Euclidean distance to the light.
+
+A view may have several faces (maps); a point's face comes from its direction alone, so
+every point is in exactly one face, and texel ``(face, i, j)`` is stored at
+``face * R^2 + j * R + i``.
+
+``texel_world(p)``: the side of a square with the area of the texel's footprint on the plane
+through ``p`` perpendicular to the light ray (the square root of the texel's solid angle
+times the distance), so "1 texel" means the same thing on every view.
 """
 from __future__ import annotations
 
@@ -44,6 +55,7 @@ class View:
     """Common part: a frame (origin ``o``, axes ``ex``, ``ey``, ``ez``) and the depth metric."""
 
     kind = "view"
+    faces = 1
 
     def __init__(self, origin, ex, ey, ez, resolution: int, near: float, far: float):
         self.resolution = int(resolution)
@@ -59,6 +71,10 @@ class View:
     def depth_range(self) -> float:
         return self.far - self.near
 
+    @property
+    def n_texels(self) -> int:
+        return self.faces * self.resolution ** 2
+
     def local(self, p):
         q = p - self.o
         return dr.dot(q, self.ex), dr.dot(q, self.ey), dr.dot(q, self.ez)
@@ -67,23 +83,49 @@ class View:
         """Depth of world point ``p`` in the view's metric (world units)."""
         return dr.dot(p - self.o, self.ez)
 
-    def depth_on_plane(self, u, v, p0, n):
-        """Depth where the ray through map position (u, v) meets the plane (p0, n).
+    def face_of(self, p):
+        return dr.zeros(mi.UInt32, dr.width(p))
+
+    def project(self, p):
+        """(u, v, face) of world point ``p``: map position in texel units and its face."""
+        face = self.face_of(p)
+        u, v = self.project_on(p, face)
+        return u, v, face
+
+    def ray_depth(self, o, d, t):
+        """Depth of the point ``o + t d``."""
+        return self.depth(o) + t * dr.dot(d, self.ez)
+
+    def depth_on_plane(self, u, v, p0, n, face=None):
+        """Depth where the ray through map position (u, v) of ``face`` meets the plane (p0, n).
 
         +inf where the ray is parallel to the plane (no NaN ever leaves here).
         """
-        o, d = self.ray_at(u, v)
+        o, d = self.ray_at(u, v, face)
         den = dr.dot(d, n)
         t = dr.dot(p0 - o, n) / dr.select(den != 0, den, 1.0)
-        depth = self.depth(o) + t * dr.dot(d, self.ez)
+        depth = self.ray_depth(o, d, t)
         return dr.select((den != 0) & dr.isfinite(depth), depth, dr.inf)
 
+    def texel_coords(self, idx):
+        """(face, centre u, centre v) of texel indices ``idx``."""
+        RR = self.R_u * self.R_u
+        face, rest = idx // RR, idx % RR
+        return face, mi.Float(rest % self.R_u) + 0.5, mi.Float(rest // self.R_u) + 0.5
+
     def texel_rays(self, first: int, count: int) -> mi.Ray3f:
-        """Rays through the centres of texels ``first .. first + count - 1`` (row-major)."""
-        idx = dr.arange(mi.UInt32, first, first + count)
-        i, j = idx % self.R_u, idx // self.R_u
-        o, d = self.ray_at(mi.Float(i) + 0.5, mi.Float(j) + 0.5)
+        """Rays through the centres of texels ``first .. first + count - 1`` (face, then row-major)."""
+        face, cu, cv = self.texel_coords(dr.arange(mi.UInt32, first, first + count))
+        o, d = self.ray_at(cu, cv, face)
         return mi.Ray3f(o, d)
+
+    def inside(self, p):
+        return dr.full(mi.Bool, True, dr.width(p))
+
+    def seam_distance(self, u, v, face):
+        """Distance in texels from map position (u, v) to the nearest seam between faces
+        (cube edges, the paraboloids' rim); +inf on a single planar map, which has none."""
+        return dr.full(mi.Float, dr.inf, dr.width(u))
 
 
 class OrthographicView(View):
@@ -109,12 +151,12 @@ class OrthographicView(View):
         super().__init__(origin, ex, ey, ez, resolution, near=0.0, far=float(zs.max() - z0 + margin))
         self.L = dr.opaque(mi.Float, self.extent)
 
-    def project(self, p):
+    def project_on(self, p, face=None):
         x, y, _ = self.local(p)
         s = self.R / self.L
         return x * s, y * s
 
-    def ray_at(self, u, v):
+    def ray_at(self, u, v, face=None):
         s = self.L / self.R
         o = self.o + self.ex * (u * s) + self.ey * (v * s)
         return o, dr.zeros(mi.Vector3f, dr.width(o)) + self.ez
@@ -126,7 +168,7 @@ class OrthographicView(View):
         return dr.zeros(mi.Vector3f, dr.width(p)) - self.ez
 
     def inside(self, p):
-        u, v = self.project(p)
+        u, v = self.project_on(p)
         return (u >= 0) & (u <= self.R) & (v >= 0) & (v <= self.R)
 
 
@@ -144,19 +186,20 @@ class PerspectiveView(View):
         self.T = dr.opaque(mi.Float, self.tan_half)
         self.cos_cut = dr.opaque(mi.Float, math.cos(math.radians(self.cutoff)))
 
-    def project(self, p):
+    def project_on(self, p, face=None):
         x, y, z = self.local(p)
         s = self.R * 0.5 / (self.T * z)
         return (x * s + self.R * 0.5), (y * s + self.R * 0.5)
 
-    def ray_at(self, u, v):
+    def ray_at(self, u, v, face=None):
         a = (2.0 * u / self.R - 1.0) * self.T
         b = (2.0 * v / self.R - 1.0) * self.T
         d = dr.normalize(self.ex * a + self.ey * b + self.ez)
         return dr.zeros(mi.Point3f, dr.width(d)) + self.o, d
 
     def texel_world(self, p):
-        return 2.0 * self.T * self.depth(p) / self.R
+        x, y, z = self.local(p)
+        return _gnomonic_texel(x, y, z, 2.0 * self.T / self.R)
 
     def to_light(self, p):
         return dr.normalize(self.o - p)
@@ -165,3 +208,151 @@ class PerspectiveView(View):
         x, y, z = self.local(p)
         in_cone = z >= dr.norm(p - self.o) * self.cos_cut
         return (z > 0) & in_cone & (dr.abs(x) <= self.T * z) & (dr.abs(y) <= self.T * z)
+
+
+def _gnomonic_texel(x, y, z, step):
+    """World texel size at local point (x, y, z) of a planar (gnomonic) map with ``step`` per texel
+    in the tangent plane at unit distance: distance * sqrt(solid angle) = step * z * (1 + a^2 + b^2)^(-1/4)."""
+    zz = dr.maximum(z, 1e-30 * dr.norm(mi.Vector3f(x, y, z)))
+    r2 = (dr.square(x) + dr.square(y)) / dr.square(zz)
+    return step * zz * dr.rsqrt(dr.sqrt(1.0 + r2))
+
+
+class PointView(View):
+    """A point light's view: rays from the light, depth = Euclidean distance to the light."""
+
+    def __init__(self, position, axis, scene_bbox, resolution: int):
+        ex, ey, ez = light_frame(axis)
+        corners = _bbox_corners(*scene_bbox)
+        far = float(np.max(np.linalg.norm(corners - np.asarray(position, float), axis=1)))
+        super().__init__(position, ex, ey, ez, resolution, near=0.0, far=max(far, 1e-30) * 1.01)
+
+    def depth(self, p):
+        return dr.norm(p - self.o)
+
+    def ray_depth(self, o, d, t):
+        return t                               # rays start at the light with unit directions
+
+    def to_light(self, p):
+        return dr.normalize(self.o - p)
+
+
+class ParaboloidView(PointView):
+    """Paraboloid map(s) of seed 001: direction v -> (vx, vy) / (1 + s vz), s = +1 front, -1 back.
+
+    The texel ray through (x, y) is the direction the paraboloid reflects toward d0:
+    ``(2x, 2y, s (1 - x^2 - y^2)) / (1 + x^2 + y^2)`` (seed 004, section 3.2). The map is
+    conformal (stereographic), so a texel's footprint is square: (2 / R) (|q| + s qz).
+    Single paraboloid: the hemisphere z >= 0 around the main direction; dual: z >= 0 is the
+    front map, z < 0 the back map, so the denominator |q| + s qz is never below |q|.
+    """
+
+    def __init__(self, position, axis, scene_bbox, resolution: int, dual: bool):
+        super().__init__(position, axis, scene_bbox, resolution)
+        self.dual = bool(dual)
+        self.faces = 2 if dual else 1
+        self.kind = "dual_paraboloid" if dual else "paraboloid"
+
+    def _sign(self, face):
+        return dr.select(face == 0, mi.Float(1.0), mi.Float(-1.0))
+
+    def face_of(self, p):
+        if not self.dual:
+            return dr.zeros(mi.UInt32, dr.width(p))
+        _, _, z = self.local(p)
+        return dr.select(z >= 0, mi.UInt32(0), mi.UInt32(1))
+
+    def _den(self, p, face):
+        x, y, z = self.local(p)
+        r = dr.norm(mi.Vector3f(x, y, z))
+        # |q| + s z >= |q| on its own face; a single paraboloid's back half (outside) is clamped
+        return x, y, dr.maximum(r + self._sign(face) * z, 1e-7 * r + 1e-30)
+
+    def project_on(self, p, face=None):
+        face = self.face_of(p) if face is None else face
+        x, y, den = self._den(p, face)
+        h = 0.5 * self.R
+        return (x / den + 1.0) * h, (y / den + 1.0) * h
+
+    def ray_at(self, u, v, face=None):
+        x = 2.0 * u / self.R - 1.0
+        y = 2.0 * v / self.R - 1.0
+        r2 = dr.square(x) + dr.square(y)
+        s = self._sign(face) if face is not None else mi.Float(1.0)
+        inv = 1.0 / (1.0 + r2)
+        d = self.ex * (2.0 * x * inv) + self.ey * (2.0 * y * inv) + self.ez * (s * (1.0 - r2) * inv)
+        return dr.zeros(mi.Point3f, dr.width(d)) + self.o, d
+
+    def texel_world(self, p):
+        _, _, den = self._den(p, self.face_of(p))
+        return 2.0 * den / self.R
+
+    def seam_distance(self, u, v, face):
+        x, y = 2.0 * u / self.R - 1.0, 2.0 * v / self.R - 1.0
+        return dr.abs(1.0 - dr.sqrt(dr.square(x) + dr.square(y))) * 0.5 * self.R
+
+    def inside(self, p):
+        if self.dual:
+            return super().inside(p)
+        _, _, z = self.local(p)
+        return z >= 0
+
+
+# cube faces: +x, -x, +y, -y, +z, -z; (U, V, W) with W the face axis and U x V = W
+_CUBE = [((0, 1, 0), (0, 0, 1), (1, 0, 0)), ((0, 0, 1), (0, 1, 0), (-1, 0, 0)),
+         ((0, 0, 1), (1, 0, 0), (0, 1, 0)), ((1, 0, 0), (0, 0, 1), (0, -1, 0)),
+         ((1, 0, 0), (0, 1, 0), (0, 0, 1)), ((0, 1, 0), (1, 0, 0), (0, 0, -1))]
+
+
+class CubeView(PointView):
+    """Six 90-degree perspective faces on the world axes around a point light.
+
+    The face of a point is its direction's major axis; ties (cube edges and corners) go to
+    the first of x, y, z, so every direction has exactly one face, and on an edge the
+    projection lands on that face's border (u or v = 0 or R), never outside it.
+    """
+    kind = "cube"
+    faces = 6
+
+    def __init__(self, position, scene_bbox, resolution: int):
+        super().__init__(position, (0, 0, 1), scene_bbox, resolution)
+        tab = np.asarray(_CUBE, float)        # (6, 3 vectors, 3 coords)
+        self.U, self.V, self.W = (mi.Vector3f(*(tab[:, k, c] for c in range(3))) for k in range(3))
+
+    def _frame(self, face):
+        return (dr.gather(mi.Vector3f, self.U, face), dr.gather(mi.Vector3f, self.V, face),
+                dr.gather(mi.Vector3f, self.W, face))
+
+    def face_of(self, p):
+        q = p - self.o
+        ax, ay, az = dr.abs(q.x), dr.abs(q.y), dr.abs(q.z)
+        use_x = (ax >= ay) & (ax >= az)
+        use_y = ~use_x & (ay >= az)
+        neg = dr.select(use_x, q.x < 0, dr.select(use_y, q.y < 0, q.z < 0))
+        axis = dr.select(use_x, mi.UInt32(0), dr.select(use_y, mi.UInt32(1), mi.UInt32(2)))
+        return 2 * axis + dr.select(neg, mi.UInt32(1), mi.UInt32(0))
+
+    def _local(self, p, face):
+        U, V, W = self._frame(face)
+        q = p - self.o
+        z = dr.dot(q, W)
+        return dr.dot(q, U), dr.dot(q, V), dr.maximum(z, 1e-30 * dr.norm(q) + 1e-38)
+
+    def project_on(self, p, face=None):
+        face = self.face_of(p) if face is None else face
+        x, y, z = self._local(p, face)
+        h = 0.5 * self.R
+        return (x / z + 1.0) * h, (y / z + 1.0) * h
+
+    def ray_at(self, u, v, face=None):
+        face = dr.zeros(mi.UInt32, dr.width(u)) if face is None else face
+        U, V, W = self._frame(face)
+        d = dr.normalize(U * (2.0 * u / self.R - 1.0) + V * (2.0 * v / self.R - 1.0) + W)
+        return dr.zeros(mi.Point3f, dr.width(d)) + self.o, d
+
+    def texel_world(self, p):
+        x, y, z = self._local(p, self.face_of(p))
+        return _gnomonic_texel(x, y, z, 2.0 / self.R)
+
+    def seam_distance(self, u, v, face):
+        return dr.minimum(dr.minimum(u, self.R - u), dr.minimum(v, self.R - v))

@@ -63,7 +63,7 @@ def test_xml_without_usable_emitter_and_no_light(tmp_path):
     path.write_text(f'[[scene]]\nfile = "{xml}"\n[[scheme]]\nname = "none"\n')
     with pytest.raises(ConfigError) as e:
         config.load(path)
-    assert "no spot or directional emitter" in str(e.value) and "[[light]]" in str(e.value)
+    assert "no point, spot or directional emitter" in str(e.value) and "[[light]]" in str(e.value)
     # with a light it is fine
     path.write_text(f'[[scene]]\nfile = "{xml}"\n[[light]]\ntype = "directional"\ndirection = [0, 0, -1]\n'
                     '[[scheme]]\nname = "none"\n')
