@@ -113,7 +113,38 @@ def write_table(path: Path, rows: list, cfg, status=None):
     for r in rows:
         cells = [r["case"]] + [_cell(r.get(k)) for k, _ in TABLE_COLUMNS]
         lines.append("| " + " | ".join(map(str, cells)) + " |")
+    lines += views_at_equal_memory(rows, getattr(cfg.map, "texels", ()))
     path.write_text("\n".join(lines) + "\n")
+
+
+def views_at_equal_memory(rows: list, budgets=()) -> list:
+    """Markdown lines comparing the views of each point light, case by case, at equal texel budgets."""
+    groups = {}
+    for r in rows:
+        budget = min(budgets, key=lambda b: abs(b - r["total_texels"])) if budgets else r["total_texels"]
+        key = (r["scene"], r["light"], r["scheme"], r["params"], r["culling"], r["filter"], r["format"], budget)
+        groups.setdefault(key, {})[r["view"]] = r
+    views = sorted({v for g in groups.values() for v in g if len(g) > 1})
+    if not views:
+        return []
+    out = ["", "## Views at equal memory", "",
+           "Each view gets the same total texel budget (R = sqrt(texels / faces)). error: (acne + peter-pan) / "
+           "receivers; seam: the error rate within 3 texels of a seam (cube edges, paraboloid rim) / elsewhere; "
+           "time: build + lookup (ms). Best: the lowest error rate, then the shorter time.", "",
+           "| scene | light | scheme | params | texels | " + " | ".join(f"{v} error | {v} seam | {v} time"
+                                                             for v in views) + " | best |",
+           "|---" * (5 + 3 * len(views) + 1) + "|"]
+    for key, g in sorted(groups.items(), key=lambda kv: (tuple(map(str, kv[0][:7])), kv[0][7])):
+        if len(g) < 2:
+            continue
+        cells = [key[0], key[1], key[2], key[3], key[7]]
+        for v in views:
+            r = g.get(v)
+            cells += ([f"{r['error_rate']:.4f}", f"{r['seam_error_rate']:.4f} / {r['off_seam_error_rate']:.4f}",
+                       f"{r['build_ms'] + r['lookup_ms']:.1f}"] if r else ["", "", ""])
+        best = min(g.values(), key=lambda r: (round(r["error_rate"], 4), r["build_ms"] + r["lookup_ms"]))
+        out.append("| " + " | ".join(map(str, cells + [best["view"]])) + " |")
+    return out
 
 
 def _cell(x):
@@ -124,27 +155,34 @@ def _cell(x):
 
 # ------------------------------------------------------------------ plots
 
-def _panels(path, series: dict, xlabel: str, ylabels: tuple, title: str, xlog: bool = False, style="o-"):
-    """One figure with a panel per y quantity; ``series``: label -> [(x, y0, y1, ...)]."""
+def _panels(path, series: dict, xlabel: str, ylabels: tuple, title: str, xlog: bool = False, style="o-",
+            styles=None):
+    """One figure with a panel per y quantity; ``series``: label -> [(x, y0, y1, ...)];
+    ``styles``: label -> extra plot keywords (colour, line style)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     series = {k: sorted(v) for k, v in series.items() if v}
     if not series:
         return
-    fig, axes = plt.subplots(1, len(ylabels), figsize=(5.5 * len(ylabels), 4))
+    n = len(ylabels)
+    fig, axes = plt.subplots(1, n, figsize=(4.6 * n + 3.4, 3.8))
     for label, pts in series.items():
         for k, ax in enumerate(axes, start=1):
-            ax.plot([p[0] for p in pts], [p[k] for p in pts], style, lw=0.9, label=label)
+            ax.plot([p[0] for p in pts], [p[k] for p in pts], style, lw=0.9, label=label,
+                    **(styles or {}).get(label, {}))
     for ax, what in zip(axes, ylabels):
         if xlog:
             ax.set_xscale("log", base=2)
         ax.set_xlabel(xlabel)
         ax.set_ylabel(what)
-        ax.set_title(title, fontsize=9)
-    axes[0].legend(fontsize=6)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
+    fig.suptitle(title, fontsize=9)
+    # one legend beside the panels and fixed margins: tight_layout costs more than the drawing
+    right = 4.6 * n / (4.6 * n + 3.4)
+    fig.subplots_adjust(left=0.07 * 4.6 * n / (4.6 * n + 3.4), right=right - 0.01, bottom=0.13, top=0.88, wspace=0.3)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="center left", bbox_to_anchor=(right, 0.5), fontsize=6, frameon=False)
+    fig.savefig(path, dpi=80)
     plt.close(fig)
 
 
@@ -179,13 +217,16 @@ def write_plots(folder: Path, rows: list):
             _panels(folder / f"vs_resolution_{tag}.png", {k: v for k, v in res.items() if len(v) > 1},
                     "map resolution R (R x R texels per face)", rates, f"{scene}, light {light}, {view}", True, ".-")
         if len(views) > 1:
-            tex = {}
+            tex, styles = {}, {}
+            cases = sorted({(r["scheme"], r["params"]) for r in rs})
             for r in rs:
-                tex.setdefault(f"{r['view']}: {r['scheme']} {r['params']}", []).append(
-                    (r["total_texels"], r["error_rate"], r["seam_error_rate"]))
+                lab = f"{r['view']}: {r['scheme']} {r['params']}"
+                tex.setdefault(lab, []).append((r["total_texels"], r["error_rate"], r["seam_error_rate"]))
+                styles[lab] = {"color": f"C{cases.index((r['scheme'], r['params'])) % 10}",
+                               "linestyle": ("-", "--", ":", "-.")[views.index(r["view"]) % 4]}
             _panels(folder / f"vs_texels_{_slug(f'{scene}_{light}')}.png", tex, "total texels of the view (all faces)",
                     ("error rate", f"error rate within {metrics.SEAM_TEXELS:g} texels of a seam"),
-                    f"{scene}, light {light}: views at equal memory", True, ".-")
+                    f"{scene}, light {light}: views at equal memory (colour: scheme, line: view)", True, ".", styles)
 
 
 def _slug(s: str) -> str:

@@ -379,7 +379,9 @@ def emitter_to_light(e):
         cutoff = float(params["cutoff_angle"][0]) if "cutoff_angle" in params else 20.0
         return LightSpec("spot", position=tuple(float(c) for c in pos), direction=_normalize(axis), cutoff=cutoff, label="spot")
     if mi.has_flag(e.flags(), mi.EmitterFlags.DeltaPosition) and "point" in kind + text:
-        pos = np.array(e.world_transform() @ mi.Point3f(0, 0, 0), float).ravel()
+        params = mi.traverse(e)     # a point light keeps its position as a parameter, not in to_world
+        pos = (np.array(params["position"], float).ravel() if "position" in params
+               else np.array(e.world_transform() @ mi.Point3f(0, 0, 0), float).ravel())
         return LightSpec("point", position=tuple(float(c) for c in pos), direction=(0.0, 0.0, -1.0), label="point")
     return None
 

@@ -80,10 +80,10 @@ def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool
     p1, n1 = dr.zeros(mi.Point3f, n), dr.zeros(mi.Vector3f, n)
     found = dr.zeros(mi.UInt32, n)
     active = dr.full(mi.Bool, True, n)
-    rays = {"map_first": 0, "map_second": 0}
+    cast1, cast2 = dr.zeros(mi.UInt32, n), dr.zeros(mi.UInt32, n)   # rays cast per texel, by layer sought
     for _ in range(MAX_STEPS):
-        rays["map_first"] += _count(active & (found == 0))
-        rays["map_second"] += _count(active & (found == 1))
+        cast1 += dr.select(active & (found == 0), 1, 0)
+        cast2 += dr.select(active & (found == 1), 1, 0)
         pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
         valid = active & pi.is_valid()
         si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.Minimal, active=valid)
@@ -102,9 +102,10 @@ def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool
         found += dr.select(accept, 1, 0)
         active = valid & (found < need)
         ray = dr.select(active, si.spawn_ray(ray.d), ray)
-        dr.eval(z1, z2, shape1, p1, n1, found, active, ray)
-        if _count(active) == 0:
+        dr.eval(z1, z2, shape1, p1, n1, found, active, ray, cast1, cast2)
+        if _count(active) == 0:          # the one synchronisation per step
             break
+    rays = {"map_first": int(dr.sum(cast1).numpy().ravel()[0]), "map_second": int(dr.sum(cast2).numpy().ravel()[0])}
     slope = plane_slope(view, p1, n1, z1, found > 0) if want_slope else None
     return z1, shape1, slope, (z2 if want_z2 else None), rays, _count(active)
 

@@ -17,9 +17,9 @@ def test_default_experiment_writes_the_report(tmp_path):
         rows = list(csv.DictReader(fh))
     assert set(report.COLUMNS) <= set(rows[0])
     assert {r["scheme"] for r in rows} == {s.NAME for s in REGISTRY}
-    assert {r["view"] for r in rows} == {"orthographic", "perspective"}
+    assert {r["view"] for r in rows} == {"orthographic", "perspective", "dual_paraboloid", "cube"}
     assert len({r["resolution"] for r in rows}) == 3
-    assert len({r["scene"] for r in rows}) == 5
+    assert len({r["scene"] for r in rows}) == 6
     run = json.loads((out / "run.json").read_text())
     for k in ("python", "mitsuba", "drjit", "libllvm", "dsm_git_commit"):
         assert run["versions"][k]

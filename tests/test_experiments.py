@@ -21,7 +21,8 @@ def test_experiment_runs_tiny(path, tmp_path):
             pytest.skip(f"{path.name} needs ../shared/meshes, which is absent: {e}")
         raise
     tiny = dataclasses.replace(cfg, camera_resolution=(48, 48), timing_repeats=1,
-                               map=dataclasses.replace(cfg.map, resolution=(32,)))
+                               map=dataclasses.replace(cfg.map, resolution=(32,),
+                                                       texels=(6 * 32 ** 2,) if cfg.map.texels else ()))
     res = dsm.run(tiny, out=tmp_path / "out")
     assert res.run["n_failed"] == 0, res.run["status"]
     assert len(res.rows) >= len(cfg.schemes)
