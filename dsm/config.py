@@ -285,12 +285,6 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
                       ("map.view", views)):
         if not vals:
             raise ConfigError(source, key, "empty list")
-    for f in filters:
-        if f != "nearest":
-            raise ConfigError(source, "map.filter", f"filter {f!r} is not available in this version", ("nearest",))
-    for f in formats:
-        if f != "float32":
-            raise ConfigError(source, "map.format", f"format {f!r} is not available in this version", ("float32",))
     mapspec = MapSpec(resolutions, filters, formats, views, texels)
 
     scheme_tables = _array_of_tables(raw, "scheme", source)

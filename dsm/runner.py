@@ -18,7 +18,7 @@ import mitsuba as mi
 import numpy as np
 
 from . import config as cfgmod
-from . import env, gbuffer, metrics, reference, report, scenes, schemes, shadowmap, timing
+from . import env, formats, gbuffer, metrics, reference, report, scenes, schemes, shadowmap, timing
 from .lookup import Receiver, visibility
 from .views import CubeView, OrthographicView, ParaboloidView, PerspectiveView
 
@@ -124,6 +124,7 @@ class Runner:
         self.rows = []
         self.images = {}
         self.case_no = 0
+        self.quantized = 0            # quantized map copies made (stored formats other than float32)
 
     # ------------------------------------------------------------ top level
     def run(self) -> Results:
@@ -249,6 +250,13 @@ class Runner:
                 self._fail(f"scene {sd.label} light {setup.label} map {R} culling {culling}", e)
                 bar.update(len(group) * per_case)
                 continue
+            try:
+                stored = {fmt: formats.store(smap, fmt) for fmt in self.cfg.map.format}
+                self.quantized += sum(1 for fmt in self.cfg.map.format if fmt != "float32")
+            except Exception as e:
+                self._fail(f"scene {sd.label} light {setup.label} map {R} culling {culling}: stored formats", e)
+                bar.update(len(group) * per_case)
+                continue
             build_times = {frozenset(needs): bt}
             for spec in group:
                 own = frozenset(schemes.get(spec.name).NEEDS)
@@ -259,7 +267,7 @@ class Runner:
                 bt = build_times[own]
                 for filt in self.cfg.map.filter:
                     for fmt in self.cfg.map.format:
-                        self._run_case(sd, gb, setup, view, smap, bt, rx, seam, spec, filt, fmt)
+                        self._run_case(sd, gb, setup, view, stored[fmt], bt, rx, seam, spec, filt, fmt)
                         bar.update(1)
 
     def _closed(self, sd):
@@ -290,7 +298,7 @@ class Runner:
             if rx is None:
                 v_np, tap_np, lt = np.zeros(0), np.zeros(0, np.uint32), timing.Timing(0.0, 0.0, 0.0, 0, 0)
             else:
-                (v, tap_shape), lt = timing.measure(lambda: visibility(module, spec.params, rx, smap),
+                (v, tap_shape), lt = timing.measure(lambda: visibility(module, spec.params, rx, smap, filt, self.cfg.seed),
                                                     self.cfg.timing_repeats)
                 v_np, tap_np = v.numpy(), tap_shape.numpy()
             m = metrics.compute(v_np, setup.v_star, setup.shape, tap_np, setup.occluder_dist, seam)

@@ -182,6 +182,7 @@ class PerspectiveView(View):
         self.cutoff = float(cutoff_deg)
         self.tan_half = math.tan(math.radians(self.cutoff))
         far = max(float(zs.max()), 1e-30)
+        self.nearest_scene_depth = max(float(zs.min()), 0.0)
         super().__init__(position, ex, ey, ez, resolution, near=0.0, far=far * 1.01)
         self.T = dr.opaque(mi.Float, self.tan_half)
         self.cos_cut = dr.opaque(mi.Float, math.cos(math.radians(self.cutoff)))
@@ -225,6 +226,9 @@ class PointView(View):
         ex, ey, ez = light_frame(axis)
         corners = _bbox_corners(*scene_bbox)
         far = float(np.max(np.linalg.norm(corners - np.asarray(position, float), axis=1)))
+        lo, hi = (np.asarray(b, float) for b in scene_bbox)
+        pos = np.asarray(position, float)
+        self.nearest_scene_depth = float(np.linalg.norm(pos - np.clip(pos, lo, hi)))
         super().__init__(position, ex, ey, ez, resolution, near=0.0, far=max(far, 1e-30) * 1.01)
 
     def depth(self, p):
