@@ -1,4 +1,4 @@
-"""Command line: ``dsm run``, ``dsm schemes``."""
+"""Command line: ``dsm run``, ``dsm plan``, ``dsm schemes``, ``dsm bench``."""
 from __future__ import annotations
 
 import argparse
@@ -22,6 +22,8 @@ def _parser():
     r.add_argument("--variant", choices=cfgmod.VARIANTS, help="Mitsuba variant (default llvm_ad_rgb)")
     r.add_argument("--threads", type=int, help="Dr.Jit worker threads")
     r.add_argument("--force", action="store_true", help="write into a non-empty --out folder")
+    p = sub.add_parser("plan", help="print what a config will compute: cases, maps, rays by kind, memory")
+    p.add_argument("config", nargs="?", help="experiment TOML file (default: the built-in default experiment)")
     sub.add_parser("schemes", help="list bias schemes, their parameters, defaults and sources")
     b = sub.add_parser("bench", help="benchmark: map build against a bare ray cast, lookup cost per scheme")
     b.add_argument("--out", default="bench", help="folder for bench.md and bench.json (default: bench/)")
@@ -55,6 +57,10 @@ def main(argv=None) -> int:
     except cfgmod.ConfigError as e:
         print(f"dsm: config error: {e}", file=sys.stderr)
         return 2
+    if args.cmd == "plan":
+        from .plan import make
+        print(make(cfg).text())
+        return 0
     out = Path(args.out) if args.out else Path("runs") / f"{cfg.name}-{time.strftime('%Y%m%d-%H%M%S')}"
     if out.exists() and any(out.iterdir()) and not args.force:
         print(f"dsm: {out} is not empty; choose another --out or pass --force", file=sys.stderr)

@@ -210,10 +210,11 @@ class Config:
     map: MapSpec = field(default_factory=MapSpec)
     schemes: tuple = ()
     timing_repeats: int = 3
+    memory_budget_mb: float | None = None   # None: a quarter of this machine's memory
     raw: dict = field(default_factory=dict, compare=False)
 
 
-TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing")
+TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing", "memory")
 
 
 def load(path) -> Config:
@@ -294,6 +295,11 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     for i, t in enumerate(scheme_tables):
         schemes += _parse_scheme(t, source, f"scheme[{i}]", REGISTRY, PRESETS)
 
+    mem = _table(raw, "memory", source)
+    _check_keys(mem, ("budget_mb",), source, "memory")
+    budget = (_number(mem["budget_mb"], source, "memory.budget_mb", positive=True)
+              if "budget_mb" in mem else None)
+
     tim = _table(raw, "timing", source)
     _check_keys(tim, ("repeats",), source, "timing")
     repeats = _number(tim.get("repeats", 3), source, "timing.repeats", integer=True, minimum=1, maximum=100)
@@ -306,7 +312,7 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
 
     return Config(name=name, source=source, seed=seed, variant=variant, camera_resolution=camera_resolution,
                   scenes=tuple(scenes), lights=tuple(lights), map=mapspec, schemes=tuple(schemes),
-                  timing_repeats=repeats, raw=raw)
+                  timing_repeats=repeats, memory_budget_mb=budget, raw=raw)
 
 
 def _table(raw, key, source) -> dict:

@@ -19,6 +19,7 @@ import numpy as np
 
 from . import config as cfgmod
 from . import env, formats, gbuffer, metrics, reference, report, scenes, schemes, shadowmap, timing
+from . import plan as planmod
 from .lookup import Receiver, visibility
 from .views import CubeView, OrthographicView, ParaboloidView, PerspectiveView
 
@@ -78,7 +79,7 @@ class Results:
         return len(self.rows)
 
 
-VIEW_FACES = {"orthographic": 1, "perspective": 1, "paraboloid": 1, "dual_paraboloid": 2, "cube": 6}
+VIEW_FACES = planmod.VIEW_FACES
 
 
 def views_for(light, point_views) -> tuple:
@@ -117,7 +118,9 @@ class Runner:
         self.variant = env.use_variant(variant or config.variant)
         self.progress = progress
         self.keep_images = keep_images
-        self.rays = {"gbuffer": 0, "reference": 0, "map_first": 0, "map_second": 0}
+        self.plan = planmod.make(config)
+        self.rays = {"gbuffer": 0, "reference": 0, "map_texel": 0, "map_continue": 0}
+        self.maps = []
         self.scene_info = []
         self.gbuffer_ms = {}
         self.status = []
@@ -132,7 +135,7 @@ class Runner:
         self.out.mkdir(parents=True, exist_ok=True)
         (self.out / "images").mkdir(exist_ok=True)
         self.csv = report.CsvWriter(self.out / "metrics.csv")
-        bar = report.progress(total=self._estimate_cases(), enabled=self.progress)
+        bar = report.progress(total=self.plan.cases, enabled=self.progress)
         for spec in self.cfg.scenes:
             try:
                 sd = scenes.load(spec, self.cfg.camera_resolution)
@@ -146,11 +149,6 @@ class Runner:
         report.write_table(self.out / "table.md", self.rows, self.cfg)
         report.write_plots(self.out / "plots", self.rows)
         return Results(self.out, self.rows, self._run_json(), self.images)
-
-    def _estimate_cases(self):
-        m = self.cfg.map
-        views = sum(len(m.view) if l.type == "point" else 1 for l in self.cfg.lights)
-        return len(self.cfg.scenes) * views * len(m.texels or m.resolution) * len(m.filter) * len(m.format) * len(self.cfg.schemes)
 
     def _fail(self, what, exc):
         self.status.append({"what": what, "status": "failed", "error": f"{type(exc).__name__}: {exc}",
@@ -237,9 +235,20 @@ class Runner:
                 if culling != "none":
                     modes = shadowmap.cull_modes_for(culling, self._closed(sd))
                 needs = needs_of(group)
-                smap, bt = timing.measure(lambda: _map_arrays(sd.scene, view, needs, culling, modes),
+                mplan = self.plan.map_for(sd.label, setup.label, view.kind, R, culling)
+                tile = mplan.tile if mplan else 0
+                timing.reset_peak()
+                smap, bt = timing.measure(lambda: _map_arrays(sd.scene, view, needs, culling, modes, tile),
                                           self.cfg.timing_repeats)
+                peak = timing.peak_bytes()
                 smap = smap[-1]
+                smap.peak_bytes = peak
+                self.maps.append({"scene": sd.label, "light": setup.label, "view": view.kind, "resolution": R,
+                                  "culling": culling, "layers": ["z1", "shape"] + [k for k in shadowmap.LAYERS
+                                                                                   if getattr(smap, k) is not None],
+                                  "tiles": smap.tiles, "rays": dict(smap.rays), "build_peak_bytes": peak,
+                                  "build_peak_bytes_est": mplan.peak_bytes if mplan else None,
+                                  "formats": [f for f in self.cfg.map.format if f != "float32"]})
                 for k, v in smap.rays.items():
                     self.rays[k] = self.rays.get(k, 0) + v
                 if smap.unfinished:
@@ -263,7 +272,7 @@ class Runner:
                 if own not in build_times:
                     # time the build of exactly what this scheme needs (the data comes from the shared map)
                     _, build_times[own] = timing.measure(
-                        lambda: _map_arrays(sd.scene, view, own, culling, modes), self.cfg.timing_repeats)
+                        lambda: _map_arrays(sd.scene, view, own, culling, modes, tile), self.cfg.timing_repeats)
                 bt = build_times[own]
                 for filt in self.cfg.map.filter:
                     for fmt in self.cfg.map.format:
@@ -305,7 +314,7 @@ class Runner:
             texel = float(np.median(rx.texel_world.numpy())) if rx is not None else 0.0
             sweep_key, sweep_value = report.sweep_of(spec, self.cfg.schemes)
             row = {**meta, **setup.exclusions, **m, "texel_size": texel,
-                   "build_ms": bt.ms, "build_compile_ms": bt.compile_ms,
+                   "build_ms": bt.ms, "build_compile_ms": bt.compile_ms, "build_peak_mb": smap.peak_bytes / 2 ** 20,
                    "lookup_ms": lt.ms, "lookup_compile_ms": lt.compile_ms, "lookup_kernels_compiled": lt.cache_misses,
                    "reference_ms": setup.reference_ms, "sweep_key": sweep_key, "sweep_value": sweep_value}
             classes = np.zeros(gb.width * gb.height, np.uint8)
@@ -326,6 +335,9 @@ class Runner:
         info = report.run_info(self.cfg, self.variant, self.rays, self.status)
         info["scenes"] = self.scene_info
         info["gbuffer_ms"] = self.gbuffer_ms     # one cold pass per scene (compile included)
+        info["plan"] = self.plan.as_dict()
+        info["maps"] = self.maps
+        info["quantized_copies"] = self.quantized
         return info
 
     def _write_run_json(self):
@@ -341,8 +353,8 @@ def _gbuffer_arrays(sd, W, H):
     return (gb.p, gb.n, gb.shape, gb)
 
 
-def _map_arrays(scene, view, needs, culling="none", modes=None):
-    smap = shadowmap.build(scene, view, needs, culling, modes)
+def _map_arrays(scene, view, needs, culling="none", modes=None, tile=None):
+    smap = shadowmap.build(scene, view, needs, culling, modes, tile)
     return (*shadowmap.arrays(smap), smap)
 
 

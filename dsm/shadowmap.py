@@ -37,15 +37,18 @@ class ShadowMap:
     culling: str = "none"
     unfinished: int = 0         # texels still searching after MAX_STEPS (0 in every sane scene)
     rays: dict = field(default_factory=dict)   # rays cast, by kind
+    tiles: int = 1                              # passes the build took (wavefront sizing)
+    peak_bytes: int = 0                         # allocation watermark of the build (set by the runner)
 
     @property
     def resolution(self) -> int:
         return self.view.resolution
 
 
-def first_layer(scene, view):
-    """(z1, shape index, preliminary hit, rays) for every texel of ``view``."""
-    rays = view.texel_rays(0, view.n_texels)
+def first_layer(scene, view, first: int = 0, count: int | None = None):
+    """(z1, shape index, preliminary hit, rays) for texels ``first .. first + count - 1``."""
+    count = view.n_texels - first if count is None else count
+    rays = view.texel_rays(first, count)
     pi = scene.ray_intersect_preliminary(rays, coherent=True)
     valid = pi.is_valid()
     z1 = dr.select(valid, view.ray_depth(rays.o, rays.d, pi.t), view.far)
@@ -53,9 +56,9 @@ def first_layer(scene, view):
     return z1, shape, pi, rays
 
 
-def plane_slope(view, p, n, z1, valid):
+def plane_slope(view, p, n, z1, valid, first: int = 0):
     """m per texel: |depth change| to the next texel in u and in v on the caster's plane (p, n)."""
-    face, cu, cv = view.texel_coords(dr.arange(mi.UInt32, view.n_texels))
+    face, cu, cv = view.texel_coords(dr.arange(mi.UInt32, first, first + dr.width(z1)))
     du = dr.abs(view.depth_on_plane(cu + 1.0, cv, p, n, face) - z1)
     dv = dr.abs(view.depth_on_plane(cu, cv + 1.0, p, n, face) - z1)
     return dr.select(valid, dr.maximum(du, dv), 0.0)
@@ -65,13 +68,14 @@ def _count(mask) -> int:
     return int(dr.count(mask).numpy().ravel()[0])
 
 
-def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool):
+def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool, first: int = 0,
+            count: int | None = None):
     """First (and second) accepted surface per texel under per-shape culling.
 
     Returns (z1, shape1, slope or None, z2 or None, rays by kind, unfinished texels).
     """
-    n = view.n_texels
-    ray = view.texel_rays(0, n)
+    n = view.n_texels - first if count is None else count
+    ray = view.texel_rays(first, n)
     modes = mi.UInt32(np.asarray(cull_modes, np.uint32))
     need = 2 if want_z2 else 1
     z1 = dr.full(mi.Float, view.far, n)
@@ -92,44 +96,82 @@ def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool
         culled = ((mode == CULL_BACK) & back) | ((mode == CULL_FRONT) & ~back)
         accept = valid & ~culled
         depth = view.depth(si.p)
-        first, second = accept & (found == 0), accept & (found == 1)
-        z1 = dr.select(first, depth, z1)
-        shape1 = dr.select(first, pi.shape_index, shape1)
+        got1, got2 = accept & (found == 0), accept & (found == 1)
+        z1 = dr.select(got1, depth, z1)
+        shape1 = dr.select(got1, pi.shape_index, shape1)
         if want_slope:
-            p1 = dr.select(first, si.p, p1)
-            n1 = dr.select(first, si.n, n1)
-        z2 = dr.select(second, depth, z2)
+            p1 = dr.select(got1, si.p, p1)
+            n1 = dr.select(got1, si.n, n1)
+        z2 = dr.select(got2, depth, z2)
         found += dr.select(accept, 1, 0)
         active = valid & (found < need)
         ray = dr.select(active, si.spawn_ray(ray.d), ray)
         dr.eval(z1, z2, shape1, p1, n1, found, active, ray, cast1, cast2)
         if _count(active) == 0:          # the one synchronisation per step
             break
-    rays = {"map_first": int(dr.sum(cast1).numpy().ravel()[0]), "map_second": int(dr.sum(cast2).numpy().ravel()[0])}
-    slope = plane_slope(view, p1, n1, z1, found > 0) if want_slope else None
+    total = int(dr.sum(cast1).numpy().ravel()[0]) + int(dr.sum(cast2).numpy().ravel()[0])
+    rays = {"map_texel": n, "map_continue": total - n}
+    slope = plane_slope(view, p1, n1, z1, found > 0, first) if want_slope else None
     return z1, shape1, slope, (z2 if want_z2 else None), rays, _count(active)
 
 
-def build(scene, view, needs, culling: str = "none", cull_modes=None) -> ShadowMap:
+def is_layered(needs, cull_modes) -> bool:
+    """Whether a build must step along each texel's ray (a second layer or culling)."""
+    culls = cull_modes is not None and np.any(np.asarray(cull_modes) != CULL_NONE)
+    return bool(culls or "z2" in needs)
+
+
+def _build_range(scene, view, needs, modes, first, count):
+    """(arrays by name, rays by kind, unfinished texels) for one range of texels."""
+    if not is_layered(needs, modes):
+        z1, shape, pi, rays = first_layer(scene, view, first, count)
+        out = {"z1": z1, "shape": shape}
+        if "slope" in needs:
+            si = pi.compute_surface_interaction(rays, ray_flags=mi.RayFlags.Minimal)
+            out["slope"] = plane_slope(view, si.p, si.n, z1, pi.is_valid(), first)
+        return out, {"map_texel": count, "map_continue": 0}, 0
+    modes = modes if modes is not None else np.zeros(len(scene.shapes()), np.uint32)
+    z1, shape, slope, z2, rays, unfinished = layered(scene, view, modes, "z2" in needs, "slope" in needs,
+                                                     first, count)
+    out = {"z1": z1, "shape": shape, "slope": slope, "z2": z2}
+    return {k: v for k, v in out.items() if v is not None}, rays, unfinished
+
+
+def build(scene, view, needs, culling: str = "none", cull_modes=None, tile: int | None = None) -> ShadowMap:
     """Build the layers ``needs`` asks for (a subset of LAYERS) over the whole map.
 
     ``cull_modes``: one of CULL_* per shape of the scene (index of scene.shapes()); ``culling``
     names the choice for the report. Without culling or a second layer, one ray per texel.
+    ``tile``: at most this many texels per pass (a wavefront that fits memory); the passes
+    are scattered into one map, identical to a single pass.
     """
     unknown = set(needs) - set(LAYERS)
     if unknown:
         raise ValueError(f"unknown map attributes {sorted(unknown)} (valid: {', '.join(LAYERS)})")
-    culls = cull_modes is not None and np.any(np.asarray(cull_modes) != CULL_NONE)
-    if not culls and "z2" not in needs:
-        z1, shape, pi, rays = first_layer(scene, view)
-        slope = None
-        if "slope" in needs:
-            si = pi.compute_surface_interaction(rays, ray_flags=mi.RayFlags.Minimal)
-            slope = plane_slope(view, si.p, si.n, z1, pi.is_valid())
-        return ShadowMap(view, z1, shape, slope, rays={"map_first": view.n_texels}, culling=culling)
-    modes = cull_modes if cull_modes is not None else np.zeros(len(scene.shapes()), np.uint32)
-    z1, shape, slope, z2, rays, unfinished = layered(scene, view, modes, "z2" in needs, "slope" in needs)
-    return ShadowMap(view, z1, shape, slope, rays=rays, z2=z2, culling=culling, unfinished=unfinished)
+    n = view.n_texels
+    tile = n if not tile or tile >= n else int(tile)
+    if tile == n:
+        out, rays, unfinished = _build_range(scene, view, needs, cull_modes, 0, n)
+        tiles = 1
+    else:
+        out, rays, unfinished, tiles = {}, {"map_texel": 0, "map_continue": 0}, 0, 0
+        for first in range(0, n, tile):
+            count = min(tile, n - first)
+            part, r, u = _build_range(scene, view, needs, cull_modes, first, count)
+            idx = dr.arange(mi.UInt32, first, first + count)
+            for k, v in part.items():
+                if k not in out:
+                    out[k] = dr.zeros(type(v), n)
+                dr.scatter(out[k], v, idx)
+            dr.eval(*out.values())
+            for k in rays:
+                rays[k] += r[k]
+            unfinished += u
+            tiles += 1
+    smap = ShadowMap(view, out["z1"], out["shape"], out.get("slope"), rays=rays, z2=out.get("z2"),
+                     culling=culling, unfinished=unfinished)
+    smap.tiles = tiles
+    return smap
 
 
 def cull_modes_for(culling: str, closed: list) -> np.ndarray:

@@ -49,3 +49,21 @@ def measure(fn, repeats: int = 3):
         warm.append(ms)
     dr.kernel_history_clear()
     return out, Timing(statistics.median(warm) if warm else cold, compile_ms, cold, len(hist), misses)
+
+
+def _backend():
+    import mitsuba as mi
+    return dr.JitBackend.CUDA if mi.variant().startswith("cuda") else dr.JitBackend.LLVM
+
+
+def reset_peak():
+    """Start a new allocation watermark (cached blocks are released first)."""
+    dr.sync_thread()
+    dr.flush_malloc_cache()
+    dr.detail.malloc_clear_statistics()
+
+
+def peak_bytes() -> int:
+    """Dr.Jit's allocation watermark since ``reset_peak`` (the device's memory on CUDA, host on LLVM)."""
+    dr.sync_thread()
+    return int(dr.detail.malloc_watermark(_backend()))

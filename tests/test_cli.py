@@ -24,7 +24,7 @@ def test_default_experiment_writes_the_report(tmp_path):
     for k in ("python", "mitsuba", "drjit", "libllvm", "dsm_git_commit"):
         assert run["versions"][k]
     assert run["variant"] == "llvm_ad_rgb" and run["threads"] >= 1
-    assert run["rays"]["map_first"] > 0 and run["rays"]["reference"] > 0
+    assert run["rays"]["map_texel"] > 0 and run["rays"]["reference"] > 0
     assert run["n_failed"] == 0 and run["n_cases_ok"] == len(rows)
     table = (out / "table.md").read_text()
     assert "acne" in table and "peter-panning: rgb" in table and table.count("\n|") >= len(rows) + 1

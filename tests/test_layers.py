@@ -31,17 +31,17 @@ def test_adaptive_scale_invariance_and_planes(run_dict):
 def test_ray_counts_follow_the_needs(run_dict):
     single = run_dict(base_config(scheme=[{"name": "constant"}, {"name": "adaptive"}],
                                   map={"resolution": [32, 64]}), "single")
-    assert single.run["rays"]["map_second"] == 0
-    assert single.run["rays"]["map_first"] == 32 * 32 + 64 * 64
+    assert single.run["rays"]["map_continue"] == 0
+    assert single.run["rays"]["map_texel"] == 32 * 32 + 64 * 64
     two = run_dict(base_config(scene=[{"builtin": "floating_plate"}], map={"resolution": 64},
                                scheme=[{"name": "midpoint"}, {"name": "dual", "culling": "none",
                                                                 "z_offset": ["1 texel", "4 texel"]},
                                        {"name": "constant"}]), "two")
     rays = two.run["rays"]
-    # one map serves constant, midpoint and both duals: its first layer is cast once per texel
-    assert rays["map_first"] == 64 * 64
-    # second-layer rays: exactly the texels whose first ray hit something (one spawn each, no culling)
-    assert 0 < rays["map_second"] <= 64 * 64
+    # one map serves constant, midpoint and both duals: one texel ray per texel
+    assert rays["map_texel"] == 64 * 64
+    # second-layer rays: the texels whose first ray hit something (one spawn each, no culling)
+    assert 0 < rays["map_continue"] <= 64 * 64
     assert len({r["build_ms"] for r in two.rows if r["scheme"] in ("midpoint", "dual")}) == 1
 
 

@@ -1,0 +1,102 @@
+"""The plan: cases, exact ray counts, layers only where a scheme needs them, tiles that fit memory."""
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import base_config
+
+CONFIGS = {
+    "one_layer": dict(scheme=[{"name": "none"}, {"name": "constant"}, {"name": "slope_scaled"}]),
+    "two_layers": dict(scheme=[{"name": "midpoint"}, {"name": "constant"}]),
+    "back_face_layers": dict(scene=[{"builtin": "plane_box"}],
+                             scheme=[{"name": "second_depth"}, {"name": "dual", "culling": "back_closed"}]),
+    "stored_format": dict(map={"resolution": [32, 64], "format": ["float32", "unorm16", "ndc24"]},
+                          scheme=[{"name": "constant"}, {"name": "dual"}]),
+    "point_views": dict(scene=[{"builtin": "room"}], map={"resolution": 32, "view": ["dual_paraboloid", "cube"]},
+                        scheme=[{"name": "adaptive"}, {"name": "midpoint"}]),
+}
+
+
+@pytest.mark.parametrize("name", sorted(CONFIGS))
+def test_plan_ray_counts_equal_what_the_run_casts(run_dict, name):
+    from dsm import config, plan
+    raw = base_config(camera={"resolution": [64, 48]}, **CONFIGS[name])
+    raw.setdefault("map", {"resolution": 64})
+    p = plan.make(config.parse(raw, "<test>"))
+    res = run_dict(raw)
+    rays = res.run["rays"]
+    assert res.run["n_failed"] == 0
+    assert len(res) == p.cases
+    for kind, n in p.rays.items():
+        assert rays[kind] == n, (kind, rays[kind], n)
+    for kind, bound in p.rays_bound.items():
+        assert rays[kind] <= bound, (kind, rays[kind], bound)
+    assert rays["reference"] > 0
+    built = [(m["scene"], m["light"], m["view"], m["resolution"], m["culling"]) for m in res.run["maps"]]
+    planned = [(m.scene, m.light, m.view, m.resolution, m.culling) for m in p.maps]
+    assert built == planned
+    for m, pm in zip(res.run["maps"], p.maps):
+        assert tuple(m["layers"]) == pm.layers
+        assert m["rays"]["map_texel"] == pm.texels
+        if not pm.layered:
+            assert m["rays"]["map_continue"] == 0
+    assert res.run["quantized_copies"] == sum(len(m.formats) for m in p.maps)
+    if name == "two_layers":
+        assert rays["map_continue"] > 0
+
+
+def test_constant_and_none_build_nothing_more(run_dict):
+    from dsm import config, plan
+    raw = base_config(scheme=[{"name": "none"}, {"name": "constant", "bias": [0.01, "1 texel"]}],
+                      map={"resolution": [32, 64]})
+    p = plan.make(config.parse(raw, "<test>"))
+    assert all(m.layers == ("z1", "shape") and not m.layered and not m.formats for m in p.maps)
+    res = run_dict(raw)
+    assert all(m["layers"] == ["z1", "shape"] and m["tiles"] == 1 for m in res.run["maps"])
+    assert res.run["rays"]["map_continue"] == 0 and res.run["quantized_copies"] == 0
+    assert "plan" in res.run and res.run["plan"]["rays"] == p.rays
+
+
+@pytest.mark.parametrize("needs,culling", [(set(), None), ({"slope"}, None), ({"z2", "slope"}, None),
+                                           ({"z2"}, "back")])
+def test_tiled_and_single_pass_builds_are_identical(variant, needs, culling):
+    from dsm import config, scenes, shadowmap
+    from dsm.config import LightSpec
+    from dsm.runner import make_view
+    cfg = config.parse(base_config(scene=[{"builtin": "room"}]), "<test>")
+    sd = scenes.load(cfg.scenes[0], (16, 16))
+    view = make_view(LightSpec("point", position=(0.2, 0.1, 1.8), direction=(0, 0, -1.0)), 48, None, sd.bbox, "cube")
+    modes = shadowmap.cull_modes_for(culling, [True] * len(sd.shape_names)) if culling else None
+    one = shadowmap.build(sd.scene, view, needs, culling or "none", modes)
+    tiled = shadowmap.build(sd.scene, view, needs, culling or "none", modes, tile=5000)
+    assert one.tiles == 1 and tiled.tiles == -(-view.n_texels // 5000)
+    for a, b in zip(shadowmap.arrays(one), shadowmap.arrays(tiled)):
+        np.testing.assert_array_equal(a.numpy(), b.numpy())
+    assert one.rays == tiled.rays
+
+
+def test_a_small_memory_budget_tiles_the_build_with_the_same_results(run_dict):
+    raw = base_config(scene=[{"builtin": "plane_box"}], map={"resolution": 512},
+                      scheme=[{"name": "dual", "culling": "none"}, {"name": "constant"}])
+    big = run_dict(raw, "big")
+    small = run_dict({**raw, "memory": {"budget_mb": 1}}, "small")
+    assert [m["tiles"] for m in big.run["maps"]] == [1]
+    assert small.run["maps"][0]["tiles"] == 512 * 512 // (1 << 16)
+    for a, b in zip(big.rows, small.rows):
+        assert (a["n_acne"], a["n_peterpan"]) == (b["n_acne"], b["n_peterpan"])
+    m = small.run["maps"][0]
+    assert m["build_peak_bytes"] < big.run["maps"][0]["build_peak_bytes"]
+
+
+def test_dsm_plan_prints_before_running(tmp_path):
+    p = subprocess.run([sys.executable, "-m", "dsm.cli", "plan"], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    for word in ("cases:", "rays (exact): gbuffer", "map_texel", "estimated peak memory", "cube", "layered"):
+        assert word in p.stdout
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[map]\nview = "sphere"\n[[scheme]]\nname = "none"\n[[scene]]\nbuiltin = "plane"\n')
+    p = subprocess.run([sys.executable, "-m", "dsm.cli", "plan", str(bad)], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2 and "map.view" in p.stderr and "cube" in p.stderr
