@@ -27,7 +27,7 @@ def _parser():
     sub.add_parser("schemes", help="list bias schemes, their parameters, defaults and sources")
     b = sub.add_parser("bench", help="benchmark: map build against a bare ray cast, lookup cost per scheme")
     b.add_argument("--out", default="bench", help="folder for bench.md and bench.json (default: bench/)")
-    b.add_argument("--resolutions", default="256,512,1024,2048", help="comma-separated map resolutions")
+    b.add_argument("--resolutions", default="256,512,1024,2048,4096", help="comma-separated map resolutions")
     b.add_argument("--repeats", type=int, default=5)
     b.add_argument("--meshes", help="folder of the real test meshes (default: ../shared/meshes)")
     b.add_argument("--variant", choices=cfgmod.VARIANTS)

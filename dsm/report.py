@@ -114,7 +114,72 @@ def write_table(path: Path, rows: list, cfg, status=None):
         cells = [r["case"]] + [_cell(r.get(k)) for k, _ in TABLE_COLUMNS]
         lines.append("| " + " | ".join(map(str, cells)) + " |")
     lines += views_at_equal_memory(rows, getattr(cfg.map, "texels", ()))
+    lines += pareto_md(rows)
     path.write_text("\n".join(lines) + "\n")
+
+
+def case_time(r) -> float:
+    """What a technique costs per frame: its map build plus its lookup (ms)."""
+    return r["build_ms"] + r["lookup_ms"]
+
+
+def pareto_front(rows: list) -> list:
+    """The rows no other row beats on both error rate and time (ties kept once), fastest first."""
+    pts = sorted(rows, key=lambda r: (case_time(r), r["error_rate"]))
+    front, best = [], float("inf")
+    for r in pts:
+        if r["error_rate"] < best:
+            front.append(r)
+            best = r["error_rate"]
+    return front
+
+
+def _pareto_groups(rows):
+    groups = {}
+    for r in rows:
+        groups.setdefault((r["scene"], r["light"], r["view"]), []).append(r)
+    return sorted(groups.items())
+
+
+def pareto_md(rows: list) -> list:
+    if not rows:
+        return []
+    out = ["", "## Cost of accuracy: the Pareto frontier", "",
+           "Per scene, light and view: the cases no other case beats on both error rate and time "
+           "(map build + lookup, warm medians), over every scheme, resolution, filter and format. "
+           "plots/pareto_*.png plots all cases with the frontier marked.", "",
+           "| scene | light | view | scheme | params | R | filter | format | error rate | time ms |",
+           "|---" * 10 + "|"]
+    for (scene, light, view), rs in _pareto_groups(rows):
+        for r in pareto_front(rs):
+            out.append(f"| {scene} | {light} | {view} | {r['scheme']} | {r['params']} | {r['resolution']} | "
+                       f"{r['filter']} | {r['format']} | {r['error_rate']:.4f} | {case_time(r):.2f} |")
+    return out
+
+
+def write_pareto(folder: Path, rows: list):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    folder.mkdir(exist_ok=True)
+    for (scene, light, view), rs in _pareto_groups(rows):
+        schemes = sorted({r["scheme"] for r in rs})
+        fig, ax = plt.subplots(figsize=(8.5, 4.2))
+        for k, s in enumerate(schemes):
+            pts = [(case_time(r), r["error_rate"]) for r in rs if r["scheme"] == s]
+            ax.scatter([p[0] for p in pts], [p[1] for p in pts], s=14, color=f"C{k % 10}", label=s)
+        front = pareto_front(rs)
+        ax.plot([case_time(r) for r in front], [r["error_rate"] for r in front], "k-", lw=0.8)
+        ax.scatter([case_time(r) for r in front], [r["error_rate"] for r in front], s=60, facecolors="none",
+                   edgecolors="k", label="non-dominated")
+        ax.set_xscale("log")
+        ax.set_xlabel("time per case: map build + lookup (ms)")
+        ax.set_ylabel("error rate (acne + peter-panning) / receivers")
+        ax.set_title(f"{scene}, light {light}, {view}", fontsize=9)
+        fig.subplots_adjust(left=0.09, right=0.72, bottom=0.13, top=0.9)
+        ax.legend(loc="center left", bbox_to_anchor=(1.02, 0.5), fontsize=7, frameon=False)
+        fig.savefig(folder / f"pareto_{_slug(f'{scene}_{light}_{view}')}.png", dpi=80)
+        plt.close(fig)
 
 
 def views_at_equal_memory(rows: list, budgets=()) -> list:
@@ -141,8 +206,8 @@ def views_at_equal_memory(rows: list, budgets=()) -> list:
         for v in views:
             r = g.get(v)
             cells += ([f"{r['error_rate']:.4f}", f"{r['seam_error_rate']:.4f} / {r['off_seam_error_rate']:.4f}",
-                       f"{r['build_ms'] + r['lookup_ms']:.1f}"] if r else ["", "", ""])
-        best = min(g.values(), key=lambda r: (round(r["error_rate"], 4), r["build_ms"] + r["lookup_ms"]))
+                       f"{case_time(r):.1f}"] if r else ["", "", ""])
+        best = min(g.values(), key=lambda r: (round(r["error_rate"], 4), case_time(r)))
         out.append("| " + " | ".join(map(str, cells + [best["view"]])) + " |")
     return out
 

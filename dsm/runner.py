@@ -148,6 +148,7 @@ class Runner:
         self._write_run_json()
         report.write_table(self.out / "table.md", self.rows, self.cfg)
         report.write_plots(self.out / "plots", self.rows)
+        report.write_pareto(self.out / "plots", self.rows)
         return Results(self.out, self.rows, self._run_json(), self.images)
 
     def _fail(self, what, exc):
