@@ -10,4 +10,21 @@ def run(config, out=None, variant=None, progress=False):
     return _run(config, out=out, variant=variant, progress=progress)
 
 
-__all__ = ["run", "ConfigError", "Length", "load_config", "parse_config"]
+def register():
+    """Register the Mitsuba integrator plugins dsm_shadow and dsm_error for the current variant."""
+    from .plugins import register as _register
+    return _register()
+
+
+def _register_if_variant_set():
+    try:
+        import mitsuba as mi
+        if mi.variant() is not None:
+            register()
+    except ImportError:
+        pass
+
+
+_register_if_variant_set()
+
+__all__ = ["run", "register", "ConfigError", "Length", "load_config", "parse_config"]

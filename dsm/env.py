@@ -30,6 +30,7 @@ def use_variant(variant: str | None = None, threads: int | None = None) -> str:
     import mitsuba as mi
     variant = variant or os.environ.get("DSM_VARIANT") or "llvm_ad_rgb"
     if mi.variant() == variant:
+        _register_plugins()
         return variant
     if variant.startswith("llvm"):
         ver = llvm_version()
@@ -47,4 +48,10 @@ def use_variant(variant: str | None = None, threads: int | None = None) -> str:
             dr.zeros(mi.Float, 1).numpy()
         except Exception as e:
             raise SetupError(f"variant {variant!r} needs a CUDA GPU: {e}") from None
+    _register_plugins()
     return variant
+
+
+def _register_plugins():
+    from .plugins import register
+    register()

@@ -110,6 +110,49 @@ def needs_of(scheme_specs) -> set:
     return out
 
 
+def light_setup(sd, gb, light, label, repeats: int = 0) -> LightSetup:
+    """Receivers of one light (hit pixels facing it, inside its domain) and their exact visibility."""
+    p_all, n_all = gb.p, gb.n
+    probe = make_view(light, 1, np.zeros((1, 3)), sd.bbox, "cube")   # a point light lights every direction
+    to_light = probe.to_light(p_all)
+    facing = (dr.dot(n_all, to_light) > 0).numpy().astype(bool)
+    inside = probe.inside(p_all).numpy().astype(bool) if light.type != "directional" else np.ones_like(facing)
+    hit = gb.hit
+    mask = hit & facing & inside
+    pixels = np.flatnonzero(mask).astype(np.uint32)
+    exclusions = {"n_pixels": int(mask.size), "n_excluded_nohit": int((~hit).sum()),
+                  "n_excluded_backfacing": int((hit & ~facing).sum()),
+                  "n_excluded_outside": int((hit & facing & ~inside).sum())}
+    if len(pixels) == 0:      # nothing faces this light: rows of zeros, no zero-sized kernels
+        empty = np.zeros(0)
+        return LightSetup(label, light, pixels, None, None, empty.astype(np.uint32), empty.astype(bool),
+                          empty, exclusions, 0.0)
+    idx = mi.UInt32(pixels)
+    si = dr.gather(mi.SurfaceInteraction3f, gb.si, idx)
+    p = dr.gather(mi.Point3f, gb.p, idx)
+    n = dr.gather(mi.Vector3f, gb.n, idx)
+    magnitude = reference.scene_magnitude(sd.bbox)
+    (vis, dist), t = timing.measure(lambda: reference.visibility(sd.scene, si, light, magnitude), repeats)
+    dr.eval(p, n)
+    return LightSetup(label, light, pixels, p, n, gb.shape.numpy()[pixels], vis.numpy().astype(bool),
+                      dist.numpy(), exclusions, t.ms, si)
+
+
+def closed_flags(sd) -> list:
+    """Per-shape closedness of a scene (detected, or set by the config), computed once."""
+    if sd.closed is None:
+        from .closedness import shape_closedness
+        over = dict(sd.closed_override)
+        sd.closed, sd.closed_reason = [], []
+        for name, shape in zip(sd.shape_names, sd.scene.shapes()):
+            closed, why = shape_closedness(shape)
+            if name in over:
+                closed, why = over[name], f"set by the config (detected: {why})"
+            sd.closed.append(closed)
+            sd.closed_reason.append(why)
+    return sd.closed
+
+
 class Runner:
     def __init__(self, config: cfgmod.Config, out: Path, variant: str | None = None, progress: bool = True,
                  keep_images: bool = True):
@@ -180,32 +223,9 @@ class Runner:
                     self._run_map(sd, gb, setup, kind, R, bar)
 
     def _light_setup(self, sd, gb, light, label) -> LightSetup:
-        p_all, n_all = gb.p, gb.n
-        probe = make_view(light, 1, np.zeros((1, 3)), sd.bbox, "cube")   # a point light lights every direction
-        to_light = probe.to_light(p_all)
-        facing = (dr.dot(n_all, to_light) > 0).numpy().astype(bool)
-        inside = probe.inside(p_all).numpy().astype(bool) if light.type != "directional" else np.ones_like(facing)
-        hit = gb.hit
-        mask = hit & facing & inside
-        pixels = np.flatnonzero(mask).astype(np.uint32)
-        exclusions = {"n_pixels": int(mask.size), "n_excluded_nohit": int((~hit).sum()),
-                                         "n_excluded_backfacing": int((hit & ~facing).sum()),
-                                         "n_excluded_outside": int((hit & facing & ~inside).sum())}
-        if len(pixels) == 0:      # nothing faces this light: rows of zeros, no zero-sized kernels
-            empty = np.zeros(0)
-            return LightSetup(label, light, pixels, None, None, empty.astype(np.uint32), empty.astype(bool),
-                              empty, exclusions, 0.0)
-        idx = mi.UInt32(pixels)
-        si = dr.gather(mi.SurfaceInteraction3f, gb.si, idx)
-        p = dr.gather(mi.Point3f, gb.p, idx)
-        n = dr.gather(mi.Vector3f, gb.n, idx)
-        magnitude = reference.scene_magnitude(sd.bbox)
-        (vis, dist), t = timing.measure(lambda: reference.visibility(sd.scene, si, light, magnitude),
-                                        self.cfg.timing_repeats)
-        self.rays["reference"] += len(pixels)
-        dr.eval(p, n)
-        return LightSetup(label, light, pixels, p, n, gb.shape.numpy()[pixels], vis.numpy().astype(bool),
-                          dist.numpy(), exclusions, t.ms, si)
+        setup = light_setup(sd, gb, light, label, self.cfg.timing_repeats)
+        self.rays["reference"] += len(setup.pixels)
+        return setup
 
     # ------------------------------------------------------------ per map
     def _run_map(self, sd, gb, setup, kind, R, bar):
@@ -282,15 +302,7 @@ class Runner:
 
     def _closed(self, sd):
         if sd.closed is None:
-            from .closedness import shape_closedness
-            over = dict(sd.closed_override)
-            sd.closed, sd.closed_reason = [], []
-            for name, shape in zip(sd.shape_names, sd.scene.shapes()):
-                closed, why = shape_closedness(shape)
-                if name in over:
-                    closed, why = over[name], f"set by the config (detected: {why})"
-                sd.closed.append(closed)
-                sd.closed_reason.append(why)
+            closed_flags(sd)
             self.scene_info.append({"scene": sd.label, "shapes": [
                 {"name": n, "closed": c, "why": w} for n, c, w in zip(sd.shape_names, sd.closed, sd.closed_reason)]})
         return sd.closed

@@ -329,9 +329,8 @@ def _finish(label, scene, own_lights, scale, notes=()):
     return SceneData(label, scene, scene.sensors()[0], names, list(own_lights), bbox, scale, list(notes))
 
 
-def _load_xml(spec, width):
-    import mitsuba as mi
-    scene = mi.load_file(str(spec.file), optimize=False)
+def lights_of(scene) -> tuple[list, list]:
+    """(LightSpecs of the scene's point, spot and directional emitters, notes on the others)."""
     lights, notes = [], []
     for e in scene.emitters():
         light = emitter_to_light(e)
@@ -339,6 +338,19 @@ def _load_xml(spec, width):
             notes.append(f"emitter {type(e).__name__} ignored (not a point, spot or directional light)")
         else:
             lights.append(light)
+    return lights, notes
+
+
+def from_mitsuba(scene, label: str = "scene") -> "SceneData":
+    """SceneData of an already loaded Mitsuba scene (the integrator plugins' entry)."""
+    lights, notes = lights_of(scene)
+    return _finish(label, scene, lights, 1.0, notes)
+
+
+def _load_xml(spec, width):
+    import mitsuba as mi
+    scene = mi.load_file(str(spec.file), optimize=False)
+    lights, notes = lights_of(scene)
     # Re-create the sensor at the requested width, keeping its aspect ratio and transform.
     film = scene.sensors()[0].film().size()
     height = max(1, round(width * film[1] / film[0]))

@@ -1,0 +1,25 @@
+"""Mitsuba integrator plugins: ``dsm_shadow`` and ``dsm_error``.
+
+Registered with Mitsuba by :func:`register` (an explicit list, as Mitsuba registers its own),
+which ``import dsm`` calls when a variant is already set and :func:`dsm.env.use_variant` calls
+after setting one. Both plugins run the same view, map, scheme, filter, format and metric
+code as the experiment runner.
+"""
+from __future__ import annotations
+
+PLUGINS = ("dsm_shadow", "dsm_error")
+_registered: set = set()
+
+
+def register() -> list:
+    """Register the plugins for the current Mitsuba variant; returns their names."""
+    import mitsuba as mi
+    if mi.variant() is None:
+        raise RuntimeError("set a Mitsuba variant (mi.set_variant) before registering the dsm plugins")
+    if mi.variant() in _registered:
+        return list(PLUGINS)
+    from .integrators import DsmError, DsmShadow
+    mi.register_integrator("dsm_shadow", lambda props: DsmShadow(props))
+    mi.register_integrator("dsm_error", lambda props: DsmError(props))
+    _registered.add(mi.variant())
+    return list(PLUGINS)
