@@ -158,6 +158,7 @@ class SceneSpec:
     params: Any = None          # builtin: its parameter dataclass; file: FileSceneParams
     label: str = ""
     closed: tuple = ()          # (shape name, closed) overrides of detected closedness
+    missing: str = ""           # an optional file that is absent: the run records it as skipped
 
 
 @dataclass(frozen=True)
@@ -304,11 +305,6 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     _check_keys(tim, ("repeats",), source, "timing")
     repeats = _number(tim.get("repeats", 3), source, "timing.repeats", integer=True, minimum=1, maximum=100)
 
-    if all(l.type == "scene" for l in lights):
-        for i, sc in enumerate(scenes):
-            if sc.file is not None and sc.file.suffix.lower() == ".xml" and not scenes_mod.xml_has_usable_emitter(sc.file):
-                raise ConfigError(source, "light", f"scene {sc.file} has no point, spot or directional emitter and "
-                                  "the config names no [[light]]; add one", ("directional", "spot", "point"))
 
     return Config(name=name, source=source, seed=seed, variant=variant, camera_resolution=camera_resolution,
                   scenes=tuple(scenes), lights=tuple(lights), map=mapspec, schemes=tuple(schemes),

@@ -165,28 +165,41 @@ def memory_budget(cfg: Config) -> int:
 
 
 def _xml_film(path, width) -> tuple:
+    root = ET.parse(path).getroot()
+    defaults = {el.get("name"): el.get("value") for el in root.iter("default")}
     w, h = 768, 576                      # Mitsuba's film defaults
-    for el in ET.parse(path).getroot().iter("film"):
+    for el in root.iter("film"):
         for it in el.iter("integer"):
+            val = it.get("value", "")
+            val = defaults.get(val[1:], val) if val.startswith("$") else val
             if it.get("name") == "width":
-                w = int(it.get("value"))
+                w = int(val)
             if it.get("name") == "height":
-                h = int(it.get("value"))
+                h = int(val)
         break
     return width, max(1, round(width * h / w))
 
 
 def _xml_emitters(path) -> list:
+    """Emitter types in document order (includes followed)."""
     out = []
     root = ET.parse(path).getroot()
     for el in root.iter():
-        if el.tag == "emitter" and el.get("type") in ("point", "spot", "directional"):
+        if el.tag == "emitter":
             out.append(el.get("type"))
         if el.tag == "include" and el.get("filename"):
             inc = path.parent / el.get("filename")
             if inc.suffix == ".xml" and inc.is_file():
                 out += _xml_emitters(inc)
     return out
+
+
+def _xml_lights(path) -> list:
+    types = _xml_emitters(path)
+    usable = [t for t in types if t in ("point", "spot", "directional")]
+    if usable:
+        return usable
+    return ["point" if "area" in types else "directional"]      # scenes.default_light
 
 
 def scene_lights(spec, cfg: Config) -> list:
@@ -196,7 +209,7 @@ def scene_lights(spec, cfg: Config) -> list:
     if spec.builtin:
         own = [builtin_geometry(spec.builtin, spec.params)[2].type]
     elif spec.file.suffix.lower() == ".xml":
-        own = _xml_emitters(spec.file)
+        own = _xml_lights(spec.file)
     else:
         own = ["directional"]
     types = []
@@ -216,6 +229,8 @@ def make(cfg: Config) -> Plan:
         groups.setdefault(schemes_mod.culling_of(spec.params), []).append(spec)
     W, H = cfg.camera_resolution
     for sc in cfg.scenes:
+        if sc.missing:
+            continue
         w, h = _xml_film(sc.file, W) if sc.file is not None and sc.file.suffix.lower() == ".xml" else (W, H)
         lights = scene_lights(sc, cfg)
         plan.scenes.append((sc.label, w, h, lights))

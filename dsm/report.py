@@ -315,7 +315,7 @@ def run_info(cfg, variant, rays, status) -> dict:
     import drjit as dr
     import mitsuba as mi
     from .env import llvm_version
-    failed = [s for s in status if s["status"] != "ok"]
+    failed = [s for s in status if s["status"] == "failed"]
     return {
         "experiment": cfg.name, "config_file": cfg.source, "config": cfg.raw,
         "versions": {"python": platform.python_version(), "mitsuba": mi.__version__, "drjit": dr.__version__,
@@ -323,5 +323,6 @@ def run_info(cfg, variant, rays, status) -> dict:
                      "dsm_git_commit": git_commit()},
         "variant": variant, "threads": dr.thread_count(), "timing_repeats": cfg.timing_repeats,
         "rays": dict(rays), "n_cases_ok": sum(1 for s in status if s["status"] == "ok" and s["what"].startswith("case")),
-        "n_failed": len(failed), "status": status,
+        "n_failed": len(failed), "n_skipped": sum(1 for s in status if s["status"] == "skipped"),
+        "n_warnings": sum(1 for s in status if s["status"] in ("warning", "note")), "status": status,
     }

@@ -180,6 +180,9 @@ class Runner:
         self.csv = report.CsvWriter(self.out / "metrics.csv")
         bar = report.progress(total=self.plan.cases, enabled=self.progress)
         for spec in self.cfg.scenes:
+            if spec.missing:
+                self.status.append({"what": f"scene {spec.label}", "status": "skipped", "error": spec.missing})
+                continue
             try:
                 sd = scenes.load(spec, self.cfg.camera_resolution)
             except Exception as e:
@@ -205,6 +208,8 @@ class Runner:
         gb = gb[-1]
         gb.ms = t.ms
         self.gbuffer_ms[sd.label] = t.ms
+        if sd.notes:
+            self.status.append({"what": f"scene {sd.label}", "status": "note", "error": "; ".join(sd.notes)})
         self.rays["gbuffer"] += W * H
         lights = sd.lights_for(self.cfg.lights)
         if not lights:

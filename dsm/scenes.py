@@ -93,14 +93,20 @@ def parse_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]
     raw = t["file"]
     if not isinstance(raw, str):
         raise ConfigError(source, f"{where}.file", f"expected a path string, got {raw!r}")
+    optional = t.get("optional", False)
+    if not isinstance(optional, bool):
+        raise ConfigError(source, f"{where}.optional", f"expected true or false, got {optional!r}")
     path = Path(raw).expanduser()
     if not path.is_absolute():
         path = (base / path).resolve()
     if path.suffix.lower() not in FILE_SUFFIXES:
         raise ConfigError(source, f"{where}.file", f"unsupported file type {path.suffix!r}", FILE_SUFFIXES)
+    if not path.is_file() and not optional:
+        raise ConfigError(source, f"{where}.file", f"no such file: {path} (optional = true skips an absent file)")
+    specs = sweep_params(FileParams, t, source, where, skip=("file", "closed", "optional"))
     if not path.is_file():
-        raise ConfigError(source, f"{where}.file", f"no such file: {path}")
-    specs = sweep_params(FileParams, t, source, where, skip=("file", "closed"))
+        return [SceneSpec(file=path, params=p, label=_label(path.stem, p, FileParams()),
+                          missing=f"skipped: {path} is absent (optional scene)") for p in specs]
     closed = _closed_override(t, source, where)
     if path.suffix.lower() == ".xml" and any(p != FileParams() for p in specs):
         raise ConfigError(source, where, "an XML scene takes no scale/up/ground keys", ("file",))
@@ -113,23 +119,6 @@ def _closed_override(t, source, where) -> tuple:
     if not isinstance(raw, dict) or not all(isinstance(v, bool) for v in raw.values()):
         raise ConfigError(source, f"{where}.closed", "expected a table of shape name = true/false")
     return tuple(sorted(raw.items()))
-
-
-def xml_has_usable_emitter(path: Path) -> bool:
-    """Whether a Mitsuba XML file (or a file it includes) declares a point, spot or directional emitter."""
-    import xml.etree.ElementTree as ET
-    try:
-        root = ET.parse(path).getroot()
-    except (ET.ParseError, OSError):
-        return True          # let Mitsuba report the file's own problem when it loads it
-    for el in root.iter():
-        if el.tag == "emitter" and el.get("type") in ("point", "spot", "directional"):
-            return True
-        if el.tag == "include" and el.get("filename"):
-            inc = (path.parent / el.get("filename"))
-            if inc.suffix == ".xml" and inc.is_file() and xml_has_usable_emitter(inc):
-                return True
-    return False
 
 
 def _check_builtin(p, source, where):
@@ -341,6 +330,26 @@ def lights_of(scene) -> tuple[list, list]:
     return lights, notes
 
 
+def default_light(scene) -> LightSpec:
+    """A light for a scene without a point, spot or directional emitter: a point light at its
+    first area light (moved 2 % of the way to the scene's centre, off the luminaire's surface),
+    or else a directional light from above (the sensor's up) and a little to the side."""
+    import mitsuba as mi
+    bb = scene.bbox()
+    centre = np.array(bb.center(), float).ravel()
+    for e in scene.emitters():
+        shape = e.get_shape()
+        if shape is not None:
+            c = np.array(shape.bbox().center(), float).ravel()
+            pos = c + 0.02 * (centre - c)
+            return LightSpec("point", position=tuple(float(x) for x in pos), direction=_normalize(centre - c),
+                             label="point")
+    up = np.array(scene.sensors()[0].world_transform() @ mi.Vector3f(0, 1, 0), float).ravel()
+    side = np.cross(up, [0.3, 0.5, 0.8])
+    return LightSpec("directional", direction=_normalize(-up + 0.3 * side / max(np.linalg.norm(side), 1e-9)),
+                     label="directional")
+
+
 def from_mitsuba(scene, label: str = "scene") -> "SceneData":
     """SceneData of an already loaded Mitsuba scene (the integrator plugins' entry)."""
     lights, notes = lights_of(scene)
@@ -351,6 +360,10 @@ def _load_xml(spec, width):
     import mitsuba as mi
     scene = mi.load_file(str(spec.file), optimize=False)
     lights, notes = lights_of(scene)
+    if not lights:
+        lights = [default_light(scene)]
+        notes.append(f"no point, spot or directional emitter: dsm added a default {lights[0].type} light "
+                     f"({lights[0]})")
     # Re-create the sensor at the requested width, keeping its aspect ratio and transform.
     film = scene.sensors()[0].film().size()
     height = max(1, round(width * film[1] / film[0]))

@@ -55,19 +55,29 @@ def test_good_config_sweeps(tmp_path):
     assert cfg.map.resolution == (64, 128)
 
 
-def test_xml_without_usable_emitter_and_no_light(tmp_path):
+def test_xml_without_usable_emitter_gets_a_default_light(tmp_path, run_dict):
+    """An area-lit XML scene gets a point light at its luminaire, said in run.json; the plan agrees."""
+    from dsm import plan
     xml = tmp_path / "area.xml"
-    xml.write_text('<scene version="3.0.0"><sensor type="perspective"/>'
-                   '<shape type="rectangle"><emitter type="area"/></shape></scene>')
-    path = tmp_path / "x.toml"
-    path.write_text(f'[[scene]]\nfile = "{xml}"\n[[scheme]]\nname = "none"\n')
-    with pytest.raises(ConfigError) as e:
-        config.load(path)
-    assert "no point, spot or directional emitter" in str(e.value) and "[[light]]" in str(e.value)
-    # with a light it is fine
-    path.write_text(f'[[scene]]\nfile = "{xml}"\n[[light]]\ntype = "directional"\ndirection = [0, 0, -1]\n'
-                    '[[scheme]]\nname = "none"\n')
-    assert config.load(path).lights[0].type == "directional"
+    xml.write_text('<scene version="3.0.0"><sensor type="perspective"><transform name="to_world">'
+                   '<lookat origin="0, -4, 3" target="0, 0, 0" up="0, 0, 1"/></transform>'
+                   '<film type="hdrfilm"><integer name="width" value="64"/><integer name="height" value="48"/>'
+                   '</film></sensor>'
+                   '<shape type="rectangle"><transform name="to_world"><scale value="3"/></transform></shape>'
+                   '<shape type="cube"><transform name="to_world"><scale value="0.3"/>'
+                   '<translate z="0.4"/></transform></shape>'
+                   '<shape type="rectangle"><transform name="to_world"><scale value="0.2"/><rotate x="1" angle="180"/>'
+                   '<translate z="2.5"/></transform><emitter type="area"/></shape></scene>')
+    raw = {"scene": [{"file": str(xml)}], "camera": {"resolution": [64, 64]}, "map": {"resolution": 64, "view": "cube"},
+           "scheme": [{"name": "adaptive"}]}
+    cfg = config.parse(raw, "<test>")
+    p = plan.make(cfg)
+    assert p.scenes[0][1:3] == (64, 48) and p.scenes[0][3] == [("0:point", "point")]
+    res = run_dict(raw)
+    assert [r["light"] for r in res.rows] == ["0:point"] and res.rows[0]["n_gt_shadowed"] > 20
+    notes = [s for s in res.run["status"] if s["status"] == "note"]
+    assert notes and "default point light" in notes[0]["error"]
+    assert res.run["rays"]["gbuffer"] == p.rays["gbuffer"]
 
 
 def test_length_parsing():
