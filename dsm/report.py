@@ -67,8 +67,8 @@ def sweep_of(spec, all_specs) -> tuple[str, float]:
 
 def write_case_images(folder: Path, case: str, classes: np.ndarray, gb, setup, v: np.ndarray):
     """The error image (one colour per class) and the shadow-mapped render of one case."""
-    import matplotlib.pyplot as plt
-    plt.imsave(folder / f"{case}_error.png", metrics.CLASS_COLORS[classes])
+    from matplotlib.image import imsave
+    imsave(folder / f"{case}_error.png", metrics.CLASS_COLORS[classes])
     # Lambert under the light with the map's visibility, ambient elsewhere.
     shade = np.zeros(gb.width * gb.height)
     shade[gb.hit] = 0.12
@@ -76,7 +76,7 @@ def write_case_images(folder: Path, case: str, classes: np.ndarray, gb, setup, v
         n = np.stack([c.numpy() for c in (setup.n.x, setup.n.y, setup.n.z)], 1)
         to_light = _to_light_np(setup, n.shape[0])
         shade[setup.pixels] = 0.12 + 0.88 * np.clip((n * to_light).sum(1), 0, 1) * v
-    plt.imsave(folder / f"{case}_shadow.png", shade.reshape(gb.height, gb.width), cmap="gray", vmin=0, vmax=1)
+    imsave(folder / f"{case}_shadow.png", shade.reshape(gb.height, gb.width), cmap="gray", vmin=0, vmax=1)
 
 
 def _to_light_np(setup, count):
@@ -158,13 +158,12 @@ def pareto_md(rows: list) -> list:
 
 
 def write_pareto(folder: Path, rows: list):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure     # no pyplot: a notebook's backend stays as it is
     folder.mkdir(exist_ok=True)
     for (scene, light, view), rs in _pareto_groups(rows):
         schemes = sorted({r["scheme"] for r in rs})
-        fig, ax = plt.subplots(figsize=(8.5, 4.2))
+        fig = Figure(figsize=(8.5, 4.2))
+        ax = fig.subplots()
         for k, s in enumerate(schemes):
             pts = [(case_time(r), r["error_rate"]) for r in rs if r["scheme"] == s]
             ax.scatter([p[0] for p in pts], [p[1] for p in pts], s=14, color=f"C{k % 10}", label=s)
@@ -179,7 +178,6 @@ def write_pareto(folder: Path, rows: list):
         fig.subplots_adjust(left=0.09, right=0.72, bottom=0.13, top=0.9)
         ax.legend(loc="center left", bbox_to_anchor=(1.02, 0.5), fontsize=7, frameon=False)
         fig.savefig(folder / f"pareto_{_slug(f'{scene}_{light}_{view}')}.png", dpi=80)
-        plt.close(fig)
 
 
 def views_at_equal_memory(rows: list, budgets=()) -> list:
@@ -224,14 +222,13 @@ def _panels(path, series: dict, xlabel: str, ylabels: tuple, title: str, xlog: b
             styles=None):
     """One figure with a panel per y quantity; ``series``: label -> [(x, y0, y1, ...)];
     ``styles``: label -> extra plot keywords (colour, line style)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
     series = {k: sorted(v) for k, v in series.items() if v}
     if not series:
         return
     n = len(ylabels)
-    fig, axes = plt.subplots(1, n, figsize=(4.6 * n + 3.4, 3.8))
+    fig = Figure(figsize=(4.6 * n + 3.4, 3.8))
+    axes = fig.subplots(1, n)
     for label, pts in series.items():
         for k, ax in enumerate(axes, start=1):
             ax.plot([p[0] for p in pts], [p[k] for p in pts], style, lw=0.9, label=label,
@@ -248,7 +245,6 @@ def _panels(path, series: dict, xlabel: str, ylabels: tuple, title: str, xlog: b
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="center left", bbox_to_anchor=(right, 0.5), fontsize=6, frameon=False)
     fig.savefig(path, dpi=80)
-    plt.close(fig)
 
 
 def write_plots(folder: Path, rows: list):

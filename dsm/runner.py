@@ -70,6 +70,23 @@ class Results:
     def column(self, name) -> np.ndarray:
         return np.array([r[name] for r in self.rows])
 
+    def rgb(self, case) -> np.ndarray:
+        """The case's error image as (H, W, 3) uint8 in the report's colours."""
+        if isinstance(case, dict):
+            case = case["case"]
+        return metrics.CLASS_COLORS[self.images[case]]
+
+    def table(self, columns=("scheme", "params", "resolution", "acne_rate", "peterpan_rate", "error_rate",
+                             "build_ms", "lookup_ms")) -> str:
+        """The rows as a Markdown table of the chosen columns (for notebooks and terminals)."""
+        fmt = lambda v: f"{v:.4f}" if isinstance(v, float) and abs(v) < 10 else (f"{v:.1f}" if isinstance(v, float) else str(v))
+        lines = ["| " + " | ".join(columns) + " |", "|---" * len(columns) + "|"]
+        lines += ["| " + " | ".join(fmt(r.get(c, "")) for c in columns) + " |" for r in self.rows]
+        return "\n".join(lines)
+
+    def _repr_markdown_(self):
+        return self.table()
+
     def __getattr__(self, name):
         if name in report.COLUMNS:
             return self.column(name)
