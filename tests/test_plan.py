@@ -58,6 +58,7 @@ def test_constant_and_none_build_nothing_more(run_dict):
     assert all(m["layers"] == ["z1", "shape"] and m["tiles"] == 1 for m in res.run["maps"])
     assert res.run["rays"]["map_continue"] == 0 and res.run["quantized_copies"] == 0
     assert "plan" in res.run and res.run["plan"]["rays"] == p.rays
+    assert all(r["build_first_ms"] == r["build_ms"] > 0 for r in res.rows)   # one layer: its build is the first
 
 
 @pytest.mark.parametrize("needs,culling", [(set(), None), ({"slope"}, None), ({"z2", "slope"}, None),

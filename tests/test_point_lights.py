@@ -265,3 +265,26 @@ def test_equal_memory_budgets(run_dict):
     from dsm.config import ConfigError, parse
     with pytest.raises(ConfigError, match="map"):
         parse(base_config(map={"texels": 1000, "resolution": 64}), "<test>")
+
+
+def test_paraboloid_texel_rays_are_dou_et_als_reflected_rays(variant):
+    """Seed 004, section 3.2: R = 2 (d0 . N) N - d0, N the paraboloid normal (x_c, y_c, 1) normalized,
+    through the texel centre (x_c, y_c); and projecting R's direction gives the centre back."""
+    import mitsuba as mi
+    R = 64
+    view = _view("paraboloid", (0.0, 0.0, 0.0), R, (np.array([-1.0, -1, -1]), np.array([1.0, 1, 1])))
+    ex, ey, ez = view.axes_np
+    i, j = np.meshgrid(np.arange(R) + 0.5, np.arange(R) + 0.5)
+    u, v = i.ravel(), j.ravel()
+    _, d = view.ray_at(mi.Float(u), mi.Float(v))
+    d = _np(d)
+    xc, yc = 2 * u / R - 1, 2 * v / R - 1
+    N = np.stack([xc, yc, np.ones_like(xc)], 1)
+    N /= np.linalg.norm(N, axis=1)[:, None]
+    d0 = np.array([0, 0, 1.0])
+    Rl = 2 * (N @ d0)[:, None] * N - d0
+    expected = Rl[:, :1] * ex + Rl[:, 1:2] * ey + Rl[:, 2:] * ez
+    np.testing.assert_allclose(d, expected, atol=2e-6)
+    pu, pv, _ = view.project(mi.Point3f(*(d[:, k] for k in range(3))))
+    np.testing.assert_allclose(pu.numpy(), u, atol=2e-4)
+    np.testing.assert_allclose(pv.numpy(), v, atol=2e-4)
