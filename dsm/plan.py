@@ -154,6 +154,11 @@ class Plan:
                          for m in self.maps]}
 
 
+def views_for(light_type: str, point_views) -> tuple:
+    """The view kinds a light gets: its own for directional and spot, the config's for points."""
+    return {"directional": ("orthographic",), "spot": ("perspective",)}.get(light_type, tuple(point_views))
+
+
 def memory_budget(cfg: Config) -> int:
     if cfg.memory_budget_mb:
         return int(cfg.memory_budget_mb * 2 ** 20)
@@ -219,8 +224,6 @@ def scene_lights(spec, cfg: Config) -> list:
 
 
 def make(cfg: Config) -> Plan:
-    from .runner import views_for
-    from .shadowmap import CULL_NONE  # noqa: F401  (culling names come from the schemes)
     plan = Plan(cfg.source, budget_bytes=memory_budget(cfg))
     per_case = len(cfg.map.filter) * len(cfg.map.format)
     fmts = tuple(f for f in cfg.map.format if f != "float32")
@@ -235,7 +238,7 @@ def make(cfg: Config) -> Plan:
         lights = scene_lights(sc, cfg)
         plan.scenes.append((sc.label, w, h, lights))
         for label, ltype in lights:
-            for view in views_for(type("L", (), {"type": ltype})(), cfg.map.view):
+            for view in views_for(ltype, cfg.map.view):
                 faces = VIEW_FACES[view]
                 for R in cfg.map.resolutions_for(faces):
                     for culling, group in groups.items():

@@ -97,11 +97,7 @@ class Results:
 
 
 VIEW_FACES = planmod.VIEW_FACES
-
-
-def views_for(light, point_views) -> tuple:
-    """The view kinds a light gets: its own for directional and spot, the config's for points."""
-    return {"directional": ("orthographic",), "spot": ("perspective",)}.get(light.type, tuple(point_views))
+views_for = planmod.views_for
 
 
 def make_view(light, R, receivers_world, bbox, kind=None):
@@ -240,7 +236,7 @@ class Runner:
             except Exception as e:
                 self._fail(f"scene {sd.label} light {label}", e)
                 continue
-            for kind in views_for(light, self.cfg.map.view):
+            for kind in views_for(light.type, self.cfg.map.view):
                 for R in self.cfg.map.resolutions_for(VIEW_FACES[kind]):
                     self._run_map(sd, gb, setup, kind, R, bar)
 
@@ -272,6 +268,7 @@ class Runner:
         groups = {}
         for spec in specs:
             groups.setdefault(schemes.culling_of(spec.params), []).append(spec)
+        first_t = None
         for culling, group in groups.items():
             try:
                 modes = None
@@ -310,13 +307,10 @@ class Runner:
                 bar.update(len(group) * per_case)
                 continue
             build_times = {frozenset(needs): bt}
-            if culling == "none" and not needs:
-                self._first_t = bt
-            elif getattr(self, "_first_view", None) is not view:
+            if first_t is None:
                 # the first layer alone, so a case's extra layers show as build_ms - build_first_ms
-                _, self._first_t = timing.measure(lambda: _map_arrays(sd.scene, view, set(), "none", None, tile),
-                                                  self.cfg.timing_repeats)
-            self._first_view = view
+                first_t = bt if culling == "none" and not needs else timing.measure(
+                    lambda: _map_arrays(sd.scene, view, set(), "none", None, tile), self.cfg.timing_repeats)[1]
             for spec in group:
                 own = frozenset(schemes.get(spec.name).NEEDS)
                 if own not in build_times:
@@ -326,7 +320,7 @@ class Runner:
                 bt = build_times[own]
                 for filt in self.cfg.map.filter:
                     for fmt in self.cfg.map.format:
-                        self._run_case(sd, gb, setup, view, stored[fmt], bt, rx, seam, spec, filt, fmt)
+                        self._run_case(sd, gb, setup, view, stored[fmt], (bt, first_t), rx, seam, spec, filt, fmt)
                         bar.update(1)
 
     def _closed(self, sd):
@@ -336,7 +330,8 @@ class Runner:
                 {"name": n, "closed": c, "why": w} for n, c, w in zip(sd.shape_names, sd.closed, sd.closed_reason)]})
         return sd.closed
 
-    def _run_case(self, sd, gb, setup, view, smap, bt, rx, seam, spec, filt, fmt):
+    def _run_case(self, sd, gb, setup, view, smap, build, rx, seam, spec, filt, fmt):
+        bt, first_t = build
         self.case_no += 1
         case = f"{self.case_no:04d}"
         meta = {"case": case, "scene": sd.label, "light": setup.label, "view": view.kind, "scheme": spec.name,
@@ -356,7 +351,7 @@ class Runner:
             texel = float(np.median(rx.texel_world.numpy())) if rx is not None else 0.0
             sweep_key, sweep_value = report.sweep_of(spec, self.cfg.schemes)
             row = {**meta, **setup.exclusions, **m, "texel_size": texel,
-                   "build_ms": bt.ms, "build_first_ms": self._first_t.ms, "build_compile_ms": bt.compile_ms, "build_peak_mb": smap.peak_bytes / 2 ** 20,
+                   "build_ms": bt.ms, "build_first_ms": first_t.ms, "build_compile_ms": bt.compile_ms, "build_peak_mb": smap.peak_bytes / 2 ** 20,
                    "lookup_ms": lt.ms, "lookup_compile_ms": lt.compile_ms, "lookup_kernels_compiled": lt.cache_misses,
                    "reference_ms": setup.reference_ms, "sweep_key": sweep_key, "sweep_value": sweep_value}
             classes = np.zeros(gb.width * gb.height, np.uint8)

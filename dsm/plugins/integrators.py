@@ -37,9 +37,10 @@ class Options:
         table = {k: v for k, v in d.items() if k not in MAP_KEYS and k != "scheme"}
         if "preset" not in table:
             table["name"] = d.get("scheme", "adaptive")
-        self.spec = cfgmod._parse_scheme(table, source, "integrator", schemes.REGISTRY, schemes.PRESETS)[0]
-        if len(cfgmod._parse_scheme(table, source, "integrator", schemes.REGISTRY, schemes.PRESETS)) != 1:
+        specs = cfgmod._parse_scheme(table, source, "integrator", schemes.REGISTRY, schemes.PRESETS)
+        if len(specs) != 1:
             raise cfgmod.ConfigError(source, "integrator", "give one value per parameter (no sweeps)")
+        self.spec = specs[0]
         self.resolution = cfgmod._number(d.get("resolution", 1024), source, "resolution", integer=True, minimum=1,
                                          maximum=16384)
         self.view = cfgmod._choice(d.get("view", "cube"), source, "view", cfgmod.POINT_VIEWS)
