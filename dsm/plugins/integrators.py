@@ -154,7 +154,10 @@ class DsmShadow(mi.SamplingIntegrator):
 
     def render(self, scene, sensor=None, seed=0, spp=0, develop=True, evaluate=True):
         sensor_obj = scene.sensors()[sensor] if isinstance(sensor, int) else sensor
-        _prepare(self, scene, sensor_obj, "dsm_shadow")
+        prep = _prepare(self, scene, sensor_obj, "dsm_shadow")
+        if len(prep["emitters"]) != len(prep["lights"]):
+            raise ValueError("dsm_shadow shades with the scene's point, spot and directional emitters; this scene has "
+                             "none (dsm_error can still classify it under dsm's default light)")
         return mi.SamplingIntegrator.render(self, scene, sensor, seed, spp, develop, evaluate)
 
     def sample(self, scene, sampler, ray, medium=None, active=True):
