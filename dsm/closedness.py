@@ -5,6 +5,10 @@ exactly two triangles that traverse it in opposite directions (a consistently wo
 manifold surface without boundary). Anything else is open, with the reason reported:
 boundary edges, non-manifold edges (three or more triangles, or duplicated triangles) or
 inconsistent winding. Seed 000 culls back faces of closed meshes only.
+
+A closed mesh wound inward (negative enclosed volume, like a room's walls seen from inside)
+is reported as such: to back-face culling its solid is everything outside it, so a light
+outside it sees through it.
 """
 from __future__ import annotations
 
@@ -36,7 +40,12 @@ def closedness(verts: np.ndarray, faces: np.ndarray) -> tuple[bool, str]:
     if int(degenerate.sum()):
         problems.append(f"{int(degenerate.sum())} degenerate triangles (ignored)")
     closed = not (boundary or nonmanifold or same_direction)
-    return closed, "closed" if closed and not problems else "; ".join(problems) or "closed"
+    if closed and not problems:
+        p = np.zeros((weld.max() + 1, 3))
+        p[weld.ravel()] = verts
+        volume = float(np.einsum("ij,ij->i", p[f[:, 0]], np.cross(p[f[:, 1]], p[f[:, 2]])).sum() / 6.0)
+        return closed, "closed" if volume >= 0 else "closed, wound inward (negative volume: its solid is outside it)"
+    return closed, "; ".join(problems) or "closed"
 
 
 def shape_closedness(shape) -> tuple[bool, str]:

@@ -57,6 +57,8 @@ def test_closedness_detection():
     assert not closed and "winding" in why
     closed, why = closedness(v, np.vstack([f, f[:1]]))    # a duplicated triangle
     assert not closed and "non-manifold" in why
+    closed, why = closedness(v, f[:, ::-1])               # closed, wound inward (a room's walls)
+    assert closed and "inward" in why
 
 
 @pytest.mark.skipif(not (MESHES / "dragon_vrip_res3.ply").exists(), reason="../shared/meshes is absent")
