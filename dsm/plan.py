@@ -242,9 +242,7 @@ def make(cfg: Config) -> Plan:
                 faces = VIEW_FACES[view]
                 for R in cfg.map.resolutions_for(faces):
                     for culling, group in groups.items():
-                        needs = set()
-                        for s in group:
-                            needs |= set(schemes_mod.get(s.name).NEEDS)
+                        needs = schemes_mod.needs_of(group)
                         m = MapPlan(sc.label, label, view, R, faces, culling, tuple(sorted(needs)),
                                     "z2" in needs or culling != "none", fmts,
                                     [f"{s.name} {s.label}".strip() for s in group], len(group) * per_case)

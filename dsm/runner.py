@@ -116,13 +116,6 @@ def make_view(light, R, receivers_world, bbox, kind=None):
     raise ValueError(f"light type {light.type!r} has no view")
 
 
-def needs_of(scheme_specs) -> set:
-    out = set()
-    for s in scheme_specs:
-        out |= set(schemes.get(s.name).NEEDS)
-    return out
-
-
 def light_setup(sd, gb, light, label, repeats: int = 0) -> LightSetup:
     """Receivers of one light (hit pixels facing it, inside its domain) and their exact visibility."""
     p_all, n_all = gb.p, gb.n
@@ -274,7 +267,7 @@ class Runner:
                 modes = None
                 if culling != "none":
                     modes = shadowmap.cull_modes_for(culling, self._closed(sd))
-                needs = needs_of(group)
+                needs = schemes.needs_of(group)
                 mplan = self.plan.map_for(sd.label, setup.label, view.kind, R, culling)
                 tile = mplan.tile if mplan else 0
                 timing.reset_peak()

@@ -107,6 +107,15 @@ class View:
         depth = self.ray_depth(o, d, t)
         return dr.select((den != 0) & dr.isfinite(depth), depth, dr.inf)
 
+    def to_square(self, u, v):
+        """Map position (texel units) as coordinates in [-1, 1]^2 over the face."""
+        return 2.0 * u / self.R - 1.0, 2.0 * v / self.R - 1.0
+
+    def from_square(self, x, y):
+        """Coordinates in [-1, 1]^2 as a map position in texel units."""
+        h = 0.5 * self.R
+        return (x + 1.0) * h, (y + 1.0) * h
+
     def texel_coords(self, idx):
         """(face, centre u, centre v) of texel indices ``idx``."""
         RR = self.R_u * self.R_u
@@ -193,9 +202,8 @@ class PerspectiveView(View):
         return (x * s + self.R * 0.5), (y * s + self.R * 0.5)
 
     def ray_at(self, u, v, face=None):
-        a = (2.0 * u / self.R - 1.0) * self.T
-        b = (2.0 * v / self.R - 1.0) * self.T
-        d = dr.normalize(self.ex * a + self.ey * b + self.ez)
+        a, b = self.to_square(u, v)
+        d = dr.normalize(self.ex * (a * self.T) + self.ey * (b * self.T) + self.ez)
         return dr.zeros(mi.Point3f, dr.width(d)) + self.o, d
 
     def texel_world(self, p):
@@ -275,12 +283,10 @@ class ParaboloidView(PointView):
     def project_on(self, p, face=None):
         face = self.face_of(p) if face is None else face
         x, y, den = self._den(p, face)
-        h = 0.5 * self.R
-        return (x / den + 1.0) * h, (y / den + 1.0) * h
+        return self.from_square(x / den, y / den)
 
     def ray_at(self, u, v, face=None):
-        x = 2.0 * u / self.R - 1.0
-        y = 2.0 * v / self.R - 1.0
+        x, y = self.to_square(u, v)
         r2 = dr.square(x) + dr.square(y)
         s = self._sign(face) if face is not None else mi.Float(1.0)
         inv = 1.0 / (1.0 + r2)
@@ -292,7 +298,7 @@ class ParaboloidView(PointView):
         return 2.0 * den / self.R
 
     def seam_distance(self, u, v, face):
-        x, y = 2.0 * u / self.R - 1.0, 2.0 * v / self.R - 1.0
+        x, y = self.to_square(u, v)
         return dr.abs(1.0 - dr.sqrt(dr.square(x) + dr.square(y))) * 0.5 * self.R
 
     def inside(self, p):
@@ -345,13 +351,13 @@ class CubeView(PointView):
     def project_on(self, p, face=None):
         face = self.face_of(p) if face is None else face
         x, y, z = self._local(p, face)
-        h = 0.5 * self.R
-        return (x / z + 1.0) * h, (y / z + 1.0) * h
+        return self.from_square(x / z, y / z)
 
     def ray_at(self, u, v, face=None):
         face = dr.zeros(mi.UInt32, dr.width(u)) if face is None else face
         U, V, W = self._frame(face)
-        d = dr.normalize(U * (2.0 * u / self.R - 1.0) + V * (2.0 * v / self.R - 1.0) + W)
+        a, b = self.to_square(u, v)
+        d = dr.normalize(U * a + V * b + W)
         return dr.zeros(mi.Point3f, dr.width(d)) + self.o, d
 
     def texel_world(self, p):

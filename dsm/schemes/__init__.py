@@ -38,3 +38,11 @@ def describe_params(params) -> str:
 def culling_of(params) -> str:
     """The map culling a scheme instance asks for (``none`` for schemes without the parameter)."""
     return getattr(params, "culling", "none")
+
+
+def needs_of(scheme_specs) -> set:
+    """The map attributes (beyond z1 and shape ids) a group of scheme instances reads."""
+    out = set()
+    for s in scheme_specs:
+        out |= set(get(s.name).NEEDS)
+    return out
