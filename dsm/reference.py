@@ -1,13 +1,13 @@
 """Exact visibility V* of each receiver from a light, by shadow rays (once per scene/light).
 
-Rays leave the receiver by Mitsuba's robust spawn rule: the origin moves along the geometric
-normal, toward the side the ray leaves by, by ``(m + max|p|) * RayEpsilon``, and a ray to a
-point stops ``ShadowEpsilon`` short of it (``Interaction.spawn_ray`` / ``spawn_ray_to``, with
-Mitsuba's own constants). Mitsuba takes ``m = 1`` (a scene about one unit across); here ``m``
-is the scene's own magnitude (the largest coordinate of its bounding box), so the offset
-keeps its size relative to the scene: with ``m = 1`` a millimetre-sized scene would see its
-shadows shrink by the offset (9 % of a 1 mm box). At unit scale both rules agree (a test
-holds them to it). ``mitsuba_spawn=True`` uses Mitsuba's methods unchanged.
+Rays leave the receiver just beyond a bound on its hit point's floating-point error
+(:mod:`dsm.spawn`: a few float32 ulps of the coordinates and of the triangle the hit was
+interpolated from, pbrt-v4's approach), toward the side the ray leaves by; a ray to a point
+light stops that far short of it. The offset never grows with a hand-set constant times the
+distance from the origin, so a scene moved far from the origin keeps its exact visibility as
+long as float32 still resolves its gaps (see :mod:`dsm.spawn` for the limit).
+``mitsuba_spawn=True`` uses Mitsuba's own ``spawn_ray`` / ``spawn_ray_to`` instead (for
+comparison in tests).
 
 The distance to the first occluder is kept: it tells peter-panning at a contact from a leak
 far away.
@@ -18,29 +18,31 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-
-def _offset_origin(si, d, magnitude):
-    mag = (magnitude + dr.max(dr.abs(si.p))) * mi.math.RayEpsilon
-    mag = dr.select(dr.dot(si.n, d) >= 0, mag, -mag)
-    return si.p + si.n * mag
+from . import spawn
 
 
 def shadow_rays(si, light, magnitude: float = 1.0, mitsuba_spawn: bool = False):
-    """Rays from the receivers' surface interactions toward ``light`` (a LightSpec)."""
+    """Rays from the receivers' surface interactions toward ``light`` (a LightSpec).
+
+    ``magnitude``: the scene's largest coordinate, the extent used in the error bound of
+    non-triangle shapes (a triangle's own extent is used for meshes).
+    """
     n = dr.width(si.p)
     if light.type == "directional":
         d = dr.zeros(mi.Vector3f, n) - mi.Vector3f(*map(float, np.asarray(light.direction) /
                                                         np.linalg.norm(light.direction)))
         if mitsuba_spawn:
             return si.spawn_ray(d)
-        return mi.Ray3f(_offset_origin(si, d, magnitude), d)
+        return spawn.ray_along(si, si.n, d, hit_error(si, magnitude))
     target = mi.Point3f(*map(float, light.position))
     if mitsuba_spawn:
         return si.spawn_ray_to(target)
-    o = _offset_origin(si, target - si.p, magnitude)
-    d = target - o
-    dist = dr.norm(d)
-    return mi.Ray3f(o, d / dist, dist * (1.0 - mi.math.ShadowEpsilon), 0.0, mi.Color0f())
+    return spawn.ray_to(si, si.n, target, hit_error(si, magnitude))
+
+
+def hit_error(si, magnitude: float):
+    """The spawn offset of each receiver (:func:`dsm.spawn.error_bound`)."""
+    return spawn.error_bound(si, dr.opaque(mi.Float, float(magnitude)))
 
 
 def visibility(scene, si, light, magnitude: float = 1.0, mitsuba_spawn: bool = False):

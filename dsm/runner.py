@@ -279,7 +279,8 @@ class Runner:
                 self.maps.append({"scene": sd.label, "light": setup.label, "view": view.kind, "resolution": R,
                                   "culling": culling, "layers": ["z1", "shape"] + [k for k in shadowmap.LAYERS
                                                                                    if getattr(smap, k) is not None],
-                                  "tiles": smap.tiles, "rays": dict(smap.rays), "build_peak_bytes": peak,
+                                  "tiles": smap.tiles, "rays": dict(smap.rays), "rehits": smap.rehits,
+                                  "build_peak_bytes": peak,
                                   "build_peak_bytes_est": mplan.peak_bytes if mplan else None,
                                   "formats": [f for f in self.cfg.map.format if f != "float32"]})
                 for k, v in smap.rays.items():

@@ -6,8 +6,10 @@ built. Extra attributes are built only when a scheme in the plan needs them:
 
 - ``slope``: the caster's largest depth change per texel step, from the caster's plane at
   the texel (its geometric normal), as rasterizer depth bias computes it.
-- ``z2``: the second surface along the texel's ray, found by spawning past the first hit
-  with Mitsuba's own offset (``spawn_ray``); the view's far bound where there is none.
+- ``z2``: the second surface along the texel's ray, found by continuing past the first hit
+  from just beyond the bound on its floating-point error (:mod:`dsm.spawn`); the view's far
+  bound where there is none. A continuation that hits the triangle it left again is counted
+  (``rehits``; 0 when the bound holds).
 
 Culling is a property of the build, per shape (``CULL_NONE``, ``CULL_BACK``, ``CULL_FRONT``):
 a culled hit is stepped over and the ray goes on. A face is a back face when its winding
@@ -20,6 +22,8 @@ from dataclasses import dataclass, field
 import drjit as dr
 import mitsuba as mi
 import numpy as np
+
+from . import spawn
 
 LAYERS = ("slope", "z2")   # optional attributes a scheme may need (besides z1 and shape)
 CULL_NONE, CULL_BACK, CULL_FRONT = 0, 1, 2
@@ -36,6 +40,7 @@ class ShadowMap:
     z2: object = None           # mi.Float or None
     culling: str = "none"
     unfinished: int = 0         # texels still searching after MAX_STEPS (0 in every sane scene)
+    rehits: int = 0             # continuation rays that hit the triangle they left again
     rays: dict = field(default_factory=dict)   # rays cast, by kind
     tiles: int = 1                              # passes the build took (wavefront sizing)
     peak_bytes: int = 0                         # allocation watermark of the build (set by the runner)
@@ -46,14 +51,17 @@ class ShadowMap:
 
 
 def first_layer(scene, view, first: int = 0, count: int | None = None):
-    """(z1, shape index, preliminary hit, rays) for texels ``first .. first + count - 1``."""
+    """(z1, shape index, surface interaction, rays) for texels ``first .. first + count - 1``."""
     count = view.n_texels - first if count is None else count
     rays = view.texel_rays(first, count)
     pi = scene.ray_intersect_preliminary(rays, coherent=True)
     valid = pi.is_valid()
-    z1 = dr.select(valid, view.ray_depth(rays.o, rays.d, pi.t), view.far)
+    # the hit point as every layer and receiver computes it (barycentric on the triangle), then
+    # the view's one depth function: a one-layer map and a layered one store the same z1
+    si = pi.compute_surface_interaction(rays, ray_flags=mi.RayFlags.Minimal, active=valid)
+    z1 = dr.select(valid, view.depth(si.p), view.far)
     shape = dr.select(valid, pi.shape_index, 0xFFFFFFFF)
-    return z1, shape, pi, rays
+    return z1, shape, si, rays
 
 
 def plane_slope(view, p, n, z1, valid, first: int = 0):
@@ -72,8 +80,10 @@ def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool
             count: int | None = None):
     """First (and second) accepted surface per texel under per-shape culling.
 
-    Returns (z1, shape1, slope or None, z2 or None, rays by kind, unfinished texels).
+    Returns (z1, shape1, slope or None, z2 or None, rays by kind, unfinished texels, re-hits).
     """
+    bb = scene.bbox()
+    magnitude = dr.opaque(mi.Float, float(np.max(np.abs(np.concatenate([np.ravel(bb.min), np.ravel(bb.max)])))))
     n = view.n_texels - first if count is None else count
     ray = view.texel_rays(first, n)
     modes = mi.UInt32(np.asarray(cull_modes, np.uint32))
@@ -85,6 +95,8 @@ def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool
     found = dr.zeros(mi.UInt32, n)
     active = dr.full(mi.Bool, True, n)
     cast1, cast2 = dr.zeros(mi.UInt32, n), dr.zeros(mi.UInt32, n)   # rays cast per texel, by layer sought
+    prev_shape, prev_prim = dr.full(mi.UInt32, 0xFFFFFFFF, n), dr.full(mi.UInt32, 0xFFFFFFFF, n)
+    rehit = dr.zeros(mi.UInt32, n)
     for _ in range(MAX_STEPS):
         cast1 += dr.select(active & (found == 0), 1, 0)
         cast2 += dr.select(active & (found == 1), 1, 0)
@@ -104,15 +116,18 @@ def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool
             n1 = dr.select(got1, si.n, n1)
         z2 = dr.select(got2, depth, z2)
         found += dr.select(accept, 1, 0)
+        rehit += dr.select(valid & (pi.shape_index == prev_shape) & (pi.prim_index == prev_prim), 1, 0)
+        prev_shape, prev_prim = dr.select(valid, pi.shape_index, prev_shape), dr.select(valid, pi.prim_index, prev_prim)
         active = valid & (found < need)
-        ray = dr.select(active, si.spawn_ray(ray.d), ray)
-        dr.eval(z1, z2, shape1, p1, n1, found, active, ray, cast1, cast2)
+        ray = dr.select(active, spawn.ray_along(si, si.n, ray.d, spawn.error_bound(si, magnitude)), ray)
+        dr.eval(z1, z2, shape1, p1, n1, found, active, ray, cast1, cast2, rehit, prev_shape, prev_prim)
         if _count(active) == 0:          # the one synchronisation per step
             break
     total = int(dr.sum(cast1).numpy().ravel()[0]) + int(dr.sum(cast2).numpy().ravel()[0])
     rays = {"map_texel": n, "map_continue": total - n}
     slope = plane_slope(view, p1, n1, z1, found > 0, first) if want_slope else None
-    return z1, shape1, slope, (z2 if want_z2 else None), rays, _count(active)
+    rehits = int(dr.sum(rehit).numpy().ravel()[0])
+    return z1, shape1, slope, (z2 if want_z2 else None), rays, _count(active), rehits
 
 
 def is_layered(needs, cull_modes) -> bool:
@@ -122,19 +137,18 @@ def is_layered(needs, cull_modes) -> bool:
 
 
 def _build_range(scene, view, needs, modes, first, count):
-    """(arrays by name, rays by kind, unfinished texels) for one range of texels."""
+    """(arrays by name, rays by kind, unfinished texels, re-hits) for one range of texels."""
     if not is_layered(needs, modes):
-        z1, shape, pi, rays = first_layer(scene, view, first, count)
+        z1, shape, si, rays = first_layer(scene, view, first, count)
         out = {"z1": z1, "shape": shape}
         if "slope" in needs:
-            si = pi.compute_surface_interaction(rays, ray_flags=mi.RayFlags.Minimal)
-            out["slope"] = plane_slope(view, si.p, si.n, z1, pi.is_valid(), first)
-        return out, {"map_texel": count, "map_continue": 0}, 0
+            out["slope"] = plane_slope(view, si.p, si.n, z1, si.is_valid(), first)
+        return out, {"map_texel": count, "map_continue": 0}, 0, 0
     modes = modes if modes is not None else np.zeros(len(scene.shapes()), np.uint32)
-    z1, shape, slope, z2, rays, unfinished = layered(scene, view, modes, "z2" in needs, "slope" in needs,
-                                                     first, count)
+    z1, shape, slope, z2, rays, unfinished, rehits = layered(scene, view, modes, "z2" in needs, "slope" in needs,
+                                                             first, count)
     out = {"z1": z1, "shape": shape, "slope": slope, "z2": z2}
-    return {k: v for k, v in out.items() if v is not None}, rays, unfinished
+    return {k: v for k, v in out.items() if v is not None}, rays, unfinished, rehits
 
 
 def build(scene, view, needs, culling: str = "none", cull_modes=None, tile: int | None = None) -> ShadowMap:
@@ -151,13 +165,13 @@ def build(scene, view, needs, culling: str = "none", cull_modes=None, tile: int 
     n = view.n_texels
     tile = n if not tile or tile >= n else int(tile)
     if tile == n:
-        out, rays, unfinished = _build_range(scene, view, needs, cull_modes, 0, n)
+        out, rays, unfinished, rehits = _build_range(scene, view, needs, cull_modes, 0, n)
         tiles = 1
     else:
-        out, rays, unfinished, tiles = {}, {"map_texel": 0, "map_continue": 0}, 0, 0
+        out, rays, unfinished, rehits, tiles = {}, {"map_texel": 0, "map_continue": 0}, 0, 0, 0
         for first in range(0, n, tile):
             count = min(tile, n - first)
-            part, r, u = _build_range(scene, view, needs, cull_modes, first, count)
+            part, r, u, h = _build_range(scene, view, needs, cull_modes, first, count)
             idx = dr.arange(mi.UInt32, first, first + count)
             for k, v in part.items():
                 if k not in out:
@@ -167,9 +181,10 @@ def build(scene, view, needs, culling: str = "none", cull_modes=None, tile: int 
             for k in rays:
                 rays[k] += r[k]
             unfinished += u
+            rehits += h
             tiles += 1
     smap = ShadowMap(view, out["z1"], out["shape"], out.get("slope"), rays=rays, z2=out.get("z2"),
-                     culling=culling, unfinished=unfinished)
+                     culling=culling, unfinished=unfinished, rehits=rehits)
     smap.tiles = tiles
     return smap
 
