@@ -8,7 +8,8 @@ inconsistent winding. Seed 000 culls back faces of closed meshes only.
 
 A closed mesh wound inward (negative enclosed volume, like a room's walls seen from inside)
 is reported as such: to back-face culling its solid is everything outside it, so a light
-outside it sees through it.
+outside it would see through it. The runner therefore never culls it (it is culled as an open
+surface is: not at all), and run.json says so.
 """
 from __future__ import annotations
 

@@ -10,7 +10,13 @@
 | seam_error_rate              | error rate of receivers within SEAM_TEXELS of a seam between
 |                              | faces (cube edges, paraboloid rim); off_seam_error_rate: the rest
 
-A rate whose denominator is zero is 0 (its count columns show why); nothing here is NaN.
+| backface_lit_rate            | pixels facing away from the light (attached shadow) that the map
+|                              | calls lit, over those pixels: seed 000's self-unshadowing, apart
+|                              | from the receivers' metrics
+
+A value without a defined meaning (a rate whose denominator is empty, the median distance
+without peter-panning, seam rates on a view without seams, anything over zero receivers) is
+NaN here: an empty cell in metrics.csv, a dash in tables, left out of means and plots.
 """
 from __future__ import annotations
 
@@ -25,8 +31,16 @@ CLASS_COLORS = np.array([[0, 0, 0], [235, 225, 190], [70, 80, 110], [230, 40, 40
 SEAM_TEXELS = 3.0
 
 
+UNDEFINED = float("nan")
+
+
 def _rate(num, den) -> float:
-    return float(num) / float(den) if den else 0.0
+    return float(num) / float(den) if den else UNDEFINED
+
+
+def defined(x) -> bool:
+    """Whether a metric value has a meaning (is not the undefined NaN)."""
+    return not (isinstance(x, float) and x != x)
 
 
 def compute(v: np.ndarray, v_star: np.ndarray, rx_shape: np.ndarray, tap_shape: np.ndarray,
@@ -44,17 +58,20 @@ def compute(v: np.ndarray, v_star: np.ndarray, rx_shape: np.ndarray, tap_shape: 
     dist = occluder_dist[peter]
     dist = dist[np.isfinite(dist)]
     err = acne | peter
-    near = np.zeros(n, bool) if seam_dist is None else np.asarray(seam_dist) < SEAM_TEXELS
+    seam_dist = None if seam_dist is None else np.asarray(seam_dist)
+    has_seams = seam_dist is not None and bool(np.isfinite(seam_dist).any())
+    near = np.zeros(n, bool) if not has_seams else seam_dist < SEAM_TEXELS
     return {
         "n_receivers": n, "n_gt_lit": n_lit, "n_gt_shadowed": n_shadow,
         "n_acne": n_acne, "n_acne_self": int(acne_self.sum()), "n_acne_edge": int(n_acne - acne_self.sum()),
         "n_peterpan": n_peter,
         "acne_rate": _rate(n_acne, n_lit), "peterpan_rate": _rate(n_peter, n_shadow),
         "error_rate": _rate(n_acne + n_peter, n),
-        "mean_abs_error": float(np.abs(v - v_star).mean()) if n else 0.0,
-        "peterpan_dist_median": float(np.median(dist)) if dist.size else 0.0,
-        "n_seam": int(near.sum()), "seam_error_rate": _rate((err & near).sum(), near.sum()),
-        "off_seam_error_rate": _rate((err & ~near).sum(), (~near).sum()),
+        "mean_abs_error": float(np.abs(v - v_star).mean()) if n else UNDEFINED,
+        "peterpan_dist_median": float(np.median(dist)) if dist.size else UNDEFINED,
+        "n_seam": int(near.sum()) if has_seams else UNDEFINED,
+        "seam_error_rate": _rate((err & near).sum(), near.sum()) if has_seams else UNDEFINED,
+        "off_seam_error_rate": _rate((err & ~near).sum(), (~near).sum()) if has_seams else UNDEFINED,
     }
 
 

@@ -1,8 +1,11 @@
 """Report: metrics.csv (written row by row), table.md, images/, plots/, run.json."""
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
+import json
+import os
 import platform
 import subprocess
 import sys
@@ -23,6 +26,31 @@ COLUMNS = [
 ]
 
 
+@contextlib.contextmanager
+def atomic(path: Path):
+    """Yield a temporary path beside ``path``; rename it to ``path`` once written, so a reader
+    (or an interrupted run) never sees a half-written file."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def write_json(path: Path, data: dict, indent=None):
+    with atomic(path) as tmp:
+        tmp.write_text(json.dumps(data, indent=indent, default=str))
+
+
+def save_png(path: Path, save):
+    """``save(file_object_or_path, format)`` into ``path`` atomically."""
+    with atomic(path) as tmp:
+        save(tmp, "png")
+
+
 class CsvWriter:
     """Appends one row per finished case, flushing each, so a crash loses nothing done."""
 
@@ -37,7 +65,9 @@ class CsvWriter:
 
 
 def _fmt(x):
-    return f"{x:.6g}" if isinstance(x, float) else x
+    if isinstance(x, float):
+        return f"{x:.6g}" if metrics.defined(x) else ""      # undefined: an empty cell
+    return x
 
 
 def read_csv(path) -> list[dict]:
@@ -68,7 +98,7 @@ def sweep_of(spec, all_specs) -> tuple[str, float]:
 def write_case_images(folder: Path, case: str, classes: np.ndarray, gb, setup, v: np.ndarray):
     """The error image (one colour per class) and the shadow-mapped render of one case."""
     from matplotlib.image import imsave
-    imsave(folder / f"{case}_error.png", metrics.CLASS_COLORS[classes])
+    save_png(folder / f"{case}_error.png", lambda f, fmt: imsave(f, metrics.CLASS_COLORS[classes], format=fmt))
     # Lambert under the light with the map's visibility, ambient elsewhere.
     shade = np.zeros(gb.width * gb.height)
     shade[gb.hit] = 0.12
@@ -76,7 +106,8 @@ def write_case_images(folder: Path, case: str, classes: np.ndarray, gb, setup, v
         n = np.stack([c.numpy() for c in (setup.n.x, setup.n.y, setup.n.z)], 1)
         to_light = _to_light_np(setup, n.shape[0])
         shade[setup.pixels] = 0.12 + 0.88 * np.clip((n * to_light).sum(1), 0, 1) * v
-    imsave(folder / f"{case}_shadow.png", shade.reshape(gb.height, gb.width), cmap="gray", vmin=0, vmax=1)
+    save_png(folder / f"{case}_shadow.png", lambda f, fmt: imsave(f, shade.reshape(gb.height, gb.width), cmap="gray",
+                                                                  vmin=0, vmax=1, format=fmt))
 
 
 def _to_light_np(setup, count):
@@ -102,12 +133,36 @@ def legend_md() -> str:
     return "Error images (`images/<case>_error.png`): " + "; ".join(items) + "."
 
 
+def status_md(status) -> list:
+    """Markdown lines listing what failed (with its reason), what was skipped and the empty cases."""
+    status = status or []
+    out = []
+    failed = [x for x in status if x["status"] == "failed"]
+    if failed:
+        out += ["", f"## Failed ({len(failed)})", "", "| what | error |", "|---|---|"]
+        out += [f"| {x['what']} | {str(x.get('error', '')).replace('|', '/')} |" for x in failed]
+    skipped = [x for x in status if x["status"] == "skipped"]
+    if skipped:
+        out += ["", f"## Skipped ({len(skipped)})", ""] + [f"- {x['what']}: {x.get('error', '')}" for x in skipped]
+    empty = [x for x in status if x["status"] == "empty"]
+    if empty:
+        groups = {}
+        for x in empty:
+            groups.setdefault((x.get("scene"), x.get("light"), x.get("view")), []).append(x["what"].split()[-1])
+        out += ["", f"## Empty cases ({len(empty)})", "",
+                "No camera pixel is a receiver of this light and view (nothing faces the light inside its "
+                "domain), so these cases say nothing about a scheme; their rates are undefined (-)."]
+        out += [f"- {sc}, light {li}, {vi}: {len(c)} cases ({c[0]} to {c[-1]})" for (sc, li, vi), c in groups.items()]
+    return out
+
+
 def write_table(path: Path, rows: list, cfg, status=None):
     lines = [f"# {cfg.name}", "", f"Config: `{cfg.source}`. {len(rows)} cases. Rates: acne = n_acne / n_gt_lit, "
              "peter-pan = n_peterpan / n_gt_shadowed, error = (acne + peter-pan) / receivers; "
              "self/edge: acne counts on the receiver's own shape / at another shape's edge; pp dist: median "
-             "distance from a peter-panned receiver to its true occluder (world units). Times are warm medians.",
-             "", legend_md(), "",
+             "distance from a peter-panned receiver to its true occluder (world units). Times are warm medians. "
+             "A dash: undefined (an empty denominator), left out of every summary and plot.",
+             *status_md(status), "", legend_md(), "",
              "| case | " + " | ".join(h for _, h in TABLE_COLUMNS) + " |",
              "|---" * (len(TABLE_COLUMNS) + 1) + "|"]
     for r in rows:
@@ -115,7 +170,8 @@ def write_table(path: Path, rows: list, cfg, status=None):
         lines.append("| " + " | ".join(map(str, cells)) + " |")
     lines += views_at_equal_memory(rows, getattr(cfg.map, "texels", ()))
     lines += pareto_md(rows)
-    path.write_text("\n".join(lines) + "\n")
+    with atomic(path) as tmp:
+        tmp.write_text("\n".join(lines) + "\n")
 
 
 def case_time(r) -> float:
@@ -125,7 +181,7 @@ def case_time(r) -> float:
 
 def pareto_front(rows: list) -> list:
     """The rows no other row beats on both error rate and time (ties kept once), fastest first."""
-    pts = sorted(rows, key=lambda r: (case_time(r), r["error_rate"]))
+    pts = sorted((r for r in rows if metrics.defined(r["error_rate"])), key=lambda r: (case_time(r), r["error_rate"]))
     front, best = [], float("inf")
     for r in pts:
         if r["error_rate"] < best:
@@ -161,11 +217,14 @@ def write_pareto(folder: Path, rows: list):
     from matplotlib.figure import Figure     # no pyplot: a notebook's backend stays as it is
     folder.mkdir(exist_ok=True)
     for (scene, light, view), rs in _pareto_groups(rows):
+        rs = [r for r in rs if metrics.defined(r["error_rate"])]     # empty cases have no error rate
+        if not rs:
+            continue
         schemes = sorted({r["scheme"] for r in rs})
         fig = Figure(figsize=(8.5, 4.2))
         ax = fig.subplots()
         for k, s in enumerate(schemes):
-            pts = [(case_time(r), r["error_rate"]) for r in rs if r["scheme"] == s]
+            pts = [(case_time(r), r["error_rate"]) for r in rs if r["scheme"] == s and metrics.defined(r["error_rate"])]
             ax.scatter([p[0] for p in pts], [p[1] for p in pts], s=14, color=f"C{k % 10}", label=s)
         front = pareto_front(rs)
         ax.plot([case_time(r) for r in front], [r["error_rate"] for r in front], "k-", lw=0.8)
@@ -177,7 +236,7 @@ def write_pareto(folder: Path, rows: list):
         ax.set_title(f"{scene}, light {light}, {view}", fontsize=9)
         fig.subplots_adjust(left=0.09, right=0.72, bottom=0.13, top=0.9)
         ax.legend(loc="center left", bbox_to_anchor=(1.02, 0.5), fontsize=7, frameon=False)
-        fig.savefig(folder / f"pareto_{_slug(f'{scene}_{light}_{view}')}.png", dpi=80)
+        save_png(folder / f"pareto_{_slug(f'{scene}_{light}_{view}')}.png", lambda f, fmt: fig.savefig(f, dpi=80, format=fmt))
 
 
 def views_at_equal_memory(rows: list, budgets=()) -> list:
@@ -203,15 +262,20 @@ def views_at_equal_memory(rows: list, budgets=()) -> list:
         cells = [key[0], key[1], key[2], key[3], key[7]]
         for v in views:
             r = g.get(v)
-            cells += ([f"{r['error_rate']:.4f}", f"{r['seam_error_rate']:.4f} / {r['off_seam_error_rate']:.4f}",
+            cells += ([_cell(r["error_rate"]), f"{_cell(r['seam_error_rate'])} / {_cell(r['off_seam_error_rate'])}",
                        f"{case_time(r):.1f}"] if r else ["", "", ""])
-        best = min(g.values(), key=lambda r: (round(r["error_rate"], 4), case_time(r)))
+        scored = [r for r in g.values() if metrics.defined(r["error_rate"])]
+        if not scored:
+            continue
+        best = min(scored, key=lambda r: (round(r["error_rate"], 4), case_time(r)))
         out.append("| " + " | ".join(map(str, cells + [best["view"]])) + " |")
     return out
 
 
 def _cell(x):
     if isinstance(x, float):
+        if not metrics.defined(x):
+            return "-"
         return f"{x:.4f}" if abs(x) < 10 else f"{x:.1f}"
     return x
 
@@ -223,7 +287,9 @@ def _panels(path, series: dict, xlabel: str, ylabels: tuple, title: str, xlog: b
     """One figure with a panel per y quantity; ``series``: label -> [(x, y0, y1, ...)];
     ``styles``: label -> extra plot keywords (colour, line style)."""
     from matplotlib.figure import Figure
-    series = {k: sorted(v) for k, v in series.items() if v}
+    # undefined values (NaN: an empty denominator) are left out, not drawn as 0
+    series = {k: sorted(p for p in v if any(metrics.defined(float(y)) for y in p[1:])) for k, v in series.items()}
+    series = {k: v for k, v in series.items() if v}
     if not series:
         return
     n = len(ylabels)
@@ -244,7 +310,7 @@ def _panels(path, series: dict, xlabel: str, ylabels: tuple, title: str, xlog: b
     fig.subplots_adjust(left=0.07 * 4.6 * n / (4.6 * n + 3.4), right=right - 0.01, bottom=0.13, top=0.88, wspace=0.3)
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="center left", bbox_to_anchor=(right, 0.5), fontsize=6, frameon=False)
-    fig.savefig(path, dpi=80)
+    save_png(path, lambda f, fmt: fig.savefig(f, dpi=80, format=fmt))
 
 
 def write_plots(folder: Path, rows: list):
@@ -307,18 +373,22 @@ def git_commit() -> str:
         return "unknown"
 
 
-def run_info(cfg, variant, rays, status) -> dict:
+def versions() -> dict:
+    """Python, Mitsuba, Dr.Jit, libLLVM and the kit's git commit (read once per run: git is a subprocess)."""
     import drjit as dr
     import mitsuba as mi
     from .env import llvm_version
+    return {"python": platform.python_version(), "mitsuba": mi.__version__, "drjit": dr.__version__,
+            "libllvm": ".".join(map(str, llvm_version() or ())) or "unavailable", "dsm_git_commit": git_commit()}
+
+
+def run_info(cfg, variant, rays, status, versions_: dict, threads: int) -> dict:
     failed = [s for s in status if s["status"] == "failed"]
     return {
-        "experiment": cfg.name, "config_file": cfg.source, "config": cfg.raw,
-        "versions": {"python": platform.python_version(), "mitsuba": mi.__version__, "drjit": dr.__version__,
-                     "libllvm": ".".join(map(str, llvm_version() or ())) or "unavailable",
-                     "dsm_git_commit": git_commit()},
-        "variant": variant, "threads": dr.thread_count(), "timing_repeats": cfg.timing_repeats,
+        "experiment": cfg.name, "config_file": cfg.source, "config": cfg.raw, "versions": versions_,
+        "variant": variant, "threads": threads, "timing_repeats": cfg.timing_repeats,
         "rays": dict(rays), "n_cases_ok": sum(1 for s in status if s["status"] == "ok" and s["what"].startswith("case")),
         "n_failed": len(failed), "n_skipped": sum(1 for s in status if s["status"] == "skipped"),
+        "n_empty": sum(1 for s in status if s["status"] == "empty"),
         "n_warnings": sum(1 for s in status if s["status"] in ("warning", "note")), "status": status,
     }

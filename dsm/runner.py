@@ -8,7 +8,7 @@ are written as they finish, so nothing done is lost.
 """
 from __future__ import annotations
 
-import json
+import sys
 import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -152,6 +152,10 @@ def closed_flags(sd) -> list:
         sd.closed, sd.closed_reason = [], []
         for name, shape in zip(sd.shape_names, sd.scene.shapes()):
             closed, why = shape_closedness(shape)
+            if closed and "wound inward" in why:
+                # its solid is everything outside it: a light outside (a spot above a room) would
+                # see through its back faces, so culling leaves it whole, as an open surface
+                closed, why = False, why + "; culling treats it as open"
             if name in over:
                 closed, why = over[name], f"set by the config (detected: {why})"
             sd.closed.append(closed)
@@ -177,14 +181,38 @@ class Runner:
         self.images = {}
         self.case_no = 0
         self.quantized = 0            # quantized map copies made (stored formats other than float32)
+        self.versions = report.versions()
+        self.state = "running"
 
     # ------------------------------------------------------------ top level
     def run(self) -> Results:
+        """Run every case. run.json is rewritten (atomically) after each case with the run's state:
+        ``running``, then ``complete``, or ``interrupted`` after Ctrl-C (re-raised once the
+        folder says what it holds); a killed run leaves ``running`` and every finished case."""
         timing.enable_history()
         self.out.mkdir(parents=True, exist_ok=True)
         (self.out / "images").mkdir(exist_ok=True)
         self.csv = report.CsvWriter(self.out / "metrics.csv")
+        self.state = "running"
+        self._write_run_json()
         bar = report.progress(total=self.plan.cases, enabled=self.progress)
+        try:
+            self._run_scenes(bar)
+        except KeyboardInterrupt:
+            self.state = "interrupted"
+            raise
+        else:
+            self.state = "complete"
+        finally:
+            bar.close()
+            self._write_run_json()
+            report.write_table(self.out / "table.md", self.rows, self.cfg, self.status)
+            if self.state == "complete":
+                report.write_plots(self.out / "plots", self.rows)
+                report.write_pareto(self.out / "plots", self.rows)
+        return Results(self.out, self.rows, self._run_json(), self.images)
+
+    def _run_scenes(self, bar):
         for spec in self.cfg.scenes:
             if spec.missing:
                 self.status.append({"what": f"scene {spec.label}", "status": "skipped", "error": spec.missing})
@@ -196,16 +224,12 @@ class Runner:
                 continue
             self._run_scene(sd, bar)
             self._write_run_json()
-        bar.close()
-        self._write_run_json()
-        report.write_table(self.out / "table.md", self.rows, self.cfg)
-        report.write_plots(self.out / "plots", self.rows)
-        report.write_pareto(self.out / "plots", self.rows)
-        return Results(self.out, self.rows, self._run_json(), self.images)
 
     def _fail(self, what, exc):
-        self.status.append({"what": what, "status": "failed", "error": f"{type(exc).__name__}: {exc}",
+        error = f"{type(exc).__name__}: {exc}"
+        self.status.append({"what": what, "status": "failed", "error": error,
                             "traceback": traceback.format_exc(limit=6)})
+        print(f"dsm: failed: {what}: {error}", file=sys.stderr)     # seen where the user looks, not only in run.json
 
     # ------------------------------------------------------------ per scene
     def _run_scene(self, sd, bar):
@@ -342,7 +366,7 @@ class Runner:
                                                     self.cfg.timing_repeats)
                 v_np, tap_np = v.numpy(), tap_shape.numpy()
             m = metrics.compute(v_np, setup.v_star, setup.shape, tap_np, setup.occluder_dist, seam)
-            texel = float(np.median(rx.texel_world.numpy())) if rx is not None else 0.0
+            texel = float(np.median(rx.texel_world.numpy())) if rx is not None else metrics.UNDEFINED
             sweep_key, sweep_value = report.sweep_of(spec, self.cfg.schemes)
             row = {**meta, **setup.exclusions, **m, "texel_size": texel,
                    "build_ms": bt.ms, "build_first_ms": first_t.ms, "build_compile_ms": bt.compile_ms, "build_peak_mb": smap.peak_bytes / 2 ** 20,
@@ -356,14 +380,18 @@ class Runner:
                 self.images[case] = classes
             self.rows.append(row)
             self.csv.write(row)
-            self.status.append({"what": f"case {case}", **{k: meta[k] for k in ("scene", "light", "scheme", "params",
-                                                                                 "resolution")}, "status": "ok"})
+            # a case without receivers says nothing about the scheme: it is reported as empty
+            self.status.append({"what": f"case {case}", **{k: meta[k] for k in ("scene", "light", "view", "scheme",
+                                                                                 "params", "resolution")},
+                                "status": "ok" if m["n_receivers"] else "empty"})
+            self._write_run_json()
         except Exception as e:
             self._fail(f"case {case} ({sd.label}, {setup.label}, {spec.name} {spec.label}, R={view.resolution})", e)
 
     # ------------------------------------------------------------ run.json
     def _run_json(self):
-        info = report.run_info(self.cfg, self.variant, self.rays, self.status)
+        info = report.run_info(self.cfg, self.variant, self.rays, self.status, self.versions, dr.thread_count())
+        info["state"] = self.state
         info["scenes"] = self.scene_info
         info["gbuffer_ms"] = self.gbuffer_ms     # one cold pass per scene (compile included)
         info["plan"] = self.plan.as_dict()
@@ -372,7 +400,8 @@ class Runner:
         return info
 
     def _write_run_json(self):
-        (self.out / "run.json").write_text(json.dumps(self._run_json(), indent=2, default=str))
+        # after every case (compact), indented once the run has ended
+        report.write_json(self.out / "run.json", self._run_json(), None if self.state == "running" else 1)
 
 
 def _points_np(p) -> np.ndarray:

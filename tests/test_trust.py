@@ -32,3 +32,18 @@ def test_counts_do_not_depend_on_the_other_schemes(run_dict, scene):
             for col in ("n_receivers", "n_acne", "n_peterpan"):
                 assert r[col] == other[col], (r["scheme"], r["view"], col, r[col], other[col])
     assert sum(r["n_receivers"] for r in together.rows) > 0
+
+
+def test_inward_wound_room_is_not_culled(run_dict):
+    """A spot above the closed room (wound inward): back_closed culling must not let the light
+    through the ceiling, so dual with back_closed equals dual without culling, and every
+    receiver inside is truly shadowed (the room is closed, the light outside)."""
+    cfg = base_config(scene=[{"builtin": "room"}], camera={"resolution": [64, 64]}, map={"resolution": 128},
+                      light=[{"type": "spot", "position": [0.0, 0.0, 5.0], "target": [0.0, 0.0, 0.0], "cutoff": 40}],
+                      scheme=[{"name": "dual", "culling": ["none", "back_closed"]}])
+    res = run_dict(cfg)
+    a, b = res.rows
+    assert a["n_receivers"] > 500 and a["n_gt_lit"] == 0 == b["n_gt_lit"]
+    assert a["n_peterpan"] == b["n_peterpan"] == 0
+    room = next(s for sc in res.run["scenes"] for s in sc["shapes"] if s["name"] == "room")
+    assert room["closed"] is False and "inward" in room["why"]
