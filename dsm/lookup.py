@@ -12,10 +12,14 @@ mean, so every scheme works with every filter; seed 000, section 5):
 - ``pcf_bilinear``: the four texels whose centres surround the position, weights from the
   fractional position (bilinear interpolation of the four binary results).
 - ``pcf_jitter4x4``: 16 taps on a 4 x 4 grid of texel spacing around the position, each
-  jittered within its cell by a per-receiver random offset (a fixed seed: runs repeat).
+  jittered within its cell by a per-receiver random offset, seeded from the receiver's own
+  position and the experiment's seed (runs repeat; a receiver's taps do not depend on which
+  other receivers are in the case).
 
 Taps stay on the receiver's face: at a cube edge or the paraboloid rim the index is clamped
-to the face rather than continued on the neighbouring face.
+to the face rather than continued on the neighbouring face. Beyond a directional light's
+(orthographic) map, which has a margin of a few texels around the receivers, a tap finds no
+caster: it reads the far bound, as a texel whose ray hit nothing.
 """
 from __future__ import annotations
 
@@ -70,6 +74,16 @@ class Tap:
         """Depth where the light ray through this texel's centre meets the plane (p0, n)."""
         return self.view.depth_on_plane(self.cu, self.cv, p0, n, self.face)
 
+    def receiver_plane_depth(self, rx):
+        """The receiver's tangent plane's depth at this texel's centre (receiver_plane, adaptive).
+
+        Where the texel's ray does not meet that plane in front of the light (the plane is
+        parallel to the ray, or crosses it behind the light), the receiver's own depth is used:
+        the test falls back to the plain depth comparison. :func:`plane_fallbacks` counts those
+        receivers for the report."""
+        depth, met = self.view.plane_hit(self.cu, self.cv, rx.p, rx.n, self.face)
+        return dr.select(met, depth, rx.d)
+
 
 def tap_at(rx: Receiver, smap, u, v) -> Tap:
     """The texel containing map position (u, v) on the receiver's face (clamped to the face)."""
@@ -80,12 +94,30 @@ def tap_at(rx: Receiver, smap, u, v) -> Tap:
     idx = (rx.face * view.R_u + mi.UInt32(j)) * view.R_u + mi.UInt32(i)
     slope = dr.gather(mi.Float, smap.slope, idx) if smap.slope is not None else None
     z2 = dr.gather(mi.Float, smap.z2, idx) if smap.z2 is not None else None
-    return Tap(view, idx, rx.face, mi.Float(i) + 0.5, mi.Float(j) + 0.5, dr.gather(mi.Float, smap.z1, idx),
-               dr.gather(mi.UInt32, smap.shape, idx), slope, z2)
+    z1 = dr.gather(mi.Float, smap.z1, idx)
+    shape = dr.gather(mi.UInt32, smap.shape, idx)
+    if view.kind == "orthographic":
+        # beyond a directional light's map no caster was recorded: the far bound, as a miss
+        out = (u < 0) | (v < 0) | (u >= view.R) | (v >= view.R)
+        z1 = dr.select(out, view.far_o, z1)
+        shape = dr.select(out, 0xFFFFFFFF, shape)
+        z2 = dr.select(out, view.far_o, z2) if z2 is not None else None
+        slope = dr.select(out, 0.0, slope) if slope is not None else None
+    return Tap(view, idx, rx.face, mi.Float(i) + 0.5, mi.Float(j) + 0.5, z1, shape, slope, z2)
 
 
 def nearest_tap(rx: Receiver, smap) -> Tap:
     return tap_at(rx, smap, rx.u, rx.v)
+
+
+def receiver_key(rx: Receiver):
+    """A per-receiver integer from its own position's float bits: a receiver's jitter does not
+    change when the set of receivers around it changes."""
+    bits = [dr.reinterpret_array(mi.UInt32, c) for c in (rx.p.x, rx.p.y, rx.p.z)]
+    h = bits[0] * 0x9E3779B1
+    h = (h ^ (h >> 15)) + bits[1] * 0x85EBCA77
+    h = (h ^ (h >> 13)) + bits[2] * 0xC2B2AE3D
+    return h ^ (h >> 16)
 
 
 def filter_taps(filt: str, rx: Receiver, seed: int = 7):
@@ -100,7 +132,9 @@ def filter_taps(filt: str, rx: Receiver, seed: int = 7):
                 for a in (0, 1) for b in (0, 1)]
     if filt == "pcf_jitter4x4":
         n = dr.width(rx.u)
-        rng = mi.PCG32(n, initstate=dr.arange(mi.UInt64, n), initseq=mi.UInt64(seed))
+        rng = mi.PCG32()
+        # seed() keeps each lane's state (the constructor would add the lane index to the stream)
+        rng.seed(mi.UInt64(receiver_key(rx)), dr.full(mi.UInt64, seed, n))
         taps = []
         for a in range(4):
             for b in range(4):
@@ -128,6 +162,18 @@ def resolve(params, rx: Receiver):
         else:
             out[f.name] = val
     return SimpleNamespace(**out)
+
+
+def plane_fallbacks(scheme, params, rx: Receiver, smap) -> int:
+    """Receivers whose nearest texel's ray misses their tangent plane (schemes that compare the
+    receiver's plane depth: ``USES_PLANE``); 0 for other schemes."""
+    if not getattr(scheme, "USES_PLANE", False):
+        return 0
+    if hasattr(scheme, "shift"):
+        rx = scheme.shift(rx, resolve(params, rx))
+    tap = nearest_tap(rx, smap)
+    _, met = rx.view.plane_hit(tap.cu, tap.cv, rx.p, rx.n, tap.face)
+    return int(dr.count(~met).numpy().ravel()[0])
 
 
 def visibility(scheme, params, rx: Receiver, smap, filt: str = "nearest", seed: int = 7):

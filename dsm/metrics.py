@@ -44,8 +44,9 @@ def defined(x) -> bool:
 
 
 def compute(v: np.ndarray, v_star: np.ndarray, rx_shape: np.ndarray, tap_shape: np.ndarray,
-            occluder_dist: np.ndarray, seam_dist: np.ndarray | None = None) -> dict:
-    """All metrics of one case from per-receiver arrays (``seam_dist``: texels to a face seam)."""
+            occluder_dist: np.ndarray, seam_dist: np.ndarray | None = None, has_seams: bool | None = None) -> dict:
+    """All metrics of one case from per-receiver arrays (``seam_dist``: texels to a face seam;
+    ``has_seams``: whether the view has seams at all, else told by finite seam distances)."""
     v = np.asarray(v, np.float64)
     v_star = np.asarray(v_star, bool)
     shadowed_v = v < 0.5
@@ -59,7 +60,10 @@ def compute(v: np.ndarray, v_star: np.ndarray, rx_shape: np.ndarray, tap_shape: 
     dist = dist[np.isfinite(dist)]
     err = acne | peter
     seam_dist = None if seam_dist is None else np.asarray(seam_dist)
-    has_seams = seam_dist is not None and bool(np.isfinite(seam_dist).any())
+    if has_seams is None:
+        has_seams = seam_dist is not None and bool(np.isfinite(seam_dist).any())
+    if seam_dist is None:
+        seam_dist = np.full(n, np.inf)
     near = np.zeros(n, bool) if not has_seams else seam_dist < SEAM_TEXELS
     return {
         "n_receivers": n, "n_gt_lit": n_lit, "n_gt_shadowed": n_shadow,

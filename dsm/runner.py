@@ -20,6 +20,7 @@ import numpy as np
 from . import config as cfgmod
 from . import env, formats, gbuffer, metrics, reference, report, scenes, schemes, shadowmap, timing
 from . import plan as planmod
+from . import lookup
 from .lookup import Receiver, visibility
 from .views import CubeView, OrthographicView, ParaboloidView, PerspectiveView
 
@@ -38,6 +39,20 @@ class LightSetup:
     exclusions: dict
     reference_ms: float
     si: object = None
+    back_p: object = None         # hit pixels facing away from the light (attached shadow), inside its domain
+    back_n: object = None
+
+    def backfacing_inside(self, view):
+        """(positions, normals) of the back-facing pixels inside ``view``, or (None, None)."""
+        if self.back_p is None:
+            return None, None
+        keep = view.inside(self.back_p).numpy().astype(bool)
+        if not keep.any():
+            return None, None
+        idx = mi.UInt32(np.flatnonzero(keep).astype(np.uint32))
+        p, n = dr.gather(mi.Point3f, self.back_p, idx), dr.gather(mi.Vector3f, self.back_n, idx)
+        dr.eval(p, n)
+        return p, n
 
     def subset(self, keep: np.ndarray) -> "LightSetup":
         """The receivers ``keep`` selects; the others count as outside the view's domain."""
@@ -129,10 +144,16 @@ def light_setup(sd, gb, light, label, repeats: int = 0) -> LightSetup:
     exclusions = {"n_pixels": int(mask.size), "n_excluded_nohit": int((~hit).sum()),
                   "n_excluded_backfacing": int((hit & ~facing).sum()),
                   "n_excluded_outside": int((hit & facing & ~inside).sum())}
-    if len(pixels) == 0:      # nothing faces this light: rows of zeros, no zero-sized kernels
+    back = np.flatnonzero(hit & ~facing & inside).astype(np.uint32)
+    back_p = back_n = None
+    if len(back):
+        bidx = mi.UInt32(back)
+        back_p, back_n = dr.gather(mi.Point3f, gb.p, bidx), dr.gather(mi.Vector3f, gb.n, bidx)
+        dr.eval(back_p, back_n)
+    if len(pixels) == 0:      # nothing faces this light: an empty case, no zero-sized kernels
         empty = np.zeros(0)
         return LightSetup(label, light, pixels, None, None, empty.astype(np.uint32), empty.astype(bool),
-                          empty, exclusions, 0.0)
+                          empty, exclusions, 0.0, None, back_p, back_n)
     idx = mi.UInt32(pixels)
     si = dr.gather(mi.SurfaceInteraction3f, gb.si, idx)
     p = dr.gather(mi.Point3f, gb.p, idx)
@@ -141,7 +162,7 @@ def light_setup(sd, gb, light, label, repeats: int = 0) -> LightSetup:
     (vis, dist), t = timing.measure(lambda: reference.visibility(sd.scene, si, light, magnitude), repeats)
     dr.eval(p, n)
     return LightSetup(label, light, pixels, p, n, gb.shape.numpy()[pixels], vis.numpy().astype(bool),
-                      dist.numpy(), exclusions, t.ms, si)
+                      dist.numpy(), exclusions, t.ms, si, back_p, back_n)
 
 
 def closed_flags(sd) -> list:
@@ -272,6 +293,7 @@ class Runner:
             rx = seam = None
             if setup.p is not None:
                 setup = setup.subset(view.inside(setup.p).numpy().astype(bool))   # a single paraboloid: its hemisphere
+            bp, bn = setup.backfacing_inside(view)
             if setup.p is not None and len(setup.pixels):
                 rx = Receiver.make(view, setup.p, setup.n, sd.diagonal)
                 seam = view.seam_distance(rx.u, rx.v, rx.face)
@@ -324,6 +346,10 @@ class Runner:
                 self._fail(f"scene {sd.label} light {setup.label} map {R} culling {culling}: stored formats", e)
                 bar.update(len(group) * per_case)
                 continue
+            # receivers in the depth function each stored format compares in (formats.stored_view)
+            rxs = {fmt: rx if rx is None or stored[fmt].view is view else
+                   Receiver.make(stored[fmt].view, setup.p, setup.n, sd.diagonal) for fmt in stored}
+            back = {fmt: Receiver.make(stored[fmt].view, bp, bn, sd.diagonal) for fmt in stored} if bp is not None else {}
             build_times = {frozenset(needs): bt}
             if first_t is None:
                 # the first layer alone, so a case's extra layers show as build_ms - build_first_ms
@@ -338,7 +364,8 @@ class Runner:
                 bt = build_times[own]
                 for filt in self.cfg.map.filter:
                     for fmt in self.cfg.map.format:
-                        self._run_case(sd, gb, setup, view, stored[fmt], (bt, first_t), rx, seam, spec, filt, fmt)
+                        self._run_case(sd, gb, setup, view, stored[fmt], (bt, first_t), rxs[fmt], seam, spec, filt,
+                                       fmt, back.get(fmt))
                         bar.update(1)
 
     def _closed(self, sd):
@@ -348,7 +375,7 @@ class Runner:
                 {"name": n, "closed": c, "why": w} for n, c, w in zip(sd.shape_names, sd.closed, sd.closed_reason)]})
         return sd.closed
 
-    def _run_case(self, sd, gb, setup, view, smap, build, rx, seam, spec, filt, fmt):
+    def _run_case(self, sd, gb, setup, view, smap, build, rx, seam, spec, filt, fmt, rx_back=None):
         bt, first_t = build
         self.case_no += 1
         case = f"{self.case_no:04d}"
@@ -361,14 +388,23 @@ class Runner:
             module = schemes.get(spec.name)
             if rx is None:
                 v_np, tap_np, lt = np.zeros(0), np.zeros(0, np.uint32), timing.Timing(0.0, 0.0, 0.0, 0, 0)
+                fallbacks = 0
             else:
                 (v, tap_shape), lt = timing.measure(lambda: visibility(module, spec.params, rx, smap, filt, self.cfg.seed),
                                                     self.cfg.timing_repeats)
                 v_np, tap_np = v.numpy(), tap_shape.numpy()
-            m = metrics.compute(v_np, setup.v_star, setup.shape, tap_np, setup.occluder_dist, seam)
+                fallbacks = lookup.plane_fallbacks(module, spec.params, rx, smap)
+            m = metrics.compute(v_np, setup.v_star, setup.shape, tap_np, setup.occluder_dist, seam,
+                                view.kind not in ("orthographic", "perspective"))
+            # seed 000's self-unshadowing: pixels in attached shadow (facing away) that the map calls lit
+            v_back = visibility(module, spec.params, rx_back, smap, filt, self.cfg.seed)[0].numpy() \
+                if rx_back is not None else np.zeros(0)
+            m["n_backfacing"] = int(v_back.size)
+            m["backface_lit_rate"] = float((v_back >= 0.5).mean()) if v_back.size else metrics.UNDEFINED
             texel = float(np.median(rx.texel_world.numpy())) if rx is not None else metrics.UNDEFINED
             sweep_key, sweep_value = report.sweep_of(spec, self.cfg.schemes)
             row = {**meta, **setup.exclusions, **m, "texel_size": texel,
+                   "n_plane_fallback": fallbacks if getattr(module, "USES_PLANE", False) else metrics.UNDEFINED,
                    "build_ms": bt.ms, "build_first_ms": first_t.ms, "build_compile_ms": bt.compile_ms, "build_peak_mb": smap.peak_bytes / 2 ** 20,
                    "lookup_ms": lt.ms, "lookup_compile_ms": lt.compile_ms, "lookup_kernels_compiled": lt.cache_misses,
                    "reference_ms": setup.reference_ms, "sweep_key": sweep_key, "sweep_value": sweep_value}

@@ -66,6 +66,7 @@ class View:
         self.ex, self.ey, self.ez = (_opaque_vec(a) for a in self.axes_np)
         self.R = dr.opaque(mi.Float, float(resolution))
         self.R_u = dr.opaque(mi.UInt32, int(resolution))
+        self.far_o = dr.opaque(mi.Float, self.far)
 
     @property
     def depth_range(self) -> float:
@@ -92,20 +93,22 @@ class View:
         u, v = self.project_on(p, face)
         return u, v, face
 
-    def ray_depth(self, o, d, t):
-        """Depth of the point ``o + t d``."""
-        return self.depth(o) + t * dr.dot(d, self.ez)
-
-    def depth_on_plane(self, u, v, p0, n, face=None):
-        """Depth where the ray through map position (u, v) of ``face`` meets the plane (p0, n).
-
-        +inf where the ray is parallel to the plane (no NaN ever leaves here).
-        """
+    def plane_hit(self, u, v, p0, n, face=None):
+        """(depth, met): where the light's ray through map position (u, v) of ``face`` meets the
+        plane (p0, n), in the view's one depth function, and whether it meets it in front of the
+        light at a finite point. Where it does not (the plane parallel to the ray, or crossing
+        behind the light) the depth is +inf and ``met`` is False; callers choose the fallback."""
         o, d = self.ray_at(u, v, face)
         den = dr.dot(d, n)
         t = dr.dot(p0 - o, n) / dr.select(den != 0, den, 1.0)
-        depth = self.ray_depth(o, d, t)
-        return dr.select((den != 0) & dr.isfinite(depth), depth, dr.inf)
+        depth = self.depth(o + d * t)
+        met = (den != 0) & (t > 0) & dr.isfinite(depth)
+        return dr.select(met, depth, dr.inf), met
+
+    def depth_on_plane(self, u, v, p0, n, face=None):
+        """Depth where the ray through map position (u, v) of ``face`` meets the plane (p0, n);
+        +inf where it does not meet it in front of the light (no NaN ever leaves here)."""
+        return self.plane_hit(u, v, p0, n, face)[0]
 
     def to_square(self, u, v):
         """Map position (texel units) as coordinates in [-1, 1]^2 over the face."""
@@ -137,7 +140,12 @@ class View:
         return dr.full(mi.Float, dr.inf, dr.width(u))
 
 
+MARGIN_TEXELS = 4
+
+
 class OrthographicView(View):
+    """A directional light's map, fitted to the receivers with MARGIN_TEXELS texels to spare on
+    each side; a lookup beyond the map (a far normal offset) finds no caster there: lit."""
     kind = "orthographic"
 
     def __init__(self, direction, receivers_world: np.ndarray, scene_bbox, resolution: int):
@@ -152,6 +160,10 @@ class OrthographicView(View):
         extent = max(xs.max() - xs.min(), ys.max() - ys.min())
         if not extent > 0:     # a single receiver or a degenerate scene: any positive width works
             extent = max(diag, 1.0) * 1e-3
+        # a margin of MARGIN_TEXELS texels on each side: receivers on the fitted border stay
+        # inside in float32, and filter taps and normal-offset lookups near it read real texels
+        m = min(MARGIN_TEXELS, resolution // 8)
+        extent *= resolution / (resolution - 2 * m)
         margin = 0.01 * max(zs.max() - zs.min(), diag, 1e-30)
         cx, cy = 0.5 * (xs.max() + xs.min()), 0.5 * (ys.max() + ys.min())
         z0 = zs.min() - margin
@@ -241,9 +253,6 @@ class PointView(View):
 
     def depth(self, p):
         return dr.norm(p - self.o)
-
-    def ray_depth(self, o, d, t):
-        return t                               # rays start at the light with unit directions
 
     def to_light(self, p):
         return dr.normalize(self.o - p)

@@ -1,5 +1,5 @@
 """Every notebook in notebooks/ runs to the end (at small sizes; its own asserts check its story)."""
-import os
+import ast
 
 import pytest
 
@@ -10,6 +10,19 @@ NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
 
 def test_there_are_four_notebooks():
     assert [p.stem[:2] for p in NOTEBOOKS] == ["01", "02", "03", "04"]
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
+def test_each_notebook_asserts_its_headline_not_finiteness(path):
+    """A notebook's asserts are its story told as numbers: several of them, and none that only
+    says a number is finite (true of almost any number, whatever the story)."""
+    nbformat = pytest.importorskip("nbformat", reason="nbformat is part of the test extra (pip install -e .[test])")
+    book = nbformat.read(path, as_version=4)
+    asserts = [node for c in book.cells if c.cell_type == "code"
+               for node in ast.walk(ast.parse(c.source)) if isinstance(node, ast.Assert)]
+    assert len(asserts) >= 2, path.stem
+    finite = [ast.unparse(a.test) for a in asserts if "isfinite" in ast.unparse(a.test)]
+    assert not finite, (path.stem, finite)
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)

@@ -108,4 +108,7 @@ def test_scale_invariance(run_dict, scene):
         assert len(rows) == 3
         for col in ("acne_rate", "peterpan_rate", "error_rate"):
             vals = [r[col] for r in rows]
+            if any(math.isnan(v) for v in vals):     # undefined (no shadow on a lone plane) at every scale
+                assert all(math.isnan(v) for v in vals), (key, col, vals)
+                continue
             assert max(vals) - min(vals) <= 0.01, (key, col, vals)

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from conftest import ROOT, base_config
+from conftest import ROOT, assert_nan_only_where_undefined, base_config
 
 POINT_VIEWS = ("paraboloid", "dual_paraboloid", "cube")
 
@@ -143,15 +143,15 @@ def test_singular_directions_stay_finite_and_accurate(run_dict, where):
     res = run_dict(cfg)
     assert len(res) == 6 and not [s for s in res.run["status"] if s["status"] == "failed"]
     for r in res.rows:
-        for k, val in r.items():
-            if isinstance(val, float):
-                assert math.isfinite(val), (r["view"], r["scheme"], k)
+        assert_nan_only_where_undefined(r)
         if r["n_receivers"] == 0:
             assert r["view"] == "paraboloid"      # the whole scene behind a hemispherical light
             continue
         assert r["acne_rate"] < 0.02, (where, r["view"], r["scheme"], r["acne_rate"])
-        assert r["peterpan_rate"] < 0.05, (where, r["view"], r["scheme"], r["peterpan_rate"])
-        assert r["seam_error_rate"] <= max(0.02, 3 * r["off_seam_error_rate"]), (where, r["view"], r["scheme"])
+        if r["n_gt_shadowed"]:
+            assert r["peterpan_rate"] < 0.05, (where, r["view"], r["scheme"], r["peterpan_rate"])
+        if r["n_seam"] > 0:                     # (no receiver near a seam: the seam rate is undefined)
+            assert r["seam_error_rate"] <= max(0.02, 3 * r["off_seam_error_rate"]), (where, r["view"], r["scheme"])
         if (where, r["view"]) in (("seam", "dual_paraboloid"), ("cube_edges", "cube")):
             assert r["n_seam"] > 0              # the case really puts receivers on the seam
 

@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from conftest import MESHES, ROOT
+from conftest import MESHES, ROOT, assert_nan_only_where_undefined
 
 pytestmark = pytest.mark.skipif(not MESHES.exists(), reason=f"{MESHES} is absent (real test meshes)")
 
@@ -20,7 +20,7 @@ def test_real_meshes_need_no_per_scene_epsilon(tmp_path):
     scenes = {r["scene"] for r in res.rows}
     assert len(scenes) == 7
     for r in res.rows:
-        assert all(math.isfinite(v) for v in r.values() if isinstance(v, float)), r
+        assert_nan_only_where_undefined(r)
     for s in scenes:
         rs = res.where(scene=s)
         assert rs.n_receivers.min() > 2000 and rs.n_gt_lit.min() > 1000 and rs.n_gt_shadowed.min() > 20, s

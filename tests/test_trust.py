@@ -47,3 +47,102 @@ def test_inward_wound_room_is_not_culled(run_dict):
     assert a["n_peterpan"] == b["n_peterpan"] == 0
     room = next(s for sc in res.run["scenes"] for s in sc["shapes"] if s["name"] == "room")
     assert room["closed"] is False and "inward" in room["why"]
+
+
+def test_backface_lit_rate_orders_dual_before_midpoint_with_culling(run_dict):
+    """Seed 000, figure 5: with back faces of closed meshes culled, midpoint's second layer lies
+    behind the L's far side, so the L's own back-facing pixels (attached shadow) read lit;
+    dual's z_offset caps that. Back-facing pixels are not receivers: backface_lit_rate sees it."""
+    cfg = base_config(scene=[{"builtin": "l_shape"}], camera={"resolution": [128, 128]}, map={"resolution": 512},
+                      scheme=[{"name": "midpoint", "culling": "back_closed"},
+                              {"name": "dual", "culling": "back_closed"}])
+    res = run_dict(cfg)
+    mid, dual = (res.where(scheme=s).rows[0] for s in ("midpoint", "dual"))
+    assert mid["n_backfacing"] == dual["n_backfacing"] > 200
+    assert mid["backface_lit_rate"] > 0.3                   # the L's far side reads lit
+    assert dual["backface_lit_rate"] < 0.5 * mid["backface_lit_rate"]
+
+
+def test_jitter_is_seeded_by_the_receiver_itself():
+    """pcf_jitter4x4: a receiver's visibility does not change when the other receivers change."""
+    import drjit as dr
+    import mitsuba as mi
+    import numpy as np
+    from dsm import gbuffer, scenes, shadowmap
+    from dsm.config import SceneSpec
+    from dsm.lookup import Receiver, visibility
+    from dsm.runner import make_view, _points_np
+    from dsm.schemes import constant
+    from dsm.config import LightSpec, Length
+    sd = scenes.load(scenes.parse_scene({"builtin": "plane_box"}, "<t>", "s", None)[0], (96, 96))
+    gb = gbuffer.cast(sd.scene, sd.sensor, 96, 96)
+    idx = np.flatnonzero(gb.hit).astype(np.uint32)
+    p = dr.gather(mi.Point3f, gb.p, mi.UInt32(idx))
+    n = dr.gather(mi.Vector3f, gb.n, mi.UInt32(idx))
+    view = make_view(LightSpec("directional", direction=(-0.4, -0.3, -1.0)), 128, _points_np(p), sd.bbox)
+    smap = shadowmap.build(sd.scene, view, set())
+    prm = constant.Params(bias=Length(0.5, "texel"))
+    full = visibility(constant, prm, Receiver.make(view, p, n, sd.diagonal), smap, "pcf_jitter4x4", 7)[0].numpy()
+    half = mi.UInt32(np.arange(1, len(idx), 2, dtype=np.uint32))
+    sub = visibility(constant, prm, Receiver.make(view, dr.gather(mi.Point3f, p, half), dr.gather(mi.Vector3f, n, half),
+                                                  sd.diagonal), smap, "pcf_jitter4x4", 7)[0].numpy()
+    partial = (full > 0) & (full < 1)
+    assert partial[1::2].sum() > 50                    # receivers in a penumbra: the jitter matters there
+    assert np.array_equal(sub, full[1::2])
+
+
+def test_orthographic_map_keeps_a_margin_and_reads_lit_beyond_it():
+    import mitsuba as mi
+    import numpy as np
+    from dsm.views import MARGIN_TEXELS, OrthographicView
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(-3, 3, (500, 3)) + [2000.0, -1500.0, 10.0]
+    view = OrthographicView((0.0, 0.0, -1.0), pts, (pts.min(0) - 1, pts.max(0) + 1), 256)
+    u, v = view.project_on(mi.Point3f(*pts.T.astype(np.float32)))
+    u, v = u.numpy(), v.numpy()
+    # the fitted square's extreme points sit MARGIN_TEXELS texels inside the map (float64 expectation)
+    assert min(u.min(), v.min()) == pytest.approx(MARGIN_TEXELS, abs=0.05)
+    assert max(u.max(), v.max()) == pytest.approx(256 - MARGIN_TEXELS, abs=0.05)
+    assert view.inside(mi.Point3f(*pts.T.astype(np.float32))).numpy().all()
+
+
+def test_lookups_beyond_the_directional_map_find_no_caster(run_dict):
+    """A normal offset far beyond the map reads no caster: every receiver lit (acne 0, all the
+    truly shadowed ones peter-panned), not the clamped border texel's depth."""
+    cfg = base_config(scene=[{"builtin": "floating_plate"}], camera={"resolution": [96, 96]}, map={"resolution": 64},
+                      scheme=[{"name": "normal_offset", "offset": "500 texel"}])
+    r = run_dict(cfg).rows[0]
+    assert r["n_gt_shadowed"] > 100
+    assert r["n_acne"] == 0 and r["peterpan_rate"] == 1.0
+
+
+def test_plane_hit_defined_where_the_ray_misses_the_plane():
+    """View.plane_hit: analytic depth where the texel ray meets the plane; +inf and not met where
+    the plane is parallel to the ray or crosses it behind the light."""
+    import mitsuba as mi
+    import numpy as np
+    from dsm.views import PerspectiveView
+    view = PerspectiveView((0.0, 0.0, 5.0), (0.0, 0.0, -1.0), 30.0, (np.array([-4.0, -4, 0]), np.array([4.0, 4, 1])), 64)
+    u, v = mi.Float(32.0), mi.Float(32.0)       # the centre: the ray straight down the axis
+    cases = [((0, 0, 1.0), (0, 0, 1.0), True, 4.0),        # the plane z = 1: depth 4 along the axis
+             ((0, 0, 1.0), (1.0, 0, 0), False, np.inf),    # a vertical plane containing the ray: parallel
+             ((0, 0, 7.0), (0, 0, 1.0), False, np.inf)]    # the plane z = 7: above (behind) the light
+    for p0, n, met_expected, depth_expected in cases:
+        depth, met = view.plane_hit(u, v, mi.Point3f(*p0), mi.Vector3f(*n))
+        assert bool(met.numpy()[0]) is met_expected
+        assert depth.numpy()[0] == pytest.approx(depth_expected)
+
+
+def test_ndc24_cube_compares_face_axis_depth(run_dict):
+    """A cube map in ndc24 stores each face's axis depth, as a rasterizer does: every point of a
+    plane perpendicular to the -z face's axis has axis depth 2.5 exactly, so no bias is needed;
+    in float32 the cube stores the Euclidean distance, which varies within a texel (acne)."""
+    cfg = base_config(scene=[{"builtin": "plane", "tilt": 0.0}], camera={"resolution": [96, 96]},
+                      light=[{"type": "point", "position": [0.3, -0.2, 2.5]}],
+                      map={"resolution": 128, "view": "cube", "format": ["float32", "ndc24"]},
+                      scheme=[{"name": "none"}])
+    res = run_dict(cfg)
+    f32, ndc = (res.where(format=f).rows[0] for f in ("float32", "ndc24"))
+    assert ndc["n_receivers"] == f32["n_receivers"] > 3000
+    assert ndc["n_acne"] == 0
+    assert f32["acne_rate"] > 0.2

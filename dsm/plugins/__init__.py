@@ -18,8 +18,10 @@ def register() -> list:
         raise RuntimeError("set a Mitsuba variant (mi.set_variant) before registering the dsm plugins")
     if mi.variant() in _registered:
         return list(PLUGINS)
-    from .integrators import DsmError, DsmShadow
-    mi.register_integrator("dsm_shadow", lambda props: DsmShadow(props))
-    mi.register_integrator("dsm_error", lambda props: DsmError(props))
+    from .integrators import DsmError, DsmShadow, clean_config_errors
+    # the factory is the outermost Python frame Mitsuba calls: it drops a ConfigError's
+    # traceback, so Mitsuba's message carries the one line naming the bad property
+    mi.register_integrator("dsm_shadow", clean_config_errors(DsmShadow))
+    mi.register_integrator("dsm_error", clean_config_errors(DsmError))
     _registered.add(mi.variant())
     return list(PLUGINS)

@@ -7,13 +7,23 @@ or ``preset``), ``resolution`` (per face, default 1024), ``view`` (point lights:
 ``pcf_bilinear``, ``pcf_jitter4x4``), ``format`` (``float32``, ``unorm16``, ``unorm24``,
 ``ndc24``), ``seed`` (jitter of pcf_jitter4x4). ``light``: which of the scene's point, spot
 and directional emitters (an index; ``dsm_shadow`` uses all of them by default, ``dsm_error``
-the first). ``dsm_shadow`` with ``aovs = true`` adds two channels per sample: ``dsm.V`` (the
-map's visibility) and ``dsm.Vstar`` (exact visibility), so a user can see where they differ.
+the first). ``dsm_shadow`` with ``aovs = true`` (a boolean: ``<boolean>`` in XML, or
+``true``/``false``/``1``/``0``) adds two channels per sample: ``dsm.V`` (the map's
+visibility) and ``dsm.Vstar`` (exact visibility), so a user can see where they differ.
 
-Before rendering, each plugin casts the same pixel-centre G-buffer as the runner (a
-directional light's map is fitted to those receivers), builds the map with exactly the
-layers the scheme needs, and (``dsm_error``) classifies each receiver pixel as the runner
-does: the image's class counts are the runner's counts for that case.
+A bad property raises :class:`~dsm.config.ConfigError` as one line naming it (Mitsuba shows
+``... failed to instantiate ...: ConfigError: <integrator type="dsm_error">: scheme: unknown
+value 'foo' (valid: ...)``); a ``light`` index the scene does not have fails at the start of
+rendering, listing the scene's point, spot and directional emitters.
+
+Before rendering, each plugin casts the same pixel-centre G-buffer as the runner, builds the
+map with exactly the layers the scheme needs, and (``dsm_error``) classifies each receiver
+pixel as the runner does (a directional light's map fitted to those receivers): the image's
+class counts are the runner's counts for that case. ``dsm_shadow`` samples anywhere inside
+a pixel, so its directional maps are fitted to the hit points of the pixel corners as well
+(a point outside such a map, where no caster was recorded, reads as lit). The prepared maps
+are kept while a fingerprint of the scene (shape vertices and transforms, emitters, sensor
+and film) is unchanged, and rebuilt after ``mi.traverse(scene)`` + ``params.update()``.
 """
 from __future__ import annotations
 
@@ -25,21 +35,52 @@ from .. import config as cfgmod
 from .. import formats, gbuffer, metrics, reference, scenes, schemes, shadowmap
 from ..lookup import Receiver, visibility
 
-MAP_KEYS = ("resolution", "view", "filter", "format", "light", "seed", "aovs")
+OWN_KEYS = ("scheme", "resolution", "view", "filter", "format", "light", "seed")
+SHADOW_KEYS = OWN_KEYS + ("aovs",)
+TRUE_WORDS, FALSE_WORDS = ("true", "1"), ("false", "0")
+
+
+def _boolean(raw, source, key):
+    """A boolean property: a bool (XML ``<boolean>``, a dict's True/False), 0/1, or a string
+    ``true``/``false``/``1``/``0`` (any case): never Python's ``bool("false") == True``."""
+    if isinstance(raw, bool):
+        return raw
+    if isinstance(raw, int) and raw in (0, 1):
+        return bool(raw)
+    if isinstance(raw, str) and raw.strip().lower() in TRUE_WORDS + FALSE_WORDS:
+        return raw.strip().lower() in TRUE_WORDS
+    raise cfgmod.ConfigError(source, key, f"expected a boolean, got {raw!r}", ("true", "false"))
 
 
 class Options:
-    """The plugin's properties, checked like a config (clear errors naming the property)."""
+    """The plugin's properties, checked like a config: a mistake raises one
+    :class:`~dsm.config.ConfigError` line naming the property as the user wrote it
+    (``scheme``, ``bias``, ``resolution``), the bad value and the valid choices."""
 
     def __init__(self, props, plugin: str, all_lights: bool):
         source = f"<integrator type=\"{plugin}\">"
-        d = {k: props[k] for k in props.keys()}
-        table = {k: v for k, v in d.items() if k not in MAP_KEYS and k != "scheme"}
+        own = SHADOW_KEYS if plugin == "dsm_shadow" else OWN_KEYS
+        # properties the base class read (hide_emitters, timeout, ...) are the base's own
+        names = list(props.unqueried()) if hasattr(props, "unqueried") else list(props.keys())
+        d = {k: props[k] for k in names}
+        table = {k: v for k, v in d.items() if k not in own}
+        if "name" in table:            # the scheme is `scheme` here, never the config's `name`
+            raise cfgmod.ConfigError(source, "name", "unknown property; the scheme is given as `scheme`", own)
         if "preset" not in table:
             table["name"] = d.get("scheme", "adaptive")
-        specs = cfgmod._parse_scheme(table, source, "integrator", schemes.REGISTRY, schemes.PRESETS)
+        elif "scheme" in d:
+            raise cfgmod.ConfigError(source, "scheme", "give either scheme (and its parameters) or preset, not both")
+        try:
+            specs = cfgmod._parse_scheme(table, source, "integrator", schemes.REGISTRY, schemes.PRESETS)
+        except cfgmod.ConfigError as e:
+            key = "scheme" if e.key == "integrator.name" else e.key.removeprefix("integrator.")
+            choices = e.choices
+            if e.problem == "unknown key":      # the plugin's own properties are valid keys too
+                choices = tuple(own) + tuple(c for c in choices if c not in own)
+                raise cfgmod.ConfigError(source, key, "unknown property", choices) from None
+            raise cfgmod.ConfigError(source, key, e.problem, choices) from None
         if len(specs) != 1:
-            raise cfgmod.ConfigError(source, "integrator", "give one value per parameter (no sweeps)")
+            raise cfgmod.ConfigError(source, "scheme", "give one value per parameter (no sweeps)")
         self.spec = specs[0]
         self.resolution = cfgmod._number(d.get("resolution", 1024), source, "resolution", integer=True, minimum=1,
                                          maximum=16384)
@@ -47,20 +88,63 @@ class Options:
         self.filter = cfgmod._choice(d.get("filter", "nearest"), source, "filter", cfgmod.FILTERS)
         self.format = cfgmod._choice(d.get("format", "float32"), source, "format", cfgmod.FORMATS)
         self.seed = cfgmod._number(d.get("seed", 7), source, "seed", integer=True, minimum=0)
+        # dsm_shadow: -1 (the default) shades with every light; dsm_error classifies one light
         self.light = cfgmod._number(d.get("light", -1 if all_lights else 0), source, "light", integer=True,
-                                    minimum=-1)
-        self.aovs = bool(d.get("aovs", False))
+                                    minimum=-1 if all_lights else 0)
+        self.aovs = _boolean(d.get("aovs", False), source, "aovs")
         self.source = source
 
 
-class Prepared:
-    """One light's receivers, exact visibility, view and stored map for a scene and sensor."""
+def clean_config_errors(fn):
+    """Re-raise a :class:`~dsm.config.ConfigError` from ``fn`` without its traceback.
 
-    def __init__(self, sd, gb, light, label, opts: Options):
+    Mitsuba reports an exception raised in a plugin's constructor as the text of its whole
+    Python traceback followed by the message; without a traceback that text is the one line
+    ``ConfigError: <integrator type="...">: key: problem (valid: ...)``. A bare ``raise``
+    re-raises without adding this frame. Other exceptions (bugs) keep their traceback.
+    """
+    import functools
+
+    @functools.wraps(fn, updated=())      # fn may be a class: copy its name, not its __dict__
+    def wrapper(*args, **kwargs):
+        try:
+            return fn(*args, **kwargs)
+        except cfgmod.ConfigError as e:
+            e.__traceback__ = None
+            raise
+    return wrapper
+
+
+def describe_lights(lights) -> str:
+    """``0: point at (0, 1.9, 0), 1: directional towards (0, 0, -1)``: the emitters ``light`` indexes."""
+    def v(x):
+        return "(" + ", ".join(f"{float(c) + 0.0:.4g}" for c in x) + ")"      # + 0.0: no "-0"
+    out = []
+    for i, lt in enumerate(lights):
+        if lt.type == "directional":
+            out.append(f"{i}: directional towards {v(lt.direction)}")
+        elif lt.type == "spot":
+            axis = lt.direction if lt.direction is not None else np.subtract(lt.target, lt.position)
+            out.append(f"{i}: spot at {v(lt.position)} towards {v(axis)}")
+        else:
+            out.append(f"{i}: {lt.type} at {v(lt.position)}")
+    return ", ".join(out)
+
+
+class Prepared:
+    """One light's receivers, exact visibility, view and stored map for a scene and sensor.
+
+    ``fit_extra``: more world points the orthographic (directional) view must cover beside the
+    pixel-centre receivers (dsm_shadow passes the hit points of the pixel corners, so that
+    every sample inside a pixel projects inside the map)."""
+
+    def __init__(self, sd, gb, light, label, opts: Options, fit_extra=None):
         from ..runner import _points_np, closed_flags, light_setup, make_view
         self.light, self.label = light, label
         setup = light_setup(sd, gb, light, label)
         pts = _points_np(setup.p) if setup.p is not None else np.zeros((0, 3))
+        if light.type == "directional" and fit_extra is not None and len(fit_extra):
+            pts = np.concatenate([pts, fit_extra])
         self.view = make_view(light, opts.resolution, pts, sd.bbox, opts.view)
         if setup.p is not None:
             setup = setup.subset(self.view.inside(setup.p).numpy().astype(bool))
@@ -70,27 +154,101 @@ class Prepared:
         modes = shadowmap.cull_modes_for(culling, closed_flags(sd)) if culling != "none" else None
         smap = shadowmap.build(sd.scene, self.view, set(module.NEEDS), culling, modes)
         self.smap = formats.store(smap, opts.format)
+        self.view = self.smap.view          # the depth function the stored format compares in
         self.module = module
 
 
+def corner_points(scene, sensor, W: int, H: int, direction) -> np.ndarray:
+    """World hit points of the (W+1) x (H+1) pixel corners on surfaces facing a directional
+    light (travelling along ``direction``): with the pixel centres they bound every point a
+    sample inside a pixel can hit (exactly on planes, to within the curvature elsewhere)."""
+    idx = dr.arange(mi.UInt32, (W + 1) * (H + 1))
+    x, y = mi.Float(idx % (W + 1)), mi.Float(idx // (W + 1))
+    ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(x / W, y / H), mi.Point2f(0.5, 0.5))
+    si = scene.ray_intersect(ray)
+    n = mi.Vector3f(si.n) * dr.sign(dr.dot(si.n, -ray.d))
+    to_light = -mi.Vector3f(*(float(c) for c in direction))
+    keep = (si.is_valid() & (dr.dot(n, to_light) > 0)).numpy().astype(bool)
+    p = np.stack([np.asarray(c.numpy(), np.float64) for c in (si.p.x, si.p.y, si.p.z)], axis=1)
+    return p[keep]
+
+
+def _array(value) -> np.ndarray:
+    if hasattr(value, "matrix"):          # a Transform4f
+        value = value.matrix
+    try:
+        return np.ascontiguousarray(np.asarray(value))
+    except Exception:                    # an object without an array form: its text
+        return np.frombuffer(str(value).encode(), np.uint8)
+
+
+def fingerprint(scene, sensor) -> str:
+    """A hash of what the G-buffer and the maps depend on: every shape's own parameters (vertex
+    positions, faces, transforms) and bounds, the point/spot/directional emitters' parameters
+    and transforms, the sensor's parameters, transform and film size. ``mi.traverse(scene)``
+    + ``params.update()`` changes it (Mitsuba does not tell the integrator), so the plugins
+    rebuild their maps for the scene as it is now, not as it was at the first render."""
+    import hashlib
+    h = hashlib.blake2b(digest_size=20)
+
+    def put(tag, value=None):
+        h.update(str(tag).encode() + b"\0")
+        if value is not None:
+            a = _array(value)
+            h.update(f"{a.dtype}{a.shape}".encode())
+            h.update(a.tobytes())
+
+    for shape in scene.shapes():
+        put(f"shape {type(shape).__name__} {shape.id()}")
+        bb = shape.bbox()
+        put("bbox", np.concatenate([np.asarray(bb.min, float).ravel(), np.asarray(bb.max, float).ravel()]))
+        params = mi.traverse(shape)
+        for k in sorted(params.keys()):
+            # the shape's own (not nested: its bsdf, area emitter); texture coordinates move nothing
+            if "." not in k and k != "vertex_texcoords":
+                put(k, params[k])
+    delta = mi.EmitterFlags.DeltaPosition | mi.EmitterFlags.DeltaDirection
+    for e in scene.emitters():
+        if not (int(e.flags()) & int(delta)):
+            continue
+        put(f"emitter {type(e).__name__}", e.world_transform())
+        params = mi.traverse(e)
+        for k in sorted(params.keys()):
+            put(k, params[k])
+    put("sensor", sensor.world_transform())
+    film = sensor.film()
+    put("film", np.array([*film.size(), *film.crop_size(), *film.crop_offset()], np.int64))
+    params = mi.traverse(sensor)
+    for k in sorted(params.keys()):
+        if not k.startswith("sampler."):
+            put(k, params[k])
+    return h.hexdigest()
+
+
 def _prepare(integrator, scene, sensor, plugin):
-    key = (id(scene), id(sensor))
+    sensor = sensor if sensor is not None else scene.sensors()[0]
+    key = (id(scene), id(sensor), fingerprint(scene, sensor))
     if integrator._key == key:
         return integrator._prep
-    sensor = sensor if sensor is not None else scene.sensors()[0]
+    integrator._key, integrator._prep = None, None
+    opts = integrator.opts
     sd = scenes.from_mitsuba(scene)
-    W, H = (int(x) for x in sensor.film().size())
-    gb = gbuffer.cast(scene, sensor, W, H)
     lights = sd.own_lights
     if not lights:
         raise ValueError(f"{plugin}: the scene has no point, spot or directional emitter")
-    opts = integrator.opts
     if opts.light >= len(lights):
-        raise cfgmod.ConfigError(opts.source, "light", f"the scene has {len(lights)} usable emitters",
-                                 [str(i) for i in range(len(lights))])
+        raise cfgmod.ConfigError(opts.source, "light", f"{opts.light} is out of range; the scene's "
+                                 f"point/spot/directional emitters are {describe_lights(lights)}")
+    W, H = (int(x) for x in sensor.film().size())
+    gb = gbuffer.cast(scene, sensor, W, H)
     chosen = range(len(lights)) if opts.light < 0 else [opts.light]
-    prep = {"sd": sd, "gb": gb, "size": (W, H),
-            "lights": [Prepared(sd, gb, lights[i], f"{i}:{lights[i].type}", opts) for i in chosen]}
+    prepared = []
+    for i in chosen:
+        extra = None
+        if plugin == "dsm_shadow" and lights[i].type == "directional":
+            extra = corner_points(scene, sensor, W, H, lights[i].direction)
+        prepared.append(Prepared(sd, gb, lights[i], f"{i}:{lights[i].type}", opts, extra))
+    prep = {"sd": sd, "gb": gb, "size": (W, H), "lights": prepared}
     # the emitters the lights came from, in the same order (for dsm_shadow's radiance)
     emitters = [e for e in scene.emitters() if scenes.emitter_to_light(e) is not None]
     prep["emitters"] = [emitters[i] for i in chosen]
@@ -127,6 +285,7 @@ class DsmError(mi.SamplingIntegrator):
         self.opts = Options(props, "dsm_error", all_lights=False)
         self._key, self._prep = None, None
 
+    @clean_config_errors
     def render(self, scene, sensor=None, seed=0, spp=0, develop=True, evaluate=True):
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
@@ -152,6 +311,7 @@ class DsmShadow(mi.SamplingIntegrator):
     def aov_names(self):
         return ["dsm.V", "dsm.Vstar"] if self.opts.aovs else []
 
+    @clean_config_errors
     def render(self, scene, sensor=None, seed=0, spp=0, develop=True, evaluate=True):
         sensor_obj = scene.sensors()[sensor] if isinstance(sensor, int) else sensor
         prep = _prepare(self, scene, sensor_obj, "dsm_shadow")
@@ -178,7 +338,14 @@ class DsmShadow(mi.SamplingIntegrator):
             f = bsdf.eval(ctx, si, si.to_local(ds.d), valid)
             rx = Receiver.make(lp.view, si.p, n, diag)
             v, _ = visibility(lp.module, self.opts.spec.params, rx, lp.smap, self.opts.filter, self.opts.seed)
-            v = dr.select(valid & lp.view.inside(si.p), v, 0.0)
+            inside = lp.view.inside(si.p)
+            if lp.view.kind == "orthographic":
+                # outside a directional light's map no caster was recorded: lit (the map is
+                # fitted to cover every pixel's footprint, so this is only a safety net)
+                v = dr.select(inside, v, 1.0)
+            else:       # outside a spot's cone or a single paraboloid's hemisphere: unlit
+                v = dr.select(inside, v, 0.0)
+            v = dr.select(valid, v, 0.0)
             result += f * spec * v
             if self.opts.aovs:
                 vstar, _ = reference.visibility(scene, si, lp.light, magnitude)

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 NAME = "adaptive"
 SOURCE = "Dou et al. 2014; seed 004"
 NEEDS = frozenset()
+USES_PLANE = True     # compares the receiver plane's depth at the texel centre (lookup.plane_fallbacks)
 
 
 @dataclass(frozen=True)
@@ -23,4 +24,4 @@ class Params:
 
 
 def lit(rx, tap, p):
-    return tap.depth_on_plane(rx.p, rx.n) <= tap.z1 + p.K * rx.scene_scale
+    return tap.receiver_plane_depth(rx) <= tap.z1 + p.K * rx.scene_scale

@@ -15,6 +15,7 @@ from ..config import Length
 NAME = "receiver_plane"
 SOURCE = "Isidoro 2006; seed 003"
 NEEDS = frozenset()
+USES_PLANE = True     # compares the receiver plane's depth at the texel centre (lookup.plane_fallbacks)
 
 
 @dataclass(frozen=True)
@@ -23,4 +24,4 @@ class Params:
 
 
 def lit(rx, tap, p):
-    return tap.depth_on_plane(rx.p, rx.n) <= tap.z1 + p.bias
+    return tap.receiver_plane_depth(rx) <= tap.z1 + p.bias
