@@ -1,9 +1,18 @@
-"""Command line: ``dsm run``, ``dsm plan``, ``dsm schemes``, ``dsm bench``."""
+"""Command line: ``dsm run``, ``dsm plan``, ``dsm schemes``, ``dsm bench``.
+
+Every bad input is one or two lines on stderr, never a traceback, before any work starts:
+exit 2 for a mistake in the config or the arguments, 3 for the machine's set-up (libLLVM, no
+GPU for cuda_ad_rgb), 1 when there is nothing to run, 130 after Ctrl-C.
+"""
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
+import re
+import shutil
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -11,73 +20,220 @@ from . import config as cfgmod
 from .env import SetupError
 
 DEFAULT_CONFIG = Path(__file__).with_name("default.toml")
+# what a dsm run writes into its folder: --force clears a folder holding nothing else
+RUN_OUTPUTS = ("run.json", "metrics.csv", "table.md", "images", "plots")
+RUN_TEMP = re.compile(r"\.(?:run\.json|metrics\.csv|table\.md)\.\d+\.tmp")    # left by a killed run (report.atomic)
+
+
+def _positive_int(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, with a mistake on one line (no usage block) and exit status 2."""
+
+    def error(self, message):
+        self.exit(2, f"dsm: {self.prog.removeprefix('dsm ') if self.prog != 'dsm' else 'arguments'}: {message} "
+                     f"(see {self.prog} --help)\n")
 
 
 def _parser():
-    ap = argparse.ArgumentParser(prog="dsm", description="Measure shadow-map bias schemes against exact visibility.")
+    ap = _Parser(prog="dsm", description="Measure shadow-map bias schemes against exact visibility.")
     sub = ap.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run", help="run an experiment config (default: the built-in default experiment)")
     r.add_argument("config", nargs="?", help="experiment TOML file")
     r.add_argument("--out", help="results folder (default: runs/<name>-<time>)")
     r.add_argument("--variant", choices=cfgmod.VARIANTS, help="Mitsuba variant (default llvm_ad_rgb)")
-    r.add_argument("--threads", type=int, help="Dr.Jit worker threads")
-    r.add_argument("--force", action="store_true", help="write into a non-empty --out folder")
+    r.add_argument("--threads", type=_positive_int, help="Dr.Jit worker threads (at least 1)")
+    r.add_argument("--force", action="store_true",
+                   help="replace a previous dsm run in --out (a folder with its run.json); never other files")
     p = sub.add_parser("plan", help="print what a config will compute: cases, maps, rays by kind, memory")
     p.add_argument("config", nargs="?", help="experiment TOML file (default: the built-in default experiment)")
     sub.add_parser("schemes", help="list bias schemes, their parameters, defaults and sources")
     b = sub.add_parser("bench", help="benchmark: map build against a bare ray cast, lookup cost per scheme")
     b.add_argument("--out", default="bench", help="folder for bench.md and bench.json (default: bench/)")
     b.add_argument("--resolutions", default="256,512,1024,2048,4096", help="comma-separated map resolutions")
-    b.add_argument("--repeats", type=int, default=5)
+    b.add_argument("--repeats", type=_positive_int, default=5)
     b.add_argument("--meshes", help="folder of the real test meshes (default: ../shared/meshes)")
     b.add_argument("--variant", choices=cfgmod.VARIANTS)
     return ap
 
 
+def _err(msg: str):
+    print(f"dsm: {msg}", file=sys.stderr)
+
+
+def _config_error(e: cfgmod.ConfigError, command: str = "run") -> int:
+    _err(f"config error: {e}")
+    more = getattr(e, "more", None) or []
+    if more:
+        if command == "plan":
+            for m in more:
+                _err(f"config error: {m}")
+        else:
+            _err(f"{len(more)} more: " + ", ".join(m.key for m in more) + " (dsm plan lists each)")
+    return 2
+
+
 def main(argv=None) -> int:
-    args = _parser().parse_args(argv)
-    if args.cmd == "schemes":
-        print(schemes_text())
-        return 0
-    if args.cmd == "bench":
-        from .bench import run_bench
-        try:
-            res = [int(x) for x in args.resolutions.split(",")]
-            run_bench(Path(args.out), res, args.repeats, args.meshes, args.variant)
-        except SetupError as e:
-            print(f"dsm: setup error: {e}", file=sys.stderr)
-            return 3
-        except ValueError:
-            print(f"dsm: --resolutions: expected integers like 256,1024, got {args.resolutions!r}", file=sys.stderr)
-            return 2
-        print((Path(args.out) / "bench.md").read_text())
-        return 0
     try:
-        cfg = cfgmod.load(args.config or DEFAULT_CONFIG)
-    except cfgmod.ConfigError as e:
-        print(f"dsm: config error: {e}", file=sys.stderr)
+        args = _parser().parse_args(argv)
+    except SystemExit as e:          # argparse printed its usage line and the error
+        return e.code if isinstance(e.code, int) else 2
+    out = None
+    try:
+        if args.cmd == "schemes":
+            print(schemes_text())
+            return 0
+        if args.cmd == "bench":
+            return _bench(args)
+        try:
+            cfg = cfgmod.load(args.config or DEFAULT_CONFIG)
+        except cfgmod.ConfigError as e:
+            return _config_error(e)
+        if args.cmd == "plan":
+            return _plan(cfg)
+        out = Path(args.out) if args.out else Path("runs") / f"{cfg.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+        return _run(cfg, args, out)
+    except KeyboardInterrupt:
+        where = f" (results so far in {out}/)" if out is not None and out.is_dir() and any(out.iterdir()) else ""
+        print(f"{chr(10) if sys.stderr.isatty() else ''}dsm: interrupted{where}", file=sys.stderr)
+        return 130
+
+
+def _bench(args) -> int:
+    from .bench import run_bench
+    try:
+        res = [int(x) for x in args.resolutions.split(",")]
+        if any(r < 1 for r in res):
+            raise ValueError
+    except ValueError:
+        _err(f"--resolutions: expected positive integers like 256,1024, got {args.resolutions!r}")
         return 2
-    if args.cmd == "plan":
-        from .plan import make
-        print(make(cfg).text())
-        return 0
-    out = Path(args.out) if args.out else Path("runs") / f"{cfg.name}-{time.strftime('%Y%m%d-%H%M%S')}"
-    if out.exists() and any(out.iterdir()) and not args.force:
-        print(f"dsm: {out} is not empty; choose another --out or pass --force", file=sys.stderr)
+    problem = _out_problem(Path(args.out), force=True, bench=True)
+    if problem:
+        _err(problem)
         return 2
+    try:
+        run_bench(Path(args.out), res, args.repeats, args.meshes, args.variant)
+    except SetupError as e:
+        _err(f"setup error: {e}")
+        return 3
+    print((Path(args.out) / "bench.md").read_text())
+    return 0
+
+
+def _plan(cfg) -> int:
+    from . import plan as planmod
+    from . import scenes
+    # which scenes cannot be read: load them (on the CPU: no GPU needed to plan)
     try:
         from . import env
+        env.use_variant(None if (cfg.variant or "").startswith("cuda") else cfg.variant)
+        loadable = True
+    except SetupError as e:
+        _err(f"note: scenes not loaded, so only checked as text ({e})")
+        loadable = False
+    try:
+        if loadable:
+            scenes.check(cfg)
+        plan = planmod.make(cfg)
+    except cfgmod.ConfigError as e:
+        return _config_error(e, "plan")
+    print(plan.text())
+    try:
+        cfgmod.check_runnable(cfg)
+        planmod.check_memory(plan, cfg.source)
+    except cfgmod.NothingToRun as e:
+        _err(e.problem)
+        return 1
+    except cfgmod.ConfigError as e:
+        return _config_error(e, "plan")
+    return 0
+
+
+def _out_problem(out: Path, force: bool, bench: bool = False) -> str | None:
+    """Why ``out`` cannot take the results (None if it can); with ``force``, a previous dsm run
+    in it is cleared first. Leaves the folder created and empty (or as bench found it)."""
+    if out.is_symlink() and not out.is_dir():
+        return f"--out {out}: a broken symbolic link"
+    if out.exists() and not out.is_dir():
+        return f"--out {out}: is a file, not a folder; choose another --out"
+    if out.is_dir() and any(out.iterdir()) and not bench:
+        if not force:
+            return f"--out {out}: is not empty; choose another --out or pass --force (which replaces a previous dsm run)"
+        foreign = sorted(p.name for p in out.iterdir() if p.name not in RUN_OUTPUTS and not RUN_TEMP.fullmatch(p.name))
+        if not (out / "run.json").is_file():
+            return (f"--force: {out} holds no previous dsm run (no run.json), so it is not cleared; "
+                    "choose another --out")
+        if foreign:
+            return (f"--force: {out} holds files a dsm run does not write ({', '.join(foreign[:3])}"
+                    f"{', ...' if len(foreign) > 3 else ''}), so it is not cleared; choose another --out")
+        try:
+            json.loads((out / "run.json").read_text())
+        except (OSError, ValueError):
+            return f"--force: {out}/run.json is not a dsm run.json, so {out} is not cleared; choose another --out"
+        if out.is_symlink():
+            return f"--force: {out} is a symbolic link; clear its target yourself or choose another --out"
+        try:
+            shutil.rmtree(out)
+        except OSError as e:
+            return f"--force: cannot clear {out}: {e.strerror or e}"
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as e:
+        return f"--out {out}: cannot write there: {e.strerror or e}"
+    return None
+
+
+def _run(cfg, args, out: Path) -> int:
+    from . import plan as planmod
+    try:
+        cfgmod.check_runnable(cfg)
+    except cfgmod.NothingToRun as e:
+        _err(e.problem)
+        return 1
+    try:
+        from . import env, scenes
         env.use_variant(args.variant or cfg.variant, args.threads)
+        scenes.check(cfg)
+        planmod.check_memory(planmod.make(cfg), cfg.source)
+    except SetupError as e:
+        _err(f"setup error: {e}")
+        return 3
+    except cfgmod.ConfigError as e:
+        return _config_error(e)
+    problem = _out_problem(out, args.force)
+    if problem:
+        _err(problem)
+        return 2
+    try:
         from .runner import Runner
         t0 = time.perf_counter()
         res = Runner(cfg, out, args.variant, progress=True).run()
     except SetupError as e:
-        print(f"dsm: setup error: {e}", file=sys.stderr)
+        _err(f"setup error: {e}")
         return 3
-    failed = res.run["n_failed"]
-    print(f"dsm: {len(res.rows)} cases in {time.perf_counter() - t0:.1f} s, {failed} failed -> {out}/"
+    except cfgmod.ConfigError as e:
+        return _config_error(e)
+    failed, empty = res.run["n_failed"], res.run["n_empty"]
+    print(f"dsm: {len(res.rows)} cases in {time.perf_counter() - t0:.1f} s -> {out}/"
           f" (table.md, metrics.csv, images/, plots/, run.json)")
-    return 1 if failed and not res.rows else 0
+    if empty:
+        print(f"dsm: {empty} cases are empty (no receiver: nothing faces the light inside its domain); "
+              "their rates are undefined (see table.md)", file=sys.stderr)
+    if failed:
+        print(f"dsm: {failed} failed (reasons above, in table.md and run.json)", file=sys.stderr)
+        return 1
+    return 0
 
 
 def schemes_text() -> str:

@@ -51,10 +51,9 @@ def closedness(verts: np.ndarray, faces: np.ndarray) -> tuple[bool, str]:
 
 def shape_closedness(shape) -> tuple[bool, str]:
     """Closedness of a Mitsuba shape: meshes by their edges, analytic shapes by kind."""
-    import mitsuba as mi
     if shape.is_mesh():
-        params = mi.traverse(shape)
-        return closedness(np.array(params["vertex_positions"]), np.array(params["faces"]))
+        # the buffers, not mi.traverse: an XML rectangle is a mesh that exposes only to_world
+        return closedness(np.array(shape.vertex_positions_buffer()), np.array(shape.faces_buffer()))
     kind = type(shape).__name__.lower()
     if "sphere" in kind:
         return True, "analytic sphere"

@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+import os
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,7 +20,8 @@ FILTERS = ("nearest", "pcf_bilinear", "pcf_jitter4x4")
 FORMATS = ("float32", "unorm16", "unorm24", "ndc24")
 POINT_VIEWS = ("paraboloid", "dual_paraboloid", "cube")
 LIGHT_TYPES = ("scene", "directional", "spot", "point")
-VARIANTS = ("llvm_ad_rgb", "cuda_ad_rgb", "scalar_rgb")
+# vectorized Dr.Jit variants only: the kit's code runs on wide arrays (scalar_rgb cannot run it)
+VARIANTS = ("llvm_ad_rgb", "cuda_ad_rgb")
 
 
 class ConfigError(ValueError):
@@ -32,6 +34,11 @@ class ConfigError(ValueError):
         if self.choices:
             msg += f" (valid: {', '.join(map(str, self.choices))})"
         super().__init__(msg)
+        self.more = []          # further problems of the same kind (scenes.check gathers every scene's)
+
+
+class NothingToRun(ConfigError):
+    """A valid config whose every scene is an absent optional file: the run would compute nothing."""
 
 
 # ---------------------------------------------------------------- lengths
@@ -120,9 +127,17 @@ def _check_keys(table: dict, allowed, source: str, where: str):
 
 
 def coerce_field(f: dataclasses.Field, raw, source: str, key: str):
-    """Convert one raw TOML value to a parameter dataclass field's type (Length, float, str)."""
+    """Convert one raw TOML value to a parameter dataclass field's type (Length, float, int, str, or
+    a ``tuple`` of three numbers). ``metadata["min"]`` bounds numbers and Lengths (their value, in
+    any unit: an upper limit or an offset below 0 has no meaning)."""
     if f.type in ("Length", Length):
-        return Length.parse(raw, source, key)
+        value = Length.parse(raw, source, key)
+        lo = f.metadata.get("min")
+        if lo is not None and value.value < lo:
+            raise ConfigError(source, key, f"must be >= {lo:g}, got {raw!r}")
+        return value
+    if f.type in ("tuple", tuple):
+        return _vec3(raw, source, key)
     if f.type in ("float", float):
         return _number(raw, source, key, minimum=f.metadata.get("min"))
     if f.type in ("int", int):
@@ -140,7 +155,11 @@ def sweep_params(cls, table: dict, source: str, where: str, skip=()) -> list:
     for k, raw in table.items():
         if k in skip:
             continue
-        values = _as_list(raw)
+        if fields[k].type in ("tuple", tuple):
+            # a vector: [x, y, z] is one value, a list of vectors sweeps
+            values = raw if isinstance(raw, list) and raw and all(isinstance(x, list) for x in raw) else [raw]
+        else:
+            values = _as_list(raw)
         if not values:
             raise ConfigError(source, f"{where}.{k}", "empty list")
         names.append(k)
@@ -159,6 +178,8 @@ class SceneSpec:
     label: str = ""
     closed: tuple = ()          # (shape name, closed) overrides of detected closedness
     missing: str = ""           # an optional file that is absent: the run records it as skipped
+    source: str = field(default="", compare=False)     # the config file, for errors found on loading
+    where: str = field(default="scene", compare=False)  # its [[scene]] key, e.g. "scene[2]"
 
 
 @dataclass(frozen=True)
@@ -205,7 +226,7 @@ class Config:
     source: str
     seed: int = 7
     variant: str | None = None
-    camera_resolution: tuple = (256, 256)
+    camera_resolution: tuple | None = None   # None: an XML scene's own film, else DEFAULT_CAMERA
     scenes: tuple = ()
     lights: tuple = ()
     map: MapSpec = field(default_factory=MapSpec)
@@ -216,11 +237,14 @@ class Config:
 
 
 TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing", "memory")
+DEFAULT_CAMERA = (256, 256)     # built-ins and meshes without [camera] resolution
 
 
 def load(path) -> Config:
     path = Path(path)
     source = str(path)
+    if path.is_dir():
+        raise ConfigError(source, "file", "is a folder, not a config file")
     if not path.is_file():
         raise ConfigError(source, "file", "no such config file")
     try:
@@ -228,7 +252,55 @@ def load(path) -> Config:
             raw = tomllib.load(fh)
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(source, "toml", f"not valid TOML: {e}") from None
+    except UnicodeDecodeError as e:
+        raise ConfigError(source, "file", f"not UTF-8 text (byte 0x{e.object[e.start]:02x} at offset {e.start}): "
+                          "TOML files are UTF-8; save it as UTF-8") from None
+    except OSError as e:
+        raise ConfigError(source, "file", f"cannot read it: {e.strerror or e}") from None
     return parse(raw, source, base=path.parent)
+
+
+def coerce(obj, source: str = "<dict>") -> Config:
+    """A Config from what ``dsm.run`` accepts: a Config, a dict of config tables, or a path (str or
+    os.PathLike) to a TOML file. Anything else is a TypeError with one line saying what is accepted;
+    a mistake inside is a ConfigError."""
+    if isinstance(obj, Config):
+        return obj
+    if isinstance(obj, dict):
+        return parse(obj, source)
+    if isinstance(obj, (str, os.PathLike)):
+        return load(obj)
+    raise TypeError(f"dsm.run: config must be a dsm Config, a dict of config tables or a path to a TOML file, "
+                    f"not {type(obj).__name__} ({obj!r:.60})")
+
+
+def absent_files(cfg: Config) -> list:
+    """Files of the config's optional scenes that are absent (each once, in config order)."""
+    out = []
+    for s in cfg.scenes:
+        if s.missing and s.file not in out:
+            out.append(s.file)
+    return out
+
+
+def check_runnable(cfg: Config):
+    """Raise NothingToRun when every scene of the config is an absent optional file."""
+    if cfg.scenes and all(s.missing for s in cfg.scenes):
+        files = absent_files(cfg)
+        where = sorted({str(f.parent) for f in files})
+        raise NothingToRun(cfg.source, "scene", "nothing to run: every scene is an absent optional file ("
+                           + ", ".join(f.name for f in files) + f" in {', '.join(where)}); "
+                           "README.md (Credits: test meshes in ../shared/meshes) says where to get them")
+
+
+def _plain_name(name, source):
+    if not isinstance(name, str) or not name:
+        raise ConfigError(source, "experiment.name", "expected a non-empty string")
+    if ("/" in name or "\\" in name or name in (".", "..") or any(ord(c) < 32 for c in name)
+            or os.sep in name or (os.altsep and os.altsep in name)):
+        raise ConfigError(source, "experiment.name", f"{name!r} must be a plain file name (it names the results "
+                          "folder under runs/): no '/', '\\', '..' or control characters")
+    return name
 
 
 def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Config:
@@ -240,9 +312,7 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
 
     exp = _table(raw, "experiment", source)
     _check_keys(exp, ("name", "seed", "variant"), source, "experiment")
-    name = exp.get("name", Path(source).stem if source != "<config>" else "experiment")
-    if not isinstance(name, str) or not name:
-        raise ConfigError(source, "experiment.name", "expected a non-empty string")
+    name = _plain_name(exp.get("name", Path(source).stem if not source.startswith("<") else "experiment"), source)
     seed = _number(exp.get("seed", 7), source, "experiment.seed", integer=True)
     variant = exp.get("variant")
     if variant is not None:
@@ -250,13 +320,15 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
 
     cam = _table(raw, "camera", source)
     _check_keys(cam, ("resolution",), source, "camera")
-    res = cam.get("resolution", [256, 256])
-    if isinstance(res, int) and not isinstance(res, bool):
-        res = [res, res]
-    if not isinstance(res, list) or len(res) != 2:
-        raise ConfigError(source, "camera.resolution", f"expected [width, height], got {res!r}")
-    camera_resolution = tuple(_number(x, source, "camera.resolution", integer=True, minimum=1, maximum=16384)
-                              for x in res)
+    camera_resolution = None
+    if "resolution" in cam:
+        res = cam["resolution"]
+        if isinstance(res, int) and not isinstance(res, bool):
+            res = [res, res]
+        if not isinstance(res, list) or len(res) != 2:
+            raise ConfigError(source, "camera.resolution", f"expected [width, height], got {res!r}")
+        camera_resolution = tuple(_number(x, source, "camera.resolution", integer=True, minimum=1, maximum=16384)
+                                  for x in res)
 
     scene_tables = _array_of_tables(raw, "scene", source)
     if not scene_tables:
@@ -287,6 +359,11 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
                       ("map.view", views)):
         if not vals:
             raise ConfigError(source, key, "empty list")
+    if "view" in m and all(l.type not in ("point", "scene") for l in lights):
+        # a scene's own lights are known only once it is loaded; explicit ones are known now
+        raise ConfigError(source, "map.view", "views are for point lights and no [[light]] is a point light "
+                          f"(the lights are {', '.join(sorted({l.type for l in lights}))}); remove map.view or "
+                          "add a point light")
     mapspec = MapSpec(resolutions, filters, formats, views, texels)
 
     scheme_tables = _array_of_tables(raw, "scheme", source)

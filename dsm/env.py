@@ -28,8 +28,16 @@ def use_variant(variant: str | None = None, threads: int | None = None) -> str:
     """Set the Mitsuba variant (default llvm_ad_rgb) once; later calls must agree."""
     import drjit as dr
     import mitsuba as mi
+    from .config import VARIANTS
     variant = variant or os.environ.get("DSM_VARIANT") or "llvm_ad_rgb"
+    if variant not in VARIANTS:
+        raise SetupError(f"variant {variant!r} is not supported: dsm runs vectorized Dr.Jit code "
+                         f"(valid: {', '.join(VARIANTS)})")
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
+        raise SetupError(f"threads must be a positive integer, got {threads!r}")
     if mi.variant() == variant:
+        if threads:
+            dr.set_thread_count(threads)
         _register_plugins()
         return variant
     if variant.startswith("llvm"):
@@ -37,8 +45,10 @@ def use_variant(variant: str | None = None, threads: int | None = None) -> str:
         if ver is None or ver[0] < 16:
             found = "none found" if ver is None else ".".join(map(str, ver))
             raise SetupError(f"{LLVM_HINT} (found: {found})")
+    if variant.startswith("cuda") and not _has_cuda():
+        raise SetupError(f"variant {variant} needs an NVIDIA GPU with CUDA; none found here: use llvm_ad_rgb")
     if threads:
-        dr.set_thread_count(int(threads))
+        dr.set_thread_count(threads)
     try:
         mi.set_variant(variant)
     except Exception as e:
@@ -47,9 +57,18 @@ def use_variant(variant: str | None = None, threads: int | None = None) -> str:
         try:
             dr.zeros(mi.Float, 1).numpy()
         except Exception as e:
-            raise SetupError(f"variant {variant!r} needs a CUDA GPU: {e}") from None
+            raise SetupError(f"variant {variant} needs an NVIDIA GPU with CUDA: {e}") from None
     _register_plugins()
     return variant
+
+
+def _has_cuda() -> bool:
+    """Whether Dr.Jit found a CUDA driver and device (it initializes its backends on import)."""
+    import drjit as dr
+    try:
+        return bool(dr.has_backend(dr.JitBackend.CUDA))
+    except Exception:
+        return False
 
 
 def _register_plugins():

@@ -12,7 +12,8 @@ Mitsuba scene is loaded) it derives:
   exactly; ``reference`` (one per receiver) and ``map_continue`` (the layered search's rays
   past the first hit) as upper bounds, since they depend on what the rays meet;
 - the buffers, each map's working set per texel, the estimated peak memory and the tile
-  (wavefront) size that keeps a build within the memory budget.
+  (wavefront) size that keeps a build within the memory budget; :func:`check_memory` refuses a
+  config whose estimate exceeds this machine's memory before any work (instead of a crash).
 
 ``dsm run`` follows the plan (the same grouping, the plan's tiles) and records the rays
 actually cast; tests hold the two to each other.
@@ -24,14 +25,19 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 
 from . import schemes as schemes_mod
-from .config import Config
+from .config import DEFAULT_CAMERA, Config, ConfigError
 from .shadowmap import MAX_STEPS
 
 VIEW_FACES = {"orthographic": 1, "perspective": 1, "paraboloid": 1, "dual_paraboloid": 2, "cube": 6}
 # bytes per pixel / texel, measured with Dr.Jit's allocation watermark on llvm_ad_rgb (the
 # first layer fuses into one kernel: nothing but its outputs is ever stored)
-GBUFFER_BYTES = 150        # surface interaction, positions, normals, shape ids
+GBUFFER_BYTES = 150        # surface interaction, positions, normals, shape ids (150.0 B/px measured, 256^2-2048^2)
 REFERENCE_BYTES = 64       # per receiver: gathered interaction, result, occluder distance
+# per camera pixel on the host: each case's class image and shadow render (numpy, matplotlib's
+# RGBA conversion for the PNGs) and allocator slack; measured as a one-case run's peak RSS growth
+# (244-275 B/px at 1024^2-4096^2) less the G-buffer and reference bytes above
+HOST_BYTES = 60
+PIXEL_BYTES = GBUFFER_BYTES + REFERENCE_BYTES + HOST_BYTES
 BUILD_BYTES = {"first": 8, "slope": 12, "layered": 84, "layered_slope": 132}   # working set incl. outputs
 STORED_BYTES = 4           # per texel and stored layer (z1, shape, slope, z2)
 MIN_TILE = 1 << 16
@@ -84,6 +90,7 @@ class Plan:
     scenes: list = field(default_factory=list)      # (label, width, height, lights [(label, type)])
     maps: list = field(default_factory=list)
     budget_bytes: int = 0
+    absent: list = field(default_factory=list)      # optional scene files that are absent
 
     @property
     def cases(self) -> int:
@@ -104,13 +111,38 @@ class Plan:
         return {"reference": ref, "map_continue": cont}
 
     def peak_bytes(self) -> int:
-        peak = 0
-        for label, w, h, lights in self.scenes:
-            base = w * h * (GBUFFER_BYTES + REFERENCE_BYTES)
-            maps = [m for m in self.maps if m.scene == label]
-            work = max((m.peak_bytes for m in maps), default=0)
-            peak = max(peak, base + work)
-        return peak
+        return max((self._scene_peak(s)[0] for s in self.scenes), default=0)
+
+    def _scene_peak(self, scene) -> tuple:
+        """(peak bytes, camera part) of one scene: its pixels' buffers plus its largest map."""
+        label, w, h, _ = scene
+        base = w * h * PIXEL_BYTES
+        work = max((m.peak_bytes for m in self.maps if m.scene == label), default=0)
+        return base + work, base
+
+    def warnings(self) -> list:
+        """One line per thing a user should know before running: maps cast in tiles to stay
+        within the memory budget, a peak above it even so, absent optional scene files."""
+        mb = 1 / 2 ** 20
+        out = []
+        tiled = [m for m in self.maps if m.tile and m.tile < m.texels]
+        peak = self.peak_bytes()
+        line = []
+        if tiled:
+            worst = max(tiled, key=lambda m: m.stored_bytes + m.texels * m.build_bytes_per_texel)
+            untiled = worst.stored_bytes + worst.texels * worst.build_bytes_per_texel
+            line.append(f"{len(tiled)} map(s) are cast in tiles to stay within the memory budget of "
+                        f"{self.budget_bytes * mb:.0f} MB (largest: {worst.scene} {worst.view} R={worst.resolution}, "
+                        f"{untiled * mb:.0f} MB in one pass)")
+        if peak > self.budget_bytes:
+            line.append(f"the estimated peak memory {peak * mb:.0f} MB exceeds the memory budget of "
+                        f"{self.budget_bytes * mb:.0f} MB{' even so' if tiled else ''} (camera buffers and stored "
+                        "layers are not tiled)")
+        if line:
+            out.append("; ".join(line))
+        if self.absent:
+            out.append("absent optional scene files (skipped): " + ", ".join(map(str, self.absent)))
+        return out
 
     def map_for(self, scene, light, view, resolution, culling):
         for m in self.maps:
@@ -142,6 +174,7 @@ class Plan:
         lines.append("  rays (exact): " + ", ".join(f"{k} {v:,}" for k, v in self.rays.items()))
         lines.append("  rays (at most): " + ", ".join(f"{k} {v:,}" for k, v in self.rays_bound.items()))
         lines.append(f"  estimated peak memory: {self.peak_bytes() * mb:.1f} MB")
+        lines += [f"  warning: {w}" for w in self.warnings()]
         return "\n".join(lines)
 
     def as_dict(self) -> dict:
@@ -159,48 +192,98 @@ def views_for(light_type: str, point_views) -> tuple:
     return {"directional": ("orthographic",), "spot": ("perspective",)}.get(light_type, tuple(point_views))
 
 
-def memory_budget(cfg: Config) -> int:
-    if cfg.memory_budget_mb:
-        return int(cfg.memory_budget_mb * 2 ** 20)
+def physical_memory() -> int:
+    """This machine's memory in bytes: physical RAM, or a lower cgroup (container) limit."""
     try:
         total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     except (ValueError, OSError, AttributeError):
         total = 8 << 30
-    return total // 4
+    for limit in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            text = open(limit).read().strip()
+        except OSError:
+            continue
+        if text.isdigit() and 0 < int(text) < total:
+            total = int(text)
+    return total
 
 
-def _xml_film(path, width) -> tuple:
-    root = ET.parse(path).getroot()
+def memory_budget(cfg: Config) -> int:
+    if cfg.memory_budget_mb:
+        return int(cfg.memory_budget_mb * 2 ** 20)
+    return physical_memory() // 4
+
+
+def check_memory(plan: "Plan", source: str = "<config>", available: int | None = None):
+    """Refuse, before any work, a plan whose estimated peak exceeds this machine's memory
+    (``available`` bytes, default :func:`physical_memory`): such a run is killed or crashes
+    (a 16384^2 camera dies with SIGSEGV). Raises ConfigError naming the part to lower."""
+    available = physical_memory() if available is None else available
+    gb = 1 / 2 ** 30
+    for scene in plan.scenes:
+        peak, camera = plan._scene_peak(scene)
+        if peak <= available:
+            continue
+        label, w, h, _ = scene
+        if camera >= peak - camera:
+            key, what = "camera.resolution", f"{w}x{h} camera pixels x {PIXEL_BYTES} B = {camera * gb:.1f} GiB"
+        else:
+            m = max((m for m in plan.maps if m.scene == label), key=lambda m: m.peak_bytes)
+            key, what = "map.resolution", (f"the {m.view} map at R={m.resolution} with {'+'.join(m.layers)} "
+                                           f"= {m.peak_bytes * gb:.1f} GiB")
+        raise ConfigError(source, key, f"scene {label}: the estimated peak memory {peak * gb:.1f} GiB exceeds this "
+                          f"machine's {available * gb:.1f} GiB ({what}); lower {key}")
+
+
+def _xml_root(path, spec=None):
+    try:
+        return ET.parse(path).getroot()
+    except (ET.ParseError, OSError) as e:
+        where = f"{spec.where}.file" if spec is not None else "file"
+        raise ConfigError(getattr(spec, "source", "") or str(path), where,
+                          f"cannot read {path}: not valid XML ({e})") from None
+
+
+def _xml_film(path, camera_resolution, spec=None) -> tuple:
+    """The camera of an XML scene: its film's size, or [camera] resolution's width at the film's aspect."""
+    root = _xml_root(path, spec)
     defaults = {el.get("name"): el.get("value") for el in root.iter("default")}
     w, h = 768, 576                      # Mitsuba's film defaults
     for el in root.iter("film"):
         for it in el.iter("integer"):
             val = it.get("value", "")
             val = defaults.get(val[1:], val) if val.startswith("$") else val
-            if it.get("name") == "width":
-                w = int(val)
-            if it.get("name") == "height":
-                h = int(val)
+            try:
+                if it.get("name") == "width":
+                    w = int(val)
+                if it.get("name") == "height":
+                    h = int(val)
+            except ValueError:
+                pass                     # Mitsuba reports it on loading
         break
+    w, h = max(w, 1), max(h, 1)
+    if camera_resolution is None:
+        return w, h
+    width = camera_resolution[0]
     return width, max(1, round(width * h / w))
 
 
-def _xml_emitters(path) -> list:
+def _xml_emitters(path, spec=None) -> list:
     """Emitter types in document order (includes followed)."""
     out = []
-    root = ET.parse(path).getroot()
+    root = _xml_root(path, spec)
     for el in root.iter():
         if el.tag == "emitter":
             out.append(el.get("type"))
         if el.tag == "include" and el.get("filename"):
             inc = path.parent / el.get("filename")
             if inc.suffix == ".xml" and inc.is_file():
-                out += _xml_emitters(inc)
+                out += _xml_emitters(inc, spec)
     return out
 
 
-def _xml_lights(path) -> list:
-    types = _xml_emitters(path)
+def _xml_lights(path, spec=None) -> list:
+    types = _xml_emitters(path, spec)
     usable = [t for t in types if t in ("point", "spot", "directional")]
     if usable:
         return usable
@@ -214,7 +297,7 @@ def scene_lights(spec, cfg: Config) -> list:
     if spec.builtin:
         own = [builtin_geometry(spec.builtin, spec.params)[2].type]
     elif spec.file.suffix.lower() == ".xml":
-        own = _xml_lights(spec.file)
+        own = _xml_lights(spec.file, spec)
     else:
         own = ["directional"]
     types = []
@@ -224,17 +307,20 @@ def scene_lights(spec, cfg: Config) -> list:
 
 
 def make(cfg: Config) -> Plan:
-    plan = Plan(cfg.source, budget_bytes=memory_budget(cfg))
+    from .config import absent_files
+    plan = Plan(cfg.source, budget_bytes=memory_budget(cfg), absent=absent_files(cfg))
     per_case = len(cfg.map.filter) * len(cfg.map.format)
     fmts = tuple(f for f in cfg.map.format if f != "float32")
     groups = {}
     for spec in cfg.schemes:
         groups.setdefault(schemes_mod.culling_of(spec.params), []).append(spec)
-    W, H = cfg.camera_resolution
     for sc in cfg.scenes:
         if sc.missing:
             continue
-        w, h = _xml_film(sc.file, W) if sc.file is not None and sc.file.suffix.lower() == ".xml" else (W, H)
+        if sc.file is not None and sc.file.suffix.lower() == ".xml":
+            w, h = _xml_film(sc.file, cfg.camera_resolution, sc)
+        else:
+            w, h = cfg.camera_resolution or DEFAULT_CAMERA
         lights = scene_lights(sc, cfg)
         plan.scenes.append((sc.label, w, h, lights))
         for label, ltype in lights:
@@ -247,7 +333,7 @@ def make(cfg: Config) -> Plan:
                                     "z2" in needs or culling != "none", fmts,
                                     [f"{s.name} {s.label}".strip() for s in group], len(group) * per_case)
                         plan.maps.append(m)
-    base = max((w * h * (GBUFFER_BYTES + REFERENCE_BYTES) for _, w, h, _ in plan.scenes), default=0)
+    base = max((w * h * PIXEL_BYTES for _, w, h, _ in plan.scenes), default=0)
     for m in plan.maps:
         room = plan.budget_bytes - base - m.stored_bytes
         fit = max(room // max(m.build_bytes_per_texel, 1), MIN_TILE)

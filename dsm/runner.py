@@ -456,10 +456,11 @@ def _map_arrays(scene, view, needs, culling="none", modes=None, tile=None):
 
 def run(config, out=None, variant=None, progress=False) -> Results:
     """Run an experiment (a Config, a dict or a path to a TOML file) and return its Results."""
-    if isinstance(config, (str, Path)):
-        config = cfgmod.load(config)
-    elif isinstance(config, dict):
-        config = cfgmod.parse(config)
+    config = cfgmod.coerce(config)           # a one-line TypeError or ConfigError for anything else
+    cfgmod.check_runnable(config)            # NothingToRun: every scene an absent optional file
+    env.use_variant(variant or config.variant)
+    scenes.check(config)                     # unreadable scenes, before any work
+    planmod.check_memory(planmod.make(config), config.source)
     if out is None:
         import tempfile
         out = Path(tempfile.mkdtemp(prefix=f"dsm-{config.name}-"))

@@ -2,18 +2,34 @@
 
 Every built-in is made of triangle meshes in code (z up), one small scene per effect the
 source documents show, with a ``scale`` parameter that scales geometry, camera and the
-config's light positions together. Shapes are loaded with ``optimize=False`` so each keeps
-its identity (attribution of acne to the receiver's own shape or another one).
+config's light positions together, and a ``translate`` offset applied after it (far from the
+origin in one line of config). Shapes are loaded with ``optimize=False`` so each keeps its
+identity (attribution of acne to the receiver's own shape or another one).
+
+A scene that cannot be used (an XML or mesh file that does not load, no sensor, no
+triangles, positions that are not finite, triangles too large or too small for float32
+normals, a ``closed`` override naming no shape) raises :class:`ConfigError` naming the
+config file and the [[scene]] key; :func:`check` loads every scene of a config up front so a
+run refuses before any work.
 """
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from .config import ConfigError, LightSpec, SceneSpec, sweep_params
+from .config import DEFAULT_CAMERA, ConfigError, LightSpec, SceneSpec, sweep_params
+
+ORIGIN = (0.0, 0.0, 0.0)
+# Mitsuba computes a triangle's normal as normalize(cross(e1, e2)) in float32, squaring the cross
+# product's length: above sqrt(FLT_MAX) = 1.8e19 it overflows to a zero normal (plane_box, whose
+# largest |e1 x e2| is 64 at scale 1, loses its receivers between scale 5e8 and 7e8), below
+# sqrt(FLT_MIN) = 1.1e-19 it flushes to zero and the normal is NaN (the unit box at scale 1e-10).
+CROSS_MAX = 1e19
+CROSS_MIN = 2e-19
 
 # ---------------------------------------------------------------- parameters
 
@@ -24,18 +40,21 @@ class PlaneParams:
     tilt: float = field(default=45.0, metadata={"min": 0.0})
     azimuth: float = 0.0
     scale: float = field(default=1.0, metadata={"min": 1e-30})
+    translate: tuple = field(default=ORIGIN, metadata={"doc": "world offset [x, y, z] after scale"})
 
 
 @dataclass(frozen=True)
 class PlaneBoxParams:
     """A closed unit box resting on an 8 x 8 ground: contact shadows."""
     scale: float = field(default=1.0, metadata={"min": 1e-30})
+    translate: tuple = field(default=ORIGIN, metadata={"doc": "world offset [x, y, z] after scale"})
 
 
 @dataclass(frozen=True)
 class LShapeParams:
     """Seed 000, figure 5: a closed L-shaped solid above the ground, light from right above."""
     scale: float = field(default=1.0, metadata={"min": 1e-30})
+    translate: tuple = field(default=ORIGIN, metadata={"doc": "world offset [x, y, z] after scale"})
 
 
 @dataclass(frozen=True)
@@ -43,6 +62,7 @@ class FloatingPlateParams:
     """An open 1.5 x 1.5 plate ``gap`` above the ground: the bias/gap threshold of peter-panning."""
     gap: float = field(default=0.2, metadata={"min": 0.0})
     scale: float = field(default=1.0, metadata={"min": 1e-30})
+    translate: tuple = field(default=ORIGIN, metadata={"doc": "world offset [x, y, z] after scale"})
 
 
 @dataclass(frozen=True)
@@ -50,18 +70,28 @@ class GrazingParams:
     """The ground and a box lit ``angle`` degrees from the ground's normal (80 to 89: projective aliasing)."""
     angle: float = field(default=85.0, metadata={"min": 0.0})
     scale: float = field(default=1.0, metadata={"min": 1e-30})
+    translate: tuple = field(default=ORIGIN, metadata={"doc": "world offset [x, y, z] after scale"})
 
 
 @dataclass(frozen=True)
 class RoomParams:
     """Seed 001, figure 3: a closed 6 x 6 x 3 room (walls facing in) with objects around a point light."""
     scale: float = field(default=1.0, metadata={"min": 1e-30})
+    translate: tuple = field(default=ORIGIN, metadata={"doc": "world offset [x, y, z] after scale"})
+
+
+@dataclass(frozen=True)
+class DoubleTorusParams:
+    """Seed 000, figure 6: a closed genus-2 solid (a double torus, 6,400 triangles) tilted above the ground."""
+    scale: float = field(default=1.0, metadata={"min": 1e-30})
+    translate: tuple = field(default=ORIGIN, metadata={"doc": "world offset [x, y, z] after scale"})
 
 
 @dataclass(frozen=True)
 class FileParams:
     """A scene file. Meshes (OBJ/PLY) get a ground under them, a default camera and light."""
     scale: float = field(default=1.0, metadata={"min": 1e-30})
+    translate: tuple = field(default=ORIGIN, metadata={"doc": "world offset [x, y, z] after scale"})
     up: str = field(default="y", metadata={"choices": ("x", "y", "z")})
     ground: str = field(default="yes", metadata={"choices": ("yes", "no")})
 
@@ -73,6 +103,7 @@ BUILTINS = {
     "floating_plate": FloatingPlateParams,
     "grazing": GrazingParams,
     "room": RoomParams,
+    "double_torus": DoubleTorusParams,
 }
 FILE_SUFFIXES = (".xml", ".obj", ".ply")
 
@@ -87,9 +118,14 @@ def parse_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]
             raise ConfigError(source, f"{where}.builtin", f"unknown scene {name!r}", list(BUILTINS))
         specs = sweep_params(BUILTINS[name], t, source, where, skip=("builtin", "closed"))
         for p in specs:
-            _check_builtin(p, source, where)
+            _check_builtin(name, p, source, where)
         closed = _closed_override(t, source, where)
-        return [SceneSpec(builtin=name, params=p, label=_label(name, p), closed=closed) for p in specs]
+        shape_names = list(builtin_geometry(name, specs[0])[0])
+        for shape, _ in closed:
+            if shape not in shape_names:
+                raise ConfigError(source, f"{where}.closed.{shape}", f"no shape named {shape!r} in {name}", shape_names)
+        return [SceneSpec(builtin=name, params=p, label=_label(name, p), closed=closed, source=source, where=where)
+                for p in specs]
     raw = t["file"]
     if not isinstance(raw, str):
         raise ConfigError(source, f"{where}.file", f"expected a path string, got {raw!r}")
@@ -101,16 +137,20 @@ def parse_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]
         path = (base / path).resolve()
     if path.suffix.lower() not in FILE_SUFFIXES:
         raise ConfigError(source, f"{where}.file", f"unsupported file type {path.suffix!r}", FILE_SUFFIXES)
+    if path.is_dir():
+        raise ConfigError(source, f"{where}.file", f"{path} is a folder, not a scene file", FILE_SUFFIXES)
     if not path.is_file() and not optional:
         raise ConfigError(source, f"{where}.file", f"no such file: {path} (optional = true skips an absent file)")
     specs = sweep_params(FileParams, t, source, where, skip=("file", "closed", "optional"))
     if not path.is_file():
         return [SceneSpec(file=path, params=p, label=_label(path.stem, p, FileParams()),
-                          missing=f"skipped: {path} is absent (optional scene)") for p in specs]
+                          missing=f"skipped: {path} is absent (optional scene)", source=source, where=where)
+                for p in specs]
     closed = _closed_override(t, source, where)
     if path.suffix.lower() == ".xml" and any(p != FileParams() for p in specs):
-        raise ConfigError(source, where, "an XML scene takes no scale/up/ground keys", ("file",))
-    return [SceneSpec(file=path, params=p, label=_label(path.stem, p, FileParams()), closed=closed) for p in specs]
+        raise ConfigError(source, where, "an XML scene takes no scale/translate/up/ground keys", ("file",))
+    return [SceneSpec(file=path, params=p, label=_label(path.stem, p, FileParams()), closed=closed, source=source,
+                      where=where) for p in specs]
 
 
 def _closed_override(t, source, where) -> tuple:
@@ -121,17 +161,44 @@ def _closed_override(t, source, where) -> tuple:
     return tuple(sorted(raw.items()))
 
 
-def _check_builtin(p, source, where):
+def _check_builtin(name, p, source, where):
     if isinstance(p, PlaneParams) and not p.tilt < 90:
         raise ConfigError(source, f"{where}.tilt", f"must be below 90 degrees, got {p.tilt}")
     if isinstance(p, GrazingParams) and not p.angle < 90:
         raise ConfigError(source, f"{where}.angle", f"must be below 90 degrees, got {p.angle}")
+    lo, hi = scale_range(name, p)
+    if not lo <= p.scale <= hi:
+        raise ConfigError(source, f"{where}.scale", f"{p.scale:g} is outside {lo:.2g} to {hi:.2g}, the scales at which "
+                          "Mitsuba's float32 triangle normals of this scene neither overflow nor underflow")
+
+
+def _cross_lengths(verts, faces) -> np.ndarray:
+    """|e1 x e2| (twice the area) of every triangle, in float64."""
+    v = np.asarray(verts, np.float64).reshape(-1, 3)
+    f = np.asarray(faces, np.int64).reshape(-1, 3)
+    return np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+
+
+def scale_range(name: str, p) -> tuple:
+    """The scales at which every triangle of a built-in keeps a float32 normal (see CROSS_MAX)."""
+    shapes = builtin_geometry(name, p)[0]
+    c = np.concatenate([_cross_lengths(v, f) for v, f in shapes.values()])
+    c = c[c > 0]
+    return math.sqrt(CROSS_MIN / c.min()), math.sqrt(CROSS_MAX / c.max())
+
+
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        return f"{v:g}"
+    if isinstance(v, tuple):
+        return "[" + ",".join(_fmt(x) for x in v) + "]"
+    return str(v)
 
 
 def _label(name, params, defaults=None) -> str:
     defaults = defaults if defaults is not None else type(params)()
-    diff = [f"{k}={getattr(params, k):g}" if isinstance(getattr(params, k), float) else f"{k}={getattr(params, k)}"
-            for k in params.__dataclass_fields__ if getattr(params, k) != getattr(defaults, k)]
+    diff = [f"{k}={_fmt(getattr(params, k))}" for k in params.__dataclass_fields__
+            if getattr(params, k) != getattr(defaults, k)]
     return f"{name}({','.join(diff)})" if diff else name
 
 
@@ -197,7 +264,76 @@ def look_at_sensor(origin, target, up, fov, width, height):
 
 def _normalize(v):
     v = np.asarray(v, float)
-    return tuple(float(c) for c in v / np.linalg.norm(v))
+    n = float(np.linalg.norm(v))
+    if not (n > 0 and math.isfinite(n)):
+        raise ValueError(f"cannot normalize the vector {tuple(float(c) for c in v)}: it is zero or not finite")
+    return tuple(float(c) for c in v / n)
+
+
+def polycube(xs, ys, zs, solid):
+    """The boundary of a union of grid cells as outward-wound quads (welded vertices):
+    ``solid[i, j, k]`` fills the cell [xs[i], xs[i+1]] x [ys[j], ys[j+1]] x [zs[k], zs[k+1]]."""
+    solid = np.asarray(solid, bool)
+    nx, ny, nz = solid.shape
+    vid = lambda i, j, k: (i * (ny + 1) + j) * (nz + 1) + k
+    S = np.pad(solid, 1)
+    quads = []
+    for i, j, k in zip(*np.nonzero(solid)):
+        if not S[i, j + 1, k + 1]:
+            quads.append([vid(i, j, k), vid(i, j, k + 1), vid(i, j + 1, k + 1), vid(i, j + 1, k)])
+        if not S[i + 2, j + 1, k + 1]:
+            quads.append([vid(i + 1, j, k), vid(i + 1, j + 1, k), vid(i + 1, j + 1, k + 1), vid(i + 1, j, k + 1)])
+        if not S[i + 1, j, k + 1]:
+            quads.append([vid(i, j, k), vid(i + 1, j, k), vid(i + 1, j, k + 1), vid(i, j, k + 1)])
+        if not S[i + 1, j + 2, k + 1]:
+            quads.append([vid(i, j + 1, k), vid(i, j + 1, k + 1), vid(i + 1, j + 1, k + 1), vid(i + 1, j + 1, k)])
+        if not S[i + 1, j + 1, k]:
+            quads.append([vid(i, j, k), vid(i, j + 1, k), vid(i + 1, j + 1, k), vid(i + 1, j, k)])
+        if not S[i + 1, j + 1, k + 2]:
+            quads.append([vid(i, j, k + 1), vid(i + 1, j, k + 1), vid(i + 1, j + 1, k + 1), vid(i, j + 1, k + 1)])
+    X, Y, Z = np.meshgrid(np.asarray(xs, float), np.asarray(ys, float), np.asarray(zs, float), indexing="ij")
+    verts = np.stack([X.ravel(), Y.ravel(), Z.ravel()], 1)
+    used, inv = np.unique(np.array(quads), return_inverse=True)
+    return verts[used], inv.reshape(-1, 4)
+
+
+def catmull_clark(verts, quads):
+    """One Catmull-Clark step of a closed quad mesh: four quads per quad, wound as their parent."""
+    V, Q = np.asarray(verts, float), np.asarray(quads, np.int64)
+    nv, nq = len(V), len(Q)
+    face_pt = V[Q].mean(1)
+    edges = np.stack([Q, np.roll(Q, -1, axis=1)], -1).reshape(-1, 2)       # quad f's edge k: (Q[f,k], Q[f,k+1])
+    uniq, inv = np.unique(np.sort(edges, 1), axis=0, return_inverse=True)
+    inv = inv.ravel()
+    fsum = np.zeros((len(uniq), 3))
+    np.add.at(fsum, inv, np.repeat(face_pt, 4, axis=0))
+    edge_pt = (V[uniq[:, 0]] + V[uniq[:, 1]] + fsum) / 4                    # two ends + two face points
+    valence = np.zeros(nv)
+    np.add.at(valence, uniq.ravel(), 1)
+    F = np.zeros((nv, 3))
+    np.add.at(F, Q.ravel(), np.repeat(face_pt, 4, axis=0))
+    mid = (V[uniq[:, 0]] + V[uniq[:, 1]]) / 2
+    R = np.zeros((nv, 3))
+    np.add.at(R, uniq[:, 0], mid)
+    np.add.at(R, uniq[:, 1], mid)
+    n = valence[:, None]
+    moved = (F / n + 2 * R / n + (n - 3) * V) / n
+    E = inv.reshape(nq, 4) + nv
+    C = np.arange(nq) + nv + len(uniq)
+    out = [np.stack([Q[:, k], E[:, k], C, E[:, (k - 1) % 4]], 1) for k in range(4)]
+    return np.vstack([moved, edge_pt, face_pt]), np.concatenate(out)
+
+
+def double_torus(levels: int = 3):
+    """A closed, outward-wound genus-2 triangle mesh: a slab with two square holes (a polycube of
+    13 cells) smoothed by Catmull-Clark; 100 * 4**levels triangles, centred, about 2.4 x 1.4 x 0.5."""
+    solid = np.ones((5, 3, 1), bool)
+    solid[1, 1, 0] = solid[3, 1, 0] = False
+    v, q = polycube([0, 1, 3, 4, 6, 7], [0, 1, 3, 4], [0, 1.5], solid)
+    for _ in range(levels):
+        v, q = catmull_clark(v, q)
+    v = (v - (v.max(0) + v.min(0)) / 2) * 0.35
+    return v, np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
 
 
 # ---------------------------------------------------------------- built-in scenes
@@ -246,15 +382,24 @@ def builtin_geometry(name: str, p):
         shapes["house"] = (shapes["house"][0] + [-0.2, 0.0, 0.0], shapes["house"][1])
         light = LightSpec("point", position=(0.2, 0.1, 1.8), direction=(0.0, 0.0, -1.0), label="point")
         return shapes, ((2.8, -2.8, 2.7), (-0.6, 0.6, 0.4), 75.0), light
+    if name == "double_torus":
+        # seed 000, figure 6: the double torus over a plane; tilted so the light from above grazes
+        # its far side and sees into both holes (midpoint's self-unshadowing shows at its lower left)
+        v, f = double_torus()
+        v = v @ _rotation([1, 0.3, 0], 20).T + [0.0, 0.0, 0.9]
+        shapes = {"ground": _ground(), "double_torus": (v, f)}
+        return shapes, ((1.0, -4.5, 3.8), (0, 0, 0.5)), LightSpec("directional", direction=_normalize([0.3, -0.2, -1]))
     raise KeyError(name)
 
 
-def _scale_light(light: LightSpec, s: float) -> LightSpec:
+def _scale_light(light: LightSpec, s: float, offset=ORIGIN) -> LightSpec:
+    """A light given relative to the scene: positions scaled by ``s``, then moved by ``offset``."""
     if light.position is None:
         return light
     from dataclasses import replace
-    return replace(light, position=tuple(s * c for c in light.position),
-                   target=None if light.target is None else tuple(s * c for c in light.target))
+    t = tuple(float(c) for c in offset)
+    return replace(light, position=tuple(s * c + o for c, o in zip(light.position, t)),
+                   target=None if light.target is None else tuple(s * c + o for c, o in zip(light.target, t)))
 
 
 # ---------------------------------------------------------------- loaded scenes
@@ -272,6 +417,7 @@ class SceneData:
     closed_override: tuple = ()    # (shape name, closed) pairs from the config
     closed: list = None            # per shape, computed when a culling choice needs it
     closed_reason: list = None
+    offset: tuple = ORIGIN         # added to the config's light positions after scaling (translate)
 
     @property
     def diagonal(self) -> float:
@@ -283,33 +429,159 @@ class SceneData:
             if spec.type == "scene":
                 out += self.own_lights
             else:
-                out.append(_scale_light(spec, self.scale))
+                out.append(_scale_light(spec, self.scale, self.offset))
         return out
 
 
-def load(spec: SceneSpec, camera_resolution) -> SceneData:
+def load(spec: SceneSpec, camera_resolution=None) -> SceneData:
+    """Load one scene with its camera at ``camera_resolution`` (width, height). None: an XML
+    scene's own film size, else DEFAULT_CAMERA; given, an XML sensor is re-created at that width
+    with its film's aspect ratio, transform and field of view. A scene that cannot be used raises
+    ConfigError naming ``spec.source`` and the [[scene]] key (``spec.where``)."""
     import mitsuba as mi
-    w, h = camera_resolution
+    if spec.missing:
+        raise ConfigError(_src(spec), f"{spec.where}.file", spec.missing)
     if spec.builtin:
+        w, h = camera_resolution or DEFAULT_CAMERA
         p = spec.params
         shapes, (cam_o, cam_t, *fov), light = builtin_geometry(spec.builtin, p)
-        s = p.scale
+        s, t = p.scale, np.asarray(p.translate, float)
         d = {"type": "scene"}
         for name, (v, f) in shapes.items():
-            d[name] = make_mesh(name, v * s, f)
-        d["sensor"] = look_at_sensor(np.multiply(cam_o, s), np.multiply(cam_t, s), (0, 0, 1), (fov or [40])[0], w, h)
+            d[name] = make_mesh(name, v * s + t, f)
+        d["sensor"] = look_at_sensor(np.multiply(cam_o, s) + t, np.multiply(cam_t, s) + t, (0, 0, 1),
+                                     (fov or [40])[0], w, h)
         scene = mi.load_dict(d, optimize=False)
-        data = _finish(spec.label, scene, [_scale_light(light, s)], s)
-    elif spec.file.suffix.lower() == ".xml":
-        data = _load_xml(spec, w)
+        data = _finish(spec.label, scene, [_scale_light(light, s, p.translate)], s)
+        data.offset = tuple(float(c) for c in p.translate)
     else:
-        data = _load_mesh_file(spec, w, h)
+        try:
+            if spec.file.suffix.lower() == ".xml":
+                data = _load_xml(spec, camera_resolution)
+            else:
+                data = _load_mesh_file(spec, *(camera_resolution or DEFAULT_CAMERA))
+        except ConfigError:
+            raise
+        except (RuntimeError, ValueError, OSError) as e:      # Mitsuba's loaders raise RuntimeError
+            raise ConfigError(_src(spec), f"{spec.where}.file", f"cannot load {spec.file}: "
+                              f"{_mitsuba_message(e, spec.file.suffix.lower() != '.xml')}") from None
     data.closed_override = spec.closed
+    _check_loaded(spec, data)
     return data
 
 
+def check(cfg, keep: bool = False):
+    """Load every scene of ``cfg`` (absent optional files aside) before any work starts.
+
+    The first scene that cannot be used raises its ConfigError, with the other scenes' problems
+    in its ``more`` list (``dsm plan`` prints them all). Returns the loaded SceneData in config
+    order (None for absent files) when ``keep``. Needs a Mitsuba variant (``env.use_variant``)."""
+    loaded, errors, seen = [], [], set()
+    for spec in cfg.scenes:
+        sd = None
+        if not spec.missing:
+            try:
+                sd = load(spec, cfg.camera_resolution)
+            except ConfigError as e:
+                if str(e) not in seen:          # a swept file that cannot be read says so once
+                    seen.add(str(e))
+                    errors.append(e)
+        loaded.append(sd if keep else None)
+    if errors:
+        errors[0].more = errors[1:]
+        raise errors[0]
+    return loaded if keep else None
+
+
+def _src(spec) -> str:
+    return spec.source or "<scene>"
+
+
+def _mitsuba_message(e, mesh_file: bool = False) -> str:
+    """A Mitsuba loader's error on one line, without its C++ source locations and the plugin
+    chatter (the file is named by the caller; an XML error keeps its line and column)."""
+    msg = re.sub(r"\[[\w./\\-]+\.(?:cpp|h|inl):\d+\]\s*", "", str(e))
+    msg = msg.replace('At dictionary node "root": ', "")
+    msg = re.sub(r'At \S+ \((line \d+, col \d+)\): ', r"\1: ", msg)
+    msg = re.sub(r'failed to instantiate \w+ plugin of type "[^"]*": ', "", msg)
+    if mesh_file:
+        msg = re.sub(r'\[\w+\] Error while loading \w+ file "[^"]*": ', "", msg)
+        msg = re.sub(r'"[^"]*\.(?:ply|obj|PLY|OBJ)": ', "", msg)
+    msg = " ".join(msg.split())
+    return msg if len(msg) <= 400 else msg[:400] + " ..."
+
+
+def _precheck_file(spec):
+    """Problems Mitsuba reports badly or not at all: an empty file, a mesh without faces, a file that is no PLY."""
+    path, key = spec.file, f"{spec.where}.file"
+    try:
+        size = path.stat().st_size
+        if size == 0:
+            raise ConfigError(_src(spec), key, f"{path} is empty")
+        suffix = path.suffix.lower()
+        if suffix == ".obj":
+            if re.search(rb"(?m)^[ \t]*f[ \t]", path.read_bytes()) is None:
+                raise ConfigError(_src(spec), key, f"{path} has no faces (no 'f' lines): dsm needs a triangle mesh")
+        elif suffix == ".ply":
+            with open(path, "rb") as fh:
+                head = fh.read(1 << 16)
+            if not head.startswith(b"ply"):
+                raise ConfigError(_src(spec), key, f"{path} is not a PLY file (it does not start with 'ply')")
+            end = head.find(b"end_header")
+            if end < 0:
+                raise ConfigError(_src(spec), key, f"{path}: the PLY header has no end_header")
+            m = re.search(rb"element\s+face\s+(\d+)", head[:end])
+            if m is None or int(m.group(1)) == 0:
+                raise ConfigError(_src(spec), key, f"{path} has no faces (PLY element face: "
+                                  f"{m.group(1).decode() if m else 'absent'}): dsm needs a triangle mesh")
+    except OSError as e:
+        raise ConfigError(_src(spec), key, f"cannot read {path}: {e.strerror or e}") from None
+
+
+def _check_loaded(spec, data):
+    """What a loaded scene must hold: shapes, triangles, finite positions, float32-safe normals."""
+    src = _src(spec)
+    key = f"{spec.where}.builtin" if spec.builtin else f"{spec.where}.file"
+    size_key = f"{spec.where}.scale" if spec.params is not None and getattr(spec.params, "scale", 1.0) != 1.0 else key
+    what = spec.builtin or str(spec.file)
+    shapes = list(data.scene.shapes())
+    if not shapes:
+        raise ConfigError(src, key, f"{what} has no shapes")
+    for name, shape in zip(data.shape_names, shapes):
+        if not shape.is_mesh():
+            continue
+        # the buffers, not mi.traverse: a rectangle or disk mesh exposes only its to_world there
+        v = np.array(shape.vertex_positions_buffer(), np.float64).reshape(-1, 3)
+        f = np.array(shape.faces_buffer(), np.int64).reshape(-1, 3)
+        if len(f) == 0:
+            raise ConfigError(src, key, f"{what}: shape {name!r} has no triangles")
+        if not np.isfinite(v).all():
+            bad = int((~np.isfinite(v).all(1)).sum())
+            raise ConfigError(src, key, f"{what}: shape {name!r} has {bad} vertex positions that are not finite "
+                              "(NaN or inf)")
+        if f.max() >= len(v):
+            raise ConfigError(src, key, f"{what}: shape {name!r} has faces referring to vertex {int(f.max())} "
+                              f"of {len(v)}")
+        c = _cross_lengths(v, f)
+        if c.max() > CROSS_MAX:
+            raise ConfigError(src, size_key, f"{what}: shape {name!r} has {int((c > CROSS_MAX).sum())} triangles too "
+                              f"large for Mitsuba's float32 normals (|e1 x e2| up to {c.max():.2g}, limit "
+                              f"{CROSS_MAX:g}): scale the scene down")
+        nz = c[c > 0]
+        if nz.size == 0:
+            raise ConfigError(src, key, f"{what}: shape {name!r} has only degenerate (zero-area) triangles")
+        if (nz < CROSS_MIN).mean() > 0.01:
+            raise ConfigError(src, size_key, f"{what}: shape {name!r} has triangles too small for Mitsuba's float32 "
+                              f"normals (|e1 x e2| down to {nz.min():.2g}, limit {CROSS_MIN:g}): scale the scene up")
+    if not (np.isfinite(data.bbox[0]).all() and np.isfinite(data.bbox[1]).all()):
+        raise ConfigError(src, key, f"{what}: its bounding box is not finite")
+    unknown = [n for n, _ in spec.closed if n not in data.shape_names]
+    if unknown:
+        raise ConfigError(src, f"{spec.where}.closed.{unknown[0]}", f"no shape named {unknown[0]!r} in {what}",
+                          data.shape_names)
+
+
 def _finish(label, scene, own_lights, scale, notes=()):
-    import mitsuba as mi
     bb = scene.bbox()
     bbox = (np.array(bb.min, float).ravel(), np.array(bb.max, float).ravel())
     names = [sh.id() or f"shape{i}" for i, sh in enumerate(scene.shapes())]
@@ -330,21 +602,40 @@ def lights_of(scene) -> tuple[list, list]:
     return lights, notes
 
 
+def _shape_normal(shape):
+    """The normal of a shape at its sample (0.5, 0.5): the side an area light emits to; None if unusable."""
+    import mitsuba as mi
+    try:
+        ps = shape.sample_position(0.0, mi.Point2f(0.5, 0.5))
+        return _normalize(np.array([ps.n.x, ps.n.y, ps.n.z], float).ravel()[:3])
+    except Exception:
+        return None
+
+
 def default_light(scene) -> LightSpec:
     """A light for a scene without a point, spot or directional emitter: a point light at its
-    first area light (moved 2 % of the way to the scene's centre, off the luminaire's surface),
-    or else a directional light from above (the sensor's up) and a little to the side."""
+    first area light (moved 2 % of the way to the scene's centre, off the luminaire's surface,
+    its axis toward the centre), or else a directional light from above (the sensor's up) and a
+    little to the side. A luminaire at the scene's centre gets its surface normal as the axis
+    (or -z) and sits 0.1 % of the scene's diagonal off its surface: never a NaN direction."""
     import mitsuba as mi
     bb = scene.bbox()
-    centre = np.array(bb.center(), float).ravel()
+    lo, hi = np.array(bb.min, float).ravel(), np.array(bb.max, float).ravel()
+    centre, diag = (lo + hi) / 2, float(np.linalg.norm(hi - lo))
     for e in scene.emitters():
         shape = e.get_shape()
         if shape is not None:
             c = np.array(shape.bbox().center(), float).ravel()
-            pos = c + 0.02 * (centre - c)
-            return LightSpec("point", position=tuple(float(x) for x in pos), direction=_normalize(centre - c),
-                             label="point")
-    up = np.array(scene.sensors()[0].world_transform() @ mi.Vector3f(0, 1, 0), float).ravel()
+            off = centre - c
+            if np.linalg.norm(off) > 1e-6 * diag:
+                pos, axis = c + 0.02 * off, _normalize(off)
+            else:
+                axis = _shape_normal(shape) or (0.0, 0.0, -1.0)
+                pos = c + 1e-3 * max(diag, 1e-30) * np.asarray(axis)
+            return LightSpec("point", position=tuple(float(x) for x in pos), direction=axis, label="point")
+    up = np.array([0.0, 0.0, 1.0])
+    if scene.sensors():
+        up = np.array(scene.sensors()[0].world_transform() @ mi.Vector3f(0, 1, 0), float).ravel()
     side = np.cross(up, [0.3, 0.5, 0.8])
     return LightSpec("directional", direction=_normalize(-up + 0.3 * side / max(np.linalg.norm(side), 1e-9)),
                      label="directional")
@@ -356,20 +647,26 @@ def from_mitsuba(scene, label: str = "scene") -> "SceneData":
     return _finish(label, scene, lights, 1.0, notes)
 
 
-def _load_xml(spec, width):
+def _load_xml(spec, camera_resolution):
     import mitsuba as mi
+    _precheck_file(spec)
     scene = mi.load_file(str(spec.file), optimize=False)
+    if not scene.sensors():
+        raise ConfigError(_src(spec), f"{spec.where}.file", f"{spec.file} has no <sensor>: dsm takes the camera "
+                          "from an XML scene's first sensor; add one")
     lights, notes = lights_of(scene)
     if not lights:
         lights = [default_light(scene)]
         notes.append(f"no point, spot or directional emitter: dsm added a default {lights[0].type} light "
                      f"({lights[0]})")
-    # Re-create the sensor at the requested width, keeping its aspect ratio and transform.
-    film = scene.sensors()[0].film().size()
-    height = max(1, round(width * film[1] / film[0]))
     sensor = scene.sensors()[0]
     data = _finish(spec.label, scene, lights, 1.0, notes)
-    data.sensor = _resized_sensor(sensor, width, height)
+    if camera_resolution is not None:
+        # [camera] resolution: the sensor re-created at that width, with its film's aspect ratio,
+        # transform and field of view; without it the XML's own sensor and film are the camera
+        film = sensor.film().size()
+        width = int(camera_resolution[0])
+        data.sensor = _resized_sensor(sensor, width, max(1, round(width * film[1] / film[0])))
     return data
 
 
@@ -414,9 +711,10 @@ def emitter_to_light(e):
 def _load_mesh_file(spec, width, height):
     import mitsuba as mi
     p = spec.params
+    _precheck_file(spec)
     up = np.eye(3)["xyz".index(p.up)]
-    mesh = mi.load_dict({"type": spec.file.suffix.lower()[1:], "filename": str(spec.file),
-                         "to_world": mi.ScalarTransform4f().scale(p.scale)})
+    to_world = mi.ScalarTransform4f().translate([float(c) for c in p.translate]).scale(p.scale)
+    mesh = mi.load_dict({"type": spec.file.suffix.lower()[1:], "filename": str(spec.file), "to_world": to_world})
     bb = mesh.bbox()
     lo, hi = np.array(bb.min, float).ravel(), np.array(bb.max, float).ravel()
     center, size = (lo + hi) / 2, float(np.linalg.norm(hi - lo))
@@ -433,4 +731,6 @@ def _load_mesh_file(spec, width, height):
     d["sensor"] = look_at_sensor(cam_o, center, up, 40, width, height)
     scene = mi.load_dict(d, optimize=False)
     light = LightSpec("directional", direction=_normalize(-up * 1.0 - a * 0.3 + b * 0.2))
-    return _finish(spec.label, scene, [light], p.scale)
+    data = _finish(spec.label, scene, [light], p.scale)
+    data.offset = tuple(float(c) for c in p.translate)
+    return data

@@ -34,8 +34,9 @@ def test_default_experiment_writes_the_report(tmp_path):
     plots = sorted(x.name for x in (out / "plots").iterdir())
     assert any(x.startswith("vs_bias_") for x in plots) and any(x.startswith("vs_resolution_") for x in plots)
     # the default experiment really shows both failure modes somewhere
-    assert max(float(r["acne_rate"]) for r in rows) > 0.3
-    assert max(float(r["peterpan_rate"]) for r in rows) > 0.05
+    defined = lambda col: [float(r[col]) for r in rows if r[col] != ""]     # "" where a rate is undefined
+    assert max(defined("acne_rate")) > 0.3
+    assert max(defined("peterpan_rate")) > 0.05
 
 
 def test_schemes_command_lists_every_scheme():

@@ -23,7 +23,7 @@ NEEDS = frozenset({"z2"})
 
 @dataclass(frozen=True)
 class Params:
-    z_offset: Length = field(default=Length(4.0, "texel"), metadata={"doc": "largest bias"})
+    z_offset: Length = field(default=Length(4.0, "texel"), metadata={"min": 0.0, "doc": "largest bias"})
     culling: str = field(default="back_closed", metadata={"doc": "map culling per shape", "choices": CULLING})
 
 

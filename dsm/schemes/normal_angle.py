@@ -21,7 +21,7 @@ NEEDS = frozenset()
 @dataclass(frozen=True)
 class Params:
     bias: Length = field(default=Length(1.0, "texel"), metadata={"doc": "scale of tan(theta)"})
-    max: Length = field(default=Length(8.0, "texel"), metadata={"doc": "largest bias"})
+    max: Length = field(default=Length(8.0, "texel"), metadata={"min": 0.0, "doc": "largest bias"})
 
 
 def lit(rx, tap, p):

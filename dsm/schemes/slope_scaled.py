@@ -24,7 +24,7 @@ NEEDS = frozenset({"slope"})
 class Params:
     bias: Length = field(default=Length(2.0 ** -24, "range"), metadata={"doc": "constant part"})
     slope: float = field(default=3.0, metadata={"doc": "factor on m, the caster's depth change per texel", "min": 0.0})
-    clamp: Length = field(default=Length(1.0 / 128.0, "range"), metadata={"doc": "largest total bias"})
+    clamp: Length = field(default=Length(1.0 / 128.0, "range"), metadata={"min": 0.0, "doc": "largest total bias"})
 
 
 def lit(rx, tap, p):
