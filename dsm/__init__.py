@@ -1,5 +1,6 @@
 """dsm: measure shadow-map bias schemes against exact ray-traced visibility (Mitsuba 3, Dr.Jit)."""
-from .config import ConfigError, Length, load as load_config, parse as parse_config
+from .config import load as load_config, parse as parse_config
+from .types import ConfigError, Length
 
 __version__ = "0.1.0"
 
@@ -12,8 +13,8 @@ def run(config, out=None, variant=None, progress=False):
 
 def register():
     """Register the Mitsuba integrator plugins dsm_shadow and dsm_error for the current variant."""
-    from .plugins import register as _register
-    return _register()
+    from .env import register_plugins
+    return register_plugins()
 
 
 def _register_if_variant_set():

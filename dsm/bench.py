@@ -43,7 +43,7 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
 
     from . import env, lookup, scenes, schemes, shadowmap, timing
     from .config import LightSpec
-    from .runner import make_view, _points_np
+    from .pipeline import make_view, points_np as _points_np
     from .gbuffer import cast
 
     variant = env.use_variant(variant)

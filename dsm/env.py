@@ -28,7 +28,7 @@ def use_variant(variant: str | None = None, threads: int | None = None) -> str:
     """Set the Mitsuba variant (default llvm_ad_rgb) once; later calls must agree."""
     import drjit as dr
     import mitsuba as mi
-    from .config import VARIANTS
+    from .types import VARIANTS
     variant = variant or os.environ.get("DSM_VARIANT") or "llvm_ad_rgb"
     if variant not in VARIANTS:
         raise SetupError(f"variant {variant!r} is not supported: dsm runs vectorized Dr.Jit code "
@@ -38,7 +38,7 @@ def use_variant(variant: str | None = None, threads: int | None = None) -> str:
     if mi.variant() == variant:
         if threads:
             dr.set_thread_count(threads)
-        _register_plugins()
+        register_plugins()
         return variant
     if variant.startswith("llvm"):
         ver = llvm_version()
@@ -58,7 +58,7 @@ def use_variant(variant: str | None = None, threads: int | None = None) -> str:
             dr.zeros(mi.Float, 1).numpy()
         except Exception as e:
             raise SetupError(f"variant {variant} needs an NVIDIA GPU with CUDA: {e}") from None
-    _register_plugins()
+    register_plugins()
     return variant
 
 
@@ -71,6 +71,15 @@ def _has_cuda() -> bool:
         return False
 
 
-def _register_plugins():
-    from .plugins import register
-    register()
+PLUGIN_GROUP = "dsm.plugins"      # entry points: callables that register Mitsuba plugins
+
+
+def register_plugins() -> list:
+    """Register the Mitsuba plugins installed with the kit (entry-point group ``dsm.plugins``;
+    ``dsm_plugins`` gives dsm_shadow and dsm_error) for the current variant; their names.
+    The kit imports no plugin statically: a plugin depends on ``dsm.pipeline``, not the reverse."""
+    from importlib.metadata import entry_points
+    names = []
+    for ep in entry_points(group=PLUGIN_GROUP):
+        names += list(ep.load()() or ())
+    return names

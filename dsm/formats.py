@@ -33,7 +33,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-FORMATS = ("float32", "unorm16", "unorm24", "ndc24")
+from .types import FORMATS  # noqa: F401  (the choices, defined once)
+
 BITS = {"unorm16": 16, "unorm24": 24, "ndc24": 24}
 
 

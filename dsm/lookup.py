@@ -30,7 +30,7 @@ from types import SimpleNamespace
 import drjit as dr
 import mitsuba as mi
 
-from .config import Length
+from .types import Length
 
 
 @dataclass

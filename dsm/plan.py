@@ -25,10 +25,9 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 
 from . import schemes as schemes_mod
-from .config import DEFAULT_CAMERA, Config, ConfigError
+from .types import DEFAULT_CAMERA, VIEW_FACES, Config, ConfigError
 from .shadowmap import MAX_STEPS
 
-VIEW_FACES = {"orthographic": 1, "perspective": 1, "paraboloid": 1, "dual_paraboloid": 2, "cube": 6}
 # bytes per pixel / texel, measured with Dr.Jit's allocation watermark on llvm_ad_rgb (the
 # first layer fuses into one kernel: nothing but its outputs is ever stored)
 GBUFFER_BYTES = 150        # surface interaction, positions, normals, shape ids (150.0 B/px measured, 256^2-2048^2)
@@ -57,6 +56,9 @@ class MapPlan:
     schemes: list
     cases: int
     tile: int = 0
+    specs: tuple = ()             # the scheme instances (SchemeSpec) read from this map, in config order
+    scene_index: int = 0          # of the config's scenes
+    light_index: int = 0          # of the scene's lights (the label's number)
 
     @property
     def texels(self) -> int:
@@ -314,7 +316,7 @@ def make(cfg: Config) -> Plan:
     groups = {}
     for spec in cfg.schemes:
         groups.setdefault(schemes_mod.culling_of(spec.params), []).append(spec)
-    for sc in cfg.scenes:
+    for si, sc in enumerate(cfg.scenes):
         if sc.missing:
             continue
         if sc.file is not None and sc.file.suffix.lower() == ".xml":
@@ -323,7 +325,7 @@ def make(cfg: Config) -> Plan:
             w, h = cfg.camera_resolution or DEFAULT_CAMERA
         lights = scene_lights(sc, cfg)
         plan.scenes.append((sc.label, w, h, lights))
-        for label, ltype in lights:
+        for li, (label, ltype) in enumerate(lights):
             for view in views_for(ltype, cfg.map.view):
                 faces = VIEW_FACES[view]
                 for R in cfg.map.resolutions_for(faces):
@@ -331,7 +333,8 @@ def make(cfg: Config) -> Plan:
                         needs = schemes_mod.needs_of(group)
                         m = MapPlan(sc.label, label, view, R, faces, culling, tuple(sorted(needs)),
                                     "z2" in needs or culling != "none", fmts,
-                                    [f"{s.name} {s.label}".strip() for s in group], len(group) * per_case)
+                                    [f"{s.name} {s.label}".strip() for s in group], len(group) * per_case,
+                                    specs=tuple(group), scene_index=si, light_index=li)
                         plan.maps.append(m)
     base = max((w * h * PIXEL_BYTES for _, w, h, _ in plan.scenes), default=0)
     for m in plan.maps:

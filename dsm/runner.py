@@ -1,73 +1,30 @@
-"""The runner: config -> shared work -> cases -> results folder.
+"""The runner: a loop over the plan's maps, with the failure policy, timing and the report.
 
-Shared work is done once: the G-buffer per scene/camera, the receivers and exact reference
-per scene/light, one map per light/resolution with only the attributes the named schemes
-need. Each case (scheme instance on a map) is a lookup, metrics, an error image and a row of
-metrics.csv. A failing case or map is recorded in run.json and the others still run; rows
-are written as they finish, so nothing done is lost.
+The plan (:mod:`dsm.plan`) lists the maps in order: scene, light, view, resolution, culling.
+The runner walks it, doing each shared stage once through :mod:`dsm.pipeline` (the G-buffer
+per scene, receivers and the exact reference per light, receivers per view, one map per
+culling choice with the layers its schemes need) and each case (a scheme instance, filter and
+format on a map) as a lookup, metrics, an error image and a row of metrics.csv.
+
+Failure policy: a stage that fails is recorded in run.json (and printed, and listed in
+table.md) with the cases it would have fed, and the rest still run; rows are written as they
+finish and run.json after each case, so nothing done is lost.
 """
 from __future__ import annotations
 
+import itertools
 import sys
 import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import drjit as dr
-import mitsuba as mi
 import numpy as np
 
 from . import config as cfgmod
-from . import env, formats, gbuffer, metrics, reference, report, scenes, schemes, shadowmap, timing
+from . import env, metrics, pipeline, report, shadowmap, timing
 from . import plan as planmod
-from . import lookup
-from .lookup import Receiver, visibility
-from .views import CubeView, OrthographicView, ParaboloidView, PerspectiveView
-
-
-@dataclass
-class LightSetup:
-    """Receivers and exact visibility of one scene from one light."""
-    label: str
-    light: object                 # LightSpec
-    pixels: np.ndarray            # pixel index of each receiver
-    p: object                     # receiver positions (mi.Point3f), normals, shapes
-    n: object
-    shape: np.ndarray
-    v_star: np.ndarray
-    occluder_dist: np.ndarray
-    exclusions: dict
-    reference_ms: float
-    si: object = None
-    back_p: object = None         # hit pixels facing away from the light (attached shadow), inside its domain
-    back_n: object = None
-
-    def backfacing_inside(self, view):
-        """(positions, normals) of the back-facing pixels inside ``view``, or (None, None)."""
-        if self.back_p is None:
-            return None, None
-        keep = view.inside(self.back_p).numpy().astype(bool)
-        if not keep.any():
-            return None, None
-        idx = mi.UInt32(np.flatnonzero(keep).astype(np.uint32))
-        p, n = dr.gather(mi.Point3f, self.back_p, idx), dr.gather(mi.Vector3f, self.back_n, idx)
-        dr.eval(p, n)
-        return p, n
-
-    def subset(self, keep: np.ndarray) -> "LightSetup":
-        """The receivers ``keep`` selects; the others count as outside the view's domain."""
-        if keep.all():
-            return self
-        ex = dict(self.exclusions)
-        ex["n_excluded_outside"] += int((~keep).sum())
-        if not keep.any():
-            return LightSetup(self.label, self.light, self.pixels[keep], None, None, self.shape[keep],
-                              self.v_star[keep], self.occluder_dist[keep], ex, self.reference_ms)
-        idx = mi.UInt32(np.flatnonzero(keep).astype(np.uint32))
-        p, n = dr.gather(mi.Point3f, self.p, idx), dr.gather(mi.Vector3f, self.n, idx)
-        dr.eval(p, n)
-        return LightSetup(self.label, self.light, self.pixels[keep], p, n, self.shape[keep], self.v_star[keep],
-                          self.occluder_dist[keep], ex, self.reference_ms)
+from .lookup import Receiver
 
 
 @dataclass
@@ -111,77 +68,8 @@ class Results:
         return len(self.rows)
 
 
-VIEW_FACES = planmod.VIEW_FACES
-views_for = planmod.views_for
-
-
-def make_view(light, R, receivers_world, bbox, kind=None):
-    if light.type == "directional":
-        return OrthographicView(light.direction, receivers_world, bbox, R)
-    if light.type == "spot":
-        axis = light.direction if light.direction is not None else np.subtract(light.target, light.position)
-        return PerspectiveView(light.position, axis, light.cutoff, bbox, R)
-    if light.type == "point":
-        axis = light.direction if light.direction is not None else (0.0, 0.0, -1.0)
-        if kind in ("paraboloid", "dual_paraboloid"):
-            return ParaboloidView(light.position, axis, bbox, R, dual=kind == "dual_paraboloid")
-        if kind == "cube":
-            return CubeView(light.position, bbox, R)
-        raise ValueError(f"unknown point-light view {kind!r} (valid: paraboloid, dual_paraboloid, cube)")
-    raise ValueError(f"light type {light.type!r} has no view")
-
-
-def light_setup(sd, gb, light, label, repeats: int = 0) -> LightSetup:
-    """Receivers of one light (hit pixels facing it, inside its domain) and their exact visibility."""
-    p_all, n_all = gb.p, gb.n
-    probe = make_view(light, 1, np.zeros((1, 3)), sd.bbox, "cube")   # a point light lights every direction
-    to_light = probe.to_light(p_all)
-    facing = (dr.dot(n_all, to_light) > 0).numpy().astype(bool)
-    inside = probe.inside(p_all).numpy().astype(bool) if light.type != "directional" else np.ones_like(facing)
-    hit = gb.hit
-    mask = hit & facing & inside
-    pixels = np.flatnonzero(mask).astype(np.uint32)
-    exclusions = {"n_pixels": int(mask.size), "n_excluded_nohit": int((~hit).sum()),
-                  "n_excluded_backfacing": int((hit & ~facing).sum()),
-                  "n_excluded_outside": int((hit & facing & ~inside).sum())}
-    back = np.flatnonzero(hit & ~facing & inside).astype(np.uint32)
-    back_p = back_n = None
-    if len(back):
-        bidx = mi.UInt32(back)
-        back_p, back_n = dr.gather(mi.Point3f, gb.p, bidx), dr.gather(mi.Vector3f, gb.n, bidx)
-        dr.eval(back_p, back_n)
-    if len(pixels) == 0:      # nothing faces this light: an empty case, no zero-sized kernels
-        empty = np.zeros(0)
-        return LightSetup(label, light, pixels, None, None, empty.astype(np.uint32), empty.astype(bool),
-                          empty, exclusions, 0.0, None, back_p, back_n)
-    idx = mi.UInt32(pixels)
-    si = dr.gather(mi.SurfaceInteraction3f, gb.si, idx)
-    p = dr.gather(mi.Point3f, gb.p, idx)
-    n = dr.gather(mi.Vector3f, gb.n, idx)
-    magnitude = reference.scene_magnitude(sd.bbox)
-    (vis, dist), t = timing.measure(lambda: reference.visibility(sd.scene, si, light, magnitude), repeats)
-    dr.eval(p, n)
-    return LightSetup(label, light, pixels, p, n, gb.shape.numpy()[pixels], vis.numpy().astype(bool),
-                      dist.numpy(), exclusions, t.ms, si, back_p, back_n)
-
-
-def closed_flags(sd) -> list:
-    """Per-shape closedness of a scene (detected, or set by the config), computed once."""
-    if sd.closed is None:
-        from .closedness import shape_closedness
-        over = dict(sd.closed_override)
-        sd.closed, sd.closed_reason = [], []
-        for name, shape in zip(sd.shape_names, sd.scene.shapes()):
-            closed, why = shape_closedness(shape)
-            if closed and "wound inward" in why:
-                # its solid is everything outside it: a light outside (a spot above a room) would
-                # see through its back faces, so culling leaves it whole, as an open surface
-                closed, why = False, why + "; culling treats it as open"
-            if name in over:
-                closed, why = over[name], f"set by the config (detected: {why})"
-            sd.closed.append(closed)
-            sd.closed_reason.append(why)
-    return sd.closed
+class StageFailed(Exception):
+    """A stage failed and was recorded; the cases it feeds are skipped."""
 
 
 class Runner:
@@ -204,6 +92,7 @@ class Runner:
         self.quantized = 0            # quantized map copies made (stored formats other than float32)
         self.versions = report.versions()
         self.state = "running"
+        self.bar = None
 
     # ------------------------------------------------------------ top level
     def run(self) -> Results:
@@ -216,16 +105,16 @@ class Runner:
         self.csv = report.CsvWriter(self.out / "metrics.csv")
         self.state = "running"
         self._write_run_json()
-        bar = report.progress(total=self.plan.cases, enabled=self.progress)
+        self.bar = report.progress(total=self.plan.cases, enabled=self.progress)
         try:
-            self._run_scenes(bar)
+            self._run_plan()
         except KeyboardInterrupt:
             self.state = "interrupted"
             raise
         else:
             self.state = "complete"
         finally:
-            bar.close()
+            self.bar.close()
             self._write_run_json()
             report.write_table(self.out / "table.md", self.rows, self.cfg, self.status)
             if self.state == "complete":
@@ -233,147 +122,166 @@ class Runner:
                 report.write_pareto(self.out / "plots", self.rows)
         return Results(self.out, self.rows, self._run_json(), self.images)
 
-    def _run_scenes(self, bar):
+    def _run_plan(self):
         for spec in self.cfg.scenes:
             if spec.missing:
                 self.status.append({"what": f"scene {spec.label}", "status": "skipped", "error": spec.missing})
-                continue
+        for si, scene_maps in itertools.groupby(self.plan.maps, key=lambda m: m.scene_index):
+            scene_maps = list(scene_maps)
             try:
-                sd = scenes.load(spec, self.cfg.camera_resolution)
-            except Exception as e:
-                self._fail(f"scene {spec.label}", e)
+                sd, gb, lights = self._scene(self.cfg.scenes[si], scene_maps)
+            except StageFailed:
                 continue
-            self._run_scene(sd, bar)
+            for li, light_maps in itertools.groupby(scene_maps, key=lambda m: m.light_index):
+                light_maps = list(light_maps)
+                try:
+                    setup = self._light(sd, gb, lights, li, light_maps)
+                except StageFailed:
+                    continue
+                for _, view_maps in itertools.groupby(light_maps, key=lambda m: (m.view, m.resolution)):
+                    self._run_view(sd, gb, setup, list(view_maps))
             self._write_run_json()
 
-    def _fail(self, what, exc):
+    # ------------------------------------------------------------ failure policy
+    def _fail(self, what, exc, skipped_maps=()):
+        """Record a failure (run.json, console, table.md) and count the cases it takes with it."""
         error = f"{type(exc).__name__}: {exc}"
         self.status.append({"what": what, "status": "failed", "error": error,
                             "traceback": traceback.format_exc(limit=6)})
         print(f"dsm: failed: {what}: {error}", file=sys.stderr)     # seen where the user looks, not only in run.json
+        self.bar.update(sum(m.cases for m in skipped_maps))
 
-    # ------------------------------------------------------------ per scene
-    def _run_scene(self, sd, bar):
-        W, H = (int(x) for x in sd.sensor.film().size())
-        gb, t = timing.measure(lambda: _gbuffer_arrays(sd, W, H), 0)
-        gb = gb[-1]
-        gb.ms = t.ms
-        self.gbuffer_ms[sd.label] = t.ms
+    def _stage(self, what, maps, fn):
+        """Run one shared stage; on an exception record it and raise StageFailed."""
+        try:
+            return fn()
+        except (KeyboardInterrupt, StageFailed):
+            raise
+        except Exception as e:
+            self._fail(what, e, maps)
+            raise StageFailed(what) from None
+
+    # ------------------------------------------------------------ stages
+    def _scene(self, spec, maps):
+        def load():
+            sd = pipeline.load_scene(spec, self.cfg.camera_resolution)
+            gb, t = timing.measure(lambda: (pipeline.gbuffer(sd),), 0)
+            gb = gb[-1]
+            gb.ms = t.ms
+            lights = sd.lights_for(self.cfg.lights)
+            if not lights:
+                raise ValueError("the scene has no usable point/spot/directional emitter and the config names "
+                                 "no [[light]]")
+            return sd, gb, lights
+        sd, gb, lights = self._stage(f"scene {spec.label}", maps, load)
+        self.gbuffer_ms[sd.label] = gb.ms
+        self.rays["gbuffer"] += gb.width * gb.height
         if sd.notes:
             self.status.append({"what": f"scene {sd.label}", "status": "note", "error": "; ".join(sd.notes)})
-        self.rays["gbuffer"] += W * H
-        lights = sd.lights_for(self.cfg.lights)
-        if not lights:
-            self._fail(f"scene {sd.label}", ValueError(
-                "the scene has no usable point/spot/directional emitter and the config names no [[light]]"))
-            return
-        for li, light in enumerate(lights):
-            label = f"{li}:{light.type}"
-            try:
-                setup = self._light_setup(sd, gb, light, label)
-            except Exception as e:
-                self._fail(f"scene {sd.label} light {label}", e)
-                continue
-            for kind in views_for(light.type, self.cfg.map.view):
-                for R in self.cfg.map.resolutions_for(VIEW_FACES[kind]):
-                    self._run_map(sd, gb, setup, kind, R, bar)
+        return sd, gb, lights
 
-    def _light_setup(self, sd, gb, light, label) -> LightSetup:
-        setup = light_setup(sd, gb, light, label, self.cfg.timing_repeats)
-        self.rays["reference"] += len(setup.pixels)
-        return setup
+    def _light(self, sd, gb, lights, li, maps):
+        label = maps[0].light
 
-    # ------------------------------------------------------------ per map
-    def _run_map(self, sd, gb, setup, kind, R, bar):
-        specs = self.cfg.schemes
-        per_case = len(self.cfg.map.filter) * len(self.cfg.map.format)
-        try:
-            view = make_view(setup.light, R, _points_np(setup.p) if setup.p is not None else np.zeros((0, 3)),
-                             sd.bbox, kind)
+        def setup():
+            if li >= len(lights):
+                raise ValueError(f"the plan expects light {label} but the loaded scene has {len(lights)} lights")
+            return pipeline.light_setup(sd, gb, lights[li], label, self.cfg.timing_repeats)
+        out = self._stage(f"scene {sd.label} light {label}", maps, setup)
+        self.rays["reference"] += len(out.pixels)
+        return out
+
+    def _run_view(self, sd, gb, setup, maps):
+        """One view and resolution of a light: its receivers, then each of its maps (one per culling)."""
+        kind, R = maps[0].view, maps[0].resolution
+
+        def receivers():
+            pts = pipeline.points_np(setup.p) if setup.p is not None else np.zeros((0, 3))
+            view = pipeline.make_view(setup.light, R, pts, sd.bbox, kind)
+            s = setup.subset(view.inside(setup.p).numpy().astype(bool)) if setup.p is not None else setup
             rx = seam = None
-            if setup.p is not None:
-                setup = setup.subset(view.inside(setup.p).numpy().astype(bool))   # a single paraboloid: its hemisphere
-            bp, bn = setup.backfacing_inside(view)
-            if setup.p is not None and len(setup.pixels):
-                rx = Receiver.make(view, setup.p, setup.n, sd.diagonal)
+            if s.p is not None and len(s.pixels):
+                rx = pipeline.receivers(view, s, sd.diagonal)
                 seam = view.seam_distance(rx.u, rx.v, rx.face)
                 dr.eval(rx.d, rx.u, rx.v, rx.face, rx.texel_world, rx.to_light, seam)
                 seam = seam.numpy()
-        except Exception as e:
-            self._fail(f"scene {sd.label} light {setup.label} view {kind} map {R}", e)
-            bar.update(len(specs) * per_case)
+            return view, s, rx, seam, s.backfacing_inside(view)
+        try:
+            view, setup, rx, seam, back = self._stage(f"scene {sd.label} light {setup.label} view {kind} map {R}",
+                                                      maps, receivers)
+        except StageFailed:
             return
-        # one map per culling choice, with the union of what its schemes need
-        groups = {}
-        for spec in specs:
-            groups.setdefault(schemes.culling_of(spec.params), []).append(spec)
         first_t = None
-        for culling, group in groups.items():
+        for m in maps:
             try:
-                modes = None
-                if culling != "none":
-                    modes = shadowmap.cull_modes_for(culling, self._closed(sd))
-                needs = schemes.needs_of(group)
-                mplan = self.plan.map_for(sd.label, setup.label, view.kind, R, culling)
-                tile = mplan.tile if mplan else 0
-                timing.reset_peak()
-                smap, bt = timing.measure(lambda: _map_arrays(sd.scene, view, needs, culling, modes, tile),
-                                          self.cfg.timing_repeats)
-                peak = timing.peak_bytes()
-                smap = smap[-1]
-                smap.peak_bytes = peak
-                self.maps.append({"scene": sd.label, "light": setup.label, "view": view.kind, "resolution": R,
-                                  "culling": culling, "layers": ["z1", "shape"] + [k for k in shadowmap.LAYERS
-                                                                                   if getattr(smap, k) is not None],
-                                  "tiles": smap.tiles, "rays": dict(smap.rays), "rehits": smap.rehits,
-                                  "build_peak_bytes": peak,
-                                  "build_peak_bytes_est": mplan.peak_bytes if mplan else None,
-                                  "formats": [f for f in self.cfg.map.format if f != "float32"]})
-                for k, v in smap.rays.items():
-                    self.rays[k] = self.rays.get(k, 0) + v
-                if smap.unfinished:
-                    self.status.append({"what": f"map {sd.label} {setup.label} R={R} culling={culling}",
-                                        "status": "warning", "error": f"{smap.unfinished} texels still searching "
-                                        f"after {shadowmap.MAX_STEPS} surfaces"})
-            except Exception as e:
-                self._fail(f"scene {sd.label} light {setup.label} map {R} culling {culling}", e)
-                bar.update(len(group) * per_case)
+                first_t = self._run_map(sd, gb, setup, view, rx, seam, back, m, first_t)
+            except StageFailed:
                 continue
-            try:
-                stored = {fmt: formats.store(smap, fmt) for fmt in self.cfg.map.format}
-                self.quantized += sum(1 for fmt in self.cfg.map.format if fmt != "float32")
-            except Exception as e:
-                self._fail(f"scene {sd.label} light {setup.label} map {R} culling {culling}: stored formats", e)
-                bar.update(len(group) * per_case)
-                continue
-            # receivers in the depth function each stored format compares in (formats.stored_view)
-            rxs = {fmt: rx if rx is None or stored[fmt].view is view else
-                   Receiver.make(stored[fmt].view, setup.p, setup.n, sd.diagonal) for fmt in stored}
-            back = {fmt: Receiver.make(stored[fmt].view, bp, bn, sd.diagonal) for fmt in stored} if bp is not None else {}
-            build_times = {frozenset(needs): bt}
-            if first_t is None:
-                # the first layer alone, so a case's extra layers show as build_ms - build_first_ms
-                first_t = bt if culling == "none" and not needs else timing.measure(
-                    lambda: _map_arrays(sd.scene, view, set(), "none", None, tile), self.cfg.timing_repeats)[1]
-            for spec in group:
-                own = frozenset(schemes.get(spec.name).NEEDS)
-                if own not in build_times:
-                    # time the build of exactly what this scheme needs (the data comes from the shared map)
-                    _, build_times[own] = timing.measure(
-                        lambda: _map_arrays(sd.scene, view, own, culling, modes, tile), self.cfg.timing_repeats)
-                bt = build_times[own]
-                for filt in self.cfg.map.filter:
-                    for fmt in self.cfg.map.format:
-                        self._run_case(sd, gb, setup, view, stored[fmt], (bt, first_t), rxs[fmt], seam, spec, filt,
-                                       fmt, back.get(fmt))
-                        bar.update(1)
 
     def _closed(self, sd):
-        if sd.closed is None:
-            closed_flags(sd)
-            self.scene_info.append({"scene": sd.label, "shapes": [
-                {"name": n, "closed": c, "why": w} for n, c, w in zip(sd.shape_names, sd.closed, sd.closed_reason)]})
-        return sd.closed
+        """Per-shape closedness, computed once per scene and recorded in run.json."""
+        for info in self.scene_info:
+            if info["scene"] == sd.label:
+                return [s["closed"] for s in info["shapes"]]
+        closed, why = pipeline.closedness(sd)
+        self.scene_info.append({"scene": sd.label, "shapes": [
+            {"name": n, "closed": c, "why": w} for n, c, w in zip(sd.shape_names, closed, why)]})
+        return closed
+
+    def _build(self, sd, view, needs, culling, tile):
+        closed = self._closed(sd) if culling != "none" else None
+        return timing.measure(lambda: _map_arrays(sd.scene, view, needs, culling, closed, tile),
+                              self.cfg.timing_repeats)
+
+    def _run_map(self, sd, gb, setup, view, rx, seam, back, m, first_t):
+        """Build one map (the plan's layers, culling and tile), store its formats, run its cases.
+        Returns the first-layer build time (measured on the view's first map)."""
+        what = f"scene {sd.label} light {setup.label} view {view.kind} map {m.resolution} culling {m.culling}"
+
+        def build():
+            timing.reset_peak()
+            smap, bt = self._build(sd, view, set(m.needs), m.culling, m.tile)
+            smap = smap[-1]
+            smap.peak_bytes = timing.peak_bytes()
+            stored = {fmt: pipeline.store(smap, fmt) for fmt in self.cfg.map.format}
+            return smap, bt, stored
+        smap, bt, stored = self._stage(what, [m], build)
+        self._record_map(sd, setup, view, m, smap)
+        self.quantized += sum(1 for fmt in self.cfg.map.format if fmt != "float32")
+        # receivers in the depth function each stored format compares in (formats.stored_view)
+        bp, bn = back
+        rxs = {fmt: rx if rx is None or stored[fmt].view is view else
+               Receiver.make(stored[fmt].view, setup.p, setup.n, sd.diagonal) for fmt in stored}
+        backs = {fmt: Receiver.make(stored[fmt].view, bp, bn, sd.diagonal) for fmt in stored} if bp is not None else {}
+        build_times = {frozenset(m.needs): bt}
+        if first_t is None:
+            # the first layer alone, so a case's extra layers show as build_ms - build_first_ms
+            first_t = bt if m.culling == "none" and not m.needs else self._build(sd, view, set(), "none", m.tile)[1]
+        for spec in m.specs:
+            own = frozenset(pipeline.scheme_module(spec.name).NEEDS)
+            if own not in build_times:
+                # the build of exactly what this scheme needs (its data comes from the shared map)
+                build_times[own] = self._build(sd, view, own, m.culling, m.tile)[1]
+            for filt in self.cfg.map.filter:
+                for fmt in self.cfg.map.format:
+                    self._run_case(sd, gb, setup, view, stored[fmt], (build_times[own], first_t), rxs[fmt], seam,
+                                   spec, filt, fmt, backs.get(fmt))
+                    self.bar.update(1)
+        return first_t
+
+    def _record_map(self, sd, setup, view, m, smap):
+        self.maps.append({"scene": sd.label, "light": setup.label, "view": view.kind, "resolution": m.resolution,
+                          "culling": m.culling, "layers": ["z1", "shape"] + [k for k in shadowmap.LAYERS
+                                                                           if getattr(smap, k) is not None],
+                          "tiles": smap.tiles, "rays": dict(smap.rays), "rehits": smap.rehits,
+                          "build_peak_bytes": smap.peak_bytes, "build_peak_bytes_est": m.peak_bytes,
+                          "formats": list(m.formats)})
+        for k, v in smap.rays.items():
+            self.rays[k] = self.rays.get(k, 0) + v
+        if smap.unfinished:
+            self.status.append({"what": f"map {sd.label} {setup.label} R={m.resolution} culling={m.culling}",
+                                "status": "warning", "error": f"{smap.unfinished} texels still searching "
+                                f"after {shadowmap.MAX_STEPS} surfaces"})
 
     def _run_case(self, sd, gb, setup, view, smap, build, rx, seam, spec, filt, fmt, rx_back=None):
         bt, first_t = build
@@ -385,31 +293,30 @@ class Runner:
                 "total_texels": view.n_texels,
                 "filter": filt, "format": fmt}
         try:
-            module = schemes.get(spec.name)
             if rx is None:
                 v_np, tap_np, lt = np.zeros(0), np.zeros(0, np.uint32), timing.Timing(0.0, 0.0, 0.0, 0, 0)
                 fallbacks = 0
             else:
-                (v, tap_shape), lt = timing.measure(lambda: visibility(module, spec.params, rx, smap, filt, self.cfg.seed),
+                (v, tap_shape), lt = timing.measure(lambda: pipeline.visibility(spec, rx, smap, filt, self.cfg.seed),
                                                     self.cfg.timing_repeats)
                 v_np, tap_np = v.numpy(), tap_shape.numpy()
-                fallbacks = lookup.plane_fallbacks(module, spec.params, rx, smap)
-            m = metrics.compute(v_np, setup.v_star, setup.shape, tap_np, setup.occluder_dist, seam,
-                                view.kind not in ("orthographic", "perspective"))
+                fallbacks = pipeline.plane_fallbacks(spec, rx, smap)
+            m = pipeline.metrics(v_np, setup, tap_np, seam, view.kind not in ("orthographic", "perspective"))
             # seed 000's self-unshadowing: pixels in attached shadow (facing away) that the map calls lit
-            v_back = visibility(module, spec.params, rx_back, smap, filt, self.cfg.seed)[0].numpy() \
+            v_back = pipeline.visibility(spec, rx_back, smap, filt, self.cfg.seed)[0].numpy() \
                 if rx_back is not None else np.zeros(0)
             m["n_backfacing"] = int(v_back.size)
             m["backface_lit_rate"] = float((v_back >= 0.5).mean()) if v_back.size else metrics.UNDEFINED
             texel = float(np.median(rx.texel_world.numpy())) if rx is not None else metrics.UNDEFINED
             sweep_key, sweep_value = report.sweep_of(spec, self.cfg.schemes)
             row = {**meta, **setup.exclusions, **m, "texel_size": texel,
-                   "n_plane_fallback": fallbacks if getattr(module, "USES_PLANE", False) else metrics.UNDEFINED,
+                   "n_plane_fallback": fallbacks if getattr(pipeline.scheme_module(spec.name), "USES_PLANE", False)
+                   else metrics.UNDEFINED,
                    "build_ms": bt.ms, "build_first_ms": first_t.ms, "build_compile_ms": bt.compile_ms, "build_peak_mb": smap.peak_bytes / 2 ** 20,
                    "lookup_ms": lt.ms, "lookup_compile_ms": lt.compile_ms, "lookup_kernels_compiled": lt.cache_misses,
                    "reference_ms": setup.reference_ms, "sweep_key": sweep_key, "sweep_value": sweep_value}
             classes = np.zeros(gb.width * gb.height, np.uint8)
-            classes[setup.pixels] = metrics.classify(v_np, setup.v_star)
+            classes[setup.pixels] = pipeline.classify(v_np, setup.v_star)
             classes = classes.reshape(gb.height, gb.width)
             report.write_case_images(self.out / "images", case, classes, gb, setup, v_np)
             if self.keep_images:
@@ -444,23 +351,14 @@ def _points_np(p) -> np.ndarray:
     return np.stack([np.asarray(c, np.float64) for c in (p.x.numpy(), p.y.numpy(), p.z.numpy())], axis=1)
 
 
-def _gbuffer_arrays(sd, W, H):
-    gb = gbuffer.cast(sd.scene, sd.sensor, W, H)
-    return (gb.p, gb.n, gb.shape, gb)
-
-
-def _map_arrays(scene, view, needs, culling="none", modes=None, tile=None):
-    smap = shadowmap.build(scene, view, needs, culling, modes, tile)
+def _map_arrays(scene, view, needs, culling="none", closed=None, tile=None):
+    smap = pipeline.build_map(scene, view, needs, culling, closed, tile)
     return (*shadowmap.arrays(smap), smap)
 
 
 def run(config, out=None, variant=None, progress=False) -> Results:
     """Run an experiment (a Config, a dict or a path to a TOML file) and return its Results."""
-    config = cfgmod.coerce(config)           # a one-line TypeError or ConfigError for anything else
-    cfgmod.check_runnable(config)            # NothingToRun: every scene an absent optional file
-    env.use_variant(variant or config.variant)
-    scenes.check(config)                     # unreadable scenes, before any work
-    planmod.check_memory(planmod.make(config), config.source)
+    config = pipeline.prepare(config, variant)
     if out is None:
         import tempfile
         out = Path(tempfile.mkdtemp(prefix=f"dsm-{config.name}-"))

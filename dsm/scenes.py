@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import DEFAULT_CAMERA, ConfigError, LightSpec, SceneSpec, sweep_params
+from .types import DEFAULT_CAMERA, ConfigError, LightSpec, SceneSpec, sweep_params
 
 ORIGIN = (0.0, 0.0, 0.0)
 # Mitsuba computes a triangle's normal as normalize(cross(e1, e2)) in float32, squaring the cross

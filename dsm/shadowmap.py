@@ -24,10 +24,10 @@ import mitsuba as mi
 import numpy as np
 
 from . import spawn
+from .types import CULLINGS  # noqa: F401  (the choices of midpoint and dual)
 
 LAYERS = ("slope", "z2")   # optional attributes a scheme may need (besides z1 and shape)
 CULL_NONE, CULL_BACK, CULL_FRONT = 0, 1, 2
-CULLINGS = ("none", "back", "front", "back_closed")   # the choices of midpoint and dual
 MAX_STEPS = 64             # surfaces stepped over per texel before giving up (reported, never silent)
 
 

@@ -276,11 +276,11 @@ def assert_layers_match(smap, expected, ok, l_index):
 def _runner_view(sd, light, R):
     """The view the runner builds for a directional light: fitted to its receivers (from the
     G-buffer), so its texel frame is the runner's."""
-    from dsm import gbuffer, runner
+    from dsm import gbuffer, pipeline
     W, H = (int(x) for x in sd.sensor.film().size())
     gb = gbuffer.cast(sd.scene, sd.sensor, W, H)
-    setup = runner.light_setup(sd, gb, light, "0:directional")
-    return runner.make_view(light, R, runner._points_np(setup.p), sd.bbox)
+    setup = pipeline.light_setup(sd, gb, light, "0:directional")
+    return pipeline.make_view(light, R, pipeline.points_np(setup.p), sd.bbox)
 
 
 def _fig5_expected(sd, R, tr, light):

@@ -66,7 +66,7 @@ def test_constant_and_none_build_nothing_more(run_dict):
 def test_tiled_and_single_pass_builds_are_identical(variant, needs, culling):
     from dsm import config, scenes, shadowmap
     from dsm.config import LightSpec
-    from dsm.runner import make_view
+    from dsm.pipeline import make_view
     cfg = config.parse(base_config(scene=[{"builtin": "room"}]), "<test>")
     sd = scenes.load(cfg.scenes[0], (16, 16))
     view = make_view(LightSpec("point", position=(0.2, 0.1, 1.8), direction=(0, 0, -1.0)), 48, None, sd.bbox, "cube")

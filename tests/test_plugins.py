@@ -9,7 +9,7 @@ SPOT_XML = ROOT / "tests" / "data" / "spot_scene.xml"
 
 
 def _classes(img):
-    from dsm.plugins.integrators import CLASS_LINEAR
+    from dsm_plugins.integrators import CLASS_LINEAR
     a = np.asarray(img)[..., :3]
     d = ((a[..., None, :] - CLASS_LINEAR[None, None]) ** 2).sum(-1)
     assert d.min(-1).max() < 1e-10                        # every pixel is exactly one class colour
@@ -212,7 +212,7 @@ def test_dsm_shadow_rim_pixels_sampled_off_centre_stay_lit(variant):
     assert not (rim & lit & (v < 1 - 1e-6)).any(), np.argwhere(rim & lit & (v < 1 - 1e-6))[:5]
     assert (vstar < 0.5).sum() > 10                     # the plate's shadow is in view
     # the map covers every pixel's footprint by itself (not only through "outside = lit")
-    from dsm.plugins.integrators import corner_points
+    from dsm_plugins.integrators import corner_points
     lp = integrator._prep["lights"][0]
     corners = corner_points(scene, scene.sensors()[0], W, W, lp.light.direction)
     assert len(corners) == (W + 1) ** 2

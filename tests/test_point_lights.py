@@ -23,7 +23,7 @@ def _np(v):
 
 def _view(kind, light, R, bbox):
     from dsm.config import LightSpec
-    from dsm.runner import make_view
+    from dsm.pipeline import make_view
     return make_view(LightSpec("point", position=tuple(light), direction=(0.0, 0.0, -1.0)), R, None, bbox, kind)
 
 
@@ -175,7 +175,7 @@ def test_points_exactly_on_singular_directions(variant):
     for kind in POINT_VIEWS:
         for axis in ((0.0, 0.0, 1.0), (0.0, 0.0, -1.0)):
             from dsm.config import LightSpec
-            from dsm.runner import make_view
+            from dsm.pipeline import make_view
             view = make_view(LightSpec("point", position=tuple(light), direction=axis), R, None, sd.bbox, kind)
             smap = shadowmap.build(sd.scene, view, {"z2"})
             rx = Receiver.make(view, p, n, sd.diagonal)

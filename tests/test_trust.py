@@ -71,7 +71,7 @@ def test_jitter_is_seeded_by_the_receiver_itself():
     from dsm import gbuffer, scenes, shadowmap
     from dsm.config import SceneSpec
     from dsm.lookup import Receiver, visibility
-    from dsm.runner import make_view, _points_np
+    from dsm.pipeline import make_view, points_np as _points_np
     from dsm.schemes import constant
     from dsm.config import LightSpec, Length
     sd = scenes.load(scenes.parse_scene({"builtin": "plane_box"}, "<t>", "s", None)[0], (96, 96))

@@ -4,11 +4,10 @@ Each module has ``NAME``, ``SOURCE``, ``NEEDS`` (the map attributes it reads), a
 ``Params`` dataclass with defaults and units, ``lit(rx, tap, params) -> Bool`` over Dr.Jit
 arrays and, for schemes that move the lookup point, ``shift(rx, params) -> Receiver``.
 """
-import dataclasses
 
 from . import (adaptive, constant, dual, midpoint, none, normal_angle, normal_offset, receiver_plane,
                second_depth, slope_scaled)
-from ..config import Length
+from ..types import Length, describe_params  # noqa: F401  (describe_params: the report's words)
 
 REGISTRY = (none, constant, slope_scaled, normal_angle, normal_offset, receiver_plane, adaptive, midpoint, dual,
             second_depth)
@@ -29,10 +28,6 @@ def get(name: str):
         if s.NAME == name:
             return s
     raise KeyError(f"unknown scheme {name!r} (valid: {', '.join(s.NAME for s in REGISTRY)})")
-
-
-def describe_params(params) -> str:
-    return " ".join(f"{f.name}={getattr(params, f.name)}" for f in dataclasses.fields(params))
 
 
 def culling_of(params) -> str:

@@ -8,7 +8,7 @@ Parameters: ``bias`` (length, default ``"1 texel"``).
 """
 from dataclasses import dataclass, field
 
-from ..config import Length
+from ..types import Length
 
 NAME = "constant"
 SOURCE = "Williams 1978"

@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 
 import drjit as dr
 
-from ..config import Length
-from ..shadowmap import CULLINGS as CULLING
+from ..types import Length
+from ..types import CULLINGS as CULLING
 
 NAME = "dual"
 SOURCE = "Weiskopf & Ertl 2003; seed 000"

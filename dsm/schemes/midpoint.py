@@ -10,7 +10,7 @@ Parameters: ``culling`` (none | back | front | back_closed, default none).
 """
 from dataclasses import dataclass, field
 
-from ..shadowmap import CULLINGS as CULLING
+from ..types import CULLINGS as CULLING
 
 NAME = "midpoint"
 SOURCE = "Woo 1992; seed 000"

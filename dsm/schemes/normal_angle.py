@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import drjit as dr
 
-from ..config import Length
+from ..types import Length
 
 NAME = "normal_angle"
 SOURCE = "Gautron 2013; seed 003"

@@ -9,7 +9,7 @@ Parameters: ``offset`` (length, default ``"1 texel"``), ``bias`` (length, defaul
 """
 from dataclasses import dataclass, field
 
-from ..config import Length
+from ..types import Length
 
 NAME = "normal_offset"
 SOURCE = "three.js, Bevy, Godot, Unity (normal bias)"

@@ -10,7 +10,7 @@ Parameters: ``bias`` (length, default ``"0.01 texel"``).
 """
 from dataclasses import dataclass, field
 
-from ..config import Length
+from ..types import Length
 
 NAME = "receiver_plane"
 SOURCE = "Isidoro 2006; seed 003"

@@ -11,7 +11,7 @@ Parameters: ``bias`` (length, default 0), ``culling`` (front | front_closed, def
 """
 from dataclasses import dataclass, field
 
-from ..config import Length
+from ..types import Length
 
 NAME = "second_depth"
 SOURCE = "Wang & Molnar 1994"

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import drjit as dr
 
-from ..config import Length
+from ..types import Length
 
 NAME = "slope_scaled"
 SOURCE = "King 2004; D3D/Vulkan/GL depth bias; seed 003"

@@ -31,9 +31,9 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .. import config as cfgmod
-from .. import formats, gbuffer, metrics, reference, scenes, schemes, shadowmap
-from ..lookup import Receiver, visibility
+import dsm.pipeline as pl
+from dsm import types as cfgmod
+from dsm.pipeline import Receiver
 
 OWN_KEYS = ("scheme", "resolution", "view", "filter", "format", "light", "seed")
 SHADOW_KEYS = OWN_KEYS + ("aovs",)
@@ -71,7 +71,7 @@ class Options:
         elif "scheme" in d:
             raise cfgmod.ConfigError(source, "scheme", "give either scheme (and its parameters) or preset, not both")
         try:
-            specs = cfgmod._parse_scheme(table, source, "integrator", schemes.REGISTRY, schemes.PRESETS)
+            specs = pl.scheme_specs(table, source, "integrator")
         except cfgmod.ConfigError as e:
             key = "scheme" if e.key == "integrator.name" else e.key.removeprefix("integrator.")
             choices = e.choices
@@ -82,14 +82,14 @@ class Options:
         if len(specs) != 1:
             raise cfgmod.ConfigError(source, "scheme", "give one value per parameter (no sweeps)")
         self.spec = specs[0]
-        self.resolution = cfgmod._number(d.get("resolution", 1024), source, "resolution", integer=True, minimum=1,
+        self.resolution = cfgmod.number(d.get("resolution", 1024), source, "resolution", integer=True, minimum=1,
                                          maximum=16384)
-        self.view = cfgmod._choice(d.get("view", "cube"), source, "view", cfgmod.POINT_VIEWS)
-        self.filter = cfgmod._choice(d.get("filter", "nearest"), source, "filter", cfgmod.FILTERS)
-        self.format = cfgmod._choice(d.get("format", "float32"), source, "format", cfgmod.FORMATS)
-        self.seed = cfgmod._number(d.get("seed", 7), source, "seed", integer=True, minimum=0)
+        self.view = cfgmod.choice(d.get("view", "cube"), source, "view", cfgmod.POINT_VIEWS)
+        self.filter = cfgmod.choice(d.get("filter", "nearest"), source, "filter", cfgmod.FILTERS)
+        self.format = cfgmod.choice(d.get("format", "float32"), source, "format", cfgmod.FORMATS)
+        self.seed = cfgmod.number(d.get("seed", 7), source, "seed", integer=True, minimum=0)
         # dsm_shadow: -1 (the default) shades with every light; dsm_error classifies one light
-        self.light = cfgmod._number(d.get("light", -1 if all_lights else 0), source, "light", integer=True,
+        self.light = cfgmod.number(d.get("light", -1 if all_lights else 0), source, "light", integer=True,
                                     minimum=-1 if all_lights else 0)
         self.aovs = _boolean(d.get("aovs", False), source, "aovs")
         self.source = source
@@ -139,21 +139,20 @@ class Prepared:
     every sample inside a pixel projects inside the map)."""
 
     def __init__(self, sd, gb, light, label, opts: Options, fit_extra=None):
-        from ..runner import _points_np, closed_flags, light_setup, make_view
         self.light, self.label = light, label
-        setup = light_setup(sd, gb, light, label)
-        pts = _points_np(setup.p) if setup.p is not None else np.zeros((0, 3))
+        setup = pl.light_setup(sd, gb, light, label)
+        pts = pl.points_np(setup.p) if setup.p is not None else np.zeros((0, 3))
         if light.type == "directional" and fit_extra is not None and len(fit_extra):
             pts = np.concatenate([pts, fit_extra])
-        self.view = make_view(light, opts.resolution, pts, sd.bbox, opts.view)
+        self.view = pl.make_view(light, opts.resolution, pts, sd.bbox, opts.view)
         if setup.p is not None:
             setup = setup.subset(self.view.inside(setup.p).numpy().astype(bool))
         self.setup = setup
-        module = schemes.get(opts.spec.name)
-        culling = schemes.culling_of(opts.spec.params)
-        modes = shadowmap.cull_modes_for(culling, closed_flags(sd)) if culling != "none" else None
-        smap = shadowmap.build(sd.scene, self.view, set(module.NEEDS), culling, modes)
-        self.smap = formats.store(smap, opts.format)
+        module = pl.scheme_module(opts.spec.name)
+        culling = pl.culling_of(opts.spec.params)
+        closed = pl.closedness(sd)[0] if culling != "none" else None
+        smap = pl.build_map(sd.scene, self.view, module.NEEDS, culling, closed)
+        self.smap = pl.store(smap, opts.format)
         self.view = self.smap.view          # the depth function the stored format compares in
         self.module = module
 
@@ -232,7 +231,7 @@ def _prepare(integrator, scene, sensor, plugin):
         return integrator._prep
     integrator._key, integrator._prep = None, None
     opts = integrator.opts
-    sd = scenes.from_mitsuba(scene)
+    sd = pl.scene_from_mitsuba(scene)
     lights = sd.own_lights
     if not lights:
         raise ValueError(f"{plugin}: the scene has no point, spot or directional emitter")
@@ -240,7 +239,7 @@ def _prepare(integrator, scene, sensor, plugin):
         raise cfgmod.ConfigError(opts.source, "light", f"{opts.light} is out of range; the scene's "
                                  f"point/spot/directional emitters are {describe_lights(lights)}")
     W, H = (int(x) for x in sensor.film().size())
-    gb = gbuffer.cast(scene, sensor, W, H)
+    gb = pl.gbuffer(sd, W, H, sensor)
     chosen = range(len(lights)) if opts.light < 0 else [opts.light]
     prepared = []
     for i in chosen:
@@ -250,7 +249,7 @@ def _prepare(integrator, scene, sensor, plugin):
         prepared.append(Prepared(sd, gb, lights[i], f"{i}:{lights[i].type}", opts, extra))
     prep = {"sd": sd, "gb": gb, "size": (W, H), "lights": prepared}
     # the emitters the lights came from, in the same order (for dsm_shadow's radiance)
-    emitters = [e for e in scene.emitters() if scenes.emitter_to_light(e) is not None]
+    emitters = [e for e in scene.emitters() if pl.emitter_light(e) is not None]
     prep["emitters"] = [emitters[i] for i in chosen]
     integrator._key, integrator._prep = key, prep
     return prep
@@ -261,7 +260,7 @@ def _srgb_to_linear(c):
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
-CLASS_LINEAR = _srgb_to_linear(metrics.CLASS_COLORS).astype(np.float32)
+CLASS_LINEAR = _srgb_to_linear(pl.CLASS_COLORS).astype(np.float32)
 
 
 def classes_image(prep: dict, opts: Options) -> np.ndarray:
@@ -272,8 +271,8 @@ def classes_image(prep: dict, opts: Options) -> np.ndarray:
     st = lp.setup
     if st.p is not None and len(st.pixels):
         rx = Receiver.make(lp.view, st.p, st.n, prep["sd"].diagonal)
-        v, _ = visibility(lp.module, opts.spec.params, rx, lp.smap, opts.filter, opts.seed)
-        classes[st.pixels] = metrics.classify(v.numpy(), st.v_star)
+        v, _ = pl.visibility(opts.spec, rx, lp.smap, opts.filter, opts.seed)
+        classes[st.pixels] = pl.classify(v.numpy(), st.v_star)
     return classes.reshape(H, W)
 
 
@@ -332,12 +331,12 @@ class DsmShadow(mi.SamplingIntegrator):
         result = mi.Spectrum(0.0)
         v_sum, vs_sum = mi.Float(0.0), mi.Float(0.0)
         diag = prep["sd"].diagonal
-        magnitude = reference.scene_magnitude(prep["sd"].bbox)
+        magnitude = pl.scene_magnitude(prep["sd"].bbox)
         for lp, emitter in zip(prep["lights"], prep["emitters"]):
             ds, spec = emitter.sample_direction(si, sampler.next_2d(), valid)
             f = bsdf.eval(ctx, si, si.to_local(ds.d), valid)
             rx = Receiver.make(lp.view, si.p, n, diag)
-            v, _ = visibility(lp.module, self.opts.spec.params, rx, lp.smap, self.opts.filter, self.opts.seed)
+            v, _ = pl.visibility(self.opts.spec, rx, lp.smap, self.opts.filter, self.opts.seed)
             inside = lp.view.inside(si.p)
             if lp.view.kind == "orthographic":
                 # outside a directional light's map no caster was recorded: lit (the map is
@@ -348,7 +347,7 @@ class DsmShadow(mi.SamplingIntegrator):
             v = dr.select(valid, v, 0.0)
             result += f * spec * v
             if self.opts.aovs:
-                vstar, _ = reference.visibility(scene, si, lp.light, magnitude)
+                vstar, _ = pl.exact_visibility(scene, si, lp.light, magnitude)
                 v_sum += v
                 vs_sum += dr.select(valid & vstar, 1.0, 0.0)
         aovs = [v_sum, vs_sum] if self.opts.aovs else []

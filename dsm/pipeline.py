@@ -1,0 +1,262 @@
+"""The kit's stages, one public function each, in the order of the data flow.
+
+    scene -> G-buffer -> light set-up (receivers, exact reference) -> view -> map (the layers
+    the plan names) -> stored format -> visibility per scheme and filter -> classification
+    and metrics
+
+The runner, the Mitsuba plugins (``dsm_plugins``), ``dsm bench``, the notebooks and every
+later capability call these and nothing private. Stage by stage::
+
+    import dsm.pipeline as pl
+    sd = pl.load_scene(pl.scene_spec({"builtin": "plane_box"}), (256, 256))
+    gb = pl.gbuffer(sd)
+    setup = pl.light_setup(sd, gb, pl.LightSpec("directional", direction=(-0.4, -0.3, -1.0)), "sun")
+    view = pl.make_view(setup.light, 1024, pl.points_np(setup.p), sd.bbox)
+    smap = pl.store(pl.build_map(sd.scene, view, pl.needs_of([spec])), "float32")
+    rx = pl.receivers(smap.view, setup, sd.diagonal)
+    v, tap_shape = pl.visibility(spec, rx, smap)
+    m = pl.metrics(v.numpy(), setup, tap_shape.numpy())
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from . import formats, lookup, reference, scenes, schemes, shadowmap, timing
+from . import gbuffer as gbuffer_mod
+from . import metrics as metrics_mod
+from .closedness import shape_closedness
+from .config import parse_scheme
+from .lookup import Receiver
+from .types import ConfigError, LightSpec, SchemeSpec  # noqa: F401  (the types a stage takes)
+from .views import CubeView, OrthographicView, ParaboloidView, PerspectiveView
+
+# ---------------------------------------------------------------- config
+
+def prepare(config, variant: str | None = None):
+    """A Config from a Config, a dict of tables or a TOML path, checked before any work: every
+    scene readable, something to run, the estimated memory within this machine's. Sets the
+    Mitsuba variant. Raises ConfigError (one line naming file, key and choices) or TypeError."""
+    from . import config as cfgmod
+    from . import env
+    from . import plan as planmod
+    config = cfgmod.coerce(config)
+    cfgmod.check_runnable(config)            # NothingToRun: every scene an absent optional file
+    env.use_variant(variant or config.variant)
+    scenes.check(config)                     # unreadable scenes
+    planmod.check_memory(planmod.make(config), config.source)
+    return config
+
+
+# ---------------------------------------------------------------- scenes
+
+load_scene = scenes.load                  # (SceneSpec, camera resolution or None) -> SceneData
+scene_from_mitsuba = scenes.from_mitsuba  # an already loaded mi.Scene (the plugins' entry)
+emitter_light = scenes.emitter_to_light   # a Mitsuba emitter as a LightSpec (None: not mapped)
+scene_magnitude = reference.scene_magnitude
+exact_visibility = reference.visibility   # (scene, interactions, light, magnitude) -> (V*, occluder distance)
+
+
+def scene_spec(table: dict, source: str = "<pipeline>"):
+    """One ``[[scene]]`` table (no sweeps) as a SceneSpec."""
+    specs = scenes.parse_scene(table, source, "scene", None)
+    if len(specs) != 1:
+        raise ConfigError(source, "scene", "give one value per parameter (no sweeps)")
+    return specs[0]
+
+
+def scheme_specs(table: dict, source: str = "<pipeline>", where: str = "scheme") -> list:
+    """The scheme instances of one ``[[scheme]]`` table (its list-valued parameters swept)."""
+    return parse_scheme(table, source, where, schemes.REGISTRY, schemes.PRESETS)
+
+
+def scheme_spec(table: dict, source: str = "<pipeline>", where: str = "scheme") -> SchemeSpec:
+    """One ``[[scheme]]`` table (a name and its parameters, or a preset; no sweeps)."""
+    specs = scheme_specs(table, source, where)
+    if len(specs) != 1:
+        raise ConfigError(source, where, "give one value per parameter (no sweeps)")
+    return specs[0]
+
+
+# ---------------------------------------------------------------- G-buffer
+
+def gbuffer(sd, width: int | None = None, height: int | None = None, sensor=None):
+    """One primary hit per camera pixel through pixel centres (the scene's sensor and its film's
+    size unless given)."""
+    sensor = sensor or sd.sensor
+    W, H = (int(x) for x in sensor.film().size())
+    return gbuffer_mod.cast(sd.scene, sensor, width or W, height or H)
+
+
+# ---------------------------------------------------------------- light set-up and reference
+
+@dataclass
+class LightSetup:
+    """Receivers and exact visibility of one scene from one light."""
+    label: str
+    light: object                 # LightSpec
+    pixels: np.ndarray            # pixel index of each receiver
+    p: object                     # receiver positions (mi.Point3f), normals, shapes
+    n: object
+    shape: np.ndarray
+    v_star: np.ndarray
+    occluder_dist: np.ndarray
+    exclusions: dict
+    reference_ms: float
+    si: object = None
+    back_p: object = None         # hit pixels facing away from the light (attached shadow), inside its domain
+    back_n: object = None
+
+    def backfacing_inside(self, view):
+        """(positions, normals) of the back-facing pixels inside ``view``, or (None, None)."""
+        if self.back_p is None:
+            return None, None
+        keep = view.inside(self.back_p).numpy().astype(bool)
+        if not keep.any():
+            return None, None
+        idx = mi.UInt32(np.flatnonzero(keep).astype(np.uint32))
+        p, n = dr.gather(mi.Point3f, self.back_p, idx), dr.gather(mi.Vector3f, self.back_n, idx)
+        dr.eval(p, n)
+        return p, n
+
+    def subset(self, keep: np.ndarray) -> "LightSetup":
+        """The receivers ``keep`` selects; the others count as outside the view's domain."""
+        if keep.all():
+            return self
+        ex = dict(self.exclusions)
+        ex["n_excluded_outside"] += int((~keep).sum())
+        if not keep.any():
+            return LightSetup(self.label, self.light, self.pixels[keep], None, None, self.shape[keep],
+                              self.v_star[keep], self.occluder_dist[keep], ex, self.reference_ms)
+        idx = mi.UInt32(np.flatnonzero(keep).astype(np.uint32))
+        p, n = dr.gather(mi.Point3f, self.p, idx), dr.gather(mi.Vector3f, self.n, idx)
+        dr.eval(p, n)
+        return LightSetup(self.label, self.light, self.pixels[keep], p, n, self.shape[keep], self.v_star[keep],
+                          self.occluder_dist[keep], ex, self.reference_ms)
+
+
+def make_view(light, R, receivers_world, bbox, kind=None):
+    if light.type == "directional":
+        return OrthographicView(light.direction, receivers_world, bbox, R)
+    if light.type == "spot":
+        axis = light.direction if light.direction is not None else np.subtract(light.target, light.position)
+        return PerspectiveView(light.position, axis, light.cutoff, bbox, R)
+    if light.type == "point":
+        axis = light.direction if light.direction is not None else (0.0, 0.0, -1.0)
+        if kind in ("paraboloid", "dual_paraboloid"):
+            return ParaboloidView(light.position, axis, bbox, R, dual=kind == "dual_paraboloid")
+        if kind == "cube":
+            return CubeView(light.position, bbox, R)
+        raise ValueError(f"unknown point-light view {kind!r} (valid: paraboloid, dual_paraboloid, cube)")
+    raise ValueError(f"light type {light.type!r} has no view")
+
+
+def light_setup(sd, gb, light, label, repeats: int = 0) -> LightSetup:
+    """Receivers of one light (hit pixels facing it, inside its domain) and their exact visibility."""
+    p_all, n_all = gb.p, gb.n
+    probe = make_view(light, 1, np.zeros((1, 3)), sd.bbox, "cube")   # a point light lights every direction
+    to_light = probe.to_light(p_all)
+    facing = (dr.dot(n_all, to_light) > 0).numpy().astype(bool)
+    inside = probe.inside(p_all).numpy().astype(bool) if light.type != "directional" else np.ones_like(facing)
+    hit = gb.hit
+    mask = hit & facing & inside
+    pixels = np.flatnonzero(mask).astype(np.uint32)
+    exclusions = {"n_pixels": int(mask.size), "n_excluded_nohit": int((~hit).sum()),
+                  "n_excluded_backfacing": int((hit & ~facing).sum()),
+                  "n_excluded_outside": int((hit & facing & ~inside).sum())}
+    back = np.flatnonzero(hit & ~facing & inside).astype(np.uint32)
+    back_p = back_n = None
+    if len(back):
+        bidx = mi.UInt32(back)
+        back_p, back_n = dr.gather(mi.Point3f, gb.p, bidx), dr.gather(mi.Vector3f, gb.n, bidx)
+        dr.eval(back_p, back_n)
+    if len(pixels) == 0:      # nothing faces this light: an empty case, no zero-sized kernels
+        empty = np.zeros(0)
+        return LightSetup(label, light, pixels, None, None, empty.astype(np.uint32), empty.astype(bool),
+                          empty, exclusions, 0.0, None, back_p, back_n)
+    idx = mi.UInt32(pixels)
+    si = dr.gather(mi.SurfaceInteraction3f, gb.si, idx)
+    p = dr.gather(mi.Point3f, gb.p, idx)
+    n = dr.gather(mi.Vector3f, gb.n, idx)
+    magnitude = scene_magnitude(sd.bbox)
+    (vis, dist), t = timing.measure(lambda: reference.visibility(sd.scene, si, light, magnitude), repeats)
+    dr.eval(p, n)
+    return LightSetup(label, light, pixels, p, n, gb.shape.numpy()[pixels], vis.numpy().astype(bool),
+                      dist.numpy(), exclusions, t.ms, si, back_p, back_n)
+
+
+def closedness(sd) -> tuple[list, list]:
+    """(closed, reason) per shape of a scene (index of ``scene.shapes()``): detected from the
+    mesh, or set by the config's ``closed`` override. A closed mesh wound inward (a room) is
+    open to culling: its solid is everything outside it, so a light outside (a spot above a
+    room) would see through its back faces."""
+    over = dict(sd.closed_override)
+    closed, reasons = [], []
+    for name, shape in zip(sd.shape_names, sd.scene.shapes()):
+        c, why = shape_closedness(shape)
+        if c and "wound inward" in why:
+            c, why = False, why + "; culling treats it as open"
+        if name in over:
+            c, why = over[name], f"set by the config (detected: {why})"
+        closed.append(c)
+        reasons.append(why)
+    return closed, reasons
+
+
+def points_np(p) -> np.ndarray:
+    """A Dr.Jit point array as an (n, 3) float64 numpy array."""
+    return np.stack([np.asarray(c, np.float64) for c in (p.x.numpy(), p.y.numpy(), p.z.numpy())], axis=1)
+
+
+# ---------------------------------------------------------------- map
+
+def cull_modes(culling: str, closed) -> np.ndarray | None:
+    """Per-shape culling of a map build (None for ``none``), given each shape's closedness."""
+    return None if culling == "none" else shadowmap.cull_modes_for(culling, closed)
+
+
+def build_map(scene, view, needs=(), culling: str = "none", closed=None, tile: int | None = None):
+    """The map of ``view``: z1 and shape ids, plus the layers ``needs`` names (slope, z2),
+    under ``culling`` (``closed``: per-shape closedness, see :func:`closedness`)."""
+    modes = cull_modes(culling, closed) if culling != "none" else None
+    return shadowmap.build(scene, view, set(needs), culling, modes, tile)
+
+
+store = formats.store                     # (map, format) -> the map as that format stores it
+
+
+# ---------------------------------------------------------------- schemes and lookup
+
+scheme_module = schemes.get
+needs_of = schemes.needs_of
+culling_of = schemes.culling_of
+
+
+def receivers(view, setup, diagonal: float) -> Receiver:
+    """The set-up's receivers as a view sees them (depth in the view's one depth function)."""
+    return Receiver.make(view, setup.p, setup.n, diagonal)
+
+
+def visibility(spec: SchemeSpec, rx: Receiver, smap, filt: str = "nearest", seed: int = 7):
+    """(V in [0, 1] per receiver, shape index of the nearest texel) of one scheme instance."""
+    return lookup.visibility(schemes.get(spec.name), spec.params, rx, smap, filt, seed)
+
+
+def plane_fallbacks(spec: SchemeSpec, rx: Receiver, smap) -> int:
+    """Receivers whose texel ray misses their tangent plane (receiver_plane, adaptive)."""
+    return lookup.plane_fallbacks(schemes.get(spec.name), spec.params, rx, smap)
+
+
+# ---------------------------------------------------------------- classification and metrics
+
+CLASS_COLORS = metrics_mod.CLASS_COLORS
+CLASS_NAMES = metrics_mod.CLASS_NAMES
+classify = metrics_mod.classify
+
+
+def metrics(v: np.ndarray, setup: LightSetup, tap_shape: np.ndarray, seam=None, has_seams=None) -> dict:
+    """Counts and rates of one case (undefined values are NaN)."""
+    return metrics_mod.compute(v, setup.v_star, setup.shape, tap_shape, setup.occluder_dist, seam, has_seams)

@@ -1,0 +1,244 @@
+"""Plain types every module of the kit may import; this module imports nothing of dsm.
+
+The lists of choices (each defined once), lengths and their units, :class:`ConfigError`,
+the value checks that produce it, and the frozen specs a config is read into.
+"""
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+LENGTH_UNITS = ("world", "texel", "range")
+FILTERS = ("nearest", "pcf_bilinear", "pcf_jitter4x4")
+FORMATS = ("float32", "unorm16", "unorm24", "ndc24")
+POINT_VIEWS = ("paraboloid", "dual_paraboloid", "cube")
+LIGHT_TYPES = ("scene", "directional", "spot", "point")
+# vectorized Dr.Jit variants only: the kit's code runs on wide arrays (scalar_rgb cannot run it)
+VARIANTS = ("llvm_ad_rgb", "cuda_ad_rgb")
+
+
+class ConfigError(ValueError):
+    """A config mistake, reported before any work starts."""
+
+    def __init__(self, source: str, key: str, problem: str, choices=None):
+        self.source, self.key, self.problem = source, key, problem
+        self.choices = tuple(choices) if choices else ()
+        msg = f"{source}: {key}: {problem}"
+        if self.choices:
+            msg += f" (valid: {', '.join(map(str, self.choices))})"
+        super().__init__(msg)
+        self.more = []          # further problems of the same kind (scenes.check gathers every scene's)
+
+
+class NothingToRun(ConfigError):
+    """A valid config whose every scene is an absent optional file: the run would compute nothing."""
+
+
+# ---------------------------------------------------------------- lengths
+
+@dataclass(frozen=True)
+class Length:
+    """A length parameter: a world-space number, ``"k texel"`` or ``"k range"``.
+
+    ``texel`` is the world width of one texel of the map at the receiver (constant for an
+    orthographic view, growing with distance for a perspective one); ``range`` is a fraction
+    of the view's depth range (far - near), the unit of hardware depth-bias constants.
+    """
+    value: float
+    unit: str = "world"
+
+    @staticmethod
+    def parse(raw: Any, source: str = "<config>", key: str = "length") -> "Length":
+        if isinstance(raw, Length):
+            return raw
+        if isinstance(raw, bool):
+            raise ConfigError(source, key, f"expected a number or a string like \"2 texel\", got {raw!r}")
+        if isinstance(raw, (int, float)):
+            value, unit = float(raw), "world"
+        elif isinstance(raw, str):
+            parts = raw.split()
+            if len(parts) != 2:
+                raise ConfigError(source, key, f"cannot read length {raw!r}; write a number or \"<k> <unit>\"",
+                                  LENGTH_UNITS)
+            try:
+                value = float(parts[0])
+            except ValueError:
+                raise ConfigError(source, key, f"{parts[0]!r} in {raw!r} is not a number") from None
+            unit = parts[1].rstrip("s") if parts[1] not in LENGTH_UNITS else parts[1]
+            if unit not in LENGTH_UNITS:
+                raise ConfigError(source, key, f"unknown unit {parts[1]!r} in {raw!r}", LENGTH_UNITS)
+        else:
+            raise ConfigError(source, key, f"expected a number or a string like \"2 texel\", got {type(raw).__name__}")
+        if not math.isfinite(value):
+            raise ConfigError(source, key, f"length {raw!r} is not finite")
+        return Length(value, unit)
+
+    def __str__(self) -> str:
+        v = f"{self.value:g}"
+        return v if self.unit == "world" else f"{v} {self.unit}"
+
+
+# ---------------------------------------------------------------- value checks
+
+def number(raw, source, key, *, integer=False, positive=False, minimum=None, maximum=None):
+    if isinstance(raw, bool) or not isinstance(raw, (int, float)) or (integer and not isinstance(raw, int)):
+        raise ConfigError(source, key, f"expected {'an integer' if integer else 'a number'}, got {raw!r}")
+    if not math.isfinite(raw):
+        raise ConfigError(source, key, f"{raw!r} is not finite")
+    if positive and raw <= 0:
+        raise ConfigError(source, key, f"must be > 0, got {raw!r}")
+    if minimum is not None and raw < minimum:
+        raise ConfigError(source, key, f"must be >= {minimum}, got {raw!r}")
+    if maximum is not None and raw > maximum:
+        raise ConfigError(source, key, f"must be <= {maximum}, got {raw!r}")
+    return int(raw) if integer else float(raw)
+
+
+def choice(raw, source, key, choices):
+    if not isinstance(raw, str) or raw not in choices:
+        raise ConfigError(source, key, f"unknown value {raw!r}", choices)
+    return raw
+
+
+def vec3(raw, source, key, nonzero=False):
+    if not isinstance(raw, list) or len(raw) != 3:
+        raise ConfigError(source, key, f"expected a list of three numbers, got {raw!r}")
+    v = tuple(number(x, source, key) for x in raw)
+    if nonzero and not any(v):
+        raise ConfigError(source, key, "direction must not be zero")
+    return v
+
+
+def as_list(raw):
+    return raw if isinstance(raw, list) else [raw]
+
+
+def check_keys(table: dict, allowed, source: str, where: str):
+    for k in table:
+        if k not in allowed:
+            raise ConfigError(source, f"{where}.{k}" if where else k, "unknown key", sorted(allowed))
+
+
+def coerce_field(f: dataclasses.Field, raw, source: str, key: str):
+    """Convert one raw TOML value to a parameter dataclass field's type (Length, float, int, str, or
+    a ``tuple`` of three numbers). ``metadata["min"]`` bounds numbers and Lengths (their value, in
+    any unit: an upper limit or an offset below 0 has no meaning)."""
+    if f.type in ("Length", Length):
+        value = Length.parse(raw, source, key)
+        lo = f.metadata.get("min")
+        if lo is not None and value.value < lo:
+            raise ConfigError(source, key, f"must be >= {lo:g}, got {raw!r}")
+        return value
+    if f.type in ("tuple", tuple):
+        return vec3(raw, source, key)
+    if f.type in ("float", float):
+        return number(raw, source, key, minimum=f.metadata.get("min"))
+    if f.type in ("int", int):
+        return number(raw, source, key, integer=True, minimum=f.metadata.get("min"))
+    if f.type in ("str", str):
+        return choice(raw, source, key, f.metadata["choices"])
+    raise TypeError(f"unsupported parameter type {f.type!r}")
+
+
+def sweep_params(cls, table: dict, source: str, where: str, skip=()) -> list:
+    """Expand a table of (possibly list-valued) parameters into instances of ``cls``."""
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    check_keys({k: v for k, v in table.items() if k not in skip}, fields, source, where)
+    names, options = [], []
+    for k, raw in table.items():
+        if k in skip:
+            continue
+        if fields[k].type in ("tuple", tuple):
+            # a vector: [x, y, z] is one value, a list of vectors sweeps
+            values = raw if isinstance(raw, list) and raw and all(isinstance(x, list) for x in raw) else [raw]
+        else:
+            values = as_list(raw)
+        if not values:
+            raise ConfigError(source, f"{where}.{k}", "empty list")
+        names.append(k)
+        options.append([coerce_field(fields[k], v, source, f"{where}.{k}") for v in values])
+    return [cls(**dict(zip(names, combo))) for combo in itertools.product(*options)]
+
+
+# ---------------------------------------------------------------- config tables
+
+@dataclass(frozen=True)
+class SceneSpec:
+    """One scene: a built-in with its parameters, or a file (Mitsuba XML, OBJ, PLY)."""
+    builtin: str | None = None
+    file: Path | None = None
+    params: Any = None          # builtin: its parameter dataclass; file: FileSceneParams
+    label: str = ""
+    closed: tuple = ()          # (shape name, closed) overrides of detected closedness
+    missing: str = ""           # an optional file that is absent: the run records it as skipped
+    source: str = field(default="", compare=False)     # the config file, for errors found on loading
+    where: str = field(default="scene", compare=False)  # its [[scene]] key, e.g. "scene[2]"
+
+
+@dataclass(frozen=True)
+class LightSpec:
+    """A light. ``scene``: the scene's own lights (built-in default or XML emitters)."""
+    type: str
+    direction: tuple | None = None
+    position: tuple | None = None
+    target: tuple | None = None
+    cutoff: float = 30.0        # spot half angle in degrees
+    label: str = ""
+
+
+@dataclass(frozen=True)
+class MapSpec:
+    resolution: tuple = (512,)
+    filter: tuple = ("nearest",)
+    format: tuple = ("float32",)
+    view: tuple = ("dual_paraboloid",)
+    texels: tuple = ()          # equal-memory sweeps: total texels per view, R = round(sqrt(texels / faces))
+
+    def resolutions_for(self, faces: int) -> tuple:
+        """Per-face resolutions of a view with ``faces`` faces (from ``texels`` when given)."""
+        if not self.texels:
+            return self.resolution
+        return tuple(max(1, round((t / faces) ** 0.5)) for t in self.texels)
+
+
+@dataclass(frozen=True)
+class SchemeSpec:
+    name: str
+    params: Any                 # the scheme's frozen parameter dataclass
+    preset: str | None = None
+
+    @property
+    def label(self) -> str:
+        return describe_params(self.params)
+
+
+@dataclass(frozen=True)
+class Config:
+    name: str
+    source: str
+    seed: int = 7
+    variant: str | None = None
+    camera_resolution: tuple | None = None   # None: an XML scene's own film, else DEFAULT_CAMERA
+    scenes: tuple = ()
+    lights: tuple = ()
+    map: MapSpec = field(default_factory=MapSpec)
+    schemes: tuple = ()
+    timing_repeats: int = 3
+    memory_budget_mb: float | None = None   # None: a quarter of this machine's memory
+    raw: dict = field(default_factory=dict, compare=False)
+
+
+# the culling choices of a map build (midpoint, dual); second_depth's front_closed is its own
+CULLINGS = ("none", "back", "front", "back_closed")
+# faces (maps) per view kind
+VIEW_FACES = {"orthographic": 1, "perspective": 1, "paraboloid": 1, "dual_paraboloid": 2, "cube": 6}
+DEFAULT_CAMERA = (256, 256)     # built-ins and meshes without [camera] resolution
+
+
+def describe_params(params) -> str:
+    """A scheme instance's parameters as ``name=value`` words (the report's ``params`` column)."""
+    return " ".join(f"{f.name}={getattr(params, f.name)}" for f in dataclasses.fields(params))

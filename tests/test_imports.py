@@ -1,0 +1,141 @@
+"""The kit's import graph, read with ast: no circles, no private names across modules.
+
+Modules are the files of ``dsm`` and of the plugins package (``plugins/dsm_plugins``). An
+edge A -> B is any ``import``/``from ... import`` of B in A, at any depth (imports inside
+functions count: a circle hidden in a function is still a circle).
+"""
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+PACKAGES = {"dsm": ROOT / "dsm", "dsm_plugins": ROOT / "plugins" / "dsm_plugins"}
+
+
+def _modules() -> dict:
+    mods = {}
+    for pkg, folder in PACKAGES.items():
+        for f in sorted(folder.rglob("*.py")):
+            rel = f.relative_to(folder).with_suffix("")
+            parts = [pkg, *rel.parts]
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            mods[".".join(parts)] = f
+    return mods
+
+
+def _resolve(mod: str, is_pkg: bool, level: int, name: str | None) -> str:
+    if level == 0:
+        return name or ""
+    base = mod.split(".") if is_pkg else mod.split(".")[:-1]
+    base = base[: len(base) - (level - 1)]
+    return ".".join(base + ([name] if name else []))
+
+
+def _graph():
+    mods = _modules()
+    edges, private_imports, private_attrs = {}, [], []
+    for mod, path in mods.items():
+        tree = ast.parse(path.read_text(), str(path))
+        is_pkg = path.name == "__init__.py"
+        deps = set()
+        aliases = {}                     # local name -> kit module it stands for
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import):
+                for a in node.names:
+                    if a.name.split(".")[0] in PACKAGES:
+                        deps.add(a.name)
+                        aliases[a.asname or a.name.split(".")[0]] = a.name if a.asname else a.name.split(".")[0]
+            elif isinstance(node, ast.ImportFrom):
+                target = _resolve(mod, is_pkg, node.level, node.module)
+                if target.split(".")[0] not in PACKAGES:
+                    continue
+                for a in node.names:
+                    sub = f"{target}.{a.name}"
+                    if sub in mods:          # "from . import config": the module itself
+                        deps.add(sub)
+                        aliases[a.asname or a.name] = sub
+                    else:
+                        deps.add(target)
+                        if a.name.startswith("_") and target != mod:
+                            private_imports.append(f"{mod}: from {target} import {a.name}")
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Attribute) and node.attr.startswith("_") and not node.attr.startswith("__")
+                    and isinstance(node.value, ast.Name) and node.value.id in aliases
+                    and aliases[node.value.id] != mod):
+                private_attrs.append(f"{mod}: {node.value.id}.{node.attr}")
+        # a package's own submodules are not dependencies of importing it
+        edges[mod] = {d if d in mods else _owner(d, mods) for d in deps} - {mod, None}
+    return edges, private_imports, private_attrs
+
+
+def _owner(name, mods):
+    while name and name not in mods:
+        name = name.rpartition(".")[0]
+    return name or None
+
+
+def _cycles(edges):
+    """Strongly connected components with more than one module (Tarjan)."""
+    index, low, stack, on, out = {}, {}, [], set(), []
+    counter = [0]
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in edges.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+    for v in sorted(edges):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def _package_edges(edges):
+    """Edges between modules, leaving out a package's edges to its own submodules (its
+    ``__init__`` listing them is not a circle) and theirs back to the package itself."""
+    out = {}
+    for a, deps in edges.items():
+        out[a] = {b for b in deps if not b.startswith(a + ".") and not a.startswith(b + ".")}
+    return out
+
+
+def test_no_import_circles():
+    edges, _, _ = _graph()
+    assert _cycles(_package_edges(edges)) == []
+
+
+def test_no_private_names_across_modules():
+    _, imports, attrs = _graph()
+    assert imports == [] and attrs == []
+
+
+def test_the_checker_sees_a_circle_and_a_private_reach_in():
+    """The checks above can fail: a made-up graph with a circle, and a private attribute."""
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    tree = ast.parse("from dsm import config as cfgmod\ncfgmod._parse_scheme(1)\n")
+    names = [n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute) and n.attr.startswith("_")]
+    assert names == ["_parse_scheme"]
+
+
+def test_plugins_depend_on_the_pipeline_only():
+    edges, _, _ = _graph()
+    kit = {d for m, deps in edges.items() if m.startswith("dsm_plugins") for d in deps if d.startswith("dsm.")}
+    assert kit <= {"dsm.pipeline", "dsm.types", "dsm"}, kit
+    assert not any(d.startswith("dsm_plugins") for m, deps in edges.items() if m.startswith("dsm.") or m == "dsm"
+                   for d in deps)
