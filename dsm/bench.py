@@ -80,7 +80,7 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
             if R == 1024:
                 smap = shadowmap.build(sd.scene, view, {"z2", "slope"})
                 rx = lookup.Receiver.make(view, p, n, sd.diagonal)
-                dr.eval(rx.d, rx.u, rx.v, rx.texel_world, rx.to_light)
+                dr.eval(rx.depth, rx.u_map, rx.v_map, rx.texel_world, rx.to_light)
                 base = None
                 for name in ("constant", "slope_scaled", "adaptive", "dual", "receiver_plane", "normal_offset",
                              "midpoint", "none"):

@@ -30,41 +30,45 @@ from types import SimpleNamespace
 import drjit as dr
 import mitsuba as mi
 
+from .schemes.base import lit
 from .types import Length
 
 
 @dataclass
 class Receiver:
+    """What a scheme may read about the shaded points; names carry their frame."""
     view: object
-    p: object            # mi.Point3f, world
-    n: object            # geometric normal (the visible side), world
-    to_light: object     # unit vector toward the light
-    d: object            # depth in the view's metric
-    u: object            # map position, texel units
-    v: object
+    p_world: object      # mi.Point3f, world
+    n_world: object      # geometric normal (the visible side), world
+    to_light: object     # unit vector toward the light, world
+    depth: object        # depth in the view's one depth function (world units)
+    u_map: object        # map position, texel units of the receiver's face
+    v_map: object
     face: object         # mi.UInt32, the view's face (map) the receiver falls in
     texel_world: object  # world width of one texel at the receiver
     scene_scale: object  # the scene's bounding-box diagonal (opaque scalar)
 
     @staticmethod
-    def make(view, p, n, scene_scale: float) -> "Receiver":
-        u, v, face = view.project(p)
-        return Receiver(view, p, n, view.to_light(p), view.depth(p), u, v, face, view.texel_world(p),
-                        dr.opaque(mi.Float, scene_scale))
+    def make(view, p_world, n_world, scene_scale: float) -> "Receiver":
+        u, v, face = view.project(p_world)
+        return Receiver(view, p_world, n_world, view.to_light(p_world), view.depth(p_world), u, v, face,
+                        view.texel_world(p_world), dr.opaque(mi.Float, scene_scale))
 
-    def moved(self, p2) -> "Receiver":
+    def moved(self, p2_world) -> "Receiver":
         """The same receiver looked up from another point (normal offset)."""
-        u, v, face = self.view.project(p2)
-        return dataclasses.replace(self, p=p2, d=self.view.depth(p2), u=u, v=v, face=face)
+        u, v, face = self.view.project(p2_world)
+        return dataclasses.replace(self, p_world=p2_world, depth=self.view.depth(p2_world), u_map=u, v_map=v,
+                                   face=face)
 
 
 @dataclass
 class Tap:
+    """What a scheme may read about one texel."""
     view: object
     idx: object          # mi.UInt32 texel index
     face: object
-    cu: object           # texel centre, texel units
-    cv: object
+    cu_map: object       # texel centre, texel units
+    cv_map: object
     z1: object
     shape: object
     slope: object = None
@@ -72,7 +76,7 @@ class Tap:
 
     def depth_on_plane(self, p0, n):
         """Depth where the light ray through this texel's centre meets the plane (p0, n)."""
-        return self.view.depth_on_plane(self.cu, self.cv, p0, n, self.face)
+        return self.view.depth_on_plane(self.cu_map, self.cv_map, p0, n, self.face)
 
     def receiver_plane_depth(self, rx):
         """The receiver's tangent plane's depth at this texel's centre (receiver_plane, adaptive).
@@ -81,8 +85,8 @@ class Tap:
         parallel to the ray, or crosses it behind the light), the receiver's own depth is used:
         the test falls back to the plain depth comparison. :func:`plane_fallbacks` counts those
         receivers for the report."""
-        depth, met = self.view.plane_hit(self.cu, self.cv, rx.p, rx.n, self.face)
-        return dr.select(met, depth, rx.d)
+        depth, met = self.view.plane_hit(self.cu_map, self.cv_map, rx.p_world, rx.n_world, self.face)
+        return dr.select(met, depth, rx.depth)
 
 
 def tap_at(rx: Receiver, smap, u, v) -> Tap:
@@ -107,13 +111,13 @@ def tap_at(rx: Receiver, smap, u, v) -> Tap:
 
 
 def nearest_tap(rx: Receiver, smap) -> Tap:
-    return tap_at(rx, smap, rx.u, rx.v)
+    return tap_at(rx, smap, rx.u_map, rx.v_map)
 
 
 def receiver_key(rx: Receiver):
     """A per-receiver integer from its own position's float bits: a receiver's jitter does not
     change when the set of receivers around it changes."""
-    bits = [dr.reinterpret_array(mi.UInt32, c) for c in (rx.p.x, rx.p.y, rx.p.z)]
+    bits = [dr.reinterpret_array(mi.UInt32, c) for c in (rx.p_world.x, rx.p_world.y, rx.p_world.z)]
     h = bits[0] * 0x9E3779B1
     h = (h ^ (h >> 15)) + bits[1] * 0x85EBCA77
     h = (h ^ (h >> 13)) + bits[2] * 0xC2B2AE3D
@@ -123,23 +127,23 @@ def receiver_key(rx: Receiver):
 def filter_taps(filt: str, rx: Receiver, seed: int = 7):
     """[(u, v, weight)] of a filter's taps around the receiver's map position."""
     if filt == "nearest":
-        return [(rx.u, rx.v, 1.0)]
+        return [(rx.u_map, rx.v_map, 1.0)]
     if filt == "pcf_bilinear":
-        x, y = rx.u - 0.5, rx.v - 0.5
+        x, y = rx.u_map - 0.5, rx.v_map - 0.5
         i0, j0 = dr.floor(x), dr.floor(y)
         fx, fy = x - i0, y - j0
         return [(i0 + 0.5 + a, j0 + 0.5 + b, (fx if a else 1.0 - fx) * (fy if b else 1.0 - fy))
                 for a in (0, 1) for b in (0, 1)]
     if filt == "pcf_jitter4x4":
-        n = dr.width(rx.u)
+        n = dr.width(rx.u_map)
         rng = mi.PCG32()
         # seed() keeps each lane's state (the constructor would add the lane index to the stream)
         rng.seed(mi.UInt64(receiver_key(rx)), dr.full(mi.UInt64, seed, n))
         taps = []
         for a in range(4):
             for b in range(4):
-                taps.append((rx.u + (a - 1.5) + (rng.next_float32() - 0.5),
-                             rx.v + (b - 1.5) + (rng.next_float32() - 0.5), 1.0 / 16.0))
+                taps.append((rx.u_map + (a - 1.5) + (rng.next_float32() - 0.5),
+                             rx.v_map + (b - 1.5) + (rng.next_float32() - 0.5), 1.0 / 16.0))
         return taps
     raise ValueError(f"unknown filter {filt!r} (valid: nearest, pcf_bilinear, pcf_jitter4x4)")
 
@@ -169,22 +173,20 @@ def plane_fallbacks(scheme, params, rx: Receiver, smap) -> int:
     receiver's plane depth: ``USES_PLANE``); 0 for other schemes."""
     if not getattr(scheme, "USES_PLANE", False):
         return 0
-    if hasattr(scheme, "shift"):
-        rx = scheme.shift(rx, resolve(params, rx))
+    rx = scheme.shift(rx, resolve(params, rx))
     tap = nearest_tap(rx, smap)
-    _, met = rx.view.plane_hit(tap.cu, tap.cv, rx.p, rx.n, tap.face)
+    _, met = rx.view.plane_hit(tap.cu_map, tap.cv_map, rx.p_world, rx.n_world, tap.face)
     return int(dr.count(~met).numpy().ravel()[0])
 
 
 def visibility(scheme, params, rx: Receiver, smap, filt: str = "nearest", seed: int = 7):
     """(V in [0, 1] per receiver, shape index of the nearest texel) for one scheme and filter."""
     prm = resolve(params, rx)
-    if hasattr(scheme, "shift"):
-        rx = scheme.shift(rx, prm)
+    rx = scheme.shift(rx, prm)
     near = nearest_tap(rx, smap)
     if filt == "nearest":
-        return dr.select(scheme.lit(rx, near, prm), mi.Float(1.0), mi.Float(0.0)), near.shape
-    vis = dr.zeros(mi.Float, dr.width(rx.u))
+        return dr.select(lit(scheme, rx, near, prm), mi.Float(1.0), mi.Float(0.0)), near.shape
+    vis = dr.zeros(mi.Float, dr.width(rx.u_map))
     for u, v, w in filter_taps(filt, rx, seed):
-        vis += dr.select(scheme.lit(rx, tap_at(rx, smap, u, v), prm), w, 0.0)
+        vis += dr.select(lit(scheme, rx, tap_at(rx, smap, u, v), prm), w, 0.0)
     return vis, near.shape

@@ -202,8 +202,8 @@ class Runner:
             rx = seam = None
             if s.p is not None and len(s.pixels):
                 rx = pipeline.receivers(view, s, sd.diagonal)
-                seam = view.seam_distance(rx.u, rx.v, rx.face)
-                dr.eval(rx.d, rx.u, rx.v, rx.face, rx.texel_world, rx.to_light, seam)
+                seam = view.seam_distance(rx.u_map, rx.v_map, rx.face)
+                dr.eval(rx.depth, rx.u_map, rx.v_map, rx.face, rx.texel_world, rx.to_light, seam)
                 seam = seam.numpy()
             return view, s, rx, seam, s.backfacing_inside(view)
         try:

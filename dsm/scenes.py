@@ -35,63 +35,55 @@ CROSS_MIN = 2e-19
 
 
 @dataclass(frozen=True)
-class PlaneParams:
+class Placement:
+    """Where a built-in scene (or a mesh file) sits: ``scale`` multiplies geometry, camera and the
+    config's light positions; ``translate`` then moves all of them (far-from-origin cases)."""
+    scale: float = field(default=1.0, metadata={"min": 1e-30})
+    translate: tuple = field(default=ORIGIN, metadata={"doc": "world offset [x, y, z] after scale"})
+
+
+@dataclass(frozen=True)
+class PlaneParams(Placement):
     """One 4 x 4 plane tilted ``tilt`` degrees about a horizontal axis at ``azimuth`` degrees; light from above."""
     tilt: float = field(default=45.0, metadata={"min": 0.0})
     azimuth: float = 0.0
-    scale: float = field(default=1.0, metadata={"min": 1e-30})
-    translate: tuple = field(default=ORIGIN, metadata={"doc": "world offset [x, y, z] after scale"})
 
 
 @dataclass(frozen=True)
-class PlaneBoxParams:
+class PlaneBoxParams(Placement):
     """A closed unit box resting on an 8 x 8 ground: contact shadows."""
-    scale: float = field(default=1.0, metadata={"min": 1e-30})
-    translate: tuple = field(default=ORIGIN, metadata={"doc": "world offset [x, y, z] after scale"})
 
 
 @dataclass(frozen=True)
-class LShapeParams:
+class LShapeParams(Placement):
     """Seed 000, figure 5: a closed L-shaped solid above the ground, light from right above."""
-    scale: float = field(default=1.0, metadata={"min": 1e-30})
-    translate: tuple = field(default=ORIGIN, metadata={"doc": "world offset [x, y, z] after scale"})
 
 
 @dataclass(frozen=True)
-class FloatingPlateParams:
+class FloatingPlateParams(Placement):
     """An open 1.5 x 1.5 plate ``gap`` above the ground: the bias/gap threshold of peter-panning."""
     gap: float = field(default=0.2, metadata={"min": 0.0})
-    scale: float = field(default=1.0, metadata={"min": 1e-30})
-    translate: tuple = field(default=ORIGIN, metadata={"doc": "world offset [x, y, z] after scale"})
 
 
 @dataclass(frozen=True)
-class GrazingParams:
+class GrazingParams(Placement):
     """The ground and a box lit ``angle`` degrees from the ground's normal (80 to 89: projective aliasing)."""
     angle: float = field(default=85.0, metadata={"min": 0.0})
-    scale: float = field(default=1.0, metadata={"min": 1e-30})
-    translate: tuple = field(default=ORIGIN, metadata={"doc": "world offset [x, y, z] after scale"})
 
 
 @dataclass(frozen=True)
-class RoomParams:
+class RoomParams(Placement):
     """Seed 001, figure 3: a closed 6 x 6 x 3 room (walls facing in) with objects around a point light."""
-    scale: float = field(default=1.0, metadata={"min": 1e-30})
-    translate: tuple = field(default=ORIGIN, metadata={"doc": "world offset [x, y, z] after scale"})
 
 
 @dataclass(frozen=True)
-class DoubleTorusParams:
+class DoubleTorusParams(Placement):
     """Seed 000, figure 6: a closed genus-2 solid (a double torus, 6,400 triangles) tilted above the ground."""
-    scale: float = field(default=1.0, metadata={"min": 1e-30})
-    translate: tuple = field(default=ORIGIN, metadata={"doc": "world offset [x, y, z] after scale"})
 
 
 @dataclass(frozen=True)
-class FileParams:
+class FileParams(Placement):
     """A scene file. Meshes (OBJ/PLY) get a ground under them, a default camera and light."""
-    scale: float = field(default=1.0, metadata={"min": 1e-30})
-    translate: tuple = field(default=ORIGIN, metadata={"doc": "world offset [x, y, z] after scale"})
     up: str = field(default="y", metadata={"choices": ("x", "y", "z")})
     ground: str = field(default="yes", metadata={"choices": ("yes", "no")})
 

@@ -84,6 +84,7 @@ def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool
     """
     bb = scene.bbox()
     magnitude = dr.opaque(mi.Float, float(np.max(np.abs(np.concatenate([np.ravel(bb.min), np.ravel(bb.max)])))))
+    extents = spawn.shape_extents(scene)
     n = view.n_texels - first if count is None else count
     ray = view.texel_rays(first, n)
     modes = mi.UInt32(np.asarray(cull_modes, np.uint32))
@@ -119,7 +120,8 @@ def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool
         rehit += dr.select(valid & (pi.shape_index == prev_shape) & (pi.prim_index == prev_prim), 1, 0)
         prev_shape, prev_prim = dr.select(valid, pi.shape_index, prev_shape), dr.select(valid, pi.prim_index, prev_prim)
         active = valid & (found < need)
-        ray = dr.select(active, spawn.ray_along(si, si.n, ray.d, spawn.error_bound(si, magnitude)), ray)
+        delta = spawn.error_bound_by_shape(si.p, pi.shape_index, extents, magnitude)
+        ray = dr.select(active, spawn.ray_along(si, si.n, ray.d, delta), ray)
         dr.eval(z1, z2, shape1, p1, n1, found, active, ray, cast1, cast2, rehit, prev_shape, prev_prim)
         if _count(active) == 0:          # the one synchronisation per step
             break

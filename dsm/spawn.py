@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 U32 = 2.0 ** -24     # float32 unit roundoff
 SAFETY = 32.0
@@ -50,6 +51,35 @@ def error_bound(si, other_extent):
         tri_extent = dr.maximum(tri_extent, dr.max(dr.abs(vk - si.p)))
     extent = dr.select(tri, tri_extent, other_extent)
     return SAFETY * U32 * (dr.max(dr.abs(si.p)) + extent)
+
+
+def shape_extents(scene):
+    """Per shape index of ``scene.shapes()``: the largest extent (max-norm of an edge) of any of
+    its triangles, a bound on ``max_k |p_k - p|`` for every hit on it; 0 for non-meshes. One
+    numpy pass over the meshes, so a loop of continuation rays needs no per-ray vertex fetch."""
+    out = []
+    for shape in scene.shapes():
+        if not shape.is_mesh():
+            out.append(0.0)
+            continue
+        v = np.asarray(shape.vertex_positions_buffer(), np.float64).reshape(-1, 3)
+        f = np.asarray(shape.faces_buffer(), np.int64).reshape(-1, 3)
+        if len(f) == 0:
+            out.append(0.0)
+            continue
+        tri = v[f]
+        edges = np.abs(tri - np.roll(tri, 1, axis=1)).max(axis=(1, 2))
+        out.append(float(edges.max()))
+    return mi.Float(np.asarray(out, np.float32)), mi.Bool(np.array([s.is_mesh() for s in scene.shapes()], bool))
+
+
+def error_bound_by_shape(p, shape_index, tables, other_extent):
+    """:func:`error_bound` with each mesh's largest triangle as the extent (``tables`` from
+    :func:`shape_extents`): a little looser, and no per-ray access to the triangle."""
+    extents, is_mesh = tables
+    ext = dr.gather(mi.Float, extents, shape_index)
+    mesh = dr.gather(mi.Bool, is_mesh, shape_index)
+    return SAFETY * U32 * (dr.max(dr.abs(p)) + dr.select(mesh, ext, other_extent))
 
 
 def offset_origin(p, n, d, delta):

@@ -53,7 +53,7 @@ def test_a_failing_case_is_recorded_and_the_rest_still_run(tmp_path, monkeypatch
 
     def broken(rx, tap, p):
         raise RuntimeError("deliberately broken for this test")
-    monkeypatch.setattr(normal_angle, "lit", broken)
+    monkeypatch.setattr(normal_angle, "margin", broken)
     cfg = {"scene": [{"builtin": "plane"}], "camera": {"resolution": [32, 32]}, "map": {"resolution": 32},
            "scheme": [{"name": "none"}, {"name": "normal_angle"}, {"name": "constant"}], "timing": {"repeats": 1}}
     res = dsm.run(cfg, out=tmp_path / "o")

@@ -40,7 +40,7 @@ def test_bilinear_pcf_rises_linearly_across_one_texel(variant):
     prm = const.Params(bias=__import__("dsm").config.Length(0.05, "world"))
     v_bil = visibility(const, prm, rx, smap, "pcf_bilinear")[0].numpy()
     v_near = visibility(const, prm, rx, smap, "nearest")[0].numpy()
-    u = rx.u.numpy()
+    u = rx.u_map.numpy()
     # the analytic answer: texel k is lit iff its centre ray misses the plate (centre x > 0.75)
     L = view.extent
     x0 = float(view.origin_np @ view.axes_np[0])

@@ -327,8 +327,8 @@ def test_receivers_exactly_on_texel_boundaries():
     pts = view.origin_np + np.outer(uu * w, ex) + np.outer(vv * w, ey)      # on the map's near plane
     p = mi.Point3f(*(mi.Float(pts[:, c].astype(np.float32)) for c in range(3)))
     rx = Receiver.make(view, p, dr.zeros(mi.Vector3f, len(pts)) + mi.Vector3f(0, 0, 1), sd.diagonal)
-    np.testing.assert_allclose(rx.u.numpy(), uu, rtol=0, atol=1e-4)
-    np.testing.assert_allclose(rx.v.numpy(), vv, rtol=0, atol=1e-4)
+    np.testing.assert_allclose(rx.u_map.numpy(), uu, rtol=0, atol=1e-4)
+    np.testing.assert_allclose(rx.v_map.numpy(), vv, rtol=0, atol=1e-4)
     tap = tap_at(rx, smap, mi.Float(uu.astype(np.float32)), mi.Float(vv.astype(np.float32)))
     i, j = np.minimum(uu, R - 1).astype(int), np.minimum(vv, R - 1).astype(int)
     np.testing.assert_array_equal(tap.idx.numpy(), j * R + i)

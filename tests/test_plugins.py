@@ -102,13 +102,8 @@ FOV = 40.0
 
 
 def _mesh(name, verts, faces):
-    import mitsuba as mi
-    mesh = mi.Mesh(name, len(verts), len(faces))
-    params = mi.traverse(mesh)
-    params["vertex_positions"] = mi.Float(np.asarray(verts, np.float32).ravel())
-    params["faces"] = mi.UInt32(np.asarray(faces, np.uint32).ravel())
-    params.update()
-    return mesh
+    from dsm.scenes import make_mesh
+    return make_mesh(name, verts, faces)
 
 
 def _plate_scene(direction, camera=OBLIQUE, size=64, box=False, extra_emitters=None):

@@ -181,12 +181,12 @@ def test_points_exactly_on_singular_directions(variant):
             rx = Receiver.make(view, p, n, sd.diagonal)
             tap = nearest_tap(rx, smap)
             inside = view.inside(p).numpy().astype(bool)
-            for arr in (rx.u, rx.v, rx.texel_world, rx.d, tap.z1, tap.z2):
+            for arr in (rx.u_map, rx.v_map, rx.texel_world, rx.depth, tap.z1, tap.z2):
                 assert np.all(np.isfinite(arr.numpy()[inside])), (kind, axis)
             assert np.all(rx.texel_world.numpy()[inside] > 0)
             idx = tap.idx.numpy()
             assert idx.max() < view.n_texels
-            u, v = rx.u.numpy()[inside], rx.v.numpy()[inside]
+            u, v = rx.u_map.numpy()[inside], rx.v_map.numpy()[inside]
             if kind == "cube":
                 assert np.all((u >= 0) & (u <= R) & (v >= 0) & (v <= R)), (u, v)
             else:

@@ -1,16 +1,21 @@
-"""Bias schemes: one module each, listed explicitly.
+"""Bias schemes: one module each, listed explicitly, each meeting :class:`base.Scheme`.
 
 Each module has ``NAME``, ``SOURCE``, ``NEEDS`` (the map attributes it reads), a frozen
-``Params`` dataclass with defaults and units, ``lit(rx, tap, params) -> Bool`` over Dr.Jit
-arrays and, for schemes that move the lookup point, ``shift(rx, params) -> Receiver``.
+``Params`` dataclass with defaults and units, a signed ``margin(rx, tap, params) -> Float``
+over Dr.Jit arrays (lit where >= 0) and ``shift(rx, params) -> Receiver`` (the identity,
+:func:`base.no_shift`, but for schemes that move the lookup point).
 """
 
 from . import (adaptive, constant, dual, midpoint, none, normal_angle, normal_offset, receiver_plane,
                second_depth, slope_scaled)
 from ..types import Length, describe_params  # noqa: F401  (describe_params: the report's words)
 
+from .base import Scheme
+
 REGISTRY = (none, constant, slope_scaled, normal_angle, normal_offset, receiver_plane, adaptive, midpoint, dual,
             second_depth)
+_broken = [m.NAME for m in REGISTRY if not isinstance(m, Scheme)]
+assert not _broken, f"scheme modules not meeting the Scheme contract: {_broken}"
 
 # Engine presets: a named engine's default bias, measurable beside every scheme.
 PRESETS = {

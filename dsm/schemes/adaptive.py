@@ -11,6 +11,7 @@ Known failure: receivers whose tangent plane is almost parallel to the light ray
 over-biased (the paper's figure 9), which shading hides but the metrics count.
 """
 from dataclasses import dataclass, field
+from .base import no_shift
 
 NAME = "adaptive"
 SOURCE = "Dou et al. 2014; seed 004"
@@ -23,5 +24,8 @@ class Params:
     K: float = field(default=1e-4, metadata={"doc": "epsilon as a fraction of the scene's diagonal", "min": 0.0})
 
 
-def lit(rx, tap, p):
-    return tap.receiver_plane_depth(rx) <= tap.z1 + p.K * rx.scene_scale
+def margin(rx, tap, p):
+    return tap.z1 + p.K * rx.scene_scale - tap.receiver_plane_depth(rx)
+
+
+shift = no_shift

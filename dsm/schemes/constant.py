@@ -9,6 +9,7 @@ Parameters: ``bias`` (length, default ``"1 texel"``).
 from dataclasses import dataclass, field
 
 from ..types import Length
+from .base import no_shift
 
 NAME = "constant"
 SOURCE = "Williams 1978"
@@ -20,5 +21,8 @@ class Params:
     bias: Length = field(default=Length(1.0, "texel"), metadata={"doc": "depth offset added to z1"})
 
 
-def lit(rx, tap, p):
-    return rx.d <= tap.z1 + p.bias
+def margin(rx, tap, p):
+    return tap.z1 + p.bias - rx.depth
+
+
+shift = no_shift

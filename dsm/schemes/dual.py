@@ -15,6 +15,7 @@ import drjit as dr
 
 from ..types import Length
 from ..types import CULLINGS as CULLING
+from .base import no_shift
 
 NAME = "dual"
 SOURCE = "Weiskopf & Ertl 2003; seed 000"
@@ -27,5 +28,8 @@ class Params:
     culling: str = field(default="back_closed", metadata={"doc": "map culling per shape", "choices": CULLING})
 
 
-def lit(rx, tap, p):
-    return rx.d <= tap.z1 + dr.minimum(0.5 * (tap.z2 - tap.z1), p.z_offset)
+def margin(rx, tap, p):
+    return tap.z1 + dr.minimum(0.5 * (tap.z2 - tap.z1), p.z_offset) - rx.depth
+
+
+shift = no_shift

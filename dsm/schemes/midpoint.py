@@ -11,6 +11,7 @@ Parameters: ``culling`` (none | back | front | back_closed, default none).
 from dataclasses import dataclass, field
 
 from ..types import CULLINGS as CULLING
+from .base import no_shift
 
 NAME = "midpoint"
 SOURCE = "Woo 1992; seed 000"
@@ -22,5 +23,8 @@ class Params:
     culling: str = field(default="none", metadata={"doc": "map culling per shape", "choices": CULLING})
 
 
-def lit(rx, tap, p):
-    return rx.d <= 0.5 * (tap.z1 + tap.z2)
+def margin(rx, tap, p):
+    return 0.5 * (tap.z1 + tap.z2) - rx.depth
+
+
+shift = no_shift

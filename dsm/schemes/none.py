@@ -6,6 +6,7 @@ tilted against the light about half of its receivers fall below their texel's sa
 Kept as the baseline every other scheme is measured against.
 """
 from dataclasses import dataclass
+from .base import no_shift
 
 NAME = "none"
 SOURCE = "Williams 1978"
@@ -17,5 +18,8 @@ class Params:
     pass
 
 
-def lit(rx, tap, p):
-    return rx.d <= tap.z1
+def margin(rx, tap, p):
+    return tap.z1 - rx.depth
+
+
+shift = no_shift

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import drjit as dr
 
 from ..types import Length
+from .base import no_shift
 
 NAME = "normal_angle"
 SOURCE = "Gautron 2013; seed 003"
@@ -24,7 +25,10 @@ class Params:
     max: Length = field(default=Length(8.0, "texel"), metadata={"min": 0.0, "doc": "largest bias"})
 
 
-def lit(rx, tap, p):
-    cos_t = dr.clip(dr.dot(rx.n, rx.to_light), 0.0, 1.0)
+def margin(rx, tap, p):
+    cos_t = dr.clip(dr.dot(rx.n_world, rx.to_light), 0.0, 1.0)
     tan_t = dr.safe_sqrt(1.0 - cos_t * cos_t) / cos_t   # receivers have cos_t > 0
-    return rx.d <= tap.z1 + dr.minimum(p.max, p.bias * tan_t)
+    return tap.z1 + dr.minimum(p.max, p.bias * tan_t) - rx.depth
+
+
+shift = no_shift

@@ -23,8 +23,8 @@ class Params:
 
 
 def shift(rx, p):
-    return rx.moved(rx.p + rx.n * p.offset)
+    return rx.moved(rx.p_world + rx.n_world * p.offset)
 
 
-def lit(rx, tap, p):
-    return rx.d <= tap.z1 + p.bias
+def margin(rx, tap, p):
+    return tap.z1 + p.bias - rx.depth

@@ -11,6 +11,7 @@ Parameters: ``bias`` (length, default ``"0.01 texel"``).
 from dataclasses import dataclass, field
 
 from ..types import Length
+from .base import no_shift
 
 NAME = "receiver_plane"
 SOURCE = "Isidoro 2006; seed 003"
@@ -23,5 +24,8 @@ class Params:
     bias: Length = field(default=Length(0.01, "texel"), metadata={"doc": "depth offset added to z1"})
 
 
-def lit(rx, tap, p):
-    return tap.receiver_plane_depth(rx) <= tap.z1 + p.bias
+def margin(rx, tap, p):
+    return tap.z1 + p.bias - tap.receiver_plane_depth(rx)
+
+
+shift = no_shift

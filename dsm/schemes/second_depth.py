@@ -12,6 +12,7 @@ Parameters: ``bias`` (length, default 0), ``culling`` (front | front_closed, def
 from dataclasses import dataclass, field
 
 from ..types import Length
+from .base import no_shift
 
 NAME = "second_depth"
 SOURCE = "Wang & Molnar 1994"
@@ -25,5 +26,8 @@ class Params:
     culling: str = field(default="front_closed", metadata={"doc": "map culling per shape", "choices": CULLING})
 
 
-def lit(rx, tap, p):
-    return rx.d <= tap.z1 + p.bias
+def margin(rx, tap, p):
+    return tap.z1 + p.bias - rx.depth
+
+
+shift = no_shift

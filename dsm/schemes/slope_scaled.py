@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import drjit as dr
 
 from ..types import Length
+from .base import no_shift
 
 NAME = "slope_scaled"
 SOURCE = "King 2004; D3D/Vulkan/GL depth bias; seed 003"
@@ -27,5 +28,8 @@ class Params:
     clamp: Length = field(default=Length(1.0 / 128.0, "range"), metadata={"min": 0.0, "doc": "largest total bias"})
 
 
-def lit(rx, tap, p):
-    return rx.d <= tap.z1 + dr.minimum(p.clamp, p.bias + p.slope * tap.slope)
+def margin(rx, tap, p):
+    return tap.z1 + dr.minimum(p.clamp, p.bias + p.slope * tap.slope) - rx.depth
+
+
+shift = no_shift

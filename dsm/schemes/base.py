@@ -1,0 +1,34 @@
+"""The contract every scheme module meets (:class:`Scheme`), and the shift that does nothing.
+
+A scheme is a module: ``NAME``, ``SOURCE``, ``NEEDS`` (map layers beyond z1 and shape ids),
+a frozen ``Params`` dataclass, ``margin(rx, tap, params) -> Float`` and ``shift(rx, params)
+-> Receiver``. The margin is signed, in the view's depth units: the receiver is lit by a tap
+when it is >= 0 (``lit``). Filters apply it per tap; tuning by gradient relaxes it.
+"""
+from __future__ import annotations
+
+from typing import Any, Protocol, runtime_checkable
+
+
+@runtime_checkable
+class Scheme(Protocol):
+    NAME: str
+    SOURCE: str
+    NEEDS: frozenset
+    Params: type
+
+    def margin(self, rx: Any, tap: Any, params: Any) -> Any:
+        """Signed margin per receiver (Dr.Jit Float): lit where >= 0."""
+
+    def shift(self, rx: Any, params: Any) -> Any:
+        """The receiver to look up (normal offset moves it; the others return it as it is)."""
+
+
+def no_shift(rx, params):
+    """The lookup point is the receiver itself."""
+    return rx
+
+
+def lit(scheme, rx, tap, params):
+    """The scheme's binary test: its margin is >= 0."""
+    return scheme.margin(rx, tap, params) >= 0

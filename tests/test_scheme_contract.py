@@ -1,0 +1,66 @@
+"""Every scheme meets the written contract, and its signed margin says what its source says."""
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+N = 4000
+
+
+def _data(rng):
+    z1 = rng.uniform(1.0, 5.0, N)
+    return dict(z1=z1, z2=z1 + rng.uniform(0.0, 0.5, N), d=z1 + rng.normal(0.0, 0.05, N),
+                plane=z1 + rng.normal(0.0, 0.05, N), slope=rng.uniform(0.0, 0.05, N),
+                cos=rng.uniform(0.05, 1.0, N), scale=7.0)
+
+
+# the tests as the sources and README state them, in float64: (params, lit)
+EXPECTED = {
+    "none": ({}, lambda x, p: x["d"] <= x["z1"]),
+    "constant": ({"bias": 0.02}, lambda x, p: x["d"] <= x["z1"] + p["bias"]),
+    "slope_scaled": ({"bias": 0.001, "slope": 3.0, "clamp": 0.05},
+                     lambda x, p: x["d"] <= x["z1"] + np.minimum(p["clamp"], p["bias"] + p["slope"] * x["slope"])),
+    "normal_angle": ({"bias": 0.01, "max": 0.08},
+                     lambda x, p: x["d"] <= x["z1"] + np.minimum(p["max"], p["bias"] * np.sqrt(1 - x["cos"] ** 2)
+                                                                / x["cos"])),
+    "normal_offset": ({"offset": 0.0, "bias": 0.02}, lambda x, p: x["d"] <= x["z1"] + p["bias"]),
+    "receiver_plane": ({"bias": 0.01}, lambda x, p: x["plane"] <= x["z1"] + p["bias"]),
+    "adaptive": ({"K": 0.003}, lambda x, p: x["plane"] <= x["z1"] + p["K"] * x["scale"]),
+    "midpoint": ({}, lambda x, p: x["d"] <= 0.5 * (x["z1"] + x["z2"])),
+    "dual": ({"z_offset": 0.1}, lambda x, p: x["d"] <= x["z1"] + np.minimum(0.5 * (x["z2"] - x["z1"]), p["z_offset"])),
+    "second_depth": ({"bias": 0.01}, lambda x, p: x["d"] <= x["z1"] + p["bias"]),
+}
+
+
+def test_every_registered_scheme_is_checked_here():
+    from dsm.schemes import REGISTRY
+    assert sorted(s.NAME for s in REGISTRY) == sorted(EXPECTED)
+
+
+@pytest.mark.parametrize("name", sorted(EXPECTED))
+def test_margin_sign_is_the_sources_test(variant, name):
+    import drjit as dr
+    import mitsuba as mi
+    from dsm.schemes import base, get
+    scheme = get(name)
+    assert isinstance(scheme, base.Scheme)
+    rng = np.random.default_rng(sum(map(ord, name)))
+    x = _data(rng)
+    f = lambda a: mi.Float(np.asarray(a, np.float32))
+    n = mi.Vector3f(f(np.sqrt(1 - x["cos"] ** 2)), 0.0, f(x["cos"]))
+    plane = f(x["plane"])
+    rx = SimpleNamespace(depth=f(x["d"]), n_world=n, to_light=mi.Vector3f(0, 0, 1), scene_scale=mi.Float(x["scale"]),
+                         p_world=dr.zeros(mi.Point3f, N))
+    tap = SimpleNamespace(z1=f(x["z1"]), z2=f(x["z2"]), slope=f(x["slope"]),
+                          receiver_plane_depth=lambda r: plane)
+    params, expected = EXPECTED[name]
+    prm = SimpleNamespace(**{k: mi.Float(v) for k, v in params.items()})
+    margin = scheme.margin(rx, tap, prm).numpy()
+    # x rounded to float32 as the kit sees it, then the source's test in float64
+    x32 = {k: (np.asarray(v, np.float32).astype(np.float64) if isinstance(v, np.ndarray) else v) for k, v in x.items()}
+    want = expected(x32, params)
+    clear = np.abs(margin) > 1e-5                    # away from ties, where float32 rounding decides
+    assert clear.mean() > 0.95 and want[clear].any() and (~want[clear]).any()
+    np.testing.assert_array_equal(margin[clear] >= 0, want[clear])
+    if name != "normal_offset":
+        assert scheme.shift(rx, prm) is rx           # the default shift does nothing
