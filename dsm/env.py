@@ -7,6 +7,9 @@ error naming the package to install.
 from __future__ import annotations
 
 import os
+import platform
+import subprocess
+from pathlib import Path
 
 LLVM_HINT = ("Dr.Jit's LLVM backend needs libLLVM 16 or newer. On Debian 12 run "
              "`apt-get install -y libllvm19` (as root), or set DRJIT_LIBLLVM_PATH to a libLLVM >= 16.")
@@ -83,3 +86,22 @@ def register_plugins() -> list:
     for ep in entry_points(group=PLUGIN_GROUP):
         names += list(ep.load()() or ())
     return names
+
+
+def git_commit() -> str:
+    try:
+        here = Path(__file__).resolve().parent
+        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, timeout=5)
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=here,
+                               capture_output=True, text=True, timeout=5).stdout.strip()
+        return out.stdout.strip() + ("+dirty" if dirty else "") if out.returncode == 0 else "unknown"
+    except Exception:
+        return "unknown"
+
+
+def versions() -> dict:
+    """Python, Mitsuba, Dr.Jit, libLLVM and the kit's git commit (read once per run: git is a subprocess)."""
+    import drjit as dr
+    import mitsuba as mi
+    return {"python": platform.python_version(), "mitsuba": mi.__version__, "drjit": dr.__version__,
+            "libllvm": ".".join(map(str, llvm_version() or ())) or "unavailable", "dsm_git_commit": git_commit()}

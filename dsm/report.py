@@ -6,8 +6,6 @@ import csv
 import dataclasses
 import json
 import os
-import platform
-import subprocess
 import sys
 from pathlib import Path
 
@@ -362,26 +360,6 @@ def _slug(s: str) -> str:
 
 
 # ------------------------------------------------------------------ run.json
-
-def git_commit() -> str:
-    try:
-        here = Path(__file__).resolve().parent
-        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, timeout=5)
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=here,
-                               capture_output=True, text=True, timeout=5).stdout.strip()
-        return out.stdout.strip() + ("+dirty" if dirty else "") if out.returncode == 0 else "unknown"
-    except Exception:
-        return "unknown"
-
-
-def versions() -> dict:
-    """Python, Mitsuba, Dr.Jit, libLLVM and the kit's git commit (read once per run: git is a subprocess)."""
-    import drjit as dr
-    import mitsuba as mi
-    from .env import llvm_version
-    return {"python": platform.python_version(), "mitsuba": mi.__version__, "drjit": dr.__version__,
-            "libllvm": ".".join(map(str, llvm_version() or ())) or "unavailable", "dsm_git_commit": git_commit()}
-
 
 def run_info(cfg, variant, rays, status, versions_: dict, threads: int) -> dict:
     failed = [s for s in status if s["status"] == "failed"]

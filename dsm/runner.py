@@ -90,7 +90,7 @@ class Runner:
         self.images = {}
         self.case_no = 0
         self.quantized = 0            # quantized map copies made (stored formats other than float32)
-        self.versions = report.versions()
+        self.versions = env.versions()
         self.state = "running"
         self.bar = None
 
