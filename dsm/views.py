@@ -30,6 +30,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from .types import VIEW_FACES
+
 
 def light_frame(direction) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Right-handed orthonormal (ex, ey, ez) with ez along ``direction``, stable for any axis."""
@@ -55,7 +57,11 @@ class View:
     """Common part: a frame (origin ``o``, axes ``ex``, ``ey``, ``ez``) and the depth metric."""
 
     kind = "view"
-    faces = 1
+
+    @property
+    def faces(self) -> int:
+        """Faces (maps) of this view: one fact, types.VIEW_FACES."""
+        return VIEW_FACES[self.kind]
 
     def __init__(self, origin, ex, ey, ez, resolution: int, near: float, far: float):
         self.resolution = int(resolution)
@@ -271,7 +277,6 @@ class ParaboloidView(PointView):
     def __init__(self, position, axis, scene_bbox, resolution: int, dual: bool):
         super().__init__(position, axis, scene_bbox, resolution)
         self.dual = bool(dual)
-        self.faces = 2 if dual else 1
         self.kind = "dual_paraboloid" if dual else "paraboloid"
 
     def _sign(self, face):
@@ -331,7 +336,6 @@ class CubeView(PointView):
     projection lands on that face's border (u or v = 0 or R), never outside it.
     """
     kind = "cube"
-    faces = 6
 
     def __init__(self, position, scene_bbox, resolution: int):
         super().__init__(position, (0, 0, 1), scene_bbox, resolution)
