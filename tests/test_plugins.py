@@ -262,7 +262,7 @@ def test_light_out_of_range_names_the_scene_emitters(variant):
     assert np.asarray(img).shape[:2] == (64, 64)
 
 
-VALID_SCHEMES = "none, constant, slope_scaled, normal_angle, normal_offset, receiver_plane, adaptive, midpoint, dual, second_depth"
+VALID_SCHEMES = "none, constant, slope_scaled, normal_angle, normal_offset, combined, receiver_plane, adaptive, midpoint, dual, second_depth"
 
 
 @pytest.mark.parametrize("props,line", [
