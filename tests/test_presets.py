@@ -27,11 +27,12 @@ EXPECTED = {
                   "spot": ((1.0, T), (1.0, T), 0.0, None),
                   "point": ((0.0, T), (1.0, T), 0.0, None)},
     # Unity-Technologies/Graphics com.unity.render-pipelines.high-definition/.../HDAdditionalLightData.cs:
-    # m_NormalBias 0.75, m_SlopeBias 0.5
-    "unity_hdrp": {t: ((0.75, T), (0.0, W), 0.5, None) for t in ("directional", "spot", "point")},
+    # m_NormalBias 0.75 times worldTexelSize (which carries sqrt(2)); slope: baseBias 5 * m_SlopeBias 0.5
+    # (HDShadowUtils.GetSlopeBias), set with SetGlobalDepthBias(1, slopeBias) in HDShadowManager.cs
+    "unity_hdrp": {t: ((0.75 * S2, T), (0.0, W), 2.5, None) for t in ("directional", "spot", "point")},
     # google/filament filament/include/filament/LightManager.h: constantBias 0.001, normalBias 1.0,
-    # polygonOffsetSlope 2.0
-    "filament": {t: ((1.0, T), (0.001, W), 2.0, None) for t in ("directional", "spot", "point")},
+    # polygonOffsetSlope 2.0; filament/src/ShadowMapManager.cpp: 0.5 * normalBias * texel size
+    "filament": {t: ((0.5, T), (0.001, W), 2.0, None) for t in ("directional", "spot", "point")},
     # mrdoob/three.js src/lights/LightShadow.js: bias 0, normalBias 0
     "three": {t: ((0.0, W), (0.0, W), 0.0, None) for t in ("directional", "spot", "point")},
     # TheRealMJP/Shadows Shadows/AppSettings.cs: Bias 0.005 (in the cascade's [0, 1] depth), OffsetScale 0

@@ -97,22 +97,35 @@ PRESETS = {
         "lights URP computes one texel size from the light's range, the kit's texel is the one at each receiver"),
     "unity_hdrp": Preset(
         "Unity HDRP",
-        {t: _p((0.75, "texel"), slope_scale=0.5) for t in LIGHT_TYPES},
+        {t: _p((0.75 * SQRT2, "texel"), slope_scale=2.5) for t in LIGHT_TYPES},
         (("Unity-Technologies/Graphics com.unity.render-pipelines.high-definition/Runtime/Lighting/Light/"
-          "HDAdditionalLightData.cs", "m_NormalBias = 0.75f, m_SlopeBias = 0.5f"),),
-        "normal bias as texels at the receiver; slope bias as a factor on m",
-        "HDRP's constant depth bias (none found in HDAdditionalLightData.cs) and how HDShadowAlgorithms scales the "
-        "normal bias (not reopened): the units above are the kit's reading"),
+          "HDAdditionalLightData.cs", "m_NormalBias = 0.75f, m_SlopeBias = 0.5f; worldTexelSize = 2 / m00 / viewport "
+          "width * sqrt(2); baseBias = 5 (raised only for high-quality soft shadows); slopeBias = "
+          "HDShadowUtils.GetSlopeBias(baseBias, m_SlopeBias) = 5 * 0.5"),
+         ("Unity-Technologies/Graphics com.unity.render-pipelines.high-definition/Runtime/Lighting/Shadow/"
+          "HDShadowUtils.cs", "GetSlopeBias(baseBias, normalizedSlopeBias) = normalizedSlopeBias * baseBias"),
+         ("Unity-Technologies/Graphics com.unity.render-pipelines.high-definition/Runtime/Lighting/Shadow/"
+          "HDShadowManager.cs", "cmd.SetGlobalDepthBias(1.0f, shadowRequest.slopeBias)"),
+         ("Unity-Technologies/Graphics com.unity.render-pipelines.high-definition/Runtime/Lighting/Shadow/"
+          "HDShadowAlgorithms.hlsl", "EvalShadow_NormalBias: normalWS * normalBias * worldTexelSize (times the "
+          "distance for perspective maps)")),
+        "normal bias: 0.75 * sqrt(2) texels at the receiver; slope bias: the rasterizer's slope factor 2.5 on m",
+        "the rasterizer's constant depth bias of 1 unit (its size depends on the atlas depth format, not verified; "
+        "below 2^-16 of the range)"),
     "filament": Preset(
         "Filament",
-        {t: _p((1.0, "texel"), (0.001, "world"), slope_scale=2.0) for t in LIGHT_TYPES},
+        {t: _p((0.5, "texel"), (0.001, "world"), slope_scale=2.0) for t in LIGHT_TYPES},
         (("google/filament filament/include/filament/LightManager.h (ShadowOptions)",
-          "constantBias = 0.001f (world units, 'shadows are moved away from the light'), normalBias = 1.0f ('amount "
-          "by which the maximum sampling error is scaled'), polygonOffsetConstant = 0.5f, polygonOffsetSlope = 2.0f"),),
-        "constant bias: world; normal bias: texels (Filament's maximum sampling error read as one texel); polygon "
-        "offset slope: a factor on m",
+          "constantBias = 0.001f (world units, 'shadows are moved away from the light'), normalBias = 1.0f, "
+          "polygonOffsetConstant = 0.5f, polygonOffsetSlope = 2.0f"),
+         ("google/filament filament/src/ShadowMapManager.cpp",
+          "'we need a half-texel size, so we multiply by 0.5': shadowBias = 0.5 * normalBias * world texel size"),
+         ("google/filament shaders/src/shadowing.fs (computeLightSpacePosition)", "p += n * (sinTheta * b)")),
+        "constant bias: world; normal bias: half a texel per unit (Filament's sin(theta) factor on it is not "
+        "modelled: the kit offsets by the full amount); polygon offset slope: a factor on m",
         "polygonOffsetConstant 0.5 (depth-resolution units of the map's format: cannot be added to a world bias; "
-        "below 2^-23 of the range)"),
+        "below 2^-16 of the range); the spot and point lights' normal-bias scaling (not reopened: the "
+        "directional value is used)"),
     "three": Preset(
         "three.js",
         {t: _p() for t in LIGHT_TYPES},
@@ -122,11 +135,13 @@ PRESETS = {
         "TheRealMJP Shadows",
         {t: _p(depth_bias=(0.005, "range")) for t in LIGHT_TYPES},
         (("TheRealMJP/Shadows Shadows/AppSettings.cs",
-          "Bias = 0.005f, OffsetScale = 0.0f (normal offset), UsePlaneDepthBias = true"),),
+          "Bias = 0.005f, OffsetScale = 0.0f (normal offset), UsePlaneDepthBias = true"),
+         ("TheRealMJP/Shadows Shadows/Mesh.hlsl", "lightDepth -= bias only without UsePlaneDepthBias_; with it, a "
+          "receiver-plane depth bias and min(fractionalSamplingError, 0.01)")),
         "Bias compares in the cascade's [0, 1] depth: a fraction of the depth range; the sample has only a "
-        "directional light, its values are used for spot and point",
-        "the receiver-plane depth bias the sample turns on by default (UsePlaneDepthBias: the receiver_plane scheme "
-        "measures it)"),
+        "directional light, its values are used for spot and point. This is the sample's constant-bias path",
+        "the sample's default path (UsePlaneDepthBias on), which does not apply Bias: a receiver-plane depth bias "
+        "(measure it with the receiver_plane scheme)"),
     "metal_api": Preset(
         "Metal API call of seed 003",
         {t: _p(depth_bias=(2.0 ** -24, "range"), slope_scale=3.0, slope_clamp=(1.0 / 128.0, "range"))
