@@ -237,7 +237,7 @@ def _run(cfg, args, out: Path) -> int:
 
 
 def schemes_text() -> str:
-    from .schemes import PRESETS, REGISTRY
+    from .schemes import REGISTRY, presets
     lines = []
     for s in REGISTRY:
         needs = ", ".join(sorted(s.NEEDS)) or "first layer only"
@@ -245,7 +245,7 @@ def schemes_text() -> str:
         for f in dataclasses.fields(s.Params):
             lines.append(f"    {f.name} = {f.default}    {f.metadata.get('doc', '')}")
         lines.append("    " + (s.__doc__ or "").strip().splitlines()[0])
-    lines.append("presets: " + ", ".join(f"{k} -> {v[0]}" for k, v in PRESETS.items()))
+    lines += presets.text()
     lines.append('lengths: a number (world units), "k texel" (texel widths at the receiver) or "k range" '
                  "(fraction of the view's depth range)")
     return "\n".join(lines)

@@ -226,9 +226,10 @@ def parse_scheme(t: dict, source: str, where: str, registry, presets) -> list:
         extra = set(t) - {"preset"}
         if extra:
             raise ConfigError(source, f"{where}.{sorted(extra)[0]}", "a preset takes no other keys", ("preset",))
-        name, values = presets[preset]
-        module = next(s for s in registry if s.NAME == name)
-        return [SchemeSpec(name, module.Params(**values), preset=preset)]
+        # a preset is a combined instance per light type: the plan resolves it per light
+        # (schemes.preset_for_light); until then it carries the directional values
+        from .schemes.presets import spec as preset_spec
+        return [preset_spec(preset)]
     if "name" not in t:
         raise ConfigError(source, f"{where}.name", "missing", names)
     name = choice(t["name"], source, f"{where}.name", names)

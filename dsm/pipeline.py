@@ -232,6 +232,7 @@ store = formats.store                     # (map, format) -> the map as that for
 
 scheme_module = schemes.get
 needs_of = schemes.needs_of
+preset_for_light = schemes.preset_for_light     # (spec, light type) -> the combined instance of a preset
 culling_of = schemes.culling_of
 
 

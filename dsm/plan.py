@@ -329,7 +329,9 @@ def make(cfg: Config) -> Plan:
             for view in views_for(ltype, cfg.map.view):
                 faces = VIEW_FACES[view]
                 for R in cfg.map.resolutions_for(faces):
-                    for culling, group in groups.items():
+                    for culling, config_group in groups.items():
+                        # engine presets are combined instances per light type, resolved here
+                        group = [schemes_mod.preset_for_light(s, ltype) for s in config_group]
                         needs = schemes_mod.needs_of(group)
                         m = MapPlan(sc.label, label, view, R, faces, culling, tuple(sorted(needs)),
                                     "z2" in needs or culling != "none", fmts,

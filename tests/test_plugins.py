@@ -19,7 +19,10 @@ def _classes(img):
 @pytest.mark.parametrize("xml,scheme,view", [(POINT_XML, {"scheme": "constant", "bias": "1 texel"}, "cube"),
                                              (POINT_XML, {"scheme": "none"}, "dual_paraboloid"),
                                              (SPOT_XML, {"scheme": "slope_scaled"}, "cube"),
-                                             (SPOT_XML, {"scheme": "normal_offset", "offset": "1.5 texel"}, "cube")])
+                                             (SPOT_XML, {"scheme": "normal_offset", "offset": "1.5 texel"}, "cube"),
+                                             # engine presets resolve per light type in the plugin as in the plan
+                                             (POINT_XML, {"preset": "bevy"}, "cube"),
+                                             (SPOT_XML, {"preset": "filament"}, "cube")])
 def test_dsm_error_matches_the_runner_pixel_for_pixel(run_dict, xml, scheme, view):
     import mitsuba as mi
     scene = mi.load_file(str(xml))
@@ -30,7 +33,8 @@ def test_dsm_error_matches_the_runner_pixel_for_pixel(run_dict, xml, scheme, vie
     table = {k: v for k, v in scheme.items() if k != "scheme"}
     res = run_dict({"scene": [{"file": str(xml)}], "camera": {"resolution": [W, W]},
                     "map": {"resolution": 256, "view": view},
-                    "scheme": [{"name": scheme["scheme"], **table}], "timing": {"repeats": 1}})
+                    "scheme": [table if "preset" in scheme else {"name": scheme["scheme"], **table}],
+                    "timing": {"repeats": 1}})
     assert len(res) == 1
     want = res.images[res.rows[0]["case"]]
     assert got.shape == want.shape
@@ -262,7 +266,7 @@ def test_light_out_of_range_names_the_scene_emitters(variant):
     assert np.asarray(img).shape[:2] == (64, 64)
 
 
-VALID_SCHEMES = "none, constant, slope_scaled, normal_angle, normal_offset, receiver_plane, adaptive, midpoint, dual, second_depth"
+VALID_SCHEMES = "none, constant, slope_scaled, normal_angle, normal_offset, combined, receiver_plane, adaptive, midpoint, dual, second_depth"
 
 
 @pytest.mark.parametrize("props,line", [

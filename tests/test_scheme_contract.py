@@ -24,6 +24,11 @@ EXPECTED = {
                      lambda x, p: x["d"] <= x["z1"] + np.minimum(p["max"], p["bias"] * np.sqrt(1 - x["cos"] ** 2)
                                                                 / x["cos"])),
     "normal_offset": ({"offset": 0.0, "bias": 0.02}, lambda x, p: x["d"] <= x["z1"] + p["bias"]),
+    # combined: normal offset (0 here: the shift is the normal_offset scheme's), then
+    # z1 + depth_bias + min(slope_clamp, slope_scale * m); the clamp bounds the slope term only
+    "combined": ({"normal_offset": 0.0, "depth_bias": 0.01, "slope_scale": 2.0, "slope_clamp": 0.04},
+                 lambda x, p: x["d"] <= x["z1"] + p["depth_bias"] + np.minimum(p["slope_clamp"],
+                                                                             p["slope_scale"] * x["slope"])),
     "receiver_plane": ({"bias": 0.01}, lambda x, p: x["plane"] <= x["z1"] + p["bias"]),
     "adaptive": ({"K": 0.003}, lambda x, p: x["plane"] <= x["z1"] + p["K"] * x["scale"]),
     "midpoint": ({}, lambda x, p: x["d"] <= 0.5 * (x["z1"] + x["z2"])),
@@ -62,5 +67,5 @@ def test_margin_sign_is_the_sources_test(variant, name):
     clear = np.abs(margin) > 1e-5                    # away from ties, where float32 rounding decides
     assert clear.mean() > 0.95 and want[clear].any() and (~want[clear]).any()
     np.testing.assert_array_equal(margin[clear] >= 0, want[clear])
-    if name != "normal_offset":
+    if name not in ("normal_offset", "combined"):
         assert scheme.shift(rx, prm) is rx           # the default shift does nothing

@@ -3,29 +3,26 @@
 Each module has ``NAME``, ``SOURCE``, ``NEEDS`` (the map attributes it reads), a frozen
 ``Params`` dataclass with defaults and units, a signed ``margin(rx, tap, params) -> Float``
 over Dr.Jit arrays (lit where >= 0) and ``shift(rx, params) -> Receiver`` (the identity,
-:func:`base.no_shift`, but for schemes that move the lookup point).
+:func:`base.no_shift`, but for schemes that move the lookup point). A module may add
+``needs(params) -> frozenset``: an instance's own layers, a subset of ``NEEDS`` (:func:`needs_of`).
+
+Engine presets (:mod:`.presets`) are :mod:`combined` instances per light type:
+:func:`preset_for_light` resolves one for a light.
 """
 
-from . import (adaptive, constant, dual, midpoint, none, normal_angle, normal_offset, receiver_plane,
+from . import (adaptive, combined, constant, dual, midpoint, none, normal_angle, normal_offset, receiver_plane,
                second_depth, slope_scaled)
 from ..types import Length, describe_params  # noqa: F401  (describe_params: the report's words)
 
 from .base import Scheme
 
-REGISTRY = (none, constant, slope_scaled, normal_angle, normal_offset, receiver_plane, adaptive, midpoint, dual,
-            second_depth)
+REGISTRY = (none, constant, slope_scaled, normal_angle, normal_offset, combined, receiver_plane, adaptive, midpoint,
+            dual, second_depth)
 _broken = [m.NAME for m in REGISTRY if not isinstance(m, Scheme)]
 assert not _broken, f"scheme modules not meeting the Scheme contract: {_broken}"
 
-# Engine presets: a named engine's default bias, measurable beside every scheme.
-PRESETS = {
-    # Bevy's DirectionalLight: shadow_depth_bias 0.02 (world), shadow_normal_bias 1.8 (texels)
-    "bevy": ("normal_offset", {"offset": Length(1.8, "texel"), "bias": Length(0.02, "world")}),
-    # three.js LightShadow: bias 0, normalBias 0
-    "three": ("normal_offset", {"offset": Length(0.0, "world"), "bias": Length(0.0, "world")}),
-    # seed 003's Metal call: setDepthBias(1, slopeScale: 3, clamp: 1/128)
-    "metal_api": ("slope_scaled", {}),
-}
+# Engine presets: a named engine's default bias, measurable beside every scheme (per light type).
+from .presets import PRESETS, preset_for_light  # noqa: E402,F401
 
 
 def get(name: str):
@@ -44,5 +41,7 @@ def needs_of(scheme_specs) -> set:
     """The map attributes (beyond z1 and shape ids) a group of scheme instances reads."""
     out = set()
     for s in scheme_specs:
-        out |= set(get(s.name).NEEDS)
+        module = get(s.name)
+        own = getattr(module, "needs", None)
+        out |= set(own(s.params) if own is not None else module.NEEDS)
     return out

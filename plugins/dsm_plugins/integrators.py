@@ -148,10 +148,11 @@ class Prepared:
         if setup.p is not None:
             setup = setup.subset(self.view.inside(setup.p).numpy().astype(bool))
         self.setup = setup
-        module = pl.scheme_module(opts.spec.name)
-        culling = pl.culling_of(opts.spec.params)
+        self.spec = pl.preset_for_light(opts.spec, light.type)      # an engine preset's values for this light
+        module = pl.scheme_module(self.spec.name)
+        culling = pl.culling_of(self.spec.params)
         closed = pl.closedness(sd)[0] if culling != "none" else None
-        smap = pl.build_map(sd.scene, self.view, module.NEEDS, culling, closed)
+        smap = pl.build_map(sd.scene, self.view, pl.needs_of([self.spec]), culling, closed)
         self.smap = pl.store(smap, opts.format)
         self.view = self.smap.view          # the depth function the stored format compares in
         self.module = module
@@ -271,7 +272,7 @@ def classes_image(prep: dict, opts: Options) -> np.ndarray:
     st = lp.setup
     if st.p is not None and len(st.pixels):
         rx = Receiver.make(lp.view, st.p, st.n, prep["sd"].diagonal)
-        v, _ = pl.visibility(opts.spec, rx, lp.smap, opts.filter, opts.seed)
+        v, _ = pl.visibility(lp.spec, rx, lp.smap, opts.filter, opts.seed)
         classes[st.pixels] = pl.classify(v.numpy(), st.v_star)
     return classes.reshape(H, W)
 
@@ -336,7 +337,7 @@ class DsmShadow(mi.SamplingIntegrator):
             ds, spec = emitter.sample_direction(si, sampler.next_2d(), valid)
             f = bsdf.eval(ctx, si, si.to_local(ds.d), valid)
             rx = Receiver.make(lp.view, si.p, n, diag)
-            v, _ = pl.visibility(self.opts.spec, rx, lp.smap, self.opts.filter, self.opts.seed)
+            v, _ = pl.visibility(lp.spec, rx, lp.smap, self.opts.filter, self.opts.seed)
             inside = lp.view.inside(si.p)
             if lp.view.kind == "orthographic":
                 # outside a directional light's map no caster was recorded: lit (the map is
