@@ -258,7 +258,8 @@ class Runner:
             # the first layer alone, so a case's extra layers show as build_ms - build_first_ms
             first_t = bt if m.culling == "none" and not m.needs else self._build(sd, view, set(), "none", m.tile)[1]
         for spec in m.specs:
-            own = frozenset(pipeline.scheme_module(spec.name).NEEDS)
+            spec = pipeline.preset_for_light(spec, setup.light.type)   # a preset's values for this light
+            own = frozenset(pipeline.needs_of([spec]))                  # this instance's own layers, for build_ms
             if own not in build_times:
                 # the build of exactly what this scheme needs (its data comes from the shared map)
                 build_times[own] = self._build(sd, view, own, m.culling, m.tile)[1]
