@@ -237,3 +237,13 @@ def test_oracle_outputs(run_dict):
             config.parse(base_config(oracle=bad), "<t>")
     assert config.parse(base_config(oracle={"lambda": [1, 2.5]}), "<t>").oracle.lambdas == (1.0, 2.5)
     assert config.parse(base_config(), "<t>").oracle.lambdas == (1.0,)
+
+
+def test_plan_counts_the_oracles_sorts():
+    from dsm import config, plan
+    cfg = config.parse(base_config(camera={"resolution": [64, 32]}, map={"resolution": [64, 128],
+                                   "format": ["float32", "unorm16"]}, oracle={"lambda": [1.0, 2.0]}), "<t>")
+    p = plan.make(cfg)
+    assert p.oracle_receivers == 2 * 2 * 64 * 32          # 2 maps x 2 formats x camera pixels
+    line = next(x for x in p.text().splitlines() if "oracles" in x)
+    assert f"{2 * 2 * 64 * 32:,}" in line and "2 lambda" in line
