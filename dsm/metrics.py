@@ -96,6 +96,12 @@ def classify(v, v_star, resolution=None) -> np.ndarray:
     return out
 
 
+def base_class(classes) -> np.ndarray:
+    """Classes with the resolution-limited errors folded into acne and peter-panning."""
+    c = np.asarray(classes)
+    return np.where(c == ACNE_RESOLUTION, ACNE, np.where(c == PETERPAN_RESOLUTION, PETERPAN, c)).astype(c.dtype)
+
+
 SPLIT_COLUMNS = ("n_acne_resolution", "n_acne_bias", "n_peterpan_resolution", "n_peterpan_bias")
 
 

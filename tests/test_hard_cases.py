@@ -121,8 +121,8 @@ def truth(scene, sensor, light_dir, tilt=2e-5):
 
 def assert_matches_truth(res, row, tr):
     """The case's receivers and exact visibility, pixel by pixel and as counts, are the tracer's."""
-    from dsm.metrics import ACNE, LIT, OUTSIDE
-    img = res.images[row["case"]].ravel()
+    from dsm.metrics import ACNE, LIT, OUTSIDE, base_class
+    img = base_class(res.images[row["case"]].ravel())
     amb = tr["ambiguous"]
     rec, vstar = img != OUTSIDE, np.isin(img, (LIT, ACNE))
     bad = np.flatnonzero((rec != tr["receiver"]) & ~amb)
