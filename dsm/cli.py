@@ -21,7 +21,7 @@ from .env import SetupError
 
 DEFAULT_CONFIG = Path(__file__).with_name("default.toml")
 # what a dsm run writes into its folder: --force clears a folder holding nothing else
-RUN_OUTPUTS = ("run.json", "metrics.csv", "table.md", "images", "plots")
+RUN_OUTPUTS = ("run.json", "metrics.csv", "oracle.csv", "table.md", "images", "plots")
 RUN_TEMP = re.compile(r"\.(?:run\.json|metrics\.csv|table\.md)\.\d+\.tmp")    # left by a killed run (report.atomic)
 
 
@@ -226,7 +226,7 @@ def _run(cfg, args, out: Path) -> int:
         return _config_error(e)
     failed, empty = res.run["n_failed"], res.run["n_empty"]
     print(f"dsm: {len(res.rows)} cases in {time.perf_counter() - t0:.1f} s -> {out}/"
-          f" (table.md, metrics.csv, images/, plots/, run.json)")
+          f" (table.md, metrics.csv, oracle.csv, images/, plots/, run.json)")
     if empty:
         print(f"dsm: {empty} cases are empty (no receiver: nothing faces the light inside its domain); "
               "their rates are undefined (see table.md)", file=sys.stderr)

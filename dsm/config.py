@@ -13,10 +13,10 @@ from pathlib import Path
 from .types import (  # noqa: F401  (re-exported: the config's vocabulary)
     LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, LIGHT_TYPES, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA,
     ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params,
-    SceneSpec, LightSpec, MapSpec, SchemeSpec, Config, describe_params)
+    SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params)
 
 
-TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing", "memory")
+TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing", "memory", "oracle")
 
 
 def load(path) -> Config:
@@ -160,11 +160,16 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     tim = _table(raw, "timing", source)
     check_keys(tim, ("repeats",), source, "timing")
     repeats = number(tim.get("repeats", 3), source, "timing.repeats", integer=True, minimum=1, maximum=100)
-
+    orc = _table(raw, "oracle", source)
+    check_keys(orc, ("lambda",), source, "oracle")
+    lambdas = as_list(orc.get("lambda", 1.0))
+    if not lambdas:
+        raise ConfigError(source, "oracle.lambda", "empty list")
+    lambdas = tuple(dict.fromkeys(number(x, source, "oracle.lambda", minimum=0) for x in lambdas))
 
     return Config(name=name, source=source, seed=seed, variant=variant, camera_resolution=camera_resolution,
                   scenes=tuple(scenes), lights=tuple(lights), map=mapspec, schemes=tuple(schemes),
-                  timing_repeats=repeats, memory_budget_mb=budget, raw=raw)
+                  timing_repeats=repeats, memory_budget_mb=budget, oracle=OracleSpec(lambdas), raw=raw)
 
 
 def _table(raw, key, source) -> dict:

@@ -23,9 +23,13 @@ from __future__ import annotations
 import numpy as np
 
 # Classes of the error image, in the order of CLASS_COLORS.
-OUTSIDE, LIT, SHADOW, ACNE, PETERPAN = range(5)
-CLASS_NAMES = ("not a receiver", "correct lit", "correct shadow", "acne", "peter-panning")
-CLASS_COLORS = np.array([[0, 0, 0], [235, 225, 190], [70, 80, 110], [230, 40, 40], [40, 170, 255]], np.uint8)
+# The last two: errors the per-texel oracle makes too (the map's resolution's, no bias fixes
+# them; nearest filter only), in a darker shade of their class.
+OUTSIDE, LIT, SHADOW, ACNE, PETERPAN, ACNE_RESOLUTION, PETERPAN_RESOLUTION = range(7)
+CLASS_NAMES = ("not a receiver", "correct lit", "correct shadow", "acne", "peter-panning",
+               "acne (resolution)", "peter-panning (resolution)")
+CLASS_COLORS = np.array([[0, 0, 0], [235, 225, 190], [70, 80, 110], [230, 40, 40], [40, 170, 255],
+                         [120, 15, 15], [15, 80, 140]], np.uint8)
 
 
 SEAM_TEXELS = 3.0
@@ -79,8 +83,37 @@ def compute(v: np.ndarray, v_star: np.ndarray, rx_shape: np.ndarray, tap_shape: 
     }
 
 
-def classify(v, v_star) -> np.ndarray:
-    """Per-receiver class (LIT, SHADOW, ACNE, PETERPAN)."""
+def classify(v, v_star, resolution=None) -> np.ndarray:
+    """Per-receiver class (LIT, SHADOW, ACNE, PETERPAN; with ``resolution``, the receivers the
+    per-texel oracle gets wrong too, errors are ACNE_RESOLUTION and PETERPAN_RESOLUTION)."""
     v_star = np.asarray(v_star, bool)
     lit = np.asarray(v) >= 0.5
-    return np.where(v_star, np.where(lit, LIT, ACNE), np.where(lit, PETERPAN, SHADOW)).astype(np.uint8)
+    out = np.where(v_star, np.where(lit, LIT, ACNE), np.where(lit, PETERPAN, SHADOW)).astype(np.uint8)
+    if resolution is not None:
+        res = np.asarray(resolution, bool)
+        out[(out == ACNE) & res] = ACNE_RESOLUTION
+        out[(out == PETERPAN) & res] = PETERPAN_RESOLUTION
+    return out
+
+
+def base_class(classes) -> np.ndarray:
+    """Classes with the resolution-limited errors folded into acne and peter-panning."""
+    c = np.asarray(classes)
+    return np.where(c == ACNE_RESOLUTION, ACNE, np.where(c == PETERPAN_RESOLUTION, PETERPAN, c)).astype(c.dtype)
+
+
+SPLIT_COLUMNS = ("n_acne_resolution", "n_acne_bias", "n_peterpan_resolution", "n_peterpan_bias")
+
+
+def split(v, v_star, resolution=None) -> dict:
+    """A case's errors split into ``resolution`` (the per-texel oracle gets the receiver wrong
+    too) and ``bias`` (the rest). Undefined (NaN) without ``resolution`` (filters other than
+    nearest: the oracles are those of a nearest lookup)."""
+    if resolution is None:
+        return {k: UNDEFINED for k in SPLIT_COLUMNS}
+    v_star = np.asarray(v_star, bool)
+    lit = np.asarray(v) >= 0.5
+    res = np.asarray(resolution, bool)
+    acne, peter = v_star & ~lit, ~v_star & lit
+    return {"n_acne_resolution": int((acne & res).sum()), "n_acne_bias": int((acne & ~res).sum()),
+            "n_peterpan_resolution": int((peter & res).sum()), "n_peterpan_bias": int((peter & ~res).sum())}

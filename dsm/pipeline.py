@@ -26,6 +26,7 @@ import mitsuba as mi
 import numpy as np
 
 from . import formats, lookup, reference, scenes, schemes, shadowmap, timing
+from . import oracle as oracle_mod
 from . import gbuffer as gbuffer_mod
 from . import metrics as metrics_mod
 from .closedness import shape_closedness
@@ -251,11 +252,45 @@ def plane_fallbacks(spec: SchemeSpec, rx: Receiver, smap) -> int:
     return lookup.plane_fallbacks(schemes.get(spec.name), spec.params, rx, smap)
 
 
+# ---------------------------------------------------------------- oracles (nearest lookup)
+
+@dataclass
+class Thresholds:
+    """Per receiver of one map and stored format: the smallest float32 world bias ``tau`` and
+    texel-unit bias ``kappa`` that light it (nearest texel, no shift), and that texel's index."""
+    tau: np.ndarray
+    kappa: np.ndarray
+    texel: np.ndarray
+    z1: np.ndarray
+    depth: np.ndarray
+    texel_world: np.ndarray
+
+
+def thresholds(rx: Receiver, smap) -> Thresholds:
+    """The oracles' thresholds of the receivers ``rx`` (built for the stored format of
+    ``smap``) against ``smap``'s nearest texels, in the lookup's float32 comparison."""
+    tap = lookup.nearest_tap(rx, smap)
+    dr.eval(tap.z1, tap.idx, rx.depth, rx.texel_world)
+    z1 = np.asarray(tap.z1.numpy(), np.float32)
+    d = np.asarray(rx.depth.numpy(), np.float32)
+    tw = np.asarray(rx.texel_world.numpy(), np.float32)
+    return Thresholds(oracle_mod.thresholds(z1, d), oracle_mod.texel_thresholds(z1, d, tw),
+                      tap.idx.numpy().astype(np.int64), z1, d, tw)
+
+
+def oracles(th: Thresholds, v_star: np.ndarray, lam: float = 1.0) -> dict:
+    """The world, texel and per-texel oracles at ``lam`` (see :mod:`dsm.oracle`): ``row`` (best
+    b and k, objectives and rates), ``curve_world``, ``curve_texel`` and ``wrong`` (per receiver,
+    wrong under the per-texel oracle: the resolution's share of the errors)."""
+    return oracle_mod.oracles(th.tau, th.kappa, v_star, th.texel, lam)
+
+
 # ---------------------------------------------------------------- classification and metrics
 
 CLASS_COLORS = metrics_mod.CLASS_COLORS
 CLASS_NAMES = metrics_mod.CLASS_NAMES
 classify = metrics_mod.classify
+split = metrics_mod.split                 # (v, V*, wrong under the per-texel oracle) -> resolution / bias counts
 
 
 def metrics(v: np.ndarray, setup: LightSetup, tap_shape: np.ndarray, seam=None, has_seams=None) -> dict:

@@ -93,6 +93,13 @@ class Plan:
     maps: list = field(default_factory=list)
     budget_bytes: int = 0
     absent: list = field(default_factory=list)      # optional scene files that are absent
+    lambdas: int = 1                                # [oracle] lambda values
+
+    @property
+    def oracle_receivers(self) -> int:
+        """Receivers the oracles sort, at most: per map and stored format, every camera pixel of its scene."""
+        px = {label: w * h for label, w, h, _ in self.scenes}
+        return sum(px.get(m.scene, 0) * (1 + len(m.formats)) for m in self.maps)
 
     @property
     def cases(self) -> int:
@@ -175,12 +182,16 @@ class Plan:
                          + ", ".join(m.schemes))
         lines.append("  rays (exact): " + ", ".join(f"{k} {v:,}" for k, v in self.rays.items()))
         lines.append("  rays (at most): " + ", ".join(f"{k} {v:,}" for k, v in self.rays_bound.items()))
+        n_fmt = sum(1 + len(m.formats) for m in self.maps)
+        lines.append(f"  oracles (nearest lookup): receivers sorted per map and stored format ({n_fmt} x "
+                     f"{self.lambdas} lambda): at most {self.oracle_receivers:,} (camera pixels per map and format)")
         lines.append(f"  estimated peak memory: {self.peak_bytes() * mb:.1f} MB")
         lines += [f"  warning: {w}" for w in self.warnings()]
         return "\n".join(lines)
 
     def as_dict(self) -> dict:
         return {"cases": self.cases, "rays": self.rays, "rays_bound": self.rays_bound,
+                "oracle_receivers_bound": self.oracle_receivers,
                 "peak_bytes_est": self.peak_bytes(), "budget_bytes": self.budget_bytes,
                 "maps": [{"scene": m.scene, "light": m.light, "view": m.view, "resolution": m.resolution,
                           "culling": m.culling, "layers": list(m.layers), "layered": m.layered,
@@ -310,7 +321,8 @@ def scene_lights(spec, cfg: Config) -> list:
 
 def make(cfg: Config) -> Plan:
     from .config import absent_files
-    plan = Plan(cfg.source, budget_bytes=memory_budget(cfg), absent=absent_files(cfg))
+    plan = Plan(cfg.source, budget_bytes=memory_budget(cfg), absent=absent_files(cfg),
+                lambdas=len(cfg.oracle.lambdas))
     per_case = len(cfg.map.filter) * len(cfg.map.format)
     fmts = tuple(f for f in cfg.map.format if f != "float32")
     groups = {}

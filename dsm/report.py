@@ -17,6 +17,7 @@ COLUMNS = [
     "case", "scene", "light", "view", "scheme", "preset", "params", "culling", "resolution", "total_texels", "filter", "format",
     "n_pixels", "n_excluded_nohit", "n_excluded_backfacing", "n_excluded_outside",
     "n_receivers", "n_gt_lit", "n_gt_shadowed", "n_acne", "n_acne_self", "n_acne_edge", "n_peterpan",
+    "n_acne_resolution", "n_acne_bias", "n_peterpan_resolution", "n_peterpan_bias",
     "acne_rate", "peterpan_rate", "error_rate", "mean_abs_error", "peterpan_dist_median",
     "n_seam", "seam_error_rate", "off_seam_error_rate", "texel_size", "n_plane_fallback",
     "n_backfacing", "backface_lit_rate",
@@ -155,7 +156,108 @@ def status_md(status) -> list:
     return out
 
 
-def write_table(path: Path, rows: list, cfg, status=None):
+# ------------------------------------------------------------------ oracles
+
+ORACLE_COLUMNS = ["scene", "light", "view", "resolution", "culling", "format", "lambda", "n_receivers", "n_gt_lit",
+                  "n_gt_shadowed", "best_b", "best_k"] + [
+    f"{o}_{q}" for o in ("world", "texel", "per_texel")
+    for q in ("objective", "acne_rate", "peterpan_rate", "n_acne", "n_peterpan")]
+
+
+def write_oracle_csv(path: Path, rows: list):
+    """oracle.csv: one row per map, stored format and lambda (written atomically)."""
+    with atomic(path) as tmp:
+        with open(tmp, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(ORACLE_COLUMNS)
+            for r in rows:
+                w.writerow([_fmt(r.get(c, "")) for c in ORACLE_COLUMNS])
+
+
+def objective(r, lam: float = 1.0) -> float:
+    """E(lambda) = (n_acne + lambda n_peterpan) / n_receivers of a case row (undefined without receivers)."""
+    return (r["n_acne"] + lam * r["n_peterpan"]) / r["n_receivers"] if r["n_receivers"] else metrics.UNDEFINED
+
+
+def _map_key(r):
+    return (r["scene"], r["light"], r["view"], r["resolution"], r["culling"], r["format"])
+
+
+def oracle_md(rows: list, oracle_rows: list) -> list:
+    """table.md's "How far from the best": per scheme instance (nearest cases), its mean objective
+    beside the mean of the oracles of the same maps; then each map's oracles and its best case."""
+    if not oracle_rows:
+        return []
+    lam = oracle_rows[0]["lambda"]
+    orc = {_map_key(o): o for o in oracle_rows if o["lambda"] == lam}
+    near = [r for r in rows if r["filter"] == "nearest" and _map_key(r) in orc and r["n_receivers"]]
+    out = ["", "## How far from the best", "",
+           f"Objective E = (n_acne + lambda n_peterpan) / receivers, lambda = {lam:g} (nearest lookup). Oracles, "
+           "exact over each map's receivers: *world*, the best single depth bias b for the map; *texel*, the best "
+           "single k with b = k texel; *per texel*, the best b chosen in each texel separately (no bias scheme "
+           "that reads only the texel can do better: the rest is the resolution's). Means over the scheme's "
+           "nearest cases and the oracles of the same maps (oracle.csv has every map, format and lambda).", "",
+           "| scheme | params | cases | E | world oracle | texel oracle | per-texel oracle | E - world |",
+           "|---|---|---|---|---|---|---|---|"]
+    groups = {}
+    for r in near:
+        groups.setdefault((r["scheme"], r["preset"] or r["params"]), []).append(r)
+    for (scheme, params), rs in groups.items():
+        e = np.mean([objective(r, lam) for r in rs])
+        ow = np.mean([orc[_map_key(r)]["world_objective"] for r in rs])
+        ok = np.mean([orc[_map_key(r)]["texel_objective"] for r in rs])
+        op = np.mean([orc[_map_key(r)]["per_texel_objective"] for r in rs])
+        out.append(f"| {scheme} | {params} | {len(rs)} | {e:.4f} | {ow:.4f} | {ok:.4f} | {op:.4f} | {e - ow:+.4f} |")
+    out += ["", "| scene | light | view | R | culling | format | best b | E world | best k | E texel | "
+                "E per texel | best case | its E |", "|---" * 13 + "|"]
+    for key, o in orc.items():
+        rs = [r for r in near if _map_key(r) == key]
+        bc = min(rs, key=lambda r: objective(r, lam)) if rs else None
+        out.append(f"| {' | '.join(map(str, key))} | {o['best_b']:.4g} | {_cell(o['world_objective'])} | "
+                   f"{o['best_k']:.4g} | {_cell(o['texel_objective'])} | {_cell(o['per_texel_objective'])} | "
+                   + (f"{bc['scheme']} {bc['preset'] or bc['params']} | {objective(bc, lam):.4f} |" if bc else "- | - |"))
+    return out
+
+
+def write_tradeoff(folder: Path, rows: list, curves: list, lam: float = 1.0):
+    """Per scene, light and view: peter-panning rate against acne rate, each map's exact oracle
+    curve (one world bias for the map) as a line and each nearest-filter case as a point."""
+    from matplotlib.figure import Figure
+    if not curves:
+        return
+    folder.mkdir(exist_ok=True)
+    groups = {}
+    for row, cw, ck in curves:
+        groups.setdefault((row["scene"], row["light"], row["view"]), []).append((row, cw, ck))
+    for (scene, light, view), cs in sorted(groups.items()):
+        cs = [c for c in cs if c[1].n_lit and c[1].n_shadowed]     # both rates defined
+        if not cs:
+            continue
+        fig = Figure(figsize=(8.5, 4.6))
+        ax = fig.subplots()
+        for k, (row, cw, ck) in enumerate(cs):
+            lab = f"oracle R={row['resolution']} {row['format']}" + (f" {row['culling']}" if row["culling"] != "none" else "")
+            ax.step(cw.acne / cw.n_lit, cw.peterpan / cw.n_shadowed, where="post", color=f"C{k % 10}", lw=1.0,
+                    label=lab + " (world b)")
+            ax.step(ck.acne / ck.n_lit, ck.peterpan / ck.n_shadowed, where="post", color=f"C{k % 10}", lw=0.8,
+                    ls=":", label=lab + " (k texel)")
+            pts = [r for r in rows if r["filter"] == "nearest" and (r["scene"], r["light"], r["view"]) ==
+                   (scene, light, view) and _map_key(r) == _map_key(row) and metrics.defined(r["acne_rate"])
+                   and metrics.defined(r["peterpan_rate"])]
+            ax.scatter([r["acne_rate"] for r in pts], [r["peterpan_rate"] for r in pts], s=14, color=f"C{k % 10}",
+                       edgecolors="k", linewidths=0.3)
+        ax.set_xscale("symlog", linthresh=1e-3)
+        ax.set_yscale("symlog", linthresh=1e-3)
+        ax.set_xlabel("acne rate")
+        ax.set_ylabel("peter-panning rate")
+        ax.set_title(f"{scene}, light {light}, {view}: exact trade-off of one bias (lines), cases (points)", fontsize=9)
+        fig.subplots_adjust(left=0.1, right=0.68, bottom=0.12, top=0.9)
+        ax.legend(loc="center left", bbox_to_anchor=(1.02, 0.5), fontsize=6, frameon=False)
+        save_png(folder / f"tradeoff_{_slug(f'{scene}_{light}_{view}')}.png",
+                 lambda f, fmt: fig.savefig(f, dpi=80, format=fmt))
+
+
+def write_table(path: Path, rows: list, cfg, status=None, oracle_rows=()):
     lines = [f"# {cfg.name}", "", f"Config: `{cfg.source}`. {len(rows)} cases. Rates: acne = n_acne / n_gt_lit, "
              "peter-pan = n_peterpan / n_gt_shadowed, error = (acne + peter-pan) / receivers; "
              "self/edge: acne counts on the receiver's own shape / at another shape's edge; pp dist: median "
@@ -168,6 +270,7 @@ def write_table(path: Path, rows: list, cfg, status=None):
         cells = [r["case"]] + [_cell(r.get(k)) for k, _ in TABLE_COLUMNS]
         lines.append("| " + " | ".join(map(str, cells)) + " |")
     lines += views_at_equal_memory(rows, getattr(cfg.map, "texels", ()))
+    lines += oracle_md(rows, list(oracle_rows or ()))
     lines += pareto_md(rows)
     with atomic(path) as tmp:
         tmp.write_text("\n".join(lines) + "\n")

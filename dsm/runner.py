@@ -34,10 +34,13 @@ class Results:
     rows: list
     run: dict
     images: dict = field(default_factory=dict)   # case id -> class image (H, W) uint8
+    oracle: list = field(default_factory=list)   # the rows of oracle.csv (per map, format and lambda)
+    curves: list = field(default_factory=list)   # per map and format: (row, world Curve, texel Curve)
 
     def where(self, **kw) -> "Results":
         rows = [r for r in self.rows if all(r.get(k) == v for k, v in kw.items())]
-        return Results(self.out, rows, self.run, {r["case"]: self.images.get(r["case"]) for r in rows})
+        return Results(self.out, rows, self.run, {r["case"]: self.images.get(r["case"]) for r in rows},
+                       self.oracle, self.curves)
 
     def column(self, name) -> np.ndarray:
         return np.array([r[name] for r in self.rows])
@@ -88,6 +91,8 @@ class Runner:
         self.status = []
         self.rows = []
         self.images = {}
+        self.oracle_rows = []         # oracle.csv
+        self.curves = []              # (oracle row at the first lambda, world curve, texel curve)
         self.case_no = 0
         self.quantized = 0            # quantized map copies made (stored formats other than float32)
         self.versions = env.versions()
@@ -116,11 +121,13 @@ class Runner:
         finally:
             self.bar.close()
             self._write_run_json()
-            report.write_table(self.out / "table.md", self.rows, self.cfg, self.status)
+            report.write_oracle_csv(self.out / "oracle.csv", self.oracle_rows)
+            report.write_table(self.out / "table.md", self.rows, self.cfg, self.status, self.oracle_rows)
             if self.state == "complete":
                 report.write_plots(self.out / "plots", self.rows)
                 report.write_pareto(self.out / "plots", self.rows)
-        return Results(self.out, self.rows, self._run_json(), self.images)
+                report.write_tradeoff(self.out / "plots", self.rows, self.curves, self.cfg.oracle.lambdas[0])
+        return Results(self.out, self.rows, self._run_json(), self.images, self.oracle_rows, self.curves)
 
     def _run_plan(self):
         for spec in self.cfg.scenes:
@@ -253,6 +260,7 @@ class Runner:
         rxs = {fmt: rx if rx is None or stored[fmt].view is view else
                Receiver.make(stored[fmt].view, setup.p, setup.n, sd.diagonal) for fmt in stored}
         backs = {fmt: Receiver.make(stored[fmt].view, bp, bn, sd.diagonal) for fmt in stored} if bp is not None else {}
+        wrong = {fmt: self._oracles(sd, setup, view, m, stored[fmt], rxs[fmt], fmt) for fmt in stored}
         build_times = {frozenset(m.needs): bt}
         if first_t is None:
             # the first layer alone, so a case's extra layers show as build_ms - build_first_ms
@@ -266,9 +274,35 @@ class Runner:
             for filt in self.cfg.map.filter:
                 for fmt in self.cfg.map.format:
                     self._run_case(sd, gb, setup, view, stored[fmt], (build_times[own], first_t), rxs[fmt], seam,
-                                   spec, filt, fmt, backs.get(fmt))
+                                   spec, filt, fmt, backs.get(fmt), wrong[fmt] if filt == "nearest" else None)
                     self.bar.update(1)
         return first_t
+
+    def _oracles(self, sd, setup, view, m, smap, rx, fmt):
+        """The oracles of one map and stored format over the view's receivers (oracle.csv, the
+        trade-off curves); returns per receiver whether the per-texel oracle at the first lambda
+        gets it wrong (the resolution's share of a nearest case's errors), None on failure."""
+        if rx is None:
+            return np.zeros(0, bool)
+        meta = {"scene": sd.label, "light": setup.label, "view": view.kind, "resolution": m.resolution,
+                "culling": m.culling, "format": fmt}
+        try:
+            th = pipeline.thresholds(rx, smap)
+            wrong = None
+            for lam in self.cfg.oracle.lambdas:
+                o = pipeline.oracles(th, setup.v_star, lam)
+                row = {**meta, **o["row"]}
+                self.oracle_rows.append(row)
+                if wrong is None:
+                    wrong = o["wrong"]
+                    self.curves.append((row, o["curve_world"], o["curve_texel"]))
+            return wrong
+        except (KeyboardInterrupt, StageFailed):
+            raise
+        except Exception as e:
+            self._fail(f"oracles of scene {sd.label} light {setup.label} view {view.kind} map {m.resolution} "
+                       f"culling {m.culling} format {fmt}", e)
+            return None
 
     def _record_map(self, sd, setup, view, m, smap):
         self.maps.append({"scene": sd.label, "light": setup.label, "view": view.kind, "resolution": m.resolution,
@@ -284,7 +318,7 @@ class Runner:
                                 "status": "warning", "error": f"{smap.unfinished} texels still searching "
                                 f"after {shadowmap.MAX_STEPS} surfaces"})
 
-    def _run_case(self, sd, gb, setup, view, smap, build, rx, seam, spec, filt, fmt, rx_back=None):
+    def _run_case(self, sd, gb, setup, view, smap, build, rx, seam, spec, filt, fmt, rx_back=None, wrong=None):
         bt, first_t = build
         self.case_no += 1
         case = f"{self.case_no:04d}"
@@ -303,6 +337,7 @@ class Runner:
                 v_np, tap_np = v.numpy(), tap_shape.numpy()
                 fallbacks = pipeline.plane_fallbacks(spec, rx, smap)
             m = pipeline.metrics(v_np, setup, tap_np, seam, view.kind not in ("orthographic", "perspective"))
+            m.update(pipeline.split(v_np, setup.v_star, wrong))     # NaN unless nearest (the oracles' lookup)
             # seed 000's self-unshadowing: pixels in attached shadow (facing away) that the map calls lit
             v_back = pipeline.visibility(spec, rx_back, smap, filt, self.cfg.seed)[0].numpy() \
                 if rx_back is not None else np.zeros(0)
@@ -317,7 +352,7 @@ class Runner:
                    "lookup_ms": lt.ms, "lookup_compile_ms": lt.compile_ms, "lookup_kernels_compiled": lt.cache_misses,
                    "reference_ms": setup.reference_ms, "sweep_key": sweep_key, "sweep_value": sweep_value}
             classes = np.zeros(gb.width * gb.height, np.uint8)
-            classes[setup.pixels] = pipeline.classify(v_np, setup.v_star)
+            classes[setup.pixels] = pipeline.classify(v_np, setup.v_star, wrong)
             classes = classes.reshape(gb.height, gb.width)
             report.write_case_images(self.out / "images", case, classes, gb, setup, v_np)
             if self.keep_images:

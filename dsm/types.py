@@ -217,6 +217,13 @@ class SchemeSpec:
 
 
 @dataclass(frozen=True)
+class OracleSpec:
+    """``[oracle]``: the weights of peter-panning in the oracles' objective
+    E(lambda) = (n_acne + lambda n_peterpan) / n_receivers; one oracle row per lambda."""
+    lambdas: tuple = (1.0,)
+
+
+@dataclass(frozen=True)
 class Config:
     name: str
     source: str
@@ -229,6 +236,7 @@ class Config:
     schemes: tuple = ()
     timing_repeats: int = 3
     memory_budget_mb: float | None = None   # None: a quarter of this machine's memory
+    oracle: "OracleSpec" = field(default_factory=lambda: OracleSpec())
     raw: dict = field(default_factory=dict, compare=False)
 
 

@@ -50,6 +50,8 @@ def assert_nan_only_where_undefined(row):
         "off_seam_error_rate": not seams or row["n_seam"] == row["n_receivers"],
         "backface_lit_rate": row["n_backfacing"] == 0,
         "n_plane_fallback": row["scheme"] not in ("receiver_plane", "adaptive"),
+        **{k: row["filter"] != "nearest" for k in ("n_acne_resolution", "n_acne_bias", "n_peterpan_resolution",
+                                                   "n_peterpan_bias")},
     }
     for k, v in row.items():
         if isinstance(v, float):

@@ -273,12 +273,15 @@ def classes_image(prep: dict, opts: Options) -> np.ndarray:
     if st.p is not None and len(st.pixels):
         rx = Receiver.make(lp.view, st.p, st.n, prep["sd"].diagonal)
         v, _ = pl.visibility(lp.spec, rx, lp.smap, opts.filter, opts.seed)
-        classes[st.pixels] = pl.classify(v.numpy(), st.v_star)
+        # nearest: errors the per-texel oracle makes too in their darker shade (lambda 1, as the runner's default)
+        wrong = pl.oracles(pl.thresholds(rx, lp.smap), st.v_star)["wrong"] if opts.filter == "nearest" else None
+        classes[st.pixels] = pl.classify(v.numpy(), st.v_star, wrong)
     return classes.reshape(H, W)
 
 
 class DsmError(mi.SamplingIntegrator):
-    """Per-pixel classification: correct lit, correct shadow, acne, peter-panning (report colours)."""
+    """Per-pixel classification: correct lit, correct shadow, acne, peter-panning (report colours;
+    with the nearest filter, errors no per-texel bias fixes in their darker shade)."""
 
     def __init__(self, props):
         super().__init__(props)
