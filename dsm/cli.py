@@ -195,17 +195,12 @@ def _out_problem(out: Path, force: bool, bench: bool = False) -> str | None:
 
 
 def _run(cfg, args, out: Path) -> int:
-    from . import plan as planmod
     try:
-        cfgmod.check_runnable(cfg)
+        from . import pipeline
+        cfg = pipeline.prepare(cfg, args.variant, args.threads)     # every check dsm.run makes, before any work
     except cfgmod.NothingToRun as e:
         _err(e.problem)
         return 1
-    try:
-        from . import env, scenes
-        env.use_variant(args.variant or cfg.variant, args.threads)
-        scenes.check(cfg)
-        planmod.check_memory(planmod.make(cfg), cfg.source)
     except SetupError as e:
         _err(f"setup error: {e}")
         return 3

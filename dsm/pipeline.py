@@ -25,7 +25,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import formats, lookup, reference, scenes, schemes, shadowmap, timing
+from . import formats, lookup, reference, scenes, schemes, shadowmap, spawn, timing
 from . import oracle as oracle_mod
 from . import gbuffer as gbuffer_mod
 from . import metrics as metrics_mod
@@ -37,16 +37,17 @@ from .views import CubeView, OrthographicView, ParaboloidView, PerspectiveView
 
 # ---------------------------------------------------------------- config
 
-def prepare(config, variant: str | None = None):
+def prepare(config, variant: str | None = None, threads: int | None = None):
     """A Config from a Config, a dict of tables or a TOML path, checked before any work: every
     scene readable, something to run, the estimated memory within this machine's. Sets the
-    Mitsuba variant. Raises ConfigError (one line naming file, key and choices) or TypeError."""
+    Mitsuba variant (and Dr.Jit's thread count, before any scene loads). Raises ConfigError
+    (one line naming file, key and choices; NothingToRun), SetupError or TypeError."""
     from . import config as cfgmod
     from . import env
     from . import plan as planmod
     config = cfgmod.coerce(config)
     cfgmod.check_runnable(config)            # NothingToRun: every scene an absent optional file
-    env.use_variant(variant or config.variant)
+    env.use_variant(variant or config.variant, threads)
     scenes.check(config)                     # unreadable scenes
     planmod.check_memory(planmod.make(config), config.source)
     return config
@@ -219,11 +220,15 @@ def cull_modes(culling: str, closed) -> np.ndarray | None:
     return None if culling == "none" else shadowmap.cull_modes_for(culling, closed)
 
 
-def build_map(scene, view, needs=(), culling: str = "none", closed=None, tile: int | None = None):
+spawn_extents = spawn.shape_extents     # scene -> per-shape error extents, once per scene for build_map
+
+
+def build_map(scene, view, needs=(), culling: str = "none", closed=None, tile: int | None = None, extents=None):
     """The map of ``view``: z1 and shape ids, plus the layers ``needs`` names (slope, z2),
-    under ``culling`` (``closed``: per-shape closedness, see :func:`closedness`)."""
+    under ``culling`` (``closed``: per-shape closedness, see :func:`closedness`; ``extents``:
+    :func:`spawn_extents` of the scene, else computed in each layered build)."""
     modes = cull_modes(culling, closed) if culling != "none" else None
-    return shadowmap.build(scene, view, set(needs), culling, modes, tile)
+    return shadowmap.build(scene, view, set(needs), culling, modes, tile, extents)
 
 
 store = formats.store                     # (map, format) -> the map as that format stores it

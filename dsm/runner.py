@@ -94,6 +94,7 @@ class Runner:
         self.oracle_rows = []         # oracle.csv
         self.curves = []              # (oracle row at the first lambda, world curve, texel curve)
         self.case_no = 0
+        self.extents = {}             # per scene: the spawn bound's per-shape extents
         self.quantized = 0            # quantized map copies made (stored formats other than float32)
         self.versions = env.versions()
         self.state = "running"
@@ -182,6 +183,7 @@ class Runner:
             return sd, gb, lights
         sd, gb, lights = self._stage(f"scene {spec.label}", maps, load)
         self.gbuffer_ms[sd.label] = gb.ms
+        self.extents[sd.label] = pipeline.spawn_extents(sd.scene)   # once per scene, outside the timed builds
         self.rays["gbuffer"] += gb.width * gb.height
         if sd.notes:
             self.status.append({"what": f"scene {sd.label}", "status": "note", "error": "; ".join(sd.notes)})
@@ -237,7 +239,8 @@ class Runner:
 
     def _build(self, sd, view, needs, culling, tile):
         closed = self._closed(sd) if culling != "none" else None
-        return timing.measure(lambda: _map_arrays(sd.scene, view, needs, culling, closed, tile),
+        extents = self.extents[sd.label]
+        return timing.measure(lambda: _map_arrays(sd.scene, view, needs, culling, closed, tile, extents),
                               self.cfg.timing_repeats)
 
     def _run_map(self, sd, gb, setup, view, rx, seam, back, m, first_t):
@@ -257,9 +260,14 @@ class Runner:
         self.quantized += sum(1 for fmt in self.cfg.map.format if fmt != "float32")
         # receivers in the depth function each stored format compares in (formats.stored_view)
         bp, bn = back
-        rxs = {fmt: rx if rx is None or stored[fmt].view is view else
-               Receiver.make(stored[fmt].view, setup.p, setup.n, sd.diagonal) for fmt in stored}
-        backs = {fmt: Receiver.make(stored[fmt].view, bp, bn, sd.diagonal) for fmt in stored} if bp is not None else {}
+        by_view = {}                  # formats sharing a depth function share their receivers
+        for fmt in stored:
+            v = stored[fmt].view
+            if id(v) not in by_view:
+                front = rx if rx is None or v is view else Receiver.make(v, setup.p, setup.n, sd.diagonal)
+                by_view[id(v)] = (front, Receiver.make(v, bp, bn, sd.diagonal) if bp is not None else None)
+        rxs = {fmt: by_view[id(stored[fmt].view)][0] for fmt in stored}
+        backs = {fmt: by_view[id(stored[fmt].view)][1] for fmt in stored}
         wrong = {fmt: self._oracles(sd, setup, view, m, stored[fmt], rxs[fmt], fmt) for fmt in stored}
         build_times = {frozenset(m.needs): bt}
         if first_t is None:
@@ -274,7 +282,7 @@ class Runner:
             for filt in self.cfg.map.filter:
                 for fmt in self.cfg.map.format:
                     self._run_case(sd, gb, setup, view, stored[fmt], (build_times[own], first_t), rxs[fmt], seam,
-                                   spec, filt, fmt, backs.get(fmt), wrong[fmt] if filt == "nearest" else None)
+                                   spec, filt, fmt, backs[fmt], wrong[fmt] if filt == "nearest" else None)
                     self.bar.update(1)
         return first_t
 
@@ -336,7 +344,7 @@ class Runner:
                                                     self.cfg.timing_repeats)
                 v_np, tap_np = v.numpy(), tap_shape.numpy()
                 fallbacks = pipeline.plane_fallbacks(spec, rx, smap)
-            m = pipeline.metrics(v_np, setup, tap_np, seam, view.kind not in ("orthographic", "perspective"))
+            m = pipeline.metrics(v_np, setup, tap_np, seam, view.has_seams)
             m.update(pipeline.split(v_np, setup.v_star, wrong))     # NaN unless nearest (the oracles' lookup)
             # seed 000's self-unshadowing: pixels in attached shadow (facing away) that the map calls lit
             v_back = pipeline.visibility(spec, rx_back, smap, filt, self.cfg.seed)[0].numpy() \
@@ -387,8 +395,8 @@ def _points_np(p) -> np.ndarray:
     return np.stack([np.asarray(c, np.float64) for c in (p.x.numpy(), p.y.numpy(), p.z.numpy())], axis=1)
 
 
-def _map_arrays(scene, view, needs, culling="none", closed=None, tile=None):
-    smap = pipeline.build_map(scene, view, needs, culling, closed, tile)
+def _map_arrays(scene, view, needs, culling="none", closed=None, tile=None, extents=None):
+    smap = pipeline.build_map(scene, view, needs, culling, closed, tile, extents)
     return (*shadowmap.arrays(smap), smap)
 
 

@@ -38,6 +38,11 @@ U32 = 2.0 ** -24     # float32 unit roundoff
 SAFETY = 32.0
 
 
+def bound(p, extent=0.0):
+    """The offset rule itself: SAFETY * u * (max|p| + extent)."""
+    return SAFETY * U32 * (dr.max(dr.abs(p)) + extent)
+
+
 def error_bound(si, other_extent):
     """The offset ``delta`` of each hit (Float): SAFETY * u * (max|p| + extent), the extent being
     the triangle's own size for meshes and ``other_extent`` for other shapes."""
@@ -50,7 +55,7 @@ def error_bound(si, other_extent):
         vk = mesh.vertex_position(fi[k], tri)
         tri_extent = dr.maximum(tri_extent, dr.max(dr.abs(vk - si.p)))
     extent = dr.select(tri, tri_extent, other_extent)
-    return SAFETY * U32 * (dr.max(dr.abs(si.p)) + extent)
+    return bound(si.p, extent)
 
 
 def shape_extents(scene):
@@ -79,7 +84,7 @@ def error_bound_by_shape(p, shape_index, tables, other_extent):
     extents, is_mesh = tables
     ext = dr.gather(mi.Float, extents, shape_index)
     mesh = dr.gather(mi.Bool, is_mesh, shape_index)
-    return SAFETY * U32 * (dr.max(dr.abs(p)) + dr.select(mesh, ext, other_extent))
+    return bound(p, dr.select(mesh, ext, other_extent))
 
 
 def offset_origin(p, n, d, delta):
@@ -98,5 +103,5 @@ def ray_to(si, n, target, delta) -> mi.Ray3f:
     o = offset_origin(si.p, n, target - si.p, delta)
     d = target - o
     dist = dr.norm(d)
-    short = SAFETY * U32 * dr.max(dr.abs(target))
+    short = bound(target)
     return mi.Ray3f(o, d / dist, dr.maximum(dist - short, 0.0), 0.0, mi.Color0f())

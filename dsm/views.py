@@ -57,6 +57,7 @@ class View:
     """Common part: a frame (origin ``o``, axes ``ex``, ``ey``, ``ez``) and the depth metric."""
 
     kind = "view"
+    has_seams = False     # seams between faces or at a rim (paraboloid and cube views)
 
     @property
     def faces(self) -> int:
@@ -247,6 +248,7 @@ def _gnomonic_texel(x, y, z, step):
 
 class PointView(View):
     """A point light's view: rays from the light, depth = Euclidean distance to the light."""
+    has_seams = True
 
     def __init__(self, position, axis, scene_bbox, resolution: int):
         ex, ey, ez = light_frame(axis)
