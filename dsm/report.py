@@ -24,6 +24,7 @@ COLUMNS = [
     "build_ms", "build_first_ms", "build_compile_ms", "build_peak_mb", "lookup_ms", "lookup_compile_ms", "lookup_kernels_compiled", "reference_ms",
     "sweep_key", "sweep_value",
 ]
+COLUMNS += list(metrics.SOFT_COLUMNS)     # area lights (soft shadows): empty cells for other lights
 
 
 @contextlib.contextmanager
@@ -108,6 +109,19 @@ def write_case_images(folder: Path, case: str, classes: np.ndarray, gb, setup, v
         shade[setup.pixels] = 0.12 + 0.88 * np.clip((n * to_light).sum(1), 0, 1) * v
     save_png(folder / f"{case}_shadow.png", lambda f, fmt: imsave(f, shade.reshape(gb.height, gb.width), cmap="gray",
                                                                   vmin=0, vmax=1, format=fmt))
+
+
+def write_soft_images(folder: Path, case: str, gb, setup, v: np.ndarray):
+    """An area light's case: V, V* and |V - V*| as colour maps (``<case>_v.png``, ``_vstar.png``,
+    ``_abserr.png``; black: not a receiver)."""
+    from matplotlib import colormaps
+    from matplotlib.image import imsave
+    for name, values, cmap in (("v", v, "viridis"), ("vstar", setup.v_frac, "viridis"),
+                               ("abserr", np.abs(np.asarray(v, float) - setup.v_frac), "magma")):
+        rgb = np.zeros((gb.width * gb.height, 3), np.float64)
+        rgb[setup.pixels] = colormaps[cmap](np.clip(values, 0, 1))[:, :3]
+        save_png(folder / f"{case}_{name}.png",
+                 lambda f, fmt, rgb=rgb: imsave(f, rgb.reshape(gb.height, gb.width, 3), format=fmt))
 
 
 def _to_light_np(setup, count):

@@ -85,6 +85,7 @@ class Runner:
         self.keep_images = keep_images
         self.plan = planmod.make(config)
         self.rays = {"gbuffer": 0, "reference": 0, "map_texel": 0, "map_continue": 0}
+        self.reference_regions = []   # area lights: the reference's receivers and rays by region
         self.maps = []
         self.scene_info = []
         self.gbuffer_ms = {}
@@ -195,9 +196,11 @@ class Runner:
         def setup():
             if li >= len(lights):
                 raise ValueError(f"the plan expects light {label} but the loaded scene has {len(lights)} lights")
-            return pipeline.light_setup(sd, gb, lights[li], label, self.cfg.timing_repeats)
+            return pipeline.light_setup(sd, gb, lights[li], label, self.cfg.timing_repeats, self.cfg.seed)
         out = self._stage(f"scene {sd.label} light {label}", maps, setup)
-        self.rays["reference"] += len(out.pixels)
+        self.rays["reference"] += out.reference_rays       # one per receiver, or an area light's samples
+        if out.ref is not None:
+            self.reference_regions.append({"scene": sd.label, "light": label, **out.ref.stats()})
         return out
 
     def _run_view(self, sd, gb, setup, maps):
@@ -292,6 +295,8 @@ class Runner:
         gets it wrong (the resolution's share of a nearest case's errors), None on failure."""
         if rx is None:
             return np.zeros(0, bool)
+        if setup.ref is not None:     # an area light: the oracles are those of a hard V*
+            return None
         meta = {"scene": sd.label, "light": setup.label, "view": view.kind, "resolution": m.resolution,
                 "culling": m.culling, "format": fmt}
         try:
@@ -363,6 +368,8 @@ class Runner:
             classes[setup.pixels] = pipeline.classify(v_np, setup.v_star, wrong)
             classes = classes.reshape(gb.height, gb.width)
             report.write_case_images(self.out / "images", case, classes, gb, setup, v_np)
+            if setup.ref is not None:
+                report.write_soft_images(self.out / "images", case, gb, setup, v_np)
             if self.keep_images:
                 self.images[case] = classes
             self.rows.append(row)
@@ -384,6 +391,7 @@ class Runner:
         info["plan"] = self.plan.as_dict()
         info["maps"] = self.maps
         info["quantized_copies"] = self.quantized
+        info["reference_regions"] = self.reference_regions
         return info
 
     def _write_run_json(self):

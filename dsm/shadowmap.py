@@ -27,7 +27,7 @@ from . import spawn
 from .types import CULLINGS  # noqa: F401  (the choices of midpoint and dual)
 
 LAYERS = ("slope", "z2")   # optional attributes a scheme may need (besides z1 and shape)
-CULL_NONE, CULL_BACK, CULL_FRONT = 0, 1, 2
+CULL_NONE, CULL_BACK, CULL_FRONT, CULL_ALL = 0, 1, 2, 3   # CULL_ALL: an area light's luminaire
 MAX_STEPS = 64             # surfaces stepped over per texel before giving up (reported, never silent)
 
 
@@ -108,7 +108,7 @@ def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool
         si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.Minimal, active=valid)
         mode = dr.gather(mi.UInt32, modes, pi.shape_index, valid)
         back = dr.dot(si.n, ray.d) > 0
-        culled = ((mode == CULL_BACK) & back) | ((mode == CULL_FRONT) & ~back)
+        culled = ((mode == CULL_BACK) & back) | ((mode == CULL_FRONT) & ~back) | (mode == CULL_ALL)
         accept = valid & ~culled
         depth = view.depth(si.p)
         got1, got2 = accept & (found == 0), accept & (found == 1)
