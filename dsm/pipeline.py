@@ -234,8 +234,9 @@ def area_setup(sd, gb, light, label, repeats: int = 0, seed: int = 7) -> LightSe
     dr.eval(p, n)
     magnitude = scene_magnitude(sd.bbox)
     # timed once (cold): repeating a Monte Carlo reference costs as much again each time
-    ref, t = timing.measure(lambda: area.reference(sd.scene, si, n, geom, magnitude, seed, light.min_samples,
-                                                   light.max_samples, light.tolerance), 0)
+    out, t = timing.measure(lambda: (area.reference(sd.scene, si, n, geom, magnitude, seed, light.min_samples,
+                                                    light.max_samples, light.tolerance),), 0)
+    ref = out[-1]
     return LightSetup(label, light, pixels, p, n, gb.shape.numpy()[pixels], ref.v >= 0.5,
                       np.full(len(pixels), np.inf), exclusions, t.ms, si, ref=ref)
 
