@@ -206,7 +206,10 @@ def _parse_area(t: dict, source: str, where: str) -> LightSpec:
     sampling = ("min_samples", "max_samples", "tolerance")
     own = {"emitter": (), "sphere": ("position", "size"), "disk": ("position", "direction", "size"),
            "rectangle": ("position", "direction", "size")}[shape]
-    check_keys(t, ("type", "shape") + own + sampling, source, where)
+    check_keys(t, ("type", "shape", "scenes") + own + sampling, source, where)
+    only = as_list(t.get("scenes", []))
+    if not all(isinstance(x, str) and x for x in only):
+        raise ConfigError(source, f"{where}.scenes", f"expected a list of scene labels, got {t['scenes']!r}")
     lo = number(t.get("min_samples", 16), source, f"{where}.min_samples", integer=True, minimum=1, maximum=1 << 20)
     hi = number(t.get("max_samples", 1024), source, f"{where}.max_samples", integer=True, minimum=lo,
                 maximum=1 << 20)
@@ -228,7 +231,7 @@ def _parse_area(t: dict, source: str, where: str) -> LightSpec:
         if shape != "sphere":
             direction = vec3(t.get("direction", [0.0, 0.0, -1.0]), source, f"{where}.direction", nonzero=True)
     return LightSpec("area", position=pos, direction=direction, label="area", shape=shape, size=size,
-                     min_samples=lo, max_samples=hi, tolerance=tol)
+                     min_samples=lo, max_samples=hi, tolerance=tol, scenes=tuple(only))
 
 
 def _parse_light(t: dict, source: str, where: str) -> LightSpec:

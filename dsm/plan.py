@@ -314,6 +314,8 @@ def scene_light_specs(spec, cfg: Config) -> list:
     """The config's LightSpec behind each of :func:`scene_lights` (None for a scene's own light)."""
     out = []
     for light in cfg.lights:
+        if not light.applies_to(spec.label):
+            continue
         if light.type == "scene":
             out += [None] * len(scene_lights(spec, dataclasses.replace(cfg, lights=(light,))))
         elif light.type == "area" and light.shape == "emitter":
@@ -342,6 +344,8 @@ def scene_lights(spec, cfg: Config) -> list:
         own = ["directional"]
     types = []
     for light in cfg.lights:
+        if not light.applies_to(spec.label):
+            continue
         if light.type == "area" and light.shape == "emitter":
             types += ["area"] * _area_emitters(spec)
         else:

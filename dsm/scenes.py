@@ -419,6 +419,8 @@ class SceneData:
     def lights_for(self, specs) -> list:
         out = []
         for spec in specs:
+            if not spec.applies_to(self.label):
+                continue
             if spec.type == "scene":
                 out += self.own_lights
             elif spec.type == "area" and spec.shape == "emitter":

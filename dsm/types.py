@@ -196,6 +196,11 @@ class LightSpec:
     max_samples: int = 1024
     tolerance: float = 0.01
     emitter_shapes: tuple = ()  # an emitter light's shape indices (its map excludes them)
+    scenes: tuple = ()          # area lights: only these scenes (labels or their first word); () all
+
+    def applies_to(self, scene_label: str) -> bool:
+        """Whether this light lights the scene labelled ``scene_label`` (``scenes`` empty: every scene)."""
+        return not self.scenes or scene_label in self.scenes or scene_label.split()[0] in self.scenes
 
 
 @dataclass(frozen=True)
