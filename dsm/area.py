@@ -287,6 +287,26 @@ def _key(p):
     return h ^ (h >> 16)
 
 
+def visible(scene, p, n, delta, geom: Geometry, u, v):
+    """Whether the light's sample (u, v) is visible from receivers at ``p`` (normals ``n`` on
+    the visible side, spawn offsets ``delta``): above the tangent plane, in front of a one-sided
+    light, and no surface on the segment (which stops the spawn bound short of the sample)."""
+    x, nl = geom.sample(u, v, p)
+    d = x - p
+    ok = dr.dot(n, d) > 0
+    if geom.one_sided:
+        ok &= dr.dot(nl, d) < 0
+    ray = spawn.ray_to(SimpleNamespace(p=p), n, x, delta)
+    return ok & ~scene.ray_test(ray, active=ok)
+
+
+def sample_visibility(scene, si, n, geom: Geometry, sample, magnitude: float):
+    """One random area sample's visibility per surface interaction (an unbiased estimate of
+    V*: the plugins' per-sample AOV)."""
+    delta = spawn.error_bound(si, dr.opaque(mi.Float, float(magnitude)))
+    return visible(scene, si.p, n, delta, geom, sample.x, sample.y)
+
+
 @dataclass
 class Reference:
     """Per receiver: visible samples ``hits`` of ``samples``; V* = hits / samples; ``half``
@@ -351,14 +371,7 @@ def reference(scene, si, n_rx, geom: Geometry, magnitude: float, seed: int = 7, 
         u = (mi.Float(s % a) + rng.next_float32()) / a
         v = (mi.Float(s // a) + rng.next_float32()) / b
         u, v = dr.minimum(u, 0.99999994), dr.minimum(v, 0.99999994)
-        x, nl = geom.sample(u, v, p)
-        d = x - p
-        ok = dr.dot(n, d) > 0
-        if geom.one_sided:
-            ok &= dr.dot(nl, d) < 0
-        ray = spawn.ray_to(SimpleNamespace(p=p), n, x, delta)
-        blocked = scene.ray_test(ray, active=ok)
-        vis = (ok & ~blocked).numpy().astype(np.int64).reshape(len(active), add)
+        vis = visible(scene, p, n, delta, geom, u, v).numpy().astype(np.int64).reshape(len(active), add)
         hits[active] += vis.sum(1)
         samples[active] += add
         k, m = hits[active], samples[active]

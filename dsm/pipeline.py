@@ -60,6 +60,9 @@ scene_from_mitsuba = scenes.from_mitsuba  # an already loaded mi.Scene (the plug
 emitter_light = scenes.emitter_to_light   # a Mitsuba emitter as a LightSpec (None: not mapped)
 scene_magnitude = reference.scene_magnitude
 exact_visibility = reference.visibility   # (scene, interactions, light, magnitude) -> (V*, occluder distance)
+area_emitter_lights = area.emitter_lights  # (mi.Scene, area LightSpec) -> one area light per area emitter
+area_geometry = area.geometry              # (area LightSpec, mi.Scene) -> its surface (sampling)
+area_sample_visibility = area.sample_visibility   # one area sample's visibility per interaction
 
 
 def scene_spec(table: dict, source: str = "<pipeline>"):

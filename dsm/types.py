@@ -200,7 +200,8 @@ class LightSpec:
 
     def applies_to(self, scene_label: str) -> bool:
         """Whether this light lights the scene labelled ``scene_label`` (``scenes`` empty: every scene)."""
-        return not self.scenes or scene_label in self.scenes or scene_label.split()[0] in self.scenes
+        first = scene_label.replace("(", " ").split()[0] if scene_label.strip() else scene_label
+        return not self.scenes or scene_label in self.scenes or first in self.scenes
 
 
 @dataclass(frozen=True)

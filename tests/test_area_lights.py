@@ -265,3 +265,55 @@ def test_cornell_box_luminaire_is_the_light_and_its_map_steps_over_it(variant):
     smap = pipeline.build_map(sd.scene, view)
     shapes = set(smap.shape.numpy().tolist())
     assert i not in shapes and len(shapes - {0xFFFFFFFF}) >= 4
+
+
+@pytest.mark.skipif(not (MESHES / "cbox_mitsuba" / "cbox.xml").is_file(),
+                    reason="../shared/meshes/cbox_mitsuba absent (README: test meshes)")
+def test_plugins_with_area_emitters(variant):
+    """dsm_shadow with area = true: its dsm.Vstar AOV (one random area sample per camera sample)
+    averages to the stratified reference's V* over the image; dsm_error renders |V - V*| whose
+    pixels are black exactly outside the receivers."""
+    import dsm_plugins
+    dsm_plugins.register()
+    scene = mi.load_file(str(MESHES / "cbox_mitsuba" / "cbox.xml"), res=48)
+    shadow = mi.load_dict({"type": "dsm_shadow", "area": True, "filter": "pcss", "scheme": "adaptive_tap",
+                           "resolution": 256, "aovs": True, "samples": 64})
+    img = np.array(mi.render(scene, integrator=shadow, spp=32))
+    sd = pipeline.scene_from_mitsuba(scene)
+    lum = pipeline.area_emitter_lights(scene, LightSpec("area", shape="emitter", min_samples=256, max_samples=256,
+                                                        tolerance=0.0))[0]
+    setup = pipeline.light_setup(sd, pipeline.gbuffer(sd), lum, "0:area")
+    vstar = np.zeros(48 * 48)
+    vstar[setup.pixels] = setup.v_frac
+    assert img.shape == (48, 48, 5)
+    print("mean V* AOV", img[..., 4].mean(), "reference", vstar.mean(), "mean V", img[..., 3].mean())
+    assert img[..., 4].mean() == pytest.approx(vstar.mean(), abs=0.02)
+    assert img[..., 3].mean() == pytest.approx(vstar.mean(), abs=0.1)        # the map's V: close, not equal
+    err = np.array(mi.render(scene, integrator=mi.load_dict({"type": "dsm_error", "area": True, "filter": "pcss",
+                                                              "resolution": 256, "samples": 32})))
+    outside = np.ones(48 * 48, bool)
+    outside[setup.pixels] = False
+    assert np.all(err.reshape(-1, 3)[outside] == 0)
+    assert (err.reshape(-1, 3)[~outside].sum(1) > 0).mean() > 0.99            # magma's darkest is not black
+
+
+def test_adaptive_tap_clamps_the_plane_depth_by_the_taps_offset(variant):
+    """The per-tap plane depth is kept within max_slope x the tap's lateral distance (texels x
+    texel width, at least one texel) of the receiver's depth (numpy, float64)."""
+    from types import SimpleNamespace
+    from dsm.schemes import adaptive_tap
+    rng = np.random.default_rng(5)
+    n = 2000
+    d, z1 = rng.uniform(2, 3, n), rng.uniform(1, 3, n)
+    plane = d + rng.normal(0, 0.5, n)
+    du, dv, tw = rng.uniform(-4, 4, n), rng.uniform(-4, 4, n), rng.uniform(0.005, 0.02, n)
+    f = lambda a: mi.Float(np.asarray(a, np.float32))
+    rx = SimpleNamespace(depth=f(d), u_map=f(np.full(n, 10.0)), v_map=f(np.full(n, 10.0)), texel_world=f(tw),
+                         scene_scale=mi.Float(5.0))
+    tap = SimpleNamespace(z1=f(z1), cu_map=f(10.0 + du), cv_map=f(10.0 + dv), receiver_plane_depth=lambda r: f(plane))
+    p = SimpleNamespace(K=mi.Float(1e-4), max_slope=mi.Float(8.0))
+    got = adaptive_tap.margin(rx, tap, p).numpy()
+    reach = 8.0 * np.maximum(np.hypot(du, dv), 1.0) * tw
+    want = z1 + 1e-4 * 5.0 - np.clip(plane, d - reach, d + reach)
+    assert (np.abs(plane - d) > reach).mean() > 0.5           # the clamp acts on most of these taps
+    np.testing.assert_allclose(got, want, atol=2e-6)
