@@ -284,6 +284,7 @@ def write_table(path: Path, rows: list, cfg, status=None, oracle_rows=()):
         cells = [r["case"]] + [_cell(r.get(k)) for k, _ in TABLE_COLUMNS]
         lines.append("| " + " | ".join(map(str, cells)) + " |")
     lines += views_at_equal_memory(rows, getattr(cfg.map, "texels", ()))
+    lines += soft_md(rows)
     lines += oracle_md(rows, list(oracle_rows or ()))
     lines += pareto_md(rows)
     with atomic(path) as tmp:
@@ -429,13 +430,62 @@ def _panels(path, series: dict, xlabel: str, ylabels: tuple, title: str, xlog: b
     save_png(path, lambda f, fmt: fig.savefig(f, dpi=80, format=fmt))
 
 
+def _soft(rows) -> list:
+    return [r for r in rows if metrics.defined(r.get("n_umbra", float("nan"))) and r.get("n_umbra") != ""]
+
+
+def soft_md(rows: list) -> list:
+    """Area lights: V against the Monte Carlo V* by region (umbra V* = 0, penumbra, lit V* = 1),
+    the reference's mean 95 % half-width, and each filter's lookup time."""
+    soft = _soft(rows)
+    if not soft:
+        return []
+    cols = [("scene", "scene"), ("light", "light"), ("scheme", "scheme"), ("filter", "filter"),
+            ("n_umbra", "umbra"), ("n_penumbra", "penumbra"), ("n_lit", "lit"), ("mae_umbra", "MAE umbra"),
+            ("mae_penumbra", "MAE penumbra"), ("mae_lit", "MAE lit"), ("rmse", "RMSE"), ("acne_rate", "acne"),
+            ("peterpan_rate", "peter-pan"), ("ref_half_width_mean", "ref ±95%"), ("lookup_ms", "lookup ms")]
+    lines = ["", "## Soft shadows (area lights)", "",
+             "V against the reference V* (the visible fraction of the light, Monte Carlo): mean absolute error "
+             "per region (umbra: no reference sample visible, lit: all, penumbra: the rest), RMSE over all "
+             "receivers; acne over the lit receivers (V < 0.5), peter-pan over the umbra (V >= 0.5); ref ±95%: "
+             "the reference's mean 95 % half-width. Rays per receiver by region: run.json `reference_regions`.",
+             "", "| case | " + " | ".join(h for _, h in cols) + " |", "|---" * (len(cols) + 1) + "|"]
+    for r in soft:
+        lines.append("| " + " | ".join(map(str, [r["case"]] + [_cell(r.get(k)) for k, _ in cols])) + " |")
+    return lines
+
+
+def write_soft_plots(folder: Path, rows: list):
+    """Area lights, per scene and light: MAE of V against V* by region, one bar per scheme and
+    filter (``soft_<scene>_<light>.png``)."""
+    from matplotlib.figure import Figure
+    groups = {}
+    for r in _soft(rows):
+        groups.setdefault((r["scene"], r["light"]), []).append(r)
+    for (scene, light), rs in sorted(groups.items()):
+        fig = Figure(figsize=(8.5, 3.6))
+        axes = fig.subplots(1, 3, sharey=True)
+        labels = [f"{r['scheme']} {r['filter']}" for r in rs]
+        for ax, region in zip(axes, ("umbra", "penumbra", "lit")):
+            vals = [r[f"mae_{region}"] for r in rs]
+            ax.bar(range(len(rs)), [float(v) for v in vals],        # NaN (an empty region): no bar
+                   color=[f"C{sorted({x['filter'] for x in rs}).index(r['filter']) % 10}" for r in rs])
+            ax.set_xticks(range(len(rs)), labels, rotation=90, fontsize=6)
+            ax.set_title(f"MAE {region}", fontsize=8)
+        fig.suptitle(f"{scene}, light {light}: |V - V*| by region (no bar: an empty region)", fontsize=8)
+        fig.subplots_adjust(bottom=0.42, top=0.86, left=0.07, right=0.99)
+        save_png(folder / f"soft_{_slug(f'{scene}_{light}')}.png", lambda f, fmt, fig=fig: fig.savefig(f, dpi=80,
+                                                                                                        format=fmt))
+
+
 def write_plots(folder: Path, rows: list):
     """Per scene and light: error rates against the swept parameter and against resolution
     (per view), and, where a light was mapped with several views, error against the total
-    texel count of each view (the equal-memory comparison)."""
+    texel count of each view (the equal-memory comparison); area lights' soft errors."""
     if not rows:
         return
     folder.mkdir(exist_ok=True)
+    write_soft_plots(folder, rows)
     groups = {}
     for r in rows:
         groups.setdefault((r["scene"], r["light"]), []).append(r)
