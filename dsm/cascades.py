@@ -33,6 +33,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import math
+import time
 from dataclasses import dataclass
 
 import drjit as dr
@@ -205,6 +206,7 @@ class CascadeView(View):
 
     def __init__(self, direction, spec: CascadeSpec, camera: Camera, receivers_world, scene_bbox, resolution: int,
                  scale: float = 1.0, receivers_f32=None):
+        t_start = time.perf_counter()
         ex, ey, ez = light_frame(direction)
         R = int(resolution)
         N = spec.count
@@ -218,7 +220,9 @@ class CascadeView(View):
             return np.stack([p @ ex, p @ ey, p @ ez], axis=1)
         pts = np.asarray(receivers_world, float).reshape(-1, 3)
         # the receivers' view depth, in the float32 arithmetic face_of uses (their cascades exactly)
+        t_jit = time.perf_counter()
         rdepth = self._view_depth_f32(camera, pts) if len(pts) else np.zeros(0)
+        t_start += time.perf_counter() - t_jit          # fit_ms: the host's float64 work, not this kernel
         near = camera.near * 1.0 if spec.near is None else spec.near * scale
         if spec.max_distance is not None:
             far = spec.max_distance * scale
@@ -333,6 +337,7 @@ class CascadeView(View):
         self.cam_f = mi.Vector3f(*(dr.opaque(mi.Float, float(c)) for c in camera.forward))
         self.S = [dr.opaque(mi.Float, float(s)) for s in splits[1:-1]]
         self.max_o = dr.opaque(mi.Float, float(self.max_distance) if math.isfinite(self.max_distance) else 3e38)
+        self.fit_ms = (time.perf_counter() - t_start) * 1e3     # splits, fits, near/far (host, float64)
 
     # ------------------------------------------------------------ helpers
     @staticmethod
@@ -476,7 +481,7 @@ def _np3(v) -> np.ndarray:
 def case_metrics(view: CascadeView, rx, v: np.ndarray, v_star: np.ndarray) -> tuple:
     """(per-case columns, per-cascade rows, distance curve, cascade index per receiver) of one case."""
     if rx is None or len(v) == 0:
-        return {"texels_per_pixel": metrics.UNDEFINED}, [], None, np.zeros(0, int)
+        return {"texels_per_pixel": metrics.UNDEFINED, "fit_ms": view.fit_ms}, [], None, np.zeros(0, int)
     p, n = _np3(rx.p_world), _np3(rx.n_world)
     face = np.asarray(rx.face.numpy(), int)
     tpp = texels_per_pixel(view, p, n, face)
@@ -505,7 +510,7 @@ def case_metrics(view: CascadeView, rx, v: np.ndarray, v_star: np.ndarray) -> tu
         if s.any():
             curve.append((float(np.sqrt(edges[i] * edges[i + 1])), float((acne | peter)[s].mean()),
                           float(np.median(tpp[s]))))
-    return {"texels_per_pixel": float(np.median(tpp))}, rows, curve, face
+    return {"texels_per_pixel": float(np.median(tpp)), "fit_ms": view.fit_ms}, rows, curve, face
 
 
 CSV_COLUMNS = ("case", "scene", "light", "cascade_layout", "scheme", "params", "resolution", "filter", "format",
@@ -523,6 +528,22 @@ def write_csv(path, rows: list):
         for r in rows:
             w.writerow([fmt(r.get(c, "")) for c in CSV_COLUMNS])
     tmp.replace(path)
+    lines = ["# Cascades", "", "Per case and cascade (cascades.csv): its range of camera view depth, texel size, "
+             "receivers, error rates and the median shadow-map texels per camera pixel (below 1: perspective "
+             "aliasing). Undefined values: -.", "",
+             "| case | scene | layout | scheme | params | R | filter | format | cascade | view depth | texel | "
+             "receivers | acne | peter-pan | error | texels/pixel |", "|---" * 16 + "|"]
+    cell = lambda x: ("-" if not metrics.defined(x) else f"{x:.4g}") if isinstance(x, float) else str(x)
+    for r in rows:
+        lines.append("| " + " | ".join(cell(r.get(k, "")) for k in (
+            "case", "scene", "cascade_layout", "scheme", "params", "resolution", "filter", "format", "cascade"))
+            + f" | {r['split_near']:.3g} to {r['split_far']:.3g} | " + " | ".join(cell(r[k]) for k in (
+                "texel_size", "n_receivers", "acne_rate", "peterpan_rate", "error_rate", "texels_per_pixel_median"))
+            + " |")
+    md = path.with_name("cascades.md")
+    tmp = md.with_name(".cascades.md.tmp")
+    tmp.write_text("\n".join(lines) + "\n")
+    tmp.replace(md)
 
 
 CASCADE_COLORS = np.array([[0, 0, 0], [228, 26, 28], [55, 126, 184], [77, 175, 74], [152, 78, 163],

@@ -1,7 +1,6 @@
 """Cascaded shadow maps (dsm.cascades): splits, cascade choice, the single-map identity, texel
 footprints per cascade, stabilization, clipped near/far, the camera pose and config errors.
 Expected values come from closed forms and float64 numpy computed here."""
-import math
 
 import numpy as np
 import pytest
@@ -265,3 +264,34 @@ def test_cascades_without_a_directional_light_is_a_config_error():
     with pytest.raises(ConfigError) as e:
         config.parse(base_config(map={"cascades": "bevy", "split": "log"}), "t.toml")
     assert e.value.key == "map.split"
+
+
+def test_blend_mixes_the_next_cascade_linearly_over_the_band():
+    """Over the last 30 % of the first split V = (1 - w) V_0 + w V_1, w = (d - band start) / band
+    (float64 here); elsewhere V is the receiver's own cascade's."""
+    import dataclasses
+    import drjit as dr
+    import mitsuba as mi
+    from dsm import lookup, schemes
+    pl, sd, gb, setup = _setup()
+    view = _view(pl, sd, setup, count=2, split="practical", lam=0.9, fit="cascade", blend=0.3)
+    smap = pl.store(pl.build_map(sd.scene, view), "float32")
+    rx = pl.receivers(view, setup, sd.diagonal)
+    spec = pl.scheme_spec({"name": "constant", "bias": "0.3 texel"})
+    v = pl.visibility(spec, rx, smap)[0].numpy()
+    v0 = lookup.visibility(schemes.get("constant"), spec.params, rx, smap)[0].numpy()
+    one = dr.full(mi.UInt32, 1, dr.width(rx.face))
+    u1, v1_ = view.project_on(rx.p_world, one)
+    rx1 = dataclasses.replace(rx, face=one, u_map=u1, v_map=v1_, texel_world=view.texel_world(rx.p_world) * 0
+                              + float(view.extents[1] / view.resolution))
+    v1 = lookup.visibility(schemes.get("constant"), spec.params, rx1, smap)[0].numpy()
+    m = np.array(sd.sensor.world_transform().matrix.numpy(), float).reshape(4, 4)
+    d = (pl.points_np(setup.p) - m[:3, 3]) @ m[:3, 2]
+    s0, s1 = view.splits[0], view.splits[1]
+    start = s1 - 0.3 * (s1 - s0)
+    face = rx.face.numpy()
+    w = np.clip((d - start) / (s1 - start), 0, 1)
+    band = (face == 0) & (d > start)
+    assert band.sum() > 50 and ((v[band] > 0) & (v[band] < 1)).any()
+    assert np.allclose(v[band], (1 - w[band]) * v0[band] + w[band] * v1[band], atol=1e-4)
+    assert np.array_equal(v[~band], v0[~band])
