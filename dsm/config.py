@@ -12,11 +12,12 @@ from pathlib import Path
 
 from .types import (  # noqa: F401  (re-exported: the config's vocabulary)
     LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, LIGHT_TYPES, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA,
+    REPORT_IMAGES,
     ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params,
     SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params)
 
 
-TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing", "memory", "oracle")
+TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing", "memory", "oracle", "report")
 
 
 def load(path) -> Config:
@@ -166,10 +167,14 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     if not lambdas:
         raise ConfigError(source, "oracle.lambda", "empty list")
     lambdas = tuple(dict.fromkeys(number(x, source, "oracle.lambda", minimum=0) for x in lambdas))
+    rep = _table(raw, "report", source)
+    check_keys(rep, ("images",), source, "report")
+    report_images = choice(rep.get("images", "all"), source, "report.images", REPORT_IMAGES)
 
     return Config(name=name, source=source, seed=seed, variant=variant, camera_resolution=camera_resolution,
                   scenes=tuple(scenes), lights=tuple(lights), map=mapspec, schemes=tuple(schemes),
-                  timing_repeats=repeats, memory_budget_mb=budget, oracle=OracleSpec(lambdas), raw=raw)
+                  timing_repeats=repeats, memory_budget_mb=budget, oracle=OracleSpec(lambdas),
+                  report_images=report_images, raw=raw)
 
 
 def _table(raw, key, source) -> dict:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import itertools
 import sys
+import time
 import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,7 +23,7 @@ import drjit as dr
 import numpy as np
 
 from . import config as cfgmod
-from . import env, metrics, pipeline, report, shadowmap, timing
+from . import env, metrics, pipeline, publish, report, shadowmap, timing
 from . import plan as planmod
 from .lookup import Receiver
 
@@ -99,6 +100,8 @@ class Runner:
         self.versions = env.versions()
         self.state = "running"
         self.bar = None
+        self.pending_images = []      # case images, written by the report once measuring is done
+        self.timing = {}              # seconds measuring and writing the report
 
     # ------------------------------------------------------------ top level
     def run(self) -> Results:
@@ -106,6 +109,7 @@ class Runner:
         ``running``, then ``complete``, or ``interrupted`` after Ctrl-C (re-raised once the
         folder says what it holds); a killed run leaves ``running`` and every finished case."""
         timing.enable_history()
+        t0 = time.perf_counter()
         self.out.mkdir(parents=True, exist_ok=True)
         (self.out / "images").mkdir(exist_ok=True)
         self.csv = report.CsvWriter(self.out / "metrics.csv")
@@ -121,13 +125,16 @@ class Runner:
             self.state = "complete"
         finally:
             self.bar.close()
+            self.timing["measure_s"] = time.perf_counter() - t0
             self._write_run_json()
             report.write_oracle_csv(self.out / "oracle.csv", self.oracle_rows)
-            report.write_table(self.out / "table.md", self.rows, self.cfg, self.status, self.oracle_rows)
-            if self.state == "complete":
-                report.write_plots(self.out / "plots", self.rows)
-                report.write_pareto(self.out / "plots", self.rows)
-                report.write_tradeoff(self.out / "plots", self.rows, self.curves, self.cfg.oracle.lambdas[0])
+            # the report, after every timed measurement: images, figures, table.md, report.html
+            t1 = time.perf_counter()
+            self.timing["report_parts"] = publish.write_report(self.out, self.pending_images, self.curves,
+                                                               plots=self.state == "complete")
+            self.pending_images = []
+            self.timing["report_s"] = time.perf_counter() - t1
+            self._write_run_json()
         return Results(self.out, self.rows, self._run_json(), self.images, self.oracle_rows, self.curves)
 
     def _run_plan(self):
@@ -362,7 +369,10 @@ class Runner:
             classes = np.zeros(gb.width * gb.height, np.uint8)
             classes[setup.pixels] = pipeline.classify(v_np, setup.v_star, wrong)
             classes = classes.reshape(gb.height, gb.width)
-            report.write_case_images(self.out / "images", case, classes, gb, setup, v_np)
+            item = publish.image_item(meta, classes, report.shade(classes.shape, gb, setup, v_np)
+                                      if self.cfg.report_images == "all" else None, self.cfg.report_images)
+            if item is not None:
+                self.pending_images.append(item)
             if self.keep_images:
                 self.images[case] = classes
             self.rows.append(row)
@@ -384,6 +394,7 @@ class Runner:
         info["plan"] = self.plan.as_dict()
         info["maps"] = self.maps
         info["quantized_copies"] = self.quantized
+        info["timing"] = self.timing
         return info
 
     def _write_run_json(self):
