@@ -178,6 +178,7 @@ def draw_lines(path, title, columns, ylabels=("acne rate", "peter-panning rate")
                 _legend(ax)
     fig.suptitle(title, fontsize=8)
     _save(fig, path)
+    return fig
 
 
 def draw_pareto(path, title, panels, front):
@@ -199,6 +200,7 @@ def draw_pareto(path, title, panels, front):
         _legend(ax)
     fig.suptitle(title, fontsize=8)
     _save(fig, path)
+    return fig
 
 
 def draw_tradeoff(path, title, panels):
@@ -222,6 +224,7 @@ def draw_tradeoff(path, title, panels):
         _legend(ax)
     fig.suptitle(title, fontsize=8)
     _save(fig, path)
+    return fig
 
 
 # ------------------------------------------------------------------ what to draw
