@@ -84,7 +84,8 @@ function applyFilters() {
   }
   document.getElementById('shown').textContent = shown;
 }
-document.querySelectorAll('.filters select, #filter-text').forEach(e => e.addEventListener('input', applyFilters));
+document.querySelectorAll('.filters select, #filter-text').forEach(e => {
+  e.addEventListener('input', applyFilters); e.addEventListener('change', applyFilters); });
 
 const viewer = document.getElementById('viewer');
 cases.tBodies[0].addEventListener('click', ev => {
