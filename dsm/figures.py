@@ -15,7 +15,10 @@ import json
 import math
 import os
 import re
-from concurrent.futures import ProcessPoolExecutor
+import pickle
+import subprocess
+import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -170,7 +173,6 @@ def draw_lines(path, title, columns, ylabels=("acne rate", "peter-panning rate")
             if j == 0:
                 ax.set_ylabel(ylabel, fontsize=7)
             ax.tick_params(labelsize=6)
-            ax.grid(alpha=0.25, lw=0.5)
             if i == 0:
                 ax.set_title(ctitle, fontsize=7)
             if i == len(ylabels) - 1:
@@ -184,7 +186,8 @@ def draw_lines(path, title, columns, ylabels=("acne rate", "peter-panning rate")
 def draw_pareto(path, title, panels, front):
     """Error rate (symlog) against time (log): panels = [{scheme: [(time, error)]}], each with the
     frontier ``front`` [(time, error)] over every case."""
-    fig, axes = _figure(len(panels), 1, width=4.2, height=3.0, legend_rows=max(len(p) for p in panels) + 1)
+    fig, axes = _figure(len(panels), 1, width=4.2, height=3.0, legend_rows=max(len(p) for p in panels) + 1,
+                        sharey=True)
     for ax, series in zip(axes[0], panels):
         for label, (k, pts) in series.items():
             ax.scatter([p[0] for p in pts], [p[1] for p in pts], s=10, color=f"C{k % 10}", label=label, clip_on=False)
@@ -194,9 +197,9 @@ def draw_pareto(path, title, panels, front):
         _x_scale(ax, [], log=True)
         _rate_axis(ax)
         ax.set_xlabel("time per case: map build + lookup (ms)", fontsize=7)
-        ax.set_ylabel("error rate: (acne + peter-pan) / receivers", fontsize=7)
+        if ax is axes[0][0]:
+            ax.set_ylabel("error rate: (acne + peter-pan) / receivers", fontsize=7)
         ax.tick_params(labelsize=6)
-        ax.grid(alpha=0.25, lw=0.5)
         _legend(ax)
     fig.suptitle(title, fontsize=8)
     _save(fig, path)
@@ -206,7 +209,8 @@ def draw_pareto(path, title, panels, front):
 def draw_tradeoff(path, title, panels):
     """Peter-panning rate against acne rate, both symlog: panels = [(panel title, [(label, colour index,
     world curve (x, y), texel curve (x, y), case points [(x, y)])])]."""
-    fig, axes = _figure(len(panels), 1, width=3.8, height=3.4, legend_rows=max(2 * len(p[1]) for p in panels))
+    fig, axes = _figure(len(panels), 1, width=3.8, height=3.4, legend_rows=max(2 * len(p[1]) for p in panels),
+                        sharey=True)
     for ax, (ptitle, maps) in zip(axes[0], panels):
         for label, k, cw, ck, pts in maps:
             ax.step(cw[0], cw[1], where="post", color=f"C{k % 10}", lw=1.0, label=f"{label}: one world bias")
@@ -217,10 +221,10 @@ def draw_tradeoff(path, title, panels):
         _rate_axis(ax, "x")
         _rate_axis(ax, "y")
         ax.set_xlabel("acne rate", fontsize=7)
-        ax.set_ylabel("peter-panning rate", fontsize=7)
+        if ax is axes[0][0]:
+            ax.set_ylabel("peter-panning rate", fontsize=7)
         ax.set_title(ptitle, fontsize=7)
         ax.tick_params(labelsize=6)
-        ax.grid(alpha=0.25, lw=0.5)
         _legend(ax)
     fig.suptitle(title, fontsize=8)
     _save(fig, path)
@@ -406,10 +410,6 @@ def load_curves(path: Path) -> list:
 
 # ------------------------------------------------------------------ running the jobs
 
-def _call(fn, args):
-    fn(*args)
-
-
 def workers() -> int:
     try:
         return max(1, len(os.sched_getaffinity(0)))
@@ -417,18 +417,41 @@ def workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+# a worker: a fresh interpreter running its share of the jobs, pickled into a file
+WORKER = "import pickle, sys\nfor fn, args in pickle.loads(open(sys.argv[1], 'rb').read()):\n    fn(*args)\n"
+
+
 def run_jobs(jobs: list, pool_min: int = 12) -> int:
-    """Run (function, arguments) jobs: in a process pool of one worker per core when there are at
-    least ``pool_min`` of them (a worker costs an interpreter start), else here. Returns the
-    number of worker processes used (0: none)."""
+    """Run (function, arguments) jobs: in one worker process per core when there are at least
+    ``pool_min`` of them (a worker costs an interpreter start), else here. Returns the number of
+    workers used (0: none). A worker that fails has its share drawn here, saying so.
+
+    The workers are plain ``python -c`` processes given their jobs in a pickle file, not a
+    multiprocessing pool: fork would copy a parent holding Dr.Jit's threads, and spawn (and
+    forkserver) re-import the parent's main script, which re-runs a script that calls dsm.run
+    without an ``if __name__ == "__main__"`` guard."""
     n = min(workers(), len(jobs))
     if n < 2 or len(jobs) < pool_min:
         for fn, args in jobs:
             fn(*args)
         return 0
-    import multiprocessing
-    # spawn, not fork: the parent holds Dr.Jit's threads, which a forked child must not inherit
-    with ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("spawn")) as ex:
-        for f in [ex.submit(_call, fn, args) for fn, args in jobs]:
-            f.result()
+    env = dict(os.environ, MPLBACKEND="Agg",
+               PYTHONPATH=os.pathsep.join([p for p in sys.path if p] + [os.environ.get("PYTHONPATH", "")]))
+    with tempfile.TemporaryDirectory(prefix="dsm-draw-") as tmp:
+        procs = []
+        for i in range(n):
+            part = jobs[i::n]          # interleaved: every worker gets a share of the costly figures
+            f = Path(tmp) / f"jobs{i}.pickle"
+            f.write_bytes(pickle.dumps(part, protocol=pickle.HIGHEST_PROTOCOL))
+            procs.append((part, subprocess.Popen([sys.executable, "-c", WORKER, str(f)], env=env,
+                                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)))
+        failed = []
+        for part, p in procs:
+            _, err = p.communicate()
+            if p.returncode:
+                failed.append((part, err.decode(errors="replace").strip().splitlines()[-1:] or ["no message"]))
+    for part, why in failed:
+        print(f"dsm: a drawing worker failed ({why[0]}); drawing its {len(part)} figures here", file=sys.stderr)
+        for fn, args in part:
+            fn(*args)
     return n

@@ -2,7 +2,7 @@
 or two runs compared.
 
 A run calls :func:`write_report` once its timed work is done: the case images and the figures
-are drawn then (in a process pool when there are enough, see ``figures.run_jobs``), so no
+are drawn then (in worker processes when there are enough, see ``figures.run_jobs``), so no
 drawing overlaps a timed build or lookup; table.md and report.html are written from the run's
 files (metrics.csv, run.json, oracle.csv, oracle_curves.npz), so :func:`rebuild` writes the
 same from the same folder.
@@ -16,7 +16,6 @@ import time
 from pathlib import Path
 
 from . import figures, htmlpage, metrics, report, summary
-from .types import REPORT_IMAGES  # noqa: F401  (the choices of [report] images)
 
 PLOT_PREFIXES = ("vs_bias_", "vs_resolution_", "vs_texels_", "pareto_", "tradeoff_")
 IMAGES_PER_JOB = 150

@@ -130,8 +130,11 @@ class Runner:
             report.write_oracle_csv(self.out / "oracle.csv", self.oracle_rows)
             # the report, after every timed measurement: images, figures, table.md, report.html
             t1 = time.perf_counter()
-            self.timing["report_parts"] = publish.write_report(self.out, self.pending_images, self.curves,
-                                                               plots=self.state == "complete")
+            try:
+                self.timing["report_parts"] = publish.write_report(self.out, self.pending_images, self.curves,
+                                                                   plots=self.state == "complete")
+            except Exception as e:          # the measurements are saved; the report can be rebuilt
+                self._fail("report (dsm report rebuilds it)", e)
             self.pending_images = []
             self.timing["report_s"] = time.perf_counter() - t1
             self._write_run_json()
