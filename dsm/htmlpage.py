@@ -39,7 +39,7 @@ th[aria-sort=descending]::after{content:" \\25BC"} tr.win td:first-child{font-we
 #viewer{margin:.5em 0;min-height:2em} #viewer img{image-rendering:pixelated;width:320px;border:1px solid #999;margin-right:6px}
 .plots figure{display:inline-block;margin:4px;vertical-align:top} .plots img{max-width:720px;border:1px solid #eee}
 .plots figcaption{font-size:11px;color:#555} .sw{display:inline-block;width:.9em;height:.9em;border:1px solid #888;vertical-align:middle}
-.bad{color:#a00}
+.bad{color:#a00} .answer{font-size:15px;font-weight:600;margin:.4em 0}
 """
 
 SCRIPT = r"""
@@ -267,7 +267,8 @@ def write_html(path: Path, rows: list, run: dict):
     body = [f"<h1>dsm: {_e(name)}</h1><p class=meta>{_e(counts)}. Files: <a href=table.md>table.md</a>, "
             f"<a href=metrics.csv>metrics.csv</a>, <a href=oracle.csv>oracle.csv</a>, <a href=run.json>run.json</a>.</p>"]
     if rows:
-        body += [_best_section(rows), _summary_section(rows)]
+        body += [f"<p class=answer id=answer>{_e(summary.answer(rows))}</p>", _best_section(rows),
+                 _summary_section(rows)]
     body += [_status_section(run)]
     if rows:
         body.append(_case_section(rows, out))

@@ -109,7 +109,7 @@ class Runner:
         ``running``, then ``complete``, or ``interrupted`` after Ctrl-C (re-raised once the
         folder says what it holds); a killed run leaves ``running`` and every finished case."""
         timing.enable_history()
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), _cpu()
         self.out.mkdir(parents=True, exist_ok=True)
         (self.out / "images").mkdir(exist_ok=True)
         self.csv = report.CsvWriter(self.out / "metrics.csv")
@@ -126,10 +126,11 @@ class Runner:
         finally:
             self.bar.close()
             self.timing["measure_s"] = time.perf_counter() - t0
+            self.timing["measure_cpu_s"] = _cpu() - c0
             self._write_run_json()
             report.write_oracle_csv(self.out / "oracle.csv", self.oracle_rows)
             # the report, after every timed measurement: images, figures, table.md, report.html
-            t1 = time.perf_counter()
+            t1, c1 = time.perf_counter(), _cpu()
             try:
                 self.timing["report_parts"] = publish.write_report(self.out, self.pending_images, self.curves,
                                                                    plots=self.state == "complete")
@@ -137,6 +138,7 @@ class Runner:
                 self._fail("report (dsm report rebuilds it)", e)
             self.pending_images = []
             self.timing["report_s"] = time.perf_counter() - t1
+            self.timing["report_cpu_s"] = _cpu() - c1
             self._write_run_json()
         return Results(self.out, self.rows, self._run_json(), self.images, self.oracle_rows, self.curves)
 
@@ -403,6 +405,13 @@ class Runner:
     def _write_run_json(self):
         # after every case (compact), indented once the run has ended
         report.write_json(self.out / "run.json", self._run_json(), None if self.state == "running" else 1)
+
+
+def _cpu() -> float:
+    """CPU seconds of this process (every thread) and of its finished children (the drawing workers)."""
+    import resource
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + ru.ru_utime + ru.ru_stime
 
 
 def _points_np(p) -> np.ndarray:

@@ -37,7 +37,7 @@ DEFINITIONS = (
 
 BEST_DEFINITION = ("Per scene, light and resolution: the instance with the lowest pooled error rate over "
                    "that group's cases (every view), ties broken by the shorter mean time (build + lookup); "
-                   "its pooled error rate in brackets.")
+                   "its pooled error rate in brackets, and how many instances tie at it.")
 
 
 def varies(rows, key) -> bool:
@@ -160,7 +160,7 @@ def summary_md(rows) -> list:
     multi = _multi(rows)
     extra = ", with " + " and ".join(multi) if multi else ""
     head = summary_columns(rows)
-    out = ["## Summary", "", DEFINITIONS.format(extra=extra), "",
+    out = ["## Summary", "", f"**{answer(rows)}**", "", DEFINITIONS.format(extra=extra), "",
            "| " + " | ".join(head) + " | cases | acne pooled | acne mean / median / max | peter-pan pooled | "
            "peter-pan mean / median / max | error pooled | error mean / median / max | undefined acne / "
            "peter-pan / error | build ms | lookup ms | best in |",
@@ -189,8 +189,20 @@ def best_pivot(rows):
 def best_cell(b) -> str:
     if b is None:
         return ""
-    tied = f", {b['tied']} more tie" if b["tied"] else ""
+    tied = f"; the fastest of {b['tied'] + 1} tied" if b["tied"] else ""
     return f"{b['label']} ({rate(b['error'])}{tied})"
+
+
+def answer(rows) -> str:
+    """One sentence: the lowest pooled error rate over the run, and the instance most often best."""
+    insts = [s for s in per_instance(rows) if defined(s["error_pooled"])]
+    if not insts:
+        return "No case of this run has a defined error rate."
+    low, most = insts[0], max(insts, key=lambda s: s["best_in"])
+    n = len({tuple(r[k] for k in SITUATION) for r in rows})
+    return (f"Lowest pooled error rate over all {len(rows)} cases: {instance_label(low['key'])} "
+            f"({rate(low['error_pooled'])}). Most often the best: {instance_label(most['key'])} "
+            f"(in {most['best_in']} of {n} situations).")
 
 
 def best_md(rows) -> list:

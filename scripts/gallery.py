@@ -2,7 +2,7 @@
 the README's tables (the default run's summary, table.md's first sections; engine defaults
 against the best possible), error images and a screenshot of the default run's report.html.
 
-    .venv/bin/python scripts/gallery.py [results folder of a default run]
+    .venv/bin/python scripts/gallery.py [results folder of a default run] [--default-only]
 
 A folder holding a complete default run is read as it is; otherwise the default experiment
 runs into it (or into a temporary folder).
@@ -58,7 +58,8 @@ def screenshot(page: Path, png: Path, size=(1280, 900)) -> bool:
 
 
 def main():
-    out = default_run(sys.argv[1] if len(sys.argv) > 1 else None)
+    args = [a for a in sys.argv[1:] if not a.startswith("--")]
+    out = default_run(args[0] if args else None)
     OUT.mkdir(parents=True, exist_ok=True)
     rows = report.read_rows(out / "metrics.csv")
     # the README's table: table.md's summary sections, as the run wrote them
@@ -124,4 +125,5 @@ def engine_defaults():
 
 if __name__ == "__main__":
     main()
-    engine_defaults()
+    if "--default-only" not in sys.argv:
+        engine_defaults()
