@@ -82,10 +82,10 @@ def write_images(out: Path, items: list):
 
 def _figure(ncols, nrows, width=3.7, height=2.5, legend_rows=0, sharey=False):
     from matplotlib.figure import Figure
-    extra = 0.2 * legend_rows + 0.6
+    extra = 0.2 * legend_rows + 0.75
     fig = Figure(figsize=(width * ncols + 0.3, height * nrows + extra))
     axes = np.array(fig.subplots(nrows, ncols, squeeze=False, sharey="row" if sharey else False))
-    fig.subplots_adjust(left=0.55 / (width * ncols + 0.3), right=0.98, top=1 - 0.45 / (height * nrows + extra),
+    fig.subplots_adjust(left=0.55 / (width * ncols + 0.3), right=0.98, top=1 - 0.6 / (height * nrows + extra),
                         bottom=(0.2 * legend_rows + 0.5) / (height * nrows + extra), wspace=0.32, hspace=0.42)
     return fig, axes
 
@@ -142,6 +142,12 @@ def _legend(ax, ncol=1):
                   frameon=False, handlelength=1.5)
 
 
+def _title(fig, text):
+    """The figure's title, wrapped to its width (a narrow figure would cut a long one)."""
+    import textwrap
+    fig.suptitle("\n".join(textwrap.wrap(text, max(30, int(fig.get_figwidth() * 17)))), fontsize=8)
+
+
 def _save(fig, path):
     _atomic_save(Path(path), lambda f: fig.savefig(f, dpi=DPI, format="png", pil_kwargs=PNG))
 
@@ -178,7 +184,7 @@ def draw_lines(path, title, columns, ylabels=("acne rate", "peter-panning rate")
             if i == len(ylabels) - 1:
                 ax.set_xlabel(xlabel, fontsize=7)
                 _legend(ax)
-    fig.suptitle(title, fontsize=8)
+    _title(fig, title)
     _save(fig, path)
     return fig
 
@@ -201,7 +207,7 @@ def draw_pareto(path, title, panels, front):
             ax.set_ylabel("error rate: (acne + peter-pan) / receivers", fontsize=7)
         ax.tick_params(labelsize=6)
         _legend(ax)
-    fig.suptitle(title, fontsize=8)
+    _title(fig, title)
     _save(fig, path)
     return fig
 
@@ -226,7 +232,7 @@ def draw_tradeoff(path, title, panels):
         ax.set_title(ptitle, fontsize=7)
         ax.tick_params(labelsize=6)
         _legend(ax)
-    fig.suptitle(title, fontsize=8)
+    _title(fig, title)
     _save(fig, path)
     return fig
 
