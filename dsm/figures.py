@@ -115,7 +115,12 @@ def _x_scale(ax, xs, log2=False, log=False):
     axis = ax.xaxis
     if log2:
         ax.set_xscale("log", base=2)
-        axis.set_major_locator(FixedLocator(sorted(set(xs.tolist()))))
+        values = sorted(set(xs.tolist()))
+        if len(values) <= 4 and all(v == 2 ** round(math.log2(v)) for v in values if v > 0):
+            axis.set_major_locator(FixedLocator(values))     # resolutions: each one labelled
+        else:                                                # texel counts: powers of two
+            axis.set_major_locator(LogLocator(base=2, numticks=6))
+            plain = FuncFormatter(lambda v, _: f"2^{math.log2(v):.0f}" if v > 0 else "0")
     elif log:
         ax.set_xscale("log")
         axis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0), numticks=8))
