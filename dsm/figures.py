@@ -262,7 +262,7 @@ def _res_text(rs) -> str:
 
 def _label(r, multi=()):
     lab = f"{r['scheme']} {r['preset'] or r['params']}".strip()
-    return " ".join([lab] + [r[k] for k in multi])[:48]
+    return " ".join([lab] + [r.get(k, "") for k in multi])[:48]
 
 
 def _groups(rows, keys):
@@ -277,7 +277,7 @@ def plot_jobs(folder: Path, rows: list, curves: list = ()) -> list:
     ``curves``: per map and format, (meta row, world curve (x, y), texel curve (x, y)) as rates."""
     folder = Path(folder)
     jobs = []
-    multi = tuple(k for k in ("filter", "format") if len({r[k] for r in rows}) > 1)
+    multi = tuple(k for k in ("filter", "format", "cascade_layout") if len({r.get(k, "") for r in rows}) > 1)
     for (scene, light), rs in sorted(_groups(rows, ("scene", "light")).items()):
         views = sorted({r["view"] for r in rs})
         for view in views:
@@ -297,7 +297,7 @@ def plot_jobs(folder: Path, rows: list, curves: list = ()) -> list:
                     name, unit = _unit(r["sweep_key"])
                     others = _others(r["params"], name)
                     lab = f"{r['scheme']}: {name}" + (f" ({others})" if others else "")
-                    lab = " ".join([lab] + [r[k] for k in multi])[:52]
+                    lab = " ".join([lab] + [r.get(k, "") for k in multi])[:52]
                     units.setdefault(unit, {}).setdefault(lab, []).append(
                         (r["sweep_value"], r["acne_rate"], r["peterpan_rate"]))
             columns = []

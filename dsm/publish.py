@@ -96,13 +96,13 @@ def rebuild(out: Path, plots: bool = True) -> dict:
 
 # ------------------------------------------------------------------ comparing two runs
 
-KEY = ("scene", "light", "view", "scheme", "params", "resolution", "filter", "format", "culling")
+KEY = ("scene", "light", "view", "scheme", "params", "resolution", "filter", "format", "culling", "cascade_layout")
 COMPARED = ("acne_rate", "peterpan_rate", "error_rate", "n_acne", "n_peterpan", "n_receivers", "build_ms",
             "lookup_ms")
 
 
 def _key(r):
-    return tuple(r["preset"] or r["params"] if k == "params" else r[k] for k in KEY)
+    return tuple(r["preset"] or r["params"] if k == "params" else r.get(k, "") for k in KEY)
 
 
 def _diff(a, b):

@@ -4,7 +4,7 @@ light and resolution (table.md's first sections, report.html's first screen, the
 Definitions (stated in the report, checked by tests/test_report.py against a numpy recomputation):
 
 - A *scheme instance* is a scheme with its parameters (or an engine preset), with the lookup
-  filter and stored format when the run has more than one of them.
+  filter, stored format and cascade layout when the run has more than one of them.
 - *Pooled* rate: the errors summed over the instance's cases divided by the receivers summed
   (acne: sum n_acne / sum n_gt_lit; peter-panning: sum n_peterpan / sum n_gt_shadowed; error:
   sum (n_acne + n_peterpan) / sum n_receivers); undefined when that sum is 0.
@@ -41,12 +41,15 @@ BEST_DEFINITION = ("Per scene, light and resolution: the instance with the lowes
 
 
 def varies(rows, key) -> bool:
-    return len({r[key] for r in rows}) > 1
+    return len({r.get(key, "") for r in rows}) > 1
+
+
+VARIED = ("filter", "format", "cascade_layout")     # part of an instance where a run varies them
 
 
 def instance_key(r, multi=()) -> tuple:
-    """(scheme, params or preset, then filter / format where the run varies them)."""
-    return (r["scheme"], r["preset"] or r["params"]) + tuple(r[k] for k in multi)
+    """(scheme, params or preset, then filter / format / cascade layout where the run varies them)."""
+    return (r["scheme"], r["preset"] or r["params"]) + tuple(r.get(k, "") for k in multi)
 
 
 def instance_label(key) -> str:
@@ -54,7 +57,7 @@ def instance_label(key) -> str:
 
 
 def _multi(rows):
-    return tuple(k for k in ("filter", "format") if varies(rows, k))
+    return tuple(k for k in VARIED if varies(rows, k))
 
 
 def _stats(values):
