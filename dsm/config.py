@@ -16,7 +16,8 @@ from .types import (  # noqa: F401  (re-exported: the config's vocabulary)
     SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params)
 
 
-TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing", "memory", "oracle")
+TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing", "memory", "oracle",
+            "tune")    # [tune]: read by dsm.tune (dsm tune), ignored by dsm run
 
 
 def load(path) -> Config:
