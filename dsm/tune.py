@@ -731,8 +731,10 @@ class TuneResult:
 def tune(config, out=None, progress: bool = False, variant: str | None = None) -> TuneResult:
     """Tune every ``[[scheme]]`` of ``config`` (a Config, dict or TOML path with a ``[tune]``
     table) on its training views; write the results into ``out`` when given."""
-    config = pl.prepare(config, variant)
-    tc = parse_tune(config)
+    from .config import coerce
+    config = coerce(config)
+    tc = parse_tune(config)                   # the [tune] table checked before any scene loads
+    tc.config = pl.prepare(config, variant)
     return run_tune(tc, out, progress)
 
 
