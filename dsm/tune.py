@@ -13,15 +13,20 @@ The relaxed loss is ``(sum over truly lit (1 - s_r) + lambda sum over truly shad
 n_receivers``; an empty class adds 0.
 
 **Gradients.** The parameters are Dr.Jit Floats with gradients; the scheme's own ``shift`` and
-``margin`` run on them (``dr.backward``), steps are ``mi.ad.Adam``'s on each parameter divided
-by its scale (its start value's magnitude, 1 when it starts at 0): ``lr`` is a fraction of that
-per step. After each step a parameter is clipped into its search range (``[tune.range]``,
-within the scheme's valid range). Parameters that act through the choice of texel (normal
-offset's ``offset``, combined's ``normal_offset``) have no derivative under a nearest lookup
-(z1 is a gather at ``floor(u)``): while tuning, schemes with a shift read z1 **bilinearly**
-between the four surrounding texel centres (continuous in the lookup point), the slope and z2
-layers and the tangent-plane texel from the nearest texel. The hard objective always uses the
-kit's nearest lookup (``pipeline.visibility``).
+``margin`` run on them (``dr.backward``), steps are ``mi.ad.Adam``'s (first-moment decay
+``BETA1`` = 0.5: the default 0.9 carries the iterate across the flat optimum of a piecewise
+constant objective after the gradient turns) on each parameter divided by one texel's worth in
+its unit (the mean texel width over the training receivers for world units, that over the depth
+range for range units, over the scene diagonal for adaptive's K; 1 for texel units and slope
+factors). ``lr`` is the step in those texels at the first temperature; it shrinks in proportion
+to the temperature. After each step a parameter is clipped into its search range
+(``[tune.range]``, default ``[valid minimum or 0, start + 16 texels' worth]``). Parameters
+that act through the choice of texel (normal offset's ``offset``, combined's
+``normal_offset``) have no derivative through z1 under a nearest lookup (a gather at
+``floor(u)``): while tuning, schemes with a shift read z1 **bilinearly** between the four
+surrounding texel centres (continuous in the lookup point), the slope and z2 layers and the
+tangent-plane texel from the nearest texel. The hard objective always uses the kit's nearest
+lookup (``pipeline.visibility``).
 
 **Learned bias map** (``[tune.bias_map]``): one bias per block of ``block x block`` texels
 of the light's map, the map fitted once to the union of every camera's receivers (training and
@@ -100,14 +105,14 @@ class BiasMapSpec:
     unit: str = "world"
     init: Length = Length(0.0, "world")
     steps: int = 100
-    lr: float = 0.1
+    lr: float = 0.5
 
 
 @dataclass(frozen=True)
 class TuneSpec:
     lam: float = 1.0
     steps: int = 100
-    lr: float = 0.1                         # texels per step at the start temperature
+    lr: float = 0.5                         # texels per step at the start temperature
     temperature: tuple = (0.25, 0.02)         # texels: start, end
     schedule: str = "geometric"
     seed: int = 7
@@ -315,8 +320,8 @@ def prepare_cases(tc, progress=None):
     R = cfg.map.resolutions_for(1)[0]
     kind = cfg.map.view[0]
     needs = {}
-    for s in tc.schemes:
-        needs.setdefault(pl.culling_of(s.params), set()).update(pl.needs_of([s]))
+    for s in tc.schemes:     # every layer a scheme may read: a tuned term may start at 0 (combined's slope_scale)
+        needs.setdefault(pl.culling_of(s.params), set()).update(pl.scheme_module(s.name).NEEDS)
     needs.setdefault("none", set())
     groups, cases, notes = [], [], []
     for spec in cfg.scenes:
