@@ -69,6 +69,9 @@ MAP_UNITS = ("world", "texel")
 CLIP = 30.0              # |margin / T| beyond which the sigmoid is flat (its derivative below 1e-13)
 BETA1 = 0.5              # Adam's first-moment decay (0.9 carries the iterate past the flat optimum of a
                          # piecewise-constant objective when the gradient flips as the temperature falls)
+BETA2 = 0.9              # and second-moment decay: the gradient's scale falls by orders of magnitude as the
+                         # iterate leaves the dense thresholds and the temperature drops; 0.999 remembers the
+                         # early scale and stalls the steps
 
 
 def tunable(module) -> tuple:
@@ -554,7 +557,7 @@ def tune_scheme(tc, spec: SchemeSpec, train, groups, progress=None) -> dict:
     ts = tc.spec
     box = _param_box(tc, spec, texel_sizes(train, groups))
     rng = np.random.default_rng(ts.seed)
-    opt = mi.ad.Adam(lr=ts.lr, beta_1=BETA1)
+    opt = mi.ad.Adam(lr=ts.lr, beta_1=BETA1, beta_2=BETA2)
     for p in box:
         opt[p.name] = mi.Float(p.start / p.scale)
     rows, relax = [], False
@@ -644,13 +647,34 @@ def _map_margin(c, groups, bias_world):
     return tap.z1 + bias_world - c.rx.depth
 
 
-def tune_bias_map(tc, train, held, groups, init_value, progress=None) -> dict:
+def map_start(tc, train, groups, const=None) -> np.ndarray:
+    """The bias map's start per map (group), in the map's unit: the best tuned constant bias
+    (``const``, a result entry) converted with the group's mean texel width over its training
+    receivers, so a block no training view sees keeps the tuned global bias; without one,
+    ``[tune.bias_map] init``."""
+    bm = tc.spec.bias_map
+    out = np.full(len(groups), bm.init.value, np.float64)
+    if const is None:
+        return out
+    b = const["spec"].params.bias
+    for g in range(len(groups)):
+        tws = [c.th.texel_world for c in train if c.group == g]
+        tw = float(np.mean(np.concatenate(tws))) if tws else float(texel_sizes(train, groups)["world"])
+        world = b.value * {"world": 1.0, "texel": tw, "range": groups[g].view.depth_range}[b.unit]
+        out[g] = world if bm.unit == "world" else world / tw
+    return out
+
+
+def tune_bias_map(tc, train, held, groups, init_values, progress=None) -> dict:
+    """Adam on one bias per block (started per map at ``init_values``, in the map's unit)."""
     bm, ts = tc.spec.bias_map, tc.spec
     blk_train, nblocks = _blocks(train, groups, bm.block)
     blk_held, _ = _blocks(held, groups, bm.block)
     scale = texel_sizes(train, groups)[bm.unit]      # steps in texels' worth, as the schemes'
-    opt = mi.ad.Adam(lr=bm.lr, beta_1=BETA1)
-    opt["b"] = dr.full(mi.Float, init_value / scale, nblocks)
+    opt = mi.ad.Adam(lr=bm.lr, beta_1=BETA1, beta_2=BETA2)
+    per_group = [g.view.faces * (-(-g.view.resolution // bm.block)) ** 2 for g in groups]
+    start = np.repeat(np.asarray(init_values, np.float64), per_group)
+    opt["b"] = mi.Float((start / scale).astype(np.float32))
     idx_train = [mi.UInt32(b.astype(np.uint32)) for b in blk_train]
     tex = bm.unit == "texel"
     rows = []
@@ -659,7 +683,7 @@ def tune_bias_map(tc, train, held, groups, init_value, progress=None) -> dict:
         val = dr.gather(mi.Float, b, idx) * scale
         return val * c.rx.texel_world if tex else val
 
-    lo = 0.0 if init_value >= 0 else init_value     # a bias map never goes below 0 unless started there
+    lo = min(0.0, float(start.min()))                # a bias map never goes below 0 unless started there
     for step in range(bm.steps):
         t_texels = temperature_at(ts, step, bm.steps)
         opt.set_learning_rate(bm.lr * t_texels / ts.temperature[0])
@@ -689,7 +713,7 @@ def tune_bias_map(tc, train, held, groups, init_value, progress=None) -> dict:
     n_held = sum(c.n for c in held)
     times = [r["time_ms"] for r in rows]
     return {"values": np.asarray(b.numpy(), np.float64) * scale, "blocks": nblocks, "block": bm.block,
-            "unit": bm.unit, "init": init_value, "steps": rows,
+            "unit": bm.unit, "init": [float(x) for x in init_values], "steps": rows,
             "train": _map_counts(train, idx_train, groups, b, scale, tex),
             "heldout": _map_counts(held, idx_held, groups, b, scale, tex),
             "heldout_covered_fraction": cov_n / n_held if n_held else float("nan"),
@@ -787,11 +811,11 @@ def run_tune(tc, out=None, progress: bool = False) -> TuneResult:
         comparison.append(_comparison_row(entry, ts.steps))
     bmap = None
     if ts.bias_map and held:
-        init = ts.bias_map.init.value
-        const = [e for e in results if e["scheme"] == "constant" and e["units"].get("bias") == ts.bias_map.unit]
-        if const:
-            init = min(const, key=lambda e: e["train"]["objective"])["values"]["bias"]
+        const = [e for e in results if e["scheme"] == "constant"]
+        best_const = min(const, key=lambda e: e["train"]["objective"]) if const else None
+        init = map_start(tc, train, groups, best_const)
         bmap = tune_bias_map(tc, train, held, groups, init, tick)
+        bmap["init_from"] = best_const["params"] if best_const else str(ts.bias_map.init)
         bmap["train"] = _with_obj(bmap["train"], ts.lam)
         bmap["heldout"] = _with_obj(bmap["heldout"], ts.lam)
         best = min(results, key=lambda e: e["train"]["objective"]) if results else None
@@ -874,7 +898,8 @@ def table_text(res: TuneResult) -> str:
         out += ["", "## learned bias map", "",
                 f"{b['blocks']} blocks of {b['block']} x {b['block']} texels ({b['blocks_trained']} with training "
                 f"receivers; {_fmt(b['heldout_covered_fraction'])} of held-out receivers fall in them), unit "
-                f"{b['unit']}, started at {b['init']:.6g}", "",
+                f"{b['unit']}, started from {b['init_from']} (per map: "
+                f"{', '.join(f'{x:.4g}' for x in b['init'])})", "",
                 "| | train | held-out |", "| --- | --- | --- |",
                 f"| learned map | {_fmt(b['train']['objective'])} | {_fmt(b['heldout']['objective'])} |",
                 f"| per-texel oracle (of those views) | {_fmt(b['per_texel_oracle_train'])} "

@@ -160,7 +160,7 @@ def test_bias_map_and_output_folder(tmp_path):
     # no bias per texel beats the per-texel oracle of the same views
     assert bm["train"]["objective"] >= bm["per_texel_oracle_train"] - 1e-12
     assert bm["heldout"]["objective"] >= bm["per_texel_oracle_heldout"] - 1e-12
-    assert bm["init"] == res.schemes[0]["values"]["bias"]       # started from the tuned constant
+    assert bm["init"] == [pytest.approx(res.schemes[0]["values"]["bias"])]    # started from the tuned constant
     # tuned.toml holds ready [[scheme]] blocks with the tuned values
     blocks = tomllib.loads((tmp_path / "tuned.toml").read_text())["scheme"]
     for blk, e in zip(blocks, res.schemes):
