@@ -843,7 +843,8 @@ def _comparison_row(e, budget):
     g = e["grid"]
     row = {"scheme": e["scheme"], "tuned_params": e["params"], "tuned_train": e["train"]["objective"],
            "tuned_heldout": e["heldout"]["objective"] if e["heldout"] else float("nan"),
-           "tuned_ms": e["tune_ms"], "tuned_evaluations": budget,
+           "tuned_ms": e["tune_ms"], "tuned_evaluations": budget, "first_step_ms": e["first_step_ms"],
+           "step_ms": e["step_ms"],
            "grid_params": g["params"], "grid_train": g["objective"], "grid_heldout": g["heldout"],
            "grid_ms": g["total_ms"], "grid_evaluations": g["evaluations"],
            "oracle": e.get("oracle", {}).get("objective", float("nan")),
@@ -884,12 +885,13 @@ def table_text(res: TuneResult) -> str:
     lam = res.spec.lam
     out = [f"# dsm tune (lambda = {lam:g}; objective (n_acne + lambda n_peterpan) / n_receivers)", "",
            f"training receivers {res.n_train}, held-out receivers {res.n_heldout}", "",
-           "| scheme | tuned | train | held-out | tune ms (evals) | grid best | grid train | grid held-out "
-           "| grid ms (evals) | oracle (train) | start train |",
+           "| scheme | tuned | train | held-out | tune ms (evals; first, median step) | grid best | grid train "
+           "| grid held-out | grid ms (evals) | oracle (train) | start train |",
            "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for r in res.comparison:
         out.append(f"| {r['scheme']} | {r['tuned_params']} | {_fmt(r['tuned_train'])} | {_fmt(r['tuned_heldout'])} "
-                   f"| {r['tuned_ms']:.0f} ({r['tuned_evaluations']}) | {r['grid_params']} | {_fmt(r['grid_train'])} "
+                   f"| {r['tuned_ms']:.0f} ({r['tuned_evaluations']}; {r['first_step_ms']:.1f}, {r['step_ms']:.1f}) "
+                   f"| {r['grid_params']} | {_fmt(r['grid_train'])} "
                    f"| {_fmt(r['grid_heldout'])} | {r['grid_ms']:.0f} ({r['grid_evaluations']}) "
                    f"| {_fmt(r['oracle'])} | {_fmt(r['start_train'])} |")
     if res.bias_map:
