@@ -93,7 +93,8 @@ def _valid_min(module, name):
 # ---------------------------------------------------------------- the [tune] table
 
 @dataclass(frozen=True)
-class CameraSpec:
+class TuneCamera:
+    """One [[tune.camera]]: a pose and its role."""
     name: str
     position: tuple
     target: tuple
@@ -227,7 +228,7 @@ def parse_tune(cfg) -> TuneConfig:
         name = c.get("name", f"cam{i}")
         if not isinstance(name, str) or not name:
             raise ConfigError(src, f"{w}.name", "expected a non-empty string")
-        cams.append(CameraSpec(name, pos, tgt, up, fov, role))
+        cams.append(TuneCamera(name, pos, tgt, up, fov, role))
     if len({c.name for c in cams}) != len(cams):
         raise ConfigError(src, "tune.camera", "camera names must differ")
     if cams and not any(c.role == "train" for c in cams):
@@ -256,6 +257,9 @@ def parse_tune(cfg) -> TuneConfig:
     for key, vals in (("map.resolution", m.resolutions_for(1)), ("map.format", m.format)):
         if len(vals) != 1:
             raise ConfigError(src, key, f"dsm tune fits one map per scene and light: give one value, got {list(vals)}")
+    if getattr(m, "cascade", ()):
+        raise ConfigError(src, "map.cascades", "dsm tune fits one map per scene and light fixed across views; "
+                          "a cascaded view follows its camera: remove the cascades")
     if m.filter != ("nearest",):
         raise ConfigError(src, "map.filter", "dsm tune measures the nearest lookup (the oracles' lookup)",
                           ("nearest",))
@@ -328,7 +332,7 @@ def prepare_cases(tc, progress=None):
     needs.setdefault("none", set())
     groups, cases, notes = [], [], []
     for spec in cfg.scenes:
-        sd = pl.load_scene(spec, cfg.camera_resolution)
+        sd = pl.load_scene(spec, cfg.camera_resolution, getattr(cfg, "camera", None))   # [camera] pose, if any
         lights = sd.lights_for(cfg.lights)
         closed = pl.closedness(sd)[0] if any(c != "none" for c in needs) else None
         extents = pl.spawn_extents(sd.scene)

@@ -213,3 +213,16 @@ def test_cli_tune(tmp_path):
     bad.write_text(cfg.read_text().replace("steps = 6", "steps = 0"))
     assert main(["tune", str(bad), "--out", str(tmp_path / "o2")]) == 2
     assert not (tmp_path / "o2").exists()
+
+
+def test_cascaded_maps_are_refused():
+    """A cascaded view follows its camera: no map grid is shared across views."""
+    import dsm.tune as tu
+    from dsm import ConfigError
+    from dsm.config import coerce
+    cfg = _cfg({"builtin": "plane_box"}, [{"name": "constant"}], light={"type": "directional",
+                                                                        "direction": [0.2, 0.1, -1.0]})
+    cfg["map"]["cascades"] = 2
+    with pytest.raises(ConfigError) as e:
+        tu.parse_tune(coerce(cfg))
+    assert e.value.key == "map.cascades"
