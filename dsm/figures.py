@@ -1,4 +1,4 @@
-"""The report's figures and case images, drawn after the measurements (in a process pool when
+"""The report's figures and case images, drawn after the measurements (by worker processes when
 there is enough to draw), so drawing never overlaps a timed build or lookup.
 
 Every rate axis is symlog (linear below 1e-4, so a zero and 1e-4 are both visible) from 0 to 1;
