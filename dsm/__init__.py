@@ -18,12 +18,12 @@ def register():
 
 
 def _register_if_variant_set():
-    try:
-        import mitsuba as mi
-        if mi.variant() is not None:
-            register()
-    except ImportError:
-        pass
+    # a variant can only be set once mitsuba is imported: importing it here would cost every
+    # process that uses dsm without Mitsuba (the report's drawing workers) a second
+    import sys
+    mi = sys.modules.get("mitsuba")
+    if mi is not None and mi.variant() is not None:
+        register()
 
 
 _register_if_variant_set()

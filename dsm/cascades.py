@@ -551,7 +551,7 @@ CASCADE_COLORS = np.array([[0, 0, 0], [228, 26, 28], [55, 126, 184], [77, 175, 7
 
 
 def write_index_image(path, pixels: np.ndarray, face: np.ndarray, width: int, height: int):
-    """images/<case>_cascade.png: each receiver coloured by its cascade (black: not a receiver)."""
+    """images/<scene>_<light>/<case>_cascade.png: each receiver coloured by its cascade (black: not a receiver)."""
     from matplotlib.image import imsave
     img = np.zeros(width * height, np.uint8)
     img[pixels] = np.asarray(face, int) + 1

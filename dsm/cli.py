@@ -1,4 +1,4 @@
-"""Command line: ``dsm run``, ``dsm plan``, ``dsm schemes``, ``dsm bench``.
+"""Command line: ``dsm run``, ``dsm plan``, ``dsm report``, ``dsm schemes``, ``dsm bench``, ``dsm tune``.
 
 Every bad input is one or two lines on stderr, never a traceback, before any work starts:
 exit 2 for a mistake in the config or the arguments, 3 for the machine's set-up (libLLVM, no
@@ -21,8 +21,10 @@ from .env import SetupError
 
 DEFAULT_CONFIG = Path(__file__).with_name("default.toml")
 # what a dsm run writes into its folder: --force clears a folder holding nothing else
-RUN_OUTPUTS = ("run.json", "metrics.csv", "oracle.csv", "table.md", "images", "plots")
-RUN_TEMP = re.compile(r"\.(?:run\.json|metrics\.csv|table\.md)\.\d+\.tmp")    # left by a killed run (report.atomic)
+RUN_OUTPUTS = ("run.json", "metrics.csv", "oracle.csv", "table.md", "images", "plots", "report.html",
+               "oracle_curves.npz", "cascades.csv", "cascades.md")
+# left by a killed run (report.atomic)
+RUN_TEMP = re.compile(r"\.(?:run\.json|metrics\.csv|oracle\.csv|table\.md|report\.html|oracle_curves\.npz)\.\d+\.tmp")
 
 
 def _positive_int(text):
@@ -53,6 +55,10 @@ def _parser():
     r.add_argument("--threads", type=_positive_int, help="Dr.Jit worker threads (at least 1)")
     r.add_argument("--force", action="store_true",
                    help="replace a previous dsm run in --out (a folder with its run.json); never other files")
+    rp = sub.add_parser("report", help="rebuild a run's table.md, plots and report.html from its files (no "
+                        "measuring); with two folders, compare the runs")
+    rp.add_argument("dirs", nargs="+", metavar="DIR", help="a results folder, or two to compare (A then B)")
+    rp.add_argument("--out", help="comparison folder (default: ./compare-<A>-<B>); only with two folders")
     p = sub.add_parser("plan", help="print what a config will compute: cases, maps, rays by kind, memory")
     p.add_argument("config", nargs="?", help="experiment TOML file (default: the built-in default experiment)")
     sub.add_parser("schemes", help="list bias schemes, their parameters, defaults and sources")
@@ -62,6 +68,11 @@ def _parser():
     b.add_argument("--repeats", type=_positive_int, default=5)
     b.add_argument("--meshes", help="folder of the real test meshes (default: ../shared/meshes)")
     b.add_argument("--variant", choices=cfgmod.VARIANTS)
+    t = sub.add_parser("tune", help="tune scheme parameters (and a learned bias map) by gradient: a config's [tune]")
+    t.add_argument("config", help="experiment TOML file with a [tune] table")
+    t.add_argument("--out", help="results folder (default: runs/<name>-tune-<time>)")
+    t.add_argument("--variant", choices=cfgmod.VARIANTS, help="Mitsuba variant (default llvm_ad_rgb)")
+    t.add_argument("--threads", type=_positive_int, help="Dr.Jit worker threads (at least 1)")
     return ap
 
 
@@ -93,12 +104,17 @@ def main(argv=None) -> int:
             return 0
         if args.cmd == "bench":
             return _bench(args)
+        if args.cmd == "report":
+            return _report(args)
         try:
             cfg = cfgmod.load(args.config or DEFAULT_CONFIG)
         except cfgmod.ConfigError as e:
             return _config_error(e)
         if args.cmd == "plan":
             return _plan(cfg)
+        if args.cmd == "tune":
+            out = Path(args.out) if args.out else Path("runs") / f"{cfg.name}-tune-{time.strftime('%Y%m%d-%H%M%S')}"
+            return _tune(cfg, args, out)
         out = Path(args.out) if args.out else Path("runs") / f"{cfg.name}-{time.strftime('%Y%m%d-%H%M%S')}"
         return _run(cfg, args, out)
     except KeyboardInterrupt:
@@ -126,6 +142,32 @@ def _bench(args) -> int:
         _err(f"setup error: {e}")
         return 3
     print((Path(args.out) / "bench.md").read_text())
+    return 0
+
+
+def _report(args) -> int:
+    from . import publish
+    dirs = [Path(d) for d in args.dirs]
+    if len(dirs) > 2:
+        _err(f"report: expected one results folder (rebuild) or two (compare), got {len(dirs)}")
+        return 2
+    if len(dirs) == 1 and args.out:
+        _err("report: --out names the comparison's folder; give two results folders to compare, or none")
+        return 2
+    try:
+        if len(dirs) == 1:
+            t0 = time.perf_counter()
+            parts = publish.rebuild(dirs[0])
+            print(f"dsm: report of {dirs[0]}/ rebuilt in {time.perf_counter() - t0:.1f} s ({parts['figures']} "
+                  "figures; table.md, plots/, report.html)")
+            return 0
+        out = Path(args.out) if args.out else Path(f"compare-{dirs[0].resolve().name}-{dirs[1].resolve().name}")
+        n = publish.compare(dirs[0], dirs[1], out)
+    except publish.NotARun as e:
+        _err(f"report: {e}")
+        return 2
+    print(f"dsm: {n['matched']} cases in both runs, {n['only_a']} only in A, {n['only_b']} only in B -> "
+          f"{out}/ (compare.md, compare.csv)")
     return 0
 
 
@@ -220,14 +262,44 @@ def _run(cfg, args, out: Path) -> int:
     except cfgmod.ConfigError as e:
         return _config_error(e)
     failed, empty = res.run["n_failed"], res.run["n_empty"]
-    print(f"dsm: {len(res.rows)} cases in {time.perf_counter() - t0:.1f} s -> {out}/"
-          f" (table.md, metrics.csv, oracle.csv, images/, plots/, run.json)")
+    t = res.run["timing"]
+    print(f"dsm: {len(res.rows)} cases in {time.perf_counter() - t0:.1f} s (measuring {t['measure_s']:.1f} s, "
+          f"report {t['report_s']:.1f} s) -> {out}/ (report.html, table.md, metrics.csv, oracle.csv, images/, "
+          "plots/, run.json)")
     if empty:
         print(f"dsm: {empty} cases are empty (no receiver: nothing faces the light inside its domain); "
               "their rates are undefined (see table.md)", file=sys.stderr)
     if failed:
         print(f"dsm: {failed} failed (reasons above, in table.md and run.json)", file=sys.stderr)
         return 1
+    return 0
+
+
+def _tune(cfg, args, out: Path) -> int:
+    from . import tune as tunemod
+    try:
+        tc = tunemod.parse_tune(cfg)                 # [tune] checked before any scene loads
+        from . import pipeline
+        tc.config = pipeline.prepare(cfg, args.variant, args.threads)
+    except cfgmod.NothingToRun as e:
+        _err(e.problem)
+        return 1
+    except SetupError as e:
+        _err(f"setup error: {e}")
+        return 3
+    except cfgmod.ConfigError as e:
+        return _config_error(e)
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        _err(f"--out {out}: is not an empty folder; choose another --out")
+        return 2
+    t0 = time.perf_counter()
+    try:
+        res = tunemod.run_tune(tc, out, progress=True)
+    except cfgmod.ConfigError as e:
+        return _config_error(e)
+    print(tunemod.table_text(res))
+    print(f"dsm: tuned {len(res.schemes)} schemes in {time.perf_counter() - t0:.1f} s -> {out}/ (tuned.toml, "
+          "table.md, steps.csv, tune.json, plots/)")
     return 0
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from .types import (  # noqa: F401  (re-exported: the config's vocabulary)
     LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, LIGHT_TYPES, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA,
+    REPORT_IMAGES,
     ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params,
     SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params,
     CameraSpec, CascadeSpec, CASCADE_SPLITS, CASCADE_FITS, DEPTH_BOUNDS, MAX_CASCADES)
@@ -21,7 +22,8 @@ from .types import (  # noqa: F401  (re-exported: the config's vocabulary)
 CASCADE_KEYS = ("cascades", "split", "lambda", "fit", "depth_bounds", "stabilize", "blend", "max_distance")
 
 
-TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing", "memory", "oracle")
+TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing", "memory", "oracle", "report",
+            "tune")    # [tune]: read by dsm.tune (dsm tune), ignored by dsm run
 
 
 def load(path) -> Config:
@@ -178,11 +180,15 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     if not lambdas:
         raise ConfigError(source, "oracle.lambda", "empty list")
     lambdas = tuple(dict.fromkeys(number(x, source, "oracle.lambda", minimum=0) for x in lambdas))
+    rep = _table(raw, "report", source)
+    check_keys(rep, ("images",), source, "report")
+    report_images = choice(rep.get("images", "all"), source, "report.images", REPORT_IMAGES)
 
     return Config(name=name, source=source, seed=seed, variant=variant, camera_resolution=camera_resolution,
                   camera=camera,
                   scenes=tuple(scenes), lights=tuple(lights), map=mapspec, schemes=tuple(schemes),
-                  timing_repeats=repeats, memory_budget_mb=budget, oracle=OracleSpec(lambdas), raw=raw)
+                  timing_repeats=repeats, memory_budget_mb=budget, oracle=OracleSpec(lambdas),
+                  report_images=report_images, raw=raw)
 
 
 def _parse_camera(cam: dict, source: str):

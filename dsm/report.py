@@ -1,4 +1,5 @@
-"""Report: metrics.csv (written row by row), table.md, images/, plots/, run.json."""
+"""Report: metrics.csv (written row by row), table.md, run.json, oracle.csv. The figures are
+dsm.figures', report.html dsm.htmlpage's, and dsm.publish writes them all after a run."""
 from __future__ import annotations
 
 import contextlib
@@ -11,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import metrics
+from . import metrics, summary
 
 COLUMNS = [
     "case", "scene", "light", "view", "scheme", "preset", "params", "culling", "resolution", "total_texels", "filter", "format",
@@ -77,6 +78,29 @@ def read_csv(path) -> list[dict]:
         return list(csv.DictReader(fh))
 
 
+TEXT_COLUMNS = {"case", "scene", "light", "view", "scheme", "preset", "params", "culling", "filter", "format",
+                "cascade_layout", "sweep_key"}
+
+
+INT_COLUMNS = {"resolution", "total_texels", "lookup_kernels_compiled"}
+
+
+def _typed(k, v):
+    if k in TEXT_COLUMNS:
+        return v
+    if v == "":
+        return metrics.UNDEFINED
+    if k in INT_COLUMNS or k.startswith("n_") or "_n_" in k:
+        return int(v)
+    return float(v)
+
+
+def read_rows(path) -> list[dict]:
+    """metrics.csv or oracle.csv with its numbers as int and float (an empty cell: NaN): the rows
+    every report section is written from, in a run and in ``dsm report``."""
+    return [{k: _typed(k, v) for k, v in r.items()} for r in read_csv(path)]
+
+
 def progress(total: int, enabled: bool):
     from tqdm import tqdm
     return tqdm(total=total, unit="case", disable=not enabled or not sys.stderr.isatty(), dynamic_ncols=True)
@@ -97,32 +121,16 @@ def sweep_of(spec, all_specs) -> tuple[str, float]:
 
 # ------------------------------------------------------------------ images
 
-def write_case_images(folder: Path, case: str, classes: np.ndarray, gb, setup, v: np.ndarray):
-    """The error image (one colour per class) and the shadow-mapped render of one case."""
-    from matplotlib.image import imsave
-    save_png(folder / f"{case}_error.png", lambda f, fmt: imsave(f, metrics.CLASS_COLORS[classes], format=fmt))
-    # Lambert under the light with the map's visibility, ambient elsewhere.
-    shade = np.zeros(gb.width * gb.height)
-    shade[gb.hit] = 0.12
+def shade(classes_shape, gb, setup, v: np.ndarray) -> np.ndarray:
+    """The shadow-mapped render of one case (H, W) in [0, 1]: Lambert under the light with the
+    map's visibility, ambient elsewhere."""
+    out = np.zeros(gb.width * gb.height)
+    out[gb.hit] = 0.12
     if setup.n is not None:
         n = np.stack([c.numpy() for c in (setup.n.x, setup.n.y, setup.n.z)], 1)
         to_light = _to_light_np(setup, n.shape[0])
-        shade[setup.pixels] = 0.12 + 0.88 * np.clip((n * to_light).sum(1), 0, 1) * v
-    save_png(folder / f"{case}_shadow.png", lambda f, fmt: imsave(f, shade.reshape(gb.height, gb.width), cmap="gray",
-                                                                  vmin=0, vmax=1, format=fmt))
-
-
-def write_soft_images(folder: Path, case: str, gb, setup, v: np.ndarray):
-    """An area light's case: V, V* and |V - V*| as colour maps (``<case>_v.png``, ``_vstar.png``,
-    ``_abserr.png``; black: not a receiver)."""
-    from matplotlib import colormaps
-    from matplotlib.image import imsave
-    for name, values, cmap in (("v", v, "viridis"), ("vstar", setup.v_frac, "viridis"),
-                               ("abserr", np.abs(np.asarray(v, float) - setup.v_frac), "magma")):
-        rgb = np.zeros((gb.width * gb.height, 3), np.float64)
-        rgb[setup.pixels] = colormaps[cmap](np.clip(values, 0, 1))[:, :3]
-        save_png(folder / f"{case}_{name}.png",
-                 lambda f, fmt, rgb=rgb: imsave(f, rgb.reshape(gb.height, gb.width, 3), format=fmt))
+        out[setup.pixels] = 0.12 + 0.88 * np.clip((n * to_light).sum(1), 0, 1) * v
+    return out.reshape(classes_shape)
 
 
 def _to_light_np(setup, count):
@@ -145,7 +153,7 @@ TABLE_COLUMNS = [("scene", "scene"), ("light", "light"), ("resolution", "R"), ("
 
 def legend_md() -> str:
     items = [f"{name}: rgb{tuple(int(c) for c in col)}" for name, col in zip(metrics.CLASS_NAMES, metrics.CLASS_COLORS)]
-    return "Error images (`images/<case>_error.png`): " + "; ".join(items) + "."
+    return "Error images (`images/<scene>_<light>/<case>_error.png`): " + "; ".join(items) + "."
 
 
 def status_md(status) -> list:
@@ -234,62 +242,57 @@ def oracle_md(rows: list, oracle_rows: list) -> list:
     return out
 
 
-def write_tradeoff(folder: Path, rows: list, curves: list, lam: float = 1.0):
-    """Per scene, light and view: peter-panning rate against acne rate, each map's exact oracle
-    curve (one world bias for the map) as a line and each nearest-filter case as a point."""
-    from matplotlib.figure import Figure
-    if not curves:
-        return
-    folder.mkdir(exist_ok=True)
-    groups = {}
-    for row, cw, ck in curves:
-        groups.setdefault((row["scene"], row["light"], row["view"]), []).append((row, cw, ck))
-    for (scene, light, view), cs in sorted(groups.items()):
-        cs = [c for c in cs if c[1].n_lit and c[1].n_shadowed]     # both rates defined
-        if not cs:
-            continue
-        fig = Figure(figsize=(8.5, 4.6))
-        ax = fig.subplots()
-        for k, (row, cw, ck) in enumerate(cs):
-            lab = f"oracle R={row['resolution']} {row['format']}" + (f" {row['culling']}" if row["culling"] != "none" else "")
-            ax.step(cw.acne / cw.n_lit, cw.peterpan / cw.n_shadowed, where="post", color=f"C{k % 10}", lw=1.0,
-                    label=lab + " (world b)")
-            ax.step(ck.acne / ck.n_lit, ck.peterpan / ck.n_shadowed, where="post", color=f"C{k % 10}", lw=0.8,
-                    ls=":", label=lab + " (k texel)")
-            pts = [r for r in rows if r["filter"] == "nearest" and (r["scene"], r["light"], r["view"]) ==
-                   (scene, light, view) and _map_key(r) == _map_key(row) and metrics.defined(r["acne_rate"])
-                   and metrics.defined(r["peterpan_rate"])]
-            ax.scatter([r["acne_rate"] for r in pts], [r["peterpan_rate"] for r in pts], s=14, color=f"C{k % 10}",
-                       edgecolors="k", linewidths=0.3)
-        ax.set_xscale("symlog", linthresh=1e-3)
-        ax.set_yscale("symlog", linthresh=1e-3)
-        ax.set_xlabel("acne rate")
-        ax.set_ylabel("peter-panning rate")
-        ax.set_title(f"{scene}, light {light}, {view}: exact trade-off of one bias (lines), cases (points)", fontsize=9)
-        fig.subplots_adjust(left=0.1, right=0.68, bottom=0.12, top=0.9)
-        ax.legend(loc="center left", bbox_to_anchor=(1.02, 0.5), fontsize=6, frameon=False)
-        save_png(folder / f"tradeoff_{_slug(f'{scene}_{light}_{view}')}.png",
-                 lambda f, fmt: fig.savefig(f, dpi=80, format=fmt))
-
-
-def write_table(path: Path, rows: list, cfg, status=None, oracle_rows=()):
-    lines = [f"# {cfg.name}", "", f"Config: `{cfg.source}`. {len(rows)} cases. Rates: acne = n_acne / n_gt_lit, "
-             "peter-pan = n_peterpan / n_gt_shadowed, error = (acne + peter-pan) / receivers; "
+def write_table(path: Path, rows: list, name: str, source: str, status=None, oracle_rows=(), texels=()):
+    """table.md: the answer first (dsm.summary), then failures, then every case, then the
+    views at equal memory, the oracles and the Pareto frontier."""
+    failed = sum(1 for x in status or [] if x["status"] == "failed")
+    lines = [f"# {name}", "", f"Config: `{source}`. {len(rows)} cases" +
+             (f"; **{failed} failed** (see Failed below)" if failed else "") + ". Rates: acne = n_acne / n_gt_lit, "
+             "peter-pan = n_peterpan / n_gt_shadowed, error = (acne + peter-pan) / receivers. "
+             "A dash: undefined (an empty denominator), left out of every summary and plot. report.html shows "
+             "the same with a sortable case table, the images and the plots.", "",
+             *summary.summary_md(rows), *status_md(status), "", "## Cases", "",
              "self/edge: acne counts on the receiver's own shape / at another shape's edge; pp dist: median "
-             "distance from a peter-panned receiver to its true occluder (world units). Times are warm medians. "
-             "A dash: undefined (an empty denominator), left out of every summary and plot.",
-             *status_md(status), "", legend_md(), "",
+             "distance from a peter-panned receiver to its true occluder (world units). Times are warm medians.",
+             "", legend_md(), "",
              "| case | " + " | ".join(h for _, h in TABLE_COLUMNS) + " |",
              "|---" * (len(TABLE_COLUMNS) + 1) + "|"]
     for r in rows:
         cells = [r["case"]] + [_cell(r.get(k)) for k, _ in TABLE_COLUMNS]
         lines.append("| " + " | ".join(map(str, cells)) + " |")
-    lines += views_at_equal_memory(rows, getattr(cfg.map, "texels", ()))
+    lines += views_at_equal_memory(rows, texels)
     lines += soft_md(rows)
     lines += oracle_md(rows, list(oracle_rows or ()))
     lines += pareto_md(rows)
     with atomic(path) as tmp:
         tmp.write_text("\n".join(lines) + "\n")
+
+
+def soft_rows(rows) -> list:
+    """The rows of area-light cases (their soft metrics defined)."""
+    return [r for r in rows if r.get("n_umbra", "") != "" and metrics.defined(r.get("n_umbra"))]
+
+
+def soft_md(rows: list) -> list:
+    """Area lights: V against the Monte Carlo V* by region (umbra V* = 0, penumbra, lit V* = 1),
+    the reference's mean 95 % half-width, and each filter's lookup time."""
+    soft = soft_rows(rows)
+    if not soft:
+        return []
+    cols = [("scene", "scene"), ("light", "light"), ("scheme", "scheme"), ("filter", "filter"),
+            ("n_umbra", "umbra"), ("n_penumbra", "penumbra"), ("n_lit", "lit"), ("mae_umbra", "MAE umbra"),
+            ("mae_penumbra", "MAE penumbra"), ("mae_lit", "MAE lit"), ("rmse", "RMSE"), ("acne_rate", "acne"),
+            ("peterpan_rate", "peter-pan"), ("ref_half_width_mean", "ref ±95%"), ("lookup_ms", "lookup ms")]
+    lines = ["", "## Soft shadows (area lights)", "",
+             "V against the reference V* (the visible fraction of the light, Monte Carlo): mean absolute error "
+             "per region (umbra: no reference sample visible, lit: all, penumbra: the rest), RMSE over all "
+             "receivers; acne over the lit receivers (V < 0.5), peter-pan over the umbra (V >= 0.5); ref ±95%: "
+             "the reference's mean 95 % half-width. Rays per receiver by region: run.json `reference_regions`. "
+             "Images: images/<scene>_<light>/<case>_v.png, _vstar.png, _abserr.png; plots/soft_*.png.",
+             "", "| case | " + " | ".join(h for _, h in cols) + " |", "|---" * (len(cols) + 1) + "|"]
+    for r in soft:
+        lines.append("| " + " | ".join(map(str, [r["case"]] + [_cell(r.get(k)) for k, _ in cols])) + " |")
+    return lines
 
 
 def case_time(r) -> float:
@@ -331,32 +334,6 @@ def pareto_md(rows: list) -> list:
     return out
 
 
-def write_pareto(folder: Path, rows: list):
-    from matplotlib.figure import Figure     # no pyplot: a notebook's backend stays as it is
-    folder.mkdir(exist_ok=True)
-    for (scene, light, view), rs in _pareto_groups(rows):
-        rs = [r for r in rs if metrics.defined(r["error_rate"])]     # empty cases have no error rate
-        if not rs:
-            continue
-        schemes = sorted({r["scheme"] for r in rs})
-        fig = Figure(figsize=(8.5, 4.2))
-        ax = fig.subplots()
-        for k, s in enumerate(schemes):
-            pts = [(case_time(r), r["error_rate"]) for r in rs if r["scheme"] == s and metrics.defined(r["error_rate"])]
-            ax.scatter([p[0] for p in pts], [p[1] for p in pts], s=14, color=f"C{k % 10}", label=s)
-        front = pareto_front(rs)
-        ax.plot([case_time(r) for r in front], [r["error_rate"] for r in front], "k-", lw=0.8)
-        ax.scatter([case_time(r) for r in front], [r["error_rate"] for r in front], s=60, facecolors="none",
-                   edgecolors="k", label="non-dominated")
-        ax.set_xscale("log")
-        ax.set_xlabel("time per case: map build + lookup (ms)")
-        ax.set_ylabel("error rate (acne + peter-panning) / receivers")
-        ax.set_title(f"{scene}, light {light}, {view}", fontsize=9)
-        fig.subplots_adjust(left=0.09, right=0.72, bottom=0.13, top=0.9)
-        ax.legend(loc="center left", bbox_to_anchor=(1.02, 0.5), fontsize=7, frameon=False)
-        save_png(folder / f"pareto_{_slug(f'{scene}_{light}_{view}')}.png", lambda f, fmt: fig.savefig(f, dpi=80, format=fmt))
-
-
 def views_at_equal_memory(rows: list, budgets=()) -> list:
     """Markdown lines comparing the views of each point light, case by case, at equal texel budgets."""
     groups = {}
@@ -396,135 +373,6 @@ def _cell(x):
             return "-"
         return f"{x:.4f}" if abs(x) < 10 else f"{x:.1f}"
     return x
-
-
-# ------------------------------------------------------------------ plots
-
-def _panels(path, series: dict, xlabel: str, ylabels: tuple, title: str, xlog: bool = False, style="o-",
-            styles=None):
-    """One figure with a panel per y quantity; ``series``: label -> [(x, y0, y1, ...)];
-    ``styles``: label -> extra plot keywords (colour, line style)."""
-    from matplotlib.figure import Figure
-    # undefined values (NaN: an empty denominator) are left out, not drawn as 0
-    series = {k: sorted(p for p in v if any(metrics.defined(float(y)) for y in p[1:])) for k, v in series.items()}
-    series = {k: v for k, v in series.items() if v}
-    if not series:
-        return
-    n = len(ylabels)
-    fig = Figure(figsize=(4.6 * n + 3.4, 3.8))
-    axes = fig.subplots(1, n)
-    for label, pts in series.items():
-        for k, ax in enumerate(axes, start=1):
-            ax.plot([p[0] for p in pts], [p[k] for p in pts], style, lw=0.9, label=label,
-                    **(styles or {}).get(label, {}))
-    for ax, what in zip(axes, ylabels):
-        if xlog:
-            ax.set_xscale("log", base=2)
-        ax.set_xlabel(xlabel)
-        ax.set_ylabel(what)
-    fig.suptitle(title, fontsize=9)
-    # one legend beside the panels and fixed margins: tight_layout costs more than the drawing
-    right = 4.6 * n / (4.6 * n + 3.4)
-    fig.subplots_adjust(left=0.07 * 4.6 * n / (4.6 * n + 3.4), right=right - 0.01, bottom=0.13, top=0.88, wspace=0.3)
-    handles, labels = axes[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="center left", bbox_to_anchor=(right, 0.5), fontsize=6, frameon=False)
-    save_png(path, lambda f, fmt: fig.savefig(f, dpi=80, format=fmt))
-
-
-def _soft(rows) -> list:
-    return [r for r in rows if metrics.defined(r.get("n_umbra", float("nan"))) and r.get("n_umbra") != ""]
-
-
-def soft_md(rows: list) -> list:
-    """Area lights: V against the Monte Carlo V* by region (umbra V* = 0, penumbra, lit V* = 1),
-    the reference's mean 95 % half-width, and each filter's lookup time."""
-    soft = _soft(rows)
-    if not soft:
-        return []
-    cols = [("scene", "scene"), ("light", "light"), ("scheme", "scheme"), ("filter", "filter"),
-            ("n_umbra", "umbra"), ("n_penumbra", "penumbra"), ("n_lit", "lit"), ("mae_umbra", "MAE umbra"),
-            ("mae_penumbra", "MAE penumbra"), ("mae_lit", "MAE lit"), ("rmse", "RMSE"), ("acne_rate", "acne"),
-            ("peterpan_rate", "peter-pan"), ("ref_half_width_mean", "ref ±95%"), ("lookup_ms", "lookup ms")]
-    lines = ["", "## Soft shadows (area lights)", "",
-             "V against the reference V* (the visible fraction of the light, Monte Carlo): mean absolute error "
-             "per region (umbra: no reference sample visible, lit: all, penumbra: the rest), RMSE over all "
-             "receivers; acne over the lit receivers (V < 0.5), peter-pan over the umbra (V >= 0.5); ref ±95%: "
-             "the reference's mean 95 % half-width. Rays per receiver by region: run.json `reference_regions`.",
-             "", "| case | " + " | ".join(h for _, h in cols) + " |", "|---" * (len(cols) + 1) + "|"]
-    for r in soft:
-        lines.append("| " + " | ".join(map(str, [r["case"]] + [_cell(r.get(k)) for k, _ in cols])) + " |")
-    return lines
-
-
-def write_soft_plots(folder: Path, rows: list):
-    """Area lights, per scene and light: MAE of V against V* by region, one bar per scheme and
-    filter (``soft_<scene>_<light>.png``)."""
-    from matplotlib.figure import Figure
-    groups = {}
-    for r in _soft(rows):
-        groups.setdefault((r["scene"], r["light"]), []).append(r)
-    for (scene, light), rs in sorted(groups.items()):
-        fig = Figure(figsize=(8.5, 3.6))
-        axes = fig.subplots(1, 3, sharey=True)
-        labels = [f"{r['scheme']} {r['filter']}" for r in rs]
-        for ax, region in zip(axes, ("umbra", "penumbra", "lit")):
-            vals = [r[f"mae_{region}"] for r in rs]
-            ax.bar(range(len(rs)), [float(v) for v in vals],        # NaN (an empty region): no bar
-                   color=[f"C{sorted({x['filter'] for x in rs}).index(r['filter']) % 10}" for r in rs])
-            ax.set_xticks(range(len(rs)), labels, rotation=90, fontsize=6)
-            ax.set_title(f"MAE {region}", fontsize=8)
-        fig.suptitle(f"{scene}, light {light}: |V - V*| by region (no bar: an empty region)", fontsize=8)
-        fig.subplots_adjust(bottom=0.42, top=0.86, left=0.07, right=0.99)
-        save_png(folder / f"soft_{_slug(f'{scene}_{light}')}.png", lambda f, fmt, fig=fig: fig.savefig(f, dpi=80,
-                                                                                                        format=fmt))
-
-
-def write_plots(folder: Path, rows: list):
-    """Per scene and light: error rates against the swept parameter and against resolution
-    (per view), and, where a light was mapped with several views, error against the total
-    texel count of each view (the equal-memory comparison); area lights' soft errors."""
-    if not rows:
-        return
-    folder.mkdir(exist_ok=True)
-    write_soft_plots(folder, rows)
-    groups = {}
-    for r in rows:
-        groups.setdefault((r["scene"], r["light"]), []).append(r)
-    rates = ("acne rate", "peter-panning rate")
-    for (scene, light), rs in sorted(groups.items()):
-        views = sorted({r["view"] for r in rs})
-        for view in views:
-            vr = [r for r in rs if r["view"] == view]
-            tag = _slug(f"{scene}_{light}" + (f"_{view}" if len(views) > 1 else ""))
-            rmax = max(r["resolution"] for r in vr)
-            bias = {}
-            for r in vr:
-                if r["resolution"] == rmax and not r["preset"]:
-                    lab = f"{r['scheme']} ({r['sweep_key']})" if r["sweep_key"] else r["scheme"]
-                    bias.setdefault(lab, []).append((r["sweep_value"], r["acne_rate"], r["peterpan_rate"]))
-            _panels(folder / f"vs_bias_{tag}.png", {k: v for k, v in bias.items()},
-                    "swept parameter value (its unit in the legend)", rates, f"{scene}, light {light}, {view}, R={rmax}")
-            res = {}
-            for r in vr:
-                res.setdefault(f"{r['scheme']} {r['params']}", []).append(
-                    (r["resolution"], r["acne_rate"], r["peterpan_rate"]))
-            _panels(folder / f"vs_resolution_{tag}.png", {k: v for k, v in res.items() if len(v) > 1},
-                    "map resolution R (R x R texels per face)", rates, f"{scene}, light {light}, {view}", True, ".-")
-        if len(views) > 1:
-            tex, styles = {}, {}
-            cases = sorted({(r["scheme"], r["params"]) for r in rs})
-            for r in rs:
-                lab = f"{r['view']}: {r['scheme']} {r['params']}"
-                tex.setdefault(lab, []).append((r["total_texels"], r["error_rate"], r["seam_error_rate"]))
-                styles[lab] = {"color": f"C{cases.index((r['scheme'], r['params'])) % 10}",
-                               "linestyle": ("-", "--", ":", "-.")[views.index(r["view"]) % 4]}
-            _panels(folder / f"vs_texels_{_slug(f'{scene}_{light}')}.png", tex, "total texels of the view (all faces)",
-                    ("error rate", f"error rate within {metrics.SEAM_TEXELS:g} texels of a seam"),
-                    f"{scene}, light {light}: views at equal memory (colour: scheme, line: view)", True, ".", styles)
-
-
-def _slug(s: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_" else "_" for c in s)
 
 
 # ------------------------------------------------------------------ run.json

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import itertools
 import sys
+import time
 import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,7 +23,7 @@ import drjit as dr
 import numpy as np
 
 from . import config as cfgmod
-from . import cascades, env, metrics, pipeline, report, shadowmap, timing
+from . import cascades, env, figures, metrics, pipeline, publish, report, shadowmap, soft_report, timing
 from . import plan as planmod
 from .lookup import Receiver
 
@@ -101,6 +102,9 @@ class Runner:
         self.versions = env.versions()
         self.state = "running"
         self.bar = None
+        self.pending_images = []      # case images, written by the report once measuring is done
+        self.pending_soft = []        # area lights' V, V*, |V - V*| images (dsm.soft_report), likewise
+        self.timing = {}              # seconds measuring and writing the report
 
     # ------------------------------------------------------------ top level
     def run(self) -> Results:
@@ -108,6 +112,7 @@ class Runner:
         ``running``, then ``complete``, or ``interrupted`` after Ctrl-C (re-raised once the
         folder says what it holds); a killed run leaves ``running`` and every finished case."""
         timing.enable_history()
+        t0, c0 = time.perf_counter(), _cpu()
         self.out.mkdir(parents=True, exist_ok=True)
         (self.out / "images").mkdir(exist_ok=True)
         self.csv = report.CsvWriter(self.out / "metrics.csv")
@@ -123,16 +128,26 @@ class Runner:
             self.state = "complete"
         finally:
             self.bar.close()
+            self.timing["measure_s"] = time.perf_counter() - t0
+            self.timing["measure_cpu_s"] = _cpu() - c0
             self._write_run_json()
             report.write_oracle_csv(self.out / "oracle.csv", self.oracle_rows)
-            report.write_table(self.out / "table.md", self.rows, self.cfg, self.status, self.oracle_rows)
             if self.cascade_rows:
                 cascades.write_csv(self.out / "cascades.csv", self.cascade_rows)
-            if self.state == "complete":
-                report.write_plots(self.out / "plots", self.rows)
-                report.write_pareto(self.out / "plots", self.rows)
-                report.write_tradeoff(self.out / "plots", self.rows, self.curves, self.cfg.oracle.lambdas[0])
-                cascades.write_plots(self.out / "plots", self.cascade_curves)
+            # the report, after every timed measurement: images, figures, table.md, report.html
+            t1, c1 = time.perf_counter(), _cpu()
+            try:
+                self.timing["report_parts"] = publish.write_report(self.out, self.pending_images, self.curves,
+                                                                   plots=self.state == "complete")
+                soft_report.write_images(self.out, self.pending_soft)
+                if self.state == "complete":
+                    cascades.write_plots(self.out / "plots", self.cascade_curves)
+            except Exception as e:          # the measurements are saved; the report can be rebuilt
+                self._fail("report (dsm report rebuilds it)", e)
+            self.pending_images = self.pending_soft = []
+            self.timing["report_s"] = time.perf_counter() - t1
+            self.timing["report_cpu_s"] = _cpu() - c1
+            self._write_run_json()
         return Results(self.out, self.rows, self._run_json(), self.images, self.oracle_rows, self.curves)
 
     def _run_plan(self):
@@ -363,8 +378,9 @@ class Runner:
                 m.update(extra)
                 self.cascade_rows += [{**meta, **r} for r in per]
                 self.cascade_curves.append((meta, curve))
-                cascades.write_index_image(self.out / "images" / f"{case}_cascade.png", setup.pixels, faces,
-                                           gb.width, gb.height)
+                folder = self.out / "images" / figures.image_folder(meta)
+                folder.mkdir(parents=True, exist_ok=True)
+                cascades.write_index_image(folder / f"{case}_cascade.png", setup.pixels, faces, gb.width, gb.height)
             m["n_backfacing"] = int(v_back.size)
             m["backface_lit_rate"] = float((v_back >= 0.5).mean()) if v_back.size else metrics.UNDEFINED
             texel = float(np.median(rx.texel_world.numpy())) if rx is not None else metrics.UNDEFINED
@@ -378,9 +394,13 @@ class Runner:
             classes = np.zeros(gb.width * gb.height, np.uint8)
             classes[setup.pixels] = pipeline.classify(v_np, setup.v_star, wrong)
             classes = classes.reshape(gb.height, gb.width)
-            report.write_case_images(self.out / "images", case, classes, gb, setup, v_np)
-            if setup.ref is not None:
-                report.write_soft_images(self.out / "images", case, gb, setup, v_np)
+            item = publish.image_item(meta, classes, report.shade(classes.shape, gb, setup, v_np)
+                                      if self.cfg.report_images == "all" else None, self.cfg.report_images)
+            if item is not None:
+                self.pending_images.append(item)
+            if setup.ref is not None and self.cfg.report_images != "none":    # area light: V, V*, |V - V*|
+                self.pending_soft.append(soft_report.image_item(meta, gb.width, gb.height, setup.pixels, v_np,
+                                                                setup.v_frac))
             if self.keep_images:
                 self.images[case] = classes
             self.rows.append(row)
@@ -403,11 +423,19 @@ class Runner:
         info["maps"] = self.maps
         info["quantized_copies"] = self.quantized
         info["reference_regions"] = self.reference_regions
+        info["timing"] = self.timing
         return info
 
     def _write_run_json(self):
         # after every case (compact), indented once the run has ended
         report.write_json(self.out / "run.json", self._run_json(), None if self.state == "running" else 1)
+
+
+def _cpu() -> float:
+    """CPU seconds of this process (every thread) and of its finished children (the drawing workers)."""
+    import resource
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + ru.ru_utime + ru.ru_stime
 
 
 def _points_np(p) -> np.ndarray:

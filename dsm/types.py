@@ -20,6 +20,8 @@ LIGHT_TYPES = ("scene", "directional", "spot", "point", "area")
 AREA_SHAPES = ("rectangle", "disk", "sphere", "emitter")
 # vectorized Dr.Jit variants only: the kit's code runs on wide arrays (scalar_rgb cannot run it)
 VARIANTS = ("llvm_ad_rgb", "cuda_ad_rgb")
+# [report] images: error and shadow images per case, error images only, or none
+REPORT_IMAGES = ("all", "errors", "none")
 
 
 class ConfigError(ValueError):
@@ -308,6 +310,7 @@ class Config:
     timing_repeats: int = 3
     memory_budget_mb: float | None = None   # None: a quarter of this machine's memory
     oracle: "OracleSpec" = field(default_factory=lambda: OracleSpec())
+    report_images: str = "all"              # [report] images (REPORT_IMAGES)
     raw: dict = field(default_factory=dict, compare=False)
 
 

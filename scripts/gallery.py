@@ -1,9 +1,14 @@
 """Regenerate docs/gallery/ from the default experiment and experiments/engine_defaults.toml:
-the README's tables (the default experiment; engine defaults against the best possible) and
-error images.
+the README's tables (the default run's summary, table.md's first sections; engine defaults
+against the best possible), error images and a screenshot of the default run's report.html.
 
-    .venv/bin/python scripts/gallery.py [results folder of a default run]
+    .venv/bin/python scripts/gallery.py [results folder of a default run] [--default-only]
+
+A folder holding a complete default run is read as it is; otherwise the default experiment
+runs into it (or into a temporary folder).
 """
+import json
+import shutil
 import sys
 from collections import defaultdict
 from pathlib import Path
@@ -12,6 +17,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 import dsm
+from dsm import figures, report, summary
 from dsm.cli import DEFAULT_CONFIG
 from dsm.metrics import CLASS_COLORS, CLASS_NAMES
 
@@ -19,33 +25,54 @@ ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "docs" / "gallery"
 
 
-def main():
-    res = dsm.run(DEFAULT_CONFIG, out=sys.argv[1] if len(sys.argv) > 1 else None)
-    OUT.mkdir(parents=True, exist_ok=True)
-    # the table: mean (max) over every case of each scheme instance
-    groups = defaultdict(list)
-    for r in res.rows:
-        groups[(r["scheme"], r["preset"] or r["params"])].append(r)
-    # undefined rates (an empty denominator: no lit or no shadowed receiver) are left out, and counted
-    lines = ["| scheme | params | cases | acne rate, mean (max) [cases] | peter-panning rate, mean (max) [cases] | "
-             "build ms | lookup ms |", "|---|---|---|---|---|---|---|"]
+def default_run(folder):
+    """A complete default run's folder: the one given if it holds one, else a fresh run."""
+    if folder is not None and (Path(folder) / "run.json").is_file():
+        run = json.loads((Path(folder) / "run.json").read_text())
+        if run.get("state") == "complete" and run.get("experiment") == "default":
+            return Path(folder)
+    return dsm.run(DEFAULT_CONFIG, out=folder).out
 
-    def cell(values):
-        v = np.array(values, float)
-        v = v[~np.isnan(v)]
-        return f"{v.mean():.4f} ({v.max():.3f}) [{v.size}]" if v.size else "-"
-    for (scheme, params), rs in groups.items():
-        lines.append(f"| {scheme} | {params} | {len(rs)} | {cell([r['acne_rate'] for r in rs])} | "
-                     f"{cell([r['peterpan_rate'] for r in rs])} | "
-                     f"{np.median([r['build_ms'] for r in rs]):.1f} | {np.median([r['lookup_ms'] for r in rs]):.2f} |")
-    (OUT / "default_table.md").write_text("\n".join(lines) + "\n")
+
+def screenshot(page: Path, png: Path, size=(1280, 900)) -> bool:
+    """report.html's first screen in headless Chromium (Selenium); False where it cannot run here."""
+    try:
+        from selenium import webdriver
+        from selenium.webdriver.chrome.options import Options
+        from selenium.webdriver.chrome.service import Service
+    except ImportError:
+        return False
+    browser, driver = shutil.which("chromium"), shutil.which("chromedriver")
+    if not browser or not driver:
+        return False
+    opts = Options()
+    opts.binary_location = browser
+    for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--hide-scrollbars", f"--window-size={size[0]},{size[1]}"):
+        opts.add_argument(a)
+    drv = webdriver.Chrome(service=Service(driver), options=opts)
+    try:
+        drv.get(page.resolve().as_uri())
+        return drv.save_screenshot(str(png))
+    finally:
+        drv.quit()
+
+
+def main():
+    args = [a for a in sys.argv[1:] if not a.startswith("--")]
+    out = default_run(args[0] if args else None)
+    OUT.mkdir(parents=True, exist_ok=True)
+    rows = report.read_rows(out / "metrics.csv")
+    # the README's table: table.md's summary sections, as the run wrote them
+    (OUT / "default_table.md").write_text("\n".join(summary.summary_md(rows)) + "\n")
     # the images: the room's own point light, cube view, R = 512, four schemes
+    from PIL import Image
     pick = [("none", ""), ("constant", "bias=2 texel"), ("normal_offset", "offset=1.5 texel bias=0"), ("adaptive", "K=0.0001")]
     fig = Figure(figsize=(13, 3.9))
     axes = fig.subplots(1, len(pick))
     for ax, (scheme, params) in zip(axes, pick):
-        r = res.where(scene="room", light="0:point", view="cube", resolution=512, scheme=scheme, params=params).rows[0]
-        ax.imshow(res.rgb(r))
+        r = next(r for r in rows if (r["scene"], r["light"], r["view"], r["resolution"], r["scheme"], r["params"]) ==
+                 ("room", "0:point", "cube", 512, scheme, params))
+        ax.imshow(np.asarray(Image.open(out / figures.image_paths(r)[0])))
         ax.set_title(f"{scheme} {params}\nacne {r['acne_rate']:.3f}, peter-panning {r['peterpan_rate']:.3f}", fontsize=9)
         ax.axis("off")
     from matplotlib.patches import Patch
@@ -53,7 +80,11 @@ def main():
                ncol=5, fontsize=9, frameon=False)
     fig.subplots_adjust(left=0.01, right=0.99, top=0.86, bottom=0.09, wspace=0.04)
     fig.savefig(OUT / "room_point_cube_errors.png", dpi=80)
-    print(f"{res.run['n_empty']} empty cases, {res.run['n_failed']} failed")
+    if not screenshot(out / "report.html", OUT / "report_html.png"):
+        print("no screenshot of report.html: selenium or chromium is missing", file=sys.stderr)
+    run = json.loads((out / "run.json").read_text())
+    print(f"{run['n_empty']} empty cases, {run['n_failed']} failed; measuring {run['timing']['measure_s']:.1f} s, "
+          f"report {run['timing']['report_s']:.1f} s")
     print((OUT / "default_table.md").read_text())
 
 
@@ -94,4 +125,5 @@ def engine_defaults():
 
 if __name__ == "__main__":
     main()
-    engine_defaults()
+    if "--default-only" not in sys.argv:
+        engine_defaults()

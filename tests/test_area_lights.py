@@ -242,7 +242,9 @@ def test_area_light_run_end_to_end(run_dict):
         assert r["n_umbra"] + r["n_penumbra"] + r["n_lit"] == r["n_receivers"]
         assert r["n_penumbra"] > 0 and r["n_umbra"] > 0
         for name in ("v", "vstar", "abserr"):
-            assert (res.out / "images" / f"{r['case']}_{name}.png").is_file()
+            assert (res.out / "images" / "plane_box_0_area" / f"{r['case']}_{name}.png").is_file()
+    assert (res.out / "plots" / "soft_plane_box_0_area.png").is_file()
+    assert "## Soft shadows (area lights)" in (res.out / "table.md").read_text()
     wide = {r["scheme"]: r for r in res.rows if r["filter"] == "pcf_wide:5"}
     assert wide["adaptive_tap"]["mae_lit"] <= wide["constant"]["mae_lit"] + 1e-9
 

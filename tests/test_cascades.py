@@ -114,7 +114,9 @@ def test_one_cascade_in_the_runner_counts_as_the_single_map(run_dict):
     keys = ("n_receivers", "n_acne", "n_peterpan", "n_gt_lit", "n_acne_resolution")
     assert [[r[k] for k in keys] for r in a.rows] == [[r[k] for k in keys] for r in b.rows]
     assert all(r["n_receivers"] > 0 for r in a.rows) and any(r["n_acne"] > 0 for r in a.rows)
-    assert (b.out / "cascades.csv").is_file() and (b.out / "images" / "0001_cascade.png").is_file()
+    from dsm import figures      # images: one folder per scene and light
+    folder = b.out / "images" / figures.image_folder(b.rows[0])
+    assert (b.out / "cascades.csv").is_file() and (folder / f"{b.rows[0]['case']}_cascade.png").is_file()
 
 
 # ---------------------------------------------------------------- bias per cascade

@@ -4,7 +4,7 @@ import json
 import subprocess
 import sys
 
-from dsm import report
+from dsm import figures, report
 from dsm.schemes import REGISTRY
 
 
@@ -28,9 +28,13 @@ def test_default_experiment_writes_the_report(tmp_path):
     assert run["n_failed"] == 0 and run["n_cases_ok"] == len(rows)
     table = (out / "table.md").read_text()
     assert "acne" in table and "peter-panning: rgb" in table and table.count("\n|") >= len(rows) + 1
-    for r in rows:
-        assert (out / "images" / f"{r['case']}_error.png").is_file()
-        assert (out / "images" / f"{r['case']}_shadow.png").is_file()
+    for r in rows:      # one folder per scene and light
+        folder = out / "images" / figures.image_folder(r)
+        assert (folder / f"{r['case']}_error.png").is_file() and (folder / f"{r['case']}_shadow.png").is_file()
+    assert len(list((out / "images").iterdir())) == len({(r["scene"], r["light"]) for r in rows})
+    assert (out / "report.html").is_file() and table.startswith("# default\n") and "## Summary" in table
+    timing = run["timing"]
+    assert "measuring" in p.stdout and timing["report_s"] > 0 and timing["measure_s"] > 0
     plots = sorted(x.name for x in (out / "plots").iterdir())
     assert any(x.startswith("vs_bias_") for x in plots) and any(x.startswith("vs_resolution_") for x in plots)
     # the default experiment really shows both failure modes somewhere

@@ -1,0 +1,182 @@
+"""The report of a run, written after its measurements; ``dsm report``: rebuilt from a run's files,
+or two runs compared.
+
+A run calls :func:`write_report` once its timed work is done: the case images and the figures
+are drawn then (in worker processes when there are enough, see ``figures.run_jobs``), so no
+drawing overlaps a timed build or lookup; table.md and report.html are written from the run's
+files (metrics.csv, run.json, oracle.csv, oracle_curves.npz), so :func:`rebuild` writes the
+same from the same folder.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import time
+from pathlib import Path
+
+from . import figures, htmlpage, metrics, report, soft_report, summary
+
+PLOT_PREFIXES = ("vs_bias_", "vs_resolution_", "vs_texels_", "pareto_", "tradeoff_", "soft_")
+IMAGES_PER_JOB = 150
+
+
+class NotARun(ValueError):
+    """A folder that holds no dsm run (no metrics.csv or run.json)."""
+
+
+def image_item(row: dict, classes, shade, mode: str = "all"):
+    """What write_report writes for one case under ``[report] images = mode``: its error image
+    (classes, (H, W) uint8), and with "all" its shadow-mapped render (shade, (H, W) in [0, 1]);
+    None for "none"."""
+    if mode == "none":
+        return None
+    err, shadow = figures.image_paths(row)
+    return err, classes, shadow, figures.shade_image(shade) if mode == "all" else None
+
+
+def _load(out: Path):
+    out = Path(out)
+    if not (out / "metrics.csv").is_file() or not (out / "run.json").is_file():
+        raise NotARun(f"{out}: not a dsm results folder (it needs metrics.csv and run.json)")
+    run = json.loads((out / "run.json").read_text())
+    rows = report.read_rows(out / "metrics.csv")
+    oracle_rows = report.read_rows(out / "oracle.csv") if (out / "oracle.csv").is_file() else []
+    return run, rows, oracle_rows
+
+
+def _texels(run) -> tuple:
+    raw = run.get("config", {}).get("map", {}).get("texels", [])
+    return tuple(raw if isinstance(raw, list) else [raw])
+
+
+def write_report(out: Path, images=(), curves=None, plots: bool = True) -> dict:
+    """Write the report of the run in ``out``: case images (``images``: image_item()s), figures
+    (``plots``), table.md and report.html. ``curves``: the oracles' exact curves of the run
+    (saved as oracle_curves.npz); None reads that file. Returns seconds spent per part."""
+    out = Path(out)
+    t0 = time.perf_counter()
+    run, rows, oracle_rows = _load(out)
+    if curves is not None:
+        rates = [figures.curve_rates(*c) for c in curves]
+        figures.save_curves(out / "oracle_curves.npz", rates)
+    else:
+        rates = figures.load_curves(out / "oracle_curves.npz")
+    jobs = []
+    if plots and rows:
+        folder = out / "plots"
+        folder.mkdir(exist_ok=True)
+        for p in folder.glob("*.png"):           # a rebuild replaces every figure a run draws
+            if p.name.startswith(PLOT_PREFIXES):
+                p.unlink()
+        jobs += figures.plot_jobs(folder, rows, rates)
+        jobs += soft_report.plot_jobs(folder, rows)          # area lights: MAE of V against V* by region
+    n_figures = len(jobs)
+    items = [i for i in images if i is not None]
+    by_folder = {}
+    for it in items:
+        by_folder.setdefault(Path(it[0]).parent, []).append(it)
+    for its in by_folder.values():
+        jobs += [(figures.write_images, (out, its[i:i + IMAGES_PER_JOB])) for i in range(0, len(its), IMAGES_PER_JOB)]
+    t1 = time.perf_counter()
+    pool = figures.run_jobs(jobs)
+    t2 = time.perf_counter()
+    report.write_table(out / "table.md", rows, run.get("experiment", out.name), run.get("config_file", ""),
+                       run.get("status", []), oracle_rows, _texels(run))
+    htmlpage.write_html(out / "report.html", rows, run)
+    t3 = time.perf_counter()
+    return {"figures": n_figures, "images": len(items), "workers": pool, "read_s": t1 - t0, "draw_s": t2 - t1,
+            "pages_s": t3 - t2}
+
+
+def rebuild(out: Path, plots: bool = True) -> dict:
+    """``dsm report DIR``: table.md, the plots and report.html again from the folder's files,
+    without measuring (the case images are kept as they are)."""
+    return write_report(out, (), None, plots)
+
+
+# ------------------------------------------------------------------ comparing two runs
+
+KEY = ("scene", "light", "view", "scheme", "params", "resolution", "filter", "format", "culling", "cascade_layout")
+COMPARED = ("acne_rate", "peterpan_rate", "error_rate", "n_acne", "n_peterpan", "n_receivers", "build_ms",
+            "lookup_ms")
+
+
+def _key(r):
+    return tuple(r["preset"] or r["params"] if k == "params" else r.get(k, "") for k in KEY)
+
+
+def _diff(a, b):
+    return b - a if metrics.defined(a) and metrics.defined(b) else math.nan
+
+
+def _signed(x) -> str:
+    if not metrics.defined(x):
+        return "-"
+    return "0" if x == 0 else f"{x:+.3g}"
+
+
+def compare(dir_a: Path, dir_b: Path, out: Path) -> dict:
+    """``dsm report A B``: the cases both runs hold (same scene, light, view, scheme instance,
+    resolution, filter, format and culling), side by side with B - A, into ``out``: compare.md
+    (the per-instance summaries of the matched cases of each run, then every matched case, the
+    largest change in error rate first) and compare.csv (every matched case, a_, b_ and diff_
+    columns). Returns the counts."""
+    run_a, rows_a, _ = _load(dir_a)
+    run_b, rows_b, _ = _load(dir_b)
+    index_b = {}
+    for r in rows_b:
+        index_b.setdefault(_key(r), r)
+    pairs, seen = [], set()
+    for r in rows_a:
+        k = _key(r)
+        if k in index_b and k not in seen:
+            pairs.append((r, index_b[k]))
+            seen.add(k)
+    only_a = sum(1 for r in rows_a if _key(r) not in index_b)
+    only_b = sum(1 for r in rows_b if _key(r) not in seen)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    with report.atomic(out / "compare.csv") as tmp, open(tmp, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(list(KEY) + ["case_a", "case_b"] + [f"{p}_{c}" for c in COMPARED for p in ("a", "b", "diff")])
+        for a, b in pairs:
+            w.writerow(list(_key(a)) + [a["case"], b["case"]] + [
+                f"{x:.6g}" if metrics.defined(x) else ""
+                for c in COMPARED for x in (float(a[c]), float(b[c]), _diff(a[c], b[c]))])
+    desc = lambda run, d: (f"`{d}` ({run.get('experiment', '?')}, {run.get('state', '?')}, commit "
+                           f"{str(run.get('versions', {}).get('dsm_git_commit', '?'))[:10]}, "
+                           f"{run.get('variant', '?')}, {run.get('threads', '?')} threads)")
+    lines = ["# Comparison: B - A", "", f"A: {desc(run_a, dir_a)}", "", f"B: {desc(run_b, dir_b)}", "",
+             f"{len(pairs)} cases in both (matched on {', '.join(KEY)}); {only_a} only in A, {only_b} only in B. "
+             "Differences are B - A; a dash: undefined in either run.", "",
+             "## Per scheme instance, over the matched cases", "",
+             "| scheme | params | cases | acne pooled A | B | B - A | peter-pan pooled A | B | B - A | "
+             "error pooled A | B | B - A | build ms A | B | lookup ms A | B |", "|---" * 16 + "|"]
+    sa = {s["key"][:2]: s for s in summary.per_instance([a for a, _ in pairs])} if pairs else {}
+    sb = {s["key"][:2]: s for s in summary.per_instance([b for _, b in pairs])} if pairs else {}
+    for k, a in sa.items():
+        b = sb.get(k)
+        if b is None:
+            continue
+        cells = [k[0], k[1], a["cases"]]
+        for t in ("acne_pooled", "peterpan_pooled", "error_pooled"):
+            cells += [summary.rate(a[t]), summary.rate(b[t]), _signed(_diff(a[t], b[t]))]
+        cells += [f"{a['build_ms']:.2f}", f"{b['build_ms']:.2f}", f"{a['lookup_ms']:.2f}", f"{b['lookup_ms']:.2f}"]
+        lines.append("| " + " | ".join(map(str, cells)) + " |")
+    lines += ["", "## Matched cases (largest change in error rate first)", "",
+              "| case A | case B | scene | light | view | scheme | params | R | filter | format | acne A | B | B - A | "
+              "peter-pan A | B | B - A | error A | B | B - A | time ms A | B |", "|---" * 21 + "|"]
+    order = sorted(pairs, key=lambda p: (not metrics.defined(_diff(p[0]["error_rate"], p[1]["error_rate"])),
+                                         -abs(_diff(p[0]["error_rate"], p[1]["error_rate"]))
+                                         if metrics.defined(_diff(p[0]["error_rate"], p[1]["error_rate"])) else 0))
+    for a, b in order:
+        cells = [a["case"], b["case"], a["scene"], a["light"], a["view"], a["scheme"], a["preset"] or a["params"],
+                 a["resolution"], a["filter"], a["format"]]
+        for c in ("acne_rate", "peterpan_rate", "error_rate"):
+            cells += [summary.rate(a[c]), summary.rate(b[c]), _signed(_diff(a[c], b[c]))]
+        cells += [f"{report.case_time(a):.2f}", f"{report.case_time(b):.2f}"]
+        lines.append("| " + " | ".join(map(str, cells)) + " |")
+    with report.atomic(out / "compare.md") as tmp:
+        tmp.write_text("\n".join(lines) + "\n")
+    return {"matched": len(pairs), "only_a": only_a, "only_b": only_b}

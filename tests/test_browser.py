@@ -1,0 +1,114 @@
+"""report.html in a real browser: headless Chromium driven by Selenium (Debian's chromium and
+chromium-driver, which scripts/setup installs when it runs as root). Opened from the file system,
+it shows the summary and the case table in the live DOM, and a click on the acne-rate header
+orders the rows as metrics.csv's values say."""
+import csv
+import math
+import shutil
+
+import pytest
+
+from conftest import base_config
+
+
+def _chrome():
+    try:
+        from selenium import webdriver
+        from selenium.webdriver.chrome.options import Options
+        from selenium.webdriver.chrome.service import Service
+    except ImportError:
+        pytest.skip("selenium is not installed (pip install -e .[test])")
+    browser = shutil.which("chromium") or shutil.which("chromium-browser")
+    driver = shutil.which("chromedriver")
+    if not browser or not driver:
+        pytest.skip("Chromium or its driver is missing (as root: apt-get install chromium chromium-driver; "
+                    "scripts/setup does it)")
+    opts = Options()
+    opts.binary_location = browser
+    for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--window-size=1280,900",
+              "--allow-file-access-from-files"):
+        opts.add_argument(a)
+    try:
+        return webdriver.Chrome(service=Service(driver), options=opts)
+    except Exception as e:       # a browser that cannot start here: say why, do not fail the suite
+        pytest.skip(f"Chromium did not start: {str(e).splitlines()[0]}")
+
+
+@pytest.fixture(scope="module")
+def page(tmp_path_factory):
+    import dsm
+    cfg = base_config(experiment={"name": "browser"}, camera={"resolution": [32, 32]},
+                      scene=[{"builtin": "plane"}, {"builtin": "plane_box"}], map={"resolution": [16, 32]},
+                      scheme=[{"name": "none"}, {"name": "constant", "bias": ["1 texel", 0.05]}, {"name": "adaptive"}])
+    res = dsm.run(cfg, out=tmp_path_factory.mktemp("browser") / "run")
+    drv = _chrome()
+    drv.get((res.out / "report.html").as_uri())
+    yield res, drv
+    drv.quit()
+
+
+def _csv(res):
+    with open(res.out / "metrics.csv", newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _visible_cases(drv):
+    return drv.execute_script("return Array.from(document.querySelectorAll('#case-table tbody tr'))"
+                              ".filter(r => !r.hidden).map(r => r.dataset.case)")
+
+
+def test_the_page_shows_the_summary_and_the_cases(page, tmp_path):
+    res, drv = page
+    shot = tmp_path / "report.png"
+    assert drv.save_screenshot(str(shot))
+    data = shot.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
+    rows = _csv(res)
+    instances = {(r["scheme"], r["preset"] or r["params"]) for r in rows}
+    summary = drv.execute_script("return Array.from(document.querySelectorAll('#summary-table tbody tr'))"
+                                 ".map(r => [r.cells[0].textContent, r.cells[1].textContent])")
+    assert {tuple(x) for x in summary} == instances and len(summary) == len(instances) == 4
+    # the best scheme per scene and light is on the first screen
+    best = drv.find_element("id", "best")
+    assert best.is_displayed() and best.location["y"] < 900
+    assert drv.execute_script("return document.querySelectorAll('#best tbody tr').length") == 2
+    assert _visible_cases(drv) == [r["case"] for r in rows]
+    # no request leaves the file system
+    assert drv.execute_script("return Array.from(document.querySelectorAll('[src],[href]'))"
+                              ".every(e => !/^https?:/.test(e.getAttribute('src') || e.getAttribute('href')))")
+
+
+def test_clicking_the_acne_rate_header_orders_the_rows(page):
+    res, drv = page
+    rows = _csv(res)
+    drv.execute_script("window.scrollTo(0, 0)")
+    header = next(th for th in drv.find_elements("css selector", "#case-table thead th") if th.text == "acne rate")
+    value = lambda r: float(r["acne_rate"]) if r["acne_rate"] != "" else math.nan
+    ascending = sorted(rows, key=lambda r: (math.isnan(value(r)), value(r) if not math.isnan(value(r)) else 0))
+    header.click()
+    assert header.get_attribute("aria-sort") == "ascending"
+    assert _visible_cases(drv) == [r["case"] for r in ascending]
+    assert [value(r) for r in ascending] != [value(r) for r in rows]      # the click changed the order
+    header.click()
+    descending = sorted(ascending, key=lambda r: (math.isnan(value(r)), -value(r) if not math.isnan(value(r)) else 0))
+    assert header.get_attribute("aria-sort") == "descending"
+    assert _visible_cases(drv) == [r["case"] for r in descending]
+
+
+def test_filtering_and_a_case_s_images(page):
+    from selenium.webdriver.support.ui import Select
+    res, drv = page
+    rows = _csv(res)
+    Select(drv.find_element("css selector", ".filters select[name=scene]")).select_by_value("plane_box")
+    shown = _visible_cases(drv)
+    assert sorted(shown) == sorted(r["case"] for r in rows if r["scene"] == "plane_box")
+    assert drv.find_element("id", "shown").text == str(len(shown))
+    Select(drv.find_element("css selector", ".filters select[name=scene]")).select_by_value("")
+    case = rows[-1]["case"]
+    drv.find_element("css selector", f"#case-table tbody tr[data-case='{case}']").click()
+    imgs = drv.find_elements("css selector", "#viewer img")
+    assert [i.get_attribute("alt") for i in imgs] == [f"error image of case {case}", f"shadow image of case {case}"]
+    # the images load from the file system (a broken link has no natural width)
+    loaded = drv.execute_script("const im = Array.from(document.querySelectorAll('#viewer img'));"
+                                "return im.every(i => i.complete && i.naturalWidth === 32)")
+    assert loaded

@@ -1,0 +1,256 @@
+"""The report a person reads: the summary's definitions against a numpy recomputation from
+metrics.csv, pooled against mean, undefined rates left out and counted, one unit per plot panel,
+``dsm report DIR`` reproducing table.md, the comparison of two runs, and ``[report] images``."""
+import csv
+import math
+import shutil
+
+import numpy as np
+import pytest
+
+from conftest import base_config
+
+TINY = base_config(
+    experiment={"name": "report_test"}, camera={"resolution": [40, 40]},
+    # the lone plane has no shadow: its peter-panning rates are undefined
+    scene=[{"builtin": "plane"}, {"builtin": "plane_box"}], map={"resolution": [32, 64]},
+    scheme=[{"name": "none"}, {"name": "constant", "bias": ["0.5 texel", "2 texel", 0.05]}, {"name": "adaptive"}])
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    import dsm
+    return dsm.run(TINY, out=tmp_path_factory.mktemp("report") / "run")
+
+
+def _csv(path):
+    """metrics.csv read here, apart from the code under test: numbers as float64, '' as NaN."""
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    num = lambda v: float(v) if v != "" else np.nan
+    return rows, num
+
+
+def test_summary_matches_a_numpy_recomputation(run):
+    from dsm import report, summary
+    raw, num = _csv(run.out / "metrics.csv")
+    got = {s["key"]: s for s in summary.per_instance(report.read_rows(run.out / "metrics.csv"))}
+    keys = sorted({(r["scheme"], r["preset"] or r["params"]) for r in raw})
+    assert set(got) == set(keys) and len(keys) == 5
+    # situations (scene, light, view, resolution): the lowest error rate wins, ties count for each
+    sit = {}
+    for r in raw:
+        sit.setdefault((r["scene"], r["light"], r["view"], r["resolution"]), []).append(r)
+    wins = {k: 0 for k in keys}
+    for rs in sit.values():
+        e = np.array([num(r["error_rate"]) for r in rs])
+        for r, x in zip(rs, e):
+            if not np.isnan(x) and x == np.nanmin(e):
+                wins[(r["scheme"], r["preset"] or r["params"])] += 1
+    for k in keys:
+        rs = [r for r in raw if (r["scheme"], r["preset"] or r["params"]) == k]
+        col = lambda c: np.array([num(r[c]) for r in rs], np.float64)
+        s = got[k]
+        assert s["cases"] == len(rs)
+        assert s["acne_pooled"] == pytest.approx(col("n_acne").sum() / col("n_gt_lit").sum(), rel=1e-12)
+        assert s["peterpan_pooled"] == pytest.approx(col("n_peterpan").sum() / col("n_gt_shadowed").sum(), rel=1e-12)
+        assert s["error_pooled"] == pytest.approx((col("n_acne") + col("n_peterpan")).sum() / col("n_receivers").sum(),
+                                                  rel=1e-12)
+        for tag, c in (("acne", "acne_rate"), ("peterpan", "peterpan_rate"), ("error", "error_rate")):
+            v = col(c)
+            assert s[f"{tag}_undefined"] == int(np.isnan(v).sum())
+            assert s[f"{tag}_mean"] == pytest.approx(np.nanmean(v), rel=1e-12)
+            assert s[f"{tag}_median"] == pytest.approx(np.nanmedian(v), rel=1e-12)
+            assert s[f"{tag}_max"] == pytest.approx(np.nanmax(v), rel=1e-12)
+        assert s["build_ms"] == pytest.approx(col("build_ms").mean(), rel=1e-12)
+        assert s["lookup_ms"] == pytest.approx(col("lookup_ms").mean(), rel=1e-12)
+        assert s["best_in"] == wins[k]
+        # the lone plane's cases: no truly shadowed receiver, so peter-panning is undefined there, and counted
+        assert s["peterpan_undefined"] == sum(1 for r in rs if r["scene"] == "plane") == 2
+    # the table is sorted by pooled error rate and table.md starts with it
+    order = [s["error_pooled"] for s in summary.per_instance(report.read_rows(run.out / "metrics.csv"))]
+    assert order == sorted(order)
+    text = (run.out / "table.md").read_text()
+    assert text.index("## Summary") < text.index("## Best per scene, light and resolution") < text.index("## Cases")
+    assert "errors summed over the cases divided by the receivers summed" in text
+    first = summary.per_instance(report.read_rows(run.out / "metrics.csv"))[0]
+    assert f"| {summary.rate(first['error_pooled'])} |" in text
+
+
+def test_pooled_is_not_the_mean_and_undefined_rates_are_left_out():
+    """Two cases of one scheme: 1 of 10 lit receivers in acne, then 90 of 100; the third case has
+    no lit receiver. Pooled acne = 91 / 110; the mean of the per-case rates = (0.1 + 0.9) / 2."""
+    from dsm import summary
+    nan = math.nan
+    base = {"scene": "s", "light": "l", "view": "v", "scheme": "x", "preset": "", "params": "", "filter": "nearest",
+            "format": "float32", "build_ms": 1.0, "lookup_ms": 2.0}
+    rows = [dict(base, resolution=1, n_acne=1, n_gt_lit=10, n_peterpan=0, n_gt_shadowed=5, n_receivers=15,
+                 acne_rate=0.1, peterpan_rate=0.0, error_rate=1 / 15),
+            dict(base, resolution=2, n_acne=90, n_gt_lit=100, n_peterpan=1, n_gt_shadowed=4, n_receivers=104,
+                 acne_rate=0.9, peterpan_rate=0.25, error_rate=91 / 104),
+            dict(base, resolution=3, n_acne=0, n_gt_lit=0, n_peterpan=2, n_gt_shadowed=4, n_receivers=4,
+                 acne_rate=nan, peterpan_rate=0.5, error_rate=0.5)]
+    s = summary.per_instance(rows)[0]
+    assert s["acne_pooled"] == pytest.approx(91 / 110)
+    assert s["acne_mean"] == pytest.approx(0.5) and s["acne_median"] == pytest.approx(0.5)
+    assert s["acne_max"] == pytest.approx(0.9) and s["acne_undefined"] == 1
+    assert s["peterpan_pooled"] == pytest.approx(3 / 13) and s["peterpan_undefined"] == 0
+    assert s["error_pooled"] == pytest.approx(94 / 123)
+    # no receiver at all: every pooled rate undefined, and a dash in the table
+    empty = dict(base, resolution=1, n_acne=0, n_gt_lit=0, n_peterpan=0, n_gt_shadowed=0, n_receivers=0,
+                 acne_rate=nan, peterpan_rate=nan, error_rate=nan, scheme="y")
+    t = {x["scheme"]: x for x in summary.per_instance(rows + [empty])}["y"]
+    assert math.isnan(t["error_pooled"]) and t["error_undefined"] == 1 and t["best_in"] == 0
+    assert any(line.startswith("| y |") and "| - |" in line for line in summary.summary_md(rows + [empty]))
+
+
+def _rows(specs):
+    """Synthetic case rows: (scheme, params, sweep_key, sweep_value, acne, peter-pan, resolution)."""
+    out = []
+    for i, (scheme, params, key, value, a, p, res) in enumerate(specs):
+        out.append({"case": f"{i:04d}", "scene": "s", "light": "0:directional", "view": "orthographic",
+                    "scheme": scheme, "preset": "", "params": params, "resolution": res, "total_texels": res * res,
+                    "filter": "nearest", "format": "float32", "culling": "none", "acne_rate": a, "peterpan_rate": p,
+                    "error_rate": (a + p) / 2, "seam_error_rate": math.nan, "build_ms": 1.0 + i, "lookup_ms": 0.5,
+                    "sweep_key": key, "sweep_value": value})
+    return out
+
+
+def test_plots_have_one_unit_per_panel_symlog_rates_and_short_legends(tmp_path):
+    from dsm import figures
+    specs = []
+    for v in (0.5, 2.0):
+        specs.append(("constant", f"bias={v:g} texel", "bias [texel]", v, 0.1 / v, 0.0, 64))
+        specs.append(("normal_offset", f"offset={v:g} texel bias=0", "offset [texel]", v, 0.01 / v, 0.001 * v, 64))
+    for v in (0.01, 0.05):
+        specs.append(("constant", f"bias={v:g}", "bias [world]", v, 0.001, 0.0, 64))
+    for v in (1e-4, 1e-3):
+        specs.append(("adaptive", f"K={v:g}", "K", v, 0.0, 0.0001, 64))
+    specs.append(("none", "", "", 0.0, 0.5, 0.0, 64))
+    # ten instances at two resolutions: more than eight legend entries in all
+    for k in range(10):
+        for res in (32, 64):
+            specs.append(("normal_angle", f"bias={k} texel max=8 texel", "bias [texel]", float(k), 0.01, 0.02, res))
+    jobs = figures.plot_jobs(tmp_path, _rows(specs))
+    byname = {a[0].name.split("_s_")[0]: (fn, a) for fn, a in jobs}
+    fn, args = byname["vs_bias"]
+    units = [c[1] for c in args[2]]
+    # texel (constant, normal_offset, normal_angle: 12 series, two columns), world, K: one unit per column
+    assert sorted(set(units)) == ["K", "parameter value [texel]", "parameter value [world]"]
+    for title, xlabel, series, _ in args[2]:
+        unit = xlabel.split("[")[-1].rstrip("]") if "[" in xlabel else xlabel
+        for label in series:
+            rows = [r for r in _rows(specs) if label.startswith(r["scheme"] + ":")
+                    and (r["sweep_key"].split(" [")[-1].rstrip("]") == unit)]
+            assert rows, (label, unit)
+    fig = fn(*args)
+    for ax in fig.axes:
+        assert ax.get_yscale() == "symlog" and ax.get_ylim() == (0, 1)
+        leg = ax.get_legend()
+        assert leg is None or len(leg.get_texts()) <= figures.MAX_LEGEND
+    assert "s, light 0:directional, orthographic, R = 64" in fig._suptitle.get_text()
+    fn, args = byname["vs_resolution"]
+    fig = fn(*args)
+    legends = [len(ax.get_legend().get_texts()) for ax in fig.axes if ax.get_legend()]
+    assert sum(legends) == 10 and max(legends) <= figures.MAX_LEGEND
+    fn, args = byname["pareto"]
+    fig = fn(*args)
+    assert all(ax.get_xscale() == "log" and ax.get_yscale() == "symlog" for ax in fig.axes)
+    assert (tmp_path / "vs_bias_s_0_directional_orthographic.png").is_file()
+
+
+def test_dsm_report_rebuilds_table_md_and_the_page(run, tmp_path):
+    from dsm import cli
+    d = tmp_path / "copy"
+    shutil.copytree(run.out, d)
+    want = (d / "table.md").read_text()
+    plots = sorted(p.name for p in (d / "plots").glob("*.png"))
+    for p in [d / "table.md", d / "report.html", *(d / "plots").glob("*.png")]:
+        p.unlink()
+    assert cli.main(["report", str(d)]) == 0
+    assert (d / "table.md").read_text() == want
+    assert sorted(p.name for p in (d / "plots").glob("*.png")) == plots and plots
+    page = (d / "report.html").read_text()
+    assert 'id=case-table' in page and page.count("<tr data-scene=") == len(run.rows)
+    assert cli.main(["report", str(tmp_path / "nothing")]) == 2
+
+
+def test_comparison_of_two_runs(run, tmp_path):
+    from dsm import cli
+    a = run.out
+    b = tmp_path / "b"
+    shutil.copytree(a, b)
+    with open(b / "metrics.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    # B: one case has 3 more acne receivers, one case is gone
+    changed, gone = rows[3], rows[5]
+    old_error = float(changed["error_rate"])
+    changed["n_acne"] = str(int(changed["n_acne"]) + 3)
+    changed["acne_rate"] = repr(int(changed["n_acne"]) / int(changed["n_gt_lit"]))
+    changed["error_rate"] = repr((int(changed["n_acne"]) + int(changed["n_peterpan"])) / int(changed["n_receivers"]))
+    with open(b / "metrics.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(r for r in rows if r is not gone)
+    out = tmp_path / "cmp"
+    assert cli.main(["report", str(a), str(b), "--out", str(out)]) == 0
+    with open(out / "compare.csv", newline="") as fh:
+        cmp = list(csv.DictReader(fh))
+    assert len(cmp) == len(rows) - 1 and gone["case"] not in {r["case_a"] for r in cmp}
+    diff = {r["case_a"]: float(r["diff_error_rate"]) for r in cmp}
+    assert diff[changed["case"]] == pytest.approx(float(changed["error_rate"]) - old_error, rel=1e-5)
+    assert diff[changed["case"]] == pytest.approx(3 / int(changed["n_receivers"]), abs=1e-6)   # A's cell: 6 digits
+    assert float(next(r for r in cmp if r["case_a"] == changed["case"])["a_error_rate"]) == pytest.approx(old_error)
+    assert all(v == 0 for k, v in diff.items() if k != changed["case"] and not math.isnan(v))
+    md = (out / "compare.md").read_text()
+    assert f"{len(rows) - 1} cases in both" in md and "1 only in A, 0 only in B" in md
+    # the largest change first
+    first = next(line for line in md.splitlines() if line.startswith(f"| {changed['case']} |"))
+    assert md.index(first) < min(md.index(f"| {r['case']} |") for r in rows if r not in (changed, gone))
+    assert cli.main(["report", str(a), "--out", str(out)]) == 2
+
+
+def test_report_images_key(tmp_path):
+    import dsm
+    from dsm import config, figures
+    from dsm.types import ConfigError
+    with pytest.raises(ConfigError, match=r"<t>: report\.images: unknown value 'some' \(valid: all, errors, none\)"):
+        config.parse(base_config(report={"images": "some"}), "<t>")
+    with pytest.raises(ConfigError, match=r"report\.image: unknown key \(valid: images\)"):
+        config.parse(base_config(report={"image": "all"}), "<t>")
+    assert config.parse(base_config(), "<t>").report_images == "all"
+    small = dict(camera={"resolution": [24, 24]}, map={"resolution": 16}, scheme=[{"name": "none"}])
+    for mode, want in (("all", {"_error.png", "_shadow.png"}), ("errors", {"_error.png"}), ("none", set())):
+        res = dsm.run(base_config(report={"images": mode}, **small), out=tmp_path / mode)
+        files = sorted(p.relative_to(res.out).as_posix() for p in (res.out / "images").rglob("*.png"))
+        err, shadow = figures.image_paths(res.rows[0])
+        assert files == sorted(p for p, s in ((err, "_error.png"), (shadow, "_shadow.png")) if s in want), mode
+        assert err == f"images/plane_0_directional/{res.rows[0]['case']}_error.png"
+    # the shadow image is the render: lit receivers brighter than the ambient 0.12 floor
+    from PIL import Image
+    grey = np.asarray(Image.open(tmp_path / "all" / figures.image_paths(res.rows[0])[1]))
+    assert grey.max() > round(0.12 * 255)
+
+
+def test_images_sit_in_one_folder_per_scene_and_light(run):
+    from dsm import figures
+    folders = {p.name for p in (run.out / "images").iterdir()}
+    assert folders == {figures.image_folder(r) for r in run.rows} and len(folders) == 2
+    for r in run.rows:
+        for p in figures.image_paths(r):
+            assert (run.out / p).is_file()
+
+
+def test_drawing_in_a_process_pool_writes_what_drawing_here_writes(tmp_path):
+    from dsm import figures, metrics
+    rng = np.random.default_rng(3)
+    items = [(f"images/a/{i}_error.png", rng.integers(0, len(metrics.CLASS_COLORS), (8, 9)).astype(np.uint8),
+              f"images/a/{i}_shadow.png", rng.integers(0, 256, (8, 9)).astype(np.uint8)) for i in range(4)]
+    jobs = [(figures.write_images, (tmp_path / "pool", items[:2])), (figures.write_images, (tmp_path / "pool", items[2:]))]
+    assert figures.run_jobs(jobs, pool_min=1) == (2 if figures.workers() >= 2 else 0)
+    figures.run_jobs([(figures.write_images, (tmp_path / "here", items))], pool_min=10)
+    from PIL import Image
+    for err, classes, shadow, grey in items:
+        for base in ("pool", "here"):
+            assert (np.asarray(Image.open(tmp_path / base / err)) == metrics.CLASS_COLORS[classes]).all()
+            assert (np.asarray(Image.open(tmp_path / base / shadow)) == grey).all()
