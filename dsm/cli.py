@@ -21,7 +21,8 @@ from .env import SetupError
 
 DEFAULT_CONFIG = Path(__file__).with_name("default.toml")
 # what a dsm run writes into its folder: --force clears a folder holding nothing else
-RUN_OUTPUTS = ("run.json", "metrics.csv", "oracle.csv", "table.md", "images", "plots")
+RUN_OUTPUTS = ("run.json", "metrics.csv", "oracle.csv", "table.md", "images", "plots", "cascades.csv", "cascades.md",
+               "frames.csv")
 RUN_TEMP = re.compile(r"\.(?:run\.json|metrics\.csv|table\.md)\.\d+\.tmp")    # left by a killed run (report.atomic)
 
 

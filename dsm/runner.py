@@ -22,7 +22,7 @@ import drjit as dr
 import numpy as np
 
 from . import config as cfgmod
-from . import cascades, env, metrics, pipeline, report, shadowmap, timing
+from . import cascades, env, metrics, motion, pipeline, report, shadowmap, timing
 from . import plan as planmod
 from .lookup import Receiver
 
@@ -96,6 +96,7 @@ class Runner:
         self.case_no = 0
         self.extents = {}             # per scene: the spawn bound's per-shape extents
         self.cascade_rows, self.cascade_curves = [], []   # cascades.csv and the distance plots
+        self.motion_frames, self.motion_curves = [], []   # frames.csv and the flicker plots
         self.quantized = 0            # quantized map copies made (stored formats other than float32)
         self.versions = env.versions()
         self.state = "running"
@@ -127,6 +128,8 @@ class Runner:
             report.write_table(self.out / "table.md", self.rows, self.cfg, self.status, self.oracle_rows)
             if self.cascade_rows:
                 cascades.write_csv(self.out / "cascades.csv", self.cascade_rows)
+            if self.cfg.motion:
+                motion.finish(self.out, self.motion_frames, self.motion_curves)
             if self.state == "complete":
                 report.write_plots(self.out / "plots", self.rows)
                 report.write_pareto(self.out / "plots", self.rows)
@@ -143,6 +146,15 @@ class Runner:
             try:
                 sd, gb, lights = self._scene(self.cfg.scenes[si], scene_maps)
             except StageFailed:
+                continue
+            if self.cfg.motion:                 # camera and light paths: dsm.motion's frame loop
+                try:
+                    self._stage(f"motion of scene {sd.label}", scene_maps, lambda: motion.run_scene(
+                        self, sd, lights, scene_maps, self._closed(sd), self.extents[sd.label], self.motion_frames,
+                        self.motion_curves))
+                except StageFailed:
+                    pass
+                self._write_run_json()
                 continue
             for li, light_maps in itertools.groupby(scene_maps, key=lambda m: m.light_index):
                 light_maps = list(light_maps)
