@@ -177,6 +177,20 @@ def points_seen(scene, fp: FixedPoints, cam: Camera):
     return seen, n
 
 
+def points_frame(scene, fp: FixedPoints, cam: Camera, light, view, magnitude: float):
+    """One frame of the fixed points: (receiver: seen, facing the light and inside the view; exact
+    visibility V*; the normal turned toward the camera). V* depends on the light alone."""
+    seen, n_cam = points_seen(scene, fp, cam)
+    n_np = pipeline.points_np(n_cam)
+    if light.type == "directional":
+        facing = n_np @ (-np.asarray(light.direction, float) / np.linalg.norm(light.direction)) > 0
+    else:
+        facing = ((np.asarray(light.position, float) - pipeline.points_np(fp.p)) * n_np).sum(1) > 0
+    vstar = np.asarray(pipeline.exact_visibility(scene, fp.si, light, magnitude)[0].numpy(), bool)
+    inside = view.inside(fp.p).numpy().astype(bool)
+    return seen & facing & inside, vstar, n_cam
+
+
 # ---------------------------------------------------------------- flicker
 
 def flicker(v, vstar, eligible, face) -> tuple:
@@ -289,17 +303,7 @@ def _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents,
             smap = dataclasses.replace(smap, view=view)
             built.append(False)
         prev_sig = sig
-        seen, n_cam = points_seen(sd.scene, pts, cam)
-        to_light = -np.asarray(light.direction, float) / np.linalg.norm(light.direction) \
-            if light.type == "directional" else None
-        n_np = pipeline.points_np(n_cam)
-        if to_light is not None:
-            facing = n_np @ to_light > 0
-        else:
-            facing = ((np.asarray(light.position, float) - pipeline.points_np(pts.p)) * n_np).sum(1) > 0
-        vstar_pts = np.asarray(pipeline.exact_visibility(sd.scene, pts.si, light, magnitude)[0].numpy(), bool)
-        inside_pts = view.inside(pts.p).numpy().astype(bool)
-        elig = seen & facing & inside_pts
+        elig, vstar_pts, n_cam = points_frame(sd.scene, pts, cam, light, view, magnitude)
         stored = {fmt: pipeline.store(smap, fmt) for fmt in cfg.map.format}
         for (spec, filt, fmt) in keys:
             sm = stored[fmt]
