@@ -39,7 +39,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import metrics, pipeline, scenes, timing
+from . import metrics, pipeline, scenes, shadowmap, timing
 from .cascades import Camera
 
 FRAME_COLUMNS = ("case", "motion", "scene", "light", "cascade_layout", "scheme", "params", "resolution", "filter",
@@ -268,7 +268,7 @@ def run_scene(runner, sd, lights, maps, closed, extents, frame_rows: list, curve
 
 
 def finish(out, frame_rows: list, curves: list):
-    """frames.csv and plots/flicker_<scene>_<light>.png of a motion run."""
+    """frames.csv and plots/flicker_<scene>_<light>_<motion>.png of a motion run."""
     _write_frames_csv(out / "frames.csv", frame_rows)
     _write_plot(out / "plots", curves)
 
@@ -293,9 +293,12 @@ def _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents,
         setup = setup.subset(view.inside(setup.p).numpy().astype(bool)) if setup.p is not None else setup
         sig = _view_signature(view)
         if sig != prev_sig or smap is None:          # the map is shared while its projection stays
-            (smap,), tm = timing.measure(lambda: (pipeline.build_map(sd.scene, view, set(m.needs), m.culling,
-                                                                      closed if m.culling != "none" else None,
-                                                                      m.tile, extents),), 0)
+            def build():
+                sm = pipeline.build_map(sd.scene, view, set(m.needs), m.culling,
+                                        closed if m.culling != "none" else None, m.tile, extents)
+                return (*shadowmap.arrays(sm), sm)       # the arrays, so the timing waits for them
+            out, tm = timing.measure(build, 0)
+            smap = out[-1]
             build_ms.append(tm.ms)
             built.append(True)
             runner.rays["map_texel"] = runner.rays.get("map_texel", 0) + smap.rays.get("map_texel", 0)
@@ -390,28 +393,27 @@ def _write_frames_csv(path, rows):
 
 
 def _write_plot(folder, curves):
-    """plots/flicker_<scene>_<light>.png: flicker rate against frame, one line per case."""
+    """plots/flicker_<scene>_<light>_<motion>.png: flicker rate against frame, one line per case."""
     if not curves:
         return
     from matplotlib.figure import Figure
     folder.mkdir(exist_ok=True)
     groups = {}
     for meta, c in curves:
-        groups.setdefault((meta["scene"], meta["light"]), []).append((meta, c))
-    for (scene, light), items in groups.items():
+        groups.setdefault((meta["scene"], meta["light"], meta["motion"]), []).append((meta, c))
+    for (scene, light, path_label), items in groups.items():
         fig = Figure(figsize=(10, 4))
         ax = fig.subplots()
         for meta, c in items:
             pts = [(x, y) for x, y in c if metrics.defined(y)]
             ax.plot([p[0] for p in pts], [p[1] for p in pts], ".-", lw=0.8,
-                    label=f"{meta['motion']}; {meta['cascade_layout']} {meta['scheme']} {meta['params']} "
-                          f"{meta['filter']}".strip())
+                    label=f"{meta['cascade_layout']} {meta['scheme']} {meta['params']} {meta['filter']}".strip())
         ax.set_xlabel("frame (flicker between it and the one before)")
         ax.set_ylabel("flicker rate (fixed points)")
-        ax.set_title(f"{scene}, light {light}", fontsize=9)
+        ax.set_title(f"{scene}, light {light}: {path_label}", fontsize=9)
         fig.subplots_adjust(left=0.08, right=0.6, bottom=0.13, top=0.9)
         ax.legend(loc="center left", bbox_to_anchor=(1.02, 0.5), fontsize=5, frameon=False)
-        slug = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in f"{scene}_{light}")
+        slug = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in f"{scene}_{light}_{path_label}")
         path = folder / f"flicker_{slug}.png"
         tmp = path.with_name(f".{path.name}.tmp.png")
         fig.savefig(tmp, dpi=80, format="png")
