@@ -101,3 +101,18 @@ def test_fixed_points_exact_visibility_does_not_depend_on_the_camera():
     assert not all(np.array_equal(eligs[0], e) for e in eligs[1:])      # the camera did move
     mts = reference.visibility(sd.scene, fp.si, light, mag, mitsuba_spawn=True)[0].numpy().astype(bool)
     assert (mts != vs[0]).mean() < 0.01 and 0.1 < vs[0].mean() < 0.99
+
+
+def test_motion_config_errors_name_the_key():
+    from dsm import config
+    from dsm.types import ConfigError
+    for motion, key in (({"frames": 1}, "motion[0].frames"), ({"camera": "dolly"}, "motion[0].offset"),
+                        ({"camera": "zoom"}, "motion[0].camera"), ({"light": "turn"}, "motion[0].light_angle"),
+                        ({"camera": "keyframes", "keys": [{"position": [0, 0, 1]}]}, "motion[0].keys"),
+                        ({"speed": 2}, "motion[0].speed")):
+        with pytest.raises(ConfigError) as e:
+            config.parse(base_config(motion=[motion]), "t.toml")
+        assert e.value.key == key, (motion, e.value)
+    cfg = config.parse(base_config(motion=[{"camera": "orbit", "angle": 30}, {"light": "turn", "light_angle": 2}]),
+                       "t.toml")
+    assert [m.label for m in cfg.motion] == ["camera orbit", "sun turn 2deg"]
