@@ -22,7 +22,8 @@ from .types import (  # noqa: F401  (re-exported: the config's vocabulary)
 CASCADE_KEYS = ("cascades", "split", "lambda", "fit", "depth_bounds", "stabilize", "blend", "max_distance")
 
 
-TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing", "memory", "oracle", "motion")
+TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing", "memory", "oracle", "motion",
+            "tune")    # [tune]: read by dsm.tune (dsm tune), ignored by dsm run
 
 
 def load(path) -> Config:
