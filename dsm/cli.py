@@ -22,7 +22,7 @@ from .env import SetupError
 DEFAULT_CONFIG = Path(__file__).with_name("default.toml")
 # what a dsm run writes into its folder: --force clears a folder holding nothing else
 RUN_OUTPUTS = ("run.json", "metrics.csv", "oracle.csv", "table.md", "images", "plots", "report.html",
-               "oracle_curves.npz", "cascades.csv", "cascades.md")
+               "oracle_curves.npz", "cascades.csv", "cascades.md", "frames.csv")
 # left by a killed run (report.atomic)
 RUN_TEMP = re.compile(r"\.(?:run\.json|metrics\.csv|oracle\.csv|table\.md|report\.html|oracle_curves\.npz)\.\d+\.tmp")
 

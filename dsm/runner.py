@@ -23,7 +23,7 @@ import drjit as dr
 import numpy as np
 
 from . import config as cfgmod
-from . import cascades, env, figures, metrics, pipeline, publish, report, shadowmap, timing
+from . import cascades, env, figures, metrics, motion, pipeline, publish, report, shadowmap, timing
 from . import plan as planmod
 from .lookup import Receiver
 
@@ -97,6 +97,7 @@ class Runner:
         self.case_no = 0
         self.extents = {}             # per scene: the spawn bound's per-shape extents
         self.cascade_rows, self.cascade_curves = [], []   # cascades.csv and the distance plots
+        self.motion_frames, self.motion_curves = [], []   # frames.csv and the flicker plots
         self.quantized = 0            # quantized map copies made (stored formats other than float32)
         self.versions = env.versions()
         self.state = "running"
@@ -139,6 +140,8 @@ class Runner:
                                                                    plots=self.state == "complete")
                 if self.state == "complete":
                     cascades.write_plots(self.out / "plots", self.cascade_curves)
+                if self.cfg.motion:
+                    motion.finish(self.out, self.motion_frames, self.motion_curves)
             except Exception as e:          # the measurements are saved; the report can be rebuilt
                 self._fail("report (dsm report rebuilds it)", e)
             self.pending_images = []
@@ -156,6 +159,15 @@ class Runner:
             try:
                 sd, gb, lights = self._scene(self.cfg.scenes[si], scene_maps)
             except StageFailed:
+                continue
+            if self.cfg.motion:                 # camera and light paths: dsm.motion's frame loop
+                try:
+                    self._stage(f"motion of scene {sd.label}", scene_maps, lambda: motion.run_scene(
+                        self, sd, lights, scene_maps, self._closed(sd), self.extents[sd.label], self.motion_frames,
+                        self.motion_curves))
+                except StageFailed:
+                    pass
+                self._write_run_json()
                 continue
             for li, light_maps in itertools.groupby(scene_maps, key=lambda m: m.light_index):
                 light_maps = list(light_maps)

@@ -247,6 +247,25 @@ class CascadeSpec:
         return out
 
 
+CAMERA_PATHS = ("none", "dolly", "pan", "orbit", "keyframes")
+LIGHT_PATHS = ("none", "turn")
+
+
+@dataclass(frozen=True)
+class MotionSpec:
+    """One ``[[motion]]`` path over ``frames`` frames (dsm.motion)."""
+    frames: int = 8
+    camera: str = "none"            # none | dolly (translate by offset) | pan | orbit (by angle) | keyframes
+    offset: tuple = (0.0, 0.0, 0.0)  # dolly: the camera's whole translation over the path (scene units)
+    angle: float = 0.0              # pan / orbit: degrees over the path, about the camera's up
+    keys: tuple = ()                # keyframes: ((position, target), ...), spread evenly over the frames
+    light: str = "none"             # none | turn (a directional light's direction about light_axis)
+    light_axis: tuple = (0.0, 0.0, 1.0)
+    light_angle: float = 0.0        # degrees over the path
+    points: int = 4000              # fixed points sampled on the surfaces (the experiment's seed)
+    label: str = ""
+
+
 @dataclass(frozen=True)
 class MapSpec:
     resolution: tuple = (512,)
@@ -297,6 +316,7 @@ class Config:
     memory_budget_mb: float | None = None   # None: a quarter of this machine's memory
     oracle: "OracleSpec" = field(default_factory=lambda: OracleSpec())
     report_images: str = "all"              # [report] images (REPORT_IMAGES)
+    motion: tuple = ()                       # MotionSpec paths ([[motion]]); empty: still frames
     raw: dict = field(default_factory=dict, compare=False)
 
 
