@@ -79,10 +79,10 @@ def read_csv(path) -> list[dict]:
 
 
 TEXT_COLUMNS = {"case", "scene", "light", "view", "scheme", "preset", "params", "culling", "filter", "format",
-                "cascade_layout", "sweep_key"}
+                "cascade_layout", "sweep_key", "motion"}
 
 
-INT_COLUMNS = {"resolution", "total_texels", "lookup_kernels_compiled"}
+INT_COLUMNS = {"resolution", "total_texels", "lookup_kernels_compiled", "frames", "maps_built"}
 
 
 def _typed(k, v):
