@@ -51,8 +51,12 @@ def _parser():
     r.add_argument("--out", help="results folder (default: runs/<name>-<time>)")
     r.add_argument("--variant", choices=cfgmod.VARIANTS, help="Mitsuba variant (default llvm_ad_rgb)")
     r.add_argument("--threads", type=_positive_int, help="Dr.Jit worker threads (at least 1)")
-    r.add_argument("--force", action="store_true",
-                   help="replace a previous dsm run in --out (a folder with its run.json); never other files")
+    again = r.add_mutually_exclusive_group()
+    again.add_argument("--force", action="store_true",
+                       help="replace a previous dsm run in --out (a folder with its run.json); never other files")
+    again.add_argument("--resume", action="store_true",
+                       help="go on with the dsm run in --out: skip its finished cases that still match the "
+                            "config, run the rest (cases the config no longer names are listed, not deleted)")
     p = sub.add_parser("plan", help="print what a config will compute: cases, maps, rays by kind, memory")
     p.add_argument("config", nargs="?", help="experiment TOML file (default: the built-in default experiment)")
     sub.add_parser("schemes", help="list bias schemes, their parameters, defaults and sources")
@@ -194,6 +198,22 @@ def _out_problem(out: Path, force: bool, bench: bool = False) -> str | None:
     return None
 
 
+def _resume_problem(out: Path) -> str | None:
+    """Why ``--resume`` cannot go on with the run in ``out`` (None if it can)."""
+    if not (out / "run.json").is_file():
+        return f"--resume: {out} holds no previous dsm run (no run.json); choose another --out"
+    try:
+        json.loads((out / "run.json").read_text())
+    except (OSError, ValueError):
+        return f"--resume: {out}/run.json is not a dsm run.json; choose another --out"
+    try:
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as e:
+        return f"--out {out}: cannot write there: {e.strerror or e}"
+    return None
+
+
 def _run(cfg, args, out: Path) -> int:
     try:
         from . import pipeline
@@ -206,20 +226,27 @@ def _run(cfg, args, out: Path) -> int:
         return 3
     except cfgmod.ConfigError as e:
         return _config_error(e)
-    problem = _out_problem(out, args.force)
+    resuming = bool(getattr(args, "resume", False)) and out.is_dir() and any(out.iterdir())
+    problem = _resume_problem(out) if resuming else _out_problem(out, args.force)
     if problem:
         _err(problem)
         return 2
     try:
         from .runner import Runner
         t0 = time.perf_counter()
-        res = Runner(cfg, out, args.variant, progress=True).run()
+        res = Runner(cfg, out, args.variant, progress=True, resume_previous=resuming).run()
     except SetupError as e:
         _err(f"setup error: {e}")
         return 3
     except cfgmod.ConfigError as e:
         return _config_error(e)
     failed, empty = res.run["n_failed"], res.run["n_empty"]
+    if resuming:
+        print(f"dsm: resumed: {res.run['resumed_cases']} finished cases kept, "
+              f"{len(res.rows) - res.run['resumed_cases']} run", file=sys.stderr)
+        for s in res.run["stale_cases"]:
+            print(f"dsm: kept, not in the config any more: case {s['case']} ({s['scene']}, {s['light']}, "
+                  f"{s['scheme']} {s['params']}, R={s['resolution']}; see run.json stale_cases)", file=sys.stderr)
     print(f"dsm: {len(res.rows)} cases in {time.perf_counter() - t0:.1f} s -> {out}/"
           f" (table.md, metrics.csv, oracle.csv, images/, plots/, run.json)")
     if empty:
