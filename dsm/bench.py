@@ -43,7 +43,7 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
 
     from . import env, lookup, scenes, schemes, shadowmap, spawn, timing
     from .config import LightSpec
-    from .pipeline import make_view, points_np as _points_np
+    from .pipeline import closedness, cull_modes, make_view, points_np as _points_np
     from .gbuffer import cast
 
     variant = env.use_variant(variant)
@@ -57,6 +57,7 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
         gb = cast(sd.scene, sd.sensor, 512, 512)
         pix = mi.UInt32(np.flatnonzero(gb.hit).astype(np.uint32))
         ext = spawn.shape_extents(sd.scene)          # once per scene, outside the timed builds
+        per_shape = cull_modes("back_closed", closedness(sd)[0])   # dual's default: culls closed meshes only
         p, n = dr.gather(mi.Point3f, gb.p, pix), dr.gather(mi.Vector3f, gb.n, pix)
         for R in resolutions:
             view = make_view(lt, R, _points_np(p), sd.bbox)
@@ -72,7 +73,12 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
                                     repeats)[1:]
             two, two_mb = _peak(timing, lambda: shadowmap.arrays(shadowmap.build(sd.scene, view, {"z2"}, extents=ext)),
                                 repeats)[1:]
+            cull, cull_mb = _peak(timing, lambda: shadowmap.arrays(shadowmap.build(
+                sd.scene, view, {"z2"}, "back_closed", per_shape, extents=ext)), repeats)[1:]
             builds.append({"scene": spec.label, "resolution": R, "ray_intersect_ms": full.ms, "bare_ms": bare.ms,
+                           "two_culled_ms": cull.ms, "two_culled_over_first": cull.ms / first.ms,
+                           "two_over_bare": two.ms / bare.ms, "two_culled_over_bare": cull.ms / bare.ms,
+                           "two_culled_peak_mb": cull_mb, "two_culled_compile_ms": cull.compile_ms,
                            "first_layer_ms": first.ms, "first_over_ray_intersect": first.ms / full.ms,
                            "two_layer_ms": two.ms, "first_over_bare": first.ms / bare.ms,
                            "two_over_first": two.ms / first.ms, "mrays_per_s": R * R / bare.ms / 1e3,
@@ -114,6 +120,16 @@ def _markdown(r) -> str:
                      f"{b['first_over_bare']:.2f} | {b['two_layer_ms']:.2f} | {b['two_over_first']:.2f} | "
                      f"{b['first_peak_mb']:.1f} | {b['two_peak_mb']:.1f} | "
                      f"{b['first_compile_ms']:.0f} / {b['two_compile_ms']:.0f} |")
+    lines += ["", "## (1b) Two layers (z1, z2) against the first layer and a bare preliminary cast", "",
+              "Goals: two / first <= 2.0 without culling, <= 2.5 with per-shape culling (back_closed, dual's "
+              "default); two layers / preliminary <= 2.2.", "",
+              "| scene | R | preliminary ms | first ms | two ms | two / first | two / preliminary | "
+              "two culled ms | culled / first | culled / preliminary |", "|---" * 10 + "|"]
+    for b in r["builds"]:
+        lines.append(f"| {b['scene']} | {b['resolution']} | {b['bare_ms']:.2f} | {b['first_layer_ms']:.2f} | "
+                     f"{b['two_layer_ms']:.2f} | {b['two_over_first']:.2f} | {b['two_over_bare']:.2f} | "
+                     f"{b['two_culled_ms']:.2f} | {b['two_culled_over_first']:.2f} | "
+                     f"{b['two_culled_over_bare']:.2f} |")
     lines += ["", "Weiskopf & Ertl, Table 1: the dual map's build costs about twice the single map's.", "",
               "## (2) Lookup time per scheme (1024^2 map, 512^2 camera) as a ratio to constant bias, "
               "and (3) its peak memory", "",

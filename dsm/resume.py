@@ -37,12 +37,11 @@ def kit_version() -> str:
     commit = env.git_commit()
     if commit and commit != "unknown":
         return "git:" + commit
+    from importlib.metadata import PackageNotFoundError, version
     try:
-        from importlib.metadata import version
         return "version:" + version("dsm")
-    except Exception:
-        from . import __version__
-        return "version:" + str(__version__)
+    except PackageNotFoundError:
+        return "version:unknown"
 
 
 def file_hash(path) -> str:
