@@ -57,6 +57,9 @@ def _parser():
     again.add_argument("--resume", action="store_true",
                        help="go on with the dsm run in --out: skip its finished cases that still match the "
                             "config, run the rest (cases the config no longer names are listed, not deleted)")
+    r.add_argument("--cluster", metavar="ADDRESS",
+                   help="run the map groups as Ray tasks on the cluster at ADDRESS (auto, ray://host:port) or on "
+                        "a Ray instance started here (local); needs pip install 'dsm[cluster]'")
     p = sub.add_parser("plan", help="print what a config will compute: cases, maps, rays by kind, memory")
     p.add_argument("config", nargs="?", help="experiment TOML file (default: the built-in default experiment)")
     sub.add_parser("schemes", help="list bias schemes, their parameters, defaults and sources")
@@ -234,7 +237,11 @@ def _run(cfg, args, out: Path) -> int:
     try:
         from .runner import Runner
         t0 = time.perf_counter()
-        res = Runner(cfg, out, args.variant, progress=True, resume_previous=resuming).run()
+        if args.cluster or cfg.execution.backend == "ray":
+            from . import cluster
+            res = cluster.run(cfg, out, args.cluster, args.variant, progress=True, resume_previous=resuming)
+        else:
+            res = Runner(cfg, out, args.variant, progress=True, resume_previous=resuming).run()
     except SetupError as e:
         _err(f"setup error: {e}")
         return 3

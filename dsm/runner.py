@@ -137,6 +137,18 @@ class Runner:
                 report.write_tradeoff(self.out / "plots", self.rows, self.curves, self.cfg.oracle.lambdas[0])
         return Results(self.out, self.rows, self._run_json(), self.images, self.oracle_rows, self.curves)
 
+    def run_maps(self, maps, kept=None):
+        """Run only ``maps`` (part of the plan: a Ray task's map group) into this runner's folder,
+        without run.json or the report; ``kept``: finished cases to write again (key -> (row, status)).
+        The rows, status, oracle rows, curves and map records stay on the runner."""
+        self.out.mkdir(parents=True, exist_ok=True)
+        (self.out / "images").mkdir(exist_ok=True)
+        self.csv = report.CsvWriter(self.out / "metrics.csv")
+        self.bar = report.progress(total=sum(m.cases for m in maps), enabled=False)
+        self.kept = kept or {}
+        self.state = "task"
+        self._run_plan(maps)
+
     def _run_plan(self, maps=None):
         maps = self.plan.maps if maps is None else maps
         for spec in self.cfg.scenes:
@@ -406,6 +418,8 @@ class Runner:
         return info
 
     def _write_run_json(self):
+        if self.state == "task":      # one map group of a cluster run: its driver writes run.json
+            return
         # after every case (compact), indented once the run has ended
         report.write_json(self.out / "run.json", self._run_json(), None if self.state == "running" else 1)
 
