@@ -50,18 +50,28 @@ class ShadowMap:
         return self.view.resolution
 
 
-def first_layer(scene, view, first: int = 0, count: int | None = None):
-    """(z1, shape index, surface interaction, rays) for texels ``first .. first + count - 1``."""
+def hit_geometry(pi, ray, valid, tables=None):
+    """(p, n) of each valid hit: the point interpolated on the triangle and its geometric
+    normal. From the meshes' buffers where ``tables`` (:func:`dsm.spawn.shape_extents`) has
+    them (every shape a mesh), else from a minimal surface interaction: the same bits."""
+    if tables is not None and getattr(tables, "positions", None) is not None:
+        return spawn.mesh_hit(pi, tables, valid)
+    si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.Minimal, active=valid)
+    return si.p, si.n
+
+
+def first_layer(scene, view, first: int = 0, count: int | None = None, tables=None):
+    """(z1, shape index, (hit point, normal, valid), rays) for texels ``first .. first + count - 1``."""
     count = view.n_texels - first if count is None else count
     rays = view.texel_rays(first, count)
     pi = scene.ray_intersect_preliminary(rays, coherent=True)
     valid = pi.is_valid()
     # the hit point as every layer and receiver computes it (barycentric on the triangle), then
     # the view's one depth function: a one-layer map and a layered one store the same z1
-    si = pi.compute_surface_interaction(rays, ray_flags=mi.RayFlags.Minimal, active=valid)
-    z1 = dr.select(valid, view.depth(si.p), view.far)
+    p, n = hit_geometry(pi, rays, valid, tables)
+    z1 = dr.select(valid, view.depth(p), view.far)
     shape = dr.select(valid, pi.shape_index, 0xFFFFFFFF)
-    return z1, shape, si, rays
+    return z1, shape, (p, n, valid), rays
 
 
 def plane_slope(view, p, n, z1, valid, first: int = 0):
@@ -90,20 +100,20 @@ def _step(scene, view, st: dict, d, modes, culls: bool, need, want_slope: bool, 
     st["cast2"] = st["cast2"] + dr.select(active & (found == 1), 1, 0)
     pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
     valid = active & pi.is_valid()
-    si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.Minimal, active=valid)
+    p, n = hit_geometry(pi, ray, valid, extents)
     if culls:
         mode = dr.gather(mi.UInt32, modes, pi.shape_index, valid)
-        back = dr.dot(si.n, d) > 0
+        back = dr.dot(n, d) > 0
         accept = valid & ~(((mode == CULL_BACK) & back) | ((mode == CULL_FRONT) & ~back))
     else:
         accept = valid
-    depth = view.depth(si.p)
+    depth = view.depth(p)
     got1, got2 = accept & (found == 0), accept & (found == 1)
     st["z1"] = dr.select(got1, depth, st["z1"])
     st["shape1"] = dr.select(got1, pi.shape_index, st["shape1"])
     if want_slope:
-        st["p1"] = dr.select(got1, si.p, st["p1"])
-        st["n1"] = dr.select(got1, si.n, st["n1"])
+        st["p1"] = dr.select(got1, p, st["p1"])
+        st["n1"] = dr.select(got1, n, st["n1"])
     st["z2"] = dr.select(got2, depth, st["z2"])
     found = found + dr.select(accept, 1, 0)
     st["found"] = found
@@ -113,8 +123,8 @@ def _step(scene, view, st: dict, d, modes, culls: bool, need, want_slope: bool, 
     st["prev_prim"] = dr.select(valid, pi.prim_index, st["prev_prim"])
     active = valid & (found < need)
     st["active"] = active
-    delta = spawn.error_bound_by_shape(si.p, pi.shape_index, extents, magnitude)
-    st["o"] = dr.select(active, spawn.offset_origin(si.p, si.n, d, delta), st["o"])
+    delta = spawn.error_bound_by_shape(p, pi.shape_index, extents, magnitude)
+    st["o"] = dr.select(active, spawn.offset_origin(p, n, d, delta), st["o"])
     return st
 
 
@@ -151,30 +161,42 @@ def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool
     if not want_slope:
         del full["p1"], full["n1"]
     work, where, d = full, None, ray.d        # where: the work set's texels (None: all, in order)
-    steps = 0
-    while True:
-        for _ in range(min(ROUND, MAX_STEPS - steps)):
+    if not culls and need <= ROUND:
+        # every texel's search ends within one round (each step accepts its hit or misses): one
+        # kernel writes only the layers and adds its counts up in place (no working state stored)
+        for _ in range(ROUND):
             work = _step(scene, view, work, d, modes, culls, need, want_slope, extents, magnitude)
-        steps += ROUND
-        dr.eval(*work.values())
-        left = _count(work["active"])          # the one synchronisation per round
-        if where is None:
-            full = work
-        else:
-            for k in work:
-                dr.scatter(full[k], work[k], where)
-        if left == 0 or steps >= MAX_STEPS:
-            break
-        pick = dr.compress(work["active"])      # the texels still searching, for the next round
-        where = pick if where is None else dr.gather(mi.UInt32, where, pick)
-        work = {k: dr.gather(type(v), v, pick) for k, v in work.items()}
-        d = dr.gather(type(d), d, pick)
-        dr.eval(*work.values(), d, where)
-    dr.eval(*full.values())
-    total = int(dr.sum(full["cast1"]).numpy().ravel()[0]) + int(dr.sum(full["cast2"]).numpy().ravel()[0])
+        counts = dr.zeros(mi.UInt32, 3)       # rays cast, re-hits, texels still searching (none)
+        for i, v in enumerate((work["cast1"] + work["cast2"], work["rehit"], mi.UInt32(dr.select(work["active"], 1, 0)))):
+            dr.scatter_reduce(dr.ReduceOp.Add, counts, v, dr.full(mi.UInt32, i, n))
+        dr.eval(*[work[k] for k in ("z1", "shape1", "z2", "found") + (("p1", "n1") if want_slope else ())], counts)
+        total, rehits, left = (int(x) for x in counts.numpy())
+        full = work
+    else:
+        steps = 0
+        while True:
+            for _ in range(min(ROUND, MAX_STEPS - steps)):
+                work = _step(scene, view, work, d, modes, culls, need, want_slope, extents, magnitude)
+            steps += ROUND
+            dr.eval(*work.values())
+            left = _count(work["active"])          # the one synchronisation per round
+            if where is None:
+                full = work
+            else:
+                for k in work:
+                    dr.scatter(full[k], work[k], where)
+            if left == 0 or steps >= MAX_STEPS:
+                break
+            pick = dr.compress(work["active"])      # the texels still searching, for the next round
+            where = pick if where is None else dr.gather(mi.UInt32, where, pick)
+            work = {k: dr.gather(type(v), v, pick) for k, v in work.items()}
+            d = dr.gather(type(d), d, pick)
+            dr.eval(*work.values(), d, where)
+        dr.eval(*full.values())
+        total = int(dr.sum(full["cast1"] + full["cast2"]).numpy().ravel()[0])
+        rehits = int(dr.sum(full["rehit"]).numpy().ravel()[0])
     rays = {"map_texel": n, "map_continue": total - n}
     slope = plane_slope(view, full["p1"], full["n1"], full["z1"], full["found"] > 0, first) if want_slope else None
-    rehits = int(dr.sum(full["rehit"]).numpy().ravel()[0])
     return (full["z1"], full["shape1"], slope, (full["z2"] if want_z2 else None), rays, left, rehits)
 
 
@@ -187,10 +209,10 @@ def is_layered(needs, cull_modes) -> bool:
 def _build_range(scene, view, needs, modes, first, count, extents=None):
     """(arrays by name, rays by kind, unfinished texels, re-hits) for one range of texels."""
     if not is_layered(needs, modes):
-        z1, shape, si, rays = first_layer(scene, view, first, count)
+        z1, shape, (p, n, valid), rays = first_layer(scene, view, first, count, extents)
         out = {"z1": z1, "shape": shape}
         if "slope" in needs:
-            out["slope"] = plane_slope(view, si.p, si.n, z1, si.is_valid(), first)
+            out["slope"] = plane_slope(view, p, n, z1, valid, first)
         return out, {"map_texel": count, "map_continue": 0}, 0, 0
     modes = modes if modes is not None else np.zeros(len(scene.shapes()), np.uint32)
     z1, shape, slope, z2, rays, unfinished, rehits = layered(scene, view, modes, "z2" in needs, "slope" in needs,
