@@ -69,6 +69,11 @@ def _parser():
     b.add_argument("--repeats", type=_positive_int, default=5)
     b.add_argument("--meshes", help="folder of the real test meshes (default: ../shared/meshes)")
     b.add_argument("--variant", choices=cfgmod.VARIANTS)
+    b.add_argument("--scaling", default="1024,2048,4096,8192",
+                   help="map resolutions of the cost-against-resolution table, tiled within the memory budget "
+                        "('' to skip; default 1024,2048,4096,8192)")
+    b.add_argument("--no-sweep", action="store_true",
+                   help="skip the sweep throughput (local run against a local two-worker Ray cluster)")
     return ap
 
 
@@ -118,17 +123,19 @@ def _bench(args) -> int:
     from .bench import run_bench
     try:
         res = [int(x) for x in args.resolutions.split(",")]
-        if any(r < 1 for r in res):
+        scale = [int(x) for x in args.scaling.split(",") if x.strip()]
+        if any(r < 1 for r in res + scale):
             raise ValueError
     except ValueError:
-        _err(f"--resolutions: expected positive integers like 256,1024, got {args.resolutions!r}")
+        _err(f"--resolutions/--scaling: expected positive integers like 256,1024, got "
+             f"{args.resolutions!r} / {args.scaling!r}")
         return 2
     problem = _out_problem(Path(args.out), force=True, bench=True)
     if problem:
         _err(problem)
         return 2
     try:
-        run_bench(Path(args.out), res, args.repeats, args.meshes, args.variant)
+        run_bench(Path(args.out), res, args.repeats, args.meshes, args.variant, scale, not args.no_sweep)
     except SetupError as e:
         _err(f"setup error: {e}")
         return 3

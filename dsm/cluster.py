@@ -131,7 +131,7 @@ class ClusterRunner(Runner):
             self.csv.write(row)
         for s in res["status"]:
             if s["what"].startswith("case "):
-                self.status.append({**s, "node": node})
+                self.status.append({**s, "node": node, "worker": res["pid"]})
                 continue
             key = (s["what"], s["status"], s.get("error"))     # a scene's notes, once (each task loads it)
             if key not in self.seen:
