@@ -136,7 +136,8 @@ def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool
     synchronisation between its steps); after a round only the texels still searching go on,
     compacted (without culling, a second layer is found in the first round by every texel).
     Per step only what the layer needs: the preliminary intersection, the hit point and
-    geometric normal of a minimal surface interaction, the culling test and the continuation.
+    winding normal from the meshes' buffers (:func:`hit_geometry`), the culling test and the
+    continuation ray.
     A step's arithmetic per texel is the same wherever it runs, so the layers are the same bits
     as a search evaluated step by step.
 
