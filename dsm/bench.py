@@ -110,7 +110,7 @@ def sweep_throughput(out: Path, workers: int = 2) -> dict:
     finally:
         ray.shutdown()
     skip = {"build_ms", "build_first_ms", "build_compile_ms", "build_peak_mb", "lookup_ms", "lookup_compile_ms",
-            "lookup_kernels_compiled", "reference_ms"}
+            "lookup_kernels_compiled", "reference_ms", "fit_ms"}
     same = [{k: v for k, v in r.items() if k not in skip} for r in report.read_csv(out / "sweep_local" / "metrics.csv")] \
         == [{k: v for k, v in r.items() if k not in skip} for r in report.read_csv(out / "sweep_ray" / "metrics.csv")]
     return {**row, "workers": workers, "ray_s": ray_s, "ray_cases_per_s": len(res.rows) / ray_s,

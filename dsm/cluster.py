@@ -67,7 +67,8 @@ def run_group(cfg, index: int, variant, threads: int, kept: dict) -> dict:
         pass
     return {"rows": r.rows, "status": r.status, "oracle": r.oracle_rows, "curves": r.curves, "maps": r.maps,
             "scenes": r.scene_info, "gbuffer_ms": r.gbuffer_ms, "rays": r.rays, "quantized": r.quantized,
-            "images": images, "node": node, "pid": os.getpid()}
+            "images": images, "node": node, "pid": os.getpid(), "cascade_rows": r.cascade_rows,
+            "cascade_curves": r.cascade_curves}
 
 
 class ClusterRunner(Runner):
@@ -138,6 +139,8 @@ class ClusterRunner(Runner):
                 self.seen.add(key)
                 self.status.append(s)
         self.oracle_rows += res["oracle"]
+        self.cascade_rows += res["cascade_rows"]
+        self.cascade_curves += res["cascade_curves"]
         self.curves += res["curves"]
         self.maps += [{**x, "node": node} for x in res["maps"]]
         for info in res["scenes"]:

@@ -6,14 +6,19 @@ parameter, scene parameter or map option multiplies the cases (see :func:`expand
 """
 from __future__ import annotations
 
+import itertools
 import os
 import tomllib
+from dataclasses import replace
 from pathlib import Path
 
 from .types import (  # noqa: F401  (re-exported: the config's vocabulary)
     LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, LIGHT_TYPES, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA,
     ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params,
-    SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec)
+    SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec,
+    CameraSpec, CascadeSpec, CASCADE_SPLITS, CASCADE_FITS, DEPTH_BOUNDS, MAX_CASCADES)
+
+CASCADE_KEYS = ("cascades", "split", "lambda", "fit", "depth_bounds", "stabilize", "blend", "max_distance")
 
 
 TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing", "memory", "oracle",
@@ -99,7 +104,7 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
         choice(variant, source, "experiment.variant", VARIANTS)
 
     cam = _table(raw, "camera", source)
-    check_keys(cam, ("resolution",), source, "camera")
+    check_keys(cam, ("resolution", "position", "target", "up", "fov", "near", "far"), source, "camera")
     camera_resolution = None
     if "resolution" in cam:
         res = cam["resolution"]
@@ -109,6 +114,8 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
             raise ConfigError(source, "camera.resolution", f"expected [width, height], got {res!r}")
         camera_resolution = tuple(number(x, source, "camera.resolution", integer=True, minimum=1, maximum=16384)
                                   for x in res)
+
+    camera = _parse_camera(cam, source)
 
     scene_tables = _array_of_tables(raw, "scene", source)
     if not scene_tables:
@@ -124,7 +131,7 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
         lights = [LightSpec("scene", label="scene")]
 
     m = _table(raw, "map", source)
-    check_keys(m, ("resolution", "texels", "filter", "format", "view"), source, "map")
+    check_keys(m, ("resolution", "texels", "filter", "format", "view") + CASCADE_KEYS, source, "map")
     if "resolution" in m and "texels" in m:
         raise ConfigError(source, "map", "give either resolution (per face) or texels (total per view), not both",
                           ("resolution", "texels"))
@@ -144,7 +151,12 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
         raise ConfigError(source, "map.view", "views are for point lights and no [[light]] is a point light "
                           f"(the lights are {', '.join(sorted({l.type for l in lights}))}); remove map.view or "
                           "add a point light")
-    mapspec = MapSpec(resolutions, filters, formats, views, texels)
+    cascade = _parse_cascades(m, source)
+    if cascade and all(l.type not in ("directional", "scene") for l in lights):
+        raise ConfigError(source, "map.cascades", "cascades are for directional lights and no [[light]] is "
+                          f"directional (the lights are {', '.join(sorted({l.type for l in lights}))}); remove "
+                          "map.cascades or add a directional light")
+    mapspec = MapSpec(resolutions, filters, formats, views, texels, cascade)
 
     scheme_tables = _array_of_tables(raw, "scheme", source)
     if not scheme_tables:
@@ -169,6 +181,7 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     lambdas = tuple(dict.fromkeys(number(x, source, "oracle.lambda", minimum=0) for x in lambdas))
 
     return Config(name=name, source=source, seed=seed, variant=variant, camera_resolution=camera_resolution,
+                  camera=camera,
                   scenes=tuple(scenes), lights=tuple(lights), map=mapspec, schemes=tuple(schemes),
                   timing_repeats=repeats, memory_budget_mb=budget, oracle=OracleSpec(lambdas), raw=raw,
                   execution=_parse_execution(_table(raw, "execution", source), source))
@@ -187,6 +200,86 @@ def _parse_execution(t: dict, source: str) -> ExecutionSpec:
     cpus = number(t.get("cpus_per_task", 1.0), source, "execution.cpus_per_task", positive=True)
     gpus = number(t.get("gpus_per_task", 0.0), source, "execution.gpus_per_task", minimum=0)
     return ExecutionSpec(backend, address, float(cpus), float(gpus))
+
+
+def _parse_camera(cam: dict, source: str):
+    """[camera] position, target, up, fov, near, far (each optional; None without any)."""
+    kw = {}
+    for k in ("position", "target", "up"):
+        if k in cam:
+            kw[k] = vec3(cam[k], source, f"camera.{k}", nonzero=k == "up")
+    if "fov" in cam:
+        kw["fov"] = number(cam["fov"], source, "camera.fov", positive=True, maximum=179.0)
+    for k in ("near", "far"):
+        if k in cam:
+            kw[k] = number(cam[k], source, f"camera.{k}", positive=True)
+    if "near" in kw and "far" in kw and not kw["near"] < kw["far"]:
+        raise ConfigError(source, "camera.far", f"must be above camera.near ({kw['near']:g}), got {kw['far']:g}")
+    if "position" in kw and "target" in kw and kw["position"] == kw["target"]:
+        raise ConfigError(source, "camera.target", "the target equals the position")
+    spec = CameraSpec(**kw)
+    return spec if spec.posed else None
+
+
+def _parse_cascades(m: dict, source: str) -> tuple:
+    """[map] cascades (a count 1 to 8 or an engine's layout, lists sweep) and the keys of a counted
+    layout (split, lambda, fit, depth_bounds, stabilize, blend, max_distance; lists sweep)."""
+    from .cascade_layouts import LAYOUTS
+    given = [k for k in CASCADE_KEYS if k in m]
+    if not given:
+        return ()
+    if "cascades" not in m:
+        raise ConfigError(source, f"map.{given[0]}", "a cascade key needs map.cascades (a count or an engine layout)",
+                          ["cascades"])
+    counts = as_list(m["cascades"])
+    if not counts:
+        raise ConfigError(source, "map.cascades", "empty list")
+    opts = {}
+    for key, conv in (("split", lambda v, k: choice(v, source, k, CASCADE_SPLITS)),
+                      ("lambda", lambda v, k: number(v, source, k, minimum=0.0, maximum=1.0)),
+                      ("fit", lambda v, k: choice(v, source, k, CASCADE_FITS)),
+                      ("depth_bounds", lambda v, k: choice(v, source, k, DEPTH_BOUNDS)),
+                      ("stabilize", _boolean(source)),
+                      ("blend", lambda v, k: number(v, source, k, minimum=0.0, maximum=0.5)),
+                      ("max_distance", lambda v, k: number(v, source, k, positive=True))):
+        if key in m:
+            vals = as_list(m[key])
+            if not vals:
+                raise ConfigError(source, f"map.{key}", "empty list")
+            opts[key] = [conv(v, f"map.{key}") for v in vals]
+    out = []
+    numeric = False
+    for c in counts:
+        if isinstance(c, str):
+            if c not in LAYOUTS:
+                raise ConfigError(source, "map.cascades", f"unknown engine layout {c!r}; give a count 1 to "
+                                  f"{MAX_CASCADES} or an engine", sorted(LAYOUTS))
+            out.append(LAYOUTS[c][0])
+            continue
+        n = number(c, source, "map.cascades", integer=True, minimum=1, maximum=MAX_CASCADES)
+        numeric = True
+        names = list(opts)
+        for combo in itertools.product(*(opts[k] for k in names)):
+            kw = dict(zip(names, combo))
+            if "lambda" in kw:
+                kw["lam"] = kw.pop("lambda")
+            spec = CascadeSpec(count=n, **kw)
+            if spec.split != "practical" and "lambda" in opts and len(opts["lambda"]) > 1:
+                spec = replace(spec, lam=CascadeSpec.lam)     # lambda sweeps only the practical split
+            if spec not in out:
+                out.append(spec)
+    if not numeric and opts:
+        raise ConfigError(source, f"map.{next(iter(opts))}", "an engine layout sets its own cascade keys; give a "
+                          "count in map.cascades to set them", ["cascades"])
+    return tuple(out)
+
+
+def _boolean(source):
+    def conv(v, key):
+        if not isinstance(v, bool):
+            raise ConfigError(source, key, f"expected true or false, got {v!r}")
+        return v
+    return conv
 
 
 def _table(raw, key, source) -> dict:

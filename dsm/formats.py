@@ -88,6 +88,8 @@ def quantize_np(z: np.ndarray, view, fmt: str) -> np.ndarray:
     z = np.asarray(z, np.float64)
     steps = float(2 ** BITS[fmt] - 1)
     near, far = float(view.near), float(view.far)
+    if hasattr(view, "texel_bounds") and z.shape == (view.n_texels,):
+        near, far = view.texel_bounds()          # a cascaded map: each cascade's own near and far
     if fmt == "ndc24" and view.kind in NDC_KINDS:
         n = ndc_near(view)
         zc = np.clip(z, n, far)

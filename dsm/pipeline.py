@@ -25,6 +25,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from . import cascades as cascades_mod
 from . import formats, lookup, reference, scenes, schemes, shadowmap, spawn, timing
 from . import oracle as oracle_mod
 from . import gbuffer as gbuffer_mod
@@ -140,7 +141,12 @@ class LightSetup:
                           self.occluder_dist[keep], ex, self.reference_ms)
 
 
-def make_view(light, R, receivers_world, bbox, kind=None):
+def make_view(light, R, receivers_world, bbox, kind=None, cascade=None, sensor=None, scale: float = 1.0):
+    """The view of ``light`` at resolution R. A directional light with ``cascade`` (a CascadeSpec)
+    gets a cascaded view for the camera ``sensor`` (dsm.cascades; ``scale``: the scene's, which
+    multiplies the layout's distances), else one map fitted to the receivers."""
+    if light.type == "directional" and cascade is not None:
+        return cascades_mod.make_view(light, cascade, R, receivers_world, bbox, sensor, scale)
     if light.type == "directional":
         return OrthographicView(light.direction, receivers_world, bbox, R)
     if light.type == "spot":
@@ -248,8 +254,15 @@ def receivers(view, setup, diagonal: float) -> Receiver:
 
 
 def visibility(spec: SchemeSpec, rx: Receiver, smap, filt: str = "nearest", seed: int = 7):
-    """(V in [0, 1] per receiver, shape index of the nearest texel) of one scheme instance."""
+    """(V in [0, 1] per receiver, shape index of the nearest texel) of one scheme instance (on a
+    cascaded view with a blend band, mixed with the next cascade's over the band)."""
+    if getattr(rx.view, "blend", 0.0) > 0:
+        return cascades_mod.blended_visibility(schemes.get(spec.name), spec.params, rx, smap, filt, seed)
     return lookup.visibility(schemes.get(spec.name), spec.params, rx, smap, filt, seed)
+
+
+cascade_metrics = cascades_mod.case_metrics     # (view, rx, v, V*) -> (columns, per-cascade rows, curve, faces)
+split_distances = cascades_mod.split_distances
 
 
 def plane_fallbacks(spec: SchemeSpec, rx: Receiver, smap) -> int:

@@ -59,6 +59,7 @@ class MapPlan:
     specs: tuple = ()             # the scheme instances (SchemeSpec) read from this map, in config order
     scene_index: int = 0          # of the config's scenes
     light_index: int = 0          # of the scene's lights (the label's number)
+    cascade: object = None        # a directional light's CascadeSpec (faces = its count), else None
 
     @property
     def texels(self) -> int:
@@ -179,7 +180,7 @@ class Plan:
             lines.append(f"    {m.scene[:18]:18s} {m.light[:12]:12s} {m.view:16s} {m.resolution:5d} {m.culling:12s} "
                          f"{'+'.join(m.layers) + (' (layered)' if m.layered else ''):22s} "
                          f"{','.join(m.formats) or '-':14s} {m.texels:10d} {tiles:5d} {mem:8.1f}  "
-                         + ", ".join(m.schemes))
+                         + ", ".join(m.schemes) + (f"  [cascades: {m.cascade.label}]" if m.cascade else ""))
         lines.append("  rays (exact): " + ", ".join(f"{k} {v:,}" for k, v in self.rays.items()))
         lines.append("  rays (at most): " + ", ".join(f"{k} {v:,}" for k, v in self.rays_bound.items()))
         n_fmt = sum(1 + len(m.formats) for m in self.maps)
@@ -196,7 +197,7 @@ class Plan:
                 "maps": [{"scene": m.scene, "light": m.light, "view": m.view, "resolution": m.resolution,
                           "culling": m.culling, "layers": list(m.layers), "layered": m.layered,
                           "formats": list(m.formats), "texels": m.texels, "tile": m.tile, "cases": m.cases,
-                          "peak_bytes_est": m.peak_bytes}
+                          "peak_bytes_est": m.peak_bytes, "cascade": m.cascade.label if m.cascade else None}
                          for m in self.maps]}
 
 
@@ -319,6 +320,16 @@ def scene_lights(spec, cfg: Config) -> list:
     return [(f"{i}:{t}", t) for i, t in enumerate(types)]
 
 
+def _layouts(views, cascade_specs):
+    """(view, cascade layout or None) pairs: a directional light's orthographic view once per layout."""
+    for view in views:
+        if view == "orthographic" and cascade_specs:
+            for c in cascade_specs:
+                yield view, c
+        else:
+            yield view, None
+
+
 def make(cfg: Config) -> Plan:
     from .config import absent_files
     plan = Plan(cfg.source, budget_bytes=memory_budget(cfg), absent=absent_files(cfg),
@@ -338,8 +349,8 @@ def make(cfg: Config) -> Plan:
         lights = scene_lights(sc, cfg)
         plan.scenes.append((sc.label, w, h, lights))
         for li, (label, ltype) in enumerate(lights):
-            for view in views_for(ltype, cfg.map.view):
-                faces = VIEW_FACES[view]
+            for view, cascade in _layouts(views_for(ltype, cfg.map.view), cfg.map.cascade):
+                faces = cascade.count if cascade is not None else VIEW_FACES[view]
                 for R in cfg.map.resolutions_for(faces):
                     for culling, config_group in groups.items():
                         # engine presets are combined instances per light type, resolved here
@@ -348,8 +359,11 @@ def make(cfg: Config) -> Plan:
                         m = MapPlan(sc.label, label, view, R, faces, culling, tuple(sorted(needs)),
                                     "z2" in needs or culling != "none", fmts,
                                     [f"{s.name} {s.label}".strip() for s in group], len(group) * per_case,
-                                    specs=tuple(group), scene_index=si, light_index=li)
+                                    specs=tuple(group), scene_index=si, light_index=li, cascade=cascade)
                         plan.maps.append(m)
+    if cfg.map.cascade and plan.maps and not any(m.cascade is not None for m in plan.maps):
+        raise ConfigError(cfg.source, "map.cascades", "cascades are for directional lights and no light of the "
+                          "config's scenes is directional; remove map.cascades or add a directional [[light]]")
     base = max((w * h * PIXEL_BYTES for _, w, h, _ in plan.scenes), default=0)
     for m in plan.maps:
         room = plan.budget_bytes - base - m.stored_bytes

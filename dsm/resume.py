@@ -27,6 +27,7 @@ from pathlib import Path
 
 # metrics.csv columns read back as text; every other column is a number ("" is undefined: NaN)
 TEXT_COLUMNS = {"case", "scene", "light", "view", "scheme", "culling", "preset", "params", "filter", "format",
+                "cascade_layout",
                 "sweep_key"}
 _FILE_HASHES: dict = {}
 
@@ -103,7 +104,8 @@ def case_keys(cfg, plan, version: str | None = None) -> list:
     """(case id, key) for every case of the plan, in the runner's order (case ids from the plan:
     the n-th case of the plan is case n, whatever fails before it)."""
     version = kit_version() if version is None else version
-    shared = {"camera": _plain(cfg.camera_resolution), "seed": cfg.seed, "variant": cfg.variant,
+    shared = {"camera": _plain(cfg.camera_resolution), "pose": _plain(getattr(cfg, "camera", None)),
+              "seed": cfg.seed, "variant": cfg.variant,
               "lambdas": _plain(cfg.oracle.lambdas), "version": version}
     scenes = [scene_identity(s) for s in cfg.scenes]
     out = []
@@ -111,7 +113,7 @@ def case_keys(cfg, plan, version: str | None = None) -> list:
     for m in plan.maps:
         light = _plain(cfg.lights[m.light_index]) if cfg.lights and m.light_index < len(cfg.lights) else None
         group = {"scene": scenes[m.scene_index], "light": m.light, "light_spec": light, "view": m.view,
-                 "resolution": m.resolution, "culling": m.culling}
+                 "resolution": m.resolution, "culling": m.culling, "cascade": _plain(getattr(m, "cascade", None))}
         for spec in m.specs:
             for filt in cfg.map.filter:
                 for fmt in cfg.map.format:
@@ -149,6 +151,7 @@ class Previous:
         from . import report
         self.out = Path(out)
         self.done = {}          # key -> (old case id, metrics.csv row as text, status entry)
+        self.cascade_rows = {}  # old case id -> its cascades.csv rows (cascaded maps)
         run_json = self.out / "run.json"
         if not run_json.is_file():
             return
@@ -156,6 +159,9 @@ class Previous:
         rows = {}
         if (self.out / "metrics.csv").is_file():
             rows = {r["case"]: r for r in report.read_csv(self.out / "metrics.csv")}
+        if (self.out / "cascades.csv").is_file():
+            for r in report.read_csv(self.out / "cascades.csv"):
+                self.cascade_rows.setdefault(r.get("case"), []).append(r)
         for s in run.get("status", []):
             if s.get("key") and s.get("status") in ("ok", "empty") and s["what"].startswith("case "):
                 case = s["what"].split()[1]
@@ -169,15 +175,16 @@ class Previous:
 
     def arrange(self, keys: list) -> tuple:
         """Before a resumed run: move the kept cases' images to their new case ids and the stale
-        ones' to images/stale/. Returns (kept: key -> (row, status entry) under the new id,
-        stale: [{key, case, ...}])."""
+        ones' to images/stale/. Returns (kept: key -> (row, status entry, cascades.csv rows) under
+        the new id, stale: [{key, case, ...}])."""
         images = self.out / "images"
         new_id = {k: c for c, k in keys}
         kept, stale, moves = {}, [], []
         for key, (old, row, status) in self.done.items():
             if key in new_id:
                 new = new_id[key]
-                kept[key] = ({**row, "case": new}, {**status, "what": f"case {new}"})
+                kept[key] = ({**row, "case": new}, {**status, "what": f"case {new}"},
+                             [parse_row({**r, "case": new}) for r in self.cascade_rows.get(old, [])])
                 if old is not None and old != new:
                     moves.append((old, images / new))
             else:
@@ -190,7 +197,7 @@ class Previous:
         # two steps, through temporary names, so that ids swapping places never overwrite each other
         staged = []
         for old, dest in moves:
-            for kind in ("error", "shadow"):
+            for kind in ("error", "shadow", "cascade"):
                 src = images / f"{old}_{kind}.png"
                 if src.is_file():
                     tmp = images / f".resume.{old}_{kind}.png"

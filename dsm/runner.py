@@ -22,7 +22,7 @@ import drjit as dr
 import numpy as np
 
 from . import config as cfgmod
-from . import env, metrics, pipeline, report, resume, shadowmap, timing
+from . import cascades, env, metrics, pipeline, report, resume, shadowmap, timing
 from . import plan as planmod
 from .lookup import Receiver
 
@@ -95,6 +95,7 @@ class Runner:
         self.curves = []              # (oracle row at the first lambda, world curve, texel curve)
         self.case_no = 0
         self.extents = {}             # per scene: the spawn bound's per-shape extents
+        self.cascade_rows, self.cascade_curves = [], []   # cascades.csv and the distance plots
         self.quantized = 0            # quantized map copies made (stored formats other than float32)
         self.versions = env.versions()
         self.state = "running"
@@ -131,10 +132,13 @@ class Runner:
             self._write_run_json()
             report.write_oracle_csv(self.out / "oracle.csv", self.oracle_rows)
             report.write_table(self.out / "table.md", self.rows, self.cfg, self.status, self.oracle_rows)
+            if self.cascade_rows:
+                cascades.write_csv(self.out / "cascades.csv", self.cascade_rows)
             if self.state == "complete":
                 report.write_plots(self.out / "plots", self.rows)
                 report.write_pareto(self.out / "plots", self.rows)
                 report.write_tradeoff(self.out / "plots", self.rows, self.curves, self.cfg.oracle.lambdas[0])
+                cascades.write_plots(self.out / "plots", self.cascade_curves)
         return Results(self.out, self.rows, self._run_json(), self.images, self.oracle_rows, self.curves)
 
     def run_maps(self, maps, kept=None):
@@ -166,7 +170,7 @@ class Runner:
                     setup = self._light(sd, gb, lights, li, light_maps)
                 except StageFailed:
                     continue
-                for _, view_maps in itertools.groupby(light_maps, key=lambda m: (m.view, m.resolution)):
+                for _, view_maps in itertools.groupby(light_maps, key=lambda m: (m.view, m.resolution, m.cascade)):
                     self._run_view(sd, gb, setup, list(view_maps))
             self._write_run_json()
 
@@ -192,7 +196,7 @@ class Runner:
     # ------------------------------------------------------------ stages
     def _scene(self, spec, maps):
         def load():
-            sd = pipeline.load_scene(spec, self.cfg.camera_resolution)
+            sd = pipeline.load_scene(spec, self.cfg.camera_resolution, self.cfg.camera)
             gb, t = timing.measure(lambda: (pipeline.gbuffer(sd),), 0)
             gb = gb[-1]
             gb.ms = t.ms
@@ -226,7 +230,7 @@ class Runner:
 
         def receivers():
             pts = pipeline.points_np(setup.p) if setup.p is not None else np.zeros((0, 3))
-            view = pipeline.make_view(setup.light, R, pts, sd.bbox, kind)
+            view = pipeline.make_view(setup.light, R, pts, sd.bbox, kind, maps[0].cascade, sd.sensor, sd.scale)
             s = setup.subset(view.inside(setup.p).numpy().astype(bool)) if setup.p is not None else setup
             rx = seam = None
             if s.p is not None and len(s.pixels):
@@ -352,7 +356,8 @@ class Runner:
         self.case_no += 1
         case = f"{self.case_no:04d}"
         if self.keys.get(case) in self.kept:          # finished by the run being resumed: its row again
-            row, st = self.kept[self.keys[case]]
+            row, st, cascade_rows = self.kept[self.keys[case]]
+            self.cascade_rows += cascade_rows
             self.rows.append(resume.parse_row(row))
             self.csv.write(self.rows[-1])
             self.status.append(st)
@@ -362,7 +367,7 @@ class Runner:
                 "culling": smap.culling,
                 "preset": spec.preset or "", "params": spec.label, "resolution": view.resolution,
                 "total_texels": view.n_texels,
-                "filter": filt, "format": fmt}
+                "filter": filt, "format": fmt, "cascade_layout": view.spec.label if hasattr(view, "spec") else ""}
         try:
             if rx is None:
                 v_np, tap_np, lt = np.zeros(0), np.zeros(0, np.uint32), timing.Timing(0.0, 0.0, 0.0, 0, 0)
@@ -377,6 +382,13 @@ class Runner:
             # seed 000's self-unshadowing: pixels in attached shadow (facing away) that the map calls lit
             v_back = pipeline.visibility(spec, rx_back, smap, filt, self.cfg.seed)[0].numpy() \
                 if rx_back is not None else np.zeros(0)
+            if hasattr(view, "cascades"):         # a cascaded map: per cascade, texels per pixel, distance plot
+                extra, per, curve, faces = pipeline.cascade_metrics(view, rx, v_np, setup.v_star)
+                m.update(extra)
+                self.cascade_rows += [{**meta, **r} for r in per]
+                self.cascade_curves.append((meta, curve))
+                cascades.write_index_image(self.out / "images" / f"{case}_cascade.png", setup.pixels, faces,
+                                           gb.width, gb.height)
             m["n_backfacing"] = int(v_back.size)
             m["backface_lit_rate"] = float((v_back >= 0.5).mean()) if v_back.size else metrics.UNDEFINED
             texel = float(np.median(rx.texel_world.numpy())) if rx is not None else metrics.UNDEFINED

@@ -82,6 +82,12 @@ class DoubleTorusParams(Placement):
 
 
 @dataclass(frozen=True)
+class LongGroundParams(Placement):
+    """A 200 x 20 ground with posts (0.4 x 0.4 x 4) every 10 units along both sides, the camera near
+    the ground at one end looking along it: perspective aliasing, the cascades' scene."""
+
+
+@dataclass(frozen=True)
 class FileParams(Placement):
     """A scene file. Meshes (OBJ/PLY) get a ground under them, a default camera and light."""
     up: str = field(default="y", metadata={"choices": ("x", "y", "z")})
@@ -96,6 +102,7 @@ BUILTINS = {
     "grazing": GrazingParams,
     "room": RoomParams,
     "double_torus": DoubleTorusParams,
+    "long_ground": LongGroundParams,
 }
 FILE_SUFFIXES = (".xml", ".obj", ".ply")
 
@@ -243,15 +250,49 @@ def make_mesh(name: str, verts: np.ndarray, faces: np.ndarray):
     return mesh
 
 
-def look_at_sensor(origin, target, up, fov, width, height):
+def look_at_sensor(origin, target, up, fov, width, height, near=None, far=None):
+    """A perspective sensor dict. Clip planes follow the scene's scale (Mitsuba's default near clip is
+    0.01 world units): ``near`` default 1/1000 of the distance to the target, ``far`` 1000 times it."""
     import mitsuba as mi
     dist = float(np.linalg.norm(np.subtract(origin, target)))
-    # clip planes follow the scene's scale (Mitsuba's default near clip is 0.01 world units)
-    return {"type": "perspective", "fov": fov, "near_clip": dist * 1e-3, "far_clip": dist * 1e3,
+    near = dist * 1e-3 if near is None else float(near)
+    far = dist * 1e3 if far is None else float(far)
+    return {"type": "perspective", "fov": fov, "near_clip": near, "far_clip": far,
             "to_world": mi.ScalarTransform4f().look_at(origin=list(map(float, origin)),
                                                        target=list(map(float, target)),
                                                        up=list(map(float, up))),
             "film": {"type": "hdrfilm", "width": int(width), "height": int(height)}}
+
+
+def far_bound(origin, target, bbox_min, bbox_max) -> float:
+    """A sensible far clip: the view depth of the scene's farthest bounding-box corner (a bound on the
+    farthest receiver), 1 % beyond it."""
+    fwd = np.subtract(target, origin).astype(float)
+    fwd /= np.linalg.norm(fwd)
+    lo, hi = np.asarray(bbox_min, float), np.asarray(bbox_max, float)
+    corners = np.array([[(lo, hi)[i >> k & 1][k] for k in range(3)] for i in range(8)])
+    return max(float(((corners - np.asarray(origin, float)) @ fwd).max()), 1e-30) * 1.01
+
+
+def posed_camera(default, camera, scale=1.0, offset=ORIGIN):
+    """(origin, target, up, fov, near, far) of a scene's camera: the scene's own ``default`` pose
+    (origin, target, up, fov, near or None, far or None, world units) with the [camera] keys that
+    are given (``camera``: a CameraSpec or None) scaled by ``scale`` and moved by ``offset`` as the
+    config's light positions are."""
+    o, t, up, fov, near, far = default
+    if camera is not None:
+        off = np.asarray(offset, float)
+        if camera.position is not None:
+            o = np.asarray(camera.position, float) * scale + off
+        if camera.target is not None:
+            t = np.asarray(camera.target, float) * scale + off
+        up = camera.up if camera.up is not None else up
+        fov = camera.fov if camera.fov is not None else fov
+        near = camera.near * scale if camera.near is not None else near
+        far = camera.far * scale if camera.far is not None else far
+    if np.allclose(np.asarray(o, float), np.asarray(t, float)):
+        raise ValueError("the camera's position equals its target")
+    return np.asarray(o, float), np.asarray(t, float), tuple(float(c) for c in up), float(fov), near, far
 
 
 def _normalize(v):
@@ -381,6 +422,17 @@ def builtin_geometry(name: str, p):
         v = v @ _rotation([1, 0.3, 0], 20).T + [0.0, 0.0, 0.9]
         shapes = {"ground": _ground(), "double_torus": (v, f)}
         return shapes, ((1.0, -4.5, 3.8), (0, 0, 0.5)), LightSpec("directional", direction=_normalize([0.3, -0.2, -1]))
+    if name == "long_ground":
+        verts, faces = [], []
+        for x in np.arange(-90.0, 91.0, 10.0):
+            for y in (-4.0, 4.0):
+                v, f = box([x - 0.2, y - 0.2, 0.0], [x + 0.2, y + 0.2, 4.0])
+                faces.append(f + sum(len(a) for a in verts))
+                verts.append(v)
+        shapes = {"ground": quad([0, 0, 0], [100.0, 0, 0], [0, 10.0, 0]),
+                  "posts": (np.vstack(verts), np.vstack(faces))}
+        return shapes, ((-99.0, 0.0, 3.0), (-60.0, 0.0, 0.0), 60.0), \
+            LightSpec("directional", direction=_normalize([0.2, -0.5, -0.6]))
     raise KeyError(name)
 
 
@@ -425,11 +477,12 @@ class SceneData:
         return out
 
 
-def load(spec: SceneSpec, camera_resolution=None) -> SceneData:
+def load(spec: SceneSpec, camera_resolution=None, camera=None) -> SceneData:
     """Load one scene with its camera at ``camera_resolution`` (width, height). None: an XML
     scene's own film size, else DEFAULT_CAMERA; given, an XML sensor is re-created at that width
     with its film's aspect ratio, transform and field of view. A scene that cannot be used raises
-    ConfigError naming ``spec.source`` and the [[scene]] key (``spec.where``)."""
+    ConfigError naming ``spec.source`` and the [[scene]] key (``spec.where``). ``camera``: the
+    [camera] pose (a CameraSpec), overriding the scene's own (an XML sensor's too)."""
     import mitsuba as mi
     if spec.missing:
         raise ConfigError(_src(spec), f"{spec.where}.file", spec.missing)
@@ -439,19 +492,24 @@ def load(spec: SceneSpec, camera_resolution=None) -> SceneData:
         shapes, (cam_o, cam_t, *fov), light = builtin_geometry(spec.builtin, p)
         s, t = p.scale, np.asarray(p.translate, float)
         d = {"type": "scene"}
+        allv = []
         for name, (v, f) in shapes.items():
             d[name] = make_mesh(name, v * s + t, f)
-        d["sensor"] = look_at_sensor(np.multiply(cam_o, s) + t, np.multiply(cam_t, s) + t, (0, 0, 1),
-                                     (fov or [40])[0], w, h)
+            allv.append(np.asarray(v, float) * s + t)
+        allv = np.concatenate(allv)
+        o, tg, up, fv, near, far = posed_camera((np.multiply(cam_o, s) + t, np.multiply(cam_t, s) + t, (0, 0, 1),
+                                                 (fov or [40])[0], None, None), camera, s, p.translate)
+        d["sensor"] = look_at_sensor(o, tg, up, fv, w, h, near,
+                                     far if far is not None else far_bound(o, tg, allv.min(0), allv.max(0)))
         scene = mi.load_dict(d, optimize=False)
         data = _finish(spec.label, scene, [_scale_light(light, s, p.translate)], s)
         data.offset = tuple(float(c) for c in p.translate)
     else:
         try:
             if spec.file.suffix.lower() == ".xml":
-                data = _load_xml(spec, camera_resolution)
+                data = _load_xml(spec, camera_resolution, camera)
             else:
-                data = _load_mesh_file(spec, *(camera_resolution or DEFAULT_CAMERA))
+                data = _load_mesh_file(spec, *(camera_resolution or DEFAULT_CAMERA), camera=camera)
         except ConfigError:
             raise
         except (RuntimeError, ValueError, OSError) as e:      # Mitsuba's loaders raise RuntimeError
@@ -473,7 +531,7 @@ def check(cfg, keep: bool = False):
         sd = None
         if not spec.missing:
             try:
-                sd = load(spec, cfg.camera_resolution)
+                sd = load(spec, cfg.camera_resolution, cfg.camera)
             except ConfigError as e:
                 if str(e) not in seen:          # a swept file that cannot be read says so once
                     seen.add(str(e))
@@ -639,7 +697,7 @@ def from_mitsuba(scene, label: str = "scene") -> "SceneData":
     return _finish(label, scene, lights, 1.0, notes)
 
 
-def _load_xml(spec, camera_resolution):
+def _load_xml(spec, camera_resolution, camera=None):
     import mitsuba as mi
     _precheck_file(spec)
     scene = mi.load_file(str(spec.file), optimize=False)
@@ -659,7 +717,28 @@ def _load_xml(spec, camera_resolution):
         film = sensor.film().size()
         width = int(camera_resolution[0])
         data.sensor = _resized_sensor(sensor, width, max(1, round(width * film[1] / film[0])))
+    if camera is not None:
+        data.sensor = _reposed_sensor(data.sensor, camera, data.bbox)
     return data
+
+
+def _reposed_sensor(sensor, camera, bbox):
+    """An XML scene's sensor with the [camera] pose: its film (size) kept, the keys given replaced."""
+    import mitsuba as mi
+    params = mi.traverse(sensor)
+    m = np.array(sensor.world_transform().matrix.numpy(), float).reshape(4, 4)
+    o = m[:3, 3]
+    fwd, up = m[:3, 2], m[:3, 1]
+    near = float(np.ravel(params["near_clip"])[0]) if "near_clip" in params else None
+    far = float(np.ravel(params["far_clip"])[0]) if "far_clip" in params else None
+    fov = float(params["x_fov"][0]) if "x_fov" in params else 40.0
+    o2, t2, up2, fov2, near2, far2 = posed_camera((o, o + fwd, up, fov, near, far), camera)
+    if camera.far is None and (camera.position is not None or camera.target is not None):
+        far2 = far_bound(o2, t2, *bbox)
+    W, H = (int(x) for x in sensor.film().size())
+    d = look_at_sensor(o2, t2, up2, fov2, W, H, near2 if near2 is not None else None, far2)
+    d["fov_axis"] = "x"
+    return mi.load_dict(d)
 
 
 def _resized_sensor(sensor, width, height):
@@ -700,7 +779,7 @@ def emitter_to_light(e):
     return None
 
 
-def _load_mesh_file(spec, width, height):
+def _load_mesh_file(spec, width, height, camera=None):
     import mitsuba as mi
     p = spec.params
     _precheck_file(spec)
@@ -720,7 +799,10 @@ def _load_mesh_file(spec, width, height):
         d["ground"] = make_mesh("ground", v, f)
     side = _normalize(a * 0.6 - b * 1.0 + up * 0.8)
     cam_o = center + np.asarray(side) * 1.6 * size
-    d["sensor"] = look_at_sensor(cam_o, center, up, 40, width, height)
+    o, tg, upv, fv, near, far = posed_camera((cam_o, center, up, 40.0, None, None), camera, p.scale, p.translate)
+    lo_all, hi_all = (lo, hi) if p.ground != "yes" else (np.minimum(lo, center - size * 1.5), np.maximum(hi, center + size * 1.5))
+    d["sensor"] = look_at_sensor(o, tg, upv, fv, width, height, near,
+                                 far if far is not None else far_bound(o, tg, lo_all, hi_all))
     scene = mi.load_dict(d, optimize=False)
     light = LightSpec("directional", direction=_normalize(-up * 1.0 - a * 0.3 + b * 0.2))
     data = _finish(spec.label, scene, [light], p.scale)

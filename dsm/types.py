@@ -190,6 +190,61 @@ class LightSpec:
     label: str = ""
 
 
+CASCADE_SPLITS = ("uniform", "log", "practical")
+CASCADE_FITS = ("receivers", "scene", "frustum", "cascade")
+DEPTH_BOUNDS = ("clipped", "scene")         # near/far: the light frustum clipped to the scene's bounds, or the bounds
+MAX_CASCADES = 8
+
+
+@dataclass(frozen=True)
+class CameraSpec:
+    """``[camera]`` pose (None: the scene's own). Positions follow a built-in's scale and translate."""
+    position: tuple | None = None
+    target: tuple | None = None
+    up: tuple | None = None
+    fov: float | None = None        # horizontal, degrees
+    near: float | None = None
+    far: float | None = None
+
+    @property
+    def posed(self) -> bool:
+        return any(getattr(self, f.name) is not None for f in dataclasses.fields(self))
+
+
+@dataclass(frozen=True)
+class CascadeSpec:
+    """A directional light's cascade layout (``[map] cascades`` and its keys; dsm.cascades)."""
+    count: int = 1
+    split: str = "practical"
+    lam: float = 0.5                # practical split: lam * log + (1 - lam) * uniform
+    fit: str = "cascade"
+    depth_bounds: str = "clipped"
+    stabilize: bool = False
+    blend: float = 0.0              # fraction of each split blended with the next cascade
+    max_distance: float | None = None   # None: the farthest receiver's view depth
+    near: float | None = None       # None: the camera's near clip
+    bounds: tuple = ()              # explicit far bounds per cascade (engine layouts), world units
+    fractions: tuple = ()           # explicit far bounds as fractions of max_distance (engine layouts)
+    blend_rule: str = "split"       # "split": f of the split's length; "distance": f of its far bound (Bevy)
+    engine: str = ""
+
+    @property
+    def label(self) -> str:
+        if self.engine:
+            return self.engine
+        split = f"practical({self.lam:g})" if self.split == "practical" else self.split
+        out = f"{self.count}x {split} fit={self.fit}"
+        if self.depth_bounds != "clipped":
+            out += f" depth={self.depth_bounds}"
+        if self.stabilize:
+            out += " stable"
+        if self.blend:
+            out += f" blend={self.blend:g}"
+        if self.max_distance is not None:
+            out += f" max={self.max_distance:g}"
+        return out
+
+
 @dataclass(frozen=True)
 class MapSpec:
     resolution: tuple = (512,)
@@ -197,6 +252,7 @@ class MapSpec:
     format: tuple = ("float32",)
     view: tuple = ("dual_paraboloid",)
     texels: tuple = ()          # equal-memory sweeps: total texels per view, R = round(sqrt(texels / faces))
+    cascade: tuple = ()         # CascadeSpec layouts of directional lights (empty: one map fitted to the receivers)
 
     def resolutions_for(self, faces: int) -> tuple:
         """Per-face resolutions of a view with ``faces`` faces (from ``texels`` when given)."""
@@ -244,6 +300,7 @@ class Config:
     seed: int = 7
     variant: str | None = None
     camera_resolution: tuple | None = None   # None: an XML scene's own film, else DEFAULT_CAMERA
+    camera: "CameraSpec | None" = None       # [camera] pose; None: the scene's own
     scenes: tuple = ()
     lights: tuple = ()
     map: MapSpec = field(default_factory=MapSpec)
