@@ -1,4 +1,4 @@
-"""Command line: ``dsm run``, ``dsm plan``, ``dsm schemes``, ``dsm bench``.
+"""Command line: ``dsm run``, ``dsm plan``, ``dsm schemes``, ``dsm bench``, ``dsm tune``.
 
 Every bad input is one or two lines on stderr, never a traceback, before any work starts:
 exit 2 for a mistake in the config or the arguments, 3 for the machine's set-up (libLLVM, no
@@ -74,6 +74,11 @@ def _parser():
                         "('' to skip; default 1024,2048,4096,8192)")
     b.add_argument("--no-sweep", action="store_true",
                    help="skip the sweep throughput (local run against a local two-worker Ray cluster)")
+    t = sub.add_parser("tune", help="tune scheme parameters (and a learned bias map) by gradient: a config's [tune]")
+    t.add_argument("config", help="experiment TOML file with a [tune] table")
+    t.add_argument("--out", help="results folder (default: runs/<name>-tune-<time>)")
+    t.add_argument("--variant", choices=cfgmod.VARIANTS, help="Mitsuba variant (default llvm_ad_rgb)")
+    t.add_argument("--threads", type=_positive_int, help="Dr.Jit worker threads (at least 1)")
     return ap
 
 
@@ -111,6 +116,9 @@ def main(argv=None) -> int:
             return _config_error(e)
         if args.cmd == "plan":
             return _plan(cfg)
+        if args.cmd == "tune":
+            out = Path(args.out) if args.out else Path("runs") / f"{cfg.name}-tune-{time.strftime('%Y%m%d-%H%M%S')}"
+            return _tune(cfg, args, out)
         out = Path(args.out) if args.out else Path("runs") / f"{cfg.name}-{time.strftime('%Y%m%d-%H%M%S')}"
         return _run(cfg, args, out)
     except KeyboardInterrupt:
@@ -269,6 +277,34 @@ def _run(cfg, args, out: Path) -> int:
     if failed:
         print(f"dsm: {failed} failed (reasons above, in table.md and run.json)", file=sys.stderr)
         return 1
+    return 0
+
+
+def _tune(cfg, args, out: Path) -> int:
+    from . import tune as tunemod
+    try:
+        tc = tunemod.parse_tune(cfg)                 # [tune] checked before any scene loads
+        from . import pipeline
+        tc.config = pipeline.prepare(cfg, args.variant, args.threads)
+    except cfgmod.NothingToRun as e:
+        _err(e.problem)
+        return 1
+    except SetupError as e:
+        _err(f"setup error: {e}")
+        return 3
+    except cfgmod.ConfigError as e:
+        return _config_error(e)
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        _err(f"--out {out}: is not an empty folder; choose another --out")
+        return 2
+    t0 = time.perf_counter()
+    try:
+        res = tunemod.run_tune(tc, out, progress=True)
+    except cfgmod.ConfigError as e:
+        return _config_error(e)
+    print(tunemod.table_text(res))
+    print(f"dsm: tuned {len(res.schemes)} schemes in {time.perf_counter() - t0:.1f} s -> {out}/ (tuned.toml, "
+          "table.md, steps.csv, tune.json, plots/)")
     return 0
 
 

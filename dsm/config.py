@@ -22,7 +22,8 @@ CASCADE_KEYS = ("cascades", "split", "lambda", "fit", "depth_bounds", "stabilize
 
 
 TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing", "memory", "oracle",
-            "execution")
+            "execution",
+            "tune")    # [tune]: read by dsm.tune (dsm tune), ignored by dsm run
 
 
 def load(path) -> Config:

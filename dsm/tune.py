@@ -1,0 +1,984 @@
+"""Bias tuned by gradient: every continuous scheme parameter, and a learned bias map, fitted by
+Dr.Jit's AD through the kit's own lookup and judged by the exact (hard) objective.
+
+**Objective** (the oracles'): ``E = (n_acne + lambda n_peterpan) / n_receivers``, pooled over
+every training case (scene x light x training camera): the counts summed, then divided by the
+summed receivers.
+
+**Relaxation.** A receiver's lit probability is ``s_r = sigmoid(margin_r(theta) / T_r)``, the
+margin being the scheme's signed margin (lit when >= 0) and ``T_r = t texel_world(r)`` a
+temperature in depth units tied to the texel at the receiver; ``t`` (texels) is annealed from
+``temperature[0]`` to ``temperature[1]`` over the steps (``schedule``: geometric or linear).
+The relaxed loss is ``(sum over truly lit (1 - s_r) + lambda sum over truly shadowed s_r) /
+n_receivers``; an empty class adds 0.
+
+**Gradients.** The parameters are Dr.Jit Floats with gradients; the scheme's own ``shift`` and
+``margin`` run on them (``dr.backward``), steps are ``mi.ad.Adam``'s (first-moment decay
+``BETA1`` = 0.5: the default 0.9 carries the iterate across the flat optimum of a piecewise
+constant objective after the gradient turns) on each parameter divided by one texel's worth in
+its unit (the mean texel width over the training receivers for world units, that over the depth
+range for range units, over the scene diagonal for adaptive's K; 1 for texel units and slope
+factors). ``lr`` is the step in those texels at the first temperature; it shrinks in proportion
+to the temperature. After each step a parameter is clipped into its search range
+(``[tune.range]``, default ``[valid minimum or 0, start + 16 texels' worth]``). Parameters
+that act through the choice of texel (normal offset's ``offset``, combined's
+``normal_offset``) have no derivative through z1 under a nearest lookup (a gather at
+``floor(u)``): while tuning, schemes with a shift read z1 **bilinearly** between the four
+surrounding texel centres (continuous in the lookup point), the slope and z2 layers and the
+tangent-plane texel from the nearest texel. The hard objective always uses the kit's nearest
+lookup (``pipeline.visibility``).
+
+**Learned bias map** (``[tune.bias_map]``): one bias per block of ``block x block`` texels
+of the light's map, the map fitted once to the union of every camera's receivers (training and
+held-out) so the grid is the same for all views. Trained on the training cameras (started from
+the tuned constant bias when one was tuned in the same unit), judged on the held-out cameras
+against the per-texel oracle of the held-out views and against the best tuned global scheme.
+
+**Comparisons.** Constant bias against the exact oracle (world or texel, by the bias's unit)
+of the training views; every scheme against a grid search over the same box with at most the
+same number of (hard) loss evaluations, both timed (``dr.sync_thread`` before each clock).
+"""
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import SimpleNamespace
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from . import lookup
+from . import pipeline as pl
+from .schemes.base import no_shift
+from .types import (DEFAULT_CAMERA, ConfigError, Length, SchemeSpec, as_list, check_keys, choice, describe_params,
+                    number, vec3)
+
+TUNE_KEYS = ("lambda", "steps", "lr", "temperature", "schedule", "seed", "batch", "params", "range", "camera",
+             "bias_map")
+CAMERA_KEYS = ("name", "position", "target", "up", "fov", "role")
+ROLES = ("train", "heldout")
+SCHEDULES = ("geometric", "linear")
+MAP_KEYS = ("block", "unit", "init", "steps", "lr")
+MAP_UNITS = ("world", "texel")
+CLIP = 30.0              # |margin / T| beyond which the sigmoid is flat (its derivative below 1e-13)
+BETA1 = 0.5              # Adam's first-moment decay (0.9 carries the iterate past the flat optimum of a
+                         # piecewise-constant objective when the gradient flips as the temperature falls)
+BETA2 = 0.9              # and second-moment decay: the gradient's scale falls by orders of magnitude as the
+                         # iterate leaves the dense thresholds and the temperature drops; 0.999 remembers the
+                         # early scale and stalls the steps
+
+
+def tunable(module) -> tuple:
+    """The continuous parameters of a scheme module (Length, float): the ones tuning can move."""
+    return tuple(f.name for f in dataclasses.fields(module.Params)
+                 if f.type in ("Length", Length, "float", float))
+
+
+def _is_length(module, name) -> bool:
+    f = {f.name: f for f in dataclasses.fields(module.Params)}[name]
+    return f.type in ("Length", Length)
+
+
+def _valid_min(module, name):
+    f = {f.name: f for f in dataclasses.fields(module.Params)}[name]
+    return f.metadata.get("min")
+
+
+# ---------------------------------------------------------------- the [tune] table
+
+@dataclass(frozen=True)
+class TuneCamera:
+    """One [[tune.camera]]: a pose and its role."""
+    name: str
+    position: tuple
+    target: tuple
+    up: tuple = (0.0, 0.0, 1.0)
+    fov: float = 40.0
+    role: str = "train"
+
+
+@dataclass(frozen=True)
+class BiasMapSpec:
+    block: int = 1
+    unit: str = "world"
+    init: Length = Length(0.0, "world")
+    steps: int = 100
+    lr: float = 0.5
+
+
+@dataclass(frozen=True)
+class TuneSpec:
+    lam: float = 1.0
+    steps: int = 100
+    lr: float = 0.5                         # texels per step at the start temperature
+    temperature: tuple = (0.25, 0.02)         # texels: start, end
+    schedule: str = "geometric"
+    seed: int = 7
+    batch: float = 1.0                        # fraction of training receivers drawn per step
+    params: dict = field(default_factory=dict)     # scheme name -> tuned parameter names
+    ranges: dict = field(default_factory=dict)     # (scheme name, parameter) -> (lo, hi) in its unit
+    cameras: tuple = ()
+    bias_map: BiasMapSpec | None = None
+
+
+@dataclass
+class TuneConfig:
+    config: object       # the experiment Config (scenes, lights, map)
+    spec: TuneSpec
+    schemes: tuple       # the SchemeSpecs to tune (the config's [[scheme]] instances)
+
+
+def parse_tune(cfg) -> TuneConfig:
+    """The ``[tune]`` table of an experiment config, checked (ConfigError naming file, key and
+    choices) before any work: the schemes to tune are the config's ``[[scheme]]`` instances."""
+    from .schemes import get
+    src = cfg.source
+    raw = cfg.raw.get("tune", {})
+    if not isinstance(raw, dict):
+        raise ConfigError(src, "tune", "expected a table [tune]")
+    check_keys(raw, TUNE_KEYS, src, "tune")
+    lam = number(raw.get("lambda", 1.0), src, "tune.lambda", minimum=0)
+    steps = number(raw.get("steps", 100), src, "tune.steps", integer=True, minimum=1, maximum=100000)
+    lr = number(raw.get("lr", TuneSpec.lr), src, "tune.lr", positive=True)
+    temp = raw.get("temperature", list(TuneSpec.temperature))
+    if not isinstance(temp, list) or len(temp) != 2:
+        raise ConfigError(src, "tune.temperature", f"expected [start, end] in texels, got {temp!r}")
+    temp = tuple(number(t, src, "tune.temperature", positive=True) for t in temp)
+    schedule = choice(raw.get("schedule", "geometric"), src, "tune.schedule", SCHEDULES)
+    seed = number(raw.get("seed", cfg.seed), src, "tune.seed", integer=True)
+    batch = number(raw.get("batch", 1.0), src, "tune.batch", positive=True, maximum=1.0)
+
+    # the schemes: the config's [[scheme]] instances, each with something to tune
+    specs = []
+    for i, s in enumerate(cfg.schemes):
+        if s.preset is not None:
+            raise ConfigError(src, f"scheme[{i}].preset", "dsm tune tunes scheme parameters, not presets: give "
+                              "the combined scheme with the preset's values (dsm schemes lists them)")
+        if not tunable(get(s.name)):
+            raise ConfigError(src, "scheme.name", f"{s.name} has no continuous parameter to tune",
+                              _tunable_names())
+        specs.append(s)
+    names = sorted({s.name for s in specs})
+    params_raw = raw.get("params", {})
+    if not isinstance(params_raw, dict):
+        raise ConfigError(src, "tune.params", "expected a table: scheme name = [parameter names]")
+    params = {}
+    for n in names:
+        mod = get(n)
+        chosen = as_list(params_raw.get(n, list(tunable(mod))))
+        for p in chosen:
+            choice(p, src, f"tune.params.{n}", tunable(mod))
+        if not chosen:
+            raise ConfigError(src, f"tune.params.{n}", "empty list", tunable(mod))
+        params[n] = tuple(dict.fromkeys(chosen))
+    for n in params_raw:
+        if n not in names:
+            raise ConfigError(src, f"tune.params.{n}", "no [[scheme]] of that name is tuned", names)
+    for s in specs:
+        for p in params[s.name]:
+            v = getattr(s.params, p)
+            if not math.isfinite(v.value if isinstance(v, Length) else v):
+                raise ConfigError(src, f"scheme.{p}", f"{s.name}.{p} starts at {v}: give a finite start to tune it")
+    ranges = {}
+    range_raw = raw.get("range", {})
+    if not isinstance(range_raw, dict):
+        raise ConfigError(src, "tune.range", "expected tables [tune.range.<scheme>] of parameter = [lo, hi]")
+    for n, t in range_raw.items():
+        if n not in names:
+            raise ConfigError(src, f"tune.range.{n}", "no [[scheme]] of that name is tuned", names)
+        if not isinstance(t, dict):
+            raise ConfigError(src, f"tune.range.{n}", "expected a table of parameter = [lo, hi]")
+        for p, lohi in t.items():
+            key = f"tune.range.{n}.{p}"
+            choice(p, src, key, params[n])
+            if not isinstance(lohi, list) or len(lohi) != 2:
+                raise ConfigError(src, key, f"expected [lo, hi] in the parameter's unit, got {lohi!r}")
+            lo, hi = (number(x, src, key) for x in lohi)
+            vmin = _valid_min(get(n), p)
+            if not lo < hi:
+                raise ConfigError(src, key, f"lo must be below hi, got {lohi!r}")
+            if vmin is not None and lo < vmin:
+                raise ConfigError(src, key, f"lo must be >= {vmin:g} (the parameter's valid range), got {lo!r}")
+            ranges[(n, p)] = (lo, hi)
+
+    cams = []
+    cam_raw = raw.get("camera", [])
+    if isinstance(cam_raw, dict):
+        cam_raw = [cam_raw]
+    if not isinstance(cam_raw, list) or not all(isinstance(c, dict) for c in cam_raw):
+        raise ConfigError(src, "tune.camera", "expected an array of tables [[tune.camera]]")
+    for i, c in enumerate(cam_raw):
+        w = f"tune.camera[{i}]"
+        check_keys(c, CAMERA_KEYS, src, w)
+        for k in ("position", "target"):
+            if k not in c:
+                raise ConfigError(src, f"{w}.{k}", "missing (a camera is a position, a target, an up and a fov)")
+        pos, tgt = vec3(c["position"], src, f"{w}.position"), vec3(c["target"], src, f"{w}.target")
+        if pos == tgt:
+            raise ConfigError(src, f"{w}.target", "the target equals the position")
+        up = vec3(c.get("up", [0.0, 0.0, 1.0]), src, f"{w}.up", nonzero=True)
+        fov = number(c.get("fov", 40.0), src, f"{w}.fov", positive=True, maximum=170.0)
+        role = choice(c.get("role", "train"), src, f"{w}.role", ROLES)
+        name = c.get("name", f"cam{i}")
+        if not isinstance(name, str) or not name:
+            raise ConfigError(src, f"{w}.name", "expected a non-empty string")
+        cams.append(TuneCamera(name, pos, tgt, up, fov, role))
+    if len({c.name for c in cams}) != len(cams):
+        raise ConfigError(src, "tune.camera", "camera names must differ")
+    if cams and not any(c.role == "train" for c in cams):
+        raise ConfigError(src, "tune.camera", "no camera has role = \"train\"", ROLES)
+
+    bmap = None
+    if "bias_map" in raw:
+        b = raw["bias_map"]
+        if not isinstance(b, dict):
+            raise ConfigError(src, "tune.bias_map", "expected a table [tune.bias_map]")
+        check_keys(b, MAP_KEYS, src, "tune.bias_map")
+        unit = choice(b.get("unit", "world"), src, "tune.bias_map.unit", MAP_UNITS)
+        init = Length.parse(b.get("init", f"0 {unit}" if unit != "world" else 0.0), src, "tune.bias_map.init")
+        if init.unit != unit:
+            raise ConfigError(src, "tune.bias_map.init", f"give the start in the map's unit ({unit})", MAP_UNITS)
+        bmap = BiasMapSpec(number(b.get("block", 1), src, "tune.bias_map.block", integer=True, minimum=1),
+                           unit, init,
+                           number(b.get("steps", steps), src, "tune.bias_map.steps", integer=True, minimum=1,
+                                  maximum=100000),
+                           number(b.get("lr", lr), src, "tune.bias_map.lr", positive=True))
+        if not any(c.role == "heldout" for c in cams):
+            raise ConfigError(src, "tune.camera", "a learned bias map is judged on held-out views: add a "
+                              "[[tune.camera]] with role = \"heldout\"", ROLES)
+
+    m = cfg.map
+    for key, vals in (("map.resolution", m.resolutions_for(1)), ("map.format", m.format)):
+        if len(vals) != 1:
+            raise ConfigError(src, key, f"dsm tune fits one map per scene and light: give one value, got {list(vals)}")
+    if getattr(m, "cascade", ()):
+        raise ConfigError(src, "map.cascades", "dsm tune fits one map per scene and light fixed across views; "
+                          "a cascaded view follows its camera: remove the cascades")
+    if m.filter != ("nearest",):
+        raise ConfigError(src, "map.filter", "dsm tune measures the nearest lookup (the oracles' lookup)",
+                          ("nearest",))
+    spec = TuneSpec(lam, steps, lr, temp, schedule, seed, batch, params, ranges, tuple(cams), bmap)
+    return TuneConfig(cfg, spec, tuple(specs))
+
+
+def _tunable_names():
+    from .schemes import REGISTRY
+    return [s.NAME for s in REGISTRY if tunable(s)]
+
+
+# ---------------------------------------------------------------- cases: receivers of every view
+
+@dataclass
+class Case:
+    """One scene, light and camera: receivers seen in the light's shared map."""
+    scene: str
+    light: str
+    camera: str
+    role: str
+    group: int                 # index of the (scene, light) map
+    setup: object              # LightSetup (receivers inside the view)
+    rx: object                 # Receiver in the stored map's view
+    v_star: np.ndarray
+    v_star_dr: object          # mi.Bool
+    th: object                 # pipeline.Thresholds (nearest texel, no shift)
+
+    @property
+    def n(self) -> int:
+        return int(self.v_star.size)
+
+
+@dataclass
+class Group:
+    """One scene and light: its map per culling (one layer set each), shared by all cameras."""
+    scene: str
+    light: str
+    view: object
+    maps: dict                 # culling -> stored map
+    n_texels: int
+    diagonal: float
+
+
+def _cameras(tc, sd):
+    """(name, role, sensor) of every camera: the [[tune.camera]] poses, placed like the config's
+    lights (scaled by the scene's scale, then moved by its translation); none: the scene's own."""
+    from .scenes import look_at_sensor
+    W, H = tc.config.camera_resolution or DEFAULT_CAMERA
+    if not tc.spec.cameras:
+        return [("scene", "train", sd.sensor)]
+    out = []
+    s, t = sd.scale, np.asarray(sd.offset, float)
+    for c in tc.spec.cameras:
+        d = look_at_sensor(np.multiply(c.position, s) + t, np.multiply(c.target, s) + t, c.up, c.fov, W, H)
+        out.append((c.name, c.role, mi.load_dict(d)))
+    return out
+
+
+def prepare_cases(tc, progress=None):
+    """Load every scene, light and camera; fit each light's map to the union of its cameras'
+    receivers; build it for every culling the tuned schemes ask for. (groups, cases, notes)"""
+    cfg = tc.config
+    fmt = cfg.map.format[0]
+    R = cfg.map.resolutions_for(1)[0]
+    kind = cfg.map.view[0]
+    needs = {}
+    for s in tc.schemes:     # every layer a scheme may read: a tuned term may start at 0 (combined's slope_scale)
+        needs.setdefault(pl.culling_of(s.params), set()).update(pl.scheme_module(s.name).NEEDS)
+    needs.setdefault("none", set())
+    groups, cases, notes = [], [], []
+    for spec in cfg.scenes:
+        sd = pl.load_scene(spec, cfg.camera_resolution, getattr(cfg, "camera", None))   # [camera] pose, if any
+        lights = sd.lights_for(cfg.lights)
+        closed = pl.closedness(sd)[0] if any(c != "none" for c in needs) else None
+        extents = pl.spawn_extents(sd.scene)
+        cams = [(name, role, pl.gbuffer(sd, sensor=sensor)) for name, role, sensor in _cameras(tc, sd)]
+        for li, light in enumerate(lights):
+            label = light.label or light.type
+            setups = [(name, role, pl.light_setup(sd, gb, light, label)) for name, role, gb in cams]
+            pts = [pl.points_np(s.p) for _, _, s in setups if s.p is not None]
+            pts = np.concatenate(pts) if pts else np.zeros((0, 3))
+            view = pl.make_view(light, R, pts, sd.bbox, kind)
+            maps = {c: pl.store(pl.build_map(sd.scene, view, sorted(nd), c, closed, extents=extents), fmt)
+                    for c, nd in needs.items()}
+            g = len(groups)
+            groups.append(Group(sd.label, label, view, maps, view.n_texels, sd.diagonal))
+            for name, role, s in setups:
+                if s.p is not None:
+                    s = s.subset(view.inside(s.p).numpy().astype(bool))
+                if s.p is None or len(s.pixels) == 0:
+                    notes.append(f"{sd.label} / {label} / {name}: no receiver (left out)")
+                    continue
+                smap = maps["none"]
+                rx = pl.receivers(smap.view, s, sd.diagonal)
+                dr.eval(rx.depth, rx.u_map, rx.v_map, rx.face, rx.texel_world, rx.to_light)
+                th = pl.thresholds(rx, smap)
+                cases.append(Case(sd.label, label, name, role, g, s, rx, s.v_star.copy(), mi.Bool(s.v_star), th))
+            if progress:
+                progress(f"{sd.label} / {label}")
+    return groups, cases, notes
+
+
+# ---------------------------------------------------------------- the relaxed loss
+
+def _bilinear_z1(rx, smap):
+    """z1 interpolated between the four texel centres around the receiver's map position
+    (each read as the nearest lookup would read that texel: clamped to the face, the far
+    bound beyond a directional map), continuous in the lookup point."""
+    x, y = rx.u_map - 0.5, rx.v_map - 0.5
+    i0, j0 = dr.floor(dr.detach(x)), dr.floor(dr.detach(y))
+    fx, fy = x - i0, y - j0
+    z = 0
+    for a in (0, 1):
+        for b in (0, 1):
+            t = lookup.tap_at(rx, smap, i0 + 0.5 + a, j0 + 0.5 + b)
+            w = (fx if a else 1.0 - fx) * (fy if b else 1.0 - fy)
+            z = z + w * t.z1
+    return z
+
+
+def _resolved(module, params, values: dict, rx):
+    """The lookup's resolved parameters (``lookup.resolve``) with the tuned ones replaced by the
+    differentiable ``values`` (name -> scalar Float in the parameter's own unit)."""
+    ns = vars(lookup.resolve(params, rx)).copy()
+    for name, val in values.items():
+        cur = getattr(params, name)
+        if isinstance(cur, Length):
+            if cur.unit == "texel":
+                val = val * rx.texel_world
+            elif cur.unit == "range":
+                val = val * dr.opaque(mi.Float, rx.view.depth_range)
+        ns[name] = val
+    return SimpleNamespace(**ns)
+
+
+def margins(module, params, values, rx, smap, relax: bool):
+    """The scheme's signed margin per receiver with ``values`` substituted (differentiable);
+    ``relax``: z1 read bilinearly (for parameters that move the lookup point)."""
+    prm = _resolved(module, params, values, rx)
+    rx2 = module.shift(rx, prm)
+    tap = lookup.nearest_tap(rx2, smap)
+    if relax:
+        tap = dataclasses.replace(tap, z1=_bilinear_z1(rx2, smap))
+    return module.margin(rx2, tap, prm)
+
+
+def relaxed_sum(m, rx, v_star_dr, t_texels, lam, weight=None):
+    """sum over truly lit (1 - s) + lambda sum over truly shadowed s, s = sigmoid(m / T),
+    T = t texel_world (a Dr.Jit scalar)."""
+    x = dr.clip(m / (t_texels * rx.texel_world), -CLIP, CLIP)
+    s = 1.0 / (1.0 + dr.exp(-x))
+    per = dr.select(v_star_dr, 1.0 - s, lam * s)
+    if weight is not None:
+        per = per * weight
+    return dr.sum(per)
+
+
+def relaxed_loss(module, params, values, cases, groups, t_texels, lam, weights=None):
+    """The relaxed objective over ``cases`` (a Dr.Jit scalar with the graph to ``values``)."""
+    relax = module.shift is not no_shift and any(
+        k in values for k in ("offset", "normal_offset"))
+    culling = pl.culling_of(params)
+    total, n = 0.0, 0
+    t = dr.opaque(mi.Float, float(t_texels))
+    for i, c in enumerate(cases):
+        smap = groups[c.group].maps[culling]
+        m = margins(module, params, values, c.rx, smap, relax)
+        w = None if weights is None else weights[i]
+        total = total + relaxed_sum(m, c.rx, c.v_star_dr, t, lam, w)
+        n += c.n            # a batch's weights are 1 / batch on the drawn receivers: the same expectation
+    return total / max(n, 1), relax
+
+
+def relaxed_loss_np(module, params, values: dict, cases, groups, t_texels, lam) -> float:
+    """The same relaxed loss computed from the kit's forward margins in numpy float64 (the
+    finite-difference tests' second computation)."""
+    vals = {k: mi.Float(float(v)) for k, v in values.items()}
+    relax = module.shift is not no_shift and any(k in vals for k in ("offset", "normal_offset"))
+    culling = pl.culling_of(params)
+    total, n = 0.0, 0
+    for c in cases:
+        m = margins(module, params, vals, c.rx, groups[c.group].maps[culling], relax)
+        x = np.asarray(m.numpy(), np.float64) / (t_texels * np.asarray(c.rx.texel_world.numpy(), np.float64))
+        x = np.clip(x, -CLIP, CLIP)
+        s = 1.0 / (1.0 + np.exp(-x))
+        total += float(np.where(c.v_star, 1.0 - s, lam * s).sum())
+        n += c.n
+    return total / max(n, 1)
+
+
+# ---------------------------------------------------------------- hard (exact) evaluation
+
+def with_values(spec: SchemeSpec, values: dict) -> SchemeSpec:
+    """The scheme instance with tuned values (numbers, in each parameter's own unit)."""
+    upd = {}
+    for k, v in values.items():
+        cur = getattr(spec.params, k)
+        upd[k] = Length(float(v), cur.unit) if isinstance(cur, Length) else float(v)
+    return SchemeSpec(spec.name, dataclasses.replace(spec.params, **upd))
+
+
+def hard_counts(spec: SchemeSpec, cases, groups) -> dict:
+    """Exact counts of one scheme instance over ``cases`` with the kit's nearest lookup."""
+    acne = pp = n = lit = 0
+    culling = pl.culling_of(spec.params)
+    for c in cases:
+        v, _ = pl.visibility(spec, c.rx, groups[c.group].maps[culling])
+        on = v.numpy() >= 0.5
+        acne += int((c.v_star & ~on).sum())
+        pp += int((~c.v_star & on).sum())
+        n += c.n
+        lit += int(c.v_star.sum())
+    return _counts(acne, pp, n, lit)
+
+
+def _counts(acne, pp, n, lit) -> dict:
+    sh = n - lit
+    nan = float("nan")
+    return {"n_receivers": n, "n_gt_lit": lit, "n_gt_shadowed": sh, "n_acne": acne, "n_peterpan": pp,
+            "acne_rate": acne / lit if lit else nan, "peterpan_rate": pp / sh if sh else nan,
+            "error_rate": (acne + pp) / n if n else nan}
+
+
+def objective(counts: dict, lam: float) -> float:
+    n = counts["n_receivers"]
+    return (counts["n_acne"] + lam * counts["n_peterpan"]) / n if n else float("nan")
+
+
+def _sync_clock():
+    dr.sync_thread()
+    return time.perf_counter()
+
+
+# ---------------------------------------------------------------- tuning one scheme
+
+@dataclass
+class Param:
+    name: str
+    unit: str                  # world | texel | range | "" (a plain number)
+    start: float
+    scale: float
+    lo: float
+    hi: float
+
+
+# parameters that are lengths without being Lengths: K multiplies the scene's diagonal (adaptive)
+DIAGONAL_FRACTIONS = {("adaptive", "K")}
+BOX_TEXELS = 16.0         # the default search range: [valid minimum or 0, start + 16 texels' worth]
+
+
+def texel_sizes(train, groups) -> dict:
+    """One texel's worth in each unit, over the training receivers: world (the mean texel
+    width), range (that over the mean depth range), diagonal (that over the mean scene diagonal)."""
+    tw = float(np.mean(np.concatenate([c.th.texel_world for c in train]).astype(np.float64)))
+    used = sorted({c.group for c in train})
+    rng = float(np.mean([groups[g].view.depth_range for g in used]))
+    diag = float(np.mean([groups[g].diagonal for g in used]))
+    return {"texel": 1.0, "world": tw, "range": tw / rng, "diagonal": tw / diag, "": 1.0}
+
+
+def _param_box(tc, spec, sizes) -> list:
+    """Each tuned parameter: its start, its step scale (one texel's worth in its unit; 1 for
+    factors on the slope) and its search range."""
+    from .schemes import get
+    mod = get(spec.name)
+    out = []
+    for name in tc.spec.params[spec.name]:
+        cur = getattr(spec.params, name)
+        v = cur.value if isinstance(cur, Length) else float(cur)
+        unit = cur.unit if isinstance(cur, Length) else ""
+        scale = sizes["diagonal" if (spec.name, name) in DIAGONAL_FRACTIONS else unit]
+        vmin = _valid_min(mod, name)
+        lo, hi = tc.spec.ranges.get((spec.name, name), (0.0 if vmin is None else vmin,
+                                                        max(v, 0.0) + BOX_TEXELS * scale))
+        if vmin is not None:
+            lo = max(lo, vmin)
+        out.append(Param(name, unit, min(max(v, lo), hi), scale, lo, hi))
+    return out
+
+
+def temperature_at(spec: TuneSpec, step: int, steps: int) -> float:
+    t0, t1 = spec.temperature
+    f = step / max(steps - 1, 1)
+    return t0 * (t1 / t0) ** f if spec.schedule == "geometric" else t0 + (t1 - t0) * f
+
+
+def _batch_weights(spec: TuneSpec, cases, rng):
+    if spec.batch >= 1.0:
+        return None
+    return [mi.Float((rng.random(c.n) < spec.batch).astype(np.float32) / spec.batch) for c in cases]
+
+
+def tune_scheme(tc, spec: SchemeSpec, train, groups, progress=None) -> dict:
+    """Adam on the relaxed loss over the training cases; per step the loss, the hard objective
+    and the time of the step (loss, gradient and update)."""
+    from .schemes import get
+    mod = get(spec.name)
+    ts = tc.spec
+    box = _param_box(tc, spec, texel_sizes(train, groups))
+    rng = np.random.default_rng(ts.seed)
+    opt = mi.ad.Adam(lr=ts.lr, beta_1=BETA1, beta_2=BETA2)
+    for p in box:
+        opt[p.name] = mi.Float(p.start / p.scale)
+    rows, relax = [], False
+    for step in range(ts.steps):
+        t_texels = temperature_at(ts, step, ts.steps)
+        w = _batch_weights(ts, train, rng)
+        opt.set_learning_rate(ts.lr * t_texels / ts.temperature[0])      # steps shrink with the temperature
+        t0 = _sync_clock()
+        values = {p.name: opt[p.name] * p.scale for p in box}
+        loss, relax = relaxed_loss(mod, spec.params, values, train, groups, t_texels, ts.lam, w)
+        dr.backward(loss)
+        grads = {p.name: float(dr.grad(opt[p.name]).numpy().ravel()[0]) / p.scale for p in box}
+        opt.step()
+        for p in box:
+            opt[p.name] = dr.clip(opt[p.name], p.lo / p.scale, p.hi / p.scale)
+        dr.eval(*[opt[p.name] for p in box])
+        ms = (_sync_clock() - t0) * 1e3
+        cur = {p.name: float(opt[p.name].numpy().ravel()[0]) * p.scale for p in box}
+        hard = objective(hard_counts(with_values(spec, cur), train, groups), ts.lam)
+        rows.append({"scheme": spec.name, "step": step, "temperature_texel": t_texels,
+                     "loss": float(loss.numpy().ravel()[0]), "hard_objective": hard, "time_ms": ms,
+                     **{f"param_{k}": v for k, v in cur.items()}, **{f"grad_{k}": g for k, g in grads.items()}})
+        if progress:
+            progress()
+    final = {p.name: float(opt[p.name].numpy().ravel()[0]) * p.scale for p in box}
+    times = [r["time_ms"] for r in rows]
+    return {"values": final, "box": box, "steps": rows, "relaxed_lookup": relax,
+            "first_step_ms": times[0], "step_ms": float(np.median(times[1:])) if len(times) > 1 else times[0],
+            "total_ms": float(sum(times))}
+
+
+def grid_search(tc, spec: SchemeSpec, box, train, groups, budget: int) -> dict:
+    """The best hard training objective over a regular grid of the same box with at most
+    ``budget`` evaluations (points per parameter: floor(budget^(1/p)))."""
+    p = len(box)
+    k = max(1, int(math.floor(budget ** (1.0 / p) + 1e-9)))
+    axes = [np.linspace(b.lo, b.hi, k) for b in box]
+    best, evals = None, 0
+    t0 = _sync_clock()
+    for combo in np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, p):
+        vals = {b.name: float(x) for b, x in zip(box, combo)}
+        obj = objective(hard_counts(with_values(spec, vals), train, groups), tc.spec.lam)
+        evals += 1
+        if best is None or obj < best[0]:
+            best = (obj, vals)
+    ms = (_sync_clock() - t0) * 1e3
+    return {"values": best[1], "objective": best[0], "evaluations": evals, "points_per_parameter": k,
+            "total_ms": ms}
+
+
+# ---------------------------------------------------------------- oracles of pooled cases
+
+def pooled_thresholds(cases, groups):
+    """The cases' thresholds as one set, texel ids made unique per map (group)."""
+    off = np.cumsum([0] + [g.n_texels for g in groups])
+    th = [c.th for c in cases]
+    cat = lambda k: np.concatenate([getattr(t, k) for t in th])
+    texel = np.concatenate([c.th.texel + off[c.group] for c in cases])
+    return pl.Thresholds(cat("tau"), cat("kappa"), texel, cat("z1"), cat("depth"), cat("texel_world")), \
+        np.concatenate([c.v_star for c in cases])
+
+
+# ---------------------------------------------------------------- learned bias map
+
+def _blocks(cases, groups, block):
+    """Per case the block index (unique across maps) of each receiver's nearest texel; the
+    number of blocks."""
+    offs, total = [], 0
+    for g in groups:
+        R = g.view.resolution
+        nb = -(-R // block)
+        offs.append((total, R, nb))
+        total += g.view.faces * nb * nb
+    out = []
+    for c in cases:
+        base, R, nb = offs[c.group]
+        t = c.th.texel
+        face, rest = t // (R * R), t % (R * R)
+        i, j = rest % R, rest // R
+        out.append(base + (face * nb + j // block) * nb + i // block)
+    return out, total
+
+
+def _map_margin(c, groups, bias_world):
+    smap = groups[c.group].maps["none"]
+    tap = lookup.nearest_tap(c.rx, smap)
+    return tap.z1 + bias_world - c.rx.depth
+
+
+def map_start(tc, train, groups, const=None) -> np.ndarray:
+    """The bias map's start per map (group), in the map's unit: the best tuned constant bias
+    (``const``, a result entry) converted with the group's mean texel width over its training
+    receivers, so a block no training view sees keeps the tuned global bias; without one,
+    ``[tune.bias_map] init``."""
+    bm = tc.spec.bias_map
+    out = np.full(len(groups), bm.init.value, np.float64)
+    if const is None:
+        return out
+    b = const["spec"].params.bias
+    for g in range(len(groups)):
+        tws = [c.th.texel_world for c in train if c.group == g]
+        tw = float(np.mean(np.concatenate(tws))) if tws else float(texel_sizes(train, groups)["world"])
+        world = b.value * {"world": 1.0, "texel": tw, "range": groups[g].view.depth_range}[b.unit]
+        out[g] = world if bm.unit == "world" else world / tw
+    return out
+
+
+def tune_bias_map(tc, train, held, groups, init_values, progress=None) -> dict:
+    """Adam on one bias per block (started per map at ``init_values``, in the map's unit)."""
+    bm, ts = tc.spec.bias_map, tc.spec
+    blk_train, nblocks = _blocks(train, groups, bm.block)
+    blk_held, _ = _blocks(held, groups, bm.block)
+    scale = texel_sizes(train, groups)[bm.unit]      # steps in texels' worth, as the schemes'
+    opt = mi.ad.Adam(lr=bm.lr, beta_1=BETA1, beta_2=BETA2)
+    per_group = [g.view.faces * (-(-g.view.resolution // bm.block)) ** 2 for g in groups]
+    start = np.repeat(np.asarray(init_values, np.float64), per_group)
+    opt["b"] = mi.Float((start / scale).astype(np.float32))
+    idx_train = [mi.UInt32(b.astype(np.uint32)) for b in blk_train]
+    tex = bm.unit == "texel"
+    rows = []
+
+    def bias(c, idx, b):
+        val = dr.gather(mi.Float, b, idx) * scale
+        return val * c.rx.texel_world if tex else val
+
+    lo = min(0.0, float(start.min()))                # a bias map never goes below 0 unless started there
+    for step in range(bm.steps):
+        t_texels = temperature_at(ts, step, bm.steps)
+        opt.set_learning_rate(bm.lr * t_texels / ts.temperature[0])
+        t0 = _sync_clock()
+        b = opt["b"]
+        total = 0.0
+        tt = dr.opaque(mi.Float, t_texels)
+        for c, idx in zip(train, idx_train):
+            total = total + relaxed_sum(_map_margin(c, groups, bias(c, idx, b)), c.rx, c.v_star_dr, tt, ts.lam)
+        loss = total / max(sum(c.n for c in train), 1)
+        dr.backward(loss)
+        opt.step()
+        opt["b"] = dr.maximum(opt["b"], lo / scale)
+        dr.eval(opt["b"])
+        ms = (_sync_clock() - t0) * 1e3
+        hard = objective(_map_counts(train, idx_train, groups, opt["b"], scale, tex), ts.lam)
+        rows.append({"scheme": "bias_map", "step": step, "temperature_texel": t_texels,
+                     "loss": float(loss.numpy().ravel()[0]), "hard_objective": hard, "time_ms": ms})
+        if progress:
+            progress()
+    b = opt["b"]
+    seen = np.zeros(nblocks, bool)
+    for x in blk_train:
+        seen[x] = True
+    idx_held = [mi.UInt32(x.astype(np.uint32)) for x in blk_held]
+    cov_n = sum(int(seen[x].sum()) for x in blk_held)
+    n_held = sum(c.n for c in held)
+    times = [r["time_ms"] for r in rows]
+    return {"values": np.asarray(b.numpy(), np.float64) * scale, "blocks": nblocks, "block": bm.block,
+            "unit": bm.unit, "init": [float(x) for x in init_values], "steps": rows,
+            "train": _map_counts(train, idx_train, groups, b, scale, tex),
+            "heldout": _map_counts(held, idx_held, groups, b, scale, tex),
+            "heldout_covered_fraction": cov_n / n_held if n_held else float("nan"),
+            "blocks_trained": int(seen.sum()),
+            "first_step_ms": times[0], "step_ms": float(np.median(times[1:])) if len(times) > 1 else times[0],
+            "total_ms": float(sum(times))}
+
+
+def _map_counts(cases, idxs, groups, b, scale, tex) -> dict:
+    acne = pp = n = lit = 0
+    for c, idx in zip(cases, idxs):
+        val = dr.gather(mi.Float, dr.detach(b), idx) * scale
+        m = _map_margin(c, groups, val * c.rx.texel_world if tex else val)
+        on = (m >= 0).numpy()
+        acne += int((c.v_star & ~on).sum())
+        pp += int((~c.v_star & on).sum())
+        n += c.n
+        lit += int(c.v_star.sum())
+    return _counts(acne, pp, n, lit)
+
+
+# ---------------------------------------------------------------- the whole run
+
+@dataclass
+class TuneResult:
+    """What ``dsm tune`` writes: per tuned scheme its values, hard metrics on the training and
+    held-out views, the grid search and (constant) the oracle; the per-step rows; the learned
+    bias map's result; the comparison rows."""
+    schemes: list
+    steps: list
+    comparison: list
+    bias_map: dict | None
+    notes: list
+    n_train: int
+    n_heldout: int
+    tuned_toml: str
+    spec: TuneSpec
+
+    def best(self):
+        """The tuned scheme with the lowest training objective."""
+        return min(self.schemes, key=lambda s: s["train"]["objective"]) if self.schemes else None
+
+
+def tune(config, out=None, progress: bool = False, variant: str | None = None) -> TuneResult:
+    """Tune every ``[[scheme]]`` of ``config`` (a Config, dict or TOML path with a ``[tune]``
+    table) on its training views; write the results into ``out`` when given."""
+    from .config import coerce
+    config = coerce(config)
+    tc = parse_tune(config)                   # the [tune] table checked before any scene loads
+    tc.config = pl.prepare(config, variant)
+    return run_tune(tc, out, progress)
+
+
+def run_tune(tc, out=None, progress: bool = False) -> TuneResult:
+    ts = tc.spec
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        total = len(tc.config.scenes) + ts.steps * len(tc.schemes) + (ts.bias_map.steps if ts.bias_map else 0)
+        bar = tqdm(total=total, desc="dsm tune", unit="step", leave=False)
+    tick = (lambda *a: bar.update(1)) if bar else None
+    groups, cases, notes = prepare_cases(tc, tick)
+    train = [c for c in cases if c.role == "train"]
+    held = [c for c in cases if c.role == "heldout"]
+    if not train:
+        raise ConfigError(tc.config.source, "tune.camera", "no training view has a receiver")
+    n_train, n_held = sum(c.n for c in train), sum(c.n for c in held)
+    th_train, vs_train = pooled_thresholds(train, groups)
+    orc_train = pl.oracles(th_train, vs_train, ts.lam)["row"]
+    orc_held = pl.oracles(*pooled_thresholds(held, groups), ts.lam)["row"] if held else None
+    results, steps, comparison = [], [], []
+    for spec in tc.schemes:
+        r = tune_scheme(tc, spec, train, groups, tick)
+        tuned = with_values(spec, r["values"])
+        g = grid_search(tc, spec, r["box"], train, groups, ts.steps)
+        grid_spec = with_values(spec, g["values"])
+        entry = {"scheme": spec.name, "start": describe_params(spec.params), "params": describe_params(tuned.params),
+                 "values": r["values"], "units": {p.name: p.unit for p in r["box"]},
+                 "box": {p.name: [p.lo, p.hi] for p in r["box"]}, "relaxed_lookup": r["relaxed_lookup"],
+                 "spec": tuned, "train": _with_obj(hard_counts(tuned, train, groups), ts.lam),
+                 "heldout": _with_obj(hard_counts(tuned, held, groups), ts.lam) if held else None,
+                 "start_train": _with_obj(hard_counts(spec, train, groups), ts.lam),
+                 "first_step_ms": r["first_step_ms"], "step_ms": r["step_ms"], "tune_ms": r["total_ms"],
+                 "grid": {**g, "params": describe_params(grid_spec.params),
+                          "heldout": _with_obj(hard_counts(grid_spec, held, groups), ts.lam)["objective"]
+                          if held else float("nan")}}
+        if spec.name == "constant":
+            unit = getattr(spec.params, "bias").unit
+            tag = "texel" if unit == "texel" else "world" if unit == "world" else None
+            if tag:
+                entry["oracle"] = {"kind": tag, "objective": orc_train[f"{tag}_objective"],
+                                   "bias": orc_train["best_k" if tag == "texel" else "best_b"]}
+        results.append(entry)
+        steps += r["steps"]
+        comparison.append(_comparison_row(entry, ts.steps))
+    bmap = None
+    if ts.bias_map and held:
+        const = [e for e in results if e["scheme"] == "constant"]
+        best_const = min(const, key=lambda e: e["train"]["objective"]) if const else None
+        init = map_start(tc, train, groups, best_const)
+        bmap = tune_bias_map(tc, train, held, groups, init, tick)
+        bmap["init_from"] = best_const["params"] if best_const else str(ts.bias_map.init)
+        bmap["train"] = _with_obj(bmap["train"], ts.lam)
+        bmap["heldout"] = _with_obj(bmap["heldout"], ts.lam)
+        best = min(results, key=lambda e: e["train"]["objective"]) if results else None
+        bmap["per_texel_oracle_heldout"] = orc_held["per_texel_objective"]
+        bmap["per_texel_oracle_train"] = orc_train["per_texel_objective"]
+        bmap["best_global"] = ({"scheme": best["scheme"], "params": best["params"],
+                                "heldout": best["heldout"]["objective"], "train": best["train"]["objective"]}
+                               if best else None)
+        steps += bmap["steps"]
+    elif ts.bias_map:
+        notes.append("no held-out view has a receiver: the learned bias map was not trained")
+    if bar:
+        bar.close()
+    res = TuneResult(results, steps, comparison, bmap, notes, n_train, n_held, tuned_toml(results), ts)
+    if out is not None:
+        write(res, Path(out), orc_train, orc_held)
+    return res
+
+
+def _with_obj(counts, lam):
+    return {**counts, "objective": objective(counts, lam)}
+
+
+def _comparison_row(e, budget):
+    g = e["grid"]
+    row = {"scheme": e["scheme"], "tuned_params": e["params"], "tuned_train": e["train"]["objective"],
+           "tuned_heldout": e["heldout"]["objective"] if e["heldout"] else float("nan"),
+           "tuned_ms": e["tune_ms"], "tuned_evaluations": budget, "first_step_ms": e["first_step_ms"],
+           "step_ms": e["step_ms"],
+           "grid_params": g["params"], "grid_train": g["objective"], "grid_heldout": g["heldout"],
+           "grid_ms": g["total_ms"], "grid_evaluations": g["evaluations"],
+           "oracle": e.get("oracle", {}).get("objective", float("nan")),
+           "start_train": e["start_train"]["objective"]}
+    return row
+
+
+def tuned_toml(results) -> str:
+    """The tuned instances as ready ``[[scheme]]`` blocks."""
+    lines = ["# tuned by dsm tune: paste into an experiment config"]
+    for e in results:
+        lines.append("[[scheme]]")
+        lines.append(f'name = "{e["scheme"]}"')
+        for f in dataclasses.fields(e["spec"].params):
+            v = getattr(e["spec"].params, f.name)
+            if isinstance(v, Length):
+                if not math.isfinite(v.value):
+                    continue               # a default without a finite value (no clamp): left at its default
+                lines.append(f'{f.name} = {v.value!r}' if v.unit == "world" else f'{f.name} = "{v.value!r} {v.unit}"')
+            elif isinstance(v, float):
+                lines.append(f"{f.name} = {v!r}")
+            elif isinstance(v, str):
+                lines.append(f'{f.name} = "{v}"')
+        lines.append(f"# train objective {e['train']['objective']:.6f}")
+        lines.append("")
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------- output folder
+
+def _fmt(x):
+    if isinstance(x, float):
+        return "-" if math.isnan(x) else f"{x:.5f}"
+    return str(x)
+
+
+def table_text(res: TuneResult) -> str:
+    lam = res.spec.lam
+    out = [f"# dsm tune (lambda = {lam:g}; objective (n_acne + lambda n_peterpan) / n_receivers)", "",
+           f"training receivers {res.n_train}, held-out receivers {res.n_heldout}", "",
+           "| scheme | tuned | train | held-out | tune ms (evals; first, median step) | grid best | grid train "
+           "| grid held-out | grid ms (evals) | oracle (train) | start train |",
+           "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for r in res.comparison:
+        out.append(f"| {r['scheme']} | {r['tuned_params']} | {_fmt(r['tuned_train'])} | {_fmt(r['tuned_heldout'])} "
+                   f"| {r['tuned_ms']:.0f} ({r['tuned_evaluations']}; {r['first_step_ms']:.1f}, {r['step_ms']:.1f}) "
+                   f"| {r['grid_params']} | {_fmt(r['grid_train'])} "
+                   f"| {_fmt(r['grid_heldout'])} | {r['grid_ms']:.0f} ({r['grid_evaluations']}) "
+                   f"| {_fmt(r['oracle'])} | {_fmt(r['start_train'])} |")
+    if res.bias_map:
+        b = res.bias_map
+        bg = b["best_global"]
+        out += ["", "## learned bias map", "",
+                f"{b['blocks']} blocks of {b['block']} x {b['block']} texels ({b['blocks_trained']} with training "
+                f"receivers; {_fmt(b['heldout_covered_fraction'])} of held-out receivers fall in them), unit "
+                f"{b['unit']}, started from {b['init_from']} (per map: "
+                f"{', '.join(f'{x:.4g}' for x in b['init'])})", "",
+                "| | train | held-out |", "| --- | --- | --- |",
+                f"| learned map | {_fmt(b['train']['objective'])} | {_fmt(b['heldout']['objective'])} |",
+                f"| per-texel oracle (of those views) | {_fmt(b['per_texel_oracle_train'])} "
+                f"| {_fmt(b['per_texel_oracle_heldout'])} |"]
+        if bg:
+            out.append(f"| best tuned global ({bg['scheme']} {bg['params']}) | {_fmt(bg['train'])} "
+                       f"| {_fmt(bg['heldout'])} |")
+    if res.notes:
+        out += ["", "notes: " + "; ".join(res.notes)]
+    return "\n".join(out) + "\n"
+
+
+def write(res: TuneResult, out: Path, orc_train=None, orc_held=None):
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "tuned.toml").write_text(res.tuned_toml)
+    keys = []
+    for r in res.steps:
+        keys += [k for k in r if k not in keys]
+    with open(out / "steps.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, keys, restval="")
+        w.writeheader()
+        for r in res.steps:
+            w.writerow({k: ("" if isinstance(v, float) and math.isnan(v) else v) for k, v in r.items()})
+    (out / "table.md").write_text(table_text(res))
+    doc = {"lambda": res.spec.lam, "n_train": res.n_train, "n_heldout": res.n_heldout, "notes": res.notes,
+           "schemes": [{k: v for k, v in e.items() if k not in ("spec",)} for e in res.schemes],
+           "comparison": res.comparison, "oracle_train": orc_train, "oracle_heldout": orc_held,
+           "bias_map": None if res.bias_map is None else
+           {k: v for k, v in res.bias_map.items() if k not in ("steps", "values")}}
+    if res.bias_map is not None:
+        np.save(out / "bias_map.npy", res.bias_map["values"])
+    (out / "tune.json").write_text(json.dumps(_no_nan(doc), indent=1, default=_json_default))
+    plot(res, out / "plots")
+
+
+def _no_nan(o):
+    """Undefined values (NaN) as JSON null."""
+    if isinstance(o, dict):
+        return {str(k): _no_nan(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_no_nan(v) for v in o]
+    if isinstance(o, Param):
+        return _no_nan(dataclasses.asdict(o))
+    if isinstance(o, (float, np.floating)):
+        return None if math.isnan(o) else float(o)
+    return o
+
+
+def _json_default(o):
+    if isinstance(o, Param):
+        return dataclasses.asdict(o)
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    return str(o)
+
+
+def plot(res: TuneResult, folder: Path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    folder.mkdir(parents=True, exist_ok=True)
+    names = list(dict.fromkeys(r["scheme"] for r in res.steps))
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
+    for name in names:
+        rows = [r for r in res.steps if r["scheme"] == name]
+        s = [r["step"] for r in rows]
+        axes[0].plot(s, [r["loss"] for r in rows], label=name)
+        axes[1].plot(s, [r["hard_objective"] for r in rows], label=name)
+    axes[0].set(title="relaxed loss", xlabel="step")
+    axes[1].set(title=f"hard objective (lambda = {res.spec.lam:g})", xlabel="step")
+    axes[1].legend(fontsize=7)
+    fig.tight_layout()
+    tmp = folder / ".tune_loss.png.tmp.png"
+    fig.savefig(tmp, dpi=110)
+    tmp.replace(folder / "tune_loss.png")
+    plt.close(fig)

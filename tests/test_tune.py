@@ -1,0 +1,228 @@
+"""dsm tune: the AD gradient against central finite differences (a float64 numpy second
+computation of the relaxed loss from the kit's forward margins), constant bias against the
+exact oracles on the tilted plane and the floating plate, repeatability, config checks."""
+import numpy as np
+import pytest
+
+CAMS = [{"position": [3.0, -5.0, 4.0], "target": [0.0, 0.0, 0.0]},
+        {"position": [-4.0, -3.0, 5.0], "target": [0.0, 0.0, 0.0], "role": "heldout"}]
+
+
+def _cfg(scene, schemes, tune=None, R=64, cam=48, light=None):
+    c = {"experiment": {"name": "t"}, "camera": {"resolution": [cam, cam]}, "scene": [scene],
+         "map": {"resolution": R}, "scheme": schemes, "tune": tune or {}}
+    if light:
+        c["light"] = [light]
+    return c
+
+
+def _prepared(cfg):
+    import dsm.pipeline as pl
+    import dsm.tune as tu
+    from dsm.config import coerce
+    tc = tu.parse_tune(coerce(cfg))
+    tc.config = pl.prepare(tc.config)
+    groups, cases, _ = tu.prepare_cases(tc)
+    return tc, groups, cases
+
+
+# ---------------------------------------------------------------- gradients
+
+GRAD_CASES = [
+    ("constant", {"bias": "0.5 texel"}, "bias"),
+    ("slope_scaled", {"bias": "0.3 texel", "slope": 1.0, "clamp": "1.5 texel"}, "bias"),
+    ("slope_scaled", {"bias": "0.3 texel", "slope": 1.0, "clamp": "8 texel"}, "slope"),
+    ("slope_scaled", {"bias": "0.3 texel", "slope": 2.0, "clamp": "1.5 texel"}, "clamp"),   # the ground: 1 texel
+    ("normal_angle", {"bias": "0.5 texel", "max": "8 texel"}, "bias"),
+    ("normal_angle", {"bias": "2 texel", "max": "1 texel"}, "max"),
+    ("normal_offset", {"offset": "1 texel", "bias": "0.2 texel"}, "offset"),
+    ("normal_offset", {"offset": "1 texel", "bias": "0.2 texel"}, "bias"),
+    ("receiver_plane", {"bias": "0.05 texel"}, "bias"),
+    ("adaptive", {"K": 0.002}, "K"),
+    ("dual", {"z_offset": "1 texel", "culling": "none"}, "z_offset"),
+    ("combined", {"normal_offset": "1 texel", "depth_bias": "0.3 texel", "slope_scale": 1.0,
+                  "slope_clamp": "2 texel"}, "normal_offset"),
+    ("combined", {"normal_offset": "1 texel", "depth_bias": "0.3 texel", "slope_scale": 1.0,
+                  "slope_clamp": "2 texel"}, "depth_bias"),
+    ("combined", {"normal_offset": "0.5 texel", "depth_bias": "0.3 texel", "slope_scale": 1.0,
+                  "slope_clamp": "8 texel"}, "slope_scale"),
+    ("combined", {"normal_offset": "0.5 texel", "depth_bias": "0.3 texel", "slope_scale": 2.0,
+                  "slope_clamp": "1 texel"}, "slope_clamp"),
+]
+
+
+@pytest.fixture(scope="module")
+def grad_setup():
+    """The L-shape over the ground (every scheme's term active somewhere), one camera."""
+    schemes = [{"name": n, **p} for n, p, _ in GRAD_CASES]
+    return _prepared(_cfg({"builtin": "l_shape"}, schemes, R=48, cam=40))
+
+
+@pytest.mark.parametrize("i", range(len(GRAD_CASES)), ids=[f"{n}.{p}" for n, _, p in GRAD_CASES])
+def test_ad_gradient_matches_central_differences(grad_setup, i):
+    import drjit as dr
+    import mitsuba as mi
+    import dsm.tune as tu
+    from dsm.schemes import get
+    tc, groups, cases = grad_setup
+    spec = tc.schemes[i]
+    name = GRAD_CASES[i][2]
+    mod = get(spec.name)
+    cur = getattr(spec.params, name)
+    v0 = cur.value if hasattr(cur, "value") else float(cur)
+    T = 1.0                                           # texels: the loss is smooth at this temperature
+    x = mi.Float(v0)
+    dr.enable_grad(x)
+    loss, _ = tu.relaxed_loss(mod, spec.params, {name: x}, cases, groups, T, 1.0)
+    dr.backward(loss)
+    ad = float(dr.grad(x).numpy().ravel()[0])
+    h = 0.02 * (tu.texel_sizes(cases, groups)["diagonal"] if name == "K" else 1.0)
+    hi = tu.relaxed_loss_np(mod, spec.params, {name: v0 + h}, cases, groups, T, 1.0)
+    lo = tu.relaxed_loss_np(mod, spec.params, {name: v0 - h}, cases, groups, T, 1.0)
+    fd = (hi - lo) / (2 * h)
+    # the relaxed loss at v0 from numpy agrees with the AD forward value, and the parameter acts
+    assert tu.relaxed_loss_np(mod, spec.params, {name: v0}, cases, groups, T, 1.0) == \
+        pytest.approx(float(loss.numpy().ravel()[0]), rel=1e-5)
+    assert abs(fd) > 1e-4, (spec.name, name, fd)
+    assert abs(ad - fd) <= 0.01 * abs(fd), (spec.name, name, ad, fd)
+
+
+def test_empty_class_adds_zero_not_nan():
+    """The tilted plane alone under its light: every receiver lit, no shadowed class."""
+    import dsm.tune as tu
+    from dsm.schemes import get
+    tc, groups, cases = _prepared(_cfg({"builtin": "plane"}, [{"name": "constant", "bias": "0.5 texel"}], R=32,
+                                       cam=24))
+    assert not any((~c.v_star).any() for c in cases)
+    spec = tc.schemes[0]
+    v = tu.relaxed_loss_np(get("constant"), spec.params, {"bias": 0.5}, cases, groups, 0.5, 1.0)
+    # a second computation: the constant margin from the thresholds (b - tau), in float64
+    th, vs = tu.pooled_thresholds(cases, groups)
+    b = 0.5 * th.texel_world.astype(np.float64)
+    s = 1.0 / (1.0 + np.exp(-np.clip((b - th.tau) / (0.5 * th.texel_world), -30, 30)))
+    assert v == pytest.approx(float((1.0 - s).mean()), rel=2e-3)
+
+
+# ---------------------------------------------------------------- against the exact oracle
+
+@pytest.mark.parametrize("scene", [{"builtin": "plane", "tilt": 60}, {"builtin": "floating_plate"}],
+                         ids=["plane", "floating_plate"])
+def test_tuned_constant_bias_reaches_the_oracle(scene):
+    import dsm.pipeline as pl
+    import dsm.tune as tu
+    cfg = _cfg(scene, [{"name": "constant", "bias": 0.01}], {"steps": 80, "lambda": 1.0}, R=64, cam=48)
+    res = tu.tune(cfg)
+    e = res.schemes[0]
+    # the oracle recomputed here from the kit's thresholds (the world oracle over the training views)
+    tc, groups, cases = _prepared(cfg)
+    th, vs = tu.pooled_thresholds(cases, groups)
+    cands = np.concatenate([[-np.inf], np.unique(th.tau)])
+    objs = [((vs & (th.tau > b)).sum() + (~vs & (th.tau <= b)).sum()) / vs.size for b in cands]
+    best = min(objs)
+    assert e["oracle"]["objective"] == pytest.approx(best)
+    assert e["train"]["objective"] >= best - 1e-12
+    assert e["train"]["objective"] - best <= 0.005
+    if scene["builtin"] == "floating_plate":
+        b = e["values"]["bias"]
+        # self acne: truly lit receivers whose nearest texel is their own shape
+        largest = -np.inf
+        for c in cases:
+            _, tap_shape = pl.visibility(pl.scheme_spec({"name": "none"}), c.rx, groups[c.group].maps["none"])
+            own = tap_shape.numpy() == c.setup.shape
+            if (own & c.v_star).any():
+                largest = max(largest, float(c.th.tau[own & c.v_star].max()))
+        assert largest < b < 0.2, (largest, b)
+
+
+def test_a_fixed_seed_repeats():
+    import dsm.tune as tu
+    cfg = _cfg({"builtin": "plane_box"}, [{"name": "slope_scaled", "bias": "0.3 texel", "slope": 1.0,
+                                           "clamp": "4 texel"}],
+               {"steps": 12, "batch": 0.5, "seed": 3}, R=32, cam=32)
+    a, b = tu.tune(cfg), tu.tune(cfg)
+    assert a.schemes[0]["values"] == b.schemes[0]["values"]
+    assert [r["loss"] for r in a.steps] == [r["loss"] for r in b.steps]
+    other = dict(cfg, tune={"steps": 12, "batch": 0.5, "seed": 4})
+    assert tu.tune(other).schemes[0]["values"] != a.schemes[0]["values"]     # the seed draws the batches
+
+
+# ---------------------------------------------------------------- bias map, output, config
+
+def test_bias_map_and_output_folder(tmp_path):
+    import tomllib
+    import dsm.pipeline as pl
+    import dsm.tune as tu
+    cfg = _cfg({"builtin": "floating_plate"}, [{"name": "constant", "bias": 0.02},
+                                               {"name": "normal_offset", "offset": "1 texel", "bias": 0.01}],
+               {"steps": 15, "camera": CAMS, "bias_map": {"block": 2, "steps": 15}}, R=32, cam=32)
+    res = tu.tune(cfg, out=tmp_path)
+    bm = res.bias_map
+    # no bias per texel beats the per-texel oracle of the same views
+    assert bm["train"]["objective"] >= bm["per_texel_oracle_train"] - 1e-12
+    assert bm["heldout"]["objective"] >= bm["per_texel_oracle_heldout"] - 1e-12
+    assert bm["init"] == [pytest.approx(res.schemes[0]["values"]["bias"])]    # started from the tuned constant
+    # tuned.toml holds ready [[scheme]] blocks with the tuned values
+    blocks = tomllib.loads((tmp_path / "tuned.toml").read_text())["scheme"]
+    for blk, e in zip(blocks, res.schemes):
+        spec = pl.scheme_spec(blk)
+        assert spec == e["spec"]
+    rows = (tmp_path / "steps.csv").read_text().splitlines()
+    assert len(rows) == 1 + 15 * 3
+    assert (tmp_path / "plots" / "tune_loss.png").stat().st_size > 0
+    # the grid used no more loss evaluations than the tuning's steps
+    assert all(r["grid_evaluations"] <= r["tuned_evaluations"] for r in res.comparison)
+
+
+@pytest.mark.parametrize("tune,key", [
+    ({"stepz": 3}, "tune.stepz"),
+    ({"params": {"constant": ["bias", "slope"]}}, "tune.params.constant"),
+    ({"params": {"dual": ["z_offset"]}}, "tune.params.dual"),
+    ({"schedule": "cosine"}, "tune.schedule"),
+    ({"bias_map": {"block": 2}}, "tune.camera"),
+    ({"camera": [{"position": [1, 2, 3]}]}, "tune.camera[0].target"),
+    ({"range": {"constant": {"bias": [1, 0]}}}, "tune.range.constant.bias"),
+])
+def test_bad_tune_tables_are_refused_before_work(tune, key):
+    import dsm.tune as tu
+    from dsm import ConfigError
+    from dsm.config import coerce
+    with pytest.raises(ConfigError) as e:
+        tu.parse_tune(coerce(_cfg({"builtin": "plane"}, [{"name": "constant"}], tune)))
+    assert e.value.key == key
+
+
+def test_schemes_without_a_continuous_parameter_are_refused():
+    import dsm.tune as tu
+    from dsm import ConfigError
+    from dsm.config import coerce
+    with pytest.raises(ConfigError) as e:
+        tu.parse_tune(coerce(_cfg({"builtin": "plane"}, [{"name": "midpoint"}])))
+    assert "constant" in e.value.choices and "midpoint" not in e.value.choices
+
+
+def test_cli_tune(tmp_path):
+    import tomllib
+    from dsm.cli import main
+    cfg = tmp_path / "t.toml"
+    cfg.write_text('[experiment]\nname = "t"\n[camera]\nresolution = 32\n[[scene]]\nbuiltin = "plane_box"\n'
+                   '[map]\nresolution = 32\n[[scheme]]\nname = "constant"\nbias = "0.5 texel"\n[tune]\nsteps = 6\n')
+    assert main(["tune", str(cfg), "--out", str(tmp_path / "o")]) == 0
+    block = tomllib.loads((tmp_path / "o" / "tuned.toml").read_text())["scheme"][0]
+    assert block["name"] == "constant" and block["bias"].endswith(" texel")
+    bad = tmp_path / "b.toml"
+    bad.write_text(cfg.read_text().replace("steps = 6", "steps = 0"))
+    assert main(["tune", str(bad), "--out", str(tmp_path / "o2")]) == 2
+    assert not (tmp_path / "o2").exists()
+
+
+def test_cascaded_maps_are_refused():
+    """A cascaded view follows its camera: no map grid is shared across views."""
+    import dsm.tune as tu
+    from dsm import ConfigError
+    from dsm.config import coerce
+    cfg = _cfg({"builtin": "plane_box"}, [{"name": "constant"}], light={"type": "directional",
+                                                                        "direction": [0.2, 0.1, -1.0]})
+    cfg["map"]["cascades"] = 2
+    with pytest.raises(ConfigError) as e:
+        tu.parse_tune(coerce(cfg))
+    assert e.value.key == "map.cascades"
