@@ -18,8 +18,9 @@ in the cascade whose range of camera view depth holds its view depth (``face_of`
   whole box along the light (the naive AABB fit).
 - **Stabilization**: each cascade's extent from a bounding sphere of its fitted points, its
   radius rounded up to a fixed quantum (a power of two near 1/256 of the scene's diagonal), and
-  its corner at a whole number of texels from a fixed anchor (the scene's bounding-box centre in
-  light space, at the scene's near plane). A texel ray is computed from the anchor and the
+  its corner at a whole number of texels from a fixed anchor (below and left of the scene's
+  bounding box in light space by twice the larger of its diagonal and max_distance, at the
+  scene's near plane). A texel ray is computed from the anchor and the
   texel's whole index counted from it, so a texel of the same world place has a bit-identical
   ray in every frame; near and far are the scene's (fixed) bounds.
 - **Blend** ``f``: over the last fraction ``f`` of each split (Bevy: of its far bound) the
@@ -267,7 +268,11 @@ class CascadeView(View):
         if spec.stabilize:
             q = 2.0 ** (math.floor(math.log2(max(diag, 1e-300))) - 8)
             self.stable_quantum = q
-            ax, ay = to_light(0.5 * (lo + hi))[0][:2]
+            # the anchor: below and left of every square a cascade can take (the scene's box in light
+            # space, less twice the larger of its diagonal and max_distance), so each square's corner is
+            # a whole number n >= 0 of texels from it and u = (x s) - n never rounds (0 <= u <= x s)
+            reach = 2.0 * max(diag, (spec.max_distance or 0.0) * scale)
+            ax, ay = box_l[:, 0].min() - reach, box_l[:, 1].min() - reach
             margin = 0.01 * max(zs.max() - zs.min(), diag, 1e-30)
             z0 = zs.min() - margin
             anchor = ex * ax + ey * ay + ez * z0
@@ -390,6 +395,8 @@ class CascadeView(View):
         s = self.R / L
         if nu is None:
             return x * s, y * s
+        # stabilized: the position counted from the anchor (the same float32 in every frame), less the
+        # whole-texel offset of the square's corner: exact, as 0 <= result <= x s (Sterbenz-like)
         return x * s - nu, y * s - nv
 
     def ray_at(self, u, v, face=None):

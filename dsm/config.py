@@ -16,14 +16,15 @@ from .types import (  # noqa: F401  (re-exported: the config's vocabulary)
     LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, LIGHT_TYPES, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA,
     REPORT_IMAGES,
     ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params,
-    SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params,
-    CameraSpec, CascadeSpec, CASCADE_SPLITS, CASCADE_FITS, DEPTH_BOUNDS, MAX_CASCADES)
+    SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec,
+    CameraSpec, CascadeSpec, CASCADE_SPLITS, CASCADE_FITS, DEPTH_BOUNDS, MAX_CASCADES,
+    MotionSpec, CAMERA_PATHS, LIGHT_PATHS)
 
 CASCADE_KEYS = ("cascades", "split", "lambda", "fit", "depth_bounds", "stabilize", "blend", "max_distance")
 
 
-TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing", "memory", "oracle", "report",
-            "tune")    # [tune]: read by dsm.tune (dsm tune), ignored by dsm run
+TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing", "memory", "oracle", "report", "motion",
+            "execution", "tune")    # [tune]: read by dsm.tune (dsm tune), ignored by dsm run
 
 
 def load(path) -> Config:
@@ -184,11 +185,30 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     check_keys(rep, ("images",), source, "report")
     report_images = choice(rep.get("images", "all"), source, "report.images", REPORT_IMAGES)
 
+    motion = tuple(_parse_motion(t, source, f"motion[{i}]") for i, t in enumerate(_array_of_tables(raw, "motion", source)))
+    if any(mo.light == "turn" for mo in motion) and all(l.type not in ("directional", "scene") for l in lights):
+        raise ConfigError(source, "motion.light", "a turning sun needs a directional light", ["directional"])
     return Config(name=name, source=source, seed=seed, variant=variant, camera_resolution=camera_resolution,
-                  camera=camera,
+                  camera=camera, motion=motion,
                   scenes=tuple(scenes), lights=tuple(lights), map=mapspec, schemes=tuple(schemes),
                   timing_repeats=repeats, memory_budget_mb=budget, oracle=OracleSpec(lambdas),
-                  report_images=report_images, raw=raw)
+                  report_images=report_images, raw=raw,
+                  execution=_parse_execution(_table(raw, "execution", source), source))
+
+
+def _parse_execution(t: dict, source: str) -> ExecutionSpec:
+    """``[execution]``: backend (local | ray), address, cpus_per_task, gpus_per_task."""
+    check_keys(t, ("backend", "address", "cpus_per_task", "gpus_per_task"), source, "execution")
+    backend = choice(t.get("backend", "local"), source, "execution.backend", BACKENDS)
+    address = t.get("address")
+    if address is not None and (not isinstance(address, str) or not address):
+        raise ConfigError(source, "execution.address", f"expected a Ray address (auto, ray://host:port) or "
+                          f"\"local\", got {address!r}")
+    if address is not None and backend != "ray":
+        raise ConfigError(source, "execution.address", 'an address is for backend = "ray"', BACKENDS)
+    cpus = number(t.get("cpus_per_task", 1.0), source, "execution.cpus_per_task", positive=True)
+    gpus = number(t.get("gpus_per_task", 0.0), source, "execution.gpus_per_task", minimum=0)
+    return ExecutionSpec(backend, address, float(cpus), float(gpus))
 
 
 def _parse_camera(cam: dict, source: str):
@@ -261,6 +281,51 @@ def _parse_cascades(m: dict, source: str) -> tuple:
         raise ConfigError(source, f"map.{next(iter(opts))}", "an engine layout sets its own cascade keys; give a "
                           "count in map.cascades to set them", ["cascades"])
     return tuple(out)
+
+
+def _parse_motion(t: dict, source: str, where: str) -> MotionSpec:
+    """One [[motion]] path: frames, a camera path and/or a light path, fixed points."""
+    check_keys(t, ("frames", "camera", "offset", "angle", "keys", "light", "light_axis", "light_angle", "points",
+                   "label"), source, where)
+    kw = {"frames": number(t.get("frames", 8), source, f"{where}.frames", integer=True, minimum=2, maximum=1000),
+          "camera": choice(t.get("camera", "none"), source, f"{where}.camera", CAMERA_PATHS),
+          "light": choice(t.get("light", "none"), source, f"{where}.light", LIGHT_PATHS),
+          "points": number(t.get("points", 4000), source, f"{where}.points", integer=True, minimum=1,
+                           maximum=10_000_000)}
+    need = {"dolly": "offset", "pan": "angle", "orbit": "angle", "keyframes": "keys"}.get(kw["camera"])
+    if need and need not in t:
+        raise ConfigError(source, f"{where}.{need}", f"camera path {kw['camera']!r} needs {need}")
+    if "offset" in t:
+        kw["offset"] = vec3(t["offset"], source, f"{where}.offset")
+    if "angle" in t:
+        kw["angle"] = number(t["angle"], source, f"{where}.angle")
+    if "keys" in t:
+        keys = t["keys"]
+        if not isinstance(keys, list) or len(keys) < 2 or not all(isinstance(k, dict) for k in keys):
+            raise ConfigError(source, f"{where}.keys", "expected a list of at least two tables {position, target}")
+        out = []
+        for j, k in enumerate(keys):
+            check_keys(k, ("position", "target"), source, f"{where}.keys[{j}]")
+            if "position" not in k or "target" not in k:
+                raise ConfigError(source, f"{where}.keys[{j}]", "a keyframe needs position and target")
+            out.append((vec3(k["position"], source, f"{where}.keys[{j}].position"),
+                        vec3(k["target"], source, f"{where}.keys[{j}].target")))
+        kw["keys"] = tuple(out)
+    if kw["light"] == "turn" and "light_angle" not in t:
+        raise ConfigError(source, f"{where}.light_angle", "light path 'turn' needs light_angle (degrees)")
+    if "light_axis" in t:
+        kw["light_axis"] = vec3(t["light_axis"], source, f"{where}.light_axis", nonzero=True)
+    if "light_angle" in t:
+        kw["light_angle"] = number(t["light_angle"], source, f"{where}.light_angle")
+    label = t.get("label", "")
+    if not isinstance(label, str):
+        raise ConfigError(source, f"{where}.label", f"expected a string, got {label!r}")
+    spec = MotionSpec(**kw)
+    if not label:
+        parts = [] if spec.camera == "none" else [f"camera {spec.camera}"]
+        parts += [] if spec.light == "none" else [f"sun turn {spec.light_angle:g}deg"]
+        label = " + ".join(parts) or "static"
+    return replace(spec, label=label)
 
 
 def _boolean(source):

@@ -97,6 +97,7 @@ class Plan:
     absent: list = field(default_factory=list)      # optional scene files that are absent
     lambdas: int = 1                                # [oracle] lambda values
     area_samples: dict = field(default_factory=dict)  # (scene, light label) -> an area light's max_samples
+    frames: int = 0                                 # [[motion]]: frames over all paths (maps built per frame, at most)
 
     @property
     def oracle_receivers(self) -> int:
@@ -190,6 +191,9 @@ class Plan:
         n_fmt = sum(1 + len(m.formats) for m in self.maps)
         lines.append(f"  oracles (nearest lookup): receivers sorted per map and stored format ({n_fmt} x "
                      f"{self.lambdas} lambda): at most {self.oracle_receivers:,} (camera pixels per map and format)")
+        if self.frames:
+            lines.append(f"  motion: {self.frames} frames over all paths; each map is built per frame at most "
+                         f"({self.frames} x {len(self.maps)} builds, fewer where the fitted projection stays)")
         lines.append(f"  estimated peak memory: {self.peak_bytes() * mb:.1f} MB")
         lines += [f"  warning: {w}" for w in self.warnings()]
         return "\n".join(lines)
@@ -402,6 +406,10 @@ def make(cfg: Config) -> Plan:
     if cfg.map.cascade and plan.maps and not any(m.cascade is not None for m in plan.maps):
         raise ConfigError(cfg.source, "map.cascades", "cascades are for directional lights and no light of the "
                           "config's scenes is directional; remove map.cascades or add a directional [[light]]")
+    if cfg.motion:          # every case runs once per [[motion]] path, its map built per frame
+        plan.frames = sum(mo.frames for mo in cfg.motion)
+        for m in plan.maps:
+            m.cases *= len(cfg.motion)
     base = max((w * h * PIXEL_BYTES for _, w, h, _ in plan.scenes), default=0)
     for m in plan.maps:
         room = plan.budget_bytes - base - m.stored_bytes

@@ -16,13 +16,14 @@ from . import metrics, summary
 
 COLUMNS = [
     "case", "scene", "light", "view", "scheme", "preset", "params", "culling", "resolution", "total_texels", "filter", "format",
-    "cascade_layout",
+    "cascade_layout", "motion", "frames",
     "n_pixels", "n_excluded_nohit", "n_excluded_backfacing", "n_excluded_outside",
     "n_receivers", "n_gt_lit", "n_gt_shadowed", "n_acne", "n_acne_self", "n_acne_edge", "n_peterpan",
     "n_acne_resolution", "n_acne_bias", "n_peterpan_resolution", "n_peterpan_bias",
     "acne_rate", "peterpan_rate", "error_rate", "mean_abs_error", "peterpan_dist_median",
     "n_seam", "seam_error_rate", "off_seam_error_rate", "texel_size", "texels_per_pixel", "fit_ms", "n_plane_fallback",
     "n_backfacing", "backface_lit_rate",
+    "flicker_rate", "flicker_ever", "flicker_magnitude", "flicker_within_rate", "flicker_change_rate", "maps_built",
     "build_ms", "build_first_ms", "build_compile_ms", "build_peak_mb", "lookup_ms", "lookup_compile_ms", "lookup_kernels_compiled", "reference_ms",
     "sweep_key", "sweep_value",
 ]
@@ -79,10 +80,10 @@ def read_csv(path) -> list[dict]:
 
 
 TEXT_COLUMNS = {"case", "scene", "light", "view", "scheme", "preset", "params", "culling", "filter", "format",
-                "cascade_layout", "sweep_key"}
+                "cascade_layout", "sweep_key", "motion"}
 
 
-INT_COLUMNS = {"resolution", "total_texels", "lookup_kernels_compiled"}
+INT_COLUMNS = {"resolution", "total_texels", "lookup_kernels_compiled", "frames", "maps_built"}
 
 
 def _typed(k, v):

@@ -23,7 +23,7 @@ import drjit as dr
 import numpy as np
 
 from . import config as cfgmod
-from . import cascades, env, figures, metrics, pipeline, publish, report, shadowmap, soft_report, timing
+from . import cascades, env, figures, metrics, motion, pipeline, publish, report, resume, shadowmap, soft_report, timing
 from . import plan as planmod
 from .lookup import Receiver
 
@@ -78,7 +78,7 @@ class StageFailed(Exception):
 
 class Runner:
     def __init__(self, config: cfgmod.Config, out: Path, variant: str | None = None, progress: bool = True,
-                 keep_images: bool = True):
+                 keep_images: bool = True, resume_previous: bool = False):
         self.cfg = config
         self.out = Path(out)
         self.variant = env.use_variant(variant or config.variant)
@@ -98,13 +98,17 @@ class Runner:
         self.case_no = 0
         self.extents = {}             # per scene: the spawn bound's per-shape extents
         self.cascade_rows, self.cascade_curves = [], []   # cascades.csv and the distance plots
+        self.motion_frames, self.motion_curves = [], []   # frames.csv and the flicker plots
         self.quantized = 0            # quantized map copies made (stored formats other than float32)
         self.versions = env.versions()
         self.state = "running"
         self.bar = None
-        self.pending_images = []      # case images, written by the report once measuring is done
-        self.pending_soft = []        # area lights' V, V*, |V - V*| images (dsm.soft_report), likewise
         self.timing = {}              # seconds measuring and writing the report
+        # case ids and identity keys from the plan (dsm.resume); a resumed run reuses matching cases
+        self.keys = dict(resume.case_keys(config, self.plan, "git:" + self.versions["dsm_git_commit"]))
+        self.first_case = list(itertools.accumulate((m.cases for m in self.plan.maps), initial=0))
+        self.resume_previous = resume_previous
+        self.kept, self.stale = {}, []
 
     # ------------------------------------------------------------ top level
     def run(self) -> Results:
@@ -114,6 +118,8 @@ class Runner:
         timing.enable_history()
         t0, c0 = time.perf_counter(), _cpu()
         self.out.mkdir(parents=True, exist_ok=True)
+        if self.resume_previous:
+            self.kept, self.stale = resume.Previous(self.out).arrange(list(self.keys.items()))
         (self.out / "images").mkdir(exist_ok=True)
         self.csv = report.CsvWriter(self.out / "metrics.csv")
         self.state = "running"
@@ -137,28 +143,50 @@ class Runner:
             # the report, after every timed measurement: images, figures, table.md, report.html
             t1, c1 = time.perf_counter(), _cpu()
             try:
-                self.timing["report_parts"] = publish.write_report(self.out, self.pending_images, self.curves,
+                self.timing["report_parts"] = publish.write_report(self.out, (), self.curves,
                                                                    plots=self.state == "complete")
-                soft_report.write_images(self.out, self.pending_soft)
                 if self.state == "complete":
                     cascades.write_plots(self.out / "plots", self.cascade_curves)
+                if self.cfg.motion:
+                    motion.finish(self.out, self.motion_frames, self.motion_curves)
             except Exception as e:          # the measurements are saved; the report can be rebuilt
                 self._fail("report (dsm report rebuilds it)", e)
-            self.pending_images = self.pending_soft = []
             self.timing["report_s"] = time.perf_counter() - t1
             self.timing["report_cpu_s"] = _cpu() - c1
             self._write_run_json()
         return Results(self.out, self.rows, self._run_json(), self.images, self.oracle_rows, self.curves)
 
-    def _run_plan(self):
+    def run_maps(self, maps, kept=None):
+        """Run only ``maps`` (part of the plan: a Ray task's map group) into this runner's folder,
+        without run.json or the report; ``kept``: finished cases to write again (key -> (row, status)).
+        The rows, status, oracle rows, curves and map records stay on the runner."""
+        self.out.mkdir(parents=True, exist_ok=True)
+        (self.out / "images").mkdir(exist_ok=True)
+        self.csv = report.CsvWriter(self.out / "metrics.csv")
+        self.bar = report.progress(total=sum(m.cases for m in maps), enabled=False)
+        self.kept = kept or {}
+        self.state = "task"
+        self._run_plan(maps)
+
+    def _run_plan(self, maps=None):
+        maps = self.plan.maps if maps is None else maps
         for spec in self.cfg.scenes:
             if spec.missing:
                 self.status.append({"what": f"scene {spec.label}", "status": "skipped", "error": spec.missing})
-        for si, scene_maps in itertools.groupby(self.plan.maps, key=lambda m: m.scene_index):
+        for si, scene_maps in itertools.groupby(maps, key=lambda m: m.scene_index):
             scene_maps = list(scene_maps)
             try:
                 sd, gb, lights = self._scene(self.cfg.scenes[si], scene_maps)
             except StageFailed:
+                continue
+            if self.cfg.motion:                 # camera and light paths: dsm.motion's frame loop
+                try:
+                    self._stage(f"motion of scene {sd.label}", scene_maps, lambda: motion.run_scene(
+                        self, sd, lights, scene_maps, self._closed(sd), self.extents[sd.label], self.motion_frames,
+                        self.motion_curves))
+                except StageFailed:
+                    pass
+                self._write_run_json()
                 continue
             for li, light_maps in itertools.groupby(scene_maps, key=lambda m: m.light_index):
                 light_maps = list(light_maps)
@@ -295,6 +323,7 @@ class Runner:
         if first_t is None:
             # the first layer alone, so a case's extra layers show as build_ms - build_first_ms
             first_t = bt if m.culling == "none" and not m.needs else self._build(sd, view, set(), "none", m.tile)[1]
+        self.case_no = self.first_case[self.plan.maps.index(m)]     # case ids from the plan
         for spec in m.specs:
             spec = pipeline.preset_for_light(spec, setup.light.type)   # a preset's values for this light
             own = frozenset(pipeline.needs_of([spec]))                  # this instance's own layers, for build_ms
@@ -354,6 +383,14 @@ class Runner:
         bt, first_t = build
         self.case_no += 1
         case = f"{self.case_no:04d}"
+        if self.keys.get(case) in self.kept:          # finished by the run being resumed: its row again
+            row, st, cascade_rows = self.kept[self.keys[case]]
+            self.cascade_rows += cascade_rows
+            self.rows.append(resume.parse_row(row))
+            self.csv.write(self.rows[-1])
+            self.status.append(st)
+            self._write_run_json()
+            return
         meta = {"case": case, "scene": sd.label, "light": setup.label, "view": view.kind, "scheme": spec.name,
                 "culling": smap.culling,
                 "preset": spec.preset or "", "params": spec.label, "resolution": view.resolution,
@@ -396,11 +433,11 @@ class Runner:
             classes = classes.reshape(gb.height, gb.width)
             item = publish.image_item(meta, classes, report.shade(classes.shape, gb, setup, v_np)
                                       if self.cfg.report_images == "all" else None, self.cfg.report_images)
-            if item is not None:
-                self.pending_images.append(item)
+            if item is not None:        # written now (Pillow, ~1 ms, between timings): a killed run keeps them
+                figures.write_images(self.out, [item])
             if setup.ref is not None and self.cfg.report_images != "none":    # area light: V, V*, |V - V*|
-                self.pending_soft.append(soft_report.image_item(meta, gb.width, gb.height, setup.pixels, v_np,
-                                                                setup.v_frac))
+                soft_report.write_images(self.out, [soft_report.image_item(meta, gb.width, gb.height, setup.pixels,
+                                                                           v_np, setup.v_frac)])
             if self.keep_images:
                 self.images[case] = classes
             self.rows.append(row)
@@ -408,7 +445,7 @@ class Runner:
             # a case without receivers says nothing about the scheme: it is reported as empty
             self.status.append({"what": f"case {case}", **{k: meta[k] for k in ("scene", "light", "view", "scheme",
                                                                                  "params", "resolution")},
-                                "status": "ok" if m["n_receivers"] else "empty"})
+                                "status": "ok" if m["n_receivers"] else "empty", "key": self.keys.get(case)})
             self._write_run_json()
         except Exception as e:
             self._fail(f"case {case} ({sd.label}, {setup.label}, {spec.name} {spec.label}, R={view.resolution})", e)
@@ -424,9 +461,14 @@ class Runner:
         info["quantized_copies"] = self.quantized
         info["reference_regions"] = self.reference_regions
         info["timing"] = self.timing
+        if self.resume_previous:
+            info["resumed_cases"] = len(self.kept)
+            info["stale_cases"] = self.stale       # cases of the folder the config no longer names (kept)
         return info
 
     def _write_run_json(self):
+        if self.state == "task":      # one map group of a cluster run: its driver writes run.json
+            return
         # after every case (compact), indented once the run has ended
         report.write_json(self.out / "run.json", self._run_json(), None if self.state == "running" else 1)
 

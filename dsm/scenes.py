@@ -738,7 +738,11 @@ def _reposed_sensor(sensor, camera, bbox):
     near = float(np.ravel(params["near_clip"])[0]) if "near_clip" in params else None
     far = float(np.ravel(params["far_clip"])[0]) if "far_clip" in params else None
     fov = float(params["x_fov"][0]) if "x_fov" in params else 40.0
-    o2, t2, up2, fov2, near2, far2 = posed_camera((o, o + fwd, up, fov, near, far), camera)
+    # the XML's target: the point of its view axis nearest the scene's centre (a new position looks there)
+    centre = 0.5 * (np.asarray(bbox[0], float) + np.asarray(bbox[1], float))
+    reach = float((centre - o) @ fwd)
+    reach = reach if reach > 0 else float(np.linalg.norm(np.asarray(bbox[1], float) - np.asarray(bbox[0], float)))
+    o2, t2, up2, fov2, near2, far2 = posed_camera((o, o + fwd * reach, up, fov, near, far), camera)
     if camera.far is None and (camera.position is not None or camera.target is not None):
         far2 = far_bound(o2, t2, *bbox)
     W, H = (int(x) for x in sensor.film().size())

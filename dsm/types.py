@@ -261,6 +261,25 @@ class CascadeSpec:
         return out
 
 
+CAMERA_PATHS = ("none", "dolly", "pan", "orbit", "keyframes")
+LIGHT_PATHS = ("none", "turn")
+
+
+@dataclass(frozen=True)
+class MotionSpec:
+    """One ``[[motion]]`` path over ``frames`` frames (dsm.motion)."""
+    frames: int = 8
+    camera: str = "none"            # none | dolly (translate by offset) | pan | orbit (by angle) | keyframes
+    offset: tuple = (0.0, 0.0, 0.0)  # dolly: the camera's whole translation over the path (scene units)
+    angle: float = 0.0              # pan / orbit: degrees over the path, about the camera's up
+    keys: tuple = ()                # keyframes: ((position, target), ...), spread evenly over the frames
+    light: str = "none"             # none | turn (a directional light's direction about light_axis)
+    light_axis: tuple = (0.0, 0.0, 1.0)
+    light_angle: float = 0.0        # degrees over the path
+    points: int = 4000              # fixed points sampled on the surfaces (the experiment's seed)
+    label: str = ""
+
+
 @dataclass(frozen=True)
 class MapSpec:
     resolution: tuple = (512,)
@@ -295,6 +314,20 @@ class OracleSpec:
     lambdas: tuple = (1.0,)
 
 
+BACKENDS = ("local", "ray")
+
+
+@dataclass(frozen=True)
+class ExecutionSpec:
+    """``[execution]``: where the cases run (dsm.cluster). ``backend`` local or ray; ``address``
+    a Ray cluster's address (``auto``, ``ray://host:port``) or ``local`` (start one here);
+    ``cpus_per_task`` / ``gpus_per_task``: what each map group's Ray task asks for (fractions allowed)."""
+    backend: str = "local"
+    address: str | None = None
+    cpus_per_task: float = 1.0
+    gpus_per_task: float = 0.0
+
+
 @dataclass(frozen=True)
 class Config:
     name: str
@@ -311,7 +344,9 @@ class Config:
     memory_budget_mb: float | None = None   # None: a quarter of this machine's memory
     oracle: "OracleSpec" = field(default_factory=lambda: OracleSpec())
     report_images: str = "all"              # [report] images (REPORT_IMAGES)
+    motion: tuple = ()                       # MotionSpec paths ([[motion]]); empty: still frames
     raw: dict = field(default_factory=dict, compare=False)
+    execution: ExecutionSpec = field(default_factory=ExecutionSpec, compare=False)   # where, not what
 
 
 # the culling choices of a map build (midpoint, dual); second_depth's front_closed is its own

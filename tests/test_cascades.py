@@ -297,3 +297,24 @@ def test_blend_mixes_the_next_cascade_linearly_over_the_band():
     assert band.sum() > 50 and ((v[band] > 0) & (v[band] < 1)).any()
     assert np.allclose(v[band], (1 - w[band]) * v0[band] + w[band] * v1[band], atol=1e-4)
     assert np.array_equal(v[~band], v0[~band])
+
+
+def test_camera_pose_replaces_an_xml_sensors_and_keeps_its_film(tmp_path):
+    import mitsuba as mi
+    from dsm import config, scenes
+    xml = tmp_path / "s.xml"
+    xml.write_text('<scene version="3.0.0"><sensor type="perspective"><float name="fov" value="45"/>'
+                   '<transform name="to_world"><lookat origin="0, -4, 3" target="0, 0, 0" up="0, 0, 1"/></transform>'
+                   '<film type="hdrfilm"><integer name="width" value="40"/><integer name="height" value="30"/></film>'
+                   '</sensor><shape type="rectangle"/><emitter type="directional"><vector name="direction" '
+                   'value="0.1, 0.2, -1"/></emitter></scene>')
+    cfg = config.parse({"scene": [{"file": str(xml)}], "camera": {"position": [3.0, 1.0, 2.0], "fov": 30.0},
+                        "scheme": [{"name": "none"}]}, "<t>")
+    sd = scenes.load(cfg.scenes[0], cfg.camera_resolution, cfg.camera)
+    m = np.array(sd.sensor.world_transform().matrix.numpy(), float).reshape(4, 4)
+    assert np.allclose(m[:3, 3], [3.0, 1.0, 2.0], atol=1e-5)
+    assert tuple(sd.sensor.film().size()) == (40, 30)
+    assert abs(float(mi.traverse(sd.sensor)["x_fov"][0]) - 30.0) < 1e-4
+    # without a target it looks at the XML's: the point of its view axis nearest the scene's centre,
+    # here the origin (the rectangle's centre lies on the axis from (0, -4, 3) to (0, 0, 0))
+    assert np.allclose(m[:3, 2], -np.array([3.0, 1.0, 2.0]) / np.sqrt(14.0), atol=1e-5)
