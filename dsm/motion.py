@@ -3,8 +3,10 @@
 A ``[[motion]]`` path moves the camera (``dolly``: a translation; ``pan``: the view turning
 about the camera's up; ``orbit``: the camera turning about its target; ``keyframes``: positions
 and targets interpolated linearly) and/or turns a directional light (``turn``: its direction
-about ``light_axis``) over ``frames`` frames. Each frame re-fits its views as an engine would
-(its own G-buffer, receivers and view; a cascaded layout re-fitted to the frame's camera).
+about ``light_axis``) or moves a spot or point light (``move``: by ``light_offset``;
+``keyframes``: along ``light_keys``) over ``frames`` frames. Each frame re-fits its views as an
+engine would (its own G-buffer, receivers and view; a cascaded layout re-fitted to the frame's
+camera; a spot's or point light's views re-fitted to its position).
 
 **Fixed points**: ``points`` points on the scene's surfaces, sampled once in world space
 (area-weighted over every mesh triangle, the experiment's seed), each the hit of a short
