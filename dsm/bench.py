@@ -6,6 +6,10 @@
 (2) Lookup time of each scheme over constant bias's, beside Dou et al.'s Table 1.
 (3) Peak memory of each build and lookup (Dr.Jit's allocation watermark).
 Warm medians after a JIT warm-up; ``dr.sync_thread()`` around every clock read.
+(4) Cost against resolution (``scaling``, up to 8192^2), each map cast in the tiles the memory
+budget allows (as ``dsm plan`` sizes them), with the exponent of time against texels fitted in
+log-log (1: linear in texels). (5) Throughput of a whole sweep in cases per second, run here
+and on a local two-worker Ray cluster (``sweep``; needs ``dsm[cluster]``).
 A benchmark, not a test: results go to bench.md and bench.json.
 """
 from __future__ import annotations
@@ -36,27 +40,107 @@ def _peak(timing, fn, repeats):
     return None, t, (timing.peak_bytes() - before) / 2 ** 20
 
 
+def tile_for(texels: int, layered: bool, budget: int) -> int:
+    """The texels per pass that keep a first-layer or two-layer build within ``budget`` bytes,
+    by the plan's own estimate (dsm.plan.MapPlan)."""
+    from .plan import MIN_TILE, MapPlan
+    m = MapPlan("", "", "orthographic", int(round(texels ** 0.5)), 1, "none", ("z2",) if layered else (), layered,
+                (), [], 0)
+    room = budget - m.stored_bytes
+    return int(min(texels, max(room // max(m.build_bytes_per_texel, 1), MIN_TILE)))
+
+
+def fitted_exponent(texels, ms) -> float:
+    """The slope of log(time) against log(texels) (least squares); NaN with fewer than two sizes."""
+    if len(texels) < 2:
+        return float("nan")
+    return float(np.polyfit(np.log(np.asarray(texels, float)), np.log(np.asarray(ms, float)), 1)[0])
+
+
+def scaling(sd, view_for, resolutions, repeats, ext, budget) -> list:
+    """(4): first and two-layer build time per resolution, tiled within the budget."""
+    from . import shadowmap, timing
+    rows = []
+    for R in resolutions:
+        view = view_for(R)
+        t1 = tile_for(R * R, False, budget)
+        t2 = tile_for(R * R, True, budget)
+        first = timing.measure(lambda: shadowmap.arrays(shadowmap.build(sd.scene, view, set(), tile=t1,
+                                                                        extents=ext)), repeats)[1]
+        two = timing.measure(lambda: shadowmap.arrays(shadowmap.build(sd.scene, view, {"z2"}, tile=t2,
+                                                                      extents=ext)), repeats)[1]
+        rows.append({"scene": sd.label, "resolution": R, "texels": R * R, "first_ms": first.ms, "two_ms": two.ms,
+                     "first_tiles": -(-R * R // t1), "two_tiles": -(-R * R // t2),
+                     "ns_per_texel_first": first.ms * 1e6 / (R * R), "ns_per_texel_two": two.ms * 1e6 / (R * R)})
+    return rows
+
+
+SWEEP_CONFIG = {
+    "experiment": {"name": "bench_sweep"}, "camera": {"resolution": [64, 64]},
+    "scene": [{"builtin": "plane_box"}, {"builtin": "plane"}, {"builtin": "plane_box"}, {"builtin": "plane"}],
+    "light": [{"type": "directional", "direction": [-0.4, -0.3, -1.0]}],
+    "map": {"resolution": [64, 128]},
+    "scheme": [{"name": "constant", "bias": ["1 texel", "3 texel"]}, {"name": "slope_scaled"},
+               {"name": "midpoint"}, {"name": "dual"}],
+    "timing": {"repeats": 1}}
+
+
+def sweep_throughput(out: Path, workers: int = 2) -> dict:
+    """(5): a small sweep's cases per second run here, then on a local Ray cluster of ``workers``
+    (Ray's start-up excluded: the cluster is started before the clock); equal rows checked."""
+    import time
+
+    from . import pipeline, report
+    from .runner import Runner
+    cfg = pipeline.prepare(SWEEP_CONFIG)
+    t0 = time.perf_counter()
+    local = Runner(cfg, out / "sweep_local", progress=False, keep_images=False).run()
+    local_s = time.perf_counter() - t0
+    row = {"cases": len(local.rows), "local_s": local_s, "local_cases_per_s": len(local.rows) / local_s}
+    try:
+        import ray
+    except ImportError:
+        return {**row, "ray": "not installed (pip install 'dsm[cluster]')"}
+    from . import cluster
+    ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False, logging_level="error")
+    try:
+        t0 = time.perf_counter()
+        res = cluster.run(cfg, out / "sweep_ray", "local", progress=False)
+        ray_s = time.perf_counter() - t0
+    finally:
+        ray.shutdown()
+    skip = {"build_ms", "build_first_ms", "build_compile_ms", "build_peak_mb", "lookup_ms", "lookup_compile_ms",
+            "lookup_kernels_compiled", "reference_ms", "fit_ms"}
+    same = [{k: v for k, v in r.items() if k not in skip} for r in report.read_csv(out / "sweep_local" / "metrics.csv")] \
+        == [{k: v for k, v in r.items() if k not in skip} for r in report.read_csv(out / "sweep_ray" / "metrics.csv")]
+    return {**row, "workers": workers, "ray_s": ray_s, "ray_cases_per_s": len(res.rows) / ray_s,
+            "speedup": local_s / ray_s, "rows_equal": same, "nodes": res.run["nodes"]}
+
+
 def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int = 5, meshes: Path | None = None,
-              variant: str | None = None) -> dict:
+              variant: str | None = None, scaling_resolutions=(), sweep: bool = False) -> dict:
     import drjit as dr
     import mitsuba as mi
 
     from . import env, lookup, scenes, schemes, shadowmap, spawn, timing
     from .config import LightSpec
-    from .pipeline import make_view, points_np as _points_np
+    from .pipeline import closedness, cull_modes, make_view, points_np as _points_np
     from .gbuffer import cast
 
     variant = env.use_variant(variant)
     timing.enable_history()
     meshes = Path(meshes) if meshes else Path(__file__).resolve().parents[2] / "shared" / "meshes"
     light = LightSpec("directional", direction=(0.25, -1.0, 0.15))
-    builds, lookups = [], []
+    from .plan import physical_memory
+    budget = physical_memory() // 4           # the default memory budget ([memory] budget_mb)
+    builds, lookups, scale = [], [], []
     for spec in _scenes(meshes):
         sd = scenes.load(spec, (512, 512))
         lt = LightSpec("directional", direction=(-0.4, -0.3, -1.0)) if spec.builtin else light
         gb = cast(sd.scene, sd.sensor, 512, 512)
         pix = mi.UInt32(np.flatnonzero(gb.hit).astype(np.uint32))
         ext = spawn.shape_extents(sd.scene)          # once per scene, outside the timed builds
+        per_shape = cull_modes("back_closed", closedness(sd)[0])   # dual's default: culls closed meshes only
         p, n = dr.gather(mi.Point3f, gb.p, pix), dr.gather(mi.Vector3f, gb.n, pix)
         for R in resolutions:
             view = make_view(lt, R, _points_np(p), sd.bbox)
@@ -72,7 +156,12 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
                                     repeats)[1:]
             two, two_mb = _peak(timing, lambda: shadowmap.arrays(shadowmap.build(sd.scene, view, {"z2"}, extents=ext)),
                                 repeats)[1:]
+            cull, cull_mb = _peak(timing, lambda: shadowmap.arrays(shadowmap.build(
+                sd.scene, view, {"z2"}, "back_closed", per_shape, extents=ext)), repeats)[1:]
             builds.append({"scene": spec.label, "resolution": R, "ray_intersect_ms": full.ms, "bare_ms": bare.ms,
+                           "two_culled_ms": cull.ms, "two_culled_over_first": cull.ms / first.ms,
+                           "two_over_bare": two.ms / bare.ms, "two_culled_over_bare": cull.ms / bare.ms,
+                           "two_culled_peak_mb": cull_mb, "two_culled_compile_ms": cull.compile_ms,
                            "first_layer_ms": first.ms, "first_over_ray_intersect": first.ms / full.ms,
                            "two_layer_ms": two.ms, "first_over_bare": first.ms / bare.ms,
                            "two_over_first": two.ms / first.ms, "mrays_per_s": R * R / bare.ms / 1e3,
@@ -92,8 +181,19 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
                     lookups.append({"scene": spec.label, "scheme": name, "receivers": dr.width(p),
                                     "lookup_ms": t.ms, "over_constant": t.ms / base,
                                     "compile_ms": t.compile_ms, "peak_mb": mb})
+        if scaling_resolutions:
+            scale += scaling(sd, lambda R: make_view(lt, R, _points_np(p), sd.bbox), scaling_resolutions,
+                             max(1, min(repeats, 3)), ext, budget)
+    exponents = {}
+    for label in dict.fromkeys(r["scene"] for r in scale):
+        rows = [r for r in scale if r["scene"] == label]
+        exponents[label] = {k: fitted_exponent([r["texels"] for r in rows], [r[k + "_ms"] for r in rows])
+                            for k in ("first", "two")}
     result = {"variant": variant, "threads": dr.thread_count(), "repeats": repeats, "builds": builds,
-              "lookups": lookups, "dou_table1_ms": DOU_TABLE1}
+              "lookups": lookups, "dou_table1_ms": DOU_TABLE1, "scaling": scale, "exponents": exponents,
+              "budget_mb": budget / 2 ** 20}
+    if sweep:
+        result["sweep"] = sweep_throughput(out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "bench.json").write_text(json.dumps(result, indent=2))
     (out / "bench.md").write_text(_markdown(result))
@@ -114,6 +214,16 @@ def _markdown(r) -> str:
                      f"{b['first_over_bare']:.2f} | {b['two_layer_ms']:.2f} | {b['two_over_first']:.2f} | "
                      f"{b['first_peak_mb']:.1f} | {b['two_peak_mb']:.1f} | "
                      f"{b['first_compile_ms']:.0f} / {b['two_compile_ms']:.0f} |")
+    lines += ["", "## (1b) Two layers (z1, z2) against the first layer and a bare preliminary cast", "",
+              "Goals: two / first <= 2.0 without culling, <= 2.5 with per-shape culling (back_closed, dual's "
+              "default); two layers / preliminary <= 2.2.", "",
+              "| scene | R | preliminary ms | first ms | two ms | two / first | two / preliminary | "
+              "two culled ms | culled / first | culled / preliminary |", "|---" * 10 + "|"]
+    for b in r["builds"]:
+        lines.append(f"| {b['scene']} | {b['resolution']} | {b['bare_ms']:.2f} | {b['first_layer_ms']:.2f} | "
+                     f"{b['two_layer_ms']:.2f} | {b['two_over_first']:.2f} | {b['two_over_bare']:.2f} | "
+                     f"{b['two_culled_ms']:.2f} | {b['two_culled_over_first']:.2f} | "
+                     f"{b['two_culled_over_bare']:.2f} |")
     lines += ["", "Weiskopf & Ertl, Table 1: the dual map's build costs about twice the single map's.", "",
               "## (2) Lookup time per scheme (1024^2 map, 512^2 camera) as a ratio to constant bias, "
               "and (3) its peak memory", "",
@@ -126,4 +236,27 @@ def _markdown(r) -> str:
                      f"{x['over_constant']:.2f} | {ref} | {x['peak_mb']:.1f} |")
     lines += ["", "Dou et al.'s ratios are of whole frames on a GTX 580 (1024^2 map, Sponza); ours are of the "
               "lookup alone, so the map build is in the first table."]
+    if r.get("scaling"):
+        lines += ["", f"## (4) Build time against resolution (tiled within the memory budget of "
+                  f"{r['budget_mb']:.0f} MB)", "",
+                  "| scene | R | texels | first ms | tiles | ns/texel | two layers ms | tiles | ns/texel |",
+                  "|---" * 9 + "|"]
+        for x in r["scaling"]:
+            lines.append(f"| {x['scene']} | {x['resolution']} | {x['texels']} | {x['first_ms']:.1f} | "
+                         f"{x['first_tiles']} | {x['ns_per_texel_first']:.1f} | {x['two_ms']:.1f} | "
+                         f"{x['two_tiles']} | {x['ns_per_texel_two']:.1f} |")
+        lines += ["", "Fitted exponent of time against texels (log-log least squares; 1 is linear):", "",
+                  "| scene | first layer | two layers |", "|---|---|---|"]
+        for label, e in r["exponents"].items():
+            lines.append(f"| {label} | {e['first']:.3f} | {e['two']:.3f} |")
+    if r.get("sweep"):
+        w = r["sweep"]
+        lines += ["", "## (5) Sweep throughput: a local run against a local Ray cluster", ""]
+        if "ray_s" in w:
+            lines += [f"{w['cases']} cases. Local: {w['local_s']:.1f} s ({w['local_cases_per_s']:.2f} cases/s). "
+                      f"Ray, {w['workers']} workers: {w['ray_s']:.1f} s ({w['ray_cases_per_s']:.2f} cases/s), "
+                      f"{w['speedup']:.2f}x; rows equal count for count: {w['rows_equal']}. Ray's start-up is "
+                      "not counted; each Ray task loads its scene, G-buffer and reference again."]
+        else:
+            lines += [f"{w['cases']} cases locally: {w['local_cases_per_s']:.2f} cases/s; Ray: {w['ray']}."]
     return "\n".join(lines) + "\n"

@@ -53,8 +53,15 @@ def _parser():
     r.add_argument("--out", help="results folder (default: runs/<name>-<time>)")
     r.add_argument("--variant", choices=cfgmod.VARIANTS, help="Mitsuba variant (default llvm_ad_rgb)")
     r.add_argument("--threads", type=_positive_int, help="Dr.Jit worker threads (at least 1)")
-    r.add_argument("--force", action="store_true",
-                   help="replace a previous dsm run in --out (a folder with its run.json); never other files")
+    again = r.add_mutually_exclusive_group()
+    again.add_argument("--force", action="store_true",
+                       help="replace a previous dsm run in --out (a folder with its run.json); never other files")
+    again.add_argument("--resume", action="store_true",
+                       help="go on with the dsm run in --out: skip its finished cases that still match the "
+                            "config, run the rest (cases the config no longer names are listed, not deleted)")
+    r.add_argument("--cluster", metavar="ADDRESS",
+                   help="run the map groups as Ray tasks on the cluster at ADDRESS (auto, ray://host:port) or on "
+                        "a Ray instance started here (local); needs pip install 'dsm[cluster]'")
     rp = sub.add_parser("report", help="rebuild a run's table.md, plots and report.html from its files (no "
                         "measuring); with two folders, compare the runs")
     rp.add_argument("dirs", nargs="+", metavar="DIR", help="a results folder, or two to compare (A then B)")
@@ -68,6 +75,11 @@ def _parser():
     b.add_argument("--repeats", type=_positive_int, default=5)
     b.add_argument("--meshes", help="folder of the real test meshes (default: ../shared/meshes)")
     b.add_argument("--variant", choices=cfgmod.VARIANTS)
+    b.add_argument("--scaling", default="1024,2048,4096,8192",
+                   help="map resolutions of the cost-against-resolution table, tiled within the memory budget "
+                        "('' to skip; default 1024,2048,4096,8192)")
+    b.add_argument("--no-sweep", action="store_true",
+                   help="skip the sweep throughput (local run against a local two-worker Ray cluster)")
     t = sub.add_parser("tune", help="tune scheme parameters (and a learned bias map) by gradient: a config's [tune]")
     t.add_argument("config", help="experiment TOML file with a [tune] table")
     t.add_argument("--out", help="results folder (default: runs/<name>-tune-<time>)")
@@ -127,17 +139,19 @@ def _bench(args) -> int:
     from .bench import run_bench
     try:
         res = [int(x) for x in args.resolutions.split(",")]
-        if any(r < 1 for r in res):
+        scale = [int(x) for x in args.scaling.split(",") if x.strip()]
+        if any(r < 1 for r in res + scale):
             raise ValueError
     except ValueError:
-        _err(f"--resolutions: expected positive integers like 256,1024, got {args.resolutions!r}")
+        _err(f"--resolutions/--scaling: expected positive integers like 256,1024, got "
+             f"{args.resolutions!r} / {args.scaling!r}")
         return 2
     problem = _out_problem(Path(args.out), force=True, bench=True)
     if problem:
         _err(problem)
         return 2
     try:
-        run_bench(Path(args.out), res, args.repeats, args.meshes, args.variant)
+        run_bench(Path(args.out), res, args.repeats, args.meshes, args.variant, scale, not args.no_sweep)
     except SetupError as e:
         _err(f"setup error: {e}")
         return 3
@@ -236,6 +250,22 @@ def _out_problem(out: Path, force: bool, bench: bool = False) -> str | None:
     return None
 
 
+def _resume_problem(out: Path) -> str | None:
+    """Why ``--resume`` cannot go on with the run in ``out`` (None if it can)."""
+    if not (out / "run.json").is_file():
+        return f"--resume: {out} holds no previous dsm run (no run.json); choose another --out"
+    try:
+        json.loads((out / "run.json").read_text())
+    except (OSError, ValueError):
+        return f"--resume: {out}/run.json is not a dsm run.json; choose another --out"
+    try:
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as e:
+        return f"--out {out}: cannot write there: {e.strerror or e}"
+    return None
+
+
 def _run(cfg, args, out: Path) -> int:
     try:
         from . import pipeline
@@ -248,20 +278,31 @@ def _run(cfg, args, out: Path) -> int:
         return 3
     except cfgmod.ConfigError as e:
         return _config_error(e)
-    problem = _out_problem(out, args.force)
+    resuming = bool(getattr(args, "resume", False)) and out.is_dir() and any(out.iterdir())
+    problem = _resume_problem(out) if resuming else _out_problem(out, args.force)
     if problem:
         _err(problem)
         return 2
     try:
         from .runner import Runner
         t0 = time.perf_counter()
-        res = Runner(cfg, out, args.variant, progress=True).run()
+        if args.cluster or cfg.execution.backend == "ray":
+            from . import cluster
+            res = cluster.run(cfg, out, args.cluster, args.variant, progress=True, resume_previous=resuming)
+        else:
+            res = Runner(cfg, out, args.variant, progress=True, resume_previous=resuming).run()
     except SetupError as e:
         _err(f"setup error: {e}")
         return 3
     except cfgmod.ConfigError as e:
         return _config_error(e)
     failed, empty = res.run["n_failed"], res.run["n_empty"]
+    if resuming:
+        print(f"dsm: resumed: {res.run['resumed_cases']} finished cases kept, "
+              f"{len(res.rows) - res.run['resumed_cases']} run", file=sys.stderr)
+        for s in res.run["stale_cases"]:
+            print(f"dsm: kept, not in the config any more: case {s['case']} ({s['scene']}, {s['light']}, "
+                  f"{s['scheme']} {s['params']}, R={s['resolution']}; see run.json stale_cases)", file=sys.stderr)
     t = res.run["timing"]
     print(f"dsm: {len(res.rows)} cases in {time.perf_counter() - t0:.1f} s (measuring {t['measure_s']:.1f} s, "
           f"report {t['report_s']:.1f} s) -> {out}/ (report.html, table.md, metrics.csv, oracle.csv, images/, "

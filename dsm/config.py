@@ -16,7 +16,7 @@ from .types import (  # noqa: F401  (re-exported: the config's vocabulary)
     LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, LIGHT_TYPES, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA,
     REPORT_IMAGES,
     ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params,
-    SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params,
+    SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec,
     CameraSpec, CascadeSpec, CASCADE_SPLITS, CASCADE_FITS, DEPTH_BOUNDS, MAX_CASCADES,
     MotionSpec, CAMERA_PATHS, LIGHT_PATHS)
 
@@ -24,7 +24,7 @@ CASCADE_KEYS = ("cascades", "split", "lambda", "fit", "depth_bounds", "stabilize
 
 
 TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing", "memory", "oracle", "report", "motion",
-            "tune")    # [tune]: read by dsm.tune (dsm tune), ignored by dsm run
+            "execution", "tune")    # [tune]: read by dsm.tune (dsm tune), ignored by dsm run
 
 
 def load(path) -> Config:
@@ -197,7 +197,23 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
                   camera=camera, motion=motion,
                   scenes=tuple(scenes), lights=tuple(lights), map=mapspec, schemes=tuple(schemes),
                   timing_repeats=repeats, memory_budget_mb=budget, oracle=OracleSpec(lambdas),
-                  report_images=report_images, raw=raw)
+                  report_images=report_images, raw=raw,
+                  execution=_parse_execution(_table(raw, "execution", source), source))
+
+
+def _parse_execution(t: dict, source: str) -> ExecutionSpec:
+    """``[execution]``: backend (local | ray), address, cpus_per_task, gpus_per_task."""
+    check_keys(t, ("backend", "address", "cpus_per_task", "gpus_per_task"), source, "execution")
+    backend = choice(t.get("backend", "local"), source, "execution.backend", BACKENDS)
+    address = t.get("address")
+    if address is not None and (not isinstance(address, str) or not address):
+        raise ConfigError(source, "execution.address", f"expected a Ray address (auto, ray://host:port) or "
+                          f"\"local\", got {address!r}")
+    if address is not None and backend != "ray":
+        raise ConfigError(source, "execution.address", 'an address is for backend = "ray"', BACKENDS)
+    cpus = number(t.get("cpus_per_task", 1.0), source, "execution.cpus_per_task", positive=True)
+    gpus = number(t.get("gpus_per_task", 0.0), source, "execution.gpus_per_task", minimum=0)
+    return ExecutionSpec(backend, address, float(cpus), float(gpus))
 
 
 def _parse_camera(cam: dict, source: str):

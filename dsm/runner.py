@@ -23,7 +23,7 @@ import drjit as dr
 import numpy as np
 
 from . import config as cfgmod
-from . import cascades, env, figures, metrics, motion, pipeline, publish, report, shadowmap, timing
+from . import cascades, env, figures, metrics, motion, pipeline, publish, report, resume, shadowmap, timing
 from . import plan as planmod
 from .lookup import Receiver
 
@@ -78,7 +78,7 @@ class StageFailed(Exception):
 
 class Runner:
     def __init__(self, config: cfgmod.Config, out: Path, variant: str | None = None, progress: bool = True,
-                 keep_images: bool = True):
+                 keep_images: bool = True, resume_previous: bool = False):
         self.cfg = config
         self.out = Path(out)
         self.variant = env.use_variant(variant or config.variant)
@@ -104,6 +104,11 @@ class Runner:
         self.bar = None
         self.pending_images = []      # case images, written by the report once measuring is done
         self.timing = {}              # seconds measuring and writing the report
+        # case ids and identity keys from the plan (dsm.resume); a resumed run reuses matching cases
+        self.keys = dict(resume.case_keys(config, self.plan, "git:" + self.versions["dsm_git_commit"]))
+        self.first_case = list(itertools.accumulate((m.cases for m in self.plan.maps), initial=0))
+        self.resume_previous = resume_previous
+        self.kept, self.stale = {}, []
 
     # ------------------------------------------------------------ top level
     def run(self) -> Results:
@@ -113,6 +118,8 @@ class Runner:
         timing.enable_history()
         t0, c0 = time.perf_counter(), _cpu()
         self.out.mkdir(parents=True, exist_ok=True)
+        if self.resume_previous:
+            self.kept, self.stale = resume.Previous(self.out).arrange(list(self.keys.items()))
         (self.out / "images").mkdir(exist_ok=True)
         self.csv = report.CsvWriter(self.out / "metrics.csv")
         self.state = "running"
@@ -150,11 +157,24 @@ class Runner:
             self._write_run_json()
         return Results(self.out, self.rows, self._run_json(), self.images, self.oracle_rows, self.curves)
 
-    def _run_plan(self):
+    def run_maps(self, maps, kept=None):
+        """Run only ``maps`` (part of the plan: a Ray task's map group) into this runner's folder,
+        without run.json or the report; ``kept``: finished cases to write again (key -> (row, status)).
+        The rows, status, oracle rows, curves and map records stay on the runner."""
+        self.out.mkdir(parents=True, exist_ok=True)
+        (self.out / "images").mkdir(exist_ok=True)
+        self.csv = report.CsvWriter(self.out / "metrics.csv")
+        self.bar = report.progress(total=sum(m.cases for m in maps), enabled=False)
+        self.kept = kept or {}
+        self.state = "task"
+        self._run_plan(maps)
+
+    def _run_plan(self, maps=None):
+        maps = self.plan.maps if maps is None else maps
         for spec in self.cfg.scenes:
             if spec.missing:
                 self.status.append({"what": f"scene {spec.label}", "status": "skipped", "error": spec.missing})
-        for si, scene_maps in itertools.groupby(self.plan.maps, key=lambda m: m.scene_index):
+        for si, scene_maps in itertools.groupby(maps, key=lambda m: m.scene_index):
             scene_maps = list(scene_maps)
             try:
                 sd, gb, lights = self._scene(self.cfg.scenes[si], scene_maps)
@@ -302,6 +322,7 @@ class Runner:
         if first_t is None:
             # the first layer alone, so a case's extra layers show as build_ms - build_first_ms
             first_t = bt if m.culling == "none" and not m.needs else self._build(sd, view, set(), "none", m.tile)[1]
+        self.case_no = self.first_case[self.plan.maps.index(m)]     # case ids from the plan
         for spec in m.specs:
             spec = pipeline.preset_for_light(spec, setup.light.type)   # a preset's values for this light
             own = frozenset(pipeline.needs_of([spec]))                  # this instance's own layers, for build_ms
@@ -359,6 +380,14 @@ class Runner:
         bt, first_t = build
         self.case_no += 1
         case = f"{self.case_no:04d}"
+        if self.keys.get(case) in self.kept:          # finished by the run being resumed: its row again
+            row, st, cascade_rows = self.kept[self.keys[case]]
+            self.cascade_rows += cascade_rows
+            self.rows.append(resume.parse_row(row))
+            self.csv.write(self.rows[-1])
+            self.status.append(st)
+            self._write_run_json()
+            return
         meta = {"case": case, "scene": sd.label, "light": setup.label, "view": view.kind, "scheme": spec.name,
                 "culling": smap.culling,
                 "preset": spec.preset or "", "params": spec.label, "resolution": view.resolution,
@@ -410,7 +439,7 @@ class Runner:
             # a case without receivers says nothing about the scheme: it is reported as empty
             self.status.append({"what": f"case {case}", **{k: meta[k] for k in ("scene", "light", "view", "scheme",
                                                                                  "params", "resolution")},
-                                "status": "ok" if m["n_receivers"] else "empty"})
+                                "status": "ok" if m["n_receivers"] else "empty", "key": self.keys.get(case)})
             self._write_run_json()
         except Exception as e:
             self._fail(f"case {case} ({sd.label}, {setup.label}, {spec.name} {spec.label}, R={view.resolution})", e)
@@ -425,9 +454,14 @@ class Runner:
         info["maps"] = self.maps
         info["quantized_copies"] = self.quantized
         info["timing"] = self.timing
+        if self.resume_previous:
+            info["resumed_cases"] = len(self.kept)
+            info["stale_cases"] = self.stale       # cases of the folder the config no longer names (kept)
         return info
 
     def _write_run_json(self):
+        if self.state == "task":      # one map group of a cluster run: its driver writes run.json
+            return
         # after every case (compact), indented once the run has ended
         report.write_json(self.out / "run.json", self._run_json(), None if self.state == "running" else 1)
 

@@ -50,18 +50,28 @@ class ShadowMap:
         return self.view.resolution
 
 
-def first_layer(scene, view, first: int = 0, count: int | None = None):
-    """(z1, shape index, surface interaction, rays) for texels ``first .. first + count - 1``."""
+def hit_geometry(pi, ray, valid, tables=None):
+    """(p, n) of each valid hit: the point interpolated on the triangle and its geometric
+    normal. From the meshes' buffers where ``tables`` (:func:`dsm.spawn.shape_extents`) has
+    them (every shape a mesh), else from a minimal surface interaction: the same bits."""
+    if tables is not None and getattr(tables, "positions", None) is not None:
+        return spawn.mesh_hit(pi, tables, valid)
+    si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.Minimal, active=valid)
+    return si.p, si.n
+
+
+def first_layer(scene, view, first: int = 0, count: int | None = None, tables=None):
+    """(z1, shape index, (hit point, normal, valid), rays) for texels ``first .. first + count - 1``."""
     count = view.n_texels - first if count is None else count
     rays = view.texel_rays(first, count)
     pi = scene.ray_intersect_preliminary(rays, coherent=True)
     valid = pi.is_valid()
     # the hit point as every layer and receiver computes it (barycentric on the triangle), then
     # the view's one depth function: a one-layer map and a layered one store the same z1
-    si = pi.compute_surface_interaction(rays, ray_flags=mi.RayFlags.Minimal, active=valid)
-    z1 = dr.select(valid, view.depth(si.p), view.far)
+    p, n = hit_geometry(pi, rays, valid, tables)
+    z1 = dr.select(valid, view.depth(p), view.far)
     shape = dr.select(valid, pi.shape_index, 0xFFFFFFFF)
-    return z1, shape, si, rays
+    return z1, shape, (p, n, valid), rays
 
 
 def plane_slope(view, p, n, z1, valid, first: int = 0):
@@ -76,9 +86,60 @@ def _count(mask) -> int:
     return int(dr.count(mask).numpy().ravel()[0])
 
 
+ROUND = 2                  # steps of the layered search traced into one kernel (no evaluation between)
+
+
+def _step(scene, view, st: dict, d, modes, culls: bool, need, want_slope: bool, extents, magnitude) -> dict:
+    """One step of every still-searching texel: the preliminary intersection, the hit point and
+    geometric normal of a minimal surface interaction, the culling test, the layer it gives and
+    the continuation ray. Traced, not evaluated: ROUND steps make one kernel."""
+    st = dict(st)
+    active, found = st["active"], st["found"]
+    ray = mi.Ray3f(st["o"], d)
+    st["cast1"] = st["cast1"] + dr.select(active & (found == 0), 1, 0)
+    st["cast2"] = st["cast2"] + dr.select(active & (found == 1), 1, 0)
+    pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
+    valid = active & pi.is_valid()
+    p, n = hit_geometry(pi, ray, valid, extents)
+    if culls:
+        mode = dr.gather(mi.UInt32, modes, pi.shape_index, valid)
+        back = dr.dot(n, d) > 0
+        accept = valid & ~(((mode == CULL_BACK) & back) | ((mode == CULL_FRONT) & ~back))
+    else:
+        accept = valid
+    depth = view.depth(p)
+    got1, got2 = accept & (found == 0), accept & (found == 1)
+    st["z1"] = dr.select(got1, depth, st["z1"])
+    st["shape1"] = dr.select(got1, pi.shape_index, st["shape1"])
+    if want_slope:
+        st["p1"] = dr.select(got1, p, st["p1"])
+        st["n1"] = dr.select(got1, n, st["n1"])
+    st["z2"] = dr.select(got2, depth, st["z2"])
+    found = found + dr.select(accept, 1, 0)
+    st["found"] = found
+    st["rehit"] = st["rehit"] + dr.select(valid & (pi.shape_index == st["prev_shape"])
+                                          & (pi.prim_index == st["prev_prim"]), 1, 0)
+    st["prev_shape"] = dr.select(valid, pi.shape_index, st["prev_shape"])
+    st["prev_prim"] = dr.select(valid, pi.prim_index, st["prev_prim"])
+    active = valid & (found < need)
+    st["active"] = active
+    delta = spawn.error_bound_by_shape(p, pi.shape_index, extents, magnitude)
+    st["o"] = dr.select(active, spawn.offset_origin(p, n, d, delta), st["o"])
+    return st
+
+
 def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool, first: int = 0,
             count: int | None = None, extents=None):
     """First (and second) accepted surface per texel under per-shape culling.
+
+    The search runs in rounds of ROUND steps, each round one kernel (no evaluation or host
+    synchronisation between its steps); after a round only the texels still searching go on,
+    compacted (without culling, a second layer is found in the first round by every texel).
+    Per step only what the layer needs: the preliminary intersection, the hit point and
+    winding normal from the meshes' buffers (:func:`hit_geometry`), the culling test and the
+    continuation ray.
+    A step's arithmetic per texel is the same wherever it runs, so the layers are the same bits
+    as a search evaluated step by step.
 
     ``extents``: :func:`dsm.spawn.shape_extents` of the scene, computed once per scene by the
     caller so that a timed build holds no pass over the meshes (computed here if absent).
@@ -90,48 +151,54 @@ def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool
     n = view.n_texels - first if count is None else count
     ray = view.texel_rays(first, n)
     modes = mi.UInt32(np.asarray(cull_modes, np.uint32))
+    culls = bool(np.any(np.asarray(cull_modes) != CULL_NONE))
     need = 2 if want_z2 else 1
-    z1 = dr.full(mi.Float, view.far, n)
-    z2 = dr.full(mi.Float, view.far, n)
-    shape1 = dr.full(mi.UInt32, 0xFFFFFFFF, n)
-    p1, n1 = dr.zeros(mi.Point3f, n), dr.zeros(mi.Vector3f, n)
-    found = dr.zeros(mi.UInt32, n)
-    active = dr.full(mi.Bool, True, n)
-    cast1, cast2 = dr.zeros(mi.UInt32, n), dr.zeros(mi.UInt32, n)   # rays cast per texel, by layer sought
-    prev_shape, prev_prim = dr.full(mi.UInt32, 0xFFFFFFFF, n), dr.full(mi.UInt32, 0xFFFFFFFF, n)
-    rehit = dr.zeros(mi.UInt32, n)
-    for _ in range(MAX_STEPS):
-        cast1 += dr.select(active & (found == 0), 1, 0)
-        cast2 += dr.select(active & (found == 1), 1, 0)
-        pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
-        valid = active & pi.is_valid()
-        si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.Minimal, active=valid)
-        mode = dr.gather(mi.UInt32, modes, pi.shape_index, valid)
-        back = dr.dot(si.n, ray.d) > 0
-        culled = ((mode == CULL_BACK) & back) | ((mode == CULL_FRONT) & ~back)
-        accept = valid & ~culled
-        depth = view.depth(si.p)
-        got1, got2 = accept & (found == 0), accept & (found == 1)
-        z1 = dr.select(got1, depth, z1)
-        shape1 = dr.select(got1, pi.shape_index, shape1)
-        if want_slope:
-            p1 = dr.select(got1, si.p, p1)
-            n1 = dr.select(got1, si.n, n1)
-        z2 = dr.select(got2, depth, z2)
-        found += dr.select(accept, 1, 0)
-        rehit += dr.select(valid & (pi.shape_index == prev_shape) & (pi.prim_index == prev_prim), 1, 0)
-        prev_shape, prev_prim = dr.select(valid, pi.shape_index, prev_shape), dr.select(valid, pi.prim_index, prev_prim)
-        active = valid & (found < need)
-        delta = spawn.error_bound_by_shape(si.p, pi.shape_index, extents, magnitude)
-        ray = dr.select(active, spawn.ray_along(si, si.n, ray.d, delta), ray)
-        dr.eval(z1, z2, shape1, p1, n1, found, active, ray, cast1, cast2, rehit, prev_shape, prev_prim)
-        if _count(active) == 0:          # the one synchronisation per step
-            break
-    total = int(dr.sum(cast1).numpy().ravel()[0]) + int(dr.sum(cast2).numpy().ravel()[0])
+    none = 0xFFFFFFFF
+    full = {"o": ray.o, "z1": dr.full(mi.Float, view.far, n), "z2": dr.full(mi.Float, view.far, n),
+            "shape1": dr.full(mi.UInt32, none, n), "p1": dr.zeros(mi.Point3f, n), "n1": dr.zeros(mi.Vector3f, n),
+            "found": dr.zeros(mi.UInt32, n), "active": dr.full(mi.Bool, True, n), "cast1": dr.zeros(mi.UInt32, n),
+            "cast2": dr.zeros(mi.UInt32, n), "rehit": dr.zeros(mi.UInt32, n),
+            "prev_shape": dr.full(mi.UInt32, none, n), "prev_prim": dr.full(mi.UInt32, none, n)}
+    if not want_slope:
+        del full["p1"], full["n1"]
+    work, where, d = full, None, ray.d        # where: the work set's texels (None: all, in order)
+    if not culls and need <= ROUND:
+        # every texel's search ends within one round (each step accepts its hit or misses): one
+        # kernel writes only the layers and adds its counts up in place (no working state stored)
+        for _ in range(ROUND):
+            work = _step(scene, view, work, d, modes, culls, need, want_slope, extents, magnitude)
+        counts = dr.zeros(mi.UInt32, 3)       # rays cast, re-hits, texels still searching (none)
+        for i, v in enumerate((work["cast1"] + work["cast2"], work["rehit"], mi.UInt32(dr.select(work["active"], 1, 0)))):
+            dr.scatter_reduce(dr.ReduceOp.Add, counts, v, dr.full(mi.UInt32, i, n))
+        dr.eval(*[work[k] for k in ("z1", "shape1", "z2", "found") + (("p1", "n1") if want_slope else ())], counts)
+        total, rehits, left = (int(x) for x in counts.numpy())
+        full = work
+    else:
+        steps = 0
+        while True:
+            for _ in range(min(ROUND, MAX_STEPS - steps)):
+                work = _step(scene, view, work, d, modes, culls, need, want_slope, extents, magnitude)
+            steps += ROUND
+            dr.eval(*work.values())
+            left = _count(work["active"])          # the one synchronisation per round
+            if where is None:
+                full = work
+            else:
+                for k in work:
+                    dr.scatter(full[k], work[k], where)
+            if left == 0 or steps >= MAX_STEPS:
+                break
+            pick = dr.compress(work["active"])      # the texels still searching, for the next round
+            where = pick if where is None else dr.gather(mi.UInt32, where, pick)
+            work = {k: dr.gather(type(v), v, pick) for k, v in work.items()}
+            d = dr.gather(type(d), d, pick)
+            dr.eval(*work.values(), d, where)
+        dr.eval(*full.values())
+        total = int(dr.sum(full["cast1"] + full["cast2"]).numpy().ravel()[0])
+        rehits = int(dr.sum(full["rehit"]).numpy().ravel()[0])
     rays = {"map_texel": n, "map_continue": total - n}
-    slope = plane_slope(view, p1, n1, z1, found > 0, first) if want_slope else None
-    rehits = int(dr.sum(rehit).numpy().ravel()[0])
-    return z1, shape1, slope, (z2 if want_z2 else None), rays, _count(active), rehits
+    slope = plane_slope(view, full["p1"], full["n1"], full["z1"], full["found"] > 0, first) if want_slope else None
+    return (full["z1"], full["shape1"], slope, (full["z2"] if want_z2 else None), rays, left, rehits)
 
 
 def is_layered(needs, cull_modes) -> bool:
@@ -143,10 +210,10 @@ def is_layered(needs, cull_modes) -> bool:
 def _build_range(scene, view, needs, modes, first, count, extents=None):
     """(arrays by name, rays by kind, unfinished texels, re-hits) for one range of texels."""
     if not is_layered(needs, modes):
-        z1, shape, si, rays = first_layer(scene, view, first, count)
+        z1, shape, (p, n, valid), rays = first_layer(scene, view, first, count, extents)
         out = {"z1": z1, "shape": shape}
         if "slope" in needs:
-            out["slope"] = plane_slope(view, si.p, si.n, z1, si.is_valid(), first)
+            out["slope"] = plane_slope(view, p, n, z1, valid, first)
         return out, {"map_texel": count, "map_continue": 0}, 0, 0
     modes = modes if modes is not None else np.zeros(len(scene.shapes()), np.uint32)
     z1, shape, slope, z2, rays, unfinished, rehits = layered(scene, view, modes, "z2" in needs, "slope" in needs,

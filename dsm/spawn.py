@@ -58,30 +58,67 @@ def error_bound(si, other_extent):
     return bound(si.p, extent)
 
 
-def shape_extents(scene):
+class ShapeTables(tuple):
+    """(extents, is_mesh) per shape, as :func:`error_bound_by_shape` reads them, with the meshes'
+    buffers concatenated for a hit's vertices without a surface interaction: ``positions``
+    (Float, xyz per vertex of every mesh), ``faces`` (UInt32, three global vertex indices per
+    triangle) and ``face_offset`` (UInt32 per shape: its first triangle); these three are None
+    when a shape is not a triangle mesh."""
+    positions = faces = face_offset = None
+
+
+def shape_extents(scene) -> ShapeTables:
     """Per shape index of ``scene.shapes()``: the largest extent (max-norm of an edge) of any of
     its triangles, a bound on ``max_k |p_k - p|`` for every hit on it; 0 for non-meshes. One
-    numpy pass over the meshes, so a loop of continuation rays needs no per-ray vertex fetch."""
-    out = []
+    numpy pass over the meshes, so a loop of continuation rays needs no per-ray vertex fetch;
+    computed once per scene (it also gathers the buffers of :class:`ShapeTables`)."""
+    out, pos, fac, first_face = [], [], [], []
+    n_vert = n_face = 0
     for shape in scene.shapes():
+        first_face.append(n_face)
         if not shape.is_mesh():
             out.append(0.0)
             continue
-        v = np.asarray(shape.vertex_positions_buffer(), np.float64).reshape(-1, 3)
+        v32 = np.asarray(shape.vertex_positions_buffer(), np.float32).reshape(-1, 3)
         f = np.asarray(shape.faces_buffer(), np.int64).reshape(-1, 3)
+        pos.append(v32)
+        fac.append(f + n_vert)
+        n_vert += len(v32)
+        n_face += len(f)
         if len(f) == 0:
             out.append(0.0)
             continue
-        tri = v[f]
+        tri = v32.astype(np.float64)[f]
         edges = np.abs(tri - np.roll(tri, 1, axis=1)).max(axis=(1, 2))
         out.append(float(edges.max()))
-    return mi.Float(np.asarray(out, np.float32)), mi.Bool(np.array([s.is_mesh() for s in scene.shapes()], bool))
+    meshes = [s.is_mesh() for s in scene.shapes()]
+    tables = ShapeTables((mi.Float(np.asarray(out, np.float32)), mi.Bool(np.array(meshes, bool))))
+    if all(meshes) and pos:
+        tables.positions = mi.Float(np.concatenate(pos).ravel())
+        tables.faces = mi.UInt32(np.concatenate(fac).astype(np.uint32).ravel())
+        tables.face_offset = mi.UInt32(np.asarray(first_face, np.uint32))
+    return tables
+
+
+def mesh_hit(pi, tables, active):
+    """(p, n) of a preliminary intersection on a triangle mesh from the meshes' buffers: the hit
+    point interpolated from the vertices and the winding normal, the same arithmetic (and bits)
+    as Mitsuba's ``compute_surface_interaction`` with ``RayFlags.Minimal``, without its call
+    through the shape."""
+    tri = dr.gather(mi.UInt32, tables.face_offset, pi.shape_index, active) + pi.prim_index
+    p0, p1, p2 = (dr.gather(mi.Point3f, tables.positions, dr.gather(mi.UInt32, tables.faces, tri * 3 + k, active),
+                            active) for k in range(3))
+    b1, b2 = pi.prim_uv.x, pi.prim_uv.y
+    b0 = 1.0 - b1 - b2
+    p = dr.fma(p0, b0, dr.fma(p1, b1, p2 * b2))
+    n = dr.normalize(dr.cross(p1 - p0, p2 - p0))
+    return p, n
 
 
 def error_bound_by_shape(p, shape_index, tables, other_extent):
     """:func:`error_bound` with each mesh's largest triangle as the extent (``tables`` from
     :func:`shape_extents`): a little looser, and no per-ray access to the triangle."""
-    extents, is_mesh = tables
+    extents, is_mesh = tables[0], tables[1]
     ext = dr.gather(mi.Float, extents, shape_index)
     mesh = dr.gather(mi.Bool, is_mesh, shape_index)
     return bound(p, dr.select(mesh, ext, other_extent))

@@ -302,6 +302,20 @@ class OracleSpec:
     lambdas: tuple = (1.0,)
 
 
+BACKENDS = ("local", "ray")
+
+
+@dataclass(frozen=True)
+class ExecutionSpec:
+    """``[execution]``: where the cases run (dsm.cluster). ``backend`` local or ray; ``address``
+    a Ray cluster's address (``auto``, ``ray://host:port``) or ``local`` (start one here);
+    ``cpus_per_task`` / ``gpus_per_task``: what each map group's Ray task asks for (fractions allowed)."""
+    backend: str = "local"
+    address: str | None = None
+    cpus_per_task: float = 1.0
+    gpus_per_task: float = 0.0
+
+
 @dataclass(frozen=True)
 class Config:
     name: str
@@ -320,6 +334,7 @@ class Config:
     report_images: str = "all"              # [report] images (REPORT_IMAGES)
     motion: tuple = ()                       # MotionSpec paths ([[motion]]); empty: still frames
     raw: dict = field(default_factory=dict, compare=False)
+    execution: ExecutionSpec = field(default_factory=ExecutionSpec, compare=False)   # where, not what
 
 
 # the culling choices of a map build (midpoint, dual); second_depth's front_closed is its own

@@ -1,0 +1,66 @@
+"""A sweep on a local two-worker Ray cluster writes the rows of a local run, count for count."""
+import csv
+import json
+
+import pytest
+
+ray = pytest.importorskip("ray", reason="Ray is not installed (pip install 'dsm[cluster]')")
+
+# timings, peak memory and compile counts differ between runs by nature; every other column is compared
+VARYING = {"build_ms", "build_first_ms", "build_compile_ms", "build_peak_mb", "lookup_ms", "lookup_compile_ms",
+           "lookup_kernels_compiled", "reference_ms", "fit_ms"}
+
+
+def _rows(path):
+    with open(path, newline="") as fh:
+        return [{k: v for k, v in r.items() if k not in VARYING} for r in csv.DictReader(fh)]
+
+
+def _cfg():
+    # two scenes, two resolutions and two cullings: 8 map groups (Ray tasks) of 3 cases each
+    return {"experiment": {"name": "cluster"}, "camera": {"resolution": [32, 32]},
+            "scene": [{"builtin": "plane_box"}, {"builtin": "plane"}],
+            "light": [{"type": "directional", "direction": [-0.4, -0.3, -1.0]}],
+            "map": {"resolution": [24, 32]},
+            "scheme": [{"name": "constant", "bias": [0.01]}, {"name": "midpoint", "culling": ["none", "back"]},
+                       {"name": "slope_scaled"}],
+            "timing": {"repeats": 1}}
+
+
+def test_a_local_two_worker_cluster_writes_the_rows_of_a_local_run(tmp_path):
+    from dsm import cluster, pipeline
+    from dsm.runner import Runner
+    cfg = pipeline.prepare(_cfg())
+    local = Runner(cfg, tmp_path / "local", progress=False).run()
+    try:
+        cluster.run(cfg, tmp_path / "ray", "local", progress=False, local_cpus=2)
+    finally:
+        ray.shutdown()
+    assert len(local.rows) == 16
+    assert _rows(tmp_path / "ray" / "metrics.csv") == _rows(tmp_path / "local" / "metrics.csv")
+    run = json.loads((tmp_path / "ray" / "run.json").read_text())
+    assert run["state"] == "complete" and run["n_failed"] == 0 and run["backend"]["name"] == "ray"
+    # the plan's work, as a local run counts it (each scene's G-buffer and each light's reference once)
+    assert run["rays"] == local.run["rays"]
+    cases = [s for s in run["status"] if s["what"].startswith("case ")]
+    assert len(cases) == 16 and all(s["node"] in run["nodes"] for s in cases)
+    assert sum(n["cases"] for n in run["nodes"].values()) == 16
+    assert sum(n["groups"] for n in run["nodes"].values()) == len(run["plan"]["maps"]) == 8
+    assert sorted(p.name for p in (tmp_path / "ray" / "images").iterdir()) == \
+        sorted(p.name for p in (tmp_path / "local" / "images").iterdir())
+    assert (tmp_path / "ray" / "oracle.csv").read_text().count("\n") == \
+        (tmp_path / "local" / "oracle.csv").read_text().count("\n")
+
+
+def test_the_execution_table_is_checked():
+    from dsm import config as cfgmod
+    raw = _cfg()
+    raw["execution"] = {"backend": "slurm"}
+    with pytest.raises(cfgmod.ConfigError, match="execution.backend.*ray"):
+        cfgmod.coerce(raw)
+    raw["execution"] = {"backend": "local", "address": "auto"}
+    with pytest.raises(cfgmod.ConfigError, match="execution.address"):
+        cfgmod.coerce(raw)
+    raw["execution"] = {"backend": "ray", "address": "auto", "cpus_per_task": 2, "gpus_per_task": 0.25}
+    ex = cfgmod.coerce(raw).execution
+    assert (ex.backend, ex.address, ex.cpus_per_task, ex.gpus_per_task) == ("ray", "auto", 2.0, 0.25)

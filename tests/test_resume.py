@@ -1,0 +1,158 @@
+"""Resumable runs: a run killed with SIGKILL resumes to the rows of an uninterrupted run; an
+edited config reruns only the cases whose identity changed and lists (keeps) the stale ones."""
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from dsm import report
+
+ROOT = __import__("pathlib").Path(__file__).resolve().parent.parent
+# timings, peak memory and compile counts differ between runs by nature; every other column is compared
+VARYING = {"build_ms", "build_first_ms", "build_compile_ms", "build_peak_mb", "lookup_ms", "lookup_compile_ms",
+           "lookup_kernels_compiled", "reference_ms", "fit_ms"}
+
+CONFIG = """
+[experiment]
+name = "resume"
+[camera]
+resolution = [40, 40]
+[[scene]]
+builtin = "plane_box"
+[[light]]
+type = "directional"
+direction = [-0.4, -0.3, -1.0]
+[map]
+resolution = [24, 32]
+[timing]
+repeats = 1
+[[scheme]]
+name = "none"
+[[scheme]]
+name = "constant"
+bias = [0.001, 0.003, 0.01, 0.03, 0.1]
+[[scheme]]
+name = "slope_scaled"
+[[scheme]]
+name = "midpoint"
+"""
+
+
+def _rows(path):
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _counts(rows):
+    return [{k: v for k, v in r.items() if k not in VARYING} for r in rows]
+
+
+def _env():
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), str(ROOT / "plugins"), env.get("PYTHONPATH", "")])
+    return env
+
+
+def _dsm(*args, **kw):
+    return subprocess.run([sys.executable, "-m", "dsm", *map(str, args)], capture_output=True, text=True,
+                          timeout=600, env=_env(), **kw)
+
+
+def test_a_killed_run_resumes_to_the_rows_of_an_uninterrupted_run(tmp_path):
+    cfg = tmp_path / "resume.toml"
+    cfg.write_text(CONFIG)
+    whole = _dsm("run", cfg, "--out", tmp_path / "whole")
+    assert whole.returncode == 0, whole.stderr[-2000:]
+    total = len(_rows(tmp_path / "whole" / "metrics.csv"))
+    assert total == 2 * 8
+
+    out = tmp_path / "killed"
+    proc = subprocess.Popen([sys.executable, "-m", "dsm", "run", str(cfg), "--out", str(out)], env=_env(),
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    done = 0
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and proc.poll() is None:
+        try:
+            done = json.loads((out / "run.json").read_text())["n_cases_ok"]
+        except (OSError, ValueError, KeyError):
+            done = 0
+        if done >= 3:
+            break
+        time.sleep(0.02)
+    assert proc.poll() is None, "the run ended before it could be killed"
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    killed = json.loads((out / "run.json").read_text())
+    assert killed["state"] == "running" and 3 <= killed["n_cases_ok"] < total
+
+    # without --resume or --force the folder is refused as before
+    again = _dsm("run", cfg, "--out", out)
+    assert again.returncode == 2 and "--force" in again.stderr
+    resumed = _dsm("run", cfg, "--out", out, "--resume")
+    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    run = json.loads((out / "run.json").read_text())
+    assert run["state"] == "complete" and run["stale_cases"] == []
+    assert killed["n_cases_ok"] <= run["resumed_cases"] < total
+    assert _counts(_rows(out / "metrics.csv")) == _counts(_rows(tmp_path / "whole" / "metrics.csv"))
+    for r in _rows(out / "metrics.csv"):
+        assert (out / "images" / f"{r['case']}_error.png").is_file()
+    # a second resume of a complete run runs nothing again
+    twice = _dsm("run", cfg, "--out", out, "--resume")
+    assert twice.returncode == 0
+    assert json.loads((out / "run.json").read_text())["resumed_cases"] == total
+
+
+def _cfg(biases, schemes=("none", "constant")):
+    sch = [{"name": "none"}] if "none" in schemes else []
+    sch.append({"name": "constant", "bias": list(biases)})
+    return {"experiment": {"name": "edit"}, "camera": {"resolution": [32, 32]}, "scene": [{"builtin": "plane_box"}],
+            "light": [{"type": "directional", "direction": [-0.4, -0.3, -1.0]}], "map": {"resolution": 32}, "scheme": sch, "timing": {"repeats": 1}}
+
+
+def test_an_edited_config_reruns_changed_cases_and_lists_stale_ones(tmp_path):
+    from dsm import pipeline
+    from dsm.runner import Runner
+    out = tmp_path / "o"
+    first = Runner(pipeline.prepare(_cfg([0.01, 0.05])), out, progress=False).run()
+    assert [r["case"] for r in first.rows] == ["0001", "0002", "0003"]
+    keys = {s["what"]: s["key"] for s in first.run["status"] if s["what"].startswith("case")}
+    # drop "none", keep bias 0.05, add bias 0.2: one kept (now case 0001), one new, two stale
+    res = Runner(pipeline.prepare(_cfg([0.05, 0.2], ("constant",))), out, progress=False,
+                 resume_previous=True).run()
+    assert res.run["resumed_cases"] == 1
+    assert sorted(s["case"] for s in res.run["stale_cases"]) == ["0001", "0002"]
+    assert {s["key"] for s in res.run["stale_cases"]} == {keys["case 0001"], keys["case 0002"]}
+    rows = _rows(out / "metrics.csv")
+    assert [(r["case"], r["params"]) for r in rows] == [("0001", "bias=0.05"), ("0002", "bias=0.2")]
+    fresh = Runner(pipeline.prepare(_cfg([0.05, 0.2], ("constant",))), tmp_path / "fresh", progress=False).run()
+    assert _counts(rows) == _counts(_rows(tmp_path / "fresh" / "metrics.csv"))
+    # the stale cases' images are kept aside, the kept case's images follow its new id
+    assert sorted(p.name for p in (out / "images" / "stale").iterdir()) == [
+        "0001_error.png", "0001_shadow.png", "0002_error.png", "0002_shadow.png"]
+    assert (out / "images" / "0001_error.png").read_bytes() == (tmp_path / "fresh" / "images" /
+                                                                "0001_error.png").read_bytes()
+
+
+def test_a_case_key_changes_with_its_input_file_and_the_kit_version(tmp_path):
+    from dsm import config as cfgmod, plan as planmod, resume
+    mesh = tmp_path / "tri.obj"
+    mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    raw = {"experiment": {"name": "k"}, "scene": [{"file": str(mesh)}], "light": [{"type": "directional",
+           "direction": [0, 0, -1]}], "map": {"resolution": 16}, "scheme": [{"name": "none"}]}
+    cfg = cfgmod.coerce(raw)
+    a = resume.case_keys(cfg, planmod.make(cfg), "v1")
+    assert a == resume.case_keys(cfg, planmod.make(cfg), "v1")
+    assert a != resume.case_keys(cfg, planmod.make(cfg), "v2")
+    mesh.write_text("v 0 0 0\nv 2 0 0\nv 0 1 0\nf 1 2 3\n")
+    assert a != resume.case_keys(cfg, planmod.make(cfg), "v1")
+
+
+@pytest.mark.parametrize("flags", [["--resume", "--force"]])
+def test_resume_and_force_exclude_each_other(tmp_path, flags):
+    p = _dsm("run", "--out", tmp_path / "x", *flags)
+    assert p.returncode == 2 and "not allowed with" in p.stderr
