@@ -59,8 +59,7 @@ def run_group(cfg, index: int, variant, threads: int, kept: dict) -> dict:
     with tempfile.TemporaryDirectory(prefix="dsm-task-") as tmp:
         r = Runner(cfg, Path(tmp), variant, progress=False, keep_images=False)
         r.run_maps([r.plan.maps[index]], kept)
-        # files the cases wrote as they ran (cascade index images, motion GIFs), by path under images/;
-        # the case images themselves are r.pending_images, written by the driver's report
+        # the files the cases wrote as they ran (case and cascade images, motion GIFs), by path under images/
         images = {str(p.relative_to(r.out / "images")): p.read_bytes()
                   for p in sorted((r.out / "images").rglob("*")) if p.is_file()}
     node = socket.gethostname()
@@ -70,7 +69,7 @@ def run_group(cfg, index: int, variant, threads: int, kept: dict) -> dict:
         pass
     return {"rows": r.rows, "status": r.status, "oracle": r.oracle_rows, "curves": r.curves, "maps": r.maps,
             "scenes": r.scene_info, "gbuffer_ms": r.gbuffer_ms, "rays": r.rays, "quantized": r.quantized,
-            "images": images, "pending": r.pending_images, "motion_frames": r.motion_frames,
+            "images": images, "motion_frames": r.motion_frames,
             "motion_curves": r.motion_curves, "node": node, "pid": os.getpid(), "cascade_rows": r.cascade_rows,
             "cascade_curves": r.cascade_curves}
 
@@ -132,7 +131,6 @@ class ClusterRunner(Runner):
             (self.out / "images" / name).parent.mkdir(parents=True, exist_ok=True)
             with report.atomic(self.out / "images" / name) as tmp:
                 tmp.write_bytes(data)
-        self.pending_images += res["pending"]
         self.motion_frames += res["motion_frames"]
         self.motion_curves += res["motion_curves"]
         for row in res["rows"]:

@@ -102,7 +102,6 @@ class Runner:
         self.versions = env.versions()
         self.state = "running"
         self.bar = None
-        self.pending_images = []      # case images, written by the report once measuring is done
         self.timing = {}              # seconds measuring and writing the report
         # case ids and identity keys from the plan (dsm.resume); a resumed run reuses matching cases
         self.keys = dict(resume.case_keys(config, self.plan, "git:" + self.versions["dsm_git_commit"]))
@@ -143,7 +142,7 @@ class Runner:
             # the report, after every timed measurement: images, figures, table.md, report.html
             t1, c1 = time.perf_counter(), _cpu()
             try:
-                self.timing["report_parts"] = publish.write_report(self.out, self.pending_images, self.curves,
+                self.timing["report_parts"] = publish.write_report(self.out, (), self.curves,
                                                                    plots=self.state == "complete")
                 if self.state == "complete":
                     cascades.write_plots(self.out / "plots", self.cascade_curves)
@@ -151,7 +150,6 @@ class Runner:
                     motion.finish(self.out, self.motion_frames, self.motion_curves)
             except Exception as e:          # the measurements are saved; the report can be rebuilt
                 self._fail("report (dsm report rebuilds it)", e)
-            self.pending_images = []
             self.timing["report_s"] = time.perf_counter() - t1
             self.timing["report_cpu_s"] = _cpu() - c1
             self._write_run_json()
@@ -430,8 +428,8 @@ class Runner:
             classes = classes.reshape(gb.height, gb.width)
             item = publish.image_item(meta, classes, report.shade(classes.shape, gb, setup, v_np)
                                       if self.cfg.report_images == "all" else None, self.cfg.report_images)
-            if item is not None:
-                self.pending_images.append(item)
+            if item is not None:        # written now (Pillow, ~1 ms, between timings): a killed run keeps them
+                figures.write_images(self.out, [item])
             if self.keep_images:
                 self.images[case] = classes
             self.rows.append(row)

@@ -46,8 +46,8 @@ def test_a_local_two_worker_cluster_writes_the_rows_of_a_local_run(tmp_path):
     assert len(cases) == 16 and all(s["node"] in run["nodes"] for s in cases)
     assert sum(n["cases"] for n in run["nodes"].values()) == 16
     assert sum(n["groups"] for n in run["nodes"].values()) == len(run["plan"]["maps"]) == 8
-    assert sorted(p.name for p in (tmp_path / "ray" / "images").iterdir()) == \
-        sorted(p.name for p in (tmp_path / "local" / "images").iterdir())
+    files = lambda run: sorted(str(p.relative_to(run / "images")) for p in (run / "images").rglob("*") if p.is_file())
+    assert files(tmp_path / "ray") == files(tmp_path / "local") and len(files(tmp_path / "local")) == 2 * 16
     assert (tmp_path / "ray" / "oracle.csv").read_text().count("\n") == \
         (tmp_path / "local" / "oracle.csv").read_text().count("\n")
 

@@ -11,6 +11,7 @@ import time
 import pytest
 
 from dsm import report
+from dsm import figures
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parent.parent
 # timings, peak memory and compile counts differ between runs by nature; every other column is compared
@@ -100,7 +101,7 @@ def test_a_killed_run_resumes_to_the_rows_of_an_uninterrupted_run(tmp_path):
     assert killed["n_cases_ok"] <= run["resumed_cases"] < total
     assert _counts(_rows(out / "metrics.csv")) == _counts(_rows(tmp_path / "whole" / "metrics.csv"))
     for r in _rows(out / "metrics.csv"):
-        assert (out / "images" / f"{r['case']}_error.png").is_file()
+        assert (out / figures.image_paths(r)[0]).is_file()
     # a second resume of a complete run runs nothing again
     twice = _dsm("run", cfg, "--out", out, "--resume")
     assert twice.returncode == 0
@@ -132,10 +133,11 @@ def test_an_edited_config_reruns_changed_cases_and_lists_stale_ones(tmp_path):
     fresh = Runner(pipeline.prepare(_cfg([0.05, 0.2], ("constant",))), tmp_path / "fresh", progress=False).run()
     assert _counts(rows) == _counts(_rows(tmp_path / "fresh" / "metrics.csv"))
     # the stale cases' images are kept aside, the kept case's images follow its new id
-    assert sorted(p.name for p in (out / "images" / "stale").iterdir()) == [
-        "0001_error.png", "0001_shadow.png", "0002_error.png", "0002_shadow.png"]
-    assert (out / "images" / "0001_error.png").read_bytes() == (tmp_path / "fresh" / "images" /
-                                                                "0001_error.png").read_bytes()
+    folder = figures.image_folder(rows[0])           # images/<scene>_<light>/
+    assert sorted(str(p.relative_to(out / "images" / "stale")) for p in (out / "images" / "stale").rglob("*.png")) \
+        == [f"{folder}/{n}" for n in ("0001_error.png", "0001_shadow.png", "0002_error.png", "0002_shadow.png")]
+    assert (out / figures.image_paths(rows[0])[0]).read_bytes() == \
+        (tmp_path / "fresh" / figures.image_paths(rows[0])[0]).read_bytes()
 
 
 def test_a_case_key_changes_with_its_input_file_and_the_kit_version(tmp_path):
