@@ -188,6 +188,11 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     motion = tuple(_parse_motion(t, source, f"motion[{i}]") for i, t in enumerate(_array_of_tables(raw, "motion", source)))
     if any(mo.light == "turn" for mo in motion) and all(l.type not in ("directional", "scene") for l in lights):
         raise ConfigError(source, "motion.light", "a turning sun needs a directional light", ["directional"])
+    for i, mo in enumerate(motion):
+        if mo.light in ("move", "keyframes") and all(l.type not in ("spot", "point", "scene") for l in lights):
+            raise ConfigError(source, f"motion[{i}].light", f"light path {mo.light!r} moves a spot or point light "
+                              "and the config's lights are all directional (a sun turns: light = \"turn\")",
+                              ["spot", "point"])
     return Config(name=name, source=source, seed=seed, variant=variant, camera_resolution=camera_resolution,
                   camera=camera, motion=motion,
                   scenes=tuple(scenes), lights=tuple(lights), map=mapspec, schemes=tuple(schemes),
@@ -285,8 +290,8 @@ def _parse_cascades(m: dict, source: str) -> tuple:
 
 def _parse_motion(t: dict, source: str, where: str) -> MotionSpec:
     """One [[motion]] path: frames, a camera path and/or a light path, fixed points."""
-    check_keys(t, ("frames", "camera", "offset", "angle", "keys", "light", "light_axis", "light_angle", "points",
-                   "label"), source, where)
+    check_keys(t, ("frames", "camera", "offset", "angle", "keys", "light", "light_axis", "light_angle",
+                   "light_offset", "light_keys", "points", "label"), source, where)
     kw = {"frames": number(t.get("frames", 8), source, f"{where}.frames", integer=True, minimum=2, maximum=1000),
           "camera": choice(t.get("camera", "none"), source, f"{where}.camera", CAMERA_PATHS),
           "light": choice(t.get("light", "none"), source, f"{where}.light", LIGHT_PATHS),
@@ -317,15 +322,42 @@ def _parse_motion(t: dict, source: str, where: str) -> MotionSpec:
         kw["light_axis"] = vec3(t["light_axis"], source, f"{where}.light_axis", nonzero=True)
     if "light_angle" in t:
         kw["light_angle"] = number(t["light_angle"], source, f"{where}.light_angle")
+    kw.update(_parse_light_move(t, kw["light"], source, where))
     label = t.get("label", "")
     if not isinstance(label, str):
         raise ConfigError(source, f"{where}.label", f"expected a string, got {label!r}")
     spec = MotionSpec(**kw)
     if not label:
         parts = [] if spec.camera == "none" else [f"camera {spec.camera}"]
-        parts += [] if spec.light == "none" else [f"sun turn {spec.light_angle:g}deg"]
+        parts += {"none": [], "turn": [f"sun turn {spec.light_angle:g}deg"]}.get(spec.light, [f"light {spec.light}"])
         label = " + ".join(parts) or "static"
     return replace(spec, label=label)
+
+
+def _parse_light_move(t: dict, path: str, source: str, where: str) -> dict:
+    """A spot or point light moving: ``light_offset`` (move) or ``light_keys`` (keyframes)."""
+    kw = {}
+    need = {"move": "light_offset", "keyframes": "light_keys"}.get(path)
+    if need and need not in t:
+        raise ConfigError(source, f"{where}.{need}", f"light path {path!r} needs {need}")
+    if "light_offset" in t:
+        kw["light_offset"] = vec3(t["light_offset"], source, f"{where}.light_offset")
+    if "light_keys" in t:
+        keys = t["light_keys"]
+        if not isinstance(keys, list) or len(keys) < 2 or not all(isinstance(k, dict) for k in keys):
+            raise ConfigError(source, f"{where}.light_keys", "expected a list of at least two tables "
+                              "{position, target (optional, a spot's aim)}")
+        out = []
+        for j, k in enumerate(keys):
+            check_keys(k, ("position", "target"), source, f"{where}.light_keys[{j}]")
+            if "position" not in k:
+                raise ConfigError(source, f"{where}.light_keys[{j}]", "a light keyframe needs position", ["position"])
+            out.append((vec3(k["position"], source, f"{where}.light_keys[{j}].position"),
+                        vec3(k["target"], source, f"{where}.light_keys[{j}].target") if "target" in k else None))
+        if len({tg is None for _, tg in out}) > 1:
+            raise ConfigError(source, f"{where}.light_keys", "give target on every light keyframe or on none")
+        kw["light_keys"] = tuple(out)
+    return kw
 
 
 def _boolean(source):

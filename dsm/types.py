@@ -262,7 +262,7 @@ class CascadeSpec:
 
 
 CAMERA_PATHS = ("none", "dolly", "pan", "orbit", "keyframes")
-LIGHT_PATHS = ("none", "turn")
+LIGHT_PATHS = ("none", "turn", "move", "keyframes")
 
 
 @dataclass(frozen=True)
@@ -273,9 +273,11 @@ class MotionSpec:
     offset: tuple = (0.0, 0.0, 0.0)  # dolly: the camera's whole translation over the path (scene units)
     angle: float = 0.0              # pan / orbit: degrees over the path, about the camera's up
     keys: tuple = ()                # keyframes: ((position, target), ...), spread evenly over the frames
-    light: str = "none"             # none | turn (a directional light's direction about light_axis)
+    light: str = "none"             # none | turn (a directional light's direction about light_axis) | move | keyframes
     light_axis: tuple = (0.0, 0.0, 1.0)
     light_angle: float = 0.0        # degrees over the path
+    light_offset: tuple = (0.0, 0.0, 0.0)  # move: a spot or point light's whole translation (scene units)
+    light_keys: tuple = ()          # keyframes: ((position, target or None), ...) of a spot or point light
     points: int = 4000              # fixed points sampled on the surfaces (the experiment's seed)
     label: str = ""
 
