@@ -13,10 +13,11 @@ from pathlib import Path
 from typing import Any
 
 LENGTH_UNITS = ("world", "texel", "range")
-FILTERS = ("nearest", "pcf_bilinear", "pcf_jitter4x4")
+FILTERS = ("nearest", "pcf_bilinear", "pcf_jitter4x4", "pcf_wide", "pcss")
 FORMATS = ("float32", "unorm16", "unorm24", "ndc24")
 POINT_VIEWS = ("paraboloid", "dual_paraboloid", "cube")
-LIGHT_TYPES = ("scene", "directional", "spot", "point")
+LIGHT_TYPES = ("scene", "directional", "spot", "point", "area")
+AREA_SHAPES = ("rectangle", "disk", "sphere", "emitter")
 # vectorized Dr.Jit variants only: the kit's code runs on wide arrays (scalar_rgb cannot run it)
 VARIANTS = ("llvm_ad_rgb", "cuda_ad_rgb")
 # [report] images: error and shadow images per case, error images only, or none
@@ -190,6 +191,19 @@ class LightSpec:
     target: tuple | None = None
     cutoff: float = 30.0        # spot half angle in degrees
     label: str = ""
+    # area lights (dsm.area): shape, size (side or [w, h]; diameter), the reference's sampling
+    shape: str = ""
+    size: tuple = ()
+    min_samples: int = 16
+    max_samples: int = 1024
+    tolerance: float = 0.01
+    emitter_shapes: tuple = ()  # an emitter light's shape indices (its map excludes them)
+    scenes: tuple = ()          # area lights: only these scenes (labels or their first word); () all
+
+    def applies_to(self, scene_label: str) -> bool:
+        """Whether this light lights the scene labelled ``scene_label`` (``scenes`` empty: every scene)."""
+        first = scene_label.replace("(", " ").split()[0] if scene_label.strip() else scene_label
+        return not self.scenes or scene_label in self.scenes or first in self.scenes
 
 
 CASCADE_SPLITS = ("uniform", "log", "practical")
@@ -339,8 +353,8 @@ class Config:
 
 # the culling choices of a map build (midpoint, dual); second_depth's front_closed is its own
 CULLINGS = ("none", "back", "front", "back_closed")
-# faces (maps) per view kind
-VIEW_FACES = {"orthographic": 1, "perspective": 1, "paraboloid": 1, "dual_paraboloid": 2, "cube": 6}
+# faces (maps) per view kind ("fitted": an area light's perspective or paraboloid view, chosen from its receivers)
+VIEW_FACES = {"fitted": 1, "orthographic": 1, "perspective": 1, "paraboloid": 1, "dual_paraboloid": 2, "cube": 6}
 DEFAULT_CAMERA = (256, 256)     # built-ins and meshes without [camera] resolution
 
 
