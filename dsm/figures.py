@@ -363,7 +363,7 @@ def plot_jobs(folder: Path, rows: list, curves: list = ()) -> list:
                 tex.setdefault(lab, []).append((r["total_texels"], r["error_rate"], r["seam_error_rate"]))
                 styles[lab] = {"color": f"C{insts.index(_label(r, multi)) % 10}",
                                "linestyle": ("-", "--", ":", "-.")[views.index(r["view"]) % 4]}
-            tex = {k: v for k, v in tex.items() if len(v) > 1}
+            # one budget is still a comparison of the views: a point each
             if tex:
                 # keep an instance's views in one panel
                 by_inst = chunks(insts, max(1, MAX_LEGEND // len(views)))
