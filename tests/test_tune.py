@@ -181,6 +181,7 @@ def test_bias_map_and_output_folder(tmp_path):
     ({"bias_map": {"block": 2}}, "tune.camera"),
     ({"camera": [{"position": [1, 2, 3]}]}, "tune.camera[0].target"),
     ({"range": {"constant": {"bias": [1, 0]}}}, "tune.range.constant.bias"),
+    ({"camera": [{"position": [0, 0, 3], "target": [0, 0, 0]}]}, "tune.camera[0].up"),   # looking along up
 ])
 def test_bad_tune_tables_are_refused_before_work(tune, key):
     import dsm.tune as tu
