@@ -186,8 +186,10 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     report_images = choice(rep.get("images", "all"), source, "report.images", REPORT_IMAGES)
 
     motion = tuple(_parse_motion(t, source, f"motion[{i}]") for i, t in enumerate(_array_of_tables(raw, "motion", source)))
-    if any(mo.light == "turn" for mo in motion) and all(l.type not in ("directional", "scene") for l in lights):
-        raise ConfigError(source, "motion.light", "a turning sun needs a directional light", ["directional"])
+    turning = [i for i, mo in enumerate(motion) if mo.light == "turn"]
+    if turning and all(l.type not in ("directional", "scene") for l in lights):
+        raise ConfigError(source, f"motion[{turning[0]}].light", "a turning sun needs a directional [[light]]",
+                          ["directional"])
     return Config(name=name, source=source, seed=seed, variant=variant, camera_resolution=camera_resolution,
                   camera=camera, motion=motion,
                   scenes=tuple(scenes), lights=tuple(lights), map=mapspec, schemes=tuple(schemes),
@@ -310,6 +312,8 @@ def _parse_motion(t: dict, source: str, where: str) -> MotionSpec:
                 raise ConfigError(source, f"{where}.keys[{j}]", "a keyframe needs position and target")
             out.append((vec3(k["position"], source, f"{where}.keys[{j}].position"),
                         vec3(k["target"], source, f"{where}.keys[{j}].target")))
+            if out[-1][0] == out[-1][1]:
+                raise ConfigError(source, f"{where}.keys[{j}].target", "the target equals the position")
         kw["keys"] = tuple(out)
     if kw["light"] == "turn" and "light_angle" not in t:
         raise ConfigError(source, f"{where}.light_angle", "light path 'turn' needs light_angle (degrees)")

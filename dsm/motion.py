@@ -80,6 +80,11 @@ def camera_path(spec, base: Camera, bbox, scale: float = 1.0, offset=(0.0, 0.0, 
             out.append((keys[k][0] * (1 - w) + keys[k + 1][0] * w, keys[k][1] * (1 - w) + keys[k + 1][1] * w, up))
         else:
             out.append((o0, t0, up))
+        o, tg, u = out[-1]
+        fwd = np.subtract(tg, o)
+        if np.linalg.norm(np.cross(fwd, u)) <= 1e-6 * np.linalg.norm(fwd) * np.linalg.norm(u):
+            raise ValueError(f"motion {spec.label!r}: frame {i}'s camera looks along its up {tuple(map(float, u))} "
+                             "(or from its target); move the keyframes")
     return out
 
 

@@ -109,10 +109,18 @@ def test_motion_config_errors_name_the_key():
     for motion, key in (({"frames": 1}, "motion[0].frames"), ({"camera": "dolly"}, "motion[0].offset"),
                         ({"camera": "zoom"}, "motion[0].camera"), ({"light": "turn"}, "motion[0].light_angle"),
                         ({"camera": "keyframes", "keys": [{"position": [0, 0, 1]}]}, "motion[0].keys"),
-                        ({"speed": 2}, "motion[0].speed")):
+                        ({"speed": 2}, "motion[0].speed"),
+                        ({"camera": "keyframes", "keys": [{"position": [0, 0, 1], "target": [0, 0, 1]},
+                                                          {"position": [0, 1, 1], "target": [0, 0, 0]}]},
+                         "motion[0].keys[0].target")):
         with pytest.raises(ConfigError) as e:
             config.parse(base_config(motion=[motion]), "t.toml")
         assert e.value.key == key, (motion, e.value)
+    spot = {"type": "spot", "position": [0, 0, 4], "target": [0, 0, 0]}
+    with pytest.raises(ConfigError) as e:     # the second path turns the sun, and there is none
+        config.parse(base_config(light=[spot], motion=[{"camera": "orbit", "angle": 30},
+                                                       {"light": "turn", "light_angle": 2}]), "t.toml")
+    assert e.value.key == "motion[1].light" and list(e.value.choices) == ["directional"]
     cfg = config.parse(base_config(motion=[{"camera": "orbit", "angle": 30}, {"light": "turn", "light_angle": 2}]),
                        "t.toml")
     assert [m.label for m in cfg.motion] == ["camera orbit", "sun turn 2deg"]
