@@ -178,6 +178,7 @@ def test_bias_map_and_output_folder(tmp_path):
     ({"params": {"constant": ["bias", "slope"]}}, "tune.params.constant"),
     ({"params": {"dual": ["z_offset"]}}, "tune.params.dual"),
     ({"schedule": "cosine"}, "tune.schedule"),
+    ({"temperature": [0.02, 0.25]}, "tune.temperature"),      # reversed: it anneals down
     ({"bias_map": {"block": 2}}, "tune.camera"),
     ({"camera": [{"position": [1, 2, 3]}]}, "tune.camera[0].target"),
     ({"range": {"constant": {"bias": [1, 0]}}}, "tune.range.constant.bias"),
@@ -198,7 +199,7 @@ def test_schemes_without_a_continuous_parameter_are_refused():
     from dsm.config import coerce
     with pytest.raises(ConfigError) as e:
         tu.parse_tune(coerce(_cfg({"builtin": "plane"}, [{"name": "midpoint"}])))
-    assert "constant" in e.value.choices and "midpoint" not in e.value.choices
+    assert "constant" in e.value.choices and "midpoint" not in e.value.choices and e.value.key == "scheme[0].name"
 
 
 def test_cli_tune(tmp_path):
