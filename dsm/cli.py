@@ -278,6 +278,22 @@ def _run(cfg, args, out: Path) -> int:
         return 3
     except cfgmod.ConfigError as e:
         return _config_error(e)
+    clustered = bool(args.cluster) or cfg.execution.backend == "ray"
+    if clustered:                       # reach the cluster before the folder is touched
+        try:
+            from . import cluster
+            if args.cluster:
+                cluster.connect(args.cluster)
+            else:
+                cluster.connect(cfg.execution.address or "local", source=cfg.source, key="execution.address")
+        except SetupError as e:
+            _err(f"setup error: {e}")
+            return 3
+        except cfgmod.ConfigError as e:
+            if args.cluster:
+                _err(str(e).removeprefix(f"{e.source}: "))
+                return 2
+            return _config_error(e)
     resuming = bool(getattr(args, "resume", False)) and out.is_dir() and any(out.iterdir())
     problem = _resume_problem(out) if resuming else _out_problem(out, args.force)
     if problem:
@@ -286,8 +302,7 @@ def _run(cfg, args, out: Path) -> int:
     try:
         from .runner import Runner
         t0 = time.perf_counter()
-        if args.cluster or cfg.execution.backend == "ray":
-            from . import cluster
+        if clustered:
             res = cluster.run(cfg, out, args.cluster, args.variant, progress=True, resume_previous=resuming)
         else:
             res = Runner(cfg, out, args.variant, progress=True, resume_previous=resuming).run()
