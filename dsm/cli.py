@@ -176,6 +176,10 @@ def _report(args) -> int:
                   "figures; table.md, plots/, report.html)")
             return 0
         out = Path(args.out) if args.out else Path(f"compare-{dirs[0].resolve().name}-{dirs[1].resolve().name}")
+        problem = _compare_out_problem(out)
+        if problem:
+            _err(f"report: {problem}")
+            return 2
         n = publish.compare(dirs[0], dirs[1], out)
     except publish.NotARun as e:
         _err(f"report: {e}")
@@ -183,6 +187,26 @@ def _report(args) -> int:
     print(f"dsm: {n['matched']} cases in both runs, {n['only_a']} only in A, {n['only_b']} only in B -> "
           f"{out}/ (compare.md, compare.csv)")
     return 0
+
+
+COMPARE_OUTPUTS = ("compare.md", "compare.csv")
+
+
+def _compare_out_problem(out: Path) -> str | None:
+    """Why a comparison cannot go into ``out`` (None if it can): a file, a dsm run's folder (its
+    files would be mixed with the comparison's) or a folder holding anything but an earlier
+    comparison (which is replaced: both runs still hold everything it was made from)."""
+    if out.exists() and not out.is_dir():
+        return f"--out {out}: is a file, not a folder; choose another --out"
+    if not out.is_dir():
+        return None
+    if (out / "run.json").exists():
+        return f"--out {out}: is a dsm run's folder; put the comparison in a folder of its own (another --out)"
+    foreign = sorted(p.name for p in out.iterdir() if p.name not in COMPARE_OUTPUTS)
+    if foreign:
+        return (f"--out {out}: holds files a comparison does not write ({', '.join(foreign[:3])}"
+                f"{', ...' if len(foreign) > 3 else ''}); choose an empty or new --out")
+    return None
 
 
 def _plan(cfg) -> int:

@@ -210,6 +210,32 @@ def test_comparison_of_two_runs(run, tmp_path):
     assert cli.main(["report", str(a), "--out", str(out)]) == 2
 
 
+def test_a_comparison_never_lands_in_a_run_or_a_foreign_folder(run, tmp_path, capsys):
+    """--out of dsm report A B: a run's folder, a file or a folder of other files is refused with
+    exit 2 naming --out, and nothing in it changes; an earlier comparison is replaced."""
+    from dsm import cli
+    a = tmp_path / "a"
+    shutil.copytree(run.out, a)
+    before = sorted(p.name for p in a.iterdir())
+    assert cli.main(["report", str(a), str(a), "--out", str(a)]) == 2
+    assert "--out" in capsys.readouterr().err and sorted(p.name for p in a.iterdir()) == before
+    other = tmp_path / "mine"
+    other.mkdir()
+    (other / "notes.txt").write_text("keep")
+    (tmp_path / "f.txt").write_text("keep")
+    for out in (other, tmp_path / "f.txt"):
+        assert cli.main(["report", str(a), str(a), "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"dsm: report: --out {out}: ") and len(err.strip().splitlines()) == 1
+    assert sorted(p.name for p in other.iterdir()) == ["notes.txt"] and (tmp_path / "f.txt").read_text() == "keep"
+    cmp = tmp_path / "cmp"
+    assert cli.main(["report", str(a), str(a), "--out", str(cmp)]) == 0
+    assert cli.main(["report", str(a), str(a), "--out", str(cmp)]) == 0       # a run with itself, again
+    with open(cmp / "compare.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == len(run.rows) and all(r["diff_error_rate"] in ("", "0") for r in rows)
+
+
 def test_report_images_key(tmp_path):
     import dsm
     from dsm import config, figures
