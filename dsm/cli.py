@@ -131,6 +131,16 @@ def main(argv=None) -> int:
         return _run(cfg, args, out)
     except KeyboardInterrupt:
         where = f" (results so far in {out}/)" if out is not None and out.is_dir() and any(out.iterdir()) else ""
+        if where and args.cmd == "run" and (out / "run.json").is_file():
+            try:
+                measured = json.loads((out / "run.json").read_text()).get("state") == "complete"
+            except (OSError, ValueError):
+                measured = False
+            if measured:       # stopped while the report was drawn: every case is measured
+                where = (f" while writing the report: every case is measured in {out}/; `dsm report {out}` "
+                         "writes table.md, plots/ and report.html")
+            else:
+                where += f"; `dsm run ... --out {out} --resume` runs the rest"
         print(f"{chr(10) if sys.stderr.isatty() else ''}dsm: interrupted{where}", file=sys.stderr)
         return 130
 

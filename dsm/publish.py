@@ -81,7 +81,8 @@ def write_report(out: Path, images=(), curves=None, plots: bool = True) -> dict:
     pool = figures.run_jobs(jobs)
     t2 = time.perf_counter()
     report.write_table(out / "table.md", rows, run.get("experiment", out.name), run.get("config_file", ""),
-                       run.get("status", []), oracle_rows, _texels(run))
+                       run.get("status", []), oracle_rows, _texels(run), state=run.get("state"),
+                       planned=run.get("plan", {}).get("cases"))
     htmlpage.write_html(out / "report.html", rows, run)
     t3 = time.perf_counter()
     return {"figures": n_figures, "images": len(items), "workers": pool, "read_s": t1 - t0, "draw_s": t2 - t1,

@@ -2,6 +2,7 @@
 metrics.csv, pooled against mean, undefined rates left out and counted, one unit per plot panel,
 ``dsm report DIR`` reproducing table.md, the comparison of two runs, and ``[report] images``."""
 import csv
+import json
 import math
 import shutil
 
@@ -234,6 +235,24 @@ def test_a_comparison_never_lands_in_a_run_or_a_foreign_folder(run, tmp_path, ca
     with open(cmp / "compare.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert len(rows) == len(run.rows) and all(r["diff_error_rate"] in ("", "0") for r in rows)
+
+
+def test_the_table_of_an_interrupted_run_says_it_covers_only_the_cases_that_ran(run, tmp_path):
+    """A Ctrl-C'd run's table.md (written then, or by dsm report later) must not read as the
+    whole experiment's answer."""
+    from dsm import cli
+    assert "interrupted" not in (run.out / "table.md").read_text()
+    d = tmp_path / "cut"
+    shutil.copytree(run.out, d)
+    info = json.loads((d / "run.json").read_text())
+    info["state"] = "interrupted"
+    (d / "run.json").write_text(json.dumps(info))
+    with open(d / "metrics.csv", newline="") as fh:           # the first 5 cases ran
+        lines = fh.read().splitlines(keepends=True)
+    (d / "metrics.csv").write_text("".join(lines[:6]))
+    assert cli.main(["report", str(d)]) == 0
+    head = (d / "table.md").read_text().split("## Summary")[0]
+    assert f"interrupted: 5 of the {len(run.rows)} planned cases ran" in head and "--resume" in head
 
 
 def test_report_images_key(tmp_path):
