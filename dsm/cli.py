@@ -284,14 +284,21 @@ def _out_problem(out: Path, force: bool, bench: bool = False) -> str | None:
     return None
 
 
-def _resume_problem(out: Path) -> str | None:
-    """Why ``--resume`` cannot go on with the run in ``out`` (None if it can)."""
+def _resume_problem(out: Path, cfg=None) -> str | None:
+    """Why ``--resume`` cannot go on with the run in ``out`` (None if it can): no dsm run there,
+    or the run of another experiment (``[experiment] name`` differs from ``cfg``'s: resuming it
+    would set every one of its cases aside as stale)."""
     if not (out / "run.json").is_file():
         return f"--resume: {out} holds no previous dsm run (no run.json); choose another --out"
     try:
-        json.loads((out / "run.json").read_text())
+        prev = json.loads((out / "run.json").read_text())
     except (OSError, ValueError):
         return f"--resume: {out}/run.json is not a dsm run.json; choose another --out"
+    if not isinstance(prev, dict):
+        return f"--resume: {out}/run.json is not a dsm run.json; choose another --out"
+    if cfg is not None and prev.get("experiment") not in (None, cfg.name):
+        return (f"--resume: {out} holds experiment {prev['experiment']!r} (config {prev.get('config_file') or '?'}), "
+                f"not {cfg.name!r} ({cfg.source}); resume it with its own config or choose another --out")
     try:
         with tempfile.TemporaryFile(dir=out):
             pass
@@ -329,7 +336,7 @@ def _run(cfg, args, out: Path) -> int:
                 return 2
             return _config_error(e)
     resuming = bool(getattr(args, "resume", False)) and out.is_dir() and any(out.iterdir())
-    problem = _resume_problem(out) if resuming else _out_problem(out, args.force)
+    problem = _resume_problem(out, cfg) if resuming else _out_problem(out, args.force)
     if problem:
         _err(problem)
         return 2
