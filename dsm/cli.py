@@ -386,8 +386,18 @@ def _tune(cfg, args, out: Path) -> int:
         return 3
     except cfgmod.ConfigError as e:
         return _config_error(e)
-    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+    if out.exists() and not out.is_dir():
+        _err(f"--out {out}: is a file, not a folder; choose another --out")
+        return 2
+    if out.is_dir() and any(out.iterdir()):
         _err(f"--out {out}: is not an empty folder; choose another --out")
+        return 2
+    try:                                # before the tuning, not when its results are written
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as e:
+        _err(f"--out {out}: cannot write there: {e.strerror or e}")
         return 2
     t0 = time.perf_counter()
     try:

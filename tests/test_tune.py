@@ -217,6 +217,25 @@ def test_cli_tune(tmp_path):
     assert not (tmp_path / "o2").exists()
 
 
+def test_cli_tune_out_that_cannot_take_the_results_is_refused_before_tuning(tmp_path, capsys):
+    """--out a file, a non-empty folder or a path that cannot be made: exit 2 naming --out, before
+    any tuning (it was a traceback once the tuning had finished), and nothing there changes."""
+    from dsm.cli import main
+    cfg = tmp_path / "t.toml"
+    cfg.write_text('[[scene]]\nbuiltin = "plane_box"\n[map]\nresolution = 16\n[camera]\nresolution = 16\n'
+                   '[[scheme]]\nname = "constant"\n[tune]\nsteps = 2\n')
+    full = tmp_path / "full"
+    full.mkdir()
+    (full / "keep.txt").write_text("keep")
+    (tmp_path / "missing").write_text("a file, so nothing can be made under it")
+    for out, why in ((cfg, "is a file, not a folder"), (full, "is not an empty folder"),
+                     (tmp_path / "missing" / "o", "cannot write there")):
+        assert main(["tune", str(cfg), "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert err == f"dsm: --out {out}: {why}" + err.split(why, 1)[1] and len(err.strip().splitlines()) == 1
+    assert [p.name for p in full.iterdir()] == ["keep.txt"] and "[tune]" in cfg.read_text()
+
+
 def test_cascaded_maps_are_refused():
     """A cascaded view follows its camera: no map grid is shared across views."""
     import dsm.tune as tu
