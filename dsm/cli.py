@@ -182,6 +182,8 @@ def _report(args) -> int:
         if len(dirs) == 1:
             t0 = time.perf_counter()
             parts = publish.rebuild(dirs[0])
+            for note in parts.get("notes", []):
+                _err(f"note: {note}")
             print(f"dsm: report of {dirs[0]}/ rebuilt in {time.perf_counter() - t0:.1f} s ({parts['figures']} "
                   "figures; table.md, plots/, report.html)")
             return 0

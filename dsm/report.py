@@ -98,7 +98,12 @@ def _typed(k, v):
 def read_rows(path) -> list[dict]:
     """metrics.csv or oracle.csv with its numbers as int and float (an empty cell: NaN): the rows
     every report section is written from, in a run and in ``dsm report``."""
-    return [{k: _typed(k, v) for k, v in r.items()} for r in read_csv(path)]
+    return typed_rows(read_csv(path))
+
+
+def typed_rows(raw: list) -> list[dict]:
+    """Rows read as text (csv.DictReader) with their numbers as int and float ('' is NaN)."""
+    return [{k: _typed(k, v) for k, v in r.items()} for r in raw]
 
 
 def progress(total: int, enabled: bool):

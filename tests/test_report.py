@@ -255,6 +255,41 @@ def test_the_table_of_an_interrupted_run_says_it_covers_only_the_cases_that_ran(
     assert f"interrupted: 5 of the {len(run.rows)} planned cases ran" in head and "--resume" in head
 
 
+def test_dsm_report_of_a_damaged_folder_is_one_line_never_a_traceback(run, tmp_path, capsys):
+    """run.json that is not JSON or not an object, a metrics.csv of another program or with text
+    in a number column: exit 2 naming the file. A last row cut short (a run killed while writing
+    it) and an unreadable oracle_curves.npz: the rest is reported, with a note naming the file."""
+    from dsm import cli
+    d = tmp_path / "d"
+
+    def damaged(name, text):
+        if d.exists():
+            shutil.rmtree(d)
+        shutil.copytree(run.out, d)
+        (d / name).write_text(text)
+        return cli.main(["report", str(d)]), capsys.readouterr().err
+    metrics_text = (run.out / "metrics.csv").read_text()
+    lines = metrics_text.splitlines(keepends=True)
+    cells = lines[1].split(",")
+    i = lines[0].split(",").index("n_acne")
+    bad_cell = ",".join(cells[:i] + ["many"] + cells[i + 1:])
+    for name, text in (("run.json", '{"state'), ("run.json", "[1, 2]"), ("metrics.csv", "a,b\n1,2\n"),
+                       ("metrics.csv", lines[0] + bad_cell)):
+        code, err = damaged(name, text)
+        assert code == 2 and err.startswith(f"dsm: report: {d / name}: ") and "Traceback" not in err, err
+        assert len(err.strip().splitlines()) == 1
+    cut = "".join(lines[:-1]) + lines[-1][:len(lines[-1]) // 2]
+    code, err = damaged("metrics.csv", cut)
+    assert code == 0 and f"note: {d / 'metrics.csv'}: 1 row(s) cut short" in err
+    assert f"{len(lines) - 2} cases" in (d / "table.md").read_text()
+    code, err = damaged("oracle_curves.npz", "not an npz")
+    assert code == 0 and f"note: {d / 'oracle_curves.npz'}: unreadable" in err and (d / "report.html").is_file()
+    (tmp_path / "tuned").mkdir()
+    (tmp_path / "tuned" / "tune.json").write_text("{}")
+    assert cli.main(["report", str(tmp_path / "tuned")]) == 2
+    assert "a dsm tune folder" in capsys.readouterr().err
+
+
 def test_report_images_key(tmp_path):
     import dsm
     from dsm import config, figures
