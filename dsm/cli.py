@@ -11,6 +11,7 @@ import dataclasses
 import json
 import re
 import shutil
+import signal
 import sys
 import tempfile
 import time
@@ -130,6 +131,10 @@ def main(argv=None) -> int:
         out = Path(args.out) if args.out else Path("runs") / f"{cfg.name}-{time.strftime('%Y%m%d-%H%M%S')}"
         return _run(cfg, args, out)
     except KeyboardInterrupt:
+        # as the command (not main([...]) from Python): a second Ctrl-C, or one passed on while Ray shuts
+        # down, must not break the exit's clean-up (tqdm's and Ray's atexit handlers) into a traceback
+        if argv is None:
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
         where = f" (results so far in {out}/)" if out is not None and out.is_dir() and any(out.iterdir()) else ""
         if where and args.cmd == "run" and (out / "run.json").is_file():
             try:
