@@ -141,14 +141,14 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
                    for r in as_list(m.get("texels", [])))
     resolutions = tuple(number(r, source, "map.resolution", integer=True, minimum=1, maximum=16384)
                         for r in as_list(m.get("resolution", 512)))
-    filters = tuple(choice(f, source, "map.filter", FILTERS) for f in as_list(m.get("filter", "nearest")))
+    filters = tuple(_filter(f, source) for f in as_list(m.get("filter", "nearest")))
     formats = tuple(choice(f, source, "map.format", FORMATS) for f in as_list(m.get("format", "float32")))
     views = tuple(choice(v, source, "map.view", POINT_VIEWS) for v in as_list(m.get("view", "dual_paraboloid")))
     for key, vals in (("map.resolution", resolutions), ("map.filter", filters), ("map.format", formats),
                       ("map.view", views)):
         if not vals:
             raise ConfigError(source, key, "empty list")
-    if "view" in m and all(l.type not in ("point", "scene") for l in lights):
+    if "view" in m and all(l.type not in ("point", "scene") and l.shape != "sphere" for l in lights):
         # a scene's own lights are known only once it is loaded; explicit ones are known now
         raise ConfigError(source, "map.view", "views are for point lights and no [[light]] is a point light "
                           f"(the lights are {', '.join(sorted({l.type for l in lights}))}); remove map.view or "
@@ -190,6 +190,11 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     if turning and all(l.type not in ("directional", "scene") for l in lights):
         raise ConfigError(source, f"motion[{turning[0]}].light", "a turning sun needs a directional [[light]]",
                           ["directional"])
+    for i, mo in enumerate(motion):
+        if mo.light in ("move", "keyframes") and all(l.type not in ("spot", "point", "scene") for l in lights):
+            raise ConfigError(source, f"motion[{i}].light", f"light path {mo.light!r} moves a spot or point light "
+                              "and the config's lights are all directional (a sun turns: light = \"turn\")",
+                              ["spot", "point"])
     return Config(name=name, source=source, seed=seed, variant=variant, camera_resolution=camera_resolution,
                   camera=camera, motion=motion,
                   scenes=tuple(scenes), lights=tuple(lights), map=mapspec, schemes=tuple(schemes),
@@ -287,8 +292,8 @@ def _parse_cascades(m: dict, source: str) -> tuple:
 
 def _parse_motion(t: dict, source: str, where: str) -> MotionSpec:
     """One [[motion]] path: frames, a camera path and/or a light path, fixed points."""
-    check_keys(t, ("frames", "camera", "offset", "angle", "keys", "light", "light_axis", "light_angle", "points",
-                   "label"), source, where)
+    check_keys(t, ("frames", "camera", "offset", "angle", "keys", "light", "light_axis", "light_angle",
+                   "light_offset", "light_keys", "points", "label"), source, where)
     kw = {"frames": number(t.get("frames", 8), source, f"{where}.frames", integer=True, minimum=2, maximum=1000),
           "camera": choice(t.get("camera", "none"), source, f"{where}.camera", CAMERA_PATHS),
           "light": choice(t.get("light", "none"), source, f"{where}.light", LIGHT_PATHS),
@@ -321,15 +326,42 @@ def _parse_motion(t: dict, source: str, where: str) -> MotionSpec:
         kw["light_axis"] = vec3(t["light_axis"], source, f"{where}.light_axis", nonzero=True)
     if "light_angle" in t:
         kw["light_angle"] = number(t["light_angle"], source, f"{where}.light_angle")
+    kw.update(_parse_light_move(t, kw["light"], source, where))
     label = t.get("label", "")
     if not isinstance(label, str):
         raise ConfigError(source, f"{where}.label", f"expected a string, got {label!r}")
     spec = MotionSpec(**kw)
     if not label:
         parts = [] if spec.camera == "none" else [f"camera {spec.camera}"]
-        parts += [] if spec.light == "none" else [f"sun turn {spec.light_angle:g}deg"]
+        parts += {"none": [], "turn": [f"sun turn {spec.light_angle:g}deg"]}.get(spec.light, [f"light {spec.light}"])
         label = " + ".join(parts) or "static"
     return replace(spec, label=label)
+
+
+def _parse_light_move(t: dict, path: str, source: str, where: str) -> dict:
+    """A spot or point light moving: ``light_offset`` (move) or ``light_keys`` (keyframes)."""
+    kw = {}
+    need = {"move": "light_offset", "keyframes": "light_keys"}.get(path)
+    if need and need not in t:
+        raise ConfigError(source, f"{where}.{need}", f"light path {path!r} needs {need}")
+    if "light_offset" in t:
+        kw["light_offset"] = vec3(t["light_offset"], source, f"{where}.light_offset")
+    if "light_keys" in t:
+        keys = t["light_keys"]
+        if not isinstance(keys, list) or len(keys) < 2 or not all(isinstance(k, dict) for k in keys):
+            raise ConfigError(source, f"{where}.light_keys", "expected a list of at least two tables "
+                              "{position, target (optional, a spot's aim)}")
+        out = []
+        for j, k in enumerate(keys):
+            check_keys(k, ("position", "target"), source, f"{where}.light_keys[{j}]")
+            if "position" not in k:
+                raise ConfigError(source, f"{where}.light_keys[{j}]", "a light keyframe needs position", ["position"])
+            out.append((vec3(k["position"], source, f"{where}.light_keys[{j}].position"),
+                        vec3(k["target"], source, f"{where}.light_keys[{j}].target") if "target" in k else None))
+        if len({tg is None for _, tg in out}) > 1:
+            raise ConfigError(source, f"{where}.light_keys", "give target on every light keyframe or on none")
+        kw["light_keys"] = tuple(out)
+    return kw
 
 
 def _boolean(source):
@@ -356,10 +388,58 @@ def _array_of_tables(raw, key, source) -> list:
     return t
 
 
+def _filter(raw, source) -> str:
+    """A map.filter value: one of FILTERS, or ``"pcf_wide:K"`` (a K x K texel kernel, 2 <= K <= 64)."""
+    if isinstance(raw, str) and raw.startswith("pcf_wide:"):
+        k = raw.split(":", 1)[1]
+        if not k.isdigit() or not 2 <= int(k) <= 64:
+            raise ConfigError(source, "map.filter", f"{raw!r}: pcf_wide:K takes a kernel width K in texels, "
+                              "an integer from 2 to 64")
+        return raw
+    return choice(raw, source, "map.filter", FILTERS)
+
+
+def _parse_area(t: dict, source: str, where: str) -> LightSpec:
+    """``type = "area"``: shape, position, direction (normal), size, and the reference's sampling."""
+    from .types import AREA_SHAPES
+    shape = choice(t.get("shape"), source, f"{where}.shape", AREA_SHAPES)
+    sampling = ("min_samples", "max_samples", "tolerance")
+    own = {"emitter": (), "sphere": ("position", "size"), "disk": ("position", "direction", "size"),
+           "rectangle": ("position", "direction", "size")}[shape]
+    check_keys(t, ("type", "shape", "scenes") + own + sampling, source, where)
+    only = as_list(t.get("scenes", []))
+    if not all(isinstance(x, str) and x for x in only):
+        raise ConfigError(source, f"{where}.scenes", f"expected a list of scene labels, got {t['scenes']!r}")
+    lo = number(t.get("min_samples", 16), source, f"{where}.min_samples", integer=True, minimum=1, maximum=1 << 20)
+    hi = number(t.get("max_samples", 1024), source, f"{where}.max_samples", integer=True, minimum=lo,
+                maximum=1 << 20)
+    tol = number(t.get("tolerance", 0.01), source, f"{where}.tolerance", minimum=0.0, maximum=1.0)
+    pos = direction = None
+    size = ()
+    if shape != "emitter":
+        for key in ("position", "size"):
+            if key not in t:
+                raise ConfigError(source, f"{where}.{key}", f"a {shape} light needs a {key}")
+        pos = vec3(t["position"], source, f"{where}.position")
+        raw = t["size"]
+        if shape == "rectangle" and isinstance(raw, list):
+            if len(raw) != 2:
+                raise ConfigError(source, f"{where}.size", f"expected a side or [width, height], got {raw!r}")
+            size = tuple(number(x, source, f"{where}.size", positive=True) for x in raw)
+        else:
+            size = (number(raw, source, f"{where}.size", positive=True),)
+        if shape != "sphere":
+            direction = vec3(t.get("direction", [0.0, 0.0, -1.0]), source, f"{where}.direction", nonzero=True)
+    return LightSpec("area", position=pos, direction=direction, label="area", shape=shape, size=size,
+                     min_samples=lo, max_samples=hi, tolerance=tol, scenes=tuple(only))
+
+
 def _parse_light(t: dict, source: str, where: str) -> LightSpec:
     kind = choice(t.get("type"), source, f"{where}.type", LIGHT_TYPES) if "type" in t else None
     if kind is None:
         raise ConfigError(source, f"{where}.type", "missing", LIGHT_TYPES)
+    if kind == "area":
+        return _parse_area(t, source, where)
     allowed = {"scene": ("type",), "directional": ("type", "direction"),
                "spot": ("type", "position", "target", "direction", "cutoff"),
                "point": ("type", "position", "direction")}[kind]

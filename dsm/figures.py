@@ -355,10 +355,11 @@ def plot_jobs(folder: Path, rows: list, curves: list = ()) -> list:
                                              f"{where}: exact trade-off of one bias for the map (lines), nearest "
                                              "cases (points)", panels)))
         if len(views) > 1:
-            tex, styles = {}, {}
+            tex, styles, inst_of = {}, {}, {}
             insts = sorted({_label(r, multi) for r in rs})
             for r in rs:
                 lab = f"{r['view']}: {_label(r, multi)}"[:52]
+                inst_of[lab] = _label(r, multi)      # the instance, also when the label was cut
                 tex.setdefault(lab, []).append((r["total_texels"], r["error_rate"], r["seam_error_rate"]))
                 styles[lab] = {"color": f"C{insts.index(_label(r, multi)) % 10}",
                                "linestyle": ("-", "--", ":", "-.")[views.index(r["view"]) % 4]}
@@ -367,9 +368,10 @@ def plot_jobs(folder: Path, rows: list, curves: list = ()) -> list:
                 # keep an instance's views in one panel
                 by_inst = chunks(insts, max(1, MAX_LEGEND // len(views)))
                 columns = [(f"schemes {i + 1} of {len(by_inst)}", "total texels of the view (all faces)",
-                            {k: v for k, v in tex.items() if k.split(": ", 1)[1] in part}, styles)
+                            {k: v for k, v in tex.items() if inst_of[k] in part}, styles)
                            for i, part in enumerate(by_inst)]
                 columns = [c for c in columns if c[2]]
+            if tex and columns:
                 jobs.append((draw_lines, (folder / f"vs_texels_{slug(f'{scene}_{light}')}.png",
                                           f"{scene}, light {light}, views {', '.join(views)}, {_res_text(rs)}: "
                                           "views at equal memory (colour: scheme, line: view)", columns,

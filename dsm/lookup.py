@@ -15,6 +15,12 @@ mean, so every scheme works with every filter; seed 000, section 5):
   jittered within its cell by a per-receiver random offset, seeded from the receiver's own
   position and the experiment's seed (runs repeat; a receiver's taps do not depend on which
   other receivers are in the case).
+- ``pcf_wide`` (``pcf_wide:K``): a fixed K x K box kernel of texel spacing centred on the
+  position (K = PCF_WIDE_DEFAULT without ``:K``), as engines ship soft shadows of fixed width.
+- ``pcss``: percentage-closer soft shadows (Fernando 2005), see :func:`pcss_estimate`: a
+  blocker search, the mean blocker depth, the penumbra width by similar triangles, then PCF of
+  that width (PCSS_FILTER x PCSS_FILTER taps). Without an area light (``view.light_size``
+  absent or 0) the width is one texel.
 
 Taps stay on the receiver's face: at a cube edge or the paraboloid rim the index is clamped
 to the face rather than continued on the neighbouring face. Beyond a directional light's
@@ -134,6 +140,11 @@ def filter_taps(filt: str, rx: Receiver, seed: int = 7):
         fx, fy = x - i0, y - j0
         return [(i0 + 0.5 + a, j0 + 0.5 + b, (fx if a else 1.0 - fx) * (fy if b else 1.0 - fy))
                 for a in (0, 1) for b in (0, 1)]
+    if filt == "pcf_wide" or filt.startswith("pcf_wide:"):
+        k = int(filt.split(":", 1)[1]) if ":" in filt else PCF_WIDE_DEFAULT
+        w = 1.0 / (k * k)
+        return [(rx.u_map + (a - 0.5 * (k - 1)), rx.v_map + (b - 0.5 * (k - 1)), w)
+                for a in range(k) for b in range(k)]
     if filt == "pcf_jitter4x4":
         n = dr.width(rx.u_map)
         rng = mi.PCG32()
@@ -145,7 +156,65 @@ def filter_taps(filt: str, rx: Receiver, seed: int = 7):
                 taps.append((rx.u_map + (a - 1.5) + (rng.next_float32() - 0.5),
                              rx.v_map + (b - 1.5) + (rng.next_float32() - 0.5), 1.0 / 16.0))
         return taps
-    raise ValueError(f"unknown filter {filt!r} (valid: nearest, pcf_bilinear, pcf_jitter4x4)")
+    raise ValueError(f"unknown filter {filt!r} (valid: nearest, pcf_bilinear, pcf_jitter4x4, pcf_wide[:K], pcss)")
+
+
+PCF_WIDE_DEFAULT = 5       # pcf_wide without :K
+PCSS_SEARCH = 6            # blocker-search taps per side
+PCSS_FILTER = 7            # PCF taps per side over the penumbra width
+PCSS_MAX_TEXELS = 64.0     # widest search and filter region, in texels
+PCSS_NEAR = 0.125          # the search region's near depth, at least this fraction of the receiver's
+
+
+def _grid(n: int, width):
+    """Offsets (texels) of an n x n grid of cells spanning ``width`` texels, centred on 0."""
+    return [((a + 0.5) / n - 0.5) * width for a in range(n)]
+
+
+def pcss_estimate(scheme, prm, rx: Receiver, smap):
+    """PCSS's blocker search and penumbra estimate (Fernando 2005), in the kit's units.
+
+    The light (width ``L`` = ``view.light_size``, world) seen from a receiver at depth ``d``
+    covers, at depth ``z``, a region ``L (d - z) / d`` wide around the receiver's ray; the map's
+    texel there is ``texel_world * z / d`` wide (a map cast from the light's centre), so the
+    region spans ``L (d - z) / (z texel_world)`` texels. The search takes it at the near depth
+    ``z_n = max(view.nearest_scene_depth, PCSS_NEAR d)`` (Fernando's near plane), capped at
+    PCSS_MAX_TEXELS, on a PCSS_SEARCH x PCSS_SEARCH grid. A tap is a blocker where the scheme's
+    margin is negative (the scheme's test, per tap). With ``z_b`` the blockers' mean depth the
+    penumbra is ``w = L (d - z_b) / z_b`` wide (world, similar triangles), ``w / texel_world``
+    texels. Returns (z_b, penumbra width in texels, any blocker found)."""
+    view = smap.view
+    L = dr.opaque(mi.Float, float(getattr(view, "light_size", 0.0) or 0.0))
+    d = rx.depth
+    z_n = dr.maximum(dr.opaque(mi.Float, float(getattr(view, "nearest_scene_depth", 0.0))), PCSS_NEAR * d)
+    search = dr.clip(L * (d - z_n) / (z_n * rx.texel_world), 1.0, PCSS_MAX_TEXELS)
+    total = dr.zeros(mi.Float, dr.width(d))
+    count = dr.zeros(mi.Float, dr.width(d))
+    offs = _grid(PCSS_SEARCH, 1.0)
+    for a in offs:
+        for b in offs:
+            tap = tap_at(rx, smap, rx.u_map + a * search, rx.v_map + b * search)
+            blocker = ~lit(scheme, rx, tap, prm)
+            total += dr.select(blocker, tap.z1, 0.0)
+            count += dr.select(blocker, 1.0, 0.0)
+    found = count > 0
+    z_b = dr.select(found, total / dr.maximum(count, 1.0), d)
+    width = L * (d - z_b) / dr.maximum(z_b, 1e-30) / rx.texel_world
+    return z_b, dr.select(found, width, 0.0), found
+
+
+def pcss(scheme, prm, rx: Receiver, smap):
+    """V of the pcss filter: 1 without blockers, else PCF over the estimated penumbra width
+    (at least one texel, at most PCSS_MAX_TEXELS)."""
+    _, width, found = pcss_estimate(scheme, prm, rx, smap)
+    w = dr.clip(width, 1.0, PCSS_MAX_TEXELS)
+    vis = dr.zeros(mi.Float, dr.width(rx.u_map))
+    offs = _grid(PCSS_FILTER, 1.0)
+    for a in offs:
+        for b in offs:
+            tap = tap_at(rx, smap, rx.u_map + a * w, rx.v_map + b * w)
+            vis += dr.select(lit(scheme, rx, tap, prm), 1.0 / PCSS_FILTER ** 2, 0.0)
+    return dr.select(found, vis, 1.0)
 
 
 def resolve(params, rx: Receiver):
@@ -186,6 +255,8 @@ def visibility(scheme, params, rx: Receiver, smap, filt: str = "nearest", seed: 
     near = nearest_tap(rx, smap)
     if filt == "nearest":
         return dr.select(lit(scheme, rx, near, prm), mi.Float(1.0), mi.Float(0.0)), near.shape
+    if filt == "pcss":
+        return pcss(scheme, prm, rx, smap), near.shape
     vis = dr.zeros(mi.Float, dr.width(rx.u_map))
     for u, v, w in filter_taps(filt, rx, seed):
         vis += dr.select(lit(scheme, rx, tap_at(rx, smap, u, v), prm), w, 0.0)

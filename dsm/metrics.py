@@ -117,3 +117,46 @@ def split(v, v_star, resolution=None) -> dict:
     acne, peter = v_star & ~lit, ~v_star & lit
     return {"n_acne_resolution": int((acne & res).sum()), "n_acne_bias": int((acne & ~res).sum()),
             "n_peterpan_resolution": int((peter & res).sum()), "n_peterpan_bias": int((peter & ~res).sum())}
+
+
+SOFT_REGIONS = ("umbra", "penumbra", "lit")
+SOFT_COLUMNS = ("n_umbra", "n_penumbra", "n_lit", "rmse", "mae_umbra", "mae_penumbra", "mae_lit", "rmse_umbra",
+                "rmse_penumbra", "rmse_lit", "ref_half_width_mean", "ref_half_width_max", "ref_samples_mean")
+
+
+def soft(v, hits, samples, half, rx_shape, tap_shape) -> dict:
+    """Soft-shadow metrics of V in [0, 1] against an area light's reference V* = hits / samples.
+
+    Regions by the reference's samples: umbra (none visible, V* = 0), penumbra (0 < V* < 1),
+    lit (all visible, V* = 1). ``mean_abs_error`` and ``rmse`` of V - V* over all receivers and
+    per region (``mae_<region>``, ``rmse_<region>``; NaN over an empty region). Acne and
+    peter-panning keep their meaning where V* is 0 or 1: acne = lit and V < 0.5 (over the lit
+    receivers: ``acne_rate``), peter-panning = umbra and V >= 0.5 (over the umbra); penumbra
+    receivers count in neither. The reference's own uncertainty: the mean and largest 95 %
+    half-width and the mean samples per receiver, to tell the kit's error from the reference's
+    noise."""
+    v = np.asarray(v, np.float64)
+    hits, samples = np.asarray(hits), np.asarray(samples)
+    v_star = hits / np.maximum(samples, 1)
+    err = v - v_star
+    umbra, lit = hits == 0, hits == samples
+    pen = ~umbra & ~lit
+    n = int(v.size)
+    acne = lit & (v < 0.5)
+    peter = umbra & (v >= 0.5)
+    acne_self = acne & (np.asarray(tap_shape) == np.asarray(rx_shape))
+    out = {"n_gt_lit": int(lit.sum()), "n_gt_shadowed": int(umbra.sum()), "n_acne": int(acne.sum()),
+           "n_acne_self": int(acne_self.sum()), "n_acne_edge": int(acne.sum() - acne_self.sum()),
+           "n_peterpan": int(peter.sum()), "acne_rate": _rate(acne.sum(), lit.sum()),
+           "peterpan_rate": _rate(peter.sum(), umbra.sum()), "error_rate": _rate(acne.sum() + peter.sum(), n),
+           "mean_abs_error": float(np.abs(err).mean()) if n else UNDEFINED,
+           "rmse": float(np.sqrt((err ** 2).mean())) if n else UNDEFINED,
+           "peterpan_dist_median": UNDEFINED,
+           "ref_half_width_mean": float(np.mean(half)) if n else UNDEFINED,
+           "ref_half_width_max": float(np.max(half)) if n else UNDEFINED,
+           "ref_samples_mean": float(np.mean(samples)) if n else UNDEFINED}
+    for name, sel in zip(SOFT_REGIONS, (umbra, pen, lit)):
+        out[f"n_{name}"] = int(sel.sum())
+        out[f"mae_{name}"] = float(np.abs(err[sel]).mean()) if sel.any() else UNDEFINED
+        out[f"rmse_{name}"] = float(np.sqrt((err[sel] ** 2).mean())) if sel.any() else UNDEFINED
+    return out

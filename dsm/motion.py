@@ -3,8 +3,10 @@
 A ``[[motion]]`` path moves the camera (``dolly``: a translation; ``pan``: the view turning
 about the camera's up; ``orbit``: the camera turning about its target; ``keyframes``: positions
 and targets interpolated linearly) and/or turns a directional light (``turn``: its direction
-about ``light_axis``) over ``frames`` frames. Each frame re-fits its views as an engine would
-(its own G-buffer, receivers and view; a cascaded layout re-fitted to the frame's camera).
+about ``light_axis``) or moves a spot or point light (``move``: by ``light_offset``;
+``keyframes``: along ``light_keys``) over ``frames`` frames. Each frame re-fits its views as an
+engine would (its own G-buffer, receivers and view; a cascaded layout re-fitted to the frame's
+camera; a spot's or point light's views re-fitted to its position).
 
 **Fixed points**: ``points`` points on the scene's surfaces, sampled once in world space
 (area-weighted over every mesh triangle, the experiment's seed), each the hit of a short
@@ -88,17 +90,45 @@ def camera_path(spec, base: Camera, bbox, scale: float = 1.0, offset=(0.0, 0.0, 
     return out
 
 
-def light_path(spec, light) -> list:
-    """The light of each frame (a directional light's direction turned about light_axis)."""
+def light_path(spec, light, scale: float = 1.0, offset=(0.0, 0.0, 0.0)) -> list:
+    """The light of each frame: a directional light's direction turned about light_axis (``turn``);
+    a spot or point light translated by ``light_offset`` (``move``; a spot keeps its direction) or
+    along ``light_keys`` (``keyframes``: positions, and a spot's targets when given, interpolated
+    linearly; positions follow the scene's ``scale`` and ``offset`` as a [[light]]'s do). A light
+    of another type than the path moves stays still."""
     out = []
+    moving = light.type in ("spot", "point") and light.position is not None
+    p0 = np.asarray(light.position, float) if moving else None
     for i in range(spec.frames):
         f = i / (spec.frames - 1)
         if spec.light == "turn" and light.type == "directional":
             d = _rotate(light.direction, spec.light_axis, spec.light_angle * f)
             out.append(dataclasses.replace(light, direction=tuple(float(c) for c in d)))
+        elif spec.light == "move" and moving:
+            d = np.asarray(spec.light_offset, float) * scale * f
+            out.append(_moved(light, p0 + d, None if light.target is None else np.asarray(light.target, float) + d))
+        elif spec.light == "keyframes" and moving:
+            keys = [(np.asarray(p, float) * scale + offset, None if tg is None else np.asarray(tg, float) * scale + offset)
+                    for p, tg in spec.light_keys]
+            x = f * (len(keys) - 1)
+            k = min(int(x), len(keys) - 2)
+            w = x - k
+            pos = keys[k][0] * (1 - w) + keys[k + 1][0] * w
+            if keys[k][1] is not None and light.type == "spot":
+                tgt = keys[k][1] * (1 - w) + keys[k + 1][1] * w
+            else:                                   # no targets: a spot keeps its direction
+                tgt = None if light.target is None else np.asarray(light.target, float) + (pos - p0)
+            out.append(_moved(light, pos, tgt))
         else:
             out.append(light)
     return out
+
+
+def _moved(light, position, target):
+    as_tuple = lambda v: None if v is None else tuple(float(c) for c in v)
+    if light.type == "spot" and target is not None and light.target is None:   # a spot given by direction
+        return dataclasses.replace(light, position=as_tuple(position), direction=as_tuple(np.subtract(target, position)))
+    return dataclasses.replace(light, position=as_tuple(position), target=as_tuple(target))
 
 
 def sensor_at(base: Camera, origin, target, up):
@@ -182,16 +212,18 @@ def points_seen(scene, fp: FixedPoints, cam: Camera):
     return seen, n
 
 
-def points_frame(scene, fp: FixedPoints, cam: Camera, light, view, magnitude: float):
+def points_frame(scene, fp: FixedPoints, cam: Camera, light, view, magnitude: float, vstar=None):
     """One frame of the fixed points: (receiver: seen, facing the light and inside the view; exact
-    visibility V*; the normal turned toward the camera). V* depends on the light alone."""
+    visibility V*; the normal turned toward the camera). V* depends on the light alone (``vstar``:
+    the one computed for this light in an earlier frame)."""
     seen, n_cam = points_seen(scene, fp, cam)
     n_np = pipeline.points_np(n_cam)
     if light.type == "directional":
         facing = n_np @ (-np.asarray(light.direction, float) / np.linalg.norm(light.direction)) > 0
     else:
         facing = ((np.asarray(light.position, float) - pipeline.points_np(fp.p)) * n_np).sum(1) > 0
-    vstar = np.asarray(pipeline.exact_visibility(scene, fp.si, light, magnitude)[0].numpy(), bool)
+    if vstar is None:
+        vstar = np.asarray(pipeline.exact_visibility(scene, fp.si, light, magnitude)[0].numpy(), bool)
     inside = view.inside(fp.p).numpy().astype(bool)
     return seen & facing & inside, vstar, n_cam
 
@@ -267,7 +299,7 @@ def run_scene(runner, sd, lights, maps, closed, extents, frame_rows: list, curve
         for m in maps:
             if m.light_index >= len(lights):
                 continue
-            light_frames = light_path(mo, lights[m.light_index])
+            light_frames = light_path(mo, lights[m.light_index], sd.scale, sd.offset)
             _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents, magnitude,
                      frame_rows, curves)
 
@@ -280,7 +312,7 @@ def finish(out, frame_rows: list, curves: list):
 
 def _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents, magnitude, frame_rows, curves):
     cfg = runner.cfg
-    cache_gb = {}
+    cache_gb, cache_setup, cache_vstar = {}, {}, {}
     specs = [pipeline.preset_for_light(s, light_frames[0].type) for s in m.specs]
     keys = [(s, filt, fmt) for s in specs for filt in cfg.map.filter for fmt in cfg.map.format]
     per = {k: {"v": [], "vstar": [], "elig": [], "face": [], "frames": [], "images": [], "metrics": []} for k in keys}
@@ -292,7 +324,9 @@ def _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents,
         if pose_key not in cache_gb:                 # the G-buffer is shared while the camera stays
             cache_gb = {pose_key: pipeline.gbuffer(sd, sensor=sensor)}
         gb = cache_gb[pose_key]
-        setup = pipeline.light_setup(sd, gb, light, m.light)
+        if (pose_key, light) not in cache_setup:     # receivers and their V*: shared while camera and light stay
+            cache_setup = {(pose_key, light): pipeline.light_setup(sd, gb, light, m.light)}
+        setup = cache_setup[(pose_key, light)]
         rpts = pipeline.points_np(setup.p) if setup.p is not None else np.zeros((0, 3))
         view = pipeline.make_view(light, m.resolution, rpts, sd.bbox, m.view, m.cascade, sensor, sd.scale)
         setup = setup.subset(view.inside(setup.p).numpy().astype(bool)) if setup.p is not None else setup
@@ -311,7 +345,8 @@ def _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents,
             smap = dataclasses.replace(smap, view=view)
             built.append(False)
         prev_sig = sig
-        elig, vstar_pts, n_cam = points_frame(sd.scene, pts, cam, light, view, magnitude)
+        elig, vstar_pts, n_cam = points_frame(sd.scene, pts, cam, light, view, magnitude, cache_vstar.get(light))
+        cache_vstar = {light: vstar_pts}             # the fixed points' V*: shared while the light stays
         stored = {fmt: pipeline.store(smap, fmt) for fmt in cfg.map.format}
         for (spec, filt, fmt) in keys:
             sm = stored[fmt]

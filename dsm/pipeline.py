@@ -26,7 +26,7 @@ import mitsuba as mi
 import numpy as np
 
 from . import cascades as cascades_mod
-from . import formats, lookup, reference, scenes, schemes, shadowmap, spawn, timing
+from . import area, formats, lookup, reference, scenes, schemes, shadowmap, spawn, timing
 from . import oracle as oracle_mod
 from . import gbuffer as gbuffer_mod
 from . import metrics as metrics_mod
@@ -61,6 +61,9 @@ scene_from_mitsuba = scenes.from_mitsuba  # an already loaded mi.Scene (the plug
 emitter_light = scenes.emitter_to_light   # a Mitsuba emitter as a LightSpec (None: not mapped)
 scene_magnitude = reference.scene_magnitude
 exact_visibility = reference.visibility   # (scene, interactions, light, magnitude) -> (V*, occluder distance)
+area_emitter_lights = area.emitter_lights  # (mi.Scene, area LightSpec) -> one area light per area emitter
+area_geometry = area.geometry              # (area LightSpec, mi.Scene) -> its surface (sampling)
+area_sample_visibility = area.sample_visibility   # one area sample's visibility per interaction
 
 
 def scene_spec(table: dict, source: str = "<pipeline>"):
@@ -112,6 +115,17 @@ class LightSetup:
     si: object = None
     back_p: object = None         # hit pixels facing away from the light (attached shadow), inside its domain
     back_n: object = None
+    ref: object = None            # area lights: the Monte Carlo reference (area.Reference); v_star = V* >= 0.5
+
+    @property
+    def v_frac(self):
+        """V* as a fraction of the light's area (area lights), else None."""
+        return None if self.ref is None else self.ref.v
+
+    @property
+    def reference_rays(self) -> int:
+        """Shadow rays the reference cast: one per receiver, or the area light's samples."""
+        return len(self.pixels) if self.ref is None else self.ref.rays
 
     def backfacing_inside(self, view):
         """(positions, normals) of the back-facing pixels inside ``view``, or (None, None)."""
@@ -131,20 +145,25 @@ class LightSetup:
             return self
         ex = dict(self.exclusions)
         ex["n_excluded_outside"] += int((~keep).sum())
+        ref = None if self.ref is None else area.Reference(self.ref.hits[keep], self.ref.samples[keep],
+                                                           self.ref.half[keep], self.ref.early[keep])
         if not keep.any():
             return LightSetup(self.label, self.light, self.pixels[keep], None, None, self.shape[keep],
-                              self.v_star[keep], self.occluder_dist[keep], ex, self.reference_ms)
+                              self.v_star[keep], self.occluder_dist[keep], ex, self.reference_ms, ref=ref)
         idx = mi.UInt32(np.flatnonzero(keep).astype(np.uint32))
         p, n = dr.gather(mi.Point3f, self.p, idx), dr.gather(mi.Vector3f, self.n, idx)
         dr.eval(p, n)
         return LightSetup(self.label, self.light, self.pixels[keep], p, n, self.shape[keep], self.v_star[keep],
-                          self.occluder_dist[keep], ex, self.reference_ms)
+                          self.occluder_dist[keep], ex, self.reference_ms, ref=ref)
 
 
 def make_view(light, R, receivers_world, bbox, kind=None, cascade=None, sensor=None, scale: float = 1.0):
     """The view of ``light`` at resolution R. A directional light with ``cascade`` (a CascadeSpec)
     gets a cascaded view for the camera ``sensor`` (dsm.cascades; ``scale``: the scene's, which
-    multiplies the layout's distances), else one map fitted to the receivers."""
+    multiplies the layout's distances), else one map fitted to the receivers; an area light
+    its view from its centre (:func:`dsm.area.make_view`)."""
+    if light.type == "area":
+        return area.make_view(light, R, receivers_world, bbox, kind)
     if light.type == "directional" and cascade is not None:
         return cascades_mod.make_view(light, cascade, R, receivers_world, bbox, sensor, scale)
     if light.type == "directional":
@@ -162,8 +181,11 @@ def make_view(light, R, receivers_world, bbox, kind=None, cascade=None, sensor=N
     raise ValueError(f"light type {light.type!r} has no view")
 
 
-def light_setup(sd, gb, light, label, repeats: int = 0) -> LightSetup:
-    """Receivers of one light (hit pixels facing it, inside its domain) and their exact visibility."""
+def light_setup(sd, gb, light, label, repeats: int = 0, seed: int = 7) -> LightSetup:
+    """Receivers of one light (hit pixels facing it, inside its domain) and their exact visibility
+    (an area light: :func:`area_setup`)."""
+    if light.type == "area":
+        return area_setup(sd, gb, light, label, repeats, seed)
     p_all, n_all = gb.p, gb.n
     probe = make_view(light, 1, np.zeros((1, 3)), sd.bbox, "cube")   # a point light lights every direction
     to_light = probe.to_light(p_all)
@@ -194,6 +216,39 @@ def light_setup(sd, gb, light, label, repeats: int = 0) -> LightSetup:
     dr.eval(p, n)
     return LightSetup(label, light, pixels, p, n, gb.shape.numpy()[pixels], vis.numpy().astype(bool),
                       dist.numpy(), exclusions, t.ms, si, back_p, back_n)
+
+
+def area_setup(sd, gb, light, label, repeats: int = 0, seed: int = 7) -> LightSetup:
+    """Receivers of an area light (hit pixels with part of the light above their tangent plane,
+    in front of a one-sided light) and the Monte Carlo reference V* (:mod:`dsm.area`). No
+    attached-shadow pixels are kept (``backface_lit_rate`` is undefined for area lights)."""
+    geom = area.geometry(light, sd.scene)
+    hit = gb.hit
+    idx_hit = np.flatnonzero(hit).astype(np.uint32)
+    keep = np.zeros(hit.shape, bool)
+    if len(idx_hit):
+        ih = mi.UInt32(idx_hit)
+        ph, nh = points_np(dr.gather(mi.Point3f, gb.p, ih)), points_np(dr.gather(mi.Vector3f, gb.n, ih))
+        keep[idx_hit] = geom.receivers(ph, nh)
+    pixels = np.flatnonzero(keep).astype(np.uint32)
+    exclusions = {"n_pixels": int(keep.size), "n_excluded_nohit": int((~hit).sum()),
+                  "n_excluded_backfacing": int((hit & ~keep).sum()), "n_excluded_outside": 0}
+    if len(pixels) == 0:
+        empty = np.zeros(0)
+        return LightSetup(label, light, pixels, None, None, empty.astype(np.uint32), empty.astype(bool), empty,
+                          exclusions, 0.0, ref=area.Reference(*(np.zeros(0, np.int64),) * 3, np.zeros(0, bool)))
+    idx = mi.UInt32(pixels)
+    si = dr.gather(mi.SurfaceInteraction3f, gb.si, idx)
+    p = dr.gather(mi.Point3f, gb.p, idx)
+    n = dr.gather(mi.Vector3f, gb.n, idx)
+    dr.eval(p, n)
+    magnitude = scene_magnitude(sd.bbox)
+    # timed once (cold): repeating a Monte Carlo reference costs as much again each time
+    out, t = timing.measure(lambda: (area.reference(sd.scene, si, n, geom, magnitude, seed, light.min_samples,
+                                                    light.max_samples, light.tolerance),), 0)
+    ref = out[-1]
+    return LightSetup(label, light, pixels, p, n, gb.shape.numpy()[pixels], ref.v >= 0.5,
+                      np.full(len(pixels), np.inf), exclusions, t.ms, si, ref=ref)
 
 
 def closedness(sd) -> tuple[list, list]:
@@ -234,6 +289,10 @@ def build_map(scene, view, needs=(), culling: str = "none", closed=None, tile: i
     under ``culling`` (``closed``: per-shape closedness, see :func:`closedness`; ``extents``:
     :func:`spawn_extents` of the scene, else computed in each layered build)."""
     modes = cull_modes(culling, closed) if culling != "none" else None
+    exclude = getattr(view, "exclude", ())      # an area light's own luminaire: stepped over
+    if exclude:
+        modes = np.zeros(len(scene.shapes()), np.uint32) if modes is None else np.array(modes, np.uint32)
+        modes[list(exclude)] = shadowmap.CULL_ALL
     return shadowmap.build(scene, view, set(needs), culling, modes, tile, extents)
 
 
@@ -312,5 +371,9 @@ split = metrics_mod.split                 # (v, V*, wrong under the per-texel or
 
 
 def metrics(v: np.ndarray, setup: LightSetup, tap_shape: np.ndarray, seam=None, has_seams=None) -> dict:
-    """Counts and rates of one case (undefined values are NaN)."""
-    return metrics_mod.compute(v, setup.v_star, setup.shape, tap_shape, setup.occluder_dist, seam, has_seams)
+    """Counts and rates of one case (undefined values are NaN); an area light's soft metrics
+    (:func:`dsm.metrics.soft`) replace the hard ones they redefine."""
+    m = metrics_mod.compute(v, setup.v_star, setup.shape, tap_shape, setup.occluder_dist, seam, has_seams)
+    if setup.ref is not None:
+        m.update(metrics_mod.soft(v, setup.ref.hits, setup.ref.samples, setup.ref.half, setup.shape, tap_shape))
+    return m

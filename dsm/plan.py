@@ -20,6 +20,7 @@ actually cast; tests hold the two to each other.
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
@@ -95,6 +96,7 @@ class Plan:
     budget_bytes: int = 0
     absent: list = field(default_factory=list)      # optional scene files that are absent
     lambdas: int = 1                                # [oracle] lambda values
+    area_samples: dict = field(default_factory=dict)  # (scene, light label) -> an area light's max_samples
     frames: int = 0                                 # [[motion]]: frames over all paths (maps built per frame, at most)
 
     @property
@@ -116,7 +118,9 @@ class Plan:
     @property
     def rays_bound(self) -> dict:
         """Upper bounds of the data-dependent kinds."""
-        ref = sum(w * h * len(lights) for _, w, h, lights in self.scenes)
+        # one ray per receiver; an area light's reference at most max_samples per receiver
+        ref = sum(w * h * self.area_samples.get((label, lab), 1) for label, w, h, lights in self.scenes
+                  for lab, _ in lights)
         cont = sum(m.texels * ((MAX_STEPS - 1) if m.layered and m.culling != "none" else 1)
                    for m in self.maps if m.layered)
         return {"reference": ref, "map_continue": cont}
@@ -205,8 +209,11 @@ class Plan:
                          for m in self.maps]}
 
 
-def views_for(light_type: str, point_views) -> tuple:
-    """The view kinds a light gets: its own for directional and spot, the config's for points."""
+def views_for(light_type: str, point_views, shape: str = "") -> tuple:
+    """The view kinds a light gets: its own for directional and spot, the config's for points and
+    sphere lights, ``fitted`` for other area lights (perspective or paraboloid, from the receivers)."""
+    if light_type == "area":
+        return tuple(point_views) if shape == "sphere" else ("fitted",)
     return {"directional": ("orthographic",), "spot": ("perspective",)}.get(light_type, tuple(point_views))
 
 
@@ -308,6 +315,28 @@ def _xml_lights(path, spec=None) -> list:
     return ["point" if "area" in types else "directional"]      # scenes.default_light
 
 
+def scene_light_specs(spec, cfg: Config) -> list:
+    """The config's LightSpec behind each of :func:`scene_lights` (None for a scene's own light)."""
+    out = []
+    for light in cfg.lights:
+        if not light.applies_to(spec.label):
+            continue
+        if light.type == "scene":
+            out += [None] * len(scene_lights(spec, dataclasses.replace(cfg, lights=(light,))))
+        elif light.type == "area" and light.shape == "emitter":
+            out += [light] * _area_emitters(spec)
+        else:
+            out.append(light)
+    return out
+
+
+def _area_emitters(spec) -> int:
+    """Area emitters of a scene (an XML file's ``<emitter type="area">``; none elsewhere)."""
+    if spec.file is None or spec.file.suffix.lower() != ".xml":
+        return 0
+    return sum(1 for t in _xml_emitters(spec.file, spec) if t == "area")
+
+
 def scene_lights(spec, cfg: Config) -> list:
     """[(label, type)] of the lights a scene gets, as the runner labels them."""
     from .scenes import builtin_geometry
@@ -320,7 +349,12 @@ def scene_lights(spec, cfg: Config) -> list:
         own = ["directional"]
     types = []
     for light in cfg.lights:
-        types += own if light.type == "scene" else [light.type]
+        if not light.applies_to(spec.label):
+            continue
+        if light.type == "area" and light.shape == "emitter":
+            types += ["area"] * _area_emitters(spec)
+        else:
+            types += own if light.type == "scene" else [light.type]
     return [(f"{i}:{t}", t) for i, t in enumerate(types)]
 
 
@@ -351,9 +385,13 @@ def make(cfg: Config) -> Plan:
         else:
             w, h = cfg.camera_resolution or DEFAULT_CAMERA
         lights = scene_lights(sc, cfg)
+        specs = scene_light_specs(sc, cfg)
         plan.scenes.append((sc.label, w, h, lights))
         for li, (label, ltype) in enumerate(lights):
-            for view, cascade in _layouts(views_for(ltype, cfg.map.view), cfg.map.cascade):
+            shape = specs[li].shape if specs[li] is not None else ""
+            if ltype == "area":
+                plan.area_samples[(sc.label, label)] = specs[li].max_samples
+            for view, cascade in _layouts(views_for(ltype, cfg.map.view, shape), cfg.map.cascade):
                 faces = cascade.count if cascade is not None else VIEW_FACES[view]
                 for R in cfg.map.resolutions_for(faces):
                     for culling, config_group in groups.items():

@@ -15,9 +15,9 @@ import math
 import time
 from pathlib import Path
 
-from . import figures, htmlpage, metrics, report, summary
+from . import figures, htmlpage, metrics, report, soft_report, summary
 
-PLOT_PREFIXES = ("vs_bias_", "vs_resolution_", "vs_texels_", "pareto_", "tradeoff_")
+PLOT_PREFIXES = ("vs_bias_", "vs_resolution_", "vs_texels_", "pareto_", "tradeoff_", "soft_")
 IMAGES_PER_JOB = 150
 
 
@@ -104,6 +104,7 @@ def write_report(out: Path, images=(), curves=None, plots: bool = True) -> dict:
             if p.name.startswith(PLOT_PREFIXES):
                 p.unlink()
         jobs += figures.plot_jobs(folder, rows, rates)
+        jobs += soft_report.plot_jobs(folder, rows)          # area lights: MAE of V against V* by region
     n_figures = len(jobs)
     items = [i for i in images if i is not None]
     by_folder = {}

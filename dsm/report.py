@@ -27,6 +27,7 @@ COLUMNS = [
     "build_ms", "build_first_ms", "build_compile_ms", "build_peak_mb", "lookup_ms", "lookup_compile_ms", "lookup_kernels_compiled", "reference_ms",
     "sweep_key", "sweep_value",
 ]
+COLUMNS += list(metrics.SOFT_COLUMNS)     # area lights (soft shadows): empty cells for other lights
 
 
 @contextlib.contextmanager
@@ -279,10 +280,38 @@ def write_table(path: Path, rows: list, name: str, source: str, status=None, ora
         cells = [r["case"]] + [_cell(r.get(k)) for k, _ in TABLE_COLUMNS]
         lines.append("| " + " | ".join(map(str, cells)) + " |")
     lines += views_at_equal_memory(rows, texels)
+    lines += soft_md(rows)
     lines += oracle_md(rows, list(oracle_rows or ()))
     lines += pareto_md(rows)
     with atomic(path) as tmp:
         tmp.write_text("\n".join(lines) + "\n")
+
+
+def soft_rows(rows) -> list:
+    """The rows of area-light cases (their soft metrics defined)."""
+    return [r for r in rows if r.get("n_umbra", "") != "" and metrics.defined(r.get("n_umbra"))]
+
+
+def soft_md(rows: list) -> list:
+    """Area lights: V against the Monte Carlo V* by region (umbra V* = 0, penumbra, lit V* = 1),
+    the reference's mean 95 % half-width, and each filter's lookup time."""
+    soft = soft_rows(rows)
+    if not soft:
+        return []
+    cols = [("scene", "scene"), ("light", "light"), ("scheme", "scheme"), ("filter", "filter"),
+            ("n_umbra", "umbra"), ("n_penumbra", "penumbra"), ("n_lit", "lit"), ("mae_umbra", "MAE umbra"),
+            ("mae_penumbra", "MAE penumbra"), ("mae_lit", "MAE lit"), ("rmse", "RMSE"), ("acne_rate", "acne"),
+            ("peterpan_rate", "peter-pan"), ("ref_half_width_mean", "ref ±95%"), ("lookup_ms", "lookup ms")]
+    lines = ["", "## Soft shadows (area lights)", "",
+             "V against the reference V* (the visible fraction of the light, Monte Carlo): mean absolute error "
+             "per region (umbra: no reference sample visible, lit: all, penumbra: the rest), RMSE over all "
+             "receivers; acne over the lit receivers (V < 0.5), peter-pan over the umbra (V >= 0.5); ref ±95%: "
+             "the reference's mean 95 % half-width. Rays per receiver by region: run.json `reference_regions`. "
+             "Images: images/<scene>_<light>/<case>_v.png, _vstar.png, _abserr.png; plots/soft_*.png.",
+             "", "| case | " + " | ".join(h for _, h in cols) + " |", "|---" * (len(cols) + 1) + "|"]
+    for r in soft:
+        lines.append("| " + " | ".join(map(str, [r["case"]] + [_cell(r.get(k)) for k, _ in cols])) + " |")
+    return lines
 
 
 def case_time(r) -> float:

@@ -198,7 +198,7 @@ class Previous:
         # a case's files: images/<scene>_<light>/<case>_<kind> (or images/<case>_<kind> of older runs)
         staged = []
         for old, dest in moves:
-            for kind in ("error.png", "shadow.png", "cascade.png", "frames.gif"):
+            for kind in ("error.png", "shadow.png", "cascade.png", "frames.gif", "v.png", "vstar.png", "abserr.png"):
                 for src in [images / f"{old}_{kind}", *images.glob(f"*/{old}_{kind}")]:
                     if not src.is_file() or src.parent.name == "stale":
                         continue

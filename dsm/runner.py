@@ -23,7 +23,7 @@ import drjit as dr
 import numpy as np
 
 from . import config as cfgmod
-from . import cascades, env, figures, metrics, motion, pipeline, publish, report, resume, shadowmap, timing
+from . import cascades, env, figures, metrics, motion, pipeline, publish, report, resume, shadowmap, soft_report, timing
 from . import plan as planmod
 from .lookup import Receiver
 
@@ -86,6 +86,7 @@ class Runner:
         self.keep_images = keep_images
         self.plan = planmod.make(config)
         self.rays = {"gbuffer": 0, "reference": 0, "map_texel": 0, "map_continue": 0}
+        self.reference_regions = []   # area lights: the reference's receivers and rays by region
         self.maps = []
         self.scene_info = []
         self.gbuffer_ms = {}
@@ -242,9 +243,11 @@ class Runner:
         def setup():
             if li >= len(lights):
                 raise ValueError(f"the plan expects light {label} but the loaded scene has {len(lights)} lights")
-            return pipeline.light_setup(sd, gb, lights[li], label, self.cfg.timing_repeats)
+            return pipeline.light_setup(sd, gb, lights[li], label, self.cfg.timing_repeats, self.cfg.seed)
         out = self._stage(f"scene {sd.label} light {label}", maps, setup)
-        self.rays["reference"] += len(out.pixels)
+        self.rays["reference"] += out.reference_rays       # one per receiver, or an area light's samples
+        if out.ref is not None:
+            self.reference_regions.append({"scene": sd.label, "light": label, **out.ref.stats()})
         return out
 
     def _run_view(self, sd, gb, setup, maps):
@@ -340,6 +343,8 @@ class Runner:
         gets it wrong (the resolution's share of a nearest case's errors), None on failure."""
         if rx is None:
             return np.zeros(0, bool)
+        if setup.ref is not None:     # an area light: the oracles are those of a hard V*
+            return None
         meta = {"scene": sd.label, "light": setup.label, "view": view.kind, "resolution": m.resolution,
                 "culling": m.culling, "format": fmt}
         try:
@@ -430,6 +435,9 @@ class Runner:
                                       if self.cfg.report_images == "all" else None, self.cfg.report_images)
             if item is not None:        # written now (Pillow, ~1 ms, between timings): a killed run keeps them
                 figures.write_images(self.out, [item])
+            if setup.ref is not None and self.cfg.report_images != "none":    # area light: V, V*, |V - V*|
+                soft_report.write_images(self.out, [soft_report.image_item(meta, gb.width, gb.height, setup.pixels,
+                                                                           v_np, setup.v_frac)])
             if self.keep_images:
                 self.images[case] = classes
             self.rows.append(row)
@@ -451,6 +459,7 @@ class Runner:
         info["plan"] = self.plan.as_dict()
         info["maps"] = self.maps
         info["quantized_copies"] = self.quantized
+        info["reference_regions"] = self.reference_regions
         info["timing"] = self.timing
         if self.resume_previous:
             info["resumed_cases"] = len(self.kept)

@@ -450,7 +450,8 @@ def _scale_light(light: LightSpec, s: float, offset=ORIGIN) -> LightSpec:
     from dataclasses import replace
     t = tuple(float(c) for c in offset)
     return replace(light, position=tuple(s * c + o for c, o in zip(light.position, t)),
-                   target=None if light.target is None else tuple(s * c + o for c, o in zip(light.target, t)))
+                   target=None if light.target is None else tuple(s * c + o for c, o in zip(light.target, t)),
+                   size=tuple(s * c for c in light.size))
 
 
 # ---------------------------------------------------------------- loaded scenes
@@ -477,8 +478,13 @@ class SceneData:
     def lights_for(self, specs) -> list:
         out = []
         for spec in specs:
+            if not spec.applies_to(self.label):
+                continue
             if spec.type == "scene":
                 out += self.own_lights
+            elif spec.type == "area" and spec.shape == "emitter":
+                from .area import emitter_lights
+                out += emitter_lights(self.scene, spec)     # the scene's own luminaires, as they are
             else:
                 out.append(_scale_light(spec, self.scale, self.offset))
         return out

@@ -27,7 +27,7 @@ from . import spawn
 from .types import CULLINGS  # noqa: F401  (the choices of midpoint and dual)
 
 LAYERS = ("slope", "z2")   # optional attributes a scheme may need (besides z1 and shape)
-CULL_NONE, CULL_BACK, CULL_FRONT = 0, 1, 2
+CULL_NONE, CULL_BACK, CULL_FRONT, CULL_ALL = 0, 1, 2, 3   # CULL_ALL: an area light's luminaire, stepped over
 MAX_STEPS = 64             # surfaces stepped over per texel before giving up (reported, never silent)
 
 
@@ -104,7 +104,7 @@ def _step(scene, view, st: dict, d, modes, culls: bool, need, want_slope: bool, 
     if culls:
         mode = dr.gather(mi.UInt32, modes, pi.shape_index, valid)
         back = dr.dot(n, d) > 0
-        accept = valid & ~(((mode == CULL_BACK) & back) | ((mode == CULL_FRONT) & ~back))
+        accept = valid & ~(((mode == CULL_BACK) & back) | ((mode == CULL_FRONT) & ~back) | (mode == CULL_ALL))
     else:
         accept = valid
     depth = view.depth(p)

@@ -13,10 +13,11 @@ from pathlib import Path
 from typing import Any
 
 LENGTH_UNITS = ("world", "texel", "range")
-FILTERS = ("nearest", "pcf_bilinear", "pcf_jitter4x4")
+FILTERS = ("nearest", "pcf_bilinear", "pcf_jitter4x4", "pcf_wide", "pcss")
 FORMATS = ("float32", "unorm16", "unorm24", "ndc24")
 POINT_VIEWS = ("paraboloid", "dual_paraboloid", "cube")
-LIGHT_TYPES = ("scene", "directional", "spot", "point")
+LIGHT_TYPES = ("scene", "directional", "spot", "point", "area")
+AREA_SHAPES = ("rectangle", "disk", "sphere", "emitter")
 # vectorized Dr.Jit variants only: the kit's code runs on wide arrays (scalar_rgb cannot run it)
 VARIANTS = ("llvm_ad_rgb", "cuda_ad_rgb")
 # [report] images: error and shadow images per case, error images only, or none
@@ -190,6 +191,19 @@ class LightSpec:
     target: tuple | None = None
     cutoff: float = 30.0        # spot half angle in degrees
     label: str = ""
+    # area lights (dsm.area): shape, size (side or [w, h]; diameter), the reference's sampling
+    shape: str = ""
+    size: tuple = ()
+    min_samples: int = 16
+    max_samples: int = 1024
+    tolerance: float = 0.01
+    emitter_shapes: tuple = ()  # an emitter light's shape indices (its map excludes them)
+    scenes: tuple = ()          # area lights: only these scenes (labels or their first word); () all
+
+    def applies_to(self, scene_label: str) -> bool:
+        """Whether this light lights the scene labelled ``scene_label`` (``scenes`` empty: every scene)."""
+        first = scene_label.replace("(", " ").split()[0] if scene_label.strip() else scene_label
+        return not self.scenes or scene_label in self.scenes or first in self.scenes
 
 
 CASCADE_SPLITS = ("uniform", "log", "practical")
@@ -248,7 +262,7 @@ class CascadeSpec:
 
 
 CAMERA_PATHS = ("none", "dolly", "pan", "orbit", "keyframes")
-LIGHT_PATHS = ("none", "turn")
+LIGHT_PATHS = ("none", "turn", "move", "keyframes")
 
 
 @dataclass(frozen=True)
@@ -259,9 +273,11 @@ class MotionSpec:
     offset: tuple = (0.0, 0.0, 0.0)  # dolly: the camera's whole translation over the path (scene units)
     angle: float = 0.0              # pan / orbit: degrees over the path, about the camera's up
     keys: tuple = ()                # keyframes: ((position, target), ...), spread evenly over the frames
-    light: str = "none"             # none | turn (a directional light's direction about light_axis)
+    light: str = "none"             # none | turn (a directional light's direction about light_axis) | move | keyframes
     light_axis: tuple = (0.0, 0.0, 1.0)
     light_angle: float = 0.0        # degrees over the path
+    light_offset: tuple = (0.0, 0.0, 0.0)  # move: a spot or point light's whole translation (scene units)
+    light_keys: tuple = ()          # keyframes: ((position, target or None), ...) of a spot or point light
     points: int = 4000              # fixed points sampled on the surfaces (the experiment's seed)
     label: str = ""
 
@@ -337,8 +353,8 @@ class Config:
 
 # the culling choices of a map build (midpoint, dual); second_depth's front_closed is its own
 CULLINGS = ("none", "back", "front", "back_closed")
-# faces (maps) per view kind
-VIEW_FACES = {"orthographic": 1, "perspective": 1, "paraboloid": 1, "dual_paraboloid": 2, "cube": 6}
+# faces (maps) per view kind ("fitted": an area light's perspective or paraboloid view, chosen from its receivers)
+VIEW_FACES = {"fitted": 1, "orthographic": 1, "perspective": 1, "paraboloid": 1, "dual_paraboloid": 2, "cube": 6}
 DEFAULT_CAMERA = (256, 256)     # built-ins and meshes without [camera] resolution
 
 

@@ -28,7 +28,7 @@ BAD = [
     (GOOD.replace('bias = ["1 texel", 0.01]', 'bais = 0.1'), "scheme[0].bais", "bias"),
     (GOOD + '\n[map]\nresolution = "big"\n', "map.resolution", None),
     (GOOD + '\n[map]\nfilter = "gaussian"\n', "map.filter", "nearest"),
-    (GOOD + '\n[[light]]\ntype = "area"\n', "light[0].type", "directional"),
+    (GOOD + '\n[[light]]\ntype = "laser"\n', "light[0].type", "directional"),
     (GOOD + '\n[[light]]\ntype = "directional"\ndirection = [0, 0]\n', "light[0].direction", None),
     (GOOD.replace('builtin = "plane"', 'builtin = "plane"\ntilt = "steep"'), "scene[0].tilt", None),
     (GOOD.replace('[[scene]]\nbuiltin = "plane"', '[[scene]]\nfile = "missing.ply"'), "scene[0].file", None),

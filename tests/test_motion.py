@@ -139,3 +139,138 @@ def test_motion_config_errors_name_the_key():
     cfg = config.parse(base_config(motion=[{"camera": "orbit", "angle": 30}, {"light": "turn", "light_angle": 2}]),
                        "t.toml")
     assert [m.label for m in cfg.motion] == ["camera orbit", "sun turn 2deg"]
+
+
+def _segment_hits_box(p, q, lo, hi):
+    """Whether the segments p -> q (n x 3, float64) meet the box [lo, hi] (slab test)."""
+    d = q - p
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1, t2 = (lo - p) / d, (hi - p) / d
+    tmin = np.where(d == 0, np.where((p >= lo) & (p <= hi), -np.inf, np.inf), np.minimum(t1, t2))
+    tmax = np.where(d == 0, np.where((p >= lo) & (p <= hi), np.inf, -np.inf), np.maximum(t1, t2))
+    enter, leave = np.max(tmin, axis=1), np.min(tmax, axis=1)
+    return (enter <= leave) & (leave >= 0) & (enter <= 1)
+
+
+@pytest.mark.parametrize("scale,translate", [(1.0, [0.0, 0.0, 0.0]), (2.0, [300.0, -50.0, 7.0])])
+def test_moving_point_light_exact_visibility_matches_the_segment_test(scale, translate):
+    """A point light moving along light_offset over plane_box: each frame's light is the start
+    moved by the offset times the frame's fraction (scaled with the scene), and the kit's V* of
+    every fixed point on the ground (outside the box's footprint) is the analytic answer: lit
+    exactly when the segment to the light misses the box [-0.5, 0.5]^2 x [0, 1] (numpy float64,
+    scaled and moved as the scene; points within 1e-3 of the box's silhouette are left out)."""
+    import dsm.pipeline as pl
+    from dsm import motion
+    from dsm.cascades import Camera
+    from dsm.types import LightSpec, MotionSpec
+    sd = pl.load_scene(pl.scene_spec({"builtin": "plane_box", "scale": scale, "translate": translate}), (48, 48))
+    light = sd.lights_for([LightSpec("point", position=(-1.5, 0.0, 2.5))])[0]
+    spec = MotionSpec(frames=5, light="move", light_offset=(3.0, 0.8, 0.0))
+    frames = motion.light_path(spec, light, sd.scale, sd.offset)
+    t = np.asarray(translate)
+    for i, lf in enumerate(frames):
+        want = (np.array([-1.5, 0.0, 2.5]) + np.array([3.0, 0.8, 0.0]) * i / 4) * scale + t
+        assert np.allclose(lf.position, want, rtol=0, atol=1e-9 * scale)
+    fp = motion.sample_points(sd.scene, 3000, 11, sd.diagonal)
+    p = pl.points_np(fp.p).astype(np.float64)
+    eps = 1e-3 * scale
+    lo, hi = np.array([-0.5, -0.5, 0.0]) * scale + t, np.array([0.5, 0.5, 1.0]) * scale + t
+    ground = (np.abs(p[:, 2] - t[2]) < 1e-5 * scale) & \
+        ((np.abs(p[:, 0] - t[0]) > 0.5 * scale + 2 * eps) | (np.abs(p[:, 1] - t[1]) > 0.5 * scale + 2 * eps))
+    base = Camera.from_sensor(sd.sensor)
+    mag = pl.scene_magnitude(sd.bbox)
+    vstars, checked = [], 0
+    for lf in frames:
+        view = pl.make_view(lf, 64, np.zeros((1, 3)), sd.bbox, "cube")
+        _, vstar, _ = motion.points_frame(sd.scene, fp, base, lf, view, mag)
+        q = np.broadcast_to(np.asarray(lf.position, np.float64), p.shape)
+        blocked = _segment_hits_box(p, q, lo + eps, hi - eps)
+        clear = ~_segment_hits_box(p, q, lo - eps, hi + eps)
+        sure = ground & (blocked | clear)
+        assert np.array_equal(vstar[sure], clear[sure])
+        checked += sure.sum()
+        vstars.append(vstar)
+    assert checked > 4 * 1000
+    changed = ground & (vstars[0] != vstars[-1])
+    assert changed.sum() > 20                              # the box's shadow did sweep over the ground
+
+
+def test_still_light_given_as_a_zero_move_flickers_zero_and_builds_once(run_dict):
+    """A spot and a point light 'moving' by [0, 0, 0]: nothing changes between frames, so every
+    scheme's flicker is 0 and each map is built once; moved by a real offset, each frame re-fits
+    its view (a map per frame) and the fixed points whose V* changes are left out of the pairs."""
+    cfg = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [48, 48]},
+                      light=[{"type": "spot", "position": [-2.0, -1.0, 3.0], "target": [0.0, 0.0, 0.0], "cutoff": 45},
+                             {"type": "point", "position": [-1.5, 0.0, 2.5]}],
+                      scheme=[{"name": "constant", "bias": "1 texel"}, {"name": "normal_offset"}],
+                      map={"resolution": 128, "view": "cube", "filter": ["nearest", "pcf_bilinear"]},
+                      motion=[{"frames": 3, "light": "move", "light_offset": [0.0, 0.0, 0.0], "points": 1500,
+                               "label": "still"},
+                              {"frames": 3, "light": "move", "light_offset": [2.0, 1.0, 0.0], "points": 1500}])
+    res = run_dict(cfg)
+    still = [r for r in res.rows if r["motion"] == "still"]
+    moving = [r for r in res.rows if r["motion"] == "light move"]
+    assert len(still) == len(moving) == 2 * 2 * 2
+    for r in still:
+        assert r["flicker_rate"] == 0 and r["flicker_ever"] == 0 and r["flicker_magnitude"] == 0, r["case"]
+        assert r["maps_built"] == 1
+    assert all(r["maps_built"] == 3 for r in moving)
+    frames = [f for f in _frames(res) if f["frame"] != "0"]
+    by = lambda label: [int(f["n_pairs_eligible"]) for f in frames if f["motion"] == label]
+    assert min(by("still")) > 100
+    # the same points, the same camera: the moving light's pairs leave out the points whose V* changed
+    assert sum(by("light move")) < sum(by("still"))
+
+
+def test_light_move_config_errors_name_the_key():
+    from dsm import config
+    from dsm.types import ConfigError
+    for motion, key in (({"light": "move"}, "motion[0].light_offset"),
+                        ({"light": "keyframes"}, "motion[0].light_keys"),
+                        ({"light": "keyframes", "light_keys": [{"position": [0, 0, 1]}]}, "motion[0].light_keys"),
+                        ({"light": "keyframes", "light_keys": [{"position": [0, 0, 1]}, {"target": [0, 0, 0]}]},
+                         "motion[0].light_keys[1]"),
+                        ({"light": "keyframes", "light_keys": [{"position": [0, 0, 1]}, {"position": [0, 0, 1],
+                                                                                          "aim": [0, 0, 0]}]},
+                         "motion[0].light_keys[1].aim"),
+                        ({"light": "keyframes", "light_keys": [{"position": [0, 0, 1], "target": [0, 0, 0]},
+                                                               {"position": [1, 0, 1]}]}, "motion[0].light_keys"),
+                        ({"light": "orbit"}, "motion[0].light")):
+        with pytest.raises(ConfigError) as e:
+            config.parse(base_config(motion=[motion]), "t.toml")
+        assert e.value.key == key, (motion, e.value)
+    with pytest.raises(ConfigError) as e:          # a sun cannot move: the path needs a spot or point light
+        config.parse(base_config(light=[{"type": "directional", "direction": [0, 0, -1]}],
+                                 motion=[{"light": "move", "light_offset": [1, 0, 0]}]), "t.toml")
+    assert e.value.key == "motion[0].light" and set(e.value.choices) == {"spot", "point"}
+    assert "t.toml" in str(e.value)
+    cfg = config.parse(base_config(motion=[{"light": "move", "light_offset": [1, 0, 0]},
+                                           {"light": "keyframes", "light_keys": [{"position": [0, 0, 1]},
+                                                                                 {"position": [1, 0, 1]}]}]), "t.toml")
+    assert [m.label for m in cfg.motion] == ["light move", "light keyframes"]
+    assert cfg.motion[1].light_keys == (((0.0, 0.0, 1.0), None), ((1.0, 0.0, 1.0), None))
+
+
+def test_light_keyframes_interpolate_positions_and_a_spots_aim():
+    """Keyframes at frames 0, 2, 4 of 5: frame 1 is halfway between the first two (scaled and moved
+    as the scene); without targets a spot keeps its direction, with targets it aims at the
+    interpolated target; a directional light stays still."""
+    from dsm import motion
+    from dsm.types import LightSpec, MotionSpec
+    spot = LightSpec("spot", position=(0.0, 0.0, 3.0), target=(1.0, 0.0, 0.0), cutoff=40.0)
+    keys = (((0.0, 0.0, 3.0), None), ((2.0, 0.0, 3.0), None), ((2.0, 2.0, 5.0), None))
+    s, t = 3.0, np.array([10.0, 0.0, -1.0])
+    out = motion.light_path(MotionSpec(frames=5, light="keyframes", light_keys=keys), spot, s, t)
+    assert np.allclose(out[1].position, np.array([1.0, 0.0, 3.0]) * s + t)
+    assert np.allclose(out[3].position, np.array([2.0, 1.0, 4.0]) * s + t)
+    for lf in out:       # direction kept: the target moves with the light
+        assert np.allclose(np.subtract(lf.target, lf.position), np.subtract(spot.target, spot.position))
+    aimed = tuple((p, (0.0, 0.0, 0.0) if i < 2 else (4.0, 0.0, 0.0)) for i, (p, _) in enumerate(keys))
+    out = motion.light_path(MotionSpec(frames=5, light="keyframes", light_keys=aimed), spot, s, t)
+    assert np.allclose(out[3].target, np.array([2.0, 0.0, 0.0]) * s + t)
+    by_dir = LightSpec("spot", position=(0.0, 0.0, 3.0), direction=(0.0, 0.0, -1.0))
+    out = motion.light_path(MotionSpec(frames=5, light="keyframes", light_keys=aimed), by_dir, s, t)
+    d = np.asarray(out[3].direction)
+    assert out[3].target is None and np.allclose(d / np.linalg.norm(d), np.array([0.0, -1.0, -4.0]) / np.sqrt(17.0))
+    sun = LightSpec("directional", direction=(0.0, 0.0, -1.0))
+    assert all(lf == sun for lf in motion.light_path(MotionSpec(frames=3, light="move", light_offset=(1, 0, 0)), sun))

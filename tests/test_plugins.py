@@ -267,7 +267,8 @@ def test_light_out_of_range_names_the_scene_emitters(variant):
     assert np.asarray(img).shape[:2] == (64, 64)
 
 
-VALID_SCHEMES = "none, constant, slope_scaled, normal_angle, normal_offset, combined, receiver_plane, adaptive, midpoint, dual, second_depth"
+VALID_SCHEMES = ("none, constant, slope_scaled, normal_angle, normal_offset, combined, receiver_plane, adaptive, midpoint, "
+                 "dual, second_depth, adaptive_tap")
 
 
 @pytest.mark.parametrize("props,line", [
@@ -276,8 +277,9 @@ VALID_SCHEMES = "none, constant, slope_scaled, normal_angle, normal_offset, comb
     ({"view": "sphere"}, "view: unknown value 'sphere' (valid: paraboloid, dual_paraboloid, cube)"),
     ({"scheme": "constant", "bias": "2 parsecs"}, "bias: unknown unit 'parsecs' in '2 parsecs' (valid: world, texel, range)"),
     ({"scheme": "constant", "colour": "red"}, "colour: unknown property (valid: scheme, resolution, view, filter, "
-                                              "format, light, seed, bias)"),
-    ({"aovs": True}, "aovs: unknown property (valid: scheme, resolution, view, filter, format, light, seed, K)"),
+                                              "format, light, seed, area, samples, bias)"),
+    ({"aovs": True}, "aovs: unknown property (valid: scheme, resolution, view, filter, format, light, seed, area, "
+                     "samples, K)"),
     ({"light": -1}, "light: must be >= 0, got -1"),
 ])
 def test_a_bad_property_reads_as_one_line_naming_it(props, line):

@@ -81,8 +81,9 @@ def test_bevy_differs_per_light_type_and_plain_specs_pass_through():
     assert preset_for_light(bevy, "point").params != preset_for_light(bevy, "directional").params
     plain = scheme_spec({"name": "constant", "bias": "1 texel"})
     assert preset_for_light(plain, "point") is plain
+    assert preset_for_light(bevy, "area") == preset_for_light(bevy, "spot")    # an area light's map is a spot's
     with pytest.raises(ValueError):
-        preset_for_light(bevy, "area")
+        preset_for_light(bevy, "laser")
 
 
 def test_unknown_preset_is_one_line_listing_the_choices():

@@ -31,6 +31,8 @@ EXPECTED = {
                                                                              p["slope_scale"] * x["slope"])),
     "receiver_plane": ({"bias": 0.01}, lambda x, p: x["plane"] <= x["z1"] + p["bias"]),
     "adaptive": ({"K": 0.003}, lambda x, p: x["plane"] <= x["z1"] + p["K"] * x["scale"]),
+    # per tap; the tap here is the receiver's own texel, 1 texel of 1 world unit: the clamp (8) is far
+    "adaptive_tap": ({"K": 0.003, "max_slope": 8.0}, lambda x, p: x["plane"] <= x["z1"] + p["K"] * x["scale"]),
     "midpoint": ({}, lambda x, p: x["d"] <= 0.5 * (x["z1"] + x["z2"])),
     "dual": ({"z_offset": 0.1}, lambda x, p: x["d"] <= x["z1"] + np.minimum(0.5 * (x["z2"] - x["z1"]), p["z_offset"])),
     "second_depth": ({"bias": 0.01}, lambda x, p: x["d"] <= x["z1"] + p["bias"]),
@@ -55,9 +57,10 @@ def test_margin_sign_is_the_sources_test(variant, name):
     n = mi.Vector3f(f(np.sqrt(1 - x["cos"] ** 2)), 0.0, f(x["cos"]))
     plane = f(x["plane"])
     rx = SimpleNamespace(depth=f(x["d"]), n_world=n, to_light=mi.Vector3f(0, 0, 1), scene_scale=mi.Float(x["scale"]),
-                         p_world=dr.zeros(mi.Point3f, N))
-    tap = SimpleNamespace(z1=f(x["z1"]), z2=f(x["z2"]), slope=f(x["slope"]),
-                          receiver_plane_depth=lambda r: plane)
+                         p_world=dr.zeros(mi.Point3f, N), u_map=mi.Float(0.5), v_map=mi.Float(0.5),
+                         texel_world=mi.Float(1.0))
+    tap = SimpleNamespace(z1=f(x["z1"]), z2=f(x["z2"]), slope=f(x["slope"]), cu_map=mi.Float(0.5),
+                          cv_map=mi.Float(0.5), receiver_plane_depth=lambda r: plane)
     params, expected = EXPECTED[name]
     prm = SimpleNamespace(**{k: mi.Float(v) for k, v in params.items()})
     margin = scheme.margin(rx, tap, prm).numpy()

@@ -166,6 +166,8 @@ def preset_for_light(scheme_spec: SchemeSpec, light_type: str) -> SchemeSpec:
     """A preset's :mod:`combined` instance for one light type; any other spec as it is."""
     if scheme_spec.preset is None:
         return scheme_spec
+    if light_type == "area":
+        light_type = "spot"       # an area light's map is a perspective view from its centre, as engines cast it
     if light_type not in LIGHT_TYPES:
         raise ValueError(f"light type {light_type!r} has no preset values (valid: {', '.join(LIGHT_TYPES)})")
     from . import combined

@@ -5,7 +5,12 @@ parameters under their names (``bias = "1 texel"``, ``K = 0.0001``, ``culling = 
 or ``preset``), ``resolution`` (per face, default 1024), ``view`` (point lights:
 ``paraboloid``, ``dual_paraboloid`` or ``cube``; default ``cube``), ``filter`` (``nearest``,
 ``pcf_bilinear``, ``pcf_jitter4x4``), ``format`` (``float32``, ``unorm16``, ``unorm24``,
-``ndc24``), ``seed`` (jitter of pcf_jitter4x4). ``light``: which of the scene's point, spot
+``ndc24``; and ``pcf_wide[:K]``, ``pcss``), ``seed`` (jitter of pcf_jitter4x4, the reference's
+samples). ``area = true``: the scene's area emitters (on meshes) are the lights, with soft
+shadows (:mod:`dsm.area`; the map cast from the luminaire's centre without it; ``pcss`` and
+``pcf_wide`` give penumbrae); ``dsm_error`` then renders |V - V*| (magma) against a reference
+of ``samples`` stratified samples per pixel (default 64), and ``dsm_shadow``'s ``dsm.Vstar``
+AOV is one area sample's visibility per sample (V* on average). ``light``: which of the scene's point, spot
 and directional emitters (an index; ``dsm_shadow`` uses all of them by default, ``dsm_error``
 the first). ``dsm_shadow`` with ``aovs = true`` (a boolean: ``<boolean>`` in XML, or
 ``true``/``false``/``1``/``0``) adds two channels per sample: ``dsm.V`` (the map's
@@ -35,7 +40,7 @@ import dsm.pipeline as pl
 from dsm import types as cfgmod
 from dsm.pipeline import Receiver
 
-OWN_KEYS = ("scheme", "resolution", "view", "filter", "format", "light", "seed")
+OWN_KEYS = ("scheme", "resolution", "view", "filter", "format", "light", "seed", "area", "samples")
 SHADOW_KEYS = OWN_KEYS + ("aovs",)
 TRUE_WORDS, FALSE_WORDS = ("true", "1"), ("false", "0")
 
@@ -85,7 +90,18 @@ class Options:
         self.resolution = cfgmod.number(d.get("resolution", 1024), source, "resolution", integer=True, minimum=1,
                                          maximum=16384)
         self.view = cfgmod.choice(d.get("view", "cube"), source, "view", cfgmod.POINT_VIEWS)
-        self.filter = cfgmod.choice(d.get("filter", "nearest"), source, "filter", cfgmod.FILTERS)
+        filt = d.get("filter", "nearest")
+        if not (isinstance(filt, str) and filt.startswith("pcf_wide:")):
+            cfgmod.choice(filt, source, "filter", cfgmod.FILTERS)
+        elif not (filt[9:].isdigit() and 2 <= int(filt[9:]) <= 64):
+            raise cfgmod.ConfigError(source, "filter", f"{filt!r}: pcf_wide:K takes a kernel width K in texels, "
+                                     "an integer from 2 to 64")
+        self.filter = filt
+        # area = true: the scene's area emitters are the lights (soft shadows; dsm.area), each
+        # receiver's reference V* from `samples` stratified samples (min = max, no early stop)
+        self.area = _boolean(d.get("area", False), source, "area")
+        self.samples = cfgmod.number(d.get("samples", 64), source, "samples", integer=True, minimum=1,
+                                     maximum=1 << 16)
         self.format = cfgmod.choice(d.get("format", "float32"), source, "format", cfgmod.FORMATS)
         self.seed = cfgmod.number(d.get("seed", 7), source, "seed", integer=True, minimum=0)
         # dsm_shadow: -1 (the default) shades with every light; dsm_error classifies one light
@@ -140,7 +156,8 @@ class Prepared:
 
     def __init__(self, sd, gb, light, label, opts: Options, fit_extra=None):
         self.light, self.label = light, label
-        setup = pl.light_setup(sd, gb, light, label)
+        setup = pl.light_setup(sd, gb, light, label, seed=opts.seed)
+        self.geom = pl.area_geometry(light, sd.scene) if light.type == "area" else None
         pts = pl.points_np(setup.p) if setup.p is not None else np.zeros((0, 3))
         if light.type == "directional" and fit_extra is not None and len(fit_extra):
             pts = np.concatenate([pts, fit_extra])
@@ -234,6 +251,11 @@ def _prepare(integrator, scene, sensor, plugin):
     opts = integrator.opts
     sd = pl.scene_from_mitsuba(scene)
     lights = sd.own_lights
+    if opts.area:
+        lights = pl.area_emitter_lights(scene, cfgmod.LightSpec("area", shape="emitter", min_samples=opts.samples,
+                                                                 max_samples=opts.samples, tolerance=0.0))
+        if not lights:
+            raise ValueError(f"{plugin}: area = true, but the scene has no area emitter on a mesh")
     if not lights:
         raise ValueError(f"{plugin}: the scene has no point, spot or directional emitter")
     if opts.light >= len(lights):
@@ -250,7 +272,10 @@ def _prepare(integrator, scene, sensor, plugin):
         prepared.append(Prepared(sd, gb, lights[i], f"{i}:{lights[i].type}", opts, extra))
     prep = {"sd": sd, "gb": gb, "size": (W, H), "lights": prepared}
     # the emitters the lights came from, in the same order (for dsm_shadow's radiance)
-    emitters = [e for e in scene.emitters() if pl.emitter_light(e) is not None]
+    if opts.area:
+        emitters = [scene.shapes()[lt.emitter_shapes[0]].emitter() for lt in lights]
+    else:
+        emitters = [e for e in scene.emitters() if pl.emitter_light(e) is not None]
     prep["emitters"] = [emitters[i] for i in chosen]
     integrator._key, integrator._prep = key, prep
     return prep
@@ -264,6 +289,22 @@ def _srgb_to_linear(c):
 CLASS_LINEAR = _srgb_to_linear(pl.CLASS_COLORS).astype(np.float32)
 
 
+def abs_error_image(prep: dict, opts: Options) -> np.ndarray:
+    """(H, W, 3) linear RGB of |V - V*| of the first prepared (area) light, magma colours as the
+    runner's ``<case>_abserr.png``; black outside the receivers."""
+    from matplotlib import colormaps
+    W, H = prep["size"]
+    lp = prep["lights"][0]
+    st = lp.setup
+    img = np.zeros((W * H, 3), np.float32)
+    if st.p is not None and len(st.pixels):
+        rx = Receiver.make(lp.view, st.p, st.n, prep["sd"].diagonal)
+        v, _ = pl.visibility(lp.spec, rx, lp.smap, opts.filter, opts.seed)
+        err = np.abs(v.numpy() - st.v_frac)
+        img[st.pixels] = _srgb_to_linear(np.round(colormaps["magma"](np.clip(err, 0, 1))[:, :3] * 255))
+    return img.reshape(H, W, 3)
+
+
 def classes_image(prep: dict, opts: Options) -> np.ndarray:
     """(H, W) classes of the first prepared light, exactly as the runner classifies the case."""
     W, H = prep["size"]
@@ -274,7 +315,8 @@ def classes_image(prep: dict, opts: Options) -> np.ndarray:
         rx = Receiver.make(lp.view, st.p, st.n, prep["sd"].diagonal)
         v, _ = pl.visibility(lp.spec, rx, lp.smap, opts.filter, opts.seed)
         # nearest: errors the per-texel oracle makes too in their darker shade (lambda 1, as the runner's default)
-        wrong = pl.oracles(pl.thresholds(rx, lp.smap), st.v_star)["wrong"] if opts.filter == "nearest" else None
+        wrong = (pl.oracles(pl.thresholds(rx, lp.smap), st.v_star)["wrong"]
+                 if opts.filter == "nearest" and st.ref is None else None)
         classes[st.pixels] = pl.classify(v.numpy(), st.v_star, wrong)
     return classes.reshape(H, W)
 
@@ -293,6 +335,8 @@ class DsmError(mi.SamplingIntegrator):
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
         prep = _prepare(self, scene, sensor, "dsm_error")
+        if self.opts.area:          # soft shadows: the error map |V - V*|
+            return mi.TensorXf(abs_error_image(prep, self.opts))
         img = CLASS_LINEAR[classes_image(prep, self.opts)]
         return mi.TensorXf(img)
 
@@ -350,7 +394,11 @@ class DsmShadow(mi.SamplingIntegrator):
                 v = dr.select(inside, v, 0.0)
             v = dr.select(valid, v, 0.0)
             result += f * spec * v
-            if self.opts.aovs:
+            if self.opts.aovs and lp.geom is not None:     # one area sample: V* on average over samples
+                vstar = pl.area_sample_visibility(scene, si, n, lp.geom, sampler.next_2d(), magnitude)
+                v_sum += v
+                vs_sum += dr.select(valid & vstar, 1.0, 0.0)
+            elif self.opts.aovs:
                 vstar, _ = pl.exact_visibility(scene, si, lp.light, magnitude)
                 v_sum += v
                 vs_sum += dr.select(valid & vstar, 1.0, 0.0)

@@ -1,0 +1,392 @@
+"""Area lights and their Monte Carlo reference: the visible fraction V* of the light's area.
+
+Shapes (``[[light]] type = "area"``):
+
+- ``rectangle``: centre ``position``, normal ``direction`` (the side it lights; default -z),
+  ``size`` = side or ``[width, height]`` along the light frame's axes (:func:`views.light_frame`);
+  one-sided.
+- ``disk``: centre, normal, ``size`` = diameter; one-sided.
+- ``sphere``: centre, ``size`` = diameter. From a receiver it shows the spherical cap facing
+  it (points of the sphere seen from there); V* is the fraction of that cap's area visible.
+- ``emitter``: the scene's own area emitters (an XML ``<emitter type="area">`` on any mesh,
+  the Cornell box's luminaire as it is), one light each, sampled uniformly by area over their
+  triangles (a triangle chosen by area with the sample's first coordinate, re-used inside it);
+  one-sided, on the side of their winding normal as Mitsuba's area emitter.
+
+V*, the reference: the fraction of the light's area visible from the receiver, by uniform
+area samples, unweighted (no cosine, no distance: the quantity shadow-map filters
+approximate). A sample below the receiver's tangent plane, or behind a one-sided light, is
+not visible. A receiver is a pixel with part of the light above its tangent plane (and in
+front of a one-sided light). Each sample is a shadow ray leaving the receiver beyond the
+bound on its hit point's error and stopping that far short of the sample
+(:func:`dsm.spawn.ray_to`), so the reference holds anywhere in the world.
+
+Sampling (:func:`reference`): stratified, in stages. The first stage takes ``min_samples``
+jittered samples on an ``a x b`` grid of the light's square parameter domain (every shape's
+map from the square to its surface preserves area, so equal cells are equal areas); each
+later stage adds as many samples as were taken so far, again one per cell of a finer grid.
+Random numbers come from the receiver's own position bits and the experiment's seed, so a
+receiver's V* does not depend on which other receivers are in the case.
+
+Interval and stopping rule: the Wilson score interval of the pooled count. Each stage is
+stratified with proportional allocation, whose variance never exceeds that of as many
+independent samples, so the binomial (Wilson) interval is conservative for the pooled
+estimate. A receiver stops when
+
+1. its first ``min_samples`` samples all agree (all visible or all blocked): the
+   *early-stop rule* (the interval is then still wide; ``tests/test_area_lights.py`` measures
+   how often it misses a penumbra against a dense reference), or
+2. the 95 % interval's half-width is at most ``tolerance``, or
+3. it reached ``max_samples``.
+
+Regions: ``umbra`` (no sample visible), ``lit`` (every sample visible), ``penumbra`` (the
+rest). The rays are counted per region.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from statistics import NormalDist
+from types import SimpleNamespace
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from . import spawn
+from .views import ParaboloidView, PerspectiveView, CubeView, light_frame
+
+SHAPES = ("rectangle", "disk", "sphere", "emitter")
+PERSPECTIVE_MAX_DEG = 70.0     # beyond this half angle a one-sided light's map is a paraboloid
+REGIONS = ("umbra", "penumbra", "lit")
+
+
+# ---------------------------------------------------------------- geometry
+
+def _unit(v) -> np.ndarray:
+    v = np.asarray(v, float)
+    return v / np.linalg.norm(v)
+
+
+def emitter_lights(scene, spec) -> list:
+    """One LightSpec per area emitter of ``scene`` (a mesh carrying an area emitter): centre
+    (the area-weighted centroid), normal (the area-weighted winding normal), size (the square
+    root of its area) and its shape index, which its map excludes. ``spec``: the config's
+    ``shape = "emitter"`` light, whose sampling settings they keep."""
+    out = []
+    for i, shape in enumerate(scene.shapes()):
+        if not (shape.is_mesh() and shape.is_emitter()):
+            continue
+        tri = _triangles(shape)
+        cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        area = 0.5 * np.linalg.norm(cross, axis=1)
+        total = float(area.sum())
+        if not total > 0:
+            continue
+        centre = (tri.mean(axis=1) * area[:, None]).sum(0) / total
+        normal = _unit(cross.sum(0)) if np.linalg.norm(cross.sum(0)) > 0 else np.array([0.0, 0.0, -1.0])
+        out.append(replace(spec, position=tuple(map(float, centre)), direction=tuple(map(float, normal)),
+                           size=(math.sqrt(total),), emitter_shapes=(i,), label="area"))
+    return out
+
+
+def _triangles(shape) -> np.ndarray:
+    v = np.asarray(shape.vertex_positions_buffer(), np.float64).reshape(-1, 3)
+    f = np.asarray(shape.faces_buffer(), np.int64).reshape(-1, 3)
+    return v[f]
+
+
+@dataclass
+class Geometry:
+    """An area light's surface: the map from the unit square to it (area preserving) and the
+    test of which receivers see part of it."""
+    shape: str
+    centre: np.ndarray
+    normal: np.ndarray
+    ex: np.ndarray
+    ey: np.ndarray
+    extent: tuple                 # rectangle (w, h); disk, sphere (radius,)
+    tris: np.ndarray | None = None    # emitter triangles (n, 3, 3), world, float64
+    dist: object = None           # mi.DiscreteDistribution over the triangles' areas
+    exclude: tuple = ()
+
+    @property
+    def one_sided(self) -> bool:
+        return self.shape != "sphere"
+
+    @property
+    def area(self) -> float:
+        if self.shape == "rectangle":
+            return self.extent[0] * self.extent[1]
+        if self.shape == "disk":
+            return math.pi * self.extent[0] ** 2
+        if self.shape == "sphere":
+            return 4 * math.pi * self.extent[0] ** 2
+        return float(0.5 * np.linalg.norm(np.cross(self.tris[:, 1] - self.tris[:, 0],
+                                                   self.tris[:, 2] - self.tris[:, 0]), axis=1).sum())
+
+    def sample(self, u, v, p):
+        """(points, light normals) of square samples (u, v) for receivers at ``p`` (Dr.Jit)."""
+        c = mi.Point3f(*map(float, self.centre))
+        nrm = mi.Vector3f(*map(float, self.normal))
+        ex, ey = mi.Vector3f(*map(float, self.ex)), mi.Vector3f(*map(float, self.ey))
+        n = dr.width(u)
+        if self.shape == "rectangle":
+            w, h = self.extent
+            x = c + ex * ((u - 0.5) * w) + ey * ((v - 0.5) * h)
+            return x, dr.zeros(mi.Vector3f, n) + nrm
+        if self.shape == "disk":
+            d = mi.warp.square_to_uniform_disk_concentric(mi.Point2f(u, v)) * self.extent[0]
+            return c + ex * d.x + ey * d.y, dr.zeros(mi.Vector3f, n) + nrm
+        if self.shape == "sphere":
+            r = self.extent[0]
+            to_rx = p - c
+            dist = dr.norm(to_rx)
+            cos_cap = dr.minimum(r / dr.maximum(dist, r), 1.0)
+            local = mi.warp.square_to_uniform_cone(mi.Point2f(u, v), cos_cap)
+            w = mi.Frame3f(to_rx / dist).to_world(local)
+            return c + w * r, w
+        idx, u2 = self.dist.sample_reuse(u)
+        t = self.tris
+        b = mi.warp.square_to_uniform_triangle(mi.Point2f(u2, v))
+        corner = [mi.Point3f(*(mi.Float(np.asarray(t[:, k, a], np.float32)) for a in range(3))) for k in range(3)]
+        pk = [dr.gather(mi.Point3f, ck, idx) for ck in corner]
+        x = pk[0] * (1.0 - b.x - b.y) + pk[1] * b.x + pk[2] * b.y
+        return x, dr.normalize(dr.cross(pk[1] - pk[0], pk[2] - pk[0]))
+
+    def receivers(self, p: np.ndarray, n: np.ndarray) -> np.ndarray:
+        """Whether part of the light is above each receiver's tangent plane (and, for a one-sided
+        light, the receiver is in front of it): (m, 3) positions and normals, float64."""
+        if self.shape == "rectangle":
+            w, h = self.extent
+            pts = np.array([self.centre + self.ex * a * w / 2 + self.ey * b * h / 2
+                            for a in (-1, 1) for b in (-1, 1)])
+            above = ((pts[None] - p[:, None]) * n[:, None]).sum(-1).max(1) > 0
+        elif self.shape == "disk":
+            r = self.extent[0]
+            nn = n - np.outer(n @ self.normal, self.normal)
+            above = ((self.centre - p) * n).sum(1) + r * np.linalg.norm(nn, axis=1) > 0
+        elif self.shape == "sphere":
+            return ((self.centre - p) * n).sum(1) + self.extent[0] > 0
+        else:
+            verts = self.tris.reshape(-1, 3)
+            above = np.zeros(len(p), bool)
+            for k in range(0, len(verts), 64):
+                above |= ((verts[None, k:k + 64] - p[:, None]) * n[:, None]).sum(-1).max(1) > 0
+            # in front of some triangle's emitting side
+            tn = np.cross(self.tris[:, 1] - self.tris[:, 0], self.tris[:, 2] - self.tris[:, 0])
+            front = np.zeros(len(p), bool)
+            for k in range(0, len(tn), 64):
+                front |= (((p[:, None] - self.tris[None, k:k + 64, 0]) * tn[None, k:k + 64]).sum(-1) > 0).any(1)
+            return above & front
+        return above & (((p - self.centre) @ self.normal) > 0)
+
+
+def geometry(light, scene=None) -> Geometry:
+    """The surface of an area LightSpec (``scene``: for emitter lights, their triangles)."""
+    c = np.asarray(light.position, float)
+    nrm = _unit(light.direction if light.direction is not None else (0.0, 0.0, -1.0))
+    ex, ey, _ = light_frame(nrm)
+    if light.shape == "rectangle":
+        w, h = (light.size * 2)[:2] if len(light.size) == 1 else light.size[:2]
+        return Geometry("rectangle", c, nrm, ex, ey, (float(w), float(h)))
+    if light.shape in ("disk", "sphere"):
+        return Geometry(light.shape, c, nrm, ex, ey, (0.5 * float(light.size[0]),))
+    if light.shape == "emitter":
+        shapes = list(scene.shapes())
+        tris = np.concatenate([_triangles(shapes[i]) for i in light.emitter_shapes])
+        area = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
+        return Geometry("emitter", c, nrm, ex, ey, (), tris, mi.DiscreteDistribution(area.astype(np.float32)),
+                        tuple(light.emitter_shapes))
+    raise ValueError(f"unknown area light shape {light.shape!r} (valid: {', '.join(SHAPES)})")
+
+
+def light_size(light) -> float:
+    """The light's width in world units (PCSS's light size): the side of a square light, the
+    larger side of a rectangle, a disk's or sphere's diameter, an emitter's square root of area."""
+    return float(max(light.size)) if light.size else 0.0
+
+
+# ---------------------------------------------------------------- views
+
+def make_view(light, R, receivers_world, bbox, kind=None):
+    """The map of an area light, cast from its centre: for a one-sided light a perspective view
+    along its normal whose field of view is fitted to the receivers (``kind`` "fitted"), or a
+    paraboloid around the normal when they span more than PERSPECTIVE_MAX_DEG; for a sphere the
+    point-light view ``kind``. The view carries ``light_size`` (for PCSS) and ``exclude`` (the
+    luminaire's own shapes, which its map steps over)."""
+    c = np.asarray(light.position, float)
+    nrm = _unit(light.direction if light.direction is not None else (0.0, 0.0, -1.0))
+    if light.shape == "sphere":
+        if kind == "cube":
+            view = CubeView(c, bbox, R)
+        elif kind in ("paraboloid", "dual_paraboloid"):
+            view = ParaboloidView(c, nrm, bbox, R, dual=kind == "dual_paraboloid")
+        else:
+            raise ValueError(f"unknown sphere-light view {kind!r} (valid: paraboloid, dual_paraboloid, cube)")
+    else:
+        pts = np.asarray(receivers_world, float).reshape(-1, 3) - c
+        dist = np.linalg.norm(pts, axis=1)
+        ok = dist > 0
+        cosang = (pts[ok] @ nrm) / dist[ok] if ok.any() else np.ones(1)
+        theta = float(np.degrees(np.arccos(np.clip(cosang.min(), -1.0, 1.0))))
+        if theta <= PERSPECTIVE_MAX_DEG:
+            # the square map's half angle covers the receivers' cone with a little to spare
+            view = PerspectiveView(c, nrm, min(max(theta * 1.02 + 0.5, 1.0), PERSPECTIVE_MAX_DEG + 1.0), bbox, R)
+        else:
+            view = ParaboloidView(c, nrm, bbox, R, dual=False)
+    view.light_size = light_size(light)
+    view.exclude = tuple(light.emitter_shapes)
+    return view
+
+
+# ---------------------------------------------------------------- interval
+
+def wilson(k, n, confidence: float = 0.95):
+    """(centre, half-width) of the Wilson score interval of k successes in n trials (numpy)."""
+    k, n = np.asarray(k, np.float64), np.asarray(n, np.float64)
+    z = NormalDist().inv_cdf(0.5 + confidence / 2)
+    z2 = z * z
+    den = n + z2
+    centre = (k + z2 / 2) / den
+    half = z / den * np.sqrt(np.maximum(k * (n - k) / np.maximum(n, 1), 0.0) + z2 / 4)
+    return centre, half
+
+
+def interval(k, n, confidence: float = 0.95):
+    """(low, high) of the Wilson interval, exactly 0 / 1 at k = 0 / k = n (where rounding of
+    centre -/+ half-width would leave the bound a few ulps inside)."""
+    centre, half = wilson(k, n, confidence)
+    k, n = np.asarray(k), np.asarray(n)
+    lo = np.where(k == 0, 0.0, np.clip(centre - half, 0.0, 1.0))
+    hi = np.where(k == n, 1.0, np.clip(centre + half, 0.0, 1.0))
+    return lo, hi
+
+
+def regions(k, n) -> np.ndarray:
+    """0 umbra (no sample visible), 1 penumbra, 2 lit (every sample visible)."""
+    k, n = np.asarray(k), np.asarray(n)
+    return np.where(k == 0, 0, np.where(k == n, 2, 1)).astype(np.uint8)
+
+
+# ---------------------------------------------------------------- reference
+
+def _grid(m: int) -> tuple:
+    """(a, b) with a * b = m, a the largest divisor of m not above sqrt(m)."""
+    a = int(math.isqrt(m))
+    while m % a:
+        a -= 1
+    return m // a, a
+
+
+def _key(p):
+    bits = [dr.reinterpret_array(mi.UInt32, c) for c in (p.x, p.y, p.z)]
+    h = bits[0] * 0x9E3779B1
+    h = (h ^ (h >> 15)) + bits[1] * 0x85EBCA77
+    h = (h ^ (h >> 13)) + bits[2] * 0xC2B2AE3D
+    return h ^ (h >> 16)
+
+
+def visible(scene, p, n, delta, geom: Geometry, u, v):
+    """Whether the light's sample (u, v) is visible from receivers at ``p`` (normals ``n`` on
+    the visible side, spawn offsets ``delta``): above the tangent plane, in front of a one-sided
+    light, and no surface on the segment (which stops the spawn bound short of the sample)."""
+    x, nl = geom.sample(u, v, p)
+    d = x - p
+    ok = dr.dot(n, d) > 0
+    if geom.one_sided:
+        ok &= dr.dot(nl, d) < 0
+    ray = spawn.ray_to(SimpleNamespace(p=p), n, x, delta)
+    return ok & ~scene.ray_test(ray, active=ok)
+
+
+def sample_visibility(scene, si, n, geom: Geometry, sample, magnitude: float):
+    """One random area sample's visibility per surface interaction (an unbiased estimate of
+    V*: the plugins' per-sample AOV)."""
+    delta = spawn.error_bound(si, dr.opaque(mi.Float, float(magnitude)))
+    return visible(scene, si.p, n, delta, geom, sample.x, sample.y)
+
+
+@dataclass
+class Reference:
+    """Per receiver: visible samples ``hits`` of ``samples``; V* = hits / samples; ``half``
+    the 95 % Wilson half-width; ``early`` stopped by the early-stop rule."""
+    hits: np.ndarray
+    samples: np.ndarray
+    half: np.ndarray
+    early: np.ndarray
+
+    @property
+    def v(self) -> np.ndarray:
+        return self.hits / np.maximum(self.samples, 1)
+
+    @property
+    def rays(self) -> int:
+        return int(self.samples.sum())
+
+    def stats(self) -> dict:
+        """Receivers, rays and rays per receiver by region; mean and max half-width; cap hits."""
+        reg = regions(self.hits, self.samples)
+        out = {}
+        for i, name in enumerate(REGIONS):
+            sel = reg == i
+            out[name] = {"receivers": int(sel.sum()), "rays": int(self.samples[sel].sum()),
+                         "rays_per_receiver": float(self.samples[sel].mean()) if sel.any() else None}
+        out["rays"] = self.rays
+        out["early_stops"] = int(self.early.sum())
+        out["half_width_mean"] = float(self.half.mean()) if self.half.size else None
+        out["half_width_max"] = float(self.half.max()) if self.half.size else None
+        return out
+
+
+def reference(scene, si, n_rx, geom: Geometry, magnitude: float, seed: int = 7, min_samples: int = 16,
+              max_samples: int = 1024, tolerance: float = 0.01, adaptive: bool = True) -> Reference:
+    """The stratified adaptive V* of receivers (surface interactions ``si``, normals ``n_rx``
+    facing the camera). ``adaptive=False``: exactly ``max_samples`` per receiver, in the same
+    stages (for convergence tests)."""
+    count = dr.width(si.p)
+    p_all = mi.Point3f(si.p)
+    delta_all = spawn.error_bound(si, dr.opaque(mi.Float, float(magnitude)))
+    key_all = _key(p_all)
+    dr.eval(p_all, delta_all, key_all)
+    hits = np.zeros(count, np.int64)
+    samples = np.zeros(count, np.int64)
+    early = np.zeros(count, bool)
+    active = np.arange(count, dtype=np.int64)
+    stage, add = 0, min(min_samples, max_samples)
+    while len(active) and add > 0:
+        a, b = _grid(add)
+        lanes = len(active) * add
+        lane = dr.arange(mi.UInt32, lanes)
+        r = lane // add
+        s = lane % add
+        ridx = dr.gather(mi.UInt32, mi.UInt32(active.astype(np.uint32)), r)
+        p = dr.gather(mi.Point3f, p_all, ridx)
+        n = dr.gather(mi.Vector3f, n_rx, ridx)
+        delta = dr.gather(mi.Float, delta_all, ridx)
+        rng = mi.PCG32()
+        # the receiver's own key and (seed, stage, cell): independent of the other receivers
+        rng.seed(mi.UInt64(dr.gather(mi.UInt32, key_all, ridx)),
+                 mi.UInt64(s) + mi.UInt64((seed & 0xFFFF) * 4096 + stage) * 1048576)
+        u = (mi.Float(s % a) + rng.next_float32()) / a
+        v = (mi.Float(s // a) + rng.next_float32()) / b
+        u, v = dr.minimum(u, 0.99999994), dr.minimum(v, 0.99999994)
+        vis = visible(scene, p, n, delta, geom, u, v).numpy().astype(np.int64).reshape(len(active), add)
+        hits[active] += vis.sum(1)
+        samples[active] += add
+        k, m = hits[active], samples[active]
+        _, half = wilson(k, m)
+        agree = (k == 0) | (k == m)
+        if adaptive:
+            stop = (half <= tolerance) | (m >= max_samples)
+            if stage == 0:
+                early[active] = agree & ~stop
+                stop |= agree
+        else:
+            stop = m >= max_samples
+        active = active[~stop]
+        stage += 1
+        total = samples[active[0]] if len(active) else 0
+        add = int(min(total, max_samples - total))
+    _, half = wilson(hits, samples)
+    return Reference(hits, samples, half, early)

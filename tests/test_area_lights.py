@@ -1,0 +1,321 @@
+"""Area lights: the Monte Carlo reference against an analytic visible fraction, the adaptive
+sampler's spending and early stops, PCSS's penumbra estimate against similar triangles, point
+lights' reference cost unchanged, soft metrics by hand, configs and a run end to end."""
+import json
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from dsm import area, config, lookup, metrics, pipeline, scenes, schemes
+from dsm.types import ConfigError, LightSpec
+
+from conftest import MESHES, base_config
+
+# the analytic scene: square light (side A, height H) above a square occluder (side B, height Hs)
+A, H, B, HS = 1.0, 2.0, 1.0, 1.0
+
+
+def _quad(z, half):
+    v = np.array([[-half, -half, z], [half, -half, z], [half, half, z], [-half, half, z]], float)
+    return scenes.make_mesh("quad", v, np.array([[0, 1, 2], [0, 2, 3]]))
+
+
+def _analytic(q):
+    """Visible fraction from ground points q (n, 2): the occluder projects from q onto the light's
+    plane as a square of side B H / Hs centred at q (1 - H / Hs); V = 1 - overlap / A^2."""
+    c, s = q * (1 - H / HS), B * H / HS
+    ov = [np.clip(np.minimum(c[:, k] + s / 2, A / 2) - np.maximum(c[:, k] - s / 2, -A / 2), 0, None) for k in (0, 1)]
+    return 1 - ov[0] * ov[1] / A ** 2
+
+
+@pytest.fixture(scope="module")
+def analytic_scene(variant):
+    scene = mi.load_dict({"type": "scene", "ground": _quad(0.0, 4.0), "occluder": _quad(HS, B / 2)})
+    g = 36
+    xs = np.linspace(-2.0, 2.0, g)
+    X, Y = np.meshgrid(xs, xs)
+    q = np.stack([X.ravel(), Y.ravel()], 1)
+    # ground points hit from below (nothing in the way), their normal facing the light
+    o = mi.Point3f(mi.Float(q[:, 0]), mi.Float(q[:, 1]), mi.Float(np.full(len(q), -1.0)))
+    si = scene.ray_intersect(mi.Ray3f(o, mi.Vector3f(0, 0, 1)))
+    assert si.is_valid().numpy().all()
+    n = dr.zeros(mi.Vector3f, len(q)) + mi.Vector3f(0, 0, 1)
+    light = LightSpec("area", position=(0.0, 0.0, H), direction=(0.0, 0.0, -1.0), shape="rectangle", size=(A,))
+    return scene, si, n, area.geometry(light), _analytic(q)
+
+
+def test_reference_is_within_its_99_percent_interval_of_the_analytic_fraction(analytic_scene):
+    scene, si, n, geom, v_true = analytic_scene
+    assert ((v_true > 0) & (v_true < 1)).mean() > 0.4 and (v_true == 0).any() and (v_true == 1).any()
+    ref = area.reference(scene, si, n, geom, 4.0, min_samples=16, max_samples=1024, tolerance=0.01)
+    lo, hi = area.interval(ref.hits, ref.samples, 0.99)
+    inside = (v_true >= lo) & (v_true <= hi)
+    print(f"analytic square: {inside.mean():.4f} of {len(v_true)} receivers within the 99 % Wilson interval")
+    assert inside.mean() >= 0.97
+
+
+def test_reference_error_falls_at_least_as_fast_as_one_over_sqrt_samples(analytic_scene):
+    scene, si, n, geom, v_true = analytic_scene
+    err = {}
+    for N in (16, 64, 256):
+        ref = area.reference(scene, si, n, geom, 4.0, min_samples=16, max_samples=N, adaptive=False)
+        assert (ref.samples == N).all()
+        err[N] = np.abs(ref.v - v_true).mean()
+    print("mean |V* - analytic| by samples:", {k: round(v, 5) for k, v in err.items()})
+    assert err[64] <= err[16] * (16 / 64) ** 0.5
+    assert err[256] <= err[16] * (16 / 256) ** 0.5
+
+
+def test_adaptive_sampler_spends_most_rays_in_the_penumbra_and_early_stops_rarely_miss(analytic_scene):
+    scene, si, n, geom, v_true = analytic_scene
+    ref = area.reference(scene, si, n, geom, 4.0, min_samples=16, max_samples=1024, tolerance=0.01)
+    st = ref.stats()
+    share = st["penumbra"]["rays"] / st["rays"]
+    print(f"rays per receiver: umbra {st['umbra']['rays_per_receiver']}, penumbra "
+          f"{st['penumbra']['rays_per_receiver']:.1f}, lit {st['lit']['rays_per_receiver']}; penumbra share "
+          f"{share:.3f} of {st['rays']} rays")
+    assert share > 0.9
+    # the early-stop rule's misses: receivers stopped after min_samples agreeing samples whose
+    # true visible fraction is strictly between 0 and 1 (analytic), and against a dense reference
+    dense = area.reference(scene, si, n, geom, 4.0, max_samples=4096, adaptive=False)
+    pen_true = (v_true > 0) & (v_true < 1)
+    pen_dense = area.regions(dense.hits, dense.samples) == 1
+    early = ref.early
+    missed = early & pen_true
+    miss_true = missed.sum() / pen_true.sum()            # penumbra receivers the rule stopped early
+    miss_dense = (early & pen_dense).sum() / pen_dense.sum()
+    print(f"early stops: {early.sum()} of {len(early)} receivers; penumbra receivers stopped early: "
+          f"{miss_true:.4f} (analytic), {miss_dense:.4f} (dense reference, 4096 samples); their mean error "
+          f"{np.abs(ref.v - v_true)[missed].mean() if missed.any() else 0:.4f}, largest "
+          f"{np.max(np.abs(ref.v - v_true)[missed], initial=0):.4f}")
+    assert early.sum() > 0.3 * len(early)
+    assert miss_true <= 0.2 and miss_dense <= 0.2
+    # a missed penumbra is one whose minority fraction is small: within 16 samples' reach
+    assert np.all(np.minimum(v_true, 1 - v_true)[early & pen_true] < 0.25)
+
+
+def test_sample_maps_are_uniform_by_area(variant):
+    """Each shape's map from the square preserves area: mean and spread of the samples
+    against the shape's own moments (numpy, float64)."""
+    rng = np.random.default_rng(3)
+    u, v = (mi.Float(rng.random(200000).astype(np.float32)) for _ in range(2))
+    p = dr.zeros(mi.Point3f, 200000) + mi.Point3f(0.0, 0.0, -5.0)
+    disk = area.geometry(LightSpec("area", position=(0, 0, 0), direction=(0, 0, 1), shape="disk", size=(2.0,)))
+    x, _ = disk.sample(u, v, p)
+    r2 = x.x.numpy() ** 2 + x.y.numpy() ** 2
+    assert np.mean(r2) == pytest.approx(0.5, abs=0.01)         # uniform disk of radius 1: E[r^2] = 1/2
+    rect = area.geometry(LightSpec("area", position=(0, 0, 0), direction=(0, 0, 1), shape="rectangle",
+                                   size=(2.0, 1.0)))
+    x, _ = rect.sample(u, v, p)
+    ext = sorted([np.ptp(x.x.numpy()), np.ptp(x.y.numpy())])
+    assert ext == pytest.approx([1.0, 2.0], abs=1e-3)
+    sph = area.geometry(LightSpec("area", position=(0, 0, 0), shape="sphere", size=(2.0,)))
+    x, _ = sph.sample(u, v, p)
+    z = x.z.numpy()
+    # the cap seen from distance 5: cos >= 1/5, z uniform on [-1, -1/5] (Archimedes)
+    assert z.max() <= -0.2 + 1e-4 and np.mean(z) == pytest.approx(-0.6, abs=0.005)
+
+
+def test_pcss_penumbra_width_matches_similar_triangles_within_a_texel(variant):
+    """A square light above a large occluder parallel to the ground: at receivers under it the
+    blocker search finds the occluder's depth and the width is L (d - z_b) / z_b."""
+    L, Hl, Ho = 0.5, 3.0, 1.0
+    scene = mi.load_dict({"type": "scene", "ground": _quad(0.0, 4.0), "occluder": _quad(Ho, 1.5)})
+    light = LightSpec("area", position=(0.0, 0.0, Hl), direction=(0.0, 0.0, -1.0), shape="rectangle", size=(L,))
+    q = np.array([[0.0, 0.0], [0.2, -0.1], [-0.3, 0.25], [0.1, 0.3]])
+    p = mi.Point3f(mi.Float(q[:, 0]), mi.Float(q[:, 1]), mi.Float(np.zeros(len(q))))
+    n = dr.zeros(mi.Vector3f, len(q)) + mi.Vector3f(0, 0, 1)
+    bbox = (np.array([-4.0, -4, 0]), np.array([4.0, 4, 1]))
+    R = 512
+    view = pipeline.make_view(light, R, np.c_[q, np.zeros(len(q))], bbox, "fitted")
+    assert view.kind == "perspective"
+    view = pipeline.make_view(light, R, np.array([[3.0, 3.0, 0.0], [-3, -3, 0]]), bbox, "fitted")  # a wider field
+    smap = pipeline.build_map(scene, view)
+    rx = lookup.Receiver.make(view, p, n, 8.0)
+    spec = pipeline.scheme_spec({"name": "constant", "bias": 0.01})
+    z_b, width, found = lookup.pcss_estimate(schemes.get("constant"), lookup.resolve(spec.params, rx), rx, smap)
+    assert found.numpy().all()
+    # expected, in float64: depths along the light's axis; the texel's world width at the
+    # receiver from the map's own geometry (a planar map: 2 tan(half) / R per unit depth, times
+    # the depth, times (1 + r^2)^(-1/4) off the axis)
+    d = Hl * np.ones(len(q))
+    zb = Hl - Ho
+    w_world = L * (d - zb) / zb
+    r2 = (q ** 2).sum(1) / d ** 2
+    texel = 2 * np.tan(np.radians(view.cutoff)) / R * d * (1 + r2) ** -0.25
+    assert np.abs(z_b.numpy() - zb).max() < 1e-4
+    got = width.numpy() * texel
+    print("PCSS width (world):", got, "similar triangles:", w_world, "texel:", texel)
+    assert np.all(np.abs(got - w_world) <= texel)
+
+
+def test_point_light_casts_one_reference_ray_per_receiver(variant):
+    """A point-light scene: the reference casts exactly one ray per receiver, as before area
+    lights (counted on a scene proxy), and run.json's count is the receivers'."""
+    class Counting:
+        def __init__(self, scene):
+            self.scene, self.rays = scene, 0
+
+        def ray_intersect_preliminary(self, ray, *a, **k):
+            self.rays += dr.width(ray.o)
+            return self.scene.ray_intersect_preliminary(ray, *a, **k)
+
+        def ray_test(self, ray, *a, **k):
+            self.rays += dr.width(ray.o)
+            return self.scene.ray_test(ray, *a, **k)
+
+    sd = pipeline.load_scene(pipeline.scene_spec({"builtin": "plane_box"}), (64, 64))
+    gb = pipeline.gbuffer(sd)
+    light = LightSpec("point", position=(1.0, -1.0, 3.0), direction=(0, 0, -1))
+    counting = Counting(sd.scene)
+    sd.scene, real = counting, sd.scene
+    setup = pipeline.light_setup(sd, gb, light, "p")
+    sd.scene = real
+    assert counting.rays == len(setup.pixels) == setup.reference_rays > 1000
+    assert setup.ref is None
+
+
+def test_point_light_run_counts_receivers_as_reference_rays(run_dict):
+    cfg = base_config(camera={"resolution": [64, 64]}, scene=[{"builtin": "plane_box"}],
+                      light=[{"type": "point", "position": [1.0, -1.0, 3.0]}], map={"resolution": 64,
+                                                                                     "view": "cube"})
+    res = run_dict(cfg)
+    sd = pipeline.load_scene(pipeline.scene_spec({"builtin": "plane_box"}), (64, 64))
+    setup = pipeline.light_setup(sd, pipeline.gbuffer(sd), sd.lights_for(config.parse(cfg).lights)[0], "p")
+    assert res.run["rays"]["reference"] == len(setup.pixels)
+    assert res.run["reference_regions"] == []
+
+
+def test_soft_metrics_by_hand():
+    # receivers: umbra (0/16), penumbra (8/16), lit (16/16), lit (16/16)
+    hits, samples = np.array([0, 8, 16, 16]), np.array([16, 16, 16, 16])
+    v = np.array([0.75, 0.25, 1.0, 0.25])
+    m = metrics.soft(v, hits, samples, np.array([0.1, 0.2, 0.1, 0.1]), np.zeros(4), np.zeros(4))
+    assert (m["n_umbra"], m["n_penumbra"], m["n_lit"]) == (1, 1, 2)
+    assert m["mae_umbra"] == 0.75 and m["mae_penumbra"] == 0.25 and m["mae_lit"] == 0.375
+    assert m["rmse_lit"] == pytest.approx(np.sqrt(0.75 ** 2 / 2))
+    assert m["mean_abs_error"] == pytest.approx((0.75 + 0.25 + 0 + 0.75) / 4)
+    assert (m["n_acne"], m["n_peterpan"]) == (1, 1)           # the lit 0.25 and the umbra 0.75; not the penumbra
+    assert m["acne_rate"] == 0.5 and m["peterpan_rate"] == 1.0
+    assert m["ref_half_width_max"] == 0.2
+    empty = metrics.soft(np.array([0.5]), np.array([3]), np.array([16]), np.array([0.2]), np.zeros(1), np.zeros(1))
+    assert np.isnan(empty["mae_umbra"]) and np.isnan(empty["acne_rate"]) and np.isnan(empty["peterpan_rate"])
+
+
+@pytest.mark.parametrize("light, key", [
+    ({"type": "area"}, "light[0].shape"),
+    ({"type": "area", "shape": "hexagon"}, "light[0].shape"),
+    ({"type": "area", "shape": "rectangle", "position": [0, 0, 3]}, "light[0].size"),
+    ({"type": "area", "shape": "disk", "position": [0, 0, 3], "size": -1}, "light[0].size"),
+    ({"type": "area", "shape": "emitter", "size": 1}, "light[0].size"),
+    ({"type": "area", "shape": "sphere", "position": [0, 0, 3], "size": 1, "min_samples": 64, "max_samples": 32},
+     "light[0].max_samples"),
+])
+def test_bad_area_lights_are_refused_naming_the_key(light, key):
+    with pytest.raises(ConfigError) as e:
+        config.parse(base_config(light=[light]), "x.toml")
+    assert e.value.key == key and "x.toml" in str(e.value)
+
+
+def test_bad_pcf_wide_width_is_refused():
+    with pytest.raises(ConfigError, match="pcf_wide:K"):
+        config.parse(base_config(map={"filter": "pcf_wide:1"}), "x.toml")
+
+
+def test_area_light_run_end_to_end(run_dict):
+    """A rectangle light over plane_box: rows with soft metrics, the V, V*, |V - V*| images,
+    run.json's reference rays equal to the regions' sum, and per-tap adaptive bias no worse than
+    a constant bias in the lit region under a wide kernel."""
+    cfg = base_config(camera={"resolution": [64, 64]}, scene=[{"builtin": "plane_box"}],
+                      light=[{"type": "area", "shape": "rectangle", "position": [0.5, 0.3, 3.0], "size": 1.0,
+                              "max_samples": 64}],
+                      map={"resolution": 128, "filter": ["nearest", "pcf_wide:5", "pcss"]},
+                      scheme=[{"name": "constant", "bias": "1 texel"}, {"name": "adaptive_tap"}])
+    res = run_dict(cfg)
+    assert len(res.rows) == 6 and all(r["view"] == "perspective" for r in res.rows)
+    reg = res.run["reference_regions"][0]
+    assert res.run["rays"]["reference"] == reg["rays"] == sum(reg[k]["rays"] for k in area.REGIONS)
+    assert reg["penumbra"]["rays_per_receiver"] == 64 and reg["umbra"]["rays_per_receiver"] == 16
+    for r in res.rows:
+        assert r["n_umbra"] + r["n_penumbra"] + r["n_lit"] == r["n_receivers"]
+        assert r["n_penumbra"] > 0 and r["n_umbra"] > 0
+        for name in ("v", "vstar", "abserr"):
+            assert (res.out / "images" / "plane_box_0_area" / f"{r['case']}_{name}.png").is_file()
+    assert (res.out / "plots" / "soft_plane_box_0_area.png").is_file()
+    assert "## Soft shadows (area lights)" in (res.out / "table.md").read_text()
+    wide = {r["scheme"]: r for r in res.rows if r["filter"] == "pcf_wide:5"}
+    assert wide["adaptive_tap"]["mae_lit"] <= wide["constant"]["mae_lit"] + 1e-9
+
+
+@pytest.mark.skipif(not (MESHES / "cbox_mitsuba" / "cbox.xml").is_file(),
+                    reason="../shared/meshes/cbox_mitsuba absent (README: test meshes)")
+def test_cornell_box_luminaire_is_the_light_and_its_map_steps_over_it(variant):
+    spec = pipeline.scene_spec({"file": str(MESHES / "cbox_mitsuba" / "cbox.xml")})
+    sd = pipeline.load_scene(spec, (48, 48))
+    lights = sd.lights_for([LightSpec("area", shape="emitter", max_samples=32)])
+    assert len(lights) == 1
+    lum = lights[0]
+    i = lum.emitter_shapes[0]
+    assert sd.scene.shapes()[i].is_emitter()
+    assert np.allclose(lum.direction, (0, -1, 0)) and lum.size[0] == pytest.approx(np.sqrt(130 * 105), rel=1e-4)
+    gb = pipeline.gbuffer(sd)
+    setup = pipeline.light_setup(sd, gb, lum, "0:area")
+    assert i not in set(setup.shape.tolist())          # the luminaire is no receiver of itself
+    view = pipeline.make_view(lum, 64, pipeline.points_np(setup.p), sd.bbox, "fitted")
+    smap = pipeline.build_map(sd.scene, view)
+    shapes = set(smap.shape.numpy().tolist())
+    assert i not in shapes and len(shapes - {0xFFFFFFFF}) >= 4
+
+
+@pytest.mark.skipif(not (MESHES / "cbox_mitsuba" / "cbox.xml").is_file(),
+                    reason="../shared/meshes/cbox_mitsuba absent (README: test meshes)")
+def test_plugins_with_area_emitters(variant):
+    """dsm_shadow with area = true: its dsm.Vstar AOV (one random area sample per camera sample)
+    averages to the stratified reference's V* over the image; dsm_error renders |V - V*| whose
+    pixels are black exactly outside the receivers."""
+    import dsm_plugins
+    dsm_plugins.register()
+    scene = mi.load_file(str(MESHES / "cbox_mitsuba" / "cbox.xml"), res=48)
+    shadow = mi.load_dict({"type": "dsm_shadow", "area": True, "filter": "pcss", "scheme": "adaptive_tap",
+                           "resolution": 256, "aovs": True, "samples": 64})
+    img = np.array(mi.render(scene, integrator=shadow, spp=32))
+    sd = pipeline.scene_from_mitsuba(scene)
+    lum = pipeline.area_emitter_lights(scene, LightSpec("area", shape="emitter", min_samples=256, max_samples=256,
+                                                        tolerance=0.0))[0]
+    setup = pipeline.light_setup(sd, pipeline.gbuffer(sd), lum, "0:area")
+    vstar = np.zeros(48 * 48)
+    vstar[setup.pixels] = setup.v_frac
+    assert img.shape == (48, 48, 5)
+    print("mean V* AOV", img[..., 4].mean(), "reference", vstar.mean(), "mean V", img[..., 3].mean())
+    assert img[..., 4].mean() == pytest.approx(vstar.mean(), abs=0.02)
+    assert img[..., 3].mean() == pytest.approx(vstar.mean(), abs=0.1)        # the map's V: close, not equal
+    err = np.array(mi.render(scene, integrator=mi.load_dict({"type": "dsm_error", "area": True, "filter": "pcss",
+                                                              "resolution": 256, "samples": 32})))
+    outside = np.ones(48 * 48, bool)
+    outside[setup.pixels] = False
+    assert np.all(err.reshape(-1, 3)[outside] == 0)
+    assert (err.reshape(-1, 3)[~outside].sum(1) > 0).mean() > 0.99            # magma's darkest is not black
+
+
+def test_adaptive_tap_clamps_the_plane_depth_by_the_taps_offset(variant):
+    """The per-tap plane depth is kept within max_slope x the tap's lateral distance (texels x
+    texel width, at least one texel) of the receiver's depth (numpy, float64)."""
+    from types import SimpleNamespace
+    from dsm.schemes import adaptive_tap
+    rng = np.random.default_rng(5)
+    n = 2000
+    d, z1 = rng.uniform(2, 3, n), rng.uniform(1, 3, n)
+    plane = d + rng.normal(0, 0.5, n)
+    du, dv, tw = rng.uniform(-4, 4, n), rng.uniform(-4, 4, n), rng.uniform(0.005, 0.02, n)
+    f = lambda a: mi.Float(np.asarray(a, np.float32))
+    rx = SimpleNamespace(depth=f(d), u_map=f(np.full(n, 10.0)), v_map=f(np.full(n, 10.0)), texel_world=f(tw),
+                         scene_scale=mi.Float(5.0))
+    tap = SimpleNamespace(z1=f(z1), cu_map=f(10.0 + du), cv_map=f(10.0 + dv), receiver_plane_depth=lambda r: f(plane))
+    p = SimpleNamespace(K=mi.Float(1e-4), max_slope=mi.Float(8.0))
+    got = adaptive_tap.margin(rx, tap, p).numpy()
+    reach = 8.0 * np.maximum(np.hypot(du, dv), 1.0) * tw
+    want = z1 + 1e-4 * 5.0 - np.clip(plane, d - reach, d + reach)
+    assert (np.abs(plane - d) > reach).mean() > 0.5           # the clamp acts on most of these taps
+    np.testing.assert_allclose(got, want, atol=2e-6)
