@@ -358,6 +358,8 @@ def _parse_light_move(t: dict, path: str, source: str, where: str) -> dict:
                 raise ConfigError(source, f"{where}.light_keys[{j}]", "a light keyframe needs position", ["position"])
             out.append((vec3(k["position"], source, f"{where}.light_keys[{j}].position"),
                         vec3(k["target"], source, f"{where}.light_keys[{j}].target") if "target" in k else None))
+            if out[-1][0] == out[-1][1]:
+                raise ConfigError(source, f"{where}.light_keys[{j}].target", "the target equals the position")
         if len({tg is None for _, tg in out}) > 1:
             raise ConfigError(source, f"{where}.light_keys", "give target on every light keyframe or on none")
         kw["light_keys"] = tuple(out)

@@ -127,7 +127,10 @@ def test_motion_config_errors_name_the_key():
                         ({"speed": 2}, "motion[0].speed"),
                         ({"camera": "keyframes", "keys": [{"position": [0, 0, 1], "target": [0, 0, 1]},
                                                           {"position": [0, 1, 1], "target": [0, 0, 0]}]},
-                         "motion[0].keys[0].target")):
+                         "motion[0].keys[0].target"),
+                        ({"light": "keyframes", "light_keys": [{"position": [0, 0, 4], "target": [0, 0, 4]},
+                                                               {"position": [1, 0, 4], "target": [0, 0, 0]}]},
+                         "motion[0].light_keys[0].target")):
         with pytest.raises(ConfigError) as e:
             config.parse(base_config(motion=[motion]), "t.toml")
         assert e.value.key == key, (motion, e.value)
