@@ -241,6 +241,9 @@ def _plan(cfg) -> int:
         if loadable:
             scenes.check(cfg)
         plan = planmod.make(cfg)
+        if "tune" in cfg.raw and loadable:     # what dsm tune would refuse, said by the plan too
+            from . import tune as tunemod
+            tunemod.parse_tune(cfg)
     except cfgmod.ConfigError as e:
         return _config_error(e, "plan")
     print(plan.text())

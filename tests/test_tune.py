@@ -236,6 +236,17 @@ def test_cli_tune_out_that_cannot_take_the_results_is_refused_before_tuning(tmp_
     assert [p.name for p in full.iterdir()] == ["keep.txt"] and "[tune]" in cfg.read_text()
 
 
+def test_dsm_plan_checks_a_tune_table_as_dsm_tune_would(tmp_path, capsys):
+    from dsm.cli import main
+    cfg = tmp_path / "t.toml"
+    cfg.write_text('[[scene]]\nbuiltin = "plane_box"\n[map]\nresolution = 16\n[camera]\nresolution = 16\n'
+                   '[[scheme]]\nname = "constant"\n[tune]\nstepz = 2\n')
+    assert main(["plan", str(cfg)]) == 2
+    assert f"{cfg}: tune.stepz: unknown key (valid: " in capsys.readouterr().err
+    cfg.write_text(cfg.read_text().replace("stepz", "steps"))
+    assert main(["plan", str(cfg)]) == 0
+
+
 def test_cascaded_maps_are_refused():
     """A cascaded view follows its camera: no map grid is shared across views."""
     import dsm.tune as tu
