@@ -11,6 +11,7 @@ import dataclasses
 import json
 import re
 import shutil
+import signal
 import sys
 import tempfile
 import time
@@ -130,7 +131,21 @@ def main(argv=None) -> int:
         out = Path(args.out) if args.out else Path("runs") / f"{cfg.name}-{time.strftime('%Y%m%d-%H%M%S')}"
         return _run(cfg, args, out)
     except KeyboardInterrupt:
+        # as the command (not main([...]) from Python): a second Ctrl-C, or one passed on while Ray shuts
+        # down, must not break the exit's clean-up (tqdm's and Ray's atexit handlers) into a traceback
+        if argv is None:
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
         where = f" (results so far in {out}/)" if out is not None and out.is_dir() and any(out.iterdir()) else ""
+        if where and args.cmd == "run" and (out / "run.json").is_file():
+            try:
+                measured = json.loads((out / "run.json").read_text()).get("state") == "complete"
+            except (OSError, ValueError):
+                measured = False
+            if measured:       # stopped while the report was drawn: every case is measured
+                where = (f" while writing the report: every case is measured in {out}/; `dsm report {out}` "
+                         "writes table.md, plots/ and report.html")
+            else:
+                where += f"; `dsm run ... --out {out} --resume` runs the rest"
         print(f"{chr(10) if sys.stderr.isatty() else ''}dsm: interrupted{where}", file=sys.stderr)
         return 130
 
@@ -172,10 +187,16 @@ def _report(args) -> int:
         if len(dirs) == 1:
             t0 = time.perf_counter()
             parts = publish.rebuild(dirs[0])
+            for note in parts.get("notes", []):
+                _err(f"note: {note}")
             print(f"dsm: report of {dirs[0]}/ rebuilt in {time.perf_counter() - t0:.1f} s ({parts['figures']} "
                   "figures; table.md, plots/, report.html)")
             return 0
         out = Path(args.out) if args.out else Path(f"compare-{dirs[0].resolve().name}-{dirs[1].resolve().name}")
+        problem = _compare_out_problem(out)
+        if problem:
+            _err(f"report: {problem}")
+            return 2
         n = publish.compare(dirs[0], dirs[1], out)
     except publish.NotARun as e:
         _err(f"report: {e}")
@@ -183,6 +204,26 @@ def _report(args) -> int:
     print(f"dsm: {n['matched']} cases in both runs, {n['only_a']} only in A, {n['only_b']} only in B -> "
           f"{out}/ (compare.md, compare.csv)")
     return 0
+
+
+COMPARE_OUTPUTS = ("compare.md", "compare.csv")
+
+
+def _compare_out_problem(out: Path) -> str | None:
+    """Why a comparison cannot go into ``out`` (None if it can): a file, a dsm run's folder (its
+    files would be mixed with the comparison's) or a folder holding anything but an earlier
+    comparison (which is replaced: both runs still hold everything it was made from)."""
+    if out.exists() and not out.is_dir():
+        return f"--out {out}: is a file, not a folder; choose another --out"
+    if not out.is_dir():
+        return None
+    if (out / "run.json").exists():
+        return f"--out {out}: is a dsm run's folder; put the comparison in a folder of its own (another --out)"
+    foreign = sorted(p.name for p in out.iterdir() if p.name not in COMPARE_OUTPUTS)
+    if foreign:
+        return (f"--out {out}: holds files a comparison does not write ({', '.join(foreign[:3])}"
+                f"{', ...' if len(foreign) > 3 else ''}); choose an empty or new --out")
+    return None
 
 
 def _plan(cfg) -> int:
@@ -200,6 +241,9 @@ def _plan(cfg) -> int:
         if loadable:
             scenes.check(cfg)
         plan = planmod.make(cfg)
+        if "tune" in cfg.raw and loadable:     # what dsm tune would refuse, said by the plan too
+            from . import tune as tunemod
+            tunemod.parse_tune(cfg)
     except cfgmod.ConfigError as e:
         return _config_error(e, "plan")
     print(plan.text())
@@ -250,14 +294,21 @@ def _out_problem(out: Path, force: bool, bench: bool = False) -> str | None:
     return None
 
 
-def _resume_problem(out: Path) -> str | None:
-    """Why ``--resume`` cannot go on with the run in ``out`` (None if it can)."""
+def _resume_problem(out: Path, cfg=None) -> str | None:
+    """Why ``--resume`` cannot go on with the run in ``out`` (None if it can): no dsm run there,
+    or the run of another experiment (``[experiment] name`` differs from ``cfg``'s: resuming it
+    would set every one of its cases aside as stale)."""
     if not (out / "run.json").is_file():
         return f"--resume: {out} holds no previous dsm run (no run.json); choose another --out"
     try:
-        json.loads((out / "run.json").read_text())
+        prev = json.loads((out / "run.json").read_text())
     except (OSError, ValueError):
         return f"--resume: {out}/run.json is not a dsm run.json; choose another --out"
+    if not isinstance(prev, dict):
+        return f"--resume: {out}/run.json is not a dsm run.json; choose another --out"
+    if cfg is not None and prev.get("experiment") not in (None, cfg.name):
+        return (f"--resume: {out} holds experiment {prev['experiment']!r} (config {prev.get('config_file') or '?'}), "
+                f"not {cfg.name!r} ({cfg.source}); resume it with its own config or choose another --out")
     try:
         with tempfile.TemporaryFile(dir=out):
             pass
@@ -278,16 +329,31 @@ def _run(cfg, args, out: Path) -> int:
         return 3
     except cfgmod.ConfigError as e:
         return _config_error(e)
+    clustered = bool(args.cluster) or cfg.execution.backend == "ray"
+    if clustered:                       # reach the cluster before the folder is touched
+        try:
+            from . import cluster
+            if args.cluster:
+                cluster.connect(args.cluster)
+            else:
+                cluster.connect(cfg.execution.address or "local", source=cfg.source, key="execution.address")
+        except SetupError as e:
+            _err(f"setup error: {e}")
+            return 3
+        except cfgmod.ConfigError as e:
+            if args.cluster:
+                _err(str(e).removeprefix(f"{e.source}: "))
+                return 2
+            return _config_error(e)
     resuming = bool(getattr(args, "resume", False)) and out.is_dir() and any(out.iterdir())
-    problem = _resume_problem(out) if resuming else _out_problem(out, args.force)
+    problem = _resume_problem(out, cfg) if resuming else _out_problem(out, args.force)
     if problem:
         _err(problem)
         return 2
     try:
         from .runner import Runner
         t0 = time.perf_counter()
-        if args.cluster or cfg.execution.backend == "ray":
-            from . import cluster
+        if clustered:
             res = cluster.run(cfg, out, args.cluster, args.variant, progress=True, resume_previous=resuming)
         else:
             res = Runner(cfg, out, args.variant, progress=True, resume_previous=resuming).run()
@@ -330,8 +396,18 @@ def _tune(cfg, args, out: Path) -> int:
         return 3
     except cfgmod.ConfigError as e:
         return _config_error(e)
-    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+    if out.exists() and not out.is_dir():
+        _err(f"--out {out}: is a file, not a folder; choose another --out")
+        return 2
+    if out.is_dir() and any(out.iterdir()):
         _err(f"--out {out}: is not an empty folder; choose another --out")
+        return 2
+    try:                                # before the tuning, not when its results are written
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as e:
+        _err(f"--out {out}: cannot write there: {e.strerror or e}")
         return 2
     t0 = time.perf_counter()
     try:

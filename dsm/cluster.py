@@ -51,6 +51,39 @@ def _start(address: str | None, cpus: int | None = None):
     return ray
 
 
+ADDRESSES = ("local", "auto", "ray://host:port", "host:port")
+
+
+def connect(address: str | None, cpus: int | None = None, source: str = "arguments", key: str = "--cluster"):
+    """Start (``local``) or join the Ray cluster at ``address`` before any work, so that a wrong
+    address is one line (a ConfigError of ``source`` naming ``key``; Ray's client package missing
+    is a SetupError) instead of a traceback after the results folder is written. Returns ray."""
+    from .env import SetupError
+    from .types import ConfigError
+    ray = _ray()
+    if address not in (None, "local", "auto") and not ray.is_initialized():
+        # Ray retries an unreachable host:port for minutes: knock once first
+        host, _, port = address.removeprefix("ray://").rpartition(":")
+        if not host or not port.isdigit():
+            raise ConfigError(source, key, f"expected local, auto or a Ray address host:port (ray://host:port for "
+                              f"Ray's client), got {address!r}", ADDRESSES)
+        try:
+            socket.create_connection((host, int(port)), timeout=5).close()
+        except OSError as e:
+            raise ConfigError(source, key, f"nothing answers at {host}:{port} ({e.strerror or e}); is the Ray "
+                              "cluster up?", ADDRESSES) from None
+    try:
+        return _start(address, cpus)
+    except Exception as e:            # Ray raises ConnectionError, ValueError, RuntimeError, TimeoutError...
+        msg = " ".join(str(e).split()) or type(e).__name__
+        if "requires pip package" in msg:
+            raise SetupError(f"{key} {address}: Ray's client is not installed: pip install 'ray[client]'") from None
+        if ray.is_initialized():
+            ray.shutdown()
+        raise ConfigError(source, key, f"cannot start or reach a Ray cluster at {address!r}: {msg[:300]}",
+                          ADDRESSES) from None
+
+
 def run_group(cfg, index: int, variant, threads: int, kept: dict) -> dict:
     """One map group of the plan, run in this process (a Ray worker): the runner's own stages on
     a temporary folder, returned as plain data for the driver."""

@@ -186,8 +186,10 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     report_images = choice(rep.get("images", "all"), source, "report.images", REPORT_IMAGES)
 
     motion = tuple(_parse_motion(t, source, f"motion[{i}]") for i, t in enumerate(_array_of_tables(raw, "motion", source)))
-    if any(mo.light == "turn" for mo in motion) and all(l.type not in ("directional", "scene") for l in lights):
-        raise ConfigError(source, "motion.light", "a turning sun needs a directional light", ["directional"])
+    turning = [i for i, mo in enumerate(motion) if mo.light == "turn"]
+    if turning and all(l.type not in ("directional", "scene") for l in lights):
+        raise ConfigError(source, f"motion[{turning[0]}].light", "a turning sun needs a directional [[light]]",
+                          ["directional"])
     for i, mo in enumerate(motion):
         if mo.light in ("move", "keyframes") and all(l.type not in ("spot", "point", "scene") for l in lights):
             raise ConfigError(source, f"motion[{i}].light", f"light path {mo.light!r} moves a spot or point light "
@@ -315,6 +317,8 @@ def _parse_motion(t: dict, source: str, where: str) -> MotionSpec:
                 raise ConfigError(source, f"{where}.keys[{j}]", "a keyframe needs position and target")
             out.append((vec3(k["position"], source, f"{where}.keys[{j}].position"),
                         vec3(k["target"], source, f"{where}.keys[{j}].target")))
+            if out[-1][0] == out[-1][1]:
+                raise ConfigError(source, f"{where}.keys[{j}].target", "the target equals the position")
         kw["keys"] = tuple(out)
     if kw["light"] == "turn" and "light_angle" not in t:
         raise ConfigError(source, f"{where}.light_angle", "light path 'turn' needs light_angle (degrees)")
@@ -354,6 +358,8 @@ def _parse_light_move(t: dict, path: str, source: str, where: str) -> dict:
                 raise ConfigError(source, f"{where}.light_keys[{j}]", "a light keyframe needs position", ["position"])
             out.append((vec3(k["position"], source, f"{where}.light_keys[{j}].position"),
                         vec3(k["target"], source, f"{where}.light_keys[{j}].target") if "target" in k else None))
+            if out[-1][0] == out[-1][1]:
+                raise ConfigError(source, f"{where}.light_keys[{j}].target", "the target equals the position")
         if len({tg is None for _, tg in out}) > 1:
             raise ConfigError(source, f"{where}.light_keys", "give target on every light keyframe or on none")
         kw["light_keys"] = tuple(out)

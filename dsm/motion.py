@@ -82,6 +82,11 @@ def camera_path(spec, base: Camera, bbox, scale: float = 1.0, offset=(0.0, 0.0, 
             out.append((keys[k][0] * (1 - w) + keys[k + 1][0] * w, keys[k][1] * (1 - w) + keys[k + 1][1] * w, up))
         else:
             out.append((o0, t0, up))
+        o, tg, u = out[-1]
+        fwd = np.subtract(tg, o)
+        if np.linalg.norm(np.cross(fwd, u)) <= 1e-6 * np.linalg.norm(fwd) * np.linalg.norm(u):
+            raise ValueError(f"motion {spec.label!r}: frame {i}'s camera looks along its up {tuple(map(float, u))} "
+                             "(or from its target); move the keyframes")
     return out
 
 
@@ -278,7 +283,7 @@ def run_scene(runner, sd, lights, maps, closed, extents, frame_rows: list, curve
     """The frame loop of every [[motion]] path over one scene's maps of the plan (called by the
     runner for a config with [[motion]]): rows of metrics.csv (per-case means), the rows of
     frames.csv and the flicker curves (appended to ``frame_rows`` and ``curves``), an animated
-    error image per case (images/<scene>_<light>/<case>_frames.gif)."""
+    error image per case (images/<scene>_<light>/<case>_frames.gif; none with [report] images = "none")."""
     cfg = runner.cfg
     base = Camera.from_sensor(sd.sensor)
     fp = sample_points(sd.scene, max(mo.points for mo in cfg.motion), cfg.seed, sd.diagonal)
@@ -363,7 +368,8 @@ def _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents,
             d["vstar"].append(vstar_pts)
             d["elig"].append(elig)
             d["face"].append(face)
-            d["images"].append(classes.reshape(gb.height, gb.width))
+            if cfg.report_images != "none":          # [report] images = "none": no GIF either
+                d["images"].append(classes.reshape(gb.height, gb.width))
             d["metrics"].append(mt)
             d.setdefault("lookup_ms", []).append(d_lookup)
             d["frames"].append({"frame": t, "map_built": built[-1], "n_points_visible": int(elig.sum()),
@@ -400,9 +406,10 @@ def _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents,
                 row[k] = metrics.UNDEFINED
         runner.rows.append(row)
         runner.csv.write(row)
-        folder = runner.out / "images" / figures.image_folder(meta)
-        folder.mkdir(parents=True, exist_ok=True)
-        _write_gif(folder / f"{case}_frames.gif", d["images"])
+        if d["images"]:
+            folder = runner.out / "images" / figures.image_folder(meta)
+            folder.mkdir(parents=True, exist_ok=True)
+            _write_gif(folder / f"{case}_frames.gif", d["images"])
         runner.status.append({"what": f"case {case}", "scene": sd.label, "light": m.light, "view": m.view,
                               "scheme": spec.name, "params": spec.label, "resolution": m.resolution,
                               "status": "ok" if row["n_receivers"] else "empty"})

@@ -35,13 +35,41 @@ def image_item(row: dict, classes, shade, mode: str = "all"):
     return err, classes, shadow, figures.shade_image(shade) if mode == "all" else None
 
 
-def _load(out: Path):
+def _read_rows(path: Path, notes: list, needs: str | None = None) -> list:
+    """A run's CSV as typed rows; a row cut short (a run killed while writing it) is left out and
+    noted; a file that is not the kit's is NotARun."""
+    try:
+        raw = report.read_csv(path)
+        with open(path, newline="") as fh:
+            header = next(csv.reader(fh), [])
+    except (OSError, UnicodeDecodeError, csv.Error) as e:
+        raise NotARun(f"{path}: cannot be read ({e})") from None
+    if needs and needs not in header:
+        raise NotARun(f"{path}: not a dsm {path.name} (no {needs!r} column)")
+    whole = [r for r in raw if None not in r and None not in r.values()]
+    if len(whole) < len(raw):
+        notes.append(f"{path}: {len(raw) - len(whole)} row(s) cut short (a run killed while writing them) left out")
+    try:
+        return report.typed_rows(whole)
+    except (TypeError, ValueError) as e:
+        raise NotARun(f"{path}: a cell that is not a number where one belongs ({e})") from None
+
+
+def _load(out: Path, notes: list | None = None):
     out = Path(out)
+    notes = [] if notes is None else notes
+    if (out / "tune.json").is_file() and not (out / "run.json").is_file():
+        raise NotARun(f"{out}: a dsm tune folder, not a run's: its table.md and tuned.toml are its report")
     if not (out / "metrics.csv").is_file() or not (out / "run.json").is_file():
         raise NotARun(f"{out}: not a dsm results folder (it needs metrics.csv and run.json)")
-    run = json.loads((out / "run.json").read_text())
-    rows = report.read_rows(out / "metrics.csv")
-    oracle_rows = report.read_rows(out / "oracle.csv") if (out / "oracle.csv").is_file() else []
+    try:
+        run = json.loads((out / "run.json").read_text())
+    except (OSError, ValueError) as e:
+        raise NotARun(f"{out}/run.json: not a dsm run.json ({e})") from None
+    if not isinstance(run, dict):
+        raise NotARun(f"{out}/run.json: not a dsm run.json (not a JSON object)")
+    rows = _read_rows(out / "metrics.csv", notes, "case")
+    oracle_rows = _read_rows(out / "oracle.csv", notes) if (out / "oracle.csv").is_file() else []
     return run, rows, oracle_rows
 
 
@@ -56,12 +84,18 @@ def write_report(out: Path, images=(), curves=None, plots: bool = True) -> dict:
     (saved as oracle_curves.npz); None reads that file. Returns seconds spent per part."""
     out = Path(out)
     t0 = time.perf_counter()
-    run, rows, oracle_rows = _load(out)
+    notes = []
+    run, rows, oracle_rows = _load(out, notes)
     if curves is not None:
         rates = [figures.curve_rates(*c) for c in curves]
         figures.save_curves(out / "oracle_curves.npz", rates)
     else:
-        rates = figures.load_curves(out / "oracle_curves.npz")
+        try:
+            rates = figures.load_curves(out / "oracle_curves.npz")
+        except Exception as e:          # numpy raises ValueError, OSError, zipfile's BadZipFile, KeyError...
+            notes.append(f"{out / 'oracle_curves.npz'}: unreadable ({type(e).__name__}), so the trade-off plots "
+                         "have no oracle curves")
+            rates = []
     jobs = []
     if plots and rows:
         folder = out / "plots"
@@ -82,11 +116,12 @@ def write_report(out: Path, images=(), curves=None, plots: bool = True) -> dict:
     pool = figures.run_jobs(jobs)
     t2 = time.perf_counter()
     report.write_table(out / "table.md", rows, run.get("experiment", out.name), run.get("config_file", ""),
-                       run.get("status", []), oracle_rows, _texels(run))
+                       run.get("status", []), oracle_rows, _texels(run), state=run.get("state"),
+                       planned=run.get("plan", {}).get("cases"))
     htmlpage.write_html(out / "report.html", rows, run)
     t3 = time.perf_counter()
     return {"figures": n_figures, "images": len(items), "workers": pool, "read_s": t1 - t0, "draw_s": t2 - t1,
-            "pages_s": t3 - t2}
+            "pages_s": t3 - t2, "notes": notes}
 
 
 def rebuild(out: Path, plots: bool = True) -> dict:

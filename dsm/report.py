@@ -99,7 +99,12 @@ def _typed(k, v):
 def read_rows(path) -> list[dict]:
     """metrics.csv or oracle.csv with its numbers as int and float (an empty cell: NaN): the rows
     every report section is written from, in a run and in ``dsm report``."""
-    return [{k: _typed(k, v) for k, v in r.items()} for r in read_csv(path)]
+    return typed_rows(read_csv(path))
+
+
+def typed_rows(raw: list) -> list[dict]:
+    """Rows read as text (csv.DictReader) with their numbers as int and float ('' is NaN)."""
+    return [{k: _typed(k, v) for k, v in r.items()} for r in raw]
 
 
 def progress(total: int, enabled: bool):
@@ -243,11 +248,24 @@ def oracle_md(rows: list, oracle_rows: list) -> list:
     return out
 
 
-def write_table(path: Path, rows: list, name: str, source: str, status=None, oracle_rows=(), texels=()):
+def unfinished_md(state, planned, n_rows: int) -> list:
+    """A line saying that the run stopped before its plan was done (its summary covers only the
+    cases that ran), or nothing for a complete run."""
+    if state not in ("interrupted", "running"):
+        return []
+    of = f" of the {planned} planned" if planned else ""
+    how = "was interrupted" if state == "interrupted" else "did not finish (state: running)"
+    return [f"**This run {how}: {n_rows}{of} cases ran, and everything below covers those only. "
+            "`dsm run CONFIG --out DIR --resume` runs the rest.**", ""]
+
+
+def write_table(path: Path, rows: list, name: str, source: str, status=None, oracle_rows=(), texels=(),
+                state=None, planned=None):
     """table.md: the answer first (dsm.summary), then failures, then every case, then the
-    views at equal memory, the oracles and the Pareto frontier."""
+    views at equal memory, the oracles and the Pareto frontier. ``state`` and ``planned`` (run.json's
+    state and the plan's case count) mark a run that stopped early."""
     failed = sum(1 for x in status or [] if x["status"] == "failed")
-    lines = [f"# {name}", "", f"Config: `{source}`. {len(rows)} cases" +
+    lines = [f"# {name}", "", *unfinished_md(state, planned, len(rows)), f"Config: `{source}`. {len(rows)} cases" +
              (f"; **{failed} failed** (see Failed below)" if failed else "") + ". Rates: acne = n_acne / n_gt_lit, "
              "peter-pan = n_peterpan / n_gt_shadowed, error = (acne + peter-pan) / receivers. "
              "A dash: undefined (an empty denominator), left out of every summary and plot. report.html shows "

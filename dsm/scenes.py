@@ -274,11 +274,12 @@ def far_bound(origin, target, bbox_min, bbox_max) -> float:
     return max(float(((corners - np.asarray(origin, float)) @ fwd).max()), 1e-30) * 1.01
 
 
-def posed_camera(default, camera, scale=1.0, offset=ORIGIN):
+def posed_camera(default, camera, scale=1.0, offset=ORIGIN, source="<config>"):
     """(origin, target, up, fov, near, far) of a scene's camera: the scene's own ``default`` pose
     (origin, target, up, fov, near or None, far or None, world units) with the [camera] keys that
     are given (``camera``: a CameraSpec or None) scaled by ``scale`` and moved by ``offset`` as the
-    config's light positions are."""
+    config's light positions are. A pose that cannot be looked from (the position on the target,
+    the up along the view) is a ConfigError of ``source`` naming the [camera] key."""
     o, t, up, fov, near, far = default
     if camera is not None:
         off = np.asarray(offset, float)
@@ -290,8 +291,14 @@ def posed_camera(default, camera, scale=1.0, offset=ORIGIN):
         fov = camera.fov if camera.fov is not None else fov
         near = camera.near * scale if camera.near is not None else near
         far = camera.far * scale if camera.far is not None else far
+    key = "target" if camera is not None and camera.target is not None else "position"
     if np.allclose(np.asarray(o, float), np.asarray(t, float)):
-        raise ValueError("the camera's position equals its target")
+        raise ConfigError(source, f"camera.{key}", f"the camera's position {tuple(float(c) for c in o)} equals "
+                          f"its target (the scene's own pose, where the [camera] key is not given)")
+    fwd, upv = np.subtract(t, o).astype(float), np.asarray(up, float)
+    if np.linalg.norm(np.cross(fwd, upv)) <= 1e-6 * np.linalg.norm(fwd) * np.linalg.norm(upv):
+        raise ConfigError(source, "camera.up", f"{tuple(float(c) for c in up)} is along the view direction "
+                          f"(target - position = {tuple(float(c) for c in fwd)}); give an up across it")
     return np.asarray(o, float), np.asarray(t, float), tuple(float(c) for c in up), float(fov), near, far
 
 
@@ -504,7 +511,7 @@ def load(spec: SceneSpec, camera_resolution=None, camera=None) -> SceneData:
             allv.append(np.asarray(v, float) * s + t)
         allv = np.concatenate(allv)
         o, tg, up, fv, near, far = posed_camera((np.multiply(cam_o, s) + t, np.multiply(cam_t, s) + t, (0, 0, 1),
-                                                 (fov or [40])[0], None, None), camera, s, p.translate)
+                                                 (fov or [40])[0], None, None), camera, s, p.translate, _src(spec))
         d["sensor"] = look_at_sensor(o, tg, up, fv, w, h, near,
                                      far if far is not None else far_bound(o, tg, allv.min(0), allv.max(0)))
         scene = mi.load_dict(d, optimize=False)
@@ -724,11 +731,11 @@ def _load_xml(spec, camera_resolution, camera=None):
         width = int(camera_resolution[0])
         data.sensor = _resized_sensor(sensor, width, max(1, round(width * film[1] / film[0])))
     if camera is not None:
-        data.sensor = _reposed_sensor(data.sensor, camera, data.bbox)
+        data.sensor = _reposed_sensor(data.sensor, camera, data.bbox, _src(spec))
     return data
 
 
-def _reposed_sensor(sensor, camera, bbox):
+def _reposed_sensor(sensor, camera, bbox, source="<config>"):
     """An XML scene's sensor with the [camera] pose: its film (size) kept, the keys given replaced."""
     import mitsuba as mi
     params = mi.traverse(sensor)
@@ -742,7 +749,7 @@ def _reposed_sensor(sensor, camera, bbox):
     centre = 0.5 * (np.asarray(bbox[0], float) + np.asarray(bbox[1], float))
     reach = float((centre - o) @ fwd)
     reach = reach if reach > 0 else float(np.linalg.norm(np.asarray(bbox[1], float) - np.asarray(bbox[0], float)))
-    o2, t2, up2, fov2, near2, far2 = posed_camera((o, o + fwd * reach, up, fov, near, far), camera)
+    o2, t2, up2, fov2, near2, far2 = posed_camera((o, o + fwd * reach, up, fov, near, far), camera, source=source)
     if camera.far is None and (camera.position is not None or camera.target is not None):
         far2 = far_bound(o2, t2, *bbox)
     W, H = (int(x) for x in sensor.film().size())
@@ -809,7 +816,8 @@ def _load_mesh_file(spec, width, height, camera=None):
         d["ground"] = make_mesh("ground", v, f)
     side = _normalize(a * 0.6 - b * 1.0 + up * 0.8)
     cam_o = center + np.asarray(side) * 1.6 * size
-    o, tg, upv, fv, near, far = posed_camera((cam_o, center, up, 40.0, None, None), camera, p.scale, p.translate)
+    o, tg, upv, fv, near, far = posed_camera((cam_o, center, up, 40.0, None, None), camera, p.scale, p.translate,
+                                         _src(spec))
     lo_all, hi_all = (lo, hi) if p.ground != "yes" else (np.minimum(lo, center - size * 1.5), np.maximum(hi, center + size * 1.5))
     d["sensor"] = look_at_sensor(o, tg, upv, fv, width, height, near,
                                  far if far is not None else far_bound(o, tg, lo_all, hi_all))

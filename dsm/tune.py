@@ -150,6 +150,9 @@ def parse_tune(cfg) -> TuneConfig:
     if not isinstance(temp, list) or len(temp) != 2:
         raise ConfigError(src, "tune.temperature", f"expected [start, end] in texels, got {temp!r}")
     temp = tuple(number(t, src, "tune.temperature", positive=True) for t in temp)
+    if temp[0] < temp[1]:
+        raise ConfigError(src, "tune.temperature", f"[start, end] anneals down: start must be at or above end, "
+                          f"got [{temp[0]:g}, {temp[1]:g}] (e.g. [0.25, 0.02])")
     schedule = choice(raw.get("schedule", "geometric"), src, "tune.schedule", SCHEDULES)
     seed = number(raw.get("seed", cfg.seed), src, "tune.seed", integer=True)
     batch = number(raw.get("batch", 1.0), src, "tune.batch", positive=True, maximum=1.0)
@@ -161,7 +164,7 @@ def parse_tune(cfg) -> TuneConfig:
             raise ConfigError(src, f"scheme[{i}].preset", "dsm tune tunes scheme parameters, not presets: give "
                               "the combined scheme with the preset's values (dsm schemes lists them)")
         if not tunable(get(s.name)):
-            raise ConfigError(src, "scheme.name", f"{s.name} has no continuous parameter to tune",
+            raise ConfigError(src, f"scheme[{i}].name", f"{s.name} has no continuous parameter to tune",
                               _tunable_names())
         specs.append(s)
     names = sorted({s.name for s in specs})
@@ -223,6 +226,10 @@ def parse_tune(cfg) -> TuneConfig:
         if pos == tgt:
             raise ConfigError(src, f"{w}.target", "the target equals the position")
         up = vec3(c.get("up", [0.0, 0.0, 1.0]), src, f"{w}.up", nonzero=True)
+        fwd = np.subtract(tgt, pos)
+        if np.linalg.norm(np.cross(fwd, up)) <= 1e-6 * np.linalg.norm(fwd) * np.linalg.norm(up):
+            raise ConfigError(src, f"{w}.up", f"{tuple(up)} is along the view direction (target - position); "
+                              "give an up across it (default [0, 0, 1])")
         fov = number(c.get("fov", 40.0), src, f"{w}.fov", positive=True, maximum=170.0)
         role = choice(c.get("role", "train"), src, f"{w}.role", ROLES)
         name = c.get("name", f"cam{i}")

@@ -268,6 +268,25 @@ def test_cascades_without_a_directional_light_is_a_config_error():
     assert e.value.key == "map.split"
 
 
+@pytest.mark.parametrize("camera,key", [
+    ({"target": [-99.0, 0.0, 3.0]}, "camera.target"),          # long_ground's own position
+    ({"position": [0.0, 0.0, 5.0], "target": [0.0, 0.0, 0.0]}, "camera.up"),   # down the default up
+    ({"up": [39.0, 0.0, -3.0]}, "camera.up"),                  # along long_ground's own view
+])
+def test_a_camera_pose_that_cannot_look_is_a_config_error_not_a_traceback(tmp_path, capsys, camera, key):
+    """The pose is completed by the scene's own, so only loading the scene sees it: still exit 2
+    before any work, one line naming the file and the key."""
+    from dsm.cli import main
+    cfg = tmp_path / "c.toml"
+    lines = "".join(f"{k} = {v}\n" for k, v in camera.items())
+    cfg.write_text('[[scene]]\nbuiltin = "long_ground"\n[[scheme]]\nname = "none"\n[map]\nresolution = 16\n'
+                   f'[camera]\nresolution = [8, 8]\n{lines}')
+    assert main(["run", str(cfg), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert f"{cfg}: {key}:" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()
+
+
 def test_blend_mixes_the_next_cascade_linearly_over_the_band():
     """Over the last 30 % of the first split V = (1 - w) V_0 + w V_1, w = (d - band start) / band
     (float64 here); elsewhere V is the receiver's own cascade's."""

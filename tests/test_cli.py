@@ -68,3 +68,26 @@ def test_a_failing_case_is_recorded_and_the_rest_still_run(tmp_path, monkeypatch
     assert saved["n_failed"] == 1
     with open(tmp_path / "o" / "metrics.csv", newline="") as fh:
         assert len(list(csv.DictReader(fh))) == 2
+
+
+def test_ctrl_c_while_the_report_is_written_says_how_to_finish_it(tmp_path, monkeypatch, capsys):
+    """Ctrl-C after the last case, while the figures are drawn: exit 130, every case kept, and the
+    message names `dsm report`, which then writes the report."""
+    from dsm import cli, publish
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('[[scene]]\nbuiltin = "plane_box"\n[[scheme]]\nname = "constant"\nbias = [0.01, 0.02]\n'
+                   '[map]\nresolution = 16\n[camera]\nresolution = [8, 8]\n[timing]\nrepeats = 1\n')
+    real = publish.write_report
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(publish, "write_report", interrupted)
+    out = tmp_path / "o"
+    assert cli.main(["run", str(cfg), "--out", str(out)]) == 130
+    err = capsys.readouterr().err
+    assert f"dsm report {out}" in err and "Traceback" not in err
+    assert json.loads((out / "run.json").read_text())["state"] == "complete"
+    with open(out / "metrics.csv", newline="") as fh:
+        assert len(list(csv.DictReader(fh))) == 2
+    monkeypatch.setattr(publish, "write_report", real)
+    assert cli.main(["report", str(out)]) == 0 and (out / "table.md").is_file() and (out / "report.html").is_file()

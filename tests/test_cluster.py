@@ -64,3 +64,21 @@ def test_the_execution_table_is_checked():
     raw["execution"] = {"backend": "ray", "address": "auto", "cpus_per_task": 2, "gpus_per_task": 0.25}
     ex = cfgmod.coerce(raw).execution
     assert (ex.backend, ex.address, ex.cpus_per_task, ex.gpus_per_task) == ("ray", "auto", 2.0, 0.25)
+
+
+def test_a_cluster_nobody_answers_at_is_refused_before_the_folder_is_touched(tmp_path, capsys):
+    """--cluster and [execution] address: knocked on before any work (Ray itself would retry for
+    minutes, then raise a traceback after writing run.json): exit 2, one line naming the key."""
+    from dsm.cli import main
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('[[scene]]\nbuiltin = "plane"\n[[scheme]]\nname = "none"\n[map]\nresolution = 16\n'
+                   '[camera]\nresolution = [8, 8]\n')
+    for address in ("127.0.0.1:1", "ray://127.0.0.1:1", "no-port-here"):   # port 1: nothing listens
+        assert main(["run", str(cfg), "--out", str(tmp_path / "o"), "--cluster", address]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("dsm: --cluster: ") and "ray://host:port" in err and len(err.splitlines()) == 1
+        assert "Traceback" not in err and not (tmp_path / "o").exists()
+    cfg.write_text(cfg.read_text() + '[execution]\nbackend = "ray"\naddress = "127.0.0.1:1"\n')
+    assert main(["run", str(cfg), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert f"{cfg}: execution.address: nothing answers at 127.0.0.1:1" in err and not (tmp_path / "o").exists()

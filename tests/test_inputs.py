@@ -232,7 +232,8 @@ def test_ctrl_c_is_one_line_and_exit_130(tmp_path):
     lines = [l for l in stderr.splitlines() if l.strip()]
     assert p.returncode == 130, stderr[-2000:]
     assert "Traceback" not in stderr
-    assert len(lines) == 1 and lines[0] == f"dsm: interrupted (results so far in {out}/)", lines
+    assert len(lines) == 1 and lines[0] == (f"dsm: interrupted (results so far in {out}/); "
+                                            f"`dsm run ... --out {out} --resume` runs the rest"), lines
 
 
 # ---------------------------------------------------------------- 3: variants

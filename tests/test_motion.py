@@ -50,6 +50,21 @@ def test_static_camera_and_light_flicker_zero_for_every_scheme(run_dict):
     assert len(list((res.out / "images").glob("*/0001_frames.gif"))) == 1     # in its scene-light folder
 
 
+def test_report_images_none_writes_no_frames_gif_and_the_same_numbers(run_dict):
+    """[report] images = "none" means no image at all, the motion GIF included; "errors" keeps it
+    (it is the frames' error images). The numbers do not depend on it."""
+    runs = {}
+    for images in ("none", "errors"):
+        cfg = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [32, 32]},
+                          map={"resolution": 32}, scheme=[{"name": "constant"}], report={"images": images},
+                          motion=[{"frames": 2, "camera": "dolly", "offset": [0.0, 0.3, 0.0], "points": 300}])
+        runs[images] = run_dict(cfg, images)
+    assert [p.name for p in (runs["none"].out / "images").rglob("*") if p.is_file()] == []
+    assert len(list((runs["errors"].out / "images").glob("*/0001_frames.gif"))) == 1
+    keep = ("case", "n_receivers", "n_acne", "n_peterpan", "flicker_rate", "flicker_ever")
+    assert [{k: r[k] for k in keep} for r in runs["none"].rows] == [{k: r[k] for k in keep} for r in runs["errors"].rows]
+
+
 @pytest.mark.parametrize("stabilize", [True, False])
 def test_stabilized_cascades_do_not_flicker_within_a_cascade(run_dict, stabilize):
     """Why stabilized flicker within a cascade is exactly 0: a fixed point's depth is measured from
@@ -109,10 +124,21 @@ def test_motion_config_errors_name_the_key():
     for motion, key in (({"frames": 1}, "motion[0].frames"), ({"camera": "dolly"}, "motion[0].offset"),
                         ({"camera": "zoom"}, "motion[0].camera"), ({"light": "turn"}, "motion[0].light_angle"),
                         ({"camera": "keyframes", "keys": [{"position": [0, 0, 1]}]}, "motion[0].keys"),
-                        ({"speed": 2}, "motion[0].speed")):
+                        ({"speed": 2}, "motion[0].speed"),
+                        ({"camera": "keyframes", "keys": [{"position": [0, 0, 1], "target": [0, 0, 1]},
+                                                          {"position": [0, 1, 1], "target": [0, 0, 0]}]},
+                         "motion[0].keys[0].target"),
+                        ({"light": "keyframes", "light_keys": [{"position": [0, 0, 4], "target": [0, 0, 4]},
+                                                               {"position": [1, 0, 4], "target": [0, 0, 0]}]},
+                         "motion[0].light_keys[0].target")):
         with pytest.raises(ConfigError) as e:
             config.parse(base_config(motion=[motion]), "t.toml")
         assert e.value.key == key, (motion, e.value)
+    spot = {"type": "spot", "position": [0, 0, 4], "target": [0, 0, 0]}
+    with pytest.raises(ConfigError) as e:     # the second path turns the sun, and there is none
+        config.parse(base_config(light=[spot], motion=[{"camera": "orbit", "angle": 30},
+                                                       {"light": "turn", "light_angle": 2}]), "t.toml")
+    assert e.value.key == "motion[1].light" and list(e.value.choices) == ["directional"]
     cfg = config.parse(base_config(motion=[{"camera": "orbit", "angle": 30}, {"light": "turn", "light_angle": 2}]),
                        "t.toml")
     assert [m.label for m in cfg.motion] == ["camera orbit", "sun turn 2deg"]

@@ -2,6 +2,7 @@
 metrics.csv, pooled against mean, undefined rates left out and counted, one unit per plot panel,
 ``dsm report DIR`` reproducing table.md, the comparison of two runs, and ``[report] images``."""
 import csv
+import json
 import math
 import shutil
 
@@ -208,6 +209,85 @@ def test_comparison_of_two_runs(run, tmp_path):
     first = next(line for line in md.splitlines() if line.startswith(f"| {changed['case']} |"))
     assert md.index(first) < min(md.index(f"| {r['case']} |") for r in rows if r not in (changed, gone))
     assert cli.main(["report", str(a), "--out", str(out)]) == 2
+
+
+def test_a_comparison_never_lands_in_a_run_or_a_foreign_folder(run, tmp_path, capsys):
+    """--out of dsm report A B: a run's folder, a file or a folder of other files is refused with
+    exit 2 naming --out, and nothing in it changes; an earlier comparison is replaced."""
+    from dsm import cli
+    a = tmp_path / "a"
+    shutil.copytree(run.out, a)
+    before = sorted(p.name for p in a.iterdir())
+    assert cli.main(["report", str(a), str(a), "--out", str(a)]) == 2
+    assert "--out" in capsys.readouterr().err and sorted(p.name for p in a.iterdir()) == before
+    other = tmp_path / "mine"
+    other.mkdir()
+    (other / "notes.txt").write_text("keep")
+    (tmp_path / "f.txt").write_text("keep")
+    for out in (other, tmp_path / "f.txt"):
+        assert cli.main(["report", str(a), str(a), "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"dsm: report: --out {out}: ") and len(err.strip().splitlines()) == 1
+    assert sorted(p.name for p in other.iterdir()) == ["notes.txt"] and (tmp_path / "f.txt").read_text() == "keep"
+    cmp = tmp_path / "cmp"
+    assert cli.main(["report", str(a), str(a), "--out", str(cmp)]) == 0
+    assert cli.main(["report", str(a), str(a), "--out", str(cmp)]) == 0       # a run with itself, again
+    with open(cmp / "compare.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == len(run.rows) and all(r["diff_error_rate"] in ("", "0") for r in rows)
+
+
+def test_the_table_of_an_interrupted_run_says_it_covers_only_the_cases_that_ran(run, tmp_path):
+    """A Ctrl-C'd run's table.md (written then, or by dsm report later) must not read as the
+    whole experiment's answer."""
+    from dsm import cli
+    assert "interrupted" not in (run.out / "table.md").read_text()
+    d = tmp_path / "cut"
+    shutil.copytree(run.out, d)
+    info = json.loads((d / "run.json").read_text())
+    info["state"] = "interrupted"
+    (d / "run.json").write_text(json.dumps(info))
+    with open(d / "metrics.csv", newline="") as fh:           # the first 5 cases ran
+        lines = fh.read().splitlines(keepends=True)
+    (d / "metrics.csv").write_text("".join(lines[:6]))
+    assert cli.main(["report", str(d)]) == 0
+    head = (d / "table.md").read_text().split("## Summary")[0]
+    assert f"interrupted: 5 of the {len(run.rows)} planned cases ran" in head and "--resume" in head
+
+
+def test_dsm_report_of_a_damaged_folder_is_one_line_never_a_traceback(run, tmp_path, capsys):
+    """run.json that is not JSON or not an object, a metrics.csv of another program or with text
+    in a number column: exit 2 naming the file. A last row cut short (a run killed while writing
+    it) and an unreadable oracle_curves.npz: the rest is reported, with a note naming the file."""
+    from dsm import cli
+    d = tmp_path / "d"
+
+    def damaged(name, text):
+        if d.exists():
+            shutil.rmtree(d)
+        shutil.copytree(run.out, d)
+        (d / name).write_text(text)
+        return cli.main(["report", str(d)]), capsys.readouterr().err
+    metrics_text = (run.out / "metrics.csv").read_text()
+    lines = metrics_text.splitlines(keepends=True)
+    cells = lines[1].split(",")
+    i = lines[0].split(",").index("n_acne")
+    bad_cell = ",".join(cells[:i] + ["many"] + cells[i + 1:])
+    for name, text in (("run.json", '{"state'), ("run.json", "[1, 2]"), ("metrics.csv", "a,b\n1,2\n"),
+                       ("metrics.csv", lines[0] + bad_cell)):
+        code, err = damaged(name, text)
+        assert code == 2 and err.startswith(f"dsm: report: {d / name}: ") and "Traceback" not in err, err
+        assert len(err.strip().splitlines()) == 1
+    cut = "".join(lines[:-1]) + lines[-1][:len(lines[-1]) // 2]
+    code, err = damaged("metrics.csv", cut)
+    assert code == 0 and f"note: {d / 'metrics.csv'}: 1 row(s) cut short" in err
+    assert f"{len(lines) - 2} cases" in (d / "table.md").read_text()
+    code, err = damaged("oracle_curves.npz", "not an npz")
+    assert code == 0 and f"note: {d / 'oracle_curves.npz'}: unreadable" in err and (d / "report.html").is_file()
+    (tmp_path / "tuned").mkdir()
+    (tmp_path / "tuned" / "tune.json").write_text("{}")
+    assert cli.main(["report", str(tmp_path / "tuned")]) == 2
+    assert "a dsm tune folder" in capsys.readouterr().err
 
 
 def test_report_images_key(tmp_path):

@@ -158,3 +158,19 @@ def test_a_case_key_changes_with_its_input_file_and_the_kit_version(tmp_path):
 def test_resume_and_force_exclude_each_other(tmp_path, flags):
     p = _dsm("run", "--out", tmp_path / "x", *flags)
     assert p.returncode == 2 and "not allowed with" in p.stderr
+
+
+def test_resume_into_another_experiments_folder_is_refused_and_changes_nothing(tmp_path):
+    """--resume with a config of another [experiment] name would set every case of the folder
+    aside as stale: exit 2 naming --resume and both experiments, before any work."""
+    from dsm import pipeline
+    from dsm.runner import Runner
+    out = tmp_path / "o"
+    Runner(pipeline.prepare(_cfg([0.01])), out, progress=False).run()
+    before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    other = tmp_path / "other.toml"
+    other.write_text(CONFIG.replace('name = "resume"', 'name = "another"'))
+    p = _dsm("run", other, "--out", out, "--resume")
+    assert p.returncode == 2 and "Traceback" not in p.stderr, p.stderr
+    assert p.stderr.startswith(f"dsm: --resume: {out} holds experiment 'edit'") and "'another'" in p.stderr
+    assert {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()} == before

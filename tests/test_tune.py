@@ -178,9 +178,11 @@ def test_bias_map_and_output_folder(tmp_path):
     ({"params": {"constant": ["bias", "slope"]}}, "tune.params.constant"),
     ({"params": {"dual": ["z_offset"]}}, "tune.params.dual"),
     ({"schedule": "cosine"}, "tune.schedule"),
+    ({"temperature": [0.02, 0.25]}, "tune.temperature"),      # reversed: it anneals down
     ({"bias_map": {"block": 2}}, "tune.camera"),
     ({"camera": [{"position": [1, 2, 3]}]}, "tune.camera[0].target"),
     ({"range": {"constant": {"bias": [1, 0]}}}, "tune.range.constant.bias"),
+    ({"camera": [{"position": [0, 0, 3], "target": [0, 0, 0]}]}, "tune.camera[0].up"),   # looking along up
 ])
 def test_bad_tune_tables_are_refused_before_work(tune, key):
     import dsm.tune as tu
@@ -197,7 +199,7 @@ def test_schemes_without_a_continuous_parameter_are_refused():
     from dsm.config import coerce
     with pytest.raises(ConfigError) as e:
         tu.parse_tune(coerce(_cfg({"builtin": "plane"}, [{"name": "midpoint"}])))
-    assert "constant" in e.value.choices and "midpoint" not in e.value.choices
+    assert "constant" in e.value.choices and "midpoint" not in e.value.choices and e.value.key == "scheme[0].name"
 
 
 def test_cli_tune(tmp_path):
@@ -213,6 +215,36 @@ def test_cli_tune(tmp_path):
     bad.write_text(cfg.read_text().replace("steps = 6", "steps = 0"))
     assert main(["tune", str(bad), "--out", str(tmp_path / "o2")]) == 2
     assert not (tmp_path / "o2").exists()
+
+
+def test_cli_tune_out_that_cannot_take_the_results_is_refused_before_tuning(tmp_path, capsys):
+    """--out a file, a non-empty folder or a path that cannot be made: exit 2 naming --out, before
+    any tuning (it was a traceback once the tuning had finished), and nothing there changes."""
+    from dsm.cli import main
+    cfg = tmp_path / "t.toml"
+    cfg.write_text('[[scene]]\nbuiltin = "plane_box"\n[map]\nresolution = 16\n[camera]\nresolution = 16\n'
+                   '[[scheme]]\nname = "constant"\n[tune]\nsteps = 2\n')
+    full = tmp_path / "full"
+    full.mkdir()
+    (full / "keep.txt").write_text("keep")
+    (tmp_path / "missing").write_text("a file, so nothing can be made under it")
+    for out, why in ((cfg, "is a file, not a folder"), (full, "is not an empty folder"),
+                     (tmp_path / "missing" / "o", "cannot write there")):
+        assert main(["tune", str(cfg), "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert err == f"dsm: --out {out}: {why}" + err.split(why, 1)[1] and len(err.strip().splitlines()) == 1
+    assert [p.name for p in full.iterdir()] == ["keep.txt"] and "[tune]" in cfg.read_text()
+
+
+def test_dsm_plan_checks_a_tune_table_as_dsm_tune_would(tmp_path, capsys):
+    from dsm.cli import main
+    cfg = tmp_path / "t.toml"
+    cfg.write_text('[[scene]]\nbuiltin = "plane_box"\n[map]\nresolution = 16\n[camera]\nresolution = 16\n'
+                   '[[scheme]]\nname = "constant"\n[tune]\nstepz = 2\n')
+    assert main(["plan", str(cfg)]) == 2
+    assert f"{cfg}: tune.stepz: unknown key (valid: " in capsys.readouterr().err
+    cfg.write_text(cfg.read_text().replace("stepz", "steps"))
+    assert main(["plan", str(cfg)]) == 0
 
 
 def test_cascaded_maps_are_refused():
