@@ -57,6 +57,21 @@ def screenshot(page: Path, png: Path, size=(1280, 900)) -> bool:
         drv.quit()
 
 
+def readme_table(table: str):
+    """The README's default table, between its two markers: the summary's sections as written,
+    their headings one level down (under the README's own section)."""
+    readme = ROOT / "README.md"
+    text = readme.read_text()
+    a, b = "<!-- default-table: scripts/gallery.py writes from here -->\n", "<!-- default-table: to here -->\n"
+    if a not in text or b not in text:
+        print("README.md: the default-table markers are missing; table left as it is", file=sys.stderr)
+        return
+    body = [("#" + line if line.startswith("## ") else line) for line in table.splitlines()
+            if line.strip() != "## Summary"]
+    head, rest = text.split(a, 1)
+    readme.write_text(head + a + "\n".join(body).strip("\n") + "\n" + b + rest.split(b, 1)[1])
+
+
 def main():
     args = [a for a in sys.argv[1:] if not a.startswith("--")]
     out = default_run(args[0] if args else None)
@@ -64,6 +79,7 @@ def main():
     rows = report.read_rows(out / "metrics.csv")
     # the README's table: table.md's summary sections, as the run wrote them
     (OUT / "default_table.md").write_text("\n".join(summary.summary_md(rows)) + "\n")
+    readme_table((OUT / "default_table.md").read_text())
     # the images: the room's own point light, cube view, R = 512, four schemes
     from PIL import Image
     pick = [("none", ""), ("constant", "bias=2 texel"), ("normal_offset", "offset=1.5 texel bias=0"), ("adaptive", "K=0.0001")]
