@@ -151,7 +151,7 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
                 return si.t, si.p, si.n
             full = timing.measure(full_cast, repeats)[1]
             bare = timing.measure(lambda: (sd.scene.ray_intersect_preliminary(rays, coherent=True).t,), repeats)[1]
-            del rays
+            rays = None                              # free the texel rays before the builds
             first, first_mb = _peak(timing, lambda: shadowmap.arrays(shadowmap.build(sd.scene, view, set(), extents=ext)),
                                     repeats)[1:]
             two, two_mb = _peak(timing, lambda: shadowmap.arrays(shadowmap.build(sd.scene, view, {"z2"}, extents=ext)),

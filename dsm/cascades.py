@@ -31,7 +31,6 @@ One depth function for the whole view: the distance along the light from one ref
 """
 from __future__ import annotations
 
-import csv
 import dataclasses
 import math
 import time
@@ -41,7 +40,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import lookup, metrics
+from . import lookup, metrics, report
 from .types import CascadeSpec
 from .views import MARGIN_TEXELS, View, light_frame
 
@@ -527,14 +526,7 @@ CSV_COLUMNS = ("case", "scene", "light", "cascade_layout", "scheme", "params", "
 
 def write_csv(path, rows: list):
     """cascades.csv: one row per case and cascade (undefined values: empty cells)."""
-    fmt = lambda x: (f"{x:.6g}" if metrics.defined(x) else "") if isinstance(x, float) else x
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(CSV_COLUMNS)
-        for r in rows:
-            w.writerow([fmt(r.get(c, "")) for c in CSV_COLUMNS])
-    tmp.replace(path)
+    report.write_csv(path, CSV_COLUMNS, rows)
     lines = ["# Cascades", "", "Per case and cascade (cascades.csv): its range of camera view depth, texel size, "
              "receivers, error rates and the median shadow-map texels per camera pixel (below 1: perspective "
              "aliasing). Undefined values: -.", "",

@@ -317,18 +317,27 @@ def _resume_problem(out: Path, cfg=None) -> str | None:
     return None
 
 
-def _run(cfg, args, out: Path) -> int:
+def _checked(check):
+    """``check()``'s result, or the exit code of the problem it raised (said in one line):
+    nothing to run 1, a config mistake 2, set-up missing 3."""
     try:
-        from . import pipeline
-        cfg = pipeline.prepare(cfg, args.variant, args.threads)     # every check dsm.run makes, before any work
+        return check(), None
     except cfgmod.NothingToRun as e:
         _err(e.problem)
-        return 1
+        return None, 1
     except SetupError as e:
         _err(f"setup error: {e}")
-        return 3
+        return None, 3
     except cfgmod.ConfigError as e:
-        return _config_error(e)
+        return None, _config_error(e)
+
+
+def _run(cfg, args, out: Path) -> int:
+    from . import pipeline
+    # every check dsm.run makes, before any work
+    cfg, rc = _checked(lambda: pipeline.prepare(cfg, args.variant, args.threads))
+    if rc is not None:
+        return rc
     clustered = bool(args.cluster) or cfg.execution.backend == "ray"
     if clustered:                       # reach the cluster before the folder is touched
         try:
@@ -384,18 +393,15 @@ def _run(cfg, args, out: Path) -> int:
 
 def _tune(cfg, args, out: Path) -> int:
     from . import tune as tunemod
-    try:
+    from . import pipeline
+
+    def check():
         tc = tunemod.parse_tune(cfg)                 # [tune] checked before any scene loads
-        from . import pipeline
         tc.config = pipeline.prepare(cfg, args.variant, args.threads)
-    except cfgmod.NothingToRun as e:
-        _err(e.problem)
-        return 1
-    except SetupError as e:
-        _err(f"setup error: {e}")
-        return 3
-    except cfgmod.ConfigError as e:
-        return _config_error(e)
+        return tc
+    tc, rc = _checked(check)
+    if rc is not None:
+        return rc
     if out.exists() and not out.is_dir():
         _err(f"--out {out}: is a file, not a folder; choose another --out")
         return 2

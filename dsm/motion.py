@@ -33,7 +33,6 @@ wrong becoming right) counts as flicker too, since a viewer sees it the same way
 """
 from __future__ import annotations
 
-import csv
 import dataclasses
 import math
 
@@ -41,7 +40,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import figures, metrics, pipeline, scenes, shadowmap, timing
+from . import figures, metrics, pipeline, report, scenes, shadowmap, timing
 from .cascades import Camera
 
 FRAME_COLUMNS = ("case", "motion", "scene", "light", "cascade_layout", "scheme", "params", "resolution", "filter",
@@ -426,14 +425,7 @@ def _write_gif(path, images):
 
 
 def _write_frames_csv(path, rows):
-    fmt = lambda x: (f"{x:.6g}" if metrics.defined(x) else "") if isinstance(x, float) else x
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(FRAME_COLUMNS)
-        for r in rows:
-            w.writerow([fmt(r.get(c, "")) for c in FRAME_COLUMNS])
-    tmp.replace(path)
+    report.write_csv(path, FRAME_COLUMNS, rows)
 
 
 def _write_plot(folder, curves):

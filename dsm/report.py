@@ -44,6 +44,15 @@ def atomic(path: Path):
             tmp.unlink()
 
 
+def write_csv(path: Path, columns: list, rows: list):
+    """A whole CSV file of ``rows`` in ``columns`` at once, atomically (undefined: empty cells)."""
+    with atomic(path) as tmp, open(tmp, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(columns)
+        for r in rows:
+            w.writerow([_fmt(r.get(c, "")) for c in columns])
+
+
 def write_json(path: Path, data: dict, indent=None):
     with atomic(path) as tmp:
         tmp.write_text(json.dumps(data, indent=indent, default=str))

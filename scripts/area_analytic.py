@@ -5,7 +5,7 @@ the MAE by region, RMSE, acne / peter-panning and the lookup time (warm median o
 
     PYTHONPATH=.:plugins .venv/bin/python scripts/area_analytic.py
 """
-import numpy as np, mitsuba as mi, drjit as dr
+import numpy as np, mitsuba as mi
 mi.set_variant("llvm_ad_rgb")
 import dsm.pipeline as pl
 from dsm import scenes, timing

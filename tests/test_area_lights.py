@@ -1,7 +1,6 @@
 """Area lights: the Monte Carlo reference against an analytic visible fraction, the adaptive
 sampler's spending and early stops, PCSS's penumbra estimate against similar triangles, point
 lights' reference cost unchanged, soft metrics by hand, configs and a run end to end."""
-import json
 
 import drjit as dr
 import mitsuba as mi

@@ -1,7 +1,6 @@
 """Bad input: a clear error naming the file, the key and the valid choices, before any work."""
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 

@@ -1,6 +1,5 @@
 """Every experiment in experiments/ and the built-in default runs at tiny resolution (no skip list)."""
 import dataclasses
-from pathlib import Path
 
 import pytest
 

@@ -1,5 +1,4 @@
 """Second layer, culling and closedness, against layers traced in float64; seed 000's figure 5 as checked numbers."""
-from pathlib import Path
 
 import numpy as np
 import pytest

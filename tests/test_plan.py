@@ -1,5 +1,4 @@
 """The plan: cases, exact ray counts, layers only where a scheme needs them, tiles that fit memory."""
-import json
 import subprocess
 import sys
 

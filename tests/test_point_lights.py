@@ -1,5 +1,4 @@
 """Point lights: paraboloid, dual-paraboloid and cube views (seed 001; seed 004 section 3.2)."""
-import math
 
 import numpy as np
 import pytest

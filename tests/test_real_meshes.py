@@ -1,6 +1,5 @@
 """Real meshes (../shared/meshes): every mesh classified, nothing NaN, one config for all scales."""
 import dataclasses
-import math
 
 import pytest
 

@@ -10,7 +10,6 @@ import time
 
 import pytest
 
-from dsm import report
 from dsm import figures
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parent.parent
@@ -130,7 +129,7 @@ def test_an_edited_config_reruns_changed_cases_and_lists_stale_ones(tmp_path):
     assert {s["key"] for s in res.run["stale_cases"]} == {keys["case 0001"], keys["case 0002"]}
     rows = _rows(out / "metrics.csv")
     assert [(r["case"], r["params"]) for r in rows] == [("0001", "bias=0.05"), ("0002", "bias=0.2")]
-    fresh = Runner(pipeline.prepare(_cfg([0.05, 0.2], ("constant",))), tmp_path / "fresh", progress=False).run()
+    Runner(pipeline.prepare(_cfg([0.05, 0.2], ("constant",))), tmp_path / "fresh", progress=False).run()
     assert _counts(rows) == _counts(_rows(tmp_path / "fresh" / "metrics.csv"))
     # the stale cases' images are kept aside, the kept case's images follow its new id
     folder = figures.image_folder(rows[0])           # images/<scene>_<light>/
