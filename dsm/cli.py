@@ -338,6 +338,9 @@ def _run(cfg, args, out: Path) -> int:
     cfg, rc = _checked(lambda: pipeline.prepare(cfg, args.variant, args.threads))
     if rc is not None:
         return rc
+    if "tune" in (cfg.raw or {}):
+        print("dsm: note: the [tune] table is read by `dsm tune`; `dsm run` measures the schemes as given",
+              file=sys.stderr)
     clustered = bool(args.cluster) or cfg.execution.backend == "ray"
     if clustered:                       # reach the cluster before the folder is touched
         try:

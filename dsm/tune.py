@@ -230,7 +230,7 @@ def parse_tune(cfg) -> TuneConfig:
         if np.linalg.norm(np.cross(fwd, up)) <= 1e-6 * np.linalg.norm(fwd) * np.linalg.norm(up):
             raise ConfigError(src, f"{w}.up", f"{tuple(up)} is along the view direction (target - position); "
                               "give an up across it (default [0, 0, 1])")
-        fov = number(c.get("fov", 40.0), src, f"{w}.fov", positive=True, maximum=170.0)
+        fov = number(c.get("fov", 40.0), src, f"{w}.fov", positive=True, maximum=179.0)
         role = choice(c.get("role", "train"), src, f"{w}.role", ROLES)
         name = c.get("name", f"cam{i}")
         if not isinstance(name, str) or not name:
