@@ -53,7 +53,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import spawn
+from . import lookup, spawn
 from .views import ParaboloidView, PerspectiveView, CubeView, light_frame
 
 SHAPES = ("rectangle", "disk", "sphere", "emitter")
@@ -279,14 +279,6 @@ def _grid(m: int) -> tuple:
     return m // a, a
 
 
-def _key(p):
-    bits = [dr.reinterpret_array(mi.UInt32, c) for c in (p.x, p.y, p.z)]
-    h = bits[0] * 0x9E3779B1
-    h = (h ^ (h >> 15)) + bits[1] * 0x85EBCA77
-    h = (h ^ (h >> 13)) + bits[2] * 0xC2B2AE3D
-    return h ^ (h >> 16)
-
-
 def visible(scene, p, n, delta, geom: Geometry, u, v):
     """Whether the light's sample (u, v) is visible from receivers at ``p`` (normals ``n`` on
     the visible side, spawn offsets ``delta``): above the tangent plane, in front of a one-sided
@@ -347,7 +339,7 @@ def reference(scene, si, n_rx, geom: Geometry, magnitude: float, seed: int = 7, 
     count = dr.width(si.p)
     p_all = mi.Point3f(si.p)
     delta_all = spawn.error_bound(si, dr.opaque(mi.Float, float(magnitude)))
-    key_all = _key(p_all)
+    key_all = lookup.position_key(p_all)
     dr.eval(p_all, delta_all, key_all)
     hits = np.zeros(count, np.int64)
     samples = np.zeros(count, np.int64)

@@ -285,6 +285,11 @@ def _out_problem(out: Path, force: bool, bench: bool = False) -> str | None:
             shutil.rmtree(out)
         except OSError as e:
             return f"--force: cannot clear {out}: {e.strerror or e}"
+    return _unwritable(out)
+
+
+def _unwritable(out: Path) -> str | None:
+    """Why files cannot be written into ``out`` (None if they can), made if missing."""
     try:
         out.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryFile(dir=out):
@@ -309,12 +314,7 @@ def _resume_problem(out: Path, cfg=None) -> str | None:
     if cfg is not None and prev.get("experiment") not in (None, cfg.name):
         return (f"--resume: {out} holds experiment {prev['experiment']!r} (config {prev.get('config_file') or '?'}), "
                 f"not {cfg.name!r} ({cfg.source}); resume it with its own config or choose another --out")
-    try:
-        with tempfile.TemporaryFile(dir=out):
-            pass
-    except OSError as e:
-        return f"--out {out}: cannot write there: {e.strerror or e}"
-    return None
+    return _unwritable(out)
 
 
 def _checked(check):
@@ -411,12 +411,9 @@ def _tune(cfg, args, out: Path) -> int:
     if out.is_dir() and any(out.iterdir()):
         _err(f"--out {out}: is not an empty folder; choose another --out")
         return 2
-    try:                                # before the tuning, not when its results are written
-        out.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=out):
-            pass
-    except OSError as e:
-        _err(f"--out {out}: cannot write there: {e.strerror or e}")
+    problem = _unwritable(out)          # before the tuning, not when its results are written
+    if problem:
+        _err(problem)
         return 2
     t0 = time.perf_counter()
     try:

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from . import metrics
-from .report import case_time, pareto_front
+from .report import atomic, case_time, pareto_front
 
 LINTHRESH = 1e-4          # symlog: linear below this rate
 MAX_LEGEND = 8            # entries per panel
@@ -48,14 +48,8 @@ def image_paths(row) -> tuple:
 
 
 def _atomic_save(path: Path, save):
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
+    with atomic(path) as tmp:
         save(tmp)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
 
 
 # ------------------------------------------------------------------ case images

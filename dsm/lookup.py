@@ -123,7 +123,12 @@ def nearest_tap(rx: Receiver, smap) -> Tap:
 def receiver_key(rx: Receiver):
     """A per-receiver integer from its own position's float bits: a receiver's jitter does not
     change when the set of receivers around it changes."""
-    bits = [dr.reinterpret_array(mi.UInt32, c) for c in (rx.p_world.x, rx.p_world.y, rx.p_world.z)]
+    return position_key(rx.p_world)
+
+
+def position_key(p):
+    """An integer per point from its float bits (a hash of x, y, z): the same point, the same key."""
+    bits = [dr.reinterpret_array(mi.UInt32, c) for c in (p.x, p.y, p.z)]
     h = bits[0] * 0x9E3779B1
     h = (h ^ (h >> 15)) + bits[1] * 0x85EBCA77
     h = (h ^ (h >> 13)) + bits[2] * 0xC2B2AE3D
@@ -166,9 +171,9 @@ PCSS_MAX_TEXELS = 64.0     # widest search and filter region, in texels
 PCSS_NEAR = 0.125          # the search region's near depth, at least this fraction of the receiver's
 
 
-def _grid(n: int, width):
-    """Offsets (texels) of an n x n grid of cells spanning ``width`` texels, centred on 0."""
-    return [((a + 0.5) / n - 0.5) * width for a in range(n)]
+def _grid(n: int):
+    """Offsets of the cell centres of an n x n grid one unit wide, centred on 0."""
+    return [(a + 0.5) / n - 0.5 for a in range(n)]
 
 
 def pcss_estimate(scheme, prm, rx: Receiver, smap):
@@ -190,7 +195,7 @@ def pcss_estimate(scheme, prm, rx: Receiver, smap):
     search = dr.clip(L * (d - z_n) / (z_n * rx.texel_world), 1.0, PCSS_MAX_TEXELS)
     total = dr.zeros(mi.Float, dr.width(d))
     count = dr.zeros(mi.Float, dr.width(d))
-    offs = _grid(PCSS_SEARCH, 1.0)
+    offs = _grid(PCSS_SEARCH)
     for a in offs:
         for b in offs:
             tap = tap_at(rx, smap, rx.u_map + a * search, rx.v_map + b * search)
@@ -209,7 +214,7 @@ def pcss(scheme, prm, rx: Receiver, smap):
     _, width, found = pcss_estimate(scheme, prm, rx, smap)
     w = dr.clip(width, 1.0, PCSS_MAX_TEXELS)
     vis = dr.zeros(mi.Float, dr.width(rx.u_map))
-    offs = _grid(PCSS_FILTER, 1.0)
+    offs = _grid(PCSS_FILTER)
     for a in offs:
         for b in offs:
             tap = tap_at(rx, smap, rx.u_map + a * w, rx.v_map + b * w)

@@ -347,13 +347,18 @@ def _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents,
         elig, vstar_pts, n_cam = points_frame(sd.scene, pts, cam, light, view, magnitude, cache_vstar.get(light))
         cache_vstar = {light: vstar_pts}             # the fixed points' V*: shared while the light stays
         stored = {fmt: pipeline.store(smap, fmt) for fmt in cfg.map.format}
+        # per stored format (its depth function): the fixed points and the frame's receivers, as
+        # lazy expressions (each lookup below still computes them in its own, timed, kernel)
+        has_rx = setup.p is not None and len(setup.pixels)
+        rx_of = {fmt: (pipeline.receivers(sm.view, dataclasses.replace(setup, p=pts.p, n=n_cam), sd.diagonal),
+                       pipeline.receivers(sm.view, setup, sd.diagonal) if has_rx else None)
+                 for fmt, sm in stored.items()}
         for (spec, filt, fmt) in keys:
             sm = stored[fmt]
-            rx_pts = pipeline.receivers(sm.view, dataclasses.replace(setup, p=pts.p, n=n_cam), sd.diagonal)
+            rx_pts, rx = rx_of[fmt]
             v_pts = np.asarray(pipeline.visibility(spec, rx_pts, sm, filt, cfg.seed)[0].numpy(), np.float64)
             face = np.asarray(rx_pts.face.numpy(), np.int64)
-            if setup.p is not None and len(setup.pixels):
-                rx = pipeline.receivers(sm.view, setup, sd.diagonal)
+            if has_rx:
                 (v, tap), lt = timing.measure(lambda: pipeline.visibility(spec, rx, sm, filt, cfg.seed), 0)
                 v_np, tap_np = v.numpy(), tap.numpy()
                 d_lookup = lt.ms

@@ -204,12 +204,7 @@ ORACLE_COLUMNS = ["scene", "light", "view", "resolution", "culling", "format", "
 
 def write_oracle_csv(path: Path, rows: list):
     """oracle.csv: one row per map, stored format and lambda (written atomically)."""
-    with atomic(path) as tmp:
-        with open(tmp, "w", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(ORACLE_COLUMNS)
-            for r in rows:
-                w.writerow([_fmt(r.get(c, "")) for c in ORACLE_COLUMNS])
+    write_csv(path, ORACLE_COLUMNS, rows)
 
 
 def objective(r, lam: float = 1.0) -> float:

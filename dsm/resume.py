@@ -25,10 +25,8 @@ import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-# metrics.csv columns read back as text; every other column is a number ("" is undefined: NaN)
-TEXT_COLUMNS = {"case", "scene", "light", "view", "scheme", "culling", "preset", "params", "filter", "format",
-                "cascade_layout",
-                "sweep_key"}
+from . import report
+
 _FILE_HASHES: dict = {}
 
 
@@ -128,7 +126,7 @@ def parse_row(row: dict) -> dict:
     """A metrics.csv row read back with its numbers as numbers (an empty number cell: NaN)."""
     out = {}
     for k, v in row.items():
-        if k in TEXT_COLUMNS or k is None:
+        if k in report.TEXT_COLUMNS or k is None:     # the columns read back as text
             out[k] = v
             continue
         if v == "":

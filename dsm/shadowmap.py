@@ -142,12 +142,11 @@ def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool
     as a search evaluated step by step.
 
     ``extents``: :func:`dsm.spawn.shape_extents` of the scene, computed once per scene by the
-    caller so that a timed build holds no pass over the meshes (computed here if absent).
+    caller so that a timed build holds no pass over the meshes (:func:`build` makes them if absent).
     Returns (z1, shape1, slope or None, z2 or None, rays by kind, unfinished texels, re-hits).
     """
     bb = scene.bbox()
     magnitude = dr.opaque(mi.Float, float(np.max(np.abs(np.concatenate([np.ravel(bb.min), np.ravel(bb.max)])))))
-    extents = spawn.shape_extents(scene) if extents is None else extents
     n = view.n_texels - first if count is None else count
     ray = view.texel_rays(first, n)
     modes = mi.UInt32(np.asarray(cull_modes, np.uint32))
@@ -234,6 +233,8 @@ def build(scene, view, needs, culling: str = "none", cull_modes=None, tile: int 
     unknown = set(needs) - set(LAYERS)
     if unknown:
         raise ValueError(f"unknown map attributes {sorted(unknown)} (valid: {', '.join(LAYERS)})")
+    if extents is None and is_layered(needs, cull_modes):
+        extents = spawn.shape_extents(scene)        # once for every tile (callers pass them, once per scene)
     n = view.n_texels
     tile = n if not tile or tile >= n else int(tile)
     if tile == n:

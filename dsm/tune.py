@@ -54,6 +54,7 @@ import mitsuba as mi
 import numpy as np
 
 from . import lookup
+from .report import objective        # (n_acne + lambda n_peterpan) / n_receivers, NaN without receivers
 from . import pipeline as pl
 from .schemes.base import no_shift
 from .types import (DEFAULT_CAMERA, ConfigError, Length, SchemeSpec, as_list, check_keys, choice, describe_params,
@@ -78,11 +79,6 @@ def tunable(module) -> tuple:
     """The continuous parameters of a scheme module (Length, float): the ones tuning can move."""
     return tuple(f.name for f in dataclasses.fields(module.Params)
                  if f.type in ("Length", Length, "float", float))
-
-
-def _is_length(module, name) -> bool:
-    f = {f.name: f for f in dataclasses.fields(module.Params)}[name]
-    return f.type in ("Length", Length)
 
 
 def _valid_min(module, name):
@@ -489,11 +485,6 @@ def _counts(acne, pp, n, lit) -> dict:
     return {"n_receivers": n, "n_gt_lit": lit, "n_gt_shadowed": sh, "n_acne": acne, "n_peterpan": pp,
             "acne_rate": acne / lit if lit else nan, "peterpan_rate": pp / sh if sh else nan,
             "error_rate": (acne + pp) / n if n else nan}
-
-
-def objective(counts: dict, lam: float) -> float:
-    n = counts["n_receivers"]
-    return (counts["n_acne"] + lam * counts["n_peterpan"]) / n if n else float("nan")
 
 
 def _sync_clock():
@@ -962,8 +953,6 @@ def _no_nan(o):
 
 
 def _json_default(o):
-    if isinstance(o, Param):
-        return dataclasses.asdict(o)
     if isinstance(o, (np.floating, np.integer)):
         return o.item()
     return str(o)

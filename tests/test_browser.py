@@ -22,7 +22,7 @@ def _chrome():
     driver = shutil.which("chromedriver")
     if not browser or not driver:
         pytest.skip("Chromium or its driver is missing (as root: apt-get install chromium chromium-driver; "
-                    "scripts/setup does it)")
+                    "scripts/test does it)")
     opts = Options()
     opts.binary_location = browser
     for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--window-size=1280,900",
