@@ -9,7 +9,11 @@ Warm medians after a JIT warm-up; ``dr.sync_thread()`` around every clock read.
 (4) Cost against resolution (``scaling``, up to 8192^2), each map cast in the tiles the memory
 budget allows (as ``dsm plan`` sizes them), with the exponent of time against texels fitted in
 log-log (1: linear in texels). (5) Throughput of a whole sweep in cases per second, run here
-and on a local two-worker Ray cluster (``sweep``; needs ``dsm[cluster]``).
+and on a local two-worker Ray cluster (``sweep``; needs ``dsm[cluster]``). (6) One frame: a
+1024^2 map of the largest scene plus the nearest lookup of every single-layer scheme over the
+visible pixels of a 1024^2 camera, timed three ways: wall clock (Python's tracing included),
+kernel time (the sum of the kernels' own execution times from Dr.Jit's kernel history) and a
+``dr.freeze``-recorded frame replayed (tracing removed), where freezing works.
 A benchmark, not a test: results go to bench.md and bench.json.
 """
 from __future__ import annotations
@@ -117,8 +121,94 @@ def sweep_throughput(out: Path, workers: int = 2) -> dict:
             "speedup": local_s / ray_s, "rows_equal": same, "nodes": res.run["nodes"]}
 
 
+FRAME_SCHEMES = ("none", "constant", "slope_scaled", "normal_angle", "normal_offset", "receiver_plane", "adaptive",
+                 "adaptive_tap", "combined")     # every scheme that reads one layer (no z2, no culling)
+
+
+def _kernel_ms(fn, repeats):
+    """Median over warm calls of the summed execution time of the kernels one call launches."""
+    import drjit as dr
+    from . import timing
+    timing._run(fn)                                       # cold: compiled here, not counted
+    sums, kernels = [], 0
+    for _ in range(repeats):
+        dr.kernel_history_clear()
+        timing._run(fn)
+        hist = [k for k in dr.kernel_history() if k.get("type") == dr.KernelType.JIT]
+        sums.append(sum(k.get("execution_time", 0.0) for k in hist))
+        kernels = len(hist)
+    dr.kernel_history_clear()
+    return float(np.median(sums)), kernels
+
+
+def frame_cost(spec, light, R: int = 1024, camera: int = 1024, repeats: int = 5) -> dict:
+    """(6): one frame's map build and single-layer lookups, as wall, kernel and frozen time."""
+    import copy
+    import time
+
+    import drjit as dr
+    import mitsuba as mi
+
+    from . import lookup, scenes, schemes, shadowmap, timing
+    from .gbuffer import cast
+    from .pipeline import make_view, points_np
+    sd = scenes.load(spec, (camera, camera))
+    gb = cast(sd.scene, sd.sensor, camera, camera)
+    pix = mi.UInt32(np.flatnonzero(gb.hit).astype(np.uint32))
+    p, n = dr.gather(mi.Point3f, gb.p, pix), dr.gather(mi.Vector3f, gb.n, pix)
+    dr.eval(p, n)
+    view = make_view(light, R, points_np(p), sd.bbox)
+    mods = [schemes.get(name) for name in FRAME_SCHEMES]
+    needs = set().union(*(set(m.NEEDS) for m in mods))
+    prms = [m.Params() for m in mods]
+    rays = view.texel_rays(0, R * R)
+    dr.eval(rays)
+
+    def bare():
+        return (sd.scene.ray_intersect_preliminary(rays, coherent=True).t,)
+
+    # the view's Dr.Jit values are the frame's inputs (a frozen function sees only its arguments)
+    state = {k: v for k, v in vars(view).items() if dr.is_array_v(v)}
+
+    def frame(scene, state, p, n):
+        v = copy.copy(view)
+        vars(v).update(state)
+        smap = shadowmap.build(scene, v, needs)
+        rx = lookup.Receiver.make(v, p, n, sd.diagonal)
+        return tuple(lookup.visibility(m, prm, rx, smap)[0] for m, prm in zip(mods, prms)) + (smap.z1,)
+
+    args = (sd.scene, state, p, n)
+    wall = timing.measure(lambda: frame(*args), repeats)[1]
+    kernel_ms, kernels = _kernel_ms(lambda: frame(*args), repeats)
+    bare_kernel_ms, _ = _kernel_ms(bare, repeats)
+    row = {"scene": spec.label, "map": R, "camera": camera,
+           "receivers": dr.width(p), "schemes": list(FRAME_SCHEMES), "wall_ms": wall.ms,
+           "compile_ms": wall.compile_ms, "kernel_ms": kernel_ms, "kernels": kernels,
+           "bare_kernel_ms": bare_kernel_ms, "bare_wall_ms": timing.measure(bare, repeats)[1].ms}
+    try:                                                  # the frame recorded once, then replayed
+        frozen = dr.freeze(frame)
+        for _ in range(3):                                # record, then replays
+            out = frozen(*args)
+            dr.eval(*out)
+        ref = frame(*args)
+        dr.eval(*ref)
+        same = all(bool(dr.all(a == b)) for a, b in zip(out, ref))
+        ts = []
+        for _ in range(repeats):
+            dr.sync_thread()
+            t0 = time.perf_counter()
+            out = frozen(*args)
+            dr.eval(*out)
+            dr.sync_thread()
+            ts.append((time.perf_counter() - t0) * 1e3)
+        row.update(frozen_ms=float(np.median(ts)), frozen_same=same)
+    except Exception as exc:                              # noqa: BLE001 (reported, not hidden)
+        row.update(frozen_ms=None, frozen_error=f"{type(exc).__name__}: {str(exc).splitlines()[0][:200]}")
+    return row
+
+
 def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int = 5, meshes: Path | None = None,
-              variant: str | None = None, scaling_resolutions=(), sweep: bool = False) -> dict:
+              variant: str | None = None, scaling_resolutions=(), sweep: bool = False, frame: bool = True) -> dict:
     import drjit as dr
     import mitsuba as mi
 
@@ -158,6 +248,15 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
                                 repeats)[1:]
             cull, cull_mb = _peak(timing, lambda: shadowmap.arrays(shadowmap.build(
                 sd.scene, view, {"z2"}, "back_closed", per_shape, extents=ext)), repeats)[1:]
+            # the same three as kernel time (the kernels' own execution times summed; no tracing)
+            rays = view.texel_rays(0, R * R)
+            dr.eval(rays)
+            k_bare = _kernel_ms(lambda: (sd.scene.ray_intersect_preliminary(rays, coherent=True).t,), repeats)[0]
+            rays = None
+            k_first = _kernel_ms(lambda: shadowmap.arrays(shadowmap.build(sd.scene, view, set(), extents=ext)),
+                                 repeats)[0]
+            k_two = _kernel_ms(lambda: shadowmap.arrays(shadowmap.build(sd.scene, view, {"z2"}, extents=ext)),
+                               repeats)[0]
             builds.append({"scene": spec.label, "resolution": R, "ray_intersect_ms": full.ms, "bare_ms": bare.ms,
                            "two_culled_ms": cull.ms, "two_culled_over_first": cull.ms / first.ms,
                            "two_over_bare": two.ms / bare.ms, "two_culled_over_bare": cull.ms / bare.ms,
@@ -166,7 +265,8 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
                            "two_layer_ms": two.ms, "first_over_bare": first.ms / bare.ms,
                            "two_over_first": two.ms / first.ms, "mrays_per_s": R * R / bare.ms / 1e3,
                            "first_peak_mb": first_mb, "two_peak_mb": two_mb,
-                           "first_compile_ms": first.compile_ms, "two_compile_ms": two.compile_ms})
+                           "first_compile_ms": first.compile_ms, "two_compile_ms": two.compile_ms,
+                           "kernel_bare_ms": k_bare, "kernel_first_ms": k_first, "kernel_two_ms": k_two})
             if R == 1024:
                 smap = shadowmap.build(sd.scene, view, {"z2", "slope"}, extents=ext)
                 rx = lookup.Receiver.make(view, p, n, sd.diagonal)
@@ -192,6 +292,11 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
     result = {"variant": variant, "threads": dr.thread_count(), "repeats": repeats, "builds": builds,
               "lookups": lookups, "dou_table1_ms": DOU_TABLE1, "scaling": scale, "exponents": exponents,
               "budget_mb": budget / 2 ** 20}
+    if frame:
+        specs = _scenes(meshes)
+        result["frame"] = frame_cost(specs[-1], LightSpec("directional", direction=(0.25, -1.0, 0.15))
+                                     if not specs[-1].builtin else LightSpec("directional", direction=(-0.4, -0.3, -1.0)),
+                                     repeats=max(repeats, 5))
     if sweep:
         result["sweep"] = sweep_throughput(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -224,6 +329,16 @@ def _markdown(r) -> str:
                      f"{b['two_layer_ms']:.2f} | {b['two_over_first']:.2f} | {b['two_over_bare']:.2f} | "
                      f"{b['two_culled_ms']:.2f} | {b['two_culled_over_first']:.2f} | "
                      f"{b['two_culled_over_bare']:.2f} |")
+    lines += ["", "The same builds as kernel time (each kernel's own execution time from Dr.Jit's kernel "
+              "history, summed over the kernels of one build; Python's tracing and launch overhead excluded):", "",
+              "| scene | R | preliminary ms | first ms | two ms | two / first | two / preliminary |",
+              "|---" * 7 + "|"]
+    for b in r["builds"]:
+        if "kernel_two_ms" in b:
+            lines.append(f"| {b['scene']} | {b['resolution']} | {b['kernel_bare_ms']:.3f} | "
+                         f"{b['kernel_first_ms']:.3f} | {b['kernel_two_ms']:.3f} | "
+                         f"{b['kernel_two_ms'] / b['kernel_first_ms']:.2f} | "
+                         f"{b['kernel_two_ms'] / b['kernel_bare_ms']:.2f} |")
     lines += ["", "Weiskopf & Ertl, Table 1: the dual map's build costs about twice the single map's.", "",
               "## (2) Lookup time per scheme (1024^2 map, 512^2 camera) as a ratio to constant bias, "
               "and (3) its peak memory", "",
@@ -249,6 +364,20 @@ def _markdown(r) -> str:
                   "| scene | first layer | two layers |", "|---|---|---|"]
         for label, e in r["exponents"].items():
             lines.append(f"| {label} | {e['first']:.3f} | {e['two']:.3f} |")
+    if r.get("frame"):
+        f = r["frame"]
+        frozen = (f"{f['frozen_ms']:.3f} ms (replays equal to a traced frame: {f['frozen_same']})"
+                  if f.get("frozen_ms") is not None else f"not measured ({f.get('frozen_error')})")
+        lines += ["", f"## (6) One frame: a {f['map']}^2 map of {f['scene']} and every single-layer scheme's "
+                  f"nearest lookup over a {f['camera']}^2 camera ({f['receivers']} visible pixels)", "",
+                  f"Schemes: {', '.join(f['schemes'])}.", "",
+                  "| measure | ms |", "|---|---|",
+                  f"| kernel time (sum of the {f['kernels']} kernels' execution times) | {f['kernel_ms']:.3f} |",
+                  f"| frozen frame replayed (dr.freeze; tracing removed) | {frozen} |",
+                  f"| wall clock, Python's tracing included | {f['wall_ms']:.3f} |",
+                  f"| bare ray_intersect_preliminary of the map's rays, kernel time | {f['bare_kernel_ms']:.3f} |",
+                  f"| bare ray_intersect_preliminary, wall clock | {f['bare_wall_ms']:.3f} |",
+                  f"| compile (cold frame) | {f['compile_ms']:.0f} |"]
     if r.get("sweep"):
         w = r["sweep"]
         lines += ["", "## (5) Sweep throughput: a local run against a local Ray cluster", ""]

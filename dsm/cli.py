@@ -79,6 +79,8 @@ def _parser():
     b.add_argument("--scaling", default="1024,2048,4096,8192",
                    help="map resolutions of the cost-against-resolution table, tiled within the memory budget "
                         "('' to skip; default 1024,2048,4096,8192)")
+    b.add_argument("--no-frame", action="store_true",
+                   help="skip the one-frame cost (map and every single-layer lookup, kernel and frozen time)")
     b.add_argument("--no-sweep", action="store_true",
                    help="skip the sweep throughput (local run against a local two-worker Ray cluster)")
     t = sub.add_parser("tune", help="tune scheme parameters (and a learned bias map) by gradient: a config's [tune]")
@@ -166,7 +168,8 @@ def _bench(args) -> int:
         _err(problem)
         return 2
     try:
-        run_bench(Path(args.out), res, args.repeats, args.meshes, args.variant, scale, not args.no_sweep)
+        run_bench(Path(args.out), res, args.repeats, args.meshes, args.variant, scale, not args.no_sweep,
+                  not args.no_frame)
     except SetupError as e:
         _err(f"setup error: {e}")
         return 3

@@ -11,6 +11,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from . import spawn
+
 
 @dataclass
 class GBuffer:
@@ -35,6 +37,6 @@ def cast(scene, sensor, width: int, height: int) -> GBuffer:
     n = mi.Vector3f(si.n) * dr.sign(dr.dot(si.n, toward_cam))
     ns = mi.Vector3f(si.sh_frame.n) * dr.sign(dr.dot(si.sh_frame.n, toward_cam))
     valid = si.is_valid()
-    shape = dr.select(valid, pi.shape_index, 0xFFFFFFFF)
+    shape = spawn.hit_shape(pi, valid, spawn.shape_table(scene))
     dr.eval(si, n, ns, shape)
     return GBuffer(width, height, si, mi.Point3f(si.p), n, ns, shape, valid.numpy().astype(bool))

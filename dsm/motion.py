@@ -40,7 +40,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import figures, metrics, pipeline, report, scenes, shadowmap, timing
+from . import figures, metrics, pipeline, report, scenes, shadowmap, spawn, timing
 from .cascades import Camera
 
 FRAME_COLUMNS = ("case", "motion", "scene", "light", "cascade_layout", "scheme", "params", "resolution", "filter",
@@ -183,7 +183,8 @@ def sample_points(scene, count: int, seed: int, diagonal: float) -> FixedPoints:
     ok &= np.asarray(pi.t.numpy()) < 2 * delta
     idx = mi.UInt32(np.flatnonzero(ok).astype(np.uint32))
     si = dr.gather(mi.SurfaceInteraction3f, si, idx)
-    shape = np.asarray(dr.gather(mi.UInt32, pi.shape_index, idx).numpy(), np.int64)
+    shape = np.asarray(dr.gather(mi.UInt32, spawn.hit_shape(pi, pi.is_valid(), spawn.shape_table(scene)), idx).numpy(),
+                       np.int64)
     prim = np.asarray(dr.gather(mi.UInt32, pi.prim_index, idx).numpy(), np.int64)
     dr.eval(si)
     return FixedPoints(si, mi.Point3f(si.p), mi.Vector3f(si.n), shape, prim)
@@ -202,7 +203,7 @@ def points_seen(scene, fp: FixedPoints, cam: Camera):
     d = dr.normalize(fp.p - o)
     pi = scene.ray_intersect_preliminary(mi.Ray3f(o + d * 0, d), coherent=False)
     t = np.asarray(pi.t.numpy(), np.float64)
-    same = (np.asarray(pi.shape_index.numpy(), np.int64) == fp.shape) & \
+    same = (np.asarray(spawn.hit_shape(pi, pi.is_valid(), spawn.shape_table(scene)).numpy(), np.int64) == fp.shape) & \
         (np.asarray(pi.prim_index.numpy(), np.int64) == fp.prim)
     seen = in_frustum & pi.is_valid().numpy().astype(bool) & (same | (t >= dist * (1 - 1e-4)))
     oc = mi.Vector3f(*(dr.opaque(mi.Float, float(c)) for c in cam.origin))

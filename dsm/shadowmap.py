@@ -50,12 +50,13 @@ class ShadowMap:
         return self.view.resolution
 
 
-def hit_geometry(pi, ray, valid, tables=None):
+def hit_geometry(pi, ray, valid, shape, tables=None):
     """(p, n) of each valid hit: the point interpolated on the triangle and its geometric
     normal. From the meshes' buffers where ``tables`` (:func:`dsm.spawn.shape_extents`) has
-    them (every shape a mesh), else from a minimal surface interaction: the same bits."""
+    them (every shape a mesh), else from a minimal surface interaction: the same bits.
+    ``shape``: each hit's index into ``scene.shapes()`` (:func:`dsm.spawn.hit_shape`)."""
     if tables is not None and getattr(tables, "positions", None) is not None:
-        return spawn.mesh_hit(pi, tables, valid)
+        return spawn.mesh_hit(pi, shape, tables, valid)
     si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.Minimal, active=valid)
     return si.p, si.n
 
@@ -66,11 +67,11 @@ def first_layer(scene, view, first: int = 0, count: int | None = None, tables=No
     rays = view.texel_rays(first, count)
     pi = scene.ray_intersect_preliminary(rays, coherent=True)
     valid = pi.is_valid()
+    shape = spawn.hit_shape(pi, valid, tables.by_id if tables is not None else spawn.shape_table(scene))
     # the hit point as every layer and receiver computes it (barycentric on the triangle), then
     # the view's one depth function: a one-layer map and a layered one store the same z1
-    p, n = hit_geometry(pi, rays, valid, tables)
+    p, n = hit_geometry(pi, rays, valid, shape, tables)
     z1 = dr.select(valid, view.depth(p), view.far)
-    shape = dr.select(valid, pi.shape_index, 0xFFFFFFFF)
     return z1, shape, (p, n, valid), rays
 
 
@@ -100,9 +101,10 @@ def _step(scene, view, st: dict, d, modes, culls: bool, need, want_slope: bool, 
     st["cast2"] = st["cast2"] + dr.select(active & (found == 1), 1, 0)
     pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
     valid = active & pi.is_valid()
-    p, n = hit_geometry(pi, ray, valid, extents)
+    shape = spawn.hit_shape(pi, valid, extents.by_id)
+    p, n = hit_geometry(pi, ray, valid, shape, extents)
     if culls:
-        mode = dr.gather(mi.UInt32, modes, pi.shape_index, valid)
+        mode = dr.gather(mi.UInt32, modes, shape, valid)
         back = dr.dot(n, d) > 0
         accept = valid & ~(((mode == CULL_BACK) & back) | ((mode == CULL_FRONT) & ~back) | (mode == CULL_ALL))
     else:
@@ -110,20 +112,20 @@ def _step(scene, view, st: dict, d, modes, culls: bool, need, want_slope: bool, 
     depth = view.depth(p)
     got1, got2 = accept & (found == 0), accept & (found == 1)
     st["z1"] = dr.select(got1, depth, st["z1"])
-    st["shape1"] = dr.select(got1, pi.shape_index, st["shape1"])
+    st["shape1"] = dr.select(got1, shape, st["shape1"])
     if want_slope:
         st["p1"] = dr.select(got1, p, st["p1"])
         st["n1"] = dr.select(got1, n, st["n1"])
     st["z2"] = dr.select(got2, depth, st["z2"])
     found = found + dr.select(accept, 1, 0)
     st["found"] = found
-    st["rehit"] = st["rehit"] + dr.select(valid & (pi.shape_index == st["prev_shape"])
+    st["rehit"] = st["rehit"] + dr.select(valid & (shape == st["prev_shape"])
                                           & (pi.prim_index == st["prev_prim"]), 1, 0)
-    st["prev_shape"] = dr.select(valid, pi.shape_index, st["prev_shape"])
+    st["prev_shape"] = dr.select(valid, shape, st["prev_shape"])
     st["prev_prim"] = dr.select(valid, pi.prim_index, st["prev_prim"])
     active = valid & (found < need)
     st["active"] = active
-    delta = spawn.error_bound_by_shape(p, pi.shape_index, extents, magnitude)
+    delta = spawn.error_bound_by_shape(p, shape, extents, magnitude)
     st["o"] = dr.select(active, spawn.offset_origin(p, n, d, delta), st["o"])
     return st
 

@@ -58,13 +58,42 @@ def error_bound(si, other_extent):
     return bound(si.p, extent)
 
 
+NO_SHAPE = 0xFFFFFFFF
+
+
+def shape_table(scene, force: bool = False):
+    """The index into ``scene.shapes()`` of each shape's registry id (UInt32, NO_SHAPE between),
+    for variants whose preliminary hits carry no ``shape_index``: OptiX (``cuda_ad_rgb``) fills
+    it with 0 and only ``pi.shape`` names the shape. None where ``pi.shape_index`` is already
+    that index (Embree, ``llvm_ad_rgb``), unless ``force``."""
+    if not force and not mi.variant().startswith("cuda"):
+        return None
+    shapes = scene.shapes()
+    if not shapes:
+        return mi.UInt32(np.array([NO_SHAPE], np.uint32))
+    ids = np.asarray(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shapes)).numpy(), np.int64)
+    table = np.full(int(ids.max()) + 1, NO_SHAPE, np.uint32)
+    table[ids] = np.arange(len(shapes), dtype=np.uint32)
+    return mi.UInt32(table)
+
+
+def hit_shape(pi, valid, table):
+    """The index into ``scene.shapes()`` of each preliminary hit, NO_SHAPE where ``valid`` is
+    False (``table``: :func:`shape_table` of the scene, None on Embree)."""
+    if table is None:
+        return dr.select(valid, pi.shape_index, NO_SHAPE)
+    ids = dr.reinterpret_array(mi.UInt32, pi.shape)
+    return dr.select(valid, dr.gather(mi.UInt32, table, ids, valid), NO_SHAPE)
+
+
 class ShapeTables(tuple):
     """(extents, is_mesh) per shape, as :func:`error_bound_by_shape` reads them, with the meshes'
     buffers concatenated for a hit's vertices without a surface interaction: ``positions``
     (Float, xyz per vertex of every mesh), ``faces`` (UInt32, three global vertex indices per
     triangle) and ``face_offset`` (UInt32 per shape: its first triangle); these three are None
-    when a shape is not a triangle mesh."""
+    when a shape is not a triangle mesh. ``by_id``: :func:`shape_table` (None on Embree)."""
     positions = faces = face_offset = None
+    by_id = None
 
 
 def shape_extents(scene) -> ShapeTables:
@@ -93,6 +122,7 @@ def shape_extents(scene) -> ShapeTables:
         out.append(float(edges.max()))
     meshes = [s.is_mesh() for s in scene.shapes()]
     tables = ShapeTables((mi.Float(np.asarray(out, np.float32)), mi.Bool(np.array(meshes, bool))))
+    tables.by_id = shape_table(scene)
     if all(meshes) and pos:
         tables.positions = mi.Float(np.concatenate(pos).ravel())
         tables.faces = mi.UInt32(np.concatenate(fac).astype(np.uint32).ravel())
@@ -100,12 +130,12 @@ def shape_extents(scene) -> ShapeTables:
     return tables
 
 
-def mesh_hit(pi, tables, active):
+def mesh_hit(pi, shape, tables, active):
     """(p, n) of a preliminary intersection on a triangle mesh from the meshes' buffers: the hit
     point interpolated from the vertices and the winding normal, the same arithmetic (and bits)
     as Mitsuba's ``compute_surface_interaction`` with ``RayFlags.Minimal``, without its call
-    through the shape."""
-    tri = dr.gather(mi.UInt32, tables.face_offset, pi.shape_index, active) + pi.prim_index
+    through the shape. ``shape``: the hit's index into ``scene.shapes()`` (:func:`hit_shape`)."""
+    tri = dr.gather(mi.UInt32, tables.face_offset, shape, active) + pi.prim_index
     p0, p1, p2 = (dr.gather(mi.Point3f, tables.positions, dr.gather(mi.UInt32, tables.faces, tri * 3 + k, active),
                             active) for k in range(3))
     b1, b2 = pi.prim_uv.x, pi.prim_uv.y

@@ -368,3 +368,29 @@ def test_weiskopf_fig5_against_the_tracer(tmp_path):
         # the open ground is never culled, so shadows on it are the same with or without culling
         assert rows[("dual", "back_closed")]["peterpan_rate"] == pytest.approx(
             rows[("dual", "none")]["peterpan_rate"], abs=0.01), R
+
+
+def test_hit_shape_by_registry_id_equals_embree_shape_index():
+    """cuda_ad_rgb's hits name their shape only by pointer (OptiX leaves ``shape_index`` 0): the
+    registry-id table must give the index into scene.shapes() that Embree's ``shape_index`` gives,
+    for meshes and analytic shapes in any order, and NO_SHAPE on a miss."""
+    import drjit as dr
+    import mitsuba as mi
+    from dsm import spawn
+    xs = {"s": -6.0, "a": -3.0, "r": 0.0, "b": 3.0, "c": 6.0}      # one shape per x, each hit head-on
+    scene = mi.load_dict({"type": "scene",
+                          "s": {"type": "sphere", "center": [xs["s"], 0, 0], "radius": 1.0},
+                          "a": {"type": "cube", "to_world": mi.ScalarTransform4f().translate([xs["a"], 0, 0])},
+                          "r": {"type": "rectangle"},
+                          "b": {"type": "cube", "to_world": mi.ScalarTransform4f().translate([xs["b"], 0, 0])},
+                          "c": {"type": "disk", "to_world": mi.ScalarTransform4f().translate([xs["c"], 0, 0])}})
+    order = [s.id() for s in scene.shapes()]
+    names = list(xs) + ["miss"]
+    ox = np.array([xs.get(k, 20.0) for k in names], np.float32)
+    ray = mi.Ray3f(mi.Point3f(mi.Float(ox), 0.0, -5.0), mi.Vector3f(0, 0, 1))
+    pi = scene.ray_intersect_preliminary(ray)
+    valid = pi.is_valid()
+    expected = np.array([order.index(k) if k != "miss" else spawn.NO_SHAPE for k in names], np.uint32)
+    by_id = spawn.hit_shape(pi, valid, spawn.shape_table(scene, force=True)).numpy()
+    assert np.array_equal(by_id, expected), (by_id, expected, order)
+    assert np.array_equal(spawn.hit_shape(pi, valid, None).numpy(), expected)
