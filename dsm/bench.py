@@ -125,6 +125,9 @@ FRAME_SCHEMES = ("none", "constant", "slope_scaled", "normal_angle", "normal_off
                  "adaptive_tap", "combined")     # every scheme that reads one layer (no z2, no culling)
 
 
+TABLE_FIELDS = ("positions", "faces", "face_offset", "by_id")   # spawn.ShapeTables' arrays beside its pair
+
+
 def _kernel_ms(fn, repeats):
     """Median over warm calls of the summed execution time of the kernels one call launches."""
     import drjit as dr
@@ -149,7 +152,7 @@ def frame_cost(spec, light, R: int = 1024, camera: int = 1024, repeats: int = 5)
     import drjit as dr
     import mitsuba as mi
 
-    from . import lookup, scenes, schemes, shadowmap, timing
+    from . import lookup, scenes, schemes, shadowmap, spawn, timing
     from .gbuffer import cast
     from .pipeline import make_view, points_np
     sd = scenes.load(spec, (camera, camera))
@@ -167,13 +170,21 @@ def frame_cost(spec, light, R: int = 1024, camera: int = 1024, repeats: int = 5)
     def bare():
         return (sd.scene.ray_intersect_preliminary(rays, coherent=True).t,)
 
-    # the view's Dr.Jit values are the frame's inputs (a frozen function sees only its arguments)
+    # the view's and the shape tables' Dr.Jit values are the frame's inputs (a frozen function
+    # sees only its arguments); the tables are made once per scene, as the runner does
     state = {k: v for k, v in vars(view).items() if dr.is_array_v(v)}
+    ext = spawn.shape_extents(sd.scene)
+    state["tables"] = {"pair": tuple(ext), **{k: getattr(ext, k) for k in TABLE_FIELDS}}
 
     def frame(scene, state, p, n):
+        state = dict(state)
+        tab = state.pop("tables")
         v = copy.copy(view)
         vars(v).update(state)
-        smap = shadowmap.build(scene, v, needs)
+        tables = spawn.ShapeTables(tab["pair"])
+        for k in TABLE_FIELDS:
+            setattr(tables, k, tab[k])
+        smap = shadowmap.build(scene, v, needs, extents=tables)
         rx = lookup.Receiver.make(v, p, n, sd.diagonal)
         return tuple(lookup.visibility(m, prm, rx, smap)[0] for m, prm in zip(mods, prms)) + (smap.z1,)
 

@@ -149,8 +149,9 @@ def error_bound_by_shape(p, shape_index, tables, other_extent):
     """:func:`error_bound` with each mesh's largest triangle as the extent (``tables`` from
     :func:`shape_extents`): a little looser, and no per-ray access to the triangle."""
     extents, is_mesh = tables[0], tables[1]
-    ext = dr.gather(mi.Float, extents, shape_index)
-    mesh = dr.gather(mi.Bool, is_mesh, shape_index)
+    hit = shape_index != NO_SHAPE                  # a miss reads nothing (out of bounds: a fault on CUDA)
+    ext = dr.gather(mi.Float, extents, shape_index, hit)
+    mesh = dr.gather(mi.Bool, is_mesh, shape_index, hit)
     return bound(p, dr.select(mesh, ext, other_extent))
 
 
