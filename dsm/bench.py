@@ -128,22 +128,6 @@ FRAME_SCHEMES = ("none", "constant", "slope_scaled", "normal_angle", "normal_off
 TABLE_FIELDS = ("positions", "faces", "face_offset", "by_id")   # spawn.ShapeTables' arrays beside its pair
 
 
-def _kernel_ms(fn, repeats):
-    """Median over warm calls of the summed execution time of the kernels one call launches."""
-    import drjit as dr
-    from . import timing
-    timing._run(fn)                                       # cold: compiled here, not counted
-    sums, kernels = [], 0
-    for _ in range(repeats):
-        dr.kernel_history_clear()
-        timing._run(fn)
-        hist = [k for k in dr.kernel_history() if k.get("type") == dr.KernelType.JIT]
-        sums.append(sum(k.get("execution_time", 0.0) for k in hist))
-        kernels = len(hist)
-    dr.kernel_history_clear()
-    return float(np.median(sums)), kernels
-
-
 def frame_cost(spec, light, R: int = 1024, camera: int = 1024, repeats: int = 5) -> dict:
     """(6): one frame's map build and single-layer lookups, as wall, kernel and frozen time."""
     import copy
@@ -190,8 +174,8 @@ def frame_cost(spec, light, R: int = 1024, camera: int = 1024, repeats: int = 5)
 
     args = (sd.scene, state, p, n)
     wall = timing.measure(lambda: frame(*args), repeats)[1]
-    kernel_ms, kernels = _kernel_ms(lambda: frame(*args), repeats)
-    bare_kernel_ms, _ = _kernel_ms(bare, repeats)
+    kernel_ms, kernels = timing.kernel_ms(lambda: frame(*args), repeats)
+    bare_kernel_ms, _ = timing.kernel_ms(bare, repeats)
     row = {"scene": spec.label, "map": R, "camera": camera,
            "receivers": dr.width(p), "schemes": list(FRAME_SCHEMES), "wall_ms": wall.ms,
            "compile_ms": wall.compile_ms, "kernel_ms": kernel_ms, "kernels": kernels,
@@ -262,11 +246,11 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
             # the same three as kernel time (the kernels' own execution times summed; no tracing)
             rays = view.texel_rays(0, R * R)
             dr.eval(rays)
-            k_bare = _kernel_ms(lambda: (sd.scene.ray_intersect_preliminary(rays, coherent=True).t,), repeats)[0]
+            k_bare = timing.kernel_ms(lambda: (sd.scene.ray_intersect_preliminary(rays, coherent=True).t,), repeats)[0]
             rays = None
-            k_first = _kernel_ms(lambda: shadowmap.arrays(shadowmap.build(sd.scene, view, set(), extents=ext)),
+            k_first = timing.kernel_ms(lambda: shadowmap.arrays(shadowmap.build(sd.scene, view, set(), extents=ext)),
                                  repeats)[0]
-            k_two = _kernel_ms(lambda: shadowmap.arrays(shadowmap.build(sd.scene, view, {"z2"}, extents=ext)),
+            k_two = timing.kernel_ms(lambda: shadowmap.arrays(shadowmap.build(sd.scene, view, {"z2"}, extents=ext)),
                                repeats)[0]
             builds.append({"scene": spec.label, "resolution": R, "ray_intersect_ms": full.ms, "bare_ms": bare.ms,
                            "two_culled_ms": cull.ms, "two_culled_over_first": cull.ms / first.ms,

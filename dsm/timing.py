@@ -51,6 +51,22 @@ def measure(fn, repeats: int = 3):
     return out, Timing(statistics.median(warm) if warm else cold, compile_ms, cold, len(hist), misses)
 
 
+def kernel_ms(fn, repeats: int = 3):
+    """(median over warm calls of the summed execution time of the kernels one call of ``fn``
+    launches, ms; kernels per call): the device's own time, without Python's tracing or launch
+    overhead. Needs the kernel history (:func:`enable_history`)."""
+    _run(fn)                                              # cold: compiled here, not counted
+    sums, kernels = [], 0
+    for _ in range(max(1, repeats)):
+        dr.kernel_history_clear()
+        _run(fn)
+        hist = [k for k in dr.kernel_history() if k.get("type") == dr.KernelType.JIT]
+        sums.append(sum(k.get("execution_time", 0.0) for k in hist))
+        kernels = len(hist)
+    dr.kernel_history_clear()
+    return statistics.median(sums), kernels
+
+
 def _backend():
     import mitsuba as mi
     return dr.JitBackend.CUDA if mi.variant().startswith("cuda") else dr.JitBackend.LLVM
