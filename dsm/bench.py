@@ -125,7 +125,7 @@ FRAME_SCHEMES = ("none", "constant", "slope_scaled", "normal_angle", "normal_off
                  "adaptive_tap", "combined")     # every scheme that reads one layer (no z2, no culling)
 
 
-TABLE_FIELDS = ("positions", "faces", "face_offset", "by_id")   # spawn.ShapeTables' arrays beside its pair
+TABLE_FIELDS = ("tri_pos", "face_offset", "by_id")   # spawn.ShapeTables' arrays beside its pair
 
 
 def frame_cost(spec, light, R: int = 1024, camera: int = 1024, repeats: int = 5) -> dict:

@@ -55,7 +55,7 @@ def hit_geometry(pi, ray, valid, shape, tables=None):
     normal. From the meshes' buffers where ``tables`` (:func:`dsm.spawn.shape_extents`) has
     them (every shape a mesh), else from a minimal surface interaction: the same bits.
     ``shape``: each hit's index into ``scene.shapes()`` (:func:`dsm.spawn.hit_shape`)."""
-    if tables is not None and getattr(tables, "positions", None) is not None:
+    if tables is not None and getattr(tables, "tri_pos", None) is not None:
         return spawn.mesh_hit(pi, shape, tables, valid)
     si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.Minimal, active=valid)
     return si.p, si.n
@@ -130,13 +130,34 @@ def _step(scene, view, st: dict, d, modes, culls: bool, need, want_slope: bool, 
     return st
 
 
+def _first_and_second(scene, view, ray, extents, magnitude):
+    """Without culling, per texel: the first hit (z1 from the hit point interpolated on its
+    triangle, as :func:`first_layer` stores it) and the second, from one continuation ray that
+    leaves the first hit beyond its error bound. The second hit's depth is taken at ``o + t d``
+    of that ray: no second vertex fetch; it differs from the interpolated point by rounding,
+    far below any bias (z2 is read only by midpoint and dual). Returns (z1, shape1, p1, n1,
+    z2, first hit, re-hit of the first triangle), traced, not evaluated."""
+    pi = scene.ray_intersect_preliminary(ray, coherent=True)
+    hit1 = pi.is_valid()
+    shape1 = spawn.hit_shape(pi, hit1, extents.by_id)
+    p1, n1 = hit_geometry(pi, ray, hit1, shape1, extents)
+    z1 = dr.select(hit1, view.depth(p1), view.far)
+    o2 = spawn.offset_origin(p1, n1, ray.d, spawn.error_bound_by_shape(p1, shape1, extents, magnitude))
+    pi2 = scene.ray_intersect_preliminary(mi.Ray3f(o2, ray.d), coherent=True, active=hit1)
+    hit2 = hit1 & pi2.is_valid()
+    rehit = hit2 & (spawn.hit_shape(pi2, hit2, extents.by_id) == shape1) & (pi2.prim_index == pi.prim_index)
+    z2 = dr.select(hit2, view.depth(dr.fma(ray.d, pi2.t, o2)), view.far)
+    return z1, shape1, p1, n1, z2, hit1, rehit
+
+
 def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool, first: int = 0,
             count: int | None = None, extents=None):
     """First (and second) accepted surface per texel under per-shape culling.
 
-    The search runs in rounds of ROUND steps, each round one kernel (no evaluation or host
-    synchronisation between its steps); after a round only the texels still searching go on,
-    compacted (without culling, a second layer is found in the first round by every texel).
+    Without culling, the first hit and one continuation ray make one straight-line kernel
+    (:func:`_first_and_second`). With culling the search runs in rounds of ROUND steps, each
+    round one kernel (no evaluation or host synchronisation between its steps); after a round
+    only the texels still searching go on, compacted.
     Per step only what the layer needs: the preliminary intersection, the hit point and
     winding normal from the meshes' buffers (:func:`hit_geometry`), the culling test and the
     continuation ray.
@@ -154,27 +175,25 @@ def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool
     modes = mi.UInt32(np.asarray(cull_modes, np.uint32))
     culls = bool(np.any(np.asarray(cull_modes) != CULL_NONE))
     need = 2 if want_z2 else 1
-    none = 0xFFFFFFFF
-    full = {"o": ray.o, "z1": dr.full(mi.Float, view.far, n), "z2": dr.full(mi.Float, view.far, n),
-            "shape1": dr.full(mi.UInt32, none, n), "p1": dr.zeros(mi.Point3f, n), "n1": dr.zeros(mi.Vector3f, n),
-            "found": dr.zeros(mi.UInt32, n), "active": dr.full(mi.Bool, True, n), "cast1": dr.zeros(mi.UInt32, n),
-            "cast2": dr.zeros(mi.UInt32, n), "rehit": dr.zeros(mi.UInt32, n),
-            "prev_shape": dr.full(mi.UInt32, none, n), "prev_prim": dr.full(mi.UInt32, none, n)}
-    if not want_slope:
-        del full["p1"], full["n1"]
-    work, where, d = full, None, ray.d        # where: the work set's texels (None: all, in order)
-    if not culls and need <= ROUND:
-        # every texel's search ends within one round (each step accepts its hit or misses): one
-        # kernel writes only the layers and adds its counts up in place (no working state stored)
-        for _ in range(ROUND):
-            work = _step(scene, view, work, d, modes, culls, need, want_slope, extents, magnitude)
-        counts = dr.zeros(mi.UInt32, 3)       # rays cast, re-hits, texels still searching (none)
-        for i, v in enumerate((work["cast1"] + work["cast2"], work["rehit"], mi.UInt32(dr.select(work["active"], 1, 0)))):
-            dr.scatter_reduce(dr.ReduceOp.Add, counts, v, dr.full(mi.UInt32, i, n))
-        dr.eval(*[work[k] for k in ("z1", "shape1", "z2", "found") + (("p1", "n1") if want_slope else ())], counts)
-        total, rehits, left = (int(x) for x in counts.numpy())
-        full = work
+    if not culls:
+        # no culling: every texel's search is its first hit and the one continuation ray beyond
+        # it, straight-line in one kernel (no working state, no counters updated per step)
+        z1, shape1, p1, n1, z2, hit1, rehit = _first_and_second(scene, view, ray, extents, magnitude)
+        full = {"z1": z1, "shape1": shape1, "z2": z2, "found": mi.UInt32(hit1)}
+        if want_slope:
+            full["p1"], full["n1"] = p1, n1
+        dr.eval(*full.values(), rehit)
+        total, rehits, left = n + _count(full["found"] > 0), _count(rehit), 0
     else:
+        none = 0xFFFFFFFF
+        full = {"o": ray.o, "z1": dr.full(mi.Float, view.far, n), "z2": dr.full(mi.Float, view.far, n),
+                "shape1": dr.full(mi.UInt32, none, n), "p1": dr.zeros(mi.Point3f, n), "n1": dr.zeros(mi.Vector3f, n),
+                "found": dr.zeros(mi.UInt32, n), "active": dr.full(mi.Bool, True, n), "cast1": dr.zeros(mi.UInt32, n),
+                "cast2": dr.zeros(mi.UInt32, n), "rehit": dr.zeros(mi.UInt32, n),
+                "prev_shape": dr.full(mi.UInt32, none, n), "prev_prim": dr.full(mi.UInt32, none, n)}
+        if not want_slope:
+            del full["p1"], full["n1"]
+        work, where, d = full, None, ray.d        # where: the work set's texels (None: all, in order)
         steps = 0
         while True:
             for _ in range(min(ROUND, MAX_STEPS - steps)):

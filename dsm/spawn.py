@@ -88,11 +88,12 @@ def hit_shape(pi, valid, table):
 
 class ShapeTables(tuple):
     """(extents, is_mesh) per shape, as :func:`error_bound_by_shape` reads them, with the meshes'
-    buffers concatenated for a hit's vertices without a surface interaction: ``positions``
-    (Float, xyz per vertex of every mesh), ``faces`` (UInt32, three global vertex indices per
-    triangle) and ``face_offset`` (UInt32 per shape: its first triangle); these three are None
-    when a shape is not a triangle mesh. ``by_id``: :func:`shape_table` (None on Embree)."""
-    positions = faces = face_offset = None
+    triangles for a hit's vertices without a surface interaction: ``tri_pos`` (Float, the nine
+    coordinates of each triangle of every mesh, p0 p1 p2, in shape order: a triangle's vertices
+    are one contiguous read, not a face read and then three vertex reads) and ``face_offset``
+    (UInt32 per shape: its first triangle); both None when a shape is not a triangle mesh.
+    ``by_id``: :func:`shape_table` (None on Embree)."""
+    tri_pos = face_offset = None
     by_id = None
 
 
@@ -101,8 +102,8 @@ def shape_extents(scene) -> ShapeTables:
     its triangles, a bound on ``max_k |p_k - p|`` for every hit on it; 0 for non-meshes. One
     numpy pass over the meshes, so a loop of continuation rays needs no per-ray vertex fetch;
     computed once per scene (it also gathers the buffers of :class:`ShapeTables`)."""
-    out, pos, fac, first_face = [], [], [], []
-    n_vert = n_face = 0
+    out, soup, first_face = [], [], []
+    n_face = 0
     for shape in scene.shapes():
         first_face.append(n_face)
         if not shape.is_mesh():
@@ -110,9 +111,7 @@ def shape_extents(scene) -> ShapeTables:
             continue
         v32 = np.asarray(shape.vertex_positions_buffer(), np.float32).reshape(-1, 3)
         f = np.asarray(shape.faces_buffer(), np.int64).reshape(-1, 3)
-        pos.append(v32)
-        fac.append(f + n_vert)
-        n_vert += len(v32)
+        soup.append(v32[f].reshape(-1))
         n_face += len(f)
         if len(f) == 0:
             out.append(0.0)
@@ -123,9 +122,8 @@ def shape_extents(scene) -> ShapeTables:
     meshes = [s.is_mesh() for s in scene.shapes()]
     tables = ShapeTables((mi.Float(np.asarray(out, np.float32)), mi.Bool(np.array(meshes, bool))))
     tables.by_id = shape_table(scene)
-    if all(meshes) and pos:
-        tables.positions = mi.Float(np.concatenate(pos).ravel())
-        tables.faces = mi.UInt32(np.concatenate(fac).astype(np.uint32).ravel())
+    if all(meshes) and soup:
+        tables.tri_pos = mi.Float(np.concatenate(soup))
         tables.face_offset = mi.UInt32(np.asarray(first_face, np.uint32))
     return tables
 
@@ -136,8 +134,7 @@ def mesh_hit(pi, shape, tables, active):
     as Mitsuba's ``compute_surface_interaction`` with ``RayFlags.Minimal``, without its call
     through the shape. ``shape``: the hit's index into ``scene.shapes()`` (:func:`hit_shape`)."""
     tri = dr.gather(mi.UInt32, tables.face_offset, shape, active) + pi.prim_index
-    p0, p1, p2 = (dr.gather(mi.Point3f, tables.positions, dr.gather(mi.UInt32, tables.faces, tri * 3 + k, active),
-                            active) for k in range(3))
+    p0, p1, p2 = (dr.gather(mi.Point3f, tables.tri_pos, tri * 3 + k, active) for k in range(3))
     b1, b2 = pi.prim_uv.x, pi.prim_uv.y
     b0 = 1.0 - b1 - b2
     p = dr.fma(p0, b0, dr.fma(p1, b1, p2 * b2))
