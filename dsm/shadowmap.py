@@ -8,7 +8,8 @@ built. Extra attributes are built only when a scheme in the plan needs them:
   the texel (its geometric normal), as rasterizer depth bias computes it.
 - ``z2``: the second surface along the texel's ray, found by continuing past the first hit
   from just beyond the bound on its floating-point error (:mod:`dsm.spawn`); the view's far
-  bound where there is none. A continuation that hits the triangle it left again is counted
+  bound where there is none (without culling its depth is taken at ``o + t d`` of the
+  continuation ray). A continuation that hits the triangle it left again is counted
   (``rehits``; 0 when the bound holds).
 
 Culling is a property of the build, per shape (``CULL_NONE``, ``CULL_BACK``, ``CULL_FRONT``):
