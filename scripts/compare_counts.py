@@ -19,10 +19,20 @@ def main(argv=None) -> int:
     ap.add_argument("b")
     ap.add_argument("--show", type=int, default=10, help="the cases that differ most (default 10)")
     args = ap.parse_args(argv)
-    with open(args.a, newline="") as fa, open(args.b, newline="") as fb:
-        a, b = list(csv.DictReader(fa)), list(csv.DictReader(fb))
+    try:
+        with open(args.a, newline="") as fa, open(args.b, newline="") as fb:
+            a, b = list(csv.DictReader(fa)), list(csv.DictReader(fb))
+        missing = [f"{path}: {k}" for path, rows in ((args.a, a), (args.b, b)) for k in ("case", "scheme") + COUNTS
+                   if rows and k not in rows[0]]
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        print(f"compare_counts: {exc}", file=sys.stderr)
+        return 2
+    if missing or not a or not b:
+        print("compare_counts: not a dsm metrics.csv (missing columns: "
+              f"{', '.join(missing) or 'no rows'})", file=sys.stderr)
+        return 2
     if [r["case"] for r in a] != [r["case"] for r in b]:
-        print("the two runs do not have the same cases", file=sys.stderr)
+        print("compare_counts: the two runs do not have the same cases", file=sys.stderr)
         return 2
     rows, per = [], defaultdict(list)
     for x, y in zip(a, b):
