@@ -105,7 +105,7 @@ def _step(scene, view, st: dict, d, modes, culls: bool, need, want_slope: bool, 
     shape = spawn.hit_shape(pi, valid, extents.by_id)
     p, n = hit_geometry(pi, ray, valid, shape, extents)
     if culls:
-        mode = dr.gather(mi.UInt32, modes, shape, valid)
+        mode = dr.gather(mi.UInt32, modes, shape, valid & (shape != spawn.NO_SHAPE))
         back = dr.dot(n, d) > 0
         accept = valid & ~(((mode == CULL_BACK) & back) | ((mode == CULL_FRONT) & ~back) | (mode == CULL_ALL))
     else:
@@ -120,8 +120,8 @@ def _step(scene, view, st: dict, d, modes, culls: bool, need, want_slope: bool, 
     st["z2"] = dr.select(got2, depth, st["z2"])
     found = found + dr.select(accept, 1, 0)
     st["found"] = found
-    st["rehit"] = st["rehit"] + dr.select(valid & (shape == st["prev_shape"])
-                                          & (pi.prim_index == st["prev_prim"]), 1, 0)
+    st["rehit"] = st["rehit"] + dr.select(valid & (shape == st["prev_shape"]) & (pi.prim_index == st["prev_prim"])
+                                          & _on_mesh(shape, extents), 1, 0)
     st["prev_shape"] = dr.select(valid, shape, st["prev_shape"])
     st["prev_prim"] = dr.select(valid, pi.prim_index, st["prev_prim"])
     active = valid & (found < need)
@@ -129,6 +129,14 @@ def _step(scene, view, st: dict, d, modes, culls: bool, need, want_slope: bool, 
     delta = spawn.error_bound_by_shape(p, shape, extents, magnitude)
     st["o"] = dr.select(active, spawn.offset_origin(p, n, d, delta), st["o"])
     return st
+
+
+def _on_mesh(shape, extents):
+    """Whether each hit's shape is a triangle mesh. A re-hit (the triangle a continuation ray
+    left, hit again) is counted on meshes only: an analytic shape's ``prim_index`` is always 0,
+    so its far side would count."""
+    known = shape != spawn.NO_SHAPE
+    return known & dr.gather(mi.Bool, extents[1], shape, known)
 
 
 def _first_and_second(scene, view, ray, extents, magnitude):
@@ -146,7 +154,8 @@ def _first_and_second(scene, view, ray, extents, magnitude):
     o2 = spawn.offset_origin(p1, n1, ray.d, spawn.error_bound_by_shape(p1, shape1, extents, magnitude))
     pi2 = scene.ray_intersect_preliminary(mi.Ray3f(o2, ray.d), coherent=True, active=hit1)
     hit2 = hit1 & pi2.is_valid()
-    rehit = hit2 & (spawn.hit_shape(pi2, hit2, extents.by_id) == shape1) & (pi2.prim_index == pi.prim_index)
+    rehit = hit2 & (spawn.hit_shape(pi2, hit2, extents.by_id) == shape1) & (pi2.prim_index == pi.prim_index) \
+        & _on_mesh(shape1, extents)
     z2 = dr.select(hit2, view.depth(dr.fma(ray.d, pi2.t, o2)), view.far)
     return z1, shape1, p1, n1, z2, hit1, rehit
 
@@ -176,7 +185,7 @@ def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool
     modes = mi.UInt32(np.asarray(cull_modes, np.uint32))
     culls = bool(np.any(np.asarray(cull_modes) != CULL_NONE))
     need = 2 if want_z2 else 1
-    if not culls:
+    if not culls and want_z2:
         # no culling: every texel's search is its first hit and the one continuation ray beyond
         # it, straight-line in one kernel (no working state, no counters updated per step)
         z1, shape1, p1, n1, z2, hit1, rehit = _first_and_second(scene, view, ray, extents, magnitude)

@@ -61,13 +61,13 @@ def error_bound(si, other_extent):
 NO_SHAPE = 0xFFFFFFFF
 
 
-def shape_table(scene, force: bool = False):
-    """The index into ``scene.shapes()`` of each shape's registry id (UInt32, NO_SHAPE between),
-    for variants whose preliminary hits carry no ``shape_index``: OptiX (``cuda_ad_rgb``) fills
-    it with 0 and only ``pi.shape`` names the shape. None where ``pi.shape_index`` is already
-    that index (Embree, ``llvm_ad_rgb``), unless ``force``."""
-    if not force and not mi.variant().startswith("cuda"):
-        return None
+def shape_table(scene):
+    """The index into ``scene.shapes()`` of each shape's registry id (UInt32, NO_SHAPE between).
+
+    A preliminary hit names its shape by pointer (``pi.shape``, or ``pi.instance`` for a hit
+    inside an instance). Its ``shape_index`` is not that index everywhere: OptiX
+    (``cuda_ad_rgb``) leaves it 0, and Embree gives an instance's inner shape. So
+    :func:`hit_shape` reads the pointer through this table on every variant."""
     shapes = scene.shapes()
     if not shapes:
         return mi.UInt32(np.array([NO_SHAPE], np.uint32))
@@ -78,12 +78,15 @@ def shape_table(scene, force: bool = False):
 
 
 def hit_shape(pi, valid, table):
-    """The index into ``scene.shapes()`` of each preliminary hit, NO_SHAPE where ``valid`` is
-    False (``table``: :func:`shape_table` of the scene, None on Embree)."""
+    """The index into ``scene.shapes()`` of each preliminary hit (the instance's for a hit inside
+    one), NO_SHAPE where ``valid`` is False or the hit names no listed shape. ``table``:
+    :func:`shape_table` of the scene (None: Embree's ``shape_index`` as it is)."""
     if table is None:
         return dr.select(valid, pi.shape_index, NO_SHAPE)
-    ids = dr.reinterpret_array(mi.UInt32, pi.shape)
-    return dr.select(valid, dr.gather(mi.UInt32, table, ids, valid), NO_SHAPE)
+    inst = dr.reinterpret_array(mi.UInt32, pi.instance)
+    ids = dr.select(inst != 0, inst, dr.reinterpret_array(mi.UInt32, pi.shape))
+    known = valid & (ids < dr.width(table))
+    return dr.select(known, dr.gather(mi.UInt32, table, ids, known), NO_SHAPE)
 
 
 class ShapeTables(tuple):
@@ -92,7 +95,7 @@ class ShapeTables(tuple):
     coordinates of each triangle of every mesh, p0 p1 p2, in shape order: a triangle's vertices
     are one contiguous read, not a face read and then three vertex reads) and ``face_offset``
     (UInt32 per shape: its first triangle); both None when a shape is not a triangle mesh.
-    ``by_id``: :func:`shape_table` (None on Embree)."""
+    ``by_id``: :func:`shape_table`."""
     tri_pos = face_offset = None
     by_id = None
 

@@ -54,7 +54,8 @@ def measure(fn, repeats: int = 3):
 def kernel_ms(fn, repeats: int = 3):
     """(median over warm calls of the summed execution time of the kernels one call of ``fn``
     launches, ms; kernels per call): the device's own time, without Python's tracing or launch
-    overhead. Needs the kernel history (:func:`enable_history`)."""
+    overhead. Turns the kernel history on (:func:`enable_history`)."""
+    enable_history()
     _run(fn)                                              # cold: compiled here, not counted
     sums, kernels = [], 0
     for _ in range(max(1, repeats)):

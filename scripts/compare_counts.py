@@ -11,6 +11,7 @@ import sys
 from collections import defaultdict
 
 COUNTS = ("n_receivers", "n_acne", "n_peterpan")
+COLUMNS = ("case", "scene", "light", "view", "resolution", "scheme", "params")
 
 
 def main(argv=None) -> int:
@@ -22,9 +23,13 @@ def main(argv=None) -> int:
     try:
         with open(args.a, newline="") as fa, open(args.b, newline="") as fb:
             a, b = list(csv.DictReader(fa)), list(csv.DictReader(fb))
-        missing = [f"{path}: {k}" for path, rows in ((args.a, a), (args.b, b)) for k in ("case", "scheme") + COUNTS
+        missing = [f"{path}: {k}" for path, rows in ((args.a, a), (args.b, b)) for k in COLUMNS + COUNTS
                    if rows and k not in rows[0]]
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        if not missing:
+            for r in a + b:
+                for k in COUNTS:
+                    int(r[k])
+    except (OSError, UnicodeDecodeError, csv.Error, ValueError) as exc:
         print(f"compare_counts: {exc}", file=sys.stderr)
         return 2
     if missing or not a or not b:
