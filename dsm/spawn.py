@@ -61,14 +61,19 @@ def error_bound(si, other_extent):
 NO_SHAPE = 0xFFFFFFFF
 
 
-def shape_table(scene):
-    """The index into ``scene.shapes()`` of each shape's registry id (UInt32, NO_SHAPE between).
+def shape_table(scene, force: bool = False):
+    """The index into ``scene.shapes()`` of each shape's registry id (UInt32, NO_SHAPE between),
+    or None where the hit's own ``shape_index`` is that index.
 
     A preliminary hit names its shape by pointer (``pi.shape``, or ``pi.instance`` for a hit
-    inside an instance). Its ``shape_index`` is not that index everywhere: OptiX
-    (``cuda_ad_rgb``) leaves it 0, and Embree gives an instance's inner shape. So
-    :func:`hit_shape` reads the pointer through this table on every variant."""
+    inside an instance). Its ``shape_index`` is the index only with Embree (``llvm_ad_rgb``)
+    and only outside instances: OptiX (``cuda_ad_rgb``) leaves it 0, and Embree gives an
+    instance's inner shape. :func:`hit_shape` reads the pointer through this table there (and
+    everywhere with ``force``); elsewhere ``shape_index`` serves and costs no table read."""
     shapes = scene.shapes()
+    if not force and not mi.variant().startswith("cuda") and \
+            not any(s.class_name() == "Instance" for s in shapes):
+        return None
     if not shapes:
         return mi.UInt32(np.array([NO_SHAPE], np.uint32))
     ids = np.asarray(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shapes)).numpy(), np.int64)
@@ -95,7 +100,7 @@ class ShapeTables(tuple):
     coordinates of each triangle of every mesh, p0 p1 p2, in shape order: a triangle's vertices
     are one contiguous read, not a face read and then three vertex reads) and ``face_offset``
     (UInt32 per shape: its first triangle); both None when a shape is not a triangle mesh.
-    ``by_id``: :func:`shape_table`."""
+    ``by_id``: :func:`shape_table` (None where ``shape_index`` serves)."""
     tri_pos = face_offset = None
     by_id = None
 

@@ -390,7 +390,7 @@ def test_hit_shape_by_registry_id_equals_embree_shape_index():
     pi = scene.ray_intersect_preliminary(ray)
     valid = pi.is_valid()
     expected = np.array([order.index(k) if k != "miss" else spawn.NO_SHAPE for k in names], np.uint32)
-    by_id = spawn.hit_shape(pi, valid, spawn.shape_table(scene)).numpy()
+    by_id = spawn.hit_shape(pi, valid, spawn.shape_table(scene, force=True)).numpy()
     assert np.array_equal(by_id, expected), (by_id, expected, order)
     if mi.variant().startswith("llvm"):            # Embree fills shape_index itself (OptiX leaves it 0)
         assert np.array_equal(spawn.hit_shape(pi, valid, None).numpy(), expected)
