@@ -274,6 +274,9 @@ def far_bound(origin, target, bbox_min, bbox_max) -> float:
     return max(float(((corners - np.asarray(origin, float)) @ fwd).max()), 1e-30) * 1.01
 
 
+NEAR_MIN = 1e-12     # the smallest near clip, relative to the camera's distance to its target (1e-19 fails)
+
+
 def posed_camera(default, camera, scale=1.0, offset=ORIGIN, source="<config>"):
     """(origin, target, up, fov, near, far) of a scene's camera: the scene's own ``default`` pose
     (origin, target, up, fov, near or None, far or None, world units) with the [camera] keys that
@@ -296,6 +299,11 @@ def posed_camera(default, camera, scale=1.0, offset=ORIGIN, source="<config>"):
         raise ConfigError(source, f"camera.{key}", f"the camera's position {tuple(float(c) for c in o)} equals "
                           f"its target (the scene's own pose, where the [camera] key is not given)")
     fwd, upv = np.subtract(t, o).astype(float), np.asarray(up, float)
+    dist = float(np.linalg.norm(fwd))
+    if camera is not None and camera.near is not None and near < NEAR_MIN * dist:
+        raise ConfigError(source, "camera.near", f"{camera.near:g} is below {NEAR_MIN:g} of the camera's distance "
+                          f"to its target ({dist / scale:g}): the float32 projection of the camera's rays breaks "
+                          f"down there (no ray would reach the scene); give at least {NEAR_MIN * dist / scale:.3g}")
     if np.linalg.norm(np.cross(fwd, upv)) <= 1e-6 * np.linalg.norm(fwd) * np.linalg.norm(upv):
         raise ConfigError(source, "camera.up", f"{tuple(float(c) for c in up)} is along the view direction "
                           f"(target - position = {tuple(float(c) for c in fwd)}); give an up across it")

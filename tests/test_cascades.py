@@ -272,6 +272,7 @@ def test_cascades_without_a_directional_light_is_a_config_error():
     ({"target": [-99.0, 0.0, 3.0]}, "camera.target"),          # long_ground's own position
     ({"position": [0.0, 0.0, 5.0], "target": [0.0, 0.0, 0.0]}, "camera.up"),   # down the default up
     ({"up": [39.0, 0.0, -3.0]}, "camera.up"),                  # along long_ground's own view
+    ({"near": 1e-20}, "camera.near"),                          # below 1e-12 of the distance: no ray would be cast
 ])
 def test_a_camera_pose_that_cannot_look_is_a_config_error_not_a_traceback(tmp_path, capsys, camera, key):
     """The pose is completed by the scene's own, so only loading the scene sees it: still exit 2
@@ -285,6 +286,15 @@ def test_a_camera_pose_that_cannot_look_is_a_config_error_not_a_traceback(tmp_pa
     err = capsys.readouterr().err
     assert f"{cfg}: {key}:" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "o").exists()
+
+
+def test_a_tiny_near_clip_still_sees_the_scene(run_dict):
+    """near = 1e-9 (about 1e-10 of plane_box's camera distance, above the refused 1e-12) gives the receivers of the
+    default near clip: the clip is in front of every surface either way."""
+    a = run_dict(base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [48, 48]}), "a").rows[0]
+    b = run_dict(base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [48, 48], "near": 1e-9}),
+                 "b").rows[0]
+    assert a["n_receivers"] > 0 and a["n_receivers"] == b["n_receivers"]
 
 
 def test_blend_mixes_the_next_cascade_linearly_over_the_band():
