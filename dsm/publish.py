@@ -151,10 +151,38 @@ def _signed(x) -> str:
     return "0" if x == 0 else f"{x:+.3g}"
 
 
+COUNTS = ("n_receivers", "n_acne", "n_peterpan")
+
+
+def count_share(a, b) -> float:
+    """The largest difference of the two cases' receiver, acne and peter-panning counts, as a
+    share of A's receivers (0 when the counts are identical; the counts themselves over an empty
+    case)."""
+    return max(abs(int(b[k]) - int(a[k])) for k in COUNTS) / max(int(a["n_receivers"]), 1)
+
+
+def _count_lines(pairs) -> list:
+    """compare.md's counts section: how many matched cases have identical counts, and the largest
+    count difference as a share of receivers, overall and per scheme (two variants, machines or
+    commits on one config)."""
+    shares = [(count_share(a, b), a) for a, b in pairs]
+    lines = ["## Counts (receivers, acne, peter-panning)", "",
+             f"{sum(1 for s, _ in shares if s == 0)} of {len(pairs)} matched cases have identical counts; the largest "
+             f"difference is {100 * max((s for s, _ in shares), default=0.0):.3f} % of a case's receivers.", "",
+             "| scheme | cases | identical | largest difference (% of receivers) |", "|---|---|---|---|"]
+    per = {}
+    for s, a in shares:
+        per.setdefault(a["scheme"], []).append(s)
+    for name, v in per.items():
+        lines.append(f"| {name} | {len(v)} | {sum(1 for s in v if s == 0)} | {100 * max(v):.3f} |")
+    return lines + [""]
+
+
 def compare(dir_a: Path, dir_b: Path, out: Path) -> dict:
     """``dsm report A B``: the cases both runs hold (same scene, light, view, scheme instance,
     resolution, filter, format and culling), side by side with B - A, into ``out``: compare.md
-    (the per-instance summaries of the matched cases of each run, then every matched case, the
+    (how many matched cases have identical counts and the largest count difference, the
+    per-instance summaries of the matched cases of each run, then every matched case, the
     largest change in error rate first) and compare.csv (every matched case, a_, b_ and diff_
     columns). Returns the counts."""
     run_a, rows_a, _ = _load(dir_a)
@@ -184,7 +212,7 @@ def compare(dir_a: Path, dir_b: Path, out: Path) -> dict:
                            f"{run.get('variant', '?')}, {run.get('threads', '?')} threads)")
     lines = ["# Comparison: B - A", "", f"A: {desc(run_a, dir_a)}", "", f"B: {desc(run_b, dir_b)}", "",
              f"{len(pairs)} cases in both (matched on {', '.join(KEY)}); {only_a} only in A, {only_b} only in B. "
-             "Differences are B - A; a dash: undefined in either run.", "",
+             "Differences are B - A; a dash: undefined in either run.", ""] + _count_lines(pairs) + [
              "## Per scheme instance, over the matched cases", "",
              "| scheme | params | cases | acne pooled A | B | B - A | peter-pan pooled A | B | B - A | "
              "error pooled A | B | B - A | build ms A | B | lookup ms A | B |", "|---" * 16 + "|"]
@@ -214,4 +242,5 @@ def compare(dir_a: Path, dir_b: Path, out: Path) -> dict:
         lines.append("| " + " | ".join(map(str, cells)) + " |")
     with report.atomic(out / "compare.md") as tmp:
         tmp.write_text("\n".join(lines) + "\n")
-    return {"matched": len(pairs), "only_a": only_a, "only_b": only_b}
+    return {"matched": len(pairs), "only_a": only_a, "only_b": only_b,
+            "identical_counts": sum(1 for a, b in pairs if count_share(a, b) == 0)}

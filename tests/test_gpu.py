@@ -101,10 +101,9 @@ def test_cuda_counts_equal_llvm_counts(tmp_path):
     gpu = _run(cfg, "cuda_ad_rgb", tmp_path / "cuda")
     assert [r["case"] for r in gpu] == [r["case"] for r in cpu]
     lines, bad = [], []
+    from dsm.publish import count_share
     for c, g in zip(cpu, gpu):
-        n = max(int(c["n_receivers"]), 1)
-        diff = {k: abs(int(g[k]) - int(c[k])) for k in ("n_receivers", "n_acne", "n_peterpan")}
-        worst = max(diff.values()) / n
+        worst = count_share(c, g)
         lines.append(f"{c['scene']} {c['light']} R={c['resolution']} {c['scheme']} {c['params']}: "
                      f"receivers {c['n_receivers']}/{g['n_receivers']} acne {c['n_acne']}/{g['n_acne']} "
                      f"peter-panning {c['n_peterpan']}/{g['n_peterpan']} ({100 * worst:.3f} % of receivers)")

@@ -205,6 +205,10 @@ def test_comparison_of_two_runs(run, tmp_path):
     assert all(v == 0 for k, v in diff.items() if k != changed["case"] and not math.isnan(v))
     md = (out / "compare.md").read_text()
     assert f"{len(rows) - 1} cases in both" in md and "1 only in A, 0 only in B" in md
+    # counts: every matched case but the changed one identical; its 3 receivers the largest share
+    share = 100 * 3 / int(changed["n_receivers"])
+    assert (f"{len(rows) - 2} of {len(rows) - 1} matched cases have identical counts; the largest difference "
+            f"is {share:.3f} % of a case's receivers") in md
     # the largest change first
     first = next(line for line in md.splitlines() if line.startswith(f"| {changed['case']} |"))
     assert md.index(first) < min(md.index(f"| {r['case']} |") for r in rows if r not in (changed, gone))
