@@ -145,6 +145,7 @@ class FixedPoints:
     n: object            # geometric normal as the mesh winds it
     shape: np.ndarray
     prim: np.ndarray
+    table: object         # spawn.shape_table of the scene (None on Embree), made once for every frame
 
     @property
     def count(self) -> int:
@@ -183,11 +184,11 @@ def sample_points(scene, count: int, seed: int, diagonal: float) -> FixedPoints:
     ok &= np.asarray(pi.t.numpy()) < 2 * delta
     idx = mi.UInt32(np.flatnonzero(ok).astype(np.uint32))
     si = dr.gather(mi.SurfaceInteraction3f, si, idx)
-    shape = np.asarray(dr.gather(mi.UInt32, spawn.hit_shape(pi, pi.is_valid(), spawn.shape_table(scene)), idx).numpy(),
-                       np.int64)
+    table = spawn.shape_table(scene)
+    shape = np.asarray(dr.gather(mi.UInt32, spawn.hit_shape(pi, pi.is_valid(), table), idx).numpy(), np.int64)
     prim = np.asarray(dr.gather(mi.UInt32, pi.prim_index, idx).numpy(), np.int64)
     dr.eval(si)
-    return FixedPoints(si, mi.Point3f(si.p), mi.Vector3f(si.n), shape, prim)
+    return FixedPoints(si, mi.Point3f(si.p), mi.Vector3f(si.n), shape, prim, table)
 
 
 def points_seen(scene, fp: FixedPoints, cam: Camera):
@@ -203,7 +204,7 @@ def points_seen(scene, fp: FixedPoints, cam: Camera):
     d = dr.normalize(fp.p - o)
     pi = scene.ray_intersect_preliminary(mi.Ray3f(o + d * 0, d), coherent=False)
     t = np.asarray(pi.t.numpy(), np.float64)
-    same = (np.asarray(spawn.hit_shape(pi, pi.is_valid(), spawn.shape_table(scene)).numpy(), np.int64) == fp.shape) & \
+    same = (np.asarray(spawn.hit_shape(pi, pi.is_valid(), fp.table).numpy(), np.int64) == fp.shape) & \
         (np.asarray(pi.prim_index.numpy(), np.int64) == fp.prim)
     seen = in_frustum & pi.is_valid().numpy().astype(bool) & (same | (t >= dist * (1 - 1e-4)))
     oc = mi.Vector3f(*(dr.opaque(mi.Float, float(c)) for c in cam.origin))
@@ -294,7 +295,7 @@ def run_scene(runner, sd, lights, maps, closed, extents, frame_rows: list, curve
         if use < fp.count:
             idx = mi.UInt32(np.arange(use, dtype=np.uint32))
             pts = FixedPoints(dr.gather(mi.SurfaceInteraction3f, fp.si, idx), dr.gather(mi.Point3f, fp.p, idx),
-                              dr.gather(mi.Vector3f, fp.n, idx), fp.shape[:use], fp.prim[:use])
+                              dr.gather(mi.Vector3f, fp.n, idx), fp.shape[:use], fp.prim[:use], fp.table)
         poses = camera_path(mo, base, sd.bbox, sd.scale, sd.offset)
         for m in maps:
             if m.light_index >= len(lights):
