@@ -74,7 +74,7 @@ def _parser():
     b.add_argument("--out", default="bench", help="folder for bench.md and bench.json (default: bench/)")
     b.add_argument("--resolutions", default="256,512,1024,2048,4096", help="comma-separated map resolutions")
     b.add_argument("--repeats", type=_positive_int, default=5)
-    b.add_argument("--meshes", help="folder of the real test meshes (default: ../shared/meshes)")
+    b.add_argument("--meshes", help="folder of the real test meshes (default: the kit's data/meshes)")
     b.add_argument("--variant", choices=cfgmod.VARIANTS)
     b.add_argument("--scaling", default="1024,2048,4096,8192",
                    help="map resolutions of the cost-against-resolution table, tiled within the memory budget "

@@ -77,7 +77,7 @@ def check_runnable(cfg: Config):
         where = sorted({str(f.parent) for f in files})
         raise NothingToRun(cfg.source, "scene", "nothing to run: every scene is an absent optional file ("
                            + ", ".join(f.name for f in files) + f" in {', '.join(where)}); "
-                           "README.md (Credits: test meshes in ../shared/meshes) says where to get them")
+                           "give each file's path relative to the config, or drop optional = true to be told when one is missing")
 
 
 def _plain_name(name, source):

@@ -41,6 +41,7 @@ def use_variant(variant: str | None = None, threads: int | None = None) -> str:
     if mi.variant() == variant:
         if threads:
             dr.set_thread_count(threads)
+        exact_math()
         register_plugins()
         return variant
     if variant.startswith("llvm"):
@@ -61,8 +62,23 @@ def use_variant(variant: str | None = None, threads: int | None = None) -> str:
             dr.zeros(mi.Float, 1).numpy()
         except Exception as e:
             raise SetupError(f"variant {variant} needs an NVIDIA GPU with CUDA: {e}") from None
+    exact_math()
     register_plugins()
     return variant
+
+
+def exact_math():
+    """Turn Dr.Jit's fast math off for this thread (the flag is per thread).
+
+    With it on, Dr.Jit's LLVM backend computes ``rsqrt`` and ``rcp`` (hence every
+    ``normalize``) with the CPU's approximate instructions where the vector width matches
+    them (AVX's 8 lanes, AVX-512's 16) and lets LLVM contract and reassociate: a texel ray's
+    direction then differs in its last bits between an AVX2 and an AVX-512 machine, and
+    between AMD's and Intel's approximation tables. Off, every operation is IEEE rounded, so
+    a value's bits do not depend on the CPU or on the vector width (docs/design.md,
+    *Results that do not depend on the machine*)."""
+    import drjit as dr
+    dr.set_flag(dr.JitFlag.FastMath, False)
 
 
 def _has_cuda() -> bool:

@@ -12,6 +12,7 @@ import mitsuba as mi
 import numpy as np
 
 from . import spawn
+from .shadowmap import COHERENT
 
 
 @dataclass
@@ -27,12 +28,18 @@ class GBuffer:
     ms: float = 0.0
 
 
-def cast(scene, sensor, width: int, height: int) -> GBuffer:
-    idx = dr.arange(mi.UInt32, width * height)
-    x, y = mi.Float(idx % width) + 0.5, mi.Float(idx // width) + 0.5
+def primary_hits(scene, sensor, width: int, height: int, pixels):
+    """(ray, preliminary intersection, surface interaction) of the camera rays through the
+    centres of ``pixels`` (mi.UInt32 indices y * width + x) of a width x height image."""
+    x, y = mi.Float(pixels % width) + 0.5, mi.Float(pixels // width) + 0.5
     ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(x / width, y / height), mi.Point2f(0.5, 0.5))
-    pi = scene.ray_intersect_preliminary(ray, coherent=True)
-    si = pi.compute_surface_interaction(ray)
+    pi = scene.ray_intersect_preliminary(ray, coherent=COHERENT)   # a pixel's hit, whatever its packet
+    return ray, pi, pi.compute_surface_interaction(ray)
+
+
+def cast(scene, sensor, width: int, height: int) -> GBuffer:
+    """The G-buffer of every pixel of a width x height image."""
+    ray, pi, si = primary_hits(scene, sensor, width, height, dr.arange(mi.UInt32, width * height))
     toward_cam = -ray.d
     n = mi.Vector3f(si.n) * dr.sign(dr.dot(si.n, toward_cam))
     ns = mi.Vector3f(si.sh_frame.n) * dr.sign(dr.dot(si.sh_frame.n, toward_cam))

@@ -31,6 +31,7 @@ from . import oracle as oracle_mod
 from . import gbuffer as gbuffer_mod
 from . import metrics as metrics_mod
 from .closedness import shape_closedness
+from .env import exact_math  # noqa: F401  (the plugins set it in the thread that renders)
 from .config import parse_scheme
 from .lookup import Receiver
 from .types import ConfigError, LightSpec, SchemeSpec  # noqa: F401  (the types a stage takes)

@@ -27,6 +27,12 @@ import numpy as np
 from . import spawn
 from .types import CULLINGS  # noqa: F401  (the choices of midpoint and dual)
 
+# Embree's coherent traversal resolves a ray near a silhouette differently depending on which
+# rays share its packet (the tile it was cast in, the compaction of a layered search, the
+# CPU's vector width); its incoherent traversal gives every ray the same hit wherever it is
+# cast (docs/design.md, *Results that do not depend on the machine*).
+COHERENT = False
+
 LAYERS = ("slope", "z2")   # optional attributes a scheme may need (besides z1 and shape)
 CULL_NONE, CULL_BACK, CULL_FRONT, CULL_ALL = 0, 1, 2, 3   # CULL_ALL: an area light's luminaire, stepped over
 MAX_STEPS = 64             # surfaces stepped over per texel before giving up (reported, never silent)
@@ -66,7 +72,7 @@ def first_layer(scene, view, first: int = 0, count: int | None = None, tables=No
     """(z1, shape index, (hit point, normal, valid), rays) for texels ``first .. first + count - 1``."""
     count = view.n_texels - first if count is None else count
     rays = view.texel_rays(first, count)
-    pi = scene.ray_intersect_preliminary(rays, coherent=True)
+    pi = scene.ray_intersect_preliminary(rays, coherent=COHERENT)
     valid = pi.is_valid()
     shape = spawn.hit_shape(pi, valid, tables.by_id if tables is not None else spawn.shape_table(scene))
     # the hit point as every layer and receiver computes it (barycentric on the triangle), then
@@ -100,7 +106,7 @@ def _step(scene, view, st: dict, d, modes, culls: bool, need, want_slope: bool, 
     ray = mi.Ray3f(st["o"], d)
     st["cast1"] = st["cast1"] + dr.select(active & (found == 0), 1, 0)
     st["cast2"] = st["cast2"] + dr.select(active & (found == 1), 1, 0)
-    pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
+    pi = scene.ray_intersect_preliminary(ray, coherent=COHERENT, active=active)
     valid = active & pi.is_valid()
     shape = spawn.hit_shape(pi, valid, extents.by_id)
     p, n = hit_geometry(pi, ray, valid, shape, extents)
@@ -146,13 +152,13 @@ def _first_and_second(scene, view, ray, extents, magnitude):
     of that ray: no second vertex fetch; it differs from the interpolated point by rounding,
     far below any bias (z2 is read only by midpoint and dual). Returns (z1, shape1, p1, n1,
     z2, first hit, re-hit of the first triangle), traced, not evaluated."""
-    pi = scene.ray_intersect_preliminary(ray, coherent=True)
+    pi = scene.ray_intersect_preliminary(ray, coherent=COHERENT)
     hit1 = pi.is_valid()
     shape1 = spawn.hit_shape(pi, hit1, extents.by_id)
     p1, n1 = hit_geometry(pi, ray, hit1, shape1, extents)
     z1 = dr.select(hit1, view.depth(p1), view.far)
     o2 = spawn.offset_origin(p1, n1, ray.d, spawn.error_bound_by_shape(p1, shape1, extents, magnitude))
-    pi2 = scene.ray_intersect_preliminary(mi.Ray3f(o2, ray.d), coherent=True, active=hit1)
+    pi2 = scene.ray_intersect_preliminary(mi.Ray3f(o2, ray.d), coherent=COHERENT, active=hit1)
     hit2 = hit1 & pi2.is_valid()
     rehit = hit2 & (spawn.hit_shape(pi2, hit2, extents.by_id) == shape1) & (pi2.prim_index == pi.prim_index) \
         & _on_mesh(shape1, extents)

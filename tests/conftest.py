@@ -4,7 +4,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-MESHES = ROOT.parent / "shared" / "meshes"
+MESHES = ROOT / "data" / "meshes"          # the real test meshes, shipped with the kit (data/meshes/README.md)
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -248,8 +248,6 @@ def test_area_light_run_end_to_end(run_dict):
     assert wide["adaptive_tap"]["mae_lit"] <= wide["constant"]["mae_lit"] + 1e-9
 
 
-@pytest.mark.skipif(not (MESHES / "cbox_mitsuba" / "cbox.xml").is_file(),
-                    reason="../shared/meshes/cbox_mitsuba absent (README: test meshes)")
 def test_cornell_box_luminaire_is_the_light_and_its_map_steps_over_it(variant):
     spec = pipeline.scene_spec({"file": str(MESHES / "cbox_mitsuba" / "cbox.xml")})
     sd = pipeline.load_scene(spec, (48, 48))
@@ -268,8 +266,6 @@ def test_cornell_box_luminaire_is_the_light_and_its_map_steps_over_it(variant):
     assert i not in shapes and len(shapes - {0xFFFFFFFF}) >= 4
 
 
-@pytest.mark.skipif(not (MESHES / "cbox_mitsuba" / "cbox.xml").is_file(),
-                    reason="../shared/meshes/cbox_mitsuba absent (README: test meshes)")
 def test_plugins_with_area_emitters(variant):
     """dsm_shadow with area = true: its dsm.Vstar AOV (one random area sample per camera sample)
     averages to the stratified reference's V* over the image; dsm_error renders |V - V*| whose

@@ -253,18 +253,29 @@ def test_cuda_without_a_gpu_is_one_plain_line(tmp_path, capsys):
 
 # ---------------------------------------------------------------- 4: nothing to run
 
-def test_every_scene_absent_says_which_and_where_to_get_them(tmp_path, capsys):
-    text = (ROOT / "experiments" / "dou_table1.toml").read_text()
-    text = text.replace("../../shared/meshes/sponza_dabrovic.ply", str(tmp_path / "moved" / "sponza_dabrovic.ply"))
-    cfg = tmp_path / "dou.toml"
-    cfg.write_text(text + '\n[[scene]]\nfile = "gone/bunny.ply"\noptional = true\n')
+def test_every_scene_absent_says_which_and_where(tmp_path, capsys):
+    moved = tmp_path / "moved" / "sponza_dabrovic.ply"
+    cfg = tmp_path / "two.toml"
+    cfg.write_text(_tiny(f'file = "{moved}"\noptional = true', '[[scene]]\nfile = "gone/bunny.ply"\noptional = true\n'))
     rc, err = _cli(capsys, "run", cfg, "--out", tmp_path / "o")
     assert rc == 1
-    _one_line(err, "nothing to run", "sponza_dabrovic.ply", "bunny.ply", "README", "../shared/meshes")
+    _one_line(err, "nothing to run", "sponza_dabrovic.ply", "bunny.ply", str(moved.parent), "optional = true")
     assert not (tmp_path / "o").exists()
     rc, err = _cli(capsys, "plan", cfg)
     assert rc == 1
     _one_line(err, "nothing to run", "sponza_dabrovic.ply")
+
+
+def test_a_shipped_experiments_mesh_is_not_optional(tmp_path, capsys):
+    """The meshes ship with the kit: a shipped experiment whose mesh is gone is a config error
+    naming the file (exit 2), never a silent skip."""
+    text = (ROOT / "experiments" / "real_meshes.toml").read_text()
+    assert 'file = "../data/meshes/mitsuba_bunny.ply"\n[[scene]]' in text       # the first scene, not optional
+    cfg = tmp_path / "real.toml"
+    cfg.write_text(text.replace("../data/meshes/mitsuba_bunny.ply", str(tmp_path / "gone.ply")))
+    rc, err = _cli(capsys, "plan", cfg)
+    assert rc == 2
+    _one_line(err, "scene[0].file", "gone.ply")
 
 
 # ---------------------------------------------------------------- 5: memory

@@ -75,7 +75,6 @@ def test_closedness_detection():
     assert closed and "inward" in why
 
 
-@pytest.mark.skipif(not (MESHES / "dragon_vrip_res3.ply").exists(), reason="../shared/meshes is absent")
 def test_dragon_is_open_and_back_closed_culls_only_closed_shapes(tmp_path):
     cfg = base_config(scene=[{"file": str(MESHES / "dragon_vrip_res3.ply")}],
                       light=[{"type": "directional", "direction": [0.3, -1.0, 0.2]}],

@@ -2,7 +2,6 @@
 import subprocess
 import sys
 
-import numpy as np
 import pytest
 
 from conftest import base_config
@@ -58,24 +57,6 @@ def test_constant_and_none_build_nothing_more(run_dict):
     assert res.run["rays"]["map_continue"] == 0 and res.run["quantized_copies"] == 0
     assert "plan" in res.run and res.run["plan"]["rays"] == p.rays
     assert all(r["build_first_ms"] == r["build_ms"] > 0 for r in res.rows)   # one layer: its build is the first
-
-
-@pytest.mark.parametrize("needs,culling", [(set(), None), ({"slope"}, None), ({"z2", "slope"}, None),
-                                           ({"z2"}, "back")])
-def test_tiled_and_single_pass_builds_are_identical(variant, needs, culling):
-    from dsm import config, scenes, shadowmap
-    from dsm.config import LightSpec
-    from dsm.pipeline import make_view
-    cfg = config.parse(base_config(scene=[{"builtin": "room"}]), "<test>")
-    sd = scenes.load(cfg.scenes[0], (16, 16))
-    view = make_view(LightSpec("point", position=(0.2, 0.1, 1.8), direction=(0, 0, -1.0)), 48, None, sd.bbox, "cube")
-    modes = shadowmap.cull_modes_for(culling, [True] * len(sd.shape_names)) if culling else None
-    one = shadowmap.build(sd.scene, view, needs, culling or "none", modes)
-    tiled = shadowmap.build(sd.scene, view, needs, culling or "none", modes, tile=5000)
-    assert one.tiles == 1 and tiled.tiles == -(-view.n_texels // 5000)
-    for a, b in zip(shadowmap.arrays(one), shadowmap.arrays(tiled)):
-        np.testing.assert_array_equal(a.numpy(), b.numpy())
-    assert one.rays == tiled.rays
 
 
 def test_a_small_memory_budget_tiles_the_build_with_the_same_results(run_dict):

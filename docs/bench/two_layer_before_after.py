@@ -8,7 +8,7 @@ from dsm import shadowmap, spawn, scenes, pipeline
 from dsm.config import SceneSpec, LightSpec
 from dsm.scenes import FileParams, PlaneBoxParams
 spec = importlib.util.spec_from_file_location("oldsm", "/tmp/scale_old_shadowmap.py"); old = importlib.util.module_from_spec(spec); sys.modules["oldsm"] = old; spec.loader.exec_module(old)
-M = Path("/work/shared/meshes"); N = int(sys.argv[1])
+M = Path(__file__).resolve().parents[2] / "data" / "meshes"; N = int(sys.argv[1])
 specs = [SceneSpec(builtin="plane_box", params=PlaneBoxParams(), label="plane_box"),
          SceneSpec(file=M/"mitsuba_bunny.ply", params=FileParams(up="y"), label="mitsuba_bunny"),
          SceneSpec(file=M/"sponza_dabrovic.ply", params=FileParams(up="y"), label="sponza_dabrovic")]

@@ -243,6 +243,7 @@ def fingerprint(scene, sensor) -> str:
 
 
 def _prepare(integrator, scene, sensor, plugin):
+    pl.exact_math()           # per thread: a user's mi.render thread gets the runner's bits
     sensor = sensor if sensor is not None else scene.sensors()[0]
     key = (id(scene), id(sensor), fingerprint(scene, sensor))
     if integrator._key == key:

@@ -1,0 +1,105 @@
+"""The two halves of scripts/compare-commits.
+
+``run OUT``: in the current checkout (put it first on PYTHONPATH), run every experiment at its
+smoke size, the default experiment, a tiled run, a run under ``--cluster local`` and
+``dsm tune experiments/tune.toml`` into OUT/<name>/.
+``compare A B``: the same runs of two checkouts, every CSV column compared row by row except
+what depends on the machine or the kernel cache; prints one line per run and the differences.
+"""
+from __future__ import annotations
+
+import csv
+import dataclasses
+import subprocess
+import sys
+from pathlib import Path
+
+# columns that measure the machine, not the method
+MACHINE = ("_ms", "_mb", "_s", "_bytes", "kernels_compiled", "time", "seconds")
+
+
+def _machine(col: str) -> bool:
+    return any(col.endswith(m) or m in col for m in MACHINE)
+
+
+def _smoke(cfg):
+    """A config at the smoke size of tests/test_experiments.py."""
+    return dataclasses.replace(cfg, camera_resolution=(48, 48), timing_repeats=1,
+                               map=dataclasses.replace(cfg.map, resolution=(32,),
+                                                       texels=(6 * 32 ** 2,) if cfg.map.texels else ()))
+
+
+def run_all(out: Path):
+    """Every run of the comparison, into out/<name>/ (a run that cannot run is noted, not fatal)."""
+    import dsm
+    from dsm import config
+    from dsm.cli import DEFAULT_CONFIG
+    out.mkdir(parents=True, exist_ok=True)
+    for path in sorted(Path("experiments").glob("*.toml")):
+        cfg = config.load(path)
+        if cfg.raw.get("tune"):
+            from dsm.tune import tune
+            tune(cfg, out=out / f"tune-{path.stem}")
+            continue
+        try:
+            dsm.run(_smoke(cfg), out=out / f"smoke-{path.stem}")
+        except Exception as e:                     # noqa: BLE001 (every scene absent: recorded)
+            print(f"{path.name}: {type(e).__name__}: {e}", file=sys.stderr)
+    dsm.run(DEFAULT_CONFIG, out=out / "default")
+    tiled = {"experiment": {"name": "tiled"}, "camera": {"resolution": [96, 96]}, "scene": [{"builtin": "plane_box"}],
+             "map": {"resolution": 512}, "memory": {"budget_mb": 1}, "timing": {"repeats": 1},
+             "scheme": [{"name": "dual", "culling": "back_closed"}, {"name": "constant"}]}
+    dsm.run(tiled, out=out / "tiled")
+    cmd = [sys.executable, "-m", "dsm.cli", "run", "experiments/point_views.toml", "--out", str(out / "cluster"),
+           "--cluster", "local"]
+    subprocess.run(cmd, check=False)
+
+
+def _rows(path: Path) -> list:
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def compare_csv(a: Path, b: Path) -> list:
+    """Differences between two CSV files of the same run (machine columns left out)."""
+    ra, rb = _rows(a), _rows(b)
+    if len(ra) != len(rb):
+        return [f"{a.name}: {len(ra)} rows against {len(rb)}"]
+    diffs = []
+    for i, (x, y) in enumerate(zip(ra, rb)):
+        if set(x) != set(y):
+            diffs.append(f"{a.name}: columns differ: {sorted(set(x) ^ set(y))}")
+            break
+        for k in x:
+            if not _machine(k) and x[k] != y[k]:
+                diffs.append(f"{a.name} row {i} ({x.get('case', '')}) {k}: {x[k]!r} against {y[k]!r}")
+    return diffs
+
+
+def compare_all(a: Path, b: Path) -> int:
+    """Print one line per run; 0 when every compared value agrees."""
+    bad = 0
+    for run_a in sorted(p for p in a.iterdir() if p.is_dir()):
+        run_b = b / run_a.name
+        files = sorted(run_a.glob("*.csv")) + [p for p in [run_a / "tuned.toml"] if p.exists()]
+        diffs = [] if run_b.is_dir() else [f"{run_a.name} missing in {b}"]
+        for f in files:
+            g = run_b / f.name
+            if not g.exists():
+                diffs.append(f"{f.name} missing in {run_b}")
+            elif f.suffix == ".csv":
+                diffs += compare_csv(f, g)
+            elif f.read_text() != g.read_text():
+                diffs.append(f"{f.name} differs")
+        print(f"{run_a.name}: {len(files)} files, " + ("identical" if not diffs else f"{len(diffs)} differences"))
+        for d in diffs[:20]:
+            print("   ", d)
+        bad += bool(diffs)
+    return 1 if bad else 0
+
+
+if __name__ == "__main__":
+    if sys.argv[1] == "run":
+        run_all(Path(sys.argv[2]))
+    else:
+        sys.exit(compare_all(Path(sys.argv[2]), Path(sys.argv[3])))
