@@ -31,6 +31,8 @@ One depth function for the whole view: the distance along the light from one ref
 """
 from __future__ import annotations
 
+import csv
+
 import dataclasses
 import math
 import time
@@ -527,6 +529,10 @@ CSV_COLUMNS = ("case", "scene", "light", "cascade_layout", "scheme", "params", "
 def write_csv(path, rows: list):
     """cascades.csv: one row per case and cascade (undefined values: empty cells)."""
     report.write_csv(path, CSV_COLUMNS, rows)
+
+
+def write_table(path, rows: list):
+    """cascades.md from cascades.csv's rows (dsm.publish composes it, for a run and a rebuild)."""
     lines = ["# Cascades", "", "Per case and cascade (cascades.csv): its range of camera view depth, texel size, "
              "receivers, error rates and the median shadow-map texels per camera pixel (below 1: perspective "
              "aliasing). Undefined values: -.", "",
@@ -539,10 +545,34 @@ def write_csv(path, rows: list):
             + f" | {r['split_near']:.3g} to {r['split_far']:.3g} | " + " | ".join(cell(r[k]) for k in (
                 "texel_size", "n_receivers", "acne_rate", "peterpan_rate", "error_rate", "texels_per_pixel_median"))
             + " |")
-    md = path.with_name("cascades.md")
-    tmp = md.with_name(".cascades.md.tmp")
-    tmp.write_text("\n".join(lines) + "\n")
-    tmp.replace(md)
+    with report.atomic(path) as tmp:
+        tmp.write_text("\n".join(lines) + "\n")
+
+
+CURVE_META = ("case", "scene", "light", "cascade_layout", "scheme", "params", "resolution", "filter", "format")
+CURVE_COLUMNS = CURVE_META + ("distance", "error_rate", "texels_per_pixel")
+
+
+def write_curves_csv(path, curves: list):
+    """cascade_curves.csv: each case's error rate and texels per pixel against camera distance (the
+    points of plots/cascades_*.png), floats written exactly (repr) so a rebuild draws the same."""
+    with report.atomic(path) as tmp, open(tmp, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(CURVE_COLUMNS)
+        for meta, curve in curves:
+            for point in curve:
+                w.writerow([meta.get(k, "") for k in CURVE_META] + [repr(float(x)) for x in point])
+
+
+def read_curves_csv(path) -> list:
+    """(case meta, [(distance, error rate, texels per pixel)]) per case, in the file's order."""
+    out, index = [], {}
+    for r in report.read_csv(path):
+        if r["case"] not in index:
+            index[r["case"]] = len(out)
+            out.append(({k: r[k] for k in CURVE_META}, []))
+        out[index[r["case"]]][1].append(tuple(float(r[k]) for k in ("distance", "error_rate", "texels_per_pixel")))
+    return out
 
 
 CASCADE_COLORS = np.array([[0, 0, 0], [228, 26, 28], [55, 126, 184], [77, 175, 74], [152, 78, 163],

@@ -100,11 +100,7 @@ def run_group(cfg, index: int, variant, threads: int, kept: dict) -> dict:
         node = f"{node}:{_ray().get_runtime_context().get_node_id()[:8]}"
     except Exception:
         pass
-    return {"rows": r.rows, "status": r.status, "oracle": r.oracle_rows, "curves": r.curves, "maps": r.maps,
-            "scenes": r.scene_info, "gbuffer_ms": r.gbuffer_ms, "rays": r.rays, "quantized": r.quantized,
-            "images": images, "motion_frames": r.motion_frames,
-            "motion_curves": r.motion_curves, "node": node, "pid": os.getpid(), "cascade_rows": r.cascade_rows,
-            "cascade_curves": r.cascade_curves}
+    return {"record": r.record, "images": images, "node": node, "pid": os.getpid()}
 
 
 class ClusterRunner(Runner):
@@ -125,7 +121,7 @@ class ClusterRunner(Runner):
                                              retry_exceptions=True)
         for spec in self.cfg.scenes:
             if spec.missing:
-                self.status.append({"what": f"scene {spec.label}", "status": "skipped", "error": spec.missing})
+                self.record.status.append({"what": f"scene {spec.label}", "status": "skipped", "error": spec.missing})
         cfg_ref = ray.put(self.cfg)
         threads = max(1, int(ex.cpus_per_task))
         pending = {}
@@ -155,51 +151,22 @@ class ClusterRunner(Runner):
         m = self.plan.maps[i]
         what = f"scene {m.scene} light {m.light} view {m.view} map {m.resolution} culling {m.culling}"
         if isinstance(res, Exception):
-            self.status.append({"what": what, "status": "failed", "error": f"{type(res).__name__}: {res}",
-                                "cases": m.cases})
+            self.record.status.append({"what": what, "status": "failed", "error": f"{type(res).__name__}: {res}",
+                                       "cases": m.cases})
             self._write_run_json()
             return
-        node = res["node"]
+        node, task = res["node"], res["record"]
         for name, data in res["images"].items():
             (self.out / "images" / name).parent.mkdir(parents=True, exist_ok=True)
             with report.atomic(self.out / "images" / name) as tmp:
                 tmp.write_bytes(data)
-        self.motion_frames += res["motion_frames"]
-        self.motion_curves += res["motion_curves"]
-        for row in res["rows"]:
-            self.rows.append(row)
+        for row in task.rows:
             self.csv.write(row)
-        for s in res["status"]:
-            if s["what"].startswith("case "):
-                self.status.append({**s, "node": node, "worker": res["pid"]})
-                continue
-            key = (s["what"], s["status"], s.get("error"))     # a scene's notes, once (each task loads it)
-            if key not in self.seen:
-                self.seen.add(key)
-                self.status.append(s)
-        self.oracle_rows += res["oracle"]
-        self.cascade_rows += res["cascade_rows"]
-        self.cascade_curves += res["cascade_curves"]
-        self.curves += res["curves"]
-        self.maps += [{**x, "node": node} for x in res["maps"]]
-        for info in res["scenes"]:
-            if all(x["scene"] != info["scene"] for x in self.scene_info):
-                self.scene_info.append(info)
-        for k, v in res["gbuffer_ms"].items():
-            self.gbuffer_ms.setdefault(k, v)
-        self.quantized += res["quantized"]
-        # the plan's work: a scene's G-buffer and a light's reference once, each map's own rays
-        first_scene = ("gbuffer", m.scene) not in self.seen
-        first_light = ("reference", m.scene, m.light) not in self.seen
-        self.seen |= {("gbuffer", m.scene), ("reference", m.scene, m.light)}
-        for k, v in res["rays"].items():
-            if (k == "gbuffer" and not first_scene) or (k == "reference" and not first_light):
-                continue
-            self.rays[k] = self.rays.get(k, 0) + v
+        self.record.merge(task, node, res["pid"], self.seen, m.scene, (m.scene, m.light))
         per = self.nodes.setdefault(node, {"rays": {}, "cases": 0, "groups": 0})
-        for k, v in res["rays"].items():
+        for k, v in task.rays.items():
             per["rays"][k] = per["rays"].get(k, 0) + v
-        per["cases"] += len(res["rows"])
+        per["cases"] += len(task.rows)
         per["groups"] += 1
         self._write_run_json()
 

@@ -280,11 +280,11 @@ def _view_signature(view) -> bytes:
     return b"".join(p.tobytes() for p in parts)
 
 
-def run_scene(runner, sd, lights, maps, closed, extents, frame_rows: list, curves: list):
+def run_scene(runner, sd, lights, maps, closed, extents):
     """The frame loop of every [[motion]] path over one scene's maps of the plan (called by the
-    runner for a config with [[motion]]): rows of metrics.csv (per-case means), the rows of
-    frames.csv and the flicker curves (appended to ``frame_rows`` and ``curves``), an animated
-    error image per case (images/<scene>_<light>/<case>_frames.gif; none with [report] images = "none")."""
+    runner for a config with [[motion]]): rows of metrics.csv (per-case means) and of frames.csv
+    (into ``runner.record``), an animated error image per case
+    (images/<scene>_<light>/<case>_frames.gif; none with [report] images = "none")."""
     cfg = runner.cfg
     base = Camera.from_sensor(sd.sensor)
     fp = sample_points(sd.scene, max(mo.points for mo in cfg.motion), cfg.seed, sd.diagonal)
@@ -301,17 +301,10 @@ def run_scene(runner, sd, lights, maps, closed, extents, frame_rows: list, curve
             if m.light_index >= len(lights):
                 continue
             light_frames = light_path(mo, lights[m.light_index], sd.scale, sd.offset)
-            _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents, magnitude,
-                     frame_rows, curves)
+            _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents, magnitude)
 
 
-def finish(out, frame_rows: list, curves: list):
-    """frames.csv and plots/flicker_<scene>_<light>_<motion>.png of a motion run."""
-    _write_frames_csv(out / "frames.csv", frame_rows)
-    _write_plot(out / "plots", curves)
-
-
-def _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents, magnitude, frame_rows, curves):
+def _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents, magnitude):
     cfg = runner.cfg
     cache_gb, cache_setup, cache_vstar = {}, {}, {}
     specs = [pipeline.preset_for_light(s, light_frames[0].type) for s in m.specs]
@@ -341,7 +334,7 @@ def _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents,
             smap = out[-1]
             build_ms.append(tm.ms)
             built.append(True)
-            runner.rays["map_texel"] = runner.rays.get("map_texel", 0) + smap.rays.get("map_texel", 0)
+            runner.record.add_rays({"map_texel": smap.rays.get("map_texel", 0)})
         else:
             smap = dataclasses.replace(smap, view=view)
             built.append(False)
@@ -388,9 +381,8 @@ def _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents,
         meta = {"case": case, "motion": mo.label, "scene": sd.label, "light": m.light,
                 "cascade_layout": m.cascade.label if m.cascade else "", "scheme": spec.name, "params": spec.label,
                 "resolution": m.resolution, "filter": filt, "format": fmt}
-        for fr, pr in zip(d["frames"], [{}] + pairs):
-            frame_rows.append({**meta, **fr, **pr})
-        curves.append((meta, [(t + 1, p["flicker_rate"]) for t, p in enumerate(pairs)]))
+        for fr, pr in zip(d["frames"], [{}] + pairs):          # frame t carries the pair (t - 1, t)
+            runner.record.motion_frames.append({**meta, **fr, **pr})
         last = d["metrics"][-1]
         row = {**last, "case": case, "scene": sd.label, "light": m.light, "view": m.view, "scheme": spec.name,
                "culling": m.culling, "preset": spec.preset or "", "params": spec.label, "resolution": m.resolution,
@@ -410,13 +402,11 @@ def _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents,
         for k, val in list(row.items()):
             if isinstance(val, float) and not metrics.defined(val):
                 row[k] = metrics.UNDEFINED
-        runner.rows.append(row)
-        runner.csv.write(row)
         if d["images"]:
             folder = runner.out / "images" / figures.image_folder(meta)
             folder.mkdir(parents=True, exist_ok=True)
             _write_gif(folder / f"{case}_frames.gif", d["images"])
-        runner.status.append({"what": f"case {case}", "scene": sd.label, "light": m.light, "view": m.view,
+        runner.add_case(row, {"what": f"case {case}", "scene": sd.label, "light": m.light, "view": m.view,
                               "scheme": spec.name, "params": spec.label, "resolution": m.resolution,
                               "status": "ok" if row["n_receivers"] else "empty"})
         runner.bar.update(1)
@@ -431,12 +421,29 @@ def _write_gif(path, images):
     tmp.replace(path)
 
 
-def _write_frames_csv(path, rows):
+def write_frames_csv(path, rows):
+    """frames.csv: one row per case and frame (the flicker of the pair ending at that frame)."""
     report.write_csv(path, FRAME_COLUMNS, rows)
 
 
-def _write_plot(folder, curves):
-    """plots/flicker_<scene>_<light>_<motion>.png: flicker rate against frame, one line per case."""
+def flicker_curves(frame_rows) -> list:
+    """(case meta, [(frame, flicker rate of the pair ending there)]) per case, from frames.csv's
+    rows as text (an empty cell: undefined)."""
+    out, index = [], {}
+    for r in frame_rows:
+        if r["case"] not in index:
+            index[r["case"]] = len(out)
+            out.append((r, []))
+        if int(r["frame"]) > 0:
+            rate = float(r["flicker_rate"]) if r["flicker_rate"] != "" else metrics.UNDEFINED
+            out[index[r["case"]]][1].append((int(r["frame"]), rate))
+    return out
+
+
+def write_plots(folder, frame_rows):
+    """plots/flicker_<scene>_<light>_<motion>.png: flicker rate against frame, one line per case
+    (from frames.csv's rows: dsm.publish composes it, for a run and a rebuild)."""
+    curves = flicker_curves(frame_rows)
     if not curves:
         return
     from matplotlib.figure import Figure

@@ -1,11 +1,14 @@
 """The report of a run, written after its measurements; ``dsm report``: rebuilt from a run's files,
 or two runs compared.
 
-A run calls :func:`write_report` once its timed work is done: the case images and the figures
-are drawn then (in worker processes when there are enough, see ``figures.run_jobs``), so no
-drawing overlaps a timed build or lookup; table.md and report.html are written from the run's
-files (metrics.csv, run.json, oracle.csv, oracle_curves.npz), so :func:`rebuild` writes the
-same from the same folder.
+A run writes its data files (:func:`write_data`: oracle.csv, cascades.csv, cascade_curves.csv,
+frames.csv beside the metrics.csv and run.json it writes as it goes, and images/), then calls
+:func:`write_report` once its timed work is done: this module is the only composer of the
+report, and it reads nothing but those files, so :func:`rebuild` (``dsm report DIR``) writes the
+same report from the same folder: table.md, cascades.md, the figures (the oracles' trade-off
+plots, the cascades' distance plots, the flicker plots, the soft-shadow plots) and report.html.
+The figures are drawn after the timed work (in worker processes when there are enough, see
+``figures.run_jobs``), so no drawing overlaps a timed build or lookup.
 """
 from __future__ import annotations
 
@@ -15,9 +18,9 @@ import math
 import time
 from pathlib import Path
 
-from . import figures, htmlpage, metrics, report, soft_report, summary
+from . import cascades, figures, htmlpage, metrics, motion, report, soft_report, summary
 
-PLOT_PREFIXES = ("vs_bias_", "vs_resolution_", "vs_texels_", "pareto_", "tradeoff_", "soft_")
+PLOT_PREFIXES = ("vs_bias_", "vs_resolution_", "vs_texels_", "pareto_", "tradeoff_", "soft_", "cascades_", "flicker_")
 IMAGES_PER_JOB = 150
 
 
@@ -73,6 +76,29 @@ def _load(out: Path, notes: list | None = None):
     return run, rows, oracle_rows
 
 
+def write_data(out: Path, rec):
+    """The run's data files beside metrics.csv and run.json, from its record (dsm.record): what
+    the report is composed from."""
+    out = Path(out)
+    report.write_oracle_csv(out / "oracle.csv", rec.oracle_rows)
+    if rec.cascade_rows:
+        cascades.write_csv(out / "cascades.csv", rec.cascade_rows)
+        cascades.write_curves_csv(out / "cascade_curves.csv", rec.cascade_curves)
+    if rec.motion_frames:
+        motion.write_frames_csv(out / "frames.csv", rec.motion_frames)
+
+
+def _sections(out: Path, notes: list, plots: bool):
+    """The sections of runs with cascades (cascades.md, plots/cascades_*.png) and motion
+    (plots/flicker_*.png), from cascades.csv, cascade_curves.csv and frames.csv."""
+    if (out / "cascades.csv").is_file():
+        cascades.write_table(out / "cascades.md", _read_rows(out / "cascades.csv", notes, "case"))
+        if plots and (out / "cascade_curves.csv").is_file():
+            cascades.write_plots(out / "plots", cascades.read_curves_csv(out / "cascade_curves.csv"))
+    if plots and (out / "frames.csv").is_file():
+        motion.write_plots(out / "plots", report.read_csv(out / "frames.csv"))
+
+
 def _texels(run) -> tuple:
     raw = run.get("config", {}).get("map", {}).get("texels", [])
     return tuple(raw if isinstance(raw, list) else [raw])
@@ -118,6 +144,7 @@ def write_report(out: Path, images=(), curves=None, plots: bool = True) -> dict:
     report.write_table(out / "table.md", rows, run.get("experiment", out.name), run.get("config_file", ""),
                        run.get("status", []), oracle_rows, _texels(run), state=run.get("state"),
                        planned=run.get("plan", {}).get("cases"))
+    _sections(out, notes, plots and bool(rows))
     htmlpage.write_html(out / "report.html", rows, run)
     t3 = time.perf_counter()
     return {"figures": n_figures, "images": len(items), "workers": pool, "read_s": t1 - t0, "draw_s": t2 - t1,

@@ -12,22 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from . import metrics, summary
+from . import metrics, record, summary
 
-COLUMNS = [
-    "case", "scene", "light", "view", "scheme", "preset", "params", "culling", "resolution", "total_texels", "filter", "format",
-    "cascade_layout", "motion", "frames",
-    "n_pixels", "n_excluded_nohit", "n_excluded_backfacing", "n_excluded_outside",
-    "n_receivers", "n_gt_lit", "n_gt_shadowed", "n_acne", "n_acne_self", "n_acne_edge", "n_peterpan",
-    "n_acne_resolution", "n_acne_bias", "n_peterpan_resolution", "n_peterpan_bias",
-    "acne_rate", "peterpan_rate", "error_rate", "mean_abs_error", "peterpan_dist_median",
-    "n_seam", "seam_error_rate", "off_seam_error_rate", "texel_size", "texels_per_pixel", "fit_ms", "n_plane_fallback",
-    "n_backfacing", "backface_lit_rate",
-    "flicker_rate", "flicker_ever", "flicker_magnitude", "flicker_within_rate", "flicker_change_rate", "maps_built",
-    "build_ms", "build_first_ms", "build_compile_ms", "build_peak_mb", "lookup_ms", "lookup_compile_ms", "lookup_kernels_compiled", "reference_ms",
-    "sweep_key", "sweep_value",
-]
-COLUMNS += list(metrics.SOFT_COLUMNS)     # area lights (soft shadows): empty cells for other lights
+COLUMNS = record.NAMES          # metrics.csv's columns: the run record's schema (dsm.record)
 
 
 @contextlib.contextmanager
@@ -73,6 +60,8 @@ class CsvWriter:
             csv.writer(fh).writerow(COLUMNS)
 
     def write(self, row: dict):
+        """Append ``row``, refusing one that does not fit the schema (record.check_row)."""
+        record.check_row(row)
         with open(self.path, "a", newline="") as fh:
             csv.writer(fh).writerow([_fmt(row.get(c, "")) for c in COLUMNS])
 
@@ -88,11 +77,8 @@ def read_csv(path) -> list[dict]:
         return list(csv.DictReader(fh))
 
 
-TEXT_COLUMNS = {"case", "scene", "light", "view", "scheme", "preset", "params", "culling", "filter", "format",
-                "cascade_layout", "sweep_key", "motion"}
-
-
-INT_COLUMNS = {"resolution", "total_texels", "lookup_kernels_compiled", "frames", "maps_built"}
+TEXT_COLUMNS = record.TEXT_COLUMNS
+INT_COLUMNS = record.INT_COLUMNS
 
 
 def _typed(k, v):

@@ -23,7 +23,7 @@ import drjit as dr
 import numpy as np
 
 from . import config as cfgmod
-from . import cascades, env, figures, metrics, motion, pipeline, publish, report, resume, shadowmap, soft_report, timing
+from . import cascades, env, figures, metrics, motion, pipeline, publish, record, report, resume, shadowmap, soft_report, timing
 from . import plan as planmod
 from .lookup import Receiver
 
@@ -39,12 +39,12 @@ class Results:
     curves: list = field(default_factory=list)   # per map and format: (row, world Curve, texel Curve)
 
     def where(self, **kw) -> "Results":
-        rows = [r for r in self.rows if all(r.get(k) == v for k, v in kw.items())]
+        rows = [r for r in self.record.rows if all(r.get(k) == v for k, v in kw.items())]
         return Results(self.out, rows, self.run, {r["case"]: self.images.get(r["case"]) for r in rows},
-                       self.oracle, self.curves)
+                       self.oracle, self.record.curves)
 
     def column(self, name) -> np.ndarray:
-        return np.array([r[name] for r in self.rows])
+        return np.array([r[name] for r in self.record.rows])
 
     def rgb(self, case) -> np.ndarray:
         """The case's error image as (H, W, 3) uint8 in the report's colours."""
@@ -57,7 +57,7 @@ class Results:
         """The rows as a Markdown table of the chosen columns (for notebooks and terminals)."""
         fmt = lambda v: f"{v:.4f}" if isinstance(v, float) and abs(v) < 10 else (f"{v:.1f}" if isinstance(v, float) else str(v))
         lines = ["| " + " | ".join(columns) + " |", "|---" * len(columns) + "|"]
-        lines += ["| " + " | ".join(fmt(r.get(c, "")) for c in columns) + " |" for r in self.rows]
+        lines += ["| " + " | ".join(fmt(r.get(c, "")) for c in columns) + " |" for r in self.record.rows]
         return "\n".join(lines)
 
     def _repr_markdown_(self):
@@ -69,7 +69,7 @@ class Results:
         raise AttributeError(name)
 
     def __len__(self):
-        return len(self.rows)
+        return len(self.record.rows)
 
 
 class StageFailed(Exception):
@@ -85,21 +85,10 @@ class Runner:
         self.progress = progress
         self.keep_images = keep_images
         self.plan = planmod.make(config)
-        self.rays = {"gbuffer": 0, "reference": 0, "map_texel": 0, "map_continue": 0}
-        self.reference_regions = []   # area lights: the reference's receivers and rays by region
-        self.maps = []
-        self.scene_info = []
-        self.gbuffer_ms = {}
-        self.status = []
-        self.rows = []
+        self.record = record.RunRecord()     # everything measured: rows, statuses, maps, rays, oracles ...
         self.images = {}
-        self.oracle_rows = []         # oracle.csv
-        self.curves = []              # (oracle row at the first lambda, world curve, texel curve)
         self.case_no = 0
         self.extents = {}             # per scene: the spawn bound's per-shape extents
-        self.cascade_rows, self.cascade_curves = [], []   # cascades.csv and the distance plots
-        self.motion_frames, self.motion_curves = [], []   # frames.csv and the flicker plots
-        self.quantized = 0            # quantized map copies made (stored formats other than float32)
         self.versions = env.versions()
         self.state = "running"
         self.bar = None
@@ -138,24 +127,19 @@ class Runner:
             self.timing["measure_s"] = time.perf_counter() - t0 - self.timing.get("images_s", 0.0)
             self.timing["measure_cpu_s"] = _cpu() - c0
             self._write_run_json()
-            report.write_oracle_csv(self.out / "oracle.csv", self.oracle_rows)
-            if self.cascade_rows:
-                cascades.write_csv(self.out / "cascades.csv", self.cascade_rows)
-            # the report, after every timed measurement: images, figures, table.md, report.html
+            publish.write_data(self.out, self.record)
+            # the report, after every timed measurement, composed from the run's files alone (as
+            # dsm report does): figures, table.md, cascades.md, report.html
             t1, c1 = time.perf_counter(), _cpu()
             try:
-                self.timing["report_parts"] = publish.write_report(self.out, (), self.curves,
+                self.timing["report_parts"] = publish.write_report(self.out, (), self.record.curves,
                                                                    plots=self.state == "complete")
-                if self.state == "complete":
-                    cascades.write_plots(self.out / "plots", self.cascade_curves)
-                if self.cfg.motion:
-                    motion.finish(self.out, self.motion_frames, self.motion_curves)
             except Exception as e:          # the measurements are saved; the report can be rebuilt
                 self._fail("report (dsm report rebuilds it)", e)
             self.timing["report_s"] = time.perf_counter() - t1 + self.timing.get("images_s", 0.0)
             self.timing["report_cpu_s"] = _cpu() - c1
             self._write_run_json()
-        return Results(self.out, self.rows, self._run_json(), self.images, self.oracle_rows, self.curves)
+        return Results(self.out, self.record.rows, self._run_json(), self.images, self.record.oracle_rows, self.record.curves)
 
     def run_maps(self, maps, kept=None):
         """Run only ``maps`` (part of the plan: a Ray task's map group) into this runner's folder,
@@ -173,7 +157,7 @@ class Runner:
         maps = self.plan.maps if maps is None else maps
         for spec in self.cfg.scenes:
             if spec.missing:
-                self.status.append({"what": f"scene {spec.label}", "status": "skipped", "error": spec.missing})
+                self.record.status.append({"what": f"scene {spec.label}", "status": "skipped", "error": spec.missing})
         for si, scene_maps in itertools.groupby(maps, key=lambda m: m.scene_index):
             scene_maps = list(scene_maps)
             try:
@@ -183,8 +167,7 @@ class Runner:
             if self.cfg.motion:                 # camera and light paths: dsm.motion's frame loop
                 try:
                     self._stage(f"motion of scene {sd.label}", scene_maps, lambda: motion.run_scene(
-                        self, sd, lights, scene_maps, self._closed(sd), self.extents[sd.label], self.motion_frames,
-                        self.motion_curves))
+                        self, sd, lights, scene_maps, self._closed(sd), self.extents[sd.label]))
                 except StageFailed:
                     pass
                 self._write_run_json()
@@ -203,7 +186,7 @@ class Runner:
     def _fail(self, what, exc, skipped_maps=()):
         """Record a failure (run.json, console, table.md) and count the cases it takes with it."""
         error = f"{type(exc).__name__}: {exc}"
-        self.status.append({"what": what, "status": "failed", "error": error,
+        self.record.status.append({"what": what, "status": "failed", "error": error,
                             "traceback": traceback.format_exc(limit=6)})
         print(f"dsm: failed: {what}: {error}", file=sys.stderr)     # seen where the user looks, not only in run.json
         self.bar.update(sum(m.cases for m in skipped_maps))
@@ -231,11 +214,11 @@ class Runner:
                                  "no [[light]]")
             return sd, gb, lights
         sd, gb, lights = self._stage(f"scene {spec.label}", maps, load)
-        self.gbuffer_ms[sd.label] = gb.ms
+        self.record.gbuffer_ms[sd.label] = gb.ms
         self.extents[sd.label] = pipeline.spawn_extents(sd.scene)   # once per scene, outside the timed builds
-        self.rays["gbuffer"] += gb.width * gb.height
+        self.record.rays["gbuffer"] += gb.width * gb.height
         if sd.notes:
-            self.status.append({"what": f"scene {sd.label}", "status": "note", "error": "; ".join(sd.notes)})
+            self.record.status.append({"what": f"scene {sd.label}", "status": "note", "error": "; ".join(sd.notes)})
         return sd, gb, lights
 
     def _light(self, sd, gb, lights, li, maps):
@@ -246,9 +229,9 @@ class Runner:
                 raise ValueError(f"the plan expects light {label} but the loaded scene has {len(lights)} lights")
             return pipeline.light_setup(sd, gb, lights[li], label, self.cfg.timing_repeats, self.cfg.seed)
         out = self._stage(f"scene {sd.label} light {label}", maps, setup)
-        self.rays["reference"] += out.reference_rays       # one per receiver, or an area light's samples
+        self.record.rays["reference"] += out.reference_rays       # one per receiver, or an area light's samples
         if out.ref is not None:
-            self.reference_regions.append({"scene": sd.label, "light": label, **out.ref.stats()})
+            self.record.reference_regions.append({"scene": sd.label, "light": label, **out.ref.stats()})
         return out
 
     def _run_view(self, sd, gb, setup, maps):
@@ -280,11 +263,11 @@ class Runner:
 
     def _closed(self, sd):
         """Per-shape closedness, computed once per scene and recorded in run.json."""
-        for info in self.scene_info:
+        for info in self.record.scene_info:
             if info["scene"] == sd.label:
                 return [s["closed"] for s in info["shapes"]]
         closed, why = pipeline.closedness(sd)
-        self.scene_info.append({"scene": sd.label, "shapes": [
+        self.record.scene_info.append({"scene": sd.label, "shapes": [
             {"name": n, "closed": c, "why": w} for n, c, w in zip(sd.shape_names, closed, why)]})
         return closed
 
@@ -308,7 +291,7 @@ class Runner:
             return smap, bt, stored
         smap, bt, stored = self._stage(what, [m], build)
         self._record_map(sd, setup, view, m, smap)
-        self.quantized += sum(1 for fmt in self.cfg.map.format if fmt != "float32")
+        self.record.quantized += sum(1 for fmt in self.cfg.map.format if fmt != "float32")
         # receivers in the depth function each stored format compares in (formats.stored_view)
         bp, bn = back
         by_view = {}                  # formats sharing a depth function share their receivers
@@ -354,10 +337,10 @@ class Runner:
             for lam in self.cfg.oracle.lambdas:
                 o = pipeline.oracles(th, setup.v_star, lam)
                 row = {**meta, **o["row"]}
-                self.oracle_rows.append(row)
+                self.record.oracle_rows.append(row)
                 if wrong is None:
                     wrong = o["wrong"]
-                    self.curves.append((row, o["curve_world"], o["curve_texel"]))
+                    self.record.curves.append((row, o["curve_world"], o["curve_texel"]))
             return wrong
         except (KeyboardInterrupt, StageFailed):
             raise
@@ -367,16 +350,16 @@ class Runner:
             return None
 
     def _record_map(self, sd, setup, view, m, smap):
-        self.maps.append({"scene": sd.label, "light": setup.label, "view": view.kind, "resolution": m.resolution,
+        self.record.maps.append({"scene": sd.label, "light": setup.label, "view": view.kind, "resolution": m.resolution,
                           "culling": m.culling, "layers": ["z1", "shape"] + [k for k in shadowmap.LAYERS
                                                                            if getattr(smap, k) is not None],
                           "tiles": smap.tiles, "rays": dict(smap.rays), "rehits": smap.rehits,
                           "build_peak_bytes": smap.peak_bytes, "build_peak_bytes_est": m.peak_bytes,
                           "formats": list(m.formats)})
         for k, v in smap.rays.items():
-            self.rays[k] = self.rays.get(k, 0) + v
+            self.record.rays[k] = self.record.rays.get(k, 0) + v
         if smap.unfinished:
-            self.status.append({"what": f"map {sd.label} {setup.label} R={m.resolution} culling={m.culling}",
+            self.record.status.append({"what": f"map {sd.label} {setup.label} R={m.resolution} culling={m.culling}",
                                 "status": "warning", "error": f"{smap.unfinished} texels still searching "
                                 f"after {shadowmap.MAX_STEPS} surfaces"})
 
@@ -386,10 +369,8 @@ class Runner:
         case = f"{self.case_no:04d}"
         if self.keys.get(case) in self.kept:          # finished by the run being resumed: its row again
             row, st, cascade_rows = self.kept[self.keys[case]]
-            self.cascade_rows += cascade_rows
-            self.rows.append(resume.parse_row(row))
-            self.csv.write(self.rows[-1])
-            self.status.append(st)
+            self.record.cascade_rows += cascade_rows
+            self.add_case(resume.parse_row(row), st)
             self._write_run_json()
             return
         meta = {"case": case, "scene": sd.label, "light": setup.label, "view": view.kind, "scheme": spec.name,
@@ -414,8 +395,8 @@ class Runner:
             if hasattr(view, "cascades"):         # a cascaded map: per cascade, texels per pixel, distance plot
                 extra, per, curve, faces = pipeline.cascade_metrics(view, rx, v_np, setup.v_star)
                 m.update(extra)
-                self.cascade_rows += [{**meta, **r} for r in per]
-                self.cascade_curves.append((meta, curve))
+                self.record.cascade_rows += [{**meta, **r} for r in per]
+                self.record.cascade_curves.append((meta, curve))
                 folder = self.out / "images" / figures.image_folder(meta)
                 folder.mkdir(parents=True, exist_ok=True)
                 cascades.write_index_image(folder / f"{case}_cascade.png", setup.pixels, faces, gb.width, gb.height)
@@ -443,26 +424,31 @@ class Runner:
             self.timing["images_s"] = self.timing.get("images_s", 0.0) + time.perf_counter() - t_img
             if self.keep_images:
                 self.images[case] = classes
-            self.rows.append(row)
-            self.csv.write(row)
             # a case without receivers says nothing about the scheme: it is reported as empty
-            self.status.append({"what": f"case {case}", **{k: meta[k] for k in ("scene", "light", "view", "scheme",
-                                                                                 "params", "resolution")},
+            self.add_case(row, {"what": f"case {case}", **{k: meta[k] for k in ("scene", "light", "view", "scheme",
+                                                                                "params", "resolution")},
                                 "status": "ok" if m["n_receivers"] else "empty", "key": self.keys.get(case)})
             self._write_run_json()
         except Exception as e:
             self._fail(f"case {case} ({sd.label}, {setup.label}, {spec.name} {spec.label}, R={view.resolution})", e)
 
+    def add_case(self, row: dict, status: dict):
+        """One finished case: its row into metrics.csv (refused unless it fits the schema,
+        record.check_row) and the record, and its status."""
+        self.csv.write(row)
+        self.record.rows.append(row)
+        self.record.status.append(status)
+
     # ------------------------------------------------------------ run.json
     def _run_json(self):
-        info = report.run_info(self.cfg, self.variant, self.rays, self.status, self.versions, dr.thread_count())
+        info = report.run_info(self.cfg, self.variant, self.record.rays, self.record.status, self.versions, dr.thread_count())
         info["state"] = self.state
-        info["scenes"] = self.scene_info
-        info["gbuffer_ms"] = self.gbuffer_ms     # one cold pass per scene (compile included)
+        info["scenes"] = self.record.scene_info
+        info["gbuffer_ms"] = self.record.gbuffer_ms     # one cold pass per scene (compile included)
         info["plan"] = self.plan.as_dict()
-        info["maps"] = self.maps
-        info["quantized_copies"] = self.quantized
-        info["reference_regions"] = self.reference_regions
+        info["maps"] = self.record.maps
+        info["quantized_copies"] = self.record.quantized
+        info["reference_regions"] = self.record.reference_regions
         info["timing"] = self.timing
         if self.resume_previous:
             info["resumed_cases"] = len(self.kept)
