@@ -42,7 +42,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import lookup, metrics, report
+from . import figures, lookup, metrics, report
 from .types import CascadeSpec
 from .views import MARGIN_TEXELS, View, light_frame
 
@@ -584,9 +584,8 @@ def write_index_image(path, pixels: np.ndarray, face: np.ndarray, width: int, he
     from matplotlib.image import imsave
     img = np.zeros(width * height, np.uint8)
     img[pixels] = np.asarray(face, int) + 1
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    imsave(tmp, CASCADE_COLORS[img.reshape(height, width)], format="png")
-    tmp.replace(path)
+    with report.atomic(path) as tmp:
+        imsave(tmp, CASCADE_COLORS[img.reshape(height, width)], format="png")
 
 
 def write_plots(folder, curves: list):
@@ -618,8 +617,5 @@ def write_plots(folder, curves: list):
         fig.subplots_adjust(left=0.06, right=0.66, bottom=0.13, top=0.9, wspace=0.3)
         h, l = a1.get_legend_handles_labels()
         fig.legend(h, l, loc="center left", bbox_to_anchor=(0.67, 0.5), fontsize=5, frameon=False)
-        slug = "".join(c if c.isalnum() or c in "-_" else "_" for c in f"{scene}_{light}")
-        path = folder / f"cascades_{slug}.png"
-        tmp = path.with_name(f".{path.name}.tmp.png")
-        fig.savefig(tmp, dpi=80, format="png")
-        tmp.replace(path)
+        with report.atomic(folder / f"cascades_{figures.slug(f'{scene}_{light}', keep='-_')}.png") as tmp:
+            fig.savefig(tmp, dpi=80, format="png")

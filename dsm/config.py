@@ -77,7 +77,8 @@ def check_runnable(cfg: Config):
         where = sorted({str(f.parent) for f in files})
         raise NothingToRun(cfg.source, "scene", "nothing to run: every scene is an absent optional file ("
                            + ", ".join(f.name for f in files) + f" in {', '.join(where)}); "
-                           "give each file's path relative to the config, or drop optional = true to be told when one is missing")
+                           "put the files at those paths to run them (models without redistribution terms are not shipped: "
+                           "data/meshes/README.md)")
 
 
 def _plain_name(name, source):

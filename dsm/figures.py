@@ -32,8 +32,9 @@ DPI = 72
 PNG = {"compress_level": 1}
 
 
-def slug(s: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_." else "_" for c in str(s))
+def slug(s: str, keep: str = "-_.") -> str:
+    """``s`` as a file name: every character but letters, digits and ``keep`` made ``_``."""
+    return "".join(c if c.isalnum() or c in keep else "_" for c in str(s))
 
 
 def image_folder(row) -> str:

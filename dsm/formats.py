@@ -100,16 +100,6 @@ def quantize_np(z: np.ndarray, view, fmt: str) -> np.ndarray:
     return near + np.round(t * steps) / steps * (far - near)
 
 
-def world_step(view, fmt: str, z):
-    """The world-space size of one stored step at depth ``z`` (numpy)."""
-    steps = float(2 ** BITS[fmt] - 1)
-    z = np.asarray(z, np.float64)
-    if fmt == "ndc24" and view.kind in NDC_KINDS:
-        n, f = ndc_near(view), view.far
-        return z * z * (f - n) / (f * n) / steps
-    return np.full_like(z, (view.far - view.near) / steps)
-
-
 def store(smap, fmt: str):
     """A copy of the map with its depth layers in ``fmt`` (the same map for float32)."""
     if fmt == "float32":

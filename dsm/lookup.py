@@ -245,7 +245,7 @@ def resolve(params, rx: Receiver):
 def plane_fallbacks(scheme, params, rx: Receiver, smap) -> int:
     """Receivers whose nearest texel's ray misses their tangent plane (schemes that compare the
     receiver's plane depth: ``USES_PLANE``); 0 for other schemes."""
-    if not getattr(scheme, "USES_PLANE", False):
+    if not scheme.USES_PLANE:
         return 0
     rx = scheme.shift(rx, resolve(params, rx))
     tap = nearest_tap(rx, smap)

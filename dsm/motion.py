@@ -416,9 +416,8 @@ def _write_gif(path, images):
     """The error images of the frames as an animated GIF (Pillow), 4 frames a second."""
     from PIL import Image
     frames = [Image.fromarray(metrics.CLASS_COLORS[c]) for c in images]
-    tmp = path.with_name(f".{path.name}.tmp.gif")
-    frames[0].save(tmp, save_all=True, append_images=frames[1:], duration=250, loop=0)
-    tmp.replace(path)
+    with report.atomic(path) as tmp:
+        frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:], duration=250, loop=0)
 
 
 def write_frames_csv(path, rows):
@@ -463,8 +462,5 @@ def write_plots(folder, frame_rows):
         ax.set_title(f"{scene}, light {light}: {path_label}", fontsize=9)
         fig.subplots_adjust(left=0.08, right=0.6, bottom=0.13, top=0.9)
         ax.legend(loc="center left", bbox_to_anchor=(1.02, 0.5), fontsize=5, frameon=False)
-        slug = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in f"{scene}_{light}_{path_label}")
-        path = folder / f"flicker_{slug}.png"
-        tmp = path.with_name(f".{path.name}.tmp.png")
-        fig.savefig(tmp, dpi=80, format="png")
-        tmp.replace(path)
+        with report.atomic(folder / f"flicker_{figures.slug(f'{scene}_{light}_{path_label}', keep='-_')}.png") as tmp:
+            fig.savefig(tmp, dpi=80, format="png")

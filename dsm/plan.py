@@ -159,16 +159,6 @@ class Plan:
             out.append("absent optional scene files (skipped): " + ", ".join(map(str, self.absent)))
         return out
 
-    def map_for(self, scene, light, view, resolution, culling):
-        for m in self.maps:
-            if (m.scene, m.light, m.view, m.resolution, m.culling) == (scene, light, view, resolution, culling):
-                return m
-        return None
-
-    def tile_for(self, scene, light, view, resolution, culling) -> int:
-        m = self.map_for(scene, light, view, resolution, culling)
-        return m.tile if m else 0
-
     def text(self) -> str:
         mb = 1 / 2 ** 20
         lines = [f"plan for {self.config}", f"  cases: {self.cases}",

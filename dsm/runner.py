@@ -39,12 +39,12 @@ class Results:
     curves: list = field(default_factory=list)   # per map and format: (row, world Curve, texel Curve)
 
     def where(self, **kw) -> "Results":
-        rows = [r for r in self.record.rows if all(r.get(k) == v for k, v in kw.items())]
+        rows = [r for r in self.rows if all(r.get(k) == v for k, v in kw.items())]
         return Results(self.out, rows, self.run, {r["case"]: self.images.get(r["case"]) for r in rows},
-                       self.oracle, self.record.curves)
+                       self.oracle, self.curves)
 
     def column(self, name) -> np.ndarray:
-        return np.array([r[name] for r in self.record.rows])
+        return np.array([r[name] for r in self.rows])
 
     def rgb(self, case) -> np.ndarray:
         """The case's error image as (H, W, 3) uint8 in the report's colours."""
@@ -57,7 +57,7 @@ class Results:
         """The rows as a Markdown table of the chosen columns (for notebooks and terminals)."""
         fmt = lambda v: f"{v:.4f}" if isinstance(v, float) and abs(v) < 10 else (f"{v:.1f}" if isinstance(v, float) else str(v))
         lines = ["| " + " | ".join(columns) + " |", "|---" * len(columns) + "|"]
-        lines += ["| " + " | ".join(fmt(r.get(c, "")) for c in columns) + " |" for r in self.record.rows]
+        lines += ["| " + " | ".join(fmt(r.get(c, "")) for c in columns) + " |" for r in self.rows]
         return "\n".join(lines)
 
     def _repr_markdown_(self):
@@ -69,7 +69,7 @@ class Results:
         raise AttributeError(name)
 
     def __len__(self):
-        return len(self.record.rows)
+        return len(self.rows)
 
 
 class StageFailed(Exception):
@@ -405,7 +405,7 @@ class Runner:
             texel = float(np.median(rx.texel_world.numpy())) if rx is not None else metrics.UNDEFINED
             sweep_key, sweep_value = report.sweep_of(spec, self.cfg.schemes)
             row = {**meta, **setup.exclusions, **m, "texel_size": texel,
-                   "n_plane_fallback": fallbacks if getattr(pipeline.scheme_module(spec.name), "USES_PLANE", False)
+                   "n_plane_fallback": fallbacks if pipeline.scheme_module(spec.name).USES_PLANE
                    else metrics.UNDEFINED,
                    "build_ms": bt.ms, "build_first_ms": first_t.ms, "build_compile_ms": bt.compile_ms, "build_peak_mb": smap.peak_bytes / 2 ** 20,
                    "lookup_ms": lt.ms, "lookup_compile_ms": lt.compile_ms, "lookup_kernels_compiled": lt.cache_misses,
@@ -467,10 +467,6 @@ def _cpu() -> float:
     import resource
     ru = resource.getrusage(resource.RUSAGE_CHILDREN)
     return time.process_time() + ru.ru_utime + ru.ru_stime
-
-
-def _points_np(p) -> np.ndarray:
-    return np.stack([np.asarray(c, np.float64) for c in (p.x.numpy(), p.y.numpy(), p.z.numpy())], axis=1)
 
 
 def _map_arrays(scene, view, needs, culling="none", closed=None, tile=None, extents=None):

@@ -319,7 +319,8 @@ def posed_camera(default, camera, scale=1.0, offset=ORIGIN, source="<config>"):
     return np.asarray(o, float), np.asarray(t, float), tuple(float(c) for c in up), float(fov), near, far
 
 
-def _normalize(v):
+def normalize(v):
+    """``v`` as a unit vector (float64); a zero or non-finite vector is a ValueError."""
     v = np.asarray(v, float)
     n = float(np.linalg.norm(v))
     if not (n > 0 and math.isfinite(n)):
@@ -395,7 +396,8 @@ def double_torus(levels: int = 3):
 
 # ---------------------------------------------------------------- built-in scenes
 
-def _rotation(axis, angle_deg):
+def rotation(axis, angle_deg):
+    """The 3 x 3 rotation by ``angle_deg`` degrees about ``axis`` (Rodrigues' formula)."""
     a = np.asarray(axis, float) / np.linalg.norm(axis)
     t = math.radians(angle_deg)
     k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
@@ -409,21 +411,21 @@ def _ground(half=4.0):
 def builtin_geometry(name: str, p):
     """(shapes {name: (verts, faces)}, camera (origin, target), default light) at scale 1."""
     if name == "plane":
-        rot = _rotation([math.cos(math.radians(p.azimuth)), math.sin(math.radians(p.azimuth)), 0], p.tilt)
+        rot = rotation([math.cos(math.radians(p.azimuth)), math.sin(math.radians(p.azimuth)), 0], p.tilt)
         v, f = quad([0, 0, 0], [2, 0, 0], [0, 2, 0])
         shapes = {"plane": (v @ rot.T, f)}
         return shapes, ((0.7, -5.0, 5.0), (0, 0, 0)), LightSpec("directional", direction=(0.0, 0.0, -1.0))
     if name == "plane_box":
         shapes = {"ground": _ground(), "box": box([-0.5, -0.5, 0.0], [0.5, 0.5, 1.0])}
-        return shapes, ((5.0, -7.0, 6.0), (0, 0, 0.3)), LightSpec("directional", direction=_normalize([-0.4, -0.3, -1]))
+        return shapes, ((5.0, -7.0, 6.0), (0, 0, 0.3)), LightSpec("directional", direction=normalize([-0.4, -0.3, -1]))
     if name == "l_shape":
         # seed 000, figure 5: an L above the ground, its vertical arm on the right, light from right above
         profile = [(-1, 0.5), (1, 0.5), (1, 2.0), (0.7, 2.0), (0.7, 0.8), (-1, 0.8)]
         shapes = {"ground": _ground(), "l_shape": prism(profile, -0.8, 0.8, fan_center=4)}
-        return shapes, ((-2.0, -6.0, 5.0), (0, 0, 0.7)), LightSpec("directional", direction=_normalize([-0.35, 0.05, -1]))
+        return shapes, ((-2.0, -6.0, 5.0), (0, 0, 0.7)), LightSpec("directional", direction=normalize([-0.35, 0.05, -1]))
     if name == "floating_plate":
         shapes = {"ground": _ground(), "plate": quad([0, 0, p.gap], [0.75, 0, 0], [0, 0.75, 0])}
-        return shapes, ((3.0, -5.0, 4.0), (0, 0, 0)), LightSpec("directional", direction=_normalize([0.2, 0.1, -1]))
+        return shapes, ((3.0, -5.0, 4.0), (0, 0, 0)), LightSpec("directional", direction=normalize([0.2, 0.1, -1]))
     if name == "grazing":
         t = math.radians(p.angle)
         shapes = {"ground": _ground(), "box": box([-2.3, -0.3, 0.0], [-1.7, 0.3, 0.6])}
@@ -443,9 +445,9 @@ def builtin_geometry(name: str, p):
         # seed 000, figure 6: the double torus over a plane; tilted so the light from above grazes
         # its far side and sees into both holes (midpoint's self-unshadowing shows at its lower left)
         v, f = double_torus()
-        v = v @ _rotation([1, 0.3, 0], 20).T + [0.0, 0.0, 0.9]
+        v = v @ rotation([1, 0.3, 0], 20).T + [0.0, 0.0, 0.9]
         shapes = {"ground": _ground(), "double_torus": (v, f)}
-        return shapes, ((1.0, -4.5, 3.8), (0, 0, 0.5)), LightSpec("directional", direction=_normalize([0.3, -0.2, -1]))
+        return shapes, ((1.0, -4.5, 3.8), (0, 0, 0.5)), LightSpec("directional", direction=normalize([0.3, -0.2, -1]))
     if name == "long_ground":
         verts, faces = [], []
         for x in np.arange(-90.0, 91.0, 10.0):
@@ -456,7 +458,7 @@ def builtin_geometry(name: str, p):
         shapes = {"ground": quad([0, 0, 0], [100.0, 0, 0], [0, 10.0, 0]),
                   "posts": (np.vstack(verts), np.vstack(faces))}
         return shapes, ((-99.0, 0.0, 3.0), (-60.0, 0.0, 0.0), 60.0), \
-            LightSpec("directional", direction=_normalize([0.2, -0.5, -0.6]))
+            LightSpec("directional", direction=normalize([0.2, -0.5, -0.6]))
     if name == "terrain":
         from . import terrain
         verts, faces = terrain.mesh(p.stride)
@@ -464,7 +466,7 @@ def builtin_geometry(name: str, p):
         # degrees down; the sun 20 degrees above the horizon from the south-east
         eye = (-13000.0, -14000.0, 1600.0)
         return {"terrain": (verts, faces)}, (eye, (-8000.0, -9000.0, -2000.0), 60.0), \
-            LightSpec("directional", direction=_normalize([-0.664, 0.664, -0.342]))
+            LightSpec("directional", direction=normalize([-0.664, 0.664, -0.342]))
     raise KeyError(name)
 
 
@@ -695,7 +697,7 @@ def _shape_normal(shape):
     import mitsuba as mi
     try:
         ps = shape.sample_position(0.0, mi.Point2f(0.5, 0.5))
-        return _normalize(np.array([ps.n.x, ps.n.y, ps.n.z], float).ravel()[:3])
+        return normalize(np.array([ps.n.x, ps.n.y, ps.n.z], float).ravel()[:3])
     except Exception:
         return None
 
@@ -716,7 +718,7 @@ def default_light(scene) -> LightSpec:
             c = np.array(shape.bbox().center(), float).ravel()
             off = centre - c
             if np.linalg.norm(off) > 1e-6 * diag:
-                pos, axis = c + 0.02 * off, _normalize(off)
+                pos, axis = c + 0.02 * off, normalize(off)
             else:
                 axis = _shape_normal(shape) or (0.0, 0.0, -1.0)
                 pos = c + 1e-3 * max(diag, 1e-30) * np.asarray(axis)
@@ -725,7 +727,7 @@ def default_light(scene) -> LightSpec:
     if scene.sensors():
         up = np.array(scene.sensors()[0].world_transform() @ mi.Vector3f(0, 1, 0), float).ravel()
     side = np.cross(up, [0.3, 0.5, 0.8])
-    return LightSpec("directional", direction=_normalize(-up + 0.3 * side / max(np.linalg.norm(side), 1e-9)),
+    return LightSpec("directional", direction=normalize(-up + 0.3 * side / max(np.linalg.norm(side), 1e-9)),
                      label="directional")
 
 
@@ -805,14 +807,14 @@ def emitter_to_light(e):
     text = str(e).lower()
     if mi.has_flag(e.flags(), mi.EmitterFlags.DeltaDirection):
         d = np.array(e.world_transform() @ mi.Vector3f(0, 0, 1), float).ravel()
-        return LightSpec("directional", direction=_normalize(d), label="directional")
+        return LightSpec("directional", direction=normalize(d), label="directional")
     if mi.has_flag(e.flags(), mi.EmitterFlags.DeltaPosition) and ("spot" in kind or "spot" in text):
         tf = e.world_transform()
         pos = np.array(tf @ mi.Point3f(0, 0, 0), float).ravel()
         axis = np.array(tf @ mi.Vector3f(0, 0, 1), float).ravel()
         params = mi.traverse(e)
         cutoff = float(params["cutoff_angle"][0]) if "cutoff_angle" in params else 20.0
-        return LightSpec("spot", position=tuple(float(c) for c in pos), direction=_normalize(axis), cutoff=cutoff, label="spot")
+        return LightSpec("spot", position=tuple(float(c) for c in pos), direction=normalize(axis), cutoff=cutoff, label="spot")
     if mi.has_flag(e.flags(), mi.EmitterFlags.DeltaPosition) and "point" in kind + text:
         params = mi.traverse(e)     # a point light keeps its position as a parameter, not in to_world
         pos = (np.array(params["position"], float).ravel() if "position" in params
@@ -839,7 +841,7 @@ def _load_mesh_file(spec, width, height, camera=None):
         base = center + up * (np.dot(lo - center, up))
         v, f = quad(base, a * size * 1.5, b * size * 1.5)
         d["ground"] = make_mesh("ground", v, f)
-    side = _normalize(a * 0.6 - b * 1.0 + up * 0.8)
+    side = normalize(a * 0.6 - b * 1.0 + up * 0.8)
     cam_o = center + np.asarray(side) * 1.6 * size
     o, tg, upv, fv, near, far = posed_camera((cam_o, center, up, 40.0, None, None), camera, p.scale, p.translate,
                                          _src(spec))
@@ -847,7 +849,7 @@ def _load_mesh_file(spec, width, height, camera=None):
     d["sensor"] = look_at_sensor(o, tg, upv, fv, width, height, near,
                                  far if far is not None else far_bound(o, tg, lo_all, hi_all))
     scene = mi.load_dict(d, optimize=False)
-    light = LightSpec("directional", direction=_normalize(-up * 1.0 - a * 0.3 + b * 0.2))
+    light = LightSpec("directional", direction=normalize(-up * 1.0 - a * 0.3 + b * 0.2))
     data = _finish(spec.label, scene, [light], p.scale)
     data.offset = tuple(float(c) for c in p.translate)
     return data

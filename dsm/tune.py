@@ -54,7 +54,7 @@ import mitsuba as mi
 import numpy as np
 
 from . import lookup
-from .report import objective        # (n_acne + lambda n_peterpan) / n_receivers, NaN without receivers
+from .report import atomic, objective        # (n_acne + lambda n_peterpan) / n_receivers, NaN without receivers
 from . import pipeline as pl
 from .schemes.base import no_shift
 from .types import (DEFAULT_CAMERA, ConfigError, Length, SchemeSpec, as_list, check_keys, choice, describe_params,
@@ -974,7 +974,6 @@ def plot(res: TuneResult, folder: Path):
     axes[1].set(title=f"hard objective (lambda = {res.spec.lam:g})", xlabel="step")
     axes[1].legend(fontsize=7)
     fig.tight_layout()
-    tmp = folder / ".tune_loss.png.tmp.png"
-    fig.savefig(tmp, dpi=110)
-    tmp.replace(folder / "tune_loss.png")
+    with atomic(folder / "tune_loss.png") as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)

@@ -325,9 +325,9 @@ class ParaboloidView(PointView):
 
 
 # cube faces: +x, -x, +y, -y, +z, -z; (U, V, W) with W the face axis and U x V = W
-_CUBE = [((0, 1, 0), (0, 0, 1), (1, 0, 0)), ((0, 0, 1), (0, 1, 0), (-1, 0, 0)),
-         ((0, 0, 1), (1, 0, 0), (0, 1, 0)), ((1, 0, 0), (0, 0, 1), (0, -1, 0)),
-         ((1, 0, 0), (0, 1, 0), (0, 0, 1)), ((0, 1, 0), (1, 0, 0), (0, 0, -1))]
+CUBE_FACES = [((0, 1, 0), (0, 0, 1), (1, 0, 0)), ((0, 0, 1), (0, 1, 0), (-1, 0, 0)),
+              ((0, 0, 1), (1, 0, 0), (0, 1, 0)), ((1, 0, 0), (0, 0, 1), (0, -1, 0)),
+              ((1, 0, 0), (0, 1, 0), (0, 0, 1)), ((0, 1, 0), (1, 0, 0), (0, 0, -1))]
 
 
 class CubeView(PointView):
@@ -341,7 +341,7 @@ class CubeView(PointView):
 
     def __init__(self, position, scene_bbox, resolution: int):
         super().__init__(position, (0, 0, 1), scene_bbox, resolution)
-        tab = np.asarray(_CUBE, float)        # (6, 3 vectors, 3 coords)
+        tab = np.asarray(CUBE_FACES, float)        # (6, 3 vectors, 3 coords)
         self.U, self.V, self.W = (mi.Vector3f(*(tab[:, k, c] for c in range(3))) for k in range(3))
 
     def _frame(self, face):

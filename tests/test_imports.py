@@ -1,6 +1,7 @@
 """The kit's import graph, read with ast: no circles, no private names across modules.
 
-Modules are the files of ``dsm`` and of the plugins package (``plugins/dsm_plugins``). An
+Modules are the files of ``dsm``, of the plugins package (``plugins/dsm_plugins``) and of the
+tests (which may not reach into private names either). An
 edge A -> B is any ``import``/``from ... import`` of B in A, at any depth (imports inside
 functions count: a circle hidden in a function is still a circle).
 """
@@ -9,11 +10,12 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = {"dsm": ROOT / "dsm", "dsm_plugins": ROOT / "plugins" / "dsm_plugins"}
+SCANNED = {**PACKAGES, "tests": ROOT / "tests"}     # the tests' imports obey the same rules
 
 
 def _modules() -> dict:
     mods = {}
-    for pkg, folder in PACKAGES.items():
+    for pkg, folder in SCANNED.items():
         for f in sorted(folder.rglob("*.py")):
             rel = f.relative_to(folder).with_suffix("")
             parts = [pkg, *rel.parts]

@@ -259,7 +259,7 @@ def test_every_scene_absent_says_which_and_where(tmp_path, capsys):
     cfg.write_text(_tiny(f'file = "{moved}"\noptional = true', '[[scene]]\nfile = "gone/bunny.ply"\noptional = true\n'))
     rc, err = _cli(capsys, "run", cfg, "--out", tmp_path / "o")
     assert rc == 1
-    _one_line(err, "nothing to run", "sponza_dabrovic.ply", "bunny.ply", str(moved.parent), "optional = true")
+    _one_line(err, "nothing to run", "sponza_dabrovic.ply", "bunny.ply", str(moved.parent), "put the files at those paths")
     assert not (tmp_path / "o").exists()
     rc, err = _cli(capsys, "plan", cfg)
     assert rc == 1
@@ -469,7 +469,7 @@ def test_area_light_at_the_scene_centre_gets_a_defined_light(tmp_path, run_dict)
 
 def test_normalize_refuses_a_zero_vector():
     with pytest.raises(ValueError, match="zero"):
-        scenes._normalize([0.0, 0.0, 0.0])
+        scenes.normalize([0.0, 0.0, 0.0])
 
 
 # ---------------------------------------------------------------- 11: scale

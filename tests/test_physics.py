@@ -20,10 +20,10 @@ def grid_angle(tilt, azimuth):
     The plane's default light shines along -z; its map frame is ex = +x, ey = -y (dsm.views.light_frame).
     The plane is rotated by ``tilt`` about the horizontal axis at ``azimuth``.
     """
-    from dsm.scenes import _rotation
+    from dsm.scenes import rotation
     from dsm.views import light_frame
     a = math.radians(azimuth)
-    n = _rotation([math.cos(a), math.sin(a), 0], tilt) @ np.array([0, 0, 1.0])
+    n = rotation([math.cos(a), math.sin(a), 0], tilt) @ np.array([0, 0, 1.0])
     ex, ey, ez = light_frame([0, 0, -1])
     # depth = -z; on the plane z = -(n_x x + n_y y) / n_z, so grad(depth) = (n_x, n_y) / n_z in world xy
     g = np.array([n[0], n[1], 0.0]) / n[2]

@@ -43,9 +43,9 @@ def test_every_room_receiver_is_in_exactly_one_map(variant):
         assert np.all(np.isfinite(u)) and np.all(np.isfinite(v))
         inside = view.inside(p).numpy().astype(bool)
         if kind == "cube":
-            from dsm.views import _CUBE
+            from dsm.views import CUBE_FACES
             dom_closed, dom_open = [], []
-            for U, V, W in np.asarray(_CUBE, float):
+            for U, V, W in np.asarray(CUBE_FACES, float):
                 z = q @ W
                 x, y = (q @ U) / np.where(z > 0, z, 1), (q @ V) / np.where(z > 0, z, 1)
                 dom_closed.append((z > 0) & (np.abs(x) <= 1 + 1e-6) & (np.abs(y) <= 1 + 1e-6))

@@ -1,6 +1,7 @@
 """The contract every scheme module meets (:class:`Scheme`), and the shift that does nothing.
 
 A scheme is a module: ``NAME``, ``SOURCE``, ``NEEDS`` (map layers beyond z1 and shape ids),
+``USES_PLANE`` (whether it reads the receiver plane, whose fallbacks are counted),
 a frozen ``Params`` dataclass, ``margin(rx, tap, params) -> Float`` and ``shift(rx, params)
 -> Receiver``. The margin is signed, in the view's depth units: the receiver is lit by a tap
 when it is >= 0 (``lit``). Filters apply it per tap; tuning by gradient relaxes it.
@@ -15,6 +16,7 @@ class Scheme(Protocol):
     NAME: str
     SOURCE: str
     NEEDS: frozenset
+    USES_PLANE: bool        # compares the receiver plane's depth at the texel centre (lookup.plane_fallbacks)
     Params: type
 
     def margin(self, rx: Any, tap: Any, params: Any) -> Any:

@@ -24,6 +24,7 @@ from ..types import Length
 NAME = "combined"
 SOURCE = "engine defaults: normal offset + constant + slope-scaled depth bias"
 NEEDS = frozenset({"slope"})
+USES_PLANE = False
 
 
 @dataclass(frozen=True)

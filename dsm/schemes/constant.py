@@ -14,6 +14,7 @@ from .base import no_shift
 NAME = "constant"
 SOURCE = "Williams 1978"
 NEEDS = frozenset()
+USES_PLANE = False
 
 
 @dataclass(frozen=True)

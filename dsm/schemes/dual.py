@@ -20,6 +20,7 @@ from .base import no_shift
 NAME = "dual"
 SOURCE = "Weiskopf & Ertl 2003; seed 000"
 NEEDS = frozenset({"z2"})
+USES_PLANE = False
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,7 @@ from .base import no_shift
 NAME = "midpoint"
 SOURCE = "Woo 1992; seed 000"
 NEEDS = frozenset({"z2"})
+USES_PLANE = False
 
 
 @dataclass(frozen=True)

@@ -11,6 +11,7 @@ from .base import no_shift
 NAME = "none"
 SOURCE = "Williams 1978"
 NEEDS = frozenset()
+USES_PLANE = False
 
 
 @dataclass(frozen=True)

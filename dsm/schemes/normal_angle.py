@@ -17,6 +17,7 @@ from .base import no_shift
 NAME = "normal_angle"
 SOURCE = "Gautron 2013; seed 003"
 NEEDS = frozenset()
+USES_PLANE = False
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ from ..types import Length
 NAME = "normal_offset"
 SOURCE = "three.js, Bevy, Godot, Unity (normal bias)"
 NEEDS = frozenset()
+USES_PLANE = False
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ from .base import no_shift
 NAME = "second_depth"
 SOURCE = "Wang & Molnar 1994"
 NEEDS = frozenset()
+USES_PLANE = False
 CULLING = ("front", "front_closed")
 
 

@@ -19,6 +19,7 @@ from .base import no_shift
 NAME = "slope_scaled"
 SOURCE = "King 2004; D3D/Vulkan/GL depth bias; seed 003"
 NEEDS = frozenset({"slope"})
+USES_PLANE = False
 
 
 @dataclass(frozen=True)
