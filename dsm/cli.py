@@ -316,8 +316,7 @@ def name_problem(path: Path, flag: str = "--out") -> str | None:
 
 
 def claim(out: Path, flag: str = "--out"):
-    """(the lock on ``out``, None), or (None, why it cannot be had) in one line: one dsm command
-    writes into a folder at a time (dsm.lock)."""
+    """(the lock on ``out``, None), or (None, why it cannot be had): one writer per folder (dsm.lock)."""
     problem = name_problem(out, flag)
     if problem is None and out.is_symlink() and not out.is_dir():
         problem = f"{flag} {out}: a broken symbolic link"
@@ -412,8 +411,8 @@ def resume_problem(out: Path, cfg=None) -> str | None:
 
 
 def folder_problem(out: Path, cfg, force: bool = False, resume: bool = False):
-    """(why a run of ``cfg`` cannot go into ``out`` or None, whether it resumes the run there):
-    the rules of dsm run's --out, --force and --resume, for a folder this process holds."""
+    """(why a run of ``cfg`` cannot go into the held ``out`` or None, whether it resumes the run there)."""
+    # dsm run's rules for --out, --force and --resume, shared with dsm.run
     resuming = resume and bool(entries(out))
     return (resume_problem(out, cfg) if resuming else out_problem(out, force)), resuming
 

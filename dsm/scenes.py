@@ -655,9 +655,10 @@ PLY_ORDER = {"binary_little_endian": "<", "binary_big_endian": ">", "ascii": Non
 
 
 def ply_index_problem(path: Path, head: bytes, end: int) -> str | None:
-    """A face index out of range in a PLY file, in words (None: all in range, or a file Mitsuba
-    reports itself: truncated, a header it cannot read). Mitsuba reads such a face past its
-    vertex buffer: a segfault, not an error."""
+    """A PLY face index outside its vertices, in words (None: all in range, or left to Mitsuba)."""
+    # Mitsuba reads such a face past its vertex buffer (a segfault, not an error); a truncated
+    # file or a header this does not read (lists before the faces, mixed polygon sizes) Mitsuba
+    # reports itself
     try:
         fmt, elements = _ply_header(head[:end])
         data = head.index(b"\n", end) + 1
