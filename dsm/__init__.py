@@ -5,10 +5,37 @@ from .types import ConfigError, Length
 __version__ = "0.1.0"
 
 
-def run(config, out=None, variant=None, progress=False):
+def run(config, out=None, variant=None, progress=False, *, force=False, resume=False):
     """Run an experiment (Config, dict or TOML path) and return its :class:`dsm.runner.Results`."""
     from .runner import run as _run
-    return _run(config, out=out, variant=variant, progress=progress)
+    if out is None:                      # a fresh temporary folder: no one else writes there
+        return _run(config, out=None, variant=variant, progress=progress)
+    return _run_in(config, out, variant, progress, force, resume)
+
+
+def _run_in(config, out, variant, progress, force, resume):
+    # dsm run's rules for --out (dsm.cli): the folder locked, a previous run kept unless
+    # force replaces it or resume goes on with it, the config checked before the folder is touched
+    from pathlib import Path
+    from . import cli, pipeline
+    from .runner import Runner
+    out = Path(out)
+    config = pipeline.prepare(config, variant)
+    held, problem = cli.claim(out)
+    if problem:
+        raise ConfigError("dsm.run", "out", _api_words(problem))
+    with held:
+        problem, resuming = cli.folder_problem(out, config, force, resume)
+        if problem:
+            raise ConfigError("dsm.run", "out", _api_words(problem))
+        return Runner(config, out, variant, progress, resume_previous=resuming).run()
+
+
+def _api_words(problem: str) -> str:
+    # the command line's wording, in dsm.run's arguments
+    for flag, arg in (("--out", "out"), ("--force", "force=True"), ("--resume", "resume=True")):
+        problem = problem.replace(flag, arg)
+    return problem
 
 
 def register():

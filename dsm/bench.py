@@ -212,6 +212,18 @@ def frame_cost(spec, light, R: int = 1024, camera: int = 1024, repeats: int = 5)
     return row
 
 
+def meshes_problem(meshes) -> str | None:
+    """Why ``meshes`` cannot be the folder of real test meshes (None if it can, or is not given)."""
+    if meshes is None:
+        return None
+    path = Path(meshes)
+    if not path.exists():
+        return f"--meshes {path}: no such folder (the real test meshes; default {MESHES})"
+    if not path.is_dir():
+        return f"--meshes {path}: is a file, not a folder of meshes (default {MESHES})"
+    return None
+
+
 def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int = 5, meshes: Path | None = None,
               variant: str | None = None, scaling_resolutions=(), sweep: bool = False, frame: bool = True) -> dict:
     import drjit as dr
@@ -221,6 +233,9 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
     from .pipeline import closedness, cull_modes, make_view, points_np as _points_np
     from .gbuffer import cast
 
+    problem = meshes_problem(meshes)
+    if problem:          # the real-mesh rows would be dropped without a word
+        raise FileNotFoundError(problem)
     variant = env.use_variant(variant)
     timing.enable_history()
     meshes = Path(meshes) if meshes else MESHES

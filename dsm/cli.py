@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
 import re
 import shutil
 import signal
@@ -18,7 +19,8 @@ import time
 from pathlib import Path
 
 from . import config as cfgmod
-from .env import SetupError
+from . import lock
+from .env import MAX_THREADS, SetupError
 
 DEFAULT_CONFIG = Path(__file__).with_name("default.toml")
 # what a dsm run writes into its folder: --force clears a folder holding nothing else
@@ -26,6 +28,7 @@ RUN_OUTPUTS = ("run.json", "metrics.csv", "oracle.csv", "table.md", "images", "p
                "oracle_curves.npz", "cascades.csv", "cascades.md", "frames.csv")
 # left by a killed run (report.atomic)
 RUN_TEMP = re.compile(r"\.(?:run\.json|metrics\.csv|oracle\.csv|table\.md|report\.html|oracle_curves\.npz)\.\d+\.tmp")
+NAME_MAX = 255       # bytes in one file name on Linux's file systems (ext4, xfs, btrfs, tmpfs)
 
 
 def _positive_int(text):
@@ -35,6 +38,14 @@ def _positive_int(text):
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def _thread_count(text):
+    # Dr.Jit raises a RuntimeError deep in its pool for counts it cannot start
+    value = _positive_int(text)
+    if value > MAX_THREADS:
+        raise argparse.ArgumentTypeError(f"at most {MAX_THREADS} Dr.Jit threads, got {value}")
     return value
 
 
@@ -53,7 +64,7 @@ def _parser():
     r.add_argument("config", nargs="?", help="experiment TOML file")
     r.add_argument("--out", help="results folder (default: runs/<name>-<time>)")
     r.add_argument("--variant", choices=cfgmod.VARIANTS, help="Mitsuba variant (default llvm_ad_rgb)")
-    r.add_argument("--threads", type=_positive_int, help="Dr.Jit worker threads (at least 1)")
+    r.add_argument("--threads", type=_thread_count, help=f"Dr.Jit worker threads (1 to {MAX_THREADS})")
     again = r.add_mutually_exclusive_group()
     again.add_argument("--force", action="store_true",
                        help="replace a previous dsm run in --out (a folder with its run.json); never other files")
@@ -87,7 +98,7 @@ def _parser():
     t.add_argument("config", help="experiment TOML file with a [tune] table")
     t.add_argument("--out", help="results folder (default: runs/<name>-tune-<time>)")
     t.add_argument("--variant", choices=cfgmod.VARIANTS, help="Mitsuba variant (default llvm_ad_rgb)")
-    t.add_argument("--threads", type=_positive_int, help="Dr.Jit worker threads (at least 1)")
+    t.add_argument("--threads", type=_thread_count, help=f"Dr.Jit worker threads (1 to {MAX_THREADS})")
     return ap
 
 
@@ -137,7 +148,7 @@ def main(argv=None) -> int:
         # down, must not break the exit's clean-up (tqdm's and Ray's atexit handlers) into a traceback
         if argv is None:
             signal.signal(signal.SIGINT, signal.SIG_IGN)
-        where = f" (results so far in {out}/)" if out is not None and out.is_dir() and any(out.iterdir()) else ""
+        where = f" (results so far in {out}/)" if out is not None and entries(out) else ""
         if where and args.cmd == "run" and (out / "run.json").is_file():
             try:
                 measured = json.loads((out / "run.json").read_text()).get("state") == "complete"
@@ -153,7 +164,7 @@ def main(argv=None) -> int:
 
 
 def _bench(args) -> int:
-    from .bench import run_bench
+    from .bench import meshes_problem
     try:
         res = [int(x) for x in args.resolutions.split(",")]
         scale = [int(x) for x in args.scaling.split(",") if x.strip()]
@@ -163,7 +174,21 @@ def _bench(args) -> int:
         _err(f"--resolutions/--scaling: expected positive integers like 256,1024, got "
              f"{args.resolutions!r} / {args.scaling!r}")
         return 2
-    problem = _out_problem(Path(args.out), force=True, bench=True)
+    problem = meshes_problem(args.meshes)
+    if problem:
+        _err(problem)
+        return 2
+    held, problem = claim(Path(args.out))
+    if problem:
+        _err(problem)
+        return 2
+    with held:
+        return _bench_held(args, res, scale)
+
+
+def _bench_held(args, res, scale) -> int:
+    from .bench import run_bench
+    problem = out_problem(Path(args.out), force=True, bench=True)
     if problem:
         _err(problem)
         return 2
@@ -186,6 +211,10 @@ def _report(args) -> int:
     if len(dirs) == 1 and args.out:
         _err("report: --out names the comparison's folder; give two results folders to compare, or none")
         return 2
+    problem = next(filter(None, (name_problem(d, "report") for d in dirs)), None)
+    if problem:
+        _err(problem)
+        return 2
     try:
         if len(dirs) == 1:
             t0 = time.perf_counter()
@@ -196,14 +225,29 @@ def _report(args) -> int:
                   "figures; table.md, plots/, report.html)")
             return 0
         out = Path(args.out) if args.out else Path(f"compare-{dirs[0].resolve().name}-{dirs[1].resolve().name}")
-        problem = _compare_out_problem(out)
-        if problem:
-            _err(f"report: {problem}")
-            return 2
-        n = publish.compare(dirs[0], dirs[1], out)
+        return _compare(dirs, out)
     except publish.NotARun as e:
         _err(f"report: {e}")
         return 2
+
+
+def _compare(dirs, out: Path) -> int:
+    from . import publish
+    made = name_problem(out) is None and not out.exists()
+    held, problem = claim(out)
+    if problem:
+        _err(f"report: {problem}")
+        return 2
+    try:
+        with held:
+            problem = _compare_out_problem(out)
+            if problem:
+                _err(f"report: {problem}")
+                return 2
+            n = publish.compare(dirs[0], dirs[1], out)
+    finally:
+        if made and entries(out) == []:       # refused or failed: no empty folder left behind
+            out.rmdir()
     print(f"dsm: {n['matched']} cases in both runs, {n['only_a']} only in A, {n['only_b']} only in B -> "
           f"{out}/ (compare.md, compare.csv)")
     return 0
@@ -222,7 +266,7 @@ def _compare_out_problem(out: Path) -> str | None:
         return None
     if (out / "run.json").exists():
         return f"--out {out}: is a dsm run's folder; put the comparison in a folder of its own (another --out)"
-    foreign = sorted(p.name for p in out.iterdir() if p.name not in COMPARE_OUTPUTS)
+    foreign = sorted(p.name for p in entries(out) if p.name not in COMPARE_OUTPUTS)
     if foreign:
         return (f"--out {out}: holds files a comparison does not write ({', '.join(foreign[:3])}"
                 f"{', ...' if len(foreign) > 3 else ''}); choose an empty or new --out")
@@ -261,17 +305,54 @@ def _plan(cfg) -> int:
     return 0
 
 
-def _out_problem(out: Path, force: bool, bench: bool = False) -> str | None:
+def name_problem(path: Path, flag: str = "--out") -> str | None:
+    """Why ``path`` cannot be made (None if it can): a component longer than NAME_MAX bytes."""
+    for part in Path(path).parts:
+        n = len(os.fsencode(part))
+        if n > NAME_MAX:
+            return (f"{flag} {str(path)[:60]}...: the name {part[:24]!r}... is {n} bytes long; a file "
+                    f"name takes at most {NAME_MAX} bytes: choose a shorter one")
+    return None
+
+
+def claim(out: Path, flag: str = "--out"):
+    """(the lock on ``out``, None), or (None, why it cannot be had): one writer per folder (dsm.lock)."""
+    problem = name_problem(out, flag)
+    if problem is None and out.is_symlink() and not out.is_dir():
+        problem = f"{flag} {out}: a broken symbolic link"
+    elif problem is None and out.exists() and not out.is_dir():
+        problem = f"{flag} {out}: is a file, not a folder; choose another {flag}"
+    if problem:
+        return None, problem
+    try:
+        return lock.acquire(out), None
+    except lock.Busy as e:
+        return None, f"{flag} {e}"
+    except OSError as e:
+        return None, f"{flag} {out}: cannot write there: {e.strerror or e}"
+
+
+def entries(out: Path) -> list:
+    """What ``out`` holds, the lock file aside (None if it is no folder)."""
+    if not out.is_dir():
+        return None
+    return [p for p in out.iterdir() if p.name != lock.LOCK_NAME]
+
+
+def out_problem(out: Path, force: bool, bench: bool = False) -> str | None:
     """Why ``out`` cannot take the results (None if it can); with ``force``, a previous dsm run
     in it is cleared first. Leaves the folder created and empty (or as bench found it)."""
     if out.is_symlink() and not out.is_dir():
         return f"--out {out}: a broken symbolic link"
     if out.exists() and not out.is_dir():
         return f"--out {out}: is a file, not a folder; choose another --out"
-    if out.is_dir() and any(out.iterdir()) and not bench:
+    held = entries(out)
+    if held and not bench:
         if not force:
-            return f"--out {out}: is not empty; choose another --out or pass --force (which replaces a previous dsm run)"
-        foreign = sorted(p.name for p in out.iterdir() if p.name not in RUN_OUTPUTS and not RUN_TEMP.fullmatch(p.name))
+            what = " (it holds a dsm run)" if (out / "run.json").is_file() else ""
+            return (f"--out {out}: is not empty{what}; choose another --out, or pass --resume (goes on with a dsm "
+                    "run there, keeping its finished cases) or --force (replaces a previous dsm run)")
+        foreign = sorted(p.name for p in held if p.name not in RUN_OUTPUTS and not RUN_TEMP.fullmatch(p.name))
         if not (out / "run.json").is_file():
             return (f"--force: {out} holds no previous dsm run (no run.json), so it is not cleared; "
                     "choose another --out")
@@ -285,10 +366,19 @@ def _out_problem(out: Path, force: bool, bench: bool = False) -> str | None:
         if out.is_symlink():
             return f"--force: {out} is a symbolic link; clear its target yourself or choose another --out"
         try:
-            shutil.rmtree(out)
+            _clear(held)
         except OSError as e:
             return f"--force: cannot clear {out}: {e.strerror or e}"
     return _unwritable(out)
+
+
+def _clear(paths):
+    # entry by entry, not the folder: its lock file is held by this process
+    for p in paths:
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p)
+        else:
+            p.unlink()
 
 
 def _unwritable(out: Path) -> str | None:
@@ -302,7 +392,7 @@ def _unwritable(out: Path) -> str | None:
     return None
 
 
-def _resume_problem(out: Path, cfg=None) -> str | None:
+def resume_problem(out: Path, cfg=None) -> str | None:
     """Why ``--resume`` cannot go on with the run in ``out`` (None if it can): no dsm run there,
     or the run of another experiment (``[experiment] name`` differs from ``cfg``'s: resuming it
     would set every one of its cases aside as stale)."""
@@ -318,6 +408,13 @@ def _resume_problem(out: Path, cfg=None) -> str | None:
         return (f"--resume: {out} holds experiment {prev['experiment']!r} (config {prev.get('config_file') or '?'}), "
                 f"not {cfg.name!r} ({cfg.source}); resume it with its own config or choose another --out")
     return _unwritable(out)
+
+
+def folder_problem(out: Path, cfg, force: bool = False, resume: bool = False):
+    """(why a run of ``cfg`` cannot go into the held ``out`` or None, whether it resumes the run there)."""
+    # dsm run's rules for --out, --force and --resume, shared with dsm.run
+    resuming = resume and bool(entries(out))
+    return (resume_problem(out, cfg) if resuming else out_problem(out, force)), resuming
 
 
 def _checked(check):
@@ -360,8 +457,16 @@ def _run(cfg, args, out: Path) -> int:
                 _err(str(e).removeprefix(f"{e.source}: "))
                 return 2
             return _config_error(e)
-    resuming = bool(getattr(args, "resume", False)) and out.is_dir() and any(out.iterdir())
-    problem = _resume_problem(out, cfg) if resuming else _out_problem(out, args.force)
+    held, problem = claim(out)
+    if problem:
+        _err(problem)
+        return 2
+    with held:
+        return _run_held(cfg, args, out, clustered)
+
+
+def _run_held(cfg, args, out: Path, clustered: bool) -> int:
+    problem, resuming = folder_problem(out, cfg, args.force, bool(getattr(args, "resume", False)))
     if problem:
         _err(problem)
         return 2
@@ -369,6 +474,7 @@ def _run(cfg, args, out: Path) -> int:
         from .runner import Runner
         t0 = time.perf_counter()
         if clustered:
+            from . import cluster
             res = cluster.run(cfg, out, args.cluster, args.variant, progress=True, resume_previous=resuming)
         else:
             res = Runner(cfg, out, args.variant, progress=True, resume_previous=resuming).run()
@@ -408,10 +514,17 @@ def _tune(cfg, args, out: Path) -> int:
     tc, rc = _checked(check)
     if rc is not None:
         return rc
-    if out.exists() and not out.is_dir():
-        _err(f"--out {out}: is a file, not a folder; choose another --out")
+    held, problem = claim(out)
+    if problem:
+        _err(problem)
         return 2
-    if out.is_dir() and any(out.iterdir()):
+    with held:
+        return _tune_held(tc, out)
+
+
+def _tune_held(tc, out: Path) -> int:
+    from . import tune as tunemod
+    if entries(out):
         _err(f"--out {out}: is not an empty folder; choose another --out")
         return 2
     problem = _unwritable(out)          # before the tuning, not when its results are written

@@ -7,6 +7,7 @@ parameter, scene parameter or map option multiplies the cases (see :func:`expand
 from __future__ import annotations
 
 import itertools
+import math
 import os
 import tomllib
 from dataclasses import replace
@@ -20,6 +21,8 @@ from .types import (  # noqa: F401  (re-exported: the config's vocabulary)
     CameraSpec, CascadeSpec, CASCADE_SPLITS, CASCADE_FITS, DEPTH_BOUNDS, MAX_CASCADES,
     MotionSpec, CAMERA_PATHS, LIGHT_PATHS)
 
+# a run's folder is runs/<name>-tune-YYYYmmdd-HHMMSS (21 bytes more) and a file name takes 255 bytes
+NAME_MAX_BYTES = 255 - len("-tune-20240101-120000")
 CASCADE_KEYS = ("cascades", "split", "lambda", "fit", "depth_bounds", "stabilize", "blend", "max_distance")
 
 
@@ -88,6 +91,9 @@ def _plain_name(name, source):
             or os.sep in name or (os.altsep and os.altsep in name)):
         raise ConfigError(source, "experiment.name", f"{name!r} must be a plain file name (it names the results "
                           "folder under runs/): no '/', '\\', '..' or control characters")
+    if len(os.fsencode(name)) > NAME_MAX_BYTES:
+        raise ConfigError(source, "experiment.name", f"{name[:24]!r}... is {len(os.fsencode(name))} bytes long; "
+                          f"it names the results folder runs/<name>-<time>, so at most {NAME_MAX_BYTES} bytes")
     return name
 
 
@@ -432,9 +438,21 @@ def _parse_area(t: dict, source: str, where: str) -> LightSpec:
         else:
             size = (number(raw, source, f"{where}.size", positive=True),)
         if shape != "sphere":
-            direction = vec3(t.get("direction", [0.0, 0.0, -1.0]), source, f"{where}.direction", nonzero=True)
+            direction = unit_direction(t.get("direction", [0.0, 0.0, -1.0]), source, f"{where}.direction")
     return LightSpec("area", position=pos, direction=direction, label="area", shape=shape, size=size,
                      min_samples=lo, max_samples=hi, tolerance=tol, scenes=tuple(only))
+
+
+def unit_direction(raw, source: str, key: str) -> tuple:
+    """A light's direction as a unit vector normalized in float64 (any finite, nonzero input)."""
+    # [1e308, 1e308, -1e308] or [1e-300, 0, -1e-300] over- or underflow when squared (float32
+    # already beyond about 1e19 or below 1e-19): every pixel read as backfacing, the case empty.
+    # Dividing by the largest component first keeps every step in range
+    v = vec3(raw, source, key, nonzero=True)
+    big = max(abs(c) for c in v)
+    u = [c / big for c in v]
+    n = math.sqrt(sum(c * c for c in u))
+    return tuple(c / n for c in u)
 
 
 def _parse_light(t: dict, source: str, where: str) -> LightSpec:
@@ -452,14 +470,14 @@ def _parse_light(t: dict, source: str, where: str) -> LightSpec:
     if kind == "directional":
         if "direction" not in t:
             raise ConfigError(source, f"{where}.direction", "a directional light needs a direction")
-        d = vec3(t["direction"], source, f"{where}.direction", nonzero=True)
+        d = unit_direction(t["direction"], source, f"{where}.direction")
         return LightSpec("directional", direction=d, label="directional")
     if kind == "point":
         if "position" not in t:
             raise ConfigError(source, f"{where}.position", "a point light needs a position")
         pos = vec3(t["position"], source, f"{where}.position")
         # main direction: the paraboloid's axis (its hemisphere), the dual paraboloid's front map
-        d = vec3(t.get("direction", [0.0, 0.0, -1.0]), source, f"{where}.direction", nonzero=True)
+        d = unit_direction(t.get("direction", [0.0, 0.0, -1.0]), source, f"{where}.direction")
         return LightSpec("point", position=pos, direction=d, label="point")
     if "position" not in t:
         raise ConfigError(source, f"{where}.position", "a spot light needs a position")
@@ -468,7 +486,7 @@ def _parse_light(t: dict, source: str, where: str) -> LightSpec:
         raise ConfigError(source, where, "a spot light needs exactly one of target or direction",
                           ("target", "direction"))
     target = vec3(t["target"], source, f"{where}.target") if "target" in t else None
-    direction = vec3(t["direction"], source, f"{where}.direction", nonzero=True) if "direction" in t else None
+    direction = unit_direction(t["direction"], source, f"{where}.direction") if "direction" in t else None
     if target is not None and target == pos:
         raise ConfigError(source, f"{where}.target", "the target equals the position")
     cutoff = number(t.get("cutoff", 30.0), source, f"{where}.cutoff", positive=True, maximum=85.0)

@@ -259,18 +259,36 @@ def make_mesh(name: str, verts: np.ndarray, faces: np.ndarray):
     return mesh
 
 
-def look_at_sensor(origin, target, up, fov, width, height, near=None, far=None):
+def look_at_sensor(origin, target, up, fov, width, height, near=None, far=None, camera=None, source="<config>"):
     """A perspective sensor dict. Clip planes follow the scene's scale (Mitsuba's default near clip is
-    0.01 world units): ``near`` default 1/1000 of the distance to the target, ``far`` 1000 times it."""
+    0.01 world units): ``near`` default 1/1000 of the distance to the target, ``far`` 1000 times it.
+    Clips that cross are a ConfigError naming the [camera] key of ``camera`` that set one alone."""
     import mitsuba as mi
     dist = float(np.linalg.norm(np.subtract(origin, target)))
     near = dist * 1e-3 if near is None else float(near)
     far = dist * 1e3 if far is None else float(far)
+    if not near < far:       # else Mitsuba's RuntimeError, with no key to name
+        raise clip_error(near, far, camera, source)
     return {"type": "perspective", "fov": fov, "near_clip": near, "far_clip": far,
             "to_world": mi.ScalarTransform4f().look_at(origin=list(map(float, origin)),
                                                        target=list(map(float, target)),
                                                        up=list(map(float, up))),
             "film": {"type": "hdrfilm", "width": int(width), "height": int(height)}}
+
+
+def clip_error(near, far, camera, source="<config>"):
+    """The error for a near clip not below the far clip: one of them given alone in [camera]."""
+    given = {k for k in ("near", "far") if camera is not None and getattr(camera, k) is not None}
+    if given == {"far"}:
+        return ConfigError(source, "camera.far", f"{camera.far:g} is not beyond the near clip it goes with "
+                           f"({near:.3g} world units: the scene's, or 1/1000 of the camera's distance to its "
+                           "target); give a larger far, or camera.near below it")
+    if given == {"near"}:
+        return ConfigError(source, "camera.near", f"{camera.near:g} is not below the far clip it goes with "
+                           f"({far:.3g} world units: the scene's, or just beyond its farthest point); give a "
+                           "smaller near, or camera.far above it")
+    return ConfigError(source, "camera", f"the near clip ({near:.3g}) is not below the far clip ({far:.3g})",
+                       ("near", "far"))
 
 
 def far_bound(origin, target, bbox_min, bbox_max) -> float:
@@ -540,7 +558,8 @@ def load(spec: SceneSpec, camera_resolution=None, camera=None) -> SceneData:
         o, tg, up, fv, near, far = posed_camera((np.multiply(cam_o, s) + t, np.multiply(cam_t, s) + t, (0, 0, 1),
                                                  (fov or [40])[0], None, None), camera, s, p.translate, _src(spec))
         d["sensor"] = look_at_sensor(o, tg, up, fv, w, h, near,
-                                     far if far is not None else far_bound(o, tg, allv.min(0), allv.max(0)))
+                                     far if far is not None else far_bound(o, tg, allv.min(0), allv.max(0)),
+                                     camera, _src(spec))
         scene = mi.load_dict(d, optimize=False)
         data = _finish(spec.label, scene, [_scale_light(light, s, p.translate)], s)
         data.offset = tuple(float(c) for c in p.translate)
@@ -624,8 +643,112 @@ def _precheck_file(spec):
             if m is None or int(m.group(1)) == 0:
                 raise ConfigError(_src(spec), key, f"{path} has no faces (PLY element face: "
                                   f"{m.group(1).decode() if m else 'absent'}): dsm needs a triangle mesh")
+            bad = ply_index_problem(path, head, end)
+            if bad:
+                raise ConfigError(_src(spec), key, f"{path}: {bad}")
     except OSError as e:
         raise ConfigError(_src(spec), key, f"cannot read {path}: {e.strerror or e}") from None
+
+
+PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
+             "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+             "float": "f4", "float32": "f4", "double": "f8", "float64": "f8"}
+PLY_ORDER = {"binary_little_endian": "<", "binary_big_endian": ">", "ascii": None}
+
+
+def ply_index_problem(path: Path, head: bytes, end: int) -> str | None:
+    """A PLY face index outside its vertices, in words (None: all in range, or left to Mitsuba)."""
+    # Mitsuba reads such a face past its vertex buffer (a segfault, not an error); a truncated
+    # file or a header this does not read (lists before the faces, mixed polygon sizes) Mitsuba
+    # reports itself
+    try:
+        fmt, elements = _ply_header(head[:end])
+        data = head.index(b"\n", end) + 1
+        counts, faces = _ply_faces(path, data, fmt, elements)
+    except (ValueError, KeyError, IndexError, StopIteration):
+        return None
+    n = counts.get("vertex", 0)
+    if faces is None or faces.size == 0:
+        return None
+    lo, hi = int(faces.min()), int(faces.max())
+    if lo >= 0 and hi < n:
+        return None
+    worst = hi if hi >= n else lo
+    which = f"face {int(np.flatnonzero((faces == worst).any(axis=1))[0])}" if faces.ndim == 2 else "a face"
+    return f"{which} refers to vertex {worst} of {n} (indices 0 to {n - 1}): the file is damaged"
+
+
+def _ply_header(text: bytes):
+    """(format, [(element, count, [(name, type) or (name, (count type, item type))])]) of a PLY header."""
+    fmt, elements = None, []
+    for line in text.decode("ascii", "replace").splitlines():
+        w = line.split()
+        if w[:1] == ["format"]:
+            fmt = w[1]
+        elif w[:1] == ["element"]:
+            elements.append((w[1], int(w[2]), []))
+        elif w[:2] == ["property", "list"]:
+            elements[-1][2].append((w[4], (PLY_TYPES[w[2]], PLY_TYPES[w[3]])))
+        elif w[:1] == ["property"]:
+            elements[-1][2].append((w[2], PLY_TYPES[w[1]]))
+    if fmt not in PLY_ORDER:
+        raise ValueError(fmt)
+    return fmt, elements
+
+
+def _ply_faces(path: Path, offset: int, fmt: str, elements):
+    """({element: count}, the face element's vertex indices: an (n, k) array, or a flat one)."""
+    counts = {name: n for name, n, _ in elements}
+    if fmt == "ascii":
+        return counts, _ply_ascii_faces(path.read_bytes()[offset:], elements)
+    order = PLY_ORDER[fmt]
+    buf = np.memmap(path, np.uint8, mode="r")
+    for name, n, props in elements:
+        if name == "face":
+            return counts, _ply_binary_faces(buf, offset, n, props, order)
+        if any(isinstance(t, tuple) for _, t in props):
+            raise ValueError("a list before the faces")      # rare: Mitsuba's own checks only
+        offset += n * sum(np.dtype(t).itemsize for _, t in props)
+    return counts, None
+
+
+def _ply_binary_faces(buf, offset, n, props, order):
+    # every face with the first face's corner count (triangles, or quads): one strided read
+    first = offset
+    fields = []
+    for name, t in props:
+        if isinstance(t, tuple):
+            k = int(np.frombuffer(buf, order + t[0], 1, first)[0])
+            fields += [(name + "#n", order + t[0]), (name, order + t[1], (k,))]
+            first += np.dtype(t[0]).itemsize
+        else:
+            fields.append((name, order + t))
+            first += np.dtype(t).itemsize
+    rec = np.frombuffer(buf, np.dtype(fields), n, offset)      # ValueError when truncated
+    lists = [name for name, t in props if isinstance(t, tuple)]
+    if not all((rec[f + "#n"] == rec[f + "#n"][0]).all() for f in lists):
+        raise ValueError("faces of several sizes")             # Mitsuba's own checks only
+    key = "vertex_indices" if "vertex_indices" in lists else lists[0]
+    return rec[key].astype(np.int64)
+
+
+def _ply_ascii_faces(body: bytes, elements):
+    rows = iter(l.split() for l in body.splitlines() if l.strip())
+    for name, n, props in elements:
+        if name != "face":
+            for _ in range(n):
+                next(rows)                                     # StopIteration: truncated
+            continue
+        out = []
+        for _ in range(n):
+            w, i = next(rows), 0
+            for pname, t in props:
+                k = int(w[i]) + 1 if isinstance(t, tuple) else 1
+                if isinstance(t, tuple) and pname in ("vertex_indices", "vertex_index"):
+                    out += [int(x) for x in w[i + 1:i + k]]
+                i += k
+        return np.asarray(out, np.int64)
+    return None
 
 
 def _check_loaded(spec, data):
@@ -780,7 +903,7 @@ def _reposed_sensor(sensor, camera, bbox, source="<config>"):
     if camera.far is None and (camera.position is not None or camera.target is not None):
         far2 = far_bound(o2, t2, *bbox)
     W, H = (int(x) for x in sensor.film().size())
-    d = look_at_sensor(o2, t2, up2, fov2, W, H, near2 if near2 is not None else None, far2)
+    d = look_at_sensor(o2, t2, up2, fov2, W, H, near2 if near2 is not None else None, far2, camera, source)
     d["fov_axis"] = "x"
     return mi.load_dict(d)
 
@@ -847,7 +970,7 @@ def _load_mesh_file(spec, width, height, camera=None):
                                          _src(spec))
     lo_all, hi_all = (lo, hi) if p.ground != "yes" else (np.minimum(lo, center - size * 1.5), np.maximum(hi, center + size * 1.5))
     d["sensor"] = look_at_sensor(o, tg, upv, fv, width, height, near,
-                                 far if far is not None else far_bound(o, tg, lo_all, hi_all))
+                                 far if far is not None else far_bound(o, tg, lo_all, hi_all), camera, _src(spec))
     scene = mi.load_dict(d, optimize=False)
     light = LightSpec("directional", direction=normalize(-up * 1.0 - a * 0.3 + b * 0.2))
     data = _finish(spec.label, scene, [light], p.scale)

@@ -1,0 +1,346 @@
+"""Hostile inputs of issue 27: one writer per results folder (an OS lock a SIGKILL releases), the
+API under the command line's folder rules, crossed clip planes, damaged PLY indices, absurd thread
+counts, over-long names, light directions beyond float32, a missing --meshes folder. Each answer
+is one line and exit 2 (a user's mistake) or the right result; the expected values are written
+here (the holder's pid, the names, the reference light's counts), not read from the kit."""
+import csv
+import json
+import os
+import signal
+import struct
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+
+import dsm
+from dsm import cli, config, lock
+from dsm.config import ConfigError
+
+ROOT = Path(__file__).resolve().parent.parent
+# holds flock on <folder>/.dsm-lock as any process could, writes its pid there, then waits
+HOLDER = ("import fcntl, os, sys, time\n"
+          "d = sys.argv[1]; os.makedirs(d, exist_ok=True)\n"
+          "fd = os.open(os.path.join(d, '.dsm-lock'), os.O_RDWR | os.O_CREAT)\n"
+          "fcntl.flock(fd, fcntl.LOCK_EX)\n"
+          "os.ftruncate(fd, 0); os.write(fd, str(os.getpid()).encode())\n"
+          "print('held', flush=True); time.sleep(600)\n")
+
+
+def _tiny(extra: str = "", scene: str = 'builtin = "plane"', name: str = "t") -> str:
+    return (f'[experiment]\nname = "{name}"\n[camera]\nresolution = [32, 32]\n[[scene]]\n{scene}\n'
+            f'[map]\nresolution = 32\n[[scheme]]\nname = "none"\n[timing]\nrepeats = 1\n{extra}')
+
+
+def _cli(capsys, *args):
+    """(exit status, non-blank stderr lines) of an in-process ``dsm`` call."""
+    capsys.readouterr()
+    rc = cli.main([str(a) for a in args])
+    return rc, [l for l in capsys.readouterr().err.splitlines() if l.strip()]
+
+
+def _one_line(err, *words):
+    assert len(err) == 1 and "Traceback" not in err[0], err
+    for w in words:
+        assert w in err[0], (w, err[0])
+
+
+class Holder:
+    """A second process holding ``folder``'s lock until killed with SIGKILL."""
+
+    def __init__(self, folder: Path):
+        self.proc = subprocess.Popen([sys.executable, "-c", HOLDER, str(folder)], stdout=subprocess.PIPE, text=True)
+        assert self.proc.stdout.readline().strip() == "held"
+        self.pid = self.proc.pid
+
+    def kill(self):
+        os.kill(self.pid, signal.SIGKILL)
+        assert self.proc.wait(timeout=30) == -signal.SIGKILL
+
+
+@pytest.fixture
+def holder():
+    made = []
+
+    def hold(folder):
+        made.append(Holder(folder))
+        return made[-1]
+    yield hold
+    for h in made:
+        if h.proc.poll() is None:
+            h.kill()
+
+
+@pytest.fixture
+def cfg_file(tmp_path):
+    path = tmp_path / "c.toml"
+    path.write_text(_tiny())
+    return path
+
+
+def _rows(folder: Path) -> list:
+    with open(folder / "metrics.csv", newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+# ---------------------------------------------------------------- 1: a lock per folder
+
+@pytest.mark.parametrize("flag", [None, "--resume", "--force"])
+def test_a_run_into_a_held_folder_is_refused_naming_the_holder_and_free_after_sigkill(tmp_path, capsys, cfg_file,
+                                                                                       holder, flag):
+    out = tmp_path / "o"
+    if flag:                                  # --resume and --force act on a previous run
+        assert _cli(capsys, "run", cfg_file, "--out", out)[0] == 0
+        before = (out / "metrics.csv").read_bytes()
+    h = holder(out)
+    rc, err = _cli(capsys, "run", cfg_file, "--out", out, *([flag] if flag else []))
+    assert rc == 2
+    _one_line(err, str(out), f"process {h.pid}", "in use")
+    if flag:
+        assert (out / "metrics.csv").read_bytes() == before          # nothing written or cleared
+    h.kill()                                  # the OS drops the lock; the lock file stays behind
+    assert (out / ".dsm-lock").is_file()
+    rc, err = _cli(capsys, "run", cfg_file, "--out", out, *([flag] if flag else []))
+    assert rc == 0, err
+    assert len(_rows(out)) == 1 and not (out / ".dsm-lock").exists()
+
+
+def test_tune_bench_and_report_refuse_a_held_folder(tmp_path, capsys, holder):
+    tune_cfg = tmp_path / "t.toml"
+    tune_cfg.write_text(_tiny('[tune]\nsteps = 2\n', 'builtin = "plane_box"').replace('"none"', '"constant"'))
+    a = tmp_path / "a"
+    assert _cli(capsys, "run", tune_cfg, "--out", a)[0] == 0
+    for args in (["tune", tune_cfg, "--out"], ["bench", "--resolutions", "32", "--scaling", "", "--repeats", "1",
+                                              "--no-sweep", "--no-frame", "--out"], ["report", a, a, "--out"]):
+        out = tmp_path / args[0]
+        h = holder(out)
+        rc, err = _cli(capsys, *args, out)
+        assert rc == 2, (args, err)
+        _one_line(err, str(out), f"process {h.pid}")
+        assert sorted(p.name for p in out.iterdir()) == [".dsm-lock"]       # nothing written
+        h.kill()
+    rc, err = _cli(capsys, "report", a, a, "--out", tmp_path / "report")   # free again after SIGKILL
+    assert rc == 0, err
+    assert (tmp_path / "report" / "compare.md").is_file()
+
+
+def test_the_api_takes_the_same_lock(tmp_path, holder):
+    out = tmp_path / "o"
+    h = holder(out)
+    with pytest.raises(ConfigError) as e:
+        dsm.run(config.parse(tomllib.loads(_tiny())), out=out)
+    assert e.value.key == "out" and f"process {h.pid}" in str(e.value) and str(out) in str(e.value)
+    assert sorted(p.name for p in out.iterdir()) == [".dsm-lock"]
+    h.kill()
+    res = dsm.run(config.parse(tomllib.loads(_tiny())), out=out)
+    assert len(res.rows) == 1 and not (out / ".dsm-lock").exists()
+
+
+def test_the_lock_is_an_os_lock_on_the_file(tmp_path):
+    """Held here, a second open of the file cannot flock it; released, the file is gone."""
+    import fcntl
+    held = lock.acquire(tmp_path / "o")
+    assert (tmp_path / "o" / ".dsm-lock").read_text().strip() == str(os.getpid())
+    fd = os.open(tmp_path / "o" / ".dsm-lock", os.O_RDWR)
+    with pytest.raises(BlockingIOError):
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    os.close(fd)
+    held.release()
+    assert not (tmp_path / "o" / ".dsm-lock").exists()
+    lock.acquire(tmp_path / "o").release()              # free again
+
+
+def test_a_rerun_after_a_kill_names_resume_and_force(tmp_path, capsys, cfg_file, holder):
+    """A run killed with SIGKILL: run.json says running and a stale lock file stays; a plain re-run
+    says how to go on (--resume) or start again (--force)."""
+    out = tmp_path / "o"
+    assert _cli(capsys, "run", cfg_file, "--out", out)[0] == 0
+    run = json.loads((out / "run.json").read_text())
+    (out / "run.json").write_text(json.dumps(dict(run, state="running")))
+    holder(out).kill()
+    rc, err = _cli(capsys, "run", cfg_file, "--out", out)
+    assert rc == 2
+    _one_line(err, str(out), "--resume", "--force")
+    rc, err = _cli(capsys, "run", cfg_file, "--out", out, "--resume")
+    assert rc == 0 and any("1 finished cases kept" in l for l in err), err
+    assert sorted(p.name for p in out.iterdir() if p.name.startswith(".")) == []
+
+
+# ---------------------------------------------------------------- 3: the API follows the CLI's rules
+
+def test_the_api_keeps_a_previous_run_unless_told(tmp_path):
+    a = tomllib.loads(_tiny())
+    b = tomllib.loads(_tiny().replace('name = "none"', 'name = "constant"'))
+    out = tmp_path / "o"
+    dsm.run(a, out=out)
+    before = (out / "metrics.csv").read_bytes()
+    with pytest.raises(ConfigError) as e:
+        dsm.run(b, out=out)
+    assert e.value.key == "out" and "resume=True" in str(e.value) and "force=True" in str(e.value)
+    assert (out / "metrics.csv").read_bytes() == before
+    assert [r["scheme"] for r in _rows(out)] == ["none"]
+    res = dsm.run(a, out=out, resume=True)
+    assert res.run["resumed_cases"] == 1
+    dsm.run(b, out=out, force=True)
+    assert [r["scheme"] for r in _rows(out)] == ["constant"]
+    other = tomllib.loads(_tiny(name="other"))
+    with pytest.raises(ConfigError) as e:
+        dsm.run(other, out=out, resume=True)
+    assert "holds experiment 't'" in str(e.value)
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "keep.txt").write_text("mine")
+    with pytest.raises(ConfigError):
+        dsm.run(a, out=tmp_path / "mine", force=True)
+    assert [p.name for p in (tmp_path / "mine").iterdir()] == ["keep.txt"]
+
+
+# ---------------------------------------------------------------- 5: a clip plane given alone
+
+@pytest.mark.parametrize("key,value", [("far", "1e-3"), ("near", "100")])
+def test_a_clip_plane_alone_that_crosses_the_other_is_a_config_error(tmp_path, capsys, key, value):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(_tiny().replace("resolution = [32, 32]", f"resolution = [32, 32]\n{key} = {value}"))
+    for cmd in (["plan", cfg], ["run", cfg, "--out", tmp_path / "o"]):
+        rc, err = _cli(capsys, *cmd)
+        assert rc == 2
+        _one_line(err, "config error", f"camera.{key}", value.replace("1e-3", "0.001"))
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_clip_plane_alone_that_fits_still_runs(tmp_path, capsys):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(_tiny().replace("resolution = [32, 32]", "resolution = [32, 32]\nfar = 100"))
+    assert _cli(capsys, "run", cfg, "--out", tmp_path / "o")[0] == 0
+
+
+# ---------------------------------------------------------------- 6: face indices of a PLY
+
+PLY = ("ply\nformat {fmt} 1.0\nelement vertex 8\nproperty float x\nproperty float y\nproperty float z\n"
+       "element face 2\nproperty list uchar {idx} vertex_indices\nend_header\n")
+CUBE = [(x, y, z) for x in (0, 1) for y in (0, 1) for z in (0, 1)]
+
+
+def _ply(path: Path, fmt: str, faces, idx="int"):
+    code = {"int": "i", "uint": "I"}[idx]
+    head = PLY.format(fmt=fmt, idx=idx).encode()
+    if fmt == "ascii":
+        body = "".join("%g %g %g\n" % v for v in CUBE) + "".join("3 %d %d %d\n" % f for f in faces)
+        path.write_bytes(head + body.encode())
+        return
+    e = "<" if fmt == "binary_little_endian" else ">"
+    body = struct.pack(f"{e}24f", *[c for v in CUBE for c in v])
+    body += b"".join(struct.pack(f"{e}B3{code}", 3, *f) for f in faces)
+    path.write_bytes(head + body)
+
+
+@pytest.mark.parametrize("fmt,idx,bad", [("binary_little_endian", "int", 99), ("binary_big_endian", "int", 99),
+                                         ("ascii", "int", 99), ("binary_little_endian", "int", -1),
+                                         ("binary_little_endian", "uint", 8)])
+def test_a_ply_face_out_of_range_is_one_line_before_mitsuba_reads_it(tmp_path, capsys, fmt, idx, bad):
+    _ply(tmp_path / "m.ply", fmt, [(0, 1, 2), (1, bad, 3)], idx)
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(_tiny(scene='file = "m.ply"'))
+    for cmd in (["plan", cfg], ["run", cfg, "--out", tmp_path / "o"]):
+        rc, err = _cli(capsys, *cmd)
+        assert rc == 2
+        _one_line(err, "scene[0].file", f"refers to vertex {bad} of 8")
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_ply_face_out_of_range_does_not_crash_a_process(tmp_path):
+    """In a process of its own (a segfault would show as a negative status), run and plan."""
+    _ply(tmp_path / "m.ply", "binary_little_endian", [(0, 1, 2), (1, 99, 3)])
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(_tiny(scene='file = "m.ply"'))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), str(ROOT / "plugins"),
+                                                       os.environ.get("PYTHONPATH", "")]))
+    for cmd in (["plan", str(cfg)], ["run", str(cfg), "--out", str(tmp_path / "o")]):
+        p = subprocess.run([sys.executable, "-m", "dsm.cli", *cmd], capture_output=True, text=True, env=env,
+                           timeout=300)
+        assert p.returncode == 2 and "vertex 99 of 8" in p.stderr, p.stderr
+
+
+def test_a_ply_with_faces_in_range_passes(tmp_path, capsys):
+    for fmt in ("binary_little_endian", "ascii"):
+        _ply(tmp_path / "m.ply", fmt, [(0, 1, 3), (0, 3, 2)])
+        cfg = tmp_path / "c.toml"
+        cfg.write_text(_tiny(scene='file = "m.ply"'))
+        rc, err = _cli(capsys, "plan", cfg)
+        assert rc == 0, err
+
+
+# ---------------------------------------------------------------- 7: thread counts
+
+def test_an_absurd_thread_count_is_one_line(tmp_path, capsys, cfg_file):
+    for n in ("100000", "1025"):
+        rc, err = _cli(capsys, "run", cfg_file, "--threads", n, "--out", tmp_path / "o")
+        assert rc == 2
+        _one_line(err, "--threads", "1024", n)
+    assert not (tmp_path / "o").exists()
+    from dsm import env
+    with pytest.raises(env.SetupError, match="1 to 1024"):
+        env.use_variant(None, 100000)
+
+
+# ---------------------------------------------------------------- 11: names over 255 bytes
+
+def test_a_name_over_255_bytes_is_one_line(tmp_path, capsys, cfg_file, monkeypatch):
+    long = "x" * 300
+    rc, err = _cli(capsys, "run", cfg_file, "--out", tmp_path / long / "o")
+    assert rc == 2
+    _one_line(err, "--out", "300 bytes", "255")
+    rc, err = _cli(capsys, "report", tmp_path / long)
+    assert rc == 2
+    _one_line(err, "report", "300 bytes")
+    half = "y" * 130                                    # each fine, the default compare-A-B is not
+    rc, err = _cli(capsys, "report", tmp_path / half, tmp_path / (half + "z"))
+    assert rc == 2
+    _one_line(err, "--out", "compare-", "270 bytes")
+    named = tmp_path / "n.toml"
+    named.write_text(_tiny(name="e" * 240))
+    monkeypatch.chdir(tmp_path)
+    rc, err = _cli(capsys, "run", named)
+    assert rc == 2
+    _one_line(err, "experiment.name", "240 bytes")
+    assert not (tmp_path / "runs").exists()
+    named.write_text(_tiny(name="e" * 234))             # the longest name a run folder takes
+    assert config.load(named).name == "e" * 234
+
+
+# ---------------------------------------------------------------- 15: light directions beyond float32
+
+def test_a_light_direction_beyond_float32_gives_the_counts_of_its_direction(tmp_path):
+    """Each hostile direction beside the plain one it points along, on plane_box: same counts."""
+    pairs = [([1e-300, 0, -1e-300], [1, 0, -1]), ([1e308, 1e308, -1e308], [1, 1, -1]),
+             ([0, 0, -1e-320], [0, 0, -1])]
+    lights = "".join(f'[[light]]\ntype = "directional"\ndirection = [{", ".join(map(repr, map(float, d)))}]\n'
+                     for pair in pairs for d in pair)
+    cfg = tomllib.loads(_tiny(lights, 'builtin = "plane_box"'))
+    rows = dsm.run(cfg, out=tmp_path / "o").rows
+    assert len(rows) == 6
+    keys = ("n_receivers", "n_gt_lit", "n_gt_shadowed", "n_acne", "n_peterpan", "n_excluded_backfacing")
+    for i in range(3):
+        hostile, plain = rows[2 * i], rows[2 * i + 1]
+        assert plain["n_receivers"] > 0                    # the case was empty, every pixel "backfacing"
+        assert {k: hostile[k] for k in keys} == {k: plain[k] for k in keys}, pairs[i]
+    assert sum(r["n_gt_shadowed"] for r in rows) > 0      # the box casts a shadow under some of them
+
+
+def test_a_light_direction_is_a_float64_unit_vector():
+    raw = tomllib.loads(_tiny('[[light]]\ntype = "directional"\ndirection = [1e-300, 0, -1e-300]\n'))
+    (light,) = config.parse(raw).lights
+    assert light.direction == pytest.approx((2 ** -0.5, 0.0, -(2 ** -0.5)), rel=1e-15, abs=0)
+
+
+# ---------------------------------------------------------------- 20: bench --meshes
+
+def test_bench_with_a_missing_meshes_folder_is_one_line(tmp_path, capsys):
+    rc, err = _cli(capsys, "bench", "--meshes", tmp_path / "nonexistent", "--out", tmp_path / "b")
+    assert rc == 2
+    _one_line(err, "--meshes", str(tmp_path / "nonexistent"), "no such folder")
+    assert not (tmp_path / "b").exists()
+    (tmp_path / "file").write_text("")
+    rc, err = _cli(capsys, "bench", "--meshes", tmp_path / "file", "--out", tmp_path / "b")
+    assert rc == 2 and "not a folder" in err[0]
