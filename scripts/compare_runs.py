@@ -30,11 +30,15 @@ def _smoke(cfg):
 
 
 def run_all(out: Path):
-    """Every run of the comparison, into out/<name>/ (a run that cannot run is noted, not fatal)."""
+    """Every run of the comparison, into out/<name>/ (a run that cannot run is noted, not fatal).
+    ``out`` starts empty: the kit refuses to run into an old run's folder."""
+    import shutil
+
     import dsm
     from dsm import config
     from dsm.cli import DEFAULT_CONFIG
-    out.mkdir(parents=True, exist_ok=True)
+    shutil.rmtree(out, ignore_errors=True)
+    out.mkdir(parents=True)
     for path in sorted(Path("experiments").glob("*.toml")):
         cfg = config.load(path)
         if cfg.raw.get("tune"):

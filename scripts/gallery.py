@@ -31,7 +31,8 @@ def default_run(folder):
         run = json.loads((Path(folder) / "run.json").read_text())
         if run.get("state") == "complete" and run.get("experiment") == "default":
             return Path(folder)
-    return dsm.run(DEFAULT_CONFIG, out=folder).out
+    # an unfinished or foreign run in the folder is replaced (dsm.run keeps it unless told)
+    return dsm.run(DEFAULT_CONFIG, out=folder, force=folder is not None and (Path(folder) / "run.json").is_file()).out
 
 
 def screenshot(page: Path, png: Path, size=(1280, 900)) -> bool:
