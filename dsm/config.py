@@ -7,14 +7,13 @@ parameter, scene parameter or map option multiplies the cases (see :func:`expand
 from __future__ import annotations
 
 import itertools
-import math
 import os
 import tomllib
 from dataclasses import replace
 from pathlib import Path
 
 from .types import (  # noqa: F401  (re-exported: the config's vocabulary)
-    LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, LIGHT_TYPES, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA,
+    LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA,
     REPORT_IMAGES,
     ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params,
     SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec,
@@ -193,15 +192,7 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     report_images = choice(rep.get("images", "all"), source, "report.images", REPORT_IMAGES)
 
     motion = tuple(_parse_motion(t, source, f"motion[{i}]") for i, t in enumerate(_array_of_tables(raw, "motion", source)))
-    turning = [i for i, mo in enumerate(motion) if mo.light == "turn"]
-    if turning and all(l.type not in ("directional", "scene") for l in lights):
-        raise ConfigError(source, f"motion[{turning[0]}].light", "a turning sun needs a directional [[light]]",
-                          ["directional"])
-    for i, mo in enumerate(motion):
-        if mo.light in ("move", "keyframes") and all(l.type not in ("spot", "point", "scene") for l in lights):
-            raise ConfigError(source, f"motion[{i}].light", f"light path {mo.light!r} moves a spot or point light "
-                              "and the config's lights are all directional (a sun turns: light = \"turn\")",
-                              ["spot", "point"])
+    _check_motion_lights(motion, lights, source)
     return Config(name=name, source=source, seed=seed, variant=variant, camera_resolution=camera_resolution,
                   camera=camera, motion=motion,
                   scenes=tuple(scenes), lights=tuple(lights), map=mapspec, schemes=tuple(schemes),
@@ -408,89 +399,25 @@ def _filter(raw, source) -> str:
     return choice(raw, source, "map.filter", FILTERS)
 
 
-def _parse_area(t: dict, source: str, where: str) -> LightSpec:
-    """``type = "area"``: shape, position, direction (normal), size, and the reference's sampling."""
-    from .types import AREA_SHAPES
-    shape = choice(t.get("shape"), source, f"{where}.shape", AREA_SHAPES)
-    sampling = ("min_samples", "max_samples", "tolerance")
-    own = {"emitter": (), "sphere": ("position", "size"), "disk": ("position", "direction", "size"),
-           "rectangle": ("position", "direction", "size")}[shape]
-    check_keys(t, ("type", "shape", "scenes") + own + sampling, source, where)
-    only = as_list(t.get("scenes", []))
-    if not all(isinstance(x, str) and x for x in only):
-        raise ConfigError(source, f"{where}.scenes", f"expected a list of scene labels, got {t['scenes']!r}")
-    lo = number(t.get("min_samples", 16), source, f"{where}.min_samples", integer=True, minimum=1, maximum=1 << 20)
-    hi = number(t.get("max_samples", 1024), source, f"{where}.max_samples", integer=True, minimum=lo,
-                maximum=1 << 20)
-    tol = number(t.get("tolerance", 0.01), source, f"{where}.tolerance", minimum=0.0, maximum=1.0)
-    pos = direction = None
-    size = ()
-    if shape != "emitter":
-        for key in ("position", "size"):
-            if key not in t:
-                raise ConfigError(source, f"{where}.{key}", f"a {shape} light needs a {key}")
-        pos = vec3(t["position"], source, f"{where}.position")
-        raw = t["size"]
-        if shape == "rectangle" and isinstance(raw, list):
-            if len(raw) != 2:
-                raise ConfigError(source, f"{where}.size", f"expected a side or [width, height], got {raw!r}")
-            size = tuple(number(x, source, f"{where}.size", positive=True) for x in raw)
-        else:
-            size = (number(raw, source, f"{where}.size", positive=True),)
-        if shape != "sphere":
-            direction = unit_direction(t.get("direction", [0.0, 0.0, -1.0]), source, f"{where}.direction")
-    return LightSpec("area", position=pos, direction=direction, label="area", shape=shape, size=size,
-                     min_samples=lo, max_samples=hi, tolerance=tol, scenes=tuple(only))
-
-
-def unit_direction(raw, source: str, key: str) -> tuple:
-    """A light's direction as a unit vector normalized in float64 (any finite, nonzero input)."""
-    # [1e308, 1e308, -1e308] or [1e-300, 0, -1e-300] over- or underflow when squared (float32
-    # already beyond about 1e19 or below 1e-19): every pixel read as backfacing, the case empty.
-    # Dividing by the largest component first keeps every step in range
-    v = vec3(raw, source, key, nonzero=True)
-    big = max(abs(c) for c in v)
-    u = [c / big for c in v]
-    n = math.sqrt(sum(c * c for c in u))
-    return tuple(c / n for c in u)
-
-
 def _parse_light(t: dict, source: str, where: str) -> LightSpec:
-    kind = choice(t.get("type"), source, f"{where}.type", LIGHT_TYPES) if "type" in t else None
+    """One [[light]] table, parsed by its type's module (dsm.lights)."""
+    from . import lights
+    kind = choice(t.get("type"), source, f"{where}.type", lights.TYPES) if "type" in t else None
     if kind is None:
-        raise ConfigError(source, f"{where}.type", "missing", LIGHT_TYPES)
-    if kind == "area":
-        return _parse_area(t, source, where)
-    allowed = {"scene": ("type",), "directional": ("type", "direction"),
-               "spot": ("type", "position", "target", "direction", "cutoff"),
-               "point": ("type", "position", "direction")}[kind]
-    check_keys(t, allowed, source, where)
-    if kind == "scene":
-        return LightSpec("scene", label="scene")
-    if kind == "directional":
-        if "direction" not in t:
-            raise ConfigError(source, f"{where}.direction", "a directional light needs a direction")
-        d = unit_direction(t["direction"], source, f"{where}.direction")
-        return LightSpec("directional", direction=d, label="directional")
-    if kind == "point":
-        if "position" not in t:
-            raise ConfigError(source, f"{where}.position", "a point light needs a position")
-        pos = vec3(t["position"], source, f"{where}.position")
-        # main direction: the paraboloid's axis (its hemisphere), the dual paraboloid's front map
-        d = unit_direction(t.get("direction", [0.0, 0.0, -1.0]), source, f"{where}.direction")
-        return LightSpec("point", position=pos, direction=d, label="point")
-    if "position" not in t:
-        raise ConfigError(source, f"{where}.position", "a spot light needs a position")
-    pos = vec3(t["position"], source, f"{where}.position")
-    if ("target" in t) == ("direction" in t):
-        raise ConfigError(source, where, "a spot light needs exactly one of target or direction",
-                          ("target", "direction"))
-    target = vec3(t["target"], source, f"{where}.target") if "target" in t else None
-    direction = unit_direction(t["direction"], source, f"{where}.direction") if "direction" in t else None
-    if target is not None and target == pos:
-        raise ConfigError(source, f"{where}.target", "the target equals the position")
-    cutoff = number(t.get("cutoff", 30.0), source, f"{where}.cutoff", positive=True, maximum=85.0)
-    return LightSpec("spot", position=pos, target=target, direction=direction, cutoff=cutoff, label="spot")
+        raise ConfigError(source, f"{where}.type", "missing", lights.TYPES)
+    return lights.get(kind).parse(t, source, where)
+
+
+def _check_motion_lights(motion, lights_of_config, source):
+    """Each [[motion]] light path needs a light whose type follows it (or the scene's own)."""
+    from . import lights
+    for i, mo in enumerate(motion):
+        if mo.light == "none":
+            continue
+        follow = [name for name, m in lights.REGISTRY.items() if mo.light in m.MOTION]
+        if all(l.type != "scene" and mo.light not in lights.get(l.type).MOTION for l in lights_of_config):
+            raise ConfigError(source, f"motion[{i}].light", f"light path {mo.light!r} needs a "
+                              f"{' or '.join(follow)} [[light]]; the config has none", follow)
 
 
 def parse_scheme(t: dict, source: str, where: str, registry, presets) -> list:

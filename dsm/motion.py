@@ -40,7 +40,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import figures, metrics, pipeline, report, scenes, shadowmap, spawn, timing
+from . import figures, lights, metrics, pipeline, report, scenes, shadowmap, spawn, timing
 from .cascades import Camera
 
 FRAME_COLUMNS = ("case", "motion", "scene", "light", "cascade_layout", "scheme", "params", "resolution", "filter",
@@ -96,11 +96,14 @@ def light_path(spec, light, scale: float = 1.0, offset=(0.0, 0.0, 0.0)) -> list:
     linearly; positions follow the scene's ``scale`` and ``offset`` as a [[light]]'s do). A light
     of another type than the path moves stays still."""
     out = []
-    moving = light.type in ("spot", "point") and light.position is not None
+    follows = lights.get(light.type).MOTION          # the paths this light's type follows
+    moving = light.position is not None
     p0 = np.asarray(light.position, float) if moving else None
     for i in range(spec.frames):
         f = i / (spec.frames - 1)
-        if spec.light == "turn" and light.type == "directional":
+        if spec.light not in follows:
+            out.append(light)
+        elif spec.light == "turn":
             d = _rotate(light.direction, spec.light_axis, spec.light_angle * f)
             out.append(dataclasses.replace(light, direction=tuple(float(c) for c in d)))
         elif spec.light == "move" and moving:
@@ -219,7 +222,7 @@ def points_frame(scene, fp: FixedPoints, cam: Camera, light, view, magnitude: fl
     the one computed for this light in an earlier frame)."""
     seen, n_cam = points_seen(scene, fp, cam)
     n_np = pipeline.points_np(n_cam)
-    if light.type == "directional":
+    if not lights.get(light.type).POSITIONAL:
         facing = n_np @ (-np.asarray(light.direction, float) / np.linalg.norm(light.direction)) > 0
     else:
         facing = ((np.asarray(light.position, float) - pipeline.points_np(fp.p)) * n_np).sum(1) > 0

@@ -26,7 +26,7 @@ import mitsuba as mi
 import numpy as np
 
 from . import cascades as cascades_mod
-from . import area, formats, lookup, reference, scenes, schemes, shadowmap, spawn, timing
+from . import area, formats, lights, lookup, reference, scenes, schemes, shadowmap, spawn, timing
 from . import oracle as oracle_mod
 from . import gbuffer as gbuffer_mod
 from . import metrics as metrics_mod
@@ -35,7 +35,6 @@ from .env import exact_math  # noqa: F401  (the plugins set it in the thread tha
 from .config import parse_scheme
 from .lookup import Receiver
 from .types import ConfigError, LightSpec, SchemeSpec  # noqa: F401  (the types a stage takes)
-from .views import CubeView, OrthographicView, ParaboloidView, PerspectiveView
 
 # ---------------------------------------------------------------- config
 
@@ -163,35 +162,19 @@ def make_view(light, R, receivers_world, bbox, kind=None, cascade=None, sensor=N
     gets a cascaded view for the camera ``sensor`` (dsm.cascades; ``scale``: the scene's, which
     multiplies the layout's distances), else one map fitted to the receivers; an area light
     its view from its centre (:func:`dsm.area.make_view`)."""
-    if light.type == "area":
-        return area.make_view(light, R, receivers_world, bbox, kind)
-    if light.type == "directional" and cascade is not None:
-        return cascades_mod.make_view(light, cascade, R, receivers_world, bbox, sensor, scale)
-    if light.type == "directional":
-        return OrthographicView(light.direction, receivers_world, bbox, R)
-    if light.type == "spot":
-        axis = light.direction if light.direction is not None else np.subtract(light.target, light.position)
-        return PerspectiveView(light.position, axis, light.cutoff, bbox, R)
-    if light.type == "point":
-        axis = light.direction if light.direction is not None else (0.0, 0.0, -1.0)
-        if kind in ("paraboloid", "dual_paraboloid"):
-            return ParaboloidView(light.position, axis, bbox, R, dual=kind == "dual_paraboloid")
-        if kind == "cube":
-            return CubeView(light.position, bbox, R)
-        raise ValueError(f"unknown point-light view {kind!r} (valid: paraboloid, dual_paraboloid, cube)")
-    raise ValueError(f"light type {light.type!r} has no view")
+    return lights.get(light.type).make_view(light, R, receivers_world, bbox, kind, cascade, sensor, scale)
 
 
 def light_setup(sd, gb, light, label, repeats: int = 0, seed: int = 7) -> LightSetup:
     """Receivers of one light (hit pixels facing it, inside its domain) and their exact visibility
     (an area light: :func:`area_setup`)."""
-    if light.type == "area":
+    if lights.is_soft(light):
         return area_setup(sd, gb, light, label, repeats, seed)
     p_all, n_all = gb.p, gb.n
     probe = make_view(light, 1, np.zeros((1, 3)), sd.bbox, "cube")   # a point light lights every direction
     to_light = probe.to_light(p_all)
     facing = (dr.dot(n_all, to_light) > 0).numpy().astype(bool)
-    inside = probe.inside(p_all).numpy().astype(bool) if light.type != "directional" else np.ones_like(facing)
+    inside = probe.inside(p_all).numpy().astype(bool) if lights.get(light.type).POSITIONAL else np.ones_like(facing)
     hit = gb.hit
     mask = hit & facing & inside
     pixels = np.flatnonzero(mask).astype(np.uint32)

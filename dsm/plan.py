@@ -25,6 +25,7 @@ import os
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 
+from . import lights as light_types
 from . import schemes as schemes_mod
 from .types import DEFAULT_CAMERA, VIEW_FACES, Config, ConfigError
 from .shadowmap import MAX_STEPS
@@ -202,9 +203,7 @@ class Plan:
 def views_for(light_type: str, point_views, shape: str = "") -> tuple:
     """The view kinds a light gets: its own for directional and spot, the config's for points and
     sphere lights, ``fitted`` for other area lights (perspective or paraboloid, from the receivers)."""
-    if light_type == "area":
-        return tuple(point_views) if shape == "sphere" else ("fitted",)
-    return {"directional": ("orthographic",), "spot": ("perspective",)}.get(light_type, tuple(point_views))
+    return light_types.get(light_type).views(point_views, shape)
 
 
 def physical_memory() -> int:
@@ -379,7 +378,7 @@ def make(cfg: Config) -> Plan:
         plan.scenes.append((sc.label, w, h, lights))
         for li, (label, ltype) in enumerate(lights):
             shape = specs[li].shape if specs[li] is not None else ""
-            if ltype == "area":
+            if light_types.get(ltype).SOFT:              # a Monte Carlo reference: its samples per receiver
                 plan.area_samples[(sc.label, label)] = specs[li].max_samples
             for view, cascade in _layouts(views_for(ltype, cfg.map.view, shape), cfg.map.cascade):
                 faces = cascade.count if cascade is not None else VIEW_FACES[view]

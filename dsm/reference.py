@@ -18,7 +18,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import spawn
+from . import lights, spawn
 
 
 def shadow_rays(si, light, magnitude: float = 1.0, mitsuba_spawn: bool = False):
@@ -28,7 +28,7 @@ def shadow_rays(si, light, magnitude: float = 1.0, mitsuba_spawn: bool = False):
     non-triangle shapes (a triangle's own extent is used for meshes).
     """
     n = dr.width(si.p)
-    if light.type == "directional":
+    if not lights.get(light.type).POSITIONAL:      # a direction: the rays go against it
         d = dr.zeros(mi.Vector3f, n) - mi.Vector3f(*map(float, np.asarray(light.direction) /
                                                         np.linalg.norm(light.direction)))
         if mitsuba_spawn:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import metrics, record, summary
+from . import lights, metrics, record, summary
 
 COLUMNS = record.NAMES          # metrics.csv's columns: the run record's schema (dsm.record)
 
@@ -136,7 +136,7 @@ def shade(classes_shape, gb, setup, v: np.ndarray) -> np.ndarray:
 
 def _to_light_np(setup, count):
     light = setup.light
-    if light.type == "directional":
+    if not lights.get(light.type).POSITIONAL:
         d = -np.asarray(light.direction, float)
         return np.broadcast_to(d / np.linalg.norm(d), (count, 3))
     p = np.stack([c.numpy() for c in (setup.p.x, setup.p.y, setup.p.z)], 1)

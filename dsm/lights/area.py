@@ -1,0 +1,65 @@
+"""An area light (dsm.area): a sphere, disk, rectangle or the scene's own area emitters, its map
+cast from its centre and its exact visibility a Monte Carlo estimate."""
+from __future__ import annotations
+
+from .. import area
+from ..types import AREA_SHAPES, ConfigError, LightSpec, as_list, check_keys, choice, number, vec3
+from .base import unit_direction
+
+TYPE = "area"
+POSITIONAL = True
+SOFT = True                     # its reference is the visible fraction V* (dsm.area), not one ray
+MOTION = ()
+SAMPLING = ("min_samples", "max_samples", "tolerance")
+SHAPE_KEYS = {"emitter": (), "sphere": ("position", "size"), "disk": ("position", "direction", "size"),
+              "rectangle": ("position", "direction", "size")}
+
+
+def _sampling(t: dict, source: str, where: str) -> tuple:
+    """(min_samples, max_samples, tolerance) of the reference."""
+    lo = number(t.get("min_samples", 16), source, f"{where}.min_samples", integer=True, minimum=1, maximum=1 << 20)
+    hi = number(t.get("max_samples", 1024), source, f"{where}.max_samples", integer=True, minimum=lo,
+                maximum=1 << 20)
+    return lo, hi, number(t.get("tolerance", 0.01), source, f"{where}.tolerance", minimum=0.0, maximum=1.0)
+
+
+def _size(t: dict, shape: str, source: str, where: str) -> tuple:
+    """A side or diameter, or a rectangle's [width, height]."""
+    raw = t["size"]
+    if shape == "rectangle" and isinstance(raw, list):
+        if len(raw) != 2:
+            raise ConfigError(source, f"{where}.size", f"expected a side or [width, height], got {raw!r}")
+        return tuple(number(x, source, f"{where}.size", positive=True) for x in raw)
+    return (number(raw, source, f"{where}.size", positive=True),)
+
+
+def parse(t: dict, source: str, where: str) -> LightSpec:
+    """``shape``, ``position``, ``direction`` (the normal), ``size``, ``scenes`` and the reference's sampling."""
+    shape = choice(t.get("shape"), source, f"{where}.shape", AREA_SHAPES)
+    check_keys(t, ("type", "shape", "scenes") + SHAPE_KEYS[shape] + SAMPLING, source, where)
+    only = as_list(t.get("scenes", []))
+    if not all(isinstance(x, str) and x for x in only):
+        raise ConfigError(source, f"{where}.scenes", f"expected a list of scene labels, got {t['scenes']!r}")
+    lo, hi, tol = _sampling(t, source, where)
+    pos = direction = None
+    size = ()
+    if shape != "emitter":
+        for key in ("position", "size"):
+            if key not in t:
+                raise ConfigError(source, f"{where}.{key}", f"a {shape} light needs a {key}")
+        pos = vec3(t["position"], source, f"{where}.position")
+        size = _size(t, shape, source, where)
+        if shape != "sphere":
+            direction = unit_direction(t.get("direction", [0.0, 0.0, -1.0]), source, f"{where}.direction")
+    return LightSpec(TYPE, position=pos, direction=direction, label=TYPE, shape=shape, size=size,
+                     min_samples=lo, max_samples=hi, tolerance=tol, scenes=tuple(only))
+
+
+def views(point_views: tuple, shape: str) -> tuple:
+    """A sphere's: the point-light views; a one-sided light's: one view fitted to it."""
+    return tuple(point_views) if shape == "sphere" else ("fitted",)
+
+
+def make_view(light, R, receivers_world, bbox, kind, cascade, sensor, scale):
+    """The view from the luminaire's centre (:func:`dsm.area.make_view`)."""
+    return area.make_view(light, R, receivers_world, bbox, kind)

@@ -1,0 +1,31 @@
+"""A directional light (the sun): an orthographic map fitted to the receivers, or cascades."""
+from __future__ import annotations
+
+from .. import cascades
+from ..types import LightSpec, check_keys
+from ..views import OrthographicView
+from .base import required, unit_direction
+
+TYPE = "directional"
+POSITIONAL = False              # every receiver is in its domain; shadow rays go along -direction
+SOFT = False
+MOTION = ("turn",)              # [[motion]] light = "turn": its direction turned about an axis
+
+
+def parse(t: dict, source: str, where: str) -> LightSpec:
+    """``direction`` (the way the light travels)."""
+    check_keys(t, ("type", "direction"), source, where)
+    d = unit_direction(required(t, "direction", source, where, TYPE), source, f"{where}.direction")
+    return LightSpec(TYPE, direction=d, label=TYPE)
+
+
+def views(point_views: tuple, shape: str) -> tuple:
+    """One orthographic view (a cascade layout makes it cascaded)."""
+    return ("orthographic",)
+
+
+def make_view(light, R, receivers_world, bbox, kind, cascade, sensor, scale):
+    """The orthographic map fitted to the receivers, or the cascades of ``cascade`` for ``sensor``."""
+    if cascade is not None:
+        return cascades.make_view(light, cascade, R, receivers_world, bbox, sensor, scale)
+    return OrthographicView(light.direction, receivers_world, bbox, R)

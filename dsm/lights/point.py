@@ -1,0 +1,34 @@
+"""A point light: paraboloid, dual paraboloid or cube maps around its position."""
+from __future__ import annotations
+
+from ..types import LightSpec, check_keys, vec3
+from ..views import CubeView, ParaboloidView
+from .base import required, unit_direction
+
+TYPE = "point"
+POSITIONAL = True
+SOFT = False
+MOTION = ("move", "keyframes")
+
+
+def parse(t: dict, source: str, where: str) -> LightSpec:
+    """``position``; ``direction``: the paraboloid's axis (its hemisphere), the dual paraboloid's front map."""
+    check_keys(t, ("type", "position", "direction"), source, where)
+    pos = vec3(required(t, "position", source, where, TYPE), source, f"{where}.position")
+    d = unit_direction(t.get("direction", [0.0, 0.0, -1.0]), source, f"{where}.direction")
+    return LightSpec(TYPE, position=pos, direction=d, label=TYPE)
+
+
+def views(point_views: tuple, shape: str) -> tuple:
+    """The config's point-light views (``[map] point_views``)."""
+    return tuple(point_views)
+
+
+def make_view(light, R, receivers_world, bbox, kind, cascade, sensor, scale):
+    """A paraboloid, dual-paraboloid or cube view at the light's position."""
+    axis = light.direction if light.direction is not None else (0.0, 0.0, -1.0)
+    if kind in ("paraboloid", "dual_paraboloid"):
+        return ParaboloidView(light.position, axis, bbox, R, dual=kind == "dual_paraboloid")
+    if kind == "cube":
+        return CubeView(light.position, bbox, R)
+    raise ValueError(f"unknown point-light view {kind!r} (valid: paraboloid, dual_paraboloid, cube)")

@@ -1,0 +1,39 @@
+"""A spot light: a perspective map along its axis, within its cutoff."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..types import ConfigError, LightSpec, check_keys, number, vec3
+from ..views import PerspectiveView
+from .base import required, unit_direction
+
+TYPE = "spot"
+POSITIONAL = True
+SOFT = False
+MOTION = ("move", "keyframes")  # translated, or along keyframes (aimed at their targets)
+
+
+def parse(t: dict, source: str, where: str) -> LightSpec:
+    """``position``, exactly one of ``target`` or ``direction``, ``cutoff`` (half angle, degrees)."""
+    check_keys(t, ("type", "position", "target", "direction", "cutoff"), source, where)
+    pos = vec3(required(t, "position", source, where, TYPE), source, f"{where}.position")
+    if ("target" in t) == ("direction" in t):
+        raise ConfigError(source, where, "a spot light needs exactly one of target or direction",
+                          ("target", "direction"))
+    target = vec3(t["target"], source, f"{where}.target") if "target" in t else None
+    direction = unit_direction(t["direction"], source, f"{where}.direction") if "direction" in t else None
+    if target is not None and target == pos:
+        raise ConfigError(source, f"{where}.target", "the target equals the position")
+    cutoff = number(t.get("cutoff", 30.0), source, f"{where}.cutoff", positive=True, maximum=85.0)
+    return LightSpec(TYPE, position=pos, target=target, direction=direction, cutoff=cutoff, label=TYPE)
+
+
+def views(point_views: tuple, shape: str) -> tuple:
+    """One perspective view."""
+    return ("perspective",)
+
+
+def make_view(light, R, receivers_world, bbox, kind, cascade, sensor, scale):
+    """The perspective map along the spot's axis (its direction, or toward its target)."""
+    axis = light.direction if light.direction is not None else np.subtract(light.target, light.position)
+    return PerspectiveView(light.position, axis, light.cutoff, bbox, R)
