@@ -28,6 +28,12 @@ surrounding texel centres (continuous in the lookup point), the slope and z2 lay
 tangent-plane texel from the nearest texel. The hard objective always uses the kit's nearest
 lookup (``pipeline.visibility``).
 
+**Search.** ``steps`` is the budget of exact objective evaluations, the grid search's too: the
+start, then a coarse grid over the search box at cell centres (a quarter of the budget), then
+Adam from the better of the two for the rest, one evaluation per step. The best evaluation is
+the result: never worse than the start, nor than any point the search saw (the relaxed loss
+only steers; it can rise where the exact objective falls, so it never picks the result).
+
 **Learned bias map** (``[tune.bias_map]``): one bias per block of ``block x block`` texels
 of the light's map, the map fitted once to the union of every camera's receivers (training and
 held-out) so the grid is the same for all views. Trained on the training cameras (started from
@@ -68,6 +74,7 @@ SCHEDULES = ("geometric", "linear")
 MAP_KEYS = ("block", "unit", "init", "steps", "lr")
 MAP_UNITS = ("world", "texel")
 CLIP = 30.0              # |margin / T| beyond which the sigmoid is flat (its derivative below 1e-13)
+NAN = float("nan")       # one object: lists of rows compare equal where both hold it
 BETA1 = 0.5              # Adam's first-moment decay (0.9 carries the iterate past the flat optimum of a
                          # piecewise-constant objective when the gradient flips as the temperature falls)
 BETA2 = 0.9              # and second-moment decay: the gradient's scale falls by orders of magnitude as the
@@ -519,9 +526,11 @@ def texel_sizes(train, groups) -> dict:
     return {"texel": 1.0, "world": tw, "range": tw / rng, "diagonal": tw / diag, "": 1.0}
 
 
-def _param_box(tc, spec, sizes) -> list:
+def _param_box(tc, spec, sizes, oracle_best=None) -> list:
     """Each tuned parameter: its start, its step scale (one texel's worth in its unit; 1 for
-    factors on the slope) and its search range."""
+    factors on the slope) and its search range. ``oracle_best``: the exact oracle's best constant
+    bias of the training views per unit (world, texel), from the thresholds: constant's default
+    range reaches twice it, so it always holds the best value."""
     from .schemes import get
     mod = get(spec.name)
     out = []
@@ -531,8 +540,10 @@ def _param_box(tc, spec, sizes) -> list:
         unit = cur.unit if isinstance(cur, Length) else ""
         scale = sizes["diagonal" if (spec.name, name) in DIAGONAL_FRACTIONS else unit]
         vmin = _valid_min(mod, name)
+        best = (oracle_best or {}).get(unit) if (spec.name, name) == ("constant", "bias") else None
+        reach = 2.0 * best if best is not None and math.isfinite(best) else 0.0
         lo, hi = tc.spec.ranges.get((spec.name, name), (0.0 if vmin is None else vmin,
-                                                        max(v, 0.0) + BOX_TEXELS * scale))
+                                                        max(max(v, 0.0) + BOX_TEXELS * scale, reach)))
         if vmin is not None:
             lo = max(lo, vmin)
         out.append(Param(name, unit, min(max(v, lo), hi), scale, lo, hi))
@@ -551,20 +562,67 @@ def _batch_weights(spec: TuneSpec, cases, rng):
     return [mi.Float((rng.random(c.n) < spec.batch).astype(np.float32) / spec.batch) for c in cases]
 
 
-def tune_scheme(tc, spec: SchemeSpec, train, groups, progress=None) -> dict:
-    """Adam on the relaxed loss over the training cases; per step the loss, the hard objective
-    and the time of the step (loss, gradient and update)."""
-    from .schemes import get
-    mod = get(spec.name)
+COARSE_SHARE = 4          # a quarter of the evaluations (after the start) for the coarse grid
+
+
+def _evaluation_row(spec, phase, step, values, hard, **extra) -> dict:
+    """One row of steps.csv: an evaluation of the exact objective (its phase: start, coarse, gradient)."""
+    return {"scheme": spec.name, "phase": phase, "step": step, "temperature_texel": NAN, "loss": NAN,
+            "hard_objective": hard, "time_ms": NAN, **{f"param_{k}": v for k, v in values.items()}, **extra}
+
+
+def coarse_grid(box, budget: int) -> list:
+    """At most ``budget`` points of a regular grid over ``box``, at cell centres (k per parameter,
+    k = floor(budget^(1/p)))."""
+    k = max(1, int(math.floor(budget ** (1.0 / len(box)) + 1e-9))) if budget >= 1 else 0
+    if k == 0:
+        return []
+    axes = [b.lo + (np.arange(k) + 0.5) * (b.hi - b.lo) / k for b in box]
+    return [{b.name: float(x) for b, x in zip(box, combo)}
+            for combo in np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, len(box))]
+
+
+def tune_scheme(tc, spec: SchemeSpec, train, groups, progress=None, oracle_best=None) -> dict:
+    """Within ``steps`` evaluations of the exact training objective: the start, a coarse grid of
+    the search box (a quarter of them), then Adam on the relaxed loss from the better of the
+    two, one evaluation per step. The best evaluation is returned, so the result is never
+    worse than the start or any point the search saw. Per evaluation its phase, the loss,
+    the exact objective and the step's time."""
     ts = tc.spec
-    box = _param_box(tc, spec, texel_sizes(train, groups))
+    box = _param_box(tc, spec, texel_sizes(train, groups), oracle_best)
+    exact = lambda vals: objective(hard_counts(with_values(spec, vals), train, groups), ts.lam)
+    start = {p.name: p.start for p in box}
+    best = (exact(start), start)
+    rows = [_evaluation_row(spec, "start", 0, start, best[0])]
+    for vals in coarse_grid(box, (ts.steps - 1) // COARSE_SHARE):
+        rows.append(_evaluation_row(spec, "coarse", len(rows), vals, exact(vals)))
+        if rows[-1]["hard_objective"] < best[0]:
+            best = (rows[-1]["hard_objective"], vals)
+    for _ in rows:
+        if progress:
+            progress()
+    adam = _adam(tc, spec, box, train, groups, best[1], ts.steps - len(rows), len(rows), progress)
+    for r in adam["rows"]:
+        if r["hard_objective"] < best[0]:
+            best = (r["hard_objective"], {p.name: r[f"param_{p.name}"] for p in box})
+    rows += adam["rows"]
+    times = [r["time_ms"] for r in adam["rows"]] or [0.0]
+    return {"values": best[1], "box": box, "steps": rows, "relaxed_lookup": adam["relax"],
+            "first_step_ms": times[0], "step_ms": float(np.median(times[1:])) if len(times) > 1 else times[0],
+            "total_ms": float(sum(times)), "evaluations": len(rows)}
+
+
+def _adam(tc, spec, box, train, groups, origin: dict, steps: int, first: int, progress=None) -> dict:
+    """``steps`` Adam steps on the relaxed loss from ``origin``; each step's exact objective."""
+    from .schemes import get
+    mod, ts = get(spec.name), tc.spec
     rng = np.random.default_rng(ts.seed)
     opt = mi.ad.Adam(lr=ts.lr, beta_1=BETA1, beta_2=BETA2)
     for p in box:
-        opt[p.name] = mi.Float(p.start / p.scale)
+        opt[p.name] = mi.Float(origin[p.name] / p.scale)
     rows, relax = [], False
-    for step in range(ts.steps):
-        t_texels = temperature_at(ts, step, ts.steps)
+    for step in range(steps):
+        t_texels = temperature_at(ts, step, steps)
         w = _batch_weights(ts, train, rng)
         opt.set_learning_rate(ts.lr * t_texels / ts.temperature[0])      # steps shrink with the temperature
         t0 = _sync_clock()
@@ -579,16 +637,12 @@ def tune_scheme(tc, spec: SchemeSpec, train, groups, progress=None) -> dict:
         ms = (_sync_clock() - t0) * 1e3
         cur = {p.name: float(opt[p.name].numpy().ravel()[0]) * p.scale for p in box}
         hard = objective(hard_counts(with_values(spec, cur), train, groups), ts.lam)
-        rows.append({"scheme": spec.name, "step": step, "temperature_texel": t_texels,
-                     "loss": float(loss.numpy().ravel()[0]), "hard_objective": hard, "time_ms": ms,
-                     **{f"param_{k}": v for k, v in cur.items()}, **{f"grad_{k}": g for k, g in grads.items()}})
+        rows.append({**_evaluation_row(spec, "gradient", first + step, cur, hard), "temperature_texel": t_texels,
+                     "loss": float(loss.numpy().ravel()[0]), "time_ms": ms,
+                     **{f"grad_{k}": g for k, g in grads.items()}})
         if progress:
             progress()
-    final = {p.name: float(opt[p.name].numpy().ravel()[0]) * p.scale for p in box}
-    times = [r["time_ms"] for r in rows]
-    return {"values": final, "box": box, "steps": rows, "relaxed_lookup": relax,
-            "first_step_ms": times[0], "step_ms": float(np.median(times[1:])) if len(times) > 1 else times[0],
-            "total_ms": float(sum(times))}
+    return {"rows": rows, "relax": relax}
 
 
 def grid_search(tc, spec: SchemeSpec, box, train, groups, budget: int) -> dict:
@@ -788,7 +842,7 @@ def run_tune(tc, out=None, progress: bool = False) -> TuneResult:
     orc_held = pl.oracles(*pooled_thresholds(held, groups), ts.lam)["row"] if held else None
     results, steps, comparison = [], [], []
     for spec in tc.schemes:
-        r = tune_scheme(tc, spec, train, groups, tick)
+        r = tune_scheme(tc, spec, train, groups, tick, {"world": orc_train["best_b"], "texel": orc_train["best_k"]})
         tuned = with_values(spec, r["values"])
         g = grid_search(tc, spec, r["box"], train, groups, ts.steps)
         grid_spec = with_values(spec, g["values"])
