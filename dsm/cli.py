@@ -97,6 +97,8 @@ def _parser():
     t = sub.add_parser("tune", help="tune scheme parameters (and a learned bias map) by gradient: a config's [tune]")
     t.add_argument("config", help="experiment TOML file with a [tune] table")
     t.add_argument("--out", help="results folder (default: runs/<name>-tune-<time>)")
+    t.add_argument("--force", action="store_true", help="replace a previous dsm tune in --out (a folder with its "
+                   "tune.json): its files only, never others")
     t.add_argument("--variant", choices=cfgmod.VARIANTS, help="Mitsuba variant (default llvm_ad_rgb)")
     t.add_argument("--threads", type=_thread_count, help=f"Dr.Jit worker threads (1 to {MAX_THREADS})")
     return ap
@@ -519,14 +521,23 @@ def _tune(cfg, args, out: Path) -> int:
         _err(problem)
         return 2
     with held:
-        return _tune_held(tc, out)
+        return _tune_held(tc, out, getattr(args, "force", False))
 
 
-def _tune_held(tc, out: Path) -> int:
+TUNE_FILES = ("tuned.toml", "table.md", "steps.csv", "tune.json", "plots/tune_loss.png")   # what dsm tune writes
+
+
+def _tune_held(tc, out: Path, force: bool = False) -> int:
     from . import tune as tunemod
     if entries(out):
-        _err(f"--out {out}: is not an empty folder; choose another --out")
-        return 2
+        if not force:
+            _err(f"--out {out}: is not an empty folder; choose another --out, or pass --force (replaces a previous "
+                 "dsm tune there)")
+            return 2
+        if not (out / "tune.json").is_file():
+            _err(f"--out {out}: --force replaces a previous dsm tune (a folder with its tune.json); this one holds none")
+            return 2
+        _clear([out / f for f in TUNE_FILES if (out / f).is_file()])
     problem = _unwritable(out)          # before the tuning, not when its results are written
     if problem:
         _err(problem)

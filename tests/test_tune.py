@@ -281,3 +281,23 @@ def test_the_tuner_returns_its_best_exact_evaluation_never_worse_than_its_start(
         assert e["train"]["objective"] <= e["start_train"]["objective"] == pytest.approx(rows[0]["hard_objective"])
     const = res.schemes[0]
     assert const["box"]["bias"][0] <= const["oracle"]["bias"] <= const["box"]["bias"][1]
+
+
+def test_cli_tune_force_replaces_only_a_previous_tune(tmp_path):
+    """--force replaces a dsm tune folder's own files and keeps a user's; a folder without a
+    tune.json is refused even with --force (exit 2)."""
+    from dsm import cli
+    cfg = tmp_path / "t.toml"
+    cfg.write_text('[experiment]\nname = "t"\n[camera]\nresolution = [32, 32]\n[[scene]]\nbuiltin = "plane_box"\n'
+                   '[map]\nresolution = 32\n[[scheme]]\nname = "constant"\nbias = "0.5 texel"\n[tune]\nsteps = 4\n')
+    out = tmp_path / "o"
+    assert cli.main(["tune", str(cfg), "--out", str(out)]) == 0
+    (out / "mine.txt").write_text("keep")
+    assert cli.main(["tune", str(cfg), "--out", str(out)]) == 2                   # not empty
+    assert cli.main(["tune", str(cfg), "--out", str(out), "--force"]) == 0
+    assert (out / "mine.txt").read_text() == "keep" and (out / "tune.json").is_file()
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "x.txt").write_text("x")
+    assert cli.main(["tune", str(cfg), "--out", str(other), "--force"]) == 2
+    assert (other / "x.txt").read_text() == "x"
