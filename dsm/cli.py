@@ -120,11 +120,18 @@ def _config_error(e: cfgmod.ConfigError, command: str = "run") -> int:
     return 2
 
 
+def _terminated(signum, frame):
+    """SIGTERM (a scheduler's stop, ``kill``) ends a command as Ctrl-C does."""
+    raise KeyboardInterrupt
+
+
 def main(argv=None) -> int:
     try:
         args = _parser().parse_args(argv)
     except SystemExit as e:          # argparse printed its usage line and the error
         return e.code if isinstance(e.code, int) else 2
+    if argv is None:                 # as the command: a SIGTERM leaves run.json "interrupted", not "running"
+        signal.signal(signal.SIGTERM, _terminated)
     out = None
     try:
         if args.cmd == "schemes":
@@ -230,6 +237,9 @@ def _report(args) -> int:
         return _compare(dirs, out)
     except publish.NotARun as e:
         _err(f"report: {e}")
+        return 2
+    except OSError as e:              # a read-only folder, a full disk: one line, not a traceback
+        _err(f"report: cannot write the report: {e.strerror or e} ({e.filename or dirs[0]})")
         return 2
 
 

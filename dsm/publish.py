@@ -72,6 +72,7 @@ def _load(out: Path, notes: list | None = None):
     if not isinstance(run, dict):
         raise NotARun(f"{out}/run.json: not a dsm run.json (not a JSON object)")
     rows = _read_rows(out / "metrics.csv", notes, "case")
+    _check_metrics(out / "metrics.csv", rows)
     oracle_rows = _read_rows(out / "oracle.csv", notes) if (out / "oracle.csv").is_file() else []
     return run, rows, oracle_rows
 
@@ -97,6 +98,29 @@ def _sections(out: Path, notes: list, plots: bool):
             cascades.write_plots(out / "plots", cascades.read_curves_csv(out / "cascade_curves.csv"))
     if plots and (out / "frames.csv").is_file():
         motion.write_plots(out / "plots", report.read_csv(out / "frames.csv"))
+
+
+RATES = (("acne_rate", "n_acne", "n_gt_lit"), ("peterpan_rate", "n_peterpan", "n_gt_shadowed"))
+
+
+def _check_metrics(path: Path, rows: list):
+    """NotARun unless every row has the core columns and rates that are their counts' (within
+    the 6 significant digits metrics.csv keeps): an edited or foreign file is not reported on."""
+    from .record import GROUPS
+    missing = sorted(GROUPS["core"] - set(rows[0])) if rows else []
+    if missing:
+        raise NotARun(f"{path}: not a dsm metrics.csv (no {', '.join(missing)} column)")
+    for r in rows:
+        if r.get("motion"):           # a motion case's rates are means over its frames, its counts sums
+            continue
+        for rate, num, den in RATES + (("error_rate", None, "n_receivers"),):
+            n = r["n_acne"] + r["n_peterpan"] if num is None else r[num]
+            want = n / r[den] if r[den] else metrics.UNDEFINED
+            got = r[rate]
+            if metrics.defined(want) != metrics.defined(got) or (metrics.defined(want) and
+                                                                  abs(got - want) > 1e-5 * max(abs(want), 1e-300)):
+                raise NotARun(f"{path}: case {r['case']}: {rate} {got} is not {'n_acne + n_peterpan' if num is None else num}"
+                              f" / {den} ({want:.6g}): an edited file")
 
 
 def _texels(run) -> tuple:

@@ -39,6 +39,11 @@ class Results:
     curves: list = field(default_factory=list)   # per map and format: (row, world Curve, texel Curve)
 
     def where(self, **kw) -> "Results":
+        """The results whose rows have every given column at the given value."""
+        unknown = sorted(set(kw) - set(report.COLUMNS))
+        if unknown:
+            raise KeyError(f"Results.where: no column {', '.join(unknown)} (columns: see dsm.record.NAMES, "
+                           "e.g. scheme, params, scene, light, view, resolution, filter, format)")
         rows = [r for r in self.rows if all(r.get(k) == v for k, v in kw.items())]
         return Results(self.out, rows, self.run, {r["case"]: self.images.get(r["case"]) for r in rows},
                        self.oracle, self.curves)
@@ -50,6 +55,10 @@ class Results:
         """The case's error image as (H, W, 3) uint8 in the report's colours."""
         if isinstance(case, dict):
             case = case["case"]
+        if case not in self.images or self.images[case] is None:
+            ids = sorted(k for k, v in self.images.items() if v is not None)
+            raise KeyError(f"Results.rgb: no image of case {case!r} (cases are ids like {ids[0]!r} to {ids[-1]!r}, "
+                           "or rows)" if ids else f"Results.rgb: no image of case {case!r}: this run kept no images")
         return metrics.CLASS_COLORS[self.images[case]]
 
     def table(self, columns=("scheme", "params", "resolution", "acne_rate", "peterpan_rate", "error_rate",

@@ -344,3 +344,72 @@ def test_bench_with_a_missing_meshes_folder_is_one_line(tmp_path, capsys):
     (tmp_path / "file").write_text("")
     rc, err = _cli(capsys, "bench", "--meshes", tmp_path / "file", "--out", tmp_path / "b")
     assert rc == 2 and "not a folder" in err[0]
+
+
+# ---------------------------------------------------------------- report inputs, Results, SIGTERM
+
+def _small_run(tmp_path):
+    import dsm
+    from conftest import base_config
+    return dsm.run(base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [32, 32]},
+                               map={"resolution": 32}, scheme=[{"name": "constant"}]), out=tmp_path / "r")
+
+
+def test_report_refuses_a_metrics_csv_without_a_core_column_or_with_rates_not_its_counts(tmp_path, capsys):
+    import csv as csvmod
+    from dsm import cli
+    res = _small_run(tmp_path)
+    path = res.out / "metrics.csv"
+    rows = list(csvmod.DictReader(open(path)))
+    header = list(rows[0])
+
+    def write(rows, header):
+        with open(path, "w", newline="") as fh:
+            w = csvmod.DictWriter(fh, header, extrasaction="ignore")
+            w.writeheader()
+            w.writerows(rows)
+    write(rows, [h for h in header if h != "n_receivers"])
+    capsys.readouterr()
+    assert cli.main(["report", str(res.out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "n_receivers" in err[0] and "Traceback" not in err[0]
+    edited = [dict(r) for r in rows]
+    edited[0]["acne_rate"] = "7.5"
+    write(edited, header)
+    assert cli.main(["report", str(res.out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "acne_rate 7.5" in err[0] and "n_acne / n_gt_lit" in err[0]
+    write(rows, header)                                              # the file as the run wrote it
+    assert cli.main(["report", str(res.out)]) == 0
+
+
+def test_results_name_an_unknown_column_and_a_missing_case(tmp_path):
+    res = _small_run(tmp_path)
+    with pytest.raises(KeyError, match="no column schem"):
+        res.where(schem="constant")
+    assert len(res.where(scheme="constant")) == len(res.rows) == 1
+    with pytest.raises(KeyError, match="no image of case 999.*'0001'"):
+        res.rgb(999)
+    assert res.rgb(res.rows[0]).shape == (32, 32, 3)
+
+
+def test_sigterm_leaves_the_run_interrupted_not_running(tmp_path):
+    import json as jsonmod
+    import signal as sig
+    import time as tm
+    cfg = tmp_path / "slow.toml"
+    cfg.write_text('[experiment]\nname = "slow"\n[camera]\nresolution = [64, 64]\n[[scene]]\nbuiltin = "plane_box"\n'
+                   '[map]\nresolution = [32, 48, 64, 96, 128, 160, 192, 224, 256]\n[[scheme]]\nname = "constant"\n'
+                   'bias = [0.001, 0.002, 0.004, 0.008, 0.016, 0.03, 0.06, 0.1]\n[timing]\nrepeats = 3\n')
+    out = tmp_path / "o"
+    p = subprocess.Popen([sys.executable, "-m", "dsm.cli", "run", str(cfg), "--out", str(out)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = tm.time() + 120
+    while tm.time() < deadline and not (out / "metrics.csv").is_file():
+        tm.sleep(0.2)
+    tm.sleep(1.0)
+    p.send_signal(sig.SIGTERM)
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == 130, err[-500:]
+    assert jsonmod.loads((out / "run.json").read_text())["state"] == "interrupted"
+    assert "interrupted" in err and "--resume" in err
