@@ -165,6 +165,11 @@ def make_view(light, R, receivers_world, bbox, kind=None, cascade=None, sensor=N
     return lights.get(light.type).make_view(light, R, receivers_world, bbox, kind, cascade, sensor, scale)
 
 
+def is_positional(light) -> bool:
+    """Whether ``light`` sits at a point (its shadow rays end there; dsm.lights)."""
+    return lights.get(light.type).POSITIONAL
+
+
 def light_setup(sd, gb, light, label, repeats: int = 0, seed: int = 7) -> LightSetup:
     """Receivers of one light (hit pixels facing it, inside its domain) and their exact visibility
     (an area light: :func:`area_setup`)."""

@@ -357,8 +357,23 @@ def _layouts(views, cascade_specs):
             yield view, None
 
 
+def check_emitters(cfg: Config):
+    """ConfigError naming the light and the scene where an area light of ``shape = "emitter"``
+    applies to a scene without an area emitter (it would give that scene no case, silently)."""
+    from .types import AREA_SHAPES
+    for i, light in enumerate(cfg.lights):
+        if light.type != "area" or light.shape != "emitter":
+            continue
+        for spec in cfg.scenes:
+            if not spec.missing and light.applies_to(spec.label) and not _area_emitters(spec):
+                raise ConfigError(cfg.source, f"light[{i}].shape", f'"emitter": scene {spec.label} has no area emitter '
+                                  '(an <emitter type="area"> of a Mitsuba XML scene); give the light a shape or '
+                                  "limit it to scenes with luminaires (scenes = [...])", AREA_SHAPES)
+
+
 def make(cfg: Config) -> Plan:
     from .config import absent_files
+    check_emitters(cfg)
     plan = Plan(cfg.source, budget_bytes=memory_budget(cfg), absent=absent_files(cfg),
                 lambdas=len(cfg.oracle.lambdas))
     per_case = len(cfg.map.filter) * len(cfg.map.format)

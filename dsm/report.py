@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import lights, metrics, record, summary
+from . import metrics, record, summary
 
 COLUMNS = record.NAMES          # metrics.csv's columns: the run record's schema (dsm.record)
 
@@ -31,13 +31,19 @@ def atomic(path: Path):
             tmp.unlink()
 
 
-def write_csv(path: Path, columns: list, rows: list):
-    """A whole CSV file of ``rows`` in ``columns`` at once, atomically (undefined: empty cells)."""
+def write_csv(path: Path, columns: list, rows: list, exact=()):
+    """A whole CSV file of ``rows`` in ``columns`` at once, atomically (undefined: empty cells).
+    Columns in ``exact`` are written so they read back to the same float (a value a user
+    pastes back, such as an oracle's bias); the others to 6 significant digits."""
     with atomic(path) as tmp, open(tmp, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(columns)
         for r in rows:
-            w.writerow([_fmt(r.get(c, "")) for c in columns])
+            w.writerow([_exact(r.get(c, "")) if c in exact else _fmt(r.get(c, "")) for c in columns])
+
+
+def _exact(x):
+    return repr(float(x)) if isinstance(x, float) and metrics.defined(x) else _fmt(x)
 
 
 def write_json(path: Path, data: dict, indent=None):
@@ -122,21 +128,22 @@ def sweep_of(spec, all_specs) -> tuple[str, float]:
 
 # ------------------------------------------------------------------ images
 
-def shade(classes_shape, gb, setup, v: np.ndarray) -> np.ndarray:
+def shade(classes_shape, gb, setup, v: np.ndarray, positional: bool) -> np.ndarray:
     """The shadow-mapped render of one case (H, W) in [0, 1]: Lambert under the light with the
-    map's visibility, ambient elsewhere."""
+    map's visibility, ambient elsewhere. ``positional``: the light sits at its position (else it
+    shines along its direction; dsm.lights)."""
     out = np.zeros(gb.width * gb.height)
     out[gb.hit] = 0.12
     if setup.n is not None:
         n = np.stack([c.numpy() for c in (setup.n.x, setup.n.y, setup.n.z)], 1)
-        to_light = _to_light_np(setup, n.shape[0])
+        to_light = _to_light_np(setup, n.shape[0], positional)
         out[setup.pixels] = 0.12 + 0.88 * np.clip((n * to_light).sum(1), 0, 1) * v
     return out.reshape(classes_shape)
 
 
-def _to_light_np(setup, count):
+def _to_light_np(setup, count, positional):
     light = setup.light
-    if not lights.get(light.type).POSITIONAL:
+    if not positional:
         d = -np.asarray(light.direction, float)
         return np.broadcast_to(d / np.linalg.norm(d), (count, 3))
     p = np.stack([c.numpy() for c in (setup.p.x, setup.p.y, setup.p.z)], 1)
@@ -189,8 +196,9 @@ ORACLE_COLUMNS = ["scene", "light", "view", "resolution", "culling", "format", "
 
 
 def write_oracle_csv(path: Path, rows: list):
-    """oracle.csv: one row per map, stored format and lambda (written atomically)."""
-    write_csv(path, ORACLE_COLUMNS, rows)
+    """oracle.csv: one row per map, stored format and lambda (written atomically); the best
+    biases exactly, so pasted into a config they give the oracle's counts."""
+    write_csv(path, ORACLE_COLUMNS, rows, exact=("best_b", "best_k"))
 
 
 def objective(r, lam: float = 1.0) -> float:

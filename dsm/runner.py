@@ -423,8 +423,9 @@ class Runner:
             classes[setup.pixels] = pipeline.classify(v_np, setup.v_star, wrong)
             classes = classes.reshape(gb.height, gb.width)
             t_img = time.perf_counter()              # the case's images: report work, timed apart
-            item = publish.image_item(meta, classes, report.shade(classes.shape, gb, setup, v_np)
-                                      if self.cfg.report_images == "all" else None, self.cfg.report_images)
+            shade = report.shade(classes.shape, gb, setup, v_np, pipeline.is_positional(setup.light)) \
+                if self.cfg.report_images == "all" else None
+            item = publish.image_item(meta, classes, shade, self.cfg.report_images)
             if item is not None:        # written now (Pillow, ~1 ms, between timings): a killed run keeps them
                 figures.write_images(self.out, [item])
             if setup.ref is not None and self.cfg.report_images != "none":    # area light: V, V*, |V - V*|

@@ -413,3 +413,34 @@ def test_sigterm_leaves_the_run_interrupted_not_running(tmp_path):
     assert p.returncode == 130, err[-500:]
     assert jsonmod.loads((out / "run.json").read_text())["state"] == "interrupted"
     assert "interrupted" in err and "--resume" in err
+
+
+def test_an_oracle_bias_pasted_back_gives_the_oracles_counts(tmp_path):
+    """oracle.csv's best world bias, read as text and pasted into a config as a constant bias,
+    gives the world oracle's acne and peter-panning counts (6 digits gave one more acne receiver)."""
+    import dsm
+    from conftest import base_config
+    raw = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [96, 96]}, map={"resolution": 128},
+                      scheme=[{"name": "none"}])
+    first = dsm.run(raw, out=tmp_path / "a")
+    rows = list(csv.DictReader(open(first.out / "oracle.csv")))
+    # every best bias reads back to the oracle's own float (6 digits did not)
+    assert [float(r["best_b"]) for r in rows] == [o["best_b"] for o in first.oracle]
+    assert [float(r["best_k"]) for r in rows] == [o["best_k"] for o in first.oracle]
+    row = rows[0]
+    pasted = dsm.run({**raw, "scheme": [{"name": "constant", "bias": float(row["best_b"])}]}, out=tmp_path / "b")
+    r = pasted.rows[0]
+    assert (r["n_acne"], r["n_peterpan"]) == (int(row["world_n_acne"]), int(row["world_n_peterpan"]))
+
+
+def test_an_emitter_light_on_a_scene_without_one_is_refused_naming_it(tmp_path, capsys):
+    from dsm import cli
+    cfg = tmp_path / "e.toml"
+    cfg.write_text('[experiment]\nname = "e"\n[camera]\nresolution = [32, 32]\n[[scene]]\nbuiltin = "plane_box"\n'
+                   '[[light]]\ntype = "area"\nshape = "emitter"\n[map]\nresolution = 32\n[[scheme]]\nname = "none"\n')
+    for cmd in (["plan", str(cfg)], ["run", str(cfg), "--out", str(tmp_path / "o")]):
+        capsys.readouterr()
+        assert cli.main(cmd) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "light[0].shape" in err[0] and "plane_box" in err[0] and "no area emitter" in err[0]
+    assert not (tmp_path / "o").exists()
