@@ -384,13 +384,33 @@ def out_problem(out: Path, force: bool, bench: bool = False) -> str | None:
     return _unwritable(out)
 
 
+# what a run writes inside images/ (<scene>_<light>/<case>_<kind>, also under stale/) and plots/
+WRITTEN = {"images": re.compile(r"\d{4}_(error|shadow|cascade|v|vstar|abserr)\.png|\d{4}_frames\.gif"),
+           "plots": re.compile(r"[^/]+\.png")}
+
+
 def _clear(paths):
+    """Remove a previous run's entries: images/ and plots/ only of what a run writes there
+    (a user's own files in them stay, with the folders that hold them)."""
     # entry by entry, not the folder: its lock file is held by this process
     for p in paths:
-        if p.is_dir() and not p.is_symlink():
+        if p.name in WRITTEN and p.is_dir() and not p.is_symlink():
+            _clear_written(p, WRITTEN[p.name])
+        elif p.is_dir() and not p.is_symlink():
             shutil.rmtree(p)
         else:
             p.unlink()
+
+
+def _clear_written(folder: Path, pattern):
+    """Delete the files under ``folder`` whose names ``pattern`` matches, then the folders left empty."""
+    for f in sorted(folder.rglob("*"), reverse=True):        # children before their folders
+        if f.is_file() and not f.is_symlink() and pattern.fullmatch(f.name):
+            f.unlink()
+        elif f.is_dir() and not f.is_symlink() and not any(f.iterdir()):
+            f.rmdir()
+    if not any(folder.iterdir()):
+        folder.rmdir()
 
 
 def _unwritable(out: Path) -> str | None:

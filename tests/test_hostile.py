@@ -444,3 +444,43 @@ def test_an_emitter_light_on_a_scene_without_one_is_refused_naming_it(tmp_path, 
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "light[0].shape" in err[0] and "plane_box" in err[0] and "no area emitter" in err[0]
     assert not (tmp_path / "o").exists()
+
+
+def test_force_clears_only_what_a_run_wrote_inside_images_and_plots(tmp_path):
+    """A user's files inside a run's images/ and plots/ survive --force; the run's own are
+    replaced (issue: --force deleted plots/keep.txt, images/mine.txt, images/album/)."""
+    import dsm
+    from conftest import base_config
+    raw = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [32, 32]}, map={"resolution": [16, 32]},
+                      scheme=[{"name": "constant"}])
+    out = tmp_path / "r"
+    dsm.run(raw, out=out)
+    (out / "plots" / "keep.txt").write_text("mine")
+    (out / "images" / "mine.txt").write_text("mine")
+    (out / "images" / "album").mkdir()
+    (out / "images" / "album" / "photo.jpg").write_bytes(b"jpg")
+    old = sorted(p.name for p in (out / "images").rglob("*_error.png"))
+    stale = out / "images" / "plane_box_0_directional" / "0099_error.png"     # a dsm image of no current case
+    stale.write_bytes(b"x")
+    assert cli.main(["run", str(_toml(tmp_path, raw)), "--out", str(out), "--force"]) == 0
+    assert (out / "plots" / "keep.txt").read_text() == "mine" and (out / "images" / "mine.txt").read_text() == "mine"
+    assert (out / "images" / "album" / "photo.jpg").read_bytes() == b"jpg"
+    assert not stale.exists() and sorted(p.name for p in (out / "images").rglob("*_error.png")) == old
+
+
+def _toml(tmp_path, raw) -> Path:
+    """``raw`` (a config dict of tables and arrays of tables) as a TOML file."""
+    def value(v):
+        if isinstance(v, str):
+            return json.dumps(v)
+        if isinstance(v, list):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        return repr(v)
+    lines = []
+    for k, v in raw.items():
+        for t in (v if isinstance(v, list) else [v]):
+            lines.append(f"[[{k}]]" if isinstance(v, list) else f"[{k}]")
+            lines += [f"{kk} = {value(vv)}" for kk, vv in t.items()]
+    p = tmp_path / "cfg.toml"
+    p.write_text("\n".join(lines) + "\n")
+    return p

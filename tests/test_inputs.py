@@ -194,13 +194,16 @@ def test_force_replaces_a_previous_run_and_nothing_else(tmp_path, capsys):
     cfg.write_text(_tiny('builtin = "plane"'))
     out = tmp_path / "o"
     assert _cli(capsys, "run", cfg, "--out", out)[0] == 0
-    (out / "images" / "stale.png").write_bytes(b"x")
+    leftover = next((out / "images").iterdir()) / "0099_error.png"      # a run's image of no current case
+    leftover.write_bytes(b"x")
+    (out / "images" / "stale.png").write_bytes(b"x")                   # not a name a run writes: the user's
     rc, err = _cli(capsys, "run", cfg, "--out", out)                   # not empty, no --force
     assert rc == 2
     _one_line(err, "not empty", "--force")
     rc, err = _cli(capsys, "run", cfg, "--out", out, "--force")        # a previous run: cleared first
     assert rc == 0, err
-    assert not (out / "images" / "stale.png").exists() and json.loads((out / "run.json").read_text())["n_failed"] == 0
+    assert not leftover.exists() and json.loads((out / "run.json").read_text())["n_failed"] == 0
+    assert (out / "images" / "stale.png").read_bytes() == b"x"
     # a folder with a run.json and a file of the user's: refused, untouched
     (out / "notes.txt").write_text("mine")
     rc, err = _cli(capsys, "run", cfg, "--out", out, "--force")
