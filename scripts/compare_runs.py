@@ -64,6 +64,14 @@ def _rows(path: Path) -> list:
         return list(csv.DictReader(f))
 
 
+def _same_number(a: str, b: str) -> bool:
+    """Two cells holding one number, one written to 6 significant digits and one exactly."""
+    try:
+        return f"{float(a):.6g}" == f"{float(b):.6g}"
+    except ValueError:
+        return False
+
+
 def compare_csv(a: Path, b: Path) -> list:
     """Differences between two CSV files of the same run (machine columns left out)."""
     ra, rb = _rows(a), _rows(b)
@@ -75,7 +83,7 @@ def compare_csv(a: Path, b: Path) -> list:
             diffs.append(f"{a.name}: columns differ: {sorted(set(x) ^ set(y))}")
             break
         for k in x:
-            if not _machine(k) and x[k] != y[k]:
+            if not _machine(k) and x[k] != y[k] and not _same_number(x[k], y[k]):
                 diffs.append(f"{a.name} row {i} ({x.get('case', '')}) {k}: {x[k]!r} against {y[k]!r}")
     return diffs
 
