@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 
 from . import config as cfgmod
-from . import lock
+from . import lock, resume
 from .env import MAX_THREADS, SetupError
 
 DEFAULT_CONFIG = Path(__file__).with_name("default.toml")
@@ -436,6 +436,9 @@ def resume_problem(out: Path, cfg=None) -> str | None:
         return f"--resume: {out}/run.json is not a dsm run.json; choose another --out"
     if not isinstance(prev, dict):
         return f"--resume: {out}/run.json is not a dsm run.json; choose another --out"
+    problem = resume.metrics_problem(out / "metrics.csv")
+    if problem:
+        return f"--resume: {problem}; choose another --out, or --force to replace the run"
     if cfg is not None and prev.get("experiment") not in (None, cfg.name):
         return (f"--resume: {out} holds experiment {prev['experiment']!r} (config {prev.get('config_file') or '?'}), "
                 f"not {cfg.name!r} ({cfg.source}); resume it with its own config or choose another --out")

@@ -17,6 +17,7 @@ before it, a run stopped at any point (Ctrl-C, kill -9, a lost worker) resumes t
 """
 from __future__ import annotations
 
+import csv
 import dataclasses
 import hashlib
 import json
@@ -142,6 +143,22 @@ def parse_row(row: dict) -> dict:
     return out
 
 
+def metrics_problem(path: Path) -> str | None:
+    """Why ``path`` cannot be read back as a run's metrics.csv (None if it can, or is absent)."""
+    if not path.is_file():
+        return None
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            header = next(csv.reader(fh), [])
+            for _ in csv.reader(fh):
+                pass
+    except (OSError, UnicodeDecodeError, csv.Error) as e:
+        return f"{path} cannot be read as a dsm metrics.csv ({type(e).__name__})"
+    if header[:1] != ["case"]:
+        return f"{path} is not a dsm metrics.csv (its first column is not case)"
+    return None
+
+
 class Previous:
     """What a previous run in ``out`` finished: per case key, its row, status entry and old id."""
 
@@ -156,7 +173,9 @@ class Previous:
         run = json.loads(run_json.read_text())
         rows = {}
         if (self.out / "metrics.csv").is_file():
-            rows = {r["case"]: r for r in report.read_csv(self.out / "metrics.csv")}
+            # a row cut short (a run killed while writing it) is not kept: its case runs again
+            rows = {r["case"]: r for r in report.read_csv(self.out / "metrics.csv")
+                    if None not in r and None not in r.values()}
         if (self.out / "cascades.csv").is_file():
             for r in report.read_csv(self.out / "cascades.csv"):
                 self.cascade_rows.setdefault(r.get("case"), []).append(r)

@@ -400,14 +400,14 @@ def test_sigterm_leaves_the_run_interrupted_not_running(tmp_path):
     cfg = tmp_path / "slow.toml"
     cfg.write_text('[experiment]\nname = "slow"\n[camera]\nresolution = [64, 64]\n[[scene]]\nbuiltin = "plane_box"\n'
                    '[map]\nresolution = [32, 48, 64, 96, 128, 160, 192, 224, 256]\n[[scheme]]\nname = "constant"\n'
-                   'bias = [0.001, 0.002, 0.004, 0.008, 0.016, 0.03, 0.06, 0.1]\n[timing]\nrepeats = 3\n')
+                   f'bias = {[0.001 * k for k in range(1, 41)]}\n[timing]\nrepeats = 3\n')
     out = tmp_path / "o"
     p = subprocess.Popen([sys.executable, "-m", "dsm.cli", "run", str(cfg), "--out", str(out)],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = tm.time() + 120
-    while tm.time() < deadline and not (out / "metrics.csv").is_file():
-        tm.sleep(0.2)
-    tm.sleep(1.0)
+    rows = lambda: (out / "metrics.csv").read_text().count("\n") if (out / "metrics.csv").is_file() else 0
+    while tm.time() < deadline and rows() < 3:       # two cases of 360 measured: mid-run
+        tm.sleep(0.05)
     p.send_signal(sig.SIGTERM)
     _, err = p.communicate(timeout=120)
     assert p.returncode == 130, err[-500:]
@@ -484,3 +484,28 @@ def _toml(tmp_path, raw) -> Path:
     p = tmp_path / "cfg.toml"
     p.write_text("\n".join(lines) + "\n")
     return p
+
+
+def test_resume_on_a_damaged_metrics_csv(tmp_path, capsys):
+    """Random bytes: one line before any work (exit 2); a row cut short: its case runs again
+    (was a TypeError after the work had started)."""
+    import dsm
+    from conftest import base_config
+    raw = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [32, 32]}, map={"resolution": [16, 32]},
+                      scheme=[{"name": "constant"}])
+    cfg = _toml(tmp_path, raw)
+    out = tmp_path / "r"
+    first = dsm.run(raw, out=out)
+    good = (out / "metrics.csv").read_bytes()
+    (out / "metrics.csv").write_bytes(os.urandom(3000))
+    capsys.readouterr()
+    assert cli.main(["run", str(cfg), "--out", str(out), "--resume"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "metrics.csv" in err[0] and "Traceback" not in err[0]
+    cut = good[: good.rindex(b"\n", 0, len(good) - 1) + 1] + good[good.rindex(b"\n", 0, len(good) - 1) + 1:][:40]
+    (out / "metrics.csv").write_bytes(cut)                             # the last row cut mid-way
+    assert cli.main(["run", str(cfg), "--out", str(out), "--resume"]) == 0
+    run = json.loads((out / "run.json").read_text())
+    assert run["resumed_cases"] == len(first.rows) - 1 and run["n_failed"] == 0
+    rows = list(csv.DictReader(open(out / "metrics.csv")))
+    assert [(r["n_acne"], r["n_peterpan"]) for r in rows] == [(str(r["n_acne"]), str(r["n_peterpan"])) for r in first.rows]
