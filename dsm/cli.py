@@ -484,6 +484,7 @@ def _run(cfg, args, out: Path) -> int:
                 cluster.connect(args.cluster)
             else:
                 cluster.connect(cfg.execution.address or "local", source=cfg.source, key="execution.address")
+            cluster.check_resources(cfg.execution, args.variant or cfg.variant, cfg.source)
         except SetupError as e:
             _err(f"setup error: {e}")
             return 3

@@ -84,6 +84,22 @@ def connect(address: str | None, cpus: int | None = None, source: str = "argumen
                           ADDRESSES) from None
 
 
+def check_resources(execution, variant: str, source: str):
+    """SetupError naming the key and what the cluster has when one task asks for more CPUs or
+    GPUs than the whole cluster holds (Ray would wait for them forever); Ray is shut down first,
+    so no process is left behind."""
+    from .env import SetupError
+    ray = _ray()
+    have = ray.cluster_resources()
+    gpus = execution.gpus_per_task or (1.0 if (variant or "").startswith("cuda") else 0.0)
+    for key, want, name in (("execution.cpus_per_task", execution.cpus_per_task, "CPU"),
+                            ("execution.gpus_per_task", gpus, "GPU")):
+        if want and want > have.get(name, 0.0):
+            ray.shutdown()
+            raise SetupError(f"{source}: {key} = {want:g} asks each task for more {name}s than the Ray cluster has "
+                             f"({have.get(name, 0.0):g}): its tasks would wait forever")
+
+
 def run_group(cfg, index: int, variant, threads: int, kept: dict) -> dict:
     """One map group of the plan, run in this process (a Ray worker): the runner's own stages on
     a temporary folder, returned as plain data for the driver."""

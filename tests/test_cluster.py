@@ -82,3 +82,26 @@ def test_a_cluster_nobody_answers_at_is_refused_before_the_folder_is_touched(tmp
     assert main(["run", str(cfg), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert f"{cfg}: execution.address: nothing answers at 127.0.0.1:1" in err and not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("table,key", [({"gpus_per_task": 1}, "gpus_per_task"), ({"cpus_per_task": 64}, "cpus_per_task")])
+def test_a_task_bigger_than_the_cluster_is_refused_and_leaves_no_ray(tmp_path, capsys, table, key):
+    """gpus_per_task on a machine without a GPU, or more CPUs per task than it has: one line,
+    exit 3 (a set-up the cluster lacks), before any work, Ray shut down (it hung for minutes)."""
+    import drjit as dr
+    from dsm import cli
+    if key == "gpus_per_task" and dr.has_backend(dr.JitBackend.CUDA):
+        pytest.skip("this machine has a GPU")
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('[experiment]\nname = "c"\n[camera]\nresolution = [32, 32]\n[[scene]]\nbuiltin = "plane"\n'
+                   '[map]\nresolution = 16\n[[scheme]]\nname = "none"\n[execution]\nbackend = "ray"\n'
+                   + "".join(f"{k} = {v}\n" for k, v in table.items()))
+    capsys.readouterr()
+    try:
+        rc = cli.main(["run", str(cfg), "--out", str(tmp_path / "o")])
+    finally:
+        initialized = ray.is_initialized()
+        ray.shutdown()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 3 and len(err) == 1 and f"execution.{key}" in err[0] and "cluster has" in err[0], err
+    assert not initialized and not (tmp_path / "o").exists()
