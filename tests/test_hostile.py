@@ -509,3 +509,15 @@ def test_resume_on_a_damaged_metrics_csv(tmp_path, capsys):
     assert run["resumed_cases"] == len(first.rows) - 1 and run["n_failed"] == 0
     rows = list(csv.DictReader(open(out / "metrics.csv")))
     assert [(r["n_acne"], r["n_peterpan"]) for r in rows] == [(str(r["n_acne"]), str(r["n_peterpan"])) for r in first.rows]
+
+
+def test_the_plugins_under_an_unsupported_variant_say_which_are(tmp_path):
+    """Under scalar_rgb or a spectral variant a dsm integrator is refused when loaded, one line
+    naming the variants dsm supports (it failed with TypeErrors deep in a render)."""
+    code = ("import mitsuba as mi, sys; mi.set_variant(sys.argv[1]); import dsm\n"
+            "try:\n    mi.load_dict({'type': 'dsm_error'})\n"
+            "except Exception as e:\n    print(str(e).strip().splitlines()[-1])\n")
+    for v in ("scalar_rgb", "llvm_ad_spectral"):
+        p = subprocess.run([sys.executable, "-c", code, v], capture_output=True, text=True, timeout=120)
+        assert p.returncode == 0, p.stderr[-800:]
+        assert f"variant {v} is not supported" in p.stdout and "llvm_ad_rgb, cuda_ad_rgb" in p.stdout, p.stdout

@@ -64,6 +64,9 @@ class Options:
 
     def __init__(self, props, plugin: str, all_lights: bool):
         source = f"<integrator type=\"{plugin}\">"
+        if mi.variant() not in cfgmod.VARIANTS:      # scalar and spectral variants fail deep in a render
+            raise cfgmod.ConfigError(source, "variant", f"Mitsuba variant {mi.variant()} is not supported: dsm runs "
+                                     "vectorized Dr.Jit code in RGB", cfgmod.VARIANTS)
         own = SHADOW_KEYS if plugin == "dsm_shadow" else OWN_KEYS
         # properties the base class read (hide_emitters, timeout, ...) are the base's own
         names = list(props.unqueried()) if hasattr(props, "unqueried") else list(props.keys())
