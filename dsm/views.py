@@ -170,7 +170,9 @@ class OrthographicView(View):
         # a margin of MARGIN_TEXELS texels on each side: receivers on the fitted border stay
         # inside in float32, and filter taps and normal-offset lookups near it read real texels
         m = min(MARGIN_TEXELS, resolution // 8)
-        extent *= resolution / (resolution - 2 * m)
+        # below 8 texels no whole texel can be spared: 1 % of the extent keeps the border
+        # receivers inside all the same (the receivers must not depend on the resolution)
+        extent *= resolution / (resolution - 2 * m) if m else 1.01
         margin = 0.01 * max(zs.max() - zs.min(), diag, 1e-30)
         cx, cy = 0.5 * (xs.max() + xs.min()), 0.5 * (ys.max() + ys.min())
         z0 = zs.min() - margin
