@@ -23,6 +23,7 @@ import hashlib
 import json
 import math
 import os
+import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -58,19 +59,30 @@ def file_hash(path) -> str:
     return _FILE_HASHES[memo]
 
 
-def input_files(path) -> list:
-    """A scene file and, for a Mitsuba XML scene, the files it names (``filename`` values) that exist."""
+def input_files(path, seen=None) -> list:
+    """A scene file and, for a Mitsuba XML scene, every file it reads that exists: ``filename``
+    values and ``<include filename>``s (followed into included XML files), with ``$name``
+    replaced by the file's ``<default>`` values as Mitsuba does."""
     p = Path(path)
+    seen = set() if seen is None else seen
+    if p.resolve() in seen:
+        return []
+    seen.add(p.resolve())
     out = [p]
-    if p.suffix.lower() == ".xml":
-        try:
-            for el in ET.parse(p).iter():
-                if el.get("name") == "filename" and el.get("value"):
-                    f = (p.parent / el.get("value"))
-                    if f.is_file():
-                        out.append(f)
-        except (ET.ParseError, OSError):
-            pass
+    if p.suffix.lower() != ".xml":
+        return out
+    try:
+        root = ET.parse(p).getroot()
+    except (ET.ParseError, OSError):
+        return out
+    defaults = {el.get("name"): el.get("value", "") for el in root.iter("default") if el.get("name")}
+    for el in root.iter():
+        name = el.get("filename") if el.tag == "include" else (el.get("value") if el.get("name") == "filename" else None)
+        if not name:
+            continue
+        f = p.parent / re.sub(r"\$(\w+)", lambda m: defaults.get(m.group(1), m.group(0)), name)
+        if f.is_file():
+            out += input_files(f, seen)
     return out
 
 

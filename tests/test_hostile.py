@@ -533,3 +533,33 @@ def test_receivers_do_not_depend_on_the_map_resolution():
     counts = {r["resolution"]: (r["n_receivers"], r["n_excluded_outside"]) for r in res.rows}
     assert len(set(counts.values())) == 1, counts
     assert counts[8][1] == 0
+
+
+def test_resume_sees_a_change_in_a_file_an_xml_includes(tmp_path):
+    """A scene XML whose shapes come through <include> and a $name default: editing the included
+    file makes --resume run its cases again (they were kept, stale)."""
+    import dsm
+    from conftest import base_config
+    ply = tmp_path / "quad.ply"
+    ply.write_text("ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+                   "element face 2\nproperty list uchar int vertex_indices\nend_header\n"
+                   "-2 -2 0\n2 -2 0\n2 2 0\n-2 2 0\n3 0 1 2\n3 0 2 3\n")
+    part = tmp_path / "part.xml"
+    part.write_text('<scene version="3.0.0"><default name="mesh" value="quad.ply"/>'
+                    '<shape type="ply"><string name="filename" value="$mesh"/></shape>'
+                    '<shape type="cube"><transform name="to_world"><scale value="0.5"/>'
+                    '<translate x="0" y="0" z="0.6"/></transform></shape></scene>')
+    main = tmp_path / "scene.xml"
+    main.write_text('<scene version="3.0.0"><include filename="part.xml"/>'
+                    '<sensor type="perspective"><transform name="to_world"><lookat origin="4,-4,4" target="0,0,0" '
+                    'up="0,0,1"/></transform><film type="hdrfilm"><integer name="width" value="32"/>'
+                    '<integer name="height" value="32"/></film></sensor></scene>')
+    raw = base_config(scene=[{"file": str(main)}], light=[{"type": "directional", "direction": [0.3, 0.2, -1.0]}],
+                      map={"resolution": 32}, camera={"resolution": [32, 32]}, scheme=[{"name": "constant"}])
+    out = tmp_path / "r"
+    dsm.run(raw, out=out)
+    assert dsm.run(raw, out=out, resume=True).run["resumed_cases"] == 1           # nothing changed: kept
+    part.write_text(part.read_text().replace('z="0.6"', 'z="0.9"'))                # the box moved
+    assert dsm.run(raw, out=out, resume=True).run["resumed_cases"] == 0
+    ply.write_text(ply.read_text().replace("-2 -2 0", "-2 -2 0.01"))                # the $mesh file changed
+    assert dsm.run(raw, out=out, resume=True).run["resumed_cases"] == 0
