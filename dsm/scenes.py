@@ -825,6 +825,17 @@ def _shape_normal(shape):
         return None
 
 
+def describe_light(light: LightSpec) -> str:
+    """One readable line for a light: its type, position and direction (3 significant digits)."""
+    vec = lambda v: "(" + ", ".join(f"{c:.3g}" for c in v) + ")"
+    parts = [f"{light.type} light"]
+    if light.position is not None:
+        parts.append(f"at {vec(light.position)}")
+    if light.direction is not None:
+        parts.append(f"{'shining along' if light.position is None else 'axis'} {vec(light.direction)}")
+    return " ".join(parts)
+
+
 def default_light(scene) -> LightSpec:
     """A light for a scene without a point, spot or directional emitter: a point light at its
     first area light (moved 2 % of the way to the scene's centre, off the luminaire's surface,
@@ -870,8 +881,7 @@ def _load_xml(spec, camera_resolution, camera=None):
     lights, notes = lights_of(scene)
     if not lights:
         lights = [default_light(scene)]
-        notes.append(f"no point, spot or directional emitter: dsm added a default {lights[0].type} light "
-                     f"({lights[0]})")
+        notes.append(f"no point, spot or directional emitter: dsm added a default {describe_light(lights[0])}")
     sensor = scene.sensors()[0]
     data = _finish(spec.label, scene, lights, 1.0, notes)
     if camera_resolution is not None:

@@ -563,3 +563,19 @@ def test_resume_sees_a_change_in_a_file_an_xml_includes(tmp_path):
     assert dsm.run(raw, out=out, resume=True).run["resumed_cases"] == 0
     ply.write_text(ply.read_text().replace("-2 -2 0", "-2 -2 0.01"))                # the $mesh file changed
     assert dsm.run(raw, out=out, resume=True).run["resumed_cases"] == 0
+
+
+def test_an_xml_without_an_emitter_says_its_default_light_in_one_readable_line(tmp_path):
+    import dsm
+    from conftest import base_config
+    xml = tmp_path / "s.xml"
+    xml.write_text('<scene version="3.0.0"><shape type="rectangle"><transform name="to_world"><scale value="3"/>'
+                   '</transform></shape><shape type="cube"><transform name="to_world"><scale value="0.3"/>'
+                   '<translate z="0.5"/></transform></shape><sensor type="perspective"><transform name="to_world">'
+                   '<lookat origin="3,-3,3" target="0,0,0" up="0,0,1"/></transform><film type="hdrfilm">'
+                   '<integer name="width" value="32"/><integer name="height" value="32"/></film></sensor></scene>')
+    res = dsm.run(base_config(scene=[{"file": str(xml)}], light=[{"type": "scene"}], map={"resolution": 32},
+                              camera={"resolution": [32, 32]}), out=tmp_path / "r")
+    notes = [s["error"] for s in res.run["status"] if s["status"] == "note"]
+    assert len(notes) == 1 and "default directional light shining along (" in notes[0], notes
+    assert "LightSpec" not in notes[0] and "\n" not in notes[0]
