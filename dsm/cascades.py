@@ -210,13 +210,12 @@ class CascadeView(View):
                  scale: float = 1.0, receivers_f32=None):
         t_start = time.perf_counter()
         ex, ey, ez = light_frame(direction)
-        R = int(resolution)
-        N = spec.count
+        R, N = int(resolution), spec.count
         self.spec, self.camera, self.cascades = spec, camera, N
         self.blend = float(spec.blend) if N > 1 else 0.0
         lo, hi = (np.asarray(b, float) for b in scene_bbox)
         diag = float(np.linalg.norm(hi - lo))
-        corners = box_corners(lo, hi)
+
         def to_light(p):        # as views.OrthographicView computes its fit: one dot product per axis
             p = np.asarray(p, float).reshape(-1, 3)
             return np.stack([p @ ex, p @ ey, p @ ez], axis=1)
@@ -225,6 +224,25 @@ class CascadeView(View):
         t_jit = time.perf_counter()
         rdepth = self._view_depth_f32(camera, pts) if len(pts) else np.zeros(0)
         t_start += time.perf_counter() - t_jit          # fit_ms: the host's float64 work, not this kernel
+        near, far = self._split_range(spec, camera, rdepth, scale)
+        self.splits = layout_splits(spec, near, far, scale)
+        self.bands = blend_bands(spec, self.splits)
+        self.cover = [(self.splits[k] - (self.bands[k - 1] if k else 0.0), self.splits[k + 1]) for k in range(N)]
+        # the scene's box, padded a hair so a flat scene still has a volume, in light space
+        pad = 1e-6 * max(diag, 1e-300)
+        box_l = to_light(box_corners(lo - pad, hi + pad))
+        zs = box_corners(lo, hi) @ ez
+        fit_pts = self._fit_points(pts, rdepth, to_light, box_l, near, far)
+        self.stable_quantum = 0.0
+        geometry = dict(frame=(ex, ey, ez), box_l=box_l, zs=zs, diag=diag, R=R, m_tex=min(MARGIN_TEXELS, R // 8))
+        squares = self._stable_squares(fit_pts, scale, **geometry) if spec.stabilize \
+            else self._fitted_squares(fit_pts, **geometry)
+        self._place(squares, (ex, ey, ez), R)
+        self.fit_ms = (time.perf_counter() - t_start) * 1e3     # splits, fits, near/far (host, float64)
+
+    # ------------------------------------------------------------ the fit, step by step
+    def _split_range(self, spec, camera, rdepth, scale) -> tuple:
+        """[near, far] of the camera's view depth that the splits divide; sets ``max_distance``."""
         near = camera.near * 1.0 if spec.near is None else spec.near * scale
         if spec.max_distance is not None:
             far = spec.max_distance * scale
@@ -232,24 +250,16 @@ class CascadeView(View):
         else:
             far = float(rdepth.max()) if len(rdepth) else camera.far
             self.max_distance = math.inf            # the farthest receiver: none beyond it
-        far = max(far, near * (1 + 1e-6))
-        splits = layout_splits(spec, near, far, scale)
-        self.splits = splits
-        bands = blend_bands(spec, splits)
-        self.bands = bands
-        cover = [(splits[k] - (bands[k - 1] if k else 0.0), splits[k + 1]) for k in range(N)]
-        self.cover = cover
-        # the scene's box, padded a hair so a flat scene still has a volume, in light space
-        pad = 1e-6 * max(diag, 1e-300)
-        box_l = to_light(box_corners(lo - pad, hi + pad))
-        zs = corners @ ez
-        m_tex = min(MARGIN_TEXELS, R // 8)
+        return near, max(far, near * (1 + 1e-6))
+
+    def _fit_points(self, pts, rdepth, to_light, box_l, near, far) -> list:
+        """Per cascade, the light-space points its square is fitted to (the ``fit`` choice)."""
+        spec, camera, splits, bands = self.spec, self.camera, self.splits, self.bands
         rl = to_light(pts) if len(pts) else np.zeros((0, 3))
         face32 = self._faces(rdepth, splits) if len(pts) else np.zeros(0, int)
-
-        rects, fit_pts = [], []
-        for k in range(N):
-            d0, d1 = cover[k]
+        fit_pts = []
+        for k in range(self.cascades):
+            d0, d1 = self.cover[k]
             if spec.fit == "scene":
                 P = box_l
             elif spec.fit == "receivers":
@@ -264,86 +274,102 @@ class CascadeView(View):
                 P = self._clipped_slice(camera, a, b, to_light, box_l) if not spec.stabilize \
                     else to_light(camera.frustum(a, b))
             fit_pts.append(P)
-        self.stable_quantum = 0.0
-        origins, offsets, extents, z0s, zfar = [], [], [], [], []
-        if spec.stabilize:
-            q = 2.0 ** (math.floor(math.log2(max(diag, 1e-300))) - 8)
-            self.stable_quantum = q
-            # the anchor: below and left of every square a cascade can take (the scene's box in light
-            # space, less twice the larger of its diagonal and max_distance), so each square's corner is
-            # a whole number n >= 0 of texels from it and u = (x s) - n never rounds (0 <= u <= x s)
-            reach = 2.0 * max(diag, (spec.max_distance or 0.0) * scale)
-            ax, ay = box_l[:, 0].min() - reach, box_l[:, 1].min() - reach
-            margin = 0.01 * max(zs.max() - zs.min(), diag, 1e-30)
-            z0 = zs.min() - margin
-            anchor = ex * ax + ey * ay + ez * z0
-            for P in fit_pts:
-                c = P.mean(0)
-                r = float(np.linalg.norm(P - c, axis=1).max())
-                rq = math.ceil(max(r, q) / q) * q
-                extent = 2.0 * rq
-                extent *= R / (R - 2 * m_tex)
-                texel = extent / R
-                nu = math.floor((c[0] - extent / 2 - ax) / texel)
-                nv = math.floor((c[1] - extent / 2 - ay) / texel)
-                origins.append(anchor)
-                offsets.append((float(nu), float(nv)))
-                extents.append(extent)
-                z0s.append(z0)
-                zfar.append(zs.max() + margin)
-                rects.append((ax + nu * texel, ay + nv * texel, extent))
-            ref = anchor
-        else:
-            for P in fit_pts:
-                xs, ys = P[:, 0], P[:, 1]
-                extent = max(xs.max() - xs.min(), ys.max() - ys.min())
-                if not extent > 0:
-                    extent = max(diag, 1.0) * 1e-3
-                extent *= R / (R - 2 * m_tex)
-                cx, cy = 0.5 * (xs.max() + xs.min()), 0.5 * (ys.max() + ys.min())
-                x0, y0 = cx - extent / 2, cy - extent / 2
-                if spec.depth_bounds == "scene":
-                    margin = 0.01 * max(zs.max() - zs.min(), diag, 1e-30)
-                    z0, zf = zs.min() - margin, zs.max() + margin
-                else:
-                    prism = box_corners((x0, y0, box_l[:, 2].min() - 1.0), (x0 + extent, y0 + extent,
-                                                                            box_l[:, 2].max() + 1.0))
-                    clip = intersect_hexahedra(box_l, prism)
-                    zl = clip[:, 2] if len(clip) else zs
-                    margin = 0.01 * max(zl.max() - zl.min(), extent)
-                    z0, zf = zl.min() - margin, zl.max() + margin
-                origins.append(ex * (cx - extent / 2) + ey * (cy - extent / 2) + ez * z0)
-                offsets.append((0.0, 0.0))
-                extents.append(float(extent))
-                z0s.append(z0)
-                zfar.append(zf)
-                rects.append((x0, y0, extent))
-            # one depth function: from the lowest near plane, at the first cascade's corner
-            x0, y0, _ = rects[0]
-            ref = origins[0] if N == 1 else ex * x0 + ey * y0 + ez * min(z0s)
-        zref = min(z0s)
-        self.rects = rects
-        self.face_near = np.array([z - zref for z in z0s])
-        self.face_far = np.array([f - zref for f in zfar])
-        self.extents = np.array(extents)
-        super().__init__(ref, ex, ey, ez, R, near=0.0, far=float(self.face_far.max()))
+        return fit_pts
+
+    def _stable_squares(self, fit_pts, scale, frame, box_l, zs, diag, R, m_tex) -> dict:
+        """Stabilized squares: each from a bounding sphere of its points, rounded up to a quantum,
+        its corner a whole number of texels from one fixed anchor; near and far the scene's."""
+        ex, ey, ez = frame
+        q = 2.0 ** (math.floor(math.log2(max(diag, 1e-300))) - 8)
+        self.stable_quantum = q
+        # the anchor: below and left of every square a cascade can take (the scene's box in light
+        # space, less twice the larger of its diagonal and max_distance), so each square's corner is
+        # a whole number n >= 0 of texels from it and u = (x s) - n never rounds (0 <= u <= x s)
+        reach = 2.0 * max(diag, (self.spec.max_distance or 0.0) * scale)
+        ax, ay = box_l[:, 0].min() - reach, box_l[:, 1].min() - reach
+        margin = 0.01 * max(zs.max() - zs.min(), diag, 1e-30)
+        z0 = zs.min() - margin
+        anchor = ex * ax + ey * ay + ez * z0
+        out = {k: [] for k in ("rects", "origins", "offsets", "extents", "z0s", "zfar")}
+        for P in fit_pts:
+            c = P.mean(0)
+            r = float(np.linalg.norm(P - c, axis=1).max())
+            rq = math.ceil(max(r, q) / q) * q
+            extent = 2.0 * rq
+            extent *= R / (R - 2 * m_tex)
+            texel = extent / R
+            nu = math.floor((c[0] - extent / 2 - ax) / texel)
+            nv = math.floor((c[1] - extent / 2 - ay) / texel)
+            out["origins"].append(anchor)
+            out["offsets"].append((float(nu), float(nv)))
+            out["extents"].append(extent)
+            out["z0s"].append(z0)
+            out["zfar"].append(zs.max() + margin)
+            out["rects"].append((ax + nu * texel, ay + nv * texel, extent))
+        out["ref"] = anchor
+        return out
+
+    def _fitted_squares(self, fit_pts, frame, box_l, zs, diag, R, m_tex) -> dict:
+        """Squares fitted to each cascade's points with MARGIN_TEXELS texels to spare; near and far
+        (``depth_bounds``) the scene's or the scene clipped to the cascade's prism."""
+        ex, ey, ez = frame
+        out = {k: [] for k in ("rects", "origins", "offsets", "extents", "z0s", "zfar")}
+        for P in fit_pts:
+            xs, ys = P[:, 0], P[:, 1]
+            extent = max(xs.max() - xs.min(), ys.max() - ys.min())
+            if not extent > 0:
+                extent = max(diag, 1.0) * 1e-3
+            extent *= R / (R - 2 * m_tex)
+            cx, cy = 0.5 * (xs.max() + xs.min()), 0.5 * (ys.max() + ys.min())
+            x0, y0 = cx - extent / 2, cy - extent / 2
+            if self.spec.depth_bounds == "scene":
+                margin = 0.01 * max(zs.max() - zs.min(), diag, 1e-30)
+                z0, zf = zs.min() - margin, zs.max() + margin
+            else:
+                prism = box_corners((x0, y0, box_l[:, 2].min() - 1.0), (x0 + extent, y0 + extent,
+                                                                        box_l[:, 2].max() + 1.0))
+                clip = intersect_hexahedra(box_l, prism)
+                zl = clip[:, 2] if len(clip) else zs
+                margin = 0.01 * max(zl.max() - zl.min(), extent)
+                z0, zf = zl.min() - margin, zl.max() + margin
+            out["origins"].append(ex * (cx - extent / 2) + ey * (cy - extent / 2) + ez * z0)
+            out["offsets"].append((0.0, 0.0))
+            out["extents"].append(float(extent))
+            out["z0s"].append(z0)
+            out["zfar"].append(zf)
+            out["rects"].append((x0, y0, extent))
+        # one depth function: from the lowest near plane, at the first cascade's corner
+        x0, y0, _ = out["rects"][0]
+        out["ref"] = out["origins"][0] if self.cascades == 1 else ex * x0 + ey * y0 + ez * min(out["z0s"])
+        return out
+
+    def _place(self, sq: dict, frame, R: int):
+        """The view's faces from the squares: depth ranges, extents, and the Dr.Jit values the
+        lookup reads (opaque, so every fit reuses one kernel)."""
+        ex, ey, ez = frame
+        N, camera = self.cascades, self.camera
+        zref = min(sq["z0s"])
+        self.rects = sq["rects"]
+        self.face_near = np.array([z - zref for z in sq["z0s"]])
+        self.face_far = np.array([f - zref for f in sq["zfar"]])
+        self.extents = np.array(sq["extents"])
+        View.__init__(self, sq["ref"], ex, ey, ez, R, near=0.0, far=float(self.face_far.max()))
         self.extent = float(self.extents[0])
-        off = np.array(offsets, float)
-        self.plain = N == 1 and not spec.stabilize       # one cascade: exactly the single orthographic map
+        off = np.array(sq["offsets"], float)
+        self.plain = N == 1 and not self.spec.stabilize       # one cascade: exactly the single orthographic map
         if N == 1:
             self.L = dr.opaque(mi.Float, self.extent)
-            self.A = mi.Vector3f(*(dr.opaque(mi.Float, float(c)) for c in origins[0]))
+            self.A = mi.Vector3f(*(dr.opaque(mi.Float, float(c)) for c in sq["origins"][0]))
             self.NU, self.NV = dr.opaque(mi.Float, off[0, 0]), dr.opaque(mi.Float, off[0, 1])
         else:
             self.L = mi.Float(np.float32(self.extents))
-            self.A = _opaque_vectors(origins)
+            self.A = _opaque_vectors(sq["origins"])
             self.NU = mi.Float(off[:, 0].astype(np.float32))
             self.NV = mi.Float(off[:, 1].astype(np.float32))
         self.cam_o = mi.Vector3f(*(dr.opaque(mi.Float, float(c)) for c in camera.origin))
         self.cam_f = mi.Vector3f(*(dr.opaque(mi.Float, float(c)) for c in camera.forward))
-        self.S = [dr.opaque(mi.Float, float(s)) for s in splits[1:-1]]
+        self.S = [dr.opaque(mi.Float, float(s)) for s in self.splits[1:-1]]
         self.max_o = dr.opaque(mi.Float, float(self.max_distance) if math.isfinite(self.max_distance) else 3e38)
-        self.fit_ms = (time.perf_counter() - t_start) * 1e3     # splits, fits, near/far (host, float64)
 
     # ------------------------------------------------------------ helpers
     @staticmethod
