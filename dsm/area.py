@@ -112,10 +112,12 @@ class Geometry:
 
     @property
     def one_sided(self) -> bool:
+        """Whether the light lights one side only (every shape but the sphere)."""
         return self.shape != "sphere"
 
     @property
     def area(self) -> float:
+        """The light's surface area in world units squared (an emitter's: its triangles' summed areas)."""
         if self.shape == "rectangle":
             return self.extent[0] * self.extent[1]
         if self.shape == "disk":
@@ -310,10 +312,12 @@ class Reference:
 
     @property
     def v(self) -> np.ndarray:
+        """V* per receiver: hits / samples (0 where no sample was drawn)."""
         return self.hits / np.maximum(self.samples, 1)
 
     @property
     def rays(self) -> int:
+        """Shadow rays cast over all receivers (the samples summed)."""
         return int(self.samples.sum())
 
     def stats(self) -> dict:

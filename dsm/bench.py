@@ -162,6 +162,7 @@ def frame_cost(spec, light, R: int = 1024, camera: int = 1024, repeats: int = 5)
     dr.eval(rays)
 
     def bare():
+        """The bare cast: the preliminary intersection of every texel ray (distances only)."""
         return (sd.scene.ray_intersect_preliminary(rays, coherent=shadowmap.COHERENT).t,)
 
     # the view's and the shape tables' Dr.Jit values are the frame's inputs (a frozen function
@@ -171,6 +172,7 @@ def frame_cost(spec, light, R: int = 1024, camera: int = 1024, repeats: int = 5)
     state["tables"] = {"pair": tuple(ext), **{k: getattr(ext, k) for k in TABLE_FIELDS}}
 
     def frame(scene, state, p, n):
+        """One frame from ``state`` (the view's and tables' values): the map built, each scheme's lookup, and z1."""
         state = dict(state)
         tab = state.pop("tables")
         v = copy.copy(view)
@@ -226,6 +228,7 @@ def meshes_problem(meshes) -> str | None:
 
 def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int = 5, meshes: Path | None = None,
               variant: str | None = None, scaling_resolutions=(), sweep: bool = False, frame: bool = True) -> dict:
+    """Measure (1) to (6) (scaling, sweep and frame as asked), write bench.md and bench.json into ``out``; the dict."""
     import drjit as dr
     import mitsuba as mi
 
@@ -255,10 +258,12 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
             rays = view.texel_rays(0, R * R)
             dr.eval(rays)
             def full_cast():
+                """A full ``ray_intersect`` of the texel rays (the build's baseline): t, p, n."""
                 si = sd.scene.ray_intersect(rays, mi.RayFlags.All, shadowmap.COHERENT)
                 return si.t, si.p, si.n
             full = timing.measure(full_cast, repeats)[1]
             def bare_cast(coherent=shadowmap.COHERENT):
+                """The preliminary intersection of the texel rays (what the build casts), distances only."""
                 return (sd.scene.ray_intersect_preliminary(rays, coherent=coherent).t,)
             bare = timing.measure(bare_cast, repeats)[1]
             # the packet-dependent coherent traversal the builds do not use: what exactness costs

@@ -65,6 +65,7 @@ class Camera:
 
     @staticmethod
     def from_sensor(sensor) -> "Camera":
+        """The Camera of a Mitsuba sensor: its world pose, horizontal fov (default 40), clip planes and film size."""
         m = np.array(sensor.world_transform().matrix.numpy(), float).reshape(4, 4)
         params = mi.traverse(sensor)
         fov = float(params["x_fov"][0]) if "x_fov" in params else 40.0
@@ -191,6 +192,7 @@ def intersect_hexahedra(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def box_corners(lo, hi) -> np.ndarray:
+    """The eight corners of the box [lo, hi] as an (8, 3) array (corner i takes hi on axis k when bit k is set)."""
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     return np.array([[(lo, hi)[i >> k & 1][k] for k in range(3)] for i in range(8)])
 
@@ -217,6 +219,7 @@ class CascadeView(View):
         diag = float(np.linalg.norm(hi - lo))
 
         def to_light(p):        # as views.OrthographicView computes its fit: one dot product per axis
+            """World points ``p`` as (n, 3) light-space coordinates along ``ex``, ``ey``, ``ez`` (float64)."""
             p = np.asarray(p, float).reshape(-1, 3)
             return np.stack([p @ ex, p @ ey, p @ ez], axis=1)
         pts = np.asarray(receivers_world, float).reshape(-1, 3)
@@ -392,6 +395,7 @@ class CascadeView(View):
 
     @property
     def faces(self) -> int:
+        """Faces of the view: one per cascade."""
         return self.cascades
 
     def _per_face(self, face):
@@ -408,6 +412,7 @@ class CascadeView(View):
         return dr.dot(p - self.cam_o, self.cam_f)
 
     def face_of(self, p):
+        """The cascade of world points ``p``: how many split distances their view depth reaches."""
         d = self.view_depth(p)
         face = dr.zeros(mi.UInt32, dr.width(p))
         for s in self.S:
@@ -415,6 +420,7 @@ class CascadeView(View):
         return face
 
     def project_on(self, p, face=None):
+        """(u, v) in texels of world points ``p`` on cascade ``face`` (default: each point's own cascade)."""
         face = self.face_of(p) if face is None else face
         A, L, nu, nv = self._per_face(face)
         q = p - A
@@ -427,6 +433,7 @@ class CascadeView(View):
         return x * s - nu, y * s - nv
 
     def ray_at(self, u, v, face=None):
+        """(origin, direction) of the light ray through (u, v) of cascade ``face`` (default 0): along ``ez``."""
         face = dr.zeros(mi.UInt32, dr.width(u)) if face is None else face
         A, L, nu, nv = self._per_face(face)
         s = L / self.R
@@ -437,13 +444,16 @@ class CascadeView(View):
         return o, dr.zeros(mi.Vector3f, dr.width(o)) + self.ez
 
     def texel_world(self, p):
+        """World width of one texel at points ``p``: their cascade's extent / resolution."""
         _, L, _, _ = self._per_face(self.face_of(p))
         return dr.zeros(mi.Float, dr.width(p)) + L / self.R
 
     def to_light(self, p):
+        """Unit direction from points ``p`` toward the light: ``-ez`` everywhere."""
         return dr.zeros(mi.Vector3f, dr.width(p)) - self.ez
 
     def inside(self, p):
+        """Whether world points ``p`` project within their cascade's square, at a view depth up to ``max_distance``."""
         u, v = self.project_on(p)
         return (u >= 0) & (u <= self.R) & (v >= 0) & (v <= self.R) & (self.view_depth(p) <= self.max_o)
 

@@ -53,6 +53,7 @@ class _Parser(argparse.ArgumentParser):
     """argparse, with a mistake on one line (no usage block) and exit status 2."""
 
     def error(self, message):
+        """Exit with status 2 after one line naming the command and the mistake (no usage block)."""
         self.exit(2, f"dsm: {self.prog.removeprefix('dsm ') if self.prog != 'dsm' else 'arguments'}: {message} "
                      f"(see {self.prog} --help)\n")
 
@@ -126,6 +127,7 @@ def _terminated(signum, frame):
 
 
 def main(argv=None) -> int:
+    """Run the ``dsm`` command line on ``argv`` (default: the process's arguments); returns the exit status."""
     try:
         args = _parser().parse_args(argv)
     except SystemExit as e:          # argparse printed its usage line and the error
@@ -544,6 +546,7 @@ def _tune(cfg, args, out: Path) -> int:
     from . import pipeline
 
     def check():
+        """The TuneConfig to run: ``[tune]`` checked, then the config prepared (variant, threads)."""
         tc = tunemod.parse_tune(cfg)                 # [tune] checked before any scene loads
         tc.config = pipeline.prepare(cfg, args.variant, args.threads)
         return tc
@@ -588,6 +591,7 @@ def _tune_held(tc, out: Path, force: bool = False) -> int:
 
 
 def schemes_text() -> str:
+    """``dsm schemes``' text: each scheme's source, layers, parameters and summary, then presets and units."""
     from .schemes import REGISTRY, presets
     lines = []
     for s in REGISTRY:

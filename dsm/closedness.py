@@ -17,6 +17,7 @@ import numpy as np
 
 
 def closedness(verts: np.ndarray, faces: np.ndarray) -> tuple[bool, str]:
+    """(closed, reason) of a triangle mesh: each welded edge shared by two oppositely wound triangles, or why not."""
     verts = np.asarray(verts, np.float64).reshape(-1, 3)
     faces = np.asarray(faces, np.int64).reshape(-1, 3)
     if len(faces) == 0:

@@ -30,6 +30,7 @@ TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing",
 
 
 def load(path) -> Config:
+    """The Config read from TOML file ``path``; ConfigError for a missing, unreadable or invalid file."""
     path = Path(path)
     source = str(path)
     if path.is_dir():
@@ -97,6 +98,7 @@ def _plain_name(name, source):
 
 
 def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Config:
+    """The Config of raw TOML tables ``raw`` from ``source`` (files relative to ``base``), every value checked."""
     from . import scenes as scenes_mod
     from .schemes import REGISTRY, PRESETS
 
@@ -366,6 +368,7 @@ def _parse_light_move(t: dict, path: str, source: str, where: str) -> dict:
 
 def _boolean(source):
     def conv(v, key):
+        """``v`` checked to be a boolean; else a ConfigError at ``key``."""
         if not isinstance(v, bool):
             raise ConfigError(source, key, f"expected true or false, got {v!r}")
         return v
@@ -421,6 +424,7 @@ def _check_motion_lights(motion, lights_of_config, source):
 
 
 def parse_scheme(t: dict, source: str, where: str, registry, presets) -> list:
+    """The SchemeSpecs of one ``[[scheme]]`` table: a preset's one, or a named scheme's over its swept lists."""
     names = [s.NAME for s in registry]
     if "preset" in t:
         preset = choice(t["preset"], source, f"{where}.preset", sorted(presets))

@@ -16,6 +16,7 @@ LLVM_HINT = ("Dr.Jit's LLVM backend needs libLLVM 16 or newer. On Debian 12 run 
 
 
 class SetupError(RuntimeError):
+    """The machine's set-up cannot do what was asked (libLLVM missing or too old, no GPU for cuda_ad_rgb, no Ray)."""
     pass
 
 
@@ -25,6 +26,7 @@ MAX_THREADS = 1024
 
 
 def llvm_version():
+    """Dr.Jit's libLLVM version as a tuple, or None when it has none."""
     import drjit as dr
     try:
         return tuple(dr.detail.llvm_version())
@@ -111,6 +113,7 @@ def register_plugins() -> list:
 
 
 def git_commit() -> str:
+    """The kit's git commit (``+dirty`` with uncommitted changes to tracked files), or ``unknown``."""
     try:
         here = Path(__file__).resolve().parent
         out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, timeout=5)

@@ -153,6 +153,7 @@ def _save(fig, path):
 
 
 def chunks(items, n=MAX_LEGEND):
+    """``items`` in lists of at most ``n`` (one empty list when there are none)."""
     items = list(items)
     return [items[i:i + n] for i in range(0, len(items), n)] or [[]]
 
@@ -409,6 +410,7 @@ def save_curves(path: Path, curves: list):
 
 
 def load_curves(path: Path) -> list:
+    """The curves save_curves wrote into ``path``: (meta, world (x, y), texel (x, y)) each; [] without the file."""
     if not Path(path).is_file():
         return []
     with np.load(path) as z:
@@ -419,6 +421,7 @@ def load_curves(path: Path) -> list:
 # ------------------------------------------------------------------ running the jobs
 
 def workers() -> int:
+    """The CPUs this process may run on (at least 1)."""
     try:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:

@@ -51,15 +51,18 @@ class AxisDepthCube:
         return getattr(self._cube, name)
 
     def depth(self, p):
+        """Depth of world points ``p``: the distance along their cube face's axis."""
         face = self._cube.face_of(p)
         _, _, W = self._cube._frame(face)
         return dr.dot(p - self._cube.o, W)
 
     def plane_hit(self, u, v, p0, n, face=None):
+        """(depth, met) as View.plane_hit gives them, in the face-axis depth."""
         depth, met = type(self._cube).plane_hit(self, u, v, p0, n, face)
         return depth, met
 
     def depth_on_plane(self, u, v, p0, n, face=None):
+        """Face-axis depth where the ray through (u, v) of ``face`` meets the plane (p0, n); +inf where it does not."""
         return self.plane_hit(u, v, p0, n, face)[0]
 
 
@@ -78,6 +81,7 @@ def _texel_axis_cosine(view) -> np.ndarray:
 
 
 def ndc_near(view) -> float:
+    """ndc24's near distance ``n``: the light's distance to the scene's bounds, at least far / 1000."""
     return max(float(getattr(view, "nearest_scene_depth", 0.0)), view.far * 1e-3)
 
 

@@ -17,6 +17,7 @@ from .shadowmap import COHERENT
 
 @dataclass
 class GBuffer:
+    """The primary hit per camera pixel: interaction, position, normals toward the camera, shape and hit mask."""
     width: int
     height: int
     si: object            # mi.SurfaceInteraction3f of every pixel (for robust spawns)

@@ -56,6 +56,7 @@ class Receiver:
 
     @staticmethod
     def make(view, p_world, n_world, scene_scale: float) -> "Receiver":
+        """The Receiver of world points ``p_world`` (normals ``n_world``) in ``view``; ``scene_scale``: the diagonal."""
         u, v, face = view.project(p_world)
         return Receiver(view, p_world, n_world, view.to_light(p_world), view.depth(p_world), u, v, face,
                         view.texel_world(p_world), dr.opaque(mi.Float, scene_scale))
@@ -117,6 +118,7 @@ def tap_at(rx: Receiver, smap, u, v) -> Tap:
 
 
 def nearest_tap(rx: Receiver, smap) -> Tap:
+    """The tap of the texel containing each receiver's map position (the nearest lookup)."""
     return tap_at(rx, smap, rx.u_map, rx.v_map)
 
 

@@ -143,6 +143,7 @@ def sensor_at(base: Camera, origin, target, up):
 
 @dataclasses.dataclass
 class FixedPoints:
+    """The fixed points on the scene's surfaces: interactions, positions, wound normals, shapes and triangles."""
     si: object           # mi.SurfaceInteraction3f
     p: object            # mi.Point3f
     n: object            # geometric normal as the mesh winds it
@@ -152,6 +153,7 @@ class FixedPoints:
 
     @property
     def count(self) -> int:
+        """The number of fixed points."""
         return len(self.shape)
 
 
@@ -330,6 +332,7 @@ def _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents,
         sig = _view_signature(view)
         if sig != prev_sig or smap is None:          # the map is shared while its projection stays
             def build():
+                """The frame's map built (the plan's layers, culling and tile): its arrays, then the ShadowMap."""
                 sm = pipeline.build_map(sd.scene, view, set(m.needs), m.culling,
                                         closed if m.culling != "none" else None, m.tile, extents)
                 return (*shadowmap.arrays(sm), sm)       # the arrays, so the timing waits for them

@@ -149,6 +149,7 @@ class Curve:
         return self.acne[i], self.peterpan[i]
 
     def objective(self, lam: float, n: int) -> np.ndarray:
+        """E(lambda) = (n_acne + lam n_peterpan) / n at each bias of ``b``; NaN when ``n`` is 0."""
         return (self.acne + lam * self.peterpan) / n if n else np.full(self.b.size, np.nan)
 
 

@@ -46,6 +46,7 @@ MIN_TILE = 1 << 16
 
 @dataclass
 class MapPlan:
+    """One map to build: scene, light, view, resolution, culling, its layers and formats, and the cases it serves."""
     scene: str
     light: str
     view: str
@@ -65,10 +66,12 @@ class MapPlan:
 
     @property
     def texels(self) -> int:
+        """Texels of the map: faces * resolution^2."""
         return self.faces * self.resolution ** 2
 
     @property
     def layers(self) -> tuple:
+        """The stored layers: ``z1`` and ``shape``, then the optional ones the schemes need."""
         return ("z1", "shape") + tuple(self.needs)
 
     @property
@@ -86,11 +89,13 @@ class MapPlan:
 
     @property
     def peak_bytes(self) -> int:
+        """Estimated peak bytes of the map's build: its stored layers plus one tile's working set."""
         return self.stored_bytes + min(self.tile or self.texels, self.texels) * self.build_bytes_per_texel
 
 
 @dataclass
 class Plan:
+    """What a config asks to compute: its scenes and maps, with ray counts and memory estimates, before any run."""
     config: str
     scenes: list = field(default_factory=list)      # (label, width, height, lights [(label, type)])
     maps: list = field(default_factory=list)
@@ -108,6 +113,7 @@ class Plan:
 
     @property
     def cases(self) -> int:
+        """The number of cases over all maps."""
         return sum(m.cases for m in self.maps)
 
     @property
@@ -127,6 +133,7 @@ class Plan:
         return {"reference": ref, "map_continue": cont}
 
     def peak_bytes(self) -> int:
+        """Estimated peak bytes of the run: the most, over scenes, of its pixels' buffers plus its largest map."""
         return max((self._scene_peak(s)[0] for s in self.scenes), default=0)
 
     def _scene_peak(self, scene) -> tuple:
@@ -161,6 +168,7 @@ class Plan:
         return out
 
     def text(self) -> str:
+        """The plan as text: scenes, a line per map, ray counts, oracle receivers, peak memory and warnings."""
         mb = 1 / 2 ** 20
         lines = [f"plan for {self.config}", f"  cases: {self.cases}",
                  f"  scenes: {len(self.scenes)}, maps: {len(self.maps)}, memory budget {self.budget_bytes * mb:.0f} MB"]
@@ -190,6 +198,7 @@ class Plan:
         return "\n".join(lines)
 
     def as_dict(self) -> dict:
+        """The plan's counts and per-map rows as a JSON-ready dict."""
         return {"cases": self.cases, "rays": self.rays, "rays_bound": self.rays_bound,
                 "oracle_receivers_bound": self.oracle_receivers,
                 "peak_bytes_est": self.peak_bytes(), "budget_bytes": self.budget_bytes,
@@ -223,6 +232,7 @@ def physical_memory() -> int:
 
 
 def memory_budget(cfg: Config) -> int:
+    """The memory budget in bytes: ``memory_budget_mb`` when set, else a quarter of this machine's memory."""
     if cfg.memory_budget_mb:
         return int(cfg.memory_budget_mb * 2 ** 20)
     return physical_memory() // 4
@@ -372,6 +382,7 @@ def check_emitters(cfg: Config):
 
 
 def make(cfg: Config) -> Plan:
+    """The Plan of ``cfg``: a MapPlan per scene/light/view/resolution/culling, each tiled to fit the budget."""
     from .config import absent_files
     check_emitters(cfg)
     plan = Plan(cfg.source, budget_bytes=memory_budget(cfg), absent=absent_files(cfg),

@@ -47,6 +47,7 @@ def _exact(x):
 
 
 def write_json(path: Path, data: dict, indent=None):
+    """Write ``data`` as JSON into ``path`` atomically (values JSON cannot hold as their ``str``)."""
     with atomic(path) as tmp:
         tmp.write_text(json.dumps(data, indent=indent, default=str))
 
@@ -79,6 +80,7 @@ def _fmt(x):
 
 
 def read_csv(path) -> list[dict]:
+    """The rows of the CSV file ``path`` as dicts of strings."""
     with open(path, newline="") as fh:
         return list(csv.DictReader(fh))
 
@@ -109,6 +111,7 @@ def typed_rows(raw: list) -> list[dict]:
 
 
 def progress(total: int, enabled: bool):
+    """A tqdm bar over ``total`` cases, shown only when ``enabled`` and stderr is a terminal."""
     from tqdm import tqdm
     return tqdm(total=total, unit="case", disable=not enabled or not sys.stderr.isatty(), dynamic_ncols=True)
 
@@ -160,6 +163,7 @@ TABLE_COLUMNS = [("scene", "scene"), ("light", "light"), ("resolution", "R"), ("
 
 
 def legend_md() -> str:
+    """The Markdown line naming the error images' class colours (``rgb(r, g, b)`` each)."""
     items = [f"{name}: rgb{tuple(int(c) for c in col)}" for name, col in zip(metrics.CLASS_NAMES, metrics.CLASS_COLORS)]
     return "Error images (`images/<scene>_<light>/<case>_error.png`): " + "; ".join(items) + "."
 
@@ -336,6 +340,7 @@ def _pareto_groups(rows):
 
 
 def pareto_md(rows: list) -> list:
+    """table.md's Pareto section: per scene, light and view, the cases none beats on both error rate and time."""
     if not rows:
         return []
     out = ["", "## Cost of accuracy: the Pareto frontier", "",
@@ -395,6 +400,7 @@ def _cell(x):
 # ------------------------------------------------------------------ run.json
 
 def run_info(cfg, variant, rays, status, versions_: dict, threads: int) -> dict:
+    """run.json's content: config, versions, variant, rays, case counts by status and every status."""
     failed = [s for s in status if s["status"] == "failed"]
     return {
         "experiment": cfg.name, "config_file": cfg.source, "config": cfg.raw, "versions": versions_,

@@ -49,6 +49,7 @@ class Results:
                        self.oracle, self.curves)
 
     def column(self, name) -> np.ndarray:
+        """The values of column ``name`` over the rows, as a numpy array."""
         return np.array([r[name] for r in self.rows])
 
     def rgb(self, case) -> np.ndarray:
@@ -86,6 +87,7 @@ class StageFailed(Exception):
 
 
 class Runner:
+    """Runs a config's plan into folder ``out``: each shared stage once, then each case's lookup, metrics and row."""
     def __init__(self, config: cfgmod.Config, out: Path, variant: str | None = None, progress: bool = True,
                  keep_images: bool = True, resume_previous: bool = False):
         self.cfg = config
@@ -213,6 +215,7 @@ class Runner:
     # ------------------------------------------------------------ stages
     def _scene(self, spec, maps):
         def load():
+            """The scene loaded, its G-buffer (timed) and its usable lights; ValueError when it has none."""
             sd = pipeline.load_scene(spec, self.cfg.camera_resolution, self.cfg.camera)
             gb, t = timing.measure(lambda: (pipeline.gbuffer(sd),), 0)
             gb = gb[-1]
@@ -234,6 +237,7 @@ class Runner:
         label = maps[0].light
 
         def setup():
+            """The light setup (receivers and exact reference) of light ``li`` of the loaded scene."""
             if li >= len(lights):
                 raise ValueError(f"the plan expects light {label} but the loaded scene has {len(lights)} lights")
             return pipeline.light_setup(sd, gb, lights[li], label, self.cfg.timing_repeats, self.cfg.seed)
@@ -248,6 +252,7 @@ class Runner:
         kind, R = maps[0].view, maps[0].resolution
 
         def receivers():
+            """(view, setup, rx, seam, back): the fitted view, the receivers inside it, their lookups and seams."""
             pts = pipeline.points_np(setup.p) if setup.p is not None else np.zeros((0, 3))
             view = pipeline.make_view(setup.light, R, pts, sd.bbox, kind, maps[0].cascade, sd.sensor, sd.scale)
             s = setup.subset(view.inside(setup.p).numpy().astype(bool)) if setup.p is not None else setup
@@ -292,6 +297,7 @@ class Runner:
         what = f"scene {sd.label} light {setup.label} view {view.kind} map {m.resolution} culling {m.culling}"
 
         def build():
+            """(map, build time, stored): the map built (timed, with its peak bytes) and its copy per stored format."""
             timing.reset_peak()
             smap, bt = self._build(sd, view, set(m.needs), m.culling, m.tile)
             smap = smap[-1]

@@ -250,6 +250,7 @@ def prism(profile_xz, y0, y1, fan_center: int):
 
 
 def make_mesh(name: str, verts: np.ndarray, faces: np.ndarray):
+    """A Mitsuba mesh ``name`` of vertex positions ``verts`` (n, 3) and triangles ``faces`` (m, 3)."""
     import mitsuba as mi
     mesh = mi.Mesh(name, len(verts), len(faces))
     params = mi.traverse(mesh)
@@ -503,6 +504,7 @@ def _scale_light(light: LightSpec, s: float, offset=ORIGIN) -> LightSpec:
 
 @dataclass
 class SceneData:
+    """A loaded scene: Mitsuba scene and sensor, shape names, own lights, bounds, and the config's scale and offset."""
     label: str
     scene: object                  # mi.Scene
     sensor: object                 # mi.Sensor
@@ -518,9 +520,11 @@ class SceneData:
 
     @property
     def diagonal(self) -> float:
+        """The length of the scene's bounding-box diagonal (world units)."""
         return float(np.linalg.norm(self.bbox[1] - self.bbox[0]))
 
     def lights_for(self, specs) -> list:
+        """The lights of the ``[[light]]`` specs that apply here: the scene's own, its emitters, or scaled."""
         out = []
         for spec in specs:
             if not spec.applies_to(self.label):

@@ -40,6 +40,7 @@ MAX_STEPS = 64             # surfaces stepped over per texel before giving up (r
 
 @dataclass
 class ShadowMap:
+    """A built map: z1 and the hit's shape per texel, the optional slope and z2 layers, and how the build went."""
     view: object
     z1: object                  # mi.Float, faces*R*R, (face * R + j) * R + i
     shape: object               # mi.UInt32, shape index of the first hit, 0xFFFFFFFF on a miss
@@ -54,6 +55,7 @@ class ShadowMap:
 
     @property
     def resolution(self) -> int:
+        """Texels per side of each face (the view's resolution)."""
         return self.view.resolution
 
 
@@ -310,4 +312,5 @@ def cull_modes_for(culling: str, closed: list) -> np.ndarray:
 
 
 def arrays(smap: ShadowMap) -> tuple:
+    """The map's Dr.Jit arrays that exist: z1, shape, then slope and z2 when built."""
     return tuple(a for a in (smap.z1, smap.shape, smap.slope, smap.z2) if a is not None)

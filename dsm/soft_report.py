@@ -48,6 +48,7 @@ def plot_jobs(folder: Path, rows: list) -> list:
 
 
 def draw(path: Path, title: str, bars: list):
+    """Draw into ``path`` the MAE of V against V* per region (umbra, penumbra, lit), a bar per entry of ``bars``."""
     from matplotlib.figure import Figure
     fig = Figure(figsize=(8.5, 3.6))
     axes = fig.subplots(1, 3, sharey=True)

@@ -41,6 +41,7 @@ BEST_DEFINITION = ("Per scene, light and resolution: the instance with the lowes
 
 
 def varies(rows, key) -> bool:
+    """Whether column ``key`` takes more than one value over ``rows``."""
     return len({r.get(key, "") for r in rows}) > 1
 
 
@@ -53,6 +54,7 @@ def instance_key(r, multi=()) -> tuple:
 
 
 def instance_label(key) -> str:
+    """An instance key as words: its non-empty parts joined by spaces."""
     return " ".join(str(k) for k in key if k != "")
 
 
@@ -152,6 +154,7 @@ def _ms(x) -> str:
 
 
 def summary_columns(rows) -> list:
+    """The summary's identifying columns: scheme, params and whichever of filter, format, layout vary."""
     return ["scheme", "params", *_multi(rows)]
 
 
@@ -190,6 +193,7 @@ def best_pivot(rows):
 
 
 def best_cell(b) -> str:
+    """A best-per-group cell: the instance, its pooled error rate and how many tied; '' for none."""
     if b is None:
         return ""
     tied = f"; the fastest of {b['tied'] + 1} tied" if b["tied"] else ""
@@ -209,6 +213,7 @@ def answer(rows) -> str:
 
 
 def best_md(rows) -> list:
+    """Markdown lines of the best instance per scene and light (rows) and resolution (columns)."""
     resolutions, pivot = best_pivot(rows)
     out = ["| scene | light | " + " | ".join(f"R = {r}" for r in resolutions) + " |",
            "|---" * (2 + len(resolutions)) + "|"]

@@ -16,6 +16,7 @@ import drjit as dr
 
 @dataclass
 class Timing:
+    """One measured function's cost: warm median, JIT compile time, cold run (ms), kernels and cache misses."""
     ms: float            # median of warm runs
     compile_ms: float    # JIT code generation + LLVM backend in the cold run
     cold_ms: float       # the first run, compile included
@@ -24,6 +25,7 @@ class Timing:
 
 
 def enable_history():
+    """Turn on Dr.Jit's kernel history (where compile times are read)."""
     dr.set_flag(dr.JitFlag.KernelHistory, True)
 
 

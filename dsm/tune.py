@@ -108,6 +108,7 @@ class TuneCamera:
 
 @dataclass(frozen=True)
 class BiasMapSpec:
+    """``[tune.bias_map]``: block size in texels, the bias's unit and start, and Adam's steps and learning rate."""
     block: int = 1
     unit: str = "world"
     init: Length = Length(0.0, "world")
@@ -117,6 +118,7 @@ class BiasMapSpec:
 
 @dataclass(frozen=True)
 class TuneSpec:
+    """``[tune]``, checked: lambda, the step budget, learning rate, temperature schedule, parameters, cameras."""
     lam: float = 1.0
     steps: int = 100
     lr: float = 0.5                         # texels per step at the start temperature
@@ -132,6 +134,7 @@ class TuneSpec:
 
 @dataclass
 class TuneConfig:
+    """A tune run: the experiment Config, its checked ``[tune]`` spec and the scheme instances to tune."""
     config: object       # the experiment Config (scenes, lights, map)
     spec: TuneSpec
     schemes: tuple       # the SchemeSpecs to tune (the config's [[scheme]] instances)
@@ -300,6 +303,7 @@ class Case:
 
     @property
     def n(self) -> int:
+        """The number of receivers in this case."""
         return int(self.v_star.size)
 
 
@@ -503,6 +507,7 @@ def _sync_clock():
 
 @dataclass
 class Param:
+    """One tuned parameter: its unit, start, step scale (one texel's worth in its unit) and search range."""
     name: str
     unit: str                  # world | texel | range | "" (a plain number)
     start: float
@@ -551,6 +556,7 @@ def _param_box(tc, spec, sizes, oracle_best=None) -> list:
 
 
 def temperature_at(spec: TuneSpec, step: int, steps: int) -> float:
+    """The temperature in texels at ``step`` of ``steps``: geometric or linear from its start to its end."""
     t0, t1 = spec.temperature
     f = step / max(steps - 1, 1)
     return t0 * (t1 / t0) ** f if spec.schedule == "geometric" else t0 + (t1 - t0) * f
@@ -736,6 +742,7 @@ def tune_bias_map(tc, train, held, groups, init_values, progress=None) -> dict:
     rows = []
 
     def bias(c, idx, b):
+        """Case ``c``'s bias in world units: block values ``b`` at ``idx`` (a texel map's times texel_world)."""
         val = dr.gather(mi.Float, b, idx) * scale
         return val * c.rx.texel_world if tex else val
 
@@ -824,6 +831,7 @@ def tune(config, out=None, progress: bool = False, variant: str | None = None) -
 
 
 def run_tune(tc, out=None, progress: bool = False) -> TuneResult:
+    """Tune and grid-search each scheme of a prepared ``tc``, then the bias map; write into ``out`` if given."""
     ts = tc.spec
     bar = None
     if progress:
@@ -938,6 +946,7 @@ def _fmt(x):
 
 
 def table_text(res: TuneResult) -> str:
+    """The Markdown summary (``table.md``): a row per tuned scheme against grid search and oracle, then the bias map."""
     lam = res.spec.lam
     out = [f"# dsm tune (lambda = {lam:g}; objective (n_acne + lambda n_peterpan) / n_receivers)", "",
            f"training receivers {res.n_train}, held-out receivers {res.n_heldout}", "",
@@ -971,6 +980,7 @@ def table_text(res: TuneResult) -> str:
 
 
 def write(res: TuneResult, out: Path, orc_train=None, orc_held=None):
+    """Write ``res`` into folder ``out``: tuned.toml, steps.csv, table.md, tune.json, bias_map.npy and the plots."""
     out.mkdir(parents=True, exist_ok=True)
     (out / "tuned.toml").write_text(res.tuned_toml)
     keys = []
@@ -1013,6 +1023,7 @@ def _json_default(o):
 
 
 def plot(res: TuneResult, folder: Path):
+    """Plot each scheme's relaxed loss and hard objective per step into ``folder``/tune_loss.png."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

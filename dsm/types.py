@@ -55,6 +55,7 @@ class Length:
 
     @staticmethod
     def parse(raw: Any, source: str = "<config>", key: str = "length") -> "Length":
+        """``raw`` (a number, a ``"k unit"`` string or a Length) as a Length; else a ConfigError at ``key``."""
         if isinstance(raw, Length):
             return raw
         if isinstance(raw, bool):
@@ -87,6 +88,7 @@ class Length:
 # ---------------------------------------------------------------- value checks
 
 def number(raw, source, key, *, integer=False, positive=False, minimum=None, maximum=None):
+    """``raw`` as a finite number (an ``int`` if ``integer``) within the bounds; else a ConfigError at ``key``."""
     if isinstance(raw, bool) or not isinstance(raw, (int, float)) or (integer and not isinstance(raw, int)):
         raise ConfigError(source, key, f"expected {'an integer' if integer else 'a number'}, got {raw!r}")
     if not math.isfinite(raw):
@@ -101,12 +103,14 @@ def number(raw, source, key, *, integer=False, positive=False, minimum=None, max
 
 
 def choice(raw, source, key, choices):
+    """``raw`` checked to be one of ``choices``; else a ConfigError at ``key`` listing them."""
     if not isinstance(raw, str) or raw not in choices:
         raise ConfigError(source, key, f"unknown value {raw!r}", choices)
     return raw
 
 
 def vec3(raw, source, key, nonzero=False):
+    """``raw`` as a tuple of three floats (not all zero if ``nonzero``); else a ConfigError at ``key``."""
     if not isinstance(raw, list) or len(raw) != 3:
         raise ConfigError(source, key, f"expected a list of three numbers, got {raw!r}")
     v = tuple(number(x, source, key) for x in raw)
@@ -116,10 +120,12 @@ def vec3(raw, source, key, nonzero=False):
 
 
 def as_list(raw):
+    """``raw`` as a list: itself if it is one, else a one-item list."""
     return raw if isinstance(raw, list) else [raw]
 
 
 def check_keys(table: dict, allowed, source: str, where: str):
+    """Raise a ConfigError for the first key of ``table`` not in ``allowed`` (reported as ``where.key``)."""
     for k in table:
         if k not in allowed:
             raise ConfigError(source, f"{where}.{k}" if where else k, "unknown key", sorted(allowed))
@@ -223,6 +229,7 @@ class CameraSpec:
 
     @property
     def posed(self) -> bool:
+        """Whether any pose field is set (else the scene's own camera stands)."""
         return any(getattr(self, f.name) is not None for f in dataclasses.fields(self))
 
 
@@ -245,6 +252,7 @@ class CascadeSpec:
 
     @property
     def label(self) -> str:
+        """The layout's name in reports: the engine's, or count, split and fit plus any non-default keys."""
         if self.engine:
             return self.engine
         split = f"practical({self.lam:g})" if self.split == "practical" else self.split
@@ -283,6 +291,7 @@ class MotionSpec:
 
 @dataclass(frozen=True)
 class MapSpec:
+    """``[map]``: the resolutions, filters, stored formats, point-light views, texel budgets and cascades swept."""
     resolution: tuple = (512,)
     filter: tuple = ("nearest",)
     format: tuple = ("float32",)
@@ -299,12 +308,14 @@ class MapSpec:
 
 @dataclass(frozen=True)
 class SchemeSpec:
+    """One scheme instance (a ``[[scheme]]`` value set): its name, frozen parameters and preset, if any."""
     name: str
     params: Any                 # the scheme's frozen parameter dataclass
     preset: str | None = None
 
     @property
     def label(self) -> str:
+        """The scheme's parameters as ``name=value`` words (describe_params)."""
         return describe_params(self.params)
 
 
@@ -331,6 +342,7 @@ class ExecutionSpec:
 
 @dataclass(frozen=True)
 class Config:
+    """An experiment config, checked and frozen: scenes, lights, the map sweep, schemes and how to run them."""
     name: str
     source: str
     seed: int = 7

@@ -77,13 +77,16 @@ class View:
 
     @property
     def depth_range(self) -> float:
+        """far - near of the view, in world units (the unit of ``range`` lengths)."""
         return self.far - self.near
 
     @property
     def n_texels(self) -> int:
+        """Texels of all the view's faces together: faces * resolution^2."""
         return self.faces * self.resolution ** 2
 
     def local(self, p):
+        """(x, y, z) of world points ``p`` in the view's frame (origin ``o``, axes ``ex``, ``ey``, ``ez``)."""
         q = p - self.o
         return dr.dot(q, self.ex), dr.dot(q, self.ey), dr.dot(q, self.ez)
 
@@ -92,6 +95,7 @@ class View:
         return dr.dot(p - self.o, self.ez)
 
     def face_of(self, p):
+        """The face of world points ``p``: 0 on a single-map view."""
         return dr.zeros(mi.UInt32, dr.width(p))
 
     def project(self, p):
@@ -139,6 +143,7 @@ class View:
         return mi.Ray3f(o, d)
 
     def inside(self, p):
+        """Whether world points ``p`` are covered by the map: every point on the base view."""
         return dr.full(mi.Bool, True, dr.width(p))
 
     def seam_distance(self, u, v, face):
@@ -182,27 +187,33 @@ class OrthographicView(View):
         self.L = dr.opaque(mi.Float, self.extent)
 
     def project_on(self, p, face=None):
+        """(u, v) in texels of world points ``p`` on the single map (``face`` ignored)."""
         x, y, _ = self.local(p)
         s = self.R / self.L
         return x * s, y * s
 
     def ray_at(self, u, v, face=None):
+        """(origin, direction) of the light ray through map position (u, v): from the map plane along ``ez``."""
         s = self.L / self.R
         o = self.o + self.ex * (u * s) + self.ey * (v * s)
         return o, dr.zeros(mi.Vector3f, dr.width(o)) + self.ez
 
     def texel_world(self, p):
+        """World width of one texel at points ``p``: extent / resolution, the same everywhere."""
         return dr.zeros(mi.Float, dr.width(p)) + self.L / self.R
 
     def to_light(self, p):
+        """Unit direction from points ``p`` toward the light: ``-ez`` everywhere."""
         return dr.zeros(mi.Vector3f, dr.width(p)) - self.ez
 
     def inside(self, p):
+        """Whether world points ``p`` project within the map square [0, R]^2."""
         u, v = self.project_on(p)
         return (u >= 0) & (u <= self.R) & (v >= 0) & (v <= self.R)
 
 
 class PerspectiveView(View):
+    """A spot light's map: a square perspective frustum from the light over its cone; depth along the axis."""
     kind = "perspective"
 
     def __init__(self, position, axis, cutoff_deg: float, scene_bbox, resolution: int):
@@ -218,23 +229,28 @@ class PerspectiveView(View):
         self.cos_cut = dr.opaque(mi.Float, math.cos(math.radians(self.cutoff)))
 
     def project_on(self, p, face=None):
+        """(u, v) in texels of world points ``p`` through the perspective projection (``face`` ignored)."""
         x, y, z = self.local(p)
         s = self.R * 0.5 / (self.T * z)
         return (x * s + self.R * 0.5), (y * s + self.R * 0.5)
 
     def ray_at(self, u, v, face=None):
+        """(origin, direction) of the ray from the light position through map position (u, v)."""
         a, b = self.to_square(u, v)
         d = dr.normalize(self.ex * (a * self.T) + self.ey * (b * self.T) + self.ez)
         return dr.zeros(mi.Point3f, dr.width(d)) + self.o, d
 
     def texel_world(self, p):
+        """World texel size at points ``p``: a planar (gnomonic) texel's footprint, growing with distance."""
         x, y, z = self.local(p)
         return _gnomonic_texel(x, y, z, 2.0 * self.T / self.R)
 
     def to_light(self, p):
+        """Unit direction from points ``p`` toward the light position."""
         return dr.normalize(self.o - p)
 
     def inside(self, p):
+        """Whether world points ``p`` lie in front of the light, inside its cone and the map square."""
         x, y, z = self.local(p)
         in_cone = z >= dr.norm(p - self.o) * self.cos_cut
         return (z > 0) & in_cone & (dr.abs(x) <= self.T * z) & (dr.abs(y) <= self.T * z)
@@ -262,9 +278,11 @@ class PointView(View):
         super().__init__(position, ex, ey, ez, resolution, near=0.0, far=max(far, 1e-30) * 1.01)
 
     def depth(self, p):
+        """Depth of world points ``p``: the Euclidean distance to the light (world units)."""
         return dr.norm(p - self.o)
 
     def to_light(self, p):
+        """Unit direction from points ``p`` toward the light position."""
         return dr.normalize(self.o - p)
 
 
@@ -287,6 +305,7 @@ class ParaboloidView(PointView):
         return dr.select(face == 0, mi.Float(1.0), mi.Float(-1.0))
 
     def face_of(self, p):
+        """The face of world points ``p``: 0 front (z >= 0 in light space), 1 back; 0 on a single paraboloid."""
         if not self.dual:
             return dr.zeros(mi.UInt32, dr.width(p))
         _, _, z = self.local(p)
@@ -299,11 +318,13 @@ class ParaboloidView(PointView):
         return x, y, dr.maximum(r + self._sign(face) * z, 1e-7 * r + 1e-30)
 
     def project_on(self, p, face=None):
+        """(u, v) in texels of world points ``p`` on face ``face`` (default: each point's own face)."""
         face = self.face_of(p) if face is None else face
         x, y, den = self._den(p, face)
         return self.from_square(x / den, y / den)
 
     def ray_at(self, u, v, face=None):
+        """(origin, direction) of the ray from the light through map position (u, v) of ``face`` (default: front)."""
         x, y = self.to_square(u, v)
         r2 = dr.square(x) + dr.square(y)
         s = self._sign(face) if face is not None else mi.Float(1.0)
@@ -312,14 +333,17 @@ class ParaboloidView(PointView):
         return dr.zeros(mi.Point3f, dr.width(d)) + self.o, d
 
     def texel_world(self, p):
+        """World texel size at points ``p`` on their face: (2 / R) (|q| + s qz), square (conformal map)."""
         _, _, den = self._den(p, self.face_of(p))
         return 2.0 * den / self.R
 
     def seam_distance(self, u, v, face):
+        """Distance in texels from map position (u, v) to the paraboloid's rim (the unit circle of the face)."""
         x, y = self.to_square(u, v)
         return dr.abs(1.0 - dr.sqrt(dr.square(x) + dr.square(y))) * 0.5 * self.R
 
     def inside(self, p):
+        """Whether world points ``p`` are covered: every point when dual, else the front hemisphere z >= 0."""
         if self.dual:
             return super().inside(p)
         _, _, z = self.local(p)
@@ -351,6 +375,7 @@ class CubeView(PointView):
                 dr.gather(mi.Vector3f, self.W, face))
 
     def face_of(self, p):
+        """The face of world points ``p``: 2 * major axis + 1 if negative (ties go to x, then y, then z)."""
         q = p - self.o
         ax, ay, az = dr.abs(q.x), dr.abs(q.y), dr.abs(q.z)
         use_x = (ax >= ay) & (ax >= az)
@@ -366,11 +391,13 @@ class CubeView(PointView):
         return dr.dot(q, U), dr.dot(q, V), dr.maximum(z, 1e-30 * dr.norm(q) + 1e-38)
 
     def project_on(self, p, face=None):
+        """(u, v) in texels of world points ``p`` on cube face ``face`` (default: each point's own face)."""
         face = self.face_of(p) if face is None else face
         x, y, z = self._local(p, face)
         return self.from_square(x / z, y / z)
 
     def ray_at(self, u, v, face=None):
+        """(origin, direction) of the ray from the light through map position (u, v) of ``face`` (default: +x)."""
         face = dr.zeros(mi.UInt32, dr.width(u)) if face is None else face
         U, V, W = self._frame(face)
         a, b = self.to_square(u, v)
@@ -378,8 +405,10 @@ class CubeView(PointView):
         return dr.zeros(mi.Point3f, dr.width(d)) + self.o, d
 
     def texel_world(self, p):
+        """World texel size at points ``p`` on their cube face (a gnomonic footprint, growing with distance)."""
         x, y, z = self._local(p, self.face_of(p))
         return _gnomonic_texel(x, y, z, 2.0 / self.R)
 
     def seam_distance(self, u, v, face):
+        """Distance in texels from map position (u, v) to the nearest edge of its cube face."""
         return dr.minimum(dr.minimum(u, self.R - u), dr.minimum(v, self.R - v))

@@ -19,6 +19,7 @@ from ..types import ConfigError, vec3
 
 @runtime_checkable
 class LightType(Protocol):
+    """The contract of a light type module: its constants and its ``parse``, ``views`` and ``make_view``."""
     TYPE: str
     POSITIONAL: bool
     SOFT: bool

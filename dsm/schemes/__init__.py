@@ -26,6 +26,7 @@ from .presets import PRESETS, preset_for_light  # noqa: E402,F401
 
 
 def get(name: str):
+    """The scheme module named ``name``; KeyError listing the valid names."""
     for s in REGISTRY:
         if s.NAME == name:
             return s

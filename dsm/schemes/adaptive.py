@@ -21,10 +21,12 @@ USES_PLANE = True     # compares the receiver plane's depth at the texel centre 
 
 @dataclass(frozen=True)
 class Params:
+    """Adaptive bias's parameter: ``K``, the epsilon as a fraction of the scene's diagonal."""
     K: float = field(default=1e-4, metadata={"doc": "epsilon as a fraction of the scene's diagonal", "min": 0.0})
 
 
 def margin(rx, tap, p):
+    """z1 + K * diagonal less the receiver plane's depth at the tap's texel centre (view depth units)."""
     return tap.z1 + p.K * rx.scene_scale - tap.receiver_plane_depth(rx)
 
 

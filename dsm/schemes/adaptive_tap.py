@@ -36,12 +36,14 @@ USES_PLANE = True
 
 @dataclass(frozen=True)
 class Params:
+    """Per-tap adaptive bias's parameters: ``K`` (a fraction of the diagonal) and the plane's clamp ``max_slope``."""
     K: float = field(default=1e-4, metadata={"doc": "epsilon as a fraction of the scene's diagonal", "min": 0.0})
     max_slope: float = field(default=8.0, metadata={"doc": "largest plane depth change per world unit of a tap's "
                                                            "offset", "min": 0.0})
 
 
 def margin(rx, tap, p):
+    """z1 + K * diagonal less the tap's plane depth, held within ``max_slope`` times its lateral distance of ``d``."""
     plane = tap.receiver_plane_depth(rx)
     du, dv = tap.cu_map - rx.u_map, tap.cv_map - rx.v_map
     # a tap's lateral distance: at least one texel (the receiver's own texel holds its centre)

@@ -13,6 +13,7 @@ from typing import Any, Protocol, runtime_checkable
 
 @runtime_checkable
 class Scheme(Protocol):
+    """The contract of a scheme module: its constants, ``Params``, ``margin`` and ``shift``."""
     NAME: str
     SOURCE: str
     NEEDS: frozenset

@@ -29,6 +29,7 @@ USES_PLANE = False
 
 @dataclass(frozen=True)
 class Params:
+    """Combined bias's parameters: normal offset, constant depth bias, slope scale and slope clamp."""
     normal_offset: Length = field(default=Length(0.0, "world"),
                                   metadata={"doc": "move the lookup point along the normal"})
     depth_bias: Length = field(default=Length(0.0, "world"), metadata={"doc": "constant depth offset added to z1"})
@@ -44,10 +45,12 @@ def needs(params) -> frozenset:
 
 
 def shift(rx, p):
+    """The receiver moved along its geometric normal by ``normal_offset`` (world units)."""
     return rx.moved(rx.p_world + rx.n_world * p.normal_offset)
 
 
 def margin(rx, tap, p):
+    """z1 + depth_bias + min(slope_clamp, slope_scale * m) - d' (view depth units; m from the slope layer)."""
     threshold = tap.z1 + p.depth_bias
     if tap.slope is not None:           # a map without the slope layer: no instance of it needs one
         threshold = threshold + dr.minimum(p.slope_clamp, p.slope_scale * tap.slope)

@@ -19,10 +19,12 @@ USES_PLANE = False
 
 @dataclass(frozen=True)
 class Params:
+    """Constant bias's parameter: ``bias``, the depth offset added to z1."""
     bias: Length = field(default=Length(1.0, "texel"), metadata={"doc": "depth offset added to z1"})
 
 
 def margin(rx, tap, p):
+    """z1 + bias - d, in view depth units (lit where >= 0)."""
     return tap.z1 + p.bias - rx.depth
 
 

@@ -25,11 +25,13 @@ USES_PLANE = False
 
 @dataclass(frozen=True)
 class Params:
+    """Dual layers' parameters: ``z_offset``, the largest bias, and the map's ``culling`` per shape."""
     z_offset: Length = field(default=Length(4.0, "texel"), metadata={"min": 0.0, "doc": "largest bias"})
     culling: str = field(default="back_closed", metadata={"doc": "map culling per shape", "choices": CULLING})
 
 
 def margin(rx, tap, p):
+    """z1 + min((z2 - z1) / 2, z_offset) - d, in view depth units."""
     return tap.z1 + dr.minimum(0.5 * (tap.z2 - tap.z1), p.z_offset) - rx.depth
 
 

@@ -21,10 +21,12 @@ USES_PLANE = False
 
 @dataclass(frozen=True)
 class Params:
+    """Midpoint's parameter: the map's ``culling`` per shape."""
     culling: str = field(default="none", metadata={"doc": "map culling per shape", "choices": CULLING})
 
 
 def margin(rx, tap, p):
+    """(z1 + z2) / 2 - d, in view depth units."""
     return 0.5 * (tap.z1 + tap.z2) - rx.depth
 
 

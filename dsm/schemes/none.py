@@ -16,10 +16,12 @@ USES_PLANE = False
 
 @dataclass(frozen=True)
 class Params:
+    """No parameters."""
     pass
 
 
 def margin(rx, tap, p):
+    """z1 - d, in view depth units."""
     return tap.z1 - rx.depth
 
 

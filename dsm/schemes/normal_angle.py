@@ -22,11 +22,13 @@ USES_PLANE = False
 
 @dataclass(frozen=True)
 class Params:
+    """Normal-angle bias's parameters: ``bias``, the scale of tan(theta), and ``max``, the largest bias."""
     bias: Length = field(default=Length(1.0, "texel"), metadata={"doc": "scale of tan(theta)"})
     max: Length = field(default=Length(8.0, "texel"), metadata={"min": 0.0, "doc": "largest bias"})
 
 
 def margin(rx, tap, p):
+    """z1 + min(max, bias * tan(theta)) - d, theta between the normal and the light (view depth units)."""
     cos_t = dr.clip(dr.dot(rx.n_world, rx.to_light), 0.0, 1.0)
     tan_t = dr.safe_sqrt(1.0 - cos_t * cos_t) / cos_t   # receivers have cos_t > 0
     return tap.z1 + dr.minimum(p.max, p.bias * tan_t) - rx.depth

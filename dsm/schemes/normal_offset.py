@@ -19,13 +19,16 @@ USES_PLANE = False
 
 @dataclass(frozen=True)
 class Params:
+    """Normal offset's parameters: ``offset`` along the normal and ``bias``, the depth offset added to z1."""
     offset: Length = field(default=Length(1.0, "texel"), metadata={"doc": "move along the normal"})
     bias: Length = field(default=Length(0.0, "world"), metadata={"doc": "depth offset added to z1"})
 
 
 def shift(rx, p):
+    """The receiver moved along its geometric normal by ``offset`` (world units)."""
     return rx.moved(rx.p_world + rx.n_world * p.offset)
 
 
 def margin(rx, tap, p):
+    """z1(p') + bias - d' at the moved receiver, in view depth units."""
     return tap.z1 + p.bias - rx.depth

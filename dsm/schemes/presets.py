@@ -32,6 +32,7 @@ def _p(normal_offset=(0.0, "world"), depth_bias=(0.0, "world"), slope_scale=0.0,
 
 @dataclass(frozen=True)
 class Preset:
+    """One engine's preset: its combined parameters per light type, the sources read, the unit mapping."""
     engine: str
     values: dict                    # light type -> combined parameters
     sources: tuple                  # (file, what was read there)
@@ -153,6 +154,7 @@ PRESETS = {
 
 
 def names() -> list:
+    """The preset names, sorted."""
     return sorted(PRESETS)
 
 

@@ -21,10 +21,12 @@ USES_PLANE = True     # compares the receiver plane's depth at the texel centre 
 
 @dataclass(frozen=True)
 class Params:
+    """Receiver plane bias's parameter: ``bias``, the depth offset added to z1."""
     bias: Length = field(default=Length(0.01, "texel"), metadata={"doc": "depth offset added to z1"})
 
 
 def margin(rx, tap, p):
+    """z1 + bias less the receiver plane's depth at the tap's texel centre (view depth units)."""
     return tap.z1 + p.bias - tap.receiver_plane_depth(rx)
 
 

@@ -23,11 +23,13 @@ CULLING = ("front", "front_closed")
 
 @dataclass(frozen=True)
 class Params:
+    """Second depth's parameters: ``bias`` on the stored depth and the map's ``culling`` per shape."""
     bias: Length = field(default=Length(0.0, "world"), metadata={"doc": "depth offset added to the stored depth"})
     culling: str = field(default="front_closed", metadata={"doc": "map culling per shape", "choices": CULLING})
 
 
 def margin(rx, tap, p):
+    """z_back + bias - d, z_back the first layer of the front-culled map (view depth units)."""
     return tap.z1 + p.bias - rx.depth
 
 

@@ -24,12 +24,14 @@ USES_PLANE = False
 
 @dataclass(frozen=True)
 class Params:
+    """Slope-scaled bias's parameters: the constant ``bias``, the factor ``slope`` on m and the ``clamp``."""
     bias: Length = field(default=Length(2.0 ** -24, "range"), metadata={"doc": "constant part"})
     slope: float = field(default=3.0, metadata={"doc": "factor on m, the caster's depth change per texel", "min": 0.0})
     clamp: Length = field(default=Length(1.0 / 128.0, "range"), metadata={"min": 0.0, "doc": "largest total bias"})
 
 
 def margin(rx, tap, p):
+    """z1 + min(clamp, bias + slope * m) - d, m the caster's depth change per texel (view depth units)."""
     return tap.z1 + dr.minimum(p.clamp, p.bias + p.slope * tap.slope) - rx.depth
 
 
