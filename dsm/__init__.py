@@ -14,6 +14,8 @@ def run(config, out=None, variant=None, progress=False, *, force=False, resume=F
 
 
 def _run_in(config, out, variant, progress, force, resume):
+    if force and resume:                 # as the command line refuses --force with --resume
+        raise ConfigError("dsm.run", "force", "force=True replaces a run and resume=True goes on with it: give one")
     # dsm run's rules for --out (dsm.cli): the folder locked, a previous run kept unless
     # force replaces it or resume goes on with it, the config checked before the folder is touched
     from pathlib import Path

@@ -73,8 +73,21 @@ def _load(out: Path, notes: list | None = None):
         raise NotARun(f"{out}/run.json: not a dsm run.json (not a JSON object)")
     rows = _read_rows(out / "metrics.csv", notes, "case")
     _check_metrics(out / "metrics.csv", rows)
+    _note_missing(out, run, rows, notes)
     oracle_rows = _read_rows(out / "oracle.csv", notes) if (out / "oracle.csv").is_file() else []
     return run, rows, oracle_rows
+
+
+def _note_missing(out: Path, run: dict, rows: list, notes: list):
+    """Notes for what the report lacks against run.json: finished cases without a row, oracle.csv."""
+    finished = {s["what"].split()[1] for s in run.get("status", []) if isinstance(s, dict)
+                and str(s.get("what", "")).startswith("case ") and s.get("status") in ("ok", "empty")}
+    lost = finished - {r["case"] for r in rows}
+    if lost:
+        notes.append(f"{out / 'metrics.csv'}: {len(lost)} case(s) run.json lists as finished have no row "
+                     f"({', '.join(sorted(lost)[:3])}{', ...' if len(lost) > 3 else ''}): left out of the report")
+    if rows and not (out / "oracle.csv").is_file() and any(r["filter"] == "nearest" for r in rows):
+        notes.append(f"{out / 'oracle.csv'} is absent: table.md has no \"How far from the best\" section")
 
 
 def write_data(out: Path, rec):
@@ -110,7 +123,11 @@ def _check_metrics(path: Path, rows: list):
     missing = sorted(GROUPS["core"] - set(rows[0])) if rows else []
     if missing:
         raise NotARun(f"{path}: not a dsm metrics.csv (no {', '.join(missing)} column)")
+    seen = set()
     for r in rows:
+        if r["case"] in seen:
+            raise NotARun(f"{path}: case {r['case']} appears twice: an edited file")
+        seen.add(r["case"])
         if r.get("motion"):           # a motion case's rates are means over its frames, its counts sums
             continue
         for rate, num, den in RATES + (("error_rate", None, "n_receivers"),):
@@ -124,7 +141,10 @@ def _check_metrics(path: Path, rows: list):
 
 
 def _texels(run) -> tuple:
-    raw = run.get("config", {}).get("map", {}).get("texels", [])
+    """The config's ``[map] texels`` as run.json recorded it (none where the record is damaged)."""
+    cfg = run.get("config")
+    mp = cfg.get("map") if isinstance(cfg, dict) else None
+    raw = mp.get("texels", []) if isinstance(mp, dict) else []
     return tuple(raw if isinstance(raw, list) else [raw])
 
 

@@ -212,12 +212,18 @@ class Previous:
         for key, (old, row, status) in self.done.items():
             if key in new_id:
                 new = new_id[key]
+                if "status" not in status:      # a case set aside by an earlier resume, named again
+                    status = {**{k: status.get(k) for k in ("scene", "light", "view", "scheme", "params",
+                                                            "resolution")}, "key": key,
+                              "status": "ok" if str(row.get("n_receivers", "0")) not in ("", "0") else "empty"}
                 kept[key] = ({**row, "case": new}, {**status, "what": f"case {new}"},
                              [parse_row({**r, "case": new}) for r in self.cascade_rows.get(old, [])])
                 if old is not None and old != new:
                     moves.append((old, images / new))
             else:
-                stale.append({"key": key, "case": old, **{k: status.get(k) for k in ("scene", "light", "view",
+                # a case already stale keeps the id it had when it was set aside
+                stale.append({"key": key, "case": old if old is not None else status.get("case"),
+                              **{k: status.get(k) for k in ("scene", "light", "view",
                                                                                      "scheme", "params",
                                                                                      "resolution")},
                               "row": row})

@@ -49,7 +49,10 @@ class Results:
                        self.oracle, self.curves)
 
     def column(self, name) -> np.ndarray:
-        """The values of column ``name`` over the rows, as a numpy array."""
+        """The values of column ``name`` over the rows, as a numpy array (a KeyError names the columns)."""
+        if name not in report.COLUMNS:
+            raise KeyError(f"Results.column: no column {name!r} (columns: see dsm.record.NAMES, e.g. acne_rate, "
+                           "peterpan_rate, error_rate, n_receivers)")
         return np.array([r[name] for r in self.rows])
 
     def rgb(self, case) -> np.ndarray:

@@ -268,7 +268,7 @@ def look_at_sensor(origin, target, up, fov, width, height, near=None, far=None, 
     dist = float(np.linalg.norm(np.subtract(origin, target)))
     near = dist * 1e-3 if near is None else float(near)
     far = dist * 1e3 if far is None else float(far)
-    if not near < far:       # else Mitsuba's RuntimeError, with no key to name
+    if not np.float32(near) < np.float32(far):   # Mitsuba compares them in float32 (else its RuntimeError)
         raise clip_error(near, far, camera, source)
     return {"type": "perspective", "fov": fov, "near_clip": near, "far_clip": far,
             "to_world": mi.ScalarTransform4f().look_at(origin=list(map(float, origin)),

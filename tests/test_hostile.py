@@ -579,3 +579,59 @@ def test_an_xml_without_an_emitter_says_its_default_light_in_one_readable_line(t
     notes = [s["error"] for s in res.run["status"] if s["status"] == "note"]
     assert len(notes) == 1 and "default directional light shining along (" in notes[0], notes
     assert "LightSpec" not in notes[0] and "\n" not in notes[0]
+
+
+def test_a_case_set_aside_by_one_resume_and_named_again_by_the_next(tmp_path):
+    """run A; --resume with B (A's cases set aside as stale); --resume with A again: A's cases
+    come back, kept (this raised KeyError 'status' and left run.json "running"); a stale
+    case is listed under the id it had, never None."""
+    import dsm
+    from conftest import base_config
+    a = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [32, 32]}, map={"resolution": 32},
+                    scheme=[{"name": "constant", "bias": 0.01}])
+    b = {**a, "scheme": [{"name": "constant", "bias": 0.02}]}
+    out = tmp_path / "r"
+    first = dsm.run(a, out=out)
+    second = dsm.run(b, out=out, resume=True)
+    assert [s["case"] for s in second.run["stale_cases"]] == ["0001"]
+    third = dsm.run(a, out=out, resume=True)
+    assert third.run["state"] == "complete" and third.run["resumed_cases"] == 1 and third.run["n_failed"] == 0
+    assert [s["case"] for s in third.run["stale_cases"]] == ["0001"]          # B's case, under its id
+    assert (third.rows[0]["n_acne"], third.rows[0]["n_peterpan"]) == (first.rows[0]["n_acne"], first.rows[0]["n_peterpan"])
+    with pytest.raises(ConfigError, match="force"):
+        dsm.run(a, out=out, resume=True, force=True)
+    with pytest.raises(KeyError, match="no column 'nope'"):
+        third.column("nope")
+
+
+def test_clip_planes_equal_in_float32_are_one_line(tmp_path, capsys):
+    """near = 5, far = 5.0000001: one float32 value, which Mitsuba refused with a traceback."""
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('[experiment]\nname = "c"\n[camera]\nresolution = [32, 32]\nnear = 5.0\nfar = 5.0000001\n'
+                   '[[scene]]\nbuiltin = "plane_box"\n[map]\nresolution = 16\n[[scheme]]\nname = "none"\n')
+    capsys.readouterr()
+    assert cli.main(["plan", str(cfg)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "camera" in err[0] and "near clip" in err[0] and "Traceback" not in err[0], err
+
+
+def test_report_says_what_a_damaged_folder_lacks(tmp_path, capsys):
+    """A duplicated row is refused; rows lost against run.json, or oracle.csv deleted, are notes
+    (the report was silently shorter); run.json's config as a string is no traceback."""
+    res = _small_run(tmp_path)
+    lines = (res.out / "metrics.csv").read_text().splitlines()
+    (res.out / "metrics.csv").write_text("\n".join(lines + [lines[1]]) + "\n")
+    capsys.readouterr()
+    assert cli.main(["report", str(res.out)]) == 2
+    assert "appears twice" in capsys.readouterr().err
+    (res.out / "metrics.csv").write_text(lines[0] + "\n")            # the header alone
+    (res.out / "oracle.csv").unlink()
+    assert cli.main(["report", str(res.out)]) == 0
+    err = capsys.readouterr().err
+    assert "1 case(s) run.json lists as finished have no row" in err
+    (res.out / "metrics.csv").write_text("\n".join(lines) + "\n")
+    assert cli.main(["report", str(res.out)]) == 0
+    assert "oracle.csv is absent" in capsys.readouterr().err
+    run = json.loads((res.out / "run.json").read_text())
+    (res.out / "run.json").write_text(json.dumps({**run, "config": "not a table"}))
+    assert cli.main(["report", str(res.out)]) == 0
