@@ -254,7 +254,8 @@ def make_mesh(name: str, verts: np.ndarray, faces: np.ndarray):
     import mitsuba as mi
     mesh = mi.Mesh(name, len(verts), len(faces))
     params = mi.traverse(mesh)
-    params["vertex_positions"] = mi.Float(np.asarray(verts, np.float32).ravel())
+    with np.errstate(over="ignore"):     # beyond float32: inf, refused by _check_loaded in one line
+        params["vertex_positions"] = mi.Float(np.asarray(verts, np.float32).ravel())
     params["faces"] = mi.UInt32(np.asarray(faces, np.uint32).ravel())
     params.update()
     return mesh
@@ -268,7 +269,9 @@ def look_at_sensor(origin, target, up, fov, width, height, near=None, far=None, 
     dist = float(np.linalg.norm(np.subtract(origin, target)))
     near = dist * 1e-3 if near is None else float(near)
     far = dist * 1e3 if far is None else float(far)
-    if not np.float32(near) < np.float32(far):   # Mitsuba compares them in float32 (else its RuntimeError)
+    with np.errstate(over="ignore"):             # a far beyond float32 is inf: still beyond near
+        crossed = not np.float32(near) < np.float32(far)   # Mitsuba compares them in float32
+    if crossed:                                  # else Mitsuba's RuntimeError, with no key to name
         raise clip_error(near, far, camera, source)
     return {"type": "perspective", "fov": fov, "near_clip": near, "far_clip": far,
             "to_world": mi.ScalarTransform4f().look_at(origin=list(map(float, origin)),
@@ -807,6 +810,18 @@ def _finish(label, scene, own_lights, scale, notes=()):
     return SceneData(label, scene, scene.sensors()[0], names, list(own_lights), bbox, scale, list(notes))
 
 
+def _check_emitters(spec, lights):
+    """ConfigError naming the file for an emitter at a position, along a direction or with a
+    cutoff that is not finite (every receiver read as backfacing: the case came out empty)."""
+    for i, light in enumerate(lights):
+        vals = {"position": light.position, "direction": light.direction,
+                "cutoff_angle": (light.cutoff,) if light.type == "spot" else None}
+        for name, v in vals.items():
+            if v is not None and not all(math.isfinite(c) for c in v):
+                raise ConfigError(_src(spec), f"{spec.where}.file", f"{spec.file}: emitter {i} ({light.type}) has a "
+                                  f"{name} that is not finite ({', '.join(f'{c:g}' for c in v)})")
+
+
 def lights_of(scene) -> tuple[list, list]:
     """(LightSpecs of the scene's point, spot and directional emitters, notes on the others)."""
     lights, notes = [], []
@@ -883,6 +898,7 @@ def _load_xml(spec, camera_resolution, camera=None):
         raise ConfigError(_src(spec), f"{spec.where}.file", f"{spec.file} has no <sensor>: dsm takes the camera "
                           "from an XML scene's first sensor; add one")
     lights, notes = lights_of(scene)
+    _check_emitters(spec, lights)
     if not lights:
         lights = [default_light(scene)]
         notes.append(f"no point, spot or directional emitter: dsm added a default {describe_light(lights[0])}")

@@ -635,3 +635,42 @@ def test_report_says_what_a_damaged_folder_lacks(tmp_path, capsys):
     run = json.loads((res.out / "run.json").read_text())
     (res.out / "run.json").write_text(json.dumps({**run, "config": "not a table"}))
     assert cli.main(["report", str(res.out)]) == 0
+
+
+@pytest.mark.parametrize("emitter,what", [
+    ('<emitter type="point"><point name="position" x="nan" y="0" z="3"/></emitter>', "position"),
+    ('<emitter type="point"><point name="position" x="inf" y="0" z="3"/></emitter>', "position"),
+    ('<emitter type="spot"><float name="cutoff_angle" value="nan"/><transform name="to_world">'
+     '<lookat origin="0,0,3" target="0,0,0"/></transform></emitter>', "cutoff_angle")])
+def test_an_xml_emitter_that_is_not_finite_is_one_line(tmp_path, capsys, emitter, what):
+    xml = tmp_path / "s.xml"
+    xml.write_text('<scene version="3.0.0"><shape type="rectangle"><transform name="to_world"><scale value="3"/>'
+                   '</transform></shape>' + emitter + '<sensor type="perspective"><transform name="to_world">'
+                   '<lookat origin="3,-3,3" target="0,0,0" up="0,0,1"/></transform><film type="hdrfilm">'
+                   '<integer name="width" value="32"/><integer name="height" value="32"/></film></sensor></scene>')
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[experiment]\nname = "c"\n[[scene]]\nfile = "{xml}"\n[map]\nresolution = 16\n'
+                   '[[scheme]]\nname = "none"\n')
+    capsys.readouterr()
+    assert cli.main(["plan", str(cfg)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "scene[0].file" in err[0] and what in err[0] and "not finite" in err[0], err
+
+
+def test_a_ply_beyond_float32_is_one_line_without_numpy_warnings(tmp_path, capsys):
+    """A vertex at 3e38 (its ground beyond float32): the config error alone, no RuntimeWarning lines."""
+    import numpy as np
+    ply = tmp_path / "big.ply"
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [3e38, 0, 0]], np.float32)
+    rec = np.zeros(2, dtype=[("n", "u1"), ("i", "<i4", 3)])
+    rec["n"], rec["i"] = 3, [[0, 1, 2], [0, 1, 3]]
+    ply.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+                    b"property float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n"
+                    + v.tobytes() + rec.tobytes())
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[experiment]\nname = "b"\n[[scene]]\nfile = "{ply}"\n[map]\nresolution = 16\n'
+                   '[[scheme]]\nname = "none"\n')
+    p = subprocess.run([sys.executable, "-m", "dsm.cli", "plan", str(cfg)], capture_output=True, text=True,
+                       timeout=120)
+    err = p.stderr.strip().splitlines()
+    assert p.returncode == 2 and len(err) == 1 and "not finite" in err[0], err
