@@ -174,6 +174,16 @@ def _check_builtin(name, p, source, where):
         raise ConfigError(source, f"{where}.tilt", f"must be below 90 degrees, got {p.tilt}")
     if isinstance(p, GrazingParams) and not p.angle < 90:
         raise ConfigError(source, f"{where}.angle", f"must be below 90 degrees, got {p.angle}")
+    t = float(np.max(np.abs(p.translate)))
+    if t > 0:
+        v = np.concatenate([np.asarray(v, float).reshape(-1, 3) for v, _ in builtin_geometry(name, p)[0].values()])
+        size = float(np.ptp(v, axis=0).max()) * p.scale
+        with np.errstate(over="ignore"):
+            step = float(np.spacing(np.float32(t)))      # float32's step at the scene's position
+        if not step * 64 <= size:                      # 64 steps across: the scene's shape still held
+            raise ConfigError(source, f"{where}.translate", f"{t:g} from the origin float32 moves in steps of "
+                              f"{step:.3g}, and the scene is {size:.3g} across: its geometry cannot be held there "
+                              f"(keep the offset below {size / 64 * 2 ** 23:.3g})")
     lo, hi = scale_range(name, p)
     if not lo <= p.scale <= hi:
         raise ConfigError(source, f"{where}.scale", f"{p.scale:g} is outside {lo:.2g} to {hi:.2g}, the scales at which "

@@ -674,3 +674,17 @@ def test_a_ply_beyond_float32_is_one_line_without_numpy_warnings(tmp_path, capsy
                        timeout=120)
     err = p.stderr.strip().splitlines()
     assert p.returncode == 2 and len(err) == 1 and "not finite" in err[0], err
+
+
+def test_a_builtin_moved_beyond_what_float32_holds_names_translate(tmp_path, capsys):
+    """translate = [1e30, 0, 0]: float32 steps there are 7.6e22; the error names translate (it
+    named the builtin and "degenerate triangles"); 1e5 still runs."""
+    for t, rc in ((1e30, 2), (1e5, 0)):
+        cfg = tmp_path / f"t{rc}.toml"
+        cfg.write_text(f'[experiment]\nname = "t"\n[[scene]]\nbuiltin = "plane_box"\ntranslate = [{t}, 0.0, 0.0]\n'
+                       '[map]\nresolution = 16\n[[scheme]]\nname = "none"\n')
+        capsys.readouterr()
+        assert cli.main(["plan", str(cfg)]) == rc
+        if rc:
+            err = capsys.readouterr().err.strip().splitlines()
+            assert len(err) == 1 and "scene[0].translate" in err[0] and "float32" in err[0], err
