@@ -34,7 +34,7 @@ from .closedness import shape_closedness
 from .env import exact_math  # noqa: F401  (the plugins set it in the thread that renders)
 from .config import parse_scheme
 from .lookup import Receiver
-from .types import ConfigError, LightSpec, SchemeSpec  # noqa: F401  (the types a stage takes)
+from .types import VARIANTS, ConfigError, LightSpec, SchemeSpec  # noqa: F401  (the types a stage takes)
 
 # ---------------------------------------------------------------- config
 
@@ -48,6 +48,8 @@ def prepare(config, variant: str | None = None, threads: int | None = None):
     from . import plan as planmod
     config = cfgmod.coerce(config)
     cfgmod.check_runnable(config)            # NothingToRun: every scene an absent optional file
+    if variant is not None and variant not in VARIANTS:     # an argument's mistake, as the TOML key's
+        raise ConfigError("<arguments>", "variant", f"unknown variant {variant!r}", VARIANTS)
     env.use_variant(variant or config.variant, threads)
     scenes.check(config)                     # unreadable scenes
     planmod.check_memory(planmod.make(config), config.source)

@@ -825,7 +825,7 @@ def _check_emitters(spec, lights):
     cutoff that is not finite (every receiver read as backfacing: the case came out empty)."""
     for i, light in enumerate(lights):
         vals = {"position": light.position, "direction": light.direction,
-                "cutoff_angle": (light.cutoff,) if light.type == "spot" else None}
+                "cutoff_angle": (light.cutoff,)}        # a spot's; the others keep the finite default
         for name, v in vals.items():
             if v is not None and not all(math.isfinite(c) for c in v):
                 raise ConfigError(_src(spec), f"{spec.where}.file", f"{spec.file}: emitter {i} ({light.type}) has a "

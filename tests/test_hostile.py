@@ -688,3 +688,11 @@ def test_a_builtin_moved_beyond_what_float32_holds_names_translate(tmp_path, cap
         if rc:
             err = capsys.readouterr().err.strip().splitlines()
             assert len(err) == 1 and "scene[0].translate" in err[0] and "float32" in err[0], err
+
+
+def test_an_unknown_variant_argument_is_a_config_error_as_the_toml_key_is(tmp_path):
+    import dsm
+    from conftest import base_config
+    with pytest.raises(ConfigError, match="variant.*bogus.*llvm_ad_rgb"):
+        dsm.run(base_config(), out=tmp_path / "r", variant="bogus")
+    assert not (tmp_path / "r").exists()
