@@ -1,4 +1,4 @@
-"""Engines' cascade layouts (``[map] cascades = "bevy"`` etc.), read from ../shared/ENGINE_DEFAULTS.md.
+"""Engines' cascade layouts (``[map] cascades = "bevy"`` etc.), as read in the source files each entry names.
 
 Each layout sets the count, the split bounds, the maximum distance, the blend band and
 stabilization as the engine's defaults do; the map's resolution stays the config's. Bias

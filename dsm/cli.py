@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 
 from . import config as cfgmod
-from . import lock, resume
+from . import figures, lock, resume
 from .env import MAX_THREADS, SetupError
 
 DEFAULT_CONFIG = Path(__file__).with_name("default.toml")
@@ -387,7 +387,7 @@ def out_problem(out: Path, force: bool, bench: bool = False) -> str | None:
 
 
 # what a run writes inside images/ (<scene>_<light>/<case>_<kind>, also under stale/) and plots/
-WRITTEN = {"images": re.compile(r"\d{4}_(error|shadow|cascade|v|vstar|abserr)\.png|\d{4}_frames\.gif"),
+WRITTEN = {"images": re.compile(r"\d{4}_(" + "|".join(map(re.escape, figures.CASE_IMAGE_KINDS)) + ")"),
            "plots": re.compile(r"[^/]+\.png")}
 
 

@@ -42,6 +42,11 @@ def image_folder(row) -> str:
     return slug(f"{row['scene']}_{row['light']}")
 
 
+# the files a case writes under images/<scene>_<light>/: <case>_<kind> (error and shadow here,
+# cascade in dsm.cascades, frames in dsm.motion, v, vstar and abserr in dsm.soft_report)
+CASE_IMAGE_KINDS = ("error.png", "shadow.png", "cascade.png", "frames.gif", "v.png", "vstar.png", "abserr.png")
+
+
 def image_paths(row) -> tuple:
     """(error image, shadow image) of a case, relative to the run's folder."""
     f = f"images/{image_folder(row)}/{row['case']}"

@@ -49,7 +49,7 @@ def _read_rows(path: Path, notes: list, needs: str | None = None) -> list:
         raise NotARun(f"{path}: cannot be read ({e})") from None
     if needs and needs not in header:
         raise NotARun(f"{path}: not a dsm {path.name} (no {needs!r} column)")
-    whole = [r for r in raw if None not in r and None not in r.values()]
+    whole = report.whole_rows(raw)
     if len(whole) < len(raw):
         notes.append(f"{path}: {len(raw) - len(whole)} row(s) cut short (a run killed while writing them) left out")
     try:

@@ -79,6 +79,12 @@ def _fmt(x):
     return x
 
 
+def whole_rows(rows: list) -> list:
+    """The rows of a read CSV that are whole: a row cut short (a run killed while writing it) has
+    missing cells (None values) or extra ones (a None key)."""
+    return [r for r in rows if None not in r and None not in r.values()]
+
+
 def read_csv(path) -> list[dict]:
     """The rows of the CSV file ``path`` as dicts of strings."""
     with open(path, newline="") as fh:

@@ -27,7 +27,7 @@ import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from . import report
+from . import figures, report
 
 _FILE_HASHES: dict = {}
 
@@ -186,8 +186,7 @@ class Previous:
         rows = {}
         if (self.out / "metrics.csv").is_file():
             # a row cut short (a run killed while writing it) is not kept: its case runs again
-            rows = {r["case"]: r for r in report.read_csv(self.out / "metrics.csv")
-                    if None not in r and None not in r.values()}
+            rows = {r["case"]: r for r in report.whole_rows(report.read_csv(self.out / "metrics.csv"))}
         if (self.out / "cascades.csv").is_file():
             for r in report.read_csv(self.out / "cascades.csv"):
                 self.cascade_rows.setdefault(r.get("case"), []).append(r)
@@ -233,7 +232,7 @@ class Previous:
         # a case's files: images/<scene>_<light>/<case>_<kind> (or images/<case>_<kind> of older runs)
         staged = []
         for old, dest in moves:
-            for kind in ("error.png", "shadow.png", "cascade.png", "frames.gif", "v.png", "vstar.png", "abserr.png"):
+            for kind in figures.CASE_IMAGE_KINDS:
                 for src in [images / f"{old}_{kind}", *images.glob(f"*/{old}_{kind}")]:
                     if not src.is_file() or src.parent.name == "stale":
                         continue

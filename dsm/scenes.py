@@ -174,9 +174,10 @@ def _check_builtin(name, p, source, where):
         raise ConfigError(source, f"{where}.tilt", f"must be below 90 degrees, got {p.tilt}")
     if isinstance(p, GrazingParams) and not p.angle < 90:
         raise ConfigError(source, f"{where}.angle", f"must be below 90 degrees, got {p.angle}")
+    shapes = builtin_geometry(name, p)[0]
     t = float(np.max(np.abs(p.translate)))
     if t > 0:
-        v = np.concatenate([np.asarray(v, float).reshape(-1, 3) for v, _ in builtin_geometry(name, p)[0].values()])
+        v = np.concatenate([np.asarray(v, float).reshape(-1, 3) for v, _ in shapes.values()])
         size = float(np.ptp(v, axis=0).max()) * p.scale
         with np.errstate(over="ignore"):
             step = float(np.spacing(np.float32(t)))      # float32's step at the scene's position
@@ -184,7 +185,7 @@ def _check_builtin(name, p, source, where):
             raise ConfigError(source, f"{where}.translate", f"{t:g} from the origin float32 moves in steps of "
                               f"{step:.3g}, and the scene is {size:.3g} across: its geometry cannot be held there "
                               f"(keep the offset below {size / 64 * 2 ** 23:.3g})")
-    lo, hi = scale_range(name, p)
+    lo, hi = scale_range(name, p, shapes)
     if not lo <= p.scale <= hi:
         raise ConfigError(source, f"{where}.scale", f"{p.scale:g} is outside {lo:.2g} to {hi:.2g}, the scales at which "
                           "Mitsuba's float32 triangle normals of this scene neither overflow nor underflow")
@@ -197,9 +198,10 @@ def _cross_lengths(verts, faces) -> np.ndarray:
     return np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
 
 
-def scale_range(name: str, p) -> tuple:
-    """The scales at which every triangle of a built-in keeps a float32 normal (see CROSS_MAX)."""
-    shapes = builtin_geometry(name, p)[0]
+def scale_range(name: str, p, shapes=None) -> tuple:
+    """The scales at which every triangle of a built-in keeps a float32 normal (see CROSS_MAX);
+    ``shapes``: its geometry where the caller has it."""
+    shapes = builtin_geometry(name, p)[0] if shapes is None else shapes
     c = np.concatenate([_cross_lengths(v, f) for v, f in shapes.values()])
     c = c[c > 0]
     return math.sqrt(CROSS_MIN / c.min()), math.sqrt(CROSS_MAX / c.max())
