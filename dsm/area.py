@@ -21,23 +21,21 @@ front of a one-sided light). Each sample is a shadow ray leaving the receiver be
 bound on its hit point's error and stopping that far short of the sample
 (:func:`dsm.spawn.ray_to`), so the reference holds anywhere in the world.
 
-Sampling (:func:`reference`): stratified, in stages. The first stage takes ``min_samples``
-jittered samples on an ``a x b`` grid of the light's square parameter domain (every shape's
-map from the square to its surface preserves area, so equal cells are equal areas); each
-later stage adds as many samples as were taken so far, again one per cell of a finer grid.
-Random numbers come from the receiver's own position bits and the experiment's seed, so a
-receiver's V* does not depend on which other receivers are in the case.
+Sampling (:func:`reference`): randomized quasi-Monte Carlo in ``replicates`` (default 16)
+independent replicates, each a jittered stratified set over the light's square parameter domain
+(every shape's map from the square to its surface preserves area, so equal cells are equal
+areas). Stages: first ``min_samples`` in all, then as many again as taken so far, each replicate
+drawing a new jittered set on a finer grid. Random numbers come from the receiver's own
+position bits and the experiment's seed, so a receiver's V* does not depend on which other
+receivers are in the case.
 
-Interval and stopping rule: the Wilson score interval of the pooled count. Each stage is
-stratified with proportional allocation, whose variance never exceeds that of as many
-independent samples, so the binomial (Wilson) interval is conservative for the pooled
-estimate. A receiver stops when
-
-1. its first ``min_samples`` samples all agree (all visible or all blocked): the
-   *early-stop rule* (the interval is then still wide; ``tests/test_area_lights.py`` measures
-   how often it misses a penumbra against a dense reference), or
-2. the 95 % interval's half-width is at most ``tolerance``, or
-3. it reached ``max_samples``.
+Interval and stopping rule (:mod:`dsm.intervals`): Student's t over the replicates' means at
+``confidence`` (default 0.99), or, where every sample agrees, the zero-count (Clopper-Pearson)
+bound, which holds for stratified samples too. A receiver stops once V* is within
+``tolerance`` of both ends of its interval, or at ``max_samples``. There is no early stop on
+a few agreeing samples: a receiver is umbra or lit only after the zero-count bound is within the
+tolerance (459 samples at 99 % and 0.01), so none is called umbra for want of samples.
+``capped`` marks receivers left at ``max_samples`` above the tolerance (the run says how many).
 
 Regions: ``umbra`` (no sample visible), ``lit`` (every sample visible), ``penumbra`` (the
 rest). The rays are counted per region.
@@ -46,14 +44,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from statistics import NormalDist
 from types import SimpleNamespace
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import lookup, spawn
+from . import intervals, lookup, spawn
 from .views import ParaboloidView, PerspectiveView, CubeView, light_frame
 
 SHAPES = ("rectangle", "disk", "sphere", "emitter")
@@ -242,36 +239,13 @@ def make_view(light, R, receivers_world, bbox, kind=None):
     return view
 
 
-# ---------------------------------------------------------------- interval
-
-def wilson(k, n, confidence: float = 0.95):
-    """(centre, half-width) of the Wilson score interval of k successes in n trials (numpy)."""
-    k, n = np.asarray(k, np.float64), np.asarray(n, np.float64)
-    z = NormalDist().inv_cdf(0.5 + confidence / 2)
-    z2 = z * z
-    den = n + z2
-    centre = (k + z2 / 2) / den
-    half = z / den * np.sqrt(np.maximum(k * (n - k) / np.maximum(n, 1), 0.0) + z2 / 4)
-    return centre, half
-
-
-def interval(k, n, confidence: float = 0.95):
-    """(low, high) of the Wilson interval, exactly 0 / 1 at k = 0 / k = n (where rounding of
-    centre -/+ half-width would leave the bound a few ulps inside)."""
-    centre, half = wilson(k, n, confidence)
-    k, n = np.asarray(k), np.asarray(n)
-    lo = np.where(k == 0, 0.0, np.clip(centre - half, 0.0, 1.0))
-    hi = np.where(k == n, 1.0, np.clip(centre + half, 0.0, 1.0))
-    return lo, hi
-
+# ---------------------------------------------------------------- reference
 
 def regions(k, n) -> np.ndarray:
     """0 umbra (no sample visible), 1 penumbra, 2 lit (every sample visible)."""
     k, n = np.asarray(k), np.asarray(n)
     return np.where(k == 0, 0, np.where(k == n, 2, 1)).astype(np.uint8)
 
-
-# ---------------------------------------------------------------- reference
 
 def _grid(m: int) -> tuple:
     """(a, b) with a * b = m, a the largest divisor of m not above sqrt(m)."""
@@ -303,12 +277,15 @@ def sample_visibility(scene, si, n, geom: Geometry, sample, magnitude: float):
 
 @dataclass
 class Reference:
-    """Per receiver: visible samples ``hits`` of ``samples``; V* = hits / samples; ``half``
-    the 95 % Wilson half-width; ``early`` stopped by the early-stop rule."""
+    """Per receiver: visible samples ``hits`` of ``samples``; V* = hits / samples; ``low`` and
+    ``high`` its interval at ``confidence`` (:func:`dsm.intervals.replicate_interval`); ``capped``:
+    it reached ``max_samples`` with the interval still wider than the tolerance."""
     hits: np.ndarray
     samples: np.ndarray
-    half: np.ndarray
-    early: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+    capped: np.ndarray
+    confidence: float = 0.99
 
     @property
     def v(self) -> np.ndarray:
@@ -316,12 +293,23 @@ class Reference:
         return self.hits / np.maximum(self.samples, 1)
 
     @property
+    def half(self) -> np.ndarray:
+        """The interval's half-width: the larger distance from V* to its ends."""
+        return np.maximum(self.high - self.v, self.v - self.low)
+
+    @property
     def rays(self) -> int:
         """Shadow rays cast over all receivers (the samples summed)."""
         return int(self.samples.sum())
 
+    def take(self, keep: np.ndarray) -> "Reference":
+        """The receivers ``keep`` selects (a boolean mask or indices)."""
+        return Reference(self.hits[keep], self.samples[keep], self.low[keep], self.high[keep], self.capped[keep],
+                         self.confidence)
+
     def stats(self) -> dict:
-        """Receivers, rays and rays per receiver by region; mean and max half-width; cap hits."""
+        """Receivers, rays and rays per receiver by region; mean and max half-width; receivers
+        left at the cap above the tolerance."""
         reg = regions(self.hits, self.samples)
         out = {}
         for i, name in enumerate(REGIONS):
@@ -329,60 +317,90 @@ class Reference:
             out[name] = {"receivers": int(sel.sum()), "rays": int(self.samples[sel].sum()),
                          "rays_per_receiver": float(self.samples[sel].mean()) if sel.any() else None}
         out["rays"] = self.rays
-        out["early_stops"] = int(self.early.sum())
-        out["half_width_mean"] = float(self.half.mean()) if self.half.size else None
-        out["half_width_max"] = float(self.half.max()) if self.half.size else None
+        out["confidence"] = self.confidence
+        out["capped_above_tolerance"] = int(self.capped.sum())
+        half = self.half
+        out["half_width_mean"] = float(half.mean()) if half.size else None
+        out["half_width_max"] = float(half.max()) if half.size else None
         return out
 
 
+def empty_reference(confidence: float = 0.99) -> Reference:
+    """A reference over no receivers."""
+    z = np.zeros(0)
+    return Reference(z.astype(np.int64), z.astype(np.int64), z, z, z.astype(bool), confidence)
+
+
+def _stage_sizes(min_samples: int, max_samples: int, replicates: int) -> list:
+    """Samples per replicate added at each stage: ``min_samples`` in all first, then as many as
+    taken so far, up to ``max_samples`` (both rounded down to whole replicates, at least one
+    sample each)."""
+    first = max(min_samples // replicates, 1)
+    cap = max(max_samples // replicates, first)
+    sizes, total = [first], first
+    while total < cap:
+        add = min(total, cap - total)
+        sizes.append(add)
+        total += add
+    return sizes
+
+
 def reference(scene, si, n_rx, geom: Geometry, magnitude: float, seed: int = 7, min_samples: int = 16,
-              max_samples: int = 1024, tolerance: float = 0.01, adaptive: bool = True) -> Reference:
+              max_samples: int = 4096, tolerance: float = 0.01, adaptive: bool = True, confidence: float = 0.99,
+              replicates: int = 16) -> Reference:
     """The stratified adaptive V* of receivers (surface interactions ``si``, normals ``n_rx``
-    facing the camera). ``adaptive=False``: exactly ``max_samples`` per receiver, in the same
-    stages (for convergence tests)."""
+    facing the camera), in ``replicates`` independent jittered sets: a receiver stops once its
+    interval at ``confidence`` is within ``tolerance`` of V* on both sides, or at ``max_samples``.
+    ``adaptive=False``: exactly ``max_samples`` per receiver, in the same stages (for
+    convergence tests)."""
     count = dr.width(si.p)
+    reps = max(1, min(int(replicates), int(min_samples)))
     p_all = mi.Point3f(si.p)
     delta_all = spawn.error_bound(si, dr.opaque(mi.Float, float(magnitude)))
     key_all = lookup.position_key(p_all)
     dr.eval(p_all, delta_all, key_all)
-    hits = np.zeros(count, np.int64)
-    samples = np.zeros(count, np.int64)
-    early = np.zeros(count, bool)
+    rep_hits = np.zeros((count, reps), np.int64)
+    per_rep = np.zeros(count, np.int64)
+    low, high = np.zeros(count), np.ones(count)
     active = np.arange(count, dtype=np.int64)
-    stage, add = 0, min(min_samples, max_samples)
-    while len(active) and add > 0:
-        a, b = _grid(add)
-        lanes = len(active) * add
-        lane = dr.arange(mi.UInt32, lanes)
-        r = lane // add
-        s = lane % add
-        ridx = dr.gather(mi.UInt32, mi.UInt32(active.astype(np.uint32)), r)
-        p = dr.gather(mi.Point3f, p_all, ridx)
-        n = dr.gather(mi.Vector3f, n_rx, ridx)
-        delta = dr.gather(mi.Float, delta_all, ridx)
-        rng = mi.PCG32()
-        # the receiver's own key and (seed, stage, cell): independent of the other receivers
-        rng.seed(mi.UInt64(dr.gather(mi.UInt32, key_all, ridx)),
-                 mi.UInt64(s) + mi.UInt64((seed & 0xFFFF) * 4096 + stage) * 1048576)
-        u = (mi.Float(s % a) + rng.next_float32()) / a
-        v = (mi.Float(s // a) + rng.next_float32()) / b
-        u, v = dr.minimum(u, 0.99999994), dr.minimum(v, 0.99999994)
-        vis = visible(scene, p, n, delta, geom, u, v).numpy().astype(np.int64).reshape(len(active), add)
-        hits[active] += vis.sum(1)
-        samples[active] += add
-        k, m = hits[active], samples[active]
-        _, half = wilson(k, m)
-        agree = (k == 0) | (k == m)
-        if adaptive:
-            stop = (half <= tolerance) | (m >= max_samples)
-            if stage == 0:
-                early[active] = agree & ~stop
-                stop |= agree
-        else:
-            stop = m >= max_samples
-        active = active[~stop]
-        stage += 1
-        total = samples[active[0]] if len(active) else 0
-        add = int(min(total, max_samples - total))
-    _, half = wilson(hits, samples)
-    return Reference(hits, samples, half, early)
+    sizes = _stage_sizes(min_samples, max_samples, reps)
+    for stage, m in enumerate(sizes):
+        if not len(active):
+            break
+        vis = _stage(scene, geom, p_all, n_rx, delta_all, key_all, active, m, reps, seed, stage)
+        rep_hits[active] += vis.reshape(len(active), reps, m).sum(2)
+        per_rep[active] += m
+        _, lo, hi = intervals.replicate_interval(rep_hits[active], int(per_rep[active[0]]), confidence)
+        low[active], high[active] = lo, hi
+        v = rep_hits[active].sum(1) / (per_rep[active] * reps)
+        done = np.maximum(hi - v, v - lo) <= tolerance
+        active = active[~done] if adaptive else active
+    samples = per_rep * reps
+    v = rep_hits.sum(1) / np.maximum(samples, 1)
+    capped = np.maximum(high - v, v - low) > tolerance
+    return Reference(rep_hits.sum(1), samples, low, high, capped, confidence)
+
+
+def _stage(scene, geom, p_all, n_rx, delta_all, key_all, active, m, reps, seed, stage) -> np.ndarray:
+    """One stage's visibility (len(active) * reps * m, receiver-major, then replicate): each
+    replicate a jittered set on an ``a x b`` grid of the light's square, from PCG32 streams keyed
+    by the receiver's own position bits and (seed, stage, sample), so a receiver's V* does not
+    depend on the others."""
+    a, b = _grid(m)
+    add = reps * m
+    lanes = len(active) * add
+    lane = dr.arange(mi.UInt32, lanes)
+    r = lane // add
+    s = lane % add
+    cell = s % m
+    ridx = dr.gather(mi.UInt32, mi.UInt32(active.astype(np.uint32)), r)
+    p = dr.gather(mi.Point3f, p_all, ridx)
+    n = dr.gather(mi.Vector3f, n_rx, ridx)
+    delta = dr.gather(mi.Float, delta_all, ridx)
+    rng = mi.PCG32()
+    rng.seed(mi.UInt64(dr.gather(mi.UInt32, key_all, ridx)),
+             mi.UInt64(s) + mi.UInt64((seed & 0xFFFF) * 4096 + stage) * 1048576)
+    u = (mi.Float(cell % a) + rng.next_float32()) / a
+    v = (mi.Float(cell // a) + rng.next_float32()) / b
+    u, v = dr.minimum(u, 0.99999994), dr.minimum(v, 0.99999994)
+    return visible(scene, p, n, delta, geom, u, v).numpy().astype(np.int64)

@@ -535,10 +535,25 @@ def _run_held(cfg, args, out: Path, clustered: bool) -> int:
     if empty:
         print(f"dsm: {empty} cases are empty (no receiver: nothing faces the light inside its domain); "
               "their rates are undefined (see table.md)", file=sys.stderr)
+    for line in reference_notes(res.run.get("reference_regions", [])):
+        print(f"dsm: {line}", file=sys.stderr)
     if failed:
         print(f"dsm: {failed} failed (reasons above, in table.md and run.json)", file=sys.stderr)
         return 1
     return 0
+
+
+def reference_notes(regions: list) -> list:
+    """One line per area light whose reference left receivers at max_samples above its tolerance."""
+    out = []
+    for r in regions:
+        n = r.get("capped_above_tolerance", 0)
+        if n:
+            total = sum(r[k]["receivers"] for k in ("umbra", "penumbra", "lit"))
+            out.append(f"area light reference of {r['scene']} {r['light']}: {n} of {total} receivers ended at "
+                       f"max_samples with a {r.get('confidence', 0.99):g} interval wider than the tolerance "
+                       f"(largest half-width {r['half_width_max']:.3g}); raise max_samples (run.json reference_regions)")
+    return out
 
 
 def _tune(cfg, args, out: Path) -> int:

@@ -132,8 +132,8 @@ def soft(v, hits, samples, half, rx_shape, tap_shape) -> dict:
     per region (``mae_<region>``, ``rmse_<region>``; NaN over an empty region). Acne and
     peter-panning keep their meaning where V* is 0 or 1: acne = lit and V < 0.5 (over the lit
     receivers: ``acne_rate``), peter-panning = umbra and V >= 0.5 (over the umbra); penumbra
-    receivers count in neither. The reference's own uncertainty: the mean and largest 95 %
-    half-width and the mean samples per receiver, to tell the kit's error from the reference's
+    receivers count in neither. The reference's own uncertainty: the mean and largest
+    half-width of its interval (at the light's confidence) and the mean samples per receiver, to tell the kit's error from the reference's
     noise."""
     v = np.asarray(v, np.float64)
     hits, samples = np.asarray(hits), np.asarray(samples)

@@ -147,8 +147,7 @@ class LightSetup:
             return self
         ex = dict(self.exclusions)
         ex["n_excluded_outside"] += int((~keep).sum())
-        ref = None if self.ref is None else area.Reference(self.ref.hits[keep], self.ref.samples[keep],
-                                                           self.ref.half[keep], self.ref.early[keep])
+        ref = None if self.ref is None else self.ref.take(keep)
         if not keep.any():
             return LightSetup(self.label, self.light, self.pixels[keep], None, None, self.shape[keep],
                               self.v_star[keep], self.occluder_dist[keep], ex, self.reference_ms, ref=ref)
@@ -227,7 +226,7 @@ def area_setup(sd, gb, light, label, repeats: int = 0, seed: int = 7) -> LightSe
     if len(pixels) == 0:
         empty = np.zeros(0)
         return LightSetup(label, light, pixels, None, None, empty.astype(np.uint32), empty.astype(bool), empty,
-                          exclusions, 0.0, ref=area.Reference(*(np.zeros(0, np.int64),) * 3, np.zeros(0, bool)))
+                          exclusions, 0.0, ref=area.empty_reference(light.confidence))
     idx = mi.UInt32(pixels)
     si = dr.gather(mi.SurfaceInteraction3f, gb.si, idx)
     p = dr.gather(mi.Point3f, gb.p, idx)
@@ -236,7 +235,8 @@ def area_setup(sd, gb, light, label, repeats: int = 0, seed: int = 7) -> LightSe
     magnitude = scene_magnitude(sd.bbox)
     # timed once (cold): repeating a Monte Carlo reference costs as much again each time
     out, t = timing.measure(lambda: (area.reference(sd.scene, si, n, geom, magnitude, seed, light.min_samples,
-                                                    light.max_samples, light.tolerance),), 0)
+                                                    light.max_samples, light.tolerance,
+                                                    confidence=light.confidence, replicates=light.replicates),), 0)
     ref = out[-1]
     return LightSetup(label, light, pixels, p, n, gb.shape.numpy()[pixels], ref.v >= 0.5,
                       np.full(len(pixels), np.inf), exclusions, t.ms, si, ref=ref)

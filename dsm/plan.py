@@ -25,6 +25,7 @@ import os
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 
+from . import intervals
 from . import lights as light_types
 from . import schemes as schemes_mod
 from .types import DEFAULT_CAMERA, VIEW_FACES, Config, ConfigError
@@ -103,6 +104,7 @@ class Plan:
     absent: list = field(default_factory=list)      # optional scene files that are absent
     lambdas: int = 1                                # [oracle] lambda values
     area_samples: dict = field(default_factory=dict)  # (scene, light label) -> an area light's max_samples
+    area_short: list = field(default_factory=list)  # area lights whose max_samples cannot reach their tolerance
     frames: int = 0                                 # [[motion]]: frames over all paths (maps built per frame, at most)
 
     @property
@@ -165,6 +167,7 @@ class Plan:
             out.append("; ".join(line))
         if self.absent:
             out.append("absent optional scene files (skipped): " + ", ".join(map(str, self.absent)))
+        out += [f"area light reference of {line}" for line in self.area_short]
         return out
 
     def text(self) -> str:
@@ -381,6 +384,17 @@ def check_emitters(cfg: Config):
                                   "limit it to scenes with luminaires (scenes = [...])", AREA_SHAPES)
 
 
+def reference_shortfall(light) -> str:
+    """Why an area light's ``max_samples`` cannot reach its ``tolerance`` for a receiver that sees
+    all or none of the light (:func:`dsm.intervals.samples_to_certify`), or "" where it can."""
+    need = intervals.samples_to_certify(light.tolerance, light.confidence)
+    if light.max_samples >= need:
+        return ""
+    return (f"max_samples {light.max_samples} cannot certify a lit or umbra receiver within tolerance "
+            f"{light.tolerance:g} at confidence {light.confidence:g} (needs {need}): such receivers end at the cap "
+            "with a wider interval")
+
+
 def make(cfg: Config) -> Plan:
     """The Plan of ``cfg``: a MapPlan per scene/light/view/resolution/culling, each tiled to fit the budget."""
     from .config import absent_files
@@ -406,6 +420,9 @@ def make(cfg: Config) -> Plan:
             shape = specs[li].shape if specs[li] is not None else ""
             if light_types.get(ltype).SOFT:              # a Monte Carlo reference: its samples per receiver
                 plan.area_samples[(sc.label, label)] = specs[li].max_samples
+                short = reference_shortfall(specs[li])
+                if short:
+                    plan.area_short.append(f"{sc.label} {label}: {short}")
             for view, cascade in _layouts(views_for(ltype, cfg.map.view, shape), cfg.map.cascade):
                 faces = cascade.count if cascade is not None else VIEW_FACES[view]
                 for R in cfg.map.resolutions_for(faces):

@@ -302,19 +302,19 @@ def soft_rows(rows) -> list:
 
 def soft_md(rows: list) -> list:
     """Area lights: V against the Monte Carlo V* by region (umbra V* = 0, penumbra, lit V* = 1),
-    the reference's mean 95 % half-width, and each filter's lookup time."""
+    the reference's mean interval half-width (at its confidence), and each filter's lookup time."""
     soft = soft_rows(rows)
     if not soft:
         return []
     cols = [("scene", "scene"), ("light", "light"), ("scheme", "scheme"), ("filter", "filter"),
             ("n_umbra", "umbra"), ("n_penumbra", "penumbra"), ("n_lit", "lit"), ("mae_umbra", "MAE umbra"),
             ("mae_penumbra", "MAE penumbra"), ("mae_lit", "MAE lit"), ("rmse", "RMSE"), ("acne_rate", "acne"),
-            ("peterpan_rate", "peter-pan"), ("ref_half_width_mean", "ref ±95%"), ("lookup_ms", "lookup ms")]
+            ("peterpan_rate", "peter-pan"), ("ref_half_width_mean", "ref ±"), ("lookup_ms", "lookup ms")]
     lines = ["", "## Soft shadows (area lights)", "",
              "V against the reference V* (the visible fraction of the light, Monte Carlo): mean absolute error "
              "per region (umbra: no reference sample visible, lit: all, penumbra: the rest), RMSE over all "
-             "receivers; acne over the lit receivers (V < 0.5), peter-pan over the umbra (V >= 0.5); ref ±95%: "
-             "the reference's mean 95 % half-width. Rays per receiver by region: run.json `reference_regions`. "
+             "receivers; acne over the lit receivers (V < 0.5), peter-pan over the umbra (V >= 0.5); ref ±: "
+             "the reference's mean interval half-width at the light's confidence (default 99 %). Rays per receiver by region: run.json `reference_regions`. "
              "Images: images/<scene>_<light>/<case>_v.png, _vstar.png, _abserr.png; plots/soft_*.png.",
              "", "| case | " + " | ".join(h for _, h in cols) + " |", "|---" * (len(cols) + 1) + "|"]
     for r in soft:

@@ -200,8 +200,10 @@ class LightSpec:
     shape: str = ""
     size: tuple = ()
     min_samples: int = 16
-    max_samples: int = 1024
+    max_samples: int = 4096
     tolerance: float = 0.01
+    confidence: float = 0.99    # the reference interval's confidence
+    replicates: int = 16        # independent jittered sets per receiver (the interval's degrees of freedom + 1)
     emitter_shapes: tuple = ()  # an emitter light's shape indices (its map excludes them)
     scenes: tuple = ()          # area lights: only these scenes (labels or their first word); () all
 

@@ -10,17 +10,26 @@ TYPE = "area"
 POSITIONAL = True
 SOFT = True                     # its reference is the visible fraction V* (dsm.area), not one ray
 MOTION = ()
-SAMPLING = ("min_samples", "max_samples", "tolerance")
+SAMPLING = ("min_samples", "max_samples", "tolerance", "confidence", "replicates")
 SHAPE_KEYS = {"emitter": (), "sphere": ("position", "size"), "disk": ("position", "direction", "size"),
               "rectangle": ("position", "direction", "size")}
 
 
-def _sampling(t: dict, source: str, where: str) -> tuple:
-    """(min_samples, max_samples, tolerance) of the reference."""
-    lo = number(t.get("min_samples", 16), source, f"{where}.min_samples", integer=True, minimum=1, maximum=1 << 20)
-    hi = number(t.get("max_samples", 1024), source, f"{where}.max_samples", integer=True, minimum=lo,
+def _sampling(t: dict, source: str, where: str) -> dict:
+    """The reference's sampling: min_samples, max_samples (whole replicates each), tolerance,
+    confidence and replicates."""
+    reps = number(t.get("replicates", 16), source, f"{where}.replicates", integer=True, minimum=2, maximum=64)
+    lo = number(t.get("min_samples", 16), source, f"{where}.min_samples", integer=True, minimum=reps,
                 maximum=1 << 20)
-    return lo, hi, number(t.get("tolerance", 0.01), source, f"{where}.tolerance", minimum=0.0, maximum=1.0)
+    hi = number(t.get("max_samples", 4096), source, f"{where}.max_samples", integer=True, minimum=lo,
+                maximum=1 << 20)
+    for key, value in (("min_samples", lo), ("max_samples", hi)):
+        if value % reps:
+            raise ConfigError(source, f"{where}.{key}", f"{value} is not a multiple of replicates = {reps} "
+                              f"(each replicate takes the same number of samples); try {value - value % reps or reps}")
+    tol = number(t.get("tolerance", 0.01), source, f"{where}.tolerance", minimum=0.0, maximum=1.0)
+    conf = number(t.get("confidence", 0.99), source, f"{where}.confidence", minimum=0.5, maximum=0.999999)
+    return {"min_samples": lo, "max_samples": hi, "tolerance": tol, "confidence": conf, "replicates": reps}
 
 
 def _size(t: dict, shape: str, source: str, where: str) -> tuple:
@@ -40,7 +49,7 @@ def parse(t: dict, source: str, where: str) -> LightSpec:
     only = as_list(t.get("scenes", []))
     if not all(isinstance(x, str) and x for x in only):
         raise ConfigError(source, f"{where}.scenes", f"expected a list of scene labels, got {t['scenes']!r}")
-    lo, hi, tol = _sampling(t, source, where)
+    sampling = _sampling(t, source, where)
     pos = direction = None
     size = ()
     if shape != "emitter":
@@ -52,7 +61,7 @@ def parse(t: dict, source: str, where: str) -> LightSpec:
         if shape != "sphere":
             direction = unit_direction(t.get("direction", [0.0, 0.0, -1.0]), source, f"{where}.direction")
     return LightSpec(TYPE, position=pos, direction=direction, label=TYPE, shape=shape, size=size,
-                     min_samples=lo, max_samples=hi, tolerance=tol, scenes=tuple(only))
+                     scenes=tuple(only), **sampling)
 
 
 def views(point_views: tuple, shape: str) -> tuple:
