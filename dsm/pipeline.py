@@ -26,7 +26,7 @@ import mitsuba as mi
 import numpy as np
 
 from . import cascades as cascades_mod
-from . import area, formats, lights, lookup, reference, scenes, schemes, shadowmap, spawn, timing
+from . import area, exact_frame, formats, lights, lookup, reference, scenes, schemes, shadowmap, spawn, timing
 from . import oracle as oracle_mod
 from . import gbuffer as gbuffer_mod
 from . import metrics as metrics_mod
@@ -96,7 +96,13 @@ def gbuffer(sd, width: int | None = None, height: int | None = None, sensor=None
     size unless given)."""
     sensor = sensor or sd.sensor
     W, H = (int(x) for x in sensor.film().size())
-    return gbuffer_mod.cast(sd.scene, sensor, width or W, height or H)
+    if sd.centre is None:
+        return gbuffer_mod.cast(sd.scene, sensor, width or W, height or H)
+    # far from the origin: hits in the frame centred on the scene, world positions from them
+    gb = gbuffer_mod.cast(sd.exact, exact_frame.sensor_in(sensor, sd.centre), width or W, height or H)
+    gb.p = exact_frame.to_world(gb.p, sd.centre)
+    dr.eval(gb.p)
+    return gb
 
 
 # ---------------------------------------------------------------- light set-up and reference
@@ -176,8 +182,9 @@ def light_setup(sd, gb, light, label, repeats: int = 0, seed: int = 7) -> LightS
     (an area light: :func:`area_setup`)."""
     if lights.is_soft(light):
         return area_setup(sd, gb, light, label, repeats, seed)
-    p_all, n_all = gb.p, gb.n
-    probe = make_view(light, 1, np.zeros((1, 3)), sd.bbox, "cube")   # a point light lights every direction
+    light_x, bbox_x = exact_side(sd, light)
+    p_all, n_all = gb.si.p, gb.n                  # the exact frame's hit points
+    probe = make_view(light_x, 1, np.zeros((1, 3)), bbox_x, "cube")   # a point light lights every direction
     to_light = probe.to_light(p_all)
     facing = (dr.dot(n_all, to_light) > 0).numpy().astype(bool)
     inside = probe.inside(p_all).numpy().astype(bool) if lights.get(light.type).POSITIONAL else np.ones_like(facing)
@@ -201,24 +208,32 @@ def light_setup(sd, gb, light, label, repeats: int = 0, seed: int = 7) -> LightS
     si = dr.gather(mi.SurfaceInteraction3f, gb.si, idx)
     p = dr.gather(mi.Point3f, gb.p, idx)
     n = dr.gather(mi.Vector3f, gb.n, idx)
-    magnitude = scene_magnitude(sd.bbox)
-    (vis, dist), t = timing.measure(lambda: reference.visibility(sd.scene, si, light, magnitude), repeats)
+    magnitude = scene_magnitude(bbox_x)
+    (vis, dist), t = timing.measure(lambda: reference.visibility(sd.exact, si, light_x, magnitude), repeats)
     dr.eval(p, n)
     return LightSetup(label, light, pixels, p, n, gb.shape.numpy()[pixels], vis.numpy().astype(bool),
                       dist.numpy(), exclusions, t.ms, si, back_p, back_n)
+
+
+def exact_side(sd, light) -> tuple:
+    """(light, bounding box) in the frame the exact side is traced in (:mod:`dsm.exact_frame`)."""
+    if sd.centre is None:
+        return light, sd.bbox
+    return exact_frame.light_in(light, sd.centre), exact_frame.bbox_in(sd.bbox, sd.centre)
 
 
 def area_setup(sd, gb, light, label, repeats: int = 0, seed: int = 7) -> LightSetup:
     """Receivers of an area light (hit pixels with part of the light above their tangent plane,
     in front of a one-sided light) and the Monte Carlo reference V* (:mod:`dsm.area`). No
     attached-shadow pixels are kept (``backface_lit_rate`` is undefined for area lights)."""
-    geom = area.geometry(light, sd.scene)
+    light_x, bbox_x = exact_side(sd, light)
+    geom = area.geometry(light_x, sd.exact)
     hit = gb.hit
     idx_hit = np.flatnonzero(hit).astype(np.uint32)
     keep = np.zeros(hit.shape, bool)
     if len(idx_hit):
         ih = mi.UInt32(idx_hit)
-        ph, nh = points_np(dr.gather(mi.Point3f, gb.p, ih)), points_np(dr.gather(mi.Vector3f, gb.n, ih))
+        ph, nh = points_np(dr.gather(mi.Point3f, gb.si.p, ih)), points_np(dr.gather(mi.Vector3f, gb.n, ih))
         keep[idx_hit] = geom.receivers(ph, nh)
     pixels = np.flatnonzero(keep).astype(np.uint32)
     exclusions = {"n_pixels": int(keep.size), "n_excluded_nohit": int((~hit).sum()),
@@ -232,9 +247,9 @@ def area_setup(sd, gb, light, label, repeats: int = 0, seed: int = 7) -> LightSe
     p = dr.gather(mi.Point3f, gb.p, idx)
     n = dr.gather(mi.Vector3f, gb.n, idx)
     dr.eval(p, n)
-    magnitude = scene_magnitude(sd.bbox)
+    magnitude = scene_magnitude(bbox_x)
     # timed once (cold): repeating a Monte Carlo reference costs as much again each time
-    out, t = timing.measure(lambda: (area.reference(sd.scene, si, n, geom, magnitude, seed, light.min_samples,
+    out, t = timing.measure(lambda: (area.reference(sd.exact, si, n, geom, magnitude, seed, light.min_samples,
                                                     light.max_samples, light.tolerance,
                                                     confidence=light.confidence, replicates=light.replicates),), 0)
     ref = out[-1]

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import exact_frame
 from .types import DEFAULT_CAMERA, ConfigError, LightSpec, SceneSpec, sweep_params
 
 ORIGIN = (0.0, 0.0, 0.0)
@@ -33,6 +34,12 @@ CROSS_MIN = 2e-19
 
 # ---------------------------------------------------------------- parameters
 
+# How the simulated engine holds positions (the map's build and lookup): ``world``, float32 world
+# coordinates (the geometry rounded at its offset); ``camera_relative``, positions relative to the
+# camera, shifted in float64 before rounding (Unreal's large world coordinates, Unity HDRP's
+# camera-relative rendering). The exact side is exact in both (dsm.exact_frame).
+PRECISIONS = ("world", "camera_relative")
+
 
 @dataclass(frozen=True)
 class Placement:
@@ -40,6 +47,7 @@ class Placement:
     config's light positions; ``translate`` then moves all of them (far-from-origin cases)."""
     scale: float = field(default=1.0, metadata={"min": 1e-30})
     translate: tuple = field(default=ORIGIN, metadata={"doc": "world offset [x, y, z] after scale"})
+    precision: str = field(default="world", metadata={"choices": PRECISIONS})
 
 
 @dataclass(frozen=True)
@@ -176,7 +184,7 @@ def _check_builtin(name, p, source, where):
         raise ConfigError(source, f"{where}.angle", f"must be below 90 degrees, got {p.angle}")
     shapes = builtin_geometry(name, p)[0]
     t = float(np.max(np.abs(p.translate)))
-    if t > 0:
+    if t > 0 and p.precision == "world":           # camera-relative: never held in float32 at its offset
         v = np.concatenate([np.asarray(v, float).reshape(-1, 3) for v, _ in shapes.values()])
         size = float(np.ptp(v, axis=0).max()) * p.scale
         with np.errstate(over="ignore"):
@@ -532,6 +540,25 @@ class SceneData:
     closed: list = None            # per shape, computed when a culling choice needs it
     closed_reason: list = None
     offset: tuple = ORIGIN         # added to the config's light positions after scaling (translate)
+    camera_origin: object = None   # the camera's position, float64 (built-ins and mesh files)
+    centre: object = None          # the exact frame's origin (dsm.exact_frame; float64 world), None: the world
+    exact_scene: object = None     # the scene in that frame (None: ``scene``)
+
+    @property
+    def exact(self):
+        """The Mitsuba scene the exact side (G-buffer, reference) is traced in."""
+        return self.scene if self.exact_scene is None else self.exact_scene
+
+    def centre_frame(self, shapes64: dict):
+        """Trace the exact side in a frame centred on the scene when it sits far from the origin
+        (:mod:`dsm.exact_frame`): ``shapes64`` the world scene's meshes by key, in float64."""
+        centre = exact_frame.centre_for(self.bbox)
+        if centre is None:
+            return
+        self.centre, self.exact_scene = centre, exact_frame.exact_scene(shapes64, centre)
+        ids = [sh.id() for sh in self.scene.shapes()]
+        if ids != [sh.id() for sh in self.exact_scene.shapes()]:
+            raise RuntimeError(f"scene {self.label!r}: the centred frame's shapes are not in the world's order")
 
     @property
     def diagonal(self) -> float:
@@ -563,6 +590,8 @@ def load(spec: SceneSpec, camera_resolution=None, camera=None) -> SceneData:
     import mitsuba as mi
     if spec.missing:
         raise ConfigError(_src(spec), f"{spec.where}.file", spec.missing)
+    if spec.params is not None and spec.params.precision == "camera_relative":
+        return _camera_relative(spec, camera_resolution, camera)
     if spec.builtin:
         w, h = camera_resolution or DEFAULT_CAMERA
         p = spec.params
@@ -582,6 +611,8 @@ def load(spec: SceneSpec, camera_resolution=None, camera=None) -> SceneData:
         scene = mi.load_dict(d, optimize=False)
         data = _finish(spec.label, scene, [_scale_light(light, s, p.translate)], s)
         data.offset = tuple(float(c) for c in p.translate)
+        data.camera_origin = np.asarray(o, float)
+        data.centre_frame({name: (np.asarray(v, float) * s + t, f) for name, (v, f) in shapes.items()})
     else:
         try:
             if spec.file.suffix.lower() == ".xml":
@@ -768,6 +799,23 @@ def _ply_ascii_faces(body: bytes, elements):
                 i += k
         return np.asarray(out, np.int64)
     return None
+
+
+def _camera_relative(spec, camera_resolution, camera):
+    """The scene as an engine rendering relative to its camera holds it: ``translate`` less the
+    camera's world position (float64) before anything is rounded to float32, so the camera sits at
+    the origin; the config's lights and camera follow (they move with ``translate``). The camera's
+    position moves with ``translate``, so it is found on the scene at the origin (one load of it
+    first, where float32 holds it whatever the offset) plus the offset."""
+    from dataclasses import replace
+    t = np.asarray(spec.params.translate, float)
+    at_origin = replace(spec.params, precision="world", translate=ORIGIN)
+    cam = load(replace(spec, params=at_origin), camera_resolution, camera).camera_origin + t
+    shift = tuple(float(c) for c in t - cam)
+    data = load(replace(spec, params=replace(at_origin, translate=shift)), camera_resolution, camera)
+    data.notes.append(f"camera_relative: positions relative to the camera at "
+                      f"({', '.join(f'{c:.9g}' for c in cam)}) in world coordinates")
+    return data
 
 
 def _check_loaded(spec, data):
@@ -1017,4 +1065,15 @@ def _load_mesh_file(spec, width, height, camera=None):
     light = LightSpec("directional", direction=normalize(-up * 1.0 - a * 0.3 + b * 0.2))
     data = _finish(spec.label, scene, [light], p.scale)
     data.offset = tuple(float(c) for c in p.translate)
+    data.camera_origin = np.asarray(o, float)
+    if exact_frame.centre_for(data.bbox) is not None:
+        # the file's vertices scaled in float32 as at the origin, then moved in float64
+        local = mi.load_dict({"type": spec.file.suffix.lower()[1:], "filename": str(spec.file),
+                              "to_world": mi.ScalarTransform4f().scale(p.scale)})
+        shapes64 = {"mesh": (np.asarray(local.vertex_positions_buffer(), np.float64).reshape(-1, 3)
+                             + np.asarray(p.translate, float),
+                             np.asarray(local.faces_buffer(), np.int64).reshape(-1, 3))}
+        if "ground" in d:
+            shapes64["ground"] = (v, f)
+        data.centre_frame(shapes64)
     return data
