@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 
 from . import config as cfgmod
-from . import figures, lock, resume
+from . import figures, headroom, lock, resume
 from .env import MAX_THREADS, SetupError
 
 DEFAULT_CONFIG = Path(__file__).with_name("default.toml")
@@ -535,8 +535,9 @@ def _run_held(cfg, args, out: Path, clustered: bool) -> int:
     if empty:
         print(f"dsm: {empty} cases are empty (no receiver: nothing faces the light inside its domain); "
               "their rates are undefined (see table.md)", file=sys.stderr)
-    for line in reference_notes(res.run.get("reference_regions", [])):
-        print(f"dsm: {line}", file=sys.stderr)
+    for line in reference_notes(res.run.get("reference_regions", [])) + [headroom.summary(res.rows)]:
+        if line:
+            print(f"dsm: {line}", file=sys.stderr)
     if failed:
         print(f"dsm: {failed} failed (reasons above, in table.md and run.json)", file=sys.stderr)
         return 1

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import metrics, record, summary
+from . import headroom, metrics, record, summary
 
 COLUMNS = record.NAMES          # metrics.csv's columns: the run record's schema (dsm.record)
 
@@ -267,6 +267,17 @@ def unfinished_md(state, planned, n_rows: int) -> list:
             "`dsm run CONFIG --out DIR --resume` runs the rest.**", ""]
 
 
+def precision_md(rows: list) -> list:
+    """A section naming the cases whose map is limited by float32 (dsm.headroom), or nothing."""
+    line = headroom.summary(rows)
+    if not line:
+        return []
+    few = headroom.limited(rows)
+    return ["", f"## Float32 precision ({len(few)} cases)", "", line[0].upper() + line[1:] + ".",
+            "Cases: " + ", ".join(r["case"] for r in few[:40]) + (" ..." if len(few) > 40 else "") +
+            " (metrics.csv `texel_f32_steps`, run.json `precision_limited`)."]
+
+
 def write_table(path: Path, rows: list, name: str, source: str, status=None, oracle_rows=(), texels=(),
                 state=None, planned=None):
     """table.md: the answer first (dsm.summary), then failures, then every case, then the
@@ -278,7 +289,7 @@ def write_table(path: Path, rows: list, name: str, source: str, status=None, ora
              "peter-pan = n_peterpan / n_gt_shadowed, error = (acne + peter-pan) / receivers. "
              "A dash: undefined (an empty denominator), left out of every summary and plot. report.html shows "
              "the same with a sortable case table, the images and the plots.", "",
-             *summary.summary_md(rows), *status_md(status), "", "## Cases", "",
+             *summary.summary_md(rows), *status_md(status), *precision_md(rows), "", "## Cases", "",
              "self/edge: acne counts on the receiver's own shape / at another shape's edge; pp dist: median "
              "distance from a peter-panned receiver to its true occluder (world units). Times are warm medians.",
              "", legend_md(), "",

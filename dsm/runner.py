@@ -23,7 +23,7 @@ import drjit as dr
 import numpy as np
 
 from . import config as cfgmod
-from . import cascades, env, figures, metrics, motion, pipeline, publish, record, report, resume, shadowmap, soft_report, timing
+from . import cascades, env, figures, headroom, metrics, motion, pipeline, publish, record, report, resume, shadowmap, soft_report, timing
 from . import plan as planmod
 from .lookup import Receiver
 
@@ -422,7 +422,8 @@ class Runner:
             m["backface_lit_rate"] = float((v_back >= 0.5).mean()) if v_back.size else metrics.UNDEFINED
             texel = float(np.median(rx.texel_world.numpy())) if rx is not None else metrics.UNDEFINED
             sweep_key, sweep_value = report.sweep_of(spec, self.cfg.schemes)
-            row = {**meta, **setup.exclusions, **m, "texel_size": texel,
+            p_map = pipeline.points_np(setup.p) if rx is not None else np.zeros((0, 3))
+            row = {**meta, **setup.exclusions, **m, **headroom.headroom(p_map, texel), "texel_size": texel,
                    "n_plane_fallback": fallbacks if pipeline.scheme_module(spec.name).USES_PLANE
                    else metrics.UNDEFINED,
                    "build_ms": bt.ms, "build_first_ms": first_t.ms, "build_compile_ms": bt.compile_ms, "build_peak_mb": smap.peak_bytes / 2 ** 20,
@@ -468,6 +469,7 @@ class Runner:
         info["maps"] = self.record.maps
         info["quantized_copies"] = self.record.quantized
         info["reference_regions"] = self.record.reference_regions
+        info["precision_limited"] = [r["case"] for r in headroom.limited(self.record.rows)]
         info["timing"] = self.timing
         if self.resume_previous:
             info["resumed_cases"] = len(self.kept)

@@ -92,3 +92,32 @@ def test_near_scenes_stay_in_world_coordinates():
     assert exact_frame.centre_for((np.array([9.0, -1, 0]), np.array([11.0, 1, 2]))) is None   # 3 diagonals out
     c = exact_frame.centre_for((np.array([999.0, -1, 0]), np.array([1001.0, 1, 2])))
     assert np.array_equal(c, [1000.0, 0.0, 1.0])
+
+
+def test_camera_relative_map_keeps_its_counts_far_away_and_world_precision_is_flagged(run_dict):
+    """At 1e6 a float32 step is 2^(19 - 23) = 0.0625 (1e6 lies in [2^19, 2^20)): the world-precision
+    case reports that step and a texel below it, run.json lists it; camera-relative rendering gives
+    the counts of the scene at the origin, with the same exact reference in all four."""
+    cfg = {"experiment": {"name": "t"}, "camera": {"resolution": [96, 96]}, "map": {"resolution": 256},
+           "scene": [{"builtin": "plane_box", "translate": [[0, 0, 0], [1e6, 5e5, 0]],
+                      "precision": ["world", "camera_relative"]}],
+           "scheme": [{"name": "constant", "bias": "1 texel"}], "timing": {"repeats": 1}}
+    res = run_dict(cfg)
+    by = {r["scene"]: r for r in res.rows}
+    origin, far = by["plane_box"], by["plane_box(translate=[1e+06,500000,0])"]
+    rel0, rel = by["plane_box(precision=camera_relative)"], by["plane_box(translate=[1e+06,500000,0],precision=camera_relative)"]
+    assert len({r["n_gt_shadowed"] for r in res.rows}) == 1 and len({r["n_receivers"] for r in res.rows}) == 1
+    assert far["f32_step"] == 0.0625 and far["texel_f32_steps"] == far["texel_size"] / 0.0625 < 1
+    assert res.run["precision_limited"] == [far["case"]]
+    for k in ("n_acne", "n_peterpan"):
+        assert abs(rel[k] - rel0[k]) <= 2 and abs(rel0[k] - origin[k]) <= 2
+    assert far["n_acne"] > 10 * max(origin["n_acne"], 1)          # float32 world coordinates cost acne at 1e6
+    assert "## Float32 precision (1 cases)" in (res.out / "table.md").read_text()
+
+
+def test_precision_choices_are_checked():
+    from dsm import config
+    from dsm.types import ConfigError
+    with pytest.raises(ConfigError) as e:
+        config.parse({"scene": [{"builtin": "plane", "precision": "double"}], "scheme": [{"name": "none"}]}, "x.toml")
+    assert e.value.key == "scene[0].precision" and "camera_relative" in str(e.value)
