@@ -36,29 +36,24 @@ def centre_for(bbox) -> np.ndarray | None:
     return (lo + hi) / 2
 
 
-def exact_scene(shapes64: dict, centre: np.ndarray):
-    """A Mitsuba scene of ``shapes64`` {key: (vertices (n, 3) float64 world, faces)} moved by
-    minus ``centre`` in float64, then rounded to float32; the keys (and so the shapes' order)
-    those of the world scene's dict."""
+def sensor_in(sensor, centre: np.ndarray, pose=None):
+    """A perspective sensor like ``sensor`` (film size, field of view, clips) moved by minus
+    ``centre``: from ``pose`` (its float64 position, target and up, where known: a small object
+    far away would see the float32 rounding of its world matrix as a move and a turn), else from
+    its float32 world matrix read in float64."""
     import mitsuba as mi
-
-    from .scenes import make_mesh
-    d = {"type": "scene"}
-    for name, (v, f) in shapes64.items():
-        d[name] = make_mesh(name, np.asarray(v, np.float64) - centre, f)
-    return mi.load_dict(d, optimize=False)
-
-
-def sensor_in(sensor, centre: np.ndarray):
-    """A perspective sensor like ``sensor`` (film size, field of view, clips) whose position is
-    moved by minus ``centre`` (its float32 world matrix read in float64)."""
-    import mitsuba as mi
-    m = np.array(sensor.world_transform().matrix, np.float64).reshape(4, 4)
-    m[:3, 3] -= centre
     w, h = (int(x) for x in sensor.film().size())
-    return mi.load_dict({"type": "perspective", "fov": float(mi.traverse(sensor)["x_fov"][0]), "fov_axis": "x",
-                         "near_clip": float(sensor.near_clip()), "far_clip": float(sensor.far_clip()),
-                         "to_world": mi.ScalarTransform4f(m.tolist()),
+    fov = float(mi.traverse(sensor)["x_fov"][0])
+    if pose is not None:
+        o, target, up = (np.asarray(x, np.float64) for x in pose)
+        to_world = mi.ScalarTransform4f().look_at(origin=(o - centre).tolist(), target=(target - centre).tolist(),
+                                                  up=up.tolist())
+    else:
+        m = np.array(sensor.world_transform().matrix, np.float64).reshape(4, 4)
+        m[:3, 3] -= centre
+        to_world = mi.ScalarTransform4f(m.tolist())
+    return mi.load_dict({"type": "perspective", "fov": fov, "fov_axis": "x", "near_clip": float(sensor.near_clip()),
+                         "far_clip": float(sensor.far_clip()), "to_world": to_world,
                          "film": {"type": "hdrfilm", "width": w, "height": h}})
 
 

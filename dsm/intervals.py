@@ -60,7 +60,7 @@ def samples_to_certify(tolerance: float, confidence: float) -> int:
         return math.inf
     if tolerance >= 1:
         return 1
-    return int(math.ceil(math.log1p(-confidence) / math.log1p(-tolerance)))
+    return math.ceil(math.log1p(-confidence) / math.log1p(-tolerance))
 
 
 def replicate_interval(rep_hits, per_replicate, confidence: float) -> tuple:

@@ -99,7 +99,8 @@ def gbuffer(sd, width: int | None = None, height: int | None = None, sensor=None
     if sd.centre is None:
         return gbuffer_mod.cast(sd.scene, sensor, width or W, height or H)
     # far from the origin: hits in the frame centred on the scene, world positions from them
-    gb = gbuffer_mod.cast(sd.exact, exact_frame.sensor_in(sensor, sd.centre), width or W, height or H)
+    pose = sd.camera_pose if sensor is sd.sensor else None
+    gb = gbuffer_mod.cast(sd.exact, exact_frame.sensor_in(sensor, sd.centre, pose), width or W, height or H)
     gb.p = exact_frame.to_world(gb.p, sd.centre)
     dr.eval(gb.p)
     return gb

@@ -540,7 +540,7 @@ class SceneData:
     closed: list = None            # per shape, computed when a culling choice needs it
     closed_reason: list = None
     offset: tuple = ORIGIN         # added to the config's light positions after scaling (translate)
-    camera_origin: object = None   # the camera's position, float64 (built-ins and mesh files)
+    camera_pose: object = None     # the camera's (position, target, up), float64 (built-ins and mesh files)
     centre: object = None          # the exact frame's origin (dsm.exact_frame; float64 world), None: the world
     exact_scene: object = None     # the scene in that frame (None: ``scene``)
 
@@ -555,7 +555,7 @@ class SceneData:
         centre = exact_frame.centre_for(self.bbox)
         if centre is None:
             return
-        self.centre, self.exact_scene = centre, exact_frame.exact_scene(shapes64, centre)
+        self.centre, self.exact_scene = centre, _moved_scene(shapes64, centre)
         ids = [sh.id() for sh in self.scene.shapes()]
         if ids != [sh.id() for sh in self.exact_scene.shapes()]:
             raise RuntimeError(f"scene {self.label!r}: the centred frame's shapes are not in the world's order")
@@ -579,6 +579,17 @@ class SceneData:
             else:
                 out.append(_scale_light(spec, self.scale, self.offset))
         return out
+
+
+def _moved_scene(shapes64: dict, centre: np.ndarray):
+    """A Mitsuba scene of ``shapes64`` {key: (vertices (n, 3) float64 world, faces)} moved by
+    minus ``centre`` in float64, then rounded to float32; the keys (and so the shapes' order)
+    those of the world scene's dict."""
+    import mitsuba as mi
+    d = {"type": "scene"}
+    for name, (v, f) in shapes64.items():
+        d[name] = make_mesh(name, np.asarray(v, np.float64) - centre, f)
+    return mi.load_dict(d, optimize=False)
 
 
 def load(spec: SceneSpec, camera_resolution=None, camera=None) -> SceneData:
@@ -611,7 +622,7 @@ def load(spec: SceneSpec, camera_resolution=None, camera=None) -> SceneData:
         scene = mi.load_dict(d, optimize=False)
         data = _finish(spec.label, scene, [_scale_light(light, s, p.translate)], s)
         data.offset = tuple(float(c) for c in p.translate)
-        data.camera_origin = np.asarray(o, float)
+        data.camera_pose = (np.asarray(o, float), np.asarray(tg, float), np.asarray(up, float))
         data.centre_frame({name: (np.asarray(v, float) * s + t, f) for name, (v, f) in shapes.items()})
     else:
         try:
@@ -810,7 +821,7 @@ def _camera_relative(spec, camera_resolution, camera):
     from dataclasses import replace
     t = np.asarray(spec.params.translate, float)
     at_origin = replace(spec.params, precision="world", translate=ORIGIN)
-    cam = load(replace(spec, params=at_origin), camera_resolution, camera).camera_origin + t
+    cam = load(replace(spec, params=at_origin), camera_resolution, camera).camera_pose[0] + t
     shift = tuple(float(c) for c in t - cam)
     data = load(replace(spec, params=replace(at_origin, translate=shift)), camera_resolution, camera)
     data.notes.append(f"camera_relative: positions relative to the camera at "
@@ -1045,6 +1056,15 @@ def _load_mesh_file(spec, width, height, camera=None):
     mesh = mi.load_dict({"type": spec.file.suffix.lower()[1:], "filename": str(spec.file), "to_world": to_world})
     bb = mesh.bbox()
     lo, hi = np.array(bb.min, float).ravel(), np.array(bb.max, float).ravel()
+    mesh64 = None
+    if exact_frame.centre_for((lo, hi)) is not None:
+        # far from the origin: the file's vertices scaled in float32 as at the origin, then moved in
+        # float64, for the exact frame and for the ground and camera both frames share
+        local = mi.load_dict({"type": spec.file.suffix.lower()[1:], "filename": str(spec.file),
+                              "to_world": mi.ScalarTransform4f().scale(p.scale)})
+        mesh64 = (np.asarray(local.vertex_positions_buffer(), np.float64).reshape(-1, 3) + np.asarray(p.translate, float),
+                  np.asarray(local.faces_buffer(), np.int64).reshape(-1, 3))
+        lo, hi = mesh64[0].min(0), mesh64[0].max(0)
     center, size = (lo + hi) / 2, float(np.linalg.norm(hi - lo))
     a, b = [np.eye(3)[k] for k in range(3) if k != "xyz".index(p.up)]
     if np.dot(np.cross(a, b), up) < 0:
@@ -1065,15 +1085,7 @@ def _load_mesh_file(spec, width, height, camera=None):
     light = LightSpec("directional", direction=normalize(-up * 1.0 - a * 0.3 + b * 0.2))
     data = _finish(spec.label, scene, [light], p.scale)
     data.offset = tuple(float(c) for c in p.translate)
-    data.camera_origin = np.asarray(o, float)
-    if exact_frame.centre_for(data.bbox) is not None:
-        # the file's vertices scaled in float32 as at the origin, then moved in float64
-        local = mi.load_dict({"type": spec.file.suffix.lower()[1:], "filename": str(spec.file),
-                              "to_world": mi.ScalarTransform4f().scale(p.scale)})
-        shapes64 = {"mesh": (np.asarray(local.vertex_positions_buffer(), np.float64).reshape(-1, 3)
-                             + np.asarray(p.translate, float),
-                             np.asarray(local.faces_buffer(), np.int64).reshape(-1, 3))}
-        if "ground" in d:
-            shapes64["ground"] = (v, f)
-        data.centre_frame(shapes64)
+    data.camera_pose = (np.asarray(o, float), np.asarray(tg, float), np.asarray(upv, float))
+    if mesh64 is not None:
+        data.centre_frame({"mesh": mesh64, **({"ground": (v, f)} if "ground" in d else {})})
     return data
