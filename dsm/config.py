@@ -100,7 +100,7 @@ def _plain_name(name, source):
 def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Config:
     """The Config of raw TOML tables ``raw`` from ``source`` (files relative to ``base``), every value checked."""
     from . import scenes as scenes_mod
-    from .schemes import REGISTRY, PRESETS
+    from .schemes import ALL as REGISTRY, PRESETS     # shadow-map schemes and the VSV lookups
 
     base = Path(base or ".")
     check_keys(raw, TOP_KEYS, source, "")
@@ -156,7 +156,9 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
                       ("map.view", views)):
         if not vals:
             raise ConfigError(source, key, "empty list")
-    if "view" in m and all(l.type not in ("point", "scene") and l.shape != "sphere" for l in lights):
+    from . import lights as light_types      # a spot's VSV grid (dsm.maps.vsv) is a view the config names
+    vsv_light = "vsv" in views and any("vsv" in light_types.get(l.type).views(views, l.shape) for l in lights)
+    if "view" in m and not vsv_light and all(l.type not in ("point", "scene") and l.shape != "sphere" for l in lights):
         # a scene's own lights are known only once it is loaded; explicit ones are known now
         raise ConfigError(source, "map.view", "views are for point lights and no [[light]] is a point light "
                           f"(the lights are {', '.join(sorted({l.type for l in lights}))}); remove map.view or "

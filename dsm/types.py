@@ -15,7 +15,7 @@ from typing import Any
 LENGTH_UNITS = ("world", "texel", "range")
 FILTERS = ("nearest", "pcf_bilinear", "pcf_jitter4x4", "pcf_wide", "pcss")
 FORMATS = ("float32", "unorm16", "unorm24", "ndc24")
-POINT_VIEWS = ("paraboloid", "dual_paraboloid", "cube")
+POINT_VIEWS = ("paraboloid", "dual_paraboloid", "cube", "vsv")   # vsv: dsm.maps.vsv, for spot lights too
 AREA_SHAPES = ("rectangle", "disk", "sphere", "emitter")
 # vectorized Dr.Jit variants only: the kit's code runs on wide arrays (scalar_rgb cannot run it)
 VARIANTS = ("llvm_ad_rgb", "cuda_ad_rgb")
@@ -365,7 +365,8 @@ class Config:
 # the culling choices of a map build (midpoint, dual); second_depth's front_closed is its own
 CULLINGS = ("none", "back", "front", "back_closed")
 # faces (maps) per view kind ("fitted": an area light's perspective or paraboloid view, chosen from its receivers)
-VIEW_FACES = {"fitted": 1, "orthographic": 1, "perspective": 1, "paraboloid": 1, "dual_paraboloid": 2, "cube": 6}
+VIEW_FACES = {"fitted": 1, "orthographic": 1, "perspective": 1, "paraboloid": 1, "dual_paraboloid": 2, "cube": 6,
+              "vsv": 1}
 DEFAULT_CAMERA = (256, 256)     # built-ins and meshes without [camera] resolution
 
 
