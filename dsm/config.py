@@ -13,7 +13,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from .types import (  # noqa: F401  (re-exported: the config's vocabulary)
-    LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA,
+    LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, MAP_VIEWS, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA,
     REPORT_IMAGES,
     ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params,
     SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec,
@@ -151,7 +151,7 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
                         for r in as_list(m.get("resolution", 512)))
     filters = tuple(_filter(f, source) for f in as_list(m.get("filter", "nearest")))
     formats = tuple(choice(f, source, "map.format", FORMATS) for f in as_list(m.get("format", "float32")))
-    views = tuple(choice(v, source, "map.view", POINT_VIEWS) for v in as_list(m.get("view", "dual_paraboloid")))
+    views = tuple(choice(v, source, "map.view", MAP_VIEWS) for v in as_list(m.get("view", "dual_paraboloid")))
     for key, vals in (("map.resolution", resolutions), ("map.filter", filters), ("map.format", formats),
                       ("map.view", views)):
         if not vals:

@@ -15,7 +15,8 @@ from typing import Any
 LENGTH_UNITS = ("world", "texel", "range")
 FILTERS = ("nearest", "pcf_bilinear", "pcf_jitter4x4", "pcf_wide", "pcss")
 FORMATS = ("float32", "unorm16", "unorm24", "ndc24")
-POINT_VIEWS = ("paraboloid", "dual_paraboloid", "cube", "vsv")   # vsv: dsm.maps.vsv, for spot lights too
+POINT_VIEWS = ("paraboloid", "dual_paraboloid", "cube")
+MAP_VIEWS = POINT_VIEWS + ("vsv",)      # [map] view: and a voxelized shadow volume (dsm.maps.vsv; spot lights too)
 AREA_SHAPES = ("rectangle", "disk", "sphere", "emitter")
 # vectorized Dr.Jit variants only: the kit's code runs on wide arrays (scalar_rgb cannot run it)
 VARIANTS = ("llvm_ad_rgb", "cuda_ad_rgb")
