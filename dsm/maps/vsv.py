@@ -125,6 +125,9 @@ class EpipolarView(View):
         self.alpha0 = float(alpha.min()) - ALPHA_MARGIN * a_span
         self.alpha_span = a_span * (1.0 + 2.0 * ALPHA_MARGIN)
         self.domain = domain               # a spot's cone (its perspective view's inside), else None
+        # what the columns depend on beside the frame (a moving camera's frames rebuild when it changes)
+        self.extents = np.array([self.theta0, self.theta_span, self.phi0, self.phi_span, self.alpha0,
+                                 self.alpha_span, dist])
         super().__init__(light_world, ex, ey, ez, R, near=0.0, far=1.0)
         self.D = dr.opaque(mi.Float, dist)
         self.T0, self.dT = (dr.opaque(mi.Float, x) for x in (self.theta0, self.theta_span / R))
