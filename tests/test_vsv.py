@@ -210,3 +210,17 @@ def test_bad_vsv_parameters_are_config_errors_naming_the_key():
         config.parse(base_config(scheme=[{"name": "vsv", "occupancy": "middle"}]), "<test>")
     with pytest.raises(config.ConfigError, match=r"scheme\[0\]\.alpha"):
         config.parse(base_config(scheme=[{"name": "vsv_adaptive", "alpha": 0}]), "<test>")
+
+
+def test_a_moving_camera_rebuilds_the_grid_each_frame_and_schemes_lists_the_lookups(run_dict):
+    """A VSV is view-dependent: a camera dolly changes the epipolar frame and ranges, so every
+    frame builds its own grid (dsm.motion compares the view's frame and extents)."""
+    from dsm import cli
+    cfg = base_config(scene=[{"builtin": "room"}], camera={"resolution": [48, 48]}, light=[{"type": "scene"}],
+                      map={"resolution": 32, "view": ["vsv"]}, scheme=[{"name": "vsv_adaptive", "alpha": 64}],
+                      motion=[{"frames": 3, "camera": "dolly", "offset": [0.3, 0.0, 0.0], "points": 300}],
+                      report={"images": "none"})
+    res = run_dict(cfg)
+    assert res.run["n_failed"] == 0 and res.rows[0]["maps_built"] == 3
+    text = cli.schemes_text()
+    assert all(name in text for name in ("vsv ", "vsv_epsilon ", "vsv_adaptive "))

@@ -1,7 +1,6 @@
-"""Dou et al.'s adaptive voxel choice for voxelized shadow volumes (JCGT 2014, section 3.3,
-Algorithm 2 and Listing 3; Wyman 2011's grid).
+"""Dou et al.'s adaptive voxel choice for voxelized shadow volumes (JCGT 2014, section 3.3).
 
-The light ray through the centre of the receiver's cell (its theta and phi) meets the receiver's
+Algorithm 2 and Listing 3 of Dou et al., on Wyman 2011's grid (dsm.maps.vsv). The light ray through the centre of the receiver's cell (its theta and phi) meets the receiver's
 tangent plane at F', the potential occluder. F' is moved toward the light by the constant epsilon
 ``K * sceneScale`` (Listing 3's "constant epsilon based on scene scale"), then its alpha voxel
 V2 is found: when F' lies behind or on V2's centre (farther from the light), V2 is tested, else
