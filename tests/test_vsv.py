@@ -224,3 +224,51 @@ def test_a_moving_camera_rebuilds_the_grid_each_frame_and_schemes_lists_the_look
     assert res.run["n_failed"] == 0 and res.rows[0]["maps_built"] == 3
     text = cli.schemes_text()
     assert all(name in text for name in ("vsv ", "vsv_epsilon ", "vsv_adaptive "))
+
+
+def test_grid_positions_and_rays_round_trip_across_theta_zero(variant):
+    """Points whose theta arc straddles theta = 0 (the camera's up): each projects inside the grid,
+    the ray of its grid position points at it, and its depth is the fraction of the alpha range,
+    alpha recomputed in float64 from its definition (the angle at the eye between E->L and E->P)."""
+    import drjit as dr
+    import mitsuba as mi
+    from dsm.maps.vsv import EpipolarView
+    rng = np.random.default_rng(5)
+    light, eye, up = np.zeros(3), np.array([0.0, 0.0, -5.0]), np.array([0.0, 1.0, 0.0])
+    p = np.stack([rng.uniform(-0.3, 0.3, 2000), rng.uniform(0.5, 1.0, 2000), rng.uniform(-4.0, -1.0, 2000)], 1)
+    R = 64
+    view = EpipolarView(light, eye, up, p, (p.min(0), p.max(0)), R)
+    assert 1.0 < view.theta_span < 1.2          # 2 atan(0.3 / 0.5) and 4 spare cells: the short arc through 0
+    pw = mi.Point3f(*(mi.Float(c.astype(np.float32)) for c in p.T))
+    u, v, _ = view.project(pw)
+    u, v = u.numpy(), v.numpy()
+    assert u.min() > 1 and u.max() < R - 1 and v.min() > 1 and v.max() < R - 1     # the spare cells
+    _, d = view.ray_at(mi.Float(u), mi.Float(v))
+    d = _np(d)
+    assert np.abs(d - p / np.linalg.norm(p, axis=1, keepdims=True)).max() < 1e-5
+    e = p - eye
+    alpha = np.arccos((e @ (light - eye)) / np.linalg.norm(e, axis=1) / 5.0)
+    depth = view.depth(pw).numpy()
+    assert np.abs(depth - (alpha - view.alpha0) / view.alpha_span).max() < 1e-4
+    assert 0 < depth.min() < 0.02 and 0.98 < depth.max() < 1                        # 1 % to spare each side
+    dr.eval()
+
+
+def test_filters_and_stored_formats_apply_to_the_voxel_tests(run_dict):
+    """Every scheme's filters (the voxel test per tap) and a stored format (the grid's first hits
+    quantized over [0, 1] of the alpha range) run on a VSV: the floor's adaptive choice stays
+    free of acne in unorm16 (its epsilon, 0.07 voxel here, exceeds the quantization's 0.002),
+    the plain test's nearest acne stays 1/2, and a nearest lookup's mean |V - V*| is its error rate."""
+    cfg = _floor_config()
+    cfg.update(map={"resolution": 64, "view": ["vsv"], "filter": ["nearest", "pcf_bilinear", "pcf_jitter4x4"],
+                    "format": ["float32", "unorm16"]},
+               scheme=[{"name": "vsv"}, {"name": "vsv_epsilon"}, {"name": "vsv_adaptive"}], report={"images": "none"})
+    res = run_dict(cfg)
+    assert res.run["n_failed"] == 0 and len(res) == 3 * 3 * 2
+    for r in res.rows:
+        if r["filter"] == "nearest":
+            assert r["mean_abs_error"] == pytest.approx(r["error_rate"], abs=1e-12)
+            if r["scheme"] == "vsv_adaptive":
+                assert r["n_acne"] == 0, r["format"]
+            if r["scheme"] == "vsv":
+                assert r["acne_rate"] == pytest.approx(0.5, abs=0.02)

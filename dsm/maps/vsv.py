@@ -33,7 +33,8 @@ scan along each view ray fills the shadowed voxels. That resampling adds a secon
 exact ray, so the only discretization measured is the voxel grid's.
 
 Known limits: the grid is fitted to one camera and one light (a VSV is view-dependent); a
-receiver on the eye-light line has no epipolar plane (theta is taken as 0 there).
+receiver on the eye-light line has no epipolar plane (theta is taken as 0 there); angles are
+float32 (``atan2``), so alpha voxels narrower than about 1e-5 radians lose precision.
 """
 from __future__ import annotations
 
@@ -117,7 +118,7 @@ class EpipolarView(View):
         cells = min(MARGIN_CELLS, R // 8) / max(R - 2 * min(MARGIN_CELLS, R // 8), 1)
         t0, t_span = shortest_arc(theta)
         t0, t_span = _padded(t0, t_span, cells, 1e-6)
-        self.theta0, self.theta_span = t0, min(t_span, TWO_PI)
+        self.theta0, self.theta_span = float(np.mod(t0, TWO_PI)), min(t_span, TWO_PI)   # (u = 0 in [0, 2 pi))
         if t_span >= TWO_PI:               # the receivers surround the eye-light line: the whole circle
             self.theta0 = float(np.min(theta))
         self.phi0, self.phi_span = _padded(float(phi.min()), float(np.ptp(phi)), cells, 1e-6)
