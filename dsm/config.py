@@ -176,6 +176,9 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     schemes = []
     for i, t in enumerate(scheme_tables):
         schemes += parse_scheme(t, source, f"scheme[{i}]", REGISTRY, PRESETS)
+    from .schemes import view_mismatch        # a VSV grid and its lookups come together (dsm.maps.vsv)
+    if view_mismatch(schemes, views):
+        raise ConfigError(source, "map.view", view_mismatch(schemes, views), MAP_VIEWS)
 
     mem = _table(raw, "memory", source)
     check_keys(mem, ("budget_mb",), source, "memory")

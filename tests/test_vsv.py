@@ -41,7 +41,8 @@ def _lookup(table, rx, smap):
 def _floor_config():
     return base_config(scene=[{"builtin": "plane", "tilt": 0}], camera={
         "resolution": [200, 200], "position": [0, 0, H_EYE], "target": [0, 0, 0], "up": [0, 1, 0], "fov": 60},
-        light=[{"type": "point", "position": [0, 0, H_LIGHT]}], map={"resolution": 64, "view": ["vsv"]})
+        light=[{"type": "point", "position": [0, 0, H_LIGHT]}], map={"resolution": 64, "view": ["vsv"]},
+        scheme=[{"name": "vsv"}])
 
 
 @pytest.fixture(scope="module")
@@ -129,7 +130,8 @@ def test_tilted_plane_classification_matches_a_float64_recomputation(variant):
     light = np.array([1.5, -1.0, 4.0])
     sd, setup, view, smap, rx = _case(base_config(scene=[{"builtin": "plane", "tilt": 30}],
                                                   light=[{"type": "point", "position": light.tolist()}],
-                                                  map={"resolution": 64, "view": ["vsv"]}))
+                                                  map={"resolution": 64, "view": ["vsv"]},
+                                                  scheme=[{"name": "vsv"}]))
     from dsm.maps.vsv import camera_pose
     eye, up = camera_pose(sd.sensor)
     p, n = _np(rx.p_world), _np(rx.n_world)
@@ -173,7 +175,8 @@ def test_floating_plate_keeps_its_shadow(variant):
     sd, setup, view, smap, rx = _case(base_config(scene=[{"builtin": "floating_plate"}], camera={
         "resolution": [192, 192], "position": [1.2, -2.0, 2.2], "target": [0, 0, 0]},
                                                   light=[{"type": "point", "position": [0.5, 0.3, 3.0]}],
-                                                  map={"resolution": 128, "view": ["vsv"]}), R=128)
+                                                  map={"resolution": 128, "view": ["vsv"]},
+                                                  scheme=[{"name": "vsv"}]), R=128)
     ground = sd.shape_names.index("ground")
     shadowed = ~setup.v_star
     assert shadowed.sum() > 1000
@@ -272,3 +275,15 @@ def test_filters_and_stored_formats_apply_to_the_voxel_tests(run_dict):
                 assert r["n_acne"] == 0, r["format"]
             if r["scheme"] == "vsv":
                 assert r["acne_rate"] == pytest.approx(0.5, abs=0.02)
+
+
+def test_a_lookup_without_its_view_and_a_view_without_its_lookups_are_config_errors():
+    from dsm import config
+    with pytest.raises(config.ConfigError, match=r"map\.view: scheme vsv_adaptive reads only a vsv view.*"
+                                                 r"valid: paraboloid, dual_paraboloid, cube, vsv"):
+        config.parse(base_config(light=[{"type": "point", "position": [0, 0, 3]}],
+                                 scheme=[{"name": "vsv_adaptive"}]), "<test>")
+    with pytest.raises(config.ConfigError, match=r"map\.view: view vsv is read by its own lookups only "
+                                                 r"\(vsv, vsv_epsilon, vsv_adaptive\)"):
+        config.parse(base_config(light=[{"type": "point", "position": [0, 0, 3]}],
+                                 map={"view": ["cube", "vsv"]}), "<test>")

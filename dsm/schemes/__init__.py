@@ -61,3 +61,17 @@ def needs_of(scheme_specs) -> set:
         own = getattr(module, "needs", None)
         out |= set(own(s.params) if own is not None else module.NEEDS)
     return out
+
+
+def view_mismatch(specs, views) -> str:
+    """What a config's scheme instances and ``[map] view`` choices leave unmatched, in words
+    ('' when nothing): a lookup whose views none names, or an exclusive view no lookup reads."""
+    for s in specs:
+        own = getattr(get(s.name), "VIEWS", None)
+        if own is not None and not set(own) & set(views):
+            return f"scheme {s.name} reads only a {' or '.join(own)} view: add it to map.view"
+    for v in sorted(set(views) & EXCLUSIVE_VIEWS):
+        if not any(reads_view(s, v) for s in specs):
+            readers = ", ".join(m.NAME for m in VOXEL_REGISTRY if v in m.VIEWS)
+            return f"view {v} is read by its own lookups only ({readers}) and no [[scheme]] is one"
+    return ""
