@@ -100,6 +100,21 @@ def _padded(lo: float, span: float, cells: float, floor_span: float) -> tuple[fl
     return lo - (grown - span) / 2.0, grown
 
 
+def fit_ranges(theta, phi, alpha, R: int) -> tuple:
+    """(theta_0, theta span, phi_0, phi span, alpha_0, alpha span) of a grid of R x R cells holding
+    the receivers' angles: MARGIN_CELLS cells to spare in theta and phi (at most R / 8), theta the
+    shortest arc (the whole circle when it would exceed it), ALPHA_MARGIN of alpha's range."""
+    spare = min(MARGIN_CELLS, R // 8)
+    cells = spare / max(R - 2 * spare, 1)
+    t0, t_span = _padded(*shortest_arc(theta), cells, 1e-6)
+    if t_span >= TWO_PI:                   # the receivers surround the eye-light line: the whole circle
+        t0, t_span = float(np.min(theta)), TWO_PI
+    p0, p_span = _padded(float(np.min(phi)), float(np.ptp(phi)), cells, 1e-6)
+    a_span = max(float(np.ptp(alpha)), 1e-6)
+    a0 = float(np.min(alpha)) - ALPHA_MARGIN * a_span
+    return float(np.mod(t0, TWO_PI)), t_span, p0, p_span, a0, a_span * (1.0 + 2.0 * ALPHA_MARGIN)
+
+
 class EpipolarView(View):
     """A VSV's grid as a view: (u, v) the theta and phi cells, depth the fraction of the alpha range."""
     kind = "vsv"
@@ -113,18 +128,9 @@ class EpipolarView(View):
         if len(pts) == 0:                  # no receivers: the scene's corners give the ranges
             lo, hi = (np.asarray(b, float) for b in scene_bbox)
             pts = np.array([[(lo, hi)[i >> k & 1][k] for k in range(3)] for i in range(8)])
-        theta, phi, alpha = angles_np(pts, light_world, self.frame)
         R = int(resolution)
-        cells = min(MARGIN_CELLS, R // 8) / max(R - 2 * min(MARGIN_CELLS, R // 8), 1)
-        t0, t_span = shortest_arc(theta)
-        t0, t_span = _padded(t0, t_span, cells, 1e-6)
-        self.theta0, self.theta_span = float(np.mod(t0, TWO_PI)), min(t_span, TWO_PI)   # (u = 0 in [0, 2 pi))
-        if t_span >= TWO_PI:               # the receivers surround the eye-light line: the whole circle
-            self.theta0 = float(np.min(theta))
-        self.phi0, self.phi_span = _padded(float(phi.min()), float(np.ptp(phi)), cells, 1e-6)
-        a_span = max(float(np.ptp(alpha)), 1e-6)
-        self.alpha0 = float(alpha.min()) - ALPHA_MARGIN * a_span
-        self.alpha_span = a_span * (1.0 + 2.0 * ALPHA_MARGIN)
+        (self.theta0, self.theta_span, self.phi0, self.phi_span, self.alpha0,
+         self.alpha_span) = fit_ranges(*angles_np(pts, light_world, self.frame), R)
         self.domain = domain               # a spot's cone (its perspective view's inside), else None
         # what the columns depend on beside the frame (a moving camera's frames rebuild when it changes)
         self.extents = np.array([self.theta0, self.theta_span, self.phi0, self.phi_span, self.alpha0,
