@@ -5,6 +5,8 @@ bounding-box diagonal; along the receiver's own light ray, so it stays in its th
 and the voxel of that point is looked up. One world length for the whole grid, while the grid's
 alpha voxels are non-uniform in world space (epipolar sampling): too small leaves acne where the
 voxels are deep, too large detaches shadows where they are shallow (Dou et al.'s figure 8, left).
+Where the view ray and the light ray are parallel (the receiver seen from near the light's
+direction) moving along the light ray leaves alpha unchanged and the epsilon does nothing.
 
 Parameters: ``K`` (default 0.01), ``alpha`` (voxels per light ray), ``occupancy`` (centre | hit).
 Only on the ``vsv`` view.
