@@ -78,7 +78,7 @@ def scene_spec(table: dict, source: str = "<pipeline>"):
 
 def scheme_specs(table: dict, source: str = "<pipeline>", where: str = "scheme") -> list:
     """The scheme instances of one ``[[scheme]]`` table (its list-valued parameters swept)."""
-    return parse_scheme(table, source, where, schemes.ALL, schemes.PRESETS)
+    return parse_scheme(table, source, where, schemes.REGISTRY, schemes.PRESETS)
 
 
 def scheme_spec(table: dict, source: str = "<pipeline>", where: str = "scheme") -> SchemeSpec:

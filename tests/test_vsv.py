@@ -32,9 +32,12 @@ def _case(cfg_dict, kind="vsv", R=64):
 
 
 def _lookup(table, rx, smap):
-    """(V, nearest tap's shape) of one scheme table on the map, as numpy arrays."""
+    """(V, nearest tap's shape) of one scheme table on the map, as numpy arrays (the config's
+    parser: pipeline.scheme_spec, the plugins' parser, knows the shadow-map schemes only)."""
     import dsm.pipeline as pl
-    v, shape = pl.visibility(pl.scheme_spec(table), rx, smap)
+    from dsm import config, schemes
+    spec, = config.parse_scheme(table, "<test>", "scheme", schemes.ALL, schemes.PRESETS)
+    v, shape = pl.visibility(spec, rx, smap)
     return v.numpy(), shape.numpy()
 
 
