@@ -319,3 +319,11 @@ def test_a_lookup_without_its_view_and_a_view_without_its_lookups_are_config_err
                                                  r"\(vsv, vsv_epsilon, vsv_adaptive\)"):
         config.parse(base_config(light=[{"type": "point", "position": [0, 0, 3]}],
                                  map={"view": ["cube", "vsv"]}), "<test>")
+
+
+def test_dsm_tune_refuses_a_vsv_lookup_naming_it():
+    from dsm import config, tune
+    cfg = config.parse(base_config(light=[{"type": "point", "position": [0, 0, 3]}], map={"view": ["vsv"]},
+                                   scheme=[{"name": "vsv_epsilon"}], tune={}), "<test>")
+    with pytest.raises(config.ConfigError, match=r"scheme\[0\]\.name: vsv_epsilon reads a voxelized shadow volume"):
+        tune.parse_tune(cfg)
