@@ -135,7 +135,7 @@ def check_keys(table: dict, allowed, source: str, where: str):
 def coerce_field(f: dataclasses.Field, raw, source: str, key: str):
     """Convert one raw TOML value to a parameter dataclass field's type (Length, float, int, str, or
     a ``tuple`` of three numbers). ``metadata["min"]`` bounds numbers and Lengths (their value, in
-    any unit: an upper limit or an offset below 0 has no meaning)."""
+    any unit: an upper limit or an offset below 0 has no meaning); ``metadata["max"]`` integers."""
     if f.type in ("Length", Length):
         value = Length.parse(raw, source, key)
         lo = f.metadata.get("min")
@@ -147,7 +147,7 @@ def coerce_field(f: dataclasses.Field, raw, source: str, key: str):
     if f.type in ("float", float):
         return number(raw, source, key, minimum=f.metadata.get("min"))
     if f.type in ("int", int):
-        return number(raw, source, key, integer=True, minimum=f.metadata.get("min"))
+        return number(raw, source, key, integer=True, minimum=f.metadata.get("min"), maximum=f.metadata.get("max"))
     if f.type in ("str", str):
         return choice(raw, source, key, f.metadata["choices"])
     raise TypeError(f"unsupported parameter type {f.type!r}")

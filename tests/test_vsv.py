@@ -243,8 +243,9 @@ def test_bad_vsv_parameters_are_config_errors_naming_the_key():
     from dsm import config
     with pytest.raises(config.ConfigError, match=r"scheme\[0\]\.occupancy.*centre, hit"):
         config.parse(base_config(scheme=[{"name": "vsv", "occupancy": "middle"}]), "<test>")
-    with pytest.raises(config.ConfigError, match=r"scheme\[0\]\.alpha"):
-        config.parse(base_config(scheme=[{"name": "vsv_adaptive", "alpha": 0}]), "<test>")
+    for alpha in (0, 65537, 2.5):
+        with pytest.raises(config.ConfigError, match=r"scheme\[0\]\.alpha"):
+            config.parse(base_config(scheme=[{"name": "vsv_adaptive", "alpha": alpha}]), "<test>")
 
 
 def test_a_moving_camera_rebuilds_the_grid_each_frame_and_schemes_lists_the_lookups(run_dict):

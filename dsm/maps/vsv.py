@@ -49,6 +49,7 @@ from ..views import View, light_frame
 MARGIN_CELLS = 2          # theta and phi cells spared on each side of the receivers' range
 ALPHA_MARGIN = 0.01       # fraction of the receivers' alpha range spared on each side
 OCCUPANCY = ("centre", "hit")
+MAX_ALPHA = 1 << 16       # alpha voxels at most: float32 depth (24 bits) keeps s to 1/256 of a voxel
 TWO_PI = 2.0 * math.pi
 
 

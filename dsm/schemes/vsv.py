@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import drjit as dr
 
-from ..maps.vsv import OCCUPANCY, voxel_lit
+from ..maps.vsv import MAX_ALPHA, OCCUPANCY, voxel_lit
 from .base import no_shift
 
 NAME = "vsv"
@@ -27,7 +27,7 @@ VIEWS = ("vsv",)      # reads a voxelized shadow volume's grid, no depth map
 class Params:
     """The grid's alpha resolution and occupancy rule."""
     alpha: int = field(default=256, metadata={"doc": "voxels along each light ray (the grid's alpha axis)",
-                                              "min": 1})
+                                              "min": 1, "max": MAX_ALPHA})
     occupancy: str = field(default="centre", metadata={"doc": "a voxel's state: its centre's, or occluded when it "
                                                               "holds the hit", "choices": OCCUPANCY})
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import drjit as dr
 
-from ..maps.vsv import OCCUPANCY, voxel_lit
+from ..maps.vsv import MAX_ALPHA, OCCUPANCY, voxel_lit
 from .base import no_shift
 
 NAME = "vsv_epsilon"
@@ -31,7 +31,7 @@ class Params:
     K: float = field(default=0.01, metadata={"doc": "epsilon toward the light as a fraction of the scene's diagonal",
                                              "min": 0.0})
     alpha: int = field(default=256, metadata={"doc": "voxels along each light ray (the grid's alpha axis)",
-                                              "min": 1})
+                                              "min": 1, "max": MAX_ALPHA})
     occupancy: str = field(default="centre", metadata={"doc": "a voxel's state: its centre's, or occluded when it "
                                                               "holds the hit", "choices": OCCUPANCY})
 
