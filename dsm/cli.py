@@ -608,9 +608,9 @@ def _tune_held(tc, out: Path, force: bool = False) -> int:
 
 def schemes_text() -> str:
     """``dsm schemes``' text: each scheme's source, layers, parameters and summary, then presets and units."""
-    from .schemes import REGISTRY, presets
+    from .schemes import ALL, presets
     lines = []
-    for s in REGISTRY:
+    for s in ALL:               # the shadow-map schemes, then the VSV lookups (view vsv only)
         needs = ", ".join(sorted(s.NEEDS)) or "first layer only"
         lines.append(f"{s.NAME}  [{s.SOURCE}]  needs: {needs}")
         for f in dataclasses.fields(s.Params):

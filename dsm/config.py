@@ -13,7 +13,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from .types import (  # noqa: F401  (re-exported: the config's vocabulary)
-    LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA,
+    LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, MAP_VIEWS, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA,
     REPORT_IMAGES,
     ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params,
     SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec,
@@ -100,7 +100,7 @@ def _plain_name(name, source):
 def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Config:
     """The Config of raw TOML tables ``raw`` from ``source`` (files relative to ``base``), every value checked."""
     from . import scenes as scenes_mod
-    from .schemes import REGISTRY, PRESETS
+    from .schemes import ALL as REGISTRY, PRESETS     # shadow-map schemes and the VSV lookups
 
     base = Path(base or ".")
     check_keys(raw, TOP_KEYS, source, "")
@@ -151,12 +151,14 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
                         for r in as_list(m.get("resolution", 512)))
     filters = tuple(_filter(f, source) for f in as_list(m.get("filter", "nearest")))
     formats = tuple(choice(f, source, "map.format", FORMATS) for f in as_list(m.get("format", "float32")))
-    views = tuple(choice(v, source, "map.view", POINT_VIEWS) for v in as_list(m.get("view", "dual_paraboloid")))
+    views = tuple(choice(v, source, "map.view", MAP_VIEWS) for v in as_list(m.get("view", "dual_paraboloid")))
     for key, vals in (("map.resolution", resolutions), ("map.filter", filters), ("map.format", formats),
                       ("map.view", views)):
         if not vals:
             raise ConfigError(source, key, "empty list")
-    if "view" in m and all(l.type not in ("point", "scene") and l.shape != "sphere" for l in lights):
+    from . import lights as light_types      # a spot's VSV grid (dsm.maps.vsv) is a view the config names
+    vsv_light = "vsv" in views and any("vsv" in light_types.get(l.type).views(views, l.shape) for l in lights)
+    if "view" in m and not vsv_light and all(l.type not in ("point", "scene") and l.shape != "sphere" for l in lights):
         # a scene's own lights are known only once it is loaded; explicit ones are known now
         raise ConfigError(source, "map.view", "views are for point lights and no [[light]] is a point light "
                           f"(the lights are {', '.join(sorted({l.type for l in lights}))}); remove map.view or "
@@ -174,6 +176,9 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     schemes = []
     for i, t in enumerate(scheme_tables):
         schemes += parse_scheme(t, source, f"scheme[{i}]", REGISTRY, PRESETS)
+    from .schemes import view_mismatch        # a VSV grid and its lookups come together (dsm.maps.vsv)
+    if view_mismatch(schemes, views):
+        raise ConfigError(source, "map.view", view_mismatch(schemes, views), MAP_VIEWS)
 
     mem = _table(raw, "memory", source)
     check_keys(mem, ("budget_mb",), source, "memory")

@@ -428,7 +428,10 @@ def make(cfg: Config) -> Plan:
                 for R in cfg.map.resolutions_for(faces):
                     for culling, config_group in groups.items():
                         # engine presets are combined instances per light type, resolved here
-                        group = [schemes_mod.preset_for_light(s, ltype) for s in config_group]
+                        group = [schemes_mod.preset_for_light(s, ltype) for s in config_group
+                                 if schemes_mod.reads_view(s, view)]     # a VSV grid: its own lookups only
+                        if not group:
+                            continue
                         needs = schemes_mod.needs_of(group)
                         m = MapPlan(sc.label, label, view, R, faces, culling, tuple(sorted(needs)),
                                     "z2" in needs or culling != "none", fmts,

@@ -345,8 +345,8 @@ class Runner:
         gets it wrong (the resolution's share of a nearest case's errors), None on failure."""
         if rx is None:
             return np.zeros(0, bool)
-        if setup.ref is not None:     # an area light: the oracles are those of a hard V*
-            return None
+        if setup.ref is not None or not getattr(view, "depth_oracles", True):
+            return None               # an area light (the oracles are a hard V*'s); a VSV grid (no depth bias)
         meta = {"scene": sd.label, "light": setup.label, "view": view.kind, "resolution": m.resolution,
                 "culling": m.culling, "format": fmt}
         try:

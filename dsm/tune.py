@@ -169,6 +169,9 @@ def parse_tune(cfg) -> TuneConfig:
         if s.preset is not None:
             raise ConfigError(src, f"scheme[{i}].preset", "dsm tune tunes scheme parameters, not presets: give "
                               "the combined scheme with the preset's values (dsm schemes lists them)")
+        if getattr(get(s.name), "VIEWS", None) is not None:      # a VSV lookup (dsm.maps.vsv): no depth map to tune on
+            raise ConfigError(src, f"scheme[{i}].name", f"{s.name} reads a voxelized shadow volume; dsm tune tunes "
+                              "shadow-map schemes", _tunable_names())
         if not tunable(get(s.name)):
             raise ConfigError(src, f"scheme[{i}].name", f"{s.name} has no continuous parameter to tune",
                               _tunable_names())

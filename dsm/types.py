@@ -16,6 +16,7 @@ LENGTH_UNITS = ("world", "texel", "range")
 FILTERS = ("nearest", "pcf_bilinear", "pcf_jitter4x4", "pcf_wide", "pcss")
 FORMATS = ("float32", "unorm16", "unorm24", "ndc24")
 POINT_VIEWS = ("paraboloid", "dual_paraboloid", "cube")
+MAP_VIEWS = POINT_VIEWS + ("vsv",)      # [map] view: and a voxelized shadow volume (dsm.maps.vsv; spot lights too)
 AREA_SHAPES = ("rectangle", "disk", "sphere", "emitter")
 # vectorized Dr.Jit variants only: the kit's code runs on wide arrays (scalar_rgb cannot run it)
 VARIANTS = ("llvm_ad_rgb", "cuda_ad_rgb")
@@ -134,7 +135,7 @@ def check_keys(table: dict, allowed, source: str, where: str):
 def coerce_field(f: dataclasses.Field, raw, source: str, key: str):
     """Convert one raw TOML value to a parameter dataclass field's type (Length, float, int, str, or
     a ``tuple`` of three numbers). ``metadata["min"]`` bounds numbers and Lengths (their value, in
-    any unit: an upper limit or an offset below 0 has no meaning)."""
+    any unit: an upper limit or an offset below 0 has no meaning); ``metadata["max"]`` integers."""
     if f.type in ("Length", Length):
         value = Length.parse(raw, source, key)
         lo = f.metadata.get("min")
@@ -146,7 +147,7 @@ def coerce_field(f: dataclasses.Field, raw, source: str, key: str):
     if f.type in ("float", float):
         return number(raw, source, key, minimum=f.metadata.get("min"))
     if f.type in ("int", int):
-        return number(raw, source, key, integer=True, minimum=f.metadata.get("min"))
+        return number(raw, source, key, integer=True, minimum=f.metadata.get("min"), maximum=f.metadata.get("max"))
     if f.type in ("str", str):
         return choice(raw, source, key, f.metadata["choices"])
     raise TypeError(f"unsupported parameter type {f.type!r}")
@@ -367,7 +368,8 @@ class Config:
 # the culling choices of a map build (midpoint, dual); second_depth's front_closed is its own
 CULLINGS = ("none", "back", "front", "back_closed")
 # faces (maps) per view kind ("fitted": an area light's perspective or paraboloid view, chosen from its receivers)
-VIEW_FACES = {"fitted": 1, "orthographic": 1, "perspective": 1, "paraboloid": 1, "dual_paraboloid": 2, "cube": 6}
+VIEW_FACES = {"fitted": 1, "orthographic": 1, "perspective": 1, "paraboloid": 1, "dual_paraboloid": 2, "cube": 6,
+              "vsv": 1}
 DEFAULT_CAMERA = (256, 256)     # built-ins and meshes without [camera] resolution
 
 

@@ -65,8 +65,8 @@ def parse(t: dict, source: str, where: str) -> LightSpec:
 
 
 def views(point_views: tuple, shape: str) -> tuple:
-    """A sphere's: the point-light views; a one-sided light's: one view fitted to it."""
-    return tuple(point_views) if shape == "sphere" else ("fitted",)
+    """A sphere's: the point-light views but a VSV grid (a hard light's); a one-sided light's: one view fitted to it."""
+    return tuple(v for v in point_views if v != "vsv") if shape == "sphere" else ("fitted",)
 
 
 def make_view(light, R, receivers_world, bbox, kind, cascade, sensor, scale):

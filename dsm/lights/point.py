@@ -1,7 +1,8 @@
-"""A point light: paraboloid, dual paraboloid or cube maps around its position."""
+"""A point light: paraboloid, dual paraboloid or cube maps around its position, or a voxelized shadow volume."""
 from __future__ import annotations
 
 from ..types import LightSpec, check_keys, vec3
+from ..maps.vsv import EpipolarView, camera_pose
 from ..views import CubeView, ParaboloidView
 from .base import required, unit_direction
 
@@ -25,10 +26,14 @@ def views(point_views: tuple, shape: str) -> tuple:
 
 
 def make_view(light, R, receivers_world, bbox, kind, cascade, sensor, scale):
-    """A paraboloid, dual-paraboloid or cube view at the light's position."""
+    """A paraboloid, dual-paraboloid or cube view at the light's position, or the VSV grid of the
+    light and the camera ``sensor`` fitted to the receivers (dsm.maps.vsv)."""
     axis = light.direction if light.direction is not None else (0.0, 0.0, -1.0)
     if kind in ("paraboloid", "dual_paraboloid"):
         return ParaboloidView(light.position, axis, bbox, R, dual=kind == "dual_paraboloid")
     if kind == "cube":
         return CubeView(light.position, bbox, R)
-    raise ValueError(f"unknown point-light view {kind!r} (valid: paraboloid, dual_paraboloid, cube)")
+    if kind == "vsv":
+        eye, up = camera_pose(sensor)
+        return EpipolarView(light.position, eye, up, receivers_world, bbox, R)
+    raise ValueError(f"unknown point-light view {kind!r} (valid: paraboloid, dual_paraboloid, cube, vsv)")

@@ -1,9 +1,10 @@
-"""A spot light: a perspective map along its axis, within its cutoff."""
+"""A spot light: a perspective map along its axis, within its cutoff; a voxelized shadow volume on request."""
 from __future__ import annotations
 
 import numpy as np
 
 from ..types import ConfigError, LightSpec, check_keys, number, vec3
+from ..maps.vsv import EpipolarView, camera_pose
 from ..views import PerspectiveView
 from .base import required, unit_direction
 
@@ -29,11 +30,16 @@ def parse(t: dict, source: str, where: str) -> LightSpec:
 
 
 def views(point_views: tuple, shape: str) -> tuple:
-    """One perspective view."""
-    return ("perspective",)
+    """One perspective view, and a VSV grid when the config's ``[map] view`` names ``vsv``."""
+    return ("perspective",) + (("vsv",) if "vsv" in point_views else ())
 
 
 def make_view(light, R, receivers_world, bbox, kind, cascade, sensor, scale):
-    """The perspective map along the spot's axis (its direction, or toward its target)."""
+    """The perspective map along the spot's axis (its direction, or toward its target); ``kind``
+    "vsv": the VSV grid of the light and the camera ``sensor`` over the same cone (dsm.maps.vsv)."""
     axis = light.direction if light.direction is not None else np.subtract(light.target, light.position)
-    return PerspectiveView(light.position, axis, light.cutoff, bbox, R)
+    view = PerspectiveView(light.position, axis, light.cutoff, bbox, R)
+    if kind != "vsv":
+        return view
+    eye, up = camera_pose(sensor)
+    return EpipolarView(light.position, eye, up, receivers_world, bbox, R, domain=view.inside)

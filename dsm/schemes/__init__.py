@@ -8,17 +8,25 @@ over Dr.Jit arrays (lit where >= 0) and ``shift(rx, params) -> Receiver`` (the i
 
 Engine presets (:mod:`.presets`) are :mod:`combined` instances per light type:
 :func:`preset_for_light` resolves one for a light.
+
+Lookups of other shadow representations (``VOXEL_REGISTRY``: a voxelized shadow volume's voxel
+tests, :mod:`dsm.maps.vsv`) meet the same contract and name the views they read (``VIEWS``); a
+shadow-map scheme, which names none, reads every view but those (:func:`reads_view`). ``ALL``
+is every scheme a config may name; ``REGISTRY`` stays the shadow-map schemes.
 """
 
 from . import (adaptive, adaptive_tap, combined, constant, dual, midpoint, none, normal_angle, normal_offset, receiver_plane,
-               second_depth, slope_scaled)
+               second_depth, slope_scaled, vsv, vsv_adaptive, vsv_epsilon)
 from ..types import Length, describe_params  # noqa: F401  (describe_params: the report's words)
 
 from .base import Scheme
 
 REGISTRY = (none, constant, slope_scaled, normal_angle, normal_offset, combined, receiver_plane, adaptive, midpoint,
             dual, second_depth, adaptive_tap)
-_broken = [m.NAME for m in REGISTRY if not isinstance(m, Scheme)]
+VOXEL_REGISTRY = (vsv, vsv_epsilon, vsv_adaptive)
+ALL = REGISTRY + VOXEL_REGISTRY
+EXCLUSIVE_VIEWS = frozenset(v for m in VOXEL_REGISTRY for v in m.VIEWS)   # views only their own lookups read
+_broken = [m.NAME for m in ALL if not isinstance(m, Scheme)]
 assert not _broken, f"scheme modules not meeting the Scheme contract: {_broken}"
 
 # Engine presets: a named engine's default bias, measurable beside every scheme (per light type).
@@ -27,10 +35,17 @@ from .presets import PRESETS, preset_for_light  # noqa: E402,F401
 
 def get(name: str):
     """The scheme module named ``name``; KeyError listing the valid names."""
-    for s in REGISTRY:
+    for s in ALL:
         if s.NAME == name:
             return s
-    raise KeyError(f"unknown scheme {name!r} (valid: {', '.join(s.NAME for s in REGISTRY)})")
+    raise KeyError(f"unknown scheme {name!r} (valid: {', '.join(s.NAME for s in ALL)})")
+
+
+def reads_view(spec, view: str) -> bool:
+    """Whether a scheme instance reads maps of view kind ``view``: its own ``VIEWS``, else every
+    view but the exclusive ones (a voxel grid is no depth map)."""
+    own = getattr(get(spec.name), "VIEWS", None)
+    return view in own if own is not None else view not in EXCLUSIVE_VIEWS
 
 
 def culling_of(params) -> str:
@@ -46,3 +61,17 @@ def needs_of(scheme_specs) -> set:
         own = getattr(module, "needs", None)
         out |= set(own(s.params) if own is not None else module.NEEDS)
     return out
+
+
+def view_mismatch(specs, views) -> str:
+    """What a config's scheme instances and ``[map] view`` choices leave unmatched, in words
+    ('' when nothing): a lookup whose views none names, or an exclusive view no lookup reads."""
+    for s in specs:
+        own = getattr(get(s.name), "VIEWS", None)
+        if own is not None and not set(own) & set(views):
+            return f"scheme {s.name} reads only a {' or '.join(own)} view: add it to map.view"
+    for v in sorted(set(views) & EXCLUSIVE_VIEWS):
+        if not any(reads_view(s, v) for s in specs):
+            readers = ", ".join(m.NAME for m in VOXEL_REGISTRY if v in m.VIEWS)
+            return f"view {v} is read by its own lookups only ({readers}) and no [[scheme]] is one"
+    return ""
