@@ -63,6 +63,7 @@ class MapPlan:
     scene_index: int = 0          # of the config's scenes
     light_index: int = 0          # of the scene's lights (the label's number)
     cascade: object = None        # a directional light's CascadeSpec (faces = its count), else None
+    moments: tuple = ()           # pre-filtered instances (MomentSpec) built from this map's z1 (culling none)
 
     @property
     def texels(self) -> int:
@@ -392,6 +393,8 @@ def make(cfg: Config) -> Plan:
     groups = {}
     for spec in cfg.schemes:
         groups.setdefault(schemes_mod.culling_of(spec.params), []).append(spec)
+    if cfg.map.moments:       # moment maps are built from the first layer, as rays see it: culling none
+        groups.setdefault("none", [])
     for si, sc in enumerate(cfg.scenes):
         if sc.missing:
             continue
@@ -413,10 +416,14 @@ def make(cfg: Config) -> Plan:
                         # engine presets are combined instances per light type, resolved here
                         group = [schemes_mod.preset_for_light(s, ltype) for s in config_group]
                         needs = schemes_mod.needs_of(group)
+                        moments = cfg.map.moments if culling == "none" else ()
                         m = MapPlan(sc.label, label, view, R, faces, culling, tuple(sorted(needs)),
                                     "z2" in needs or culling != "none", fmts,
-                                    [f"{s.name} {s.label}".strip() for s in group], len(group) * per_case,
-                                    specs=tuple(group), scene_index=si, light_index=li, cascade=cascade)
+                                    [f"{s.name} {s.label}".strip() for s in group]
+                                    + [f"{s.name} {s.label} {s.filter}" for s in moments],
+                                    len(group) * per_case + len(moments) * len(cfg.map.format),
+                                    specs=tuple(group), scene_index=si, light_index=li, cascade=cascade,
+                                    moments=moments)
                         plan.maps.append(m)
     if cfg.map.cascade and plan.maps and not any(m.cascade is not None for m in plan.maps):
         raise ConfigError(cfg.source, "map.cascades", "cascades are for directional lights and no light of the "
