@@ -341,3 +341,42 @@ def test_unfiltered_vsm_is_the_constant_bias_receiver_by_receiver_and_lights_not
     plate = sd.shape_names.index("plate")
     under = ~setup.v_star & (shape == plate)
     assert under.sum() > 20 and (v[under] < 0.5).all()
+
+
+def test_stacked_plates_leak_in_the_one_texel_column_derived_by_hand():
+    """stacked_plates, light straight down: the high plate (x in [-0.75, 0], height 2) over half
+    of the low one (|x|, |y| <= 0.75, height 0.25) over the ground. In normalized depth the
+    ground is g = 0.25 / range behind the low plate and the low plate D = 1.75 / range behind the
+    high one (r = g / D = 1/7). A ground receiver under the low plate alone whose W = 5 window
+    holds a fraction f of high-plate texels is lit (p >= 0.5) exactly when f(1-f) D^2 >= (g + f D)^2,
+    i.e. 2 f^2 - (1 - 2r) f + r^2 <= 0: f in [0.031, 0.326]. The window of column i_h + k (i_h:
+    the last column whose centre ray meets the high plate) holds 3 - k high columns of 5: f = 0.4
+    at k = 1 (not lit), f = 0.2 at k = 2 (lit), 0 beyond. So within rows and columns clear of the
+    other edges, the leak is the column i_h + 2 exactly, and it is a leak (0.25 world from the low
+    plate, about 10 texels), not contact."""
+    import dsm.pipeline as pl
+    from dsm import metrics
+    from dsm.types import MomentSpec
+    from dsm.prefilter import vsm
+    sd = pl.load_scene(pl.scene_spec({"builtin": "stacked_plates"}), (160, 160))
+    setup = pl.light_setup(sd, pl.gbuffer(sd), sd.own_lights[0], "sun")
+    R = 256
+    view = pl.make_view(setup.light, R, pl.points_np(setup.p), sd.bbox)
+    smap = pl.build_map(sd.scene, view)
+    rx = pl.receivers(view, setup, sd.diagonal)
+    spec = MomentSpec("vsm", vsm.Params(min_variance=1e-4), 5)
+    v, _ = pl.moment_visibility(spec, rx, pl.moment_map(spec, smap, "float32"), smap)
+    v = v.numpy()
+    col, row = np.floor(rx.u_map.numpy()), np.floor(rx.v_map.numpy())
+    u0, u1 = (float(view.project(mi.Point3f(x, 0.0, 0.0))[0].numpy()[0]) for x in (0.0, 0.75))   # plate edges
+    v_lo, v_hi = sorted(float(view.project(mi.Point3f(0.0, y, 0.0))[1].numpy()[0]) for y in (-0.75, 0.75))
+    assert u1 > u0                                          # u grows with world x (the light frame)
+    i_h = np.ceil(u0 - 0.5) - 1                             # centre (i + 0.5) < u0: the high plate's
+    ground = setup.shape == sd.shape_names.index("ground")
+    region = ground & ~setup.v_star & (col > i_h) & (col < np.floor(u1) - 3) & (row > v_lo + 3) & (row < v_hi - 3)
+    assert region.sum() > 30 and (col[region] == i_h + 2).sum() > 3
+    lit = v >= 0.5
+    assert (lit[region] == (col[region] == i_h + 2)).all()
+    split = metrics.leak_split(v[region], setup.v_star[region], setup.occluder_dist[region],
+                               rx.texel_world.numpy()[region], 2.0)
+    assert split["n_leak"] == (col[region] == i_h + 2).sum() and split["n_peterpan_contact"] == 0
