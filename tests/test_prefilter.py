@@ -380,3 +380,18 @@ def test_stacked_plates_leak_in_the_one_texel_column_derived_by_hand():
     split = metrics.leak_split(v[region], setup.v_star[region], setup.occluder_dist[region],
                                rx.texel_world.numpy()[region], 2.0)
     assert split["n_leak"] == (col[region] == i_h + 2).sum() and split["n_peterpan_contact"] == 0
+
+
+def test_msm_where_float32_leaves_the_system_singular_falls_back_to_chebyshev():
+    """A window of one depth (0.8347) under the default bias 3e-5, the receiver 2.5e-5 behind
+    it: float32's Cholesky gives c2 = 0 and a NaN bound (found in l_shape at W = 9). V is then
+    Chebyshev's bound of the biased E[t], E[t^2], computed here in float64."""
+    from dsm.prefilter import msm
+    b = [0.83470887, 0.6967454, 0.5815904, 0.48547226]
+    t, a = 0.83473355, 3e-5
+    v = _np(msm.visibility([_f([x]) for x in b], _f([t]), _prm(moment_bias=a, depth_bias=0.0)))[0]
+    b0, b1 = ((1 - a) * np.float32(x).astype(np.float64) + a * 0.5 for x in b[:2])
+    var = b1 - b0 * b0
+    t64 = float(np.float32(t))
+    want = 1.0 if t64 <= b0 else var / (var + (t64 - b0) ** 2)
+    assert np.isfinite(v) and v == pytest.approx(want, abs=0.05)

@@ -9,7 +9,8 @@ B c = (1, t, t^2) for the 3 x 3 Hankel matrix B of (1, b1', b2'; b1', b2', b3'; 
 (Cholesky, as the paper's code), take the roots z2 <= z3 of c0 + c1 z + c2 z^2, and sum the
 weights of the three-point distribution at (t, z2, z3) that lie in front of the receiver: the
 sharpest lower bound on the shadow the four moments allow (Hamburger's moment problem).
-V = 1 - that bound, clamped to [0, 1].
+V = 1 - that bound, clamped to [0, 1]. Where float32 leaves B singular (the bound is NaN: a
+window of one depth under a small bias), Chebyshev's bound of the biased E[t], E[t^2] stands in.
 
 The 16-bit layout of the paper (its optimized quantization, a 4 x 4 transform before unorm16
 storage) is not implemented: ``float16`` stores the raw power moments as halves.
@@ -19,6 +20,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import drjit as dr
+
+from .base import chebyshev
 
 NAME = "msm"
 SOURCE = "Peters & Klein 2015 (I3D), Moment Shadow Mapping, algorithm 2 (Hamburger 4MSM)"
@@ -75,4 +78,7 @@ def visibility(b, t, prm):
     s2 = dr.select(beyond, 1.0, 0.0)
     quotient = (s0 * z3 - b0 * (s0 + z3) + b1) / ((z3 - s1) * (t - z2))
     shadow = s2 + dr.select(between, quotient, 0.0)      # not 0 * inf where no root lies in front
-    return 1.0 - dr.clip(shadow, 0.0, 1.0)
+    v = 1.0 - dr.clip(shadow, 0.0, 1.0)
+    # float32 can leave the system singular (c2 = 0 for a window of one depth with a small bias:
+    # a NaN bound); Chebyshev's bound of the same biased moments, looser but defined, stands in
+    return dr.select(dr.isfinite(v), v, chebyshev(b0, b1, t, 0.0))
