@@ -395,3 +395,25 @@ def test_msm_where_float32_leaves_the_system_singular_falls_back_to_chebyshev():
     t64 = float(np.float32(t))
     want = 1.0 if t64 <= b0 else var / (var + (t64 - b0) ** 2)
     assert np.isfinite(v) and v == pytest.approx(want, abs=0.05)
+
+
+def test_dsm_schemes_lists_each_map_kind_with_its_source_and_parameters():
+    from dataclasses import fields
+    from dsm import prefilter
+    from dsm.cli import schemes_text
+    text = schemes_text()
+    for k in prefilter.REGISTRY:
+        assert f"{k.NAME}  [{k.SOURCE}]" in text
+        for f in fields(k.Params):
+            assert f"    {f.name} = {f.default}" in text
+
+
+def test_a_resumed_run_keeps_its_moment_cases(run_dict, tmp_path):
+    import dsm
+    cfg = base_config(scene=[{"builtin": "floating_plate"}], camera={"resolution": [32, 32]},
+                      map={"resolution": 32, "kind": ["depth", "vsm", "msm"], "blur": [1, 3]})
+    first = dsm.run(cfg, out=tmp_path / "r")
+    again = dsm.run(cfg, out=tmp_path / "r", resume=True)
+    assert again.run["resumed_cases"] == len(first.rows) == 1 + 2 * 2
+    assert [(r["case"], r["scheme"], r["filter"], r["n_leak"]) for r in again.rows] == \
+        [(r["case"], r["scheme"], r["filter"], r["n_leak"]) for r in first.rows]
