@@ -41,6 +41,9 @@ HOST_BYTES = 60
 PIXEL_BYTES = GBUFFER_BYTES + REFERENCE_BYTES + HOST_BYTES
 BUILD_BYTES = {"first": 8, "slope": 12, "layered": 84, "layered_slope": 132}   # working set incl. outputs
 STORED_BYTES = 4           # per texel and stored layer (z1, shape, slope, z2)
+# a pre-filtered map's build per texel: numpy's float64 moments and blur (peak 104 B/texel for
+# four moments at W = 9, tracemalloc, R = 1024) and the four float32 moments on the device
+MOMENT_BYTES = 120
 MIN_TILE = 1 << 16
 
 
@@ -90,8 +93,10 @@ class MapPlan:
 
     @property
     def peak_bytes(self) -> int:
-        """Estimated peak bytes of the map's build: its stored layers plus one tile's working set."""
-        return self.stored_bytes + min(self.tile or self.texels, self.texels) * self.build_bytes_per_texel
+        """Estimated peak bytes of the map's build: its stored layers plus one tile's working set
+        (and a moment map's build, where the map serves pre-filtered instances)."""
+        moments = self.texels * MOMENT_BYTES if self.moments else 0
+        return self.stored_bytes + min(self.tile or self.texels, self.texels) * self.build_bytes_per_texel + moments
 
 
 @dataclass
