@@ -616,8 +616,7 @@ def prefilter_text() -> list:
         lines.append(f"{k.NAME}  [{k.SOURCE}]")
         lines += [f"    {f.name} = {f.default}" for f in dataclasses.fields(k.Params)]
         lines.append("    " + (k.Params.__doc__ or "").strip().splitlines()[0])
-    lines.append("  no engine presets of these kinds are shipped (their values are not read from the engines' "
-                 "source files here)")
+    lines += prefilter.presets.text()
     return lines
 
 

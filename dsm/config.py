@@ -341,10 +341,21 @@ def _parse_moments(m: dict, kinds, formats, source: str) -> tuple:
         t = m.get(name, {})
         if not isinstance(t, dict):
             raise ConfigError(source, f"map.{name}", f"expected a table [map.{name}]")
-        params = sweep_params(prefilter.get(name).Params, t, source, f"map.{name}")
+        preset = None
+        if "preset" in t and not prefilter.presets.names(name):
+            raise ConfigError(source, f"map.{name}.preset", f"{name} has no engine presets (dsm schemes lists them)",
+                              sorted(k for k in prefilter.presets.PRESETS))
+        if "preset" in t:
+            preset = choice(t["preset"], source, f"map.{name}.preset", prefilter.presets.names(name))
+            if set(t) != {"preset"}:
+                raise ConfigError(source, f"map.{name}.{sorted(set(t) - {'preset'})[0]}", "a preset takes no other keys",
+                                  ("preset",))
+            params = [prefilter.presets.PRESETS[name][preset]]
+        else:
+            params = sweep_params(prefilter.get(name).Params, t, source, f"map.{name}")
         for p in params:
             prefilter.check(name, p, formats, source, f"map.{name}")
-        out += [MomentSpec(name, p, w) for p in params for w in blurs]
+        out += [MomentSpec(name, p, w, preset) for p in params for w in blurs]
     return tuple(out)
 
 

@@ -417,3 +417,45 @@ def test_a_resumed_run_keeps_its_moment_cases(run_dict, tmp_path):
     assert again.run["resumed_cases"] == len(first.rows) == 1 + 2 * 2
     assert [(r["case"], r["scheme"], r["filter"], r["n_leak"]) for r in again.rows] == \
         [(r["case"], r["scheme"], r["filter"], r["n_leak"]) for r in first.rows]
+
+
+def test_mjp_presets_are_mjps_defaults_in_the_kits_units():
+    """MJP's Shadows sample: AppSettings.cs VSMBias = 0.01 (used as VSMBias * 0.01), MSMMomentBias
+    = 0.003 (used x 0.001), exponents 40 / 5. Its EVSM minimum variance is (VSMBias * 0.01 * c w)^2
+    in x = 2t - 1; the kit's EVSM with the preset's min_variance must give the same V as MJP's
+    ChebyshevUpperBound with that variance, written here in float64."""
+    from dsm import config
+    from dsm.prefilter import evsm
+    cfg = config.parse(base_config(map={"kind": ["depth", "vsm", "evsm", "msm"], "vsm": {"preset": "mjp"},
+                                        "evsm": {"preset": "mjp"}, "msm": {"preset": "mjp"}}), "<test>")
+    got = {m.name: m for m in cfg.map.moments}
+    assert got["vsm"].params.min_variance == pytest.approx(0.01 * 0.01) and got["vsm"].params.bleed == 0.0
+    assert got["msm"].params.moment_bias == pytest.approx(0.003 * 0.001) and got["msm"].preset == "mjp"
+    p = got["evsm"].params
+    assert (p.positive, p.negative, p.moments) == (40.0, 5.0, 4)
+    # MJP's EVSM4 in float64 on the moments of a two-caster window
+    za, zb, f = RNG.uniform(0.2, 0.5, 200), RNG.uniform(0.5, 0.8, 200), RNG.uniform(0, 1, 200)
+    moms = [f * a + (1 - f) * b_ for a, b_ in zip(evsm.moments(za, p), evsm.moments(zb, p))]
+    t = np.float32(RNG.uniform(0.3, 0.9, 200)).astype(np.float64)
+    x = 2 * t - 1
+    w = np.stack([np.exp(40 * x), -np.exp(-5 * x)])
+    min_var = (0.01 * 0.01 * np.array([[40.0], [5.0]]) * w) ** 2
+    m32 = [np.float32(m).astype(np.float64) for m in moms]
+
+    def cheb(m1, m2, d, mv):        # MJP's ChebyshevUpperBound, bleed 0
+        var = np.maximum(m2 - m1 * m1, mv)
+        return np.where(d <= m1, 1.0, var / (var + (d - m1) ** 2))
+    want = np.minimum(cheb(m32[0], m32[1], w[0], min_var[0]), cheb(m32[2], m32[3], w[1], min_var[1]))
+    v = _np(evsm.visibility([_f(m) for m in moms], _f(t), _prm(positive=40, negative=5, min_variance=p.min_variance,
+                                                                bleed=0.0)))
+    assert np.abs(v - want).max() < 2e-3 and (want < 0.5).any() and (want > 0.5).any()
+
+
+def test_a_preset_takes_no_other_keys_and_esm_has_none():
+    from dsm import config
+    for m, key in (({"kind": "vsm", "vsm": {"preset": "mjp", "bleed": 0.1}}, "map.vsm.bleed"),
+                   ({"kind": "esm", "esm": {"preset": "mjp"}}, "map.esm.preset"),
+                   ({"kind": "msm", "msm": {"preset": "three"}}, "map.msm.preset")):
+        with pytest.raises(config.ConfigError) as e:
+            config.parse({"scene": [{"builtin": "plane"}], "map": m}, "<test>")
+        assert e.value.key == key

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from . import esm, evsm, msm, vsm
+from . import esm, evsm, msm, presets, vsm  # noqa: F401  (presets: the engines' values)
 from .base import LOG_MAX, MOMENT_FORMATS, MapKind, build as build_map, fetch, normalized_depth  # noqa: F401  (MOMENT_FORMATS: the choices)
 from ..lookup import resolve
 from ..types import ConfigError
