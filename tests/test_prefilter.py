@@ -459,3 +459,11 @@ def test_a_preset_takes_no_other_keys_and_esm_has_none():
         with pytest.raises(config.ConfigError) as e:
             config.parse({"scene": [{"builtin": "plane"}], "map": m}, "<test>")
         assert e.value.key == key
+
+
+def test_dsm_tune_refuses_a_config_with_pre_filtered_kinds():
+    from dsm import config, tune
+    cfg = config.parse(base_config(map={"kind": ["depth", "vsm"]}, scheme=[{"name": "constant"}]), "<test>")
+    with pytest.raises(config.ConfigError) as e:
+        tune.parse_tune(cfg)
+    assert e.value.key == "map.kind"
