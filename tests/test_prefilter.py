@@ -467,3 +467,24 @@ def test_dsm_tune_refuses_a_config_with_pre_filtered_kinds():
     with pytest.raises(config.ConfigError) as e:
         tune.parse_tune(cfg)
     assert e.value.key == "map.kind"
+
+
+def test_the_summary_pools_the_leak_split_per_instance():
+    from dsm import summary
+    base = {"preset": "", "format": "float32", "cascade_layout": ""}
+    rows = [{**base, "scheme": "vsm", "params": "min_variance=0.0001", "filter": "box:3", "map_kind": "vsm",
+             "n_gt_shadowed": 100, "n_peterpan": 10, "n_peterpan_contact": 4, "n_leak": 6, "mean_abs_error": 0.02,
+             "moments_ms": 3.0},
+            {**base, "scheme": "vsm", "params": "min_variance=0.0001", "filter": "box:3", "map_kind": "vsm",
+             "n_gt_shadowed": 300, "n_peterpan": 2, "n_peterpan_contact": 2, "n_leak": 0, "mean_abs_error": 0.04,
+             "moments_ms": 5.0},
+            {**base, "scheme": "constant", "params": "bias=1 texel", "filter": "nearest", "map_kind": "depth",
+             "n_gt_shadowed": 50, "n_peterpan": 1, "n_peterpan_contact": 1, "n_leak": 0, "mean_abs_error": 0.01,
+             "moments_ms": float("nan")}]
+    lines = summary.leak_md(rows)
+    # vsm: leak 6 / 400 = 0.015, contact 6 / 400, peter-pan 12 / 400 = 0.03, mae (0.02 + 0.04) / 2, moments 4 ms
+    assert "| vsm | min_variance=0.0001 | box:3 | vsm | 2 | 0.03 | 0.015 | 0.015 | 0.03 | 4.00 |" in lines
+    assert "| constant | bias=1 texel | nearest | depth | 1 | 0.02 | 0.02 | 0 | 0.01 | - |" in lines
+    assert lines.index("| constant | bias=1 texel | nearest | depth | 1 | 0.02 | 0.02 | 0 | 0.01 | - |") < \
+        lines.index("| vsm | min_variance=0.0001 | box:3 | vsm | 2 | 0.03 | 0.015 | 0.015 | 0.03 | 4.00 |")
+    assert summary.leak_md([{k: v for k, v in r.items() if k != "map_kind"} for r in rows]) == []
