@@ -5,18 +5,18 @@ Only values read in the engine's own source files are encoded, each with its fil
 338290a5) holds the UI defaults and ``Shadows/Mesh.hlsl``, ``VSM.hlsl``, ``MSM.hlsl`` (commit
 37b61461) how they are used:
 
-- VSM: ``ChebyshevUpperBound(occluder, depth, VSMBias * 0.01, LightBleedingReduction)`` with
-  ``VSMBias = 0.01`` and ``LightBleedingReduction = 0.0``: min_variance 1e-4 (the map's [0, 1]
-  depth, the kit's normalized depth on an orthographic map), bleed 0.
-- EVSM: ``PositiveExponent = 40``, ``NegativeExponent = 5`` (clamped by ``GetEVSMExponents`` to
-  42 in fp32, 5.54 in fp16; the kit refuses an exponent the format cannot hold instead), depth
-  warped at ``2 depth - 1``, minimum variance ``(VSMBias * 0.01 * c * w)^2`` with w the warped
-  depth: a standard deviation of 1e-4 in x = 2t - 1, times the warp's slope c w. The kit's
+- VSM: the lookup passes ``VSMBias * 0.01`` as Chebyshev's minimum variance and
+  ``LightBleedingReduction`` as the bleed amount; the defaults are 0.01 and 0: min_variance 1e-4
+  (of the map's [0, 1] depth, the kit's normalized depth on an orthographic map), bleed 0.
+- EVSM: exponents ``PositiveExponent = 40``, ``NegativeExponent = 5`` (capped at 42 in fp32 and
+  5.54 in fp16; the kit refuses an exponent the format cannot hold instead), depth warped at
+  2 depth - 1, and a minimum variance per warp of (VSMBias * 0.01 * c * w)^2, w the warped
+  depth: a standard deviation of 1e-4 in x = 2t - 1 times the warp's slope c w. The kit's
   min_variance (normalized depth squared) times (dw/dt)^2 = (2 c w)^2 equals it for
-  min_variance = (1e-4 / 2)^2 = 2.5e-9. ``mjp`` is the four-component mode ("EVSM 4
-  Component"), ``mjp2`` the two-component one.
-- MSM: ``ComputeMSMHamburger(moments, depth, MSMDepthBias * 0.001f, MSMMomentBias * 0.001f)``
-  with ``MSMDepthBias = 0`` and ``MSMMomentBias = 0.003``: moment bias 3e-6, depth bias 0.
+  min_variance = (1e-4 / 2)^2 = 2.5e-9. ``mjp`` is the four-component mode, ``mjp2`` the
+  two-component one.
+- MSM (Hamburger): depth bias ``MSMDepthBias * 0.001`` and moment bias ``MSMMomentBias *
+  0.001`` with defaults 0 and 0.003: moment bias 3e-6, depth bias 0.
 
 Not encoded: three.js (``VSMShadowMap``) and Filament (VSM): their VSM source files could not
 be opened here at a release that names its values; ESM has no preset (MJP's sample has none).
