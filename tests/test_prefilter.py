@@ -170,7 +170,7 @@ def test_float16_depth_format_stores_the_normalized_depth_as_a_half():
 
 # ---------------------------------------------------------------- a synthetic map: the classic leak
 
-def _synthetic(z1, R):
+def _synthetic(R):
     """A one-face view of normalized depth (near 0, far 1) and a receiver at every texel centre."""
     view = SimpleNamespace(near=0.0, far=1.0, faces=1, resolution=R, R_u=dr.opaque(mi.UInt32, R))
     jj, ii = np.meshgrid(np.arange(R), np.arange(R), indexing="ij")
@@ -183,7 +183,7 @@ def _vsm_map(z1, R, blur, mv, receiver_t):
     from dsm import prefilter
     from dsm.prefilter import vsm
     from dsm.types import MomentSpec
-    view, rx = _synthetic(z1, R)
+    view, rx = _synthetic(R)
     rx.depth = _f(np.full(R * R, receiver_t))
     spec = MomentSpec("vsm", vsm.Params(min_variance=mv), blur)
     mmap = prefilter.build(spec, z1, view, "float32")
@@ -294,11 +294,11 @@ def test_without_kind_the_plan_and_rows_are_unchanged():
 # ---------------------------------------------------------------- a run
 
 def test_a_run_of_floating_plate_measures_each_kind_and_vsm_unfiltered_is_a_constant_bias(run_dict):
-    """floating_plate (a plate 0.2 above the ground). The unfiltered VSM lights a receiver g
-    behind its texel exactly when g^2 <= min_variance (normalized depth): the depth test with a
-    constant bias of sqrt(min_variance) depth ranges, here 0.01 range. Their V agree receiver by
-    receiver, and no receiver whose texel is the plate (a planar occluder 0.2 world above the
-    ground, far more than 0.01 range) is lit under it."""
+    """floating_plate (a plate 0.2 above the ground), every kind at W = 1 and 5: each row has the
+    prefilter group, its contact and leak add up to n_peterpan. The unfiltered VSM lights a
+    receiver g behind its texel exactly when g^2 <= min_variance (normalized depth): the depth
+    test with a constant bias of sqrt(min_variance) depth ranges, here 0.01 range, so the two
+    cases classify every pixel alike."""
     from dsm import record
     res = run_dict(base_config(scene=[{"builtin": "floating_plate"}], camera={"resolution": [64, 64]},
                                map={"resolution": 64, "kind": ["depth", "vsm", "esm", "evsm", "msm"], "blur": [1, 5],
