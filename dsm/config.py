@@ -168,6 +168,9 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
                           f"directional (the lights are {', '.join(sorted({l.type for l in lights}))}); remove "
                           "map.cascades or add a directional light")
     kinds = _parse_kinds(m, formats, lights, cascade, source)
+    if "leak_texels" in m and "kind" not in m:
+        raise ConfigError(source, "map.leak_texels", "the leak split is made in runs that give map.kind (e.g. "
+                          'kind = ["depth"]); add it', ("kind",))
     mapspec = MapSpec(resolutions, filters, formats, views, texels, cascade, kinds,
                       _parse_moments(m, kinds, formats, source),
                       "kind" in m, number(m.get("leak_texels", 2.0), source, "map.leak_texels", minimum=0.0))
@@ -309,6 +312,9 @@ def _parse_kinds(m: dict, formats, lights, cascade, source: str) -> tuple:
         raise ConfigError(source, "map.kind", "empty list", MAP_KINDS)
     if kinds == ("depth",):
         return kinds
+    if "filter" in m and "depth" not in kinds:
+        raise ConfigError(source, "map.filter", "filters are the depth map's (a pre-filtered map's filter is "
+                          "map.blur); add depth to map.kind or remove map.filter", ("depth",))
     bad = [f for f in formats if f not in MOMENT_FORMATS]
     if bad:
         raise ConfigError(source, "map.format", f"{bad[0]!r}: pre-filtered maps store their moments in", MOMENT_FORMATS)

@@ -252,11 +252,18 @@ def test_leak_split_by_the_distance_to_the_occluder_in_texels():
     ({"kind": "evsm", "evsm": {"positive": 40}, "format": "float16"}, "map.evsm"),
     ({"kind": "vsm", "vsm": {"bleed": 1.5}}, "map.vsm.bleed"),
     ({"kind": "vsm", "cascades": 2}, "map.cascades"),
+    ({"kind": "vsm", "filter": "pcf_wide:5"}, "map.filter"),
+    ({"leak_texels": 3}, "map.leak_texels"),
+    ({"kind": "vsm", "blur": 65}, "map.blur"),
+    ({"kind": "vsm", "vsm": 5}, "map.vsm"),
 ])
 def test_bad_map_kind_input_is_one_config_error_naming_the_key(m, key):
     from dsm import config
+    cfg = base_config(map={"resolution": 32, **m})
+    if m.get("kind") == "vsm":
+        del cfg["scheme"]            # schemes are the depth kind's
     with pytest.raises(config.ConfigError) as e:
-        config.parse(base_config(map={"resolution": 32, **m}), "<test>")
+        config.parse(cfg, "<test>")
     assert e.value.key == key and "\n" not in str(e.value)
 
 
@@ -488,3 +495,14 @@ def test_the_summary_pools_the_leak_split_per_instance():
     assert lines.index("| constant | bias=1 texel | nearest | depth | 1 | 0.02 | 0.02 | 0 | 0.01 | - |") < \
         lines.index("| vsm | min_variance=0.0001 | box:3 | vsm | 2 | 0.03 | 0.015 | 0.015 | 0.03 | 4.00 |")
     assert summary.leak_md([{k: v for k, v in r.items() if k != "map_kind"} for r in rows]) == []
+
+
+@pytest.mark.parametrize("extra", [
+    {"light": [{"type": "area", "shape": "rectangle", "position": [0, 0, 3], "direction": [0, 0, -1], "size": 1.0}]},
+    {"motion": [{"frames": 3, "camera": "dolly", "offset": [0, 1, 0]}]},
+], ids=["area light", "motion"])
+def test_pre_filtered_kinds_refuse_area_lights_and_motion(extra):
+    from dsm import config
+    with pytest.raises(config.ConfigError) as e:
+        config.parse({"scene": [{"builtin": "plane"}], "map": {"kind": "vsm"}, **extra}, "<test>")
+    assert e.value.key == "map.kind"
