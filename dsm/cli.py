@@ -619,7 +619,21 @@ def schemes_text() -> str:
     lines += presets.text()
     lines.append('lengths: a number (world units), "k texel" (texel widths at the receiver) or "k range" '
                  "(fraction of the view's depth range)")
+    lines += prefilter_text()
     return "\n".join(lines)
+
+
+def prefilter_text() -> list:
+    """The pre-filtered map kinds of ``[map] kind`` (dsm.prefilter): source, parameters, defaults."""
+    from . import prefilter
+    lines = ["pre-filtered maps ([map] kind = [...], parameters in [map.<kind>], [map] blur = box widths in texels; "
+             "a continuous V per receiver, not a margin per tap):"]
+    for k in prefilter.REGISTRY:
+        lines.append(f"{k.NAME}  [{k.SOURCE}]")
+        lines += [f"    {f.name} = {f.default}" for f in dataclasses.fields(k.Params)]
+        lines.append("    " + (k.Params.__doc__ or "").strip().splitlines()[0])
+    lines += prefilter.presets.text()
+    return lines
 
 
 if __name__ == "__main__":

@@ -18,10 +18,11 @@ from .types import (  # noqa: F401  (re-exported: the config's vocabulary)
     ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params,
     SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec,
     CameraSpec, CascadeSpec, CASCADE_SPLITS, CASCADE_FITS, DEPTH_BOUNDS, MAX_CASCADES,
-    MotionSpec, CAMERA_PATHS, LIGHT_PATHS)
+    MotionSpec, CAMERA_PATHS, LIGHT_PATHS, MAP_KINDS, MomentSpec)
 
 # a run's folder is runs/<name>-tune-YYYYmmdd-HHMMSS (21 bytes more) and a file name takes 255 bytes
 NAME_MAX_BYTES = 255 - len("-tune-20240101-120000")
+KIND_KEYS = ("kind", "blur", "leak_texels", "vsm", "esm", "evsm", "msm")    # [map] kind and its tables
 CASCADE_KEYS = ("cascades", "split", "lambda", "fit", "depth_bounds", "stabilize", "blend", "max_distance")
 
 
@@ -141,7 +142,7 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
         lights = [LightSpec("scene", label="scene")]
 
     m = _table(raw, "map", source)
-    check_keys(m, ("resolution", "texels", "filter", "format", "view") + CASCADE_KEYS, source, "map")
+    check_keys(m, ("resolution", "texels", "filter", "format", "view") + CASCADE_KEYS + KIND_KEYS, source, "map")
     if "resolution" in m and "texels" in m:
         raise ConfigError(source, "map", "give either resolution (per face) or texels (total per view), not both",
                           ("resolution", "texels"))
@@ -168,10 +169,19 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
         raise ConfigError(source, "map.cascades", "cascades are for directional lights and no [[light]] is "
                           f"directional (the lights are {', '.join(sorted({l.type for l in lights}))}); remove "
                           "map.cascades or add a directional light")
-    mapspec = MapSpec(resolutions, filters, formats, views, texels, cascade)
+    kinds = _parse_kinds(m, formats, lights, cascade, source)
+    if "leak_texels" in m and "kind" not in m:
+        raise ConfigError(source, "map.leak_texels", "the leak split is made in runs that give map.kind (e.g. "
+                          'kind = ["depth"]); add it', ("kind",))
+    mapspec = MapSpec(resolutions, filters, formats, views, texels, cascade, kinds,
+                      _parse_moments(m, kinds, formats, source),
+                      "kind" in m, number(m.get("leak_texels", 2.0), source, "map.leak_texels", minimum=0.0))
 
     scheme_tables = _array_of_tables(raw, "scheme", source)
-    if not scheme_tables:
+    if "depth" not in kinds and scheme_tables:
+        raise ConfigError(source, "scheme", "[[scheme]] tables are the depth map's and map.kind does not name depth; "
+                          "add depth to map.kind or remove them", MAP_KINDS)
+    if not scheme_tables and "depth" in kinds:
         raise ConfigError(source, "scheme", "at least one [[scheme]] is required", [s.NAME for s in REGISTRY])
     schemes = []
     for i, t in enumerate(scheme_tables):
@@ -200,6 +210,9 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
 
     motion = tuple(_parse_motion(t, source, f"motion[{i}]") for i, t in enumerate(_array_of_tables(raw, "motion", source)))
     _check_motion_lights(motion, lights, source)
+    if motion and mapspec.moments:
+        raise ConfigError(source, "map.kind", "pre-filtered maps are measured on still frames; remove [[motion]] "
+                          "or keep map.kind = depth", ("depth",))
     return Config(name=name, source=source, seed=seed, variant=variant, camera_resolution=camera_resolution,
                   camera=camera, motion=motion,
                   scenes=tuple(scenes), lights=tuple(lights), map=mapspec, schemes=tuple(schemes),
@@ -292,6 +305,68 @@ def _parse_cascades(m: dict, source: str) -> tuple:
     if not numeric and opts:
         raise ConfigError(source, f"map.{next(iter(opts))}", "an engine layout sets its own cascade keys; give a "
                           "count in map.cascades to set them", ["cascades"])
+    return tuple(out)
+
+
+def _parse_kinds(m: dict, formats, lights, cascade, source: str) -> tuple:
+    """``[map] kind`` (MAP_KINDS, default depth), checked against what a pre-filtered map cannot do."""
+    from . import lights as light_types
+    from .prefilter import MOMENT_FORMATS
+    kinds = tuple(dict.fromkeys(choice(k, source, "map.kind", MAP_KINDS) for k in as_list(m.get("kind", "depth"))))
+    if not kinds:
+        raise ConfigError(source, "map.kind", "empty list", MAP_KINDS)
+    if kinds == ("depth",):
+        return kinds
+    if "filter" in m and "depth" not in kinds:
+        raise ConfigError(source, "map.filter", "filters are the depth map's (a pre-filtered map's filter is "
+                          "map.blur); add depth to map.kind or remove map.filter", ("depth",))
+    bad = [f for f in formats if f not in MOMENT_FORMATS]
+    if bad:
+        raise ConfigError(source, "map.format", f"{bad[0]!r}: pre-filtered maps store their moments in", MOMENT_FORMATS)
+    if cascade:
+        raise ConfigError(source, "map.cascades", "pre-filtered maps are built on one map per view; remove "
+                          "map.cascades or keep map.kind = depth", ("depth",))
+    if any(l.type in light_types.REGISTRY and light_types.is_soft(l) for l in lights):
+        raise ConfigError(source, "map.kind", "pre-filtered maps are measured against one exact ray per receiver; "
+                          "an area light's reference is a fraction: remove it or keep map.kind = depth", ("depth",))
+    return kinds
+
+
+def _parse_moments(m: dict, kinds, formats, source: str) -> tuple:
+    """The MomentSpec instances of ``[map.<kind>]`` tables (lists sweep) times ``[map] blur`` widths."""
+    from . import prefilter
+    for name in prefilter.NAMES:
+        if name in m and name not in kinds:
+            raise ConfigError(source, f"map.{name}", f"parameters of {name}, which map.kind does not name", kinds)
+    blurs = tuple(number(w, source, "map.blur", integer=True, minimum=1, maximum=63) for w in as_list(m.get("blur", 1)))
+    if not blurs:
+        raise ConfigError(source, "map.blur", "empty list")
+    if any(w % 2 == 0 for w in blurs):
+        raise ConfigError(source, "map.blur", f"a box width is odd (centred on the texel), got {blurs}")
+    if "blur" in m and kinds == ("depth",):
+        raise ConfigError(source, "map.blur", "blurs moments; map.kind names no pre-filtered map", prefilter.NAMES)
+    out = []
+    for name in kinds:
+        if name == "depth":
+            continue
+        t = m.get(name, {})
+        if not isinstance(t, dict):
+            raise ConfigError(source, f"map.{name}", f"expected a table [map.{name}]")
+        preset = None
+        if "preset" in t and not prefilter.presets.names(name):
+            raise ConfigError(source, f"map.{name}.preset", f"{name} has no engine presets (dsm schemes lists them)",
+                              sorted(k for k in prefilter.presets.PRESETS))
+        if "preset" in t:
+            preset = choice(t["preset"], source, f"map.{name}.preset", prefilter.presets.names(name))
+            if set(t) != {"preset"}:
+                raise ConfigError(source, f"map.{name}.{sorted(set(t) - {'preset'})[0]}", "a preset takes no other keys",
+                                  ("preset",))
+            params = [prefilter.presets.PRESETS[name][preset]]
+        else:
+            params = sweep_params(prefilter.get(name).Params, t, source, f"map.{name}")
+        for p in params:
+            prefilter.check(name, p, formats, source, f"map.{name}")
+        out += [MomentSpec(name, p, w, preset) for p in params for w in blurs]
     return tuple(out)
 
 

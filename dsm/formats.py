@@ -12,7 +12,10 @@ depth before its comparison:
   Euclidean distance, which a rasterizer cannot store): a cube map in ndc24 therefore uses
   the face-axis depth for every layer and every receiver (:class:`AxisDepthCube`), so the
   comparison happens in the quantity stored. Its world step grows as z^2 (f - n) / (f n 2^24):
-  fine near the light, coarse far from it. Orthographic views have linear NDC depth (=
+  fine near the light, coarse far from it.
+- ``float16``: the depth's position in [near, far] as an IEEE half (a 16-bit float render
+  target, as pre-filtered moment maps use; :mod:`dsm.prefilter` stores its moments so): 11
+  significant bits, so a relative step of 2^-11 of the normalized depth, fine near ``near``. Orthographic views have linear NDC depth (=
   unorm24); paraboloid maps store the Euclidean distance linearly between near and far
   (Brabec, Annen & Seidel 2002), so ndc24 there equals unorm24. ``n`` is the distance from
   the light to the scene's bounds, at least 1/1000 of far.
@@ -90,10 +93,13 @@ def quantize_np(z: np.ndarray, view, fmt: str) -> np.ndarray:
     if fmt == "float32":
         return z
     z = np.asarray(z, np.float64)
-    steps = float(2 ** BITS[fmt] - 1)
     near, far = float(view.near), float(view.far)
     if hasattr(view, "texel_bounds") and z.shape == (view.n_texels,):
         near, far = view.texel_bounds()          # a cascaded map: each cascade's own near and far
+    if fmt == "float16":
+        t = np.clip((z - near) / (far - near), 0.0, 1.0)
+        return near + t.astype(np.float16).astype(np.float64) * (far - near)
+    steps = float(2 ** BITS[fmt] - 1)
     if fmt == "ndc24" and view.kind in NDC_KINDS:
         n = ndc_near(view)
         zc = np.clip(z, n, far)

@@ -10,6 +10,12 @@
 | seam_error_rate              | error rate of receivers within SEAM_TEXELS of a seam between
 |                              | faces (cube edges, paraboloid rim); off_seam_error_rate: the rest
 
+| n_peterpan_contact, n_leak   | peter-panning split by the receiver's distance to its exact
+|                              | occluder (along the shadow ray) in texels at the receiver: within
+|                              | ``leak_texels`` (contact: the occluder touches or nearly touches the
+|                              | receiver) or beyond it (light leaking, the pre-filtered maps' error)
+| leak_rate                    | n_leak / n_gt_shadowed; peterpan_contact_rate likewise
+
 | backface_lit_rate            | pixels facing away from the light (attached shadow) that the map
 |                              | calls lit, over those pixels: seed 000's self-unshadowing, apart
 |                              | from the receivers' metrics
@@ -81,6 +87,22 @@ def compute(v: np.ndarray, v_star: np.ndarray, rx_shape: np.ndarray, tap_shape: 
         "seam_error_rate": _rate((err & near).sum(), near.sum()) if has_seams else UNDEFINED,
         "off_seam_error_rate": _rate((err & ~near).sum(), (~near).sum()) if has_seams else UNDEFINED,
     }
+
+
+LEAK_COLUMNS = ("n_peterpan_contact", "n_leak", "peterpan_contact_rate", "leak_rate")
+
+
+def leak_split(v, v_star, occluder_dist_world, texel_world, leak_texels: float) -> dict:
+    """A case's peter-panning (V* = 0, V >= 0.5) split by the distance to the exact occluder
+    in texels at the receiver: contact within ``leak_texels``, leak beyond it. The two add up
+    to n_peterpan; their rates are over n_gt_shadowed (NaN where nothing is shadowed)."""
+    v_star = np.asarray(v_star, bool)
+    peter = ~v_star & (np.asarray(v, np.float64) >= 0.5)
+    dist_texels = np.asarray(occluder_dist_world, np.float64) / np.asarray(texel_world, np.float64)
+    contact = peter & (dist_texels <= leak_texels)
+    n_contact, n_leak, n_shadow = int(contact.sum()), int((peter & ~contact).sum()), int((~v_star).sum())
+    return {"n_peterpan_contact": n_contact, "n_leak": n_leak,
+            "peterpan_contact_rate": _rate(n_contact, n_shadow), "leak_rate": _rate(n_leak, n_shadow)}
 
 
 def classify(v, v_star, resolution=None) -> np.ndarray:

@@ -26,7 +26,7 @@ import mitsuba as mi
 import numpy as np
 
 from . import cascades as cascades_mod
-from . import area, exact_frame, formats, lights, lookup, reference, scenes, schemes, shadowmap, spawn, timing
+from . import area, exact_frame, formats, lights, lookup, prefilter, reference, scenes, schemes, shadowmap, spawn, timing
 from . import oracle as oracle_mod
 from . import gbuffer as gbuffer_mod
 from . import metrics as metrics_mod
@@ -325,6 +325,22 @@ def visibility(spec: SchemeSpec, rx: Receiver, smap, filt: str = "nearest", seed
     if getattr(rx.view, "blend", 0.0) > 0:
         return cascades_mod.blended_visibility(schemes.get(spec.name), spec.params, rx, smap, filt, seed)
     return lookup.visibility(schemes.get(spec.name), spec.params, rx, smap, filt, seed)
+
+
+# ---------------------------------------------------------------- pre-filtered maps (dsm.prefilter)
+
+moment_key = prefilter.build_key          # (MomentSpec, format) -> what its moment map depends on
+
+
+def moment_map(spec, smap, fmt: str):
+    """The MomentMap of one pre-filtered instance from a depth map's z1 (its float32 build), stored in ``fmt``."""
+    return prefilter.build(spec, smap.z1.numpy(), smap.view, fmt)
+
+
+def moment_visibility(spec, rx: Receiver, mmap, smap):
+    """(continuous V per receiver, shape index of the nearest texel of ``smap``) of one
+    pre-filtered instance on its MomentMap."""
+    return prefilter.visibility(spec, rx, mmap), lookup.nearest_tap(rx, smap).shape
 
 
 cascade_metrics = cascades_mod.case_metrics     # (view, rx, v, V*) -> (columns, per-cascade rows, curve, faces)

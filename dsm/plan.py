@@ -42,6 +42,9 @@ HOST_BYTES = 60
 PIXEL_BYTES = GBUFFER_BYTES + REFERENCE_BYTES + HOST_BYTES
 BUILD_BYTES = {"first": 8, "slope": 12, "layered": 84, "layered_slope": 132}   # working set incl. outputs
 STORED_BYTES = 4           # per texel and stored layer (z1, shape, slope, z2)
+# a pre-filtered map's build per texel: numpy's float64 moments and blur (peak 104 B/texel for
+# four moments at W = 9, tracemalloc, R = 1024) and the four float32 moments on the device
+MOMENT_BYTES = 120
 MIN_TILE = 1 << 16
 
 
@@ -64,6 +67,7 @@ class MapPlan:
     scene_index: int = 0          # of the config's scenes
     light_index: int = 0          # of the scene's lights (the label's number)
     cascade: object = None        # a directional light's CascadeSpec (faces = its count), else None
+    moments: tuple = ()           # pre-filtered instances (MomentSpec) built from this map's z1 (culling none)
 
     @property
     def texels(self) -> int:
@@ -90,8 +94,10 @@ class MapPlan:
 
     @property
     def peak_bytes(self) -> int:
-        """Estimated peak bytes of the map's build: its stored layers plus one tile's working set."""
-        return self.stored_bytes + min(self.tile or self.texels, self.texels) * self.build_bytes_per_texel
+        """Estimated peak bytes of the map's build: its stored layers plus one tile's working set
+        (and a moment map's build, where the map serves pre-filtered instances)."""
+        moments = self.texels * MOMENT_BYTES if self.moments else 0
+        return self.stored_bytes + min(self.tile or self.texels, self.texels) * self.build_bytes_per_texel + moments
 
 
 @dataclass
@@ -406,6 +412,8 @@ def make(cfg: Config) -> Plan:
     groups = {}
     for spec in cfg.schemes:
         groups.setdefault(schemes_mod.culling_of(spec.params), []).append(spec)
+    if cfg.map.moments:       # moment maps are built from the first layer, as rays see it: culling none
+        groups.setdefault("none", [])
     for si, sc in enumerate(cfg.scenes):
         if sc.missing:
             continue
@@ -433,10 +441,14 @@ def make(cfg: Config) -> Plan:
                         if not group:
                             continue
                         needs = schemes_mod.needs_of(group)
+                        moments = cfg.map.moments if culling == "none" else ()
                         m = MapPlan(sc.label, label, view, R, faces, culling, tuple(sorted(needs)),
                                     "z2" in needs or culling != "none", fmts,
-                                    [f"{s.name} {s.label}".strip() for s in group], len(group) * per_case,
-                                    specs=tuple(group), scene_index=si, light_index=li, cascade=cascade)
+                                    [f"{s.name} {s.label}".strip() for s in group]
+                                    + [f"{s.name} {s.label} {s.filter}" for s in moments],
+                                    len(group) * per_case + len(moments) * len(cfg.map.format),
+                                    specs=tuple(group), scene_index=si, light_index=li, cascade=cascade,
+                                    moments=moments)
                         plan.maps.append(m)
     if cfg.map.cascade and plan.maps and not any(m.cascade is not None for m in plan.maps):
         raise ConfigError(cfg.source, "map.cascades", "cascades are for directional lights and no light of the "

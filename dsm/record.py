@@ -3,8 +3,10 @@
 :data:`COLUMNS` is the schema of a case's row, metrics.csv's columns in order, each with its
 kind (text, int, float) and its group: ``core`` (every case), ``map`` (a case on one map: its
 exclusions, the split of its errors, its build and lookup costs), ``cascade`` (a cascaded map),
-``motion`` (a case over frames), ``area`` (an area light's soft-shadow metrics) and
-``precision`` (the map's float32 headroom: :mod:`dsm.headroom`). A row holds
+``motion`` (a case over frames), ``area`` (an area light's soft-shadow metrics),
+``precision`` (the map's float32 headroom: :mod:`dsm.headroom`) and ``prefilter`` (a run whose
+``[map] kind`` is given: every case's map kind, its peter-panning split into contact and leak,
+and a moment map's build time). A row holds
 the core group and each other group whole or not at all; :func:`check_row` refuses a column the
 schema does not name and a group cut short, so a metric can no longer vanish from metrics.csv.
 
@@ -17,7 +19,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .metrics import SOFT_COLUMNS
+from .metrics import LEAK_COLUMNS, SOFT_COLUMNS
 
 TEXT, INT, FLOAT = "text", "int", "float"
 
@@ -49,7 +51,8 @@ _ORDER = (
     "off_seam_error_rate texel_size texels_per_pixel fit_ms n_plane_fallback n_backfacing backface_lit_rate "
     "flicker_rate flicker_ever flicker_magnitude flicker_within_rate flicker_change_rate maps_built build_ms "
     "build_first_ms build_compile_ms build_peak_mb lookup_ms lookup_compile_ms lookup_kernels_compiled "
-    "reference_ms sweep_key sweep_value").split() + list(SOFT_COLUMNS) + ["f32_step", "texel_f32_steps"]
+    "reference_ms sweep_key sweep_value").split() + list(SOFT_COLUMNS) + ["f32_step", "texel_f32_steps", "map_kind",
+                                                                         *LEAK_COLUMNS, "moments_ms"]
 
 _GROUPS = (
     _cols("core", "case:t scene:t light:t view:t scheme:t preset:t params:t culling:t resolution:i total_texels:i "
@@ -64,7 +67,8 @@ _GROUPS = (
     + _cols("motion", "motion:t frames:i flicker_rate flicker_ever flicker_magnitude flicker_within_rate "
                       "flicker_change_rate maps_built:i")
     + _cols("area", " ".join(SOFT_COLUMNS))
-    + _cols("precision", "f32_step texel_f32_steps"))
+    + _cols("precision", "f32_step texel_f32_steps")
+    + _cols("prefilter", "map_kind:t " + " ".join(LEAK_COLUMNS) + " moments_ms"))
 
 _BY_NAME = {c.name: c for c in _GROUPS}
 COLUMNS = tuple(_BY_NAME[n] for n in _ORDER)
@@ -72,7 +76,7 @@ NAMES = [c.name for c in COLUMNS]
 TEXT_COLUMNS = {c.name for c in COLUMNS if c.kind == TEXT}
 INT_COLUMNS = {c.name for c in COLUMNS if c.kind == INT}
 GROUPS = {g: {c.name for c in COLUMNS if c.group == g} for g in ("core", "map", "cascade", "motion", "area",
-                                                                  "precision")}
+                                                                  "precision", "prefilter")}
 
 
 class SchemaError(ValueError):

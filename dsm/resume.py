@@ -118,6 +118,8 @@ def case_keys(cfg, plan, version: str | None = None) -> list:
     shared = {"camera": _plain(cfg.camera_resolution), "pose": _plain(getattr(cfg, "camera", None)),
               "seed": cfg.seed, "variant": cfg.variant,
               "lambdas": _plain(cfg.oracle.lambdas), "version": version}
+    if cfg.map.leak_split:                # the leak split's distance changes every row (only when asked for)
+        shared["leak_texels"] = cfg.map.leak_texels
     scenes = [scene_identity(s) for s in cfg.scenes]
     out = []
     n = 0
@@ -132,6 +134,12 @@ def case_keys(cfg, plan, version: str | None = None) -> list:
                     text = json.dumps({**shared, **group, "scheme": _plain(spec), "filter": filt, "format": fmt},
                                       sort_keys=True, default=str)
                     out.append((f"{n:04d}", hashlib.sha256(text.encode()).hexdigest()[:24]))
+        for spec in m.moments:            # pre-filtered instances, after the map's schemes (the runner's order)
+            for fmt in cfg.map.format:
+                n += 1
+                text = json.dumps({**shared, **group, "map_kind": _plain(spec), "format": fmt}, sort_keys=True,
+                                  default=str)
+                out.append((f"{n:04d}", hashlib.sha256(text.encode()).hexdigest()[:24]))
     return out
 
 

@@ -337,7 +337,30 @@ class Runner:
                     self._run_case(sd, gb, setup, view, stored[fmt], (build_times[own], first_t), rxs[fmt], seam,
                                    spec, filt, fmt, backs[fmt], wrong[fmt] if filt == "nearest" else None)
                     self.bar.update(1)
+        moment_maps = {}              # instances sharing their moments share one build (dsm.prefilter)
+        for spec in m.moments:
+            for fmt in self.cfg.map.format:
+                # build_ms: the depth map's first layer, which the moments are made of (moments_ms apart)
+                self._run_case(sd, gb, setup, view, smap, (first_t, first_t), rxs[fmt], seam, spec, spec.filter, fmt,
+                               backs[fmt], None, moment=self._moments(moment_maps, spec, smap, fmt))
+                self.bar.update(1)
         return first_t
+
+    def _moments(self, cache, spec, smap, fmt):
+        """A function giving (MomentMap, build Timing) of ``spec`` on ``smap``, built (timed) once per moment key."""
+        key = pipeline.moment_key(spec, fmt)
+
+        def get():
+            """The cached build, made on first use (inside the case's failure policy)."""
+            if key not in cache:
+                def build():
+                    """The moment map's arrays (evaluated by the clock) and the map."""
+                    mm = pipeline.moment_map(spec, smap, fmt)
+                    return (*mm.b, mm)
+                out, t = timing.measure(build, self.cfg.timing_repeats)
+                cache[key] = (out[-1], t)
+            return cache[key]
+        return get
 
     def _oracles(self, sd, setup, view, m, smap, rx, fmt):
         """The oracles of one map and stored format over the view's receivers (oracle.csv, the
@@ -381,7 +404,10 @@ class Runner:
                                 "status": "warning", "error": f"{smap.unfinished} texels still searching "
                                 f"after {shadowmap.MAX_STEPS} surfaces"})
 
-    def _run_case(self, sd, gb, setup, view, smap, build, rx, seam, spec, filt, fmt, rx_back=None, wrong=None):
+    def _run_case(self, sd, gb, setup, view, smap, build, rx, seam, spec, filt, fmt, rx_back=None, wrong=None,
+                  moment=None):
+        """One case: a scheme instance and filter on a stored depth map, or (``moment``: its
+        MomentMap's builder) a pre-filtered instance on the depth map's moments."""
         bt, first_t = build
         self.case_no += 1
         case = f"{self.case_no:04d}"
@@ -397,19 +423,23 @@ class Runner:
                 "total_texels": view.n_texels,
                 "filter": filt, "format": fmt, "cascade_layout": view.spec.label if hasattr(view, "spec") else ""}
         try:
+            if moment is None:
+                look = lambda r: pipeline.visibility(spec, r, smap, filt, self.cfg.seed)
+            else:
+                mmap, mt = moment()
+                look = lambda r: pipeline.moment_visibility(spec, r, mmap, smap)
+            uses_plane = moment is None and pipeline.scheme_module(spec.name).USES_PLANE
             if rx is None:
                 v_np, tap_np, lt = np.zeros(0), np.zeros(0, np.uint32), timing.Timing(0.0, 0.0, 0.0, 0, 0)
                 fallbacks = 0
             else:
-                (v, tap_shape), lt = timing.measure(lambda: pipeline.visibility(spec, rx, smap, filt, self.cfg.seed),
-                                                    self.cfg.timing_repeats)
+                (v, tap_shape), lt = timing.measure(lambda: look(rx), self.cfg.timing_repeats)
                 v_np, tap_np = v.numpy(), tap_shape.numpy()
-                fallbacks = pipeline.plane_fallbacks(spec, rx, smap)
+                fallbacks = pipeline.plane_fallbacks(spec, rx, smap) if uses_plane else 0
             m = pipeline.metrics(v_np, setup, tap_np, seam, view.has_seams)
             m.update(pipeline.split(v_np, setup.v_star, wrong))     # NaN unless nearest (the oracles' lookup)
             # seed 000's self-unshadowing: pixels in attached shadow (facing away) that the map calls lit
-            v_back = pipeline.visibility(spec, rx_back, smap, filt, self.cfg.seed)[0].numpy() \
-                if rx_back is not None else np.zeros(0)
+            v_back = look(rx_back)[0].numpy() if rx_back is not None else np.zeros(0)
             if hasattr(view, "cascades"):         # a cascaded map: per cascade, texels per pixel, distance plot
                 extra, per, curve, faces = pipeline.cascade_metrics(view, rx, v_np, setup.v_star)
                 m.update(extra)
@@ -421,14 +451,19 @@ class Runner:
             m["n_backfacing"] = int(v_back.size)
             m["backface_lit_rate"] = float((v_back >= 0.5).mean()) if v_back.size else metrics.UNDEFINED
             texel = float(np.median(rx.texel_world.numpy())) if rx is not None else metrics.UNDEFINED
-            sweep_key, sweep_value = report.sweep_of(spec, self.cfg.schemes)
+            sweep_key, sweep_value = report.sweep_of(spec, self.cfg.schemes if moment is None else self.cfg.map.moments)
             p_map = pipeline.points_np(setup.p) if rx is not None else np.zeros((0, 3))
             row = {**meta, **setup.exclusions, **m, **headroom.headroom(p_map, texel), "texel_size": texel,
-                   "n_plane_fallback": fallbacks if pipeline.scheme_module(spec.name).USES_PLANE
-                   else metrics.UNDEFINED,
+                   "n_plane_fallback": fallbacks if uses_plane else metrics.UNDEFINED,
                    "build_ms": bt.ms, "build_first_ms": first_t.ms, "build_compile_ms": bt.compile_ms, "build_peak_mb": smap.peak_bytes / 2 ** 20,
                    "lookup_ms": lt.ms, "lookup_compile_ms": lt.compile_ms, "lookup_kernels_compiled": lt.cache_misses,
                    "reference_ms": setup.reference_ms, "sweep_key": sweep_key, "sweep_value": sweep_value}
+            if self.cfg.map.leak_split:          # [map] kind given: every case's leak split (dsm.metrics)
+                texel_np = rx.texel_world.numpy() if rx is not None else np.zeros(0)
+                row.update({"map_kind": spec.name if moment is not None else "depth",
+                            **metrics.leak_split(v_np, setup.v_star, setup.occluder_dist, texel_np,
+                                                 self.cfg.map.leak_texels),
+                            "moments_ms": mt.ms if moment is not None else metrics.UNDEFINED})
             classes = np.zeros(gb.width * gb.height, np.uint8)
             classes[setup.pixels] = pipeline.classify(v_np, setup.v_star, wrong)
             classes = classes.reshape(gb.height, gb.width)

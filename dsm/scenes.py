@@ -74,6 +74,14 @@ class FloatingPlateParams(Placement):
 
 
 @dataclass(frozen=True)
+class StackedPlatesParams(Placement):
+    """Two open plates over the ground, a 0.75 x 1.5 one at ``high`` over half of a 1.5 x 1.5 one
+    at ``low``: occluders at two depths, the classic light leak of variance shadow maps."""
+    low: float = field(default=0.25, metadata={"min": 0.0})
+    high: float = field(default=2.0, metadata={"min": 0.0})
+
+
+@dataclass(frozen=True)
 class GrazingParams(Placement):
     """The ground and a box lit ``angle`` degrees from the ground's normal (80 to 89: projective aliasing)."""
     angle: float = field(default=85.0, metadata={"min": 0.0})
@@ -115,6 +123,7 @@ BUILTINS = {
     "plane_box": PlaneBoxParams,
     "l_shape": LShapeParams,
     "floating_plate": FloatingPlateParams,
+    "stacked_plates": StackedPlatesParams,
     "grazing": GrazingParams,
     "room": RoomParams,
     "double_torus": DoubleTorusParams,
@@ -468,6 +477,11 @@ def builtin_geometry(name: str, p):
     if name == "floating_plate":
         shapes = {"ground": _ground(), "plate": quad([0, 0, p.gap], [0.75, 0, 0], [0, 0.75, 0])}
         return shapes, ((3.0, -5.0, 4.0), (0, 0, 0)), LightSpec("directional", direction=normalize([0.2, 0.1, -1]))
+    if name == "stacked_plates":
+        shapes = {"ground": _ground(), "low": quad([0, 0, p.low], [0.75, 0, 0], [0, 0.75, 0]),
+                  "high": quad([-0.375, 0, p.high], [0.375, 0, 0], [0, 0.75, 0])}
+        # the camera low, to see the ground under the plates, where the leak is; the light straight down
+        return shapes, ((2.4, -3.0, 0.8), (0.0, 0.0, 0.1), 40.0), LightSpec("directional", direction=(0.0, 0.0, -1.0))
     if name == "grazing":
         t = math.radians(p.angle)
         shapes = {"ground": _ground(), "box": box([-2.3, -0.3, 0.0], [-1.7, 0.3, 0.6])}

@@ -178,7 +178,44 @@ def summary_md(rows) -> list:
                    f"{rate(s['error_pooled'])} | {trio('error')} | {s['acne_undefined']} / "
                    f"{s['peterpan_undefined']} / {s['error_undefined']} | {_ms(s['build_ms'])} | "
                    f"{_ms(s['lookup_ms'])} | {s['best_in']} |")
+    out += leak_md(rows)
     out += ["", "## Best per scene, light and resolution", "", BEST_DEFINITION, ""] + best_md(rows)
+    return out
+
+
+LEAK_DEFINITION = ("A run that gives [map] kind splits each case's peter-panning by the receiver's distance to "
+                   "its exact occluder: *contact* within leak_texels texels, *leak* beyond (light leaking). Per "
+                   "scheme instance (a pre-filtered kind's filter is its blur box:W): pooled over its cases, each "
+                   "over sum n_gt_shadowed; mean abs error: the mean of the cases' mean |V - V*|; moments ms: the "
+                   "mean build of a pre-filtered map's moments and blur. Sorted by pooled leak rate.")
+
+
+def leak_md(rows) -> list:
+    """Markdown lines of the light-leaking table, for a run whose rows carry the leak split (else none)."""
+    if not any(r.get("map_kind") for r in rows):
+        return []
+    multi = _multi(rows)
+    head = summary_columns(rows)
+    groups = {}
+    for r in rows:
+        groups.setdefault(instance_key(r, multi), []).append(r)
+    table = []
+    for key, rs in groups.items():
+        shadowed = sum(r["n_gt_shadowed"] for r in rs)
+        s = {"scheme": key[0], "params": key[1], **dict(zip(multi, key[2:]))}
+        table.append(([str(s[h]) for h in head], rs[0]["map_kind"], len(rs),
+                      _pooled(sum(r["n_peterpan"] for r in rs), shadowed),
+                      _pooled(sum(r["n_peterpan_contact"] for r in rs), shadowed),
+                      _pooled(sum(r["n_leak"] for r in rs), shadowed),
+                      _stats([r["mean_abs_error"] for r in rs])["mean"],
+                      _stats([r["moments_ms"] for r in rs])["mean"]))
+    table.sort(key=lambda t: (not defined(t[5]), t[5] if defined(t[5]) else 0))
+    out = ["", "## Light leaking", "", LEAK_DEFINITION, "",
+           "| " + " | ".join(head) + " | map kind | cases | peter-pan pooled | contact pooled | leak pooled | "
+           "mean abs error | moments ms |", "|---" * (len(head) + 7) + "|"]
+    for cells, kind, n, pp, contact, leak, mae, mom in table:
+        out.append("| " + " | ".join(cells) + f" | {kind} | {n} | {rate(pp)} | {rate(contact)} | {rate(leak)} | "
+                   f"{rate(mae)} | {_ms(mom) if defined(mom) else '-'} |")
     return out
 
 

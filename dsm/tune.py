@@ -163,6 +163,9 @@ def parse_tune(cfg) -> TuneConfig:
     seed = number(raw.get("seed", cfg.seed), src, "tune.seed", integer=True)
     batch = number(raw.get("batch", 1.0), src, "tune.batch", positive=True, maximum=1.0)
 
+    if cfg.map.moments:           # dsm tune's objective relaxes a margin per tap: depth schemes only
+        raise ConfigError(src, "map.kind", "dsm tune tunes depth schemes; remove the pre-filtered kinds from "
+                          "map.kind (dsm run measures them)", ("depth",))
     # the schemes: the config's [[scheme]] instances, each with something to tune
     specs = []
     for i, s in enumerate(cfg.schemes):

@@ -14,7 +14,9 @@ from typing import Any
 
 LENGTH_UNITS = ("world", "texel", "range")
 FILTERS = ("nearest", "pcf_bilinear", "pcf_jitter4x4", "pcf_wide", "pcss")
-FORMATS = ("float32", "unorm16", "unorm24", "ndc24")
+FORMATS = ("float32", "unorm16", "unorm24", "ndc24", "float16")
+# [map] kind: the depth-compare map, or a pre-filtered moment map (dsm.prefilter)
+MAP_KINDS = ("depth", "vsm", "esm", "evsm", "msm")
 POINT_VIEWS = ("paraboloid", "dual_paraboloid", "cube")
 MAP_VIEWS = POINT_VIEWS + ("vsv",)      # [map] view: and a voxelized shadow volume (dsm.maps.vsv; spot lights too)
 AREA_SHAPES = ("rectangle", "disk", "sphere", "emitter")
@@ -301,6 +303,10 @@ class MapSpec:
     view: tuple = ("dual_paraboloid",)
     texels: tuple = ()          # equal-memory sweeps: total texels per view, R = round(sqrt(texels / faces))
     cascade: tuple = ()         # CascadeSpec layouts of directional lights (empty: one map fitted to the receivers)
+    kind: tuple = ("depth",)    # map kinds (MAP_KINDS): depth runs the [[scheme]]s, the others their moments
+    moments: tuple = ()         # MomentSpec instances of the pre-filtered kinds (dsm.prefilter)
+    leak_split: bool = False    # kind given: every case splits its peter-panning into contact and leak
+    leak_texels: float = 2.0    # the split: peter-panning farther than this from its occluder is a leak
 
     def resolutions_for(self, faces: int) -> tuple:
         """Per-face resolutions of a view with ``faces`` faces (from ``texels`` when given)."""
@@ -320,6 +326,25 @@ class SchemeSpec:
     def label(self) -> str:
         """The scheme's parameters as ``name=value`` words (describe_params)."""
         return describe_params(self.params)
+
+
+@dataclass(frozen=True)
+class MomentSpec:
+    """One pre-filtered map instance: its kind (``name``), frozen parameters and box blur width (texels)."""
+    name: str
+    params: Any
+    blur: int = 1
+    preset: str | None = None
+
+    @property
+    def label(self) -> str:
+        """The kind's parameters as ``name=value`` words (describe_params)."""
+        return describe_params(self.params)
+
+    @property
+    def filter(self) -> str:
+        """The case's filter column: the blur, ``box:W``."""
+        return f"box:{self.blur}"
 
 
 @dataclass(frozen=True)

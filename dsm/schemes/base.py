@@ -5,6 +5,12 @@ A scheme is a module: ``NAME``, ``SOURCE``, ``NEEDS`` (map layers beyond z1 and 
 a frozen ``Params`` dataclass, ``margin(rx, tap, params) -> Float`` and ``shift(rx, params)
 -> Receiver``. The margin is signed, in the view's depth units: the receiver is lit by a tap
 when it is >= 0 (``lit``). Filters apply it per tap; tuning by gradient relaxes it.
+
+This is the contract of the depth map (``[map] kind = "depth"``): *a signed margin per filter
+tap*, V the filter's weighted share of taps with margin >= 0. Pre-filtered maps (``vsm``,
+``esm``, ``evsm``, ``msm``) meet the sibling contract :class:`dsm.prefilter.base.MapKind`: *a
+continuous V per receiver* from filtered moments, with no taps and no margin. Both are
+measured alike: lit means V >= 0.5, and mean_abs_error is the mean |V - V*|.
 """
 from __future__ import annotations
 

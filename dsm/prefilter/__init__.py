@@ -1,0 +1,62 @@
+"""Pre-filtered shadow maps: one module per map kind, each meeting :class:`base.MapKind`.
+
+VSM (Donnelly & Lauritzen 2006), ESM (Annen et al. 2008), EVSM (Lauritzen & McCool 2008) and
+MSM (Peters & Klein 2015, Hamburger 4MSM). A ``[map] kind`` other than ``depth`` builds the
+kind's moments from the depth map's z1 (:func:`build`), blurs them and looks them up per
+receiver (:func:`visibility`): a continuous V, not a margin per tap (:mod:`dsm.prefilter.base`).
+"""
+from __future__ import annotations
+
+import dataclasses
+
+from . import esm, evsm, msm, presets, vsm  # noqa: F401  (presets: the engines' values)
+from .base import LOG_MAX, MOMENT_FORMATS, MapKind, build as build_map, fetch, normalized_depth  # noqa: F401  (MOMENT_FORMATS: the choices)
+from ..lookup import resolve
+from ..types import ConfigError
+
+REGISTRY = (vsm, esm, evsm, msm)
+_broken = [m.NAME for m in REGISTRY if not isinstance(m, MapKind)]
+assert not _broken, f"map kind modules not meeting the MapKind contract: {_broken}"
+NAMES = tuple(m.NAME for m in REGISTRY)
+
+
+def get(name: str):
+    """The map kind module named ``name``; KeyError listing the valid names."""
+    for m in REGISTRY:
+        if m.NAME == name:
+            return m
+    raise KeyError(f"unknown map kind {name!r} (valid: {', '.join(NAMES)})")
+
+
+def check(name: str, params, formats, source: str, where: str):
+    """ConfigError for a parameter above its ``max`` or outside its ``choices`` (the min is the
+    sweep's), or an exponential moment that overflows one of the stored ``formats``."""
+    for f in dataclasses.fields(params):
+        val = getattr(params, f.name)
+        hi = f.metadata.get("max")
+        if hi is not None and val > hi:
+            raise ConfigError(source, f"{where}.{f.name}", f"must be <= {hi:g}, got {val!r}")
+        if "choices" in f.metadata and val not in f.metadata["choices"]:
+            raise ConfigError(source, f"{where}.{f.name}", f"unknown value {val!r}", f.metadata["choices"])
+    log_max = getattr(get(name), "log_max", None)
+    for fmt in formats:
+        if log_max is not None and log_max(params) > LOG_MAX[fmt]:
+            raise ConfigError(source, where, f"{params}: its largest moment exp({log_max(params):g}) overflows "
+                              f"{fmt} (at most exp({LOG_MAX[fmt]:.2f})); lower the exponent")
+
+
+def build(spec, z1_world, view, fmt: str):
+    """The MomentMap of one instance (``spec``: a MomentSpec) from a depth map's z1 (numpy, world)."""
+    return build_map(get(spec.name), spec.params, z1_world, view, fmt, spec.blur)
+
+
+def build_key(spec, fmt: str) -> tuple:
+    """What a MomentMap of ``spec`` depends on besides its depth map: instances sharing it share a build."""
+    return (spec.name, get(spec.name).moment_key(spec.params), spec.blur, fmt)
+
+
+def visibility(spec, rx, mmap):
+    """V in [0, 1] per receiver of one instance on its built MomentMap (parameters opaque)."""
+    module = get(spec.name)
+    prm = resolve(spec.params, rx)
+    return module.visibility(fetch(mmap, rx), normalized_depth(rx.depth, mmap.view), prm)

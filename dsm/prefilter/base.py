@@ -1,0 +1,137 @@
+"""The contract of a pre-filtered map kind, and what every kind shares: depth normalization,
+storage precision, the separable box blur and the per-receiver fetch.
+
+Depth-compare schemes (:mod:`dsm.schemes.base`) give a signed margin per filter tap, and a
+filter averages their binary tests. A pre-filtered map gives a *continuous V per receiver*
+instead: its texels store moments of the depth (statistics a linear filter may average), and
+its lookup turns the filtered moments at the receiver into a visibility in [0, 1]. A kind
+module (:class:`MapKind`) has ``NAME``, ``SOURCE``, a frozen ``Params`` dataclass, ``COUNT(params)``
+(moments per texel), ``moment_key(params)`` (the parameters the moments depend on: maps sharing
+it share one build), ``moments(t, params)`` (numpy float64, one array per moment, from the
+normalized depth ``t``) and ``visibility(b, t, prm)`` (Dr.Jit: the filtered moments ``b`` and
+the receiver's normalized depth ``t`` -> V).
+
+Depth is normalized to the view's range, ``t = (z - near) / (far - near)`` in [0, 1], the
+linear depth engines write into a moment map; a texel whose ray hit nothing holds ``t = 1``.
+The moments come from the ray-cast ``z1`` of each texel (one sample per texel: no
+supersampling). ``format`` is their storage precision: ``float32`` or ``float16`` (IEEE half,
+rounded to nearest; a value beyond 65504 becomes +inf as a half render target stores it). The
+moments are stored, blurred in float64, and the blurred moments stored again in the format.
+
+The blur is a separable box of odd width ``W`` texels (``W = 1``: the unfiltered fetch). It
+stays on its face: at a face edge the window is clamped to the face (edge texels repeat), so
+cube maps are not blurred across their seams and a paraboloid face is blurred over its whole
+square, rim included (the texels beyond the rim hold their rays' hits, or t = 1 where they
+missed). The fetch is the nearest texel of the blurred map; a receiver beyond a directional
+light's map reads the moments of t = 1 (no caster, as a depth tap reads the far bound).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+MOMENT_FORMATS = ("float32", "float16")
+# the largest e-exponent each format holds: ln(FLT_MAX), ln(65504)
+LOG_MAX = {"float32": float(np.log(np.finfo(np.float32).max)), "float16": float(np.log(np.finfo(np.float16).max))}
+
+
+@runtime_checkable
+class MapKind(Protocol):
+    """A pre-filtered map kind module: its constants, ``Params``, moments and lookup."""
+    NAME: str
+    SOURCE: str
+    Params: type
+
+    def count(self, params: Any) -> int:
+        """Moments stored per texel."""
+
+    def moment_key(self, params: Any) -> tuple:
+        """The parameters the stored moments depend on (equal keys: one build)."""
+
+    def moments(self, t: np.ndarray, params: Any) -> list:
+        """The moments of normalized depths ``t`` (numpy float64), one array each."""
+
+    def visibility(self, b: list, t: Any, prm: Any) -> Any:
+        """V in [0, 1] per receiver from filtered moments ``b`` and normalized depth ``t`` (Dr.Jit)."""
+
+
+@dataclass
+class MomentMap:
+    """A built pre-filtered map: its view, the blurred stored moments (mi.Float each, texel order
+    of the depth map) and the moments of t = 1 (read beyond a directional light's map)."""
+    view: object
+    b: list
+    far_b: list
+    fmt: str
+    blur: int
+
+
+def normalized_depth(z, view):
+    """Depth ``z`` (world, Dr.Jit or numpy) as t = (z - near) / (far - near), the moment maps' depth."""
+    if isinstance(z, np.ndarray):
+        return np.clip((z.astype(np.float64) - view.near) / (view.far - view.near), 0.0, 1.0)
+    near = dr.opaque(mi.Float, float(view.near))
+    return (z - near) / dr.opaque(mi.Float, float(view.far - view.near))
+
+
+def stored(x: np.ndarray, fmt: str) -> np.ndarray:
+    """``x`` as the format stores it, read back in float64."""
+    if fmt == "float16":
+        with np.errstate(over="ignore"):
+            return x.astype(np.float16).astype(np.float64)
+    return x.astype(np.float32).astype(np.float64)
+
+
+def box_blur(x: np.ndarray, width: int, faces: int, R: int) -> np.ndarray:
+    """A separable ``width`` x ``width`` box mean of texel values ``x`` (faces * R * R, float64),
+    each face on its own, the window clamped at face edges (edge texels repeat). Summed tap by
+    tap, not by a running sum: an exponential moment spans 30 decades, and a running sum's
+    difference would lose the small values to the large ones."""
+    if width == 1:
+        return x
+    h = width // 2
+    img = x.reshape(faces, R, R)
+    for axis in (1, 2):
+        pad = [(0, 0)] * 3
+        pad[axis] = (h, h)
+        padded = np.pad(img, pad, mode="edge")
+        img = sum(np.take(padded, np.arange(k, k + R), axis=axis) for k in range(width)) / width
+    return img.reshape(-1)
+
+
+def build(kind, params, z1_world: np.ndarray, view, fmt: str, blur: int) -> MomentMap:
+    """The moment map of ``kind`` from a depth map's z1 (world, texel order): moments, stored,
+    blurred, stored again."""
+    t = normalized_depth(z1_world, view)
+    b = [stored(box_blur(stored(m, fmt), blur, view.faces, view.resolution), fmt)
+         for m in kind.moments(t, params)]
+    far_b = [float(stored(m, fmt)[0]) for m in kind.moments(np.ones(1), params)]
+    return MomentMap(view, [mi.Float(m.astype(np.float32)) for m in b], far_b, fmt, blur)
+
+
+def fetch(mmap: MomentMap, rx):
+    """The filtered moments at each receiver's nearest texel (the moments of t = 1 beyond the map)."""
+    view = mmap.view
+    R1 = mi.Int32(view.R_u) - 1
+    i = mi.Int32(dr.floor(rx.u_map))
+    j = mi.Int32(dr.floor(rx.v_map))
+    out = (i < 0) | (j < 0) | (i > R1) | (j > R1)
+    idx = (rx.face * view.R_u + mi.UInt32(dr.clip(j, 0, R1))) * view.R_u + mi.UInt32(dr.clip(i, 0, R1))
+    return [dr.select(out, dr.opaque(mi.Float, f), dr.gather(mi.Float, b, idx)) for b, f in zip(mmap.b, mmap.far_b)]
+
+
+def linstep(lo, hi, x):
+    """(x - lo) / (hi - lo) clamped to [0, 1]: the light-bleeding reduction's ramp."""
+    return dr.clip((x - lo) / (hi - lo), 0.0, 1.0)
+
+
+def chebyshev(mean, mean_sq, t, min_variance):
+    """Chebyshev's one-sided upper bound on P(z >= t) from E[z], E[z^2] (Donnelly & Lauritzen
+    2006): 1 where t <= E[z], else var / (var + (t - E[z])^2), var at least ``min_variance``."""
+    var = dr.maximum(mean_sq - mean * mean, min_variance)
+    d = t - mean
+    return dr.select(t <= mean, 1.0, var / (var + d * d))

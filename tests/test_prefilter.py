@@ -1,0 +1,508 @@
+"""Pre-filtered shadow maps (dsm.prefilter): each kind's lookup against a numpy float64
+computation, the blur against explicit windows, the classic VSM leak of stacked occluders
+derived by hand, the unfiltered VSM that must not leak, the leak split, and a run's rows."""
+from types import SimpleNamespace
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from conftest import base_config
+
+RNG = np.random.default_rng(30)
+
+
+def _prm(**kw):
+    """Parameters as the lookup gets them: opaque float32 values."""
+    return SimpleNamespace(**{k: dr.opaque(mi.Float, float(v)) for k, v in kw.items()})
+
+
+def _f(x):
+    return mi.Float(np.asarray(x, np.float32))
+
+
+def _np(x):
+    return np.asarray(x.numpy(), np.float64)
+
+
+# ---------------------------------------------------------------- Chebyshev (VSM) against float64
+
+def test_vsm_is_chebyshevs_bound_as_numpy_float64_computes_it():
+    from dsm.prefilter import vsm
+    n = 4000
+    mean = RNG.uniform(0.05, 0.95, n)
+    var = RNG.uniform(0.0, 0.02, n)
+    t = RNG.uniform(0.0, 1.0, n)
+    mean_sq = mean * mean + var
+    mv, bleed = 1e-3, 0.2
+    v = _np(vsm.visibility([_f(mean), _f(mean_sq)], _f(t), _prm(min_variance=mv, bleed=bleed)))
+    # the float64 reference: one-sided Chebyshev (Cantelli) P(z >= t) <= s^2 / (s^2 + (t - mu)^2)
+    m32, s32, t32 = (np.float32(a).astype(np.float64) for a in (mean, mean_sq, t))
+    s2 = np.maximum(s32 - m32 ** 2, mv)
+    p = np.where(t32 <= m32, 1.0, s2 / (s2 + (t32 - m32) ** 2))
+    want = np.clip((p - bleed) / (1 - bleed), 0, 1)
+    # float32 cancellation of E[z^2] - E[z]^2 is ~1e-7 absolute, divided by var >= 1e-3
+    assert np.abs(v - want).max() < 2e-4
+    assert (want < 0.5).any() and (want > 0.5).any()        # both sides of the lit test are exercised
+
+
+# ---------------------------------------------------------------- MSM Hamburger 4MSM against float64
+
+def _hamburger_np(b, t, alpha):
+    """Peters & Klein 2015, algorithm 2, in float64 with numpy's solver and roots (not the
+    kit's Cholesky): V = 1 - G for biased moments b' = (1 - a) b + a 0.5."""
+    out = np.empty(len(t))
+    for k in range(len(t)):
+        b1, b2, b3, b4 = (1 - alpha) * b[:, k] + alpha * 0.5
+        B = np.array([[1, b1, b2], [b1, b2, b3], [b2, b3, b4]])
+        c = np.linalg.solve(B, [1.0, t[k], t[k] ** 2])
+        z2, z3 = np.sort(np.roots([c[2], c[1], c[0]]).real)
+        zf = t[k]
+        if zf <= z2:
+            g = 0.0
+        elif zf <= z3:
+            g = (zf * z3 - b1 * (zf + z3) + b2) / ((z3 - z2) * (zf - z2))
+        else:
+            g = 1.0 - (z2 * z3 - b1 * (z2 + z3) + b2) / ((zf - z2) * (zf - z3))
+        out[k] = 1.0 - np.clip(g, 0, 1)
+    return out
+
+
+def test_msm_hamburger_4msm_matches_numpy_float64():
+    from dsm.prefilter import msm
+    n = 400
+    # moments of three-point depth distributions (a blurred window over three casters)
+    z = RNG.uniform(0.1, 0.9, (3, n))
+    w = RNG.dirichlet([1, 1, 1], n).T
+    b = np.stack([(w * z ** k).sum(0) for k in (1, 2, 3, 4)])
+    t = RNG.uniform(0.05, 0.95, n)
+    alpha = 2e-3          # large enough that float32's Cholesky stays within 1e-3 of float64's
+    b32 = np.float32(b).astype(np.float64)
+    t32 = np.float32(t).astype(np.float64)
+    v = _np(msm.visibility([_f(x) for x in b], _f(t), _prm(moment_bias=alpha, depth_bias=0.0)))
+    want = _hamburger_np(b32, t32, alpha)
+    assert np.abs(v - want).max() < 2e-3
+    assert (want < 0.2).any() and (want > 0.8).any()
+
+
+def test_msm_lights_a_receiver_in_front_of_every_caster_and_shadows_one_behind():
+    from dsm.prefilter import msm
+    b = [_f([m] * 2) for m in (0.4, 0.4 ** 2, 0.4 ** 3, 0.4 ** 4)]     # one caster at t = 0.4
+    v = _np(msm.visibility(b, _f([0.2, 0.8]), _prm(moment_bias=3e-5, depth_bias=0.0)))
+    assert v[0] == pytest.approx(1.0, abs=1e-3) and v[1] < 0.05
+
+
+# ---------------------------------------------------------------- ESM, EVSM against float64
+
+def test_esm_is_the_exponential_test_of_the_filtered_moment():
+    from dsm.prefilter import esm
+    c = 40.0
+    z = RNG.uniform(0.1, 0.9, 500)
+    t = RNG.uniform(0.0, 1.0, 500)
+    v = _np(esm.visibility([_f(np.exp(c * z))], _f(t), _prm(c=c)))
+    want = np.clip(np.exp(-c * (np.float32(t) - np.float32(z))), 0, 1)   # exp(c z) exp(-c t), float64
+    assert np.abs(v - want).max() < 1e-4 * c
+
+
+@pytest.mark.parametrize("count", [2, 4])
+def test_evsm_is_the_smaller_warped_chebyshev_bound(count):
+    from dsm.prefilter import evsm
+    cp, cn, mv = 5.0, 3.0, 1e-4
+    p = evsm.Params(positive=cp, negative=cn, moments=count, min_variance=mv)
+    # a window of two casters: the exact warped moments of its mixture
+    za, zb, f = RNG.uniform(0.1, 0.5, 300), RNG.uniform(0.5, 0.9, 300), RNG.uniform(0, 1, 300)
+    moms = [f * a + (1 - f) * b_ for a, b_ in zip(evsm.moments(za, p), evsm.moments(zb, p))]
+    t = RNG.uniform(0.0, 1.0, 300)
+    v = _np(evsm.visibility([_f(m) for m in moms], _f(t), _prm(positive=cp, negative=cn, min_variance=mv, bleed=0.0)))
+    x = 2 * np.float32(t).astype(np.float64) - 1
+    m32 = [np.float32(m).astype(np.float64) for m in moms]
+
+    def cheb(m1, m2, d, slope):
+        var = np.maximum(m2 - m1 ** 2, mv * slope ** 2)
+        return np.where(d <= m1, 1.0, var / (var + (d - m1) ** 2))
+    want = cheb(m32[0], m32[1], np.exp(cp * x), 2 * cp * np.exp(cp * x))
+    if count == 4:
+        want = np.minimum(want, cheb(m32[2], m32[3], -np.exp(-cn * x), 2 * cn * np.exp(-cn * x)))
+    assert np.abs(v - want).max() < 5e-4
+
+
+# ---------------------------------------------------------------- storage and blur
+
+def test_box_blur_is_the_mean_over_the_window_clamped_at_the_face_edge():
+    from dsm.prefilter.base import box_blur
+    faces, R, W = 2, 7, 5
+    x = RNG.uniform(0, 1, faces * R * R)
+    got = box_blur(x, W, faces, R).reshape(faces, R, R)
+    img = x.reshape(faces, R, R)
+    h = W // 2
+    for f in range(faces):          # explicit windows, indices clamped to the face (never the other face)
+        for j in range(R):
+            for i in range(R):
+                rows = np.clip(np.arange(j - h, j + h + 1), 0, R - 1)
+                cols = np.clip(np.arange(i - h, i + h + 1), 0, R - 1)
+                assert got[f, j, i] == pytest.approx(img[f][np.ix_(rows, cols)].mean(), abs=1e-12)
+
+
+def test_box_blur_keeps_the_small_values_of_an_exponential_moment():
+    """A running sum would lose exp(8) next to exp(80) (30 decades); the window's own sum keeps it."""
+    from dsm.prefilter.base import box_blur
+    x = np.full(9 * 9, np.exp(8.0))
+    x[:9] = np.exp(80.0)                # the first row
+    got = box_blur(x, 3, 1, 9).reshape(9, 9)
+    assert got[4, 4] == pytest.approx(np.exp(8.0), rel=1e-12)
+
+
+def test_float16_storage_rounds_as_ieee_half():
+    from dsm.prefilter.base import stored
+    x = np.array([0.1, 1 / 3, 1000.1, 70000.0])
+    assert list(stored(x, "float16")) == [float(np.float16(0.1)), float(np.float16(1 / 3)), 1000.0, np.inf]
+    assert stored(np.array([1 / 3]), "float32")[0] == float(np.float32(1 / 3))
+
+
+def test_float16_depth_format_stores_the_normalized_depth_as_a_half():
+    from dsm import formats
+    view = SimpleNamespace(near=0.0, far=10.0, kind="orthographic", n_texels=3)
+    q = formats.quantize_np(np.array([1.0, 3.3333, 9.99]), view, "float16")
+    want = [10 * float(np.float16(0.1)), 10 * float(np.float16(0.33333)), 10 * float(np.float16(0.999))]
+    assert q == pytest.approx(want, rel=1e-12)
+
+
+# ---------------------------------------------------------------- a synthetic map: the classic leak
+
+def _synthetic(R):
+    """A one-face view of normalized depth (near 0, far 1) and a receiver at every texel centre."""
+    view = SimpleNamespace(near=0.0, far=1.0, faces=1, resolution=R, R_u=dr.opaque(mi.UInt32, R))
+    jj, ii = np.meshgrid(np.arange(R), np.arange(R), indexing="ij")
+    rx = SimpleNamespace(u_map=_f(ii.ravel() + 0.5), v_map=_f(jj.ravel() + 0.5),
+                         face=dr.zeros(mi.UInt32, R * R), depth=None)
+    return view, rx
+
+
+def _vsm_map(z1, R, blur, mv, receiver_t):
+    from dsm import prefilter
+    from dsm.prefilter import vsm
+    from dsm.types import MomentSpec
+    view, rx = _synthetic(R)
+    rx.depth = _f(np.full(R * R, receiver_t))
+    spec = MomentSpec("vsm", vsm.Params(min_variance=mv), blur)
+    mmap = prefilter.build(spec, z1, view, "float32")
+    return _np(prefilter.visibility(spec, rx, mmap)).reshape(R, R)
+
+
+@pytest.mark.parametrize("blur", [1, 3, 5])
+def test_stacked_occluders_leak_where_the_window_straddles_them_derived_by_hand(blur):
+    """Columns u < 8 see a near occluder A at t_A = 0.1 (with B under it), columns u >= 8 the
+    plate B at t_B = 0.5; the ground receiver at d = 0.55 is shadowed everywhere (V* = 0).
+
+    A window holding a fraction f of A has mean mu = t_B - f D (D = t_B - t_A = 0.4) and variance
+    f (1 - f) D^2, so Chebyshev gives p = f(1-f) D^2 / (f(1-f) D^2 + (d - t_B + f D)^2), and
+    p >= 0.5 (lit: a leak) exactly when f(1-f) D^2 >= (d - t_B + f D)^2, i.e. with D = 0.4 and
+    d - t_B = 0.05: 0.16 f (1 - f) >= (0.05 + 0.4 f)^2, i.e. 0.32 f^2 - 0.12 f + 0.0025 <= 0:
+    f in [0.0215, 0.3535]. f = 0 (all B) and f = 1 (all A) give p = min_variance-limited ~ 0.
+    A box of width W centred on column u holds f = (8 - (u - h)) / W of A for the columns whose
+    window straddles the edge (h = W // 2): W = 1 never straddles (no leak); W = 3: f = 1/3 at
+    u = 8 only (2/3 at u = 7 is outside the interval); W = 5: f = 1/5 at u = 9 and 2/5 at u = 8
+    (0.4 > 0.3535): so only column 9."""
+    R = 16
+    z1 = np.where(np.arange(R)[None, :] < 8, 0.1, 0.5) * np.ones((R, 1))
+    v = _vsm_map(z1.ravel(), R, blur, 1e-6, 0.55)
+    leak_cols = sorted(set(np.nonzero(v >= 0.5)[1]))
+    expected = {1: [], 3: [8], 5: [9]}[blur]
+    assert leak_cols == expected
+    assert all((v[:, c] >= 0.5).all() for c in expected)         # the whole column (the edge is along v)
+
+
+def test_unfiltered_vsm_under_one_planar_occluder_does_not_leak():
+    """One plate at t = 0.3 over every texel; receivers g behind it. With W = 1 the texel's
+    variance is 0, clamped to min_variance s^2, so p = s^2 / (s^2 + g^2) < 0.5 iff g > s: a gap
+    larger than sqrt(min_variance) leaves no receiver lit, and one just below it lights them."""
+    R, mv = 8, 1e-4
+    s = np.sqrt(mv)
+    z1 = np.full(R * R, 0.3)
+    assert (_vsm_map(z1, R, 1, mv, 0.3 + 1.05 * s) < 0.5).all()
+    assert (_vsm_map(z1, R, 1, mv, 0.3 + 0.95 * s) >= 0.5).all()
+
+
+# ---------------------------------------------------------------- the leak split
+
+def test_leak_split_by_the_distance_to_the_occluder_in_texels():
+    from dsm import metrics
+    v = np.array([1.0, 0.6, 0.7, 0.2, 1.0, 0.0])
+    v_star = np.array([False, False, False, False, True, False])
+    dist = np.array([0.05, 0.5, 0.21, 5.0, np.inf, 0.01])      # world
+    texel = np.full(6, 0.1)                                     # world per texel: 0.5, 5, 2.1, 50 texels
+    out = metrics.leak_split(v, v_star, dist, texel, 2.0)
+    # false light: receivers 0 (0.5 texel: contact), 1 (5 texels: leak), 2 (2.1: leak)
+    assert out == {"n_peterpan_contact": 1, "n_leak": 2, "peterpan_contact_rate": 1 / 5, "leak_rate": 2 / 5}
+    none = metrics.leak_split(v[4:5], v_star[4:5], dist[4:5], texel[4:5], 2.0)
+    assert np.isnan(none["leak_rate"]) and none["n_leak"] == 0   # nothing shadowed: the rate is undefined
+
+
+# ---------------------------------------------------------------- config
+
+@pytest.mark.parametrize("m, key", [
+    ({"kind": "vsx"}, "map.kind"),
+    ({"kind": "vsm", "format": "unorm24"}, "map.format"),
+    ({"kind": "vsm", "blur": 4}, "map.blur"),
+    ({"blur": 3}, "map.blur"),
+    ({"esm": {"c": 10}}, "map.esm"),
+    ({"kind": "evsm", "evsm": {"moments": 3}}, "map.evsm.moments"),
+    ({"kind": "esm", "esm": {"c": 20}, "format": "float16"}, "map.esm"),
+    ({"kind": "evsm", "evsm": {"positive": 40}, "format": "float16"}, "map.evsm"),
+    ({"kind": "vsm", "vsm": {"bleed": 1.5}}, "map.vsm.bleed"),
+    ({"kind": "vsm", "cascades": 2}, "map.cascades"),
+    ({"kind": "vsm", "filter": "pcf_wide:5"}, "map.filter"),
+    ({"leak_texels": 3}, "map.leak_texels"),
+    ({"kind": "vsm", "blur": 65}, "map.blur"),
+    ({"kind": "vsm", "vsm": 5}, "map.vsm"),
+])
+def test_bad_map_kind_input_is_one_config_error_naming_the_key(m, key):
+    from dsm import config
+    cfg = base_config(map={"resolution": 32, **m})
+    if m.get("kind") == "vsm":
+        del cfg["scheme"]            # schemes are the depth kind's
+    with pytest.raises(config.ConfigError) as e:
+        config.parse(cfg, "<test>")
+    assert e.value.key == key and "\n" not in str(e.value)
+
+
+def test_schemes_belong_to_the_depth_kind():
+    from dsm import config
+    with pytest.raises(config.ConfigError) as e:
+        config.parse(base_config(map={"kind": "vsm"}), "<test>")
+    assert e.value.key == "scheme"
+    cfg = base_config(map={"kind": "vsm"})
+    del cfg["scheme"]
+    assert config.parse(cfg, "<test>").schemes == ()
+
+
+def test_plan_counts_the_moment_cases_and_resume_keys_them():
+    from dsm import config, plan, resume
+    cfg = config.parse(base_config(map={"resolution": 32, "kind": ["depth", "vsm", "msm"], "blur": [1, 3],
+                                        "format": ["float32", "float16"], "vsm": {"min_variance": [1e-4, 1e-3]},
+                                        "filter": ["nearest", "pcf_bilinear"]},
+                                   scheme=[{"name": "none"}, {"name": "dual", "culling": "back"}]), "<test>")
+    p = plan.make(cfg)
+    # depth: 2 schemes x 2 filters x 2 formats; moments: (2 vsm + 1 msm) x 2 blurs x 2 formats, on the culling-none map
+    assert p.cases == 2 * 2 * 2 + 3 * 2 * 2
+    assert [len(m.moments) for m in p.maps] == [6, 0]
+    keys = resume.case_keys(cfg, p, "v")
+    assert len(keys) == p.cases and len({k for _, k in keys}) == p.cases
+
+
+def test_without_kind_the_plan_and_rows_are_unchanged():
+    from dsm import config, plan
+    cfg = config.parse(base_config(), "<test>")
+    assert cfg.map.kind == ("depth",) and not cfg.map.leak_split and cfg.map.moments == ()
+    assert all(m.moments == () for m in plan.make(cfg).maps)
+
+
+# ---------------------------------------------------------------- a run
+
+def test_a_run_of_floating_plate_measures_each_kind_and_vsm_unfiltered_is_a_constant_bias(run_dict):
+    """floating_plate (a plate 0.2 above the ground), every kind at W = 1 and 5: each row has the
+    prefilter group, its contact and leak add up to n_peterpan. The unfiltered VSM lights a
+    receiver g behind its texel exactly when g^2 <= min_variance (normalized depth): the depth
+    test with a constant bias of sqrt(min_variance) depth ranges, here 0.01 range, so the two
+    cases classify every pixel alike."""
+    from dsm import record
+    res = run_dict(base_config(scene=[{"builtin": "floating_plate"}], camera={"resolution": [64, 64]},
+                               map={"resolution": 64, "kind": ["depth", "vsm", "esm", "evsm", "msm"], "blur": [1, 5],
+                                    "vsm": {"min_variance": 1e-4}, "esm": {"c": 40}, "evsm": {"positive": 20}},
+                               scheme=[{"name": "constant", "bias": "0.01 range"}]))
+    rows = {(r["scheme"], r["filter"]): r for r in res.rows}
+    assert len(res.rows) == 1 + 4 * 2
+    for r in res.rows:
+        assert record.check_row(r) is r
+        assert set(r) == record.GROUPS["core"] | record.GROUPS["map"] | record.GROUPS["prefilter"]
+        assert r["n_peterpan_contact"] + r["n_leak"] == r["n_peterpan"]
+        assert (r["map_kind"] == "depth") == (r["scheme"] == "constant")
+        assert np.isnan(r["moments_ms"]) == (r["map_kind"] == "depth")
+    depth, vsm1 = rows[("constant", "nearest")], rows[("vsm", "box:1")]
+    assert depth["n_acne"] == vsm1["n_acne"] and depth["n_peterpan"] == vsm1["n_peterpan"]
+    from dsm.metrics import base_class           # (the depth case's image shades its resolution errors apart)
+    assert (base_class(res.images[depth["case"]]) == res.images[vsm1["case"]]).all()   # the same class per pixel
+    assert vsm1["mean_abs_error"] >= depth["mean_abs_error"]    # V continuous: errs by its soft values too
+
+
+def test_unfiltered_vsm_is_the_constant_bias_receiver_by_receiver_and_lights_nothing_under_the_plate():
+    """Stage by stage on floating_plate: per receiver, V_vsm >= 0.5 iff the constant bias of
+    sqrt(min_variance) ranges lights it; among the receivers the exact visibility shadows whose
+    nearest texel is the plate (its gap 0.2 world is > sqrt(min_variance) ranges), none is lit."""
+    import dsm.pipeline as pl
+    from dsm.types import MomentSpec
+    from dsm.prefilter import vsm
+    sd = pl.load_scene(pl.scene_spec({"builtin": "floating_plate", "gap": 0.2}), (64, 64))
+    setup = pl.light_setup(sd, pl.gbuffer(sd), sd.own_lights[0], "sun")
+    view = pl.make_view(setup.light, 64, pl.points_np(setup.p), sd.bbox)
+    smap = pl.build_map(sd.scene, view)
+    rx = pl.receivers(view, setup, sd.diagonal)
+    mv = 1e-4
+    assert 0.2 > np.sqrt(mv) * view.depth_range          # the gap exceeds the VSM's own bias
+    spec = MomentSpec("vsm", vsm.Params(min_variance=mv), 1)
+    v, shape = pl.moment_visibility(spec, rx, pl.moment_map(spec, smap, "float32"), smap)
+    v_depth, _ = pl.visibility(pl.scheme_spec({"name": "constant", "bias": "0.01 range"}), rx, smap)
+    v, shape, v_depth = v.numpy(), shape.numpy(), v_depth.numpy()
+    assert ((v >= 0.5) == (v_depth >= 0.5)).all()
+    plate = sd.shape_names.index("plate")
+    under = ~setup.v_star & (shape == plate)
+    assert under.sum() > 20 and (v[under] < 0.5).all()
+
+
+def test_stacked_plates_leak_in_the_one_texel_column_derived_by_hand():
+    """stacked_plates, light straight down: the high plate (x in [-0.75, 0], height 2) over half
+    of the low one (|x|, |y| <= 0.75, height 0.25) over the ground. In normalized depth the
+    ground is g = 0.25 / range behind the low plate and the low plate D = 1.75 / range behind the
+    high one (r = g / D = 1/7). A ground receiver under the low plate alone whose W = 5 window
+    holds a fraction f of high-plate texels is lit (p >= 0.5) exactly when f(1-f) D^2 >= (g + f D)^2,
+    i.e. 2 f^2 - (1 - 2r) f + r^2 <= 0: f in [0.031, 0.326]. The window of column i_h + k (i_h:
+    the last column whose centre ray meets the high plate) holds 3 - k high columns of 5: f = 0.4
+    at k = 1 (not lit), f = 0.2 at k = 2 (lit), 0 beyond. So within rows and columns clear of the
+    other edges, the leak is the column i_h + 2 exactly, and it is a leak (0.25 world from the low
+    plate, about 10 texels), not contact."""
+    import dsm.pipeline as pl
+    from dsm import metrics
+    from dsm.types import MomentSpec
+    from dsm.prefilter import vsm
+    sd = pl.load_scene(pl.scene_spec({"builtin": "stacked_plates"}), (160, 160))
+    setup = pl.light_setup(sd, pl.gbuffer(sd), sd.own_lights[0], "sun")
+    R = 256
+    view = pl.make_view(setup.light, R, pl.points_np(setup.p), sd.bbox)
+    smap = pl.build_map(sd.scene, view)
+    rx = pl.receivers(view, setup, sd.diagonal)
+    spec = MomentSpec("vsm", vsm.Params(min_variance=1e-4), 5)
+    v, _ = pl.moment_visibility(spec, rx, pl.moment_map(spec, smap, "float32"), smap)
+    v = v.numpy()
+    col, row = np.floor(rx.u_map.numpy()), np.floor(rx.v_map.numpy())
+    u0, u1 = (float(view.project(mi.Point3f(x, 0.0, 0.0))[0].numpy()[0]) for x in (0.0, 0.75))   # plate edges
+    v_lo, v_hi = sorted(float(view.project(mi.Point3f(0.0, y, 0.0))[1].numpy()[0]) for y in (-0.75, 0.75))
+    assert u1 > u0                                          # u grows with world x (the light frame)
+    i_h = np.ceil(u0 - 0.5) - 1                             # centre (i + 0.5) < u0: the high plate's
+    ground = setup.shape == sd.shape_names.index("ground")
+    region = ground & ~setup.v_star & (col > i_h) & (col < np.floor(u1) - 3) & (row > v_lo + 3) & (row < v_hi - 3)
+    assert region.sum() > 30 and (col[region] == i_h + 2).sum() > 3
+    lit = v >= 0.5
+    assert (lit[region] == (col[region] == i_h + 2)).all()
+    split = metrics.leak_split(v[region], setup.v_star[region], setup.occluder_dist[region],
+                               rx.texel_world.numpy()[region], 2.0)
+    assert split["n_leak"] == (col[region] == i_h + 2).sum() and split["n_peterpan_contact"] == 0
+
+
+def test_msm_where_float32_leaves_the_system_singular_falls_back_to_chebyshev():
+    """A window of one depth (0.8347) under the default bias 3e-5, the receiver 2.5e-5 behind
+    it: float32's Cholesky gives c2 = 0 and a NaN bound (found in l_shape at W = 9). V is then
+    Chebyshev's bound of the biased E[t], E[t^2], computed here in float64."""
+    from dsm.prefilter import msm
+    b = [0.83470887, 0.6967454, 0.5815904, 0.48547226]
+    t, a = 0.83473355, 3e-5
+    v = _np(msm.visibility([_f([x]) for x in b], _f([t]), _prm(moment_bias=a, depth_bias=0.0)))[0]
+    b0, b1 = ((1 - a) * np.float32(x).astype(np.float64) + a * 0.5 for x in b[:2])
+    var = b1 - b0 * b0
+    t64 = float(np.float32(t))
+    want = 1.0 if t64 <= b0 else var / (var + (t64 - b0) ** 2)
+    assert np.isfinite(v) and v == pytest.approx(want, abs=0.05)
+
+
+def test_dsm_schemes_lists_each_map_kind_with_its_source_and_parameters():
+    from dataclasses import fields
+    from dsm import prefilter
+    from dsm.cli import schemes_text
+    text = schemes_text()
+    for k in prefilter.REGISTRY:
+        assert f"{k.NAME}  [{k.SOURCE}]" in text
+        for f in fields(k.Params):
+            assert f"    {f.name} = {f.default}" in text
+
+
+def test_a_resumed_run_keeps_its_moment_cases(run_dict, tmp_path):
+    import dsm
+    cfg = base_config(scene=[{"builtin": "floating_plate"}], camera={"resolution": [32, 32]},
+                      map={"resolution": 32, "kind": ["depth", "vsm", "msm"], "blur": [1, 3]})
+    first = dsm.run(cfg, out=tmp_path / "r")
+    again = dsm.run(cfg, out=tmp_path / "r", resume=True)
+    assert again.run["resumed_cases"] == len(first.rows) == 1 + 2 * 2
+    assert [(r["case"], r["scheme"], r["filter"], r["n_leak"]) for r in again.rows] == \
+        [(r["case"], r["scheme"], r["filter"], r["n_leak"]) for r in first.rows]
+
+
+def test_mjp_presets_are_mjps_defaults_in_the_kits_units():
+    """MJP's Shadows sample: AppSettings.cs VSMBias = 0.01 (used as VSMBias * 0.01), MSMMomentBias
+    = 0.003 (used x 0.001), exponents 40 / 5. Its EVSM minimum variance is (VSMBias * 0.01 * c w)^2
+    in x = 2t - 1; the kit's EVSM with the preset's min_variance must give the same V as MJP's
+    ChebyshevUpperBound with that variance, written here in float64."""
+    from dsm import config
+    from dsm.prefilter import evsm
+    cfg = config.parse(base_config(map={"kind": ["depth", "vsm", "evsm", "msm"], "vsm": {"preset": "mjp"},
+                                        "evsm": {"preset": "mjp"}, "msm": {"preset": "mjp"}}), "<test>")
+    got = {m.name: m for m in cfg.map.moments}
+    assert got["vsm"].params.min_variance == pytest.approx(0.01 * 0.01) and got["vsm"].params.bleed == 0.0
+    assert got["msm"].params.moment_bias == pytest.approx(0.003 * 0.001) and got["msm"].preset == "mjp"
+    p = got["evsm"].params
+    assert (p.positive, p.negative, p.moments) == (40.0, 5.0, 4)
+    # MJP's EVSM4 in float64 on the moments of a two-caster window
+    za, zb, f = RNG.uniform(0.2, 0.5, 200), RNG.uniform(0.5, 0.8, 200), RNG.uniform(0, 1, 200)
+    moms = [f * a + (1 - f) * b_ for a, b_ in zip(evsm.moments(za, p), evsm.moments(zb, p))]
+    t = np.float32(RNG.uniform(0.3, 0.9, 200)).astype(np.float64)
+    x = 2 * t - 1
+    w = np.stack([np.exp(40 * x), -np.exp(-5 * x)])
+    min_var = (0.01 * 0.01 * np.array([[40.0], [5.0]]) * w) ** 2
+    m32 = [np.float32(m).astype(np.float64) for m in moms]
+
+    def cheb(m1, m2, d, mv):        # MJP's ChebyshevUpperBound, bleed 0
+        var = np.maximum(m2 - m1 * m1, mv)
+        return np.where(d <= m1, 1.0, var / (var + (d - m1) ** 2))
+    want = np.minimum(cheb(m32[0], m32[1], w[0], min_var[0]), cheb(m32[2], m32[3], w[1], min_var[1]))
+    v = _np(evsm.visibility([_f(m) for m in moms], _f(t), _prm(positive=40, negative=5, min_variance=p.min_variance,
+                                                                bleed=0.0)))
+    assert np.abs(v - want).max() < 2e-3 and (want < 0.5).any() and (want > 0.5).any()
+
+
+def test_a_preset_takes_no_other_keys_and_esm_has_none():
+    from dsm import config
+    for m, key in (({"kind": "vsm", "vsm": {"preset": "mjp", "bleed": 0.1}}, "map.vsm.bleed"),
+                   ({"kind": "esm", "esm": {"preset": "mjp"}}, "map.esm.preset"),
+                   ({"kind": "msm", "msm": {"preset": "three"}}, "map.msm.preset")):
+        with pytest.raises(config.ConfigError) as e:
+            config.parse({"scene": [{"builtin": "plane"}], "map": m}, "<test>")
+        assert e.value.key == key
+
+
+def test_dsm_tune_refuses_a_config_with_pre_filtered_kinds():
+    from dsm import config, tune
+    cfg = config.parse(base_config(map={"kind": ["depth", "vsm"]}, scheme=[{"name": "constant"}]), "<test>")
+    with pytest.raises(config.ConfigError) as e:
+        tune.parse_tune(cfg)
+    assert e.value.key == "map.kind"
+
+
+def test_the_summary_pools_the_leak_split_per_instance():
+    from dsm import summary
+    base = {"preset": "", "format": "float32", "cascade_layout": ""}
+    rows = [{**base, "scheme": "vsm", "params": "min_variance=0.0001", "filter": "box:3", "map_kind": "vsm",
+             "n_gt_shadowed": 100, "n_peterpan": 10, "n_peterpan_contact": 4, "n_leak": 6, "mean_abs_error": 0.02,
+             "moments_ms": 3.0},
+            {**base, "scheme": "vsm", "params": "min_variance=0.0001", "filter": "box:3", "map_kind": "vsm",
+             "n_gt_shadowed": 300, "n_peterpan": 2, "n_peterpan_contact": 2, "n_leak": 0, "mean_abs_error": 0.04,
+             "moments_ms": 5.0},
+            {**base, "scheme": "constant", "params": "bias=1 texel", "filter": "nearest", "map_kind": "depth",
+             "n_gt_shadowed": 50, "n_peterpan": 1, "n_peterpan_contact": 1, "n_leak": 0, "mean_abs_error": 0.01,
+             "moments_ms": float("nan")}]
+    lines = summary.leak_md(rows)
+    # vsm: leak 6 / 400 = 0.015, contact 6 / 400, peter-pan 12 / 400 = 0.03, mae (0.02 + 0.04) / 2, moments 4 ms
+    assert "| vsm | min_variance=0.0001 | box:3 | vsm | 2 | 0.03 | 0.015 | 0.015 | 0.03 | 4.00 |" in lines
+    assert "| constant | bias=1 texel | nearest | depth | 1 | 0.02 | 0.02 | 0 | 0.01 | - |" in lines
+    assert lines.index("| constant | bias=1 texel | nearest | depth | 1 | 0.02 | 0.02 | 0 | 0.01 | - |") < \
+        lines.index("| vsm | min_variance=0.0001 | box:3 | vsm | 2 | 0.03 | 0.015 | 0.015 | 0.03 | 4.00 |")
+    assert summary.leak_md([{k: v for k, v in r.items() if k != "map_kind"} for r in rows]) == []
+
+
+@pytest.mark.parametrize("extra", [
+    {"light": [{"type": "area", "shape": "rectangle", "position": [0, 0, 3], "direction": [0, 0, -1], "size": 1.0}]},
+    {"motion": [{"frames": 3, "camera": "dolly", "offset": [0, 1, 0]}]},
+], ids=["area light", "motion"])
+def test_pre_filtered_kinds_refuse_area_lights_and_motion(extra):
+    from dsm import config
+    with pytest.raises(config.ConfigError) as e:
+        config.parse({"scene": [{"builtin": "plane"}], "map": {"kind": "vsm"}, **extra}, "<test>")
+    assert e.value.key == "map.kind"
