@@ -118,6 +118,9 @@ def case_keys(cfg, plan, version: str | None = None) -> list:
     shared = {"camera": _plain(cfg.camera_resolution), "pose": _plain(getattr(cfg, "camera", None)),
               "seed": cfg.seed, "variant": cfg.variant,
               "lambdas": _plain(cfg.oracle.lambdas), "version": version}
+    for opt in ("contact", "shrink"):     # opt-in steps enter a case's identity only when asked (old keys stay)
+        if getattr(cfg, opt, None) is not None:
+            shared[opt] = _plain(getattr(cfg, opt))
     scenes = [scene_identity(s) for s in cfg.scenes]
     out = []
     n = 0

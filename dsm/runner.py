@@ -24,6 +24,7 @@ import numpy as np
 
 from . import config as cfgmod
 from . import cascades, env, figures, metrics, motion, pipeline, publish, record, report, resume, shadowmap, soft_report, timing
+from . import contact
 from . import plan as planmod
 from .lookup import Receiver
 
@@ -112,6 +113,8 @@ class Runner:
         self.first_case = list(itertools.accumulate((m.cases for m in self.plan.maps), initial=0))
         self.resume_previous = resume_previous
         self.kept, self.stale = {}, []
+        self.depth_buffers = {}       # [contact]: per scene, the camera's depth buffer (made when a case asks)
+        self.marches = {}             # [contact]: per receiver set, (receivers, occluded, timing) of its march
 
     # ------------------------------------------------------------ top level
     def run(self) -> Results:
@@ -407,6 +410,8 @@ class Runner:
                 fallbacks = pipeline.plane_fallbacks(spec, rx, smap)
             m = pipeline.metrics(v_np, setup, tap_np, seam, view.has_seams)
             m.update(pipeline.split(v_np, setup.v_star, wrong))     # NaN unless nearest (the oracles' lookup)
+            if self.cfg.contact is not None:      # screen-space contact shadows after the lookup
+                m.update(self._contact(sd, gb, setup, rx, v_np))
             # seed 000's self-unshadowing: pixels in attached shadow (facing away) that the map calls lit
             v_back = pipeline.visibility(spec, rx_back, smap, filt, self.cfg.seed)[0].numpy() \
                 if rx_back is not None else np.zeros(0)
@@ -450,6 +455,21 @@ class Runner:
             self._write_run_json()
         except Exception as e:
             self._fail(f"case {case} ({sd.label}, {setup.label}, {spec.name} {spec.label}, R={view.resolution})", e)
+
+    def _contact(self, sd, gb, setup, rx, v_np) -> dict:
+        """The contact step's columns of one case: its receivers' march (once per receiver set, timed)
+        applied to the case's V."""
+        if rx is None:
+            return {**contact.case_metrics(v_np, setup.v_star, np.zeros(0, bool)), "contact_ms": 0.0}
+        if sd.label not in self.depth_buffers:
+            self.depth_buffers[sd.label] = contact.depth_buffer(gb, sd.sensor)
+        db = self.depth_buffers[sd.label]
+        if id(rx) not in self.marches:    # the march reads receivers and light only: every case of them shares it
+            out, t = timing.measure(lambda: (contact.march(db, rx, self.cfg.contact, self.cfg.seed),),
+                                    self.cfg.timing_repeats)
+            self.marches = {id(rx): (rx, out[-1].numpy().astype(bool), t)}    # the receivers kept: their id stays theirs
+        _, occ, t = self.marches[id(rx)]
+        return {**contact.case_metrics(v_np, setup.v_star, occ, setup.v_frac), "contact_ms": t.ms}
 
     def add_case(self, row: dict, status: dict):
         """One finished case: its row into metrics.csv (refused unless it fits the schema,
