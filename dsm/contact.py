@@ -50,17 +50,12 @@ class DepthBuffer:
     height: int
 
 
-def camera_of(sensor) -> Camera:
-    """The pinhole Camera of a perspective sensor; ValueError for any other kind."""
-    if "x_fov" not in mi.traverse(sensor):
-        raise ValueError(f"contact shadows need a perspective camera; the scene's sensor is {type(sensor).__name__} "
-                         "without a field of view")
-    return Camera.from_sensor(sensor)
-
-
-def depth_buffer(gb, sensor) -> DepthBuffer:
-    """The depth buffer of a G-buffer cast from ``sensor`` (its film's size)."""
-    cam = camera_of(sensor)
+def depth_buffer(gb) -> DepthBuffer:
+    """The depth buffer of a G-buffer (cast from a perspective sensor: ``gb.camera``); ValueError for
+    any other camera."""
+    cam = gb.camera
+    if cam is None:
+        raise ValueError("contact shadows need a perspective camera (the scene's sensor has no field of view)")
     o, f = _vec(cam.origin), _vec(cam.forward)
     z = dr.dot(gb.p - o, f)
     z = dr.select(mi.Bool(gb.hit), z, dr.inf)

@@ -319,8 +319,8 @@ class Runner:
         for fmt in stored:
             v = stored[fmt].view
             if id(v) not in by_view:
-                front = rx if rx is None or v is view else Receiver.make(v, setup.p, setup.n, sd.diagonal)
-                by_view[id(v)] = (front, Receiver.make(v, bp, bn, sd.diagonal) if bp is not None else None)
+                front = rx if rx is None or v is view else Receiver.make(v, setup.p, setup.n, sd.diagonal, setup.camera)
+                by_view[id(v)] = (front, Receiver.make(v, bp, bn, sd.diagonal, setup.camera) if bp is not None else None)
         rxs = {fmt: by_view[id(stored[fmt].view)][0] for fmt in stored}
         backs = {fmt: by_view[id(stored[fmt].view)][1] for fmt in stored}
         wrong = {fmt: self._oracles(sd, setup, view, m, stored[fmt], rxs[fmt], fmt) for fmt in stored}
@@ -462,7 +462,7 @@ class Runner:
         if rx is None:
             return {**contact.case_metrics(v_np, setup.v_star, np.zeros(0, bool)), "contact_ms": 0.0}
         if sd.label not in self.depth_buffers:
-            self.depth_buffers[sd.label] = contact.depth_buffer(gb, sd.sensor)
+            self.depth_buffers[sd.label] = contact.depth_buffer(gb)
         db = self.depth_buffers[sd.label]
         if id(rx) not in self.marches:    # the march reads receivers and light only: every case of them shares it
             out, t = timing.measure(lambda: (contact.march(db, rx, self.cfg.contact, self.cfg.seed),),

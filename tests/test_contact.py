@@ -94,7 +94,7 @@ def test_depth_buffer_projects_each_hit_to_its_own_pixel(plate):
     t, p_hand, _ = first_hit(pixel_rays())
     assert np.array_equal(np.isfinite(t), gb.hit)
     assert np.abs(pl.points_np(gb.p)[gb.hit] - p_hand[gb.hit]).max() < 1e-5    # the frame derived by hand
-    db = contact.depth_buffer(gb, sd.sensor)
+    db = contact.depth_buffer(gb)
     assert np.allclose(db.depth.numpy()[gb.hit], t[gb.hit], rtol=1e-5)
 
 
@@ -104,7 +104,7 @@ def test_plate_recovered_pixels_are_the_hand_march(plate):
     peter-panned among them."""
     sd, gb, setup, smap, rx = plate
     spec = ContactSpec(Length(LENGTH, "world"), STEPS, Length(THICK, "world"), 0.0)
-    occ = contact.march(contact.depth_buffer(gb, sd.sensor), rx, spec).numpy().astype(bool)
+    occ = contact.march(contact.depth_buffer(gb), rx, spec).numpy().astype(bool)
     _, p_rx, on_plate = first_hit(pixel_rays()[setup.pixels])
     hand, amb = hand_march(p_rx)
     assert amb.mean() < 0.01
@@ -156,7 +156,7 @@ def test_a_caster_hidden_behind_a_receiver_is_a_miss(with_hider):
     v = pl.visibility(pl.scheme_spec({"name": "constant", "bias": 0.4}), rx, smap)[0].numpy()
     assert (v[region] >= 0.5).all()                                   # the bias peter-pans them all
     spec = ContactSpec(Length(0.5, "world"), 16, Length(0.1, "world"), 0.0)
-    occ = contact.march(contact.depth_buffer(gb, sd.sensor), rx, spec).numpy().astype(bool)
+    occ = contact.march(contact.depth_buffer(gb), rx, spec).numpy().astype(bool)
     m = contact.case_metrics(v[region], setup.v_star[region], occ[region])
     if with_hider:
         assert m["n_contact_recovered"] == 0 and m["n_contact_missed"] == region.sum()

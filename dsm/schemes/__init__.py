@@ -10,14 +10,14 @@ Engine presets (:mod:`.presets`) are :mod:`combined` instances per light type:
 :func:`preset_for_light` resolves one for a light.
 """
 
-from . import (adaptive, adaptive_tap, combined, constant, dual, midpoint, none, normal_angle, normal_offset, receiver_plane,
-               second_depth, slope_scaled)
+from . import (adaptive, adaptive_tap, combined, constant, distance_normal, dual, midpoint, none, normal_angle,
+               normal_offset, receiver_plane, second_depth, slope_scaled)
 from ..types import Length, describe_params  # noqa: F401  (describe_params: the report's words)
 
 from .base import Scheme
 
 REGISTRY = (none, constant, slope_scaled, normal_angle, normal_offset, combined, receiver_plane, adaptive, midpoint,
-            dual, second_depth, adaptive_tap)
+            dual, second_depth, adaptive_tap, distance_normal)
 _broken = [m.NAME for m in REGISTRY if not isinstance(m, Scheme)]
 assert not _broken, f"scheme modules not meeting the Scheme contract: {_broken}"
 
