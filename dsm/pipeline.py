@@ -29,6 +29,7 @@ from . import cascades as cascades_mod
 from . import area, formats, lights, lookup, reference, scenes, schemes, shadowmap, spawn, timing
 from . import oracle as oracle_mod
 from . import gbuffer as gbuffer_mod
+from . import shrink as shrink_mod
 from . import metrics as metrics_mod
 from .closedness import shape_closedness
 from .env import exact_math  # noqa: F401  (the plugins set it in the thread that renders)
@@ -301,6 +302,12 @@ def build_map(scene, view, needs=(), culling: str = "none", closed=None, tile: i
         modes = np.zeros(len(scene.shapes()), np.uint32) if modes is None else np.array(modes, np.uint32)
         modes[list(exclude)] = shadowmap.CULL_ALL
     return shadowmap.build(scene, view, set(needs), culling, modes, tile, extents)
+
+
+def shrunk_scene(scene, distance: float):
+    """A copy of ``scene`` whose meshes moved ``distance`` inward along their welded vertex normals
+    (``[map] shrink``, :mod:`dsm.shrink`): what a map is cast against, the rest using ``scene``."""
+    return shrink_mod.shrunk_scene(scene, distance)
 
 
 store = formats.store                     # (map, format) -> the map as that format stores it

@@ -115,6 +115,7 @@ class Runner:
         self.kept, self.stale = {}, []
         self.depth_buffers = {}       # [contact]: per scene, the camera's depth buffer (made when a case asks)
         self.marches = {}             # [contact]: per receiver set, (receivers, occluded, timing) of its march
+        self.shrunk = (None, None)    # [map] shrink: (scene label, its shrunk copy)
 
     # ------------------------------------------------------------ top level
     def run(self) -> Results:
@@ -294,8 +295,17 @@ class Runner:
     def _build(self, sd, view, needs, culling, tile):
         closed = self._closed(sd) if culling != "none" else None
         extents = self.extents[sd.label]
-        return timing.measure(lambda: _map_arrays(sd.scene, view, needs, culling, closed, tile, extents),
+        casters = self._casters(sd)
+        return timing.measure(lambda: _map_arrays(casters, view, needs, culling, closed, tile, extents),
                               self.cfg.timing_repeats)
+
+    def _casters(self, sd):
+        """The scene the maps are cast against: the scene, or its copy shrunk by ``[map] shrink`` (once per scene)."""
+        if self.cfg.shrink is None:
+            return sd.scene
+        if self.shrunk[0] != sd.label:
+            self.shrunk = (sd.label, pipeline.shrunk_scene(sd.scene, self.cfg.shrink))
+        return self.shrunk[1]
 
     def _run_map(self, sd, gb, setup, view, rx, seam, back, m, first_t):
         """Build one map (the plan's layers, culling and tile), store its formats, run its cases.
