@@ -601,6 +601,8 @@ def schemes_text() -> str:
             lines.append(f"    {f.name} = {f.default}    {f.metadata.get('doc', '')}")
         lines.append("    " + (s.__doc__ or "").strip().splitlines()[0])
     lines += presets.text()
+    from . import contact_presets
+    lines += contact_presets.text()
     lines.append('lengths: a number (world units), "k texel" (texel widths at the receiver) or "k range" '
                  "(fraction of the view's depth range)")
     return "\n".join(lines)

@@ -213,6 +213,13 @@ def _parse_contact(raw: dict, source: str, motion: bool):
     if "contact" not in raw:
         return None
     t = _table(raw, "contact", source)
+    if "preset" in t:
+        from .contact_presets import PRESETS as CONTACT_PRESETS
+        name = choice(t["preset"], source, "contact.preset", sorted(CONTACT_PRESETS))
+        extra = sorted(set(t) - {"preset"})
+        if extra:
+            raise ConfigError(source, f"contact.{extra[0]}", "a preset takes no other keys", ("preset",))
+        t = dict(vars(CONTACT_PRESETS[name][0]))
     for k, v in t.items():
         if isinstance(v, list):
             raise ConfigError(source, f"contact.{k}", f"give one value (contact parameters are not swept), got {v!r}")
