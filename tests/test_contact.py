@@ -188,6 +188,11 @@ def test_run_writes_the_contact_group_only_when_asked(run_dict):
         assert b["n_contact_missed"] == b["n_peterpan"] - b["n_contact_recovered"]
     assert with_c.rows[1]["n_contact_recovered"] > 0
     assert with_c.rows[1]["contact_error_rate"] < with_c.rows[1]["error_rate"]
+    for r in with_c.rows:       # the error after: acne gains the false shadows, peter-pan loses the recovered
+        after = r["n_acne"] + r["n_contact_false"] + r["n_peterpan"] - r["n_contact_recovered"]
+        assert r["contact_error_rate"] == pytest.approx(after / r["n_receivers"])
+    table = (with_c.out / "table.md").read_text()
+    assert "## Contact shadows" in table and "## Contact shadows" not in (plain.out / "table.md").read_text()
 
 
 @pytest.mark.parametrize("table, key", [({"steps": 0}, "contact.steps"), ({"steps": 300}, "contact.steps"),
