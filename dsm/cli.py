@@ -553,6 +553,10 @@ def _tune(cfg, args, out: Path) -> int:
     tc, rc = _checked(check)
     if rc is not None:
         return rc
+    ignored = [k for k, v in (("[contact]", cfg.contact), ("map.shrink", cfg.shrink)) if v is not None]
+    if ignored:                          # the tuner's objective is the map's lookup alone
+        print(f"dsm: note: {' and '.join(ignored)} are measured by `dsm run`; `dsm tune` tunes without them",
+              file=sys.stderr)
     held, problem = claim(out)
     if problem:
         _err(problem)

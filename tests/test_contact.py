@@ -213,3 +213,25 @@ def test_bevy_preset_is_its_source_values():
         with pytest.raises(ConfigError) as e:
             dsm.config.parse(base_config(contact=table), "<t>")
         assert e.value.key == key
+
+
+def test_largest_bias_within_the_tolerance():
+    """scripts/contact_bias.py: the largest bias whose pooled error is within 1.1x the sweep's minimum."""
+    import importlib.util
+    from conftest import ROOT
+    spec = importlib.util.spec_from_file_location("contact_bias", ROOT / "scripts" / "contact_bias.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    errors = {1.0: (0.010, 0.5), 2.0: (0.0100, 0.020), 4.0: (0.0105, 0.021), 8.0: (0.0111, 0.022), 16.0: (0.02, 0.03)}
+    assert mod.largest_within(errors, 0) == (4.0, 0.010)        # 0.0111 > 1.1 x 0.010
+    assert mod.largest_within(errors, 1) == (8.0, 0.020)        # 0.022 <= 1.1 x 0.020
+
+
+def test_contact_and_shrink_enter_the_case_keys_only_when_asked():
+    from dsm import plan, resume
+    cfg = dsm.config.parse(base_config(), "<t>")
+    keys = resume.case_keys(cfg, plan.make(cfg), "v")
+    with_c = dsm.config.parse(base_config(contact={"steps": 4}), "<t>")
+    assert keys != resume.case_keys(with_c, plan.make(with_c), "v")
+    again = dsm.config.parse(base_config(), "<t>")
+    assert keys == resume.case_keys(again, plan.make(again), "v")
