@@ -24,7 +24,7 @@ import numpy as np
 
 from . import config as cfgmod
 from . import cascades, env, figures, metrics, motion, pipeline, publish, record, report, resume, shadowmap, soft_report, timing
-from . import contact
+from . import contact, contact_report
 from . import plan as planmod
 from .lookup import Receiver
 
@@ -421,7 +421,13 @@ class Runner:
             m = pipeline.metrics(v_np, setup, tap_np, seam, view.has_seams)
             m.update(pipeline.split(v_np, setup.v_star, wrong))     # NaN unless nearest (the oracles' lookup)
             if self.cfg.contact is not None:      # screen-space contact shadows after the lookup
-                m.update(self._contact(sd, gb, setup, rx, v_np))
+                cols, occ = self._contact(sd, gb, setup, rx, v_np)
+                m.update(cols)
+                if self.cfg.report_images != "none":
+                    folder = self.out / "images" / figures.image_folder(meta)
+                    folder.mkdir(parents=True, exist_ok=True)
+                    contact_report.write_image(folder / f"{case}_contact.png", setup.pixels,
+                                               contact_report.classes(v_np, setup.v_star, occ), gb.width, gb.height)
             # seed 000's self-unshadowing: pixels in attached shadow (facing away) that the map calls lit
             v_back = pipeline.visibility(spec, rx_back, smap, filt, self.cfg.seed)[0].numpy() \
                 if rx_back is not None else np.zeros(0)
@@ -467,10 +473,11 @@ class Runner:
             self._fail(f"case {case} ({sd.label}, {setup.label}, {spec.name} {spec.label}, R={view.resolution})", e)
 
     def _contact(self, sd, gb, setup, rx, v_np) -> dict:
-        """The contact step's columns of one case: its receivers' march (once per receiver set, timed)
-        applied to the case's V."""
+        """(columns, occluded per receiver) of one case's contact step: its receivers' march (once per
+        receiver set, timed) applied to the case's V."""
         if rx is None:
-            return {**contact.case_metrics(v_np, setup.v_star, np.zeros(0, bool)), "contact_ms": 0.0}
+            none = np.zeros(0, bool)
+            return {**contact.case_metrics(v_np, setup.v_star, none), "contact_ms": 0.0}, none
         if sd.label not in self.depth_buffers:
             self.depth_buffers[sd.label] = contact.depth_buffer(gb)
         db = self.depth_buffers[sd.label]
@@ -479,7 +486,7 @@ class Runner:
                                     self.cfg.timing_repeats)
             self.marches = {id(rx): (rx, out[-1].numpy().astype(bool), t)}    # the receivers kept: their id stays theirs
         _, occ, t = self.marches[id(rx)]
-        return {**contact.case_metrics(v_np, setup.v_star, occ, setup.v_frac), "contact_ms": t.ms}
+        return {**contact.case_metrics(v_np, setup.v_star, occ, setup.v_frac), "contact_ms": t.ms}, occ
 
     def add_case(self, row: dict, status: dict):
         """One finished case: its row into metrics.csv (refused unless it fits the schema,
