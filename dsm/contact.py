@@ -24,8 +24,7 @@ count what the step darkens wrongly (``n_contact_false``), the peter-panned rece
 recovers (``n_contact_recovered``) and those it leaves (``n_contact_missed``).
 
 Lengths in ``"k texel"`` are the shadow map's texel at the receiver (the kit's one meaning of
-a texel length); ``"k range"`` a fraction of the view's depth range. The march does not stop
-at a positional light: keep ``length`` below the light's distance. Perspective cameras only
+a texel length); ``"k range"`` a fraction of the view's depth range. Perspective cameras only
 (the projection is the pinhole's).
 """
 from __future__ import annotations
@@ -91,14 +90,18 @@ def sample_distances(spec, length, rx: Receiver, seed: int) -> list:
     return [length * (dr.opaque(mi.Float, float(k)) - back) * inv for k in range(1, spec.steps + 1)]
 
 
-def march(db: DepthBuffer, rx: Receiver, spec, seed: int = 7):
-    """Per receiver (mi.Bool): some march sample lies behind the depth buffer by less than ``thickness``."""
+def march(db: DepthBuffer, rx: Receiver, spec, seed: int = 7, light_world=None):
+    """Per receiver (mi.Bool): some march sample lies behind the depth buffer by less than ``thickness``.
+    ``light_world``: a positional light's position (its samples stop short of it), None for a direction."""
     prm = resolve(spec, rx)           # length and thickness in world units (texels per receiver)
     occluded = dr.zeros(mi.Bool, dr.width(rx.p_world))
     W, H = db.width, db.height
+    reach = dr.full(mi.Float, dr.inf, dr.width(rx.p_world))
+    if light_world is not None:       # nothing beyond the light can shadow the receiver
+        reach = dr.norm(_vec(light_world) - rx.p_world)
     for t in sample_distances(spec, prm.length, rx, seed):
         x, y, z = project(db, rx.p_world + rx.to_light * t)
-        inside = (z > 0) & (x >= 0) & (x < W) & (y >= 0) & (y < H)
+        inside = (z > 0) & (x >= 0) & (x < W) & (y >= 0) & (y < H) & (t < reach)
         i = dr.clip(mi.Int32(dr.floor(x)), 0, W - 1)
         j = dr.clip(mi.Int32(dr.floor(y)), 0, H - 1)
         z_b = dr.gather(mi.Float, db.depth, mi.UInt32(j * W + i), inside)
@@ -114,7 +117,7 @@ def case_metrics(v: np.ndarray, v_star: np.ndarray, occluded: np.ndarray, v_frac
     gt = np.asarray(v_star, bool)
     occ = np.asarray(occluded, bool)
     lit_map = v >= 0.5
-    v_c = np.where(occ, 0.0, v)
+    v_c = visibility_after(v, occ)
     lit_c = v_c >= 0.5
     acne, pp = gt & ~lit_c, ~gt & lit_c
     n, n_lit, n_sh = len(v), int(gt.sum()), int((~gt).sum())

@@ -482,7 +482,8 @@ class Runner:
             self.depth_buffers[sd.label] = contact.depth_buffer(gb)
         db = self.depth_buffers[sd.label]
         if id(rx) not in self.marches:    # the march reads receivers and light only: every case of them shares it
-            out, t = timing.measure(lambda: (contact.march(db, rx, self.cfg.contact, self.cfg.seed),),
+            light_world = setup.light.position if pipeline.is_positional(setup.light) else None
+            out, t = timing.measure(lambda: (contact.march(db, rx, self.cfg.contact, self.cfg.seed, light_world),),
                                     self.cfg.timing_repeats)
             self.marches = {id(rx): (rx, out[-1].numpy().astype(bool), t)}    # the receivers kept: their id stays theirs
         _, occ, t = self.marches[id(rx)]
