@@ -24,7 +24,7 @@ import numpy as np
 
 from . import config as cfgmod
 from . import cascades, env, figures, metrics, motion, pipeline, publish, record, report, resume, shadowmap, soft_report, timing
-from . import contact, contact_report
+from . import contact, contact_images
 from . import plan as planmod
 from .lookup import Receiver
 
@@ -426,8 +426,8 @@ class Runner:
                 if self.cfg.report_images != "none":
                     folder = self.out / "images" / figures.image_folder(meta)
                     folder.mkdir(parents=True, exist_ok=True)
-                    contact_report.write_image(folder / f"{case}_contact.png", setup.pixels,
-                                               contact_report.classes(v_np, setup.v_star, occ), gb.width, gb.height)
+                    contact_images.write_image(folder / f"{case}_contact.png", setup.pixels,
+                                               contact_images.classes(v_np, setup.v_star, occ), gb.width, gb.height)
             # seed 000's self-unshadowing: pixels in attached shadow (facing away) that the map calls lit
             v_back = pipeline.visibility(spec, rx_back, smap, filt, self.cfg.seed)[0].numpy() \
                 if rx_back is not None else np.zeros(0)

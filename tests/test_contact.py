@@ -217,9 +217,9 @@ def test_run_writes_the_contact_group_only_when_asked(run_dict):
         after = r["n_acne"] + r["n_contact_false"] + r["n_peterpan"] - r["n_contact_recovered"]
         assert r["contact_error_rate"] == pytest.approx(after / r["n_receivers"])
         from PIL import Image
-        from dsm import contact_report, figures
+        from dsm import contact_images, figures
         img = np.asarray(Image.open(with_c.out / "images" / figures.image_folder(r) / f"{r['case']}_contact.png"))
-        count = lambda k: int((img.reshape(-1, 3) == contact_report.CONTACT_COLORS[k]).all(1).sum())
+        count = lambda k: int((img.reshape(-1, 3) == contact_images.CONTACT_COLORS[k]).all(1).sum())
         assert (count(3), count(4), count(5)) == (r["n_contact_recovered"], r["n_contact_false"],
                                                   r["n_contact_missed"])
     table = (with_c.out / "table.md").read_text()
