@@ -113,7 +113,7 @@ class Runner:
         self.first_case = list(itertools.accumulate((m.cases for m in self.plan.maps), initial=0))
         self.resume_previous = resume_previous
         self.kept, self.stale = {}, []
-        self.depth_buffers = {}       # [contact]: per scene, the camera's depth buffer (made when a case asks)
+        self.depth_buffers = {}       # [contact]: the current scene's camera depth buffer (made when a case asks)
         self.marches = {}             # [contact]: per receiver set, (receivers, occluded, timing) of its march
         self.shrunk = (None, None)    # [map] shrink: (scene label, its shrunk copy)
 
@@ -420,14 +420,10 @@ class Runner:
                 fallbacks = pipeline.plane_fallbacks(spec, rx, smap)
             m = pipeline.metrics(v_np, setup, tap_np, seam, view.has_seams)
             m.update(pipeline.split(v_np, setup.v_star, wrong))     # NaN unless nearest (the oracles' lookup)
+            occ = None
             if self.cfg.contact is not None:      # screen-space contact shadows after the lookup
                 cols, occ = self._contact(sd, gb, setup, rx, v_np)
                 m.update(cols)
-                if self.cfg.report_images != "none":
-                    folder = self.out / "images" / figures.image_folder(meta)
-                    folder.mkdir(parents=True, exist_ok=True)
-                    contact_images.write_image(folder / f"{case}_contact.png", setup.pixels,
-                                               contact_images.classes(v_np, setup.v_star, occ), gb.width, gb.height)
             # seed 000's self-unshadowing: pixels in attached shadow (facing away) that the map calls lit
             v_back = pipeline.visibility(spec, rx_back, smap, filt, self.cfg.seed)[0].numpy() \
                 if rx_back is not None else np.zeros(0)
@@ -458,6 +454,11 @@ class Runner:
             item = publish.image_item(meta, classes, shade, self.cfg.report_images)
             if item is not None:        # written now (Pillow, ~1 ms, between timings): a killed run keeps them
                 figures.write_images(self.out, [item])
+            if occ is not None and self.cfg.report_images != "none":         # what the contact march did
+                folder = self.out / "images" / figures.image_folder(meta)
+                folder.mkdir(parents=True, exist_ok=True)
+                contact_images.write_image(folder / f"{case}_contact.png", setup.pixels,
+                                           contact_images.classes(v_np, setup.v_star, occ), gb.width, gb.height)
             if setup.ref is not None and self.cfg.report_images != "none":    # area light: V, V*, |V - V*|
                 soft_report.write_images(self.out, [soft_report.image_item(meta, gb.width, gb.height, setup.pixels,
                                                                            v_np, setup.v_frac)])
@@ -472,14 +473,14 @@ class Runner:
         except Exception as e:
             self._fail(f"case {case} ({sd.label}, {setup.label}, {spec.name} {spec.label}, R={view.resolution})", e)
 
-    def _contact(self, sd, gb, setup, rx, v_np) -> dict:
+    def _contact(self, sd, gb, setup, rx, v_np) -> tuple:
         """(columns, occluded per receiver) of one case's contact step: its receivers' march (once per
         receiver set, timed) applied to the case's V."""
         if rx is None:
             none = np.zeros(0, bool)
             return {**contact.case_metrics(v_np, setup.v_star, none), "contact_ms": 0.0}, none
-        if sd.label not in self.depth_buffers:
-            self.depth_buffers[sd.label] = contact.depth_buffer(gb)
+        if sd.label not in self.depth_buffers:     # the current scene's only: the runner walks scene by scene
+            self.depth_buffers = {sd.label: contact.depth_buffer(gb)}
         db = self.depth_buffers[sd.label]
         if id(rx) not in self.marches:    # the march reads receivers and light only: every case of them shares it
             light_world = setup.light.position if pipeline.is_positional(setup.light) else None
