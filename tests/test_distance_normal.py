@@ -65,3 +65,25 @@ def test_without_a_camera_it_says_so(box):
     bare = Receiver.make(rx.view, rx.p_world, rx.n_world, sd.diagonal)
     with pytest.raises(ValueError, match="camera"):
         pl.visibility(pl.scheme_spec({"name": "distance_normal"}), bare, smap)
+
+
+def test_lookup_is_the_numpy_margin_at_the_moved_point(box):
+    """V against numpy float64: p' = p + n offset, its texel in the orthographic map (origin, axes,
+    extent), lit where z1 + bias - depth(p') >= 0; receivers at a tie or a texel border left out."""
+    sd, setup, smap, rx = box
+    nb, bias = 4.0, 0.002
+    v = pl.visibility(pl.scheme_spec({"name": "distance_normal", "normal_bias": nb, "bias": bias}), rx, smap)[0].numpy()
+    p, n = pl.points_np(rx.p_world), pl.points_np(rx.n_world)
+    view = smap.view
+    q = p + n * expected_offset(p, nb, 0.0)[:, None] - view.origin_np
+    ex, ey, ez = view.axes_np
+    R = view.resolution
+    u, w = (q @ ex) * R / view.extent, (q @ ey) * R / view.extent
+    inside = (u >= 0) & (u < R) & (w >= 0) & (w < R)
+    idx = np.clip(np.floor(w), 0, R - 1).astype(int) * R + np.clip(np.floor(u), 0, R - 1).astype(int)
+    z1 = np.where(inside, np.asarray(smap.z1.numpy(), np.float64)[idx], view.far)
+    margin = z1 + bias - q @ ez
+    border = lambda a: np.abs(a - np.round(a)) < 1e-3
+    clear = (np.abs(margin) > 1e-4) & ~border(u) & ~border(w)
+    assert clear.mean() > 0.95 and (margin[clear] < 0).any() and (margin[clear] >= 0).any()
+    assert np.array_equal(v[clear] >= 0.5, margin[clear] >= 0)
