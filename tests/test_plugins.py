@@ -270,7 +270,7 @@ def test_light_out_of_range_names_the_scene_emitters(variant):
 
 
 VALID_SCHEMES = ("none, constant, slope_scaled, normal_angle, normal_offset, combined, receiver_plane, adaptive, midpoint, "
-                 "dual, second_depth, adaptive_tap")
+                 "dual, second_depth, adaptive_tap, distance_normal")
 
 
 @pytest.mark.parametrize("props,line", [
