@@ -7,10 +7,11 @@ import pytest
 
 import dsm
 import dsm.pipeline as pl
-from conftest import base_config
+from conftest import ROOT, base_config
 from dsm import contact, record
 from dsm.types import ConfigError, ContactSpec, Length, LightSpec
 
+ROOT_DATA = ROOT / "tests" / "data"
 W, H = 128, 96
 GAP, LENGTH, STEPS, THICK = 0.15, 0.3, 8, 0.08
 CAM_O, CAM_T, FOV = np.array([3.0, -5.0, 4.0]), np.zeros(3), 40.0     # the floating_plate built-in's camera
@@ -266,3 +267,16 @@ def test_contact_and_shrink_enter_the_case_keys_only_when_asked():
     assert keys != resume.case_keys(with_c, plan.make(with_c), "v")
     again = dsm.config.parse(base_config(), "<t>")
     assert keys == resume.case_keys(again, plan.make(again), "v")
+
+
+def test_contact_without_a_perspective_camera_is_refused_before_work(tmp_path):
+    """An XML scene's own orthographic sensor (no [camera] resolution, so it is kept)."""
+    xml = (ROOT_DATA / "spot_scene.xml").read_text().replace('<sensor type="perspective">\n        <float name="fov" value="45"/>',
+                                                            '<sensor type="orthographic">')
+    path = tmp_path / "ortho.xml"
+    path.write_text(xml)
+    for extra, key in (({"contact": {"steps": 4}}, "contact"),
+                       ({"scheme": [{"name": "distance_normal"}]}, "scheme")):
+        with pytest.raises(ConfigError) as e:
+            pl.prepare(base_config(scene=[{"file": str(path)}], map={"resolution": 32}, camera={}, **extra))
+        assert e.value.key == key and "perspective" in str(e.value)

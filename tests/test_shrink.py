@@ -90,3 +90,16 @@ def test_bad_shrink_is_a_config_error(value):
     with pytest.raises(ConfigError) as e:
         dsm.config.parse(base_config(map={"resolution": 64, "shrink": value}), "<t>")
     assert e.value.key == "map.shrink"
+
+
+def test_shrink_of_a_scene_with_non_mesh_shapes_is_refused_before_work(tmp_path):
+    """Mitsuba's analytic sphere has no vertices to move."""
+    from conftest import ROOT
+    xml = (ROOT / "tests" / "data" / "spot_scene.xml").read_text().replace('<shape type="cube" id="box">',
+                                                                          '<shape type="sphere" id="ball">')
+    path = tmp_path / "ball.xml"
+    path.write_text(xml)
+    cfg = base_config(scene=[{"file": str(path)}], map={"resolution": 32, "shrink": 0.01})
+    with pytest.raises(ConfigError) as e:
+        pl.prepare(cfg)
+    assert e.value.key == "map.shrink" and "ball" in str(e.value) and "\n" not in str(e.value)
