@@ -569,6 +569,10 @@ def _tune(cfg, args, out: Path) -> int:
     tc, rc = _checked(check)
     if rc is not None:
         return rc
+    ignored = [k for k, v in (("[contact]", cfg.contact), ("map.shrink", cfg.shrink)) if v is not None]
+    if ignored:                          # the tuner's objective is the map's lookup alone
+        print(f"dsm: note: {' and '.join(ignored)} are measured by `dsm run`; `dsm tune` tunes without them",
+              file=sys.stderr)
     held, problem = claim(out)
     if problem:
         _err(problem)
@@ -617,6 +621,8 @@ def schemes_text() -> str:
             lines.append(f"    {f.name} = {f.default}    {f.metadata.get('doc', '')}")
         lines.append("    " + (s.__doc__ or "").strip().splitlines()[0])
     lines += presets.text()
+    from . import contact_presets
+    lines += contact_presets.text()
     lines.append('lengths: a number (world units), "k texel" (texel widths at the receiver) or "k range" '
                  "(fraction of the view's depth range)")
     lines += prefilter_text()

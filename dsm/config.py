@@ -18,7 +18,7 @@ from .types import (  # noqa: F401  (re-exported: the config's vocabulary)
     ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params,
     SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec,
     CameraSpec, CascadeSpec, CASCADE_SPLITS, CASCADE_FITS, DEPTH_BOUNDS, MAX_CASCADES,
-    MotionSpec, CAMERA_PATHS, LIGHT_PATHS, MAP_KINDS, MomentSpec)
+    MotionSpec, CAMERA_PATHS, LIGHT_PATHS, MAP_KINDS, MomentSpec, ContactSpec)
 
 # a run's folder is runs/<name>-tune-YYYYmmdd-HHMMSS (21 bytes more) and a file name takes 255 bytes
 NAME_MAX_BYTES = 255 - len("-tune-20240101-120000")
@@ -27,7 +27,7 @@ CASCADE_KEYS = ("cascades", "split", "lambda", "fit", "depth_bounds", "stabilize
 
 
 TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing", "memory", "oracle", "report", "motion",
-            "execution", "tune")    # [tune]: read by dsm.tune (dsm tune), ignored by dsm run
+            "execution", "tune", "contact")    # [tune]: read by dsm.tune (dsm tune), ignored by dsm run
 
 
 def load(path) -> Config:
@@ -142,7 +142,8 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
         lights = [LightSpec("scene", label="scene")]
 
     m = _table(raw, "map", source)
-    check_keys(m, ("resolution", "texels", "filter", "format", "view") + CASCADE_KEYS + KIND_KEYS, source, "map")
+    check_keys(m, ("resolution", "texels", "filter", "format", "view", "shrink") + CASCADE_KEYS + KIND_KEYS, source,
+               "map")
     if "resolution" in m and "texels" in m:
         raise ConfigError(source, "map", "give either resolution (per face) or texels (total per view), not both",
                           ("resolution", "texels"))
@@ -213,12 +214,56 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     if motion and mapspec.moments:
         raise ConfigError(source, "map.kind", "pre-filtered maps are measured on still frames; remove [[motion]] "
                           "or keep map.kind = depth", ("depth",))
+    contact = _parse_contact(raw, source, bool(motion))
+    shrink = _parse_shrink(m, source, bool(motion))
     return Config(name=name, source=source, seed=seed, variant=variant, camera_resolution=camera_resolution,
                   camera=camera, motion=motion,
                   scenes=tuple(scenes), lights=tuple(lights), map=mapspec, schemes=tuple(schemes),
                   timing_repeats=repeats, memory_budget_mb=budget, oracle=OracleSpec(lambdas),
-                  report_images=report_images, raw=raw,
+                  report_images=report_images, raw=raw, contact=contact, shrink=shrink,
                   execution=_parse_execution(_table(raw, "execution", source), source))
+
+
+CONTACT_MAX_STEPS = 256
+
+
+def _parse_contact(raw: dict, source: str, motion: bool):
+    """``[contact]`` (length, steps, thickness, jitter; one value each) as a ContactSpec, None without it."""
+    if "contact" not in raw:
+        return None
+    t = _table(raw, "contact", source)
+    if "preset" in t:
+        from .contact_presets import PRESETS as CONTACT_PRESETS
+        name = choice(t["preset"], source, "contact.preset", sorted(CONTACT_PRESETS))
+        extra = sorted(set(t) - {"preset"})
+        if extra:
+            raise ConfigError(source, f"contact.{extra[0]}", "a preset takes no other keys", ("preset",))
+        t = dict(vars(CONTACT_PRESETS[name][0]))
+    for k, v in t.items():
+        if isinstance(v, list):
+            raise ConfigError(source, f"contact.{k}", f"give one value (contact parameters are not swept), got {v!r}")
+    spec = sweep_params(ContactSpec, t, source, "contact")[0]
+    if spec.steps > CONTACT_MAX_STEPS:
+        raise ConfigError(source, "contact.steps", f"must be <= {CONTACT_MAX_STEPS}, got {spec.steps}")
+    if spec.jitter > 1.0:
+        raise ConfigError(source, "contact.jitter", f"must be <= 1 (a fraction of a step), got {spec.jitter:g}")
+    if spec.length.value <= 0:
+        raise ConfigError(source, "contact.length", f"must be > 0, got {spec.length}")
+    if motion:
+        raise ConfigError(source, "contact", "contact shadows are measured on still frames; remove [contact] or "
+                          "the [[motion]] paths", ["motion"])
+    return spec
+
+
+def _parse_shrink(m: dict, source: str, motion: bool):
+    """``[map] shrink``: the world distance casters move inward along their welded normals (None: off)."""
+    if "shrink" not in m:
+        return None
+    d = number(m["shrink"], source, "map.shrink", minimum=0.0)
+    if motion:
+        raise ConfigError(source, "map.shrink", "caster shrinking is measured on still frames; remove map.shrink or "
+                          "the [[motion]] paths", ["motion"])
+    return d
 
 
 def _parse_execution(t: dict, source: str) -> ExecutionSpec:

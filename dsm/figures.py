@@ -44,7 +44,8 @@ def image_folder(row) -> str:
 
 # the files a case writes under images/<scene>_<light>/: <case>_<kind> (error and shadow here,
 # cascade in dsm.cascades, frames in dsm.motion, v, vstar and abserr in dsm.soft_report)
-CASE_IMAGE_KINDS = ("error.png", "shadow.png", "cascade.png", "frames.gif", "v.png", "vstar.png", "abserr.png")
+CASE_IMAGE_KINDS = ("error.png", "shadow.png", "cascade.png", "frames.gif", "v.png", "vstar.png", "abserr.png",
+                    "contact.png")
 
 
 def image_paths(row) -> tuple:

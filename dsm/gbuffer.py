@@ -27,6 +27,7 @@ class GBuffer:
     shape: object         # mi.UInt32 index into scene.shapes(); 0xFFFFFFFF on a miss
     hit: np.ndarray       # bool per pixel
     ms: float = 0.0
+    camera: object = None  # the sensor's pinhole camera (dsm.cascades.Camera); None: not a perspective sensor
 
 
 def primary_hits(scene, sensor, width: int, height: int, pixels):

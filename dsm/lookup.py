@@ -53,13 +53,15 @@ class Receiver:
     face: object         # mi.UInt32, the view's face (map) the receiver falls in
     texel_world: object  # world width of one texel at the receiver
     scene_scale: object  # the scene's bounding-box diagonal (opaque scalar)
+    camera: object = None  # the pinhole camera that sees the receivers (dsm.cascades.Camera), None: not known
 
     @staticmethod
-    def make(view, p_world, n_world, scene_scale: float) -> "Receiver":
-        """The Receiver of world points ``p_world`` (normals ``n_world``) in ``view``; ``scene_scale``: the diagonal."""
+    def make(view, p_world, n_world, scene_scale: float, camera=None) -> "Receiver":
+        """The Receiver of world points ``p_world`` (normals ``n_world``) in ``view``; ``scene_scale``: the
+        diagonal; ``camera``: the camera that sees them (schemes scaled by the distance to it read it)."""
         u, v, face = view.project(p_world)
         return Receiver(view, p_world, n_world, view.to_light(p_world), view.depth(p_world), u, v, face,
-                        view.texel_world(p_world), dr.opaque(mi.Float, scene_scale))
+                        view.texel_world(p_world), dr.opaque(mi.Float, scene_scale), camera)
 
     def moved(self, p2_world) -> "Receiver":
         """The same receiver looked up from another point (normal offset)."""

@@ -29,6 +29,7 @@ from . import cascades as cascades_mod
 from . import area, exact_frame, formats, lights, lookup, prefilter, reference, scenes, schemes, shadowmap, spawn, timing
 from . import oracle as oracle_mod
 from . import gbuffer as gbuffer_mod
+from . import shrink as shrink_mod
 from . import metrics as metrics_mod
 from .closedness import shape_closedness
 from .env import exact_math  # noqa: F401  (the plugins set it in the thread that renders)
@@ -97,12 +98,14 @@ def gbuffer(sd, width: int | None = None, height: int | None = None, sensor=None
     sensor = sensor or sd.sensor
     W, H = (int(x) for x in sensor.film().size())
     if sd.centre is None:
-        return gbuffer_mod.cast(sd.scene, sensor, width or W, height or H)
-    # far from the origin: hits in the frame centred on the scene, world positions from them
-    pose = sd.camera_pose if sensor is sd.sensor else None
-    gb = gbuffer_mod.cast(sd.exact, exact_frame.sensor_in(sensor, sd.centre, pose), width or W, height or H)
-    gb.p = exact_frame.to_world(gb.p, sd.centre)
-    dr.eval(gb.p)
+        gb = gbuffer_mod.cast(sd.scene, sensor, width or W, height or H)
+    else:
+        # far from the origin: hits in the frame centred on the scene, world positions from them
+        pose = sd.camera_pose if sensor is sd.sensor else None
+        gb = gbuffer_mod.cast(sd.exact, exact_frame.sensor_in(sensor, sd.centre, pose), width or W, height or H)
+        gb.p = exact_frame.to_world(gb.p, sd.centre)
+        dr.eval(gb.p)
+    gb.camera = pinhole_camera(sensor)
     return gb
 
 
@@ -125,6 +128,7 @@ class LightSetup:
     back_p: object = None         # hit pixels facing away from the light (attached shadow), inside its domain
     back_n: object = None
     ref: object = None            # area lights: the Monte Carlo reference (area.Reference); v_star = V* >= 0.5
+    camera: object = None         # the pinhole camera of the G-buffer (cascades.Camera); None: not a perspective sensor
 
     @property
     def v_frac(self):
@@ -157,12 +161,13 @@ class LightSetup:
         ref = None if self.ref is None else self.ref.take(keep)
         if not keep.any():
             return LightSetup(self.label, self.light, self.pixels[keep], None, None, self.shape[keep],
-                              self.v_star[keep], self.occluder_dist[keep], ex, self.reference_ms, ref=ref)
+                              self.v_star[keep], self.occluder_dist[keep], ex, self.reference_ms, ref=ref,
+                              camera=self.camera)
         idx = mi.UInt32(np.flatnonzero(keep).astype(np.uint32))
         p, n = dr.gather(mi.Point3f, self.p, idx), dr.gather(mi.Vector3f, self.n, idx)
         dr.eval(p, n)
         return LightSetup(self.label, self.light, self.pixels[keep], p, n, self.shape[keep], self.v_star[keep],
-                          self.occluder_dist[keep], ex, self.reference_ms, ref=ref)
+                          self.occluder_dist[keep], ex, self.reference_ms, ref=ref, camera=self.camera)
 
 
 def make_view(light, R, receivers_world, bbox, kind=None, cascade=None, sensor=None, scale: float = 1.0):
@@ -179,8 +184,20 @@ def is_positional(light) -> bool:
 
 
 def light_setup(sd, gb, light, label, repeats: int = 0, seed: int = 7) -> LightSetup:
-    """Receivers of one light (hit pixels facing it, inside its domain) and their exact visibility
-    (an area light: :func:`area_setup`)."""
+    """Receivers of one light (hit pixels facing it, inside its domain), their exact visibility
+    (an area light: :func:`area_setup`) and the camera that sees them (perspective sensors)."""
+    setup = _light_setup(sd, gb, light, label, repeats, seed)
+    setup.camera = gb.camera
+    return setup
+
+
+def pinhole_camera(sensor):
+    """The pinhole camera of a perspective sensor (dsm.cascades.Camera; at its film's size), None for any other."""
+    return cascades_mod.Camera.from_sensor(sensor) if "x_fov" in mi.traverse(sensor) else None
+
+
+def _light_setup(sd, gb, light, label, repeats: int = 0, seed: int = 7) -> LightSetup:
+    """:func:`light_setup` without the camera."""
     if lights.is_soft(light):
         return area_setup(sd, gb, light, label, repeats, seed)
     light_x, bbox_x = exact_side(sd, light)
@@ -303,6 +320,12 @@ def build_map(scene, view, needs=(), culling: str = "none", closed=None, tile: i
     return shadowmap.build(scene, view, set(needs), culling, modes, tile, extents)
 
 
+def shrunk_scene(scene, distance: float):
+    """A copy of ``scene`` whose meshes moved ``distance`` inward along their welded vertex normals
+    (``[map] shrink``, :mod:`dsm.shrink`): what a map is cast against, the rest using ``scene``."""
+    return shrink_mod.shrunk_scene(scene, distance)
+
+
 store = formats.store                     # (map, format) -> the map as that format stores it
 
 
@@ -316,7 +339,7 @@ culling_of = schemes.culling_of
 
 def receivers(view, setup, diagonal: float) -> Receiver:
     """The set-up's receivers as a view sees them (depth in the view's one depth function)."""
-    return Receiver.make(view, setup.p, setup.n, diagonal)
+    return Receiver.make(view, setup.p, setup.n, diagonal, setup.camera)
 
 
 def visibility(spec: SchemeSpec, rx: Receiver, smap, filt: str = "nearest", seed: int = 7):

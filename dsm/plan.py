@@ -112,6 +112,8 @@ class Plan:
     area_samples: dict = field(default_factory=dict)  # (scene, light label) -> an area light's max_samples
     area_short: list = field(default_factory=list)  # area lights whose max_samples cannot reach their tolerance
     frames: int = 0                                 # [[motion]]: frames over all paths (maps built per frame, at most)
+    contact: object = None                          # [contact]: the ContactSpec of every case's march, None: none
+    shrink: float | None = None                     # [map] shrink: casters moved inward (world units), None: off
 
     @property
     def oracle_receivers(self) -> int:
@@ -202,6 +204,13 @@ class Plan:
         if self.frames:
             lines.append(f"  motion: {self.frames} frames over all paths; each map is built per frame at most "
                          f"({self.frames} x {len(self.maps)} builds, fewer where the fitted projection stays)")
+        if self.contact is not None:
+            c = self.contact
+            lines.append(f"  contact shadows: a march of {c.steps} samples over {c.length} (thickness {c.thickness}, "
+                         f"jitter {c.jitter:g}) per receiver of each view, through each scene's camera depth buffer")
+        if self.shrink is not None:
+            lines.append(f"  caster shrinking: maps cast against a copy of each scene's meshes moved {self.shrink:g} "
+                         "inward along their welded vertex normals")
         lines.append(f"  estimated peak memory: {self.peak_bytes() * mb:.1f} MB")
         lines += [f"  warning: {w}" for w in self.warnings()]
         return "\n".join(lines)
@@ -215,7 +224,9 @@ class Plan:
                           "culling": m.culling, "layers": list(m.layers), "layered": m.layered,
                           "formats": list(m.formats), "texels": m.texels, "tile": m.tile, "cases": m.cases,
                           "peak_bytes_est": m.peak_bytes, "cascade": m.cascade.label if m.cascade else None}
-                         for m in self.maps]}
+                         for m in self.maps],
+                **({"contact": dataclasses.asdict(self.contact)} if self.contact is not None else {}),
+                **({"shrink": self.shrink} if self.shrink is not None else {})}
 
 
 def views_for(light_type: str, point_views, shape: str = "") -> tuple:
@@ -406,7 +417,7 @@ def make(cfg: Config) -> Plan:
     from .config import absent_files
     check_emitters(cfg)
     plan = Plan(cfg.source, budget_bytes=memory_budget(cfg), absent=absent_files(cfg),
-                lambdas=len(cfg.oracle.lambdas))
+                lambdas=len(cfg.oracle.lambdas), contact=getattr(cfg, "contact", None), shrink=getattr(cfg, "shrink", None))
     per_case = len(cfg.map.filter) * len(cfg.map.format)
     fmts = tuple(f for f in cfg.map.format if f != "float32")
     groups = {}

@@ -4,9 +4,10 @@
 kind (text, int, float) and its group: ``core`` (every case), ``map`` (a case on one map: its
 exclusions, the split of its errors, its build and lookup costs), ``cascade`` (a cascaded map),
 ``motion`` (a case over frames), ``area`` (an area light's soft-shadow metrics),
-``precision`` (the map's float32 headroom: :mod:`dsm.headroom`) and ``prefilter`` (a run whose
+``precision`` (the map's float32 headroom: :mod:`dsm.headroom`), ``prefilter`` (a run whose
 ``[map] kind`` is given: every case's map kind, its peter-panning split into contact and leak,
-and a moment map's build time). A row holds
+and a moment map's build time) and ``contact`` (a case with ``[contact]``'s screen-space contact
+shadows after its lookup, dsm.contact). A row holds
 the core group and each other group whole or not at all; :func:`check_row` refuses a column the
 schema does not name and a group cut short, so a metric can no longer vanish from metrics.csv.
 
@@ -42,6 +43,9 @@ def _cols(group: str, spec: str) -> list:
     return out
 
 
+CONTACT_COLUMNS = ("n_contact_false n_contact_recovered n_contact_missed contact_acne_rate contact_peterpan_rate "
+                   "contact_error_rate contact_mean_abs_error contact_ms").split()
+
 # metrics.csv's order (the order of the kit's releases, kept so old folders read the same)
 _ORDER = (
     "case scene light view scheme preset params culling resolution total_texels filter format cascade_layout "
@@ -52,7 +56,7 @@ _ORDER = (
     "flicker_rate flicker_ever flicker_magnitude flicker_within_rate flicker_change_rate maps_built build_ms "
     "build_first_ms build_compile_ms build_peak_mb lookup_ms lookup_compile_ms lookup_kernels_compiled "
     "reference_ms sweep_key sweep_value").split() + list(SOFT_COLUMNS) + ["f32_step", "texel_f32_steps", "map_kind",
-                                                                         *LEAK_COLUMNS, "moments_ms"]
+                                                                         *LEAK_COLUMNS, "moments_ms"] + CONTACT_COLUMNS
 
 _GROUPS = (
     _cols("core", "case:t scene:t light:t view:t scheme:t preset:t params:t culling:t resolution:i total_texels:i "
@@ -68,7 +72,8 @@ _GROUPS = (
                       "flicker_change_rate maps_built:i")
     + _cols("area", " ".join(SOFT_COLUMNS))
     + _cols("precision", "f32_step texel_f32_steps")
-    + _cols("prefilter", "map_kind:t " + " ".join(LEAK_COLUMNS) + " moments_ms"))
+    + _cols("prefilter", "map_kind:t " + " ".join(LEAK_COLUMNS) + " moments_ms")
+    + _cols("contact", " ".join(CONTACT_COLUMNS)))
 
 _BY_NAME = {c.name: c for c in _GROUPS}
 COLUMNS = tuple(_BY_NAME[n] for n in _ORDER)
@@ -76,7 +81,7 @@ NAMES = [c.name for c in COLUMNS]
 TEXT_COLUMNS = {c.name for c in COLUMNS if c.kind == TEXT}
 INT_COLUMNS = {c.name for c in COLUMNS if c.kind == INT}
 GROUPS = {g: {c.name for c in COLUMNS if c.group == g} for g in ("core", "map", "cascade", "motion", "area",
-                                                                  "precision", "prefilter")}
+                                                                  "precision", "prefilter", "contact")}
 
 
 class SchemaError(ValueError):

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import headroom, metrics, record, summary
+from . import contact_report, headroom, metrics, record, summary
 
 COLUMNS = record.NAMES          # metrics.csv's columns: the run record's schema (dsm.record)
 
@@ -300,6 +300,7 @@ def write_table(path: Path, rows: list, name: str, source: str, status=None, ora
         lines.append("| " + " | ".join(map(str, cells)) + " |")
     lines += views_at_equal_memory(rows, texels)
     lines += soft_md(rows)
+    lines += contact_report.contact_md(rows)
     lines += oracle_md(rows, list(oracle_rows or ()))
     lines += pareto_md(rows)
     with atomic(path) as tmp:

@@ -120,6 +120,9 @@ def case_keys(cfg, plan, version: str | None = None) -> list:
               "lambdas": _plain(cfg.oracle.lambdas), "version": version}
     if cfg.map.leak_split:                # the leak split's distance changes every row (only when asked for)
         shared["leak_texels"] = cfg.map.leak_texels
+    for opt in ("contact", "shrink"):     # opt-in steps enter a case's identity only when asked (old keys stay)
+        if getattr(cfg, opt, None) is not None:
+            shared[opt] = _plain(getattr(cfg, opt))
     scenes = [scene_identity(s) for s in cfg.scenes]
     out = []
     n = 0

@@ -24,6 +24,7 @@ import numpy as np
 
 from . import config as cfgmod
 from . import cascades, env, figures, headroom, metrics, motion, pipeline, publish, record, report, resume, shadowmap, soft_report, timing
+from . import contact, contact_images
 from . import plan as planmod
 from .lookup import Receiver
 
@@ -112,6 +113,9 @@ class Runner:
         self.first_case = list(itertools.accumulate((m.cases for m in self.plan.maps), initial=0))
         self.resume_previous = resume_previous
         self.kept, self.stale = {}, []
+        self.depth_buffers = {}       # [contact]: the current scene's camera depth buffer (made when a case asks)
+        self.marches = {}             # [contact]: per receiver set, (receivers, occluded, timing) of its march
+        self.shrunk = (None, None)    # [map] shrink: (scene label, its shrunk copy)
 
     # ------------------------------------------------------------ top level
     def run(self) -> Results:
@@ -291,8 +295,17 @@ class Runner:
     def _build(self, sd, view, needs, culling, tile):
         closed = self._closed(sd) if culling != "none" else None
         extents = self.extents[sd.label]
-        return timing.measure(lambda: _map_arrays(sd.scene, view, needs, culling, closed, tile, extents),
+        casters = self._casters(sd)
+        return timing.measure(lambda: _map_arrays(casters, view, needs, culling, closed, tile, extents),
                               self.cfg.timing_repeats)
+
+    def _casters(self, sd):
+        """The scene the maps are cast against: the scene, or its copy shrunk by ``[map] shrink`` (once per scene)."""
+        if self.cfg.shrink is None:
+            return sd.scene
+        if self.shrunk[0] != sd.label:
+            self.shrunk = (sd.label, pipeline.shrunk_scene(sd.scene, self.cfg.shrink))
+        return self.shrunk[1]
 
     def _run_map(self, sd, gb, setup, view, rx, seam, back, m, first_t):
         """Build one map (the plan's layers, culling and tile), store its formats, run its cases.
@@ -316,8 +329,8 @@ class Runner:
         for fmt in stored:
             v = stored[fmt].view
             if id(v) not in by_view:
-                front = rx if rx is None or v is view else Receiver.make(v, setup.p, setup.n, sd.diagonal)
-                by_view[id(v)] = (front, Receiver.make(v, bp, bn, sd.diagonal) if bp is not None else None)
+                front = rx if rx is None or v is view else Receiver.make(v, setup.p, setup.n, sd.diagonal, setup.camera)
+                by_view[id(v)] = (front, Receiver.make(v, bp, bn, sd.diagonal, setup.camera) if bp is not None else None)
         rxs = {fmt: by_view[id(stored[fmt].view)][0] for fmt in stored}
         backs = {fmt: by_view[id(stored[fmt].view)][1] for fmt in stored}
         wrong = {fmt: self._oracles(sd, setup, view, m, stored[fmt], rxs[fmt], fmt) for fmt in stored}
@@ -438,6 +451,10 @@ class Runner:
                 fallbacks = pipeline.plane_fallbacks(spec, rx, smap) if uses_plane else 0
             m = pipeline.metrics(v_np, setup, tap_np, seam, view.has_seams)
             m.update(pipeline.split(v_np, setup.v_star, wrong))     # NaN unless nearest (the oracles' lookup)
+            occ = None
+            if self.cfg.contact is not None:      # screen-space contact shadows after the lookup
+                cols, occ = self._contact(sd, gb, setup, rx, v_np)
+                m.update(cols)
             # seed 000's self-unshadowing: pixels in attached shadow (facing away) that the map calls lit
             v_back = look(rx_back)[0].numpy() if rx_back is not None else np.zeros(0)
             if hasattr(view, "cascades"):         # a cascaded map: per cascade, texels per pixel, distance plot
@@ -473,6 +490,11 @@ class Runner:
             item = publish.image_item(meta, classes, shade, self.cfg.report_images)
             if item is not None:        # written now (Pillow, ~1 ms, between timings): a killed run keeps them
                 figures.write_images(self.out, [item])
+            if occ is not None and self.cfg.report_images != "none":         # what the contact march did
+                folder = self.out / "images" / figures.image_folder(meta)
+                folder.mkdir(parents=True, exist_ok=True)
+                contact_images.write_image(folder / f"{case}_contact.png", setup.pixels,
+                                           contact_images.classes(v_np, setup.v_star, occ), gb.width, gb.height)
             if setup.ref is not None and self.cfg.report_images != "none":    # area light: V, V*, |V - V*|
                 soft_report.write_images(self.out, [soft_report.image_item(meta, gb.width, gb.height, setup.pixels,
                                                                            v_np, setup.v_frac)])
@@ -486,6 +508,23 @@ class Runner:
             self._write_run_json()
         except Exception as e:
             self._fail(f"case {case} ({sd.label}, {setup.label}, {spec.name} {spec.label}, R={view.resolution})", e)
+
+    def _contact(self, sd, gb, setup, rx, v_np) -> tuple:
+        """(columns, occluded per receiver) of one case's contact step: its receivers' march (once per
+        receiver set, timed) applied to the case's V."""
+        if rx is None:
+            none = np.zeros(0, bool)
+            return {**contact.case_metrics(v_np, setup.v_star, none), "contact_ms": 0.0}, none
+        if sd.label not in self.depth_buffers:     # the current scene's only: the runner walks scene by scene
+            self.depth_buffers = {sd.label: contact.depth_buffer(gb)}
+        db = self.depth_buffers[sd.label]
+        if id(rx) not in self.marches:    # the march reads receivers and light only: every case of them shares it
+            light_world = setup.light.position if pipeline.is_positional(setup.light) else None
+            out, t = timing.measure(lambda: (contact.march(db, rx, self.cfg.contact, self.cfg.seed, light_world),),
+                                    self.cfg.timing_repeats)
+            self.marches = {id(rx): (rx, out[-1].numpy().astype(bool), t)}    # the receivers kept: their id stays theirs
+        _, occ, t = self.marches[id(rx)]
+        return {**contact.case_metrics(v_np, setup.v_star, occ, setup.v_frac), "contact_ms": t.ms}, occ
 
     def add_case(self, row: dict, status: dict):
         """One finished case: its row into metrics.csv (refused unless it fits the schema,

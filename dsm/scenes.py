@@ -666,6 +666,7 @@ def check(cfg, keep: bool = False):
         if not spec.missing:
             try:
                 sd = load(spec, cfg.camera_resolution, cfg.camera)
+                _check_options(cfg, spec, sd)
             except ConfigError as e:
                 if str(e) not in seen:          # a swept file that cannot be read says so once
                     seen.add(str(e))
@@ -675,6 +676,24 @@ def check(cfg, keep: bool = False):
         errors[0].more = errors[1:]
         raise errors[0]
     return loaded if keep else None
+
+
+def _check_options(cfg, spec, sd):
+    """ConfigError where a loaded scene cannot take the config's opt-in steps: contact shadows and
+    distance-scaled schemes need a perspective camera, caster shrinking triangle meshes."""
+    import mitsuba as mi
+    need = ["contact"] if getattr(cfg, "contact", None) is not None else []
+    need += [f"scheme {s.name}" for s in cfg.schemes if s.name == "distance_normal"][:1]
+    if need and "x_fov" not in mi.traverse(sd.sensor):
+        raise ConfigError(_src(spec), need[0].split()[0], f"{spec.where}: {need[0]} needs a perspective camera; the "
+                          f"scene's sensor has no field of view ({type(sd.sensor).__name__})")
+    if getattr(cfg, "shrink", None) is not None:
+        flat = [sh.id() or str(i) for i, sh in enumerate(sd.scene.shapes()) if not sh.is_mesh()]
+        if flat:
+            raise ConfigError(_src(spec), "map.shrink", f"{spec.where}: shrinking moves mesh vertices and "
+                              + (f"{flat[0]} is not a triangle mesh; remove map.shrink or give it as a mesh"
+                                 if len(flat) == 1 else f"{', '.join(flat[:3])} are not triangle meshes; remove "
+                                 "map.shrink or give them as meshes"))
 
 
 def _src(spec) -> str:

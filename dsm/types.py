@@ -354,6 +354,21 @@ class OracleSpec:
     lambdas: tuple = (1.0,)
 
 
+@dataclass(frozen=True)
+class ContactSpec:
+    """``[contact]``: screen-space contact shadows after every case's lookup (dsm.contact). A march
+    of ``steps`` samples from each receiver toward the light over ``length`` through the camera's
+    depth buffer; a sample is occluded where it lies behind the buffer by less than ``thickness``;
+    ``jitter`` (0 to 1) moves every sample back by up to that fraction of a step, per receiver."""
+    length: Length = field(default=Length(8.0, "texel"), metadata={"doc": "march length toward the light",
+                                                                   "min": 0.0})
+    steps: int = field(default=16, metadata={"doc": "samples along the march", "min": 1})
+    thickness: Length = field(default=Length(2.0, "texel"), metadata={"doc": "depth a buffer surface is taken "
+                                                                      "to occupy behind itself", "min": 0.0})
+    jitter: float = field(default=0.0, metadata={"doc": "per-receiver offset of the samples, in steps",
+                                                 "min": 0.0})
+
+
 BACKENDS = ("local", "ray")
 
 
@@ -386,6 +401,8 @@ class Config:
     oracle: "OracleSpec" = field(default_factory=lambda: OracleSpec())
     report_images: str = "all"              # [report] images (REPORT_IMAGES)
     motion: tuple = ()                       # MotionSpec paths ([[motion]]); empty: still frames
+    contact: "ContactSpec | None" = None     # [contact]: contact shadows after each case (None: not planned)
+    shrink: float | None = None              # [map] shrink: casters moved inward along welded normals, world units (None: off)
     raw: dict = field(default_factory=dict, compare=False)
     execution: ExecutionSpec = field(default_factory=ExecutionSpec, compare=False)   # where, not what
 

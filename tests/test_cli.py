@@ -16,7 +16,9 @@ def test_default_experiment_writes_the_report(tmp_path):
     with open(out / "metrics.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert set(report.COLUMNS) <= set(rows[0])
-    assert {r["scheme"] for r in rows} == {s.NAME for s in REGISTRY}
+    # distance_normal (issue 31) is measured by experiments/contact_bias.toml: in the default it would
+    # change the default's published tables (README, docs/gallery), a change of its own
+    assert {r["scheme"] for r in rows} == {s.NAME for s in REGISTRY} - {"distance_normal"}
     assert {r["view"] for r in rows} == {"orthographic", "perspective", "dual_paraboloid", "cube"}
     assert len({r["resolution"] for r in rows}) == 3
     assert len({r["scene"] for r in rows}) == 6

@@ -22,7 +22,9 @@ def _classes(img):
                                              (SPOT_XML, {"scheme": "normal_offset", "offset": "1.5 texel"}, "cube"),
                                              # engine presets resolve per light type in the plugin as in the plan
                                              (POINT_XML, {"preset": "bevy"}, "cube"),
-                                             (SPOT_XML, {"preset": "filament"}, "cube")])
+                                             (SPOT_XML, {"preset": "filament"}, "cube"),
+                                             # the camera reaches a distance-scaled scheme in the plugin too
+                                             (SPOT_XML, {"scheme": "distance_normal", "normal_bias": 8.0}, "cube")])
 def test_dsm_error_matches_the_runner_pixel_for_pixel(run_dict, xml, scheme, view):
     import mitsuba as mi
     scene = mi.load_file(str(xml))
@@ -268,7 +270,7 @@ def test_light_out_of_range_names_the_scene_emitters(variant):
 
 
 VALID_SCHEMES = ("none, constant, slope_scaled, normal_angle, normal_offset, combined, receiver_plane, adaptive, midpoint, "
-                 "dual, second_depth, adaptive_tap")
+                 "dual, second_depth, adaptive_tap, distance_normal")
 
 
 @pytest.mark.parametrize("props,line", [

@@ -36,6 +36,8 @@ EXPECTED = {
     "midpoint": ({}, lambda x, p: x["d"] <= 0.5 * (x["z1"] + x["z2"])),
     "dual": ({"z_offset": 0.1}, lambda x, p: x["d"] <= x["z1"] + np.minimum(0.5 * (x["z2"] - x["z1"]), p["z_offset"])),
     "second_depth": ({"bias": 0.01}, lambda x, p: x["d"] <= x["z1"] + p["bias"]),
+    # distance_normal: its offset moves the lookup point (tests/test_distance_normal.py); then z1 + bias
+    "distance_normal": ({"normal_bias": 0.5, "min_offset": 0.0, "bias": 0.02}, lambda x, p: x["d"] <= x["z1"] + p["bias"]),
 }
 
 
@@ -70,5 +72,5 @@ def test_margin_sign_is_the_sources_test(variant, name):
     clear = np.abs(margin) > 1e-5                    # away from ties, where float32 rounding decides
     assert clear.mean() > 0.95 and want[clear].any() and (~want[clear]).any()
     np.testing.assert_array_equal(margin[clear] >= 0, want[clear])
-    if name not in ("normal_offset", "combined"):
+    if name not in ("normal_offset", "combined", "distance_normal"):
         assert scheme.shift(rx, prm) is rx           # the default shift does nothing

@@ -15,14 +15,14 @@ shadow-map scheme, which names none, reads every view but those (:func:`reads_vi
 is every scheme a config may name; ``REGISTRY`` stays the shadow-map schemes.
 """
 
-from . import (adaptive, adaptive_tap, combined, constant, dual, midpoint, none, normal_angle, normal_offset, receiver_plane,
-               second_depth, slope_scaled, vsv, vsv_adaptive, vsv_epsilon)
+from . import (adaptive, adaptive_tap, combined, constant, distance_normal, dual, midpoint, none, normal_angle,
+               normal_offset, receiver_plane, second_depth, slope_scaled, vsv, vsv_adaptive, vsv_epsilon)
 from ..types import Length, describe_params  # noqa: F401  (describe_params: the report's words)
 
 from .base import Scheme
 
 REGISTRY = (none, constant, slope_scaled, normal_angle, normal_offset, combined, receiver_plane, adaptive, midpoint,
-            dual, second_depth, adaptive_tap)
+            dual, second_depth, adaptive_tap, distance_normal)
 VOXEL_REGISTRY = (vsv, vsv_epsilon, vsv_adaptive)
 ALL = REGISTRY + VOXEL_REGISTRY
 EXCLUSIVE_VIEWS = frozenset(v for m in VOXEL_REGISTRY for v in m.VIEWS)   # views only their own lookups read

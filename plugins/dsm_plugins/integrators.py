@@ -302,7 +302,7 @@ def abs_error_image(prep: dict, opts: Options) -> np.ndarray:
     st = lp.setup
     img = np.zeros((W * H, 3), np.float32)
     if st.p is not None and len(st.pixels):
-        rx = Receiver.make(lp.view, st.p, st.n, prep["sd"].diagonal)
+        rx = Receiver.make(lp.view, st.p, st.n, prep["sd"].diagonal, st.camera)
         v, _ = pl.visibility(lp.spec, rx, lp.smap, opts.filter, opts.seed)
         err = np.abs(v.numpy() - st.v_frac)
         img[st.pixels] = _srgb_to_linear(np.round(colormaps["magma"](np.clip(err, 0, 1))[:, :3] * 255))
@@ -316,7 +316,7 @@ def classes_image(prep: dict, opts: Options) -> np.ndarray:
     classes = np.zeros(W * H, np.uint8)
     st = lp.setup
     if st.p is not None and len(st.pixels):
-        rx = Receiver.make(lp.view, st.p, st.n, prep["sd"].diagonal)
+        rx = Receiver.make(lp.view, st.p, st.n, prep["sd"].diagonal, st.camera)
         v, _ = pl.visibility(lp.spec, rx, lp.smap, opts.filter, opts.seed)
         # nearest: errors the per-texel oracle makes too in their darker shade (lambda 1, as the runner's default)
         wrong = (pl.oracles(pl.thresholds(rx, lp.smap), st.v_star)["wrong"]
@@ -387,7 +387,7 @@ class DsmShadow(mi.SamplingIntegrator):
         for lp, emitter in zip(prep["lights"], prep["emitters"]):
             ds, spec = emitter.sample_direction(si, sampler.next_2d(), valid)
             f = bsdf.eval(ctx, si, si.to_local(ds.d), valid)
-            rx = Receiver.make(lp.view, si.p, n, diag)
+            rx = Receiver.make(lp.view, si.p, n, diag, lp.setup.camera)   # distance-scaled schemes read it
             v, _ = pl.visibility(lp.spec, rx, lp.smap, self.opts.filter, self.opts.seed)
             inside = lp.view.inside(si.p)
             if lp.view.kind == "orthographic":
