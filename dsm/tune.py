@@ -62,12 +62,13 @@ import numpy as np
 from . import lookup
 from .report import atomic, objective        # (n_acne + lambda n_peterpan) / n_receivers, NaN without receivers
 from . import pipeline as pl
+from .schemes import get as get_scheme
 from .schemes.base import no_shift
 from .types import (DEFAULT_CAMERA, ConfigError, Length, SchemeSpec, as_list, check_keys, choice, describe_params,
                     number, vec3)
 
 TUNE_KEYS = ("lambda", "steps", "lr", "temperature", "schedule", "seed", "batch", "params", "range", "camera",
-             "bias_map")
+             "bias_map", "scan")
 CAMERA_KEYS = ("name", "position", "target", "up", "fov", "role")
 ROLES = ("train", "heldout")
 SCHEDULES = ("geometric", "linear")
@@ -130,6 +131,7 @@ class TuneSpec:
     ranges: dict = field(default_factory=dict)     # (scheme name, parameter) -> (lo, hi) in its unit
     cameras: tuple = ()
     bias_map: BiasMapSpec | None = None
+    scan: int = 0                             # points of the exact 1-D scan of a one-parameter scheme (0: none)
 
 
 @dataclass
@@ -162,6 +164,7 @@ def parse_tune(cfg) -> TuneConfig:
     schedule = choice(raw.get("schedule", "geometric"), src, "tune.schedule", SCHEDULES)
     seed = number(raw.get("seed", cfg.seed), src, "tune.seed", integer=True)
     batch = number(raw.get("batch", 1.0), src, "tune.batch", positive=True, maximum=1.0)
+    scan = number(raw.get("scan", 0), src, "tune.scan", integer=True, minimum=0, maximum=100000)
 
     # the schemes: the config's [[scheme]] instances, each with something to tune
     specs = []
@@ -276,7 +279,7 @@ def parse_tune(cfg) -> TuneConfig:
     if m.filter != ("nearest",):
         raise ConfigError(src, "map.filter", "dsm tune measures the nearest lookup (the oracles' lookup)",
                           ("nearest",))
-    spec = TuneSpec(lam, steps, lr, temp, schedule, seed, batch, params, ranges, tuple(cams), bmap)
+    spec = TuneSpec(lam, steps, lr, temp, schedule, seed, batch, params, ranges, tuple(cams), bmap, scan)
     return TuneConfig(cfg, spec, tuple(specs))
 
 
@@ -588,34 +591,170 @@ def coarse_grid(box, budget: int) -> list:
             for combo in np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, len(box))]
 
 
+def phase_budgets(steps: int) -> dict:
+    """How ``steps`` exact evaluations are spent: the start, a coarse grid (a quarter of the rest),
+    the exact local refinement (another quarter), Adam steps (what remains)."""
+    coarse = refine = (steps - 1) // COARSE_SHARE
+    return {"start": 1, "coarse": coarse, "gradient": steps - 1 - coarse - refine, "refine": refine}
+
+
 def tune_scheme(tc, spec: SchemeSpec, train, groups, progress=None, oracle_best=None) -> dict:
     """Within ``steps`` evaluations of the exact training objective: the start, a coarse grid of
-    the search box (a quarter of them), then Adam on the relaxed loss from the better of the
-    two, one evaluation per step. The best evaluation is returned, so the result is never
+    the search box (a quarter of them), Adam on the relaxed loss from the better of the two
+    (one evaluation per step), then a compass search on the exact objective around the best
+    point so far (the last quarter). The best evaluation is returned, so the result is never
     worse than the start or any point the search saw. Per evaluation its phase, the loss,
     the exact objective and the step's time."""
     ts = tc.spec
     box = _param_box(tc, spec, texel_sizes(train, groups), oracle_best)
     exact = lambda vals: objective(hard_counts(with_values(spec, vals), train, groups), ts.lam)
+    budget = phase_budgets(ts.steps)
     start = {p.name: p.start for p in box}
     best = (exact(start), start)
     rows = [_evaluation_row(spec, "start", 0, start, best[0])]
-    for vals in coarse_grid(box, (ts.steps - 1) // COARSE_SHARE):
+    grid = coarse_grid(box, budget["coarse"])
+    for vals in grid:
         rows.append(_evaluation_row(spec, "coarse", len(rows), vals, exact(vals)))
         if rows[-1]["hard_objective"] < best[0]:
             best = (rows[-1]["hard_objective"], vals)
     for _ in rows:
         if progress:
             progress()
-    adam = _adam(tc, spec, box, train, groups, best[1], ts.steps - len(rows), len(rows), progress)
+    # a coarse grid may hold fewer points than its share (k^p <= share): Adam takes the rest
+    adam = _adam(tc, spec, box, train, groups, best[1], ts.steps - len(rows) - budget["refine"], len(rows), progress)
     for r in adam["rows"]:
         if r["hard_objective"] < best[0]:
             best = (r["hard_objective"], {p.name: r[f"param_{p.name}"] for p in box})
     rows += adam["rows"]
+    k = max(1, round(len(grid) ** (1.0 / len(box)))) if grid else 1
+    ref = exact_refinement(spec, box, best, train, groups, ts.lam, exact, ts.steps - len(rows), k)
+    for phase, vals, obj in ref["evaluations"]:
+        rows.append(_evaluation_row(spec, phase, len(rows), vals, obj))
+        if progress:
+            progress()
+    best = ref["best"]
     times = [r["time_ms"] for r in adam["rows"]] or [0.0]
     return {"values": best[1], "box": box, "steps": rows, "relaxed_lookup": adam["relax"],
             "first_step_ms": times[0], "step_ms": float(np.median(times[1:])) if len(times) > 1 else times[0],
-            "total_ms": float(sum(times)), "evaluations": len(rows)}
+            "total_ms": float(sum(times)) + ref["ms"], "refine_ms": ref["ms"], "evaluations": len(rows)}
+
+
+def margin_line(module, params, values: dict, direction: dict, cases, groups) -> tuple:
+    """Every receiver's exact (nearest-lookup) margin at ``values`` and its derivative along
+    ``direction`` (parameter name -> change per unit step, in the parameter's unit), by Dr.Jit's
+    forward-mode AD: (margin, slope), float64 arrays over the cases in order."""
+    culling = pl.culling_of(params)
+    m_all, g_all = [], []
+    for c in cases:
+        a = mi.Float(0.0)
+        dr.enable_grad(a)
+        vals = {k: dr.opaque(mi.Float, float(v)) + a * dr.opaque(mi.Float, float(direction.get(k, 0.0)))
+                for k, v in values.items()}
+        m = margins(module, params, vals, c.rx, groups[c.group].maps[culling], relax=False)
+        dr.forward(a)
+        m_all.append(np.asarray(dr.detach(m).numpy(), np.float64))
+        g_all.append(np.asarray(dr.grad(m).numpy(), np.float64))
+    return np.concatenate(m_all), np.concatenate(g_all)
+
+
+def line_objective(m, g, v_star, lam, a_lo: float, a_hi: float) -> tuple:
+    """The exact objective of margins that are affine in a step ``a`` (``m + a g``), at its best
+    over ``[a_lo, a_hi]``: each receiver flips at ``a = -m / g``; counted at the ends and at the
+    midpoints between consecutive flips by sorted counts (the threshold sweep of the exact
+    oracles, along any line). (best step, its objective); ties: the widest interval's midpoint."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        flip = -m / g
+    up, down, flat = g > 0, g < 0, g == 0
+    inside = np.sort(flip[(up | down) & (flip > a_lo) & (flip < a_hi)])
+    edges = np.unique(np.concatenate([[a_lo], inside, [a_hi]]))
+    cands = np.concatenate([[a_lo], 0.5 * (edges[:-1] + edges[1:]), [a_hi]]) if len(edges) > 1 else edges
+    width = np.concatenate([[0.0], np.diff(edges), [0.0]]) if len(edges) > 1 else np.zeros(1)
+    err = np.zeros(len(cands))
+    for sel, lit_when_above in ((up, True), (down, False)):
+        for truth, weight in ((True, 1.0), (False, lam)):
+            th = np.sort(flip[sel & (v_star == truth)])
+            # lit iff a >= flip (g > 0) or a <= flip (g < 0); an error when lit differs from the truth
+            n_lit = np.searchsorted(th, cands, "right") if lit_when_above else len(th) - np.searchsorted(th, cands, "left")
+            err += weight * ((len(th) - n_lit) if truth else n_lit)
+    err += float(((m[flat] < 0) & v_star[flat]).sum() + lam * ((m[flat] >= 0) & ~v_star[flat]).sum())
+    obj = err / max(m.size, 1)
+    best = np.flatnonzero(obj == obj.min())
+    i = best[np.argmax(width[best])]
+    return float(cands[i]), float(obj[i])
+
+
+def line_search(module, spec, box, best, train, groups, lam, p) -> dict:
+    """The exact objective's best along parameter ``p`` from ``best``'s values, under the
+    receivers' margins linearised in that parameter (forward AD), within ``p``'s range: the
+    point to evaluate (exact for a margin affine in the parameter: constant, receiver plane,
+    adaptive; a candidate to check otherwise) and the objective the linearisation predicts there."""
+    vals = best[1]
+    m, g = margin_line(module, spec.params, vals, {p.name: 1.0}, train, groups)
+    v_star = np.concatenate([c.v_star for c in train])
+    a, predicted = line_objective(m, g, v_star, lam, p.lo - vals[p.name], p.hi - vals[p.name])
+    return {**vals, p.name: min(max(vals[p.name] + a, p.lo), p.hi)}, predicted
+
+
+def exact_refinement(spec, box, best, train, groups, lam, exact, budget: int, cells: int) -> dict:
+    """At most ``budget`` exact evaluations around ``best``: a compass search (keeping two per
+    parameter back), exact line searches along each parameter until a round gains nothing, and
+    the compass search again with what is left. {best, evaluations: (phase, values, objective), ms}."""
+    t0, out = _sync_clock(), []
+    ref = compass_search(box, exact, best, max(budget - 2 * len(box), 0), cells)
+    out += [("refine", v, o) for v, o in ref["evaluations"]]
+    best, seen, improved = ref["best"], set(), True
+    while improved and len(out) < budget:     # exact line searches along each parameter
+        improved = False
+        for p in box:
+            if len(out) >= budget:
+                break
+            vals, predicted = line_search(get_scheme(spec.name), spec, box, best, train, groups, lam, p)
+            key = tuple(vals[q.name] for q in box)
+            if key in seen or predicted >= best[0]:     # the model is exact at the current point: no gain
+                continue
+            seen.add(key)
+            out.append(("line", vals, exact(vals)))
+            if out[-1][2] < best[0]:
+                best, improved = (out[-1][2], vals), True
+    ref = compass_search(box, exact, best, budget - len(out), cells)
+    out += [("refine", v, o) for v, o in ref["evaluations"]]
+    return {"best": ref["best"], "evaluations": out, "ms": (_sync_clock() - t0) * 1e3}
+
+
+def compass_search(box, exact, best, budget: int, cells: int) -> dict:
+    """Compass (pattern) search on the exact objective from ``best`` = (objective, values), at most
+    ``budget`` new evaluations: each parameter is tried one step up and down (clipped to its
+    range; a point already evaluated is not evaluated again), a strict improvement moves there,
+    and a poll with none halves every step. First step: half a coarse-grid cell (``cells``
+    points per parameter). Hooke & Jeeves, "Direct search solution of numerical and
+    statistical problems", J. ACM 1961; Kolda, Lewis & Torczon, SIAM Review 2003 (compass search).
+    The exact objective is piecewise constant, so its gradient is 0 almost everywhere: near the
+    relaxed loss's optimum only a direct search on the exact objective can pick its best step."""
+    steps = {p.name: (p.hi - p.lo) / cells / 2.0 for p in box}
+    seen = {tuple(best[1][p.name] for p in box)}
+    evaluations, t0 = [], _sync_clock()
+    while len(evaluations) < budget and any(v > 0 for v in steps.values()):
+        moved = False
+        for p in box:
+            for sign in (1.0, -1.0):
+                if len(evaluations) >= budget:
+                    break
+                vals = dict(best[1])
+                vals[p.name] = min(max(best[1][p.name] + sign * steps[p.name], p.lo), p.hi)
+                key = tuple(vals[q.name] for q in box)
+                if key in seen:
+                    continue
+                seen.add(key)
+                obj = exact(vals)
+                evaluations.append((vals, obj))
+                if obj < best[0]:
+                    best, moved = (obj, vals), True
+                    break
+        if not moved:
+            steps = {k: v / 2.0 for k, v in steps.items()}
+            if max(s / (p.hi - p.lo) for p, s in zip(box, steps.values())) < 1e-7:
+                break                # below float32 resolution of the box: nothing left to find
+    return {"best": best, "evaluations": evaluations, "ms": (_sync_clock() - t0) * 1e3}
 
 
 def _adam(tc, spec, box, train, groups, origin: dict, steps: int, first: int, progress=None) -> dict:
@@ -668,6 +807,21 @@ def grid_search(tc, spec: SchemeSpec, box, train, groups, budget: int) -> dict:
     ms = (_sync_clock() - t0) * 1e3
     return {"values": best[1], "objective": best[0], "evaluations": evals, "points_per_parameter": k,
             "total_ms": ms}
+
+
+def exact_scan(tc, spec: SchemeSpec, box, train, groups, points: int) -> dict | None:
+    """A one-parameter scheme's exact training objective at ``points`` evenly spaced values of its
+    search range, ends included (the reference the tuner is held to; for a constant bias, the
+    oracle's curve sampled); None for a scheme tuning more than one parameter."""
+    if len(box) != 1 or points < 1:
+        return None
+    b = box[0]
+    best, t0 = None, _sync_clock()
+    for x in np.linspace(b.lo, b.hi, points):
+        obj = objective(hard_counts(with_values(spec, {b.name: float(x)}), train, groups), tc.spec.lam)
+        if best is None or obj < best[0]:
+            best = (obj, {b.name: float(x)})
+    return {"values": best[1], "objective": best[0], "evaluations": points, "total_ms": (_sync_clock() - t0) * 1e3}
 
 
 # ---------------------------------------------------------------- oracles of pooled cases
@@ -854,12 +1008,15 @@ def run_tune(tc, out=None, progress: bool = False) -> TuneResult:
         tuned = with_values(spec, r["values"])
         g = grid_search(tc, spec, r["box"], train, groups, ts.steps)
         grid_spec = with_values(spec, g["values"])
+        scan = exact_scan(tc, spec, r["box"], train, groups, ts.scan)
         entry = {"scheme": spec.name, "start": describe_params(spec.params), "params": describe_params(tuned.params),
                  "values": r["values"], "units": {p.name: p.unit for p in r["box"]},
                  "box": {p.name: [p.lo, p.hi] for p in r["box"]}, "relaxed_lookup": r["relaxed_lookup"],
                  "spec": tuned, "train": _with_obj(hard_counts(tuned, train, groups), ts.lam),
                  "heldout": _with_obj(hard_counts(tuned, held, groups), ts.lam) if held else None,
                  "start_train": _with_obj(hard_counts(spec, train, groups), ts.lam),
+                 "start_heldout": _with_obj(hard_counts(spec, held, groups), ts.lam)["objective"] if held else NAN,
+                 "scan": None if scan is None else {**scan, "params": describe_params(with_values(spec, scan["values"]).params)},
                  "first_step_ms": r["first_step_ms"], "step_ms": r["step_ms"], "tune_ms": r["total_ms"],
                  "grid": {**g, "params": describe_params(grid_spec.params),
                           "heldout": _with_obj(hard_counts(grid_spec, held, groups), ts.lam)["objective"]
@@ -912,7 +1069,10 @@ def _comparison_row(e, budget):
            "grid_params": g["params"], "grid_train": g["objective"], "grid_heldout": g["heldout"],
            "grid_ms": g["total_ms"], "grid_evaluations": g["evaluations"],
            "oracle": e.get("oracle", {}).get("objective", float("nan")),
-           "start_train": e["start_train"]["objective"]}
+           "start_train": e["start_train"]["objective"], "start_heldout": e["start_heldout"],
+           "scan_params": e["scan"]["params"] if e["scan"] else "-",
+           "scan_train": e["scan"]["objective"] if e["scan"] else NAN,
+           "scan_evaluations": e["scan"]["evaluations"] if e["scan"] else 0}
     return row
 
 
@@ -951,14 +1111,17 @@ def table_text(res: TuneResult) -> str:
     out = [f"# dsm tune (lambda = {lam:g}; objective (n_acne + lambda n_peterpan) / n_receivers)", "",
            f"training receivers {res.n_train}, held-out receivers {res.n_heldout}", "",
            "| scheme | tuned | train | held-out | tune ms (evals; first, median step) | grid best | grid train "
-           "| grid held-out | grid ms (evals) | oracle (train) | start train |",
-           "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+           "| grid held-out | grid ms (evals) | oracle (train) | start train | start held-out | 1-D scan best "
+           "| scan train (evals) | tuned / scan |",
+           "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for r in res.comparison:
         out.append(f"| {r['scheme']} | {r['tuned_params']} | {_fmt(r['tuned_train'])} | {_fmt(r['tuned_heldout'])} "
                    f"| {r['tuned_ms']:.0f} ({r['tuned_evaluations']}; {r['first_step_ms']:.1f}, {r['step_ms']:.1f}) "
                    f"| {r['grid_params']} | {_fmt(r['grid_train'])} "
                    f"| {_fmt(r['grid_heldout'])} | {r['grid_ms']:.0f} ({r['grid_evaluations']}) "
-                   f"| {_fmt(r['oracle'])} | {_fmt(r['start_train'])} |")
+                   f"| {_fmt(r['oracle'])} | {_fmt(r['start_train'])} | {_fmt(r['start_heldout'])} "
+                   f"| {r['scan_params']} | {_fmt(r['scan_train'])} ({r['scan_evaluations']}) "
+                   f"| {_fmt(r['tuned_train'] / r['scan_train']) if r['scan_train'] > 0 else '-'} |")
     if res.bias_map:
         b = res.bias_map
         bg = b["best_global"]
