@@ -59,7 +59,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import lookup
+from . import lookup, tune_resume
 from .report import atomic, objective        # (n_acne + lambda n_peterpan) / n_receivers, NaN without receivers
 from . import pipeline as pl
 from .schemes import get as get_scheme
@@ -968,24 +968,27 @@ class TuneResult:
     n_heldout: int
     tuned_toml: str
     spec: TuneSpec
+    resumed: int = 0      # schemes kept from the previous tune in the folder (--resume)
 
     def best(self):
         """The tuned scheme with the lowest training objective."""
         return min(self.schemes, key=lambda s: s["train"]["objective"]) if self.schemes else None
 
 
-def tune(config, out=None, progress: bool = False, variant: str | None = None) -> TuneResult:
+def tune(config, out=None, progress: bool = False, variant: str | None = None, resume: bool = False) -> TuneResult:
     """Tune every ``[[scheme]]`` of ``config`` (a Config, dict or TOML path with a ``[tune]``
-    table) on its training views; write the results into ``out`` when given."""
+    table) on its training views; write the results into ``out`` when given (``resume``: keep
+    the schemes the tune already in ``out`` finished with the same input)."""
     from .config import coerce
     config = coerce(config)
     tc = parse_tune(config)                   # the [tune] table checked before any scene loads
     tc.config = pl.prepare(config, variant)
-    return run_tune(tc, out, progress)
+    return run_tune(tc, out, progress, resume)
 
 
-def run_tune(tc, out=None, progress: bool = False) -> TuneResult:
-    """Tune and grid-search each scheme of a prepared ``tc``, then the bias map; write into ``out`` if given."""
+def run_tune(tc, out=None, progress: bool = False, resume: bool = False) -> TuneResult:
+    """Tune and grid-search each scheme of a prepared ``tc``, then the bias map; write into ``out``
+    if given, with the state ``--resume`` reads after each scheme (``resume``: keep its finished ones)."""
     ts = tc.spec
     bar = None
     if progress:
@@ -1003,7 +1006,21 @@ def run_tune(tc, out=None, progress: bool = False) -> TuneResult:
     orc_train = pl.oracles(th_train, vs_train, ts.lam)["row"]
     orc_held = pl.oracles(*pooled_thresholds(held, groups), ts.lam)["row"] if held else None
     results, steps, comparison = [], [], []
-    for spec in tc.schemes:
+    keys = tune_resume.scheme_keys(tc)
+    previous = tune_resume.read_state(out) if (resume and out is not None) else {}
+    finished, kept = [], 0
+    for spec, key in zip(tc.schemes, keys):
+        if key in previous:                 # finished by the tune in ``out`` with this very input
+            entry = {**previous[key]["entry"], "spec": with_values(spec, previous[key]["entry"]["values"])}
+            results.append(entry)
+            steps += previous[key]["steps"]
+            comparison.append(_comparison_row(entry, ts.steps))
+            finished.append(previous[key])
+            kept += 1
+            if tick:
+                for _ in range(ts.steps):
+                    tick()
+            continue
         r = tune_scheme(tc, spec, train, groups, tick, {"world": orc_train["best_b"], "texel": orc_train["best_k"]})
         tuned = with_values(spec, r["values"])
         g = grid_search(tc, spec, r["box"], train, groups, ts.steps)
@@ -1030,6 +1047,10 @@ def run_tune(tc, out=None, progress: bool = False) -> TuneResult:
         results.append(entry)
         steps += r["steps"]
         comparison.append(_comparison_row(entry, ts.steps))
+        if out is not None:                 # after each scheme, so a stopped tune resumes from here
+            finished.append({"key": key, "entry": {k: v for k, v in entry.items() if k != "spec"},
+                             "steps": r["steps"]})
+            tune_resume.write_state(out, tc.config.name, finished)
     bmap = None
     if ts.bias_map and held:
         const = [e for e in results if e["scheme"] == "constant"]
@@ -1050,7 +1071,7 @@ def run_tune(tc, out=None, progress: bool = False) -> TuneResult:
         notes.append("no held-out view has a receiver: the learned bias map was not trained")
     if bar:
         bar.close()
-    res = TuneResult(results, steps, comparison, bmap, notes, n_train, n_held, tuned_toml(results), ts)
+    res = TuneResult(results, steps, comparison, bmap, notes, n_train, n_held, tuned_toml(results), ts, kept)
     if out is not None:
         write(res, Path(out), orc_train, orc_held)
     return res

@@ -359,3 +359,48 @@ def test_one_parameter_schemes_come_within_one_percent_of_an_exact_scan(grid_run
     best = min(((vs & (th.tau > c * th.texel_world)).sum() + (~vs & (th.tau <= c * th.texel_world)).sum()) / vs.size
                for c in cands[:: max(1, len(cands) // 2000)])
     assert res.comparison[0]["scan_train"] >= min(best, res.schemes[0]["oracle"]["objective"]) - 1e-12
+
+
+RESUME_CFG = ('[experiment]\nname = "t"\n[camera]\nresolution = [32, 32]\n[[scene]]\nbuiltin = "plane_box"\n'
+              '[map]\nresolution = 32\n[[scheme]]\nname = "constant"\nbias = "0.5 texel"\n'
+              '[[scheme]]\nname = "receiver_plane"\n[tune]\nsteps = 9\n')
+
+
+def test_cli_tune_resume_keeps_finished_schemes_and_tunes_the_rest(tmp_path, capsys):
+    """A tune stopped after its first scheme (its state holding only that one) resumes to the
+    values of an uninterrupted tune, the kept scheme's rows (times included) unchanged; a changed
+    start tunes that scheme again and keeps the other; --resume with --force is refused, and
+    --resume on a folder without a tune's state too."""
+    import json
+    from dsm import cli
+    cfg = tmp_path / "t.toml"
+    cfg.write_text(RESUME_CFG)
+    full, out = tmp_path / "full", tmp_path / "o"
+    assert cli.main(["tune", str(cfg), "--out", str(full)]) == 0
+    whole = json.loads((full / "tune.json").read_text())
+    assert cli.main(["tune", str(cfg), "--out", str(out)]) == 0
+    state = json.loads((out / "tune_state.json").read_text())
+    assert [s["entry"]["scheme"] for s in state["schemes"]] == ["constant", "receiver_plane"]
+    state["schemes"] = state["schemes"][:1]                     # as if stopped after the first scheme
+    (out / "tune_state.json").write_text(json.dumps(state))
+    (out / "tune.json").unlink()
+    first_rows = [r for r in (out / "steps.csv").read_text().splitlines() if r.startswith("constant,")]
+    capsys.readouterr()
+    assert cli.main(["tune", str(cfg), "--out", str(out), "--resume"]) == 0
+    assert "resumed: 1 finished schemes kept, 1 tuned" in capsys.readouterr().err
+    again = json.loads((out / "tune.json").read_text())
+    assert [e["values"] for e in again["schemes"]] == [e["values"] for e in whole["schemes"]]
+    assert [r for r in (out / "steps.csv").read_text().splitlines() if r.startswith("constant,")] == first_rows
+    # a changed start: receiver_plane tuned again, constant kept
+    cfg.write_text(RESUME_CFG.replace('name = "receiver_plane"', 'name = "receiver_plane"\nbias = "0.5 texel"'))
+    assert cli.main(["tune", str(cfg), "--out", str(out), "--resume"]) == 0
+    assert "resumed: 1 finished schemes kept, 1 tuned" in capsys.readouterr().err
+    changed = json.loads((out / "tune.json").read_text())
+    assert changed["schemes"][1]["start"] == "bias=0.5 texel" and changed["schemes"][0] == again["schemes"][0]
+    assert cli.main(["tune", str(cfg), "--out", str(out), "--resume", "--force"]) == 2
+    assert "not allowed with argument" in capsys.readouterr().err
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "x.txt").write_text("x")
+    assert cli.main(["tune", str(cfg), "--out", str(other), "--resume"]) == 2
+    assert "holds no previous dsm tune" in capsys.readouterr().err and (other / "x.txt").read_text() == "x"
