@@ -72,7 +72,8 @@ TUNE_KEYS = ("lambda", "steps", "lr", "temperature", "schedule", "seed", "batch"
 CAMERA_KEYS = ("name", "position", "target", "up", "fov", "role")
 ROLES = ("train", "heldout")
 SCHEDULES = ("geometric", "linear")
-MAP_KEYS = ("block", "unit", "init", "steps", "lr")
+MAP_KEYS = ("block", "unit", "init", "steps", "lr", "fit", "radius", "min_gain", "margin")
+MAP_FITS = ("adam", "residual")
 MAP_UNITS = ("world", "texel")
 CLIP = 30.0              # |margin / T| beyond which the sigmoid is flat (its derivative below 1e-13)
 NAN = float("nan")       # one object: lists of rows compare equal where both hold it
@@ -115,6 +116,11 @@ class BiasMapSpec:
     init: Length = Length(0.0, "world")
     steps: int = 100
     lr: float = 0.5
+    fit: str = "adam"                 # adam: a bias per block by Adam; residual: see dsm.residual_map
+    blocks: tuple = (1, 2, 4)         # residual: the candidates of validation (block, radius, min_gain)
+    radii: tuple = (0, 1, 2)
+    gains: tuple = (1, 2, 3)
+    margin: float = 0.5               # residual: texels kept inside a block's optimal interval
 
 
 @dataclass(frozen=True)
@@ -260,11 +266,25 @@ def parse_tune(cfg) -> TuneConfig:
         init = Length.parse(b.get("init", f"0 {unit}" if unit != "world" else 0.0), src, "tune.bias_map.init")
         if init.unit != unit:
             raise ConfigError(src, "tune.bias_map.init", f"give the start in the map's unit ({unit})", MAP_UNITS)
-        bmap = BiasMapSpec(number(b.get("block", 1), src, "tune.bias_map.block", integer=True, minimum=1),
-                           unit, init,
+        fit = choice(b.get("fit", "adam"), src, "tune.bias_map.fit", MAP_FITS)
+        ints = lambda key, default, lo: tuple(number(x, src, f"tune.bias_map.{key}", integer=True, minimum=lo)
+                                              for x in as_list(b.get(key, list(default))))
+        blocks = ints("block", BiasMapSpec.blocks if fit == "residual" else [1], 1)
+        if fit == "adam" and len(blocks) != 1:
+            raise ConfigError(src, "tune.bias_map.block", "Adam fits one block size: give one number (a list is "
+                              "validated with fit = \"residual\")", MAP_FITS)
+        for key in ("radius", "min_gain", "margin"):
+            if key in b and fit != "residual":
+                raise ConfigError(src, f"tune.bias_map.{key}", "only with fit = \"residual\"", MAP_FITS)
+        bmap = BiasMapSpec(blocks[0], unit, init,
                            number(b.get("steps", steps), src, "tune.bias_map.steps", integer=True, minimum=1,
                                   maximum=100000),
-                           number(b.get("lr", lr), src, "tune.bias_map.lr", positive=True))
+                           number(b.get("lr", lr), src, "tune.bias_map.lr", positive=True), fit, blocks,
+                           ints("radius", BiasMapSpec.radii, 0), ints("min_gain", BiasMapSpec.gains, 1),
+                           number(b.get("margin", BiasMapSpec.margin), src, "tune.bias_map.margin", minimum=0))
+        if fit == "residual" and sum(c.role == "train" for c in cams) < 2:
+            raise ConfigError(src, "tune.camera", "a residual map chooses its block size by leaving one training "
+                              "camera out: give at least two [[tune.camera]] with role = \"train\"", ROLES)
         if not any(c.role == "heldout" for c in cams):
             raise ConfigError(src, "tune.camera", "a learned bias map is judged on held-out views: add a "
                               "[[tune.camera]] with role = \"heldout\"", ROLES)
@@ -933,23 +953,95 @@ def tune_bias_map(tc, train, held, groups, init_values, progress=None) -> dict:
             "unit": bm.unit, "init": [float(x) for x in init_values], "steps": rows,
             "train": _map_counts(train, idx_train, groups, b, scale, tex),
             "heldout": _map_counts(held, idx_held, groups, b, scale, tex),
+            "heldout_lit": _map_lit(held, idx_held, groups, b, scale, tex),
+            "heldout_covered": [seen[x] for x in blk_held],
             "heldout_covered_fraction": cov_n / n_held if n_held else float("nan"),
             "blocks_trained": int(seen.sum()),
             "first_step_ms": times[0], "step_ms": float(np.median(times[1:])) if len(times) > 1 else times[0],
             "total_ms": float(sum(times))}
 
 
-def _map_counts(cases, idxs, groups, b, scale, tex) -> dict:
-    acne = pp = n = lit = 0
+def _map_lit(cases, idxs, groups, b, scale, tex) -> list:
+    """Per case whether each receiver is lit under the bias map ``b``."""
+    out = []
     for c, idx in zip(cases, idxs):
         val = dr.gather(mi.Float, dr.detach(b), idx) * scale
-        m = _map_margin(c, groups, val * c.rx.texel_world if tex else val)
-        on = (m >= 0).numpy()
+        out.append((_map_margin(c, groups, val * c.rx.texel_world if tex else val) >= 0).numpy())
+    return out
+
+
+def _map_counts(cases, idxs, groups, b, scale, tex) -> dict:
+    acne = pp = n = lit = 0
+    for c, on in zip(cases, _map_lit(cases, idxs, groups, b, scale, tex)):
         acne += int((c.v_star & ~on).sum())
         pp += int((~c.v_star & on).sum())
         n += c.n
         lit += int(c.v_star.sum())
     return _counts(acne, pp, n, lit)
+
+
+def margin_arrays(spec: SchemeSpec, cases, groups) -> dict:
+    """A scheme instance's exact margins and what a residual map reads, per receiver over ``cases``
+    (numpy: m, v_star, unit = texel_world, texel, group, resolution)."""
+    mod, culling = get_scheme(spec.name), pl.culling_of(spec.params)
+    ms = [np.asarray(margins(mod, spec.params, {}, c.rx, groups[c.group].maps[culling], False).numpy(), np.float64)
+          for c in cases]
+    cat = lambda xs: np.concatenate(xs) if xs else np.zeros(0)
+    return {"m": cat(ms), "v_star": cat([c.v_star for c in cases]).astype(bool),
+            "unit": cat([c.th.texel_world for c in cases]).astype(np.float64),
+            "texel": cat([c.th.texel for c in cases]).astype(np.int64),
+            "group": cat([np.full(c.n, c.group, np.int64) for c in cases]).astype(np.int64),
+            "resolution": cat([np.full(c.n, groups[c.group].view.resolution, np.int64) for c in cases]).astype(np.int64)}
+
+
+def residual_bias_map(tc, train, held, groups, base) -> dict:
+    """The residual map over the best global scheme (``base``, a result entry): candidates
+    validated leaving one training camera out, the chosen one fitted to every training view
+    (dsm.residual_map); its counts on the training and held-out views."""
+    from . import residual_map as rm
+    bm, lam = tc.spec.bias_map, tc.spec.lam
+    t0 = _sync_clock()
+    rx_tr, rx_he = margin_arrays(base["spec"], train, groups), margin_arrays(base["spec"], held, groups)
+    cams = np.concatenate([np.full(c.n, c.camera) for c in train])
+    ch = rm.choose(rx_tr, cams, bm.blocks, bm.radii, bm.gains, lam, bm.margin)
+    block, radius, gain = ch["chosen"] or (bm.blocks[0], 0, math.inf)      # none: coverage by the first block
+    fit = rm.smoothed_fit(rx_tr, block, radius, lam, bm.margin)
+    m_tr, _ = rm.apply(fit, gain, rx_tr, block)
+    m_he, covered = rm.apply(fit, gain, rx_he, block)
+    moved = rm.residuals(fit, gain)
+    counts = lambda m, v: _counts(int(((m < 0) & v).sum()), int(((m >= 0) & ~v).sum()), int(v.size), int(v.sum()))
+    split = np.cumsum([c.n for c in held])[:-1]
+    return {"fit": "residual", "base": f"{base['scheme']} {base['params']}", "block": block, "radius": radius,
+            "min_gain": gain if ch["chosen"] else None, "chosen": ch["chosen"] is not None,
+            "validation": {"none": ch["none"], "scores": ch["scores"]}, "unit": "texel",
+            "values": np.stack([fit["keys"].astype(np.float64), moved]), "blocks": int(fit["keys"].size),
+            "blocks_trained": int(fit["keys"].size), "blocks_moved": int((moved != 0).sum()), "steps": [],
+            "train": counts(m_tr, rx_tr["v_star"]), "heldout": counts(m_he, rx_he["v_star"]),
+            "heldout_lit": np.split(m_he >= 0, split), "heldout_covered": np.split(covered, split),
+            "heldout_covered_fraction": float(covered.mean()) if covered.size else NAN,
+            "init": [], "total_ms": (_sync_clock() - t0) * 1e3}
+
+
+def heldout_split(held, groups, lit_map, covered, best_spec, lam) -> dict:
+    """The learned map against the best global scheme and the per-texel oracle over the held-out
+    receivers whose block saw training receivers (``covered``) and over the rest, with the share
+    of the gap to the oracle the map closes: (global - map) / (global - oracle)."""
+    v = np.concatenate([c.v_star for c in held])
+    lit_map, covered = np.concatenate(lit_map), np.concatenate(covered).astype(bool)
+    culling = pl.culling_of(best_spec.params)
+    lit_best = np.concatenate([pl.visibility(best_spec, c.rx, groups[c.group].maps[culling])[0].numpy() >= 0.5
+                               for c in held])
+    th, vs = pooled_thresholds(held, groups)
+    out = {}
+    for name, sel in (("covered", covered), ("uncovered", ~covered)):
+        n = int(sel.sum())
+        obj = lambda lit: float(((~lit & v)[sel].sum() + lam * (lit & ~v)[sel].sum()) / n) if n else NAN
+        sub = pl.Thresholds(**{f.name: getattr(th, f.name)[sel] for f in dataclasses.fields(th)})
+        orc = pl.oracles(sub, vs[sel], lam)["row"]["per_texel_objective"] if n else NAN
+        g, m = obj(lit_best), obj(lit_map)
+        out[name] = {"n_receivers": n, "map": m, "best_global": g, "per_texel_oracle": orc,
+                     "gap_closed": (g - m) / (g - orc) if n and g > orc else NAN}
+    return out
 
 
 # ---------------------------------------------------------------- the whole run
@@ -993,7 +1085,8 @@ def run_tune(tc, out=None, progress: bool = False, resume: bool = False) -> Tune
     bar = None
     if progress:
         from tqdm import tqdm
-        total = len(tc.config.scenes) + ts.steps * len(tc.schemes) + (ts.bias_map.steps if ts.bias_map else 0)
+        total = len(tc.config.scenes) + ts.steps * len(tc.schemes) + (
+            ts.bias_map.steps if ts.bias_map and ts.bias_map.fit == "adam" else 0)
         bar = tqdm(total=total, desc="dsm tune", unit="step", leave=False)
     tick = (lambda *a: bar.update(1)) if bar else None
     groups, cases, notes = prepare_cases(tc, tick)
@@ -1055,12 +1148,19 @@ def run_tune(tc, out=None, progress: bool = False, resume: bool = False) -> Tune
     if ts.bias_map and held:
         const = [e for e in results if e["scheme"] == "constant"]
         best_const = min(const, key=lambda e: e["train"]["objective"]) if const else None
-        init = map_start(tc, train, groups, best_const)
-        bmap = tune_bias_map(tc, train, held, groups, init, tick)
-        bmap["init_from"] = best_const["params"] if best_const else str(ts.bias_map.init)
+        best = min(results, key=lambda e: e["train"]["objective"]) if results else None
+        if ts.bias_map.fit == "residual" and best is not None:
+            bmap = residual_bias_map(tc, train, held, groups, best)
+            bmap["init_from"] = bmap["base"]
+        else:
+            init = map_start(tc, train, groups, best_const)
+            bmap = tune_bias_map(tc, train, held, groups, init, tick)
+            bmap["init_from"] = best_const["params"] if best_const else str(ts.bias_map.init)
         bmap["train"] = _with_obj(bmap["train"], ts.lam)
         bmap["heldout"] = _with_obj(bmap["heldout"], ts.lam)
-        best = min(results, key=lambda e: e["train"]["objective"]) if results else None
+        lit, covered = bmap.pop("heldout_lit"), bmap.pop("heldout_covered")
+        if best is not None:
+            bmap["heldout_split"] = heldout_split(held, groups, lit, covered, best["spec"], ts.lam)
         bmap["per_texel_oracle_heldout"] = orc_held["per_texel_objective"]
         bmap["per_texel_oracle_train"] = orc_train["per_texel_objective"]
         bmap["best_global"] = ({"scheme": best["scheme"], "params": best["params"],
@@ -1146,11 +1246,20 @@ def table_text(res: TuneResult) -> str:
     if res.bias_map:
         b = res.bias_map
         bg = b["best_global"]
-        out += ["", "## learned bias map", "",
-                f"{b['blocks']} blocks of {b['block']} x {b['block']} texels ({b['blocks_trained']} with training "
-                f"receivers; {_fmt(b['heldout_covered_fraction'])} of held-out receivers fall in them), unit "
-                f"{b['unit']}, started from {b['init_from']} (per map: "
-                f"{', '.join(f'{x:.4g}' for x in b['init'])})", "",
+        if b.get("fit") == "residual":
+            how = (f"a residual in texels over {b['base']}, blocks of {b['block']} x {b['block']} texels fitted "
+                   f"exactly to the training receivers of the blocks within {b['radius']} of each, moved where they "
+                   f"gain at least {b['min_gain']} errors ({b['blocks_moved']} of {b['blocks']} blocks moved)"
+                   if b["chosen"] else f"no residual over {b['base']}: no candidate (block, radius, min_gain) "
+                   f"beat it leaving one training camera out ({b['validation']['none']:g} errors; best candidate "
+                   f"{min((s['errors'] for s in b['validation']['scores']), default=float('nan')):g})")
+            head = f"{how}; {_fmt(b['heldout_covered_fraction'])} of held-out receivers fall in trained blocks"
+        else:
+            head = (f"{b['blocks']} blocks of {b['block']} x {b['block']} texels ({b['blocks_trained']} with training "
+                    f"receivers; {_fmt(b['heldout_covered_fraction'])} of held-out receivers fall in them), unit "
+                    f"{b['unit']}, started from {b['init_from']} (per map: "
+                    f"{', '.join(f'{x:.4g}' for x in b['init'])})")
+        out += ["", "## learned bias map", "", head, "",
                 "| | train | held-out |", "| --- | --- | --- |",
                 f"| learned map | {_fmt(b['train']['objective'])} | {_fmt(b['heldout']['objective'])} |",
                 f"| per-texel oracle (of those views) | {_fmt(b['per_texel_oracle_train'])} "
@@ -1158,6 +1267,13 @@ def table_text(res: TuneResult) -> str:
         if bg:
             out.append(f"| best tuned global ({bg['scheme']} {bg['params']}) | {_fmt(bg['train'])} "
                        f"| {_fmt(bg['heldout'])} |")
+        if b.get("heldout_split"):
+            out += ["", "| held-out receivers | n | learned map | best tuned global | per-texel oracle | gap closed |",
+                    "| --- | --- | --- | --- | --- | --- |"]
+            for name, r in b["heldout_split"].items():
+                out.append(f"| in {'trained' if name == 'covered' else 'untrained'} blocks | {r['n_receivers']} "
+                           f"| {_fmt(r['map'])} | {_fmt(r['best_global'])} | {_fmt(r['per_texel_oracle'])} "
+                           f"| {_fmt(r['gap_closed'])} |")
     if res.notes:
         out += ["", "notes: " + "; ".join(res.notes)]
     return "\n".join(out) + "\n"

@@ -186,6 +186,11 @@ def test_bias_map_and_output_folder(tmp_path):
     ({"camera": [{"position": [1, 2, 3]}]}, "tune.camera[0].target"),
     ({"range": {"constant": {"bias": [1, 0]}}}, "tune.range.constant.bias"),
     ({"camera": [{"position": [0, 0, 3], "target": [0, 0, 0]}]}, "tune.camera[0].up"),   # looking along up
+    ({"camera": CAMS, "bias_map": {"fit": "residual"}}, "tune.camera"),      # one training camera: no validation
+    ({"camera": CAMS, "bias_map": {"block": [1, 2]}}, "tune.bias_map.block"),        # a list is for residual
+    ({"camera": CAMS, "bias_map": {"radius": [1]}}, "tune.bias_map.radius"),
+    ({"camera": CAMS, "bias_map": {"fit": "sgd"}}, "tune.bias_map.fit"),
+    ({"scan": -1}, "tune.scan"),
 ])
 def test_bad_tune_tables_are_refused_before_work(tune, key):
     import dsm.tune as tu
