@@ -68,7 +68,7 @@ from .types import (DEFAULT_CAMERA, ConfigError, Length, SchemeSpec, as_list, ch
                     number, vec3)
 
 TUNE_KEYS = ("lambda", "steps", "lr", "temperature", "schedule", "seed", "batch", "params", "range", "camera",
-             "bias_map", "scan")
+             "bias_map", "scan", "gradcheck")
 CAMERA_KEYS = ("name", "position", "target", "up", "fov", "role")
 ROLES = ("train", "heldout")
 SCHEDULES = ("geometric", "linear")
@@ -138,6 +138,7 @@ class TuneSpec:
     cameras: tuple = ()
     bias_map: BiasMapSpec | None = None
     scan: int = 0                             # points of the exact 1-D scan of a one-parameter scheme (0: none)
+    gradcheck: bool = False                   # AD against central differences of the relaxed loss, per parameter
 
 
 @dataclass
@@ -171,6 +172,9 @@ def parse_tune(cfg) -> TuneConfig:
     seed = number(raw.get("seed", cfg.seed), src, "tune.seed", integer=True)
     batch = number(raw.get("batch", 1.0), src, "tune.batch", positive=True, maximum=1.0)
     scan = number(raw.get("scan", 0), src, "tune.scan", integer=True, minimum=0, maximum=100000)
+    gradcheck = raw.get("gradcheck", False)
+    if not isinstance(gradcheck, bool):
+        raise ConfigError(src, "tune.gradcheck", f"expected true or false, got {gradcheck!r}", (True, False))
 
     # the schemes: the config's [[scheme]] instances, each with something to tune
     specs = []
@@ -299,7 +303,7 @@ def parse_tune(cfg) -> TuneConfig:
     if m.filter != ("nearest",):
         raise ConfigError(src, "map.filter", "dsm tune measures the nearest lookup (the oracles' lookup)",
                           ("nearest",))
-    spec = TuneSpec(lam, steps, lr, temp, schedule, seed, batch, params, ranges, tuple(cams), bmap, scan)
+    spec = TuneSpec(lam, steps, lr, temp, schedule, seed, batch, params, ranges, tuple(cams), bmap, scan, gradcheck)
     return TuneConfig(cfg, spec, tuple(specs))
 
 
@@ -844,6 +848,31 @@ def exact_scan(tc, spec: SchemeSpec, box, train, groups, points: int) -> dict | 
     return {"values": best[1], "objective": best[0], "evaluations": points, "total_ms": (_sync_clock() - t0) * 1e3}
 
 
+GRADCHECK_STEP = 0.01      # texels' worth: the central difference's half step
+
+
+def gradient_check(tc, spec: SchemeSpec, box, train, groups) -> dict:
+    """Per tuned parameter at the start: the relaxed loss's derivative by Dr.Jit AD (all
+    parameters differentiated together) against a central difference of the same loss computed
+    in numpy float64 from the kit's forward margins, at the first temperature; half step
+    ``GRADCHECK_STEP`` texels' worth in the parameter's unit. {name: {ad, fd, rel_error}}."""
+    ts, mod = tc.spec, get_scheme(spec.name)
+    start = {p.name: p.start for p in box}
+    x = {p.name: mi.Float(float(p.start)) for p in box}
+    for v in x.values():
+        dr.enable_grad(v)
+    loss, _ = relaxed_loss(mod, spec.params, x, train, groups, ts.temperature[0], ts.lam)
+    dr.backward(loss)
+    out = {}
+    for p in box:
+        h = GRADCHECK_STEP * p.scale
+        f = lambda v: relaxed_loss_np(mod, spec.params, {**start, p.name: v}, train, groups, ts.temperature[0], ts.lam)
+        fd = (f(p.start + h) - f(p.start - h)) / (2 * h)
+        ad = float(dr.grad(x[p.name]).numpy().ravel()[0])
+        out[p.name] = {"ad": ad, "fd": fd, "rel_error": abs(ad - fd) / abs(fd) if fd else NAN}
+    return out
+
+
 # ---------------------------------------------------------------- oracles of pooled cases
 
 def pooled_thresholds(cases, groups):
@@ -1119,6 +1148,7 @@ def run_tune(tc, out=None, progress: bool = False, resume: bool = False) -> Tune
         g = grid_search(tc, spec, r["box"], train, groups, ts.steps)
         grid_spec = with_values(spec, g["values"])
         scan = exact_scan(tc, spec, r["box"], train, groups, ts.scan)
+        check = gradient_check(tc, spec, r["box"], train, groups) if ts.gradcheck else None
         entry = {"scheme": spec.name, "start": describe_params(spec.params), "params": describe_params(tuned.params),
                  "values": r["values"], "units": {p.name: p.unit for p in r["box"]},
                  "box": {p.name: [p.lo, p.hi] for p in r["box"]}, "relaxed_lookup": r["relaxed_lookup"],
@@ -1126,6 +1156,7 @@ def run_tune(tc, out=None, progress: bool = False, resume: bool = False) -> Tune
                  "heldout": _with_obj(hard_counts(tuned, held, groups), ts.lam) if held else None,
                  "start_train": _with_obj(hard_counts(spec, train, groups), ts.lam),
                  "start_heldout": _with_obj(hard_counts(spec, held, groups), ts.lam)["objective"] if held else NAN,
+                 "gradcheck": check,
                  "scan": None if scan is None else {**scan, "params": describe_params(with_values(spec, scan["values"]).params)},
                  "first_step_ms": r["first_step_ms"], "step_ms": r["step_ms"], "tune_ms": r["total_ms"],
                  "grid": {**g, "params": describe_params(grid_spec.params),
@@ -1243,6 +1274,12 @@ def table_text(res: TuneResult) -> str:
                    f"| {_fmt(r['oracle'])} | {_fmt(r['start_train'])} | {_fmt(r['start_heldout'])} "
                    f"| {r['scan_params']} | {_fmt(r['scan_train'])} ({r['scan_evaluations']}) "
                    f"| {_fmt(r['tuned_train'] / r['scan_train']) if r['scan_train'] > 0 else '-'} |")
+    checks = [(e["scheme"], k, g) for e in res.schemes for k, g in (e.get("gradcheck") or {}).items()]
+    if checks:
+        out += ["", f"## gradient check (relaxed loss at the start, temperature {res.spec.temperature[0]:g} texel; "
+                f"central difference, half step {GRADCHECK_STEP:g} texel's worth, numpy float64)", "",
+                "| scheme | parameter | AD | central difference | relative error |", "| --- | --- | --- | --- | --- |"]
+        out += [f"| {n} | {k} | {g['ad']:.6g} | {g['fd']:.6g} | {_fmt(g['rel_error'])} |" for n, k, g in checks]
     if res.bias_map:
         b = res.bias_map
         bg = b["best_global"]
