@@ -30,11 +30,15 @@ lookup (``pipeline.visibility``).
 
 **Search.** ``steps`` is the budget of exact objective evaluations, the grid search's too: the
 start, then a coarse grid over the search box at cell centres (a quarter of the budget), then
-Adam from the better of the two for the rest, one evaluation per step. The best evaluation is
-the result: never worse than the start, nor than any point the search saw (the relaxed loss
-only steers; it can rise where the exact objective falls, so it never picks the result).
+Adam from the better of the two, one evaluation per step, then an exact refinement (a quarter):
+a compass search on the exact objective and exact line searches along each parameter (the
+margins linearised by forward-mode AD, the objective along the line counted at every
+receiver's flip). The best evaluation is the result: never worse than the start, nor than any
+point the search saw (the relaxed loss only steers; it can rise where the exact objective
+falls, so it never picks the result).
 
-**Learned bias map** (``[tune.bias_map]``): one bias per block of ``block x block`` texels
+**Learned bias map** (``[tune.bias_map]``, ``fit = "adam"``; ``fit = "residual"``: a residual over
+the best tuned scheme, dsm.residual_map): one bias per block of ``block x block`` texels
 of the light's map, the map fitted once to the union of every camera's receivers (training and
 held-out) so the grid is the same for all views. Trained on the training cameras (started from
 the tuned constant bias when one was tuned in the same unit), judged on the held-out cameras
