@@ -98,8 +98,12 @@ def _parser():
     t = sub.add_parser("tune", help="tune scheme parameters (and a learned bias map) by gradient: a config's [tune]")
     t.add_argument("config", help="experiment TOML file with a [tune] table")
     t.add_argument("--out", help="results folder (default: runs/<name>-tune-<time>)")
-    t.add_argument("--force", action="store_true", help="replace a previous dsm tune in --out (a folder with its "
-                   "tune.json): its files only, never others")
+    tagain = t.add_mutually_exclusive_group()
+    tagain.add_argument("--force", action="store_true", help="replace a previous dsm tune in --out (a folder with "
+                        "its tune.json): its files only, never others")
+    tagain.add_argument("--resume", action="store_true",
+                        help="go on with the dsm tune in --out: keep its finished schemes that still match the "
+                             "config, tune the rest")
     t.add_argument("--variant", choices=cfgmod.VARIANTS, help="Mitsuba variant (default llvm_ad_rgb)")
     t.add_argument("--threads", type=_thread_count, help=f"Dr.Jit worker threads (1 to {MAX_THREADS})")
     return ap
@@ -578,20 +582,28 @@ def _tune(cfg, args, out: Path) -> int:
         _err(problem)
         return 2
     with held:
-        return _tune_held(tc, out, getattr(args, "force", False))
+        return _tune_held(tc, out, getattr(args, "force", False), getattr(args, "resume", False))
 
 
-TUNE_FILES = ("tuned.toml", "table.md", "steps.csv", "tune.json", "plots/tune_loss.png")   # what dsm tune writes
+TUNE_FILES = ("tuned.toml", "table.md", "steps.csv", "tune.json", "plots/tune_loss.png", "bias_map.npy",
+              "tune_state.json")   # what dsm tune writes
 
 
-def _tune_held(tc, out: Path, force: bool = False) -> int:
+def _tune_held(tc, out: Path, force: bool = False, resume: bool = False) -> int:
     from . import tune as tunemod
-    if entries(out):
-        if not force:
-            _err(f"--out {out}: is not an empty folder; choose another --out, or pass --force (replaces a previous "
-                 "dsm tune there)")
+    from . import tune_resume
+    resuming = resume and bool(entries(out))
+    if resuming:
+        problem = tune_resume.state_problem(out, tc.config.name)
+        if problem:
+            _err(problem)
             return 2
-        if not (out / "tune.json").is_file():
+    elif entries(out):
+        if not force:
+            _err(f"--out {out}: is not an empty folder; choose another --out, or pass --resume (goes on with a dsm "
+                 "tune there, keeping its finished schemes) or --force (replaces a previous dsm tune there)")
+            return 2
+        if not ((out / "tune.json").is_file() or (out / "tune_state.json").is_file()):     # a stopped tune: its state
             _err(f"--out {out}: --force replaces a previous dsm tune (a folder with its tune.json); this one holds none")
             return 2
         _clear([out / f for f in TUNE_FILES if (out / f).is_file()])
@@ -601,10 +613,13 @@ def _tune_held(tc, out: Path, force: bool = False) -> int:
         return 2
     t0 = time.perf_counter()
     try:
-        res = tunemod.run_tune(tc, out, progress=True)
+        res = tunemod.run_tune(tc, out, progress=True, resume=resuming)
     except cfgmod.ConfigError as e:
         return _config_error(e)
     print(tunemod.table_text(res))
+    if resuming:
+        print(f"dsm: resumed: {res.resumed} finished schemes kept, {len(res.schemes) - res.resumed} tuned",
+              file=sys.stderr)
     print(f"dsm: tuned {len(res.schemes)} schemes in {time.perf_counter() - t0:.1f} s -> {out}/ (tuned.toml, "
           "table.md, steps.csv, tune.json, plots/)")
     return 0

@@ -30,11 +30,15 @@ lookup (``pipeline.visibility``).
 
 **Search.** ``steps`` is the budget of exact objective evaluations, the grid search's too: the
 start, then a coarse grid over the search box at cell centres (a quarter of the budget), then
-Adam from the better of the two for the rest, one evaluation per step. The best evaluation is
-the result: never worse than the start, nor than any point the search saw (the relaxed loss
-only steers; it can rise where the exact objective falls, so it never picks the result).
+Adam from the better of the two, one evaluation per step, then an exact refinement (a quarter):
+a compass search on the exact objective and exact line searches along each parameter (the
+margins linearised by forward-mode AD, the objective along the line counted at every
+receiver's flip). The best evaluation is the result: never worse than the start, nor than any
+point the search saw (the relaxed loss only steers; it can rise where the exact objective
+falls, so it never picks the result).
 
-**Learned bias map** (``[tune.bias_map]``): one bias per block of ``block x block`` texels
+**Learned bias map** (``[tune.bias_map]``, ``fit = "adam"``; ``fit = "residual"``: a residual over
+the best tuned scheme, dsm.residual_map): one bias per block of ``block x block`` texels
 of the light's map, the map fitted once to the union of every camera's receivers (training and
 held-out) so the grid is the same for all views. Trained on the training cameras (started from
 the tuned constant bias when one was tuned in the same unit), judged on the held-out cameras
@@ -59,19 +63,21 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import lookup
+from . import lookup, tune_resume
 from .report import atomic, objective        # (n_acne + lambda n_peterpan) / n_receivers, NaN without receivers
 from . import pipeline as pl
+from .schemes import get as get_scheme
 from .schemes.base import no_shift
 from .types import (DEFAULT_CAMERA, ConfigError, Length, SchemeSpec, as_list, check_keys, choice, describe_params,
                     number, vec3)
 
 TUNE_KEYS = ("lambda", "steps", "lr", "temperature", "schedule", "seed", "batch", "params", "range", "camera",
-             "bias_map")
+             "bias_map", "scan", "gradcheck")
 CAMERA_KEYS = ("name", "position", "target", "up", "fov", "role")
 ROLES = ("train", "heldout")
 SCHEDULES = ("geometric", "linear")
-MAP_KEYS = ("block", "unit", "init", "steps", "lr")
+MAP_KEYS = ("block", "unit", "init", "steps", "lr", "fit", "radius", "min_gain", "margin")
+MAP_FITS = ("adam", "residual")
 MAP_UNITS = ("world", "texel")
 CLIP = 30.0              # |margin / T| beyond which the sigmoid is flat (its derivative below 1e-13)
 NAN = float("nan")       # one object: lists of rows compare equal where both hold it
@@ -114,6 +120,11 @@ class BiasMapSpec:
     init: Length = Length(0.0, "world")
     steps: int = 100
     lr: float = 0.5
+    fit: str = "adam"                 # adam: a bias per block by Adam; residual: see dsm.residual_map
+    blocks: tuple = (1, 2, 4)         # residual: the candidates of validation (block, radius, min_gain)
+    radii: tuple = (0, 1, 2)
+    gains: tuple = (1, 2, 3)
+    margin: float = 0.5               # residual: texels kept inside a block's optimal interval
 
 
 @dataclass(frozen=True)
@@ -130,6 +141,8 @@ class TuneSpec:
     ranges: dict = field(default_factory=dict)     # (scheme name, parameter) -> (lo, hi) in its unit
     cameras: tuple = ()
     bias_map: BiasMapSpec | None = None
+    scan: int = 0                             # points of the exact 1-D scan of a one-parameter scheme (0: none)
+    gradcheck: bool = False                   # AD against central differences of the relaxed loss, per parameter
 
 
 @dataclass
@@ -162,6 +175,10 @@ def parse_tune(cfg) -> TuneConfig:
     schedule = choice(raw.get("schedule", "geometric"), src, "tune.schedule", SCHEDULES)
     seed = number(raw.get("seed", cfg.seed), src, "tune.seed", integer=True)
     batch = number(raw.get("batch", 1.0), src, "tune.batch", positive=True, maximum=1.0)
+    scan = number(raw.get("scan", 0), src, "tune.scan", integer=True, minimum=0, maximum=100000)
+    gradcheck = raw.get("gradcheck", False)
+    if not isinstance(gradcheck, bool):
+        raise ConfigError(src, "tune.gradcheck", f"expected true or false, got {gradcheck!r}", (True, False))
 
     if cfg.map.moments:           # dsm tune's objective relaxes a margin per tap: depth schemes only
         raise ConfigError(src, "map.kind", "dsm tune tunes depth schemes; remove the pre-filtered kinds from "
@@ -263,11 +280,25 @@ def parse_tune(cfg) -> TuneConfig:
         init = Length.parse(b.get("init", f"0 {unit}" if unit != "world" else 0.0), src, "tune.bias_map.init")
         if init.unit != unit:
             raise ConfigError(src, "tune.bias_map.init", f"give the start in the map's unit ({unit})", MAP_UNITS)
-        bmap = BiasMapSpec(number(b.get("block", 1), src, "tune.bias_map.block", integer=True, minimum=1),
-                           unit, init,
+        fit = choice(b.get("fit", "adam"), src, "tune.bias_map.fit", MAP_FITS)
+        ints = lambda key, default, lo: tuple(number(x, src, f"tune.bias_map.{key}", integer=True, minimum=lo)
+                                              for x in as_list(b.get(key, list(default))))
+        blocks = ints("block", BiasMapSpec.blocks if fit == "residual" else [1], 1)
+        if fit == "adam" and len(blocks) != 1:
+            raise ConfigError(src, "tune.bias_map.block", "Adam fits one block size: give one number (a list is "
+                              "validated with fit = \"residual\")", MAP_FITS)
+        for key in ("radius", "min_gain", "margin"):
+            if key in b and fit != "residual":
+                raise ConfigError(src, f"tune.bias_map.{key}", "only with fit = \"residual\"", MAP_FITS)
+        bmap = BiasMapSpec(blocks[0], unit, init,
                            number(b.get("steps", steps), src, "tune.bias_map.steps", integer=True, minimum=1,
                                   maximum=100000),
-                           number(b.get("lr", lr), src, "tune.bias_map.lr", positive=True))
+                           number(b.get("lr", lr), src, "tune.bias_map.lr", positive=True), fit, blocks,
+                           ints("radius", BiasMapSpec.radii, 0), ints("min_gain", BiasMapSpec.gains, 1),
+                           number(b.get("margin", BiasMapSpec.margin), src, "tune.bias_map.margin", minimum=0))
+        if fit == "residual" and sum(c.role == "train" for c in cams) < 2:
+            raise ConfigError(src, "tune.camera", "a residual map chooses its block size by leaving one training "
+                              "camera out: give at least two [[tune.camera]] with role = \"train\"", ROLES)
         if not any(c.role == "heldout" for c in cams):
             raise ConfigError(src, "tune.camera", "a learned bias map is judged on held-out views: add a "
                               "[[tune.camera]] with role = \"heldout\"", ROLES)
@@ -282,7 +313,7 @@ def parse_tune(cfg) -> TuneConfig:
     if m.filter != ("nearest",):
         raise ConfigError(src, "map.filter", "dsm tune measures the nearest lookup (the oracles' lookup)",
                           ("nearest",))
-    spec = TuneSpec(lam, steps, lr, temp, schedule, seed, batch, params, ranges, tuple(cams), bmap)
+    spec = TuneSpec(lam, steps, lr, temp, schedule, seed, batch, params, ranges, tuple(cams), bmap, scan, gradcheck)
     return TuneConfig(cfg, spec, tuple(specs))
 
 
@@ -594,34 +625,170 @@ def coarse_grid(box, budget: int) -> list:
             for combo in np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, len(box))]
 
 
+def phase_budgets(steps: int) -> dict:
+    """How ``steps`` exact evaluations are spent: the start, a coarse grid (a quarter of the rest),
+    the exact local refinement (another quarter), Adam steps (what remains)."""
+    coarse = refine = (steps - 1) // COARSE_SHARE
+    return {"start": 1, "coarse": coarse, "gradient": steps - 1 - coarse - refine, "refine": refine}
+
+
 def tune_scheme(tc, spec: SchemeSpec, train, groups, progress=None, oracle_best=None) -> dict:
     """Within ``steps`` evaluations of the exact training objective: the start, a coarse grid of
-    the search box (a quarter of them), then Adam on the relaxed loss from the better of the
-    two, one evaluation per step. The best evaluation is returned, so the result is never
+    the search box (a quarter of them), Adam on the relaxed loss from the better of the two
+    (one evaluation per step), then a compass search on the exact objective around the best
+    point so far (the last quarter). The best evaluation is returned, so the result is never
     worse than the start or any point the search saw. Per evaluation its phase, the loss,
     the exact objective and the step's time."""
     ts = tc.spec
     box = _param_box(tc, spec, texel_sizes(train, groups), oracle_best)
     exact = lambda vals: objective(hard_counts(with_values(spec, vals), train, groups), ts.lam)
+    budget = phase_budgets(ts.steps)
     start = {p.name: p.start for p in box}
     best = (exact(start), start)
     rows = [_evaluation_row(spec, "start", 0, start, best[0])]
-    for vals in coarse_grid(box, (ts.steps - 1) // COARSE_SHARE):
+    grid = coarse_grid(box, budget["coarse"])
+    for vals in grid:
         rows.append(_evaluation_row(spec, "coarse", len(rows), vals, exact(vals)))
         if rows[-1]["hard_objective"] < best[0]:
             best = (rows[-1]["hard_objective"], vals)
     for _ in rows:
         if progress:
             progress()
-    adam = _adam(tc, spec, box, train, groups, best[1], ts.steps - len(rows), len(rows), progress)
+    # a coarse grid may hold fewer points than its share (k^p <= share): Adam takes the rest
+    adam = _adam(tc, spec, box, train, groups, best[1], ts.steps - len(rows) - budget["refine"], len(rows), progress)
     for r in adam["rows"]:
         if r["hard_objective"] < best[0]:
             best = (r["hard_objective"], {p.name: r[f"param_{p.name}"] for p in box})
     rows += adam["rows"]
+    k = max(1, round(len(grid) ** (1.0 / len(box)))) if grid else 1
+    ref = exact_refinement(spec, box, best, train, groups, ts.lam, exact, ts.steps - len(rows), k)
+    for phase, vals, obj in ref["evaluations"]:
+        rows.append(_evaluation_row(spec, phase, len(rows), vals, obj))
+        if progress:
+            progress()
+    best = ref["best"]
     times = [r["time_ms"] for r in adam["rows"]] or [0.0]
     return {"values": best[1], "box": box, "steps": rows, "relaxed_lookup": adam["relax"],
             "first_step_ms": times[0], "step_ms": float(np.median(times[1:])) if len(times) > 1 else times[0],
-            "total_ms": float(sum(times)), "evaluations": len(rows)}
+            "total_ms": float(sum(times)) + ref["ms"], "refine_ms": ref["ms"], "evaluations": len(rows)}
+
+
+def margin_line(module, params, values: dict, direction: dict, cases, groups) -> tuple:
+    """Every receiver's exact (nearest-lookup) margin at ``values`` and its derivative along
+    ``direction`` (parameter name -> change per unit step, in the parameter's unit), by Dr.Jit's
+    forward-mode AD: (margin, slope), float64 arrays over the cases in order."""
+    culling = pl.culling_of(params)
+    m_all, g_all = [], []
+    for c in cases:
+        a = mi.Float(0.0)
+        dr.enable_grad(a)
+        vals = {k: dr.opaque(mi.Float, float(v)) + a * dr.opaque(mi.Float, float(direction.get(k, 0.0)))
+                for k, v in values.items()}
+        m = margins(module, params, vals, c.rx, groups[c.group].maps[culling], relax=False)
+        dr.forward(a)
+        m_all.append(np.asarray(dr.detach(m).numpy(), np.float64))
+        g_all.append(np.asarray(dr.grad(m).numpy(), np.float64))
+    return np.concatenate(m_all), np.concatenate(g_all)
+
+
+def line_objective(m, g, v_star, lam, a_lo: float, a_hi: float) -> tuple:
+    """The exact objective of margins that are affine in a step ``a`` (``m + a g``), at its best
+    over ``[a_lo, a_hi]``: each receiver flips at ``a = -m / g``; counted at the ends and at the
+    midpoints between consecutive flips by sorted counts (the threshold sweep of the exact
+    oracles, along any line). (best step, its objective); ties: the widest interval's midpoint."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        flip = -m / g
+    up, down, flat = g > 0, g < 0, g == 0
+    inside = np.sort(flip[(up | down) & (flip > a_lo) & (flip < a_hi)])
+    edges = np.unique(np.concatenate([[a_lo], inside, [a_hi]]))
+    cands = np.concatenate([[a_lo], 0.5 * (edges[:-1] + edges[1:]), [a_hi]]) if len(edges) > 1 else edges
+    width = np.concatenate([[0.0], np.diff(edges), [0.0]]) if len(edges) > 1 else np.zeros(1)
+    err = np.zeros(len(cands))
+    for sel, lit_when_above in ((up, True), (down, False)):
+        for truth, weight in ((True, 1.0), (False, lam)):
+            th = np.sort(flip[sel & (v_star == truth)])
+            # lit iff a >= flip (g > 0) or a <= flip (g < 0); an error when lit differs from the truth
+            n_lit = np.searchsorted(th, cands, "right") if lit_when_above else len(th) - np.searchsorted(th, cands, "left")
+            err += weight * ((len(th) - n_lit) if truth else n_lit)
+    err += float(((m[flat] < 0) & v_star[flat]).sum() + lam * ((m[flat] >= 0) & ~v_star[flat]).sum())
+    obj = err / max(m.size, 1)
+    best = np.flatnonzero(obj == obj.min())
+    i = best[np.argmax(width[best])]
+    return float(cands[i]), float(obj[i])
+
+
+def line_search(module, spec, box, best, train, groups, lam, p) -> dict:
+    """The exact objective's best along parameter ``p`` from ``best``'s values, under the
+    receivers' margins linearised in that parameter (forward AD), within ``p``'s range: the
+    point to evaluate (exact for a margin affine in the parameter: constant, receiver plane,
+    adaptive; a candidate to check otherwise) and the objective the linearisation predicts there."""
+    vals = best[1]
+    m, g = margin_line(module, spec.params, vals, {p.name: 1.0}, train, groups)
+    v_star = np.concatenate([c.v_star for c in train])
+    a, predicted = line_objective(m, g, v_star, lam, p.lo - vals[p.name], p.hi - vals[p.name])
+    return {**vals, p.name: min(max(vals[p.name] + a, p.lo), p.hi)}, predicted
+
+
+def exact_refinement(spec, box, best, train, groups, lam, exact, budget: int, cells: int) -> dict:
+    """At most ``budget`` exact evaluations around ``best``: a compass search (keeping two per
+    parameter back), exact line searches along each parameter until a round gains nothing, and
+    the compass search again with what is left. {best, evaluations: (phase, values, objective), ms}."""
+    t0, out = _sync_clock(), []
+    ref = compass_search(box, exact, best, max(budget - 2 * len(box), 0), cells)
+    out += [("refine", v, o) for v, o in ref["evaluations"]]
+    best, seen, improved = ref["best"], set(), True
+    while improved and len(out) < budget:     # exact line searches along each parameter
+        improved = False
+        for p in box:
+            if len(out) >= budget:
+                break
+            vals, predicted = line_search(get_scheme(spec.name), spec, box, best, train, groups, lam, p)
+            key = tuple(vals[q.name] for q in box)
+            if key in seen or predicted >= best[0]:     # the model is exact at the current point: no gain
+                continue
+            seen.add(key)
+            out.append(("line", vals, exact(vals)))
+            if out[-1][2] < best[0]:
+                best, improved = (out[-1][2], vals), True
+    ref = compass_search(box, exact, best, budget - len(out), cells)
+    out += [("refine", v, o) for v, o in ref["evaluations"]]
+    return {"best": ref["best"], "evaluations": out, "ms": (_sync_clock() - t0) * 1e3}
+
+
+def compass_search(box, exact, best, budget: int, cells: int) -> dict:
+    """Compass (pattern) search on the exact objective from ``best`` = (objective, values), at most
+    ``budget`` new evaluations: each parameter is tried one step up and down (clipped to its
+    range; a point already evaluated is not evaluated again), a strict improvement moves there,
+    and a poll with none halves every step. First step: half a coarse-grid cell (``cells``
+    points per parameter). Hooke & Jeeves, "Direct search solution of numerical and
+    statistical problems", J. ACM 1961; Kolda, Lewis & Torczon, SIAM Review 2003 (compass search).
+    The exact objective is piecewise constant, so its gradient is 0 almost everywhere: near the
+    relaxed loss's optimum only a direct search on the exact objective can pick its best step."""
+    steps = {p.name: (p.hi - p.lo) / cells / 2.0 for p in box}
+    seen = {tuple(best[1][p.name] for p in box)}
+    evaluations, t0 = [], _sync_clock()
+    while len(evaluations) < budget and any(v > 0 for v in steps.values()):
+        moved = False
+        for p in box:
+            for sign in (1.0, -1.0):
+                if len(evaluations) >= budget:
+                    break
+                vals = dict(best[1])
+                vals[p.name] = min(max(best[1][p.name] + sign * steps[p.name], p.lo), p.hi)
+                key = tuple(vals[q.name] for q in box)
+                if key in seen:
+                    continue
+                seen.add(key)
+                obj = exact(vals)
+                evaluations.append((vals, obj))
+                if obj < best[0]:
+                    best, moved = (obj, vals), True
+                    break
+        if not moved:
+            steps = {k: v / 2.0 for k, v in steps.items()}
+            if max(s / (p.hi - p.lo) for p, s in zip(box, steps.values())) < 1e-7:
+                break                # below float32 resolution of the box: nothing left to find
+    return {"best": best, "evaluations": evaluations, "ms": (_sync_clock() - t0) * 1e3}
 
 
 def _adam(tc, spec, box, train, groups, origin: dict, steps: int, first: int, progress=None) -> dict:
@@ -674,6 +841,46 @@ def grid_search(tc, spec: SchemeSpec, box, train, groups, budget: int) -> dict:
     ms = (_sync_clock() - t0) * 1e3
     return {"values": best[1], "objective": best[0], "evaluations": evals, "points_per_parameter": k,
             "total_ms": ms}
+
+
+def exact_scan(tc, spec: SchemeSpec, box, train, groups, points: int) -> dict | None:
+    """A one-parameter scheme's exact training objective at ``points`` evenly spaced values of its
+    search range, ends included (the reference the tuner is held to; for a constant bias, the
+    oracle's curve sampled); None for a scheme tuning more than one parameter."""
+    if len(box) != 1 or points < 1:
+        return None
+    b = box[0]
+    best, t0 = None, _sync_clock()
+    for x in np.linspace(b.lo, b.hi, points):
+        obj = objective(hard_counts(with_values(spec, {b.name: float(x)}), train, groups), tc.spec.lam)
+        if best is None or obj < best[0]:
+            best = (obj, {b.name: float(x)})
+    return {"values": best[1], "objective": best[0], "evaluations": points, "total_ms": (_sync_clock() - t0) * 1e3}
+
+
+GRADCHECK_STEP = 0.01      # texels' worth: the central difference's half step
+
+
+def gradient_check(tc, spec: SchemeSpec, box, train, groups) -> dict:
+    """Per tuned parameter at the start: the relaxed loss's derivative by Dr.Jit AD (all
+    parameters differentiated together) against a central difference of the same loss computed
+    in numpy float64 from the kit's forward margins, at the first temperature; half step
+    ``GRADCHECK_STEP`` texels' worth in the parameter's unit. {name: {ad, fd, rel_error}}."""
+    ts, mod = tc.spec, get_scheme(spec.name)
+    start = {p.name: p.start for p in box}
+    x = {p.name: mi.Float(float(p.start)) for p in box}
+    for v in x.values():
+        dr.enable_grad(v)
+    loss, _ = relaxed_loss(mod, spec.params, x, train, groups, ts.temperature[0], ts.lam)
+    dr.backward(loss)
+    out = {}
+    for p in box:
+        h = GRADCHECK_STEP * p.scale
+        f = lambda v: relaxed_loss_np(mod, spec.params, {**start, p.name: v}, train, groups, ts.temperature[0], ts.lam)
+        fd = (f(p.start + h) - f(p.start - h)) / (2 * h)
+        ad = float(dr.grad(x[p.name]).numpy().ravel()[0])
+        out[p.name] = {"ad": ad, "fd": fd, "rel_error": abs(ad - fd) / abs(fd) if fd else NAN}
+    return out
 
 
 # ---------------------------------------------------------------- oracles of pooled cases
@@ -785,23 +992,95 @@ def tune_bias_map(tc, train, held, groups, init_values, progress=None) -> dict:
             "unit": bm.unit, "init": [float(x) for x in init_values], "steps": rows,
             "train": _map_counts(train, idx_train, groups, b, scale, tex),
             "heldout": _map_counts(held, idx_held, groups, b, scale, tex),
+            "heldout_lit": _map_lit(held, idx_held, groups, b, scale, tex),
+            "heldout_covered": [seen[x] for x in blk_held],
             "heldout_covered_fraction": cov_n / n_held if n_held else float("nan"),
             "blocks_trained": int(seen.sum()),
             "first_step_ms": times[0], "step_ms": float(np.median(times[1:])) if len(times) > 1 else times[0],
             "total_ms": float(sum(times))}
 
 
-def _map_counts(cases, idxs, groups, b, scale, tex) -> dict:
-    acne = pp = n = lit = 0
+def _map_lit(cases, idxs, groups, b, scale, tex) -> list:
+    """Per case whether each receiver is lit under the bias map ``b``."""
+    out = []
     for c, idx in zip(cases, idxs):
         val = dr.gather(mi.Float, dr.detach(b), idx) * scale
-        m = _map_margin(c, groups, val * c.rx.texel_world if tex else val)
-        on = (m >= 0).numpy()
+        out.append((_map_margin(c, groups, val * c.rx.texel_world if tex else val) >= 0).numpy())
+    return out
+
+
+def _map_counts(cases, idxs, groups, b, scale, tex) -> dict:
+    acne = pp = n = lit = 0
+    for c, on in zip(cases, _map_lit(cases, idxs, groups, b, scale, tex)):
         acne += int((c.v_star & ~on).sum())
         pp += int((~c.v_star & on).sum())
         n += c.n
         lit += int(c.v_star.sum())
     return _counts(acne, pp, n, lit)
+
+
+def margin_arrays(spec: SchemeSpec, cases, groups) -> dict:
+    """A scheme instance's exact margins and what a residual map reads, per receiver over ``cases``
+    (numpy: m, v_star, unit = texel_world, texel, group, resolution)."""
+    mod, culling = get_scheme(spec.name), pl.culling_of(spec.params)
+    ms = [np.asarray(margins(mod, spec.params, {}, c.rx, groups[c.group].maps[culling], False).numpy(), np.float64)
+          for c in cases]
+    cat = lambda xs: np.concatenate(xs) if xs else np.zeros(0)
+    return {"m": cat(ms), "v_star": cat([c.v_star for c in cases]).astype(bool),
+            "unit": cat([c.th.texel_world for c in cases]).astype(np.float64),
+            "texel": cat([c.th.texel for c in cases]).astype(np.int64),
+            "group": cat([np.full(c.n, c.group, np.int64) for c in cases]).astype(np.int64),
+            "resolution": cat([np.full(c.n, groups[c.group].view.resolution, np.int64) for c in cases]).astype(np.int64)}
+
+
+def residual_bias_map(tc, train, held, groups, base) -> dict:
+    """The residual map over the best global scheme (``base``, a result entry): candidates
+    validated leaving one training camera out, the chosen one fitted to every training view
+    (dsm.residual_map); its counts on the training and held-out views."""
+    from . import residual_map as rm
+    bm, lam = tc.spec.bias_map, tc.spec.lam
+    t0 = _sync_clock()
+    rx_tr, rx_he = margin_arrays(base["spec"], train, groups), margin_arrays(base["spec"], held, groups)
+    cams = np.concatenate([np.full(c.n, c.camera) for c in train])
+    ch = rm.choose(rx_tr, cams, bm.blocks, bm.radii, bm.gains, lam, bm.margin)
+    block, radius, gain = ch["chosen"] or (bm.blocks[0], 0, math.inf)      # none: coverage by the first block
+    fit = rm.smoothed_fit(rx_tr, block, radius, lam, bm.margin)
+    m_tr, _ = rm.apply(fit, gain, rx_tr, block)
+    m_he, covered = rm.apply(fit, gain, rx_he, block)
+    moved = rm.residuals(fit, gain)
+    counts = lambda m, v: _counts(int(((m < 0) & v).sum()), int(((m >= 0) & ~v).sum()), int(v.size), int(v.sum()))
+    split = np.cumsum([c.n for c in held])[:-1]
+    return {"fit": "residual", "base": f"{base['scheme']} {base['params']}", "block": block, "radius": radius,
+            "min_gain": gain if ch["chosen"] else None, "chosen": ch["chosen"] is not None,
+            "validation": {"none": ch["none"], "scores": ch["scores"]}, "unit": "texel",
+            "values": np.stack([fit["keys"].astype(np.float64), moved]), "blocks": int(fit["keys"].size),
+            "blocks_trained": int(fit["keys"].size), "blocks_moved": int((moved != 0).sum()), "steps": [],
+            "train": counts(m_tr, rx_tr["v_star"]), "heldout": counts(m_he, rx_he["v_star"]),
+            "heldout_lit": np.split(m_he >= 0, split), "heldout_covered": np.split(covered, split),
+            "heldout_covered_fraction": float(covered.mean()) if covered.size else NAN,
+            "init": [], "total_ms": (_sync_clock() - t0) * 1e3}
+
+
+def heldout_split(held, groups, lit_map, covered, best_spec, lam) -> dict:
+    """The learned map against the best global scheme and the per-texel oracle over the held-out
+    receivers whose block saw training receivers (``covered``) and over the rest, with the share
+    of the gap to the oracle the map closes: (global - map) / (global - oracle)."""
+    v = np.concatenate([c.v_star for c in held])
+    lit_map, covered = np.concatenate(lit_map), np.concatenate(covered).astype(bool)
+    culling = pl.culling_of(best_spec.params)
+    lit_best = np.concatenate([pl.visibility(best_spec, c.rx, groups[c.group].maps[culling])[0].numpy() >= 0.5
+                               for c in held])
+    th, vs = pooled_thresholds(held, groups)
+    out = {}
+    for name, sel in (("covered", covered), ("uncovered", ~covered)):
+        n = int(sel.sum())
+        obj = lambda lit: float(((~lit & v)[sel].sum() + lam * (lit & ~v)[sel].sum()) / n) if n else NAN
+        sub = pl.Thresholds(**{f.name: getattr(th, f.name)[sel] for f in dataclasses.fields(th)})
+        orc = pl.oracles(sub, vs[sel], lam)["row"]["per_texel_objective"] if n else NAN
+        g, m = obj(lit_best), obj(lit_map)
+        out[name] = {"n_receivers": n, "map": m, "best_global": g, "per_texel_oracle": orc,
+                     "gap_closed": (g - m) / (g - orc) if n and g > orc else NAN}
+    return out
 
 
 # ---------------------------------------------------------------- the whole run
@@ -820,29 +1099,33 @@ class TuneResult:
     n_heldout: int
     tuned_toml: str
     spec: TuneSpec
+    resumed: int = 0      # schemes kept from the previous tune in the folder (--resume)
 
     def best(self):
         """The tuned scheme with the lowest training objective."""
         return min(self.schemes, key=lambda s: s["train"]["objective"]) if self.schemes else None
 
 
-def tune(config, out=None, progress: bool = False, variant: str | None = None) -> TuneResult:
+def tune(config, out=None, progress: bool = False, variant: str | None = None, resume: bool = False) -> TuneResult:
     """Tune every ``[[scheme]]`` of ``config`` (a Config, dict or TOML path with a ``[tune]``
-    table) on its training views; write the results into ``out`` when given."""
+    table) on its training views; write the results into ``out`` when given (``resume``: keep
+    the schemes the tune already in ``out`` finished with the same input)."""
     from .config import coerce
     config = coerce(config)
     tc = parse_tune(config)                   # the [tune] table checked before any scene loads
     tc.config = pl.prepare(config, variant)
-    return run_tune(tc, out, progress)
+    return run_tune(tc, out, progress, resume)
 
 
-def run_tune(tc, out=None, progress: bool = False) -> TuneResult:
-    """Tune and grid-search each scheme of a prepared ``tc``, then the bias map; write into ``out`` if given."""
+def run_tune(tc, out=None, progress: bool = False, resume: bool = False) -> TuneResult:
+    """Tune and grid-search each scheme of a prepared ``tc``, then the bias map; write into ``out``
+    if given, with the state ``--resume`` reads after each scheme (``resume``: keep its finished ones)."""
     ts = tc.spec
     bar = None
     if progress:
         from tqdm import tqdm
-        total = len(tc.config.scenes) + ts.steps * len(tc.schemes) + (ts.bias_map.steps if ts.bias_map else 0)
+        total = len(tc.config.scenes) + ts.steps * len(tc.schemes) + (
+            ts.bias_map.steps if ts.bias_map and ts.bias_map.fit == "adam" else 0)
         bar = tqdm(total=total, desc="dsm tune", unit="step", leave=False)
     tick = (lambda *a: bar.update(1)) if bar else None
     groups, cases, notes = prepare_cases(tc, tick)
@@ -855,17 +1138,36 @@ def run_tune(tc, out=None, progress: bool = False) -> TuneResult:
     orc_train = pl.oracles(th_train, vs_train, ts.lam)["row"]
     orc_held = pl.oracles(*pooled_thresholds(held, groups), ts.lam)["row"] if held else None
     results, steps, comparison = [], [], []
-    for spec in tc.schemes:
+    keys = tune_resume.scheme_keys(tc)
+    previous = tune_resume.read_state(out) if (resume and out is not None) else {}
+    finished, kept = [], 0
+    for spec, key in zip(tc.schemes, keys):
+        if key in previous:                 # finished by the tune in ``out`` with this very input
+            entry = {**previous[key]["entry"], "spec": with_values(spec, previous[key]["entry"]["values"])}
+            results.append(entry)
+            steps += previous[key]["steps"]
+            comparison.append(_comparison_row(entry, ts.steps))
+            finished.append(previous[key])
+            kept += 1
+            if tick:
+                for _ in range(ts.steps):
+                    tick()
+            continue
         r = tune_scheme(tc, spec, train, groups, tick, {"world": orc_train["best_b"], "texel": orc_train["best_k"]})
         tuned = with_values(spec, r["values"])
         g = grid_search(tc, spec, r["box"], train, groups, ts.steps)
         grid_spec = with_values(spec, g["values"])
+        scan = exact_scan(tc, spec, r["box"], train, groups, ts.scan)
+        check = gradient_check(tc, spec, r["box"], train, groups) if ts.gradcheck else None
         entry = {"scheme": spec.name, "start": describe_params(spec.params), "params": describe_params(tuned.params),
                  "values": r["values"], "units": {p.name: p.unit for p in r["box"]},
                  "box": {p.name: [p.lo, p.hi] for p in r["box"]}, "relaxed_lookup": r["relaxed_lookup"],
                  "spec": tuned, "train": _with_obj(hard_counts(tuned, train, groups), ts.lam),
                  "heldout": _with_obj(hard_counts(tuned, held, groups), ts.lam) if held else None,
                  "start_train": _with_obj(hard_counts(spec, train, groups), ts.lam),
+                 "start_heldout": _with_obj(hard_counts(spec, held, groups), ts.lam)["objective"] if held else NAN,
+                 "gradcheck": check,
+                 "scan": None if scan is None else {**scan, "params": describe_params(with_values(spec, scan["values"]).params)},
                  "first_step_ms": r["first_step_ms"], "step_ms": r["step_ms"], "tune_ms": r["total_ms"],
                  "grid": {**g, "params": describe_params(grid_spec.params),
                           "heldout": _with_obj(hard_counts(grid_spec, held, groups), ts.lam)["objective"]
@@ -879,16 +1181,27 @@ def run_tune(tc, out=None, progress: bool = False) -> TuneResult:
         results.append(entry)
         steps += r["steps"]
         comparison.append(_comparison_row(entry, ts.steps))
+        if out is not None:                 # after each scheme, so a stopped tune resumes from here
+            finished.append({"key": key, "entry": {k: v for k, v in entry.items() if k != "spec"},
+                             "steps": r["steps"]})
+            tune_resume.write_state(out, tc.config.name, finished)
     bmap = None
     if ts.bias_map and held:
         const = [e for e in results if e["scheme"] == "constant"]
         best_const = min(const, key=lambda e: e["train"]["objective"]) if const else None
-        init = map_start(tc, train, groups, best_const)
-        bmap = tune_bias_map(tc, train, held, groups, init, tick)
-        bmap["init_from"] = best_const["params"] if best_const else str(ts.bias_map.init)
+        best = min(results, key=lambda e: e["train"]["objective"]) if results else None
+        if ts.bias_map.fit == "residual" and best is not None:
+            bmap = residual_bias_map(tc, train, held, groups, best)
+            bmap["init_from"] = bmap["base"]
+        else:
+            init = map_start(tc, train, groups, best_const)
+            bmap = tune_bias_map(tc, train, held, groups, init, tick)
+            bmap["init_from"] = best_const["params"] if best_const else str(ts.bias_map.init)
         bmap["train"] = _with_obj(bmap["train"], ts.lam)
         bmap["heldout"] = _with_obj(bmap["heldout"], ts.lam)
-        best = min(results, key=lambda e: e["train"]["objective"]) if results else None
+        lit, covered = bmap.pop("heldout_lit"), bmap.pop("heldout_covered")
+        if best is not None:
+            bmap["heldout_split"] = heldout_split(held, groups, lit, covered, best["spec"], ts.lam)
         bmap["per_texel_oracle_heldout"] = orc_held["per_texel_objective"]
         bmap["per_texel_oracle_train"] = orc_train["per_texel_objective"]
         bmap["best_global"] = ({"scheme": best["scheme"], "params": best["params"],
@@ -899,7 +1212,7 @@ def run_tune(tc, out=None, progress: bool = False) -> TuneResult:
         notes.append("no held-out view has a receiver: the learned bias map was not trained")
     if bar:
         bar.close()
-    res = TuneResult(results, steps, comparison, bmap, notes, n_train, n_held, tuned_toml(results), ts)
+    res = TuneResult(results, steps, comparison, bmap, notes, n_train, n_held, tuned_toml(results), ts, kept)
     if out is not None:
         write(res, Path(out), orc_train, orc_held)
     return res
@@ -918,7 +1231,10 @@ def _comparison_row(e, budget):
            "grid_params": g["params"], "grid_train": g["objective"], "grid_heldout": g["heldout"],
            "grid_ms": g["total_ms"], "grid_evaluations": g["evaluations"],
            "oracle": e.get("oracle", {}).get("objective", float("nan")),
-           "start_train": e["start_train"]["objective"]}
+           "start_train": e["start_train"]["objective"], "start_heldout": e["start_heldout"],
+           "scan_params": e["scan"]["params"] if e["scan"] else "-",
+           "scan_train": e["scan"]["objective"] if e["scan"] else NAN,
+           "scan_evaluations": e["scan"]["evaluations"] if e["scan"] else 0}
     return row
 
 
@@ -957,22 +1273,40 @@ def table_text(res: TuneResult) -> str:
     out = [f"# dsm tune (lambda = {lam:g}; objective (n_acne + lambda n_peterpan) / n_receivers)", "",
            f"training receivers {res.n_train}, held-out receivers {res.n_heldout}", "",
            "| scheme | tuned | train | held-out | tune ms (evals; first, median step) | grid best | grid train "
-           "| grid held-out | grid ms (evals) | oracle (train) | start train |",
-           "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+           "| grid held-out | grid ms (evals) | oracle (train) | start train | start held-out | 1-D scan best "
+           "| scan train (evals) | tuned / scan |",
+           "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for r in res.comparison:
         out.append(f"| {r['scheme']} | {r['tuned_params']} | {_fmt(r['tuned_train'])} | {_fmt(r['tuned_heldout'])} "
                    f"| {r['tuned_ms']:.0f} ({r['tuned_evaluations']}; {r['first_step_ms']:.1f}, {r['step_ms']:.1f}) "
                    f"| {r['grid_params']} | {_fmt(r['grid_train'])} "
                    f"| {_fmt(r['grid_heldout'])} | {r['grid_ms']:.0f} ({r['grid_evaluations']}) "
-                   f"| {_fmt(r['oracle'])} | {_fmt(r['start_train'])} |")
+                   f"| {_fmt(r['oracle'])} | {_fmt(r['start_train'])} | {_fmt(r['start_heldout'])} "
+                   f"| {r['scan_params']} | {_fmt(r['scan_train'])} ({r['scan_evaluations']}) "
+                   f"| {_fmt(r['tuned_train'] / r['scan_train']) if r['scan_train'] > 0 else '-'} |")
+    checks = [(e["scheme"], k, g) for e in res.schemes for k, g in (e.get("gradcheck") or {}).items()]
+    if checks:
+        out += ["", f"## gradient check (relaxed loss at the start, temperature {res.spec.temperature[0]:g} texel; "
+                f"central difference, half step {GRADCHECK_STEP:g} texel's worth, numpy float64)", "",
+                "| scheme | parameter | AD | central difference | relative error |", "| --- | --- | --- | --- | --- |"]
+        out += [f"| {n} | {k} | {g['ad']:.6g} | {g['fd']:.6g} | {_fmt(g['rel_error'])} |" for n, k, g in checks]
     if res.bias_map:
         b = res.bias_map
         bg = b["best_global"]
-        out += ["", "## learned bias map", "",
-                f"{b['blocks']} blocks of {b['block']} x {b['block']} texels ({b['blocks_trained']} with training "
-                f"receivers; {_fmt(b['heldout_covered_fraction'])} of held-out receivers fall in them), unit "
-                f"{b['unit']}, started from {b['init_from']} (per map: "
-                f"{', '.join(f'{x:.4g}' for x in b['init'])})", "",
+        if b.get("fit") == "residual":
+            how = (f"a residual in texels over {b['base']}, blocks of {b['block']} x {b['block']} texels fitted "
+                   f"exactly to the training receivers of the blocks within {b['radius']} of each, moved where they "
+                   f"gain at least {b['min_gain']} errors ({b['blocks_moved']} of {b['blocks']} blocks moved)"
+                   if b["chosen"] else f"no residual over {b['base']}: no candidate (block, radius, min_gain) "
+                   f"beat it leaving one training camera out ({b['validation']['none']:g} errors; best candidate "
+                   f"{min((s['errors'] for s in b['validation']['scores']), default=float('nan')):g})")
+            head = f"{how}; {_fmt(b['heldout_covered_fraction'])} of held-out receivers fall in trained blocks"
+        else:
+            head = (f"{b['blocks']} blocks of {b['block']} x {b['block']} texels ({b['blocks_trained']} with training "
+                    f"receivers; {_fmt(b['heldout_covered_fraction'])} of held-out receivers fall in them), unit "
+                    f"{b['unit']}, started from {b['init_from']} (per map: "
+                    f"{', '.join(f'{x:.4g}' for x in b['init'])})")
+        out += ["", "## learned bias map", "", head, "",
                 "| | train | held-out |", "| --- | --- | --- |",
                 f"| learned map | {_fmt(b['train']['objective'])} | {_fmt(b['heldout']['objective'])} |",
                 f"| per-texel oracle (of those views) | {_fmt(b['per_texel_oracle_train'])} "
@@ -980,6 +1314,13 @@ def table_text(res: TuneResult) -> str:
         if bg:
             out.append(f"| best tuned global ({bg['scheme']} {bg['params']}) | {_fmt(bg['train'])} "
                        f"| {_fmt(bg['heldout'])} |")
+        if b.get("heldout_split"):
+            out += ["", "| held-out receivers | n | learned map | best tuned global | per-texel oracle | gap closed |",
+                    "| --- | --- | --- | --- | --- | --- |"]
+            for name, r in b["heldout_split"].items():
+                out.append(f"| in {'trained' if name == 'covered' else 'untrained'} blocks | {r['n_receivers']} "
+                           f"| {_fmt(r['map'])} | {_fmt(r['best_global'])} | {_fmt(r['per_texel_oracle'])} "
+                           f"| {_fmt(r['gap_closed'])} |")
     if res.notes:
         out += ["", "notes: " + "; ".join(res.notes)]
     return "\n".join(out) + "\n"
