@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 
 import drjit as dr
 
-from ..maps.vsv import MAX_ALPHA, OCCUPANCY, voxel_lit
+from ..maps.vsv import voxel_lit
+from .vsv import Params as GridParams
 from .base import no_shift
 
 NAME = "vsv_epsilon"
@@ -26,14 +27,10 @@ VIEWS = ("vsv",)
 
 
 @dataclass(frozen=True)
-class Params:
+class Params(GridParams):
     """The epsilon's fraction of the scene's diagonal, the grid's alpha resolution and occupancy rule."""
     K: float = field(default=0.01, metadata={"doc": "epsilon toward the light as a fraction of the scene's diagonal",
                                              "min": 0.0})
-    alpha: int = field(default=256, metadata={"doc": "voxels along each light ray (the grid's alpha axis)",
-                                              "min": 1, "max": MAX_ALPHA})
-    occupancy: str = field(default="centre", metadata={"doc": "a voxel's state: its centre's, or occluded when it "
-                                                              "holds the hit", "choices": OCCUPANCY})
 
 
 def margin(rx, tap, p):
