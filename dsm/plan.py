@@ -25,7 +25,7 @@ import os
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 
-from . import intervals
+from . import intervals, scene_size
 from . import lights as light_types
 from . import schemes as schemes_mod
 from .types import DEFAULT_CAMERA, VIEW_FACES, Config, ConfigError
@@ -46,6 +46,14 @@ STORED_BYTES = 4           # per texel and stored layer (z1, shape, slope, z2)
 # four moments at W = 9, tracemalloc, R = 1024) and the four float32 moments on the device
 MOMENT_BYTES = 120
 MIN_TILE = 1 << 16
+# per triangle of the scene: Mitsuba's mesh buffers, Embree's BVH, the loader's temporaries and
+# the kit's per-triangle tables (spawn extents, closedness); measured as the peak RSS growth of
+# `dsm run` on grid meshes of 1e4 to 1e7 triangles (372 B per triangle at 1e6 and 1e7)
+TRIANGLE_BYTES = 372
+# the process itself (Python, Mitsuba, Dr.Jit's LLVM backend, numpy, matplotlib): the peak RSS of
+# `dsm run` on a 1e4-triangle mesh with a 64^2 camera and a 256^2 map (129 to 220 MiB over runs,
+# with Dr.Jit's kernel cache warm or cold), less those: the middle of that range
+PROCESS_BYTES = 170 << 20
 
 
 @dataclass
@@ -111,6 +119,7 @@ class Plan:
     lambdas: int = 1                                # [oracle] lambda values
     area_samples: dict = field(default_factory=dict)  # (scene, light label) -> an area light's max_samples
     area_short: list = field(default_factory=list)  # area lights whose max_samples cannot reach their tolerance
+    triangles: dict = field(default_factory=dict)   # scene label -> (triangles, the [[scene]] key naming it)
     frames: int = 0                                 # [[motion]]: frames over all paths (maps built per frame, at most)
     contact: object = None                          # [contact]: the ContactSpec of every case's march, None: none
     shrink: float | None = None                     # [map] shrink: casters moved inward (world units), None: off
@@ -147,11 +156,13 @@ class Plan:
         return max((self._scene_peak(s)[0] for s in self.scenes), default=0)
 
     def _scene_peak(self, scene) -> tuple:
-        """(peak bytes, camera part) of one scene: its pixels' buffers plus its largest map."""
+        """(peak bytes, parts) of one scene: the process, its pixels' buffers, its geometry and its
+        largest map; parts names the last three ({"camera", "geometry", "map"}: bytes)."""
         label, w, h, _ = scene
-        base = w * h * PIXEL_BYTES
-        work = max((m.peak_bytes for m in self.maps if m.scene == label), default=0)
-        return base + work, base
+        parts = {"camera": w * h * PIXEL_BYTES,
+                 "geometry": self.triangles.get(label, (0, ""))[0] * TRIANGLE_BYTES,
+                 "map": max((m.peak_bytes for m in self.maps if m.scene == label), default=0)}
+        return PROCESS_BYTES + sum(parts.values()), parts
 
     def warnings(self) -> list:
         """One line per thing a user should know before running: maps cast in tiles to stay
@@ -184,7 +195,9 @@ class Plan:
         lines = [f"plan for {self.config}", f"  cases: {self.cases}",
                  f"  scenes: {len(self.scenes)}, maps: {len(self.maps)}, memory budget {self.budget_bytes * mb:.0f} MB"]
         for label, w, h, lights in self.scenes:
-            lines.append(f"  scene {label}: G-buffer {w}x{h} ({w * h * GBUFFER_BYTES * mb:.1f} MB), lights: "
+            tris = self.triangles.get(label, (0, ""))[0]
+            lines.append(f"  scene {label}: {tris:,} triangles ({tris * TRIANGLE_BYTES * mb:.1f} MB), "
+                         f"G-buffer {w}x{h} ({w * h * GBUFFER_BYTES * mb:.1f} MB), lights: "
                          + ", ".join(f"{lab} ({t})" for lab, t in lights))
         lines.append("  maps (one per scene/light/view/resolution/culling; layers only as the schemes need):")
         lines.append(f"    {'scene':18s} {'light':12s} {'view':16s} {'R':>5s} {'culling':12s} {'layers':22s} "
@@ -211,7 +224,8 @@ class Plan:
         if self.shrink is not None:
             lines.append(f"  caster shrinking: maps cast against a copy of each scene's meshes moved {self.shrink:g} "
                          "inward along their welded vertex normals")
-        lines.append(f"  estimated peak memory: {self.peak_bytes() * mb:.1f} MB")
+        lines.append(f"  estimated peak memory: {self.peak_bytes() * mb:.1f} MB (the process "
+                     f"{PROCESS_BYTES * mb:.0f} MB, camera buffers, geometry and the largest map of a scene)")
         lines += [f"  warning: {w}" for w in self.warnings()]
         return "\n".join(lines)
 
@@ -220,6 +234,7 @@ class Plan:
         return {"cases": self.cases, "rays": self.rays, "rays_bound": self.rays_bound,
                 "oracle_receivers_bound": self.oracle_receivers,
                 "peak_bytes_est": self.peak_bytes(), "budget_bytes": self.budget_bytes,
+                "triangles": {label: t for label, (t, _) in self.triangles.items()},
                 "maps": [{"scene": m.scene, "light": m.light, "view": m.view, "resolution": m.resolution,
                           "culling": m.culling, "layers": list(m.layers), "layered": m.layered,
                           "formats": list(m.formats), "texels": m.texels, "tile": m.tile, "cases": m.cases,
@@ -265,18 +280,23 @@ def check_memory(plan: "Plan", source: str = "<config>", available: int | None =
     available = physical_memory() if available is None else available
     gb = 1 / 2 ** 30
     for scene in plan.scenes:
-        peak, camera = plan._scene_peak(scene)
+        peak, parts = plan._scene_peak(scene)
         if peak <= available:
             continue
         label, w, h, _ = scene
-        if camera >= peak - camera:
-            key, what = "camera.resolution", f"{w}x{h} camera pixels x {PIXEL_BYTES} B = {camera * gb:.1f} GiB"
+        cause = max(parts, key=parts.get)
+        if cause == "camera":
+            key, what = "camera.resolution", f"{w}x{h} camera pixels x {PIXEL_BYTES} B = {parts['camera'] * gb:.1f} GiB"
+        elif cause == "geometry":
+            tris, key = plan.triangles[label]
+            what = f"{tris:,} triangles x {TRIANGLE_BYTES} B = {parts['geometry'] * gb:.1f} GiB"
         else:
             m = max((m for m in plan.maps if m.scene == label), key=lambda m: m.peak_bytes)
             key, what = "map.resolution", (f"the {m.view} map at R={m.resolution} with {'+'.join(m.layers)} "
                                            f"= {m.peak_bytes * gb:.1f} GiB")
         raise ConfigError(source, key, f"scene {label}: the estimated peak memory {peak * gb:.1f} GiB exceeds this "
-                          f"machine's {available * gb:.1f} GiB ({what}); lower {key}")
+                          f"machine's {available * gb:.1f} GiB ({what}); "
+                          + ("use a smaller mesh" if cause == "geometry" else f"lower {key}"))
 
 
 def _xml_root(path, spec=None):
@@ -412,6 +432,15 @@ def reference_shortfall(light) -> str:
             "with a wider interval")
 
 
+def scene_triangles(spec) -> tuple:
+    """(triangles, the [[scene]] key naming the scene) of a scene spec, before it is loaded."""
+    if spec.builtin:
+        from .scenes import builtin_geometry
+        shapes = builtin_geometry(spec.builtin, spec.params)[0]
+        return sum(len(f) for _, f in shapes.values()), f"{spec.where}.builtin"
+    return scene_size.file_triangles(spec.file), f"{spec.where}.file"
+
+
 def make(cfg: Config) -> Plan:
     """The Plan of ``cfg``: a MapPlan per scene/light/view/resolution/culling, each tiled to fit the budget."""
     from .config import absent_files
@@ -435,6 +464,7 @@ def make(cfg: Config) -> Plan:
         lights = scene_lights(sc, cfg)
         specs = scene_light_specs(sc, cfg)
         plan.scenes.append((sc.label, w, h, lights))
+        plan.triangles[sc.label] = scene_triangles(sc)
         for li, (label, ltype) in enumerate(lights):
             shape = specs[li].shape if specs[li] is not None else ""
             if light_types.get(ltype).SOFT:              # a Monte Carlo reference: its samples per receiver

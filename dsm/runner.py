@@ -144,6 +144,7 @@ class Runner:
             # the case images are written as cases finish (so a killed run keeps them): report time
             self.timing["measure_s"] = time.perf_counter() - t0 - self.timing.get("images_s", 0.0)
             self.timing["measure_cpu_s"] = _cpu() - c0
+            self.timing["measure_peak_rss_bytes"] = peak_rss()     # against the plan's peak_bytes_est
             self._write_run_json()
             publish.write_data(self.out, self.record)
             # the report, after every timed measurement, composed from the run's files alone (as
@@ -555,6 +556,13 @@ class Runner:
             return
         # after every case (compact), indented once the run has ended
         report.write_json(self.out / "run.json", self._run_json(), None if self.state == "running" else 1)
+
+
+def peak_rss() -> int:
+    """This process's peak resident memory so far, in bytes (Linux reports kilobytes, macOS bytes)."""
+    import resource
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return int(rss if sys.platform == "darwin" else rss * 1024)
 
 
 def _cpu() -> float:

@@ -2,6 +2,7 @@
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from conftest import base_config
@@ -84,3 +85,38 @@ def test_dsm_plan_prints_before_running(tmp_path):
     bad.write_text('[map]\nview = "sphere"\n[[scheme]]\nname = "none"\n[[scene]]\nbuiltin = "plane"\n')
     p = subprocess.run([sys.executable, "-m", "dsm.cli", "plan", str(bad)], capture_output=True, text=True, timeout=120)
     assert p.returncode == 2 and "map.view" in p.stderr and "cube" in p.stderr
+
+
+def _grid_ply(path, n):
+    """An n x n grid of quads (2 n^2 triangles) with a bump, as a binary little-endian PLY."""
+    xs = np.linspace(-1, 1, n + 1)
+    X, Y = np.meshgrid(xs, xs)
+    v = np.stack([X.ravel(), Y.ravel(), 0.2 * np.exp(-(X.ravel() ** 2 + Y.ravel() ** 2) * 8)], 1).astype("<f4")
+    i = (np.arange(n)[:, None] * (n + 1) + np.arange(n)[None, :]).ravel()
+    f = np.concatenate([np.stack([i, i + 1, i + n + 2], 1), np.stack([i, i + n + 2, i + n + 1], 1)])
+    rec = np.empty(len(f), dtype=[("n", "u1"), ("i", "<i4", 3)])
+    rec["n"], rec["i"] = 3, f
+    head = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(v)}\nproperty float x\nproperty float y\n"
+            f"property float z\nelement face {len(f)}\nproperty list uchar int vertex_indices\nend_header\n")
+    path.write_bytes(head.encode() + v.tobytes() + rec.tobytes())
+    return len(f)
+
+
+@pytest.mark.parametrize("n", [71, 224, 707])
+def test_the_memory_estimate_counts_the_geometry(tmp_path, n):
+    """Meshes of 1e4, 1e5 and 1e6 triangles: the plan counts their triangles from the file's header
+    and its estimated peak is within 0.5x to 2x of the run's measured peak resident memory."""
+    import json
+    tris = _grid_ply(tmp_path / "grid.ply", n)
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('[experiment]\nname = "mem"\n[camera]\nresolution = [64, 64]\n[[scene]]\nfile = "grid.ply"\n'
+                   'up = "z"\n[map]\nresolution = 256\n[[scheme]]\nname = "constant"\n[timing]\nrepeats = 1\n'
+                   '[report]\nimages = "none"\n')
+    p = subprocess.run([sys.executable, "-m", "dsm", "run", str(cfg), "--out", str(tmp_path / "o")],
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr[-2000:]
+    run = json.loads((tmp_path / "o" / "run.json").read_text())
+    assert list(run["plan"]["triangles"].values()) == [tris]
+    est, measured = run["plan"]["peak_bytes_est"], run["timing"]["measure_peak_rss_bytes"]
+    print(f"{tris} triangles: estimate {est / 2 ** 20:.0f} MB, measured peak {measured / 2 ** 20:.0f} MB")
+    assert 0.5 <= est / measured <= 2.0
