@@ -57,7 +57,7 @@ def use_variant(variant: str | None = None, threads: int | None = None) -> str:
         if ver is None or ver[0] < 16:
             found = "none found" if ver is None else ".".join(map(str, ver))
             raise SetupError(f"{LLVM_HINT} (found: {found})")
-    if variant.startswith("cuda") and not _has_cuda():
+    if variant.startswith("cuda") and not has_cuda():
         raise SetupError(f"variant {variant} needs an NVIDIA GPU with CUDA; none found here: use llvm_ad_rgb")
     if threads:
         dr.set_thread_count(threads)
@@ -89,7 +89,7 @@ def exact_math():
     dr.set_flag(dr.JitFlag.FastMath, False)
 
 
-def _has_cuda() -> bool:
+def has_cuda() -> bool:
     """Whether Dr.Jit found a CUDA driver and device (it initializes its backends on import)."""
     import drjit as dr
     try:
