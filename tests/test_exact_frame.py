@@ -50,6 +50,61 @@ def _float64_shadowed(spec, sd, setup):
     return blocked
 
 
+def _blocked64(p, d, tris, chunk=256):
+    """Whether each ray p + t d (t > 1e-4, one direction d for all) meets one of ``tris``: the
+    triangles whose bounds, projected along d, hold the ray's projected origin, then
+    Moller-Trumbore on those pairs (float64)."""
+    ea = np.cross(d, [1.0, 0, 0] if abs(d[0]) < 0.9 else [0, 1.0, 0])
+    ea /= np.linalg.norm(ea)
+    eb = np.cross(d, ea)
+    basis = np.stack([ea, eb], 1)
+    p2, t2 = p @ basis, tris @ basis
+    lo, hi = t2.min(1), t2.max(1)
+    blocked = np.zeros(len(p), bool)
+    for k in range(0, len(p), chunk):
+        q = p2[k:k + chunk, None]
+        r, t = np.nonzero(((q >= lo[None]) & (q <= hi[None])).all(-1))
+        r = r + k
+        t0, e1, e2 = tris[t, 0], tris[t, 1] - tris[t, 0], tris[t, 2] - tris[t, 0]
+        h = np.cross(d, e2)
+        a = (h * e1).sum(1)
+        ok = np.abs(a) > 1e-14
+        inv = np.where(ok, 1 / np.where(ok, a, 1), 0)
+        s_ = p[r] - t0
+        u = (s_ * h).sum(1) * inv
+        qv = np.cross(s_, e1)
+        v = (qv @ d) * inv
+        tt = (qv * e2).sum(1) * inv
+        hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (tt > 1e-4)
+        np.logical_or.at(blocked, r[hit], True)
+    return blocked
+
+
+def test_a_mesh_far_from_the_origin_keeps_its_reference(variant):
+    """The Stanford dragon (47,794 triangles, data/meshes) on its ground at 0, 1e4, 1e5 and 1e6:
+    the same receivers, and shadowed ones equal to a float64 ray-triangle count over the mesh's
+    own vertices at their float64 world positions."""
+    from conftest import MESHES
+    counts = {}
+    for off in OFFSETS:
+        spec = pipeline.scene_spec({"file": str(MESHES / "dragon_vrip_res3.ply"), "translate": [off, 0.5 * off, 0.0]})
+        sd = pipeline.load_scene(spec, (64, 64))
+        setup = pipeline.light_setup(sd, pipeline.gbuffer(sd), sd.own_lights[0], "0")
+        centre = sd.centre if sd.centre is not None else 0.0
+        tris = np.concatenate([np.asarray(sh.vertex_positions_buffer(), np.float64).reshape(-1, 3)[
+            np.asarray(sh.faces_buffer(), np.int64).reshape(-1, 3)] for sh in sd.exact.shapes()]) + centre
+        p = np.stack([np.asarray(c, np.float64) for c in (setup.si.p.x, setup.si.p.y, setup.si.p.z)], 1) + centre
+        d = -np.asarray(setup.light.direction, float) / np.linalg.norm(setup.light.direction)
+        exact64 = _blocked64(p, d, tris)
+        shadowed = ~setup.v_star
+        counts[off] = (len(setup.pixels), int(shadowed.sum()), int((shadowed != exact64).sum()))
+    print("dragon (receivers, shadowed, differing from float64) by offset:", counts)
+    n0, s0, _ = counts[0.0]
+    assert s0 > 100
+    for off, (n, s, diff) in counts.items():
+        assert n == n0 and abs(s - s0) <= max(2, 0.01 * s0) and diff <= max(2, 0.01 * s), (off, counts)
+
+
 @pytest.mark.parametrize("builtin, light", [
     ("plane_box", None),
     ("floating_plate", {"type": "point", "position": [0.4, 0.2, 3.0]}),
