@@ -46,6 +46,7 @@ def assert_nan_only_where_undefined(row):
         "acne_rate": row["n_gt_lit"] == 0, "peterpan_rate": row["n_gt_shadowed"] == 0,
         "error_rate": row["n_receivers"] == 0, "mean_abs_error": row["n_receivers"] == 0,
         "texel_size": row["n_receivers"] == 0, "peterpan_dist_median": row["n_peterpan"] == 0,
+        "f32_step": row["n_receivers"] == 0, "texel_f32_steps": row["n_receivers"] == 0,
         "n_seam": not seams, "seam_error_rate": not seams or row["n_seam"] == 0,
         "off_seam_error_rate": not seams or row["n_seam"] == row["n_receivers"],
         "backface_lit_rate": row["n_backfacing"] == 0,
