@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 from . import intervals
 from . import lights as light_types
 from . import schemes as schemes_mod
-from .types import DEFAULT_CAMERA, VIEW_FACES, Config, ConfigError
+from .types import DEFAULT_CAMERA, POINT_VIEWS, VIEW_FACES, Config, ConfigError
 from .shadowmap import MAX_STEPS
 
 # bytes per pixel / texel, measured with Dr.Jit's allocation watermark on llvm_ad_rgb (the
@@ -449,10 +449,12 @@ def make(cfg: Config) -> Plan:
                         # engine presets are combined instances per light type, resolved here
                         group = [schemes_mod.preset_for_light(s, ltype) for s in config_group
                                  if schemes_mod.reads_view(s, view)]     # a VSV grid: its own lookups only
-                        if not group:
+                        # moments are a depth map's (a voxel grid holds no depth), on its culling-none map
+                        moments = (cfg.map.moments if culling == "none" and view not in schemes_mod.EXCLUSIVE_VIEWS
+                                   else ())
+                        if not group and not moments:
                             continue
                         needs = schemes_mod.needs_of(group)
-                        moments = cfg.map.moments if culling == "none" else ()
                         m = MapPlan(sc.label, label, view, R, faces, culling, tuple(sorted(needs)),
                                     "z2" in needs or culling != "none", fmts,
                                     [f"{s.name} {s.label}".strip() for s in group]
@@ -461,6 +463,10 @@ def make(cfg: Config) -> Plan:
                                     specs=tuple(group), scene_index=si, light_index=li, cascade=cascade,
                                     moments=moments)
                         plan.maps.append(m)
+    if cfg.map.moments and plan.maps and not any(m.moments for m in plan.maps):
+        raise ConfigError(cfg.source, "map.kind", "pre-filtered maps are built from a depth map and no light of the "
+                          "config's scenes gets one (a vsv view is a voxel grid); add a depth view to map.view",
+                          POINT_VIEWS)
     if cfg.map.cascade and plan.maps and not any(m.cascade is not None for m in plan.maps):
         raise ConfigError(cfg.source, "map.cascades", "cascades are for directional lights and no light of the "
                           "config's scenes is directional; remove map.cascades or add a directional [[light]]")
