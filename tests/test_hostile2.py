@@ -25,6 +25,22 @@ def _one_line(err, *words):
         assert w in err[0], (w, err[0])
 
 
+def _toml(d: dict, prefix: str = "") -> str:
+    """``d`` as TOML (scalars, lists of scalars, tables and arrays of tables): the config a user writes."""
+    val = lambda v: ("true" if v else "false") if isinstance(v, bool) else repr(v) if not isinstance(v, str) else f'"{v}"'
+    flat = lambda v: "[" + ", ".join(val(x) for x in v) + "]" if isinstance(v, list) else val(v)
+    plain = {k: v for k, v in d.items() if not isinstance(v, dict) and not (isinstance(v, list) and v and isinstance(v[0], dict))}
+    out = [f"{k} = {flat(v)}" for k, v in plain.items()]
+    for k, v in d.items():
+        name = f"{prefix}{k}"
+        if isinstance(v, dict):
+            out += [f"[{name}]", _toml(v, name + ".")]
+        elif isinstance(v, list) and v and isinstance(v[0], dict):
+            for t in v:
+                out += [f"[[{name}]]", _toml(t, name + ".")]
+    return "\n".join(out) + "\n"
+
+
 # ---------------------------------------------------------------- pre-filtered maps
 
 def _point_light_cfg(views, kinds, schemes):
@@ -69,3 +85,48 @@ def test_pre_filtered_kinds_with_only_a_voxel_grid_are_a_config_error(capsys, tm
     with pytest.raises(ConfigError) as e:
         plan.make(cfg)
     assert e.value.key == "map.kind" and "cube" in str(e.value)
+
+
+# ---------------------------------------------------------------- dsm tune's table
+
+CAMS3 = [{"position": [3.0, -5.0, 4.0], "target": [0.0, 0.0, 0.0]},
+         {"position": [-3.0, -5.0, 4.0], "target": [0.0, 0.0, 0.0]},
+         {"position": [-4.0, -3.0, 5.0], "target": [0.0, 0.0, 0.0], "role": "heldout"}]
+
+
+def _tune_cfg(tune, schemes=({"name": "constant"},)):
+    return {"experiment": {"name": "t"}, "camera": {"resolution": [32, 32]}, "scene": [{"builtin": "plane"}],
+            "map": {"resolution": 32}, "scheme": list(schemes), "tune": tune}
+
+
+@pytest.mark.parametrize("tune,key,words", [
+    # an empty candidate list was an IndexError traceback
+    ({"camera": CAMS3, "bias_map": {"fit": "residual", "block": []}}, "tune.bias_map.block", ["empty"]),
+    ({"camera": CAMS3, "bias_map": {"fit": "residual", "radius": []}}, "tune.bias_map.radius", ["empty"]),
+    ({"camera": CAMS3, "bias_map": {"block": []}}, "tune.bias_map.block", ["empty"]),
+    # one scan point is the box's low end alone: table.md gave "tuned / scan" against it
+    ({"scan": 1}, "tune.scan", ["both ends"]),
+    # Adam's keys were silently ignored by the exact residual fit
+    ({"camera": CAMS3, "bias_map": {"fit": "residual", "unit": "world"}}, "tune.bias_map.unit", ["adam"]),
+    ({"camera": CAMS3, "bias_map": {"fit": "residual", "lr": 0.1}}, "tune.bias_map.lr", ["adam"]),
+    ({"camera": CAMS3, "bias_map": {"fit": "residual", "steps": 5}}, "tune.bias_map.steps", ["adam"]),
+])
+def test_bad_tune_input_is_one_config_error(tmp_path, capsys, tune, key, words):
+    path = tmp_path / "c.toml"
+    path.write_text(_toml(_tune_cfg(tune)))
+    rc, err = _cli(capsys, "tune", path, "--out", tmp_path / "out")
+    assert rc == 2
+    _one_line(err, str(path), key, *words)
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+def test_an_infinite_start_names_the_schemes_index_and_tune_params():
+    """combined's default slope_clamp is inf: the error named "scheme.slope_clamp" (no index)."""
+    import dsm.tune as tu
+    from dsm.config import coerce
+    cfg = _tune_cfg({}, [{"name": "constant"}, {"name": "combined"}])
+    with pytest.raises(ConfigError) as e:
+        tu.parse_tune(coerce(cfg))
+    assert e.value.key == "scheme[1].slope_clamp" and "tune.params.combined" in str(e.value)
+    cfg["tune"] = {"params": {"combined": ["depth_bias"]}}
+    assert tu.parse_tune(coerce(cfg)).spec.params["combined"] == ("depth_bias",)
