@@ -164,7 +164,7 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
         # a scene's own lights are known only once it is loaded; explicit ones are known now
         raise ConfigError(source, "map.view", "views are for point lights and no [[light]] is a point light "
                           f"(the lights are {', '.join(sorted({l.type for l in lights}))}); remove map.view or "
-                          "add a point light")
+                          "add a point light" + (" (vsv: or a spot light)" if "vsv" in views else ""))
     cascade = _parse_cascades(m, source)
     if cascade and all(l.type not in ("directional", "scene") for l in lights):
         raise ConfigError(source, "map.cascades", "cascades are for directional lights and no [[light]] is "

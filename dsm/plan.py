@@ -412,6 +412,23 @@ def reference_shortfall(light) -> str:
             "with a wider interval")
 
 
+def _check_every_scheme_read(cfg: Config, used: set, views_seen: set):
+    """ConfigError where a [[scheme]] instance reads no map the config's lights get (it would be
+    dropped without a case): a VSV lookup without a point or spot light, a depth scheme where
+    map.view gives the point lights only a voxel grid."""
+    if not cfg.schemes or all(sc.missing for sc in cfg.scenes):   # optional files absent: nothing planned
+        return
+    for s in cfg.schemes:
+        if id(s) in used:
+            continue
+        own = getattr(schemes_mod.get(s.name), "VIEWS", None)
+        why = (f"it reads only a {' or '.join(own)} grid, which point and spot lights get"
+               if own is not None else "it reads a depth map: add a depth view to map.view")
+        raise ConfigError(cfg.source, "map.view", f"scheme {s.name} {s.label}".rstrip() + " reads no map of this "
+                          f"config (its lights get {', '.join(sorted(views_seen)) or 'no'} views): {why}",
+                          tuple(own) if own is not None else POINT_VIEWS)
+
+
 def make(cfg: Config) -> Plan:
     """The Plan of ``cfg``: a MapPlan per scene/light/view/resolution/culling, each tiled to fit the budget."""
     from .config import absent_files
@@ -425,6 +442,7 @@ def make(cfg: Config) -> Plan:
         groups.setdefault(schemes_mod.culling_of(spec.params), []).append(spec)
     if cfg.map.moments:       # moment maps are built from the first layer, as rays see it: culling none
         groups.setdefault("none", [])
+    used, views_seen = set(), set()        # the scheme instances some map reads; the views the lights get
     for si, sc in enumerate(cfg.scenes):
         if sc.missing:
             continue
@@ -447,8 +465,10 @@ def make(cfg: Config) -> Plan:
                 for R in cfg.map.resolutions_for(faces):
                     for culling, config_group in groups.items():
                         # engine presets are combined instances per light type, resolved here
-                        group = [schemes_mod.preset_for_light(s, ltype) for s in config_group
-                                 if schemes_mod.reads_view(s, view)]     # a VSV grid: its own lookups only
+                        read = [s for s in config_group if schemes_mod.reads_view(s, view)]  # a VSV grid: its own
+                        used.update(id(s) for s in read)
+                        views_seen.add(view)
+                        group = [schemes_mod.preset_for_light(s, ltype) for s in read]
                         # moments are a depth map's (a voxel grid holds no depth), on its culling-none map
                         moments = (cfg.map.moments if culling == "none" and view not in schemes_mod.EXCLUSIVE_VIEWS
                                    else ())
@@ -463,6 +483,7 @@ def make(cfg: Config) -> Plan:
                                     specs=tuple(group), scene_index=si, light_index=li, cascade=cascade,
                                     moments=moments)
                         plan.maps.append(m)
+    _check_every_scheme_read(cfg, used, views_seen)
     if cfg.map.moments and plan.maps and not any(m.moments for m in plan.maps):
         raise ConfigError(cfg.source, "map.kind", "pre-filtered maps are built from a depth map and no light of the "
                           "config's scenes gets one (a vsv view is a voxel grid); add a depth view to map.view",
