@@ -170,3 +170,36 @@ def test_a_vsv_view_for_a_directional_light_names_spot_lights_too(tmp_path, caps
     rc, err = _cli(capsys, "plan", path)
     assert rc == 2
     _one_line(err, "map.view", "point light", "spot light")
+
+
+# ---------------------------------------------------------------- contact shadows under an area light
+
+def test_contact_columns_under_an_area_light_use_its_lit_and_umbra_regions():
+    """Receivers by V* = 1, 1 (lit), 0, 0 (umbra), 0.5, 0.5 (penumbra, in neither count, as the core
+    metrics): the march darkens receivers 0, 2, 4, 5. By hand: false shadow 1 (receiver 0; the
+    penumbra's receiver 4 was counted too), recovered 1 (receiver 2), nothing missed; after it
+    acne 1 of 2 lit, peter-panning 0 of 2 umbra, error 1 of 6, mean |V - V*| (1 + .5 + .5) / 6."""
+    import numpy as np
+    from dsm import contact
+    v_frac = np.array([1.0, 1.0, 0.0, 0.0, 0.5, 0.5])
+    v = np.array([1.0, 1.0, 1.0, 0.0, 1.0, 0.0])
+    occ = np.array([True, False, True, False, True, True])
+    m = contact.case_metrics(v, v_frac >= 0.5, occ, v_frac)     # as the runner passes them
+    assert (m["n_contact_false"], m["n_contact_recovered"], m["n_contact_missed"]) == (1, 1, 0)
+    assert m["contact_acne_rate"] == 0.5 and m["contact_peterpan_rate"] == 0.0
+    assert m["contact_error_rate"] == pytest.approx(1 / 6) and m["contact_mean_abs_error"] == pytest.approx(2 / 6)
+
+
+def test_an_area_light_runs_contact_error_rate_is_the_documented_sum(run_dict):
+    """design.md: contact_error_rate = (n_acne + n_contact_false + n_peterpan - n_contact_recovered)
+    / n_receivers. Under an area light recovered (46) exceeded n_peterpan (0) and the sum failed."""
+    res = run_dict(base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [48, 48]},
+                               light=[{"type": "area", "shape": "rectangle", "position": [0.6, -0.4, 3.0],
+                                       "size": 0.5, "max_samples": 512}],
+                               map={"resolution": 64}, contact={"length": "4 texel"},
+                               scheme=[{"name": "constant", "bias": "1 texel"}]))
+    (r,) = res.rows
+    assert r["n_penumbra"] > 0 and r["n_contact_false"] > 0
+    assert r["n_contact_recovered"] <= r["n_peterpan"] and r["n_contact_missed"] <= r["n_peterpan"]
+    assert r["contact_error_rate"] == pytest.approx(
+        (r["n_acne"] + r["n_contact_false"] + r["n_peterpan"] - r["n_contact_recovered"]) / r["n_receivers"])
