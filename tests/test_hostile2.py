@@ -203,3 +203,50 @@ def test_an_area_light_runs_contact_error_rate_is_the_documented_sum(run_dict):
     assert r["n_contact_recovered"] <= r["n_peterpan"] and r["n_contact_missed"] <= r["n_peterpan"]
     assert r["contact_error_rate"] == pytest.approx(
         (r["n_acne"] + r["n_contact_false"] + r["n_peterpan"] - r["n_contact_recovered"]) / r["n_receivers"])
+
+
+# ---------------------------------------------------------------- far from the origin
+
+BUNNY = Path(__file__).resolve().parent.parent / "data" / "meshes" / "mitsuba_bunny.ply"
+
+
+def _far_run(tmp_path, capsys, text):
+    path = tmp_path / "c.toml"
+    path.write_text('[experiment]\nname = "f"\n' + text + '[map]\nresolution = 16\n[[scheme]]\nname = "none"\n'
+                    '[timing]\nrepeats = 1\n')
+    rc, err = _cli(capsys, "run", path, "--out", tmp_path / "out")
+    return rc, err, path
+
+
+def test_a_mesh_file_moved_beyond_what_float32_holds_names_translate(tmp_path, capsys):
+    """The bunny and its ground (0.75 across) at 1e7, where float32 steps are 1: the error named
+    the file and "shape 'ground' has only degenerate triangles"; a built-in's names translate."""
+    rc, err, path = _far_run(tmp_path, capsys, f'[camera]\nresolution = [16, 16]\n[[scene]]\nfile = "{BUNNY}"\n'
+                                               'translate = [1e7, 0, 0]\n')
+    assert rc == 2
+    _one_line(err, str(path), "scene[0].translate", "float32", "steps of 1,")
+    assert not (tmp_path / "out" / "metrics.csv").exists()
+
+
+def test_a_mesh_file_where_float32_still_holds_it_loads(tmp_path):
+    """At 1e5 (steps of 1/128) the bunny's ground spans about 96 steps: still loaded."""
+    from dsm import pipeline
+    sd = pipeline.load_scene(pipeline.scene_spec({"file": str(BUNNY), "translate": [1e5, 0, 0]}), (16, 16))
+    assert sd.bbox[0][0] > 1e5 - 1 and sd.bbox[1][0] < 1e5 + 1
+
+
+def test_camera_relative_with_a_camera_far_from_the_scene_names_the_camera(tmp_path, capsys):
+    """Rendered relative to a camera 1e8 away, plane_box (8 across) lies where float32 steps are 8:
+    the error named the built-in and its degenerate ground. In world coordinates it runs."""
+    cam = '[camera]\nresolution = [16, 16]\nposition = [1e8, 0, 3]\ntarget = [0, 0, 0]\nfov = 0.000004\n'
+    rc, err, path = _far_run(tmp_path, capsys, cam + '[[scene]]\nbuiltin = "plane_box"\nprecision = "camera_relative"\n')
+    assert rc == 2
+    _one_line(err, str(path), "camera.position", "camera_relative", "steps of 8,")
+
+
+def test_the_precision_line_does_not_suggest_camera_relative_to_camera_relative_cases():
+    from dsm import headroom
+    row = lambda scene: {"scene": scene, "texel_f32_steps": 0.5, "f32_step": 0.0625}
+    assert "precision = \"camera_relative\"" in headroom.summary([row("plane_box(translate=[1e+06,0,0])")])
+    line = headroom.summary([row("plane_box(precision=camera_relative)")])
+    assert "precision = \"camera_relative\" shows" not in line and "camera far from their receivers" in line
