@@ -250,3 +250,18 @@ def test_the_precision_line_does_not_suggest_camera_relative_to_camera_relative_
     assert "precision = \"camera_relative\"" in headroom.summary([row("plane_box(translate=[1e+06,0,0])")])
     line = headroom.summary([row("plane_box(precision=camera_relative)")])
     assert "precision = \"camera_relative\" shows" not in line and "camera far from their receivers" in line
+
+
+def test_a_motion_case_far_from_the_origin_reports_its_float32_headroom(run_dict):
+    """Motion rows left f32_step and texel_f32_steps empty, so a precision-limited motion case
+    was never flagged. Receivers about 1e5 from the origin lie where float32's step is 2^-7
+    (1e5 is in [2^16, 2^17)); at the origin plane_box's receivers (within 3 of it) have steps
+    of at most 2^-22."""
+    res = run_dict(base_config(scene=[{"builtin": "plane_box", "translate": [[0, 0, 0], [1e5, 0, 0]]}],
+                               camera={"resolution": [32, 32]}, map={"resolution": 64},
+                               motion=[{"frames": 2, "camera": "dolly", "offset": [0.0, 0.5, 0.0], "points": 200}],
+                               scheme=[{"name": "constant", "bias": "1 texel"}]))
+    near, far = res.rows
+    assert far["f32_step"] == 2.0 ** -7 and near["f32_step"] <= 2.0 ** -22
+    assert far["texel_f32_steps"] < 64 <= near["texel_f32_steps"]
+    assert res.run["precision_limited"] == [far["case"]]
