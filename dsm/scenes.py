@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
@@ -173,7 +173,11 @@ def parse_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]
                 for p in specs]
     closed = _closed_override(t, source, where)
     if path.suffix.lower() == ".xml" and any(p != FileParams() for p in specs):
-        raise ConfigError(source, where, "an XML scene takes no scale/translate/up/ground keys", ("file",))
+        given = [f.name for f in fields(FileParams) if any(getattr(p, f.name) != getattr(FileParams(), f.name)
+                                                            for p in specs)]
+        raise ConfigError(source, f"{where}.{given[0]}", "an XML scene takes no "
+                          f"{'/'.join(f.name for f in fields(FileParams))} keys: its geometry, camera and lights "
+                          "are the file's, in its own world coordinates", ("file", "closed", "optional"))
     return [SceneSpec(file=path, params=p, label=_label(path.stem, p, FileParams()), closed=closed, source=source,
                       where=where) for p in specs]
 

@@ -265,3 +265,18 @@ def test_a_motion_case_far_from_the_origin_reports_its_float32_headroom(run_dict
     assert far["f32_step"] == 2.0 ** -7 and near["f32_step"] <= 2.0 ** -22
     assert far["texel_f32_steps"] < 64 <= near["texel_f32_steps"]
     assert res.run["precision_limited"] == [far["case"]]
+
+
+CBOX = Path(__file__).resolve().parent.parent / "data" / "meshes" / "cbox_mitsuba" / "cbox.xml"
+
+
+@pytest.mark.parametrize("key,value", [("precision", '"camera_relative"'), ("precision", '["world", "camera_relative"]'),
+                                       ("translate", "[1e5, 0, 0]")])
+def test_a_placement_key_on_an_xml_scene_names_that_key(tmp_path, capsys, key, value):
+    """The error named scene[0] and "scale/translate/up/ground", not precision, which was the key given."""
+    path = tmp_path / "c.toml"
+    path.write_text(f'[experiment]\nname = "x"\n[[scene]]\nfile = "{CBOX}"\n{key} = {value}\n'
+                    '[map]\nresolution = 16\n[[scheme]]\nname = "none"\n')
+    rc, err = _cli(capsys, "plan", path)
+    assert rc == 2
+    _one_line(err, str(path), f"scene[0].{key}:", "XML", "precision")
