@@ -280,3 +280,27 @@ def test_a_placement_key_on_an_xml_scene_names_that_key(tmp_path, capsys, key, v
     rc, err = _cli(capsys, "plan", path)
     assert rc == 2
     _one_line(err, str(path), f"scene[0].{key}:", "XML", "precision")
+
+
+# ---------------------------------------------------------------- area-light reference
+
+def test_an_area_reference_in_chunks_is_the_reference_in_one_launch(monkeypatch):
+    """A stage launched every receiver's samples at once: max_samples = 2^20 over a few thousand
+    receivers passed 2^32 lanes (Dr.Jit's UInt32 index) and the memory. Now receivers go in
+    chunks of at most STAGE_LANES rays; each receiver's samples have their own seeds, so V* is
+    the same: here with chunks of one to a few receivers against one launch per stage."""
+    import numpy as np
+    from dsm import area, config, pipeline
+    cfg = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [24, 24]},
+                      light=[{"type": "area", "shape": "rectangle", "position": [0.6, -0.4, 3.0], "size": 0.5,
+                              "max_samples": 512, "tolerance": 0.05}])
+    sd = pipeline.load_scene(pipeline.scene_spec({"builtin": "plane_box"}), (24, 24))
+    light = sd.lights_for(config.parse(cfg).lights)[0]
+    gb = pipeline.gbuffer(sd)
+    monkeypatch.setattr(area, "STAGE_LANES", 1 << 30)
+    whole = pipeline.light_setup(sd, gb, light, "a").ref
+    monkeypatch.setattr(area, "STAGE_LANES", 40)
+    chunked = pipeline.light_setup(sd, gb, light, "a").ref
+    assert len(whole.hits) > 100 and len(np.unique(whole.samples)) >= 3    # receivers stopped at several stages
+    assert np.array_equal(whole.hits, chunked.hits) and np.array_equal(whole.samples, chunked.samples)
+    assert np.array_equal(whole.low, chunked.low) and np.array_equal(whole.high, chunked.high)
