@@ -98,6 +98,17 @@ def _plain_name(name, source):
     return name
 
 
+def _check_light_scenes(lights, scenes, source):
+    """ConfigError where a light's ``scenes = [...]`` names no scene of the config (the light would
+    light nothing, silently)."""
+    for i, light in enumerate(lights):
+        for name in light.scenes:
+            if not any(replace(light, scenes=(name,)).applies_to(sc.label) for sc in scenes):
+                firsts = {sc.label.replace("(", " ").split()[0] for sc in scenes}
+                raise ConfigError(source, f"light[{i}].scenes", f"{name!r} names no scene of the config (a scene's "
+                                  "label, or its first word)", sorted(firsts | {sc.label for sc in scenes}))
+
+
 def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Config:
     """The Config of raw TOML tables ``raw`` from ``source`` (files relative to ``base``), every value checked."""
     from . import scenes as scenes_mod
@@ -140,6 +151,7 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
         lights.append(_parse_light(t, source, f"light[{i}]"))
     if not lights:
         lights = [LightSpec("scene", label="scene")]
+    _check_light_scenes(lights, scenes, source)
 
     m = _table(raw, "map", source)
     check_keys(m, ("resolution", "texels", "filter", "format", "view", "shrink") + CASCADE_KEYS + KIND_KEYS, source,

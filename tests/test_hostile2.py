@@ -304,3 +304,17 @@ def test_an_area_reference_in_chunks_is_the_reference_in_one_launch(monkeypatch)
     assert len(whole.hits) > 100 and len(np.unique(whole.samples)) >= 3    # receivers stopped at several stages
     assert np.array_equal(whole.hits, chunked.hits) and np.array_equal(whole.samples, chunked.samples)
     assert np.array_equal(whole.low, chunked.low) and np.array_equal(whole.high, chunked.high)
+
+
+def test_a_lights_scenes_that_name_no_scene_are_a_config_error(tmp_path, capsys):
+    """scenes = ["plane"] beside only plane_box lit nothing: a run of 0 cases, exit 0."""
+    light = {"type": "area", "shape": "rectangle", "position": [0.6, -0.4, 3.0], "size": 0.5}
+    scene = [{"builtin": "plane_box", "precision": ["world", "camera_relative"]}]
+    path = tmp_path / "c.toml"
+    path.write_text(_toml(base_config(scene=scene, light=[{**light, "scenes": ["plane"]}])))
+    rc, err = _cli(capsys, "plan", path)
+    assert rc == 2
+    _one_line(err, str(path), "light[0].scenes", "'plane'", "plane_box(precision=camera_relative)")
+    for names, lit in ((["plane_box"], 2), (["plane_box(precision=camera_relative)"], 1)):   # a first word; a label
+        p = plan.make(config.parse(base_config(scene=scene, light=[{**light, "scenes": names}]), "<test>"))
+        assert sum(1 for _, _, _, lights in p.scenes if lights) == lit
