@@ -706,6 +706,24 @@ def _check_options(cfg, spec, sd):
                               + (f"{flat[0]} is not a triangle mesh; remove map.shrink or give it as a mesh"
                                  if len(flat) == 1 else f"{', '.join(flat[:3])} are not triangle meshes; remove "
                                  "map.shrink or give them as meshes"))
+        _check_shrink_fits(cfg.shrink, spec, sd)
+
+
+def _check_shrink_fits(d: float, spec, sd):
+    """ConfigError where ``[map] shrink`` is at least half the thinnest box extent of a closed mesh:
+    its copy moved ``d`` inward passes through itself and comes out inside out (a caster larger
+    than the shape, facing in)."""
+    from .closedness import shape_closedness
+    for i, (name, shape) in enumerate(zip(sd.shape_names, sd.scene.shapes())):
+        closed, why = shape_closedness(shape)
+        if not closed or "wound inward" in why:        # open shapes and rooms move, they do not invert
+            continue
+        bb = shape.bbox()
+        thin = float(np.min(np.array(bb.max, float).ravel() - np.array(bb.min, float).ravel()))
+        if d >= thin / 2:
+            raise ConfigError(_src(spec), "map.shrink", f"{spec.where}: {d:g} is at least half the thinnest extent "
+                              f"of the closed shape {name!r} ({thin:.3g} across): moved that far inward it turns "
+                              f"inside out; give less than {thin / 2:.3g}")
 
 
 def _src(spec) -> str:

@@ -318,3 +318,23 @@ def test_a_lights_scenes_that_name_no_scene_are_a_config_error(tmp_path, capsys)
     for names, lit in ((["plane_box"], 2), (["plane_box(precision=camera_relative)"], 1)):   # a first word; a label
         p = plan.make(config.parse(base_config(scene=scene, light=[{**light, "scenes": names}]), "<test>"))
         assert sum(1 for _, _, _, lights in p.scenes if lights) == lit
+
+
+# ---------------------------------------------------------------- caster shrinking
+
+def test_a_shrink_that_turns_a_closed_caster_inside_out_is_a_config_error(tmp_path, capsys):
+    """plane_box's box is 1 x 1 x 1 (a closed cube): shrunk by 0.5 or more its faces cross and it
+    comes out inside out, a larger caster facing in (the watertight bunny shrunk by 5 shadowed
+    92 % of the lit receivers, exit 0). The ground is open: it only moves down. Just below half
+    it still runs."""
+    from dsm import scenes
+    cfg = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [16, 16]},
+                      map={"resolution": 16, "shrink": 0.5})
+    path = tmp_path / "c.toml"
+    path.write_text(_toml(cfg))
+    rc, err = _cli(capsys, "run", path, "--out", tmp_path / "out")
+    assert rc == 2
+    _one_line(err, str(path), "map.shrink", "'box'", "inside out", "0.5")
+    assert not (tmp_path / "out" / "metrics.csv").exists()
+    scenes.check(config.parse(base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [16, 16]},
+                                          map={"resolution": 16, "shrink": 0.49}), "<test>"))
