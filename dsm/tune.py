@@ -182,6 +182,12 @@ def parse_tune(cfg) -> TuneConfig:
     if not isinstance(gradcheck, bool):
         raise ConfigError(src, "tune.gradcheck", f"expected true or false, got {gradcheck!r}", (True, False))
 
+    from . import lights as light_types
+    for i, light in enumerate(cfg.lights):      # the objective and oracles count a hard V*, one ray per receiver
+        if light.type in light_types.REGISTRY and light_types.is_soft(light):
+            raise ConfigError(src, f"light[{i}].type", "dsm tune's objective and oracles are those of a hard V* "
+                              "(one ray per receiver); an area light's reference is a fraction: remove it (dsm run "
+                              "measures it)", tuple(t for t in light_types.REGISTRY if t != light.type))
     if cfg.map.moments:           # dsm tune's objective relaxes a margin per tap: depth schemes only
         raise ConfigError(src, "map.kind", "dsm tune tunes depth schemes; remove the pre-filtered kinds from "
                           "map.kind (dsm run measures them)", ("depth",))

@@ -338,3 +338,15 @@ def test_a_shrink_that_turns_a_closed_caster_inside_out_is_a_config_error(tmp_pa
     assert not (tmp_path / "out" / "metrics.csv").exists()
     scenes.check(config.parse(base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [16, 16]},
                                           map={"resolution": 16, "shrink": 0.49}), "<test>"))
+
+
+def test_dsm_tune_refuses_an_area_light(tmp_path, capsys):
+    """It tuned against V* >= 0.5 and an "oracle" of that hard V*, where dsm run counts acne in the
+    lit region alone and computes no oracle for an area light: a number where none is defined."""
+    cfg = _tune_cfg({}, [{"name": "constant"}])
+    cfg["light"] = [{"type": "area", "shape": "rectangle", "position": [0.6, -0.4, 3.0], "size": 0.5}]
+    path = tmp_path / "c.toml"
+    path.write_text(_toml(cfg))
+    rc, err = _cli(capsys, "tune", path, "--out", tmp_path / "out")
+    assert rc == 2
+    _one_line(err, str(path), "light[0].type", "area", "directional")
