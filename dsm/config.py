@@ -551,6 +551,11 @@ def _parse_light(t: dict, source: str, where: str) -> LightSpec:
 def _check_motion_lights(motion, lights_of_config, source):
     """Each [[motion]] light path needs a light whose type follows it (or the scene's own)."""
     from . import lights
+    soft = [j for j, l in enumerate(lights_of_config) if l.type in lights.REGISTRY and lights.is_soft(l)]
+    if motion and soft:       # the fixed points' V* is one ray; an area light's reference is a fraction per frame
+        raise ConfigError(source, f"light[{soft[0]}].type", "[[motion]] measures hard lights: its fixed points' V* "
+                          "is one ray, where an area light's is a Monte Carlo fraction; remove the area light or "
+                          "the [[motion]] paths", tuple(t for t, m in lights.REGISTRY.items() if not m.SOFT))
     for i, mo in enumerate(motion):
         if mo.light == "none":
             continue

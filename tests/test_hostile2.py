@@ -350,3 +350,17 @@ def test_dsm_tune_refuses_an_area_light(tmp_path, capsys):
     rc, err = _cli(capsys, "tune", path, "--out", tmp_path / "out")
     assert rc == 2
     _one_line(err, str(path), "light[0].type", "area", "directional")
+
+
+def test_motion_with_an_area_light_is_a_config_error(tmp_path, capsys):
+    """It ran: its fixed points' V* was one ray to the light's centre, and its row summed the
+    frames' counts beside the last frame's penumbra count and errors (n_gt_lit + n_gt_shadowed +
+    n_penumbra was not n_receivers)."""
+    cfg = base_config(scene=[{"builtin": "plane_box"}],
+                      light=[{"type": "area", "shape": "rectangle", "position": [0.6, -0.4, 3.0], "size": 0.5}],
+                      motion=[{"frames": 2, "camera": "dolly", "offset": [0.0, 0.5, 0.0], "points": 100}])
+    path = tmp_path / "c.toml"
+    path.write_text(_toml(cfg))
+    rc, err = _cli(capsys, "plan", path)
+    assert rc == 2
+    _one_line(err, str(path), "light[0].type", "[[motion]]", "point")
