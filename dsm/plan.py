@@ -484,6 +484,13 @@ def make(cfg: Config) -> Plan:
                                     moments=moments)
                         plan.maps.append(m)
     _check_every_scheme_read(cfg, used, views_seen)
+    contact = getattr(cfg, "contact", None)
+    grids = sorted(views_seen & schemes_mod.EXCLUSIVE_VIEWS)
+    for key in ("length", "thickness") if contact is not None and grids else ():
+        if getattr(contact, key).unit == "range":     # a voxel grid's depth is a fraction of its alpha range
+            raise ConfigError(cfg.source, f"contact.{key}", f"a \"k range\" length is a fraction of a depth map's "
+                              f"depth range, which a {grids[0]} grid has not (its depth is the fraction of its "
+                              "alpha range): give it in world or texel units", ("world", "texel"))
     if cfg.map.moments and plan.maps and not any(m.moments for m in plan.maps):
         raise ConfigError(cfg.source, "map.kind", "pre-filtered maps are built from a depth map and no light of the "
                           "config's scenes gets one (a vsv view is a voxel grid); add a depth view to map.view",

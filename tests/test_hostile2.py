@@ -364,3 +364,19 @@ def test_motion_with_an_area_light_is_a_config_error(tmp_path, capsys):
     rc, err = _cli(capsys, "plan", path)
     assert rc == 2
     _one_line(err, str(path), "light[0].type", "[[motion]]", "point")
+
+
+def test_a_range_contact_length_beside_a_vsv_grid_is_a_config_error(tmp_path, capsys):
+    """A VSV view's near and far are 0 and 1 (its depth is a fraction of the alpha range), so a
+    contact length of "0.5 range" marched 0.5 world units there, not half a depth range."""
+    point = {"type": "point", "position": [0.6, -0.8, 2.2]}
+    cfg = base_config(scene=[{"builtin": "plane_box"}], light=[point], map={"resolution": 32, "view": ["cube", "vsv"]},
+                      scheme=[{"name": "constant"}, {"name": "vsv"}], contact={"length": "0.5 range"})
+    path = tmp_path / "c.toml"
+    path.write_text(_toml(cfg))
+    rc, err = _cli(capsys, "plan", path)
+    assert rc == 2
+    _one_line(err, str(path), "contact.length", "vsv", "texel")
+    cfg["map"]["view"] = ["cube"]
+    cfg["scheme"] = [{"name": "constant"}]
+    assert plan.make(config.parse(cfg, "<test>")).cases == 1          # a depth map's range is defined
