@@ -56,6 +56,8 @@ from .views import ParaboloidView, PerspectiveView, CubeView, light_frame
 SHAPES = ("rectangle", "disk", "sphere", "emitter")
 PERSPECTIVE_MAX_DEG = 70.0     # beyond this half angle a one-sided light's map is a paraboloid
 REGIONS = ("umbra", "penumbra", "lit")
+STAGE_LANES = 1 << 23          # shadow rays per launch of a stage: receivers go in chunks (a stage of 2^20
+                               # samples over thousands of receivers would pass 2^32 lanes and the memory)
 
 
 # ---------------------------------------------------------------- geometry
@@ -367,8 +369,10 @@ def reference(scene, si, n_rx, geom: Geometry, magnitude: float, seed: int = 7, 
     for stage, m in enumerate(sizes):
         if not len(active):
             break
-        vis = _stage(scene, geom, p_all, n_rx, delta_all, key_all, active, m, reps, seed, stage)
-        rep_hits[active] += vis.reshape(len(active), reps, m).sum(2)
+        step = max(1, STAGE_LANES // (reps * m))
+        for part in (active[i:i + step] for i in range(0, len(active), step)):   # a receiver's rays: its own seeds
+            vis = _stage(scene, geom, p_all, n_rx, delta_all, key_all, part, m, reps, seed, stage)
+            rep_hits[part] += vis.reshape(len(part), reps, m).sum(2)
         per_rep[active] += m
         _, lo, hi = intervals.replicate_interval(rep_hits[active], int(per_rep[active[0]]), confidence)
         low[active], high[active] = lo, hi

@@ -98,6 +98,17 @@ def _plain_name(name, source):
     return name
 
 
+def _check_light_scenes(lights, scenes, source):
+    """ConfigError where a light's ``scenes = [...]`` names no scene of the config (the light would
+    light nothing, silently)."""
+    for i, light in enumerate(lights):
+        for name in light.scenes:
+            if not any(replace(light, scenes=(name,)).applies_to(sc.label) for sc in scenes):
+                firsts = {sc.label.replace("(", " ").split()[0] for sc in scenes}
+                raise ConfigError(source, f"light[{i}].scenes", f"{name!r} names no scene of the config (a scene's "
+                                  "label, or its first word)", sorted(firsts | {sc.label for sc in scenes}))
+
+
 def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Config:
     """The Config of raw TOML tables ``raw`` from ``source`` (files relative to ``base``), every value checked."""
     from . import scenes as scenes_mod
@@ -140,6 +151,7 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
         lights.append(_parse_light(t, source, f"light[{i}]"))
     if not lights:
         lights = [LightSpec("scene", label="scene")]
+    _check_light_scenes(lights, scenes, source)
 
     m = _table(raw, "map", source)
     check_keys(m, ("resolution", "texels", "filter", "format", "view", "shrink") + CASCADE_KEYS + KIND_KEYS, source,
@@ -164,7 +176,7 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
         # a scene's own lights are known only once it is loaded; explicit ones are known now
         raise ConfigError(source, "map.view", "views are for point lights and no [[light]] is a point light "
                           f"(the lights are {', '.join(sorted({l.type for l in lights}))}); remove map.view or "
-                          "add a point light")
+                          "add a point light" + (" (vsv: or a spot light)" if "vsv" in views else ""))
     cascade = _parse_cascades(m, source)
     if cascade and all(l.type not in ("directional", "scene") for l in lights):
         raise ConfigError(source, "map.cascades", "cascades are for directional lights and no [[light]] is "
@@ -539,6 +551,11 @@ def _parse_light(t: dict, source: str, where: str) -> LightSpec:
 def _check_motion_lights(motion, lights_of_config, source):
     """Each [[motion]] light path needs a light whose type follows it (or the scene's own)."""
     from . import lights
+    soft = [j for j, l in enumerate(lights_of_config) if l.type in lights.REGISTRY and lights.is_soft(l)]
+    if motion and soft:       # the fixed points' V* is one ray; an area light's reference is a fraction per frame
+        raise ConfigError(source, f"light[{soft[0]}].type", "[[motion]] measures hard lights: its fixed points' V* "
+                          "is one ray, where an area light's is a Monte Carlo fraction; remove the area light or "
+                          "the [[motion]] paths", tuple(t for t, m in lights.REGISTRY.items() if not m.SOFT))
     for i, mo in enumerate(motion):
         if mo.light == "none":
             continue

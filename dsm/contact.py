@@ -112,19 +112,26 @@ def march(db: DepthBuffer, rx: Receiver, spec, seed: int = 7, light_world=None):
 
 def case_metrics(v: np.ndarray, v_star: np.ndarray, occluded: np.ndarray, v_frac=None) -> dict:
     """The contact step's columns of one case: what it darkens wrongly, recovers and leaves, and
-    the error after it (rates as metrics.csv's; NaN where a denominator is empty)."""
+    the error after it (rates as metrics.csv's; NaN where a denominator is empty). ``v_frac``: an
+    area light's V* fraction, whose lit (1) and umbra (0) receivers are the core metrics' (penumbra
+    receivers count in neither, as in :func:`dsm.metrics.soft`)."""
     v = np.asarray(v, float)
-    gt = np.asarray(v_star, bool)
     occ = np.asarray(occluded, bool)
+    if v_frac is None:
+        gt = np.asarray(v_star, bool)
+        sh = ~gt
+    else:
+        ref = np.asarray(v_frac, float)
+        gt, sh = ref == 1.0, ref == 0.0
     lit_map = v >= 0.5
     v_c = visibility_after(v, occ)
     lit_c = v_c >= 0.5
-    acne, pp = gt & ~lit_c, ~gt & lit_c
-    n, n_lit, n_sh = len(v), int(gt.sum()), int((~gt).sum())
+    acne, pp = gt & ~lit_c, sh & lit_c
+    n, n_lit, n_sh = len(v), int(gt.sum()), int(sh.sum())
     ref = gt.astype(float) if v_frac is None else np.asarray(v_frac, float)
     rate = lambda k, d: k / d if d else metrics_mod.UNDEFINED
     return {"n_contact_false": int((gt & lit_map & occ).sum()),
-            "n_contact_recovered": int((~gt & lit_map & occ).sum()),
+            "n_contact_recovered": int((sh & lit_map & occ).sum()),
             "n_contact_missed": int(pp.sum()),
             "contact_acne_rate": rate(int(acne.sum()), n_lit),
             "contact_peterpan_rate": rate(int(pp.sum()), n_sh),

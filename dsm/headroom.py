@@ -50,7 +50,11 @@ def summary(rows: list) -> str:
     if not few:
         return ""
     worst = min(few, key=lambda r: r["texel_f32_steps"])
+    # a scene's label names its non-default parameters (dsm.scenes): already relative to its camera
+    relative = all("precision=camera_relative" in str(r.get("scene", "")) for r in few)
+    fix = ("they are rendered relative to a camera far from their receivers: a camera nearer to them holds more"
+           if relative else "[[scene]] precision = \"camera_relative\" shows what rendering relative to the camera "
+           "buys back")
     return (f"{len(few)} cases have a texel spanning fewer than {FEW_STEPS:g} float32 steps at the receivers "
             f"(fewest {worst['texel_f32_steps']:.3g}, scene {worst['scene']}: a step there is "
-            f"{worst['f32_step']:.3g}): their acne and peter-panning include the map's float32 rounding; "
-            "[[scene]] precision = \"camera_relative\" shows what rendering relative to the camera buys back")
+            f"{worst['f32_step']:.3g}): their acne and peter-panning include the map's float32 rounding; {fix}")

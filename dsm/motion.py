@@ -40,7 +40,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import figures, lights, metrics, pipeline, report, scenes, shadowmap, spawn, timing
+from . import figures, headroom, lights, metrics, pipeline, report, scenes, shadowmap, spawn, timing
 from .cascades import Camera
 
 FRAME_COLUMNS = ("case", "motion", "scene", "light", "cascade_layout", "scheme", "params", "resolution", "filter",
@@ -316,6 +316,7 @@ def _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents,
     keys = [(s, filt, fmt) for s in specs for filt in cfg.map.filter for fmt in cfg.map.format]
     per = {k: {"v": [], "vstar": [], "elig": [], "face": [], "frames": [], "images": [], "metrics": []} for k in keys}
     prev_sig, smap, built, build_ms = None, None, [], []
+    tight = headroom.headroom(np.zeros((0, 3)), float("nan"))   # the frame with the fewest float32 steps per texel
     for t, ((o, tg, up), light) in enumerate(zip(poses, light_frames)):
         pose_key = (tuple(np.round(o, 12)), tuple(np.round(tg, 12)), tuple(np.round(up, 12)))
         sensor = sensor_at(base, o, tg, up)
@@ -354,6 +355,11 @@ def _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents,
         rx_of = {fmt: (pipeline.receivers(sm.view, dataclasses.replace(setup, p=pts.p, n=n_cam), sd.diagonal),
                        pipeline.receivers(sm.view, setup, sd.diagonal) if has_rx else None)
                  for fmt, sm in stored.items()}
+        if has_rx:               # the map's float32 headroom at this frame's receivers (dsm.headroom)
+            hr = headroom.headroom(pipeline.points_np(setup.p),
+                                   float(np.median(rx_of[cfg.map.format[0]][1].texel_world.numpy())))
+            if math.isnan(tight["texel_f32_steps"]) or hr["texel_f32_steps"] < tight["texel_f32_steps"]:
+                tight = hr
         for (spec, filt, fmt) in keys:
             sm = stored[fmt]
             rx_pts, rx = rx_of[fmt]
@@ -404,7 +410,7 @@ def _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents,
                     "flicker_change_rate": _mean([p["flicker_change_rate"] for p in pairs]),
                     "maps_built": int(sum(built)), "build_ms": float(np.median(build_ms)), "build_first_ms": float("nan"),
                     "lookup_ms": _median(d.get("lookup_ms", [])), "reference_ms": float("nan"), "sweep_key": "", "sweep_value": float("nan"),
-                    "texel_size": float("nan")})
+                    "texel_size": float("nan"), **tight})
         for k, val in list(row.items()):
             if isinstance(val, float) and not metrics.defined(val):
                 row[k] = metrics.UNDEFINED

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 from . import intervals, scene_size
 from . import lights as light_types
 from . import schemes as schemes_mod
-from .types import DEFAULT_CAMERA, VIEW_FACES, Config, ConfigError
+from .types import DEFAULT_CAMERA, POINT_VIEWS, VIEW_FACES, Config, ConfigError
 from .shadowmap import MAX_STEPS
 
 # bytes per pixel / texel, measured with Dr.Jit's allocation watermark on llvm_ad_rgb (the
@@ -441,6 +441,23 @@ def scene_triangles(spec) -> tuple:
     return scene_size.file_triangles(spec.file), f"{spec.where}.file"
 
 
+def _check_every_scheme_read(cfg: Config, used: set, views_seen: set):
+    """ConfigError where a [[scheme]] instance reads no map the config's lights get (it would be
+    dropped without a case): a VSV lookup without a point or spot light, a depth scheme where
+    map.view gives the point lights only a voxel grid."""
+    if not cfg.schemes or all(sc.missing for sc in cfg.scenes):   # optional files absent: nothing planned
+        return
+    for s in cfg.schemes:
+        if id(s) in used:
+            continue
+        own = getattr(schemes_mod.get(s.name), "VIEWS", None)
+        why = (f"it reads only a {' or '.join(own)} grid, which point and spot lights get"
+               if own is not None else "it reads a depth map: add a depth view to map.view")
+        raise ConfigError(cfg.source, "map.view", f"scheme {s.name} {s.label}".rstrip() + " reads no map of this "
+                          f"config (its lights get {', '.join(sorted(views_seen)) or 'no'} views): {why}",
+                          tuple(own) if own is not None else POINT_VIEWS)
+
+
 def make(cfg: Config) -> Plan:
     """The Plan of ``cfg``: a MapPlan per scene/light/view/resolution/culling, each tiled to fit the budget."""
     from .config import absent_files
@@ -454,6 +471,7 @@ def make(cfg: Config) -> Plan:
         groups.setdefault(schemes_mod.culling_of(spec.params), []).append(spec)
     if cfg.map.moments:       # moment maps are built from the first layer, as rays see it: culling none
         groups.setdefault("none", [])
+    used, views_seen = set(), set()        # the scheme instances some map reads; the views the lights get
     for si, sc in enumerate(cfg.scenes):
         if sc.missing:
             continue
@@ -477,12 +495,16 @@ def make(cfg: Config) -> Plan:
                 for R in cfg.map.resolutions_for(faces):
                     for culling, config_group in groups.items():
                         # engine presets are combined instances per light type, resolved here
-                        group = [schemes_mod.preset_for_light(s, ltype) for s in config_group
-                                 if schemes_mod.reads_view(s, view)]     # a VSV grid: its own lookups only
-                        if not group:
+                        read = [s for s in config_group if schemes_mod.reads_view(s, view)]  # a VSV grid: its own
+                        used.update(id(s) for s in read)
+                        views_seen.add(view)
+                        group = [schemes_mod.preset_for_light(s, ltype) for s in read]
+                        # moments are a depth map's (a voxel grid holds no depth), on its culling-none map
+                        moments = (cfg.map.moments if culling == "none" and view not in schemes_mod.EXCLUSIVE_VIEWS
+                                   else ())
+                        if not group and not moments:
                             continue
                         needs = schemes_mod.needs_of(group)
-                        moments = cfg.map.moments if culling == "none" else ()
                         m = MapPlan(sc.label, label, view, R, faces, culling, tuple(sorted(needs)),
                                     "z2" in needs or culling != "none", fmts,
                                     [f"{s.name} {s.label}".strip() for s in group]
@@ -491,6 +513,18 @@ def make(cfg: Config) -> Plan:
                                     specs=tuple(group), scene_index=si, light_index=li, cascade=cascade,
                                     moments=moments)
                         plan.maps.append(m)
+    _check_every_scheme_read(cfg, used, views_seen)
+    contact = getattr(cfg, "contact", None)
+    grids = sorted(views_seen & schemes_mod.EXCLUSIVE_VIEWS)
+    for key in ("length", "thickness") if contact is not None and grids else ():
+        if getattr(contact, key).unit == "range":     # a voxel grid's depth is a fraction of its alpha range
+            raise ConfigError(cfg.source, f"contact.{key}", f"a \"k range\" length is a fraction of a depth map's "
+                              f"depth range, which a {grids[0]} grid has not (its depth is the fraction of its "
+                              "alpha range): give it in world or texel units", ("world", "texel"))
+    if cfg.map.moments and plan.maps and not any(m.moments for m in plan.maps):
+        raise ConfigError(cfg.source, "map.kind", "pre-filtered maps are built from a depth map and no light of the "
+                          "config's scenes gets one (a vsv view is a voxel grid); add a depth view to map.view",
+                          POINT_VIEWS)
     if cfg.map.cascade and plan.maps and not any(m.cascade is not None for m in plan.maps):
         raise ConfigError(cfg.source, "map.cascades", "cascades are for directional lights and no light of the "
                           "config's scenes is directional; remove map.cascades or add a directional [[light]]")

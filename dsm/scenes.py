@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
@@ -173,7 +173,11 @@ def parse_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]
                 for p in specs]
     closed = _closed_override(t, source, where)
     if path.suffix.lower() == ".xml" and any(p != FileParams() for p in specs):
-        raise ConfigError(source, where, "an XML scene takes no scale/translate/up/ground keys", ("file",))
+        given = [f.name for f in fields(FileParams) if any(getattr(p, f.name) != getattr(FileParams(), f.name)
+                                                            for p in specs)]
+        raise ConfigError(source, f"{where}.{given[0]}", "an XML scene takes no "
+                          f"{'/'.join(f.name for f in fields(FileParams))} keys: its geometry, camera and lights "
+                          "are the file's, in its own world coordinates", ("file", "closed", "optional"))
     return [SceneSpec(file=path, params=p, label=_label(path.stem, p, FileParams()), closed=closed, source=source,
                       where=where) for p in specs]
 
@@ -192,20 +196,28 @@ def _check_builtin(name, p, source, where):
     if isinstance(p, GrazingParams) and not p.angle < 90:
         raise ConfigError(source, f"{where}.angle", f"must be below 90 degrees, got {p.angle}")
     shapes = builtin_geometry(name, p)[0]
-    t = float(np.max(np.abs(p.translate)))
-    if t > 0 and p.precision == "world":           # camera-relative: never held in float32 at its offset
+    if p.precision == "world":           # camera-relative: checked where the camera is known (load)
         v = np.concatenate([np.asarray(v, float).reshape(-1, 3) for v, _ in shapes.values()])
-        size = float(np.ptp(v, axis=0).max()) * p.scale
-        with np.errstate(over="ignore"):
-            step = float(np.spacing(np.float32(t)))      # float32's step at the scene's position
-        if not step * 64 <= size:                      # 64 steps across: the scene's shape still held
-            raise ConfigError(source, f"{where}.translate", f"{t:g} from the origin float32 moves in steps of "
-                              f"{step:.3g}, and the scene is {size:.3g} across: its geometry cannot be held there "
-                              f"(keep the offset below {size / 64 * 2 ** 23:.3g})")
+        _check_held(float(np.ptp(v, axis=0).max()) * p.scale, p.translate, source, f"{where}.translate",
+                    "from the origin")
     lo, hi = scale_range(name, p, shapes)
     if not lo <= p.scale <= hi:
         raise ConfigError(source, f"{where}.scale", f"{p.scale:g} is outside {lo:.2g} to {hi:.2g}, the scales at which "
                           "Mitsuba's float32 triangle normals of this scene neither overflow nor underflow")
+
+
+def _check_held(size: float, offset, source: str, key: str, where_from: str, what: str = "the offset"):
+    """ConfigError naming ``key`` where float32 holds fewer than 64 steps across a scene ``size``
+    across at ``offset`` (world units): its geometry would round to a few points (degenerate)."""
+    t = float(np.max(np.abs(np.asarray(offset, float))))
+    if t == 0:
+        return
+    with np.errstate(over="ignore"):
+        step = float(np.spacing(np.float32(t)))      # float32's step at the scene's position
+    if not step * 64 <= size:                      # 64 steps across: the scene's shape still held
+        raise ConfigError(source, key, f"{t:g} {where_from} float32 moves in steps of {step:.3g}, and the scene "
+                          f"is {size:.3g} across: its geometry cannot be held there (keep {what} below "
+                          f"{size / 64 * 2 ** 23:.3g})")
 
 
 def _cross_lengths(verts, faces) -> np.ndarray:
@@ -694,6 +706,24 @@ def _check_options(cfg, spec, sd):
                               + (f"{flat[0]} is not a triangle mesh; remove map.shrink or give it as a mesh"
                                  if len(flat) == 1 else f"{', '.join(flat[:3])} are not triangle meshes; remove "
                                  "map.shrink or give them as meshes"))
+        _check_shrink_fits(cfg.shrink, spec, sd)
+
+
+def _check_shrink_fits(d: float, spec, sd):
+    """ConfigError where ``[map] shrink`` is at least half the thinnest box extent of a closed mesh:
+    its copy moved ``d`` inward passes through itself and comes out inside out (a caster larger
+    than the shape, facing in)."""
+    from .closedness import shape_closedness
+    for i, (name, shape) in enumerate(zip(sd.shape_names, sd.scene.shapes())):
+        closed, why = shape_closedness(shape)
+        if not closed or "wound inward" in why:        # open shapes and rooms move, they do not invert
+            continue
+        bb = shape.bbox()
+        thin = float(np.min(np.array(bb.max, float).ravel() - np.array(bb.min, float).ravel()))
+        if d >= thin / 2:
+            raise ConfigError(_src(spec), "map.shrink", f"{spec.where}: {d:g} is at least half the thinnest extent "
+                              f"of the closed shape {name!r} ({thin:.3g} across): moved that far inward it turns "
+                              f"inside out; give less than {thin / 2:.3g}")
 
 
 def _src(spec) -> str:
@@ -854,8 +884,13 @@ def _camera_relative(spec, camera_resolution, camera):
     from dataclasses import replace
     t = np.asarray(spec.params.translate, float)
     at_origin = replace(spec.params, precision="world", translate=ORIGIN)
-    cam = load(replace(spec, params=at_origin), camera_resolution, camera).camera_pose[0] + t
+    origin = load(replace(spec, params=at_origin), camera_resolution, camera)
+    cam = origin.camera_pose[0] + t
     shift = tuple(float(c) for c in t - cam)
+    lo, hi = (np.asarray(c, float) for c in origin.bbox)
+    _check_held(float(np.max(hi - lo)), np.maximum(np.abs(lo + shift), np.abs(hi + shift)), _src(spec),
+                "camera.position" if camera is not None and camera.position is not None else f"{spec.where}.precision",
+                "from its camera (camera_relative)", "the scene's distance to the camera")
     data = load(replace(spec, params=replace(at_origin, translate=shift)), camera_resolution, camera)
     data.notes.append(f"camera_relative: positions relative to the camera at "
                       f"({', '.join(f'{c:.9g}' for c in cam)}) in world coordinates")
@@ -1099,6 +1134,9 @@ def _load_mesh_file(spec, width, height, camera=None):
                   np.asarray(local.faces_buffer(), np.int64).reshape(-1, 3))
         lo, hi = mesh64[0].min(0), mesh64[0].max(0)
     center, size = (lo + hi) / 2, float(np.linalg.norm(hi - lo))
+    if p.precision == "world":       # the mesh and its ground (3 diagonals across) rounded at the offset
+        _check_held(max(float(np.max(hi - lo)), 3 * size if p.ground == "yes" else 0.0), p.translate, _src(spec),
+                    f"{spec.where}.translate", "from the origin")
     a, b = [np.eye(3)[k] for k in range(3) if k != "xyz".index(p.up)]
     if np.dot(np.cross(a, b), up) < 0:
         a, b = b, a

@@ -176,10 +176,18 @@ def parse_tune(cfg) -> TuneConfig:
     seed = number(raw.get("seed", cfg.seed), src, "tune.seed", integer=True)
     batch = number(raw.get("batch", 1.0), src, "tune.batch", positive=True, maximum=1.0)
     scan = number(raw.get("scan", 0), src, "tune.scan", integer=True, minimum=0, maximum=100000)
+    if scan == 1:                 # evenly spaced with both ends of the box: one point holds only the low end
+        raise ConfigError(src, "tune.scan", "a scan takes both ends of the search box: give 0 (no scan) or at least 2")
     gradcheck = raw.get("gradcheck", False)
     if not isinstance(gradcheck, bool):
         raise ConfigError(src, "tune.gradcheck", f"expected true or false, got {gradcheck!r}", (True, False))
 
+    from . import lights as light_types
+    for i, light in enumerate(cfg.lights):      # the objective and oracles count a hard V*, one ray per receiver
+        if light.type in light_types.REGISTRY and light_types.is_soft(light):
+            raise ConfigError(src, f"light[{i}].type", "dsm tune's objective and oracles are those of a hard V* "
+                              "(one ray per receiver); an area light's reference is a fraction: remove it (dsm run "
+                              "measures it)", tuple(t for t in light_types.REGISTRY if t != light.type))
     if cfg.map.moments:           # dsm tune's objective relaxes a margin per tap: depth schemes only
         raise ConfigError(src, "map.kind", "dsm tune tunes depth schemes; remove the pre-filtered kinds from "
                           "map.kind (dsm run measures them)", ("depth",))
@@ -212,11 +220,12 @@ def parse_tune(cfg) -> TuneConfig:
     for n in params_raw:
         if n not in names:
             raise ConfigError(src, f"tune.params.{n}", "no [[scheme]] of that name is tuned", names)
-    for s in specs:
+    for i, s in enumerate(specs):              # specs are cfg.schemes, every one kept (or refused above)
         for p in params[s.name]:
             v = getattr(s.params, p)
             if not math.isfinite(v.value if isinstance(v, Length) else v):
-                raise ConfigError(src, f"scheme.{p}", f"{s.name}.{p} starts at {v}: give a finite start to tune it")
+                raise ConfigError(src, f"scheme[{i}].{p}", f"{s.name}.{p} starts at {v}: give a finite start to tune "
+                                  f"it, or leave it out of tune.params.{s.name}", params[s.name])
     ranges = {}
     range_raw = raw.get("range", {})
     if not isinstance(range_raw, dict):
@@ -281,8 +290,12 @@ def parse_tune(cfg) -> TuneConfig:
         if init.unit != unit:
             raise ConfigError(src, "tune.bias_map.init", f"give the start in the map's unit ({unit})", MAP_UNITS)
         fit = choice(b.get("fit", "adam"), src, "tune.bias_map.fit", MAP_FITS)
-        ints = lambda key, default, lo: tuple(number(x, src, f"tune.bias_map.{key}", integer=True, minimum=lo)
-                                              for x in as_list(b.get(key, list(default))))
+        def ints(key, default, lo):
+            """A bias-map key's candidates: one integer or a non-empty list."""
+            vals = as_list(b.get(key, list(default)))
+            if not vals:
+                raise ConfigError(src, f"tune.bias_map.{key}", f"empty list: give at least one value (default {list(default)})")
+            return tuple(number(x, src, f"tune.bias_map.{key}", integer=True, minimum=lo) for x in vals)
         blocks = ints("block", BiasMapSpec.blocks if fit == "residual" else [1], 1)
         if fit == "adam" and len(blocks) != 1:
             raise ConfigError(src, "tune.bias_map.block", "Adam fits one block size: give one number (a list is "
@@ -290,6 +303,10 @@ def parse_tune(cfg) -> TuneConfig:
         for key in ("radius", "min_gain", "margin"):
             if key in b and fit != "residual":
                 raise ConfigError(src, f"tune.bias_map.{key}", "only with fit = \"residual\"", MAP_FITS)
+        for key in ("unit", "init", "steps", "lr"):     # the residual is in texels, fitted exactly: no Adam
+            if key in b and fit == "residual":
+                raise ConfigError(src, f"tune.bias_map.{key}", "only with fit = \"adam\" (a residual map is in "
+                                  "texels, fitted exactly per block)", MAP_FITS)
         bmap = BiasMapSpec(blocks[0], unit, init,
                            number(b.get("steps", steps), src, "tune.bias_map.steps", integer=True, minimum=1,
                                   maximum=100000),
