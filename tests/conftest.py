@@ -60,3 +60,18 @@ def assert_nan_only_where_undefined(row):
                 assert math.isnan(v), (row["case"], k, v)
             else:
                 assert math.isfinite(v), (row["case"], k, v)
+
+
+def cli_run(capsys, *args):
+    """(exit status, non-blank stderr lines) of an in-process ``dsm`` call."""
+    from dsm import cli
+    capsys.readouterr()
+    rc = cli.main([str(a) for a in args])
+    return rc, [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+
+
+def one_line(err, *words):
+    """``err`` is one line, no traceback, holding every one of ``words``."""
+    assert len(err) == 1 and "Traceback" not in err[0], err
+    for w in words:
+        assert w in err[0], (w, err[0])

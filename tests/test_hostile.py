@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 
 import dsm
+from conftest import cli_run as _cli, one_line as _one_line
 from dsm import cli, config, lock
 from dsm.config import ConfigError
 
@@ -32,19 +33,6 @@ HOLDER = ("import fcntl, os, sys, time\n"
 def _tiny(extra: str = "", scene: str = 'builtin = "plane"', name: str = "t") -> str:
     return (f'[experiment]\nname = "{name}"\n[camera]\nresolution = [32, 32]\n[[scene]]\n{scene}\n'
             f'[map]\nresolution = 32\n[[scheme]]\nname = "none"\n[timing]\nrepeats = 1\n{extra}')
-
-
-def _cli(capsys, *args):
-    """(exit status, non-blank stderr lines) of an in-process ``dsm`` call."""
-    capsys.readouterr()
-    rc = cli.main([str(a) for a in args])
-    return rc, [l for l in capsys.readouterr().err.splitlines() if l.strip()]
-
-
-def _one_line(err, *words):
-    assert len(err) == 1 and "Traceback" not in err[0], err
-    for w in words:
-        assert w in err[0], (w, err[0])
 
 
 class Holder:

@@ -7,22 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from conftest import base_config
-from dsm import cli, config, plan
+from conftest import cli_run as _cli, one_line as _one_line, base_config
+from dsm import config, plan
 from dsm.config import ConfigError
-
-
-def _cli(capsys, *args):
-    """(exit status, non-blank stderr lines) of an in-process ``dsm`` call."""
-    capsys.readouterr()
-    rc = cli.main([str(a) for a in args])
-    return rc, [l for l in capsys.readouterr().err.splitlines() if l.strip()]
-
-
-def _one_line(err, *words):
-    assert len(err) == 1 and "Traceback" not in err[0], err
-    for w in words:
-        assert w in err[0], (w, err[0])
 
 
 def _toml(d: dict, prefix: str = "") -> str:

@@ -13,6 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import cli_run as _cli
+
 from dsm import cli, config, plan, scenes
 from dsm.config import ConfigError, Length
 
@@ -27,14 +29,6 @@ PLY_HEAD = ("ply\nformat {fmt} 1.0\nelement vertex 3\nproperty float x\nproperty
 def _tiny(scene: str, extra: str = "") -> str:
     return (f'[experiment]\nname = "t"\n[camera]\nresolution = [32, 32]\n[[scene]]\n{scene}\n'
             f'[map]\nresolution = 32\n[[scheme]]\nname = "none"\n[timing]\nrepeats = 1\n{extra}')
-
-
-def _cli(capsys, *args):
-    """(exit status, non-blank stderr lines) of an in-process ``dsm`` call."""
-    capsys.readouterr()
-    rc = cli.main([str(a) for a in args])
-    err = [l for l in capsys.readouterr().err.splitlines() if l.strip()]
-    return rc, err
 
 
 def _size(sd) -> tuple:
