@@ -31,7 +31,6 @@ def _edge_setup(R=60):
 
 
 def test_bilinear_pcf_rises_linearly_across_one_texel(variant):
-    import mitsuba as mi
     from dsm import schemes
     from dsm.lookup import Receiver, visibility
     sd, view, smap, p, n, vstar = _edge_setup()

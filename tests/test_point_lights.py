@@ -79,7 +79,6 @@ def test_every_room_receiver_is_in_exactly_one_map(variant):
 def test_texel_size_is_the_texel_footprint_on_every_view(variant, kind):
     """texel_world(p) = sqrt(area of the texel's footprint on the plane through p normal to the ray):
     measured from the rays through the texel's four corners, so '1 texel' means the same on every view."""
-    import drjit as dr
     import mitsuba as mi
     from dsm.views import OrthographicView, PerspectiveView
     R = 256

@@ -69,7 +69,6 @@ def test_jitter_is_seeded_by_the_receiver_itself():
     import mitsuba as mi
     import numpy as np
     from dsm import gbuffer, scenes, shadowmap
-    from dsm.config import SceneSpec
     from dsm.lookup import Receiver, visibility
     from dsm.pipeline import make_view, points_np as _points_np
     from dsm.schemes import constant
