@@ -48,12 +48,11 @@ MOMENT_BYTES = 120
 MIN_TILE = 1 << 16
 # per triangle of the scene: Mitsuba's mesh buffers, Embree's BVH, the loader's temporaries and
 # the kit's per-triangle tables (spawn extents, closedness); measured as the peak RSS growth of
-# `dsm run` on grid meshes of 1e4 to 1e7 triangles (372 B per triangle at 1e6 and 1e7)
-TRIANGLE_BYTES = 372
-# the process itself (Python, Mitsuba, Dr.Jit's LLVM backend, numpy, matplotlib): the peak RSS of
-# `dsm run` on a 1e4-triangle mesh with a 64^2 camera and a 256^2 map (129 to 220 MiB over runs,
-# with Dr.Jit's kernel cache warm or cold), less those: the middle of that range
-PROCESS_BYTES = 170 << 20
+# `dsm run` on grid meshes of 1e4 to 1e7 triangles (381 to 410 B per triangle at 1e6 and 1e7)
+TRIANGLE_BYTES = 384
+# the process itself (Python, Mitsuba, Dr.Jit's LLVM backend, numpy, matplotlib): the peak RSS
+# (VmHWM) of `dsm run` on a 1e4-triangle mesh with a 64^2 camera and a 256^2 map, 129 MiB, less those
+PROCESS_BYTES = 125 << 20
 
 
 @dataclass

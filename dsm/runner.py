@@ -559,8 +559,16 @@ class Runner:
 
 
 def peak_rss() -> int:
-    """This process's peak resident memory so far, in bytes (Linux reports kilobytes, macOS bytes)."""
+    """This process's peak resident memory so far, in bytes: Linux's VmHWM (of this program's own
+    address space: getrusage's ru_maxrss keeps the parent's size across fork and exec), else
+    ru_maxrss (kilobytes, bytes on macOS)."""
     import resource
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return int(rss if sys.platform == "darwin" else rss * 1024)
 

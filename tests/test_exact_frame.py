@@ -81,12 +81,13 @@ def _blocked64(p, d, tris, chunk=256):
 
 
 def test_a_mesh_far_from_the_origin_keeps_its_reference(variant):
-    """The Stanford dragon (47,794 triangles, data/meshes) on its ground at 0, 1e4, 1e5 and 1e6:
-    the same receivers, and shadowed ones equal to a float64 ray-triangle count over the mesh's
-    own vertices at their float64 world positions."""
+    """The Stanford dragon (47,794 triangles, 0.8 across, data/meshes) on its ground at 0, 1e4 and
+    1e5 (at 1e6 float32 holds 13 steps across it: refused in world precision): the same receivers,
+    and shadowed ones equal to a float64 ray-triangle count over the mesh's own vertices at their
+    float64 world positions."""
     from conftest import MESHES
     counts = {}
-    for off in OFFSETS:
+    for off in OFFSETS[:3]:
         spec = pipeline.scene_spec({"file": str(MESHES / "dragon_vrip_res3.ply"), "translate": [off, 0.5 * off, 0.0]})
         sd = pipeline.load_scene(spec, (64, 64))
         setup = pipeline.light_setup(sd, pipeline.gbuffer(sd), sd.own_lights[0], "0")
