@@ -753,8 +753,15 @@ def _precheck_file(spec):
             raise ConfigError(_src(spec), key, f"{path} is empty")
         suffix = path.suffix.lower()
         if suffix == ".obj":
-            if re.search(rb"(?m)^[ \t]*f[ \t]", path.read_bytes()) is None:
+            data = path.read_bytes()
+            if re.search(rb"(?m)^[ \t]*f[ \t]", data) is None:
                 raise ConfigError(_src(spec), key, f"{path} has no faces (no 'f' lines): dsm needs a triangle mesh")
+            # a record cut short (a file truncated mid-line): Mitsuba would load the rest silently
+            short = re.search(rb"(?m)^[ \t]*([vf])[ \t]+\S+(?:[ \t]+\S+)?[ \t]*\r?$", data)
+            if short is not None:
+                line = data.count(b"\n", 0, short.start()) + 1
+                what = "vertex with fewer than 3 coordinates" if short.group(1) == b"v" else "face with fewer than 3 corners"
+                raise ConfigError(_src(spec), key, f"{path}: line {line} is a {what} (a file cut short?)")
         elif suffix == ".ply":
             with open(path, "rb") as fh:
                 head = fh.read(1 << 16)
@@ -897,41 +904,49 @@ def _camera_relative(spec, camera_resolution, camera):
     return data
 
 
+def check_mesh(shape, name: str, spec):
+    """ConfigError naming the [[scene]] key where a mesh has no triangles, non-finite positions,
+    faces beyond its vertices or triangles whose float32 normals overflow or underflow."""
+    src = _src(spec)
+    key = f"{spec.where}.builtin" if spec.builtin else f"{spec.where}.file"
+    size_key = f"{spec.where}.scale" if spec.params is not None and getattr(spec.params, "scale", 1.0) != 1.0 else key
+    what = spec.builtin or str(spec.file)
+    # the buffers, not mi.traverse: a rectangle or disk mesh exposes only its to_world there
+    v = np.array(shape.vertex_positions_buffer(), np.float64).reshape(-1, 3)
+    f = np.array(shape.faces_buffer(), np.int64).reshape(-1, 3)
+    if len(f) == 0:
+        raise ConfigError(src, key, f"{what}: shape {name!r} has no triangles")
+    if not np.isfinite(v).all():
+        bad = int((~np.isfinite(v).all(1)).sum())
+        raise ConfigError(src, key, f"{what}: shape {name!r} has {bad} vertex positions that are not finite "
+                          "(NaN or inf)")
+    if f.max() >= len(v):
+        raise ConfigError(src, key, f"{what}: shape {name!r} has faces referring to vertex {int(f.max())} "
+                          f"of {len(v)}")
+    c = _cross_lengths(v, f)
+    if c.max() > CROSS_MAX:
+        raise ConfigError(src, size_key, f"{what}: shape {name!r} has {int((c > CROSS_MAX).sum())} triangles too "
+                          f"large for Mitsuba's float32 normals (|e1 x e2| up to {c.max():.2g}, limit "
+                          f"{CROSS_MAX:g}): scale the scene down")
+    nz = c[c > 0]
+    if nz.size == 0:
+        raise ConfigError(src, key, f"{what}: shape {name!r} has only degenerate (zero-area) triangles")
+    if (nz < CROSS_MIN).mean() > 0.01:
+        raise ConfigError(src, size_key, f"{what}: shape {name!r} has triangles too small for Mitsuba's float32 "
+                          f"normals (|e1 x e2| down to {nz.min():.2g}, limit {CROSS_MIN:g}): scale the scene up")
+
+
 def _check_loaded(spec, data):
     """What a loaded scene must hold: shapes, triangles, finite positions, float32-safe normals."""
     src = _src(spec)
     key = f"{spec.where}.builtin" if spec.builtin else f"{spec.where}.file"
-    size_key = f"{spec.where}.scale" if spec.params is not None and getattr(spec.params, "scale", 1.0) != 1.0 else key
     what = spec.builtin or str(spec.file)
     shapes = list(data.scene.shapes())
     if not shapes:
         raise ConfigError(src, key, f"{what} has no shapes")
     for name, shape in zip(data.shape_names, shapes):
-        if not shape.is_mesh():
-            continue
-        # the buffers, not mi.traverse: a rectangle or disk mesh exposes only its to_world there
-        v = np.array(shape.vertex_positions_buffer(), np.float64).reshape(-1, 3)
-        f = np.array(shape.faces_buffer(), np.int64).reshape(-1, 3)
-        if len(f) == 0:
-            raise ConfigError(src, key, f"{what}: shape {name!r} has no triangles")
-        if not np.isfinite(v).all():
-            bad = int((~np.isfinite(v).all(1)).sum())
-            raise ConfigError(src, key, f"{what}: shape {name!r} has {bad} vertex positions that are not finite "
-                              "(NaN or inf)")
-        if f.max() >= len(v):
-            raise ConfigError(src, key, f"{what}: shape {name!r} has faces referring to vertex {int(f.max())} "
-                              f"of {len(v)}")
-        c = _cross_lengths(v, f)
-        if c.max() > CROSS_MAX:
-            raise ConfigError(src, size_key, f"{what}: shape {name!r} has {int((c > CROSS_MAX).sum())} triangles too "
-                              f"large for Mitsuba's float32 normals (|e1 x e2| up to {c.max():.2g}, limit "
-                              f"{CROSS_MAX:g}): scale the scene down")
-        nz = c[c > 0]
-        if nz.size == 0:
-            raise ConfigError(src, key, f"{what}: shape {name!r} has only degenerate (zero-area) triangles")
-        if (nz < CROSS_MIN).mean() > 0.01:
-            raise ConfigError(src, size_key, f"{what}: shape {name!r} has triangles too small for Mitsuba's float32 "
-                              f"normals (|e1 x e2| down to {nz.min():.2g}, limit {CROSS_MIN:g}): scale the scene up")
+        if shape.is_mesh():
+            check_mesh(shape, name, spec)
     if not (np.isfinite(data.bbox[0]).all() and np.isfinite(data.bbox[1]).all()):
         raise ConfigError(src, key, f"{what}: its bounding box is not finite")
     unknown = [n for n, _ in spec.closed if n not in data.shape_names]
@@ -1122,6 +1137,7 @@ def _load_mesh_file(spec, width, height, camera=None):
     up = np.eye(3)["xyz".index(p.up)]
     to_world = mi.ScalarTransform4f().translate([float(c) for c in p.translate]).scale(p.scale)
     mesh = mi.load_dict({"type": spec.file.suffix.lower()[1:], "filename": str(spec.file), "to_world": to_world})
+    check_mesh(mesh, "mesh", spec)      # before the camera is posed from its bounds (a 1e-20 mesh has none)
     bb = mesh.bbox()
     lo, hi = np.array(bb.min, float).ravel(), np.array(bb.max, float).ravel()
     mesh64 = None

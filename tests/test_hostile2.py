@@ -367,3 +367,26 @@ def test_a_range_contact_length_beside_a_vsv_grid_is_a_config_error(tmp_path, ca
     cfg["map"]["view"] = ["cube"]
     cfg["scheme"] = [{"name": "constant"}]
     assert plan.make(config.parse(cfg, "<test>")).cases == 1          # a depth map's range is defined
+
+
+def test_a_mesh_scaled_below_float32_normals_names_the_scale_not_the_camera(tmp_path, capsys):
+    """The bunny at scale 1e-20: |e1 x e2| about 1e-42 is below float32's normals (limit 2e-19);
+    the message was about the camera's position equal to its target."""
+    from conftest import MESHES
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[[scene]]\nfile = "{MESHES / "mitsuba_bunny.ply"}"\nscale = 1e-20\n[[scheme]]\nname = "none"\n')
+    rc, err = _cli(capsys, "run", cfg, "--out", tmp_path / "o")
+    assert rc == 2
+    _one_line(err, "scene[0].scale", "too small for Mitsuba's float32 normals")
+
+
+@pytest.mark.parametrize("tail, what", [("f 2 4", "face with fewer than 3 corners"),
+                                        ("v 1 1", "vertex with fewer than 3 coordinates")])
+def test_an_obj_cut_mid_record_is_refused_naming_the_line(tmp_path, capsys, tail, what):
+    obj = tmp_path / "cut.obj"
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\n" + tail)
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('[[scene]]\nfile = "cut.obj"\n[[scheme]]\nname = "none"\n')
+    rc, err = _cli(capsys, "run", cfg, "--out", tmp_path / "o")
+    assert rc == 2
+    _one_line(err, "scene[0].file", "line 6", what)
