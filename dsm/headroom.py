@@ -24,13 +24,13 @@ FEW_STEPS = 64.0      # a texel spanning fewer float32 steps than this rounds vi
 UNDEFINED = math.nan
 
 
-def headroom(p_map_frame: np.ndarray, texel_world: float) -> dict:
-    """``f32_step`` and ``texel_f32_steps`` of receivers at ``p_map_frame`` (m, 3) with median
-    texel width ``texel_world`` (NaN without receivers)."""
-    p = np.asarray(p_map_frame, np.float64).reshape(-1, 3)
-    if not len(p) or not math.isfinite(texel_world):
+def headroom(max_abs_coordinate: float, texel_world: float) -> dict:
+    """``f32_step`` and ``texel_f32_steps`` of receivers whose largest absolute coordinate in the
+    map's frame is ``max_abs_coordinate``, with median texel width ``texel_world`` (NaN without
+    receivers)."""
+    if not (math.isfinite(max_abs_coordinate) and math.isfinite(texel_world)):
         return {"f32_step": UNDEFINED, "texel_f32_steps": UNDEFINED}
-    step = float(np.spacing(np.float32(np.abs(p).max())))
+    step = float(np.spacing(np.float32(max_abs_coordinate)))
     return {"f32_step": step, "texel_f32_steps": texel_world / step}
 
 

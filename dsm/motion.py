@@ -316,7 +316,7 @@ def _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents,
     keys = [(s, filt, fmt) for s in specs for filt in cfg.map.filter for fmt in cfg.map.format]
     per = {k: {"v": [], "vstar": [], "elig": [], "face": [], "frames": [], "images": [], "metrics": []} for k in keys}
     prev_sig, smap, built, build_ms = None, None, [], []
-    tight = headroom.headroom(np.zeros((0, 3)), float("nan"))   # the frame with the fewest float32 steps per texel
+    tight = headroom.headroom(math.nan, math.nan)   # the frame with the fewest float32 steps per texel
     for t, ((o, tg, up), light) in enumerate(zip(poses, light_frames)):
         pose_key = (tuple(np.round(o, 12)), tuple(np.round(tg, 12)), tuple(np.round(up, 12)))
         sensor = sensor_at(base, o, tg, up)
@@ -356,7 +356,7 @@ def _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents,
                        pipeline.receivers(sm.view, setup, sd.diagonal) if has_rx else None)
                  for fmt, sm in stored.items()}
         if has_rx:               # the map's float32 headroom at this frame's receivers (dsm.headroom)
-            hr = headroom.headroom(pipeline.points_np(setup.p),
+            hr = headroom.headroom(setup.max_abs_coordinate,
                                    float(np.median(rx_of[cfg.map.format[0]][1].texel_world.numpy())))
             if math.isnan(tight["texel_f32_steps"]) or hr["texel_f32_steps"] < tight["texel_f32_steps"]:
                 tight = hr

@@ -21,6 +21,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import functools
+import math
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -128,6 +131,14 @@ class LightSetup:
     back_p: object = None         # hit pixels facing away from the light (attached shadow), inside its domain
     back_n: object = None
     ref: object = None            # area lights: the Monte Carlo reference (area.Reference); v_star = V* >= 0.5
+
+    @functools.cached_property
+    def max_abs_coordinate(self) -> float:
+        """The receivers' largest absolute coordinate in the map's frame (NaN without receivers):
+        what every case on them shares for its float32 headroom (dsm.headroom), read once."""
+        if self.p is None or not len(self.pixels):
+            return math.nan
+        return float(np.abs(points_np(self.p)).max())
     camera: object = None         # the pinhole camera of the G-buffer (cascades.Camera); None: not a perspective sensor
 
     @property

@@ -470,8 +470,8 @@ class Runner:
             m["backface_lit_rate"] = float((v_back >= 0.5).mean()) if v_back.size else metrics.UNDEFINED
             texel = float(np.median(rx.texel_world.numpy())) if rx is not None else metrics.UNDEFINED
             sweep_key, sweep_value = report.sweep_of(spec, self.cfg.schemes if moment is None else self.cfg.map.moments)
-            p_map = pipeline.points_np(setup.p) if rx is not None else np.zeros((0, 3))
-            row = {**meta, **setup.exclusions, **m, **headroom.headroom(p_map, texel), "texel_size": texel,
+            extent = setup.max_abs_coordinate if rx is not None else metrics.UNDEFINED
+            row = {**meta, **setup.exclusions, **m, **headroom.headroom(extent, texel), "texel_size": texel,
                    "n_plane_fallback": fallbacks if uses_plane else metrics.UNDEFINED,
                    "build_ms": bt.ms, "build_first_ms": first_t.ms, "build_compile_ms": bt.compile_ms, "build_peak_mb": smap.peak_bytes / 2 ** 20,
                    "lookup_ms": lt.ms, "lookup_compile_ms": lt.compile_ms, "lookup_kernels_compiled": lt.cache_misses,
