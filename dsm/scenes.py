@@ -567,6 +567,7 @@ class SceneData:
     closed_reason: list = None
     offset: tuple = ORIGIN         # added to the config's light positions after scaling (translate)
     camera_pose: object = None     # the camera's (position, target, up), float64 (built-ins and mesh files)
+    checked: tuple = ()            # shapes the loader already checked (check_mesh), not checked again
     centre: object = None          # the exact frame's origin (dsm.exact_frame; float64 world), None: the world
     exact_scene: object = None     # the scene in that frame (None: ``scene``)
 
@@ -945,7 +946,7 @@ def _check_loaded(spec, data):
     if not shapes:
         raise ConfigError(src, key, f"{what} has no shapes")
     for name, shape in zip(data.shape_names, shapes):
-        if shape.is_mesh():
+        if shape.is_mesh() and name not in data.checked:
             check_mesh(shape, name, spec)
     if not (np.isfinite(data.bbox[0]).all() and np.isfinite(data.bbox[1]).all()):
         raise ConfigError(src, key, f"{what}: its bounding box is not finite")
@@ -1173,6 +1174,7 @@ def _load_mesh_file(spec, width, height, camera=None):
     data = _finish(spec.label, scene, [light], p.scale)
     data.offset = tuple(float(c) for c in p.translate)
     data.camera_pose = (np.asarray(o, float), np.asarray(tg, float), np.asarray(upv, float))
+    data.checked = ("mesh",)              # checked before the camera was posed
     if mesh64 is not None:
         data.centre_frame({"mesh": mesh64, **({"ground": (v, f)} if "ground" in d else {})})
     return data
