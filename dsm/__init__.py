@@ -1,13 +1,16 @@
 """dsm: measure shadow-map bias schemes against exact ray-traced visibility (Mitsuba 3, Dr.Jit)."""
-from .config import load as load_config, parse as parse_config
+from .config.read import load as load_config, parse as parse_config
 from .types import ConfigError, Length
+from . import old_paths
+
+old_paths.install()          # dsm.truth.metrics, dsm.report.figures, ...: the flat paths, for one release
 
 __version__ = "0.1.0"
 
 
 def run(config, out=None, variant=None, progress=False, *, force=False, resume=False):
-    """Run an experiment (Config, dict or TOML path) and return its :class:`dsm.runner.Results`."""
-    from .runner import run as _run
+    """Run an experiment (Config, dict or TOML path) and return its :class:`dsm.experiment.runner.Results`."""
+    from .experiment.runner import run as _run
     if out is None:                      # a fresh temporary folder: no one else writes there
         return _run(config, out=None, variant=variant, progress=progress)
     return _run_in(config, out, variant, progress, force, resume)
@@ -15,21 +18,21 @@ def run(config, out=None, variant=None, progress=False, *, force=False, resume=F
 
 def _run_in(config, out, variant, progress, force, resume):
     if force and resume:                 # as the command line refuses --force with --resume
-        raise ConfigError("dsm.run", "force", "force=True replaces a run and resume=True goes on with it: give one")
+        raise ConfigError("dsm.experiment", "force", "force=True replaces a run and resume=True goes on with it: give one")
     # dsm run's rules for --out (dsm.cli): the folder locked, a previous run kept unless
     # force replaces it or resume goes on with it, the config checked before the folder is touched
     from pathlib import Path
     from . import cli, pipeline
-    from .runner import Runner
+    from .experiment.runner import Runner
     out = Path(out)
     config = pipeline.prepare(config, variant)
     held, problem = cli.claim(out)
     if problem:
-        raise ConfigError("dsm.run", "out", _api_words(problem))
+        raise ConfigError("dsm.experiment", "out", _api_words(problem))
     with held:
         problem, resuming = cli.folder_problem(out, config, force, resume)
         if problem:
-            raise ConfigError("dsm.run", "out", _api_words(problem))
+            raise ConfigError("dsm.experiment", "out", _api_words(problem))
         return Runner(config, out, variant, progress, resume_previous=resuming).run()
 
 
@@ -42,7 +45,7 @@ def _api_words(problem: str) -> str:
 
 def register():
     """Register the Mitsuba integrator plugins dsm_shadow and dsm_error for the current variant."""
-    from .env import register_plugins
+    from .tools.env import register_plugins
     return register_plugins()
 
 

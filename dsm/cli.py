@@ -18,11 +18,13 @@ import tempfile
 import time
 from pathlib import Path
 
-from . import config as cfgmod
-from . import figures, headroom, lock, resume
-from .env import MAX_THREADS, SetupError
+from .config import read as cfgmod
+from .report import figures
+from .maps import headroom
+from .experiment import lock, resume
+from .tools.env import MAX_THREADS, SetupError
 
-DEFAULT_CONFIG = Path(__file__).with_name("default.toml")
+DEFAULT_CONFIG = Path(__file__).parent / "config" / "default.toml"
 # what a dsm run writes into its folder: --force clears a folder holding nothing else
 RUN_OUTPUTS = ("run.json", "metrics.csv", "oracle.csv", "table.md", "images", "plots", "report.html",
                "oracle_curves.npz", "cascades.csv", "cascades.md", "frames.csv")
@@ -179,7 +181,7 @@ def main(argv=None) -> int:
 
 
 def _bench(args) -> int:
-    from .bench import meshes_problem
+    from .tools.bench import meshes_problem
     try:
         res = [int(x) for x in args.resolutions.split(",")]
         scale = [int(x) for x in args.scaling.split(",") if x.strip()]
@@ -202,7 +204,7 @@ def _bench(args) -> int:
 
 
 def _bench_held(args, res, scale) -> int:
-    from .bench import run_bench
+    from .tools.bench import run_bench
     problem = out_problem(Path(args.out), force=True, bench=True)
     if problem:
         _err(problem)
@@ -218,7 +220,7 @@ def _bench_held(args, res, scale) -> int:
 
 
 def _report(args) -> int:
-    from . import publish
+    from .report import publish
     dirs = [Path(d) for d in args.dirs]
     if len(dirs) > 2:
         _err(f"report: expected one results folder (rebuild) or two (compare), got {len(dirs)}")
@@ -250,7 +252,7 @@ def _report(args) -> int:
 
 
 def _compare(dirs, out: Path) -> int:
-    from . import publish
+    from .report import publish
     made = name_problem(out) is None and not out.exists()
     held, problem = claim(out)
     if problem:
@@ -292,11 +294,11 @@ def _compare_out_problem(out: Path) -> str | None:
 
 
 def _plan(cfg) -> int:
-    from . import plan as planmod
-    from . import scenes
+    from .experiment import plan as planmod
+    from .scenes import load as scenes
     # which scenes cannot be read: load them (on the CPU: no GPU needed to plan)
     try:
-        from . import env
+        from .tools import env
         env.use_variant(None if (cfg.variant or "").startswith("cuda") else cfg.variant)
         loadable = True
     except SetupError as e:
@@ -307,7 +309,7 @@ def _plan(cfg) -> int:
             scenes.check(cfg)
         plan = planmod.make(cfg)
         if "tune" in cfg.raw and loadable:     # what dsm tune would refuse, said by the plan too
-            from . import tune as tunemod
+            from .tune import tuner as tunemod
             tunemod.parse_tune(cfg)
     except cfgmod.ConfigError as e:
         return _config_error(e, "plan")
@@ -334,7 +336,7 @@ def name_problem(path: Path, flag: str = "--out") -> str | None:
 
 
 def claim(out: Path, flag: str = "--out"):
-    """(the lock on ``out``, None), or (None, why it cannot be had): one writer per folder (dsm.lock)."""
+    """(the lock on ``out``, None), or (None, why it cannot be had): one writer per folder (dsm.experiment.lock)."""
     problem = name_problem(out, flag)
     if problem is None and out.is_symlink() and not out.is_dir():
         problem = f"{flag} {out}: a broken symbolic link"
@@ -485,7 +487,7 @@ def _run(cfg, args, out: Path) -> int:
     clustered = bool(args.cluster) or cfg.execution.backend == "ray"
     if clustered:                       # reach the cluster before the folder is touched
         try:
-            from . import cluster
+            from .experiment import cluster
             if args.cluster:
                 cluster.connect(args.cluster)
             else:
@@ -513,10 +515,10 @@ def _run_held(cfg, args, out: Path, clustered: bool) -> int:
         _err(problem)
         return 2
     try:
-        from .runner import Runner
+        from .experiment.runner import Runner
         t0 = time.perf_counter()
         if clustered:
-            from . import cluster
+            from .experiment import cluster
             res = cluster.run(cfg, out, args.cluster, args.variant, progress=True, resume_previous=resuming)
         else:
             res = Runner(cfg, out, args.variant, progress=True, resume_previous=resuming).run()
@@ -562,7 +564,7 @@ def reference_notes(regions: list) -> list:
 
 
 def _tune(cfg, args, out: Path) -> int:
-    from . import tune as tunemod
+    from .tune import tuner as tunemod
     from . import pipeline
 
     def check():
@@ -590,8 +592,8 @@ TUNE_FILES = ("tuned.toml", "table.md", "steps.csv", "tune.json", "plots/tune_lo
 
 
 def _tune_held(tc, out: Path, force: bool = False, resume: bool = False) -> int:
-    from . import tune as tunemod
-    from . import tune_resume
+    from .tune import tuner as tunemod
+    from .tune import resume as tune_resume
     resuming = resume and bool(entries(out))
     if resuming:
         problem = tune_resume.state_problem(out, tc.config.name)
@@ -636,7 +638,7 @@ def schemes_text() -> str:
             lines.append(f"    {f.name} = {f.default}    {f.metadata.get('doc', '')}")
         lines.append("    " + (s.__doc__ or "").strip().splitlines()[0])
     lines += presets.text()
-    from . import contact_presets
+    from .contact import presets as contact_presets
     lines += contact_presets.text()
     lines.append('lengths: a number (world units), "k texel" (texel widths at the receiver) or "k range" '
                  "(fraction of the view's depth range)")

@@ -28,17 +28,21 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import cascades as cascades_mod
-from . import area, exact_frame, formats, lights, lookup, prefilter, reference, scenes, schemes, shadowmap, spawn, timing
-from . import oracle as oracle_mod
-from . import gbuffer as gbuffer_mod
-from . import shrink as shrink_mod
-from . import metrics as metrics_mod
-from .closedness import shape_closedness
-from .env import exact_math  # noqa: F401  (the plugins set it in the thread that renders)
-from .config import parse_scheme
-from .lookup import Receiver
-from .types import VARIANTS, ConfigError, LightSpec, SchemeSpec  # noqa: F401  (the types a stage takes)
+from .maps import cascades as cascades_mod
+from .truth import area, reference
+from .scenes import exact_frame, load as scenes
+from .maps import formats, lookup, shadowmap, spawn
+from . import lights, prefilter, schemes
+from .tools import timing
+from .truth import oracle as oracle_mod
+from .scenes import gbuffer as gbuffer_mod
+from .maps import shrink as shrink_mod
+from .truth import metrics as metrics_mod
+from .scenes.closedness import shape_closedness
+from .tools.env import exact_math
+from .config.read import parse_scheme
+from .maps.lookup import Receiver
+from .types import VARIANTS, ConfigError, LightSpec, SchemeSpec
 
 # ---------------------------------------------------------------- config
 
@@ -47,9 +51,9 @@ def prepare(config, variant: str | None = None, threads: int | None = None):
     scene readable, something to run, the estimated memory within this machine's. Sets the
     Mitsuba variant (and Dr.Jit's thread count, before any scene loads). Raises ConfigError
     (one line naming file, key and choices; NothingToRun), SetupError or TypeError."""
-    from . import config as cfgmod
-    from . import env
-    from . import plan as planmod
+    from .config import read as cfgmod
+    from .tools import env
+    from .experiment import plan as planmod
     config = cfgmod.coerce(config)
     cfgmod.check_runnable(config)            # NothingToRun: every scene an absent optional file
     if variant is not None and variant not in VARIANTS:     # an argument's mistake, as the TOML key's
@@ -135,7 +139,7 @@ class LightSetup:
     @functools.cached_property
     def max_abs_coordinate(self) -> float:
         """The receivers' largest absolute coordinate in the map's frame (NaN without receivers):
-        what every case on them shares for its float32 headroom (dsm.headroom), read once."""
+        what every case on them shares for its float32 headroom (dsm.maps.headroom), read once."""
         if self.p is None or not len(self.pixels):
             return math.nan
         return float(np.abs(points_np(self.p)).max())
@@ -183,9 +187,9 @@ class LightSetup:
 
 def make_view(light, R, receivers_world, bbox, kind=None, cascade=None, sensor=None, scale: float = 1.0):
     """The view of ``light`` at resolution R. A directional light with ``cascade`` (a CascadeSpec)
-    gets a cascaded view for the camera ``sensor`` (dsm.cascades; ``scale``: the scene's, which
+    gets a cascaded view for the camera ``sensor`` (dsm.maps.cascades; ``scale``: the scene's, which
     multiplies the layout's distances), else one map fitted to the receivers; an area light
-    its view from its centre (:func:`dsm.area.make_view`)."""
+    its view from its centre (:func:`dsm.truth.area.make_view`)."""
     return lights.get(light.type).make_view(light, R, receivers_world, bbox, kind, cascade, sensor, scale)
 
 
@@ -203,7 +207,7 @@ def light_setup(sd, gb, light, label, repeats: int = 0, seed: int = 7) -> LightS
 
 
 def pinhole_camera(sensor):
-    """The pinhole camera of a perspective sensor (dsm.cascades.Camera; at its film's size), None for any other."""
+    """The pinhole camera of a perspective sensor (dsm.maps.cascades.Camera; at its film's size), None for any other."""
     return cascades_mod.Camera.from_sensor(sensor) if "x_fov" in mi.traverse(sensor) else None
 
 
@@ -245,7 +249,7 @@ def _light_setup(sd, gb, light, label, repeats: int = 0, seed: int = 7) -> Light
 
 
 def exact_side(sd, light) -> tuple:
-    """(light, bounding box) in the frame the exact side is traced in (:mod:`dsm.exact_frame`)."""
+    """(light, bounding box) in the frame the exact side is traced in (:mod:`dsm.scenes.exact_frame`)."""
     if sd.centre is None:
         return light, sd.bbox
     return exact_frame.light_in(light, sd.centre), exact_frame.bbox_in(sd.bbox, sd.centre)
@@ -253,7 +257,7 @@ def exact_side(sd, light) -> tuple:
 
 def area_setup(sd, gb, light, label, repeats: int = 0, seed: int = 7) -> LightSetup:
     """Receivers of an area light (hit pixels with part of the light above their tangent plane,
-    in front of a one-sided light) and the Monte Carlo reference V* (:mod:`dsm.area`). No
+    in front of a one-sided light) and the Monte Carlo reference V* (:mod:`dsm.truth.area`). No
     attached-shadow pixels are kept (``backface_lit_rate`` is undefined for area lights)."""
     light_x, bbox_x = exact_side(sd, light)
     geom = area.geometry(light_x, sd.exact)
@@ -333,7 +337,7 @@ def build_map(scene, view, needs=(), culling: str = "none", closed=None, tile: i
 
 def shrunk_scene(scene, distance: float):
     """A copy of ``scene`` whose meshes moved ``distance`` inward along their welded vertex normals
-    (``[map] shrink``, :mod:`dsm.shrink`): what a map is cast against, the rest using ``scene``."""
+    (``[map] shrink``, :mod:`dsm.maps.shrink`): what a map is cast against, the rest using ``scene``."""
     return shrink_mod.shrunk_scene(scene, distance)
 
 
@@ -413,7 +417,7 @@ def thresholds(rx: Receiver, smap) -> Thresholds:
 
 
 def oracles(th: Thresholds, v_star: np.ndarray, lam: float = 1.0) -> dict:
-    """The world, texel and per-texel oracles at ``lam`` (see :mod:`dsm.oracle`): ``row`` (best
+    """The world, texel and per-texel oracles at ``lam`` (see :mod:`dsm.truth.oracle`): ``row`` (best
     b and k, objectives and rates), ``curve_world``, ``curve_texel`` and ``wrong`` (per receiver,
     wrong under the per-texel oracle: the resolution's share of the errors)."""
     return oracle_mod.oracles(th.tau, th.kappa, v_star, th.texel, lam)
@@ -429,7 +433,7 @@ split = metrics_mod.split                 # (v, V*, wrong under the per-texel or
 
 def metrics(v: np.ndarray, setup: LightSetup, tap_shape: np.ndarray, seam=None, has_seams=None) -> dict:
     """Counts and rates of one case (undefined values are NaN); an area light's soft metrics
-    (:func:`dsm.metrics.soft`) replace the hard ones they redefine."""
+    (:func:`dsm.truth.metrics.soft`) replace the hard ones they redefine."""
     m = metrics_mod.compute(v, setup.v_star, setup.shape, tap_shape, setup.occluder_dist, seam, has_seams)
     if setup.ref is not None:
         m.update(metrics_mod.soft(v, setup.ref.hits, setup.ref.samples, setup.ref.half, setup.shape, tap_shape))

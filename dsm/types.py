@@ -199,7 +199,7 @@ class LightSpec:
     target: tuple | None = None
     cutoff: float = 30.0        # spot half angle in degrees
     label: str = ""
-    # area lights (dsm.area): shape, size (side or [w, h]; diameter), the reference's sampling
+    # area lights (dsm.truth.area): shape, size (side or [w, h]; diameter), the reference's sampling
     shape: str = ""
     size: tuple = ()
     min_samples: int = 16
@@ -240,7 +240,7 @@ class CameraSpec:
 
 @dataclass(frozen=True)
 class CascadeSpec:
-    """A directional light's cascade layout (``[map] cascades`` and its keys; dsm.cascades)."""
+    """A directional light's cascade layout (``[map] cascades`` and its keys; dsm.maps.cascades)."""
     count: int = 1
     split: str = "practical"
     lam: float = 0.5                # practical split: lam * log + (1 - lam) * uniform
@@ -279,7 +279,7 @@ LIGHT_PATHS = ("none", "turn", "move", "keyframes")
 
 @dataclass(frozen=True)
 class MotionSpec:
-    """One ``[[motion]]`` path over ``frames`` frames (dsm.motion)."""
+    """One ``[[motion]]`` path over ``frames`` frames (dsm.experiment.motion)."""
     frames: int = 8
     camera: str = "none"            # none | dolly (translate by offset) | pan | orbit (by angle) | keyframes
     offset: tuple = (0.0, 0.0, 0.0)  # dolly: the camera's whole translation over the path (scene units)
@@ -374,7 +374,7 @@ BACKENDS = ("local", "ray")
 
 @dataclass(frozen=True)
 class ExecutionSpec:
-    """``[execution]``: where the cases run (dsm.cluster). ``backend`` local or ray; ``address``
+    """``[execution]``: where the cases run (dsm.experiment.cluster). ``backend`` local or ray; ``address``
     a Ray cluster's address (``auto``, ``ray://host:port``) or ``local`` (start one here);
     ``cpus_per_task`` / ``gpus_per_task``: what each map group's Ray task asks for (fractions allowed)."""
     backend: str = "local"

@@ -13,12 +13,12 @@ from pathlib import Path
 import mitsuba as mi
 import numpy as np
 
-from dsm import env
+from dsm.tools import env
 
 env.use_variant("llvm_ad_rgb")
 import dsm.pipeline as pl                                   # noqa: E402
-from dsm import scenes                                      # noqa: E402
-from dsm.types import LightSpec                             # noqa: E402
+from dsm.scenes import load as scenes
+from dsm.types import LightSpec
 
 A, H, B, HS = 1.0, 4.0, 1.0, 2.0
 W = 256

@@ -35,14 +35,14 @@ def run_all(out: Path):
     import shutil
 
     import dsm
-    from dsm import config
+    from dsm.config import read as config
     from dsm.cli import DEFAULT_CONFIG
     shutil.rmtree(out, ignore_errors=True)
     out.mkdir(parents=True)
     for path in sorted(Path("experiments").glob("*.toml")):
         cfg = config.load(path)
         if cfg.raw.get("tune"):
-            from dsm.tune import tune
+            from dsm.tune.tuner import tune
             tune(cfg, out=out / f"tune-{path.stem}")
             continue
         try:

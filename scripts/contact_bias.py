@@ -13,7 +13,9 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from dsm import contact_report, report, resume
+from dsm.report.sections import contact as contact_report
+from dsm.report import io as report
+from dsm.experiment import resume
 
 TOLERANCE = 1.1
 

@@ -17,9 +17,9 @@ import numpy as np
 from matplotlib.figure import Figure
 
 import dsm
-from dsm import figures, report, summary
+from dsm.report import figures, io as report, summary
 from dsm.cli import DEFAULT_CONFIG
-from dsm.metrics import CLASS_COLORS, CLASS_NAMES
+from dsm.truth.metrics import CLASS_COLORS, CLASS_NAMES
 
 ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "docs" / "gallery"

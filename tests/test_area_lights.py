@@ -7,7 +7,11 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from dsm import area, config, intervals, lookup, metrics, pipeline, scenes, schemes
+from dsm.truth import area, intervals, metrics
+from dsm.config import read as config
+from dsm.maps import lookup
+from dsm import pipeline, schemes
+from dsm.scenes import load as scenes
 from dsm.types import ConfigError, LightSpec
 
 from conftest import MESHES, base_config

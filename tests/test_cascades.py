@@ -1,4 +1,4 @@
-"""Cascaded shadow maps (dsm.cascades): splits, cascade choice, the single-map identity, texel
+"""Cascaded shadow maps (dsm.maps.cascades): splits, cascade choice, the single-map identity, texel
 footprints per cascade, stabilization, clipped near/far, the camera pose and config errors.
 Expected values come from closed forms and float64 numpy computed here."""
 
@@ -34,7 +34,7 @@ def _np3(v):
 @pytest.mark.parametrize("kind,lam", [("uniform", 0.5), ("log", 0.5), ("practical", 0.0), ("practical", 0.5),
                                       ("practical", 0.9)])
 def test_split_distances_equal_the_closed_forms(kind, lam):
-    from dsm.cascades import split_distances
+    from dsm.maps.cascades import split_distances
     n, f, N = 0.1, 150.0, 4
     got = split_distances(kind, N, n, f, lam)
     uni = [n + (f - n) * i / N for i in range(N + 1)]
@@ -47,8 +47,8 @@ def test_split_distances_equal_the_closed_forms(kind, lam):
 def test_engine_layouts_bounds():
     """Bevy: first far bound 10, maximum 150, spaced geometrically (10 * 15^(i/3)); Godot: 0.1, 0.2,
     0.5, 1 of its max distance 100."""
-    from dsm.cascade_layouts import LAYOUTS
-    from dsm.cascades import layout_splits
+    from dsm.maps.cascade_layouts import LAYOUTS
+    from dsm.maps.cascades import layout_splits
     bevy = layout_splits(LAYOUTS["bevy"][0], 0.1, 150.0)
     assert np.allclose(bevy, [0.1, 10.0, 10.0 * 15 ** (1 / 3), 10.0 * 15 ** (2 / 3), 150.0], rtol=1e-12)
     godot = LAYOUTS["godot"][0]
@@ -58,7 +58,7 @@ def test_engine_layouts_bounds():
 # ---------------------------------------------------------------- cascade choice
 
 def test_each_receiver_is_looked_up_in_the_cascade_whose_range_holds_its_depth():
-    from dsm.lookup import nearest_tap
+    from dsm.maps.lookup import nearest_tap
     pl, sd, gb, setup = _setup()
     view = _view(pl, sd, setup, count=4, split="practical", lam=0.5, fit="cascade")
     rx = pl.receivers(view, setup, sd.diagonal)
@@ -83,7 +83,7 @@ def test_each_receiver_is_looked_up_in_the_cascade_whose_range_holds_its_depth()
 @pytest.mark.parametrize("builtin", ["plane_box", "long_ground"])
 def test_one_cascade_fit_receivers_equals_the_single_map(builtin):
     """Bit-identical z1 and the same visibility per receiver, for every scheme, filter and format."""
-    from dsm.views import OrthographicView
+    from dsm.maps.views import OrthographicView
     pl, sd, gb, setup = _setup(builtin, res=96)
     pts = pl.points_np(setup.p)
     ortho = pl.make_view(setup.light, 128, pts, sd.bbox)
@@ -114,7 +114,7 @@ def test_one_cascade_in_the_runner_counts_as_the_single_map(run_dict):
     keys = ("n_receivers", "n_acne", "n_peterpan", "n_gt_lit", "n_acne_resolution")
     assert [[r[k] for k in keys] for r in a.rows] == [[r[k] for k in keys] for r in b.rows]
     assert all(r["n_receivers"] > 0 for r in a.rows) and any(r["n_acne"] > 0 for r in a.rows)
-    from dsm import figures      # images: one folder per scene and light
+    from dsm.report import figures
     folder = b.out / "images" / figures.image_folder(b.rows[0])
     assert (b.out / "cascades.csv").is_file() and (folder / f"{b.rows[0]['case']}_cascade.png").is_file()
 
@@ -124,7 +124,7 @@ def test_one_cascade_in_the_runner_counts_as_the_single_map(run_dict):
 def test_one_texel_in_cascade_k_is_that_cascades_measured_footprint():
     import drjit as dr
     import mitsuba as mi
-    from dsm.lookup import resolve
+    from dsm.maps.lookup import resolve
     pl, sd, gb, setup = _setup()
     view = _view(pl, sd, setup, count=4, split="log", fit="cascade")
     rx = pl.receivers(view, setup, sd.diagonal)
@@ -199,7 +199,7 @@ def test_stabilized_cascades_have_bit_identical_texel_rays_under_camera_translat
 
 def test_light_frustum_clipped_to_the_scene_bounds():
     """intersect_hexahedra against a dense sampling of one box kept where it lies in the other."""
-    from dsm.cascades import box_corners, intersect_hexahedra
+    from dsm.maps.cascades import box_corners, intersect_hexahedra
     rng = np.random.default_rng(3)
     rot = np.linalg.qr(rng.normal(size=(3, 3)))[0]
     a = box_corners([-1, -2, -0.5], [3, 1, 0.5]) @ rot.T       # an oriented box
@@ -247,7 +247,8 @@ def test_camera_pose_overrides_and_far_plane_is_the_farthest_corner():
 
 
 def test_cascades_without_a_directional_light_is_a_config_error():
-    from dsm import config, plan
+    from dsm.config import read as config
+    from dsm.experiment import plan
     from dsm.types import ConfigError
     spot = {"type": "spot", "position": [0, 0, 4], "target": [0, 0, 0]}
     with pytest.raises(ConfigError) as e:
@@ -303,7 +304,8 @@ def test_blend_mixes_the_next_cascade_linearly_over_the_band():
     import dataclasses
     import drjit as dr
     import mitsuba as mi
-    from dsm import lookup, schemes
+    from dsm.maps import lookup
+    from dsm import schemes
     pl, sd, gb, setup = _setup()
     view = _view(pl, sd, setup, count=2, split="practical", lam=0.9, fit="cascade", blend=0.3)
     smap = pl.store(pl.build_map(sd.scene, view), "float32")
@@ -330,7 +332,8 @@ def test_blend_mixes_the_next_cascade_linearly_over_the_band():
 
 def test_camera_pose_replaces_an_xml_sensors_and_keeps_its_film(tmp_path):
     import mitsuba as mi
-    from dsm import config, scenes
+    from dsm.config import read as config
+    from dsm.scenes import load as scenes
     xml = tmp_path / "s.xml"
     xml.write_text('<scene version="3.0.0"><sensor type="perspective"><float name="fov" value="45"/>'
                    '<transform name="to_world"><lookat origin="0, -4, 3" target="0, 0, 0" up="0, 0, 1"/></transform>'

@@ -4,7 +4,7 @@ import json
 import subprocess
 import sys
 
-from dsm import figures, report
+from dsm.report import figures, tables as report
 from dsm.schemes import REGISTRY
 
 
@@ -75,7 +75,8 @@ def test_a_failing_case_is_recorded_and_the_rest_still_run(tmp_path, monkeypatch
 def test_ctrl_c_while_the_report_is_written_says_how_to_finish_it(tmp_path, monkeypatch, capsys):
     """Ctrl-C after the last case, while the figures are drawn: exit 130, every case kept, and the
     message names `dsm report`, which then writes the report."""
-    from dsm import cli, publish
+    from dsm import cli
+    from dsm.report import publish
     cfg = tmp_path / "c.toml"
     cfg.write_text('[[scene]]\nbuiltin = "plane_box"\n[[scheme]]\nname = "constant"\nbias = [0.01, 0.02]\n'
                    '[map]\nresolution = 16\n[camera]\nresolution = [8, 8]\n[timing]\nrepeats = 1\n')

@@ -28,8 +28,9 @@ def _cfg():
 
 
 def test_a_local_two_worker_cluster_writes_the_rows_of_a_local_run(tmp_path):
-    from dsm import cluster, pipeline
-    from dsm.runner import Runner
+    from dsm.experiment import cluster
+    from dsm import pipeline
+    from dsm.experiment.runner import Runner
     cfg = pipeline.prepare(_cfg())
     local = Runner(cfg, tmp_path / "local", progress=False).run()
     try:
@@ -53,7 +54,7 @@ def test_a_local_two_worker_cluster_writes_the_rows_of_a_local_run(tmp_path):
 
 
 def test_the_execution_table_is_checked():
-    from dsm import config as cfgmod
+    from dsm.config import read as cfgmod
     raw = _cfg()
     raw["execution"] = {"backend": "slurm"}
     with pytest.raises(cfgmod.ConfigError, match="execution.backend.*ray"):

@@ -8,7 +8,8 @@ import pytest
 import dsm
 import dsm.pipeline as pl
 from conftest import ROOT, base_config
-from dsm import contact, record
+from dsm.contact import march as contact
+from dsm.experiment import record
 from dsm.types import ConfigError, ContactSpec, Length, LightSpec
 
 ROOT_DATA = ROOT / "tests" / "data"
@@ -153,7 +154,7 @@ def hidden_scene(with_hider: bool):
     """Ground; a caster plate 0.2 above it; (with_hider) a smaller plate at height 2 over the caster
     hiding it from a camera straight above; the sun at 45 degrees from -x."""
     import mitsuba as mi
-    from dsm.scenes import look_at_sensor, make_mesh, quad
+    from dsm.scenes.load import look_at_sensor, make_mesh, quad
     d = {"type": "scene", "ground": make_mesh("ground", *quad([0, 0, 0], [4, 0, 0], [0, 4, 0])),
          "caster": make_mesh("caster", *quad([0, 0, 0.2], [0.5, 0, 0], [0, 0.5, 0])),
          "sensor": look_at_sensor((0, 0, 5), (0, 0, 0), (0, 1, 0), 40.0, 128, 128)}
@@ -218,7 +219,8 @@ def test_run_writes_the_contact_group_only_when_asked(run_dict):
         after = r["n_acne"] + r["n_contact_false"] + r["n_peterpan"] - r["n_contact_recovered"]
         assert r["contact_error_rate"] == pytest.approx(after / r["n_receivers"])
         from PIL import Image
-        from dsm import contact_images, figures
+        from dsm.report.sections import contact_images
+        from dsm.report import figures
         img = np.asarray(Image.open(with_c.out / "images" / figures.image_folder(r) / f"{r['case']}_contact.png"))
         count = lambda k: int((img.reshape(-1, 3) == contact_images.CONTACT_COLORS[k]).all(1).sum())
         assert (count(3), count(4), count(5)) == (r["n_contact_recovered"], r["n_contact_false"],
@@ -260,7 +262,7 @@ def test_largest_bias_within_the_tolerance():
 
 
 def test_contact_and_shrink_enter_the_case_keys_only_when_asked():
-    from dsm import plan, resume
+    from dsm.experiment import plan, resume
     cfg = dsm.config.parse(base_config(), "<t>")
     keys = resume.case_keys(cfg, plan.make(cfg), "v")
     with_c = dsm.config.parse(base_config(contact={"steps": 4}), "<t>")

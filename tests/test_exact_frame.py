@@ -5,7 +5,8 @@ and both agree with a float64 ray-triangle count (numpy) over the built-in's own
 import numpy as np
 import pytest
 
-from dsm import exact_frame, pipeline, scenes
+from dsm.scenes import exact_frame, load as scenes
+from dsm import pipeline
 
 OFFSETS = (0.0, 1e4, 1e5, 1e6)
 
@@ -111,7 +112,7 @@ def test_a_mesh_far_from_the_origin_keeps_its_reference(variant):
     ("floating_plate", {"type": "point", "position": [0.4, 0.2, 3.0]}),
 ])
 def test_reference_far_from_the_origin_is_the_reference_at_the_origin(variant, builtin, light):
-    from dsm import config
+    from dsm.config import read as config
     spec_light = None
     if light is not None:
         spec_light = config.parse({"scene": [{"builtin": builtin}], "light": [light],
@@ -169,7 +170,7 @@ def test_camera_relative_map_keeps_its_counts_far_away_and_world_precision_is_fl
 
 
 def test_precision_choices_are_checked():
-    from dsm import config
+    from dsm.config import read as config
     from dsm.types import ConfigError
     with pytest.raises(ConfigError) as e:
         config.parse({"scene": [{"builtin": "plane", "precision": "double"}], "scheme": [{"name": "none"}]}, "x.toml")

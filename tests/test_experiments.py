@@ -9,7 +9,7 @@ from conftest import MESHES, ROOT
 # files an experiment may name without the kit shipping them: their publishers state no
 # redistribution terms (data/meshes/README.md); a user's own copy in data/meshes/ is used
 NOT_SHIPPED = {"sponza_dabrovic.ply", "mitsuba_teapot.ply"}
-from dsm import config
+from dsm.config import read as config
 from dsm.cli import DEFAULT_CONFIG
 
 FILES = sorted((ROOT / "experiments").glob("*.toml")) + [DEFAULT_CONFIG]

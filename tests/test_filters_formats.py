@@ -10,9 +10,12 @@ def _edge_setup(R=60):
     straight shadow edge along the map's v axis (the view's ex is +x)."""
     import drjit as dr
     import mitsuba as mi
-    from dsm import config, gbuffer, reference, scenes, shadowmap
-    from dsm.config import LightSpec
-    from dsm.views import OrthographicView
+    from dsm.config import read as config
+    from dsm.scenes import gbuffer, load as scenes
+    from dsm.truth import reference
+    from dsm.maps import shadowmap
+    from dsm.config.read import LightSpec
+    from dsm.maps.views import OrthographicView
     cfg = config.parse(base_config(scene=[{"builtin": "floating_plate"}]), "<test>")
     sd = scenes.load(cfg.scenes[0], (256, 256))
     gb = gbuffer.cast(sd.scene, sd.sensor, 256, 256)
@@ -32,7 +35,7 @@ def _edge_setup(R=60):
 
 def test_bilinear_pcf_rises_linearly_across_one_texel(variant):
     from dsm import schemes
-    from dsm.lookup import Receiver, visibility
+    from dsm.maps.lookup import Receiver, visibility
     sd, view, smap, p, n, vstar = _edge_setup()
     rx = Receiver.make(view, p, n, sd.diagonal)
     const = schemes.get("constant")
@@ -110,7 +113,7 @@ def test_stored_formats_on_a_deep_scene_make_the_acne_their_step_predicts(run_di
     constant bias b (and a receiver's own depth spread within its texel, here at most
     tan(45) * texel * sqrt(1/2) = 0.039, never reaching s / 2 - b) a lit receiver is acne when
     e > b: a rate of 1/2 - b / s where s / 2 > b, none where s / 2 + 0.039 < b."""
-    from dsm.views import PerspectiveView
+    from dsm.maps.views import PerspectiveView
     bias = 0.05
     cfg = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [128, 128]}, light=[SPOT],
                       map={"resolution": 256, "format": ["float32", "unorm16", "unorm24", "ndc24"]},
@@ -138,8 +141,8 @@ def test_quantization_error_is_the_format_step_rounded_to_nearest(variant):
     off by a quarter step on average (uniform over the half step). The steps come from each
     format's definition with the view's near and far: ndc24's grows as z^2 (fine near the
     light, coarse far from it), unorm's is constant."""
-    from dsm import formats
-    from dsm.views import PerspectiveView
+    from dsm.maps import formats
+    from dsm.maps.views import PerspectiveView
     bbox = (np.array([-1.0, -1, 0]), np.array([1.0, 1, 1000]))
     view = PerspectiveView((0, 0, 1001.0), (0, 0, -1), 10, bbox, 16)
     # ndc24's n: the light's distance to the scene's bounds (1001 - 1000), at least far / 1000

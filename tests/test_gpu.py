@@ -101,7 +101,7 @@ def test_cuda_counts_equal_llvm_counts(tmp_path):
     gpu = _run(cfg, "cuda_ad_rgb", tmp_path / "cuda")
     assert [r["case"] for r in gpu] == [r["case"] for r in cpu]
     lines, bad = [], []
-    from dsm.publish import count_share
+    from dsm.report.publish import count_share
     for c, g in zip(cpu, gpu):
         worst = count_share(c, g)
         lines.append(f"{c['scene']} {c['light']} R={c['resolution']} {c['scheme']} {c['params']}: "

@@ -121,7 +121,7 @@ def truth(scene, sensor, light_dir, tilt=2e-5):
 
 def assert_matches_truth(res, row, tr):
     """The case's receivers and exact visibility, pixel by pixel and as counts, are the tracer's."""
-    from dsm.metrics import ACNE, LIT, OUTSIDE, base_class
+    from dsm.truth.metrics import ACNE, LIT, OUTSIDE, base_class
     img = base_class(res.images[row["case"]].ravel())
     amb = tr["ambiguous"]
     rec, vstar = img != OUTSIDE, np.isin(img, (LIT, ACNE))
@@ -157,7 +157,7 @@ def assert_errors_only_at_the_outline(res, row, tr, polygon, light_dir):
     """A planar receiver facing the light with a positive bias is wrong only where its texel's
     centre ray and its own light ray fall on different sides of the caster's outline: within
     half a texel diagonal of it. The texel is at most (receivers' span in the light plane) / R."""
-    from dsm.metrics import ACNE, ACNE_RESOLUTION, PETERPAN, PETERPAN_RESOLUTION
+    from dsm.truth.metrics import ACNE, ACNE_RESOLUTION, PETERPAN, PETERPAN_RESOLUTION
     img = res.images[row["case"]].ravel()
     ez = _unit(np.asarray(light_dir, float))
     p = tr["p"][tr["receiver"]]
@@ -170,7 +170,8 @@ def assert_errors_only_at_the_outline(res, row, tr, polygon, light_dir):
 
 
 def _config_scene(cfg):
-    from dsm import config, scenes
+    from dsm.config import read as config
+    from dsm.scenes import load as scenes
     c = config.parse(cfg, "<test>")
     return [scenes.load(spec, c.camera_resolution) for spec in c.scenes]
 
@@ -309,10 +310,11 @@ def test_receivers_exactly_on_texel_boundaries():
     i covers [i, i + 1), so u = k is in texel k, and u = R, past the last texel, is clamped to
     R - 1 for the index but is beyond the map (no caster: the far bound). The texel holds the
     plane's depth at its centre; points built at those corners in world space project there."""
-    from dsm import scenes, shadowmap
-    from dsm.config import parse
-    from dsm.lookup import Receiver, tap_at
-    from dsm.views import OrthographicView
+    from dsm.scenes import load as scenes
+    from dsm.maps import shadowmap
+    from dsm.config.read import parse
+    from dsm.maps.lookup import Receiver, tap_at
+    from dsm.maps.views import OrthographicView
     cfg = parse(base_config(), "<test>")                 # a 4 x 4 plane tilted 45 degrees about x
     sd = scenes.load(cfg.scenes[0], (32, 32))
     R = 16

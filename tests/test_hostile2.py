@@ -8,8 +8,9 @@ from pathlib import Path
 import pytest
 
 from conftest import cli_run as _cli, one_line as _one_line, base_config
-from dsm import config, plan
-from dsm.config import ConfigError
+from dsm.config import read as config
+from dsm.experiment import plan
+from dsm.config.read import ConfigError
 
 
 def _toml(d: dict, prefix: str = "") -> str:
@@ -109,8 +110,8 @@ def test_bad_tune_input_is_one_config_error(tmp_path, capsys, tune, key, words):
 
 def test_an_infinite_start_names_the_schemes_index_and_tune_params():
     """combined's default slope_clamp is inf: the error named "scheme.slope_clamp" (no index)."""
-    import dsm.tune as tu
-    from dsm.config import coerce
+    from dsm.tune import tuner as tu
+    from dsm.config.read import coerce
     cfg = _tune_cfg({}, [{"name": "constant"}, {"name": "combined"}])
     with pytest.raises(ConfigError) as e:
         tu.parse_tune(coerce(cfg))
@@ -167,7 +168,7 @@ def test_contact_columns_under_an_area_light_use_its_lit_and_umbra_regions():
     penumbra's receiver 4 was counted too), recovered 1 (receiver 2), nothing missed; after it
     acne 1 of 2 lit, peter-panning 0 of 2 umbra, error 1 of 6, mean |V - V*| (1 + .5 + .5) / 6."""
     import numpy as np
-    from dsm import contact
+    from dsm.contact import march as contact
     v_frac = np.array([1.0, 1.0, 0.0, 0.0, 0.5, 0.5])
     v = np.array([1.0, 1.0, 1.0, 0.0, 1.0, 0.0])
     occ = np.array([True, False, True, False, True, True])
@@ -232,7 +233,7 @@ def test_camera_relative_with_a_camera_far_from_the_scene_names_the_camera(tmp_p
 
 
 def test_the_precision_line_does_not_suggest_camera_relative_to_camera_relative_cases():
-    from dsm import headroom
+    from dsm.maps import headroom
     row = lambda scene: {"scene": scene, "texel_f32_steps": 0.5, "f32_step": 0.0625}
     assert "precision = \"camera_relative\"" in headroom.summary([row("plane_box(translate=[1e+06,0,0])")])
     line = headroom.summary([row("plane_box(precision=camera_relative)")])
@@ -277,7 +278,9 @@ def test_an_area_reference_in_chunks_is_the_reference_in_one_launch(monkeypatch)
     chunks of at most STAGE_LANES rays; each receiver's samples have their own seeds, so V* is
     the same: here with chunks of one to a few receivers against one launch per stage."""
     import numpy as np
-    from dsm import area, config, pipeline
+    from dsm.truth import area
+    from dsm.config import read as config
+    from dsm import pipeline
     cfg = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [24, 24]},
                       light=[{"type": "area", "shape": "rectangle", "position": [0.6, -0.4, 3.0], "size": 0.5,
                               "max_samples": 512, "tolerance": 0.05}])
@@ -314,7 +317,7 @@ def test_a_shrink_that_turns_a_closed_caster_inside_out_is_a_config_error(tmp_pa
     comes out inside out, a larger caster facing in (the watertight bunny shrunk by 5 shadowed
     92 % of the lit receivers, exit 0). The ground is open: it only moves down. Just below half
     it still runs."""
-    from dsm import scenes
+    from dsm.scenes import load as scenes
     cfg = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [16, 16]},
                       map={"resolution": 16, "shrink": 0.5})
     path = tmp_path / "c.toml"

@@ -150,7 +150,7 @@ def test_light_types_branch_only_in_the_registry():
     """No module of the kit outside dsm/lights compares a light's type with a type's name, but
     the few listed here (each a reason in docs/design.md, *Light types*): a new light type is a
     module in dsm/lights and a line in its REGISTRY."""
-    allowed = {"dsm.plan": 5, "dsm.scenes": 2, "dsm.motion": 2, "dsm.schemes.presets": 1, "dsm.config": 1,
+    allowed = {"dsm.experiment.plan": 5, "dsm.scenes.load": 2, "dsm.experiment.motion": 2, "dsm.schemes.presets": 1, "dsm.config.read": 1,
                "dsm_plugins.integrators": 5}
     names = {"directional", "spot", "point", "area", "scene"}
     found = {}
@@ -165,3 +165,22 @@ def test_light_types_branch_only_in_the_registry():
                         (isinstance(left, ast.Name) and left.id in ("light_type", "ltype")):
                     found[mod] = found.get(mod, 0) + 1
     assert found == allowed, found
+
+
+def test_every_folder_of_the_kit_is_packaged():
+    """pyproject.toml lists every package of dsm/ (a folder missing there is missing from a
+    wheel, while an editable install still finds it)."""
+    import tomllib
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    folders = {".".join(p.parent.relative_to(ROOT).parts) for p in (ROOT / "dsm").rglob("__init__.py")}
+    assert folders | {"dsm_plugins"} == listed
+
+
+def test_no_folder_shadows_a_public_name():
+    """A subpackage named like a public function of dsm (``dsm.run``) would replace it as an
+    attribute of the package the moment any module of the folder is imported."""
+    import dsm
+    folders = {p.parent.name for p in (ROOT / "dsm").rglob("__init__.py")}
+    public = {n for n in dir(dsm) if not n.startswith("_") and callable(getattr(dsm, n))
+              and not isinstance(getattr(dsm, n), type(dsm))}
+    assert "run" in public and not folders & public

@@ -15,8 +15,11 @@ import pytest
 
 from conftest import cli_run as _cli
 
-from dsm import cli, config, plan, scenes
-from dsm.config import ConfigError, Length
+from dsm import cli
+from dsm.config import read as config
+from dsm.experiment import plan
+from dsm.scenes import load as scenes
+from dsm.config.read import ConfigError, Length
 
 ROOT = Path(__file__).resolve().parent.parent
 CAM = '''<sensor type="perspective"><transform name="to_world"><lookat origin="0, -4, 3" target="0, 0, 0" up="0, 0, 1"/>
@@ -406,7 +409,7 @@ def test_translate_must_be_three_numbers():
 # ---------------------------------------------------------------- 8: double torus
 
 def test_double_torus_is_a_closed_genus_two_mesh(run_dict):
-    from dsm.closedness import shape_closedness
+    from dsm.scenes.closedness import shape_closedness
     cfg = config.parse({"scene": [{"builtin": "double_torus"}], "scheme": [{"name": "none"}]})
     sd = scenes.load(cfg.scenes[0], (8, 8))
     shape = sd.scene.shapes()[sd.shape_names.index("double_torus")]

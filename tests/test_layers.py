@@ -5,8 +5,8 @@ import pytest
 
 import dsm
 from conftest import MESHES, ROOT, base_config
-from dsm.closedness import closedness
-from dsm.scenes import box, prism, quad
+from dsm.scenes.closedness import closedness
+from dsm.scenes.load import box, prism, quad
 from test_hard_cases import Scene64, assert_matches_truth, truth
 
 
@@ -43,7 +43,8 @@ def test_ray_counts_follow_the_needs(run_dict):
     assert rays["map_texel"] == 64 * 64
     # second-layer rays: one continuation per texel whose first ray hit the plate or the ground
     # (no culling); counted here by the tracer along the runner's texel rays
-    from dsm import config, scenes
+    from dsm.config import read as config
+    from dsm.scenes import load as scenes
     c = config.parse(cfg, "<test>")
     sd = scenes.load(c.scenes[0], c.camera_resolution)
     view = _runner_view(sd, sd.lights_for(c.lights)[0], 64)
@@ -89,12 +90,13 @@ def test_dragon_is_open_and_back_closed_culls_only_closed_shapes(tmp_path):
 def test_back_closed_in_a_mixed_scene(run_dict):
     """l_shape (closed) over the ground (open): back_closed culls the L's back faces only, so the
     second layer behind the L's top is the ground, while an open-only map is unaffected."""
-    from dsm import scenes, shadowmap
-    from dsm.config import parse
-    from dsm.views import OrthographicView
+    from dsm.scenes import load as scenes
+    from dsm.maps import shadowmap
+    from dsm.config.read import parse
+    from dsm.maps.views import OrthographicView
     cfg = parse(base_config(scene=[{"builtin": "l_shape"}]), "<test>")
     sd = scenes.load(cfg.scenes[0], (32, 32))
-    from dsm.closedness import shape_closedness
+    from dsm.scenes.closedness import shape_closedness
     closed = [shape_closedness(s)[0] for s in sd.scene.shapes()]
     assert dict(zip(sd.shape_names, closed)) == {"ground": False, "l_shape": True}
     modes = shadowmap.cull_modes_for("back_closed", closed)
@@ -150,10 +152,12 @@ def test_two_plates_layers_and_midpoint_dual_against_analytic_depths():
     against d <= (z1 + z2) / 2 and d <= z1 + min((z2 - z1) / 2, 4 texels) on those depths."""
     import drjit as dr
     import mitsuba as mi
-    from dsm import scenes, schemes, shadowmap
-    from dsm.config import Length, parse
-    from dsm.lookup import Receiver, visibility
-    from dsm.views import OrthographicView
+    from dsm.scenes import load as scenes
+    from dsm import schemes
+    from dsm.maps import shadowmap
+    from dsm.config.read import Length, parse
+    from dsm.maps.lookup import Receiver, visibility
+    from dsm.maps.views import OrthographicView
     gap, R = 0.6, 160
     sd = scenes.load(parse(base_config(scene=[{"builtin": "floating_plate", "gap": gap}]), "<test>").scenes[0],
                      (32, 32))
@@ -260,7 +264,7 @@ def assert_layers_match(smap, expected, ok, l_index):
     """z1, z2 and the first hit's shape of a map against the tracer's. A float32 hit is a few ulps
     off its surface, which moves it along a ray meeting the surface at |cos| = |n . d| by that
     over |cos|; z2 is found from a continuation ray that starts delta = 32 u (max|p| + extent)
-    (dsm.spawn, under 1e-5 in these scenes) off the first hit along its normal, a ray parallel to
+    (dsm.maps.spawn, under 1e-5 in these scenes) off the first hit along its normal, a ray parallel to
     the texel's, which moves it by at most delta (1 + 1 / |cos2|)."""
     z1, is_l, z2, cos1, cos2 = expected
     tol1 = 1e-6 + 4e-6 / cos1
@@ -274,7 +278,8 @@ def assert_layers_match(smap, expected, ok, l_index):
 def _runner_view(sd, light, R):
     """The view the runner builds for a directional light: fitted to its receivers (from the
     G-buffer), so its texel frame is the runner's."""
-    from dsm import gbuffer, pipeline
+    from dsm.scenes import gbuffer
+    from dsm import pipeline
     W, H = (int(x) for x in sd.sensor.film().size())
     gb = gbuffer.cast(sd.scene, sd.sensor, W, H)
     setup = pipeline.light_setup(sd, gb, light, "0:directional")
@@ -285,8 +290,8 @@ def _fig5_expected(sd, R, tr, light):
     """Per receiver pixel: the class (LIT, SHADOW, ACNE, PETERPAN) each (scheme, culling) of the
     experiment must give, from the tracer's hit points and V* and the L's analytic layers in the
     runner's own map frame; and which pixels are too close to a texel edge or a threshold to say."""
-    from dsm import shadowmap
-    from dsm.metrics import classify
+    from dsm.maps import shadowmap
+    from dsm.truth.metrics import classify
     view = _runner_view(sd, light, R)
     ex, ey, ez = view.axes_np
     w = view.extent / R
@@ -329,8 +334,9 @@ def test_weiskopf_fig5_against_the_tracer(tmp_path):
     tests on those depths. Then the paper's claims that the per-receiver metric can see on these
     checked numbers (receivers face the light, so the self-unshadowing of back-facing regions in
     its figure 5 (e) is outside every metric)."""
-    from dsm import config, scenes
-    from dsm.metrics import ACNE, OUTSIDE, PETERPAN, base_class
+    from dsm.config import read as config
+    from dsm.scenes import load as scenes
+    from dsm.truth.metrics import ACNE, OUTSIDE, PETERPAN, base_class
     toml = ROOT / "experiments" / "weiskopf_fig5.toml"
     res = dsm.run(toml, out=tmp_path / "w")
     assert res.run["n_failed"] == 0
@@ -374,7 +380,7 @@ def test_hit_shape_by_registry_id_equals_embree_shape_index():
     registry-id table must give the index into scene.shapes() that Embree's ``shape_index`` gives,
     for meshes and analytic shapes in any order, and NO_SHAPE on a miss."""
     import mitsuba as mi
-    from dsm import spawn
+    from dsm.maps import spawn
     xs = {"s": -6.0, "a": -3.0, "r": 0.0, "b": 3.0, "c": 6.0}      # one shape per x, each hit head-on
     scene = mi.load_dict({"type": "scene",
                           "s": {"type": "sphere", "center": [xs["s"], 0, 0], "radius": 1.0},
@@ -399,7 +405,7 @@ def test_a_hit_inside_an_instance_names_the_instance():
     """Two instances of one shape group: each hit names its own instance's index in
     scene.shapes() (Embree's shape_index gives the group's inner shape, OptiX's 0)."""
     import mitsuba as mi
-    from dsm import spawn
+    from dsm.maps import spawn
     T = mi.ScalarTransform4f()
     scene = mi.load_dict({"type": "scene",
                           "grp": {"type": "shapegroup", "c": {"type": "cube"}},
@@ -419,11 +425,11 @@ def test_a_hit_inside_an_instance_names_the_instance():
 def test_a_continuation_through_a_sphere_is_not_a_rehit():
     """A sphere's far side is the same shape and prim_index (always 0) as its near side, yet a
     legitimate second layer: re-hits count on triangle meshes only."""
-    from dsm import shadowmap
+    from dsm.maps import shadowmap
     import mitsuba as mi
     scene = mi.load_dict({"type": "scene", "s": {"type": "sphere", "radius": 1.0},
                           "g": {"type": "rectangle", "to_world": mi.ScalarTransform4f().translate([0, 0, -2]).scale(4)}})
-    from dsm.config import LightSpec
+    from dsm.config.read import LightSpec
     from dsm.pipeline import make_view
     pts = np.array([[-4, -4, -2], [4, 4, 1]], float)
     view = make_view(LightSpec("directional", direction=(0.0, 0.0, -1.0)), 64, pts, (pts[0], pts[1]))

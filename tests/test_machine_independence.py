@@ -15,7 +15,8 @@ BUILDS = [(set(), None), ({"slope"}, None), ({"z2", "slope"}, None), ({"z2"}, "b
 
 
 def _room_cube(res=48):
-    from dsm import config, scenes
+    from dsm.config import read as config
+    from dsm.scenes import load as scenes
     from dsm.pipeline import make_view
     from dsm.types import LightSpec
     sd = scenes.load(config.parse(base_config(scene=[{"builtin": "room"}]), "<test>").scenes[0], (16, 16))
@@ -26,7 +27,7 @@ def _room_cube(res=48):
 @pytest.mark.parametrize("needs,culling", BUILDS)
 def test_tiles_of_any_size_give_the_single_pass_bits(variant, needs, culling):
     """Tiles of 1000, 4097 and 5000 texels leave partial packets at every vector width."""
-    from dsm import shadowmap
+    from dsm.maps import shadowmap
     sd, view = _room_cube()
     modes = shadowmap.cull_modes_for(culling, [True] * len(sd.shape_names)) if culling else None
     one = shadowmap.build(sd.scene, view, needs, culling or "none", modes)
@@ -43,7 +44,8 @@ def test_a_pixels_hit_does_not_depend_on_its_packet(variant):
     hit the same points of the same shapes."""
     import drjit as dr
     import mitsuba as mi
-    from dsm import config, gbuffer, scenes
+    from dsm.config import read as config
+    from dsm.scenes import gbuffer, load as scenes
     sd = scenes.load(config.parse(base_config(scene=[{"builtin": "room"}]), "<test>").scenes[0], (96, 96))
     full = gbuffer.cast(sd.scene, sd.sensor, 96, 96)
     order = np.r_[np.arange(96 * 96 - 1, 4000, -1), np.arange(3, 4001)].astype(np.uint32)   # reversed, shifted

@@ -1,4 +1,4 @@
-"""Motion (dsm.motion): flicker of fixed points over frames. Static frames flicker 0; stabilized
+"""Motion (dsm.experiment.motion): flicker of fixed points over frames. Static frames flicker 0; stabilized
 cascades under a sideways camera flicker 0 within a cascade; a fixed point's exact visibility
 does not depend on the camera; the flicker arithmetic against counts made by hand."""
 import csv
@@ -19,7 +19,7 @@ def _frames(res):
 
 def test_flicker_counts_by_hand():
     """Three frames, five points: the pairs' eligible sets, flips, cascade changes and |dV| here."""
-    from dsm.motion import flicker
+    from dsm.experiment.motion import flicker
     v = np.array([[1.0, 0.0, 1.0, 0.25, 1.0], [0.0, 0.0, 1.0, 0.75, 1.0], [1.0, 1.0, 1.0, 0.75, 0.0]])
     vstar = np.array([[1, 0, 1, 1, 1], [1, 0, 1, 1, 1], [1, 1, 1, 1, 1]], bool)
     elig = np.array([[1, 1, 1, 1, 0], [1, 1, 1, 1, 1], [1, 1, 0, 1, 1]], bool)
@@ -95,8 +95,9 @@ def test_fixed_points_exact_visibility_does_not_depend_on_the_camera():
     """An orbit of 60 degrees: each frame's V* of every fixed point is the same, and agrees with
     Mitsuba's own spawned shadow rays (an independent offset) on all but a sliver."""
     import dsm.pipeline as pl
-    from dsm import motion, reference
-    from dsm.cascades import Camera
+    from dsm.experiment import motion
+    from dsm.truth import reference
+    from dsm.maps.cascades import Camera
     from dsm.types import LightSpec, MotionSpec
     sd = pl.load_scene(pl.scene_spec({"builtin": "plane_box"}), (48, 48))
     light = LightSpec("directional", direction=(-0.4, -0.3, -1.0))
@@ -119,7 +120,7 @@ def test_fixed_points_exact_visibility_does_not_depend_on_the_camera():
 
 
 def test_motion_config_errors_name_the_key():
-    from dsm import config
+    from dsm.config import read as config
     from dsm.types import ConfigError
     for motion, key in (({"frames": 1}, "motion[0].frames"), ({"camera": "dolly"}, "motion[0].offset"),
                         ({"camera": "zoom"}, "motion[0].camera"), ({"light": "turn"}, "motion[0].light_angle"),
@@ -163,8 +164,8 @@ def test_moving_point_light_exact_visibility_matches_the_segment_test(scale, tra
     exactly when the segment to the light misses the box [-0.5, 0.5]^2 x [0, 1] (numpy float64,
     scaled and moved as the scene; points within 1e-3 of the box's silhouette are left out)."""
     import dsm.pipeline as pl
-    from dsm import motion
-    from dsm.cascades import Camera
+    from dsm.experiment import motion
+    from dsm.maps.cascades import Camera
     from dsm.types import LightSpec, MotionSpec
     sd = pl.load_scene(pl.scene_spec({"builtin": "plane_box", "scale": scale, "translate": translate}), (48, 48))
     light = sd.lights_for([LightSpec("point", position=(-1.5, 0.0, 2.5))])[0]
@@ -226,7 +227,7 @@ def test_still_light_given_as_a_zero_move_flickers_zero_and_builds_once(run_dict
 
 
 def test_light_move_config_errors_name_the_key():
-    from dsm import config
+    from dsm.config import read as config
     from dsm.types import ConfigError
     for motion, key in (({"light": "move"}, "motion[0].light_offset"),
                         ({"light": "keyframes"}, "motion[0].light_keys"),
@@ -258,7 +259,7 @@ def test_light_keyframes_interpolate_positions_and_a_spots_aim():
     """Keyframes at frames 0, 2, 4 of 5: frame 1 is halfway between the first two (scaled and moved
     as the scene); without targets a spot keeps its direction, with targets it aims at the
     interpolated target; a directional light stays still."""
-    from dsm import motion
+    from dsm.experiment import motion
     from dsm.types import LightSpec, MotionSpec
     spot = LightSpec("spot", position=(0.0, 0.0, 3.0), target=(1.0, 0.0, 0.0), cutoff=40.0)
     keys = (((0.0, 0.0, 3.0), None), ((2.0, 0.0, 3.0), None), ((2.0, 2.0, 5.0), None))

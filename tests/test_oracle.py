@@ -1,5 +1,5 @@
-"""The oracles (dsm.oracle): the best any bias can do, held to the kit's own sweeps and to
-geometry derived here, independently of oracle.py."""
+"""The oracles (dsm.truth.oracle): the best any bias can do, held to the kit's own sweeps and to
+geometry derived here, independently of truth/oracle.py."""
 import math
 
 import numpy as np
@@ -30,7 +30,7 @@ def objective(r, lam=1.0):
 
 def test_thresholds_are_the_smallest_float32_bias_that_lights():
     """Against a brute-force walk over the float32 values (np.nextafter) near d - z1."""
-    from dsm import oracle
+    from dsm.truth import oracle
     rng = np.random.default_rng(1)
     z1 = rng.uniform(0.1, 50.0, 400).astype(np.float32)
     d = (z1 + rng.normal(0, 1e-4, 400) * z1).astype(np.float32)
@@ -54,7 +54,7 @@ def test_thresholds_are_the_smallest_float32_bias_that_lights():
 
 def test_per_texel_oracle_against_brute_force():
     """Per texel, every candidate bias tried (the texel's thresholds and one below them all)."""
-    from dsm import oracle
+    from dsm.truth import oracle
     rng = np.random.default_rng(2)
     n = 3000
     tau = rng.normal(0, 1, n).round(1).astype(np.float32)          # ties on purpose
@@ -215,7 +215,9 @@ def test_per_texel_oracle_bounds_every_texel_only_scheme(run_dict):
 def test_oracle_outputs(run_dict):
     """oracle.csv (one row per map, format and lambda), table.md's section, the trade-off plot,
     the error image's resolution classes, and the config's checks."""
-    from dsm import config, metrics, report
+    from dsm.config import read as config
+    from dsm.truth import metrics
+    from dsm.report import io as report
     from dsm.types import ConfigError
     res = run_dict(base_config(scene=[{"builtin": "floating_plate"}], camera={"resolution": [64, 64]},
                                map={"resolution": 64, "format": ["float32", "unorm16"]},
@@ -240,7 +242,8 @@ def test_oracle_outputs(run_dict):
 
 
 def test_plan_counts_the_oracles_sorts():
-    from dsm import config, plan
+    from dsm.config import read as config
+    from dsm.experiment import plan
     cfg = config.parse(base_config(camera={"resolution": [64, 32]}, map={"resolution": [64, 128],
                                    "format": ["float32", "unorm16"]}, oracle={"lambda": [1.0, 2.0]}), "<t>")
     p = plan.make(cfg)

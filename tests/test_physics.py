@@ -17,11 +17,11 @@ def analytic_acne(k: float, phi: float) -> float:
 def grid_angle(tilt, azimuth):
     """The angle phi between the map's u axis and the depth gradient of the tilted plane.
 
-    The plane's default light shines along -z; its map frame is ex = +x, ey = -y (dsm.views.light_frame).
+    The plane's default light shines along -z; its map frame is ex = +x, ey = -y (dsm.maps.views.light_frame).
     The plane is rotated by ``tilt`` about the horizontal axis at ``azimuth``.
     """
-    from dsm.scenes import rotation
-    from dsm.views import light_frame
+    from dsm.scenes.load import rotation
+    from dsm.maps.views import light_frame
     a = math.radians(azimuth)
     n = rotation([math.cos(a), math.sin(a), 0], tilt) @ np.array([0, 0, 1.0])
     ex, ey, ez = light_frame([0, 0, -1])

@@ -9,7 +9,8 @@ POINT_VIEWS = ("paraboloid", "dual_paraboloid", "cube")
 
 
 def _room():
-    from dsm import config, gbuffer, scenes
+    from dsm.config import read as config
+    from dsm.scenes import gbuffer, load as scenes
     cfg = config.parse(base_config(scene=[{"builtin": "room"}]), "<test>")
     sd = scenes.load(cfg.scenes[0], (160, 160))
     gb = gbuffer.cast(sd.scene, sd.sensor, 160, 160)
@@ -21,14 +22,14 @@ def _np(v):
 
 
 def _view(kind, light, R, bbox):
-    from dsm.config import LightSpec
+    from dsm.config.read import LightSpec
     from dsm.pipeline import make_view
     return make_view(LightSpec("point", position=tuple(light), direction=(0.0, 0.0, -1.0)), R, None, bbox, kind)
 
 
 def test_every_room_receiver_is_in_exactly_one_map(variant):
     """Each receiver's chosen face holds it (closed domain); no other face holds it in its interior.
-    The domains are recomputed here from seed 001's formulas, independently of dsm.views."""
+    The domains are recomputed here from seed 001's formulas, independently of dsm.maps.views."""
     import drjit as dr
     import mitsuba as mi
     sd, gb = _room()
@@ -43,7 +44,7 @@ def test_every_room_receiver_is_in_exactly_one_map(variant):
         assert np.all(np.isfinite(u)) and np.all(np.isfinite(v))
         inside = view.inside(p).numpy().astype(bool)
         if kind == "cube":
-            from dsm.views import CUBE_FACES
+            from dsm.maps.views import CUBE_FACES
             dom_closed, dom_open = [], []
             for U, V, W in np.asarray(CUBE_FACES, float):
                 z = q @ W
@@ -80,7 +81,7 @@ def test_texel_size_is_the_texel_footprint_on_every_view(variant, kind):
     """texel_world(p) = sqrt(area of the texel's footprint on the plane through p normal to the ray):
     measured from the rays through the texel's four corners, so '1 texel' means the same on every view."""
     import mitsuba as mi
-    from dsm.views import OrthographicView, PerspectiveView
+    from dsm.maps.views import OrthographicView, PerspectiveView
     R = 256
     bbox = (np.array([-4.0, -4, -4]), np.array([4.0, 4, 4]))
     rng = np.random.default_rng(3)
@@ -159,8 +160,10 @@ def test_points_exactly_on_singular_directions(variant):
     one face, a position inside it, a finite texel size and a texel index inside the map."""
     import drjit as dr
     import mitsuba as mi
-    from dsm import config, scenes, shadowmap
-    from dsm.lookup import Receiver, nearest_tap
+    from dsm.config import read as config
+    from dsm.scenes import load as scenes
+    from dsm.maps import shadowmap
+    from dsm.maps.lookup import Receiver, nearest_tap
     cfg = config.parse(base_config(scene=[{"builtin": "plane_box"}]), "<test>")
     sd = scenes.load(cfg.scenes[0], (32, 32))
     light = np.array([0.0, 0.0, 2.0])
@@ -172,7 +175,7 @@ def test_points_exactly_on_singular_directions(variant):
     R = 32
     for kind in POINT_VIEWS:
         for axis in ((0.0, 0.0, 1.0), (0.0, 0.0, -1.0)):
-            from dsm.config import LightSpec
+            from dsm.config.read import LightSpec
             from dsm.pipeline import make_view
             view = make_view(LightSpec("point", position=tuple(light), direction=axis), R, None, sd.bbox, kind)
             smap = shadowmap.build(sd.scene, view, {"z2"})
@@ -198,8 +201,10 @@ def test_point_reference_matches_an_independent_shadow_ray_count(variant):
     """V* of the ground under a box from a point light equals a slab test of each segment in numpy."""
     import drjit as dr
     import mitsuba as mi
-    from dsm import config, gbuffer, reference, scenes
-    from dsm.config import LightSpec
+    from dsm.config import read as config
+    from dsm.scenes import gbuffer, load as scenes
+    from dsm.truth import reference
+    from dsm.config.read import LightSpec
     cfg = config.parse(base_config(scene=[{"builtin": "plane_box"}]), "<test>")
     sd = scenes.load(cfg.scenes[0], (256, 256))
     gb = gbuffer.cast(sd.scene, sd.sensor, 256, 256)
@@ -260,7 +265,7 @@ def test_equal_memory_budgets(run_dict):
     got = {r["view"]: (r["resolution"], r["total_texels"]) for r in res.rows}
     assert got == {"paraboloid": (157, 157 ** 2), "dual_paraboloid": (111, 2 * 111 ** 2), "cube": (64, 6 * 64 ** 2)}
     assert (res.out / "plots" / "vs_texels_room_0_point.png").is_file()
-    from dsm.config import ConfigError, parse
+    from dsm.config.read import ConfigError, parse
     with pytest.raises(ConfigError, match="map"):
         parse(base_config(map={"texels": 1000, "resolution": 64}), "<test>")
 

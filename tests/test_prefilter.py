@@ -161,7 +161,7 @@ def test_float16_storage_rounds_as_ieee_half():
 
 
 def test_float16_depth_format_stores_the_normalized_depth_as_a_half():
-    from dsm import formats
+    from dsm.maps import formats
     view = SimpleNamespace(near=0.0, far=10.0, kind="orthographic", n_texels=3)
     q = formats.quantize_np(np.array([1.0, 3.3333, 9.99]), view, "float16")
     want = [10 * float(np.float16(0.1)), 10 * float(np.float16(0.33333)), 10 * float(np.float16(0.999))]
@@ -227,7 +227,7 @@ def test_unfiltered_vsm_under_one_planar_occluder_does_not_leak():
 # ---------------------------------------------------------------- the leak split
 
 def test_leak_split_by_the_distance_to_the_occluder_in_texels():
-    from dsm import metrics
+    from dsm.truth import metrics
     v = np.array([1.0, 0.6, 0.7, 0.2, 1.0, 0.0])
     v_star = np.array([False, False, False, False, True, False])
     dist = np.array([0.05, 0.5, 0.21, 5.0, np.inf, 0.01])      # world
@@ -258,7 +258,7 @@ def test_leak_split_by_the_distance_to_the_occluder_in_texels():
     ({"kind": "vsm", "vsm": 5}, "map.vsm"),
 ])
 def test_bad_map_kind_input_is_one_config_error_naming_the_key(m, key):
-    from dsm import config
+    from dsm.config import read as config
     cfg = base_config(map={"resolution": 32, **m})
     if m.get("kind") == "vsm":
         del cfg["scheme"]            # schemes are the depth kind's
@@ -268,7 +268,7 @@ def test_bad_map_kind_input_is_one_config_error_naming_the_key(m, key):
 
 
 def test_schemes_belong_to_the_depth_kind():
-    from dsm import config
+    from dsm.config import read as config
     with pytest.raises(config.ConfigError) as e:
         config.parse(base_config(map={"kind": "vsm"}), "<test>")
     assert e.value.key == "scheme"
@@ -278,7 +278,8 @@ def test_schemes_belong_to_the_depth_kind():
 
 
 def test_plan_counts_the_moment_cases_and_resume_keys_them():
-    from dsm import config, plan, resume
+    from dsm.config import read as config
+    from dsm.experiment import plan, resume
     cfg = config.parse(base_config(map={"resolution": 32, "kind": ["depth", "vsm", "msm"], "blur": [1, 3],
                                         "format": ["float32", "float16"], "vsm": {"min_variance": [1e-4, 1e-3]},
                                         "filter": ["nearest", "pcf_bilinear"]},
@@ -292,7 +293,8 @@ def test_plan_counts_the_moment_cases_and_resume_keys_them():
 
 
 def test_without_kind_the_plan_and_rows_are_unchanged():
-    from dsm import config, plan
+    from dsm.config import read as config
+    from dsm.experiment import plan
     cfg = config.parse(base_config(), "<test>")
     assert cfg.map.kind == ("depth",) and not cfg.map.leak_split and cfg.map.moments == ()
     assert all(m.moments == () for m in plan.make(cfg).maps)
@@ -306,7 +308,7 @@ def test_a_run_of_floating_plate_measures_each_kind_and_vsm_unfiltered_is_a_cons
     receiver g behind its texel exactly when g^2 <= min_variance (normalized depth): the depth
     test with a constant bias of sqrt(min_variance) depth ranges, here 0.01 range, so the two
     cases classify every pixel alike."""
-    from dsm import record
+    from dsm.experiment import record
     res = run_dict(base_config(scene=[{"builtin": "floating_plate"}], camera={"resolution": [64, 64]},
                                map={"resolution": 64, "kind": ["depth", "vsm", "esm", "evsm", "msm"], "blur": [1, 5],
                                     "vsm": {"min_variance": 1e-4}, "esm": {"c": 40}, "evsm": {"positive": 20}},
@@ -321,7 +323,7 @@ def test_a_run_of_floating_plate_measures_each_kind_and_vsm_unfiltered_is_a_cons
         assert np.isnan(r["moments_ms"]) == (r["map_kind"] == "depth")
     depth, vsm1 = rows[("constant", "nearest")], rows[("vsm", "box:1")]
     assert depth["n_acne"] == vsm1["n_acne"] and depth["n_peterpan"] == vsm1["n_peterpan"]
-    from dsm.metrics import base_class           # (the depth case's image shades its resolution errors apart)
+    from dsm.truth.metrics import base_class
     assert (base_class(res.images[depth["case"]]) == res.images[vsm1["case"]]).all()   # the same class per pixel
     assert vsm1["mean_abs_error"] >= depth["mean_abs_error"]    # V continuous: errs by its soft values too
 
@@ -362,7 +364,7 @@ def test_stacked_plates_leak_in_the_one_texel_column_derived_by_hand():
     other edges, the leak is the column i_h + 2 exactly, and it is a leak (0.25 world from the low
     plate, about 10 texels), not contact."""
     import dsm.pipeline as pl
-    from dsm import metrics
+    from dsm.truth import metrics
     from dsm.types import MomentSpec
     from dsm.prefilter import vsm
     sd = pl.load_scene(pl.scene_spec({"builtin": "stacked_plates"}), (160, 160))
@@ -431,7 +433,7 @@ def test_mjp_presets_are_mjps_defaults_in_the_kits_units():
     = 0.003 (used x 0.001), exponents 40 / 5. Its EVSM minimum variance is (VSMBias * 0.01 * c w)^2
     in x = 2t - 1; the kit's EVSM with the preset's min_variance must give the same V as MJP's
     ChebyshevUpperBound with that variance, written here in float64."""
-    from dsm import config
+    from dsm.config import read as config
     from dsm.prefilter import evsm
     cfg = config.parse(base_config(map={"kind": ["depth", "vsm", "evsm", "msm"], "vsm": {"preset": "mjp"},
                                         "evsm": {"preset": "mjp"}, "msm": {"preset": "mjp"}}), "<test>")
@@ -459,7 +461,7 @@ def test_mjp_presets_are_mjps_defaults_in_the_kits_units():
 
 
 def test_a_preset_takes_no_other_keys_and_esm_has_none():
-    from dsm import config
+    from dsm.config import read as config
     for m, key in (({"kind": "vsm", "vsm": {"preset": "mjp", "bleed": 0.1}}, "map.vsm.bleed"),
                    ({"kind": "esm", "esm": {"preset": "mjp"}}, "map.esm.preset"),
                    ({"kind": "msm", "msm": {"preset": "three"}}, "map.msm.preset")):
@@ -469,7 +471,8 @@ def test_a_preset_takes_no_other_keys_and_esm_has_none():
 
 
 def test_dsm_tune_refuses_a_config_with_pre_filtered_kinds():
-    from dsm import config, tune
+    from dsm.config import read as config
+    from dsm.tune import tuner as tune
     cfg = config.parse(base_config(map={"kind": ["depth", "vsm"]}, scheme=[{"name": "constant"}]), "<test>")
     with pytest.raises(config.ConfigError) as e:
         tune.parse_tune(cfg)
@@ -477,7 +480,7 @@ def test_dsm_tune_refuses_a_config_with_pre_filtered_kinds():
 
 
 def test_the_summary_pools_the_leak_split_per_instance():
-    from dsm import summary
+    from dsm.report import summary
     base = {"preset": "", "format": "float32", "cascade_layout": ""}
     rows = [{**base, "scheme": "vsm", "params": "min_variance=0.0001", "filter": "box:3", "map_kind": "vsm",
              "n_gt_shadowed": 100, "n_peterpan": 10, "n_peterpan_contact": 4, "n_leak": 6, "mean_abs_error": 0.02,
@@ -502,7 +505,7 @@ def test_the_summary_pools_the_leak_split_per_instance():
     {"motion": [{"frames": 3, "camera": "dolly", "offset": [0, 1, 0]}]},
 ], ids=["area light", "motion"])
 def test_pre_filtered_kinds_refuse_area_lights_and_motion(extra):
-    from dsm import config
+    from dsm.config import read as config
     with pytest.raises(config.ConfigError) as e:
         config.parse({"scene": [{"builtin": "plane"}], "map": {"kind": "vsm"}, **extra}, "<test>")
     assert e.value.key == "map.kind"

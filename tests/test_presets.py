@@ -87,7 +87,7 @@ def test_bevy_differs_per_light_type_and_plain_specs_pass_through():
 
 
 def test_unknown_preset_is_one_line_listing_the_choices():
-    from dsm.config import parse
+    from dsm.config.read import parse
     from dsm.schemes import PRESETS
     cfg = {"scene": [{"builtin": "plane"}], "scheme": [{"preset": "unreal_engine"}]}
     with pytest.raises(ConfigError) as e:
@@ -107,8 +107,8 @@ def test_combined_needs_slope_only_with_a_slope_term():
 
 
 def test_plan_resolves_presets_per_light():
-    from dsm.config import parse
-    from dsm import plan
+    from dsm.config.read import parse
+    from dsm.experiment import plan
     cfg = parse({"scene": [{"builtin": "plane_box"}],
                  "light": [{"type": "directional", "direction": [0.2, 0.1, -1.0]},
                            {"type": "point", "position": [0.5, -0.5, 3.0]}],

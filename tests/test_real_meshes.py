@@ -8,7 +8,7 @@ from conftest import ROOT, assert_nan_only_where_undefined
 
 def test_real_meshes_need_no_per_scene_epsilon(tmp_path):
     import dsm
-    from dsm import config
+    from dsm.config import read as config
     cfg = config.load(ROOT / "experiments" / "real_meshes.toml")
     cfg = dataclasses.replace(cfg, camera_resolution=(128, 128), timing_repeats=1,
                               map=dataclasses.replace(cfg.map, resolution=(512,)))
@@ -41,7 +41,7 @@ def test_terrain_is_the_dem_in_metres():
     import numpy as np
     from matplotlib import cbook
 
-    from dsm import terrain
+    from dsm.scenes import terrain
     with np.load(cbook.get_sample_data("jacksboro_fault_dem.npz", asfileobj=False)) as d:
         z, dx, dy = d["elevation"].astype(float), float(d["dx"]), float(d["dy"])
         lat0 = math.radians((float(d["ymin"]) + float(d["ymax"])) / 2)

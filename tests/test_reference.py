@@ -6,8 +6,11 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from dsm import config, gbuffer, reference, scenes, spawn
-from dsm.config import LightSpec
+from dsm.config import read as config
+from dsm.scenes import gbuffer, load as scenes
+from dsm.truth import reference
+from dsm.maps import spawn
+from dsm.config.read import LightSpec
 
 DATA = Path(__file__).parent / "data"
 

@@ -33,7 +33,7 @@ def _csv(path):
 
 
 def test_summary_matches_a_numpy_recomputation(run):
-    from dsm import report, summary
+    from dsm.report import io as report, summary
     raw, num = _csv(run.out / "metrics.csv")
     got = {s["key"]: s for s in summary.per_instance(report.read_rows(run.out / "metrics.csv"))}
     keys = sorted({(r["scheme"], r["preset"] or r["params"]) for r in raw})
@@ -81,7 +81,7 @@ def test_summary_matches_a_numpy_recomputation(run):
 def test_pooled_is_not_the_mean_and_undefined_rates_are_left_out():
     """Two cases of one scheme: 1 of 10 lit receivers in acne, then 90 of 100; the third case has
     no lit receiver. Pooled acne = 91 / 110; the mean of the per-case rates = (0.1 + 0.9) / 2."""
-    from dsm import summary
+    from dsm.report import summary
     nan = math.nan
     base = {"scene": "s", "light": "l", "view": "v", "scheme": "x", "preset": "", "params": "", "filter": "nearest",
             "format": "float32", "build_ms": 1.0, "lookup_ms": 2.0}
@@ -118,7 +118,7 @@ def _rows(specs):
 
 
 def test_plots_have_one_unit_per_panel_symlog_rates_and_short_legends(tmp_path):
-    from dsm import figures
+    from dsm.report import figures
     specs = []
     for v in (0.5, 2.0):
         specs.append(("constant", f"bias={v:g} texel", "bias [texel]", v, 0.1 / v, 0.0, 64))
@@ -296,7 +296,8 @@ def test_dsm_report_of_a_damaged_folder_is_one_line_never_a_traceback(run, tmp_p
 
 def test_report_images_key(tmp_path):
     import dsm
-    from dsm import config, figures
+    from dsm.config import read as config
+    from dsm.report import figures
     from dsm.types import ConfigError
     with pytest.raises(ConfigError, match=r"<t>: report\.images: unknown value 'some' \(valid: all, errors, none\)"):
         config.parse(base_config(report={"images": "some"}), "<t>")
@@ -317,7 +318,7 @@ def test_report_images_key(tmp_path):
 
 
 def test_images_sit_in_one_folder_per_scene_and_light(run):
-    from dsm import figures
+    from dsm.report import figures
     folders = {p.name for p in (run.out / "images").iterdir()}
     assert folders == {figures.image_folder(r) for r in run.rows} and len(folders) == 2
     for r in run.rows:
@@ -326,7 +327,8 @@ def test_images_sit_in_one_folder_per_scene_and_light(run):
 
 
 def test_drawing_in_a_process_pool_writes_what_drawing_here_writes(tmp_path):
-    from dsm import figures, metrics
+    from dsm.report import figures
+    from dsm.truth import metrics
     rng = np.random.default_rng(3)
     items = [(f"images/a/{i}_error.png", rng.integers(0, len(metrics.CLASS_COLORS), (8, 9)).astype(np.uint8),
               f"images/a/{i}_shadow.png", rng.integers(0, 256, (8, 9)).astype(np.uint8)) for i in range(4)]

@@ -4,7 +4,7 @@ where nothing generalizes."""
 import numpy as np
 import pytest
 
-import dsm.residual_map as rm
+from dsm.tune import residual_map as rm
 
 
 def _brute(m, v, unit, keys, lam):
@@ -95,7 +95,7 @@ def test_tune_residual_map_reports_the_split_against_its_base():
     """dsm tune with fit = "residual": the map's held-out counts, where no residual was chosen,
     are the best global scheme's exact counts (the kit's lookup, recomputed here); the split's
     receivers add up to the held-out ones; no map beats the per-texel oracle of its receivers."""
-    import dsm.tune as tu
+    from dsm.tune import tuner as tu
     cams = [{"position": [3.0, -5.0, 4.0], "target": [0.0, 0.0, 0.0]},
             {"position": [-4.0, -4.0, 5.0], "target": [0.0, 0.0, 0.0]},
             {"position": [-4.0, 3.0, 5.0], "target": [0.0, 0.0, 0.0], "role": "heldout"}]

@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from dsm import figures
+from dsm.report import figures
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parent.parent
 # timings, peak memory and compile counts differ between runs by nature; every other column is compared
@@ -116,7 +116,7 @@ def _cfg(biases, schemes=("none", "constant")):
 
 def test_an_edited_config_reruns_changed_cases_and_lists_stale_ones(tmp_path):
     from dsm import pipeline
-    from dsm.runner import Runner
+    from dsm.experiment.runner import Runner
     out = tmp_path / "o"
     first = Runner(pipeline.prepare(_cfg([0.01, 0.05])), out, progress=False).run()
     assert [r["case"] for r in first.rows] == ["0001", "0002", "0003"]
@@ -140,7 +140,8 @@ def test_an_edited_config_reruns_changed_cases_and_lists_stale_ones(tmp_path):
 
 
 def test_a_case_key_changes_with_its_input_file_and_the_kit_version(tmp_path):
-    from dsm import config as cfgmod, plan as planmod, resume
+    from dsm.config import read as cfgmod
+    from dsm.experiment import plan as planmod, resume
     mesh = tmp_path / "tri.obj"
     mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     raw = {"experiment": {"name": "k"}, "scene": [{"file": str(mesh)}], "light": [{"type": "directional",
@@ -163,7 +164,7 @@ def test_resume_into_another_experiments_folder_is_refused_and_changes_nothing(t
     """--resume with a config of another [experiment] name would set every case of the folder
     aside as stale: exit 2 naming --resume and both experiments, before any work."""
     from dsm import pipeline
-    from dsm.runner import Runner
+    from dsm.experiment.runner import Runner
     out = tmp_path / "o"
     Runner(pipeline.prepare(_cfg([0.01])), out, progress=False).run()
     before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}

@@ -5,7 +5,7 @@ import pytest
 
 import dsm.pipeline as pl
 from conftest import base_config
-from dsm import shrink
+from dsm.maps import shrink
 from dsm.types import ConfigError, LightSpec
 
 R, D = 1.0, 0.1
@@ -46,7 +46,7 @@ def test_octahedron_normals_are_radial():
 @pytest.fixture(scope="module")
 def octa():
     import mitsuba as mi
-    from dsm.scenes import look_at_sensor, make_mesh
+    from dsm.scenes.load import look_at_sensor, make_mesh
     v, f = split_octahedron(R)
     scene = mi.load_dict({"type": "scene", "octa": make_mesh("octa", v, f),
                           "sensor": look_at_sensor((0, -0.5, 5), (0, 0, 0), (0, 1, 0), 40.0, 96, 96)}, optimize=False)

@@ -68,11 +68,12 @@ def test_jitter_is_seeded_by_the_receiver_itself():
     import drjit as dr
     import mitsuba as mi
     import numpy as np
-    from dsm import gbuffer, scenes, shadowmap
-    from dsm.lookup import Receiver, visibility
+    from dsm.scenes import gbuffer, load as scenes
+    from dsm.maps import shadowmap
+    from dsm.maps.lookup import Receiver, visibility
     from dsm.pipeline import make_view, points_np as _points_np
     from dsm.schemes import constant
-    from dsm.config import LightSpec, Length
+    from dsm.config.read import LightSpec, Length
     sd = scenes.load(scenes.parse_scene({"builtin": "plane_box"}, "<t>", "s", None)[0], (96, 96))
     gb = gbuffer.cast(sd.scene, sd.sensor, 96, 96)
     idx = np.flatnonzero(gb.hit).astype(np.uint32)
@@ -93,7 +94,7 @@ def test_jitter_is_seeded_by_the_receiver_itself():
 def test_orthographic_map_keeps_a_margin_and_reads_lit_beyond_it():
     import mitsuba as mi
     import numpy as np
-    from dsm.views import MARGIN_TEXELS, OrthographicView
+    from dsm.maps.views import MARGIN_TEXELS, OrthographicView
     rng = np.random.default_rng(0)
     pts = rng.uniform(-3, 3, (500, 3)) + [2000.0, -1500.0, 10.0]
     view = OrthographicView((0.0, 0.0, -1.0), pts, (pts.min(0) - 1, pts.max(0) + 1), 256)
@@ -120,7 +121,7 @@ def test_plane_hit_defined_where_the_ray_misses_the_plane():
     the plane is parallel to the ray or crosses it behind the light."""
     import mitsuba as mi
     import numpy as np
-    from dsm.views import PerspectiveView
+    from dsm.maps.views import PerspectiveView
     view = PerspectiveView((0.0, 0.0, 5.0), (0.0, 0.0, -1.0), 30.0, (np.array([-4.0, -4, 0]), np.array([4.0, 4, 1])), 64)
     u, v = mi.Float(32.0), mi.Float(32.0)       # the centre: the ray straight down the axis
     cases = [((0, 0, 1.0), (0, 0, 1.0), True, 4.0),        # the plane z = 1: depth 4 along the axis

@@ -18,8 +18,8 @@ def _cfg(scene, schemes, tune=None, R=64, cam=48, light=None):
 
 def _prepared(cfg):
     import dsm.pipeline as pl
-    import dsm.tune as tu
-    from dsm.config import coerce
+    from dsm.tune import tuner as tu
+    from dsm.config.read import coerce
     tc = tu.parse_tune(coerce(cfg))
     tc.config = pl.prepare(tc.config)
     groups, cases, _ = tu.prepare_cases(tc)
@@ -62,7 +62,7 @@ def grad_setup():
 def test_ad_gradient_matches_central_differences(grad_setup, i):
     import drjit as dr
     import mitsuba as mi
-    import dsm.tune as tu
+    from dsm.tune import tuner as tu
     from dsm.schemes import get
     tc, groups, cases = grad_setup
     spec = tc.schemes[i]
@@ -89,7 +89,7 @@ def test_ad_gradient_matches_central_differences(grad_setup, i):
 
 def test_empty_class_adds_zero_not_nan():
     """The tilted plane alone under its light: every receiver lit, no shadowed class."""
-    import dsm.tune as tu
+    from dsm.tune import tuner as tu
     from dsm.schemes import get
     tc, groups, cases = _prepared(_cfg({"builtin": "plane"}, [{"name": "constant", "bias": "0.5 texel"}], R=32,
                                        cam=24))
@@ -109,7 +109,7 @@ def test_empty_class_adds_zero_not_nan():
                          ids=["plane", "floating_plate"])
 def test_tuned_constant_bias_reaches_the_oracle(scene):
     import dsm.pipeline as pl
-    import dsm.tune as tu
+    from dsm.tune import tuner as tu
     cfg = _cfg(scene, [{"name": "constant", "bias": 0.01}], {"steps": 80, "lambda": 1.0}, R=64, cam=48)
     res = tu.tune(cfg)
     e = res.schemes[0]
@@ -135,7 +135,7 @@ def test_tuned_constant_bias_reaches_the_oracle(scene):
 
 
 def test_a_fixed_seed_repeats():
-    import dsm.tune as tu
+    from dsm.tune import tuner as tu
     cfg = _cfg({"builtin": "plane_box"}, [{"name": "slope_scaled", "bias": "0.3 texel", "slope": 1.0,
                                            "clamp": "4 texel"}],
                {"steps": 12, "batch": 0.5, "seed": 3}, R=32, cam=32)
@@ -154,7 +154,7 @@ def test_a_fixed_seed_repeats():
 def test_bias_map_and_output_folder(tmp_path):
     import tomllib
     import dsm.pipeline as pl
-    import dsm.tune as tu
+    from dsm.tune import tuner as tu
     cfg = _cfg({"builtin": "floating_plate"}, [{"name": "constant", "bias": 0.02},
                                                {"name": "normal_offset", "offset": "1 texel", "bias": 0.01}],
                {"steps": 15, "camera": CAMS, "bias_map": {"block": 2, "steps": 15}}, R=32, cam=32)
@@ -193,18 +193,18 @@ def test_bias_map_and_output_folder(tmp_path):
     ({"scan": -1}, "tune.scan"),
 ])
 def test_bad_tune_tables_are_refused_before_work(tune, key):
-    import dsm.tune as tu
+    from dsm.tune import tuner as tu
     from dsm import ConfigError
-    from dsm.config import coerce
+    from dsm.config.read import coerce
     with pytest.raises(ConfigError) as e:
         tu.parse_tune(coerce(_cfg({"builtin": "plane"}, [{"name": "constant"}], tune)))
     assert e.value.key == key
 
 
 def test_schemes_without_a_continuous_parameter_are_refused():
-    import dsm.tune as tu
+    from dsm.tune import tuner as tu
     from dsm import ConfigError
-    from dsm.config import coerce
+    from dsm.config.read import coerce
     with pytest.raises(ConfigError) as e:
         tu.parse_tune(coerce(_cfg({"builtin": "plane"}, [{"name": "midpoint"}])))
     assert "constant" in e.value.choices and "midpoint" not in e.value.choices and e.value.key == "scheme[0].name"
@@ -257,9 +257,9 @@ def test_dsm_plan_checks_a_tune_table_as_dsm_tune_would(tmp_path, capsys):
 
 def test_cascaded_maps_are_refused():
     """A cascaded view follows its camera: no map grid is shared across views."""
-    import dsm.tune as tu
+    from dsm.tune import tuner as tu
     from dsm import ConfigError
-    from dsm.config import coerce
+    from dsm.config.read import coerce
     cfg = _cfg({"builtin": "plane_box"}, [{"name": "constant"}], light={"type": "directional",
                                                                         "direction": [0.2, 0.1, -1.0]})
     cfg["map"]["cascades"] = 2
@@ -272,7 +272,7 @@ def test_the_tuner_returns_its_best_exact_evaluation_never_worse_than_its_start(
     """Per scheme: the result is the lowest exact training objective of its evaluations (the
     start's among them), recomputed here from the counts; evaluations = steps, as the grid's
     budget; constant's search box holds the exact oracle's best bias."""
-    import dsm.tune as tu
+    from dsm.tune import tuner as tu
     schemes = [{"name": "constant", "bias": "0.5 texel"}, {"name": "normal_offset", "offset": "1 texel", "bias": 0.0},
                {"name": "slope_scaled", "bias": "0.3 texel", "slope": 1.0, "clamp": "4 texel"}]
     res = tu.tune(_cfg({"builtin": "plane_box"}, schemes, {"steps": 13}, R=32, cam=32))
@@ -316,7 +316,7 @@ GRID_SCHEMES = [{"name": "constant", "bias": "0.5 texel"}, {"name": "receiver_pl
 @pytest.fixture(scope="module")
 def grid_run():
     """The L-shape over the ground: five schemes tuned with 40 evaluations and a 1-D scan of 200."""
-    import dsm.tune as tu
+    from dsm.tune import tuner as tu
     cfg = _cfg({"builtin": "l_shape"}, GRID_SCHEMES, {"steps": 40, "scan": 200}, R=48, cam=40)
     return tu.tune(cfg), _prepared(cfg)
 
@@ -325,7 +325,7 @@ def test_tuned_is_at_most_a_grid_with_as_many_evaluations(grid_run):
     """Per scheme: the tuned training objective is at most the best of a regular grid over the same
     box with at most 40 points (recomputed here from the kit's exact counts, not the tuner's grid)."""
     import itertools
-    import dsm.tune as tu
+    from dsm.tune import tuner as tu
     res, (tc, groups, cases) = grid_run
     train = [c for c in cases if c.role == "train"]
     for e, spec in zip(res.schemes, tc.schemes):
@@ -343,7 +343,7 @@ def test_one_parameter_schemes_come_within_one_percent_of_an_exact_scan(grid_run
     """A scheme with one continuous parameter: tuned within 1 % of the exact objective's best over
     400 evenly spaced values of its box (the test's own scan, twice as fine as the reported one);
     the constant bias's scan is bounded below by the exact oracle of the thresholds."""
-    import dsm.tune as tu
+    from dsm.tune import tuner as tu
     res, (tc, groups, cases) = grid_run
     train = [c for c in cases if c.role == "train"]
     one = [(e, s) for e, s in zip(res.schemes, tc.schemes) if len(e["box"]) == 1]
@@ -415,7 +415,7 @@ def test_gradient_check_is_reported_per_scheme_and_parameter():
     """[tune] gradcheck: per scheme and parameter the AD derivative of the relaxed loss at the
     start agrees within 1 % with a central difference recomputed here (numpy float64, a step
     of 0.02 texel rather than the report's 0.01), and table.md lists every row."""
-    import dsm.tune as tu
+    from dsm.tune import tuner as tu
     from dsm.schemes import get
     schemes = [{"name": "constant", "bias": "0.5 texel"},
                {"name": "slope_scaled", "bias": "0.3 texel", "slope": 1.0, "clamp": "1.5 texel"}]

@@ -18,7 +18,7 @@ H_LIGHT, H_EYE = 6.0, 3.0       # the floor test: light and eye on the floor's n
 def _case(cfg_dict, kind="vsv", R=64):
     """(scene, setup, view, map, receivers) of the config's first scene and light, by the kit's stages."""
     import dsm.pipeline as pl
-    from dsm import config
+    from dsm.config import read as config
     cfg = config.parse(cfg_dict, "<test>")
     sd = pl.load_scene(cfg.scenes[0], cfg.camera_resolution, cfg.camera)
     gb = pl.gbuffer(sd)
@@ -35,7 +35,8 @@ def _lookup(table, rx, smap):
     """(V, nearest tap's shape) of one scheme table on the map, as numpy arrays (the config's
     parser: pipeline.scheme_spec, the plugins' parser, knows the shadow-map schemes only)."""
     import dsm.pipeline as pl
-    from dsm import config, schemes
+    from dsm.config import read as config
+    from dsm import schemes
     spec, = config.parse_scheme(table, "<test>", "scheme", schemes.ALL, schemes.PRESETS)
     v, shape = pl.visibility(spec, rx, smap)
     return v.numpy(), shape.numpy()
@@ -223,7 +224,8 @@ def test_floating_plate_keeps_its_shadow(variant):
 def test_plan_pairs_each_view_with_its_own_lookups_and_a_spot_gets_a_grid(run_dict):
     """A VSV grid is read by the vsv lookups only, a depth map by the shadow-map schemes only; a
     spot light with view = ["vsv"] gets its perspective map and a grid over the same cone."""
-    from dsm import config, plan
+    from dsm.config import read as config
+    from dsm.experiment import plan
     cfg = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [64, 64]},
                       light=[{"type": "spot", "position": [2, -2, 4], "target": [0, 0, 0], "cutoff": 35}],
                       map={"resolution": 32, "view": ["vsv"]},
@@ -240,7 +242,7 @@ def test_plan_pairs_each_view_with_its_own_lookups_and_a_spot_gets_a_grid(run_di
 
 
 def test_bad_vsv_parameters_are_config_errors_naming_the_key():
-    from dsm import config
+    from dsm.config import read as config
     with pytest.raises(config.ConfigError, match=r"scheme\[0\]\.occupancy.*centre, hit"):
         config.parse(base_config(scheme=[{"name": "vsv", "occupancy": "middle"}]), "<test>")
     for alpha in (0, 65537, 2.5):
@@ -250,7 +252,7 @@ def test_bad_vsv_parameters_are_config_errors_naming_the_key():
 
 def test_a_moving_camera_rebuilds_the_grid_each_frame_and_schemes_lists_the_lookups(run_dict):
     """A VSV is view-dependent: a camera dolly changes the epipolar frame and ranges, so every
-    frame builds its own grid (dsm.motion compares the view's frame and extents)."""
+    frame builds its own grid (dsm.experiment.motion compares the view's frame and extents)."""
     from dsm import cli
     cfg = base_config(scene=[{"builtin": "room"}], camera={"resolution": [48, 48]}, light=[{"type": "scene"}],
                       map={"resolution": 32, "view": ["vsv"]}, scheme=[{"name": "vsv_adaptive", "alpha": 64}],
@@ -311,7 +313,7 @@ def test_filters_and_stored_formats_apply_to_the_voxel_tests(run_dict):
 
 
 def test_a_lookup_without_its_view_and_a_view_without_its_lookups_are_config_errors():
-    from dsm import config
+    from dsm.config import read as config
     with pytest.raises(config.ConfigError, match=r"map\.view: scheme vsv_adaptive reads only a vsv view.*"
                                                  r"valid: paraboloid, dual_paraboloid, cube, vsv"):
         config.parse(base_config(light=[{"type": "point", "position": [0, 0, 3]}],
@@ -323,7 +325,8 @@ def test_a_lookup_without_its_view_and_a_view_without_its_lookups_are_config_err
 
 
 def test_dsm_tune_refuses_a_vsv_lookup_naming_it():
-    from dsm import config, tune
+    from dsm.config import read as config
+    from dsm.tune import tuner as tune
     cfg = config.parse(base_config(light=[{"type": "point", "position": [0, 0, 3]}], map={"view": ["vsv"]},
                                    scheme=[{"name": "vsv_epsilon"}], tune={}), "<test>")
     with pytest.raises(config.ConfigError, match=r"scheme\[0\]\.name: vsv_epsilon reads a voxelized shadow volume"):

@@ -28,7 +28,9 @@ def force_width(width: int):
 def arrays() -> dict:
     """Every array the machine-independence test compares, by name."""
     import numpy as np
-    from dsm import config, gbuffer, scenes, shadowmap
+    from dsm.config import read as config
+    from dsm.scenes import gbuffer, load as scenes
+    from dsm.maps import shadowmap
     from dsm.pipeline import make_view
     from dsm.types import LightSpec
     raw = {"experiment": {"name": "w"}, "scene": [{"builtin": "room"}], "scheme": [{"name": "none"}]}
@@ -51,6 +53,6 @@ if __name__ == "__main__":
     import numpy as np
     mi.set_variant("llvm_ad_rgb")          # the LLVM backend up, no kernel compiled yet
     width = force_width(int(sys.argv[1]))
-    from dsm import env
+    from dsm.tools import env
     env.use_variant("llvm_ad_rgb")
     np.savez(sys.argv[2], width=width, **arrays())

@@ -7,7 +7,7 @@ is asked of its module here, so a new light type is a module and a line in REGIS
 from __future__ import annotations
 
 from . import area, directional, point, scene, spot
-from .base import LightType, unit_direction  # noqa: F401  (the contract; config's direction parser)
+from .base import LightType, unit_direction
 
 REGISTRY = {m.TYPE: m for m in (scene, directional, spot, point, area)}
 TYPES = tuple(REGISTRY)

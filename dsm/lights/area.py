@@ -1,14 +1,14 @@
-"""An area light (dsm.area): a sphere, disk, rectangle or the scene's own area emitters, its map
+"""An area light (dsm.truth.area): a sphere, disk, rectangle or the scene's own area emitters, its map
 cast from its centre and its exact visibility a Monte Carlo estimate."""
 from __future__ import annotations
 
-from .. import area
+from ..truth import area
 from ..types import AREA_SHAPES, ConfigError, LightSpec, as_list, check_keys, choice, number, vec3
 from .base import unit_direction
 
 TYPE = "area"
 POSITIONAL = True
-SOFT = True                     # its reference is the visible fraction V* (dsm.area), not one ray
+SOFT = True                     # its reference is the visible fraction V* (dsm.truth.area), not one ray
 MOTION = ()
 SAMPLING = ("min_samples", "max_samples", "tolerance", "confidence", "replicates")
 SHAPE_KEYS = {"emitter": (), "sphere": ("position", "size"), "disk": ("position", "direction", "size"),
@@ -70,5 +70,5 @@ def views(point_views: tuple, shape: str) -> tuple:
 
 
 def make_view(light, R, receivers_world, bbox, kind, cascade, sensor, scale):
-    """The view from the luminaire's centre (:func:`dsm.area.make_view`)."""
+    """The view from the luminaire's centre (:func:`dsm.truth.area.make_view`)."""
     return area.make_view(light, R, receivers_world, bbox, kind)

@@ -6,7 +6,7 @@ reaches everywhere), ``MOTION`` (the ``[[motion]]`` light paths it follows), ``p
 source, where) -> LightSpec`` (its ``[[light]]`` table, keys checked), ``views(point_views,
 shape) -> tuple`` (the view kinds the plan gives it) and ``make_view(light, R, receivers_world,
 bbox, kind, cascade, sensor, scale)``; ``SOFT``: whether its exact visibility is a visible fraction
-(dsm.area's Monte Carlo reference) rather than one shadow ray. A new light type is a module here and a line in
+(dsm.truth.area's Monte Carlo reference) rather than one shadow ray. A new light type is a module here and a line in
 ``lights/__init__.py``'s registry.
 """
 from __future__ import annotations

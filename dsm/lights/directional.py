@@ -1,9 +1,9 @@
 """A directional light (the sun): an orthographic map fitted to the receivers, or cascades."""
 from __future__ import annotations
 
-from .. import cascades
+from ..maps import cascades
 from ..types import LightSpec, check_keys
-from ..views import OrthographicView
+from ..maps.views import OrthographicView
 from .base import required, unit_direction
 
 TYPE = "directional"

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from ..types import LightSpec, check_keys, vec3
 from ..maps.vsv import EpipolarView, camera_pose
-from ..views import CubeView, ParaboloidView
+from ..maps.views import CubeView, ParaboloidView
 from .base import required, unit_direction
 
 TYPE = "point"

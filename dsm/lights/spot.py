@@ -5,7 +5,7 @@ import numpy as np
 
 from ..types import ConfigError, LightSpec, check_keys, number, vec3
 from ..maps.vsv import EpipolarView, camera_pose
-from ..views import PerspectiveView
+from ..maps.views import PerspectiveView
 from .base import required, unit_direction
 
 TYPE = "spot"

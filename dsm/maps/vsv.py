@@ -17,7 +17,7 @@ alpha range, ``(alpha - alpha_0) / (alpha_1 - alpha_0)``: ``N`` times it is the 
 coordinate ``s`` (voxel ``k`` covers ``[k, k + 1)``, its centre at ``k + 1/2``).
 
 **The build: ray casting, not rasterization.** One ray from the light per ``(theta, phi)`` cell,
-through the cell's centre (``View.texel_rays`` and :mod:`dsm.shadowmap`, the kit's map build:
+through the cell's centre (``View.texel_rays`` and :mod:`dsm.maps.shadowmap`, the kit's map build:
 ``z1`` is the first hit's depth). The voxels of the cell's column past the first hit are
 occluded; the hit's own voxel is occluded when its centre lies past the hit (``occupancy =
 "centre"``, the default: each voxel takes the shadow state at its centre, as Wyman's resampling
@@ -44,7 +44,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..views import View, light_frame
+from .views import View, light_frame
 
 MARGIN_CELLS = 2          # theta and phi cells spared on each side of the receivers' range
 ALPHA_MARGIN = 0.01       # fraction of the receivers' alpha range spared on each side

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import dataclasses
 
-from . import esm, evsm, msm, presets, vsm  # noqa: F401  (presets: the engines' values)
-from .base import LOG_MAX, MOMENT_FORMATS, MapKind, build as build_map, fetch, normalized_depth  # noqa: F401  (MOMENT_FORMATS: the choices)
-from ..lookup import resolve
+from . import esm, evsm, msm, presets, vsm
+from .base import LOG_MAX, MOMENT_FORMATS, MapKind, build as build_map, fetch, normalized_depth
+from ..maps.lookup import resolve
 from ..types import ConfigError
 
 REGISTRY = (vsm, esm, evsm, msm)

@@ -15,9 +15,8 @@ shadow-map scheme, which names none, reads every view but those (:func:`reads_vi
 is every scheme a config may name; ``REGISTRY`` stays the shadow-map schemes.
 """
 
-from . import (adaptive, adaptive_tap, combined, constant, distance_normal, dual, midpoint, none, normal_angle,
-               normal_offset, receiver_plane, second_depth, slope_scaled, vsv, vsv_adaptive, vsv_epsilon)
-from ..types import Length, describe_params  # noqa: F401  (describe_params: the report's words)
+from . import adaptive, adaptive_tap, combined, constant, distance_normal, dual, midpoint, none, normal_angle, normal_offset, receiver_plane, second_depth, slope_scaled, vsv, vsv_adaptive, vsv_epsilon
+from ..types import Length, describe_params
 
 from .base import Scheme
 
@@ -30,7 +29,7 @@ _broken = [m.NAME for m in ALL if not isinstance(m, Scheme)]
 assert not _broken, f"scheme modules not meeting the Scheme contract: {_broken}"
 
 # Engine presets: a named engine's default bias, measurable beside every scheme (per light type).
-from .presets import PRESETS, preset_for_light  # noqa: E402,F401
+from .presets import PRESETS, preset_for_light
 
 
 def get(name: str):

@@ -7,7 +7,7 @@ or ``preset``), ``resolution`` (per face, default 1024), ``view`` (point lights:
 ``pcf_bilinear``, ``pcf_jitter4x4``), ``format`` (``float32``, ``unorm16``, ``unorm24``,
 ``ndc24``; and ``pcf_wide[:K]``, ``pcss``), ``seed`` (jitter of pcf_jitter4x4, the reference's
 samples). ``area = true``: the scene's area emitters (on meshes) are the lights, with soft
-shadows (:mod:`dsm.area`; the map cast from the luminaire's centre without it; ``pcss`` and
+shadows (:mod:`dsm.truth.area`; the map cast from the luminaire's centre without it; ``pcss`` and
 ``pcf_wide`` give penumbrae); ``dsm_error`` then renders |V - V*| (magma) against a reference
 of ``samples`` stratified samples per pixel (default 64), and ``dsm_shadow``'s ``dsm.Vstar``
 AOV is one area sample's visibility per sample (V* on average). ``light``: which of the scene's point, spot
@@ -100,7 +100,7 @@ class Options:
             raise cfgmod.ConfigError(source, "filter", f"{filt!r}: pcf_wide:K takes a kernel width K in texels, "
                                      "an integer from 2 to 64")
         self.filter = filt
-        # area = true: the scene's area emitters are the lights (soft shadows; dsm.area), each
+        # area = true: the scene's area emitters are the lights (soft shadows; dsm.truth.area), each
         # receiver's reference V* from `samples` stratified samples (min = max, no early stop)
         self.area = _boolean(d.get("area", False), source, "area")
         self.samples = cfgmod.number(d.get("samples", 64), source, "samples", integer=True, minimum=1,

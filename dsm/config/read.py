@@ -1,0 +1,578 @@
+"""Experiment configs: TOML read once into frozen, validated dataclasses.
+
+Everything is checked before any work starts. A mistake raises :class:`ConfigError`, whose
+message names the file, the key and the valid choices. Lists sweep: every list-valued scheme
+parameter, scene parameter or map option multiplies the cases (see :func:`expand`).
+"""
+from __future__ import annotations
+
+import itertools
+import os
+import tomllib
+from dataclasses import replace
+from pathlib import Path
+
+from ..types import LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, MAP_VIEWS, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA, REPORT_IMAGES, ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params, SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec, CameraSpec, CascadeSpec, CASCADE_SPLITS, CASCADE_FITS, DEPTH_BOUNDS, MAX_CASCADES, MotionSpec, CAMERA_PATHS, LIGHT_PATHS, MAP_KINDS, MomentSpec, ContactSpec
+
+# a run's folder is runs/<name>-tune-YYYYmmdd-HHMMSS (21 bytes more) and a file name takes 255 bytes
+NAME_MAX_BYTES = 255 - len("-tune-20240101-120000")
+KIND_KEYS = ("kind", "blur", "leak_texels", "vsm", "esm", "evsm", "msm")    # [map] kind and its tables
+CASCADE_KEYS = ("cascades", "split", "lambda", "fit", "depth_bounds", "stabilize", "blend", "max_distance")
+
+
+TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing", "memory", "oracle", "report", "motion",
+            "execution", "tune", "contact")    # [tune]: read by dsm.tune (dsm tune), ignored by dsm run
+
+
+def load(path) -> Config:
+    """The Config read from TOML file ``path``; ConfigError for a missing, unreadable or invalid file."""
+    path = Path(path)
+    source = str(path)
+    if path.is_dir():
+        raise ConfigError(source, "file", "is a folder, not a config file")
+    if not path.is_file():
+        raise ConfigError(source, "file", "no such config file")
+    try:
+        with open(path, "rb") as fh:
+            raw = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(source, "toml", f"not valid TOML: {e}") from None
+    except UnicodeDecodeError as e:
+        raise ConfigError(source, "file", f"not UTF-8 text (byte 0x{e.object[e.start]:02x} at offset {e.start}): "
+                          "TOML files are UTF-8; save it as UTF-8") from None
+    except OSError as e:
+        raise ConfigError(source, "file", f"cannot read it: {e.strerror or e}") from None
+    return parse(raw, source, base=path.parent)
+
+
+def coerce(obj, source: str = "<dict>") -> Config:
+    """A Config from what ``dsm.run`` accepts: a Config, a dict of config tables, or a path (str or
+    os.PathLike) to a TOML file. Anything else is a TypeError with one line saying what is accepted;
+    a mistake inside is a ConfigError."""
+    if isinstance(obj, Config):
+        return obj
+    if isinstance(obj, dict):
+        return parse(obj, source)
+    if isinstance(obj, (str, os.PathLike)):
+        return load(obj)
+    raise TypeError(f"dsm.run: config must be a dsm Config, a dict of config tables or a path to a TOML file, "
+                    f"not {type(obj).__name__} ({obj!r:.60})")
+
+
+def absent_files(cfg: Config) -> list:
+    """Files of the config's optional scenes that are absent (each once, in config order)."""
+    out = []
+    for s in cfg.scenes:
+        if s.missing and s.file not in out:
+            out.append(s.file)
+    return out
+
+
+def check_runnable(cfg: Config):
+    """Raise NothingToRun when every scene of the config is an absent optional file."""
+    if cfg.scenes and all(s.missing for s in cfg.scenes):
+        files = absent_files(cfg)
+        where = sorted({str(f.parent) for f in files})
+        raise NothingToRun(cfg.source, "scene", "nothing to run: every scene is an absent optional file ("
+                           + ", ".join(f.name for f in files) + f" in {', '.join(where)}); "
+                           "put the files at those paths to run them (models without redistribution terms are not shipped: "
+                           "data/meshes/README.md)")
+
+
+def _plain_name(name, source):
+    if not isinstance(name, str) or not name:
+        raise ConfigError(source, "experiment.name", "expected a non-empty string")
+    if ("/" in name or "\\" in name or name in (".", "..") or any(ord(c) < 32 for c in name)
+            or os.sep in name or (os.altsep and os.altsep in name)):
+        raise ConfigError(source, "experiment.name", f"{name!r} must be a plain file name (it names the results "
+                          "folder under runs/): no '/', '\\', '..' or control characters")
+    if len(os.fsencode(name)) > NAME_MAX_BYTES:
+        raise ConfigError(source, "experiment.name", f"{name[:24]!r}... is {len(os.fsencode(name))} bytes long; "
+                          f"it names the results folder runs/<name>-<time>, so at most {NAME_MAX_BYTES} bytes")
+    return name
+
+
+def _check_light_scenes(lights, scenes, source):
+    """ConfigError where a light's ``scenes = [...]`` names no scene of the config (the light would
+    light nothing, silently)."""
+    for i, light in enumerate(lights):
+        for name in light.scenes:
+            if not any(replace(light, scenes=(name,)).applies_to(sc.label) for sc in scenes):
+                firsts = {sc.label.replace("(", " ").split()[0] for sc in scenes}
+                raise ConfigError(source, f"light[{i}].scenes", f"{name!r} names no scene of the config (a scene's "
+                                  "label, or its first word)", sorted(firsts | {sc.label for sc in scenes}))
+
+
+def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Config:
+    """The Config of raw TOML tables ``raw`` from ``source`` (files relative to ``base``), every value checked."""
+    from ..scenes import load as scenes_mod
+    from ..schemes import ALL as REGISTRY, PRESETS
+
+    base = Path(base or ".")
+    check_keys(raw, TOP_KEYS, source, "")
+
+    exp = _table(raw, "experiment", source)
+    check_keys(exp, ("name", "seed", "variant"), source, "experiment")
+    name = _plain_name(exp.get("name", Path(source).stem if not source.startswith("<") else "experiment"), source)
+    seed = number(exp.get("seed", 7), source, "experiment.seed", integer=True)
+    variant = exp.get("variant")
+    if variant is not None:
+        choice(variant, source, "experiment.variant", VARIANTS)
+
+    cam = _table(raw, "camera", source)
+    check_keys(cam, ("resolution", "position", "target", "up", "fov", "near", "far"), source, "camera")
+    camera_resolution = None
+    if "resolution" in cam:
+        res = cam["resolution"]
+        if isinstance(res, int) and not isinstance(res, bool):
+            res = [res, res]
+        if not isinstance(res, list) or len(res) != 2:
+            raise ConfigError(source, "camera.resolution", f"expected [width, height], got {res!r}")
+        camera_resolution = tuple(number(x, source, "camera.resolution", integer=True, minimum=1, maximum=16384)
+                                  for x in res)
+
+    camera = _parse_camera(cam, source)
+
+    scene_tables = _array_of_tables(raw, "scene", source)
+    if not scene_tables:
+        raise ConfigError(source, "scene", "at least one [[scene]] is required", scenes_mod.BUILTINS)
+    scenes = []
+    for i, t in enumerate(scene_tables):
+        scenes += scenes_mod.parse_scene(t, source, f"scene[{i}]", base)
+
+    lights = []
+    for i, t in enumerate(_array_of_tables(raw, "light", source)):
+        lights.append(_parse_light(t, source, f"light[{i}]"))
+    if not lights:
+        lights = [LightSpec("scene", label="scene")]
+    _check_light_scenes(lights, scenes, source)
+
+    m = _table(raw, "map", source)
+    check_keys(m, ("resolution", "texels", "filter", "format", "view", "shrink") + CASCADE_KEYS + KIND_KEYS, source,
+               "map")
+    if "resolution" in m and "texels" in m:
+        raise ConfigError(source, "map", "give either resolution (per face) or texels (total per view), not both",
+                          ("resolution", "texels"))
+    texels = tuple(number(r, source, "map.texels", integer=True, minimum=1, maximum=6 * 16384 ** 2)
+                   for r in as_list(m.get("texels", [])))
+    resolutions = tuple(number(r, source, "map.resolution", integer=True, minimum=1, maximum=16384)
+                        for r in as_list(m.get("resolution", 512)))
+    filters = tuple(_filter(f, source) for f in as_list(m.get("filter", "nearest")))
+    formats = tuple(choice(f, source, "map.format", FORMATS) for f in as_list(m.get("format", "float32")))
+    views = tuple(choice(v, source, "map.view", MAP_VIEWS) for v in as_list(m.get("view", "dual_paraboloid")))
+    for key, vals in (("map.resolution", resolutions), ("map.filter", filters), ("map.format", formats),
+                      ("map.view", views)):
+        if not vals:
+            raise ConfigError(source, key, "empty list")
+    from .. import lights as light_types
+    vsv_light = "vsv" in views and any("vsv" in light_types.get(l.type).views(views, l.shape) for l in lights)
+    if "view" in m and not vsv_light and all(l.type not in ("point", "scene") and l.shape != "sphere" for l in lights):
+        # a scene's own lights are known only once it is loaded; explicit ones are known now
+        raise ConfigError(source, "map.view", "views are for point lights and no [[light]] is a point light "
+                          f"(the lights are {', '.join(sorted({l.type for l in lights}))}); remove map.view or "
+                          "add a point light" + (" (vsv: or a spot light)" if "vsv" in views else ""))
+    cascade = _parse_cascades(m, source)
+    if cascade and all(l.type not in ("directional", "scene") for l in lights):
+        raise ConfigError(source, "map.cascades", "cascades are for directional lights and no [[light]] is "
+                          f"directional (the lights are {', '.join(sorted({l.type for l in lights}))}); remove "
+                          "map.cascades or add a directional light")
+    kinds = _parse_kinds(m, formats, lights, cascade, source)
+    if "leak_texels" in m and "kind" not in m:
+        raise ConfigError(source, "map.leak_texels", "the leak split is made in runs that give map.kind (e.g. "
+                          'kind = ["depth"]); add it', ("kind",))
+    mapspec = MapSpec(resolutions, filters, formats, views, texels, cascade, kinds,
+                      _parse_moments(m, kinds, formats, source),
+                      "kind" in m, number(m.get("leak_texels", 2.0), source, "map.leak_texels", minimum=0.0))
+
+    scheme_tables = _array_of_tables(raw, "scheme", source)
+    if "depth" not in kinds and scheme_tables:
+        raise ConfigError(source, "scheme", "[[scheme]] tables are the depth map's and map.kind does not name depth; "
+                          "add depth to map.kind or remove them", MAP_KINDS)
+    if not scheme_tables and "depth" in kinds:
+        raise ConfigError(source, "scheme", "at least one [[scheme]] is required", [s.NAME for s in REGISTRY])
+    schemes = []
+    for i, t in enumerate(scheme_tables):
+        schemes += parse_scheme(t, source, f"scheme[{i}]", REGISTRY, PRESETS)
+    from ..schemes import view_mismatch
+    if view_mismatch(schemes, views):
+        raise ConfigError(source, "map.view", view_mismatch(schemes, views), MAP_VIEWS)
+
+    mem = _table(raw, "memory", source)
+    check_keys(mem, ("budget_mb",), source, "memory")
+    budget = (number(mem["budget_mb"], source, "memory.budget_mb", positive=True)
+              if "budget_mb" in mem else None)
+
+    tim = _table(raw, "timing", source)
+    check_keys(tim, ("repeats",), source, "timing")
+    repeats = number(tim.get("repeats", 3), source, "timing.repeats", integer=True, minimum=1, maximum=100)
+    orc = _table(raw, "oracle", source)
+    check_keys(orc, ("lambda",), source, "oracle")
+    lambdas = as_list(orc.get("lambda", 1.0))
+    if not lambdas:
+        raise ConfigError(source, "oracle.lambda", "empty list")
+    lambdas = tuple(dict.fromkeys(number(x, source, "oracle.lambda", minimum=0) for x in lambdas))
+    rep = _table(raw, "report", source)
+    check_keys(rep, ("images",), source, "report")
+    report_images = choice(rep.get("images", "all"), source, "report.images", REPORT_IMAGES)
+
+    motion = tuple(_parse_motion(t, source, f"motion[{i}]") for i, t in enumerate(_array_of_tables(raw, "motion", source)))
+    _check_motion_lights(motion, lights, source)
+    if motion and mapspec.moments:
+        raise ConfigError(source, "map.kind", "pre-filtered maps are measured on still frames; remove [[motion]] "
+                          "or keep map.kind = depth", ("depth",))
+    contact = _parse_contact(raw, source, bool(motion))
+    shrink = _parse_shrink(m, source, bool(motion))
+    return Config(name=name, source=source, seed=seed, variant=variant, camera_resolution=camera_resolution,
+                  camera=camera, motion=motion,
+                  scenes=tuple(scenes), lights=tuple(lights), map=mapspec, schemes=tuple(schemes),
+                  timing_repeats=repeats, memory_budget_mb=budget, oracle=OracleSpec(lambdas),
+                  report_images=report_images, raw=raw, contact=contact, shrink=shrink,
+                  execution=_parse_execution(_table(raw, "execution", source), source))
+
+
+CONTACT_MAX_STEPS = 256
+
+
+def _parse_contact(raw: dict, source: str, motion: bool):
+    """``[contact]`` (length, steps, thickness, jitter; one value each) as a ContactSpec, None without it."""
+    if "contact" not in raw:
+        return None
+    t = _table(raw, "contact", source)
+    if "preset" in t:
+        from ..contact.presets import PRESETS as CONTACT_PRESETS
+        name = choice(t["preset"], source, "contact.preset", sorted(CONTACT_PRESETS))
+        extra = sorted(set(t) - {"preset"})
+        if extra:
+            raise ConfigError(source, f"contact.{extra[0]}", "a preset takes no other keys", ("preset",))
+        t = dict(vars(CONTACT_PRESETS[name][0]))
+    for k, v in t.items():
+        if isinstance(v, list):
+            raise ConfigError(source, f"contact.{k}", f"give one value (contact parameters are not swept), got {v!r}")
+    spec = sweep_params(ContactSpec, t, source, "contact")[0]
+    if spec.steps > CONTACT_MAX_STEPS:
+        raise ConfigError(source, "contact.steps", f"must be <= {CONTACT_MAX_STEPS}, got {spec.steps}")
+    if spec.jitter > 1.0:
+        raise ConfigError(source, "contact.jitter", f"must be <= 1 (a fraction of a step), got {spec.jitter:g}")
+    if spec.length.value <= 0:
+        raise ConfigError(source, "contact.length", f"must be > 0, got {spec.length}")
+    if motion:
+        raise ConfigError(source, "contact", "contact shadows are measured on still frames; remove [contact] or "
+                          "the [[motion]] paths", ["motion"])
+    return spec
+
+
+def _parse_shrink(m: dict, source: str, motion: bool):
+    """``[map] shrink``: the world distance casters move inward along their welded normals (None: off)."""
+    if "shrink" not in m:
+        return None
+    d = number(m["shrink"], source, "map.shrink", minimum=0.0)
+    if motion:
+        raise ConfigError(source, "map.shrink", "caster shrinking is measured on still frames; remove map.shrink or "
+                          "the [[motion]] paths", ["motion"])
+    return d
+
+
+def _parse_execution(t: dict, source: str) -> ExecutionSpec:
+    """``[execution]``: backend (local | ray), address, cpus_per_task, gpus_per_task."""
+    check_keys(t, ("backend", "address", "cpus_per_task", "gpus_per_task"), source, "execution")
+    backend = choice(t.get("backend", "local"), source, "execution.backend", BACKENDS)
+    address = t.get("address")
+    if address is not None and (not isinstance(address, str) or not address):
+        raise ConfigError(source, "execution.address", f"expected a Ray address (auto, ray://host:port) or "
+                          f"\"local\", got {address!r}")
+    if address is not None and backend != "ray":
+        raise ConfigError(source, "execution.address", 'an address is for backend = "ray"', BACKENDS)
+    cpus = number(t.get("cpus_per_task", 1.0), source, "execution.cpus_per_task", positive=True)
+    gpus = number(t.get("gpus_per_task", 0.0), source, "execution.gpus_per_task", minimum=0)
+    return ExecutionSpec(backend, address, float(cpus), float(gpus))
+
+
+def _parse_camera(cam: dict, source: str):
+    """[camera] position, target, up, fov, near, far (each optional; None without any)."""
+    kw = {}
+    for k in ("position", "target", "up"):
+        if k in cam:
+            kw[k] = vec3(cam[k], source, f"camera.{k}", nonzero=k == "up")
+    if "fov" in cam:
+        kw["fov"] = number(cam["fov"], source, "camera.fov", positive=True, maximum=179.0)
+    for k in ("near", "far"):
+        if k in cam:
+            kw[k] = number(cam[k], source, f"camera.{k}", positive=True)
+    if "near" in kw and "far" in kw and not kw["near"] < kw["far"]:
+        raise ConfigError(source, "camera.far", f"must be above camera.near ({kw['near']:g}), got {kw['far']:g}")
+    if "position" in kw and "target" in kw and kw["position"] == kw["target"]:
+        raise ConfigError(source, "camera.target", "the target equals the position")
+    spec = CameraSpec(**kw)
+    return spec if spec.posed else None
+
+
+def _parse_cascades(m: dict, source: str) -> tuple:
+    """[map] cascades (a count 1 to 8 or an engine's layout, lists sweep) and the keys of a counted
+    layout (split, lambda, fit, depth_bounds, stabilize, blend, max_distance; lists sweep)."""
+    from ..maps.cascade_layouts import LAYOUTS
+    given = [k for k in CASCADE_KEYS if k in m]
+    if not given:
+        return ()
+    if "cascades" not in m:
+        raise ConfigError(source, f"map.{given[0]}", "a cascade key needs map.cascades (a count or an engine layout)",
+                          ["cascades"])
+    counts = as_list(m["cascades"])
+    if not counts:
+        raise ConfigError(source, "map.cascades", "empty list")
+    opts = {}
+    for key, conv in (("split", lambda v, k: choice(v, source, k, CASCADE_SPLITS)),
+                      ("lambda", lambda v, k: number(v, source, k, minimum=0.0, maximum=1.0)),
+                      ("fit", lambda v, k: choice(v, source, k, CASCADE_FITS)),
+                      ("depth_bounds", lambda v, k: choice(v, source, k, DEPTH_BOUNDS)),
+                      ("stabilize", _boolean(source)),
+                      ("blend", lambda v, k: number(v, source, k, minimum=0.0, maximum=0.5)),
+                      ("max_distance", lambda v, k: number(v, source, k, positive=True))):
+        if key in m:
+            vals = as_list(m[key])
+            if not vals:
+                raise ConfigError(source, f"map.{key}", "empty list")
+            opts[key] = [conv(v, f"map.{key}") for v in vals]
+    out = []
+    numeric = False
+    for c in counts:
+        if isinstance(c, str):
+            if c not in LAYOUTS:
+                raise ConfigError(source, "map.cascades", f"unknown engine layout {c!r}; give a count 1 to "
+                                  f"{MAX_CASCADES} or an engine", sorted(LAYOUTS))
+            out.append(LAYOUTS[c][0])
+            continue
+        n = number(c, source, "map.cascades", integer=True, minimum=1, maximum=MAX_CASCADES)
+        numeric = True
+        names = list(opts)
+        for combo in itertools.product(*(opts[k] for k in names)):
+            kw = dict(zip(names, combo))
+            if "lambda" in kw:
+                kw["lam"] = kw.pop("lambda")
+            spec = CascadeSpec(count=n, **kw)
+            if spec.split != "practical" and "lambda" in opts and len(opts["lambda"]) > 1:
+                spec = replace(spec, lam=CascadeSpec.lam)     # lambda sweeps only the practical split
+            if spec not in out:
+                out.append(spec)
+    if not numeric and opts:
+        raise ConfigError(source, f"map.{next(iter(opts))}", "an engine layout sets its own cascade keys; give a "
+                          "count in map.cascades to set them", ["cascades"])
+    return tuple(out)
+
+
+def _parse_kinds(m: dict, formats, lights, cascade, source: str) -> tuple:
+    """``[map] kind`` (MAP_KINDS, default depth), checked against what a pre-filtered map cannot do."""
+    from .. import lights as light_types
+    from ..prefilter import MOMENT_FORMATS
+    kinds = tuple(dict.fromkeys(choice(k, source, "map.kind", MAP_KINDS) for k in as_list(m.get("kind", "depth"))))
+    if not kinds:
+        raise ConfigError(source, "map.kind", "empty list", MAP_KINDS)
+    if kinds == ("depth",):
+        return kinds
+    if "filter" in m and "depth" not in kinds:
+        raise ConfigError(source, "map.filter", "filters are the depth map's (a pre-filtered map's filter is "
+                          "map.blur); add depth to map.kind or remove map.filter", ("depth",))
+    bad = [f for f in formats if f not in MOMENT_FORMATS]
+    if bad:
+        raise ConfigError(source, "map.format", f"{bad[0]!r}: pre-filtered maps store their moments in", MOMENT_FORMATS)
+    if cascade:
+        raise ConfigError(source, "map.cascades", "pre-filtered maps are built on one map per view; remove "
+                          "map.cascades or keep map.kind = depth", ("depth",))
+    if any(l.type in light_types.REGISTRY and light_types.is_soft(l) for l in lights):
+        raise ConfigError(source, "map.kind", "pre-filtered maps are measured against one exact ray per receiver; "
+                          "an area light's reference is a fraction: remove it or keep map.kind = depth", ("depth",))
+    return kinds
+
+
+def _parse_moments(m: dict, kinds, formats, source: str) -> tuple:
+    """The MomentSpec instances of ``[map.<kind>]`` tables (lists sweep) times ``[map] blur`` widths."""
+    from .. import prefilter
+    for name in prefilter.NAMES:
+        if name in m and name not in kinds:
+            raise ConfigError(source, f"map.{name}", f"parameters of {name}, which map.kind does not name", kinds)
+    blurs = tuple(number(w, source, "map.blur", integer=True, minimum=1, maximum=63) for w in as_list(m.get("blur", 1)))
+    if not blurs:
+        raise ConfigError(source, "map.blur", "empty list")
+    if any(w % 2 == 0 for w in blurs):
+        raise ConfigError(source, "map.blur", f"a box width is odd (centred on the texel), got {blurs}")
+    if "blur" in m and kinds == ("depth",):
+        raise ConfigError(source, "map.blur", "blurs moments; map.kind names no pre-filtered map", prefilter.NAMES)
+    out = []
+    for name in kinds:
+        if name == "depth":
+            continue
+        t = m.get(name, {})
+        if not isinstance(t, dict):
+            raise ConfigError(source, f"map.{name}", f"expected a table [map.{name}]")
+        preset = None
+        if "preset" in t and not prefilter.presets.names(name):
+            raise ConfigError(source, f"map.{name}.preset", f"{name} has no engine presets (dsm schemes lists them)",
+                              sorted(k for k in prefilter.presets.PRESETS))
+        if "preset" in t:
+            preset = choice(t["preset"], source, f"map.{name}.preset", prefilter.presets.names(name))
+            if set(t) != {"preset"}:
+                raise ConfigError(source, f"map.{name}.{sorted(set(t) - {'preset'})[0]}", "a preset takes no other keys",
+                                  ("preset",))
+            params = [prefilter.presets.PRESETS[name][preset]]
+        else:
+            params = sweep_params(prefilter.get(name).Params, t, source, f"map.{name}")
+        for p in params:
+            prefilter.check(name, p, formats, source, f"map.{name}")
+        out += [MomentSpec(name, p, w, preset) for p in params for w in blurs]
+    return tuple(out)
+
+
+def _parse_motion(t: dict, source: str, where: str) -> MotionSpec:
+    """One [[motion]] path: frames, a camera path and/or a light path, fixed points."""
+    check_keys(t, ("frames", "camera", "offset", "angle", "keys", "light", "light_axis", "light_angle",
+                   "light_offset", "light_keys", "points", "label"), source, where)
+    kw = {"frames": number(t.get("frames", 8), source, f"{where}.frames", integer=True, minimum=2, maximum=1000),
+          "camera": choice(t.get("camera", "none"), source, f"{where}.camera", CAMERA_PATHS),
+          "light": choice(t.get("light", "none"), source, f"{where}.light", LIGHT_PATHS),
+          "points": number(t.get("points", 4000), source, f"{where}.points", integer=True, minimum=1,
+                           maximum=10_000_000)}
+    need = {"dolly": "offset", "pan": "angle", "orbit": "angle", "keyframes": "keys"}.get(kw["camera"])
+    if need and need not in t:
+        raise ConfigError(source, f"{where}.{need}", f"camera path {kw['camera']!r} needs {need}")
+    if "offset" in t:
+        kw["offset"] = vec3(t["offset"], source, f"{where}.offset")
+    if "angle" in t:
+        kw["angle"] = number(t["angle"], source, f"{where}.angle")
+    if "keys" in t:
+        keys = t["keys"]
+        if not isinstance(keys, list) or len(keys) < 2 or not all(isinstance(k, dict) for k in keys):
+            raise ConfigError(source, f"{where}.keys", "expected a list of at least two tables {position, target}")
+        out = []
+        for j, k in enumerate(keys):
+            check_keys(k, ("position", "target"), source, f"{where}.keys[{j}]")
+            if "position" not in k or "target" not in k:
+                raise ConfigError(source, f"{where}.keys[{j}]", "a keyframe needs position and target")
+            out.append((vec3(k["position"], source, f"{where}.keys[{j}].position"),
+                        vec3(k["target"], source, f"{where}.keys[{j}].target")))
+            if out[-1][0] == out[-1][1]:
+                raise ConfigError(source, f"{where}.keys[{j}].target", "the target equals the position")
+        kw["keys"] = tuple(out)
+    if kw["light"] == "turn" and "light_angle" not in t:
+        raise ConfigError(source, f"{where}.light_angle", "light path 'turn' needs light_angle (degrees)")
+    if "light_axis" in t:
+        kw["light_axis"] = vec3(t["light_axis"], source, f"{where}.light_axis", nonzero=True)
+    if "light_angle" in t:
+        kw["light_angle"] = number(t["light_angle"], source, f"{where}.light_angle")
+    kw.update(_parse_light_move(t, kw["light"], source, where))
+    label = t.get("label", "")
+    if not isinstance(label, str):
+        raise ConfigError(source, f"{where}.label", f"expected a string, got {label!r}")
+    spec = MotionSpec(**kw)
+    if not label:
+        parts = [] if spec.camera == "none" else [f"camera {spec.camera}"]
+        parts += {"none": [], "turn": [f"sun turn {spec.light_angle:g}deg"]}.get(spec.light, [f"light {spec.light}"])
+        label = " + ".join(parts) or "static"
+    return replace(spec, label=label)
+
+
+def _parse_light_move(t: dict, path: str, source: str, where: str) -> dict:
+    """A spot or point light moving: ``light_offset`` (move) or ``light_keys`` (keyframes)."""
+    kw = {}
+    need = {"move": "light_offset", "keyframes": "light_keys"}.get(path)
+    if need and need not in t:
+        raise ConfigError(source, f"{where}.{need}", f"light path {path!r} needs {need}")
+    if "light_offset" in t:
+        kw["light_offset"] = vec3(t["light_offset"], source, f"{where}.light_offset")
+    if "light_keys" in t:
+        keys = t["light_keys"]
+        if not isinstance(keys, list) or len(keys) < 2 or not all(isinstance(k, dict) for k in keys):
+            raise ConfigError(source, f"{where}.light_keys", "expected a list of at least two tables "
+                              "{position, target (optional, a spot's aim)}")
+        out = []
+        for j, k in enumerate(keys):
+            check_keys(k, ("position", "target"), source, f"{where}.light_keys[{j}]")
+            if "position" not in k:
+                raise ConfigError(source, f"{where}.light_keys[{j}]", "a light keyframe needs position", ["position"])
+            out.append((vec3(k["position"], source, f"{where}.light_keys[{j}].position"),
+                        vec3(k["target"], source, f"{where}.light_keys[{j}].target") if "target" in k else None))
+            if out[-1][0] == out[-1][1]:
+                raise ConfigError(source, f"{where}.light_keys[{j}].target", "the target equals the position")
+        if len({tg is None for _, tg in out}) > 1:
+            raise ConfigError(source, f"{where}.light_keys", "give target on every light keyframe or on none")
+        kw["light_keys"] = tuple(out)
+    return kw
+
+
+def _boolean(source):
+    def conv(v, key):
+        """``v`` checked to be a boolean; else a ConfigError at ``key``."""
+        if not isinstance(v, bool):
+            raise ConfigError(source, key, f"expected true or false, got {v!r}")
+        return v
+    return conv
+
+
+def _table(raw, key, source) -> dict:
+    t = raw.get(key, {})
+    if not isinstance(t, dict):
+        raise ConfigError(source, key, f"expected a table [{key}]")
+    return t
+
+
+def _array_of_tables(raw, key, source) -> list:
+    t = raw.get(key, [])
+    if isinstance(t, dict):
+        t = [t]
+    if not isinstance(t, list) or not all(isinstance(x, dict) for x in t):
+        raise ConfigError(source, key, f"expected an array of tables [[{key}]]")
+    return t
+
+
+def _filter(raw, source) -> str:
+    """A map.filter value: one of FILTERS, or ``"pcf_wide:K"`` (a K x K texel kernel, 2 <= K <= 64)."""
+    if isinstance(raw, str) and raw.startswith("pcf_wide:"):
+        k = raw.split(":", 1)[1]
+        if not k.isdigit() or not 2 <= int(k) <= 64:
+            raise ConfigError(source, "map.filter", f"{raw!r}: pcf_wide:K takes a kernel width K in texels, "
+                              "an integer from 2 to 64")
+        return raw
+    return choice(raw, source, "map.filter", FILTERS)
+
+
+def _parse_light(t: dict, source: str, where: str) -> LightSpec:
+    """One [[light]] table, parsed by its type's module (dsm.lights)."""
+    from .. import lights
+    kind = choice(t.get("type"), source, f"{where}.type", lights.TYPES) if "type" in t else None
+    if kind is None:
+        raise ConfigError(source, f"{where}.type", "missing", lights.TYPES)
+    return lights.get(kind).parse(t, source, where)
+
+
+def _check_motion_lights(motion, lights_of_config, source):
+    """Each [[motion]] light path needs a light whose type follows it (or the scene's own)."""
+    from .. import lights
+    soft = [j for j, l in enumerate(lights_of_config) if l.type in lights.REGISTRY and lights.is_soft(l)]
+    if motion and soft:       # the fixed points' V* is one ray; an area light's reference is a fraction per frame
+        raise ConfigError(source, f"light[{soft[0]}].type", "[[motion]] measures hard lights: its fixed points' V* "
+                          "is one ray, where an area light's is a Monte Carlo fraction; remove the area light or "
+                          "the [[motion]] paths", tuple(t for t, m in lights.REGISTRY.items() if not m.SOFT))
+    for i, mo in enumerate(motion):
+        if mo.light == "none":
+            continue
+        follow = [name for name, m in lights.REGISTRY.items() if mo.light in m.MOTION]
+        if all(l.type != "scene" and mo.light not in lights.get(l.type).MOTION for l in lights_of_config):
+            raise ConfigError(source, f"motion[{i}].light", f"light path {mo.light!r} needs a "
+                              f"{' or '.join(follow)} [[light]]; the config has none", follow)
+
+
+def parse_scheme(t: dict, source: str, where: str, registry, presets) -> list:
+    """The SchemeSpecs of one ``[[scheme]]`` table: a preset's one, or a named scheme's over its swept lists."""
+    names = [s.NAME for s in registry]
+    if "preset" in t:
+        preset = choice(t["preset"], source, f"{where}.preset", sorted(presets))
+        extra = set(t) - {"preset"}
+        if extra:
+            raise ConfigError(source, f"{where}.{sorted(extra)[0]}", "a preset takes no other keys", ("preset",))
+        # a preset is a combined instance per light type: the plan resolves it per light
+        # (schemes.preset_for_light); until then it carries the directional values
+        from ..schemes.presets import spec as preset_spec
+        return [preset_spec(preset)]
+    if "name" not in t:
+        raise ConfigError(source, f"{where}.name", "missing", names)
+    name = choice(t["name"], source, f"{where}.name", names)
+    module = next(s for s in registry if s.NAME == name)
+    return [SchemeSpec(name, p) for p in sweep_params(module.Params, t, source, where, skip=("name",))]

@@ -1,0 +1,483 @@
+"""Motion: camera and light paths over frames, and shimmering measured as a number.
+
+A ``[[motion]]`` path moves the camera (``dolly``: a translation; ``pan``: the view turning
+about the camera's up; ``orbit``: the camera turning about its target; ``keyframes``: positions
+and targets interpolated linearly) and/or turns a directional light (``turn``: its direction
+about ``light_axis``) or moves a spot or point light (``move``: by ``light_offset``;
+``keyframes``: along ``light_keys``) over ``frames`` frames. Each frame re-fits its views as an
+engine would (its own G-buffer, receivers and view; a cascaded layout re-fitted to the frame's
+camera; a spot's or point light's views re-fitted to its position).
+
+**Fixed points**: ``points`` points on the scene's surfaces, sampled once in world space
+(area-weighted over every mesh triangle, the experiment's seed), each the hit of a short
+probe ray onto its triangle so it carries a surface interaction for its exact shadow ray.
+In a frame, a fixed point counts where the camera sees it (inside the frustum, the first hit
+of the ray from the camera) and its visible side faces the light: a receiver of that frame.
+
+**Flicker** per pair of consecutive frames (t, t + 1), over the fixed points that are
+receivers in both and whose exact visibility V* is the same in both:
+
+- ``flicker_rate``: the fraction whose shadow-map class (lit: V >= 0.5) changes;
+- ``flicker_within_rate`` / ``flicker_change_rate``: the same over the points whose cascade is
+  the same in both frames / differs (cascaded maps; a single map is one cascade);
+- ``flicker_magnitude``: the mean |V(t+1) - V(t)| (meaningful with PCF);
+- ``flicker_ever``: the fraction of the points eligible in at least one pair that flicker at
+  least once.
+
+The metric counts what a viewer sees as shimmer: a surface point whose shadow state toggles
+while the truth does not. Its limits: it samples points, not pixels, so a flicker on a surface
+no fixed point lies on is missed (the count sets the resolution); a point whose V* changes
+(a moving light crossing a shadow edge) is left out of that pair, so a light path measures the
+flicker of the points away from the moving edges; and a change that is correct (a map that was
+wrong becoming right) counts as flicker too, since a viewer sees it the same way.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ..report import figures, io as report
+from ..maps import headroom, shadowmap, spawn
+from .. import lights, pipeline
+from ..truth import metrics
+from ..scenes import load as scenes
+from ..tools import timing
+from ..maps.cascades import Camera
+
+FRAME_COLUMNS = ("case", "motion", "scene", "light", "cascade_layout", "scheme", "params", "resolution", "filter",
+                 "format", "frame", "map_built", "n_points_visible", "n_pairs_eligible", "n_flicker", "flicker_rate",
+                 "n_eligible_within", "flicker_within_rate", "n_eligible_change", "flicker_change_rate",
+                 "flicker_magnitude", "n_receivers", "acne_rate", "peterpan_rate", "error_rate")
+
+
+# ---------------------------------------------------------------- paths
+
+def _rotate(v, axis, deg):
+    a = np.asarray(axis, float) / np.linalg.norm(axis)
+    t = math.radians(deg)
+    v = np.asarray(v, float)
+    return v * math.cos(t) + np.cross(a, v) * math.sin(t) + a * (a @ v) * (1 - math.cos(t))
+
+
+def camera_path(spec, base: Camera, bbox, scale: float = 1.0, offset=(0.0, 0.0, 0.0)) -> list:
+    """[(origin, target, up)] per frame (world units; the base camera's pose moved along the path)."""
+    centre = 0.5 * (np.asarray(bbox[0], float) + np.asarray(bbox[1], float))
+    reach = max(float((centre - base.origin) @ base.forward), 10.0 * base.near)
+    o0, t0, up = base.origin, base.origin + base.forward * reach, base.up
+    out = []
+    for i in range(spec.frames):
+        f = i / (spec.frames - 1)
+        if spec.camera == "dolly":
+            d = np.asarray(spec.offset, float) * scale * f
+            out.append((o0 + d, t0 + d, up))
+        elif spec.camera == "pan":
+            out.append((o0, o0 + _rotate(t0 - o0, up, spec.angle * f), up))
+        elif spec.camera == "orbit":
+            out.append((t0 + _rotate(o0 - t0, up, spec.angle * f), t0, up))
+        elif spec.camera == "keyframes":
+            keys = [(np.asarray(p, float) * scale + offset, np.asarray(t, float) * scale + offset) for p, t in spec.keys]
+            x = f * (len(keys) - 1)
+            k = min(int(x), len(keys) - 2)
+            w = x - k
+            out.append((keys[k][0] * (1 - w) + keys[k + 1][0] * w, keys[k][1] * (1 - w) + keys[k + 1][1] * w, up))
+        else:
+            out.append((o0, t0, up))
+        o, tg, u = out[-1]
+        fwd = np.subtract(tg, o)
+        if np.linalg.norm(np.cross(fwd, u)) <= 1e-6 * np.linalg.norm(fwd) * np.linalg.norm(u):
+            raise ValueError(f"motion {spec.label!r}: frame {i}'s camera looks along its up {tuple(map(float, u))} "
+                             "(or from its target); move the keyframes")
+    return out
+
+
+def light_path(spec, light, scale: float = 1.0, offset=(0.0, 0.0, 0.0)) -> list:
+    """The light of each frame: a directional light's direction turned about light_axis (``turn``);
+    a spot or point light translated by ``light_offset`` (``move``; a spot keeps its direction) or
+    along ``light_keys`` (``keyframes``: positions, and a spot's targets when given, interpolated
+    linearly; positions follow the scene's ``scale`` and ``offset`` as a [[light]]'s do). A light
+    of another type than the path moves stays still."""
+    out = []
+    follows = lights.get(light.type).MOTION          # the paths this light's type follows
+    moving = light.position is not None
+    p0 = np.asarray(light.position, float) if moving else None
+    for i in range(spec.frames):
+        f = i / (spec.frames - 1)
+        if spec.light not in follows:
+            out.append(light)
+        elif spec.light == "turn":
+            d = _rotate(light.direction, spec.light_axis, spec.light_angle * f)
+            out.append(dataclasses.replace(light, direction=tuple(float(c) for c in d)))
+        elif spec.light == "move" and moving:
+            d = np.asarray(spec.light_offset, float) * scale * f
+            out.append(_moved(light, p0 + d, None if light.target is None else np.asarray(light.target, float) + d))
+        elif spec.light == "keyframes" and moving:
+            keys = [(np.asarray(p, float) * scale + offset, None if tg is None else np.asarray(tg, float) * scale + offset)
+                    for p, tg in spec.light_keys]
+            x = f * (len(keys) - 1)
+            k = min(int(x), len(keys) - 2)
+            w = x - k
+            pos = keys[k][0] * (1 - w) + keys[k + 1][0] * w
+            if keys[k][1] is not None and light.type == "spot":
+                tgt = keys[k][1] * (1 - w) + keys[k + 1][1] * w
+            else:                                   # no targets: a spot keeps its direction
+                tgt = None if light.target is None else np.asarray(light.target, float) + (pos - p0)
+            out.append(_moved(light, pos, tgt))
+        else:
+            out.append(light)
+    return out
+
+
+def _moved(light, position, target):
+    as_tuple = lambda v: None if v is None else tuple(float(c) for c in v)
+    if light.type == "spot" and target is not None and light.target is None:   # a spot given by direction
+        return dataclasses.replace(light, position=as_tuple(position), direction=as_tuple(np.subtract(target, position)))
+    return dataclasses.replace(light, position=as_tuple(position), target=as_tuple(target))
+
+
+def sensor_at(base: Camera, origin, target, up):
+    """A sensor at a pose with the base camera's film, field of view and clip planes."""
+    fov = math.degrees(2 * math.atan(base.tan_x))
+    return mi.load_dict(scenes.look_at_sensor(origin, target, up, fov, base.width, base.height, base.near, base.far))
+
+
+# ---------------------------------------------------------------- fixed points
+
+@dataclasses.dataclass
+class FixedPoints:
+    """The fixed points on the scene's surfaces: interactions, positions, wound normals, shapes and triangles."""
+    si: object           # mi.SurfaceInteraction3f
+    p: object            # mi.Point3f
+    n: object            # geometric normal as the mesh winds it
+    shape: np.ndarray
+    prim: np.ndarray
+    table: object         # spawn.shape_table of the scene (None on Embree), made once for every frame
+
+    @property
+    def count(self) -> int:
+        """The number of fixed points."""
+        return len(self.shape)
+
+
+def sample_points(scene, count: int, seed: int, diagonal: float) -> FixedPoints:
+    """``count`` points area-weighted over every mesh triangle (numpy, seeded), each snapped to
+    its triangle by a probe ray (kept where the probe hits that triangle)."""
+    tris = []
+    for k, sh in enumerate(scene.shapes()):
+        if not sh.is_mesh():
+            continue
+        v = np.array(sh.vertex_positions_buffer(), np.float64).reshape(-1, 3)
+        f = np.array(sh.faces_buffer(), np.int64).reshape(-1, 3)
+        tris.append((k, v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]))
+    a = np.concatenate([0.5 * np.linalg.norm(np.cross(b - a_, c - a_), axis=1) for _, a_, b, c in tris])
+    rng = np.random.default_rng(seed)
+    pick = rng.choice(len(a), size=count, p=a / a.sum())
+    v0 = np.concatenate([t[1] for t in tris])[pick]
+    v1 = np.concatenate([t[2] for t in tris])[pick]
+    v2 = np.concatenate([t[3] for t in tris])[pick]
+    r1, r2 = rng.random(count), rng.random(count)
+    s = np.sqrt(r1)
+    p = v0 * (1 - s)[:, None] + v1 * (s * (1 - r2))[:, None] + v2 * (s * r2)[:, None]
+    n = np.cross(v1 - v0, v2 - v0)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    delta = 1e-4 * diagonal
+    o = p + n * delta
+    ray = mi.Ray3f(mi.Point3f(*(mi.Float(o[:, c].astype(np.float32)) for c in range(3))),
+                   mi.Vector3f(*(mi.Float(-n[:, c].astype(np.float32)) for c in range(3))))
+    pi = scene.ray_intersect_preliminary(ray, coherent=False)
+    si = pi.compute_surface_interaction(ray)
+    dr.eval(si)
+    ok = si.is_valid().numpy().astype(bool)
+    ok &= np.asarray(pi.t.numpy()) < 2 * delta
+    idx = mi.UInt32(np.flatnonzero(ok).astype(np.uint32))
+    si = dr.gather(mi.SurfaceInteraction3f, si, idx)
+    table = spawn.shape_table(scene)
+    shape = np.asarray(dr.gather(mi.UInt32, spawn.hit_shape(pi, pi.is_valid(), table), idx).numpy(), np.int64)
+    prim = np.asarray(dr.gather(mi.UInt32, pi.prim_index, idx).numpy(), np.int64)
+    dr.eval(si)
+    return FixedPoints(si, mi.Point3f(si.p), mi.Vector3f(si.n), shape, prim, table)
+
+
+def points_seen(scene, fp: FixedPoints, cam: Camera):
+    """(seen by the camera, the normal turned toward the camera) of each fixed point."""
+    p = pipeline.points_np(fp.p)
+    q = p - cam.origin
+    depth = q @ cam.forward
+    x, y = q @ cam.left, q @ cam.up
+    in_frustum = (depth > cam.near) & (depth < cam.far) & (np.abs(x) <= cam.tan_x * depth) & \
+        (np.abs(y) <= cam.tan_y * depth)
+    dist = np.linalg.norm(q, axis=1)
+    o = mi.Point3f(*(dr.opaque(mi.Float, float(c)) for c in cam.origin))
+    d = dr.normalize(fp.p - o)
+    pi = scene.ray_intersect_preliminary(mi.Ray3f(o + d * 0, d), coherent=False)
+    t = np.asarray(pi.t.numpy(), np.float64)
+    same = (np.asarray(spawn.hit_shape(pi, pi.is_valid(), fp.table).numpy(), np.int64) == fp.shape) & \
+        (np.asarray(pi.prim_index.numpy(), np.int64) == fp.prim)
+    seen = in_frustum & pi.is_valid().numpy().astype(bool) & (same | (t >= dist * (1 - 1e-4)))
+    oc = mi.Vector3f(*(dr.opaque(mi.Float, float(c)) for c in cam.origin))
+    n = fp.n * dr.sign(dr.dot(fp.n, oc - fp.p))
+    dr.eval(n)
+    return seen, n
+
+
+def points_frame(scene, fp: FixedPoints, cam: Camera, light, view, magnitude: float, vstar=None):
+    """One frame of the fixed points: (receiver: seen, facing the light and inside the view; exact
+    visibility V*; the normal turned toward the camera). V* depends on the light alone (``vstar``:
+    the one computed for this light in an earlier frame)."""
+    seen, n_cam = points_seen(scene, fp, cam)
+    n_np = pipeline.points_np(n_cam)
+    if not lights.get(light.type).POSITIONAL:
+        facing = n_np @ (-np.asarray(light.direction, float) / np.linalg.norm(light.direction)) > 0
+    else:
+        facing = ((np.asarray(light.position, float) - pipeline.points_np(fp.p)) * n_np).sum(1) > 0
+    if vstar is None:
+        vstar = np.asarray(pipeline.exact_visibility(scene, fp.si, light, magnitude)[0].numpy(), bool)
+    inside = view.inside(fp.p).numpy().astype(bool)
+    return seen & facing & inside, vstar, n_cam
+
+
+# ---------------------------------------------------------------- flicker
+
+def flicker(v, vstar, eligible, face) -> tuple:
+    """Per pair of consecutive frames and overall, from per-frame arrays (frames, points):
+    V, V*, receiver (eligible), cascade. Returns (per-pair dicts, flicker_ever)."""
+    F = len(v)
+    pairs, ever, seen = [], np.zeros(v.shape[1], bool), np.zeros(v.shape[1], bool)
+    for t in range(1, F):
+        e = eligible[t - 1] & eligible[t] & (vstar[t - 1] == vstar[t])
+        flip = e & ((v[t - 1] >= 0.5) != (v[t] >= 0.5))
+        same = face[t - 1] == face[t]
+        rate = lambda num, den: float(num) / float(den) if den else metrics.UNDEFINED
+        pairs.append({"n_pairs_eligible": int(e.sum()), "n_flicker": int(flip.sum()),
+                      "flicker_rate": rate(flip.sum(), e.sum()),
+                      "n_eligible_within": int((e & same).sum()), "flicker_within_rate": rate((flip & same).sum(),
+                                                                                             (e & same).sum()),
+                      "n_eligible_change": int((e & ~same).sum()), "flicker_change_rate": rate((flip & ~same).sum(),
+                                                                                               (e & ~same).sum()),
+                      "flicker_magnitude": float(np.abs(v[t] - v[t - 1])[e].mean()) if e.any() else metrics.UNDEFINED})
+        ever |= flip
+        seen |= e
+    return pairs, (float(ever[seen].mean()) if seen.any() else metrics.UNDEFINED)
+
+
+def _median(xs):
+    xs = [x for x in xs if metrics.defined(x)]
+    return float(np.median(xs)) if xs else metrics.UNDEFINED
+
+
+def _mean(xs):
+    xs = [x for x in xs if metrics.defined(x)]
+    return float(np.mean(xs)) if xs else metrics.UNDEFINED
+
+
+# ---------------------------------------------------------------- the frame loop
+
+def _view_signature(view) -> bytes:
+    """What a map's texels depend on: the frame, extents, offsets, depth origin and far bound."""
+    parts = [np.asarray(view.origin_np, np.float32), np.asarray(view.axes_np, np.float32),
+             np.float32([view.far, view.near, view.resolution])]
+    for name in ("extents", "face_near", "face_far", "rects"):
+        if hasattr(view, name):
+            parts.append(np.asarray(getattr(view, name), np.float32))
+    if hasattr(view, "NU"):
+        parts += [np.asarray(view.A.numpy(), np.float32), np.asarray(view.NU.numpy(), np.float32),
+                  np.asarray(view.NV.numpy(), np.float32)]
+    if hasattr(view, "extent"):
+        parts.append(np.float32([view.extent]))
+    return b"".join(p.tobytes() for p in parts)
+
+
+def run_scene(runner, sd, lights, maps, closed, extents):
+    """The frame loop of every [[motion]] path over one scene's maps of the plan (called by the
+    runner for a config with [[motion]]): rows of metrics.csv (per-case means) and of frames.csv
+    (into ``runner.record``), an animated error image per case
+    (images/<scene>_<light>/<case>_frames.gif; none with [report] images = "none")."""
+    cfg = runner.cfg
+    base = Camera.from_sensor(sd.sensor)
+    fp = sample_points(sd.scene, max(mo.points for mo in cfg.motion), cfg.seed, sd.diagonal)
+    magnitude = pipeline.scene_magnitude(sd.bbox)
+    for mo in cfg.motion:
+        use = min(mo.points, fp.count)
+        pts = fp
+        if use < fp.count:
+            idx = mi.UInt32(np.arange(use, dtype=np.uint32))
+            pts = FixedPoints(dr.gather(mi.SurfaceInteraction3f, fp.si, idx), dr.gather(mi.Point3f, fp.p, idx),
+                              dr.gather(mi.Vector3f, fp.n, idx), fp.shape[:use], fp.prim[:use], fp.table)
+        poses = camera_path(mo, base, sd.bbox, sd.scale, sd.offset)
+        for m in maps:
+            if m.light_index >= len(lights):
+                continue
+            light_frames = light_path(mo, lights[m.light_index], sd.scale, sd.offset)
+            _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents, magnitude)
+
+
+def _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents, magnitude):
+    cfg = runner.cfg
+    cache_gb, cache_setup, cache_vstar = {}, {}, {}
+    specs = [pipeline.preset_for_light(s, light_frames[0].type) for s in m.specs]
+    keys = [(s, filt, fmt) for s in specs for filt in cfg.map.filter for fmt in cfg.map.format]
+    per = {k: {"v": [], "vstar": [], "elig": [], "face": [], "frames": [], "images": [], "metrics": []} for k in keys}
+    prev_sig, smap, built, build_ms = None, None, [], []
+    tight = headroom.headroom(math.nan, math.nan)   # the frame with the fewest float32 steps per texel
+    for t, ((o, tg, up), light) in enumerate(zip(poses, light_frames)):
+        pose_key = (tuple(np.round(o, 12)), tuple(np.round(tg, 12)), tuple(np.round(up, 12)))
+        sensor = sensor_at(base, o, tg, up)
+        cam = Camera.from_sensor(sensor)
+        if pose_key not in cache_gb:                 # the G-buffer is shared while the camera stays
+            cache_gb = {pose_key: pipeline.gbuffer(sd, sensor=sensor)}
+        gb = cache_gb[pose_key]
+        if (pose_key, light) not in cache_setup:     # receivers and their V*: shared while camera and light stay
+            cache_setup = {(pose_key, light): pipeline.light_setup(sd, gb, light, m.light)}
+        setup = cache_setup[(pose_key, light)]
+        rpts = pipeline.points_np(setup.p) if setup.p is not None else np.zeros((0, 3))
+        view = pipeline.make_view(light, m.resolution, rpts, sd.bbox, m.view, m.cascade, sensor, sd.scale)
+        setup = setup.subset(view.inside(setup.p).numpy().astype(bool)) if setup.p is not None else setup
+        sig = _view_signature(view)
+        if sig != prev_sig or smap is None:          # the map is shared while its projection stays
+            def build():
+                """The frame's map built (the plan's layers, culling and tile): its arrays, then the ShadowMap."""
+                sm = pipeline.build_map(sd.scene, view, set(m.needs), m.culling,
+                                        closed if m.culling != "none" else None, m.tile, extents)
+                return (*shadowmap.arrays(sm), sm)       # the arrays, so the timing waits for them
+            out, tm = timing.measure(build, 0)
+            smap = out[-1]
+            build_ms.append(tm.ms)
+            built.append(True)
+            runner.record.add_rays({"map_texel": smap.rays.get("map_texel", 0)})
+        else:
+            smap = dataclasses.replace(smap, view=view)
+            built.append(False)
+        prev_sig = sig
+        elig, vstar_pts, n_cam = points_frame(sd.scene, pts, cam, light, view, magnitude, cache_vstar.get(light))
+        cache_vstar = {light: vstar_pts}             # the fixed points' V*: shared while the light stays
+        stored = {fmt: pipeline.store(smap, fmt) for fmt in cfg.map.format}
+        # per stored format (its depth function): the fixed points and the frame's receivers, as
+        # lazy expressions (each lookup below still computes them in its own, timed, kernel)
+        has_rx = setup.p is not None and len(setup.pixels)
+        rx_of = {fmt: (pipeline.receivers(sm.view, dataclasses.replace(setup, p=pts.p, n=n_cam), sd.diagonal),
+                       pipeline.receivers(sm.view, setup, sd.diagonal) if has_rx else None)
+                 for fmt, sm in stored.items()}
+        if has_rx:               # the map's float32 headroom at this frame's receivers (dsm.maps.headroom)
+            hr = headroom.headroom(setup.max_abs_coordinate,
+                                   float(np.median(rx_of[cfg.map.format[0]][1].texel_world.numpy())))
+            if math.isnan(tight["texel_f32_steps"]) or hr["texel_f32_steps"] < tight["texel_f32_steps"]:
+                tight = hr
+        for (spec, filt, fmt) in keys:
+            sm = stored[fmt]
+            rx_pts, rx = rx_of[fmt]
+            v_pts = np.asarray(pipeline.visibility(spec, rx_pts, sm, filt, cfg.seed)[0].numpy(), np.float64)
+            face = np.asarray(rx_pts.face.numpy(), np.int64)
+            if has_rx:
+                (v, tap), lt = timing.measure(lambda: pipeline.visibility(spec, rx, sm, filt, cfg.seed), 0)
+                v_np, tap_np = v.numpy(), tap.numpy()
+                d_lookup = lt.ms
+            else:
+                v_np, tap_np, d_lookup = np.zeros(0), np.zeros(0, np.uint32), float("nan")
+            mt = pipeline.metrics(v_np, setup, tap_np, None, False)
+            classes = np.zeros(gb.width * gb.height, np.uint8)
+            classes[setup.pixels] = pipeline.classify(v_np, setup.v_star)
+            d = per[(spec, filt, fmt)]
+            d["v"].append(v_pts)
+            d["vstar"].append(vstar_pts)
+            d["elig"].append(elig)
+            d["face"].append(face)
+            if cfg.report_images != "none":          # [report] images = "none": no GIF either
+                d["images"].append(classes.reshape(gb.height, gb.width))
+            d["metrics"].append(mt)
+            d.setdefault("lookup_ms", []).append(d_lookup)
+            d["frames"].append({"frame": t, "map_built": built[-1], "n_points_visible": int(elig.sum()),
+                                "n_receivers": mt["n_receivers"], "acne_rate": mt["acne_rate"],
+                                "peterpan_rate": mt["peterpan_rate"], "error_rate": mt["error_rate"]})
+    for (spec, filt, fmt), d in per.items():
+        runner.case_no += 1
+        case = f"{runner.case_no:04d}"
+        pairs, ever = flicker(np.array(d["v"]), np.array(d["vstar"]), np.array(d["elig"]), np.array(d["face"]))
+        meta = {"case": case, "motion": mo.label, "scene": sd.label, "light": m.light,
+                "cascade_layout": m.cascade.label if m.cascade else "", "scheme": spec.name, "params": spec.label,
+                "resolution": m.resolution, "filter": filt, "format": fmt}
+        for fr, pr in zip(d["frames"], [{}] + pairs):          # frame t carries the pair (t - 1, t)
+            runner.record.motion_frames.append({**meta, **fr, **pr})
+        last = d["metrics"][-1]
+        row = {**last, "case": case, "scene": sd.label, "light": m.light, "view": m.view, "scheme": spec.name,
+               "culling": m.culling, "preset": spec.preset or "", "params": spec.label, "resolution": m.resolution,
+               "total_texels": m.texels, "filter": filt, "format": fmt, "cascade_layout": meta["cascade_layout"],
+               "motion": mo.label, "frames": mo.frames}
+        for k in ("n_receivers", "n_gt_lit", "n_gt_shadowed", "n_acne", "n_acne_self", "n_acne_edge", "n_peterpan"):
+            row[k] = int(sum(x[k] for x in d["metrics"]))       # summed over the frames
+        for k in ("acne_rate", "peterpan_rate", "error_rate", "mean_abs_error"):
+            row[k] = _mean([x[k] for x in d["metrics"]])          # the mean over the frames
+        row.update({"flicker_rate": _mean([p["flicker_rate"] for p in pairs]), "flicker_ever": ever,
+                    "flicker_magnitude": _mean([p["flicker_magnitude"] for p in pairs]),
+                    "flicker_within_rate": _mean([p["flicker_within_rate"] for p in pairs]),
+                    "flicker_change_rate": _mean([p["flicker_change_rate"] for p in pairs]),
+                    "maps_built": int(sum(built)), "build_ms": float(np.median(build_ms)), "build_first_ms": float("nan"),
+                    "lookup_ms": _median(d.get("lookup_ms", [])), "reference_ms": float("nan"), "sweep_key": "", "sweep_value": float("nan"),
+                    "texel_size": float("nan"), **tight})
+        for k, val in list(row.items()):
+            if isinstance(val, float) and not metrics.defined(val):
+                row[k] = metrics.UNDEFINED
+        if d["images"]:
+            folder = runner.out / "images" / figures.image_folder(meta)
+            folder.mkdir(parents=True, exist_ok=True)
+            _write_gif(folder / f"{case}_frames.gif", d["images"])
+        runner.add_case(row, {"what": f"case {case}", "scene": sd.label, "light": m.light, "view": m.view,
+                              "scheme": spec.name, "params": spec.label, "resolution": m.resolution,
+                              "status": "ok" if row["n_receivers"] else "empty"})
+        runner.bar.update(1)
+
+
+def _write_gif(path, images):
+    """The error images of the frames as an animated GIF (Pillow), 4 frames a second."""
+    from PIL import Image
+    frames = [Image.fromarray(metrics.CLASS_COLORS[c]) for c in images]
+    with report.atomic(path) as tmp:
+        frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:], duration=250, loop=0)
+
+
+def write_frames_csv(path, rows):
+    """frames.csv: one row per case and frame (the flicker of the pair ending at that frame)."""
+    report.write_csv(path, FRAME_COLUMNS, rows)
+
+
+def flicker_curves(frame_rows) -> list:
+    """(case meta, [(frame, flicker rate of the pair ending there)]) per case, from frames.csv's
+    rows as text (an empty cell: undefined)."""
+    out, index = [], {}
+    for r in frame_rows:
+        if r["case"] not in index:
+            index[r["case"]] = len(out)
+            out.append((r, []))
+        if int(r["frame"]) > 0:
+            rate = float(r["flicker_rate"]) if r["flicker_rate"] != "" else metrics.UNDEFINED
+            out[index[r["case"]]][1].append((int(r["frame"]), rate))
+    return out
+
+
+def write_plots(folder, frame_rows):
+    """plots/flicker_<scene>_<light>_<motion>.png: flicker rate against frame, one line per case
+    (from frames.csv's rows: dsm.report.publish composes it, for a run and a rebuild)."""
+    curves = flicker_curves(frame_rows)
+    if not curves:
+        return
+    from matplotlib.figure import Figure
+    folder.mkdir(exist_ok=True)
+    groups = {}
+    for meta, c in curves:
+        groups.setdefault((meta["scene"], meta["light"], meta["motion"]), []).append((meta, c))
+    for (scene, light, path_label), items in groups.items():
+        fig = Figure(figsize=(10, 4))
+        ax = fig.subplots()
+        for meta, c in items:
+            pts = [(x, y) for x, y in c if metrics.defined(y)]
+            ax.plot([p[0] for p in pts], [p[1] for p in pts], ".-", lw=0.8,
+                    label=f"{meta['cascade_layout']} {meta['scheme']} {meta['params']} {meta['filter']}".strip())
+        ax.set_xlabel("frame (flicker between it and the one before)")
+        ax.set_ylabel("flicker rate (fixed points)")
+        ax.set_title(f"{scene}, light {light}: {path_label}", fontsize=9)
+        fig.subplots_adjust(left=0.08, right=0.6, bottom=0.13, top=0.9)
+        ax.legend(loc="center left", bbox_to_anchor=(1.02, 0.5), fontsize=5, frameon=False)
+        with report.atomic(folder / f"flicker_{figures.slug(f'{scene}_{light}_{path_label}', keep='-_')}.png") as tmp:
+            fig.savefig(tmp, dpi=80, format="png")

@@ -1,0 +1,601 @@
+"""The runner: a loop over the plan's maps, with the failure policy, timing and the report.
+
+The plan (:mod:`dsm.experiment.plan`) lists the maps in order: scene, light, view, resolution, culling.
+The runner walks it, doing each shared stage once through :mod:`dsm.pipeline` (the G-buffer
+per scene, receivers and the exact reference per light, receivers per view, one map per
+culling choice with the layers its schemes need) and each case (a scheme instance, filter and
+format on a map) as a lookup, metrics, an error image and a row of metrics.csv.
+
+Failure policy: a stage that fails is recorded in run.json (and printed, and listed in
+table.md) with the cases it would have fed, and the rest still run; rows are written as they
+finish and run.json after each case, so nothing done is lost.
+"""
+from __future__ import annotations
+
+import itertools
+import sys
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import drjit as dr
+import numpy as np
+
+from ..config import read as cfgmod
+from ..maps import cascades, headroom, shadowmap
+from ..tools import env, timing
+from ..report import figures, publish, tables as report, io as report_io
+from ..truth import metrics
+from . import motion, record, resume
+from .. import pipeline
+from ..report.sections import soft as soft_report
+from ..contact import march as contact
+from ..report.sections import contact_images
+from . import plan as planmod
+from ..maps.lookup import Receiver
+
+
+@dataclass
+class Results:
+    """What a run produced: the rows of metrics.csv, run.json's content and the images."""
+    out: Path
+    rows: list
+    run: dict
+    images: dict = field(default_factory=dict)   # case id -> class image (H, W) uint8
+    oracle: list = field(default_factory=list)   # the rows of oracle.csv (per map, format and lambda)
+    curves: list = field(default_factory=list)   # per map and format: (row, world Curve, texel Curve)
+
+    def where(self, **kw) -> "Results":
+        """The results whose rows have every given column at the given value."""
+        unknown = sorted(set(kw) - set(report.COLUMNS))
+        if unknown:
+            raise KeyError(f"Results.where: no column {', '.join(unknown)} (columns: see dsm.experiment.record.NAMES, "
+                           "e.g. scheme, params, scene, light, view, resolution, filter, format)")
+        rows = [r for r in self.rows if all(r.get(k) == v for k, v in kw.items())]
+        return Results(self.out, rows, self.run, {r["case"]: self.images.get(r["case"]) for r in rows},
+                       self.oracle, self.curves)
+
+    def column(self, name) -> np.ndarray:
+        """The values of column ``name`` over the rows, as a numpy array (a KeyError names the columns)."""
+        if name not in report.COLUMNS:
+            raise KeyError(f"Results.column: no column {name!r} (columns: see dsm.experiment.record.NAMES, e.g. acne_rate, "
+                           "peterpan_rate, error_rate, n_receivers)")
+        return np.array([r[name] for r in self.rows])
+
+    def rgb(self, case) -> np.ndarray:
+        """The case's error image as (H, W, 3) uint8 in the report's colours."""
+        if isinstance(case, dict):
+            case = case["case"]
+        if case not in self.images or self.images[case] is None:
+            ids = sorted(k for k, v in self.images.items() if v is not None)
+            raise KeyError(f"Results.rgb: no image of case {case!r} (cases are ids like {ids[0]!r} to {ids[-1]!r}, "
+                           "or rows)" if ids else f"Results.rgb: no image of case {case!r}: this run kept no images")
+        return metrics.CLASS_COLORS[self.images[case]]
+
+    def table(self, columns=("scheme", "params", "resolution", "acne_rate", "peterpan_rate", "error_rate",
+                             "build_ms", "lookup_ms")) -> str:
+        """The rows as a Markdown table of the chosen columns (for notebooks and terminals)."""
+        fmt = lambda v: f"{v:.4f}" if isinstance(v, float) and abs(v) < 10 else (f"{v:.1f}" if isinstance(v, float) else str(v))
+        lines = ["| " + " | ".join(columns) + " |", "|---" * len(columns) + "|"]
+        lines += ["| " + " | ".join(fmt(r.get(c, "")) for c in columns) + " |" for r in self.rows]
+        return "\n".join(lines)
+
+    def _repr_markdown_(self):
+        return self.table()
+
+    def __getattr__(self, name):
+        if name in report.COLUMNS:
+            return self.column(name)
+        raise AttributeError(name)
+
+    def __len__(self):
+        return len(self.rows)
+
+
+class StageFailed(Exception):
+    """A stage failed and was recorded; the cases it feeds are skipped."""
+
+
+class Runner:
+    """Runs a config's plan into folder ``out``: each shared stage once, then each case's lookup, metrics and row."""
+    def __init__(self, config: cfgmod.Config, out: Path, variant: str | None = None, progress: bool = True,
+                 keep_images: bool = True, resume_previous: bool = False):
+        self.cfg = config
+        self.out = Path(out)
+        self.variant = env.use_variant(variant or config.variant)
+        self.progress = progress
+        self.keep_images = keep_images
+        self.plan = planmod.make(config)
+        self.record = record.RunRecord()     # everything measured: rows, statuses, maps, rays, oracles ...
+        self.images = {}
+        self.case_no = 0
+        self.extents = {}             # per scene: the spawn bound's per-shape extents
+        self.versions = env.versions()
+        self.state = "running"
+        self.bar = None
+        self.timing = {}              # seconds measuring and writing the report
+        # case ids and identity keys from the plan (dsm.experiment.resume); a resumed run reuses matching cases
+        self.keys = dict(resume.case_keys(config, self.plan, "git:" + self.versions["dsm_git_commit"]))
+        self.first_case = list(itertools.accumulate((m.cases for m in self.plan.maps), initial=0))
+        self.resume_previous = resume_previous
+        self.kept, self.stale = {}, []
+        self.depth_buffers = {}       # [contact]: the current scene's camera depth buffer (made when a case asks)
+        self.marches = {}             # [contact]: per receiver set, (receivers, occluded, timing) of its march
+        self.shrunk = (None, None)    # [map] shrink: (scene label, its shrunk copy)
+
+    # ------------------------------------------------------------ top level
+    def run(self) -> Results:
+        """Run every case. run.json is rewritten (atomically) after each case with the run's state:
+        ``running``, then ``complete``, or ``interrupted`` after Ctrl-C (re-raised once the
+        folder says what it holds); a killed run leaves ``running`` and every finished case."""
+        timing.enable_history()
+        t0, c0 = time.perf_counter(), _cpu()
+        self.out.mkdir(parents=True, exist_ok=True)
+        if self.resume_previous:
+            self.kept, self.stale = resume.Previous(self.out).arrange(list(self.keys.items()))
+        (self.out / "images").mkdir(exist_ok=True)
+        self.csv = report_io.CsvWriter(self.out / "metrics.csv")
+        self.state = "running"
+        self._write_run_json()
+        self.bar = report.progress(total=self.plan.cases, enabled=self.progress)
+        try:
+            self._run_plan()
+        except KeyboardInterrupt:
+            self.state = "interrupted"
+            raise
+        else:
+            self.state = "complete"
+        finally:
+            self.bar.close()
+            # the case images are written as cases finish (so a killed run keeps them): report time
+            self.timing["measure_s"] = time.perf_counter() - t0 - self.timing.get("images_s", 0.0)
+            self.timing["measure_cpu_s"] = _cpu() - c0
+            self.timing["measure_peak_rss_bytes"] = peak_rss()     # against the plan's peak_bytes_est
+            self._write_run_json()
+            publish.write_data(self.out, self.record)
+            # the report, after every timed measurement, composed from the run's files alone (as
+            # dsm report does): figures, table.md, cascades.md, report.html
+            t1, c1 = time.perf_counter(), _cpu()
+            try:
+                self.timing["report_parts"] = publish.write_report(self.out, (), self.record.curves,
+                                                                   plots=self.state == "complete")
+            except Exception as e:          # the measurements are saved; the report can be rebuilt
+                self._fail("report (dsm report rebuilds it)", e)
+            self.timing["report_s"] = time.perf_counter() - t1 + self.timing.get("images_s", 0.0)
+            self.timing["report_cpu_s"] = _cpu() - c1
+            self._write_run_json()
+        return Results(self.out, self.record.rows, self._run_json(), self.images, self.record.oracle_rows, self.record.curves)
+
+    def run_maps(self, maps, kept=None):
+        """Run only ``maps`` (part of the plan: a Ray task's map group) into this runner's folder,
+        without run.json or the report; ``kept``: finished cases to write again (key -> (row, status)).
+        The rows, status, oracle rows, curves and map records stay on the runner."""
+        self.out.mkdir(parents=True, exist_ok=True)
+        (self.out / "images").mkdir(exist_ok=True)
+        self.csv = report_io.CsvWriter(self.out / "metrics.csv")
+        self.bar = report.progress(total=sum(m.cases for m in maps), enabled=False)
+        self.kept = kept or {}
+        self.state = "task"
+        self._run_plan(maps)
+
+    def _run_plan(self, maps=None):
+        maps = self.plan.maps if maps is None else maps
+        for spec in self.cfg.scenes:
+            if spec.missing:
+                self.record.status.append({"what": f"scene {spec.label}", "status": "skipped", "error": spec.missing})
+        for si, scene_maps in itertools.groupby(maps, key=lambda m: m.scene_index):
+            scene_maps = list(scene_maps)
+            try:
+                sd, gb, lights = self._scene(self.cfg.scenes[si], scene_maps)
+            except StageFailed:
+                continue
+            if self.cfg.motion:                 # camera and light paths: dsm.experiment.motion's frame loop
+                try:
+                    self._stage(f"motion of scene {sd.label}", scene_maps, lambda: motion.run_scene(
+                        self, sd, lights, scene_maps, self._closed(sd), self.extents[sd.label]))
+                except StageFailed:
+                    pass
+                self._write_run_json()
+                continue
+            for li, light_maps in itertools.groupby(scene_maps, key=lambda m: m.light_index):
+                light_maps = list(light_maps)
+                try:
+                    setup = self._light(sd, gb, lights, li, light_maps)
+                except StageFailed:
+                    continue
+                for _, view_maps in itertools.groupby(light_maps, key=lambda m: (m.view, m.resolution, m.cascade)):
+                    self._run_view(sd, gb, setup, list(view_maps))
+            self._write_run_json()
+
+    # ------------------------------------------------------------ failure policy
+    def _fail(self, what, exc, skipped_maps=()):
+        """Record a failure (run.json, console, table.md) and count the cases it takes with it."""
+        error = f"{type(exc).__name__}: {exc}"
+        self.record.status.append({"what": what, "status": "failed", "error": error,
+                            "traceback": traceback.format_exc(limit=6)})
+        print(f"dsm: failed: {what}: {error}", file=sys.stderr)     # seen where the user looks, not only in run.json
+        self.bar.update(sum(m.cases for m in skipped_maps))
+
+    def _stage(self, what, maps, fn):
+        """Run one shared stage; on an exception record it and raise StageFailed."""
+        try:
+            return fn()
+        except (KeyboardInterrupt, StageFailed):
+            raise
+        except Exception as e:
+            self._fail(what, e, maps)
+            raise StageFailed(what) from None
+
+    # ------------------------------------------------------------ stages
+    def _scene(self, spec, maps):
+        def load():
+            """The scene loaded, its G-buffer (timed) and its usable lights; ValueError when it has none."""
+            sd = pipeline.load_scene(spec, self.cfg.camera_resolution, self.cfg.camera)
+            gb, t = timing.measure(lambda: (pipeline.gbuffer(sd),), 0)
+            gb = gb[-1]
+            gb.ms = t.ms
+            lights = sd.lights_for(self.cfg.lights)
+            if not lights:
+                raise ValueError("the scene has no usable point/spot/directional emitter and the config names "
+                                 "no [[light]]")
+            return sd, gb, lights
+        sd, gb, lights = self._stage(f"scene {spec.label}", maps, load)
+        self.record.gbuffer_ms[sd.label] = gb.ms
+        self.extents[sd.label] = pipeline.spawn_extents(sd.scene)   # once per scene, outside the timed builds
+        self.record.rays["gbuffer"] += gb.width * gb.height
+        if sd.notes:
+            self.record.status.append({"what": f"scene {sd.label}", "status": "note", "error": "; ".join(sd.notes)})
+        return sd, gb, lights
+
+    def _light(self, sd, gb, lights, li, maps):
+        label = maps[0].light
+
+        def setup():
+            """The light setup (receivers and exact reference) of light ``li`` of the loaded scene."""
+            if li >= len(lights):
+                raise ValueError(f"the plan expects light {label} but the loaded scene has {len(lights)} lights")
+            return pipeline.light_setup(sd, gb, lights[li], label, self.cfg.timing_repeats, self.cfg.seed)
+        out = self._stage(f"scene {sd.label} light {label}", maps, setup)
+        self.record.rays["reference"] += out.reference_rays       # one per receiver, or an area light's samples
+        if out.ref is not None:
+            self.record.reference_regions.append({"scene": sd.label, "light": label, **out.ref.stats()})
+        return out
+
+    def _run_view(self, sd, gb, setup, maps):
+        """One view and resolution of a light: its receivers, then each of its maps (one per culling)."""
+        kind, R = maps[0].view, maps[0].resolution
+
+        def receivers():
+            """(view, setup, rx, seam, back): the fitted view, the receivers inside it, their lookups and seams."""
+            pts = pipeline.points_np(setup.p) if setup.p is not None else np.zeros((0, 3))
+            view = pipeline.make_view(setup.light, R, pts, sd.bbox, kind, maps[0].cascade, sd.sensor, sd.scale)
+            s = setup.subset(view.inside(setup.p).numpy().astype(bool)) if setup.p is not None else setup
+            rx = seam = None
+            if s.p is not None and len(s.pixels):
+                rx = pipeline.receivers(view, s, sd.diagonal)
+                seam = view.seam_distance(rx.u_map, rx.v_map, rx.face)
+                dr.eval(rx.depth, rx.u_map, rx.v_map, rx.face, rx.texel_world, rx.to_light, seam)
+                seam = seam.numpy()
+            return view, s, rx, seam, s.backfacing_inside(view)
+        try:
+            view, setup, rx, seam, back = self._stage(f"scene {sd.label} light {setup.label} view {kind} map {R}",
+                                                      maps, receivers)
+        except StageFailed:
+            return
+        first_t = None
+        for m in maps:
+            try:
+                first_t = self._run_map(sd, gb, setup, view, rx, seam, back, m, first_t)
+            except StageFailed:
+                continue
+
+    def _closed(self, sd):
+        """Per-shape closedness, computed once per scene and recorded in run.json."""
+        for info in self.record.scene_info:
+            if info["scene"] == sd.label:
+                return [s["closed"] for s in info["shapes"]]
+        closed, why = pipeline.closedness(sd)
+        self.record.scene_info.append({"scene": sd.label, "shapes": [
+            {"name": n, "closed": c, "why": w} for n, c, w in zip(sd.shape_names, closed, why)]})
+        return closed
+
+    def _build(self, sd, view, needs, culling, tile):
+        closed = self._closed(sd) if culling != "none" else None
+        extents = self.extents[sd.label]
+        casters = self._casters(sd)
+        return timing.measure(lambda: _map_arrays(casters, view, needs, culling, closed, tile, extents),
+                              self.cfg.timing_repeats)
+
+    def _casters(self, sd):
+        """The scene the maps are cast against: the scene, or its copy shrunk by ``[map] shrink`` (once per scene)."""
+        if self.cfg.shrink is None:
+            return sd.scene
+        if self.shrunk[0] != sd.label:
+            self.shrunk = (sd.label, pipeline.shrunk_scene(sd.scene, self.cfg.shrink))
+        return self.shrunk[1]
+
+    def _run_map(self, sd, gb, setup, view, rx, seam, back, m, first_t):
+        """Build one map (the plan's layers, culling and tile), store its formats, run its cases.
+        Returns the first-layer build time (measured on the view's first map)."""
+        what = f"scene {sd.label} light {setup.label} view {view.kind} map {m.resolution} culling {m.culling}"
+
+        def build():
+            """(map, build time, stored): the map built (timed, with its peak bytes) and its copy per stored format."""
+            timing.reset_peak()
+            smap, bt = self._build(sd, view, set(m.needs), m.culling, m.tile)
+            smap = smap[-1]
+            smap.peak_bytes = timing.peak_bytes()
+            stored = {fmt: pipeline.store(smap, fmt) for fmt in self.cfg.map.format}
+            return smap, bt, stored
+        smap, bt, stored = self._stage(what, [m], build)
+        self._record_map(sd, setup, view, m, smap)
+        self.record.quantized += sum(1 for fmt in self.cfg.map.format if fmt != "float32")
+        # receivers in the depth function each stored format compares in (formats.stored_view)
+        bp, bn = back
+        by_view = {}                  # formats sharing a depth function share their receivers
+        for fmt in stored:
+            v = stored[fmt].view
+            if id(v) not in by_view:
+                front = rx if rx is None or v is view else Receiver.make(v, setup.p, setup.n, sd.diagonal, setup.camera)
+                by_view[id(v)] = (front, Receiver.make(v, bp, bn, sd.diagonal, setup.camera) if bp is not None else None)
+        rxs = {fmt: by_view[id(stored[fmt].view)][0] for fmt in stored}
+        backs = {fmt: by_view[id(stored[fmt].view)][1] for fmt in stored}
+        wrong = {fmt: self._oracles(sd, setup, view, m, stored[fmt], rxs[fmt], fmt) for fmt in stored}
+        build_times = {frozenset(m.needs): bt}
+        if first_t is None:
+            # the first layer alone, so a case's extra layers show as build_ms - build_first_ms
+            first_t = bt if m.culling == "none" and not m.needs else self._build(sd, view, set(), "none", m.tile)[1]
+        self.case_no = self.first_case[self.plan.maps.index(m)]     # case ids from the plan
+        for spec in m.specs:
+            spec = pipeline.preset_for_light(spec, setup.light.type)   # a preset's values for this light
+            own = frozenset(pipeline.needs_of([spec]))                  # this instance's own layers, for build_ms
+            if own not in build_times:
+                # the build of exactly what this scheme needs (its data comes from the shared map)
+                build_times[own] = self._build(sd, view, own, m.culling, m.tile)[1]
+            for filt in self.cfg.map.filter:
+                for fmt in self.cfg.map.format:
+                    self._run_case(sd, gb, setup, view, stored[fmt], (build_times[own], first_t), rxs[fmt], seam,
+                                   spec, filt, fmt, backs[fmt], wrong[fmt] if filt == "nearest" else None)
+                    self.bar.update(1)
+        moment_maps = {}              # instances sharing their moments share one build (dsm.prefilter)
+        for spec in m.moments:
+            for fmt in self.cfg.map.format:
+                # build_ms: the depth map's first layer, which the moments are made of (moments_ms apart)
+                self._run_case(sd, gb, setup, view, smap, (first_t, first_t), rxs[fmt], seam, spec, spec.filter, fmt,
+                               backs[fmt], None, moment=self._moments(moment_maps, spec, smap, fmt))
+                self.bar.update(1)
+        return first_t
+
+    def _moments(self, cache, spec, smap, fmt):
+        """A function giving (MomentMap, build Timing) of ``spec`` on ``smap``, built (timed) once per moment key."""
+        key = pipeline.moment_key(spec, fmt)
+
+        def get():
+            """The cached build, made on first use (inside the case's failure policy)."""
+            if key not in cache:
+                def build():
+                    """The moment map's arrays (evaluated by the clock) and the map."""
+                    mm = pipeline.moment_map(spec, smap, fmt)
+                    return (*mm.b, mm)
+                out, t = timing.measure(build, self.cfg.timing_repeats)
+                cache[key] = (out[-1], t)
+            return cache[key]
+        return get
+
+    def _oracles(self, sd, setup, view, m, smap, rx, fmt):
+        """The oracles of one map and stored format over the view's receivers (oracle.csv, the
+        trade-off curves); returns per receiver whether the per-texel oracle at the first lambda
+        gets it wrong (the resolution's share of a nearest case's errors), None on failure."""
+        if rx is None:
+            return np.zeros(0, bool)
+        if setup.ref is not None or not getattr(view, "depth_oracles", True):
+            return None               # an area light (the oracles are a hard V*'s); a VSV grid (no depth bias)
+        meta = {"scene": sd.label, "light": setup.label, "view": view.kind, "resolution": m.resolution,
+                "culling": m.culling, "format": fmt}
+        try:
+            th = pipeline.thresholds(rx, smap)
+            wrong = None
+            for lam in self.cfg.oracle.lambdas:
+                o = pipeline.oracles(th, setup.v_star, lam)
+                row = {**meta, **o["row"]}
+                self.record.oracle_rows.append(row)
+                if wrong is None:
+                    wrong = o["wrong"]
+                    self.record.curves.append((row, o["curve_world"], o["curve_texel"]))
+            return wrong
+        except (KeyboardInterrupt, StageFailed):
+            raise
+        except Exception as e:
+            self._fail(f"oracles of scene {sd.label} light {setup.label} view {view.kind} map {m.resolution} "
+                       f"culling {m.culling} format {fmt}", e)
+            return None
+
+    def _record_map(self, sd, setup, view, m, smap):
+        self.record.maps.append({"scene": sd.label, "light": setup.label, "view": view.kind, "resolution": m.resolution,
+                          "culling": m.culling, "layers": ["z1", "shape"] + [k for k in shadowmap.LAYERS
+                                                                           if getattr(smap, k) is not None],
+                          "tiles": smap.tiles, "rays": dict(smap.rays), "rehits": smap.rehits,
+                          "build_peak_bytes": smap.peak_bytes, "build_peak_bytes_est": m.peak_bytes,
+                          "formats": list(m.formats)})
+        for k, v in smap.rays.items():
+            self.record.rays[k] = self.record.rays.get(k, 0) + v
+        if smap.unfinished:
+            self.record.status.append({"what": f"map {sd.label} {setup.label} R={m.resolution} culling={m.culling}",
+                                "status": "warning", "error": f"{smap.unfinished} texels still searching "
+                                f"after {shadowmap.MAX_STEPS} surfaces"})
+
+    def _run_case(self, sd, gb, setup, view, smap, build, rx, seam, spec, filt, fmt, rx_back=None, wrong=None,
+                  moment=None):
+        """One case: a scheme instance and filter on a stored depth map, or (``moment``: its
+        MomentMap's builder) a pre-filtered instance on the depth map's moments."""
+        bt, first_t = build
+        self.case_no += 1
+        case = f"{self.case_no:04d}"
+        if self.keys.get(case) in self.kept:          # finished by the run being resumed: its row again
+            row, st, cascade_rows = self.kept[self.keys[case]]
+            self.record.cascade_rows += cascade_rows
+            self.add_case(resume.parse_row(row), st)
+            self._write_run_json()
+            return
+        meta = {"case": case, "scene": sd.label, "light": setup.label, "view": view.kind, "scheme": spec.name,
+                "culling": smap.culling,
+                "preset": spec.preset or "", "params": spec.label, "resolution": view.resolution,
+                "total_texels": view.n_texels,
+                "filter": filt, "format": fmt, "cascade_layout": view.spec.label if hasattr(view, "spec") else ""}
+        try:
+            if moment is None:
+                look = lambda r: pipeline.visibility(spec, r, smap, filt, self.cfg.seed)
+            else:
+                mmap, mt = moment()
+                look = lambda r: pipeline.moment_visibility(spec, r, mmap, smap)
+            uses_plane = moment is None and pipeline.scheme_module(spec.name).USES_PLANE
+            if rx is None:
+                v_np, tap_np, lt = np.zeros(0), np.zeros(0, np.uint32), timing.Timing(0.0, 0.0, 0.0, 0, 0)
+                fallbacks = 0
+            else:
+                (v, tap_shape), lt = timing.measure(lambda: look(rx), self.cfg.timing_repeats)
+                v_np, tap_np = v.numpy(), tap_shape.numpy()
+                fallbacks = pipeline.plane_fallbacks(spec, rx, smap) if uses_plane else 0
+            m = pipeline.metrics(v_np, setup, tap_np, seam, view.has_seams)
+            m.update(pipeline.split(v_np, setup.v_star, wrong))     # NaN unless nearest (the oracles' lookup)
+            occ = None
+            if self.cfg.contact is not None:      # screen-space contact shadows after the lookup
+                cols, occ = self._contact(sd, gb, setup, rx, v_np)
+                m.update(cols)
+            # seed 000's self-unshadowing: pixels in attached shadow (facing away) that the map calls lit
+            v_back = look(rx_back)[0].numpy() if rx_back is not None else np.zeros(0)
+            if hasattr(view, "cascades"):         # a cascaded map: per cascade, texels per pixel, distance plot
+                extra, per, curve, faces = pipeline.cascade_metrics(view, rx, v_np, setup.v_star)
+                m.update(extra)
+                self.record.cascade_rows += [{**meta, **r} for r in per]
+                self.record.cascade_curves.append((meta, curve))
+                folder = self.out / "images" / figures.image_folder(meta)
+                folder.mkdir(parents=True, exist_ok=True)
+                cascades.write_index_image(folder / f"{case}_cascade.png", setup.pixels, faces, gb.width, gb.height)
+            m["n_backfacing"] = int(v_back.size)
+            m["backface_lit_rate"] = float((v_back >= 0.5).mean()) if v_back.size else metrics.UNDEFINED
+            texel = float(np.median(rx.texel_world.numpy())) if rx is not None else metrics.UNDEFINED
+            sweep_key, sweep_value = report.sweep_of(spec, self.cfg.schemes if moment is None else self.cfg.map.moments)
+            extent = setup.max_abs_coordinate if rx is not None else metrics.UNDEFINED
+            row = {**meta, **setup.exclusions, **m, **headroom.headroom(extent, texel), "texel_size": texel,
+                   "n_plane_fallback": fallbacks if uses_plane else metrics.UNDEFINED,
+                   "build_ms": bt.ms, "build_first_ms": first_t.ms, "build_compile_ms": bt.compile_ms, "build_peak_mb": smap.peak_bytes / 2 ** 20,
+                   "lookup_ms": lt.ms, "lookup_compile_ms": lt.compile_ms, "lookup_kernels_compiled": lt.cache_misses,
+                   "reference_ms": setup.reference_ms, "sweep_key": sweep_key, "sweep_value": sweep_value}
+            if self.cfg.map.leak_split:          # [map] kind given: every case's leak split (dsm.truth.metrics)
+                texel_np = rx.texel_world.numpy() if rx is not None else np.zeros(0)
+                row.update({"map_kind": spec.name if moment is not None else "depth",
+                            **metrics.leak_split(v_np, setup.v_star, setup.occluder_dist, texel_np,
+                                                 self.cfg.map.leak_texels),
+                            "moments_ms": mt.ms if moment is not None else metrics.UNDEFINED})
+            classes = np.zeros(gb.width * gb.height, np.uint8)
+            classes[setup.pixels] = pipeline.classify(v_np, setup.v_star, wrong)
+            classes = classes.reshape(gb.height, gb.width)
+            t_img = time.perf_counter()              # the case's images: report work, timed apart
+            shade = report.shade(classes.shape, gb, setup, v_np, pipeline.is_positional(setup.light)) \
+                if self.cfg.report_images == "all" else None
+            item = publish.image_item(meta, classes, shade, self.cfg.report_images)
+            if item is not None:        # written now (Pillow, ~1 ms, between timings): a killed run keeps them
+                figures.write_images(self.out, [item])
+            if occ is not None and self.cfg.report_images != "none":         # what the contact march did
+                folder = self.out / "images" / figures.image_folder(meta)
+                folder.mkdir(parents=True, exist_ok=True)
+                contact_images.write_image(folder / f"{case}_contact.png", setup.pixels,
+                                           contact_images.classes(v_np, setup.v_star, occ), gb.width, gb.height)
+            if setup.ref is not None and self.cfg.report_images != "none":    # area light: V, V*, |V - V*|
+                soft_report.write_images(self.out, [soft_report.image_item(meta, gb.width, gb.height, setup.pixels,
+                                                                           v_np, setup.v_frac)])
+            self.timing["images_s"] = self.timing.get("images_s", 0.0) + time.perf_counter() - t_img
+            if self.keep_images:
+                self.images[case] = classes
+            # a case without receivers says nothing about the scheme: it is reported as empty
+            self.add_case(row, {"what": f"case {case}", **{k: meta[k] for k in ("scene", "light", "view", "scheme",
+                                                                                "params", "resolution")},
+                                "status": "ok" if m["n_receivers"] else "empty", "key": self.keys.get(case)})
+            self._write_run_json()
+        except Exception as e:
+            self._fail(f"case {case} ({sd.label}, {setup.label}, {spec.name} {spec.label}, R={view.resolution})", e)
+
+    def _contact(self, sd, gb, setup, rx, v_np) -> tuple:
+        """(columns, occluded per receiver) of one case's contact step: its receivers' march (once per
+        receiver set, timed) applied to the case's V."""
+        if rx is None:
+            none = np.zeros(0, bool)
+            return {**contact.case_metrics(v_np, setup.v_star, none), "contact_ms": 0.0}, none
+        if sd.label not in self.depth_buffers:     # the current scene's only: the runner walks scene by scene
+            self.depth_buffers = {sd.label: contact.depth_buffer(gb)}
+        db = self.depth_buffers[sd.label]
+        if id(rx) not in self.marches:    # the march reads receivers and light only: every case of them shares it
+            light_world = setup.light.position if pipeline.is_positional(setup.light) else None
+            out, t = timing.measure(lambda: (contact.march(db, rx, self.cfg.contact, self.cfg.seed, light_world),),
+                                    self.cfg.timing_repeats)
+            self.marches = {id(rx): (rx, out[-1].numpy().astype(bool), t)}    # the receivers kept: their id stays theirs
+        _, occ, t = self.marches[id(rx)]
+        return {**contact.case_metrics(v_np, setup.v_star, occ, setup.v_frac), "contact_ms": t.ms}, occ
+
+    def add_case(self, row: dict, status: dict):
+        """One finished case: its row into metrics.csv (refused unless it fits the schema,
+        record.check_row) and the record, and its status."""
+        self.csv.write(row)
+        self.record.rows.append(row)
+        self.record.status.append(status)
+
+    # ------------------------------------------------------------ run.json
+    def _run_json(self):
+        info = report.run_info(self.cfg, self.variant, self.record.rays, self.record.status, self.versions, dr.thread_count())
+        info["state"] = self.state
+        info["scenes"] = self.record.scene_info
+        info["gbuffer_ms"] = self.record.gbuffer_ms     # one cold pass per scene (compile included)
+        info["plan"] = self.plan.as_dict()
+        info["maps"] = self.record.maps
+        info["quantized_copies"] = self.record.quantized
+        info["reference_regions"] = self.record.reference_regions
+        info["precision_limited"] = [r["case"] for r in headroom.limited(self.record.rows)]
+        info["timing"] = self.timing
+        if self.resume_previous:
+            info["resumed_cases"] = len(self.kept)
+            info["stale_cases"] = self.stale       # cases of the folder the config no longer names (kept)
+        return info
+
+    def _write_run_json(self):
+        if self.state == "task":      # one map group of a cluster run: its driver writes run.json
+            return
+        # after every case (compact), indented once the run has ended
+        report_io.write_json(self.out / "run.json", self._run_json(), None if self.state == "running" else 1)
+
+
+def peak_rss() -> int:
+    """This process's peak resident memory so far, in bytes: Linux's VmHWM (of this program's own
+    address space: getrusage's ru_maxrss keeps the parent's size across fork and exec), else
+    ru_maxrss (kilobytes, bytes on macOS)."""
+    import resource
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return int(rss if sys.platform == "darwin" else rss * 1024)
+
+
+def _cpu() -> float:
+    """CPU seconds of this process (every thread) and of its finished children (the drawing workers)."""
+    import resource
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + ru.ru_utime + ru.ru_stime
+
+
+def _map_arrays(scene, view, needs, culling="none", closed=None, tile=None, extents=None):
+    smap = pipeline.build_map(scene, view, needs, culling, closed, tile, extents)
+    return (*shadowmap.arrays(smap), smap)
+
+
+def run(config, out=None, variant=None, progress=False) -> Results:
+    """Run an experiment (a Config, a dict or a path to a TOML file) and return its Results."""
+    config = pipeline.prepare(config, variant)
+    if out is None:
+        import tempfile
+        out = Path(tempfile.mkdtemp(prefix=f"dsm-{config.name}-"))
+    return Runner(config, Path(out), variant, progress).run()

@@ -1,0 +1,475 @@
+"""The report's figures and case images, drawn after the measurements (by worker processes when
+there is enough to draw), so drawing never overlaps a timed build or lookup.
+
+Every rate axis is symlog (linear below 1e-4, so a zero and 1e-4 are both visible) from 0 to 1;
+a rate-against-parameter figure has a column of panels per parameter unit (texel, world,
+range, K, ...); time axes are log; every figure names its scene, light, view and resolution;
+no panel's legend has more than eight entries (more series are spread over more panels).
+Figures are drawn with matplotlib's Agg canvas (no pyplot: a notebook's backend stays as it is)
+and case images written with Pillow (matplotlib's own PNG writer), both with fast PNG
+compression.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import pickle
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from ..truth import metrics
+from .io import atomic
+from .tables import case_time, pareto_front
+
+LINTHRESH = 1e-4          # symlog: linear below this rate
+MAX_LEGEND = 8            # entries per panel
+DPI = 72
+PNG = {"compress_level": 1}
+
+
+def slug(s: str, keep: str = "-_.") -> str:
+    """``s`` as a file name: every character but letters, digits and ``keep`` made ``_``."""
+    return "".join(c if c.isalnum() or c in keep else "_" for c in str(s))
+
+
+def image_folder(row) -> str:
+    """images/<this>/: one sub-folder per scene and light."""
+    return slug(f"{row['scene']}_{row['light']}")
+
+
+# the files a case writes under images/<scene>_<light>/: <case>_<kind> (error and shadow here,
+# cascade in dsm.maps.cascades, frames in dsm.experiment.motion, v, vstar and abserr in dsm.report.sections.soft)
+CASE_IMAGE_KINDS = ("error.png", "shadow.png", "cascade.png", "frames.gif", "v.png", "vstar.png", "abserr.png",
+                    "contact.png")
+
+
+def image_paths(row) -> tuple:
+    """(error image, shadow image) of a case, relative to the run's folder."""
+    f = f"images/{image_folder(row)}/{row['case']}"
+    return f + "_error.png", f + "_shadow.png"
+
+
+def _atomic_save(path: Path, save):
+    with atomic(path) as tmp:
+        save(tmp)
+
+
+# ------------------------------------------------------------------ case images
+
+def shade_image(shade: np.ndarray) -> np.ndarray:
+    """A shadow-mapped render in [0, 1] as 8-bit grey (what the PNG stores)."""
+    return np.round(np.clip(shade, 0, 1) * 255).astype(np.uint8)
+
+
+def write_images(out: Path, items: list):
+    """items: (error path, class image (H, W) uint8 or None, shadow path, 8-bit grey image or None)."""
+    from PIL import Image
+    for err_path, classes, shadow_path, grey in items:
+        for path, img in ((err_path, None if classes is None else metrics.CLASS_COLORS[classes]),
+                          (shadow_path, grey)):
+            if img is None:
+                continue
+            p = Path(out) / path
+            p.parent.mkdir(parents=True, exist_ok=True)
+            _atomic_save(p, lambda f, img=img: Image.fromarray(img).save(f, format="png", **PNG))
+
+
+# ------------------------------------------------------------------ drawing primitives
+
+def _figure(ncols, nrows, width=3.7, height=2.5, legend_rows=0, sharey=False):
+    from matplotlib.figure import Figure
+    extra = 0.2 * legend_rows + 0.75
+    fig = Figure(figsize=(width * ncols + 0.3, height * nrows + extra))
+    axes = np.array(fig.subplots(nrows, ncols, squeeze=False, sharey="row" if sharey else False))
+    fig.subplots_adjust(left=0.55 / (width * ncols + 0.3), right=0.98, top=1 - 0.6 / (height * nrows + extra),
+                        bottom=(0.2 * legend_rows + 0.5) / (height * nrows + extra), wspace=0.32, hspace=0.42)
+    return fig, axes
+
+
+RATE_TICKS = (0, 1e-4, 1e-3, 1e-2, 1e-1, 1)
+RATE_LABELS = ("0", "1e-4", "0.001", "0.01", "0.1", "1")
+
+
+def _rate_axis(ax, which="y"):
+    """A rate axis: symlog from 0 to 1, fixed plain tick labels (cheap to draw), no minor ticks."""
+    from matplotlib.ticker import FixedFormatter, FixedLocator, NullLocator
+    set_scale, set_lim = (ax.set_yscale, ax.set_ylim) if which == "y" else (ax.set_xscale, ax.set_xlim)
+    set_scale("symlog", linthresh=LINTHRESH, linscale=0.6)
+    set_lim(0, 1)
+    axis = ax.yaxis if which == "y" else ax.xaxis
+    axis.set_major_locator(FixedLocator(RATE_TICKS))
+    axis.set_major_formatter(FixedFormatter(RATE_LABELS))
+    axis.set_minor_locator(NullLocator())
+
+
+def _x_scale(ax, xs, log2=False, log=False):
+    """Linear, or log where the positive values span more than a factor 50 (symlog if a 0 is among
+    them); a single value gets a single tick. Few ticks, no minor ones, plain labels."""
+    from matplotlib.ticker import (FixedLocator, FuncFormatter, LogLocator, MaxNLocator, NullLocator)
+    xs = np.array([x for x in xs if math.isfinite(x)], float)
+    plain = FuncFormatter(lambda v, _: f"{v:g}")
+    axis = ax.xaxis
+    if log2:
+        ax.set_xscale("log", base=2)
+        values = sorted(set(xs.tolist()))
+        if len(values) <= 4 and all(v == 2 ** round(math.log2(v)) for v in values if v > 0):
+            axis.set_major_locator(FixedLocator(values))     # resolutions: each one labelled
+        else:                                                # texel counts: powers of two
+            axis.set_major_locator(LogLocator(base=2, numticks=6))
+            plain = FuncFormatter(lambda v, _: f"2^{math.log2(v):.0f}" if v > 0 else "0")
+    elif log:
+        ax.set_xscale("log")
+        axis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0), numticks=8))
+    elif np.unique(xs).size == 1:
+        axis.set_major_locator(FixedLocator([float(xs[0])]))
+    else:
+        pos = xs[xs > 0]
+        if pos.size >= 2 and pos.max() / pos.min() > 50:
+            if (xs <= 0).any():
+                ax.set_xscale("symlog", linthresh=float(pos.min()))
+            else:
+                ax.set_xscale("log")
+            axis.set_major_locator(LogLocator(numticks=5))
+        else:
+            axis.set_major_locator(MaxNLocator(4))
+    axis.set_major_formatter(plain)
+    axis.set_minor_locator(NullLocator())
+
+
+def _legend(ax, ncol=1):
+    handles, labels = ax.get_legend_handles_labels()
+    if handles:
+        ax.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, -0.22), ncol=ncol, fontsize=6,
+                  frameon=False, handlelength=1.5)
+
+
+def _title(fig, text):
+    """The figure's title, wrapped to its width (a narrow figure would cut a long one)."""
+    import textwrap
+    fig.suptitle("\n".join(textwrap.wrap(text, max(30, int(fig.get_figwidth() * 17)))), fontsize=8)
+
+
+def _save(fig, path):
+    _atomic_save(Path(path), lambda f: fig.savefig(f, dpi=DPI, format="png", pil_kwargs=PNG))
+
+
+def chunks(items, n=MAX_LEGEND):
+    """``items`` in lists of at most ``n`` (one empty list when there are none)."""
+    items = list(items)
+    return [items[i:i + n] for i in range(0, len(items), n)] or [[]]
+
+
+def draw_lines(path, title, columns, ylabels=("acne rate", "peter-panning rate"), xlog2=False):
+    """A grid of panels: a row per rate, a column per entry of ``columns`` =
+    [(column title, x label, {label: [(x, rate0, rate1, ...)]}, {label: plot keywords})]."""
+    nleg = max(len(c[2]) for c in columns)
+    fig, axes = _figure(len(columns), len(ylabels), legend_rows=nleg, sharey=True)
+    for j, (ctitle, xlabel, series, styles) in enumerate(columns):
+        for i, ylabel in enumerate(ylabels):
+            ax = axes[i, j]
+            xs = []
+            for k, (label, pts) in enumerate(series.items()):
+                pts = sorted(p for p in pts if metrics.defined(p[1 + i]))    # undefined: left out, not 0
+                if not pts:
+                    ax.plot([], [], label=label, **{"color": f"C{k % 10}", "marker": "o", **styles.get(label, {})})
+                    continue
+                xs += [p[0] for p in pts]
+                kw = {"color": f"C{k % 10}", "marker": "o", "ms": 3, "lw": 0.9, **styles.get(label, {})}
+                ax.plot([p[0] for p in pts], [p[1 + i] for p in pts], label=label, clip_on=False, **kw)
+            _rate_axis(ax)
+            _x_scale(ax, xs, xlog2)
+            if j == 0:
+                ax.set_ylabel(ylabel, fontsize=7)
+            ax.tick_params(labelsize=6)
+            if i == 0:
+                ax.set_title(ctitle, fontsize=7)
+            if i == len(ylabels) - 1:
+                ax.set_xlabel(xlabel, fontsize=7)
+                _legend(ax)
+    _title(fig, title)
+    _save(fig, path)
+    return fig
+
+
+def draw_pareto(path, title, panels, front):
+    """Error rate (symlog) against time (log): panels = [{scheme: [(time, error)]}], each with the
+    frontier ``front`` [(time, error)] over every case."""
+    fig, axes = _figure(len(panels), 1, width=4.2, height=3.0, legend_rows=max(len(p) for p in panels) + 1,
+                        sharey=True)
+    for ax, series in zip(axes[0], panels):
+        for label, (k, pts) in series.items():
+            ax.scatter([p[0] for p in pts], [p[1] for p in pts], s=10, color=f"C{k % 10}", label=label, clip_on=False)
+        ax.plot([p[0] for p in front], [p[1] for p in front], "k-", lw=0.8, label="non-dominated (all schemes)")
+        ax.scatter([p[0] for p in front], [p[1] for p in front], s=40, facecolors="none", edgecolors="k", lw=0.6,
+                   clip_on=False)
+        _x_scale(ax, [], log=True)
+        _rate_axis(ax)
+        ax.set_xlabel("time per case: map build + lookup (ms)", fontsize=7)
+        if ax is axes[0][0]:
+            ax.set_ylabel("error rate: (acne + peter-pan) / receivers", fontsize=7)
+        ax.tick_params(labelsize=6)
+        _legend(ax)
+    _title(fig, title)
+    _save(fig, path)
+    return fig
+
+
+def draw_tradeoff(path, title, panels):
+    """Peter-panning rate against acne rate, both symlog: panels = [(panel title, [(label, colour index,
+    world curve (x, y), texel curve (x, y), case points [(x, y)])])]."""
+    fig, axes = _figure(len(panels), 1, width=3.8, height=3.4, legend_rows=max(2 * len(p[1]) for p in panels),
+                        sharey=True)
+    for ax, (ptitle, maps) in zip(axes[0], panels):
+        for label, k, cw, ck, pts in maps:
+            ax.step(cw[0], cw[1], where="post", color=f"C{k % 10}", lw=1.0, label=f"{label}: one world bias")
+            ax.step(ck[0], ck[1], where="post", color=f"C{k % 10}", lw=0.8, ls=":", label=f"{label}: one k texel")
+            if pts:
+                ax.scatter([p[0] for p in pts], [p[1] for p in pts], s=12, color=f"C{k % 10}", edgecolors="k",
+                           linewidths=0.3, clip_on=False, zorder=3)
+        _rate_axis(ax, "x")
+        _rate_axis(ax, "y")
+        ax.set_xlabel("acne rate", fontsize=7)
+        if ax is axes[0][0]:
+            ax.set_ylabel("peter-panning rate", fontsize=7)
+        ax.set_title(ptitle, fontsize=7)
+        ax.tick_params(labelsize=6)
+        _legend(ax)
+    _title(fig, title)
+    _save(fig, path)
+    return fig
+
+
+# ------------------------------------------------------------------ what to draw
+
+def _unit(sweep_key: str) -> tuple:
+    """'bias [texel]' -> ('bias', 'texel'); 'K' -> ('K', 'K')."""
+    m = re.fullmatch(r"(.*) \[(.*)\]", sweep_key)
+    return (m.group(1), m.group(2)) if m else (sweep_key, sweep_key)
+
+
+def _others(params: str, name: str) -> str:
+    """A scheme's parameters without the swept one."""
+    return re.sub(rf"(^| ){re.escape(name)}=\S+(?: (?:texel|range|world))?", "", params).strip()
+
+
+def _res_text(rs) -> str:
+    res = sorted({r["resolution"] for r in rs})
+    return f"R = {res[0]}" if len(res) == 1 else "R = " + ", ".join(map(str, res))
+
+
+def _label(r, multi=()):
+    lab = f"{r['scheme']} {r['preset'] or r['params']}".strip()
+    return " ".join([lab] + [r.get(k, "") for k in multi])[:48]
+
+
+def _groups(rows, keys):
+    out = {}
+    for r in rows:
+        out.setdefault(tuple(r[k] for k in keys), []).append(r)
+    return out
+
+
+def plot_jobs(folder: Path, rows: list, curves: list = ()) -> list:
+    """The figures of a run as (function, arguments) pairs, each writing one PNG into ``folder``.
+    ``curves``: per map and format, (meta row, world curve (x, y), texel curve (x, y)) as rates."""
+    folder = Path(folder)
+    jobs = []
+    multi = tuple(k for k in ("filter", "format", "cascade_layout") if len({r.get(k, "") for r in rows}) > 1)
+    for (scene, light), rs in sorted(_groups(rows, ("scene", "light")).items()):
+        views = sorted({r["view"] for r in rs})
+        for view in views:
+            vr = [r for r in rs if r["view"] == view]
+            tag = slug(f"{scene}_{light}_{view}")
+            where = f"{scene}, light {light}, {view}"
+            # rates against the swept parameter, a column per unit, at the largest resolution
+            rmax = max(r["resolution"] for r in vr)
+            units = {}
+            swept = {}
+            for r in vr:
+                if r["resolution"] == rmax and not r["preset"] and r["sweep_key"]:
+                    swept.setdefault((r["scheme"], r["sweep_key"]), set()).add(r["sweep_value"])
+            for r in vr:
+                # schemes whose sweep has one value have no curve: the summary and the other plots show them
+                if r["resolution"] == rmax and not r["preset"] and len(swept.get((r["scheme"], r["sweep_key"]), ())) > 1:
+                    name, unit = _unit(r["sweep_key"])
+                    others = _others(r["params"], name)
+                    lab = f"{r['scheme']}: {name}" + (f" ({others})" if others else "")
+                    lab = " ".join([lab] + [r.get(k, "") for k in multi])[:52]
+                    units.setdefault(unit, {}).setdefault(lab, []).append(
+                        (r["sweep_value"], r["acne_rate"], r["peterpan_rate"]))
+            columns = []
+            for unit, series in sorted(units.items()):
+                series = {k: v for k, v in series.items() if len(v) > 1}
+                if not series:
+                    continue
+                for part in chunks(sorted(series)):
+                    lengths = unit in ("texel", "world", "range")
+                    columns.append((f"lengths in {unit}" if lengths else f"parameter {unit} (no unit)",
+                                    f"parameter value [{unit}]" if lengths else unit, {k: series[k] for k in part}, {}))
+            if columns:
+                jobs.append((draw_lines, (folder / f"vs_bias_{tag}.png",
+                                          f"{where}, R = {rmax}: rates against each scheme's swept parameter "
+                                          "(one column per unit)", columns)))
+            # rates against resolution, per instance
+            series = {}
+            for r in vr:
+                series.setdefault(_label(r, multi), []).append((r["resolution"], r["acne_rate"], r["peterpan_rate"]))
+            series = {k: v for k, v in series.items() if len(v) > 1}
+            if series:
+                columns = [(f"schemes {i + 1} of {len(chunks(series))}" if len(series) > MAX_LEGEND else "schemes",
+                            "map resolution R (R x R texels per face)", {k: series[k] for k in part}, {})
+                           for i, part in enumerate(chunks(series))]
+                jobs.append((draw_lines, (folder / f"vs_resolution_{tag}.png", f"{where}, {_res_text(vr)}",
+                                          columns, ("acne rate", "peter-panning rate"), True)))
+            # the cost of accuracy
+            scored = [r for r in vr if metrics.defined(r["error_rate"])]
+            if scored:
+                schemes = sorted({r["scheme"] for r in scored})
+                panels = []
+                for part in chunks(schemes, MAX_LEGEND - 1):
+                    panels.append({s: (schemes.index(s), [(case_time(r), r["error_rate"]) for r in scored
+                                                          if r["scheme"] == s]) for s in part})
+                front = [(case_time(r), r["error_rate"]) for r in pareto_front(scored)]
+                jobs.append((draw_pareto, (folder / f"pareto_{tag}.png",
+                                           f"{where}, {_res_text(scored)}: error rate against time, every case",
+                                           panels, front)))
+            # the exact trade-off of one bias, with the cases on it
+            cs = [c for c in curves if (c[0]["scene"], c[0]["light"], c[0]["view"]) == (scene, light, view)]
+            if cs:
+                panels = []
+                for res in sorted({c[0]["resolution"] for c in cs}):
+                    maps = []
+                    for k, (meta, cw, ck) in enumerate(c for c in cs if c[0]["resolution"] == res):
+                        key = ("culling", "format")
+                        pts = [(r["acne_rate"], r["peterpan_rate"]) for r in vr if r["filter"] == "nearest"
+                               and r["resolution"] == res and all(r[x] == meta[x] for x in key)
+                               and metrics.defined(r["acne_rate"]) and metrics.defined(r["peterpan_rate"])]
+                        lab = f"{meta['format']}" + (f" {meta['culling']}" if meta["culling"] != "none" else "")
+                        maps.append((lab, k, cw, ck, pts))
+                    for i, part in enumerate(chunks(maps, MAX_LEGEND // 2)):
+                        panels.append((f"R = {res}" + (f" ({i + 1})" if len(maps) > MAX_LEGEND // 2 else ""), part))
+                jobs.append((draw_tradeoff, (folder / f"tradeoff_{tag}.png",
+                                             f"{where}: exact trade-off of one bias for the map (lines), nearest "
+                                             "cases (points)", panels)))
+        if len(views) > 1:
+            tex, styles, inst_of = {}, {}, {}
+            insts = sorted({_label(r, multi) for r in rs})
+            for r in rs:
+                lab = f"{r['view']}: {_label(r, multi)}"[:52]
+                inst_of[lab] = _label(r, multi)      # the instance, also when the label was cut
+                tex.setdefault(lab, []).append((r["total_texels"], r["error_rate"], r["seam_error_rate"]))
+                styles[lab] = {"color": f"C{insts.index(_label(r, multi)) % 10}",
+                               "linestyle": ("-", "--", ":", "-.")[views.index(r["view"]) % 4]}
+            # one budget is still a comparison of the views: a point each
+            if tex:
+                # keep an instance's views in one panel
+                by_inst = chunks(insts, max(1, MAX_LEGEND // len(views)))
+                columns = [(f"schemes {i + 1} of {len(by_inst)}", "total texels of the view (all faces)",
+                            {k: v for k, v in tex.items() if inst_of[k] in part}, styles)
+                           for i, part in enumerate(by_inst)]
+                columns = [c for c in columns if c[2]]
+            if tex and columns:
+                jobs.append((draw_lines, (folder / f"vs_texels_{slug(f'{scene}_{light}')}.png",
+                                          f"{scene}, light {light}, views {', '.join(views)}, {_res_text(rs)}: "
+                                          "views at equal memory (colour: scheme, line: view)", columns,
+                                          ("error rate", f"error rate within {metrics.SEAM_TEXELS:g} texels of a "
+                                           "seam"), True)))
+    return jobs
+
+
+# ------------------------------------------------------------------ oracle curves on disk
+
+def decimate(x: np.ndarray, y: np.ndarray, steps: int = 600) -> tuple:
+    """A monotone step curve reduced to the points that move it visibly on symlog axes."""
+    x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
+    if x.size <= 2:
+        return x.astype(np.float32), y.astype(np.float32)
+    t = lambda v: np.log10(1 + v / LINTHRESH) / np.log10(1 + 1 / LINTHRESH)
+    q = np.round(t(x) * steps).astype(np.int64) * (steps + 1) + np.round(t(y) * steps).astype(np.int64)
+    keep = np.ones(x.size, bool)
+    keep[1:] = q[1:] != q[:-1]
+    keep[-1] = True
+    return x[keep].astype(np.float32), y[keep].astype(np.float32)
+
+
+CURVE_META = ("scene", "light", "view", "resolution", "culling", "format")
+
+
+def curve_rates(row, cw, ck) -> tuple:
+    """(meta, world (x, y), texel (x, y)) as decimated rates, from the oracle's exact curves."""
+    meta = {k: row[k] for k in CURVE_META}
+    rates = lambda c: decimate(c.acne / max(c.n_lit, 1), c.peterpan / max(c.n_shadowed, 1))
+    return meta, rates(cw), rates(ck)
+
+
+def save_curves(path: Path, curves: list):
+    """oracle_curves.npz: the trade-off curves as decimated rates (both rates defined only)."""
+    arrays = {"meta": np.array(json.dumps([c[0] for c in curves]))}
+    for i, (_, w, k) in enumerate(curves):
+        arrays.update({f"w{i}_x": w[0], f"w{i}_y": w[1], f"k{i}_x": k[0], f"k{i}_y": k[1]})
+    _atomic_save(Path(path), lambda f: np.savez_compressed(open(f, "wb"), **arrays))
+
+
+def load_curves(path: Path) -> list:
+    """The curves save_curves wrote into ``path``: (meta, world (x, y), texel (x, y)) each; [] without the file."""
+    if not Path(path).is_file():
+        return []
+    with np.load(path) as z:
+        meta = json.loads(str(z["meta"]))
+        return [(m, (z[f"w{i}_x"], z[f"w{i}_y"]), (z[f"k{i}_x"], z[f"k{i}_y"])) for i, m in enumerate(meta)]
+
+
+# ------------------------------------------------------------------ running the jobs
+
+def workers() -> int:
+    """The CPUs this process may run on (at least 1)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:
+        return max(1, os.cpu_count() or 1)
+
+
+# a worker: a fresh interpreter running its share of the jobs, pickled into a file
+WORKER = "import pickle, sys\nfor fn, args in pickle.loads(open(sys.argv[1], 'rb').read()):\n    fn(*args)\n"
+
+
+def run_jobs(jobs: list, pool_min: int = 12) -> int:
+    """Run (function, arguments) jobs: in one worker process per core when there are at least
+    ``pool_min`` of them (a worker costs an interpreter start), else here. Returns the number of
+    workers used (0: none). A worker that fails has its share drawn here, saying so.
+
+    The workers are plain ``python -c`` processes given their jobs in a pickle file, not a
+    multiprocessing pool: fork would copy a parent holding Dr.Jit's threads, and spawn (and
+    forkserver) re-import the parent's main script, which re-runs a script that calls dsm.run
+    without an ``if __name__ == "__main__"`` guard."""
+    n = min(workers(), len(jobs))
+    if n < 2 or len(jobs) < pool_min:
+        for fn, args in jobs:
+            fn(*args)
+        return 0
+    env = dict(os.environ, MPLBACKEND="Agg",
+               PYTHONPATH=os.pathsep.join([p for p in sys.path if p] + [os.environ.get("PYTHONPATH", "")]))
+    with tempfile.TemporaryDirectory(prefix="dsm-draw-") as tmp:
+        procs = []
+        for i in range(n):
+            part = jobs[i::n]          # interleaved: every worker gets a share of the costly figures
+            f = Path(tmp) / f"jobs{i}.pickle"
+            f.write_bytes(pickle.dumps(part, protocol=pickle.HIGHEST_PROTOCOL))
+            procs.append((part, subprocess.Popen([sys.executable, "-c", WORKER, str(f)], env=env,
+                                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)))
+        failed = []
+        for part, p in procs:
+            _, err = p.communicate()
+            if p.returncode:
+                failed.append((part, err.decode(errors="replace").strip().splitlines()[-1:] or ["no message"]))
+    for part, why in failed:
+        print(f"dsm: a drawing worker failed ({why[0]}); drawing its {len(part)} figures here", file=sys.stderr)
+        for fn, args in part:
+            fn(*args)
+    return n

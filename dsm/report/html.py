@@ -1,0 +1,282 @@
+"""report.html: one self-contained page per run that opens from the file system (no server, no
+network, no external script; images referenced relatively, inside the run's folder).
+
+First screen: the best scheme per scene, light and resolution, then the per-instance summary
+(dsm.report.summary); then a sortable, filterable case table (click a header to sort, a row to see its
+error and shadow images), the plots, failures, and the run's versions and timing.
+
+Written with the standard library (html.escape and f-strings): one page with a fixed layout
+gains nothing from a templating library's dependency; the script is plain JavaScript, with no
+framework and no build step.
+"""
+from __future__ import annotations
+
+import html
+from pathlib import Path
+
+from ..truth import metrics
+from . import io as report, summary
+from .figures import image_paths
+
+CASE_COLUMNS = [("case", "case", "text"), ("scene", "scene", "text"), ("light", "light", "text"),
+                ("view", "view", "text"), ("scheme", "scheme", "text"), ("params", "params", "text"),
+                ("resolution", "R", "num"), ("filter", "filter", "text"), ("format", "format", "text"),
+                ("n_receivers", "receivers", "num"), ("acne_rate", "acne rate", "num"),
+                ("peterpan_rate", "peter-pan rate", "num"), ("error_rate", "error rate", "num"),
+                ("build_ms", "build ms", "num"), ("lookup_ms", "lookup ms", "num")]
+FILTER_COLUMNS = ("scene", "light", "view", "scheme", "resolution")
+
+CSS = """
+body{font:14px/1.4 system-ui,sans-serif;margin:0 1.2em 2em;color:#222;max-width:1500px}
+h1{font-size:1.35em;margin:.5em 0 .1em} h2{font-size:1.1em;margin:1.1em 0 .3em;border-bottom:1px solid #ccc}
+.meta{color:#555;margin:0 0 .4em} .note{color:#555;font-size:12px;max-width:1100px}
+table{border-collapse:collapse;font-size:12px} th,td{border:1px solid #ddd;padding:2px 6px;text-align:left}
+td.n{text-align:right;font-variant-numeric:tabular-nums} th{background:#f2f2f2;position:sticky;top:0}
+table.sortable th{cursor:pointer;user-select:none} th[aria-sort=ascending]::after{content:" \\25B2"}
+th[aria-sort=descending]::after{content:" \\25BC"} tr.win td:first-child{font-weight:600}
+#best td.cell{min-width:14em} .scroll{max-height:32em;overflow:auto;border:1px solid #ccc;display:inline-block}
+#case-table tbody tr{cursor:pointer} #case-table tbody tr:hover{background:#eef4ff}
+#case-table tbody tr.sel{background:#dde8ff} .filters{margin:.3em 0} .filters label{margin-right:.8em}
+#viewer{margin:.5em 0;min-height:2em} #viewer img{image-rendering:pixelated;width:320px;border:1px solid #999;margin-right:6px}
+.plots figure{display:inline-block;margin:4px;vertical-align:top} .plots img{max-width:720px;border:1px solid #eee}
+.plots figcaption{font-size:11px;color:#555} .sw{display:inline-block;width:.9em;height:.9em;border:1px solid #888;vertical-align:middle}
+.bad{color:#a00} .answer{font-size:15px;font-weight:600;margin:.4em 0}
+"""
+
+SCRIPT = r"""
+function cellValue(td, num) {
+  const v = td.dataset.v !== undefined ? td.dataset.v : td.textContent;
+  if (!num) return v;
+  return v === '' || v === '-' ? NaN : parseFloat(v);
+}
+function sortBy(table, th) {
+  const i = Array.from(th.parentNode.children).indexOf(th);
+  const num = th.dataset.type === 'num';
+  const asc = th.getAttribute('aria-sort') !== 'ascending';
+  table.querySelectorAll('th').forEach(h => h.removeAttribute('aria-sort'));
+  th.setAttribute('aria-sort', asc ? 'ascending' : 'descending');
+  const body = table.tBodies[0];
+  const rows = Array.from(body.rows);
+  rows.sort((a, b) => {
+    const x = cellValue(a.cells[i], num), y = cellValue(b.cells[i], num);
+    if (num) {                      // undefined values (NaN) last, in either direction
+      if (isNaN(x) || isNaN(y)) return isNaN(x) - isNaN(y);
+      return asc ? x - y : y - x;
+    }
+    return asc ? x.localeCompare(y) : y.localeCompare(x);
+  });
+  const frag = document.createDocumentFragment();
+  rows.forEach(r => frag.appendChild(r));
+  body.appendChild(frag);
+}
+document.querySelectorAll('table.sortable').forEach(t =>
+  t.querySelectorAll('thead th').forEach(th => th.addEventListener('click', () => sortBy(t, th))));
+
+const cases = document.getElementById('case-table');
+function applyFilters() {
+  const sel = Array.from(document.querySelectorAll('.filters select'));
+  const text = document.getElementById('filter-text').value.toLowerCase();
+  let shown = 0;
+  for (const tr of cases.tBodies[0].rows) {
+    const ok = sel.every(s => s.value === '' || tr.dataset[s.name] === s.value) &&
+               (text === '' || tr.textContent.toLowerCase().includes(text));
+    tr.hidden = !ok;
+    shown += ok;
+  }
+  document.getElementById('shown').textContent = shown;
+}
+document.querySelectorAll('.filters select, #filter-text').forEach(e => {
+  e.addEventListener('input', applyFilters); e.addEventListener('change', applyFilters); });
+
+const viewer = document.getElementById('viewer');
+cases.tBodies[0].addEventListener('click', ev => {
+  const tr = ev.target.closest('tr');
+  if (!tr) return;
+  cases.querySelectorAll('tr.sel').forEach(r => r.classList.remove('sel'));
+  tr.classList.add('sel');
+  viewer.replaceChildren();
+  const cap = document.createElement('p');
+  cap.textContent = 'case ' + tr.dataset.case + ': ' + tr.dataset.label;
+  viewer.appendChild(cap);
+  if (!tr.dataset.err && !tr.dataset.shadow) {
+    cap.textContent += ' (no images were written: [report] images = "none")';
+    return;
+  }
+  for (const [src, alt] of [[tr.dataset.err, 'error image'], [tr.dataset.shadow, 'shadow image']]) {
+    if (!src) continue;
+    const img = document.createElement('img');
+    img.src = src; img.alt = alt + ' of case ' + tr.dataset.case; img.title = alt;
+    viewer.appendChild(img);
+  }
+});
+"""
+
+
+def _e(x) -> str:
+    return html.escape(str(x), quote=True)
+
+
+def _num(x) -> tuple:
+    """(data value, shown text) of a number; undefined: ('', '-')."""
+    if not metrics.defined(x):
+        return "", "-"
+    if isinstance(x, int):
+        return str(x), str(x)
+    return repr(float(x)), (summary.rate(x) if abs(x) < 1 else (f"{x:.2f}" if x < 100 else f"{x:.1f}"))
+
+
+def _td(text, value, num) -> str:
+    cls = " class=n" if num else ""
+    data = "" if value is None else f' data-v="{_e(value)}"'
+    return f"<td{cls}{data}>{_e(text)}</td>"
+
+
+def _table(head, rows, table_id=None, sortable=False) -> str:
+    """head: [(text, type)]; rows: [(tr attributes, [(cell text, data value or None, numeric)])]."""
+    out = [f"<table{f' id={_e(table_id)}' if table_id else ''}{' class=sortable' if sortable else ''}><thead><tr>"]
+    out += [f"<th data-type={t}>{_e(h)}</th>" for h, t in head]
+    out.append("</tr></thead><tbody>")
+    for attrs, cells in rows:
+        out.append(f"<tr{attrs}>" + "".join(_td(t, v, num) for t, v, num in cells) + "</tr>")
+    out.append("</tbody></table>")
+    return "".join(out)
+
+
+def _best_section(rows) -> str:
+    resolutions, pivot = summary.best_pivot(rows)
+    head = [("scene", "text"), ("light", "text")] + [(f"R = {r}", "text") for r in resolutions]
+    body = [("", [(s, None, False), (l, None, False)] + [(summary.best_cell(cells.get(r)), None, False)
+                                                         for r in resolutions]) for s, l, cells in pivot]
+    return (f"<section id=best><h2>Best scheme per scene, light and resolution</h2>"
+            f"<p class=note>{_e(summary.BEST_DEFINITION)}</p>{_table(head, body)}</section>")
+
+
+def _summary_section(rows) -> str:
+    insts = summary.per_instance(rows)
+    cols = summary.summary_columns(rows)
+    head = [(c, "text") for c in cols] + [(h, "num") for h in (
+        "cases", "acne pooled", "acne mean", "acne median", "acne max", "peter-pan pooled", "peter-pan mean",
+        "peter-pan median", "peter-pan max", "error pooled", "error mean", "error median", "error max")] + [
+        ("undefined acne / peter-pan / error", "text")] + [(h, "num") for h in ("build ms", "lookup ms", "best in")]
+    body = []
+    for s in insts:
+        cells = [(s[c], None, False) for c in cols]
+        for k in ("cases", "acne_pooled", "acne_mean", "acne_median", "acne_max", "peterpan_pooled", "peterpan_mean",
+                  "peterpan_median", "peterpan_max", "error_pooled", "error_mean", "error_median", "error_max",
+                  "undefined", "build_ms", "lookup_ms", "best_in"):
+            if k == "undefined":
+                cells.append((f"{s['acne_undefined']} / {s['peterpan_undefined']} / {s['error_undefined']}", None,
+                              False))
+                continue
+            v, t = _num(s[k])
+            cells.append((t, v, True))
+        body.append((" class=win" if s is insts[0] else "", cells))
+    multi = [c for c in cols if c not in ("scheme", "params")]
+    extra = ", with " + " and ".join(multi) if multi else ""
+    return (f"<section id=summary><h2>Per scheme instance (lowest pooled error first)</h2>"
+            f"<p class=note>{_e(summary.DEFINITIONS.format(extra=extra).replace('*', ''))}</p>"
+            f"<div class=scroll>{_table(head, body, 'summary-table', True)}</div></section>")
+
+
+def _case_section(rows, out: Path) -> str:
+    head = [(h, t) for _, h, t in CASE_COLUMNS]
+    body = []
+    for r in rows:
+        err, shadow = image_paths(r)
+        err = err if (out / err).is_file() else ""
+        shadow = shadow if (out / shadow).is_file() else ""
+        label = f"{r['scene']}, light {r['light']}, {r['view']}, {r['scheme']} {r['preset'] or r['params']}, " \
+                f"R = {r['resolution']}, {r['filter']}, {r['format']}"
+        attrs = "".join(f' data-{k}="{_e(r[k])}"' for k in FILTER_COLUMNS) + \
+            f' data-case="{_e(r["case"])}" data-err="{_e(err)}" data-shadow="{_e(shadow)}" data-label="{_e(label)}"'
+        cells = []
+        for key, _, t in CASE_COLUMNS:
+            if t == "num":
+                v, txt = _num(r[key])
+                cells.append((txt, v, True))
+            else:
+                cells.append((r[key], None, False))
+        body.append((attrs, cells))
+    selects = []
+    for k in FILTER_COLUMNS:
+        values = sorted({r[k] for r in rows}, key=lambda v: (isinstance(v, str), v))
+        opts = "".join(f"<option value=\"{_e(v)}\">{_e(v)}</option>" for v in values)
+        selects.append(f"<label>{_e(k)} <select name={k}><option value=\"\">all</option>{opts}</select></label>")
+    legend = " ".join(f"<span class=sw style=\"background:rgb{tuple(int(c) for c in col)}\"></span> {_e(n)}"
+                      for n, col in zip(metrics.CLASS_NAMES, metrics.CLASS_COLORS))
+    return (f"<section id=cases><h2>Cases (<span id=shown>{len(rows)}</span> of {len(rows)} shown)</h2>"
+            f"<p class=note>Click a header to sort (undefined values, '-', last), a row to see its error and shadow "
+            f"images below the table. Rates: acne = n_acne / n_gt_lit, peter-pan = n_peterpan / n_gt_shadowed, "
+            f"error = (acne + peter-pan) / receivers; times are warm medians (ms).</p>"
+            f"<div class=filters>{''.join(selects)}<label>text <input id=filter-text size=18></label></div>"
+            f"<div class=scroll>{_table(head, body, 'case-table', True)}</div>"
+            f"<div id=viewer><p class=note>Error image colours: {legend}</p></div></section>")
+
+
+def _plots_section(out: Path) -> str:
+    plots = sorted((out / "plots").glob("*.png")) if (out / "plots").is_dir() else []
+    if not plots:
+        return "<section id=plots><h2>Plots</h2><p class=note>No plots (the run did not complete).</p></section>"
+    kinds = (("vs_bias_", "Rates against each scheme's swept parameter (a column per unit)"),
+             ("vs_resolution_", "Rates against map resolution"), ("vs_texels_", "Views at equal memory"),
+             ("pareto_", "Cost of accuracy: error rate against time"),
+             ("tradeoff_", "The exact trade-off of one bias, with the cases on it"))
+    out_html = ["<section id=plots class=plots><h2>Plots</h2>"]
+    for prefix, title in kinds:
+        ps = [p for p in plots if p.name.startswith(prefix)]
+        if not ps:
+            continue
+        out_html.append(f"<details><summary>{_e(title)} ({len(ps)})</summary>")
+        out_html += [f"<figure><img loading=lazy src=\"plots/{_e(p.name)}\" alt=\"{_e(p.stem)}\">"
+                     f"<figcaption>{_e(p.name)}</figcaption></figure>" for p in ps]
+        out_html.append("</details>")
+    out_html.append("</section>")
+    return "".join(out_html)
+
+
+def _status_section(run) -> str:
+    bad = [s for s in run.get("status", []) if s.get("status") in ("failed", "skipped")]
+    if not bad:
+        return ""
+    items = "".join(f"<li><b>{_e(s['status'])}</b>: {_e(s['what'])}: {_e(s.get('error', ''))}</li>" for s in bad)
+    return f"<section id=status><h2 class=bad>Failed or skipped ({len(bad)})</h2><ul>{items}</ul></section>"
+
+
+def _run_section(run) -> str:
+    timing = run.get("timing", {})
+    items = [("state", run.get("state", "")), ("config", run.get("config_file", "")),
+             ("variant", run.get("variant", "")), ("threads", run.get("threads", ""))]
+    items += [(k, v) for k, v in run.get("versions", {}).items()]
+    if "measure_s" in timing:
+        items.append(("measuring (s)", f"{timing['measure_s']:.1f}"))
+    items += [(f"G-buffer {k} (ms, cold)", f"{v:.1f}") for k, v in run.get("gbuffer_ms", {}).items()]
+    items += [(f"rays: {k}", f"{v:,}") for k, v in run.get("rays", {}).items()]
+    rows = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in items)
+    return f"<section id=run><h2>Run: versions and timing</h2><table>{rows}</table></section>"
+
+
+def write_html(path: Path, rows: list, run: dict):
+    """report.html in ``path``'s folder (the run's), from its typed rows and run.json."""
+    path = Path(path)
+    out = path.parent
+    name = run.get("experiment", out.name)
+    timing = run.get("timing", {})
+    took = f", measured in {timing['measure_s']:.1f} s" if "measure_s" in timing else ""
+    counts = (f"{len(rows)} cases, {len({r['scene'] for r in rows})} scenes, "
+              f"{len({(r['scene'], r['light']) for r in rows})} scene-light pairs{took}; "
+              f"{run.get('n_failed', 0)} failed, {run.get('n_empty', 0)} empty; state: {run.get('state', '?')}")
+    body = [f"<h1>dsm: {_e(name)}</h1><p class=meta>{_e(counts)}. Files: <a href=table.md>table.md</a>, "
+            f"<a href=metrics.csv>metrics.csv</a>, <a href=oracle.csv>oracle.csv</a>, <a href=run.json>run.json</a>.</p>"]
+    if rows:
+        body += [f"<p class=answer id=answer>{_e(summary.answer(rows))}</p>", _best_section(rows),
+                 _summary_section(rows)]
+    body += [_status_section(run)]
+    if rows:
+        body.append(_case_section(rows, out))
+    body += [_plots_section(out), _run_section(run)]
+    page = (f"<!doctype html><html lang=en><head><meta charset=utf-8><title>dsm: {_e(name)}</title>"
+            f"<meta name=viewport content=\"width=device-width\"><style>{CSS}</style></head><body>"
+            + "".join(body) + (f"<script>{SCRIPT}</script>" if rows else "") + "</body></html>\n")
+    with report.atomic(path) as tmp:
+        tmp.write_text(page, encoding="utf-8")
+

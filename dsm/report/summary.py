@@ -1,0 +1,259 @@
+"""The answer first: per scheme instance over a run's cases, and the best instance per scene,
+light and resolution (table.md's first sections, report.html's first screen, the README's table).
+
+Definitions (stated in the report, checked by tests/test_report.py against a numpy recomputation):
+
+- A *scheme instance* is a scheme with its parameters (or an engine preset), with the lookup
+  filter, stored format and cascade layout when the run has more than one of them.
+- *Pooled* rate: the errors summed over the instance's cases divided by the receivers summed
+  (acne: sum n_acne / sum n_gt_lit; peter-panning: sum n_peterpan / sum n_gt_shadowed; error:
+  sum (n_acne + n_peterpan) / sum n_receivers); undefined when that sum is 0.
+- *Mean, median, max*: of the per-case rates where the rate is defined; the undefined ones (an
+  empty denominator) are left out and counted.
+- *Best in*: the number of situations (scene, light, view, resolution) where the instance's
+  error rate is the lowest of all instances (ties count for each tied instance).
+- *Best per scene, light and resolution*: the lowest pooled error rate over that group's cases
+  (every view), ties broken by the shorter mean time (build + lookup).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..truth.metrics import defined
+
+SITUATION = ("scene", "light", "view", "resolution")
+
+DEFINITIONS = (
+    "Per scheme instance (a scheme with its parameters, or an engine preset{extra}) over its cases: "
+    "*pooled* rates are the errors summed over the cases divided by the receivers summed (acne: "
+    "sum n_acne / sum n_gt_lit; peter-pan: sum n_peterpan / sum n_gt_shadowed; error: sum (n_acne + "
+    "n_peterpan) / sum n_receivers); *mean / median / max* are over the per-case rates where they are "
+    "defined, and *undefined* counts the cases left out (an empty denominator: no truly lit, no truly "
+    "shadowed receiver, or none at all); times are means of the per-case warm medians (ms); *best in*: "
+    "the situations (scene, light, view, resolution) where its error rate is the lowest (ties count for "
+    "each). Sorted by pooled error rate.")
+
+BEST_DEFINITION = ("Per scene, light and resolution: the instance with the lowest pooled error rate over "
+                   "that group's cases (every view), ties broken by the shorter mean time (build + lookup); "
+                   "its pooled error rate in brackets, and how many instances tie at it.")
+
+
+def varies(rows, key) -> bool:
+    """Whether column ``key`` takes more than one value over ``rows``."""
+    return len({r.get(key, "") for r in rows}) > 1
+
+
+VARIED = ("filter", "format", "cascade_layout")     # part of an instance where a run varies them
+
+
+def instance_key(r, multi=()) -> tuple:
+    """(scheme, params or preset, then filter / format / cascade layout where the run varies them)."""
+    return (r["scheme"], r["preset"] or r["params"]) + tuple(r.get(k, "") for k in multi)
+
+
+def instance_label(key) -> str:
+    """An instance key as words: its non-empty parts joined by spaces."""
+    return " ".join(str(k) for k in key if k != "")
+
+
+def _multi(rows):
+    return tuple(k for k in VARIED if varies(rows, k))
+
+
+def _stats(values):
+    v = np.array([x for x in values if defined(x)], np.float64)
+    undefined = len(values) - v.size
+    if not v.size:
+        return {"mean": math.nan, "median": math.nan, "max": math.nan, "undefined": undefined}
+    return {"mean": float(v.mean()), "median": float(np.median(v)), "max": float(v.max()), "undefined": undefined}
+
+
+def _pooled(num, den):
+    return num / den if den else math.nan
+
+
+def best_counts(rows, multi=None) -> dict:
+    """instance key -> the number of situations where its error rate is the lowest (ties count)."""
+    multi = _multi(rows) if multi is None else multi
+    groups = {}
+    for r in rows:
+        groups.setdefault(tuple(r[k] for k in SITUATION), []).append(r)
+    counts = {}
+    for rs in groups.values():
+        scored = [r for r in rs if defined(r["error_rate"])]
+        if not scored:
+            continue
+        low = min(r["error_rate"] for r in scored)
+        for key in {instance_key(r, multi) for r in scored if r["error_rate"] == low}:
+            counts[key] = counts.get(key, 0) + 1
+    return counts
+
+
+def per_instance(rows) -> list:
+    """One dict per scheme instance (see the module's definitions), lowest pooled error first."""
+    multi = _multi(rows)
+    groups = {}
+    for r in rows:
+        groups.setdefault(instance_key(r, multi), []).append(r)
+    best = best_counts(rows, multi)
+    out = []
+    for key, rs in groups.items():
+        s = {"key": key, "scheme": key[0], "params": key[1], **dict(zip(multi, key[2:])), "cases": len(rs),
+             "acne_pooled": _pooled(sum(r["n_acne"] for r in rs), sum(r["n_gt_lit"] for r in rs)),
+             "peterpan_pooled": _pooled(sum(r["n_peterpan"] for r in rs), sum(r["n_gt_shadowed"] for r in rs)),
+             "error_pooled": _pooled(sum(r["n_acne"] + r["n_peterpan"] for r in rs),
+                                     sum(r["n_receivers"] for r in rs)),
+             "build_ms": float(np.mean([r["build_ms"] for r in rs])),
+             "lookup_ms": float(np.mean([r["lookup_ms"] for r in rs])),
+             "best_in": best.get(key, 0)}
+        for rate, tag in (("acne_rate", "acne"), ("peterpan_rate", "peterpan"), ("error_rate", "error")):
+            for k, v in _stats([r[rate] for r in rs]).items():
+                s[f"{tag}_{k}"] = v
+        out.append(s)
+    out.sort(key=lambda s: (not defined(s["error_pooled"]), s["error_pooled"] if defined(s["error_pooled"]) else 0,
+                            s["build_ms"] + s["lookup_ms"]))
+    return out
+
+
+def best_per_group(rows) -> list:
+    """Per (scene, light, resolution): the best instance by pooled error rate (ties: shorter mean time);
+    dicts with scene, light, resolution, label, error (its pooled rate), tied (how many others tie)."""
+    multi = _multi(rows)
+    groups = {}
+    for r in rows:
+        groups.setdefault((r["scene"], r["light"], r["resolution"]), {}).setdefault(
+            instance_key(r, multi), []).append(r)
+    out = []
+    for (scene, light, res), inst in groups.items():
+        scored = []
+        for key, rs in inst.items():
+            e = _pooled(sum(r["n_acne"] + r["n_peterpan"] for r in rs), sum(r["n_receivers"] for r in rs))
+            if defined(e):
+                scored.append((e, float(np.mean([r["build_ms"] + r["lookup_ms"] for r in rs])), key))
+        if not scored:
+            out.append({"scene": scene, "light": light, "resolution": res, "label": "-", "error": math.nan, "tied": 0})
+            continue
+        scored.sort(key=lambda t: (t[0], t[1]))
+        e, _, key = scored[0]
+        out.append({"scene": scene, "light": light, "resolution": res, "label": instance_label(key), "error": e,
+                    "tied": sum(1 for t in scored[1:] if t[0] == e)})
+    return out
+
+
+def rate(x) -> str:
+    """A rate for a table: '-' when undefined, 3 significant digits."""
+    if not defined(x):
+        return "-"
+    return "0" if x == 0 else f"{x:.3g}"
+
+
+def _ms(x) -> str:
+    return f"{x:.2f}" if x < 10 else f"{x:.1f}"
+
+
+def summary_columns(rows) -> list:
+    """The summary's identifying columns: scheme, params and whichever of filter, format, layout vary."""
+    return ["scheme", "params", *_multi(rows)]
+
+
+def summary_md(rows) -> list:
+    """Markdown lines: the per-instance table with its definitions, then the best per scene,
+    light and resolution (a row per scene and light, a column per resolution)."""
+    if not rows:
+        return []
+    multi = _multi(rows)
+    extra = ", with " + " and ".join(multi) if multi else ""
+    head = summary_columns(rows)
+    out = ["## Summary", "", f"**{answer(rows)}**", "", DEFINITIONS.format(extra=extra), "",
+           "| " + " | ".join(head) + " | cases | acne pooled | acne mean / median / max | peter-pan pooled | "
+           "peter-pan mean / median / max | error pooled | error mean / median / max | undefined acne / "
+           "peter-pan / error | build ms | lookup ms | best in |",
+           "|---" * (len(head) + 11) + "|"]
+    for s in per_instance(rows):
+        trio = lambda t: f"{rate(s[t + '_mean'])} / {rate(s[t + '_median'])} / {rate(s[t + '_max'])}"
+        out.append("| " + " | ".join(str(s[h]) for h in head) + f" | {s['cases']} | {rate(s['acne_pooled'])} | "
+                   f"{trio('acne')} | {rate(s['peterpan_pooled'])} | {trio('peterpan')} | "
+                   f"{rate(s['error_pooled'])} | {trio('error')} | {s['acne_undefined']} / "
+                   f"{s['peterpan_undefined']} / {s['error_undefined']} | {_ms(s['build_ms'])} | "
+                   f"{_ms(s['lookup_ms'])} | {s['best_in']} |")
+    out += leak_md(rows)
+    out += ["", "## Best per scene, light and resolution", "", BEST_DEFINITION, ""] + best_md(rows)
+    return out
+
+
+LEAK_DEFINITION = ("A run that gives [map] kind splits each case's peter-panning by the receiver's distance to "
+                   "its exact occluder: *contact* within leak_texels texels, *leak* beyond (light leaking). Per "
+                   "scheme instance (a pre-filtered kind's filter is its blur box:W): pooled over its cases, each "
+                   "over sum n_gt_shadowed; mean abs error: the mean of the cases' mean |V - V*|; moments ms: the "
+                   "mean build of a pre-filtered map's moments and blur. Sorted by pooled leak rate.")
+
+
+def leak_md(rows) -> list:
+    """Markdown lines of the light-leaking table, for a run whose rows carry the leak split (else none)."""
+    if not any(r.get("map_kind") for r in rows):
+        return []
+    multi = _multi(rows)
+    head = summary_columns(rows)
+    groups = {}
+    for r in rows:
+        groups.setdefault(instance_key(r, multi), []).append(r)
+    table = []
+    for key, rs in groups.items():
+        shadowed = sum(r["n_gt_shadowed"] for r in rs)
+        s = {"scheme": key[0], "params": key[1], **dict(zip(multi, key[2:]))}
+        table.append(([str(s[h]) for h in head], rs[0]["map_kind"], len(rs),
+                      _pooled(sum(r["n_peterpan"] for r in rs), shadowed),
+                      _pooled(sum(r["n_peterpan_contact"] for r in rs), shadowed),
+                      _pooled(sum(r["n_leak"] for r in rs), shadowed),
+                      _stats([r["mean_abs_error"] for r in rs])["mean"],
+                      _stats([r["moments_ms"] for r in rs])["mean"]))
+    table.sort(key=lambda t: (not defined(t[5]), t[5] if defined(t[5]) else 0))
+    out = ["", "## Light leaking", "", LEAK_DEFINITION, "",
+           "| " + " | ".join(head) + " | map kind | cases | peter-pan pooled | contact pooled | leak pooled | "
+           "mean abs error | moments ms |", "|---" * (len(head) + 7) + "|"]
+    for cells, kind, n, pp, contact, leak, mae, mom in table:
+        out.append("| " + " | ".join(cells) + f" | {kind} | {n} | {rate(pp)} | {rate(contact)} | {rate(leak)} | "
+                   f"{rate(mae)} | {_ms(mom) if defined(mom) else '-'} |")
+    return out
+
+
+def best_pivot(rows):
+    """(resolutions, [(scene, light, {resolution: best dict})]) in the order the run met them."""
+    best = best_per_group(rows)
+    resolutions = sorted({b["resolution"] for b in best})
+    pivot = {}
+    for b in best:
+        pivot.setdefault((b["scene"], b["light"]), {})[b["resolution"]] = b
+    return resolutions, [(s, l, cells) for (s, l), cells in pivot.items()]
+
+
+def best_cell(b) -> str:
+    """A best-per-group cell: the instance, its pooled error rate and how many tied; '' for none."""
+    if b is None:
+        return ""
+    tied = f"; the fastest of {b['tied'] + 1} tied" if b["tied"] else ""
+    return f"{b['label']} ({rate(b['error'])}{tied})"
+
+
+def answer(rows) -> str:
+    """One sentence: the lowest pooled error rate over the run, and the instance most often best."""
+    insts = [s for s in per_instance(rows) if defined(s["error_pooled"])]
+    if not insts:
+        return "No case of this run has a defined error rate."
+    low, most = insts[0], max(insts, key=lambda s: s["best_in"])
+    n = len({tuple(r[k] for k in SITUATION) for r in rows})
+    return (f"Lowest pooled error rate over all {len(rows)} cases: {instance_label(low['key'])} "
+            f"({rate(low['error_pooled'])}). Most often the best: {instance_label(most['key'])} "
+            f"(in {most['best_in']} of {n} situations).")
+
+
+def best_md(rows) -> list:
+    """Markdown lines of the best instance per scene and light (rows) and resolution (columns)."""
+    resolutions, pivot = best_pivot(rows)
+    out = ["| scene | light | " + " | ".join(f"R = {r}" for r in resolutions) + " |",
+           "|---" * (2 + len(resolutions)) + "|"]
+    for scene, light, cells in pivot:
+        out.append(f"| {scene} | {light} | " + " | ".join(best_cell(cells.get(r)) for r in resolutions) + " |")
+    return out

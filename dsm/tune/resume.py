@@ -1,0 +1,88 @@
+"""Resumable ``dsm tune``: each tuned scheme's identity, and the schemes a previous tune in the
+folder already finished.
+
+``dsm tune CONFIG --out DIR`` rewrites ``DIR/tune_state.json`` atomically after each scheme:
+per finished scheme its key and its whole result (the entry of tune.json and its rows of
+steps.csv). ``--resume`` reads it back: a scheme whose key matches is not tuned again (its
+result and rows are kept, times included), the others are tuned; the scenes, maps and oracles
+are always rebuilt (the bias map and held-out evaluation need them), and the learned bias map
+is trained again (it starts from the tuned results). A scheme's key hashes everything its
+result depends on: the kit's version, the scenes (with their input files' hashes), lights,
+map, camera and pose, variant, the ``[tune]`` table but its ``bias_map``, and the scheme
+instance, so a changed config tunes again what it changes and keeps the rest.
+"""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from pathlib import Path
+
+from ..report.io import atomic
+from ..experiment.resume import kit_version, scene_identity
+
+STATE = "tune_state.json"
+KIND = "dsm tune state"
+
+
+def shared_identity(tc, version: str | None = None) -> dict:
+    """What every tuned scheme's result depends on: kit, scenes, lights, map, cameras, [tune]."""
+    cfg = tc.config
+    return {"version": kit_version() if version is None else version,
+            "scenes": [scene_identity(s) for s in cfg.scenes], "lights": repr(cfg.lights), "map": repr(cfg.map),
+            "camera": repr(cfg.camera_resolution), "pose": repr(getattr(cfg, "camera", None)),
+            "variant": cfg.variant, "seed": cfg.seed, "tune": repr(dataclasses.replace(tc.spec, bias_map=None))}
+
+
+def scheme_keys(tc, version: str | None = None) -> list:
+    """One key per tuned scheme instance of ``tc``, in order (the position counts: two equal
+    instances are two results)."""
+    shared = shared_identity(tc, version)
+    return [hashlib.sha256(json.dumps({**shared, "index": i, "scheme": repr(s)}, sort_keys=True, default=str)
+                           .encode()).hexdigest()[:24] for i, s in enumerate(tc.schemes)]
+
+
+def read_state(out: Path) -> dict:
+    """The finished schemes of a previous tune in ``out``: key -> {"entry", "steps"} (none: {})."""
+    p = Path(out) / STATE
+    if not p.is_file():
+        return {}
+    try:
+        doc = json.loads(p.read_text())
+    except (OSError, ValueError):
+        return {}
+    if not isinstance(doc, dict) or doc.get("kind") != KIND:
+        return {}
+    return {s["key"]: s for s in doc.get("schemes", []) if isinstance(s, dict) and "key" in s}
+
+
+def state_problem(out: Path, name: str) -> str | None:
+    """Why ``--resume`` cannot go on with the tune in ``out`` (None if it can)."""
+    p = Path(out) / STATE
+    if not p.is_file():
+        return f"--resume: {out} holds no previous dsm tune ({STATE}); choose another --out"
+    try:
+        doc = json.loads(p.read_text())
+    except (OSError, ValueError):
+        doc = None
+    if not isinstance(doc, dict) or doc.get("kind") != KIND:
+        return f"--resume: {p} is not a dsm tune state; choose another --out, or --force to replace the tune"
+    if doc.get("experiment") != name:
+        return (f"--resume: {out} holds experiment {doc.get('experiment')!r}, not {name!r}; resume it with its own "
+                "config or choose another --out")
+    return None
+
+
+def write_state(out: Path, name: str, finished: list):
+    """Rewrite ``out``/tune_state.json with the finished schemes: [{"key", "entry", "steps"}]."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    with atomic(out / STATE) as tmp:
+        tmp.write_text(json.dumps({"kind": KIND, "experiment": name, "schemes": finished}, default=_plain))
+
+
+def _plain(o):
+    """numpy scalars as numbers, anything else (a spec) as its text."""
+    if hasattr(o, "item"):
+        return o.item()
+    return str(o)
