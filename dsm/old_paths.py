@@ -46,3 +46,15 @@ def install():
     """Put the finder on ``sys.meta_path`` once."""
     if not any(isinstance(f, OldPathFinder) for f in sys.meta_path):
         sys.meta_path.append(OldPathFinder())
+
+
+def forwarder(package: str, homes: tuple):
+    """A package's ``__getattr__`` that hands on the names of the flat module the package
+    replaced (``dsm.config.parse``, ``dsm.report.case_time``, ...), read from ``homes``."""
+    def getattr_(name: str):
+        for home in homes:
+            module = importlib.import_module(f"{package}.{home}")
+            if hasattr(module, name):
+                return getattr(module, name)
+        raise AttributeError(f"module {package!r} has no attribute {name!r}")
+    return getattr_

@@ -315,31 +315,30 @@ class MapSpec:
         return tuple(max(1, round((t / faces) ** 0.5)) for t in self.texels)
 
 
+class ParamsLabel:
+    """A spec of frozen ``params`` whose report label is those parameters."""
+
+    @property
+    def label(self) -> str:
+        """The parameters as ``name=value`` words (describe_params)."""
+        return describe_params(self.params)
+
+
 @dataclass(frozen=True)
-class SchemeSpec:
+class SchemeSpec(ParamsLabel):
     """One scheme instance (a ``[[scheme]]`` value set): its name, frozen parameters and preset, if any."""
     name: str
     params: Any                 # the scheme's frozen parameter dataclass
     preset: str | None = None
 
-    @property
-    def label(self) -> str:
-        """The scheme's parameters as ``name=value`` words (describe_params)."""
-        return describe_params(self.params)
-
 
 @dataclass(frozen=True)
-class MomentSpec:
+class MomentSpec(ParamsLabel):
     """One pre-filtered map instance: its kind (``name``), frozen parameters and box blur width (texels)."""
     name: str
     params: Any
     blur: int = 1
     preset: str | None = None
-
-    @property
-    def label(self) -> str:
-        """The kind's parameters as ``name=value`` words (describe_params)."""
-        return describe_params(self.params)
 
     @property
     def filter(self) -> str:

@@ -1,15 +1,5 @@
 """Experiment configs: TOML read once into the typed specs of dsm.types (dsm.config.read), the default experiment."""
-import importlib
+from ..old_paths import forwarder
 
-# The names of the module this folder replaced (dsm/{name}.py before the layout of
-# docs/design.md): an old import path kept as a thin alias for one release.
-_OLD_HOMES = ('read',)
-
-
-def __getattr__(name: str):
-    """A name of the old flat module, read from its new home (for one release)."""
-    for home in _OLD_HOMES:
-        module = importlib.import_module(f"{__name__}.{home}")
-        if hasattr(module, name):
-            return getattr(module, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+# the names of the module this folder replaced (dsm/config.py), kept as an alias for one release
+__getattr__ = forwarder(__name__, ('read',))
