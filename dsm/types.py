@@ -415,5 +415,8 @@ DEFAULT_CAMERA = (256, 256)     # built-ins and meshes without [camera] resoluti
 
 
 def describe_params(params) -> str:
-    """A scheme instance's parameters as ``name=value`` words (the report's ``params`` column)."""
-    return " ".join(f"{f.name}={getattr(params, f.name)}" for f in dataclasses.fields(params))
+    """A scheme instance's parameters as ``name=value`` words (the report's ``params`` column); a
+    field marked ``metadata["label"] = "if_set"`` (one added after runs were labelled without
+    it) only where it differs from its default, so earlier labels stay as they were."""
+    return " ".join(f"{f.name}={getattr(params, f.name)}" for f in dataclasses.fields(params)
+                    if f.metadata.get("label") != "if_set" or getattr(params, f.name) != f.default)

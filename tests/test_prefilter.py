@@ -36,7 +36,7 @@ def test_vsm_is_chebyshevs_bound_as_numpy_float64_computes_it():
     t = RNG.uniform(0.0, 1.0, n)
     mean_sq = mean * mean + var
     mv, bleed = 1e-3, 0.2
-    v = _np(vsm.visibility([_f(mean), _f(mean_sq)], _f(t), _prm(min_variance=mv, bleed=bleed)))
+    v = _np(vsm.visibility([_f(mean), _f(mean_sq)], _f(t), _prm(min_variance=mv, bleed=bleed, bleed_high=1.0)))
     # the float64 reference: one-sided Chebyshev (Cantelli) P(z >= t) <= s^2 / (s^2 + (t - mu)^2)
     m32, s32, t32 = (np.float32(a).astype(np.float64) for a in (mean, mean_sq, t))
     s2 = np.maximum(s32 - m32 ** 2, mv)
@@ -458,6 +458,88 @@ def test_mjp_presets_are_mjps_defaults_in_the_kits_units():
     v = _np(evsm.visibility([_f(m) for m in moms], _f(t), _prm(positive=40, negative=5, min_variance=p.min_variance,
                                                                 bleed=0.0)))
     assert np.abs(v - want).max() < 2e-3 and (want < 0.5).any() and (want > 0.5).any()
+
+
+def _preset(kind, name):
+    from dsm.config import read as config
+    cfg = config.parse(base_config(map={"kind": ["depth", kind], kind: {"preset": name}}), "<test>")
+    (spec,) = cfg.map.moments
+    return spec.params
+
+
+def _two_caster_moments(moments_of, p, n=400):
+    """The moments of windows covering two casters, a share f at za and 1 - f at zb."""
+    za, zb, f = RNG.uniform(0.2, 0.5, n), RNG.uniform(0.5, 0.8, n), RNG.uniform(0, 1, n)
+    return [f * a + (1 - f) * b_ for a, b_ in zip(moments_of(za, p), moments_of(zb, p))]
+
+
+def test_three_js_preset_is_three_js_vsm_shadow_in_float64():
+    """three.js's VSMShadow (shadowmap_pars_fragment.glsl.js): the map holds the mean and standard
+    deviation; variance = std^2 floored at 0, p = var / (var + d^2), clamp((p - 0.3) / (0.95 -
+    0.3)), lit where the compared depth is at or before the mean. Written here in float64 from
+    the mean and standard deviation, against the kit's VSM with the preset."""
+    from dsm.prefilter import vsm
+    p = _preset("vsm", "three")
+    moms = _two_caster_moments(vsm.moments, p)
+    m1, m2 = (np.float32(m).astype(np.float64) for m in moms)
+    t = np.float32(RNG.uniform(0.15, 0.9, len(m1))).astype(np.float64)
+    std = np.sqrt(np.maximum(m2 - m1 * m1, 0.0))
+    var = np.maximum(0.0, std * std)
+    d = t - m1
+    soft = np.clip((var / (var + d * d) - 0.3) / (0.95 - 0.3), 0.0, 1.0)
+    want = np.where(t <= m1, 1.0, soft)
+    v = _np(vsm.visibility([_f(m) for m in moms], _f(t), _prm(**vars(p))))
+    big = var > 1e-4          # where float32's E[t^2] - E[t]^2 keeps 3 digits of the variance
+    assert np.abs(v - want)[big].max() < 2e-3 and (want < 0.5).any() and (want > 0.5).any()
+    assert ((v < 0.5) == (want < 0.5))[np.abs(want - 0.5) > 0.05].all()
+
+
+@pytest.mark.parametrize("name, elvsm", [("filament", False), ("filament_elvsm", True)])
+def test_filament_presets_are_filaments_shadow_sample_vsm_in_float64(name, elvsm):
+    """Filament's ShadowSample_VSM (shadowing.fs) with prepareShadowVSM's uniforms: exponent 5.54,
+    vsmDepthScale = minVarianceScale 0.5 * 0.01 * 5.54, each warp's variance floored at
+    (vsmDepthScale w)^2, reduceLightBleed(p, 0.15) = linstep(0.15, 1, p); with elvsm the smaller of
+    the positive warp's bound and the negative warp's (-1/w). Written in float64 from those
+    constants, against the kit's EVSM with the preset."""
+    from dsm.prefilter import evsm
+    p = _preset("evsm", name)
+    assert (p.moments == 4) == elvsm
+    moms = _two_caster_moments(evsm.moments, p)
+    m32 = [np.float32(m).astype(np.float64) for m in moms]
+    t = np.float32(RNG.uniform(0.15, 0.9, len(m32[0]))).astype(np.float64)
+    c, depth_scale, amount = 5.54, 0.5 * 0.01 * 5.54, 0.15
+
+    def evaluate(m1, m2, w):
+        var = np.maximum(m2 - m1 * m1, (depth_scale * w) ** 2)
+        bound = np.clip((var / (var + (w - m1) ** 2) - amount) / (1 - amount), 0.0, 1.0)
+        return np.where(w <= m1, 1.0, bound)
+    w = np.exp(c * (2 * t - 1))
+    want = evaluate(m32[0], m32[1], w)
+    if elvsm:
+        want = np.minimum(want, evaluate(m32[2], m32[3], -1.0 / w))
+    v = _np(evsm.visibility([_f(m) for m in moms], _f(t), _prm(**vars(p))))
+    assert np.abs(v - want).max() < 2e-3 and (want < 0.5).any() and (want > 0.5).any()
+
+
+def test_vsm_bleed_high_above_bleed_and_the_old_label_kept():
+    """bleed_high at or below bleed is refused naming the key; a VSM instance that leaves it at 1
+    keeps the label earlier runs wrote (no bleed_high word)."""
+    from dsm.config import read as config
+    from dsm.prefilter import vsm
+    with pytest.raises(config.ConfigError) as e:
+        config.parse(base_config(map={"kind": ["depth", "vsm"], "vsm": {"bleed": 0.4, "bleed_high": 0.4}}), "<test>")
+    assert e.value.key == "map.vsm.bleed_high"
+    from dsm.types import describe_params
+    assert "bleed_high" not in describe_params(vsm.Params()) and "bleed_high=0.95" in describe_params(
+        _preset("vsm", "three"))
+
+
+def test_dsm_schemes_names_the_engine_files_of_the_pre_filtered_presets():
+    from dsm.cli import schemes_text
+    text = schemes_text()
+    for needle in ("vsm three:", "evsm filament:", "evsm filament_elvsm:", "shadowmap_pars_fragment.glsl.js",
+                   "shaders/src/shadowing.fs", "VsmShadowOptions", "TheRealMJP/Shadows"):
+        assert needle in text, needle
 
 
 def test_a_preset_takes_no_other_keys_and_esm_has_none():

@@ -29,13 +29,17 @@ def get(name: str):
 
 
 def check(name: str, params, formats, source: str, where: str):
-    """ConfigError for a parameter above its ``max`` or outside its ``choices`` (the min is the
-    sweep's), or an exponential moment that overflows one of the stored ``formats``."""
+    """ConfigError for a parameter above its ``max``, not above the field its ``above`` names, or
+    outside its ``choices`` (the min is the sweep's), or an exponential moment that overflows one of the stored ``formats``."""
     for f in dataclasses.fields(params):
         val = getattr(params, f.name)
         hi = f.metadata.get("max")
         if hi is not None and val > hi:
             raise ConfigError(source, f"{where}.{f.name}", f"must be <= {hi:g}, got {val!r}")
+        below = f.metadata.get("above")
+        if below is not None and not val > getattr(params, below):
+            raise ConfigError(source, f"{where}.{f.name}", f"must be > {below} ({getattr(params, below)!r}), "
+                              f"got {val!r}")
         if "choices" in f.metadata and val not in f.metadata["choices"]:
             raise ConfigError(source, f"{where}.{f.name}", f"unknown value {val!r}", f.metadata["choices"])
     log_max = getattr(get(name), "log_max", None)

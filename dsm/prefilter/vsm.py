@@ -3,8 +3,9 @@
 Moments E[t], E[t^2] of the normalized depth. V is Chebyshev's one-sided upper bound on the
 fraction of the filter region at or beyond the receiver, with the variance clamped below at
 ``min_variance`` (normalized depth squared), then the light-bleeding reduction of Lauritzen
-(GPU Gems 3, chapter 8, "Summed-Area Variance Shadow Maps", 2007): V' = linstep(bleed, 1, V),
-which cuts the bound's tail below ``bleed``. With ``W = 1`` and ``bleed = 0`` a receiver
+(GPU Gems 3, chapter 8, "Summed-Area Variance Shadow Maps", 2007): V' = linstep(bleed,
+bleed_high, V), which cuts the bound's tail below ``bleed`` (and, with ``bleed_high`` below 1,
+saturates it above, as three.js's ramp from 0.3 to 0.95 does). With ``W = 1`` and ``bleed = 0`` a receiver
 behind its texel's depth by g is lit exactly when g^2 <= min_variance: the unfiltered VSM is
 a depth test with a constant bias of sqrt(min_variance) depth ranges.
 """
@@ -20,9 +21,11 @@ SOURCE = "Donnelly & Lauritzen 2006 (I3D); light-bleeding reduction: Lauritzen 2
 
 @dataclass(frozen=True)
 class Params:
-    """VSM's minimum variance (normalized depth squared) and light-bleeding reduction amount in [0, 1)."""
+    """VSM's minimum variance (normalized depth squared) and light-bleeding reduction ramp
+    [bleed, bleed_high] of Chebyshev's bound."""
     min_variance: float = field(default=1e-4, metadata={"min": 0.0})
     bleed: float = field(default=0.0, metadata={"min": 0.0, "max": 0.999})
+    bleed_high: float = field(default=1.0, metadata={"max": 1.0, "above": "bleed", "label": "if_set"})
 
 
 def count(params) -> int:
@@ -41,5 +44,5 @@ def moments(t, params) -> list:
 
 
 def visibility(b, t, prm):
-    """linstep(bleed, 1, Chebyshev's bound) of the receiver's normalized depth ``t``."""
-    return linstep(prm.bleed, 1.0, chebyshev(b[0], b[1], t, prm.min_variance))
+    """linstep(bleed, bleed_high, Chebyshev's bound) of the receiver's normalized depth ``t``."""
+    return linstep(prm.bleed, prm.bleed_high, chebyshev(b[0], b[1], t, prm.min_variance))
