@@ -17,6 +17,8 @@ FILTERS = ("nearest", "pcf_bilinear", "pcf_jitter4x4", "pcf_wide", "pcss")
 FORMATS = ("float32", "unorm16", "unorm24", "ndc24", "float16")
 # [map] kind: the depth-compare map, or a pre-filtered moment map (dsm.prefilter)
 MAP_KINDS = ("depth", "vsm", "esm", "evsm", "msm")
+BLUR_KERNELS = ("box", "gaussian")         # [map] blur_kernel: a pre-filtered map's separable blur
+BLUR_LABELS = {"box": "box", "gaussian": "gauss"}      # the filter column's word for each
 POINT_VIEWS = ("paraboloid", "dual_paraboloid", "cube")
 MAP_VIEWS = POINT_VIEWS + ("vsv",)      # [map] view: and a voxelized shadow volume (dsm.maps.vsv; spot lights too)
 AREA_SHAPES = ("rectangle", "disk", "sphere", "emitter")
@@ -334,16 +336,18 @@ class SchemeSpec(ParamsLabel):
 
 @dataclass(frozen=True)
 class MomentSpec(ParamsLabel):
-    """One pre-filtered map instance: its kind (``name``), frozen parameters and box blur width (texels)."""
+    """One pre-filtered map instance: its kind (``name``), frozen parameters, blur width (texels)
+    and blur kernel (``box`` or ``gaussian``)."""
     name: str
     params: Any
     blur: int = 1
     preset: str | None = None
+    kernel: str = "box"
 
     @property
     def filter(self) -> str:
-        """The case's filter column: the blur, ``box:W``."""
-        return f"box:{self.blur}"
+        """The case's filter column: the blur, ``box:W`` or ``gauss:W``."""
+        return f"{BLUR_LABELS[self.kernel]}:{self.blur}"
 
 
 @dataclass(frozen=True)

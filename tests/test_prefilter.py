@@ -144,6 +144,41 @@ def test_box_blur_is_the_mean_over_the_window_clamped_at_the_face_edge():
                 assert got[f, j, i] == pytest.approx(img[f][np.ix_(rows, cols)].mean(), abs=1e-12)
 
 
+def test_gaussian_blur_is_the_weighted_window_of_sigma_w_plus_1_over_6():
+    """Each texel is the 2D Gaussian-weighted mean of its W x W window (sigma = (W + 1) / 6, the
+    weights normalized over the window, indices clamped to the face), computed here window by
+    window with an explicit outer-product kernel."""
+    from dsm.prefilter.base import gaussian_blur
+    faces, R, W = 2, 7, 5
+    x = RNG.uniform(0, 1, faces * R * R)
+    got = gaussian_blur(x, W, faces, R).reshape(faces, R, R)
+    img = x.reshape(faces, R, R)
+    h, sigma = W // 2, (W + 1) / 6
+    k = np.arange(-h, h + 1)
+    g = np.exp(-(k[:, None] ** 2 + k[None, :] ** 2) / (2 * sigma ** 2))
+    g /= g.sum()
+    for f in range(faces):
+        for j in range(R):
+            for i in range(R):
+                rows = np.clip(np.arange(j - h, j + h + 1), 0, R - 1)
+                cols = np.clip(np.arange(i - h, i + h + 1), 0, R - 1)
+                assert got[f, j, i] == pytest.approx((img[f][np.ix_(rows, cols)] * g).sum(), abs=1e-12)
+    assert np.array_equal(gaussian_blur(x, 1, faces, R), x)
+
+
+def test_blur_kernel_sweeps_and_names_the_filter_column():
+    """[map] blur_kernel sweeps box and gaussian (the filter column box:W / gauss:W); a bad value
+    or a kernel without a pre-filtered kind is one error naming map.blur_kernel."""
+    from dsm.config import read as config
+    cfg = config.parse(base_config(map={"kind": ["depth", "vsm"], "blur": [1, 5],
+                                        "blur_kernel": ["box", "gaussian"]}), "<test>")
+    assert [m.filter for m in cfg.map.moments] == ["box:1", "gauss:1", "box:5", "gauss:5"]
+    for m in ({"kind": ["depth", "vsm"], "blur_kernel": "tent"}, {"blur_kernel": "gaussian"}):
+        with pytest.raises(config.ConfigError) as e:
+            config.parse(base_config(map=m), "<test>")
+        assert e.value.key == "map.blur_kernel"
+
+
 def test_box_blur_keeps_the_small_values_of_an_exponential_moment():
     """A running sum would lose exp(8) next to exp(80) (30 decades); the window's own sum keeps it."""
     from dsm.prefilter.base import box_blur

@@ -12,11 +12,11 @@ import tomllib
 from dataclasses import replace
 from pathlib import Path
 
-from ..types import LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, MAP_VIEWS, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA, REPORT_IMAGES, ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params, SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec, CameraSpec, CascadeSpec, CASCADE_SPLITS, CASCADE_FITS, DEPTH_BOUNDS, MAX_CASCADES, MotionSpec, CAMERA_PATHS, LIGHT_PATHS, MAP_KINDS, MomentSpec, ContactSpec
+from ..types import LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, MAP_VIEWS, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA, REPORT_IMAGES, ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params, SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec, CameraSpec, CascadeSpec, CASCADE_SPLITS, CASCADE_FITS, DEPTH_BOUNDS, MAX_CASCADES, MotionSpec, CAMERA_PATHS, LIGHT_PATHS, MAP_KINDS, MomentSpec, ContactSpec, BLUR_KERNELS
 
 # a run's folder is runs/<name>-tune-YYYYmmdd-HHMMSS (21 bytes more) and a file name takes 255 bytes
 NAME_MAX_BYTES = 255 - len("-tune-20240101-120000")
-KIND_KEYS = ("kind", "blur", "leak_texels", "vsm", "esm", "evsm", "msm")    # [map] kind and its tables
+KIND_KEYS = ("kind", "blur", "blur_kernel", "leak_texels", "vsm", "esm", "evsm", "msm")    # [map] kind and its tables
 CASCADE_KEYS = ("cascades", "split", "lambda", "fit", "depth_bounds", "stabilize", "blend", "max_distance")
 
 
@@ -394,8 +394,12 @@ def _parse_moments(m: dict, kinds, formats, source: str) -> tuple:
         raise ConfigError(source, "map.blur", "empty list")
     if any(w % 2 == 0 for w in blurs):
         raise ConfigError(source, "map.blur", f"a box width is odd (centred on the texel), got {blurs}")
-    if "blur" in m and kinds == ("depth",):
-        raise ConfigError(source, "map.blur", "blurs moments; map.kind names no pre-filtered map", prefilter.NAMES)
+    for key in ("blur", "blur_kernel"):
+        if key in m and kinds == ("depth",):
+            raise ConfigError(source, f"map.{key}", "blurs moments; map.kind names no pre-filtered map", prefilter.NAMES)
+    kernels = tuple(choice(k, source, "map.blur_kernel", BLUR_KERNELS) for k in as_list(m.get("blur_kernel", "box")))
+    if not kernels:
+        raise ConfigError(source, "map.blur_kernel", "empty list", BLUR_KERNELS)
     out = []
     for name in kinds:
         if name == "depth":
@@ -417,7 +421,7 @@ def _parse_moments(m: dict, kinds, formats, source: str) -> tuple:
             params = sweep_params(prefilter.get(name).Params, t, source, f"map.{name}")
         for p in params:
             prefilter.check(name, p, formats, source, f"map.{name}")
-        out += [MomentSpec(name, p, w, preset) for p in params for w in blurs]
+        out += [MomentSpec(name, p, w, preset, k) for p in params for w in blurs for k in kernels]
     return tuple(out)
 
 

@@ -51,12 +51,12 @@ def check(name: str, params, formats, source: str, where: str):
 
 def build(spec, z1_world, view, fmt: str):
     """The MomentMap of one instance (``spec``: a MomentSpec) from a depth map's z1 (numpy, world)."""
-    return build_map(get(spec.name), spec.params, z1_world, view, fmt, spec.blur)
+    return build_map(get(spec.name), spec.params, z1_world, view, fmt, spec.blur, spec.kernel)
 
 
 def build_key(spec, fmt: str) -> tuple:
     """What a MomentMap of ``spec`` depends on besides its depth map: instances sharing it share a build."""
-    return (spec.name, get(spec.name).moment_key(spec.params), spec.blur, fmt)
+    return (spec.name, get(spec.name).moment_key(spec.params), spec.blur, spec.kernel, fmt)
 
 
 def visibility(spec, rx, mmap):

@@ -18,8 +18,8 @@ supersampling). ``format`` is their storage precision: ``float32`` or ``float16`
 rounded to nearest; a value beyond 65504 becomes +inf as a half render target stores it). The
 moments are stored, blurred in float64, and the blurred moments stored again in the format.
 
-The blur is a separable box of odd width ``W`` texels (``W = 1``: the unfiltered fetch). It
-stays on its face: at a face edge the window is clamped to the face (edge texels repeat), so
+The blur is a separable box or Gaussian (``[map] blur_kernel``; sigma (W + 1) / 6, Filament's)
+of odd width ``W`` texels (``W = 1``: the unfiltered fetch). It stays on its face: at a face edge the window is clamped to the face (edge texels repeat), so
 cube maps are not blurred across their seams and a paraboloid face is blurred over its whole
 square, rim included (the texels beyond the rim hold their rays' hits, or t = 1 where they
 missed). The fetch is the nearest texel of the blurred map; a receiver beyond a directional
@@ -103,11 +103,38 @@ def box_blur(x: np.ndarray, width: int, faces: int, R: int) -> np.ndarray:
     return img.reshape(-1)
 
 
-def build(kind, params, z1_world: np.ndarray, view, fmt: str, blur: int) -> MomentMap:
+def gaussian_weights(width: int) -> np.ndarray:
+    """The ``width`` taps of a normalized Gaussian of sigma (width + 1) / 6, Filament's relation
+    of a VSM blur's width to its sigma (filament/src/ShadowMapManager.cpp), cut at the window."""
+    sigma = (width + 1) / 6.0
+    k = np.arange(width) - width // 2
+    w = np.exp(-k * k / (2.0 * sigma * sigma))
+    return w / w.sum()
+
+
+def gaussian_blur(x: np.ndarray, width: int, faces: int, R: int) -> np.ndarray:
+    """A separable ``width`` x ``width`` Gaussian (gaussian_weights) of texel values ``x``, each
+    face on its own, clamped at face edges as box_blur is; summed tap by tap as box_blur is."""
+    if width == 1:
+        return x
+    h, weights = width // 2, gaussian_weights(width)
+    img = x.reshape(faces, R, R)
+    for axis in (1, 2):
+        pad = [(0, 0)] * 3
+        pad[axis] = (h, h)
+        padded = np.pad(img, pad, mode="edge")
+        img = sum(weights[k] * np.take(padded, np.arange(k, k + R), axis=axis) for k in range(width))
+    return img.reshape(-1)
+
+
+BLURS = {"box": box_blur, "gaussian": gaussian_blur}
+
+
+def build(kind, params, z1_world: np.ndarray, view, fmt: str, blur: int, kernel: str = "box") -> MomentMap:
     """The moment map of ``kind`` from a depth map's z1 (world, texel order): moments, stored,
-    blurred, stored again."""
+    blurred (``kernel``: box or gaussian, ``blur`` texels wide), stored again."""
     t = normalized_depth(z1_world, view)
-    b = [stored(box_blur(stored(m, fmt), blur, view.faces, view.resolution), fmt)
+    b = [stored(BLURS[kernel](stored(m, fmt), blur, view.faces, view.resolution), fmt)
          for m in kind.moments(t, params)]
     far_b = [float(stored(m, fmt)[0]) for m in kind.moments(np.ones(1), params)]
     return MomentMap(view, [mi.Float(m.astype(np.float32)) for m in b], far_b, fmt, blur)
