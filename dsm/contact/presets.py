@@ -37,7 +37,8 @@ PRESETS = {
         "over the view depth goes to 0). Not simulated: samples evenly spaced in NDC (here in world), the "
         "per-pixel dither of +-0.5 step (here jitter 0), the ray bias (the start moved 0.2% of its camera distance "
         "toward the camera, HDRP's positions being camera-relative), the half-resolution first pass, the "
-        "screen-edge and distance fades (a binary shadow here; the distance fade is 1 nearer than 45 m); applied to every light here, area lights included"),
+        "screen-edge and distance fades (a binary shadow here; the distance fade is 1 nearer than 45 m); applied to every "
+        "light here, area lights included"),
 }
 
 NOT_ENCODED = {
