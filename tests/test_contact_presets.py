@@ -118,3 +118,15 @@ def test_hdrp_preset_runs_end_to_end(run_dict):
     assert r["n_contact_missed"] == r["n_peterpan"] - r["n_contact_recovered"]
     after = r["n_acne"] + r["n_contact_false"] + r["n_peterpan"] - r["n_contact_recovered"]
     assert r["contact_error_rate"] == pytest.approx(after / r["n_receivers"])
+
+
+def test_depth_scaled_keys_parse_and_negative_values_are_config_errors():
+    from dsm.types import ConfigError
+    cfg = dsm.config.parse(base_config(contact={"length": 0.1, "length_depth_scale": 0.5, "length_depth_min": 2,
+                                                "thickness_per_length": 0.3}), "<t>")
+    assert (cfg.contact.length_depth_scale, cfg.contact.length_depth_min, cfg.contact.thickness_per_length) == \
+        (0.5, 2.0, 0.3)
+    for key in ("length_depth_scale", "length_depth_min", "thickness_per_length"):
+        with pytest.raises(ConfigError) as e:
+            dsm.config.parse(base_config(contact={key: -1}), "<t>")
+        assert e.value.key == f"contact.{key}"
