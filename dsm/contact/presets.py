@@ -29,7 +29,7 @@ PRESETS = {
         f"{HDRP}/RenderPipeline/HDRenderPipeline.LightLoop.cs (commit 02a1e8c6): the shader gets length, "
         "distanceScaleFactor, thicknessScale x 10, rayBias x 0.01",
         f"{HDRP}/Lighting/Shadow/ContactShadows.compute (commit 0a82c9d4): ray length = length x max(0.5, "
-        "linearDepth x distanceScaleFactor); threshold = |NDC depth change over one ray length toward the camera| "
+        "linearDepth x distanceScaleFactor); threshold = |NDC depth change over one ray length along the view axis| "
         "x thickness x max(0.07, 1/sampleCount), occluded where 0 < buffer - sample < 2 x threshold (reversed z); "
         "directional, point and spot lights"],
         "units: HDRP's metres as world units; the depth scaling is exact; the thickness is HDRP's threshold to "
@@ -37,8 +37,8 @@ PRESETS = {
         "over the view depth goes to 0). Not simulated: samples evenly spaced in NDC (here in world), the "
         "per-pixel dither of +-0.5 step (here jitter 0), the ray bias (the start moved 0.2% of its camera distance "
         "toward the camera, HDRP's positions being camera-relative), the half-resolution first pass, the "
-        "screen-edge and distance fades (a binary shadow here; the distance fade is 1 nearer than 45 m); applied to every "
-        "light here, area lights included"),
+        "screen-edge and distance fades (a binary shadow here; the distance fade is 1 nearer than 45 m); "
+        "applied to every light here, area lights included"),
 }
 
 NOT_ENCODED = {
