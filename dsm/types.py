@@ -362,7 +362,9 @@ class ContactSpec:
     """``[contact]``: screen-space contact shadows after every case's lookup (dsm.contact). A march
     of ``steps`` samples from each receiver toward the light over ``length`` through the camera's
     depth buffer; a sample is occluded where it lies behind the buffer by less than ``thickness``;
-    ``jitter`` (0 to 1) moves every sample back by up to that fraction of a step, per receiver."""
+    ``jitter`` (0 to 1) moves every sample back by up to that fraction of a step, per receiver;
+    ``length_depth_scale`` / ``length_depth_min`` / ``thickness_per_length``: a length scaled by the
+    receiver's view depth and a thickness relative to it (Unity HDRP's; off by default)."""
     length: Length = field(default=Length(8.0, "texel"), metadata={"doc": "march length toward the light",
                                                                    "min": 0.0})
     steps: int = field(default=16, metadata={"doc": "samples along the march", "min": 1})
@@ -370,6 +372,15 @@ class ContactSpec:
                                                                       "to occupy behind itself", "min": 0.0})
     jitter: float = field(default=0.0, metadata={"doc": "per-receiver offset of the samples, in steps",
                                                  "min": 0.0})
+    # opt-in, off by default (the march is then unchanged): HDRP's depth-scaled ray (dsm.contact.march)
+    length_depth_scale: float = field(default=0.0, metadata={
+        "doc": "0: off; else the length is scaled by max(length_depth_min, this x the receiver's view depth), "
+               "per world unit of depth", "min": 0.0})
+    length_depth_min: float = field(default=1.0, metadata={"doc": "the least factor of the depth-scaled length",
+                                                           "min": 0.0})
+    thickness_per_length: float = field(default=0.0, metadata={
+        "doc": "0: off; else the thickness is this fraction of the receiver's (scaled) length, replacing "
+               "thickness", "min": 0.0})
 
 
 BACKENDS = ("local", "ray")

@@ -243,7 +243,7 @@ def test_bad_contact_values_are_config_errors(table, key):
 def test_bevy_preset_is_its_source_values():
     cfg = dsm.config.parse(base_config(contact={"preset": "bevy"}), "<t>")
     assert cfg.contact == ContactSpec(Length(0.3, "world"), 16, Length(0.1, "world"), 0.0)
-    for table, key in (({"preset": "hdrp"}, "contact.preset"), ({"preset": "bevy", "steps": 4}, "contact.steps")):
+    for table, key in (({"preset": "unreal"}, "contact.preset"), ({"preset": "bevy", "steps": 4}, "contact.steps")):
         with pytest.raises(ConfigError) as e:
             dsm.config.parse(base_config(contact=table), "<t>")
         assert e.value.key == key

@@ -23,6 +23,12 @@ another surface, or off screen) is not in it, and the march misses its shadow. T
 count what the step darkens wrongly (``n_contact_false``), the peter-panned receivers it
 recovers (``n_contact_recovered``) and those it leaves (``n_contact_missed``).
 
+Unity HDRP's ray grows with depth (``[contact] length_depth_scale``, off by default): the length
+is ``length max(length_depth_min, length_depth_scale z_view)``, ``z_view`` the receiver's view depth
+in world units, and ``thickness_per_length > 0`` replaces the thickness by that fraction of the
+receiver's (scaled) length (HDRP's depth-compare threshold scales with its ray length;
+dsm.contact.presets says how far the rest of HDRP's march maps).
+
 Lengths in ``"k texel"`` are the shadow map's texel at the receiver (the kit's one meaning of
 a texel length); ``"k range"`` a fraction of the view's depth range. Perspective cameras only
 (the projection is the pinhole's).
@@ -94,20 +100,35 @@ def march(db: DepthBuffer, rx: Receiver, spec, seed: int = 7, light_world=None):
     """Per receiver (mi.Bool): some march sample lies behind the depth buffer by less than ``thickness``.
     ``light_world``: a positional light's position (its samples stop short of it), None for a direction."""
     prm = resolve(spec, rx)           # length and thickness in world units (texels per receiver)
+    length, thickness = march_extent(db, rx, spec, prm)
     occluded = dr.zeros(mi.Bool, dr.width(rx.p_world))
     W, H = db.width, db.height
     reach = dr.full(mi.Float, dr.inf, dr.width(rx.p_world))
     if light_world is not None:       # nothing beyond the light can shadow the receiver
         reach = dr.norm(_vec(light_world) - rx.p_world)
-    for t in sample_distances(spec, prm.length, rx, seed):
+    for t in sample_distances(spec, length, rx, seed):
         x, y, z = project(db, rx.p_world + rx.to_light * t)
         inside = (z > 0) & (x >= 0) & (x < W) & (y >= 0) & (y < H) & (t < reach)
         i = dr.clip(mi.Int32(dr.floor(x)), 0, W - 1)
         j = dr.clip(mi.Int32(dr.floor(y)), 0, H - 1)
         z_b = dr.gather(mi.Float, db.depth, mi.UInt32(j * W + i), inside)
         behind = z - z_b
-        occluded |= inside & (behind > 0) & (behind < prm.thickness)
+        occluded |= inside & (behind > 0) & (behind < thickness)
     return occluded
+
+
+def march_extent(db: DepthBuffer, rx: Receiver, spec, prm):
+    """(length, thickness) of each receiver's march in world units: ``length`` times
+    ``max(length_depth_min, length_depth_scale z_view)`` where ``length_depth_scale > 0`` (``z_view``
+    the receiver's view depth), and ``thickness_per_length`` times that length where it is > 0."""
+    length, thickness = prm.length, prm.thickness
+    # both options are skipped when off, so the default march's kernel (and its numbers) is unchanged
+    if spec.length_depth_scale > 0:
+        z_view = dr.dot(rx.p_world - _vec(db.camera.origin), _vec(db.camera.forward))
+        length = length * dr.maximum(prm.length_depth_min, prm.length_depth_scale * z_view)
+    if spec.thickness_per_length > 0:
+        thickness = prm.thickness_per_length * length
+    return length, thickness
 
 
 def case_metrics(v: np.ndarray, v_star: np.ndarray, occluded: np.ndarray, v_frac=None) -> dict:
