@@ -236,6 +236,42 @@ def _frozen_ms(frame, args, repeats) -> dict:
         return {"frozen_ms": None, "frozen_error": f"{type(exc).__name__}: {str(exc).splitlines()[0][:200]}"}
 
 
+def mesh_cost(ply: Path, label: str, triangles: int, R: int, camera: int, repeats: int) -> dict:
+    """The first-layer build (kernel and wall time) and one frame (:func:`frame_cost`) on one mesh."""
+    from ..config.read import LightSpec, SceneSpec
+    from ..scenes.load import FileParams
+    spec = SceneSpec(file=ply, params=FileParams(up="z", ground="no"), label=label)
+    light = LightSpec("directional", direction=(0.25, -1.0, 0.15))
+    f = frame_cost(spec, light, R=R, camera=camera, repeats=repeats, frozen=False)
+    return {"scene": label, "triangles": triangles, "map": R, "camera": camera,
+            "build_kernel_ms": f["build_kernel_ms"], "build_wall_ms": f["build_wall_ms"],
+            "frame_kernel_ms": f["kernel_ms"], "frame_wall_ms": f["wall_ms"], "bare_kernel_ms": f["bare_kernel_ms"]}
+
+
+def geometry_cost(out: Path, triangles=None, R: int = 1024, camera: int = 512, repeats: int = 3,
+                  memory: bool = True) -> dict:
+    """(7) (:mod:`dsm.tools.bench_geometry`): rows per mesh size (default TRIANGLES) and the
+    exponents of build and frame time against triangles."""
+    from .bench_geometry import TRIANGLES, resampled_terrain, run_peak, write_ply
+    triangles = TRIANGLES if triangles is None else triangles
+    work = out / "geometry"
+    rows = []
+    for n in triangles:
+        ply = work / f"terrain_{n}.ply"
+        tris = write_ply(ply, *resampled_terrain(n))
+        row = mesh_cost(ply, f"terrain_{tris}", tris, R, camera, repeats)
+        if memory:
+            row.update(run_peak(ply, work))
+        rows.append(row)
+        ply.unlink()
+    if work.is_dir() and not any(work.iterdir()):
+        work.rmdir()
+    tri = [r["triangles"] for r in rows]
+    exps = {k: fitted_exponent(tri, [r[k] for r in rows])
+            for k in ("build_kernel_ms", "build_wall_ms", "frame_kernel_ms", "frame_wall_ms")}
+    return {"rows": rows, "exponents": exps}
+
+
 def meshes_problem(meshes) -> str | None:
     """Why ``meshes`` cannot be the folder of real test meshes (None if it can, or is not given)."""
     if meshes is None:
@@ -275,7 +311,6 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
         specs = _scenes(meshes)
         result["frame"] = frame_cost(specs[-1], _light_for(specs[-1]), repeats=max(repeats, 5))
     if geometry:
-        from .bench_geometry import geometry_cost
         result["geometry"] = geometry_cost(out, tuple(geometry), repeats=max(1, min(repeats, 3)))
     if sweep:
         result["sweep"] = sweep_throughput(out)

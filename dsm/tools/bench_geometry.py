@@ -2,8 +2,9 @@
 
 The meshes are the real terrain of :mod:`dsm.scenes.terrain` (the Jacksboro fault DEM)
 resampled bilinearly to grids of about 1e4 to 1e6 triangles, written as binary PLY and loaded
-as a user's mesh file. Per mesh: the first-layer build and one frame (:func:`bench.frame_cost`:
-the map plus every single-layer lookup) as kernel and wall time, in this process; and the peak
+as a user's mesh file (here). Per mesh: the first-layer build and one frame (:func:`bench.frame_cost`:
+the map plus every single-layer lookup) as kernel and wall time, in the bench's process
+(:func:`dsm.tools.bench.geometry_cost`); and the peak
 resident memory (Linux's VmHWM) of a one-case ``dsm run`` on the mesh in its own process,
 against ``dsm plan``'s estimate for the same config (run.json's ``peak_bytes_est``). The
 exponent of time against triangles is fitted in log-log as for resolutions.
@@ -82,41 +83,6 @@ def run_peak(ply: Path, work: Path) -> dict:
     cfg.unlink()
     est, peak = run["plan"]["peak_bytes_est"], run["timing"]["measure_peak_rss_bytes"]
     return {"peak_mb": peak / 2 ** 20, "plan_peak_mb": est / 2 ** 20, "plan_over_peak": est / peak}
-
-
-def mesh_cost(ply: Path, label: str, triangles: int, R: int, camera: int, repeats: int) -> dict:
-    """The first-layer build (kernel and wall time) and one frame (:func:`bench.frame_cost`) on one mesh."""
-    from ..config.read import LightSpec, SceneSpec
-    from ..scenes.load import FileParams
-    from . import bench
-    spec = SceneSpec(file=ply, params=FileParams(up="z", ground="no"), label=label)
-    light = LightSpec("directional", direction=(0.25, -1.0, 0.15))
-    f = bench.frame_cost(spec, light, R=R, camera=camera, repeats=repeats, frozen=False)
-    return {"scene": label, "triangles": triangles, "map": R, "camera": camera,
-            "build_kernel_ms": f["build_kernel_ms"], "build_wall_ms": f["build_wall_ms"],
-            "frame_kernel_ms": f["kernel_ms"], "frame_wall_ms": f["wall_ms"], "bare_kernel_ms": f["bare_kernel_ms"]}
-
-
-def geometry_cost(out: Path, triangles=TRIANGLES, R: int = 1024, camera: int = 512, repeats: int = 3,
-                  memory: bool = True) -> dict:
-    """(7): rows per mesh size and the exponents of build and frame time against triangles."""
-    from .bench import fitted_exponent
-    work = out / "geometry"
-    rows = []
-    for n in triangles:
-        ply = work / f"terrain_{n}.ply"
-        tris = write_ply(ply, *resampled_terrain(n))
-        row = mesh_cost(ply, f"terrain_{tris}", tris, R, camera, repeats)
-        if memory:
-            row.update(run_peak(ply, work))
-        rows.append(row)
-        ply.unlink()
-    if work.is_dir() and not any(work.iterdir()):
-        work.rmdir()
-    tri = [r["triangles"] for r in rows]
-    exps = {k: fitted_exponent(tri, [r[k] for r in rows])
-            for k in ("build_kernel_ms", "build_wall_ms", "frame_kernel_ms", "frame_wall_ms")}
-    return {"rows": rows, "exponents": exps}
 
 
 def markdown(g: dict) -> list:
