@@ -93,6 +93,9 @@ def _parser():
     b.add_argument("--scaling", default="1024,2048,4096,8192",
                    help="map resolutions of the cost-against-resolution table, tiled within the memory budget "
                         "('' to skip; default 1024,2048,4096,8192)")
+    b.add_argument("--geometry", default="",
+                   help="triangle counts of the cost-against-geometry table (the DEM terrain resampled; e.g. "
+                        "10000,100000,1000000; default '': skipped, it loads each mesh twice)")
     b.add_argument("--no-frame", action="store_true",
                    help="skip the one-frame cost (map and every single-layer lookup, kernel and frozen time)")
     b.add_argument("--no-sweep", action="store_true",
@@ -185,11 +188,12 @@ def _bench(args) -> int:
     try:
         res = [int(x) for x in args.resolutions.split(",")]
         scale = [int(x) for x in args.scaling.split(",") if x.strip()]
-        if any(r < 1 for r in res + scale):
+        args.geometry_triangles = [int(x) for x in args.geometry.split(",") if x.strip()]
+        if any(r < 1 for r in res + scale + args.geometry_triangles):
             raise ValueError
     except ValueError:
-        _err(f"--resolutions/--scaling: expected positive integers like 256,1024, got "
-             f"{args.resolutions!r} / {args.scaling!r}")
+        _err(f"--resolutions/--scaling/--geometry: expected positive integers like 256,1024, got "
+             f"{args.resolutions!r} / {args.scaling!r} / {args.geometry!r}")
         return 2
     problem = meshes_problem(args.meshes)
     if problem:
@@ -211,7 +215,7 @@ def _bench_held(args, res, scale) -> int:
         return 2
     try:
         run_bench(Path(args.out), res, args.repeats, args.meshes, args.variant, scale, not args.no_sweep,
-                  not args.no_frame)
+                  not args.no_frame, args.geometry_triangles)
     except SetupError as e:
         _err(f"setup error: {e}")
         return 3

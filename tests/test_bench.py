@@ -41,3 +41,34 @@ def test_the_frozen_frame_replays_the_traced_frame():
     assert row.get("frozen_error") is None, row.get("frozen_error")
     assert row["frozen_same"] is True
     assert row["receivers"] > 0 and len(row["schemes"]) == len(bench.FRAME_SCHEMES)
+
+
+def test_the_resampled_terrain_at_the_dem_s_own_size_is_the_terrain():
+    """Resampled to the DEM's own 344 x 403 grid (275,772 triangles), the bench's terrain is the
+    scene's terrain vertex for vertex and face for face (the bilinear weights are 0 or 1)."""
+    from dsm.scenes import terrain
+    from dsm.tools import bench_geometry
+    verts, faces = terrain.mesh(1)
+    v, f = bench_geometry.resampled_terrain(len(faces))
+    np.testing.assert_array_equal(v, verts)
+    np.testing.assert_array_equal(f, faces)
+
+
+def test_the_resampled_terrain_interpolates_bilinearly_and_writes_its_triangles(tmp_path):
+    """Between DEM samples the height is the bilinear blend, computed here in numpy from the
+    DEM's grid; the PLY written holds the triangles asked for (read back from its header)."""
+    from dsm.scenes import terrain
+    from dsm.scenes.size import ply_triangles
+    from dsm.tools import bench_geometry
+    verts, _ = terrain.mesh(1)
+    z0 = verts[:, 2].reshape(344, 403)
+    v, f = bench_geometry.resampled_terrain(1_000_000)
+    rows, cols = bench_geometry.grid_for(1_000_000, 402 / 343)
+    assert 2 * (rows - 1) * (cols - 1) == len(f) and abs(len(f) - 1_000_000) < 0.01 * 1_000_000
+    fr, fc = np.linspace(0, 343, rows)[123], np.linspace(0, 402, cols)[456]
+    r, c = int(fr), int(fc)
+    wr, wc = fr - r, fc - c
+    z = (1 - wr) * ((1 - wc) * z0[r, c] + wc * z0[r, c + 1]) + wr * ((1 - wc) * z0[r + 1, c] + wc * z0[r + 1, c + 1])
+    assert np.isclose(v[123 * cols + 456, 2], z, rtol=0, atol=1e-9)
+    assert bench_geometry.write_ply(tmp_path / "t.ply", v[:9], np.array([[0, 1, 2], [3, 4, 5]])) == 2
+    assert ply_triangles(tmp_path / "t.ply") == 2

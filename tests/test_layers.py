@@ -440,3 +440,37 @@ def test_a_continuation_through_a_sphere_is_not_a_rehit():
     # the sphere (radius 1) covers about pi / (8/64)^2 = 201 texels of the 8 x 8 map
     assert 150 < through.sum() < 260, through.sum()
     assert smap.rehits == 0
+
+
+def test_a_hit_from_the_triangle_tables_is_the_surface_interaction_bit_for_bit():
+    """spawn.mesh_hit reads a triangle's vertices as one packet of the padded soup: its point and
+    winding normal are Mitsuba's minimal surface interaction's bits, on two meshes (the hit's
+    face offset in the soup), rays hitting both and missing both; the soup holds each
+    triangle's nine coordinates at TRI_STRIDE, as numpy reads them from the meshes' buffers."""
+    import drjit as dr
+    import mitsuba as mi
+    from dsm.maps import spawn
+    scene = mi.load_dict({"type": "scene", "a": {"type": "cube"},
+                          "b": {"type": "cube", "to_world": mi.ScalarTransform4f().translate([0, 0, 4])
+                                @ mi.ScalarTransform4f().rotate([1, 1, 0], 30)}})
+    tables = spawn.shape_extents(scene)
+    soup = np.asarray(tables.tri_pos.numpy()).reshape(-1, spawn.TRI_STRIDE)
+    want = np.concatenate([np.asarray(s.vertex_positions_buffer(), np.float32).reshape(-1, 3)[
+        np.asarray(s.faces_buffer(), np.int64).reshape(-1, 3)].reshape(-1, 9) for s in scene.shapes()])
+    assert np.array_equal(soup[:, :9], want) and not soup[:, 9:].any()
+    rng = np.random.default_rng(3)
+    n = 4000
+    o = rng.uniform([-2.5, -2.5, -3.0], [2.5, 2.5, -3.0], (n, 3)).astype(np.float32)
+    d = rng.normal([0.0, 0.0, 1.0], 0.15, (n, 3)).astype(np.float32)
+    ray = mi.Ray3f(mi.Point3f(*o.T), dr.normalize(mi.Vector3f(*d.T)))
+    pi = scene.ray_intersect_preliminary(ray, coherent=False)
+    valid = pi.is_valid()
+    shape = spawn.hit_shape(pi, valid, tables.by_id)
+    p, nrm = spawn.mesh_hit(pi, shape, tables, valid)
+    si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.Minimal, active=valid)
+    hit = valid.numpy()
+    assert 0.2 * n < hit.sum() < n                       # hits and misses both
+    for mine, theirs in ((p, si.p), (nrm, si.n)):
+        a, b = np.asarray(mine.numpy())[:, hit], np.asarray(theirs.numpy())[:, hit]      # (3, n)
+        assert np.array_equal(a.view(np.uint32), b.view(np.uint32))
+    assert set(np.unique(shape.numpy()[hit])) == {0, 1}

@@ -19,6 +19,7 @@ normal points along the ray (away from the light).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import drjit as dr
 import mitsuba as mi
@@ -168,14 +169,25 @@ def _first_and_second(scene, view, ray, extents, magnitude):
     return z1, shape1, p1, n1, z2, hit1, rehit
 
 
+class Layers(NamedTuple):
+    """What :func:`layered` builds: the layers, the rays cast by kind and how the search went."""
+    z1: object                  # mi.Float per texel
+    shape: object               # mi.UInt32, the first accepted hit's shape (NO_SHAPE: none)
+    slope: object               # mi.Float or None (not asked)
+    z2: object                  # mi.Float or None (not asked)
+    rays: dict                  # {"map_texel": n, "map_continue": continuation rays}
+    unfinished: int             # texels still searching after MAX_STEPS
+    rehits: int                 # continuation rays that hit the triangle they left again
+
+
 def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool, first: int = 0,
-            count: int | None = None, extents=None):
+            count: int | None = None, extents=None) -> Layers:
     """First (and second) accepted surface per texel under per-shape culling.
 
     Without culling, the first hit and one continuation ray make one straight-line kernel
     (:func:`_first_and_second`). With culling the search runs in rounds of ROUND steps, each
     round one kernel (no evaluation or host synchronisation between its steps); after a round
-    only the texels still searching go on, compacted.
+    only the texels still searching go on, compacted (:func:`_search`).
     Per step only what the layer needs: the preliminary intersection, the hit point and
     winding normal from the meshes' buffers (:func:`hit_geometry`), the culling test and the
     continuation ray.
@@ -184,15 +196,12 @@ def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool
 
     ``extents``: :func:`dsm.maps.spawn.shape_extents` of the scene, computed once per scene by the
     caller so that a timed build holds no pass over the meshes (:func:`build` makes them if absent).
-    Returns (z1, shape1, slope or None, z2 or None, rays by kind, unfinished texels, re-hits).
     """
     bb = scene.bbox()
     magnitude = dr.opaque(mi.Float, float(np.max(np.abs(np.concatenate([np.ravel(bb.min), np.ravel(bb.max)])))))
     n = view.n_texels - first if count is None else count
     ray = view.texel_rays(first, n)
-    modes = mi.UInt32(np.asarray(cull_modes, np.uint32))
     culls = bool(np.any(np.asarray(cull_modes) != CULL_NONE))
-    need = 2 if want_z2 else 1
     if not culls and want_z2:
         # no culling: every texel's search is its first hit and the one continuation ray beyond
         # it, straight-line in one kernel (no working state, no counters updated per step)
@@ -203,40 +212,49 @@ def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool
         dr.eval(*full.values(), rehit)
         total, rehits, left = n + _count(full["found"] > 0), _count(rehit), 0
     else:
-        none = 0xFFFFFFFF
-        full = {"o": ray.o, "z1": dr.full(mi.Float, view.far, n), "z2": dr.full(mi.Float, view.far, n),
-                "shape1": dr.full(mi.UInt32, none, n), "p1": dr.zeros(mi.Point3f, n), "n1": dr.zeros(mi.Vector3f, n),
-                "found": dr.zeros(mi.UInt32, n), "active": dr.full(mi.Bool, True, n), "cast1": dr.zeros(mi.UInt32, n),
-                "cast2": dr.zeros(mi.UInt32, n), "rehit": dr.zeros(mi.UInt32, n),
-                "prev_shape": dr.full(mi.UInt32, none, n), "prev_prim": dr.full(mi.UInt32, none, n)}
-        if not want_slope:
-            del full["p1"], full["n1"]
-        work, where, d = full, None, ray.d        # where: the work set's texels (None: all, in order)
-        steps = 0
-        while True:
-            for _ in range(min(ROUND, MAX_STEPS - steps)):
-                work = _step(scene, view, work, d, modes, culls, need, want_slope, extents, magnitude)
-            steps += ROUND
-            dr.eval(*work.values())
-            left = _count(work["active"])          # the one synchronisation per round
-            if where is None:
-                full = work
-            else:
-                for k in work:
-                    dr.scatter(full[k], work[k], where)
-            if left == 0 or steps >= MAX_STEPS:
-                break
-            pick = dr.compress(work["active"])      # the texels still searching, for the next round
-            where = pick if where is None else dr.gather(mi.UInt32, where, pick)
-            work = {k: dr.gather(type(v), v, pick) for k, v in work.items()}
-            d = dr.gather(type(d), d, pick)
-            dr.eval(*work.values(), d, where)
-        dr.eval(*full.values())
-        total = int(dr.sum(full["cast1"] + full["cast2"]).numpy().ravel()[0])
-        rehits = int(dr.sum(full["rehit"]).numpy().ravel()[0])
+        modes = mi.UInt32(np.asarray(cull_modes, np.uint32))
+        full, total, rehits, left = _search(scene, view, ray, modes, culls, 2 if want_z2 else 1, want_slope,
+                                            extents, magnitude)
     rays = {"map_texel": n, "map_continue": total - n}
     slope = plane_slope(view, full["p1"], full["n1"], full["z1"], full["found"] > 0, first) if want_slope else None
-    return (full["z1"], full["shape1"], slope, (full["z2"] if want_z2 else None), rays, left, rehits)
+    return Layers(full["z1"], full["shape1"], slope, (full["z2"] if want_z2 else None), rays, left, rehits)
+
+
+def _search(scene, view, ray, modes, culls: bool, need: int, want_slope: bool, extents, magnitude) -> tuple:
+    """The stepped search of :func:`layered`: (working state per texel, rays cast, re-hits,
+    texels still searching), in rounds of ROUND traced steps with the searching texels compacted."""
+    n, none = dr.width(ray.d), 0xFFFFFFFF
+    full = {"o": ray.o, "z1": dr.full(mi.Float, view.far, n), "z2": dr.full(mi.Float, view.far, n),
+            "shape1": dr.full(mi.UInt32, none, n), "p1": dr.zeros(mi.Point3f, n), "n1": dr.zeros(mi.Vector3f, n),
+            "found": dr.zeros(mi.UInt32, n), "active": dr.full(mi.Bool, True, n), "cast1": dr.zeros(mi.UInt32, n),
+            "cast2": dr.zeros(mi.UInt32, n), "rehit": dr.zeros(mi.UInt32, n),
+            "prev_shape": dr.full(mi.UInt32, none, n), "prev_prim": dr.full(mi.UInt32, none, n)}
+    if not want_slope:
+        del full["p1"], full["n1"]
+    work, where, d = full, None, ray.d        # where: the work set's texels (None: all, in order)
+    steps = 0
+    while True:
+        for _ in range(min(ROUND, MAX_STEPS - steps)):
+            work = _step(scene, view, work, d, modes, culls, need, want_slope, extents, magnitude)
+        steps += ROUND
+        dr.eval(*work.values())
+        left = _count(work["active"])          # the one synchronisation per round
+        if where is None:
+            full = work
+        else:
+            for k in work:
+                dr.scatter(full[k], work[k], where)
+        if left == 0 or steps >= MAX_STEPS:
+            break
+        pick = dr.compress(work["active"])      # the texels still searching, for the next round
+        where = pick if where is None else dr.gather(mi.UInt32, where, pick)
+        work = {k: dr.gather(type(v), v, pick) for k, v in work.items()}
+        d = dr.gather(type(d), d, pick)
+        dr.eval(*work.values(), d, where)
+    dr.eval(*full.values())
+    total = int(dr.sum(full["cast1"] + full["cast2"]).numpy().ravel()[0])
+    rehits = int(dr.sum(full["rehit"]).numpy().ravel()[0])
+    return full, total, rehits, left
 
 
 def is_layered(needs, cull_modes) -> bool:
@@ -254,10 +272,9 @@ def _build_range(scene, view, needs, modes, first, count, extents=None):
             out["slope"] = plane_slope(view, p, n, z1, valid, first)
         return out, {"map_texel": count, "map_continue": 0}, 0, 0
     modes = modes if modes is not None else np.zeros(len(scene.shapes()), np.uint32)
-    z1, shape, slope, z2, rays, unfinished, rehits = layered(scene, view, modes, "z2" in needs, "slope" in needs,
-                                                             first, count, extents)
-    out = {"z1": z1, "shape": shape, "slope": slope, "z2": z2}
-    return {k: v for k, v in out.items() if v is not None}, rays, unfinished, rehits
+    lay = layered(scene, view, modes, "z2" in needs, "slope" in needs, first, count, extents)
+    out = {"z1": lay.z1, "shape": lay.shape, "slope": lay.slope, "z2": lay.z2}
+    return {k: v for k, v in out.items() if v is not None}, lay.rays, lay.unfinished, lay.rehits
 
 
 def build(scene, view, needs, culling: str = "none", cull_modes=None, tile: int | None = None,

@@ -140,15 +140,12 @@ FRAME_SCHEMES = ("none", "constant", "slope_scaled", "normal_angle", "normal_off
 TABLE_FIELDS = ("tri_pos", "face_offset", "by_id")   # spawn.ShapeTables' arrays beside its pair
 
 
-def frame_cost(spec, light, R: int = 1024, camera: int = 1024, repeats: int = 5) -> dict:
-    """(6): one frame's map build and single-layer lookups, as wall, kernel and frozen time."""
-    import copy
-    import time
-
+def frame_cost(spec, light, R: int = 1024, camera: int = 1024, repeats: int = 5, frozen: bool = True) -> dict:
+    """(6): one frame's map build and single-layer lookups, as wall, kernel and (``frozen``) frozen time."""
     import drjit as dr
     import mitsuba as mi
 
-    from ..maps import lookup, shadowmap, spawn
+    from ..maps import shadowmap, spawn
     from ..scenes import load as scenes
     from .. import schemes
     from . import timing
@@ -162,7 +159,6 @@ def frame_cost(spec, light, R: int = 1024, camera: int = 1024, repeats: int = 5)
     view = make_view(light, R, points_np(p), sd.bbox)
     mods = [schemes.get(name) for name in FRAME_SCHEMES]
     needs = set().union(*(set(m.NEEDS) for m in mods))
-    prms = [m.Params() for m in mods]
     rays = view.texel_rays(0, R * R)
     dr.eval(rays)
 
@@ -170,10 +166,32 @@ def frame_cost(spec, light, R: int = 1024, camera: int = 1024, repeats: int = 5)
         """The bare cast: the preliminary intersection of every texel ray (distances only)."""
         return (sd.scene.ray_intersect_preliminary(rays, coherent=shadowmap.COHERENT).t,)
 
-    # the view's and the shape tables' Dr.Jit values are the frame's inputs (a frozen function
-    # sees only its arguments); the tables are made once per scene, as the runner does
+    ext = spawn.shape_extents(sd.scene)                   # made once per scene, as the runner does
+    frame, state = _frame_fn(sd, view, mods, needs, ext)
+    args = (sd.scene, state, p, n)
+    wall = timing.measure(lambda: frame(*args), repeats)[1]
+    kernel_ms, kernels = timing.kernel_ms(lambda: frame(*args), repeats)
+    first = lambda: shadowmap.arrays(shadowmap.build(sd.scene, view, set(), extents=ext))   # noqa: E731
+    row = {"scene": spec.label, "map": R, "camera": camera,
+           "receivers": dr.width(p), "schemes": list(FRAME_SCHEMES), "wall_ms": wall.ms,
+           "compile_ms": wall.compile_ms, "kernel_ms": kernel_ms, "kernels": kernels,
+           "bare_kernel_ms": timing.kernel_ms(bare, repeats)[0], "bare_wall_ms": timing.measure(bare, repeats)[1].ms,
+           "build_kernel_ms": timing.kernel_ms(first, repeats)[0], "build_wall_ms": timing.measure(first, repeats)[1].ms}
+    if frozen:
+        row.update(_frozen_ms(frame, args, repeats))
+    return row
+
+
+def _frame_fn(sd, view, mods, needs, ext) -> tuple:
+    """(frame function of (scene, state, p, n), state): the view's and the shape tables' Dr.Jit
+    values are the frame's inputs, since a frozen function sees only its arguments."""
+    import copy
+
+    import drjit as dr
+
+    from ..maps import lookup, shadowmap, spawn
+    prms = [m.Params() for m in mods]
     state = {k: v for k, v in vars(view).items() if dr.is_array_v(v)}
-    ext = spawn.shape_extents(sd.scene)
     state["tables"] = {"pair": tuple(ext), **{k: getattr(ext, k) for k in TABLE_FIELDS}}
 
     def frame(scene, state, p, n):
@@ -188,16 +206,16 @@ def frame_cost(spec, light, R: int = 1024, camera: int = 1024, repeats: int = 5)
         smap = shadowmap.build(scene, v, needs, extents=tables)
         rx = lookup.Receiver.make(v, p, n, sd.diagonal)
         return tuple(lookup.visibility(m, prm, rx, smap)[0] for m, prm in zip(mods, prms)) + (smap.z1,)
+    return frame, state
 
-    args = (sd.scene, state, p, n)
-    wall = timing.measure(lambda: frame(*args), repeats)[1]
-    kernel_ms, kernels = timing.kernel_ms(lambda: frame(*args), repeats)
-    bare_kernel_ms, _ = timing.kernel_ms(bare, repeats)
-    row = {"scene": spec.label, "map": R, "camera": camera,
-           "receivers": dr.width(p), "schemes": list(FRAME_SCHEMES), "wall_ms": wall.ms,
-           "compile_ms": wall.compile_ms, "kernel_ms": kernel_ms, "kernels": kernels,
-           "bare_kernel_ms": bare_kernel_ms, "bare_wall_ms": timing.measure(bare, repeats)[1].ms}
-    try:                                                  # the frame recorded once, then replayed
+
+def _frozen_ms(frame, args, repeats) -> dict:
+    """The frame recorded once by ``dr.freeze`` and replayed: the median replay (ms) and whether a
+    replay equals a traced frame, or why freezing failed."""
+    import time
+
+    import drjit as dr
+    try:
         frozen = dr.freeze(frame)
         for _ in range(3):                                # record, then replays
             out = frozen(*args)
@@ -213,10 +231,45 @@ def frame_cost(spec, light, R: int = 1024, camera: int = 1024, repeats: int = 5)
             dr.eval(*out)
             dr.sync_thread()
             ts.append((time.perf_counter() - t0) * 1e3)
-        row.update(frozen_ms=float(np.median(ts)), frozen_same=same)
+        return {"frozen_ms": float(np.median(ts)), "frozen_same": same}
     except Exception as exc:                              # noqa: BLE001 (reported, not hidden)
-        row.update(frozen_ms=None, frozen_error=f"{type(exc).__name__}: {str(exc).splitlines()[0][:200]}")
-    return row
+        return {"frozen_ms": None, "frozen_error": f"{type(exc).__name__}: {str(exc).splitlines()[0][:200]}"}
+
+
+def mesh_cost(ply: Path, label: str, triangles: int, R: int, camera: int, repeats: int) -> dict:
+    """The first-layer build (kernel and wall time) and one frame (:func:`frame_cost`) on one mesh."""
+    from ..config.read import LightSpec, SceneSpec
+    from ..scenes.load import FileParams
+    spec = SceneSpec(file=ply, params=FileParams(up="z", ground="no"), label=label)
+    light = LightSpec("directional", direction=(0.25, -1.0, 0.15))
+    f = frame_cost(spec, light, R=R, camera=camera, repeats=repeats, frozen=False)
+    return {"scene": label, "triangles": triangles, "map": R, "camera": camera,
+            "build_kernel_ms": f["build_kernel_ms"], "build_wall_ms": f["build_wall_ms"],
+            "frame_kernel_ms": f["kernel_ms"], "frame_wall_ms": f["wall_ms"], "bare_kernel_ms": f["bare_kernel_ms"]}
+
+
+def geometry_cost(out: Path, triangles=None, R: int = 1024, camera: int = 512, repeats: int = 3,
+                  memory: bool = True) -> dict:
+    """(7) (:mod:`dsm.tools.bench_geometry`): rows per mesh size (default TRIANGLES) and the
+    exponents of build and frame time against triangles."""
+    from .bench_geometry import TRIANGLES, resampled_terrain, run_peak, write_ply
+    triangles = TRIANGLES if triangles is None else triangles
+    work = out / "geometry"
+    rows = []
+    for n in triangles:
+        ply = work / f"terrain_{n}.ply"
+        tris = write_ply(ply, *resampled_terrain(n))
+        row = mesh_cost(ply, f"terrain_{tris}", tris, R, camera, repeats)
+        if memory:
+            row.update(run_peak(ply, work))
+        rows.append(row)
+        ply.unlink()
+    if work.is_dir() and not any(work.iterdir()):
+        work.rmdir()
+    tri = [r["triangles"] for r in rows]
+    exps = {k: fitted_exponent(tri, [r[k] for r in rows])
+            for k in ("build_kernel_ms", "build_wall_ms", "frame_kernel_ms", "frame_wall_ms")}
+    return {"rows": rows, "exponents": exps}
 
 
 def meshes_problem(meshes) -> str | None:
@@ -232,17 +285,13 @@ def meshes_problem(meshes) -> str | None:
 
 
 def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int = 5, meshes: Path | None = None,
-              variant: str | None = None, scaling_resolutions=(), sweep: bool = False, frame: bool = True) -> dict:
-    """Measure (1) to (6) (scaling, sweep and frame as asked), write bench.md and bench.json into ``out``; the dict."""
+              variant: str | None = None, scaling_resolutions=(), sweep: bool = False, frame: bool = True,
+              geometry=()) -> dict:
+    """Measure (1) to (7) (scaling, sweep, frame and geometry as asked), write bench.md and bench.json into ``out``; the dict."""
     import drjit as dr
-    import mitsuba as mi
 
     from . import env, timing
-    from ..maps import lookup, shadowmap, spawn
-    from ..scenes import load as scenes
-    from .. import schemes
-    from ..pipeline import closedness, cull_modes, make_view, points_np as _points_np
-    from ..scenes.gbuffer import cast
+    from ..experiment.plan import physical_memory
 
     problem = meshes_problem(meshes)
     if problem:          # the real-mesh rows would be dropped without a word
@@ -250,80 +299,19 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
     variant = env.use_variant(variant)
     timing.enable_history()
     meshes = Path(meshes) if meshes else MESHES
-    from ..experiment.plan import physical_memory
     budget = physical_memory() // 4           # the default memory budget ([memory] budget_mb)
     builds, lookups, scale = [], [], []
     for spec in _scenes(meshes):
-        sd = scenes.load(spec, (512, 512))
-        lt = _light_for(spec)
-        gb = cast(sd.scene, sd.sensor, 512, 512)
-        pix = mi.UInt32(np.flatnonzero(gb.hit).astype(np.uint32))
-        ext = spawn.shape_extents(sd.scene)          # once per scene, outside the timed builds
-        per_shape = cull_modes("back_closed", closedness(sd)[0])   # dual's default: culls closed meshes only
-        p, n = dr.gather(mi.Point3f, gb.p, pix), dr.gather(mi.Vector3f, gb.n, pix)
-        for R in resolutions:
-            view = make_view(lt, R, _points_np(p), sd.bbox)
-            rays = view.texel_rays(0, R * R)
-            dr.eval(rays)
-            def full_cast():
-                """A full ``ray_intersect`` of the texel rays (the build's baseline): t, p, n."""
-                si = sd.scene.ray_intersect(rays, mi.RayFlags.All, shadowmap.COHERENT)
-                return si.t, si.p, si.n
-            full = timing.measure(full_cast, repeats)[1]
-            def bare_cast(coherent=shadowmap.COHERENT):
-                """The preliminary intersection of the texel rays (what the build casts), distances only."""
-                return (sd.scene.ray_intersect_preliminary(rays, coherent=coherent).t,)
-            bare = timing.measure(bare_cast, repeats)[1]
-            # the packet-dependent coherent traversal the builds do not use: what exactness costs
-            coherent = timing.measure(lambda: bare_cast(True), repeats)[1]
-            k_bare = timing.kernel_ms(bare_cast, repeats)[0]   # kernel time: the kernels' own, no tracing
-            rays = None                              # free the texel rays before the builds
-            builds_of = {"first": lambda: shadowmap.arrays(shadowmap.build(sd.scene, view, set(), extents=ext)),
-                         "two": lambda: shadowmap.arrays(shadowmap.build(sd.scene, view, {"z2"}, extents=ext)),
-                         "cull": lambda: shadowmap.arrays(shadowmap.build(sd.scene, view, {"z2"}, "back_closed",
-                                                                          per_shape, extents=ext))}
-            (first, first_mb), (two, two_mb), (cull, cull_mb) = (_peak(timing, f, repeats)[1:] for f in builds_of.values())
-            k_first, k_two, k_cull = (timing.kernel_ms(f, repeats)[0] for f in builds_of.values())
-            builds.append({"scene": spec.label, "resolution": R, "ray_intersect_ms": full.ms, "bare_ms": bare.ms,
-                           "bare_coherent_ms": coherent.ms, "bare_over_coherent": bare.ms / coherent.ms,
-                           "two_culled_ms": cull.ms, "two_culled_over_first": cull.ms / first.ms,
-                           "two_over_bare": two.ms / bare.ms, "two_culled_over_bare": cull.ms / bare.ms,
-                           "two_culled_peak_mb": cull_mb, "two_culled_compile_ms": cull.compile_ms,
-                           "first_layer_ms": first.ms, "first_over_ray_intersect": first.ms / full.ms,
-                           "two_layer_ms": two.ms, "first_over_bare": first.ms / bare.ms,
-                           "two_over_first": two.ms / first.ms, "mrays_per_s": R * R / bare.ms / 1e3,
-                           "first_peak_mb": first_mb, "two_peak_mb": two_mb,
-                           "first_compile_ms": first.compile_ms, "two_compile_ms": two.compile_ms,
-                           "kernel_bare_ms": k_bare, "kernel_first_ms": k_first, "kernel_two_ms": k_two,
-                           "kernel_two_culled_ms": k_cull})
-            if R == 1024:
-                smap = shadowmap.build(sd.scene, view, {"z2", "slope"}, extents=ext)
-                rx = lookup.Receiver.make(view, p, n, sd.diagonal)
-                dr.eval(rx.depth, rx.u_map, rx.v_map, rx.texel_world, rx.to_light)
-                base = None
-                for name in ("constant", "slope_scaled", "adaptive", "dual", "receiver_plane", "normal_offset",
-                             "midpoint", "none"):
-                    mod = schemes.get(name)
-                    prm = mod.Params() if name != "dual" else mod.Params(culling="none")
-                    t, mb = _peak(timing, lambda: lookup.visibility(mod, prm, rx, smap), repeats)[1:]
-                    base = base or t.ms
-                    lookups.append({"scene": spec.label, "scheme": name, "receivers": dr.width(p),
-                                    "lookup_ms": t.ms, "over_constant": t.ms / base,
-                                    "compile_ms": t.compile_ms, "peak_mb": mb})
-        if scaling_resolutions:
-            scale += scaling(sd, lambda R: make_view(lt, R, _points_np(p), sd.bbox), scaling_resolutions,
-                             max(1, min(repeats, 3)), ext, budget)
-    exponents = {}
-    for label in dict.fromkeys(r["scene"] for r in scale):
-        rows = [r for r in scale if r["scene"] == label]
-        exponents[label] = {k: fitted_exponent([r["texels"] for r in rows], [r[k + "_ms"] for r in rows])
-                            for k in ("first", "two")}
+        b, x, s = _scene_bench(spec, resolutions, repeats, scaling_resolutions, budget)
+        builds, lookups, scale = builds + b, lookups + x, scale + s
     result = {"variant": variant, "threads": dr.thread_count(), "repeats": repeats, "builds": builds,
-              "lookups": lookups, "dou_table1_ms": DOU_TABLE1, "scaling": scale, "exponents": exponents,
+              "lookups": lookups, "dou_table1_ms": DOU_TABLE1, "scaling": scale, "exponents": _exponents(scale),
               "budget_mb": budget / 2 ** 20}
     if frame:
         specs = _scenes(meshes)
         result["frame"] = frame_cost(specs[-1], _light_for(specs[-1]), repeats=max(repeats, 5))
+    if geometry:
+        result["geometry"] = geometry_cost(out, tuple(geometry), repeats=max(1, min(repeats, 3)))
     if sweep:
         result["sweep"] = sweep_throughput(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -332,7 +320,120 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
     return result
 
 
+def _exponents(scale) -> dict:
+    """Per scene of the scaling rows: the fitted exponent of first- and two-layer time against texels."""
+    out = {}
+    for label in dict.fromkeys(r["scene"] for r in scale):
+        rows = [r for r in scale if r["scene"] == label]
+        out[label] = {k: fitted_exponent([r["texels"] for r in rows], [r[k + "_ms"] for r in rows])
+                      for k in ("first", "two")}
+    return out
+
+
+def _scene_bench(spec, resolutions, repeats, scaling_resolutions, budget) -> tuple:
+    """(build rows, lookup rows, scaling rows) of one scene: (1), (2) at 1024^2 and (4)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from ..maps import spawn
+    from ..scenes import load as scenes
+    from ..pipeline import closedness, cull_modes, make_view, points_np
+    from ..scenes.gbuffer import cast
+    sd = scenes.load(spec, (512, 512))
+    lt = _light_for(spec)
+    gb = cast(sd.scene, sd.sensor, 512, 512)
+    pix = mi.UInt32(np.flatnonzero(gb.hit).astype(np.uint32))
+    ext = spawn.shape_extents(sd.scene)          # once per scene, outside the timed builds
+    per_shape = cull_modes("back_closed", closedness(sd)[0])   # dual's default: culls closed meshes only
+    p, n = dr.gather(mi.Point3f, gb.p, pix), dr.gather(mi.Vector3f, gb.n, pix)
+    builds, lookups = [], []
+    for R in resolutions:
+        view = make_view(lt, R, points_np(p), sd.bbox)
+        builds.append(_build_row(sd, spec.label, view, R, repeats, ext, per_shape))
+        if R == 1024:
+            lookups += _lookup_rows(sd, spec.label, view, p, n, ext, repeats)
+    scale = []
+    if scaling_resolutions:
+        scale = scaling(sd, lambda R: make_view(lt, R, points_np(p), sd.bbox), scaling_resolutions,
+                        max(1, min(repeats, 3)), ext, budget)
+    return builds, lookups, scale
+
+
+def _build_row(sd, label, view, R, repeats, ext, per_shape) -> dict:
+    """(1) at one resolution: the builds against a full and a bare cast of the same texel rays,
+    wall clock back to back and kernel time interleaved (one call of each in turn per repeat)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from ..maps import shadowmap
+    from . import timing
+    rays = view.texel_rays(0, R * R)
+    dr.eval(rays)
+
+    def full_cast():
+        """A full ``ray_intersect`` of the texel rays (the build's baseline): t, p, n."""
+        si = sd.scene.ray_intersect(rays, mi.RayFlags.All, shadowmap.COHERENT)
+        return si.t, si.p, si.n
+
+    def bare_cast(coherent=shadowmap.COHERENT):
+        """The preliminary intersection of the texel rays (what the build casts), distances only."""
+        return (sd.scene.ray_intersect_preliminary(rays, coherent=coherent).t,)
+    full = timing.measure(full_cast, repeats)[1]
+    bare = timing.measure(bare_cast, repeats)[1]
+    # the packet-dependent coherent traversal the builds do not use: what exactness costs
+    coherent = timing.measure(lambda: bare_cast(True), repeats)[1]
+    builds_of = {"first": lambda: shadowmap.arrays(shadowmap.build(sd.scene, view, set(), extents=ext)),
+                 "two": lambda: shadowmap.arrays(shadowmap.build(sd.scene, view, {"z2"}, extents=ext)),
+                 "cull": lambda: shadowmap.arrays(shadowmap.build(sd.scene, view, {"z2"}, "back_closed",
+                                                                  per_shape, extents=ext))}
+    (first, first_mb), (two, two_mb), (cull, cull_mb) = (_peak(timing, f, repeats)[1:] for f in builds_of.values())
+    k = timing.kernel_ms_interleaved({"bare": bare_cast, **builds_of}, repeats)
+    return {"scene": label, "resolution": R, "ray_intersect_ms": full.ms, "bare_ms": bare.ms,
+            "bare_coherent_ms": coherent.ms, "bare_over_coherent": bare.ms / coherent.ms,
+            "two_culled_ms": cull.ms, "two_culled_over_first": cull.ms / first.ms,
+            "two_over_bare": two.ms / bare.ms, "two_culled_over_bare": cull.ms / bare.ms,
+            "two_culled_peak_mb": cull_mb, "two_culled_compile_ms": cull.compile_ms,
+            "first_layer_ms": first.ms, "first_over_ray_intersect": first.ms / full.ms,
+            "two_layer_ms": two.ms, "first_over_bare": first.ms / bare.ms,
+            "two_over_first": two.ms / first.ms, "mrays_per_s": R * R / bare.ms / 1e3,
+            "first_peak_mb": first_mb, "two_peak_mb": two_mb,
+            "first_compile_ms": first.compile_ms, "two_compile_ms": two.compile_ms,
+            "kernel_bare_ms": k["bare"], "kernel_first_ms": k["first"], "kernel_two_ms": k["two"],
+            "kernel_two_culled_ms": k["cull"]}
+
+
+def _lookup_rows(sd, label, view, p, n, ext, repeats) -> list:
+    """(2) and (3): each scheme's lookup on a 1024^2 two-layer map with slope, against constant bias's."""
+    import drjit as dr
+
+    from ..maps import lookup, shadowmap
+    from .. import schemes
+    from . import timing
+    smap = shadowmap.build(sd.scene, view, {"z2", "slope"}, extents=ext)
+    rx = lookup.Receiver.make(view, p, n, sd.diagonal)
+    dr.eval(rx.depth, rx.u_map, rx.v_map, rx.texel_world, rx.to_light)
+    rows, base = [], None
+    for name in ("constant", "slope_scaled", "adaptive", "dual", "receiver_plane", "normal_offset", "midpoint",
+                 "none"):
+        mod = schemes.get(name)
+        prm = mod.Params() if name != "dual" else mod.Params(culling="none")
+        t, mb = _peak(timing, lambda: lookup.visibility(mod, prm, rx, smap), repeats)[1:]
+        base = base or t.ms
+        rows.append({"scene": label, "scheme": name, "receivers": dr.width(p), "lookup_ms": t.ms,
+                     "over_constant": t.ms / base, "compile_ms": t.compile_ms, "peak_mb": mb})
+    return rows
+
+
 def _markdown(r) -> str:
+    """bench.md: every section measured, in order."""
+    from .bench_geometry import markdown as geometry_md
+    lines = _md_builds(r) + _md_two(r) + _md_lookups(r) + _md_scaling(r) + _md_frame(r)
+    lines += geometry_md(r["geometry"]) if r.get("geometry") else []
+    return "\n".join(lines + _md_sweep(r)) + "\n"
+
+
+def _md_builds(r) -> list:
+    """Section (1): builds against a full and a bare cast, wall clock."""
     lines = [f"# dsm bench ({r['variant']}, {r['threads']} threads, median of {r['repeats']} warm runs)", "",
              "## (1) Map build against a bare ray cast of the same texel rays", "",
              "Goal: first layer / ray_intersect <= 1.2. Peak: Dr.Jit's allocation watermark during the build "
@@ -349,7 +450,12 @@ def _markdown(r) -> str:
                      f"{b['first_over_bare']:.2f} | {b['two_layer_ms']:.2f} | {b['two_over_first']:.2f} | "
                      f"{b['first_peak_mb']:.1f} | {b['two_peak_mb']:.1f} | "
                      f"{b['first_compile_ms']:.0f} / {b['two_compile_ms']:.0f} |")
-    lines += ["", "## (1b) Two layers (z1, z2) against the first layer and a bare preliminary cast", "",
+    return lines
+
+
+def _md_two(r) -> list:
+    """Section (1b): two layers against the first and a bare cast, wall clock and kernel time."""
+    lines = ["", "## (1b) Two layers (z1, z2) against the first layer and a bare preliminary cast", "",
               "Goals: two / first <= 2.0 without culling, <= 2.5 with per-shape culling (back_closed, dual's "
               "default); two layers / preliminary <= 2.2.", "",
               "| scene | R | preliminary ms | first ms | two ms | two / first | two / preliminary | "
@@ -360,16 +466,23 @@ def _markdown(r) -> str:
                      f"{b['two_culled_ms']:.2f} | {b['two_culled_over_first']:.2f} | "
                      f"{b['two_culled_over_bare']:.2f} |")
     lines += ["", "The same builds as kernel time (each kernel's own execution time from Dr.Jit's kernel "
-              "history, summed over the kernels of one build; Python's tracing and launch overhead excluded):", "",
-              "| scene | R | preliminary ms | first ms | two ms | two / first | two / preliminary | two culled ms | "
-              "culled / first |", "|---" * 9 + "|"]
+              "history, summed over the kernels of one build; Python's tracing and launch overhead excluded). "
+              "The four are timed interleaved, one call of each in turn per repeat, so a change of the machine's "
+              "load falls on all of them. Goals: first / preliminary <= 1.5, two / preliminary <= 2.5.", "",
+              "| scene | R | preliminary ms | first ms | first / preliminary | two ms | two / first | "
+              "two / preliminary | two culled ms | culled / first |", "|---" * 10 + "|"]
     for b in r["builds"]:
         lines.append(f"| {b['scene']} | {b['resolution']} | {b['kernel_bare_ms']:.3f} | "
-                     f"{b['kernel_first_ms']:.3f} | {b['kernel_two_ms']:.3f} | "
-                     f"{b['kernel_two_ms'] / b['kernel_first_ms']:.2f} | "
+                     f"{b['kernel_first_ms']:.3f} | {b['kernel_first_ms'] / b['kernel_bare_ms']:.2f} | "
+                     f"{b['kernel_two_ms']:.3f} | {b['kernel_two_ms'] / b['kernel_first_ms']:.2f} | "
                      f"{b['kernel_two_ms'] / b['kernel_bare_ms']:.2f} | {b['kernel_two_culled_ms']:.3f} | "
                      f"{b['kernel_two_culled_ms'] / b['kernel_first_ms']:.2f} |")
-    lines += ["", "Weiskopf & Ertl, Table 1: the dual map's build costs about twice the single map's.", "",
+    return lines
+
+
+def _md_lookups(r) -> list:
+    """Sections (2) and (3): lookups per scheme against constant bias, and their peak memory."""
+    lines = ["", "Weiskopf & Ertl, Table 1: the dual map's build costs about twice the single map's.", "",
               "## (2) Lookup time per scheme (1024^2 map, 512^2 camera) as a ratio to constant bias, "
               "and (3) its peak memory", "",
               "| scene | scheme | receivers | lookup ms | / constant | Dou et al. Table 1 / constant | peak MB |",
@@ -381,6 +494,12 @@ def _markdown(r) -> str:
                      f"{x['over_constant']:.2f} | {ref} | {x['peak_mb']:.1f} |")
     lines += ["", "Dou et al.'s ratios are of whole frames on a GTX 580 (1024^2 map, Sponza); ours are of the "
               "lookup alone, so the map build is in the first table."]
+    return lines
+
+
+def _md_scaling(r) -> list:
+    """Section (4): build time against resolution, with the fitted exponents."""
+    lines = []
     if r.get("scaling"):
         lines += ["", f"## (4) Build time against resolution (tiled within the memory budget of "
                   f"{r['budget_mb']:.0f} MB)", "",
@@ -394,6 +513,12 @@ def _markdown(r) -> str:
                   "| scene | first layer | two layers |", "|---|---|---|"]
         for label, e in r["exponents"].items():
             lines.append(f"| {label} | {e['first']:.3f} | {e['two']:.3f} |")
+    return lines
+
+
+def _md_frame(r) -> list:
+    """Section (6): one frame's kernel, frozen and wall time."""
+    lines = []
     if r.get("frame"):
         f = r["frame"]
         frozen = (f"{f['frozen_ms']:.3f} ms (replays equal to a traced frame: {f['frozen_same']})"
@@ -408,6 +533,12 @@ def _markdown(r) -> str:
                   f"| bare ray_intersect_preliminary of the map's rays, kernel time | {f['bare_kernel_ms']:.3f} |",
                   f"| bare ray_intersect_preliminary, wall clock | {f['bare_wall_ms']:.3f} |",
                   f"| compile (cold frame) | {f['compile_ms']:.0f} |"]
+    return lines
+
+
+def _md_sweep(r) -> list:
+    """Section (5): sweep throughput, local against a local Ray cluster."""
+    lines = []
     if r.get("sweep"):
         w = r["sweep"]
         lines += ["", "## (5) Sweep throughput: a local run against a local Ray cluster", ""]
@@ -418,4 +549,4 @@ def _markdown(r) -> str:
                       "not counted; each Ray task loads its scene, G-buffer and reference again."]
         else:
             lines += [f"{w['cases']} cases locally: {w['local_cases_per_s']:.2f} cases/s; Ray: {w['ray']}."]
-    return "\n".join(lines) + "\n"
+    return lines

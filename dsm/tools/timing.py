@@ -86,3 +86,22 @@ def peak_bytes() -> int:
     """Dr.Jit's allocation watermark since ``reset_peak`` (the device's memory on CUDA, host on LLVM)."""
     dr.sync_thread()
     return int(dr.detail.malloc_watermark(_backend()))
+
+
+def kernel_ms_interleaved(fns: dict, repeats: int = 3) -> dict:
+    """{name: median over ``repeats`` rounds of one call's summed kernel execution time, ms} for
+    each function of ``fns``, called in turn within every round (after one cold call each), so
+    that a change of the machine's load between functions falls on all of them: their ratios
+    hold under load where back-to-back medians do not."""
+    enable_history()
+    for fn in fns.values():
+        _run(fn)                                          # cold: compiled here, not counted
+    sums = {name: [] for name in fns}
+    for _ in range(max(1, repeats)):
+        for name, fn in fns.items():
+            dr.kernel_history_clear()
+            _run(fn)
+            hist = [k for k in dr.kernel_history() if k.get("type") == dr.KernelType.JIT]
+            sums[name].append(sum(k.get("execution_time", 0.0) for k in hist))
+    dr.kernel_history_clear()
+    return {name: statistics.median(v) for name, v in sums.items()}
