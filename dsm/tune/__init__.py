@@ -1,9 +1,9 @@
 """Tuning by gradient (dsm tune): relaxed objective, search, bias maps, resume."""
 import importlib
 
-# The names of the module this folder replaced (dsm/{name}.py before the layout of
-# docs/design.md): an old import path kept as a thin alias for one release.
-_OLD_HOMES = ('tuner',)
+# The names of the module this folder replaced (dsm/tune.py before the layout of docs/design.md, then
+# tuner.py, split into these): an old import path kept as a thin alias for one release.
+_OLD_HOMES = ('tuner', 'output', 'search', 'refine', 'compare', 'relax', 'evaluate', 'cases', 'bias_map')
 
 
 def __getattr__(name: str):
