@@ -172,14 +172,14 @@ def residual_bias_map(tc, train, held, groups, base) -> dict:
     m_tr, _ = rm.apply(fit, gain, rx_tr, block)
     m_he, covered = rm.apply(fit, gain, rx_he, block)
     moved = rm.residuals(fit, gain)
-    counts = lambda m, v: counts(int(((m < 0) & v).sum()), int(((m >= 0) & ~v).sum()), int(v.size), int(v.sum()))
+    counted = lambda m, v: counts(int(((m < 0) & v).sum()), int(((m >= 0) & ~v).sum()), int(v.size), int(v.sum()))
     split = np.cumsum([c.n for c in held])[:-1]
     return {"fit": "residual", "base": f"{base['scheme']} {base['params']}", "block": block, "radius": radius,
             "min_gain": gain if ch["chosen"] else None, "chosen": ch["chosen"] is not None,
             "validation": {"none": ch["none"], "scores": ch["scores"]}, "unit": "texel",
             "values": np.stack([fit["keys"].astype(np.float64), moved]), "blocks": int(fit["keys"].size),
             "blocks_trained": int(fit["keys"].size), "blocks_moved": int((moved != 0).sum()), "steps": [],
-            "train": counts(m_tr, rx_tr["v_star"]), "heldout": counts(m_he, rx_he["v_star"]),
+            "train": counted(m_tr, rx_tr["v_star"]), "heldout": counted(m_he, rx_he["v_star"]),
             "heldout_lit": np.split(m_he >= 0, split), "heldout_covered": np.split(covered, split),
             "heldout_covered_fraction": float(covered.mean()) if covered.size else NAN,
             "init": [], "total_ms": (sync_clock() - t0) * 1e3}
