@@ -201,6 +201,38 @@ def test_bad_tune_tables_are_refused_before_work(tune, key):
     assert e.value.key == key
 
 
+def test_a_bad_tune_table_is_refused_when_the_config_file_is_read(tmp_path):
+    """[tune] is read with the config: loading the file alone raises, naming the file and the key."""
+    from dsm import ConfigError
+    from dsm.config.read import load
+    path = tmp_path / "bad.toml"
+    path.write_text('[[scene]]\nbuiltin = "plane"\n[[scheme]]\nname = "constant"\n'
+                    '[tune]\nsteps = 4\n[tune.range.constant]\nbias = [0.5, 0.1]\n')
+    with pytest.raises(ConfigError) as e:
+        load(path)
+    assert (e.value.source, e.value.key) == (str(path), "tune.range.constant.bias")
+    assert str(e.value) == f"{path}: tune.range.constant.bias: lo must be below hi, got [0.5, 0.1]"
+
+
+def test_the_config_carries_its_tune_spec_typed_and_frozen():
+    """Config.tune holds the [tune] values as given, the experiment's seed as the default seed and
+    every continuous parameter of a tuned scheme; a config without [tune] has none."""
+    import dataclasses
+    from dsm.config.read import coerce
+    from dsm.config.tune import TuneSpec
+    raw = _cfg({"builtin": "plane"}, [{"name": "constant"}, {"name": "slope_scaled"}],
+               {"steps": 7, "lambda": 2.5, "temperature": [0.5, 0.1], "params": {"slope_scaled": ["slope"]}})
+    raw["experiment"]["seed"] = 11
+    spec = coerce(raw).tune
+    assert isinstance(spec, TuneSpec)
+    assert (spec.steps, spec.lam, spec.temperature, spec.seed) == (7, 2.5, (0.5, 0.1), 11)
+    assert spec.params == {"constant": ("bias",), "slope_scaled": ("slope",)}
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        spec.steps = 8
+    del raw["tune"]
+    assert coerce(raw).tune is None
+
+
 def test_schemes_without_a_continuous_parameter_are_refused():
     from dsm.tune import tuner as tu
     from dsm import ConfigError

@@ -47,6 +47,10 @@ against the per-texel oracle of the held-out views and against the best tuned gl
 **Comparisons.** Constant bias against the exact oracle (world or texel, by the bias's unit)
 of the training views; every scheme against a grid search over the same box with at most the
 same number of (hard) loss evaluations, both timed (``dr.sync_thread`` before each clock).
+
+This module is the run: what dsm tune refuses of a config (``parse_tune``) and ``run_tune``; ``[tune]``
+itself is read with the config (dsm.config.tune), the stages are cases, relax, evaluate, search (with
+refine and compare), bias_map (with residual_map) and output.
 """
 from __future__ import annotations
 
