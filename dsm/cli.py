@@ -598,6 +598,7 @@ TUNE_FILES = ("tuned.toml", "table.md", "steps.csv", "tune.json", "plots/tune_lo
 def _tune_held(tc, out: Path, force: bool = False, resume: bool = False) -> int:
     from .tune import tuner as tunemod
     from .tune import resume as tune_resume
+    from .tune.output import table_text
     resuming = resume and bool(entries(out))
     if resuming:
         problem = tune_resume.state_problem(out, tc.config.name)
@@ -622,7 +623,7 @@ def _tune_held(tc, out: Path, force: bool = False, resume: bool = False) -> int:
         res = tunemod.run_tune(tc, out, progress=True, resume=resuming)
     except cfgmod.ConfigError as e:
         return _config_error(e)
-    print(tunemod.table_text(res))
+    print(table_text(res))
     if resuming:
         print(f"dsm: resumed: {res.resumed} finished schemes kept, {len(res.schemes) - res.resumed} tuned",
               file=sys.stderr)

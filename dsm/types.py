@@ -417,6 +417,7 @@ class Config:
     motion: tuple = ()                       # MotionSpec paths ([[motion]]); empty: still frames
     contact: "ContactSpec | None" = None     # [contact]: contact shadows after each case (None: not planned)
     shrink: float | None = None              # [map] shrink: casters moved inward along welded normals, world units (None: off)
+    tune: "TuneSpec | None" = field(default=None, compare=False, repr=False)   # [tune] (dsm.config.tune), read by dsm tune
     raw: dict = field(default_factory=dict, compare=False)
     execution: ExecutionSpec = field(default_factory=ExecutionSpec, compare=False)   # where, not what
 

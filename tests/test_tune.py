@@ -18,11 +18,11 @@ def _cfg(scene, schemes, tune=None, R=64, cam=48, light=None):
 
 def _prepared(cfg):
     import dsm.pipeline as pl
-    from dsm.tune import tuner as tu
+    from dsm.tune import tuner as tu, cases as tcase
     from dsm.config.read import coerce
     tc = tu.parse_tune(coerce(cfg))
     tc.config = pl.prepare(tc.config)
-    groups, cases, _ = tu.prepare_cases(tc)
+    groups, cases, _ = tcase.prepare_cases(tc)
     return tc, groups, cases
 
 
@@ -62,7 +62,7 @@ def grad_setup():
 def test_ad_gradient_matches_central_differences(grad_setup, i):
     import drjit as dr
     import mitsuba as mi
-    from dsm.tune import tuner as tu
+    from dsm.tune import relax as trx, search as tsr
     from dsm.schemes import get
     tc, groups, cases = grad_setup
     spec = tc.schemes[i]
@@ -73,15 +73,15 @@ def test_ad_gradient_matches_central_differences(grad_setup, i):
     T = 1.0                                           # texels: the loss is smooth at this temperature
     x = mi.Float(v0)
     dr.enable_grad(x)
-    loss, _ = tu.relaxed_loss(mod, spec.params, {name: x}, cases, groups, T, 1.0)
+    loss, _ = trx.relaxed_loss(mod, spec.params, {name: x}, cases, groups, T, 1.0)
     dr.backward(loss)
     ad = float(dr.grad(x).numpy().ravel()[0])
-    h = 0.02 * (tu.texel_sizes(cases, groups)["diagonal"] if name == "K" else 1.0)
-    hi = tu.relaxed_loss_np(mod, spec.params, {name: v0 + h}, cases, groups, T, 1.0)
-    lo = tu.relaxed_loss_np(mod, spec.params, {name: v0 - h}, cases, groups, T, 1.0)
+    h = 0.02 * (tsr.texel_sizes(cases, groups)["diagonal"] if name == "K" else 1.0)
+    hi = trx.relaxed_loss_np(mod, spec.params, {name: v0 + h}, cases, groups, T, 1.0)
+    lo = trx.relaxed_loss_np(mod, spec.params, {name: v0 - h}, cases, groups, T, 1.0)
     fd = (hi - lo) / (2 * h)
     # the relaxed loss at v0 from numpy agrees with the AD forward value, and the parameter acts
-    assert tu.relaxed_loss_np(mod, spec.params, {name: v0}, cases, groups, T, 1.0) == \
+    assert trx.relaxed_loss_np(mod, spec.params, {name: v0}, cases, groups, T, 1.0) == \
         pytest.approx(float(loss.numpy().ravel()[0]), rel=1e-5)
     assert abs(fd) > 1e-4, (spec.name, name, fd)
     assert abs(ad - fd) <= 0.01 * abs(fd), (spec.name, name, ad, fd)
@@ -89,15 +89,15 @@ def test_ad_gradient_matches_central_differences(grad_setup, i):
 
 def test_empty_class_adds_zero_not_nan():
     """The tilted plane alone under its light: every receiver lit, no shadowed class."""
-    from dsm.tune import tuner as tu
+    from dsm.tune import cases as tcase, relax as trx
     from dsm.schemes import get
     tc, groups, cases = _prepared(_cfg({"builtin": "plane"}, [{"name": "constant", "bias": "0.5 texel"}], R=32,
                                        cam=24))
     assert not any((~c.v_star).any() for c in cases)
     spec = tc.schemes[0]
-    v = tu.relaxed_loss_np(get("constant"), spec.params, {"bias": 0.5}, cases, groups, 0.5, 1.0)
+    v = trx.relaxed_loss_np(get("constant"), spec.params, {"bias": 0.5}, cases, groups, 0.5, 1.0)
     # a second computation: the constant margin from the thresholds (b - tau), in float64
-    th, vs = tu.pooled_thresholds(cases, groups)
+    th, vs = tcase.pooled_thresholds(cases, groups)
     b = 0.5 * th.texel_world.astype(np.float64)
     s = 1.0 / (1.0 + np.exp(-np.clip((b - th.tau) / (0.5 * th.texel_world), -30, 30)))
     assert v == pytest.approx(float((1.0 - s).mean()), rel=2e-3)
@@ -109,13 +109,13 @@ def test_empty_class_adds_zero_not_nan():
                          ids=["plane", "floating_plate"])
 def test_tuned_constant_bias_reaches_the_oracle(scene):
     import dsm.pipeline as pl
-    from dsm.tune import tuner as tu
+    from dsm.tune import tuner as tu, cases as tcase
     cfg = _cfg(scene, [{"name": "constant", "bias": 0.01}], {"steps": 80, "lambda": 1.0}, R=64, cam=48)
     res = tu.tune(cfg)
     e = res.schemes[0]
     # the oracle recomputed here from the kit's thresholds (the world oracle over the training views)
     tc, groups, cases = _prepared(cfg)
-    th, vs = tu.pooled_thresholds(cases, groups)
+    th, vs = tcase.pooled_thresholds(cases, groups)
     cands = np.concatenate([[-np.inf], np.unique(th.tau)])
     objs = [((vs & (th.tau > b)).sum() + (~vs & (th.tau <= b)).sum()) / vs.size for b in cands]
     best = min(objs)
@@ -199,6 +199,38 @@ def test_bad_tune_tables_are_refused_before_work(tune, key):
     with pytest.raises(ConfigError) as e:
         tu.parse_tune(coerce(_cfg({"builtin": "plane"}, [{"name": "constant"}], tune)))
     assert e.value.key == key
+
+
+def test_a_bad_tune_table_is_refused_when_the_config_file_is_read(tmp_path):
+    """[tune] is read with the config: loading the file alone raises, naming the file and the key."""
+    from dsm import ConfigError
+    from dsm.config.read import load
+    path = tmp_path / "bad.toml"
+    path.write_text('[[scene]]\nbuiltin = "plane"\n[[scheme]]\nname = "constant"\n'
+                    '[tune]\nsteps = 4\n[tune.range.constant]\nbias = [0.5, 0.1]\n')
+    with pytest.raises(ConfigError) as e:
+        load(path)
+    assert (e.value.source, e.value.key) == (str(path), "tune.range.constant.bias")
+    assert str(e.value) == f"{path}: tune.range.constant.bias: lo must be below hi, got [0.5, 0.1]"
+
+
+def test_the_config_carries_its_tune_spec_typed_and_frozen():
+    """Config.tune holds the [tune] values as given, the experiment's seed as the default seed and
+    every continuous parameter of a tuned scheme; a config without [tune] has none."""
+    import dataclasses
+    from dsm.config.read import coerce
+    from dsm.config.tune import TuneSpec
+    raw = _cfg({"builtin": "plane"}, [{"name": "constant"}, {"name": "slope_scaled"}],
+               {"steps": 7, "lambda": 2.5, "temperature": [0.5, 0.1], "params": {"slope_scaled": ["slope"]}})
+    raw["experiment"]["seed"] = 11
+    spec = coerce(raw).tune
+    assert isinstance(spec, TuneSpec)
+    assert (spec.steps, spec.lam, spec.temperature, spec.seed) == (7, 2.5, (0.5, 0.1), 11)
+    assert spec.params == {"constant": ("bias",), "slope_scaled": ("slope",)}
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        spec.steps = 8
+    del raw["tune"]
+    assert coerce(raw).tune is None
 
 
 def test_schemes_without_a_continuous_parameter_are_refused():
@@ -325,7 +357,7 @@ def test_tuned_is_at_most_a_grid_with_as_many_evaluations(grid_run):
     """Per scheme: the tuned training objective is at most the best of a regular grid over the same
     box with at most 40 points (recomputed here from the kit's exact counts, not the tuner's grid)."""
     import itertools
-    from dsm.tune import tuner as tu
+    from dsm.tune import evaluate as tev
     res, (tc, groups, cases) = grid_run
     train = [c for c in cases if c.role == "train"]
     for e, spec in zip(res.schemes, tc.schemes):
@@ -334,7 +366,7 @@ def test_tuned_is_at_most_a_grid_with_as_many_evaluations(grid_run):
         axes = [np.linspace(lo, hi, k) for lo, hi in box.values()]
         objs = []
         for combo in itertools.product(*axes):
-            n = tu.hard_counts(tu.with_values(spec, dict(zip(box, combo))), train, groups)
+            n = tev.hard_counts(tev.with_values(spec, dict(zip(box, combo))), train, groups)
             objs.append((n["n_acne"] + n["n_peterpan"]) / n["n_receivers"])
         assert len(objs) <= 40 and e["train"]["objective"] <= min(objs) + 1e-12, (e["scheme"], min(objs))
 
@@ -343,7 +375,7 @@ def test_one_parameter_schemes_come_within_one_percent_of_an_exact_scan(grid_run
     """A scheme with one continuous parameter: tuned within 1 % of the exact objective's best over
     400 evenly spaced values of its box (the test's own scan, twice as fine as the reported one);
     the constant bias's scan is bounded below by the exact oracle of the thresholds."""
-    from dsm.tune import tuner as tu
+    from dsm.tune import cases as tcase, evaluate as tev
     res, (tc, groups, cases) = grid_run
     train = [c for c in cases if c.role == "train"]
     one = [(e, s) for e, s in zip(res.schemes, tc.schemes) if len(e["box"]) == 1]
@@ -352,13 +384,13 @@ def test_one_parameter_schemes_come_within_one_percent_of_an_exact_scan(grid_run
         (name, (lo, hi)), = e["box"].items()
         objs = []
         for x in np.linspace(lo, hi, 400):
-            n = tu.hard_counts(tu.with_values(spec, {name: float(x)}), train, groups)
+            n = tev.hard_counts(tev.with_values(spec, {name: float(x)}), train, groups)
             objs.append((n["n_acne"] + n["n_peterpan"]) / n["n_receivers"])
         assert e["train"]["objective"] <= 1.01 * min(objs) + 1e-12, (e["scheme"], e["train"]["objective"], min(objs))
         row = next(r for r in res.comparison if r["scheme"] == e["scheme"])
         assert row["scan_evaluations"] == 200 and row["scan_train"] >= min(objs) - 1e-12
     # constant (texel): the oracle from the thresholds, b = k texel_world against tau, in float64
-    th, vs = tu.pooled_thresholds(train, groups)
+    th, vs = tcase.pooled_thresholds(train, groups)
     k = np.unique(th.tau / th.texel_world.astype(np.float64))
     cands = np.concatenate([[-np.inf], k])
     best = min(((vs & (th.tau > c * th.texel_world)).sum() + (~vs & (th.tau <= c * th.texel_world)).sum()) / vs.size
@@ -415,7 +447,7 @@ def test_gradient_check_is_reported_per_scheme_and_parameter():
     """[tune] gradcheck: per scheme and parameter the AD derivative of the relaxed loss at the
     start agrees within 1 % with a central difference recomputed here (numpy float64, a step
     of 0.02 texel rather than the report's 0.01), and table.md lists every row."""
-    from dsm.tune import tuner as tu
+    from dsm.tune import tuner as tu, output as tout, relax as trx
     from dsm.schemes import get
     schemes = [{"name": "constant", "bias": "0.5 texel"},
                {"name": "slope_scaled", "bias": "0.3 texel", "slope": 1.0, "clamp": "1.5 texel"}]
@@ -423,13 +455,13 @@ def test_gradient_check_is_reported_per_scheme_and_parameter():
                R=48, cam=40)
     res = tu.tune(cfg)
     tc, groups, cases = _prepared(cfg)
-    text = tu.table_text(res)
+    text = tout.table_text(res)
     for e, spec in zip(res.schemes, tc.schemes):
         assert set(e["gradcheck"]) == set(e["box"])
         for name, g in e["gradcheck"].items():
             # the starts, every parameter here in texels or a plain factor (a step of 0.02 in its unit)
             start = {p: getattr(getattr(spec.params, p), "value", getattr(spec.params, p)) for p in e["box"]}
-            f = lambda v: tu.relaxed_loss_np(get(spec.name), spec.params, {**start, name: v}, cases, groups, 1.0, 1.0)
+            f = lambda v: trx.relaxed_loss_np(get(spec.name), spec.params, {**start, name: v}, cases, groups, 1.0, 1.0)
             fd = (f(start[name] + 0.02) - f(start[name] - 0.02)) / 0.04
             assert abs(fd) > 1e-4 and abs(g["ad"] - fd) <= 0.01 * abs(fd), (spec.name, name, g, fd)
             assert abs(g["fd"] - fd) <= 0.01 * abs(fd) and g["rel_error"] <= 0.01

@@ -222,11 +222,13 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
                           "or keep map.kind = depth", ("depth",))
     contact = _parse_contact(raw, source, bool(motion))
     shrink = _parse_shrink(m, source, bool(motion))
+    from .tune import parse_tune                 # [tune]: dsm tune's, checked here so a bad key fails at load
+    tune = parse_tune(raw, source, seed, tuple(schemes))
     return Config(name=name, source=source, seed=seed, variant=variant, camera_resolution=camera_resolution,
                   camera=camera, motion=motion,
                   scenes=tuple(scenes), lights=tuple(lights), map=mapspec, schemes=tuple(schemes),
                   timing_repeats=repeats, memory_budget_mb=budget, oracle=OracleSpec(lambdas),
-                  report_images=report_images, raw=raw, contact=contact, shrink=shrink,
+                  report_images=report_images, raw=raw, contact=contact, shrink=shrink, tune=tune,
                   execution=_parse_execution(_table(raw, "execution", source), source))
 
 

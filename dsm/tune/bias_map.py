@@ -1,0 +1,207 @@
+"""The learned bias map: one bias per block of map texels, by Adam or as a residual over the best scheme."""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ..maps import lookup
+from ..report.tables import objective
+from .. import pipeline as pl
+from ..schemes import get as get_scheme
+from ..types import SchemeSpec
+from .evaluate import NAN, counts, sync_clock
+from .relax import margins, relaxed_sum
+from .cases import pooled_thresholds
+from .search import BETA1, BETA2, temperature_at, texel_sizes
+
+
+# ---------------------------------------------------------------- learned bias map
+
+def _blocks(cases, groups, block):
+    """Per case the block index (unique across maps) of each receiver's nearest texel; the
+    number of blocks."""
+    offs, total = [], 0
+    for g in groups:
+        R = g.view.resolution
+        nb = -(-R // block)
+        offs.append((total, R, nb))
+        total += g.view.faces * nb * nb
+    out = []
+    for c in cases:
+        base, R, nb = offs[c.group]
+        t = c.th.texel
+        face, rest = t // (R * R), t % (R * R)
+        i, j = rest % R, rest // R
+        out.append(base + (face * nb + j // block) * nb + i // block)
+    return out, total
+
+
+def _map_margin(c, groups, bias_world):
+    smap = groups[c.group].maps["none"]
+    tap = lookup.nearest_tap(c.rx, smap)
+    return tap.z1 + bias_world - c.rx.depth
+
+
+def map_start(tc, train, groups, const=None) -> np.ndarray:
+    """The bias map's start per map (group), in the map's unit: the best tuned constant bias
+    (``const``, a result entry) converted with the group's mean texel width over its training
+    receivers, so a block no training view sees keeps the tuned global bias; without one,
+    ``[tune.bias_map] init``."""
+    bm = tc.spec.bias_map
+    out = np.full(len(groups), bm.init.value, np.float64)
+    if const is None:
+        return out
+    b = const["spec"].params.bias
+    for g in range(len(groups)):
+        tws = [c.th.texel_world for c in train if c.group == g]
+        tw = float(np.mean(np.concatenate(tws))) if tws else float(texel_sizes(train, groups)["world"])
+        world = b.value * {"world": 1.0, "texel": tw, "range": groups[g].view.depth_range}[b.unit]
+        out[g] = world if bm.unit == "world" else world / tw
+    return out
+
+
+def tune_bias_map(tc, train, held, groups, init_values, progress=None) -> dict:
+    """Adam on one bias per block (started per map at ``init_values``, in the map's unit)."""
+    bm, ts = tc.spec.bias_map, tc.spec
+    blk_train, nblocks = _blocks(train, groups, bm.block)
+    blk_held, _ = _blocks(held, groups, bm.block)
+    scale = texel_sizes(train, groups)[bm.unit]      # steps in texels' worth, as the schemes'
+    opt = mi.ad.Adam(lr=bm.lr, beta_1=BETA1, beta_2=BETA2)
+    per_group = [g.view.faces * (-(-g.view.resolution // bm.block)) ** 2 for g in groups]
+    start = np.repeat(np.asarray(init_values, np.float64), per_group)
+    opt["b"] = mi.Float((start / scale).astype(np.float32))
+    idx_train = [mi.UInt32(b.astype(np.uint32)) for b in blk_train]
+    tex = bm.unit == "texel"
+    rows = []
+
+    def bias(c, idx, b):
+        """Case ``c``'s bias in world units: block values ``b`` at ``idx`` (a texel map's times texel_world)."""
+        val = dr.gather(mi.Float, b, idx) * scale
+        return val * c.rx.texel_world if tex else val
+
+    lo = min(0.0, float(start.min()))                # a bias map never goes below 0 unless started there
+    for step in range(bm.steps):
+        t_texels = temperature_at(ts, step, bm.steps)
+        opt.set_learning_rate(bm.lr * t_texels / ts.temperature[0])
+        t0 = sync_clock()
+        b = opt["b"]
+        total = 0.0
+        tt = dr.opaque(mi.Float, t_texels)
+        for c, idx in zip(train, idx_train):
+            total = total + relaxed_sum(_map_margin(c, groups, bias(c, idx, b)), c.rx, c.v_star_dr, tt, ts.lam)
+        loss = total / max(sum(c.n for c in train), 1)
+        dr.backward(loss)
+        opt.step()
+        opt["b"] = dr.maximum(opt["b"], lo / scale)
+        dr.eval(opt["b"])
+        ms = (sync_clock() - t0) * 1e3
+        hard = objective(_map_counts(train, idx_train, groups, opt["b"], scale, tex), ts.lam)
+        rows.append({"scheme": "bias_map", "step": step, "temperature_texel": t_texels,
+                     "loss": float(loss.numpy().ravel()[0]), "hard_objective": hard, "time_ms": ms})
+        if progress:
+            progress()
+    b = opt["b"]
+    seen = np.zeros(nblocks, bool)
+    for x in blk_train:
+        seen[x] = True
+    idx_held = [mi.UInt32(x.astype(np.uint32)) for x in blk_held]
+    cov_n = sum(int(seen[x].sum()) for x in blk_held)
+    n_held = sum(c.n for c in held)
+    times = [r["time_ms"] for r in rows]
+    return {"values": np.asarray(b.numpy(), np.float64) * scale, "blocks": nblocks, "block": bm.block,
+            "unit": bm.unit, "init": [float(x) for x in init_values], "steps": rows,
+            "train": _map_counts(train, idx_train, groups, b, scale, tex),
+            "heldout": _map_counts(held, idx_held, groups, b, scale, tex),
+            "heldout_lit": _map_lit(held, idx_held, groups, b, scale, tex),
+            "heldout_covered": [seen[x] for x in blk_held],
+            "heldout_covered_fraction": cov_n / n_held if n_held else float("nan"),
+            "blocks_trained": int(seen.sum()),
+            "first_step_ms": times[0], "step_ms": float(np.median(times[1:])) if len(times) > 1 else times[0],
+            "total_ms": float(sum(times))}
+
+
+def _map_lit(cases, idxs, groups, b, scale, tex) -> list:
+    """Per case whether each receiver is lit under the bias map ``b``."""
+    out = []
+    for c, idx in zip(cases, idxs):
+        val = dr.gather(mi.Float, dr.detach(b), idx) * scale
+        out.append((_map_margin(c, groups, val * c.rx.texel_world if tex else val) >= 0).numpy())
+    return out
+
+
+def _map_counts(cases, idxs, groups, b, scale, tex) -> dict:
+    acne = pp = n = lit = 0
+    for c, on in zip(cases, _map_lit(cases, idxs, groups, b, scale, tex)):
+        acne += int((c.v_star & ~on).sum())
+        pp += int((~c.v_star & on).sum())
+        n += c.n
+        lit += int(c.v_star.sum())
+    return counts(acne, pp, n, lit)
+
+
+def margin_arrays(spec: SchemeSpec, cases, groups) -> dict:
+    """A scheme instance's exact margins and what a residual map reads, per receiver over ``cases``
+    (numpy: m, v_star, unit = texel_world, texel, group, resolution)."""
+    mod, culling = get_scheme(spec.name), pl.culling_of(spec.params)
+    ms = [np.asarray(margins(mod, spec.params, {}, c.rx, groups[c.group].maps[culling], False).numpy(), np.float64)
+          for c in cases]
+    cat = lambda xs: np.concatenate(xs) if xs else np.zeros(0)
+    return {"m": cat(ms), "v_star": cat([c.v_star for c in cases]).astype(bool),
+            "unit": cat([c.th.texel_world for c in cases]).astype(np.float64),
+            "texel": cat([c.th.texel for c in cases]).astype(np.int64),
+            "group": cat([np.full(c.n, c.group, np.int64) for c in cases]).astype(np.int64),
+            "resolution": cat([np.full(c.n, groups[c.group].view.resolution, np.int64) for c in cases]).astype(np.int64)}
+
+
+def residual_bias_map(tc, train, held, groups, base) -> dict:
+    """The residual map over the best global scheme (``base``, a result entry): candidates
+    validated leaving one training camera out, the chosen one fitted to every training view
+    (dsm.tune.residual_map); its counts on the training and held-out views."""
+    from . import residual_map as rm
+    bm, lam = tc.spec.bias_map, tc.spec.lam
+    t0 = sync_clock()
+    rx_tr, rx_he = margin_arrays(base["spec"], train, groups), margin_arrays(base["spec"], held, groups)
+    cams = np.concatenate([np.full(c.n, c.camera) for c in train])
+    ch = rm.choose(rx_tr, cams, bm.blocks, bm.radii, bm.gains, lam, bm.margin)
+    block, radius, gain = ch["chosen"] or (bm.blocks[0], 0, math.inf)      # none: coverage by the first block
+    fit = rm.smoothed_fit(rx_tr, block, radius, lam, bm.margin)
+    m_tr, _ = rm.apply(fit, gain, rx_tr, block)
+    m_he, covered = rm.apply(fit, gain, rx_he, block)
+    moved = rm.residuals(fit, gain)
+    counted = lambda m, v: counts(int(((m < 0) & v).sum()), int(((m >= 0) & ~v).sum()), int(v.size), int(v.sum()))
+    split = np.cumsum([c.n for c in held])[:-1]
+    return {"fit": "residual", "base": f"{base['scheme']} {base['params']}", "block": block, "radius": radius,
+            "min_gain": gain if ch["chosen"] else None, "chosen": ch["chosen"] is not None,
+            "validation": {"none": ch["none"], "scores": ch["scores"]}, "unit": "texel",
+            "values": np.stack([fit["keys"].astype(np.float64), moved]), "blocks": int(fit["keys"].size),
+            "blocks_trained": int(fit["keys"].size), "blocks_moved": int((moved != 0).sum()), "steps": [],
+            "train": counted(m_tr, rx_tr["v_star"]), "heldout": counted(m_he, rx_he["v_star"]),
+            "heldout_lit": np.split(m_he >= 0, split), "heldout_covered": np.split(covered, split),
+            "heldout_covered_fraction": float(covered.mean()) if covered.size else NAN,
+            "init": [], "total_ms": (sync_clock() - t0) * 1e3}
+
+
+def heldout_split(held, groups, lit_map, covered, best_spec, lam) -> dict:
+    """The learned map against the best global scheme and the per-texel oracle over the held-out
+    receivers whose block saw training receivers (``covered``) and over the rest, with the share
+    of the gap to the oracle the map closes: (global - map) / (global - oracle)."""
+    v = np.concatenate([c.v_star for c in held])
+    lit_map, covered = np.concatenate(lit_map), np.concatenate(covered).astype(bool)
+    culling = pl.culling_of(best_spec.params)
+    lit_best = np.concatenate([pl.visibility(best_spec, c.rx, groups[c.group].maps[culling])[0].numpy() >= 0.5
+                               for c in held])
+    th, vs = pooled_thresholds(held, groups)
+    out = {}
+    for name, sel in (("covered", covered), ("uncovered", ~covered)):
+        n = int(sel.sum())
+        obj = lambda lit: float(((~lit & v)[sel].sum() + lam * (lit & ~v)[sel].sum()) / n) if n else NAN
+        sub = pl.Thresholds(**{f.name: getattr(th, f.name)[sel] for f in dataclasses.fields(th)})
+        orc = pl.oracles(sub, vs[sel], lam)["row"]["per_texel_objective"] if n else NAN
+        g, m = obj(lit_best), obj(lit_map)
+        out[name] = {"n_receivers": n, "map": m, "best_global": g, "per_texel_oracle": orc,
+                     "gap_closed": (g - m) / (g - orc) if n and g > orc else NAN}
+    return out

@@ -1,0 +1,73 @@
+"""The tuner's references: a grid search with the same budget, an exact 1-D scan, a gradient check."""
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ..report.tables import objective
+from ..schemes import get as get_scheme
+from ..types import SchemeSpec
+from .evaluate import NAN, hard_counts, sync_clock, with_values
+from .relax import relaxed_loss, relaxed_loss_np
+
+
+def grid_search(tc, spec: SchemeSpec, box, train, groups, budget: int) -> dict:
+    """The best hard training objective over a regular grid of the same box with at most
+    ``budget`` evaluations (points per parameter: floor(budget^(1/p)))."""
+    p = len(box)
+    k = max(1, int(math.floor(budget ** (1.0 / p) + 1e-9)))
+    axes = [np.linspace(b.lo, b.hi, k) for b in box]
+    best, evals = None, 0
+    t0 = sync_clock()
+    for combo in np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, p):
+        vals = {b.name: float(x) for b, x in zip(box, combo)}
+        obj = objective(hard_counts(with_values(spec, vals), train, groups), tc.spec.lam)
+        evals += 1
+        if best is None or obj < best[0]:
+            best = (obj, vals)
+    ms = (sync_clock() - t0) * 1e3
+    return {"values": best[1], "objective": best[0], "evaluations": evals, "points_per_parameter": k,
+            "total_ms": ms}
+
+
+def exact_scan(tc, spec: SchemeSpec, box, train, groups, points: int) -> dict | None:
+    """A one-parameter scheme's exact training objective at ``points`` evenly spaced values of its
+    search range, ends included (the reference the tuner is held to; for a constant bias, the
+    oracle's curve sampled); None for a scheme tuning more than one parameter."""
+    if len(box) != 1 or points < 1:
+        return None
+    b = box[0]
+    best, t0 = None, sync_clock()
+    for x in np.linspace(b.lo, b.hi, points):
+        obj = objective(hard_counts(with_values(spec, {b.name: float(x)}), train, groups), tc.spec.lam)
+        if best is None or obj < best[0]:
+            best = (obj, {b.name: float(x)})
+    return {"values": best[1], "objective": best[0], "evaluations": points, "total_ms": (sync_clock() - t0) * 1e3}
+
+
+GRADCHECK_STEP = 0.01      # texels' worth: the central difference's half step
+
+
+def gradient_check(tc, spec: SchemeSpec, box, train, groups) -> dict:
+    """Per tuned parameter at the start: the relaxed loss's derivative by Dr.Jit AD (all
+    parameters differentiated together) against a central difference of the same loss computed
+    in numpy float64 from the kit's forward margins, at the first temperature; half step
+    ``GRADCHECK_STEP`` texels' worth in the parameter's unit. {name: {ad, fd, rel_error}}."""
+    ts, mod = tc.spec, get_scheme(spec.name)
+    start = {p.name: p.start for p in box}
+    x = {p.name: mi.Float(float(p.start)) for p in box}
+    for v in x.values():
+        dr.enable_grad(v)
+    loss, _ = relaxed_loss(mod, spec.params, x, train, groups, ts.temperature[0], ts.lam)
+    dr.backward(loss)
+    out = {}
+    for p in box:
+        h = GRADCHECK_STEP * p.scale
+        f = lambda v: relaxed_loss_np(mod, spec.params, {**start, p.name: v}, train, groups, ts.temperature[0], ts.lam)
+        fd = (f(p.start + h) - f(p.start - h)) / (2 * h)
+        ad = float(dr.grad(x[p.name]).numpy().ravel()[0])
+        out[p.name] = {"ad": ad, "fd": fd, "rel_error": abs(ad - fd) / abs(fd) if fd else NAN}
+    return out

@@ -1,0 +1,191 @@
+"""What dsm tune writes into its folder: tuned.toml, table.md, steps.csv, tune.json, bias_map.npy, plots."""
+from __future__ import annotations
+
+import csv
+import dataclasses
+from dataclasses import dataclass
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..report.io import atomic
+from ..types import Length
+from .compare import GRADCHECK_STEP
+from .search import Param
+from ..config.tune import TuneSpec
+
+
+@dataclass
+class TuneResult:
+    """What ``dsm tune`` writes: per tuned scheme its values, hard metrics on the training and
+    held-out views, the grid search and (constant) the oracle; the per-step rows; the learned
+    bias map's result; the comparison rows."""
+    schemes: list
+    steps: list
+    comparison: list
+    bias_map: dict | None
+    notes: list
+    n_train: int
+    n_heldout: int
+    tuned_toml: str
+    spec: TuneSpec
+    resumed: int = 0      # schemes kept from the previous tune in the folder (--resume)
+
+    def best(self):
+        """The tuned scheme with the lowest training objective."""
+        return min(self.schemes, key=lambda s: s["train"]["objective"]) if self.schemes else None
+
+
+def tuned_toml(results) -> str:
+    """The tuned instances as ready ``[[scheme]]`` blocks."""
+    lines = ["# tuned by dsm tune: paste into an experiment config"]
+    for e in results:
+        lines.append("[[scheme]]")
+        lines.append(f'name = "{e["scheme"]}"')
+        for f in dataclasses.fields(e["spec"].params):
+            v = getattr(e["spec"].params, f.name)
+            if isinstance(v, Length):
+                if not math.isfinite(v.value):
+                    continue               # a default without a finite value (no clamp): left at its default
+                lines.append(f'{f.name} = {v.value!r}' if v.unit == "world" else f'{f.name} = "{v.value!r} {v.unit}"')
+            elif isinstance(v, float):
+                lines.append(f"{f.name} = {v!r}")
+            elif isinstance(v, str):
+                lines.append(f'{f.name} = "{v}"')
+        lines.append(f"# train objective {e['train']['objective']:.6f}")
+        lines.append("")
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------- output folder
+
+def _fmt(x):
+    if isinstance(x, float):
+        return "-" if math.isnan(x) else f"{x:.5f}"
+    return str(x)
+
+
+def table_text(res: TuneResult) -> str:
+    """The Markdown summary (``table.md``): a row per tuned scheme against grid search and oracle, then the bias map."""
+    lam = res.spec.lam
+    out = [f"# dsm tune (lambda = {lam:g}; objective (n_acne + lambda n_peterpan) / n_receivers)", "",
+           f"training receivers {res.n_train}, held-out receivers {res.n_heldout}", "",
+           "| scheme | tuned | train | held-out | tune ms (evals; first, median step) | grid best | grid train "
+           "| grid held-out | grid ms (evals) | oracle (train) | start train | start held-out | 1-D scan best "
+           "| scan train (evals) | tuned / scan |",
+           "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for r in res.comparison:
+        out.append(f"| {r['scheme']} | {r['tuned_params']} | {_fmt(r['tuned_train'])} | {_fmt(r['tuned_heldout'])} "
+                   f"| {r['tuned_ms']:.0f} ({r['tuned_evaluations']}; {r['first_step_ms']:.1f}, {r['step_ms']:.1f}) "
+                   f"| {r['grid_params']} | {_fmt(r['grid_train'])} "
+                   f"| {_fmt(r['grid_heldout'])} | {r['grid_ms']:.0f} ({r['grid_evaluations']}) "
+                   f"| {_fmt(r['oracle'])} | {_fmt(r['start_train'])} | {_fmt(r['start_heldout'])} "
+                   f"| {r['scan_params']} | {_fmt(r['scan_train'])} ({r['scan_evaluations']}) "
+                   f"| {_fmt(r['tuned_train'] / r['scan_train']) if r['scan_train'] > 0 else '-'} |")
+    checks = [(e["scheme"], k, g) for e in res.schemes for k, g in (e.get("gradcheck") or {}).items()]
+    if checks:
+        out += ["", f"## gradient check (relaxed loss at the start, temperature {res.spec.temperature[0]:g} texel; "
+                f"central difference, half step {GRADCHECK_STEP:g} texel's worth, numpy float64)", "",
+                "| scheme | parameter | AD | central difference | relative error |", "| --- | --- | --- | --- | --- |"]
+        out += [f"| {n} | {k} | {g['ad']:.6g} | {g['fd']:.6g} | {_fmt(g['rel_error'])} |" for n, k, g in checks]
+    if res.bias_map:
+        b = res.bias_map
+        bg = b["best_global"]
+        if b.get("fit") == "residual":
+            how = (f"a residual in texels over {b['base']}, blocks of {b['block']} x {b['block']} texels fitted "
+                   f"exactly to the training receivers of the blocks within {b['radius']} of each, moved where they "
+                   f"gain at least {b['min_gain']} errors ({b['blocks_moved']} of {b['blocks']} blocks moved)"
+                   if b["chosen"] else f"no residual over {b['base']}: no candidate (block, radius, min_gain) "
+                   f"beat it leaving one training camera out ({b['validation']['none']:g} errors; best candidate "
+                   f"{min((s['errors'] for s in b['validation']['scores']), default=float('nan')):g})")
+            head = f"{how}; {_fmt(b['heldout_covered_fraction'])} of held-out receivers fall in trained blocks"
+        else:
+            head = (f"{b['blocks']} blocks of {b['block']} x {b['block']} texels ({b['blocks_trained']} with training "
+                    f"receivers; {_fmt(b['heldout_covered_fraction'])} of held-out receivers fall in them), unit "
+                    f"{b['unit']}, started from {b['init_from']} (per map: "
+                    f"{', '.join(f'{x:.4g}' for x in b['init'])})")
+        out += ["", "## learned bias map", "", head, "",
+                "| | train | held-out |", "| --- | --- | --- |",
+                f"| learned map | {_fmt(b['train']['objective'])} | {_fmt(b['heldout']['objective'])} |",
+                f"| per-texel oracle (of those views) | {_fmt(b['per_texel_oracle_train'])} "
+                f"| {_fmt(b['per_texel_oracle_heldout'])} |"]
+        if bg:
+            out.append(f"| best tuned global ({bg['scheme']} {bg['params']}) | {_fmt(bg['train'])} "
+                       f"| {_fmt(bg['heldout'])} |")
+        if b.get("heldout_split"):
+            out += ["", "| held-out receivers | n | learned map | best tuned global | per-texel oracle | gap closed |",
+                    "| --- | --- | --- | --- | --- | --- |"]
+            for name, r in b["heldout_split"].items():
+                out.append(f"| in {'trained' if name == 'covered' else 'untrained'} blocks | {r['n_receivers']} "
+                           f"| {_fmt(r['map'])} | {_fmt(r['best_global'])} | {_fmt(r['per_texel_oracle'])} "
+                           f"| {_fmt(r['gap_closed'])} |")
+    if res.notes:
+        out += ["", "notes: " + "; ".join(res.notes)]
+    return "\n".join(out) + "\n"
+
+
+def write(res: TuneResult, out: Path, orc_train=None, orc_held=None):
+    """Write ``res`` into folder ``out``: tuned.toml, steps.csv, table.md, tune.json, bias_map.npy and the plots."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "tuned.toml").write_text(res.tuned_toml)
+    keys = []
+    for r in res.steps:
+        keys += [k for k in r if k not in keys]
+    with open(out / "steps.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, keys, restval="")
+        w.writeheader()
+        for r in res.steps:
+            w.writerow({k: ("" if isinstance(v, float) and math.isnan(v) else v) for k, v in r.items()})
+    (out / "table.md").write_text(table_text(res))
+    doc = {"lambda": res.spec.lam, "n_train": res.n_train, "n_heldout": res.n_heldout, "notes": res.notes,
+           "schemes": [{k: v for k, v in e.items() if k not in ("spec",)} for e in res.schemes],
+           "comparison": res.comparison, "oracle_train": orc_train, "oracle_heldout": orc_held,
+           "bias_map": None if res.bias_map is None else
+           {k: v for k, v in res.bias_map.items() if k not in ("steps", "values")}}
+    if res.bias_map is not None:
+        np.save(out / "bias_map.npy", res.bias_map["values"])
+    (out / "tune.json").write_text(json.dumps(_no_nan(doc), indent=1, default=_json_default))
+    plot(res, out / "plots")
+
+
+def _no_nan(o):
+    """Undefined values (NaN) as JSON null."""
+    if isinstance(o, dict):
+        return {str(k): _no_nan(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_no_nan(v) for v in o]
+    if isinstance(o, Param):
+        return _no_nan(dataclasses.asdict(o))
+    if isinstance(o, (float, np.floating)):
+        return None if math.isnan(o) else float(o)
+    return o
+
+
+def _json_default(o):
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    return str(o)
+
+
+def plot(res: TuneResult, folder: Path):
+    """Plot each scheme's relaxed loss and hard objective per step into ``folder``/tune_loss.png."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    folder.mkdir(parents=True, exist_ok=True)
+    names = list(dict.fromkeys(r["scheme"] for r in res.steps))
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
+    for name in names:
+        rows = [r for r in res.steps if r["scheme"] == name]
+        s = [r["step"] for r in rows]
+        axes[0].plot(s, [r["loss"] for r in rows], label=name)
+        axes[1].plot(s, [r["hard_objective"] for r in rows], label=name)
+    axes[0].set(title="relaxed loss", xlabel="step")
+    axes[1].set(title=f"hard objective (lambda = {res.spec.lam:g})", xlabel="step")
+    axes[1].legend(fontsize=7)
+    fig.tight_layout()
+    with atomic(folder / "tune_loss.png") as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
