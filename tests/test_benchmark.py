@@ -147,3 +147,4 @@ def test_benchmark_end_to_end_at_test_size(tmp_path, monkeypatch):
         100 * recs[("bunny", "m", "bevy")]["texel_size"], rel=1e-3)
     page = (tmp_path / "leaderboard.html").read_text()
     assert "Ranking" in page and "Oracle floor" in page and "three" in page and "http" not in page
+    assert "function sortBy" in page and "class=sortable" in page           # report.html's header sort

@@ -5,6 +5,7 @@ import html
 from pathlib import Path
 
 from ..report.html import CSS, SCRIPT
+from ..schemes.presets import PRESETS
 from . import bias_units, ranking
 
 SORT_SCRIPT = SCRIPT.split("const cases")[0]      # report.html's header sort, without its case viewer
@@ -32,13 +33,13 @@ def table(head: list, rows: list, sortable=True) -> str:
 
 def answer(doc: dict, ranked: list) -> str:
     """The page's opening: the ranking's top, the most scale-robust preset, the oracle's floor."""
-    from ..schemes.presets import PRESETS
     floor = ranking.oracle_floor(doc)
     top = ", ".join(f"{r['rank']}. {r['contender']} ({r['error']:.4f})" for r in ranked[:5])
     robust = ranking.most_scale_robust(ranked, among=set(PRESETS))
     return (f"<p class=answer>Ranking (mean error rate over every scene, unit and light): {html.escape(top)}.</p>"
             f"<p class=answer>Most scale-robust preset: {html.escape(robust['contender'])} (mean spread of its error "
-            f"across cm, m and km: {robust['spread']:.4f}).</p>"
+            f"across cm, m and km: {robust['spread']:.4f}; its mean error rate {robust['error']:.4f}: a preset that fails "
+            "alike at every unit is robust by this measure, not good).</p>"
             f"<p class=answer>Oracle floor: per-texel {floor['per_texel_objective']:.4f}, best single world bias "
             f"{floor['world_objective']:.4f}, best single texel bias {floor['texel_objective']:.4f}.</p>")
 
