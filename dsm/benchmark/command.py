@@ -5,6 +5,7 @@ import os
 import sys
 from pathlib import Path
 
+from ..config.read import VARIANTS
 from . import compare, page, results
 
 SIZE_ENV = "DSM_BENCHMARK_SIZE"     # a hidden size for tests: DSM_BENCHMARK_SIZE=test
@@ -17,7 +18,7 @@ def add_parser(sub):
     b.add_argument("--out", default="benchmark", help="folder for results.json and leaderboard.html (default: benchmark/)")
     b.add_argument("--full", action="store_true", help="the full size (larger resolutions: a GPU or a cluster)")
     b.add_argument("--compare", nargs=2, metavar=("A.json", "B.json"), help="compare two results.json files")
-    b.add_argument("--variant", help="Mitsuba variant (default llvm_ad_rgb)")
+    b.add_argument("--variant", choices=VARIANTS, help="Mitsuba variant (default llvm_ad_rgb)")
     return b
 
 
