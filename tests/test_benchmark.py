@@ -120,6 +120,7 @@ def test_ranking_orders_and_ties_by_hand():
     assert ranked[1]["spread"] == pytest.approx(0.1)          # a: 0.20 - 0.10 across cm and m
     # smallest spread: c and d (0); c has the lower score
     assert ranking.most_scale_robust(ranked)["contender"] == "c"
+    assert ranking.most_scale_robust(ranked, among={"bevy"}) is None      # no such contender: no answer, no error
     assert ranking.oracle_floor(doc)["world_objective"] == pytest.approx(0.02)
 
 

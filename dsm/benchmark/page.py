@@ -36,10 +36,14 @@ def answer(doc: dict, ranked: list) -> str:
     floor = ranking.oracle_floor(doc)
     top = ", ".join(f"{r['rank']}. {r['contender']} ({r['error']:.4f})" for r in ranked[:5])
     robust = ranking.most_scale_robust(ranked, among=set(PRESETS))
+    if robust is None:
+        robust_text = "Most scale-robust preset: none (no preset ran at more than one unit)."
+    else:
+        robust_text = (f"Most scale-robust preset: {robust['contender']} (mean spread of its error across cm, m and "
+                       f"km: {robust['spread']:.4f}; its mean error rate {robust['error']:.4f}: a preset that fails "
+                       "alike at every unit is robust by this measure, not good).")
     return (f"<p class=answer>Ranking (mean error rate over every scene, unit and light): {html.escape(top)}.</p>"
-            f"<p class=answer>Most scale-robust preset: {html.escape(robust['contender'])} (mean spread of its error "
-            f"across cm, m and km: {robust['spread']:.4f}; its mean error rate {robust['error']:.4f}: a preset that fails "
-            "alike at every unit is robust by this measure, not good).</p>"
+            f"<p class=answer>{html.escape(robust_text)}</p>"
             f"<p class=answer>Oracle floor: per-texel {floor['per_texel_objective']:.4f}, best single world bias "
             f"{floor['world_objective']:.4f}, best single texel bias {floor['texel_objective']:.4f}.</p>")
 

@@ -9,6 +9,7 @@ scale-robust.
 """
 from __future__ import annotations
 
+import math
 from collections import defaultdict
 
 TIE_RATE = 0.001
@@ -55,10 +56,11 @@ def ranking(doc: dict) -> list:
     return out
 
 
-def most_scale_robust(ranked: list, among=None) -> dict:
-    """The row with the smallest scale spread (among contender names ``among`` if given; ties by score)."""
-    pool = [r for r in ranked if among is None or r["contender"] in among]
-    return min(pool, key=lambda r: (r["spread"], r["error"], r["contender"]))
+def most_scale_robust(ranked: list, among=None):
+    """The row with the smallest scale spread (among contender names ``among`` if given; ties by score);
+    None when no row has a spread (none of them, or a run at one unit)."""
+    pool = [r for r in ranked if (among is None or r["contender"] in among) and not math.isnan(r["spread"])]
+    return min(pool, key=lambda r: (r["spread"], r["error"], r["contender"])) if pool else None
 
 
 def oracle_floor(doc: dict) -> dict:
