@@ -44,7 +44,7 @@ def answer(doc: dict, ranked: list) -> str:
                        "alike at every unit is robust by this measure, not good).")
     return (f"<p class=answer>Ranking (mean error rate over every scene, unit and light): {html.escape(top)}.</p>"
             f"<p class=answer>{html.escape(robust_text)}</p>"
-            f"<p class=answer>Oracle floor: per-texel {floor['per_texel_objective']:.4f}, best single world bias "
+            f"<p class=answer>Oracle floor: per-texel {floor['per_texel_objective']:.2g}, best single world bias "
             f"{floor['world_objective']:.4f}, best single texel bias {floor['texel_objective']:.4f}.</p>")
 
 
