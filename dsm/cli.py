@@ -18,6 +18,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from .benchmark import command as benchmark_command
 from .config import read as cfgmod
 from .report import figures
 from .maps import headroom
@@ -100,6 +101,7 @@ def _parser():
                    help="skip the one-frame cost (map and every single-layer lookup, kernel and frozen time)")
     b.add_argument("--no-sweep", action="store_true",
                    help="skip the sweep throughput (local run against a local two-worker Ray cluster)")
+    benchmark_command.add_parser(sub)
     t = sub.add_parser("tune", help="tune scheme parameters (and a learned bias map) by gradient: a config's [tune]")
     t.add_argument("config", help="experiment TOML file with a [tune] table")
     t.add_argument("--out", help="results folder (default: runs/<name>-tune-<time>)")
@@ -150,6 +152,8 @@ def main(argv=None) -> int:
             return 0
         if args.cmd == "bench":
             return _bench(args)
+        if args.cmd == "benchmark":
+            return benchmark_command.main(args)
         if args.cmd == "report":
             return _report(args)
         try:

@@ -112,3 +112,31 @@ def test_filtering_and_a_case_s_images(page):
     loaded = drv.execute_script("const im = Array.from(document.querySelectorAll('#viewer img'));"
                                 "return im.every(i => i.complete && i.naturalWidth === 32)")
     assert loaded
+
+
+def test_the_benchmark_leaderboard_sorts_in_the_browser(tmp_path):
+    """dsm benchmark's leaderboard.html from the file system: the answer first, and a click on the
+    error-rate header twice orders the ranking rows by hand-made error rates, largest first."""
+    from dsm.benchmark import page as bench_page
+    rates = {"a": 0.30, "b": 0.10, "c": 0.20}          # one case each at 1000 receivers
+    cases = [{"scene": "s", "unit": "m", "light": "directional", "contender": c, "n_receivers": 1000,
+              "n_acne": int(e * 1000), "n_peterpan": 0, "acne_rate": e, "peterpan_rate": 0.0, "error_rate": e,
+              "texel_size": 0.01, "build_ms": 1.0, "lookup_ms": 1.0} for c, e in rates.items()]
+    cases.append({"scene": "s", "unit": "m", "light": "directional", "contender": "oracle", "n_receivers": 1000,
+                  "world_objective": 0.05, "texel_objective": 0.05, "per_texel_objective": 0.0})
+    doc = {"suite": "dsm-bench-1", "suite_sha256": "0" * 64, "size": "test", "dsm_version": "0", "variant": "x",
+           "versions": {"dsm_git_commit": "c"}, "machine": {"cpu": "cpu", "cores": 1}, "cases": cases}
+    path = bench_page.write_page(doc, tmp_path)
+    drv = _chrome()
+    try:
+        drv.get(path.as_uri())
+        assert drv.find_element("css selector", "p.answer").text.startswith("Ranking")
+        table = drv.find_elements("css selector", "table.sortable")[0]
+        head = [th for th in table.find_elements("css selector", "thead th") if th.text.startswith("error rate")][0]
+        head.click()
+        head.click()
+        order = drv.execute_script("return Array.from(arguments[0].tBodies[0].rows).map(r => r.cells[1].textContent)",
+                                   table)
+        assert order == ["a", "c", "b"]
+    finally:
+        drv.quit()

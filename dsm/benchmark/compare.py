@@ -1,0 +1,76 @@
+"""Two benchmark results compared: which cases changed, under a stated rule for what counts as a change.
+
+Counts from two machines differ by float32 rounding (about 0.1 % of receivers, measured CPU
+against GPU). The rule: a case's count (receivers, acne, peter-panning) has changed when it moved
+by more than ``max(0.1 % of A's receivers, 2)`` receivers; a smaller move is a tie. A case present
+in one file only is added or removed. A change in the suite's hash makes the files incomparable
+(they measure different suites): that is reported first.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+COUNTS = ("n_receivers", "n_acne", "n_peterpan")
+TIE_FRACTION = 0.001           # of the case's receivers
+TIE_MIN = 2                    # receivers
+
+
+def case_key(rec: dict) -> tuple:
+    """A case's identity across runs: (scene, unit, light, contender)."""
+    return rec["scene"], rec["unit"], rec["light"], rec["contender"]
+
+
+def tie_tolerance(n_receivers: int) -> float:
+    """The largest count move that is a tie: max(0.1 % of the receivers, 2)."""
+    return max(TIE_FRACTION * n_receivers, TIE_MIN)
+
+
+def case_changes(a: dict, b: dict) -> list:
+    """The counts of one case that changed from ``a`` to ``b``: (count, value in a, value in b)."""
+    tol = tie_tolerance(a["n_receivers"])
+    return [(c, a[c], b[c]) for c in COUNTS if c in a and c in b and abs(b[c] - a[c]) > tol]
+
+
+def compare(doc_a: dict, doc_b: dict) -> dict:
+    """What changed from result ``doc_a`` to ``doc_b``: changed, tied, added and removed cases."""
+    a = {case_key(r): r for r in doc_a["cases"] if "n_acne" in r}
+    b = {case_key(r): r for r in doc_b["cases"] if "n_acne" in r}
+    changed, tied = [], 0
+    for k in sorted(set(a) & set(b)):
+        moves = case_changes(a[k], b[k])
+        if moves:
+            changed.append({"case": list(k), "moves": [list(m) for m in moves]})
+        else:
+            tied += 1
+    return {"same_suite": doc_a.get("suite_sha256") == doc_b.get("suite_sha256"),
+            "suites": [doc_a.get("suite"), doc_b.get("suite")],
+            "commits": [doc_a.get("versions", {}).get("dsm_git_commit"), doc_b.get("versions", {}).get("dsm_git_commit")],
+            "rule": f"a count is changed when it moves by more than max({TIE_FRACTION:.1%} of A's receivers, "
+                    f"{TIE_MIN}); else a tie",
+            "changed": changed, "n_tied": tied,
+            "added": [list(k) for k in sorted(set(b) - set(a))], "removed": [list(k) for k in sorted(set(a) - set(b))]}
+
+
+def text(diff: dict) -> str:
+    """The comparison as printed lines."""
+    lines = [f"suites {diff['suites'][0]} -> {diff['suites'][1]}" + ("" if diff["same_suite"] else
+             " (different suite hashes: the files measure different suites)"),
+             f"rule: {diff['rule']}",
+             f"{len(diff['changed'])} cases changed, {diff['n_tied']} tied, {len(diff['added'])} added, "
+             f"{len(diff['removed'])} removed"]
+    for c in diff["changed"]:
+        moves = ", ".join(f"{n} {x} -> {y}" for n, x, y in c["moves"])
+        lines.append(f"  changed {'/'.join(c['case'])}: {moves}")
+    lines += [f"  added {'/'.join(k)}" for k in diff["added"]] + [f"  removed {'/'.join(k)}" for k in diff["removed"]]
+    return "\n".join(lines)
+
+
+def write(diff: dict, out: Path) -> Path:
+    """Write ``compare.json`` and ``compare.txt`` in ``out``; returns the JSON's path."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "compare.txt").write_text(text(diff) + "\n")
+    path = out / "compare.json"
+    path.write_text(json.dumps(diff, indent=1))
+    return path

@@ -1,0 +1,96 @@
+"""The leaderboard page: static HTML next to results.json (no network), sortable like report.html."""
+from __future__ import annotations
+
+import html
+from pathlib import Path
+
+from ..report.html import CSS, SCRIPT
+from ..schemes.presets import PRESETS
+from . import bias_units, ranking
+
+SORT_SCRIPT = SCRIPT.split("const cases")[0]      # report.html's header sort, without its case viewer
+
+
+def fmt(v, digits=4) -> str:
+    """A cell's text: numbers to ``digits`` significant digits, None as '-'."""
+    if v is None:
+        return "-"
+    return f"{v:.{digits}g}" if isinstance(v, float) else str(v)
+
+
+def table(head: list, rows: list, sortable=True) -> str:
+    """An HTML table: ``head`` the column titles, ``rows`` lists of cells (numbers right-aligned, sortable)."""
+    num = [all(isinstance(r[i], (int, float)) or r[i] is None for r in rows) for i in range(len(head))]
+    out = [f"<table{' class=sortable' if sortable else ''}><thead><tr>"]
+    out += [f"<th data-type={'num' if n else 'text'}>{html.escape(h)}</th>" for h, n in zip(head, num)]
+    out.append("</tr></thead><tbody>")
+    for r in rows:
+        cells = [f"<td class=n data-v='{'' if v is None else v}'>{fmt(v)}</td>" if n else f"<td>{html.escape(fmt(v))}</td>"
+                 for v, n in zip(r, num)]
+        out.append("<tr>" + "".join(cells) + "</tr>")
+    return "".join(out) + "</tbody></table>"
+
+
+def answer(doc: dict, ranked: list) -> str:
+    """The page's opening: the ranking's top, the most scale-robust preset, the oracle's floor."""
+    floor = ranking.oracle_floor(doc)
+    top = ", ".join(f"{r['rank']}. {r['contender']} ({r['error']:.4f})" for r in ranked[:5])
+    robust = ranking.most_scale_robust(ranked, among=set(PRESETS))
+    if robust is None:
+        robust_text = "Most scale-robust preset: none (no preset ran at more than one unit)."
+    else:
+        robust_text = (f"Most scale-robust preset: {robust['contender']} (mean spread of its error across cm, m and "
+                       f"km: {robust['spread']:.4f}; its mean error rate {robust['error']:.4f}: a preset that fails "
+                       "alike at every unit is robust by this measure, not good).")
+    return (f"<p class=answer>Ranking (mean error rate over every scene, unit and light): {html.escape(top)}.</p>"
+            f"<p class=answer>{html.escape(robust_text)}</p>"
+            f"<p class=answer>Oracle floor: per-texel {floor['per_texel_objective']:.2g}, best single world bias "
+            f"{floor['world_objective']:.4f}, best single texel bias {floor['texel_objective']:.4f}.</p>")
+
+
+def grid_section(doc: dict) -> str:
+    """One row per contender, a column per scene x unit (error rate averaged over the lights), the oracle row."""
+    cells = ranking.error_by(doc, lambda r: (r["scene"], r["unit"]))
+    cols = sorted({k for d in cells.values() for k in d}, key=lambda k: (k[0], ["cm", "m", "km"].index(k[1])))
+    rows = [[c] + [cells[c].get(k) for k in cols] for c in sorted(cells)]
+    return "<h2>Error rate per scene and unit</h2>" + table(["contender"] + [f"{s} {u}" for s, u in cols], rows)
+
+
+def scale_section(doc: dict) -> str:
+    """Per contender: its error rate against the unit, and its spread."""
+    cells = ranking.error_by(doc, lambda r: r["unit"])
+    units = [u for u in ("cm", "m", "km") if any(u in d for d in cells.values())]
+    rows = [[c] + [cells[c].get(u) for u in units] for c in sorted(cells)]
+    return "<h2>Error rate against scale</h2>" + table(["contender"] + units, rows)
+
+
+def bias_section(doc: dict) -> str:
+    """Each preset's bias in world units and texels at each unit, on the suite's first scene."""
+    scene = doc["cases"][0]["scene"]
+    rows = [[r["preset"], r["light"], r["unit"], r["texel_size"], r["depth_bias"], r["depth_bias_world"],
+             r["depth_bias_texels"], r["normal_offset"], r["normal_offset_world"], r["normal_offset_texels"],
+             r["error_rate"]] for r in bias_units.bias_rows(doc, scene)]
+    head = ["preset", "light", "unit", "texel (world)", "depth bias", "depth world", "depth texels", "normal offset",
+            "normal world", "normal texels", "error rate"]
+    return (f"<h2>Preset biases in world units and texels ({html.escape(scene)})</h2><p class=note>A world-unit term "
+            "is fixed as the scene grows: in texels it swings by 10^5 from cm to km. A texel term is scale-free. "
+            "'range' terms (a fraction of the depth range) are shown as given.</p>" + table(head, rows))
+
+
+def write_page(doc: dict, out: Path) -> Path:
+    """Write ``leaderboard.html`` in ``out`` from a result document; returns its path."""
+    ranked = ranking.ranking(doc)
+    head = ["rank", "contender", "error rate", "acne rate", "peter-pan rate", "scale spread", "build ms", "lookup ms"]
+    rows = [[r["rank"], r["contender"], r["error"], r["acne"], r["peterpan"], r["spread"], r["build_ms"],
+             r["lookup_ms"]] for r in ranked]
+    m = doc["machine"]
+    meta = (f"{doc['suite']} (sha256 {doc['suite_sha256'][:12]}), size {doc['size']}, dsm {doc['dsm_version']} "
+            f"{doc['versions'].get('dsm_git_commit')}, {doc['variant']}, {m['cpu']} ({m['cores']} cores)")
+    body = (f"<h1>Shadow-bias leaderboard: {html.escape(doc['suite'])}</h1><p class=meta>{html.escape(meta)}</p>"
+            + answer(doc, ranked) + "<h2>Ranking</h2><p class=note>Scores within 0.001 tie (shared rank, by name). "
+            "Click a header to sort.</p>" + table(head, rows) + grid_section(doc) + scale_section(doc)
+            + bias_section(doc))
+    path = Path(out) / "leaderboard.html"
+    path.write_text(f"<!doctype html><html><head><meta charset=utf-8><title>{html.escape(doc['suite'])}</title>"
+                    f"<style>{CSS}</style></head><body>{body}<script>{SORT_SCRIPT}</script></body></html>")
+    return path

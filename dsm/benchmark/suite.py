@@ -1,0 +1,104 @@
+"""The frozen suite: its definition (suite_1.toml in the package), its hash, and the run configs it makes.
+
+One config per (scene, unit): the scene at ``scale = factor * unit`` (factor: native units to
+metres; unit: 100 for centimetres, 1 for metres, 0.001 for kilometres), its three lights and every
+contender. Spot and point positions are stated in metres about the scene's centre and handed to
+the kit in the scene's native units (the kit multiplies a light's position by the scene's scale).
+"""
+from __future__ import annotations
+
+import hashlib
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+SUITE_FILE = Path(__file__).with_name("suite_1.toml")
+MESHES = Path(__file__).resolve().parents[2] / "data" / "meshes"
+SIZES = ("test", "default", "full")
+LIGHTS = ("directional", "spot", "point")
+
+
+@dataclass(frozen=True)
+class Case:
+    """One run of the suite: a scene at one unit, with its lights and contenders."""
+    scene: str
+    unit: str
+    scale: float          # the config's ``scale``: native units to the unit's world units
+    config: dict
+
+
+def suite_sha256(path: Path = SUITE_FILE) -> str:
+    """The SHA-256 of the suite's definition file (its bytes): the suite's identity."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def load_suite(path: Path = SUITE_FILE) -> dict:
+    """The suite's definition as a dict (the TOML)."""
+    return tomllib.loads(Path(path).read_text())
+
+
+def size_of(suite: dict, size: str) -> dict:
+    """The pinned size ``size``: scenes, units, lights, contenders and resolutions (defaults: everything)."""
+    if size not in SIZES:
+        raise ValueError(f"unknown suite size {size!r} (one of {', '.join(SIZES)})")
+    s = dict(suite["size"][size])
+    s.setdefault("scenes", [sc["name"] for sc in suite["scene"]])
+    s.setdefault("units", [u for u, _ in suite["suite"]["units"]])
+    s.setdefault("lights", list(LIGHTS))
+    s.setdefault("contenders", suite["contenders"]["presets"] + suite["contenders"]["schemes"])
+    return s
+
+
+def contender_tables(suite: dict, names: list) -> list:
+    """The [[scheme]] tables of the contenders ``names``: presets by name, kit schemes at their defaults."""
+    presets = set(suite["contenders"]["presets"])
+    return [{"preset": n} if n in presets else {"name": n} for n in names]
+
+
+def scene_table(scene: dict, scale: float) -> dict:
+    """The [[scene]] table of one suite scene at ``scale``."""
+    if "file" in scene:
+        return {"file": str(MESHES / scene["file"]), "scale": scale, "closed": {"mesh": scene["closed"]}}
+    skip = ("name", "factor", "builtin")
+    return {"builtin": scene["builtin"], "scale": scale, **{k: v for k, v in scene.items() if k not in skip}}
+
+
+def light_tables(suite: dict, scene: dict, lights: list) -> list:
+    """The [[light]] tables of one scene, positions in its native units (metres / factor)."""
+    out = []
+    for kind in lights:
+        if kind == "directional":
+            out.append({"type": "scene"})
+            continue
+        if "file" in scene:           # metres about the mesh's centre, to native units
+            t = dict(suite["lights"]["mesh"][kind])
+            c = scene["centre"]
+            t["position"] = [(ci + pi) / scene["factor"] for ci, pi in zip(c, t["position"])]
+            if kind == "spot":
+                t["target"] = [ci / scene["factor"] for ci in c]
+        else:
+            t = dict(suite["lights"]["builtin"][kind])
+        out.append({"type": kind, **t})
+    return out
+
+
+def cases(suite: dict, size: str) -> list:
+    """Every (scene, unit) Case of the suite at ``size``, each with its dsm.run config dict."""
+    s = size_of(suite, size)
+    units = dict((u, f) for u, f in suite["suite"]["units"])
+    by_name = {sc["name"]: sc for sc in suite["scene"]}
+    out = []
+    for name in s["scenes"]:
+        scene = by_name[name]
+        for unit in s["units"]:
+            scale = scene["factor"] * units[unit]
+            mp = {"resolution": s["map"], "view": "cube"}      # cube: the point light's view
+            if "directional" in s["lights"]:
+                mp["cascades"] = suite["lights"]["directional"]["cascades"]
+            cfg = {"experiment": {"name": f"{suite['suite']['name']}-{name}-{unit}"},
+                   "camera": {"resolution": [s["camera"], s["camera"]]},
+                   "scene": [scene_table(scene, scale)],
+                   "light": light_tables(suite, scene, s["lights"]),
+                   "map": mp, "scheme": contender_tables(suite, s["contenders"])}
+            out.append(Case(name, unit, scale, cfg))
+    return out
