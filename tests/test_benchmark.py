@@ -149,3 +149,16 @@ def test_benchmark_end_to_end_at_test_size(tmp_path, monkeypatch):
     page = (tmp_path / "leaderboard.html").read_text()
     assert "Ranking" in page and "Oracle floor" in page and "three" in page and "http" not in page
     assert "function sortBy" in page and "class=sortable" in page           # report.html's header sort
+
+
+def test_a_second_benchmark_into_the_same_folder_is_refused_and_keeps_the_first(tmp_path, capsys):
+    """results.json of an earlier run is never overwritten without --force: one line naming --out
+    and --force, exit 2, the file as it was."""
+    from dsm.cli import main
+    out = tmp_path / "bm"
+    out.mkdir()
+    (out / "results.json").write_text('{"kept": true}')
+    assert main(["benchmark", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--out" in err[0] and "--force" in err[0] and "results.json" in err[0]
+    assert (out / "results.json").read_text() == '{"kept": true}'
