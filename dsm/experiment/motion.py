@@ -44,7 +44,7 @@ from ..report import figures, io as report
 from ..maps import headroom, shadowmap, spawn
 from .. import lights, pipeline
 from ..truth import metrics
-from ..scenes import load as scenes
+from ..scenes.camera import look_at_sensor
 from ..tools import timing
 from ..maps.cascades import Camera
 
@@ -141,7 +141,7 @@ def _moved(light, position, target):
 def sensor_at(base: Camera, origin, target, up):
     """A sensor at a pose with the base camera's film, field of view and clip planes."""
     fov = math.degrees(2 * math.atan(base.tan_x))
-    return mi.load_dict(scenes.look_at_sensor(origin, target, up, fov, base.width, base.height, base.near, base.far))
+    return mi.load_dict(look_at_sensor(origin, target, up, fov, base.width, base.height, base.near, base.far))
 
 
 # ---------------------------------------------------------------- fixed points

@@ -378,7 +378,7 @@ def _area_emitters(spec) -> int:
 
 def scene_lights(spec, cfg: Config) -> list:
     """[(label, type)] of the lights a scene gets, as the runner labels them."""
-    from ..scenes.load import builtin_geometry
+    from ..scenes.builtins import builtin_geometry
     own = []
     if spec.builtin:
         own = [builtin_geometry(spec.builtin, spec.params)[2].type]
@@ -435,7 +435,7 @@ def reference_shortfall(light) -> str:
 def scene_triangles(spec) -> tuple:
     """(triangles, the [[scene]] key naming the scene) of a scene spec, before it is loaded."""
     if spec.builtin:
-        from ..scenes.load import builtin_geometry
+        from ..scenes.builtins import builtin_geometry
         shapes = builtin_geometry(spec.builtin, spec.params)[0]
         return sum(len(f) for _, f in shapes.values()), f"{spec.where}.builtin"
     return scene_size.file_triangles(spec.file), f"{spec.where}.file"
