@@ -429,8 +429,7 @@ class Runner:
                   moment=None):
         """One case: a scheme instance and filter on a stored depth map, or (``moment``: its
         MomentMap's builder) a pre-filtered instance on the depth map's moments."""
-        self.case_no += 1
-        case = f"{self.case_no:04d}"
+        case = self.next_case()
         if self.keys.get(case) in self.kept:          # finished by the run being resumed: its row again
             row, st, cascade_rows = self.kept[self.keys[case]]
             self.record.cascade_rows += cascade_rows
@@ -554,6 +553,16 @@ class Runner:
             self.marches = {id(rx): (rx, out[-1].numpy().astype(bool), t)}    # the receivers kept: their id stays theirs
         _, occ, t = self.marches[id(rx)]
         return {**contact.case_metrics(v_np, setup.v_star, occ, setup.v_frac), "contact_ms": t.ms}, occ
+
+    def next_case(self) -> str:
+        """The next case's id ("0001", ...), counted."""
+        self.case_no += 1
+        return f"{self.case_no:04d}"
+
+    def case_done(self, row: dict, status: dict):
+        """A finished case's row and status recorded, and the progress bar moved on by one."""
+        self.add_case(row, status)
+        self.bar.update(1)
 
     def add_case(self, row: dict, status: dict):
         """One finished case: its row into metrics.csv (refused unless it fits the schema,
