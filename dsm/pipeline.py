@@ -31,6 +31,8 @@ import numpy as np
 from .maps import cascades as cascades_mod
 from .truth import area, reference
 from .scenes import exact_frame, load as scenes
+from .scenes.emitters import emitter_to_light
+from .scenes.spec import parse_scene
 from .maps import formats, lookup, shadowmap, spawn
 from . import lights, prefilter, schemes
 from .tools import timing
@@ -68,7 +70,7 @@ def prepare(config, variant: str | None = None, threads: int | None = None):
 
 load_scene = scenes.load                  # (SceneSpec, camera resolution or None) -> SceneData
 scene_from_mitsuba = scenes.from_mitsuba  # an already loaded mi.Scene (the plugins' entry)
-emitter_light = scenes.emitter_to_light   # a Mitsuba emitter as a LightSpec (None: not mapped)
+emitter_light = emitter_to_light           # a Mitsuba emitter as a LightSpec (None: not mapped)
 scene_magnitude = reference.scene_magnitude
 exact_visibility = reference.visibility   # (scene, interactions, light, magnitude) -> (V*, occluder distance)
 area_emitter_lights = area.emitter_lights  # (mi.Scene, area LightSpec) -> one area light per area emitter
@@ -78,7 +80,7 @@ area_sample_visibility = area.sample_visibility   # one area sample's visibility
 
 def scene_spec(table: dict, source: str = "<pipeline>"):
     """One ``[[scene]]`` table (no sweeps) as a SceneSpec."""
-    specs = scenes.parse_scene(table, source, "scene", None)
+    specs = parse_scene(table, source, "scene", None)
     if len(specs) != 1:
         raise ConfigError(source, "scene", "give one value per parameter (no sweeps)")
     return specs[0]

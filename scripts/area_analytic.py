@@ -17,7 +17,7 @@ from dsm.tools import env
 
 env.use_variant("llvm_ad_rgb")
 import dsm.pipeline as pl                                   # noqa: E402
-from dsm.scenes import load as scenes
+from dsm.scenes import camera as scene_camera, geometry as scene_geometry
 from dsm.types import LightSpec
 
 A, H, B, HS = 1.0, 4.0, 1.0, 2.0
@@ -27,7 +27,7 @@ W = 256
 def quad(z, half):
     """A square at height z, wound upward."""
     v = np.array([[-half, -half, z], [half, -half, z], [half, half, z], [-half, half, z]], float)
-    return scenes.make_mesh("quad", v, np.array([[0, 1, 2], [0, 2, 3]]))
+    return scene_geometry.make_mesh("quad", v, np.array([[0, 1, 2], [0, 2, 3]]))
 
 
 def luminaire(z, half, folder):
@@ -54,7 +54,7 @@ def main():
     ap.add_argument("--seed", type=int, default=7)
     args = ap.parse_args()
     parts = {"type": "scene", "ground": quad(0.0, 6.0), "occluder": quad(HS, B / 2),
-             "sensor": scenes.look_at_sensor((0.0, -7.0, 6.0), (0, 0, 0), (0, 0, 1), 45, W, W)}
+             "sensor": scene_camera.look_at_sensor((0.0, -7.0, 6.0), (0, 0, 0), (0, 0, 1), 45, W, W)}
     if args.light == "emitter":
         parts["luminaire"] = luminaire(H, A / 2, tempfile.mkdtemp())
     sd = pl.scene_from_mitsuba(mi.load_dict(parts), "analytic_square")

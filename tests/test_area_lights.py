@@ -11,7 +11,7 @@ from dsm.truth import area, intervals, metrics
 from dsm.config import read as config
 from dsm.maps import lookup
 from dsm import pipeline, schemes
-from dsm.scenes import load as scenes
+from dsm.scenes import geometry as scene_geometry
 from dsm.types import ConfigError, LightSpec
 
 from conftest import MESHES, base_config
@@ -23,7 +23,7 @@ G, HALF = 100, 2.5          # receivers: a G x G grid of ground points over [-HA
 
 def _quad(z, half):
     v = np.array([[-half, -half, z], [half, -half, z], [half, half, z], [-half, half, z]], float)
-    return scenes.make_mesh("quad", v, np.array([[0, 1, 2], [0, 2, 3]]))
+    return scene_geometry.make_mesh("quad", v, np.array([[0, 1, 2], [0, 2, 3]]))
 
 
 def _analytic(q):

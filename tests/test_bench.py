@@ -34,7 +34,7 @@ def test_the_frozen_frame_replays_the_traced_frame():
     traced frame's bits: every Dr.Jit value it reads is one of its inputs."""
     from dsm.tools import bench, timing
     from dsm.config.read import LightSpec, SceneSpec
-    from dsm.scenes.load import PlaneBoxParams
+    from dsm.scenes.params import PlaneBoxParams
     timing.enable_history()
     spec = SceneSpec(builtin="plane_box", params=PlaneBoxParams(), label="plane_box")
     row = bench.frame_cost(spec, LightSpec("directional", direction=(-0.4, -0.3, -1.0)), R=64, camera=64, repeats=1)

@@ -154,7 +154,8 @@ def hidden_scene(with_hider: bool):
     """Ground; a caster plate 0.2 above it; (with_hider) a smaller plate at height 2 over the caster
     hiding it from a camera straight above; the sun at 45 degrees from -x."""
     import mitsuba as mi
-    from dsm.scenes.load import look_at_sensor, make_mesh, quad
+    from dsm.scenes.camera import look_at_sensor
+    from dsm.scenes.geometry import make_mesh, quad
     d = {"type": "scene", "ground": make_mesh("ground", *quad([0, 0, 0], [4, 0, 0], [0, 4, 0])),
          "caster": make_mesh("caster", *quad([0, 0, 0.2], [0.5, 0, 0], [0, 0.5, 0])),
          "sensor": look_at_sensor((0, 0, 5), (0, 0, 0), (0, 1, 0), 40.0, 128, 128)}

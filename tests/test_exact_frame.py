@@ -5,7 +5,7 @@ and both agree with a float64 ray-triangle count (numpy) over the built-in's own
 import numpy as np
 import pytest
 
-from dsm.scenes import exact_frame, load as scenes
+from dsm.scenes import builtins as scene_builtins, exact_frame
 from dsm import pipeline
 
 OFFSETS = (0.0, 1e4, 1e5, 1e6)
@@ -22,7 +22,7 @@ def _setup(builtin, offset, light=None):
 def _float64_shadowed(spec, sd, setup):
     """V* = 0 by a float64 Moller-Trumbore test of each receiver's ray to the light against the
     built-in's triangles at their float64 world positions (scale, then translate)."""
-    shapes, _, _ = scenes.builtin_geometry(spec.builtin, spec.params)
+    shapes, _, _ = scene_builtins.builtin_geometry(spec.builtin, spec.params)
     t = np.asarray(spec.params.translate, float)
     tris = np.concatenate([(np.asarray(v, float) * spec.params.scale + t)[np.asarray(f)] for v, f in shapes.values()])
     p = np.stack([np.asarray(c, np.float64) for c in (setup.si.p.x, setup.si.p.y, setup.si.p.z)], 1)

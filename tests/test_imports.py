@@ -150,7 +150,7 @@ def test_light_types_branch_only_in_the_registry():
     """No module of the kit outside dsm/lights compares a light's type with a type's name, but
     the few listed here (each a reason in docs/design.md, *Light types*): a new light type is a
     module in dsm/lights and a line in its REGISTRY."""
-    allowed = {"dsm.experiment.plan": 5, "dsm.scenes.load": 2, "dsm.experiment.motion": 2, "dsm.schemes.presets": 1, "dsm.config.read": 1,
+    allowed = {"dsm.experiment.plan": 5, "dsm.scenes.data": 2, "dsm.experiment.motion": 2, "dsm.schemes.presets": 1, "dsm.config.read": 1,
                "dsm_plugins.integrators": 5}
     names = {"directional", "spot", "point", "area", "scene"}
     found = {}

@@ -18,7 +18,7 @@ from conftest import cli_run as _cli
 from dsm import cli
 from dsm.config import read as config
 from dsm.experiment import plan
-from dsm.scenes import load as scenes
+from dsm.scenes import builtins as scene_builtins, geometry, load as scenes, params as scene_params
 from dsm.config.read import ConfigError, Length
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -469,7 +469,7 @@ def test_area_light_at_the_scene_centre_gets_a_defined_light(tmp_path, run_dict)
 
 def test_normalize_refuses_a_zero_vector():
     with pytest.raises(ValueError, match="zero"):
-        scenes.normalize([0.0, 0.0, 0.0])
+        geometry.normalize([0.0, 0.0, 0.0])
 
 
 # ---------------------------------------------------------------- 11: scale
@@ -477,7 +477,7 @@ def test_normalize_refuses_a_zero_vector():
 def test_scale_beyond_float32_normals_is_refused(run_dict):
     """Mitsuba's triangle normals overflow in float32 (plane_box keeps 2488 receivers at scale
     3e8 and 75 at 1e9): refused at the limit, which the message names."""
-    lo, hi = scenes.scale_range("plane_box", scenes.PlaneBoxParams())
+    lo, hi = scene_builtins.scale_range("plane_box", scene_params.PlaneBoxParams())
     assert lo < 1e-9 and 1e8 < hi < 5.4e8
     with pytest.raises(ConfigError) as e:
         config.parse({"scene": [{"builtin": "plane_box", "scale": 1e9}], "scheme": [{"name": "none"}]}, "<t>")

@@ -6,7 +6,7 @@ import pytest
 import dsm
 from conftest import MESHES, ROOT, base_config
 from dsm.scenes.closedness import closedness
-from dsm.scenes.load import box, prism, quad
+from dsm.scenes.geometry import box, prism, quad
 from test_hard_cases import Scene64, assert_matches_truth, truth
 
 

@@ -20,7 +20,7 @@ def grid_angle(tilt, azimuth):
     The plane's default light shines along -z; its map frame is ex = +x, ey = -y (dsm.maps.views.light_frame).
     The plane is rotated by ``tilt`` about the horizontal axis at ``azimuth``.
     """
-    from dsm.scenes.load import rotation
+    from dsm.scenes.geometry import rotation
     from dsm.maps.views import light_frame
     a = math.radians(azimuth)
     n = rotation([math.cos(a), math.sin(a), 0], tilt) @ np.array([0, 0, 1.0])

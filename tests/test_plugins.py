@@ -109,7 +109,7 @@ FOV = 40.0
 
 
 def _mesh(name, verts, faces):
-    from dsm.scenes.load import make_mesh
+    from dsm.scenes.geometry import make_mesh
     return make_mesh(name, verts, faces)
 
 

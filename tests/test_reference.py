@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from dsm.config import read as config
-from dsm.scenes import gbuffer, load as scenes
+from dsm.scenes import camera as scene_camera, gbuffer, geometry, load as scenes, spec as scene_spec
 from dsm.truth import reference
 from dsm.maps import spawn
 from dsm.config.read import LightSpec
@@ -16,7 +16,7 @@ DATA = Path(__file__).parent / "data"
 
 
 def _setup(spec_table, light, res=(160, 160)):
-    spec = scenes.parse_scene(spec_table, "<test>", "scene", DATA)[0]
+    spec = scene_spec.parse_scene(spec_table, "<test>", "scene", DATA)[0]
     sd = scenes.load(spec, res)
     w, h = (int(x) for x in sd.sensor.film().size())
     gb = gbuffer.cast(sd.scene, sd.sensor, w, h)
@@ -94,11 +94,11 @@ def test_mitsuba_spawn_breaks_at_millimetre_scale_and_ours_does_not():
 def _plate_scene(offset, gap=0.2, res=128):
     """The floating plate (a 1.5 x 1.5 open plate ``gap`` above an 8 x 8 ground), moved by ``offset``."""
     off = np.asarray(offset, float)
-    g_v, g_f = scenes.quad(off, [4, 0, 0], [0, 4, 0])
-    p_v, p_f = scenes.quad(off + [0, 0, gap], [0.75, 0, 0], [0, 0.75, 0])
-    sensor = scenes.look_at_sensor(off + [3.0, -5.0, 4.0], off, (0, 0, 1), 40, res, res)
-    scene = mi.load_dict({"type": "scene", "ground": scenes.make_mesh("ground", g_v, g_f),
-                          "plate": scenes.make_mesh("plate", p_v, p_f), "sensor": sensor}, optimize=False)
+    g_v, g_f = geometry.quad(off, [4, 0, 0], [0, 4, 0])
+    p_v, p_f = geometry.quad(off + [0, 0, gap], [0.75, 0, 0], [0, 0.75, 0])
+    sensor = scene_camera.look_at_sensor(off + [3.0, -5.0, 4.0], off, (0, 0, 1), 40, res, res)
+    scene = mi.load_dict({"type": "scene", "ground": geometry.make_mesh("ground", g_v, g_f),
+                          "plate": geometry.make_mesh("plate", p_v, p_f), "sensor": sensor}, optimize=False)
     gb = gbuffer.cast(scene, scene.sensors()[0], res, res)
     idx = mi.UInt32(np.flatnonzero(gb.hit).astype(np.uint32))
     return scene, dr.gather(mi.SurfaceInteraction3f, gb.si, idx)
@@ -150,7 +150,7 @@ def test_hit_points_lie_within_a_third_of_the_spawn_offset():
     for centre in ([0, 0, 0], [2000, 1500, 100], [1e4, -1e4, 5e3], [3e5, 0, 0]):
         c = np.asarray(centre, float)
         v = c + rng.uniform(-3, 3, (3, 3))
-        scene = mi.load_dict({"type": "scene", "tri": scenes.make_mesh("tri", v, np.array([[0, 1, 2]]))},
+        scene = mi.load_dict({"type": "scene", "tri": geometry.make_mesh("tri", v, np.array([[0, 1, 2]]))},
                              optimize=False)
         v32 = v.astype(np.float32).astype(np.float64)          # the vertices as stored
         normal = np.cross(v32[1] - v32[0], v32[2] - v32[0])

@@ -46,7 +46,8 @@ def test_octahedron_normals_are_radial():
 @pytest.fixture(scope="module")
 def octa():
     import mitsuba as mi
-    from dsm.scenes.load import look_at_sensor, make_mesh
+    from dsm.scenes.camera import look_at_sensor
+    from dsm.scenes.geometry import make_mesh
     v, f = split_octahedron(R)
     scene = mi.load_dict({"type": "scene", "octa": make_mesh("octa", v, f),
                           "sensor": look_at_sensor((0, -0.5, 5), (0, 0, 0), (0, 1, 0), 40.0, 96, 96)}, optimize=False)

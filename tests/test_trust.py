@@ -68,13 +68,13 @@ def test_jitter_is_seeded_by_the_receiver_itself():
     import drjit as dr
     import mitsuba as mi
     import numpy as np
-    from dsm.scenes import gbuffer, load as scenes
+    from dsm.scenes import gbuffer, load as scenes, spec as scene_spec
     from dsm.maps import shadowmap
     from dsm.maps.lookup import Receiver, visibility
     from dsm.pipeline import make_view, points_np as _points_np
     from dsm.schemes import constant
     from dsm.config.read import LightSpec, Length
-    sd = scenes.load(scenes.parse_scene({"builtin": "plane_box"}, "<t>", "s", None)[0], (96, 96))
+    sd = scenes.load(scene_spec.parse_scene({"builtin": "plane_box"}, "<t>", "s", None)[0], (96, 96))
     gb = gbuffer.cast(sd.scene, sd.sensor, 96, 96)
     idx = np.flatnonzero(gb.hit).astype(np.uint32)
     p = dr.gather(mi.Point3f, gb.p, mi.UInt32(idx))

@@ -105,116 +105,19 @@ def _check_light_scenes(lights, scenes, source):
 
 def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Config:
     """The Config of raw TOML tables ``raw`` from ``source`` (files relative to ``base``), every value checked."""
-    from ..scenes import load as scenes_mod
-    from ..schemes import ALL as REGISTRY, PRESETS
-
     base = Path(base or ".")
     check_keys(raw, TOP_KEYS, source, "")
-
-    exp = _table(raw, "experiment", source)
-    check_keys(exp, ("name", "seed", "variant"), source, "experiment")
-    name = _plain_name(exp.get("name", Path(source).stem if not source.startswith("<") else "experiment"), source)
-    seed = number(exp.get("seed", 7), source, "experiment.seed", integer=True)
-    variant = exp.get("variant")
-    if variant is not None:
-        choice(variant, source, "experiment.variant", VARIANTS)
-
+    name, seed, variant = _parse_experiment(raw, source)
     cam = _table(raw, "camera", source)
     check_keys(cam, ("resolution", "position", "target", "up", "fov", "near", "far"), source, "camera")
-    camera_resolution = None
-    if "resolution" in cam:
-        res = cam["resolution"]
-        if isinstance(res, int) and not isinstance(res, bool):
-            res = [res, res]
-        if not isinstance(res, list) or len(res) != 2:
-            raise ConfigError(source, "camera.resolution", f"expected [width, height], got {res!r}")
-        camera_resolution = tuple(number(x, source, "camera.resolution", integer=True, minimum=1, maximum=16384)
-                                  for x in res)
-
+    camera_resolution = _parse_camera_resolution(cam, source)
     camera = _parse_camera(cam, source)
-
-    scene_tables = _array_of_tables(raw, "scene", source)
-    if not scene_tables:
-        raise ConfigError(source, "scene", "at least one [[scene]] is required", scenes_mod.BUILTINS)
-    scenes = []
-    for i, t in enumerate(scene_tables):
-        scenes += scenes_mod.parse_scene(t, source, f"scene[{i}]", base)
-
-    lights = []
-    for i, t in enumerate(_array_of_tables(raw, "light", source)):
-        lights.append(_parse_light(t, source, f"light[{i}]"))
-    if not lights:
-        lights = [LightSpec("scene", label="scene")]
-    _check_light_scenes(lights, scenes, source)
-
+    scenes = _parse_scenes(raw, source, base)
+    lights = _parse_lights(raw, source, scenes)
     m = _table(raw, "map", source)
-    check_keys(m, ("resolution", "texels", "filter", "format", "view", "shrink") + CASCADE_KEYS + KIND_KEYS, source,
-               "map")
-    if "resolution" in m and "texels" in m:
-        raise ConfigError(source, "map", "give either resolution (per face) or texels (total per view), not both",
-                          ("resolution", "texels"))
-    texels = tuple(number(r, source, "map.texels", integer=True, minimum=1, maximum=6 * 16384 ** 2)
-                   for r in as_list(m.get("texels", [])))
-    resolutions = tuple(number(r, source, "map.resolution", integer=True, minimum=1, maximum=16384)
-                        for r in as_list(m.get("resolution", 512)))
-    filters = tuple(_filter(f, source) for f in as_list(m.get("filter", "nearest")))
-    formats = tuple(choice(f, source, "map.format", FORMATS) for f in as_list(m.get("format", "float32")))
-    views = tuple(choice(v, source, "map.view", MAP_VIEWS) for v in as_list(m.get("view", "dual_paraboloid")))
-    for key, vals in (("map.resolution", resolutions), ("map.filter", filters), ("map.format", formats),
-                      ("map.view", views)):
-        if not vals:
-            raise ConfigError(source, key, "empty list")
-    from .. import lights as light_types
-    vsv_light = "vsv" in views and any("vsv" in light_types.get(l.type).views(views, l.shape) for l in lights)
-    if "view" in m and not vsv_light and all(l.type not in ("point", "scene") and l.shape != "sphere" for l in lights):
-        # a scene's own lights are known only once it is loaded; explicit ones are known now
-        raise ConfigError(source, "map.view", "views are for point lights and no [[light]] is a point light "
-                          f"(the lights are {', '.join(sorted({l.type for l in lights}))}); remove map.view or "
-                          "add a point light" + (" (vsv: or a spot light)" if "vsv" in views else ""))
-    cascade = _parse_cascades(m, source)
-    if cascade and all(l.type not in ("directional", "scene") for l in lights):
-        raise ConfigError(source, "map.cascades", "cascades are for directional lights and no [[light]] is "
-                          f"directional (the lights are {', '.join(sorted({l.type for l in lights}))}); remove "
-                          "map.cascades or add a directional light")
-    kinds = _parse_kinds(m, formats, lights, cascade, source)
-    if "leak_texels" in m and "kind" not in m:
-        raise ConfigError(source, "map.leak_texels", "the leak split is made in runs that give map.kind (e.g. "
-                          'kind = ["depth"]); add it', ("kind",))
-    mapspec = MapSpec(resolutions, filters, formats, views, texels, cascade, kinds,
-                      _parse_moments(m, kinds, formats, source),
-                      "kind" in m, number(m.get("leak_texels", 2.0), source, "map.leak_texels", minimum=0.0))
-
-    scheme_tables = _array_of_tables(raw, "scheme", source)
-    if "depth" not in kinds and scheme_tables:
-        raise ConfigError(source, "scheme", "[[scheme]] tables are the depth map's and map.kind does not name depth; "
-                          "add depth to map.kind or remove them", MAP_KINDS)
-    if not scheme_tables and "depth" in kinds:
-        raise ConfigError(source, "scheme", "at least one [[scheme]] is required", [s.NAME for s in REGISTRY])
-    schemes = []
-    for i, t in enumerate(scheme_tables):
-        schemes += parse_scheme(t, source, f"scheme[{i}]", REGISTRY, PRESETS)
-    from ..schemes import view_mismatch
-    if view_mismatch(schemes, views):
-        raise ConfigError(source, "map.view", view_mismatch(schemes, views), MAP_VIEWS)
-
-    mem = _table(raw, "memory", source)
-    check_keys(mem, ("budget_mb",), source, "memory")
-    budget = (number(mem["budget_mb"], source, "memory.budget_mb", positive=True)
-              if "budget_mb" in mem else None)
-
-    tim = _table(raw, "timing", source)
-    check_keys(tim, ("repeats",), source, "timing")
-    repeats = number(tim.get("repeats", 3), source, "timing.repeats", integer=True, minimum=1, maximum=100)
-    orc = _table(raw, "oracle", source)
-    check_keys(orc, ("lambda",), source, "oracle")
-    lambdas = as_list(orc.get("lambda", 1.0))
-    if not lambdas:
-        raise ConfigError(source, "oracle.lambda", "empty list")
-    lambdas = tuple(dict.fromkeys(number(x, source, "oracle.lambda", minimum=0) for x in lambdas))
-    rep = _table(raw, "report", source)
-    check_keys(rep, ("images",), source, "report")
-    report_images = choice(rep.get("images", "all"), source, "report.images", REPORT_IMAGES)
-
+    mapspec = _parse_map(m, lights, source)
+    schemes = _parse_schemes(raw, mapspec, source)
+    budget, repeats, lambdas, report_images = _parse_run_tables(raw, source)
     motion = tuple(_parse_motion(t, source, f"motion[{i}]") for i, t in enumerate(_array_of_tables(raw, "motion", source)))
     _check_motion_lights(motion, lights, source)
     if motion and mapspec.moments:
@@ -231,6 +134,135 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
                   report_images=report_images, raw=raw, contact=contact, shrink=shrink, tune=tune,
                   execution=_parse_execution(_table(raw, "execution", source), source))
 
+
+def _parse_experiment(raw: dict, source: str) -> tuple:
+    """``[experiment]``: (name, seed, variant or None)."""
+    exp = _table(raw, "experiment", source)
+    check_keys(exp, ("name", "seed", "variant"), source, "experiment")
+    name = _plain_name(exp.get("name", Path(source).stem if not source.startswith("<") else "experiment"), source)
+    seed = number(exp.get("seed", 7), source, "experiment.seed", integer=True)
+    variant = exp.get("variant")
+    if variant is not None:
+        choice(variant, source, "experiment.variant", VARIANTS)
+    return name, seed, variant
+
+
+def _parse_camera_resolution(cam: dict, source: str):
+    """``[camera] resolution`` as (width, height) pixels (one number: square), None where not given."""
+    if "resolution" not in cam:
+        return None
+    res = cam["resolution"]
+    if isinstance(res, int) and not isinstance(res, bool):
+        res = [res, res]
+    if not isinstance(res, list) or len(res) != 2:
+        raise ConfigError(source, "camera.resolution", f"expected [width, height], got {res!r}")
+    return tuple(number(x, source, "camera.resolution", integer=True, minimum=1, maximum=16384) for x in res)
+
+
+def _parse_scenes(raw: dict, source: str, base: Path) -> list:
+    """Every ``[[scene]]`` table (at least one), swept, as SceneSpecs; files relative to ``base``."""
+    from ..scenes.params import BUILTINS
+    from ..scenes.spec import parse_scene
+    scene_tables = _array_of_tables(raw, "scene", source)
+    if not scene_tables:
+        raise ConfigError(source, "scene", "at least one [[scene]] is required", BUILTINS)
+    scenes = []
+    for i, t in enumerate(scene_tables):
+        scenes += parse_scene(t, source, f"scene[{i}]", base)
+    return scenes
+
+
+def _parse_lights(raw: dict, source: str, scenes) -> list:
+    """Every ``[[light]]`` table as a LightSpec (none: the scenes' own lights), checked against ``scenes``."""
+    lights = []
+    for i, t in enumerate(_array_of_tables(raw, "light", source)):
+        lights.append(_parse_light(t, source, f"light[{i}]"))
+    if not lights:
+        lights = [LightSpec("scene", label="scene")]
+    _check_light_scenes(lights, scenes, source)
+    return lights
+
+
+def _parse_map(m: dict, lights, source: str) -> MapSpec:
+    """The ``[map]`` table ``m`` as a MapSpec: sizes, filters, formats, views, cascades and kinds."""
+    check_keys(m, ("resolution", "texels", "filter", "format", "view", "shrink") + CASCADE_KEYS + KIND_KEYS, source,
+               "map")
+    if "resolution" in m and "texels" in m:
+        raise ConfigError(source, "map", "give either resolution (per face) or texels (total per view), not both",
+                          ("resolution", "texels"))
+    texels = tuple(number(r, source, "map.texels", integer=True, minimum=1, maximum=6 * 16384 ** 2)
+                   for r in as_list(m.get("texels", [])))
+    resolutions = tuple(number(r, source, "map.resolution", integer=True, minimum=1, maximum=16384)
+                        for r in as_list(m.get("resolution", 512)))
+    filters = tuple(_filter(f, source) for f in as_list(m.get("filter", "nearest")))
+    formats = tuple(choice(f, source, "map.format", FORMATS) for f in as_list(m.get("format", "float32")))
+    views = tuple(choice(v, source, "map.view", MAP_VIEWS) for v in as_list(m.get("view", "dual_paraboloid")))
+    for key, vals in (("map.resolution", resolutions), ("map.filter", filters), ("map.format", formats),
+                      ("map.view", views)):
+        if not vals:
+            raise ConfigError(source, key, "empty list")
+    _check_map_lights(m, views, lights, source)
+    cascade = _parse_cascades(m, source)
+    if cascade and all(l.type not in ("directional", "scene") for l in lights):
+        raise ConfigError(source, "map.cascades", "cascades are for directional lights and no [[light]] is "
+                          f"directional (the lights are {', '.join(sorted({l.type for l in lights}))}); remove "
+                          "map.cascades or add a directional light")
+    kinds = _parse_kinds(m, formats, lights, cascade, source)
+    if "leak_texels" in m and "kind" not in m:
+        raise ConfigError(source, "map.leak_texels", "the leak split is made in runs that give map.kind (e.g. "
+                          'kind = ["depth"]); add it', ("kind",))
+    return MapSpec(resolutions, filters, formats, views, texels, cascade, kinds,
+                   _parse_moments(m, kinds, formats, source),
+                   "kind" in m, number(m.get("leak_texels", 2.0), source, "map.leak_texels", minimum=0.0))
+
+
+def _check_map_lights(m: dict, views, lights, source: str):
+    """ConfigError where ``[map] view`` is given and no [[light]] is one the views are for."""
+    from .. import lights as light_types
+    vsv_light = "vsv" in views and any("vsv" in light_types.get(l.type).views(views, l.shape) for l in lights)
+    if "view" in m and not vsv_light and all(l.type not in ("point", "scene") and l.shape != "sphere" for l in lights):
+        # a scene's own lights are known only once it is loaded; explicit ones are known now
+        raise ConfigError(source, "map.view", "views are for point lights and no [[light]] is a point light "
+                          f"(the lights are {', '.join(sorted({l.type for l in lights}))}); remove map.view or "
+                          "add a point light" + (" (vsv: or a spot light)" if "vsv" in views else ""))
+
+
+def _parse_schemes(raw: dict, mapspec: MapSpec, source: str) -> list:
+    """Every ``[[scheme]]`` table, swept and presets expanded, as SchemeSpecs (none without a depth map)."""
+    from ..schemes import ALL as REGISTRY, PRESETS, view_mismatch
+    scheme_tables = _array_of_tables(raw, "scheme", source)
+    if "depth" not in mapspec.kind and scheme_tables:
+        raise ConfigError(source, "scheme", "[[scheme]] tables are the depth map's and map.kind does not name depth; "
+                          "add depth to map.kind or remove them", MAP_KINDS)
+    if not scheme_tables and "depth" in mapspec.kind:
+        raise ConfigError(source, "scheme", "at least one [[scheme]] is required", [s.NAME for s in REGISTRY])
+    schemes = []
+    for i, t in enumerate(scheme_tables):
+        schemes += parse_scheme(t, source, f"scheme[{i}]", REGISTRY, PRESETS)
+    if view_mismatch(schemes, mapspec.view):
+        raise ConfigError(source, "map.view", view_mismatch(schemes, mapspec.view), MAP_VIEWS)
+    return schemes
+
+
+def _parse_run_tables(raw: dict, source: str) -> tuple:
+    """``[memory]``, ``[timing]``, ``[oracle]`` and ``[report]``: (budget MB or None, repeats, lambdas, images)."""
+    mem = _table(raw, "memory", source)
+    check_keys(mem, ("budget_mb",), source, "memory")
+    budget = (number(mem["budget_mb"], source, "memory.budget_mb", positive=True)
+              if "budget_mb" in mem else None)
+    tim = _table(raw, "timing", source)
+    check_keys(tim, ("repeats",), source, "timing")
+    repeats = number(tim.get("repeats", 3), source, "timing.repeats", integer=True, minimum=1, maximum=100)
+    orc = _table(raw, "oracle", source)
+    check_keys(orc, ("lambda",), source, "oracle")
+    lambdas = as_list(orc.get("lambda", 1.0))
+    if not lambdas:
+        raise ConfigError(source, "oracle.lambda", "empty list")
+    lambdas = tuple(dict.fromkeys(number(x, source, "oracle.lambda", minimum=0) for x in lambdas))
+    rep = _table(raw, "report", source)
+    check_keys(rep, ("images",), source, "report")
+    report_images = choice(rep.get("images", "all"), source, "report.images", REPORT_IMAGES)
+    return budget, repeats, lambdas, report_images
 
 CONTACT_MAX_STEPS = 256
 

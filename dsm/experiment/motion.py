@@ -44,7 +44,7 @@ from ..report import figures, io as report
 from ..maps import headroom, shadowmap, spawn
 from .. import lights, pipeline
 from ..truth import metrics
-from ..scenes import load as scenes
+from ..scenes.camera import look_at_sensor
 from ..tools import timing
 from ..maps.cascades import Camera
 
@@ -141,7 +141,7 @@ def _moved(light, position, target):
 def sensor_at(base: Camera, origin, target, up):
     """A sensor at a pose with the base camera's film, field of view and clip planes."""
     fov = math.degrees(2 * math.atan(base.tan_x))
-    return mi.load_dict(scenes.look_at_sensor(origin, target, up, fov, base.width, base.height, base.near, base.far))
+    return mi.load_dict(look_at_sensor(origin, target, up, fov, base.width, base.height, base.near, base.far))
 
 
 # ---------------------------------------------------------------- fixed points
@@ -314,119 +314,157 @@ def run_scene(runner, sd, lights, maps, closed, extents):
             _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents, magnitude)
 
 
+@dataclasses.dataclass
+class _MapFrames:
+    """What the frames of one planned map share while camera, light or projection stay: the
+    G-buffer, the receivers' set-up, the fixed points' V*, the map; and what they add up."""
+    gb: dict = dataclasses.field(default_factory=dict)        # {camera pose: G-buffer}
+    setup: dict = dataclasses.field(default_factory=dict)     # {(camera pose, light): LightSetup}
+    vstar: dict = dataclasses.field(default_factory=dict)     # {light: the fixed points' V*}
+    signature: object = None                                  # the last map's projection
+    smap: object = None
+    built: list = dataclasses.field(default_factory=list)     # per frame: the map was built (not reused)
+    build_ms: list = dataclasses.field(default_factory=list)
+    tight: dict = dataclasses.field(default_factory=lambda: headroom.headroom(math.nan, math.nan))
+
+
 def _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents, magnitude):
+    """Every frame of [[motion]] path ``mo`` on planned map ``m``, then one case row per scheme
+    instance, filter and format (its counts summed over the frames, rates and flicker averaged)."""
     cfg = runner.cfg
-    cache_gb, cache_setup, cache_vstar = {}, {}, {}
     specs = [pipeline.preset_for_light(s, light_frames[0].type) for s in m.specs]
     keys = [(s, filt, fmt) for s in specs for filt in cfg.map.filter for fmt in cfg.map.format]
     per = {k: {"v": [], "vstar": [], "elig": [], "face": [], "frames": [], "images": [], "metrics": []} for k in keys}
-    prev_sig, smap, built, build_ms = None, None, [], []
-    tight = headroom.headroom(math.nan, math.nan)   # the frame with the fewest float32 steps per texel
+    state = _MapFrames()
     for t, ((o, tg, up), light) in enumerate(zip(poses, light_frames)):
-        pose_key = (tuple(np.round(o, 12)), tuple(np.round(tg, 12)), tuple(np.round(up, 12)))
-        sensor = sensor_at(base, o, tg, up)
-        cam = Camera.from_sensor(sensor)
-        if pose_key not in cache_gb:                 # the G-buffer is shared while the camera stays
-            cache_gb = {pose_key: pipeline.gbuffer(sd, sensor=sensor)}
-        gb = cache_gb[pose_key]
-        if (pose_key, light) not in cache_setup:     # receivers and their V*: shared while camera and light stay
-            cache_setup = {(pose_key, light): pipeline.light_setup(sd, gb, light, m.light)}
-        setup = cache_setup[(pose_key, light)]
-        rpts = pipeline.points_np(setup.p) if setup.p is not None else np.zeros((0, 3))
-        view = pipeline.make_view(light, m.resolution, rpts, sd.bbox, m.view, m.cascade, sensor, sd.scale)
-        setup = setup.subset(view.inside(setup.p).numpy().astype(bool)) if setup.p is not None else setup
-        sig = _view_signature(view)
-        if sig != prev_sig or smap is None:          # the map is shared while its projection stays
-            def build():
-                """The frame's map built (the plan's layers, culling and tile): its arrays, then the ShadowMap."""
-                sm = pipeline.build_map(sd.scene, view, set(m.needs), m.culling,
-                                        closed if m.culling != "none" else None, m.tile, extents)
-                return (*shadowmap.arrays(sm), sm)       # the arrays, so the timing waits for them
-            out, tm = timing.measure(build, 0)
-            smap = out[-1]
-            build_ms.append(tm.ms)
-            built.append(True)
-            runner.record.add_rays({"map_texel": smap.rays.get("map_texel", 0)})
-        else:
-            smap = dataclasses.replace(smap, view=view)
-            built.append(False)
-        prev_sig = sig
-        elig, vstar_pts, n_cam = points_frame(sd.scene, pts, cam, light, view, magnitude, cache_vstar.get(light))
-        cache_vstar = {light: vstar_pts}             # the fixed points' V*: shared while the light stays
-        stored = {fmt: pipeline.store(smap, fmt) for fmt in cfg.map.format}
-        # per stored format (its depth function): the fixed points and the frame's receivers, as
-        # lazy expressions (each lookup below still computes them in its own, timed, kernel)
-        has_rx = setup.p is not None and len(setup.pixels)
-        rx_of = {fmt: (pipeline.receivers(sm.view, dataclasses.replace(setup, p=pts.p, n=n_cam), sd.diagonal),
-                       pipeline.receivers(sm.view, setup, sd.diagonal) if has_rx else None)
-                 for fmt, sm in stored.items()}
-        if has_rx:               # the map's float32 headroom at this frame's receivers (dsm.maps.headroom)
-            hr = headroom.headroom(setup.max_abs_coordinate,
-                                   float(np.median(rx_of[cfg.map.format[0]][1].texel_world.numpy())))
-            if math.isnan(tight["texel_f32_steps"]) or hr["texel_f32_steps"] < tight["texel_f32_steps"]:
-                tight = hr
-        for (spec, filt, fmt) in keys:
-            sm = stored[fmt]
-            rx_pts, rx = rx_of[fmt]
-            v_pts = np.asarray(pipeline.visibility(spec, rx_pts, sm, filt, cfg.seed)[0].numpy(), np.float64)
-            face = np.asarray(rx_pts.face.numpy(), np.int64)
-            if has_rx:
-                (v, tap), lt = timing.measure(lambda: pipeline.visibility(spec, rx, sm, filt, cfg.seed), 0)
-                v_np, tap_np = v.numpy(), tap.numpy()
-                d_lookup = lt.ms
-            else:
-                v_np, tap_np, d_lookup = np.zeros(0), np.zeros(0, np.uint32), float("nan")
-            mt = pipeline.metrics(v_np, setup, tap_np, None, False)
-            classes = np.zeros(gb.width * gb.height, np.uint8)
-            classes[setup.pixels] = pipeline.classify(v_np, setup.v_star)
-            d = per[(spec, filt, fmt)]
-            d["v"].append(v_pts)
-            d["vstar"].append(vstar_pts)
-            d["elig"].append(elig)
-            d["face"].append(face)
-            if cfg.report_images != "none":          # [report] images = "none": no GIF either
-                d["images"].append(classes.reshape(gb.height, gb.width))
-            d["metrics"].append(mt)
-            d.setdefault("lookup_ms", []).append(d_lookup)
-            d["frames"].append({"frame": t, "map_built": built[-1], "n_points_visible": int(elig.sum()),
-                                "n_receivers": mt["n_receivers"], "acne_rate": mt["acne_rate"],
-                                "peterpan_rate": mt["peterpan_rate"], "error_rate": mt["error_rate"]})
+        _run_frame(runner, state, keys, per, t, sd, m, base, (o, tg, up), light, pts, closed, extents, magnitude)
     for (spec, filt, fmt), d in per.items():
-        runner.case_no += 1
-        case = f"{runner.case_no:04d}"
-        pairs, ever = flicker(np.array(d["v"]), np.array(d["vstar"]), np.array(d["elig"]), np.array(d["face"]))
-        meta = {"case": case, "motion": mo.label, "scene": sd.label, "light": m.light,
-                "cascade_layout": m.cascade.label if m.cascade else "", "scheme": spec.name, "params": spec.label,
-                "resolution": m.resolution, "filter": filt, "format": fmt}
-        for fr, pr in zip(d["frames"], [{}] + pairs):          # frame t carries the pair (t - 1, t)
-            runner.record.motion_frames.append({**meta, **fr, **pr})
-        last = d["metrics"][-1]
-        row = {**last, "case": case, "scene": sd.label, "light": m.light, "view": m.view, "scheme": spec.name,
-               "culling": m.culling, "preset": spec.preset or "", "params": spec.label, "resolution": m.resolution,
-               "total_texels": m.texels, "filter": filt, "format": fmt, "cascade_layout": meta["cascade_layout"],
-               "motion": mo.label, "frames": mo.frames}
-        for k in ("n_receivers", "n_gt_lit", "n_gt_shadowed", "n_acne", "n_acne_self", "n_acne_edge", "n_peterpan"):
-            row[k] = int(sum(x[k] for x in d["metrics"]))       # summed over the frames
-        for k in ("acne_rate", "peterpan_rate", "error_rate", "mean_abs_error"):
-            row[k] = _mean([x[k] for x in d["metrics"]])          # the mean over the frames
-        row.update({"flicker_rate": _mean([p["flicker_rate"] for p in pairs]), "flicker_ever": ever,
-                    "flicker_magnitude": _mean([p["flicker_magnitude"] for p in pairs]),
-                    "flicker_within_rate": _mean([p["flicker_within_rate"] for p in pairs]),
-                    "flicker_change_rate": _mean([p["flicker_change_rate"] for p in pairs]),
-                    "maps_built": int(sum(built)), "build_ms": float(np.median(build_ms)), "build_first_ms": float("nan"),
-                    "lookup_ms": _median(d.get("lookup_ms", [])), "reference_ms": float("nan"), "sweep_key": "", "sweep_value": float("nan"),
-                    "texel_size": float("nan"), **tight})
-        for k, val in list(row.items()):
-            if isinstance(val, float) and not metrics.defined(val):
-                row[k] = metrics.UNDEFINED
-        if d["images"]:
-            folder = runner.out / "images" / figures.image_folder(meta)
-            folder.mkdir(parents=True, exist_ok=True)
-            _write_gif(folder / f"{case}_frames.gif", d["images"])
-        runner.add_case(row, {"what": f"case {case}", "scene": sd.label, "light": m.light, "view": m.view,
-                              "scheme": spec.name, "params": spec.label, "resolution": m.resolution,
-                              "status": "ok" if row["n_receivers"] else "empty"})
-        runner.bar.update(1)
+        _write_case(runner, state, sd, m, mo, spec, filt, fmt, d)
+
+
+def _frame_view(state: _MapFrames, sd, m, base, pose, light):
+    """(sensor, camera, G-buffer, receivers' set-up inside the view, view) of one frame."""
+    o, tg, up = pose
+    pose_key = (tuple(np.round(o, 12)), tuple(np.round(tg, 12)), tuple(np.round(up, 12)))
+    sensor = sensor_at(base, o, tg, up)
+    cam = Camera.from_sensor(sensor)
+    if pose_key not in state.gb:                 # the G-buffer is shared while the camera stays
+        state.gb = {pose_key: pipeline.gbuffer(sd, sensor=sensor)}
+    gb = state.gb[pose_key]
+    if (pose_key, light) not in state.setup:     # receivers and their V*: shared while camera and light stay
+        state.setup = {(pose_key, light): pipeline.light_setup(sd, gb, light, m.light)}
+    setup = state.setup[(pose_key, light)]
+    rpts = pipeline.points_np(setup.p) if setup.p is not None else np.zeros((0, 3))
+    view = pipeline.make_view(light, m.resolution, rpts, sd.bbox, m.view, m.cascade, sensor, sd.scale)
+    setup = setup.subset(view.inside(setup.p).numpy().astype(bool)) if setup.p is not None else setup
+    return cam, gb, setup, view
+
+
+def _frame_map(runner, state: _MapFrames, sd, m, view, closed, extents):
+    """The frame's ShadowMap: built where the view's projection changed, else the last one re-viewed."""
+    sig = _view_signature(view)
+    if sig != state.signature or state.smap is None:          # the map is shared while its projection stays
+        def build():
+            """The frame's map built (the plan's layers, culling and tile): its arrays, then the ShadowMap."""
+            sm = pipeline.build_map(sd.scene, view, set(m.needs), m.culling,
+                                    closed if m.culling != "none" else None, m.tile, extents)
+            return (*shadowmap.arrays(sm), sm)       # the arrays, so the timing waits for them
+        out, tm = timing.measure(build, 0)
+        state.smap = out[-1]
+        state.build_ms.append(tm.ms)
+        state.built.append(True)
+        runner.record.add_rays({"map_texel": state.smap.rays.get("map_texel", 0)})
+    else:
+        state.smap = dataclasses.replace(state.smap, view=view)
+        state.built.append(False)
+    state.signature = sig
+    return state.smap
+
+
+def _run_frame(runner, state: _MapFrames, keys, per, t, sd, m, base, pose, light, pts, closed, extents, magnitude):
+    """Frame ``t``: its view and map, then every (scheme instance, filter, format) of ``keys`` looked
+    up at the fixed points and the frame's receivers, into ``per``."""
+    cfg = runner.cfg
+    cam, gb, setup, view = _frame_view(state, sd, m, base, pose, light)
+    smap = _frame_map(runner, state, sd, m, view, closed, extents)
+    elig, vstar_pts, n_cam = points_frame(sd.scene, pts, cam, light, view, magnitude, state.vstar.get(light))
+    state.vstar = {light: vstar_pts}             # the fixed points' V*: shared while the light stays
+    stored = {fmt: pipeline.store(smap, fmt) for fmt in cfg.map.format}
+    # per stored format (its depth function): the fixed points and the frame's receivers, as
+    # lazy expressions (each lookup below still computes them in its own, timed, kernel)
+    has_rx = setup.p is not None and len(setup.pixels)
+    rx_of = {fmt: (pipeline.receivers(sm.view, dataclasses.replace(setup, p=pts.p, n=n_cam), sd.diagonal),
+                   pipeline.receivers(sm.view, setup, sd.diagonal) if has_rx else None)
+             for fmt, sm in stored.items()}
+    if has_rx:               # the map's float32 headroom at this frame's receivers (dsm.maps.headroom)
+        hr = headroom.headroom(setup.max_abs_coordinate,
+                               float(np.median(rx_of[cfg.map.format[0]][1].texel_world.numpy())))
+        if math.isnan(state.tight["texel_f32_steps"]) or hr["texel_f32_steps"] < state.tight["texel_f32_steps"]:
+            state.tight = hr
+    for (spec, filt, fmt) in keys:
+        d = per[(spec, filt, fmt)]
+        sm = stored[fmt]
+        rx_pts, rx = rx_of[fmt]
+        v_pts = np.asarray(pipeline.visibility(spec, rx_pts, sm, filt, cfg.seed)[0].numpy(), np.float64)
+        face = np.asarray(rx_pts.face.numpy(), np.int64)
+        if has_rx:
+            (v, tap), lt = timing.measure(lambda: pipeline.visibility(spec, rx, sm, filt, cfg.seed), 0)
+            v_np, tap_np = v.numpy(), tap.numpy()
+            d_lookup = lt.ms
+        else:
+            v_np, tap_np, d_lookup = np.zeros(0), np.zeros(0, np.uint32), float("nan")
+        mt = pipeline.metrics(v_np, setup, tap_np, None, False)
+        classes = np.zeros(gb.width * gb.height, np.uint8)
+        classes[setup.pixels] = pipeline.classify(v_np, setup.v_star)
+        d["v"].append(v_pts)
+        d["vstar"].append(vstar_pts)
+        d["elig"].append(elig)
+        d["face"].append(face)
+        if cfg.report_images != "none":          # [report] images = "none": no GIF either
+            d["images"].append(classes.reshape(gb.height, gb.width))
+        d["metrics"].append(mt)
+        d.setdefault("lookup_ms", []).append(d_lookup)
+        d["frames"].append({"frame": t, "map_built": state.built[-1], "n_points_visible": int(elig.sum()),
+                            "n_receivers": mt["n_receivers"], "acne_rate": mt["acne_rate"],
+                            "peterpan_rate": mt["peterpan_rate"], "error_rate": mt["error_rate"]})
+
+
+def _write_case(runner, state: _MapFrames, sd, m, mo, spec, filt, fmt, d):
+    """One motion case: its frames into frames.csv, its row (frames summed and averaged), its GIF."""
+    case = runner.next_case()
+    pairs, ever = flicker(np.array(d["v"]), np.array(d["vstar"]), np.array(d["elig"]), np.array(d["face"]))
+    meta = {"case": case, "motion": mo.label, "scene": sd.label, "light": m.light,
+            "cascade_layout": m.cascade.label if m.cascade else "", "scheme": spec.name, "params": spec.label,
+            "resolution": m.resolution, "filter": filt, "format": fmt}
+    for fr, pr in zip(d["frames"], [{}] + pairs):          # frame t carries the pair (t - 1, t)
+        runner.record.motion_frames.append({**meta, **fr, **pr})
+    last = d["metrics"][-1]
+    row = {**last, "case": case, "scene": sd.label, "light": m.light, "view": m.view, "scheme": spec.name,
+           "culling": m.culling, "preset": spec.preset or "", "params": spec.label, "resolution": m.resolution,
+           "total_texels": m.texels, "filter": filt, "format": fmt, "cascade_layout": meta["cascade_layout"],
+           "motion": mo.label, "frames": mo.frames}
+    for k in ("n_receivers", "n_gt_lit", "n_gt_shadowed", "n_acne", "n_acne_self", "n_acne_edge", "n_peterpan"):
+        row[k] = int(sum(x[k] for x in d["metrics"]))       # summed over the frames
+    for k in ("acne_rate", "peterpan_rate", "error_rate", "mean_abs_error"):
+        row[k] = _mean([x[k] for x in d["metrics"]])          # the mean over the frames
+    row.update({"flicker_rate": _mean([p["flicker_rate"] for p in pairs]), "flicker_ever": ever,
+                "flicker_magnitude": _mean([p["flicker_magnitude"] for p in pairs]),
+                "flicker_within_rate": _mean([p["flicker_within_rate"] for p in pairs]),
+                "flicker_change_rate": _mean([p["flicker_change_rate"] for p in pairs]),
+                "maps_built": int(sum(state.built)), "build_ms": float(np.median(state.build_ms)),
+                "build_first_ms": float("nan"),
+                "lookup_ms": _median(d.get("lookup_ms", [])), "reference_ms": float("nan"), "sweep_key": "",
+                "sweep_value": float("nan"), "texel_size": float("nan"), **state.tight})
+    for k, val in list(row.items()):
+        if isinstance(val, float) and not metrics.defined(val):
+            row[k] = metrics.UNDEFINED
+    if d["images"]:
+        folder = runner.out / "images" / figures.image_folder(meta)
+        folder.mkdir(parents=True, exist_ok=True)
+        _write_gif(folder / f"{case}_frames.gif", d["images"])
+    runner.case_done(row, {"what": f"case {case}", "scene": sd.label, "light": m.light, "view": m.view,
+                           "scheme": spec.name, "params": spec.label, "resolution": m.resolution,
+                           "status": "ok" if row["n_receivers"] else "empty"})
 
 
 def _write_gif(path, images):

@@ -378,7 +378,7 @@ def _area_emitters(spec) -> int:
 
 def scene_lights(spec, cfg: Config) -> list:
     """[(label, type)] of the lights a scene gets, as the runner labels them."""
-    from ..scenes.load import builtin_geometry
+    from ..scenes.builtins import builtin_geometry
     own = []
     if spec.builtin:
         own = [builtin_geometry(spec.builtin, spec.params)[2].type]
@@ -435,7 +435,7 @@ def reference_shortfall(light) -> str:
 def scene_triangles(spec) -> tuple:
     """(triangles, the [[scene]] key naming the scene) of a scene spec, before it is loaded."""
     if spec.builtin:
-        from ..scenes.load import builtin_geometry
+        from ..scenes.builtins import builtin_geometry
         shapes = builtin_geometry(spec.builtin, spec.params)[0]
         return sum(len(f) for _, f in shapes.values()), f"{spec.where}.builtin"
     return scene_size.file_triangles(spec.file), f"{spec.where}.file"
@@ -464,56 +464,91 @@ def make(cfg: Config) -> Plan:
     check_emitters(cfg)
     plan = Plan(cfg.source, budget_bytes=memory_budget(cfg), absent=absent_files(cfg),
                 lambdas=len(cfg.oracle.lambdas), contact=getattr(cfg, "contact", None), shrink=getattr(cfg, "shrink", None))
-    per_case = len(cfg.map.filter) * len(cfg.map.format)
-    fmts = tuple(f for f in cfg.map.format if f != "float32")
+    groups = _culling_groups(cfg)
+    used, views_seen = set(), set()        # the scheme instances some map reads; the views the lights get
+    for si, sc in enumerate(cfg.scenes):
+        if not sc.missing:
+            _plan_scene(plan, cfg, si, sc, groups, used, views_seen)
+    _check_every_scheme_read(cfg, used, views_seen)
+    _check_planned(cfg, plan, views_seen)
+    if cfg.motion:          # every case runs once per [[motion]] path, its map built per frame
+        plan.frames = sum(mo.frames for mo in cfg.motion)
+        for m in plan.maps:
+            m.cases *= len(cfg.motion)
+    base = max((w * h * PIXEL_BYTES for _, w, h, _ in plan.scenes), default=0)
+    for m in plan.maps:
+        room = plan.budget_bytes - base - m.stored_bytes
+        fit = max(room // max(m.build_bytes_per_texel, 1), MIN_TILE)
+        m.tile = int(min(m.texels, fit))
+    return plan
+
+
+def _culling_groups(cfg: Config) -> dict:
+    """The config's scheme instances by the culling of the map they read ({culling: [SchemeSpec]})."""
     groups = {}
     for spec in cfg.schemes:
         groups.setdefault(schemes_mod.culling_of(spec.params), []).append(spec)
     if cfg.map.moments:       # moment maps are built from the first layer, as rays see it: culling none
         groups.setdefault("none", [])
-    used, views_seen = set(), set()        # the scheme instances some map reads; the views the lights get
-    for si, sc in enumerate(cfg.scenes):
-        if sc.missing:
-            continue
-        if sc.file is not None and sc.file.suffix.lower() == ".xml":
-            w, h = _xml_film(sc.file, cfg.camera_resolution, sc)
-        else:
-            w, h = cfg.camera_resolution or DEFAULT_CAMERA
-        lights = scene_lights(sc, cfg)
-        specs = scene_light_specs(sc, cfg)
-        plan.scenes.append((sc.label, w, h, lights))
-        plan.triangles[sc.label] = scene_triangles(sc)
-        for li, (label, ltype) in enumerate(lights):
-            shape = specs[li].shape if specs[li] is not None else ""
-            if light_types.get(ltype).SOFT:              # a Monte Carlo reference: its samples per receiver
-                plan.area_samples[(sc.label, label)] = specs[li].max_samples
-                short = reference_shortfall(specs[li])
-                if short:
-                    plan.area_short.append(f"{sc.label} {label}: {short}")
-            for view, cascade in _layouts(views_for(ltype, cfg.map.view, shape), cfg.map.cascade):
-                faces = cascade.count if cascade is not None else VIEW_FACES[view]
-                for R in cfg.map.resolutions_for(faces):
-                    for culling, config_group in groups.items():
-                        # engine presets are combined instances per light type, resolved here
-                        read = [s for s in config_group if schemes_mod.reads_view(s, view)]  # a VSV grid: its own
-                        used.update(id(s) for s in read)
-                        views_seen.add(view)
-                        group = [schemes_mod.preset_for_light(s, ltype) for s in read]
-                        # moments are a depth map's (a voxel grid holds no depth), on its culling-none map
-                        moments = (cfg.map.moments if culling == "none" and view not in schemes_mod.EXCLUSIVE_VIEWS
-                                   else ())
-                        if not group and not moments:
-                            continue
-                        needs = schemes_mod.needs_of(group)
-                        m = MapPlan(sc.label, label, view, R, faces, culling, tuple(sorted(needs)),
-                                    "z2" in needs or culling != "none", fmts,
-                                    [f"{s.name} {s.label}".strip() for s in group]
-                                    + [f"{s.name} {s.label} {s.filter}" for s in moments],
-                                    len(group) * per_case + len(moments) * len(cfg.map.format),
-                                    specs=tuple(group), scene_index=si, light_index=li, cascade=cascade,
-                                    moments=moments)
+    return groups
+
+
+def _plan_scene(plan: Plan, cfg: Config, si: int, sc, groups: dict, used: set, views_seen: set):
+    """Scene ``si``'s camera size, lights, triangles and maps into ``plan``; the scheme instances read
+    into ``used``, the views its lights get into ``views_seen``."""
+    if sc.file is not None and sc.file.suffix.lower() == ".xml":
+        w, h = _xml_film(sc.file, cfg.camera_resolution, sc)
+    else:
+        w, h = cfg.camera_resolution or DEFAULT_CAMERA
+    lights = scene_lights(sc, cfg)
+    specs = scene_light_specs(sc, cfg)
+    plan.scenes.append((sc.label, w, h, lights))
+    plan.triangles[sc.label] = scene_triangles(sc)
+    for li, (label, ltype) in enumerate(lights):
+        shape = specs[li].shape if specs[li] is not None else ""
+        if light_types.get(ltype).SOFT:              # a Monte Carlo reference: its samples per receiver
+            plan.area_samples[(sc.label, label)] = specs[li].max_samples
+            short = reference_shortfall(specs[li])
+            if short:
+                plan.area_short.append(f"{sc.label} {label}: {short}")
+        for view, cascade in _layouts(views_for(ltype, cfg.map.view, shape), cfg.map.cascade):
+            faces = cascade.count if cascade is not None else VIEW_FACES[view]
+            for R in cfg.map.resolutions_for(faces):
+                for culling, config_group in groups.items():
+                    m = _map_plan(cfg, sc.label, si, label, li, ltype, view, cascade, faces, R, culling, config_group,
+                                  used, views_seen)
+                    if m is not None:
                         plan.maps.append(m)
-    _check_every_scheme_read(cfg, used, views_seen)
+
+
+def _map_plan(cfg: Config, scene_label, si, label, li, ltype, view, cascade, faces, R, culling, config_group,
+              used: set, views_seen: set):
+    """The MapPlan of one scene, light, view, resolution and culling; None where no scheme reads it."""
+    per_case = len(cfg.map.filter) * len(cfg.map.format)
+    fmts = tuple(f for f in cfg.map.format if f != "float32")
+    # engine presets are combined instances per light type, resolved here
+    read = [s for s in config_group if schemes_mod.reads_view(s, view)]  # a VSV grid: its own
+    used.update(id(s) for s in read)
+    views_seen.add(view)
+    group = [schemes_mod.preset_for_light(s, ltype) for s in read]
+    # moments are a depth map's (a voxel grid holds no depth), on its culling-none map
+    moments = (cfg.map.moments if culling == "none" and view not in schemes_mod.EXCLUSIVE_VIEWS
+               else ())
+    if not group and not moments:
+        return None
+    needs = schemes_mod.needs_of(group)
+    return MapPlan(scene_label, label, view, R, faces, culling, tuple(sorted(needs)),
+                   "z2" in needs or culling != "none", fmts,
+                   [f"{s.name} {s.label}".strip() for s in group]
+                   + [f"{s.name} {s.label} {s.filter}" for s in moments],
+                   len(group) * per_case + len(moments) * len(cfg.map.format),
+                   specs=tuple(group), scene_index=si, light_index=li, cascade=cascade,
+                   moments=moments)
+
+
+def _check_planned(cfg: Config, plan: Plan, views_seen: set):
+    """ConfigError where the planned maps cannot take the config's options: a contact length in
+    "range" units on a voxel grid, moments or cascades that no planned map gets."""
     contact = getattr(cfg, "contact", None)
     grids = sorted(views_seen & schemes_mod.EXCLUSIVE_VIEWS)
     for key in ("length", "thickness") if contact is not None and grids else ():
@@ -528,13 +563,3 @@ def make(cfg: Config) -> Plan:
     if cfg.map.cascade and plan.maps and not any(m.cascade is not None for m in plan.maps):
         raise ConfigError(cfg.source, "map.cascades", "cascades are for directional lights and no light of the "
                           "config's scenes is directional; remove map.cascades or add a directional [[light]]")
-    if cfg.motion:          # every case runs once per [[motion]] path, its map built per frame
-        plan.frames = sum(mo.frames for mo in cfg.motion)
-        for m in plan.maps:
-            m.cases *= len(cfg.motion)
-    base = max((w * h * PIXEL_BYTES for _, w, h, _ in plan.scenes), default=0)
-    for m in plan.maps:
-        room = plan.budget_bytes - base - m.stored_bytes
-        fit = max(room // max(m.build_bytes_per_texel, 1), MIN_TILE)
-        m.tile = int(min(m.texels, fit))
-    return plan

@@ -429,9 +429,7 @@ class Runner:
                   moment=None):
         """One case: a scheme instance and filter on a stored depth map, or (``moment``: its
         MomentMap's builder) a pre-filtered instance on the depth map's moments."""
-        bt, first_t = build
-        self.case_no += 1
-        case = f"{self.case_no:04d}"
+        case = self.next_case()
         if self.keys.get(case) in self.kept:          # finished by the run being resumed: its row again
             row, st, cascade_rows = self.kept[self.keys[case]]
             self.record.cascade_rows += cascade_rows
@@ -444,71 +442,18 @@ class Runner:
                 "total_texels": view.n_texels,
                 "filter": filt, "format": fmt, "cascade_layout": view.spec.label if hasattr(view, "spec") else ""}
         try:
+            mt = None
             if moment is None:
                 look = lambda r: pipeline.visibility(spec, r, smap, filt, self.cfg.seed)
             else:
                 mmap, mt = moment()
                 look = lambda r: pipeline.moment_visibility(spec, r, mmap, smap)
             uses_plane = moment is None and pipeline.scheme_module(spec.name).USES_PLANE
-            if rx is None:
-                v_np, tap_np, lt = np.zeros(0), np.zeros(0, np.uint32), timing.Timing(0.0, 0.0, 0.0, 0, 0)
-                fallbacks = 0
-            else:
-                (v, tap_shape), lt = timing.measure(lambda: look(rx), self.cfg.timing_repeats)
-                v_np, tap_np = v.numpy(), tap_shape.numpy()
-                fallbacks = pipeline.plane_fallbacks(spec, rx, smap) if uses_plane else 0
-            m = pipeline.metrics(v_np, setup, tap_np, seam, view.has_seams)
-            m.update(pipeline.split(v_np, setup.v_star, wrong))     # NaN unless nearest (the oracles' lookup)
-            occ = None
-            if self.cfg.contact is not None:      # screen-space contact shadows after the lookup
-                cols, occ = self._contact(sd, gb, setup, rx, v_np)
-                m.update(cols)
-            # seed 000's self-unshadowing: pixels in attached shadow (facing away) that the map calls lit
-            v_back = look(rx_back)[0].numpy() if rx_back is not None else np.zeros(0)
-            if hasattr(view, "cascades"):         # a cascaded map: per cascade, texels per pixel, distance plot
-                extra, per, curve, faces = pipeline.cascade_metrics(view, rx, v_np, setup.v_star)
-                m.update(extra)
-                self.record.cascade_rows += [{**meta, **r} for r in per]
-                self.record.cascade_curves.append((meta, curve))
-                folder = self.out / "images" / figures.image_folder(meta)
-                folder.mkdir(parents=True, exist_ok=True)
-                cascades.write_index_image(folder / f"{case}_cascade.png", setup.pixels, faces, gb.width, gb.height)
-            m["n_backfacing"] = int(v_back.size)
-            m["backface_lit_rate"] = float((v_back >= 0.5).mean()) if v_back.size else metrics.UNDEFINED
-            texel = float(np.median(rx.texel_world.numpy())) if rx is not None else metrics.UNDEFINED
-            sweep_key, sweep_value = report.sweep_of(spec, self.cfg.schemes if moment is None else self.cfg.map.moments)
-            extent = setup.max_abs_coordinate if rx is not None else metrics.UNDEFINED
-            row = {**meta, **setup.exclusions, **m, **headroom.headroom(extent, texel), "texel_size": texel,
-                   "n_plane_fallback": fallbacks if uses_plane else metrics.UNDEFINED,
-                   "build_ms": bt.ms, "build_first_ms": first_t.ms, "build_compile_ms": bt.compile_ms, "build_peak_mb": smap.peak_bytes / 2 ** 20,
-                   "lookup_ms": lt.ms, "lookup_compile_ms": lt.compile_ms, "lookup_kernels_compiled": lt.cache_misses,
-                   "reference_ms": setup.reference_ms, "sweep_key": sweep_key, "sweep_value": sweep_value}
-            if self.cfg.map.leak_split:          # [map] kind given: every case's leak split (dsm.truth.metrics)
-                texel_np = rx.texel_world.numpy() if rx is not None else np.zeros(0)
-                row.update({"map_kind": spec.name if moment is not None else "depth",
-                            **metrics.leak_split(v_np, setup.v_star, setup.occluder_dist, texel_np,
-                                                 self.cfg.map.leak_texels),
-                            "moments_ms": mt.ms if moment is not None else metrics.UNDEFINED})
-            classes = np.zeros(gb.width * gb.height, np.uint8)
-            classes[setup.pixels] = pipeline.classify(v_np, setup.v_star, wrong)
-            classes = classes.reshape(gb.height, gb.width)
-            t_img = time.perf_counter()              # the case's images: report work, timed apart
-            shade = report.shade(classes.shape, gb, setup, v_np, pipeline.is_positional(setup.light)) \
-                if self.cfg.report_images == "all" else None
-            item = publish.image_item(meta, classes, shade, self.cfg.report_images)
-            if item is not None:        # written now (Pillow, ~1 ms, between timings): a killed run keeps them
-                figures.write_images(self.out, [item])
-            if occ is not None and self.cfg.report_images != "none":         # what the contact march did
-                folder = self.out / "images" / figures.image_folder(meta)
-                folder.mkdir(parents=True, exist_ok=True)
-                contact_images.write_image(folder / f"{case}_contact.png", setup.pixels,
-                                           contact_images.classes(v_np, setup.v_star, occ), gb.width, gb.height)
-            if setup.ref is not None and self.cfg.report_images != "none":    # area light: V, V*, |V - V*|
-                soft_report.write_images(self.out, [soft_report.image_item(meta, gb.width, gb.height, setup.pixels,
-                                                                           v_np, setup.v_frac)])
-            self.timing["images_s"] = self.timing.get("images_s", 0.0) + time.perf_counter() - t_img
-            if self.keep_images:
-                self.images[case] = classes
+            v_np, tap_np, lt, fallbacks = self._looked_up(spec, smap, rx, look, uses_plane)
+            m, occ = self._case_metrics(sd, gb, setup, view, rx, seam, look, rx_back, wrong, v_np, tap_np, meta)
+            fallback = fallbacks if uses_plane else metrics.UNDEFINED
+            row = self._case_row(meta, setup, m, rx, spec, moment, mt, build, smap, lt, v_np, fallback)
+            self._case_images(meta, gb, setup, v_np, wrong, occ)
             # a case without receivers says nothing about the scheme: it is reported as empty
             self.add_case(row, {"what": f"case {case}", **{k: meta[k] for k in ("scene", "light", "view", "scheme",
                                                                                 "params", "resolution")},
@@ -516,6 +461,81 @@ class Runner:
             self._write_run_json()
         except Exception as e:
             self._fail(f"case {case} ({sd.label}, {setup.label}, {spec.name} {spec.label}, R={view.resolution})", e)
+
+    def _looked_up(self, spec, smap, rx, look, uses_plane) -> tuple:
+        """(visibility, tap shapes (numpy), the lookup's Timing, plane fallbacks) of receivers ``rx``."""
+        if rx is None:
+            return np.zeros(0), np.zeros(0, np.uint32), timing.Timing(0.0, 0.0, 0.0, 0, 0), 0
+        (v, tap_shape), lt = timing.measure(lambda: look(rx), self.cfg.timing_repeats)
+        fallbacks = pipeline.plane_fallbacks(spec, rx, smap) if uses_plane else 0
+        return v.numpy(), tap_shape.numpy(), lt, fallbacks
+
+    def _case_metrics(self, sd, gb, setup, view, rx, seam, look, rx_back, wrong, v_np, tap_np, meta) -> tuple:
+        """(the case's counts and rates, the contact march's occlusion or None); a cascaded map's
+        per-cascade rows, curve and index image recorded on the way."""
+        m = pipeline.metrics(v_np, setup, tap_np, seam, view.has_seams)
+        m.update(pipeline.split(v_np, setup.v_star, wrong))     # NaN unless nearest (the oracles' lookup)
+        occ = None
+        if self.cfg.contact is not None:      # screen-space contact shadows after the lookup
+            cols, occ = self._contact(sd, gb, setup, rx, v_np)
+            m.update(cols)
+        # seed 000's self-unshadowing: pixels in attached shadow (facing away) that the map calls lit
+        v_back = look(rx_back)[0].numpy() if rx_back is not None else np.zeros(0)
+        if hasattr(view, "cascades"):         # a cascaded map: per cascade, texels per pixel, distance plot
+            extra, per, curve, faces = pipeline.cascade_metrics(view, rx, v_np, setup.v_star)
+            m.update(extra)
+            self.record.cascade_rows += [{**meta, **r} for r in per]
+            self.record.cascade_curves.append((meta, curve))
+            folder = self.out / "images" / figures.image_folder(meta)
+            folder.mkdir(parents=True, exist_ok=True)
+            cascades.write_index_image(folder / f"{meta['case']}_cascade.png", setup.pixels, faces, gb.width, gb.height)
+        m["n_backfacing"] = int(v_back.size)
+        m["backface_lit_rate"] = float((v_back >= 0.5).mean()) if v_back.size else metrics.UNDEFINED
+        return m, occ
+
+    def _case_row(self, meta, setup, m, rx, spec, moment, mt, build, smap, lt, v_np, fallback) -> dict:
+        """The case's metrics.csv row: its keys, exclusions, metrics, headroom, timings and sweep
+        (``fallback``: its plane fallbacks, or UNDEFINED for a scheme without a plane)."""
+        bt, first_t = build
+        texel = float(np.median(rx.texel_world.numpy())) if rx is not None else metrics.UNDEFINED
+        sweep_key, sweep_value = report.sweep_of(spec, self.cfg.schemes if moment is None else self.cfg.map.moments)
+        extent = setup.max_abs_coordinate if rx is not None else metrics.UNDEFINED
+        row = {**meta, **setup.exclusions, **m, **headroom.headroom(extent, texel), "texel_size": texel,
+               "n_plane_fallback": fallback,
+               "build_ms": bt.ms, "build_first_ms": first_t.ms, "build_compile_ms": bt.compile_ms, "build_peak_mb": smap.peak_bytes / 2 ** 20,
+               "lookup_ms": lt.ms, "lookup_compile_ms": lt.compile_ms, "lookup_kernels_compiled": lt.cache_misses,
+               "reference_ms": setup.reference_ms, "sweep_key": sweep_key, "sweep_value": sweep_value}
+        if self.cfg.map.leak_split:          # [map] kind given: every case's leak split (dsm.truth.metrics)
+            texel_np = rx.texel_world.numpy() if rx is not None else np.zeros(0)
+            row.update({"map_kind": spec.name if moment is not None else "depth",
+                        **metrics.leak_split(v_np, setup.v_star, setup.occluder_dist, texel_np,
+                                             self.cfg.map.leak_texels),
+                        "moments_ms": mt.ms if moment is not None else metrics.UNDEFINED})
+        return row
+
+    def _case_images(self, meta, gb, setup, v_np, wrong, occ):
+        """The case's images (classes, shading, contact march, area-light V), written now."""
+        case = meta["case"]
+        classes = np.zeros(gb.width * gb.height, np.uint8)
+        classes[setup.pixels] = pipeline.classify(v_np, setup.v_star, wrong)
+        classes = classes.reshape(gb.height, gb.width)
+        t_img = time.perf_counter()              # the case's images: report work, timed apart
+        shade = report.shade(classes.shape, gb, setup, v_np, pipeline.is_positional(setup.light)) \
+            if self.cfg.report_images == "all" else None
+        item = publish.image_item(meta, classes, shade, self.cfg.report_images)
+        if item is not None:        # written now (Pillow, ~1 ms, between timings): a killed run keeps them
+            figures.write_images(self.out, [item])
+        if occ is not None and self.cfg.report_images != "none":         # what the contact march did
+            folder = self.out / "images" / figures.image_folder(meta)
+            folder.mkdir(parents=True, exist_ok=True)
+            contact_images.write_image(folder / f"{case}_contact.png", setup.pixels,
+                                       contact_images.classes(v_np, setup.v_star, occ), gb.width, gb.height)
+        if setup.ref is not None and self.cfg.report_images != "none":    # area light: V, V*, |V - V*|
+            soft_report.write_images(self.out, [soft_report.image_item(meta, gb.width, gb.height, setup.pixels,
+                                                                       v_np, setup.v_frac)])
+        self.timing["images_s"] = self.timing.get("images_s", 0.0) + time.perf_counter() - t_img
+        if self.keep_images:
+            self.images[case] = classes
 
     def _contact(self, sd, gb, setup, rx, v_np) -> tuple:
         """(columns, occluded per receiver) of one case's contact step: its receivers' march (once per
@@ -533,6 +553,16 @@ class Runner:
             self.marches = {id(rx): (rx, out[-1].numpy().astype(bool), t)}    # the receivers kept: their id stays theirs
         _, occ, t = self.marches[id(rx)]
         return {**contact.case_metrics(v_np, setup.v_star, occ, setup.v_frac), "contact_ms": t.ms}, occ
+
+    def next_case(self) -> str:
+        """The next case's id ("0001", ...), counted."""
+        self.case_no += 1
+        return f"{self.case_no:04d}"
+
+    def case_done(self, row: dict, status: dict):
+        """A finished case's row and status recorded, and the progress bar moved on by one."""
+        self.add_case(row, status)
+        self.bar.update(1)
 
     def add_case(self, row: dict, status: dict):
         """One finished case: its row into metrics.csv (refused unless it fits the schema,

@@ -41,7 +41,7 @@ def shrunk_scene(scene, distance: float):
     """A Mitsuba scene of ``scene``'s shapes, each mesh's vertices shrunk by ``distance`` (same shape
     order); ValueError for a shape that is not a triangle mesh."""
     import mitsuba as mi
-    from ..scenes.load import make_mesh
+    from ..scenes.geometry import make_mesh
     d = {"type": "scene"}
     ids = []
     for i, shape in enumerate(scene.shapes()):

@@ -1,0 +1,126 @@
+"""Camera poses and sensors: the [camera] keys over a scene's own pose, clip planes, Mitsuba sensor dicts."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..types import ConfigError
+from .params import ORIGIN
+
+
+def look_at_sensor(origin, target, up, fov, width, height, near=None, far=None, camera=None, source="<config>"):
+    """A perspective sensor dict. Clip planes follow the scene's scale (Mitsuba's default near clip is
+    0.01 world units): ``near`` default 1/1000 of the distance to the target, ``far`` 1000 times it.
+    Clips that cross are a ConfigError naming the [camera] key of ``camera`` that set one alone."""
+    import mitsuba as mi
+    dist = float(np.linalg.norm(np.subtract(origin, target)))
+    near = dist * 1e-3 if near is None else float(near)
+    far = dist * 1e3 if far is None else float(far)
+    with np.errstate(over="ignore"):             # a far beyond float32 is inf: still beyond near
+        crossed = not np.float32(near) < np.float32(far)   # Mitsuba compares them in float32
+    if crossed:                                  # else Mitsuba's RuntimeError, with no key to name
+        raise clip_error(near, far, camera, source)
+    return {"type": "perspective", "fov": fov, "near_clip": near, "far_clip": far,
+            "to_world": mi.ScalarTransform4f().look_at(origin=list(map(float, origin)),
+                                                       target=list(map(float, target)),
+                                                       up=list(map(float, up))),
+            "film": {"type": "hdrfilm", "width": int(width), "height": int(height)}}
+
+
+def clip_error(near, far, camera, source="<config>"):
+    """The error for a near clip not below the far clip: one of them given alone in [camera]."""
+    given = {k for k in ("near", "far") if camera is not None and getattr(camera, k) is not None}
+    if given == {"far"}:
+        return ConfigError(source, "camera.far", f"{camera.far:g} is not beyond the near clip it goes with "
+                           f"({near:.3g} world units: the scene's, or 1/1000 of the camera's distance to its "
+                           "target); give a larger far, or camera.near below it")
+    if given == {"near"}:
+        return ConfigError(source, "camera.near", f"{camera.near:g} is not below the far clip it goes with "
+                           f"({far:.3g} world units: the scene's, or just beyond its farthest point); give a "
+                           "smaller near, or camera.far above it")
+    return ConfigError(source, "camera", f"the near clip ({near:.3g}) is not below the far clip ({far:.3g})",
+                       ("near", "far"))
+
+
+def far_bound(origin, target, bbox_min, bbox_max) -> float:
+    """A sensible far clip: the view depth of the scene's farthest bounding-box corner (a bound on the
+    farthest receiver), 1 % beyond it."""
+    fwd = np.subtract(target, origin).astype(float)
+    fwd /= np.linalg.norm(fwd)
+    lo, hi = np.asarray(bbox_min, float), np.asarray(bbox_max, float)
+    corners = np.array([[(lo, hi)[i >> k & 1][k] for k in range(3)] for i in range(8)])
+    return max(float(((corners - np.asarray(origin, float)) @ fwd).max()), 1e-30) * 1.01
+
+
+NEAR_MIN = 1e-12     # the smallest near clip, relative to the camera's distance to its target (1e-19 fails)
+
+
+def posed_camera(default, camera, scale=1.0, offset=ORIGIN, source="<config>"):
+    """(origin, target, up, fov, near, far) of a scene's camera: the scene's own ``default`` pose
+    (origin, target, up, fov, near or None, far or None, world units) with the [camera] keys that
+    are given (``camera``: a CameraSpec or None) scaled by ``scale`` and moved by ``offset`` as the
+    config's light positions are. A pose that cannot be looked from (the position on the target,
+    the up along the view) is a ConfigError of ``source`` naming the [camera] key."""
+    o, t, up, fov, near, far = default
+    if camera is not None:
+        off = np.asarray(offset, float)
+        if camera.position is not None:
+            o = np.asarray(camera.position, float) * scale + off
+        if camera.target is not None:
+            t = np.asarray(camera.target, float) * scale + off
+        up = camera.up if camera.up is not None else up
+        fov = camera.fov if camera.fov is not None else fov
+        near = camera.near * scale if camera.near is not None else near
+        far = camera.far * scale if camera.far is not None else far
+    key = "target" if camera is not None and camera.target is not None else "position"
+    if np.allclose(np.asarray(o, float), np.asarray(t, float)):
+        raise ConfigError(source, f"camera.{key}", f"the camera's position {tuple(float(c) for c in o)} equals "
+                          f"its target (the scene's own pose, where the [camera] key is not given)")
+    fwd, upv = np.subtract(t, o).astype(float), np.asarray(up, float)
+    dist = float(np.linalg.norm(fwd))
+    if camera is not None and camera.near is not None and near < NEAR_MIN * dist:
+        raise ConfigError(source, "camera.near", f"{camera.near:g} is below {NEAR_MIN:g} of the camera's distance "
+                          f"to its target ({dist / scale:g}): the float32 projection of the camera's rays breaks "
+                          f"down there (no ray would reach the scene); give at least {NEAR_MIN * dist / scale:.3g}")
+    if np.linalg.norm(np.cross(fwd, upv)) <= 1e-6 * np.linalg.norm(fwd) * np.linalg.norm(upv):
+        raise ConfigError(source, "camera.up", f"{tuple(float(c) for c in up)} is along the view direction "
+                          f"(target - position = {tuple(float(c) for c in fwd)}); give an up across it")
+    return np.asarray(o, float), np.asarray(t, float), tuple(float(c) for c in up), float(fov), near, far
+
+
+def reposed_sensor(sensor, camera, bbox, source="<config>"):
+    """An XML scene's sensor with the [camera] pose: its film (size) kept, the keys given replaced."""
+    import mitsuba as mi
+    params = mi.traverse(sensor)
+    m = np.array(sensor.world_transform().matrix.numpy(), float).reshape(4, 4)
+    o = m[:3, 3]
+    fwd, up = m[:3, 2], m[:3, 1]
+    near = float(np.ravel(params["near_clip"])[0]) if "near_clip" in params else None
+    far = float(np.ravel(params["far_clip"])[0]) if "far_clip" in params else None
+    fov = float(params["x_fov"][0]) if "x_fov" in params else 40.0
+    # the XML's target: the point of its view axis nearest the scene's centre (a new position looks there)
+    centre = 0.5 * (np.asarray(bbox[0], float) + np.asarray(bbox[1], float))
+    reach = float((centre - o) @ fwd)
+    reach = reach if reach > 0 else float(np.linalg.norm(np.asarray(bbox[1], float) - np.asarray(bbox[0], float)))
+    o2, t2, up2, fov2, near2, far2 = posed_camera((o, o + fwd * reach, up, fov, near, far), camera, source=source)
+    if camera.far is None and (camera.position is not None or camera.target is not None):
+        far2 = far_bound(o2, t2, *bbox)
+    W, H = (int(x) for x in sensor.film().size())
+    d = look_at_sensor(o2, t2, up2, fov2, W, H, near2 if near2 is not None else None, far2, camera, source)
+    d["fov_axis"] = "x"
+    return mi.load_dict(d)
+
+
+def resized_sensor(sensor, width, height):
+    """A perspective sensor of the same transform, field of view and clips at width x height."""
+    import mitsuba as mi
+    params = mi.traverse(sensor)
+    m = np.array(sensor.world_transform().matrix.numpy(), float).reshape(4, 4)
+    d = {"type": "perspective", "to_world": mi.ScalarTransform4f(m),
+         "film": {"type": "hdrfilm", "width": int(width), "height": int(height)}}
+    if "x_fov" in params:
+        d["fov"] = float(params["x_fov"][0])
+        d["fov_axis"] = "x"
+    for k in ("near_clip", "far_clip"):
+        if k in params:
+            d[k] = float(np.ravel(params[k])[0])
+    return mi.load_dict(d)

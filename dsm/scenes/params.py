@@ -1,0 +1,108 @@
+"""The parameters of a [[scene]]: where it sits (scale, translate, precision) and each built-in's own."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+ORIGIN = (0.0, 0.0, 0.0)
+
+
+# How the simulated engine holds positions (the map's build and lookup): ``world``, float32 world
+# coordinates (the geometry rounded at its offset); ``camera_relative``, positions relative to the
+# camera, shifted in float64 before rounding (Unreal's large world coordinates, Unity HDRP's
+# camera-relative rendering). The exact side is exact in both (dsm.scenes.exact_frame).
+PRECISIONS = ("world", "camera_relative")
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Where a built-in scene (or a mesh file) sits: ``scale`` multiplies geometry, camera and the
+    config's light positions; ``translate`` then moves all of them (far-from-origin cases)."""
+    scale: float = field(default=1.0, metadata={"min": 1e-30})
+    translate: tuple = field(default=ORIGIN, metadata={"doc": "world offset [x, y, z] after scale"})
+    precision: str = field(default="world", metadata={"choices": PRECISIONS})
+
+
+@dataclass(frozen=True)
+class PlaneParams(Placement):
+    """One 4 x 4 plane tilted ``tilt`` degrees about a horizontal axis at ``azimuth`` degrees; light from above."""
+    tilt: float = field(default=45.0, metadata={"min": 0.0})
+    azimuth: float = 0.0
+
+
+@dataclass(frozen=True)
+class PlaneBoxParams(Placement):
+    """A closed unit box resting on an 8 x 8 ground: contact shadows."""
+
+
+@dataclass(frozen=True)
+class LShapeParams(Placement):
+    """Seed 000, figure 5: a closed L-shaped solid above the ground, light from right above."""
+
+
+@dataclass(frozen=True)
+class FloatingPlateParams(Placement):
+    """An open 1.5 x 1.5 plate ``gap`` above the ground: the bias/gap threshold of peter-panning."""
+    gap: float = field(default=0.2, metadata={"min": 0.0})
+
+
+@dataclass(frozen=True)
+class StackedPlatesParams(Placement):
+    """Two open plates over the ground, a 0.75 x 1.5 one at ``high`` over half of a 1.5 x 1.5 one
+    at ``low``: occluders at two depths, the classic light leak of variance shadow maps."""
+    low: float = field(default=0.25, metadata={"min": 0.0})
+    high: float = field(default=2.0, metadata={"min": 0.0})
+
+
+@dataclass(frozen=True)
+class GrazingParams(Placement):
+    """The ground and a box lit ``angle`` degrees from the ground's normal (80 to 89: projective aliasing)."""
+    angle: float = field(default=85.0, metadata={"min": 0.0})
+
+
+@dataclass(frozen=True)
+class RoomParams(Placement):
+    """Seed 001, figure 3: a closed 6 x 6 x 3 room (walls facing in) with objects around a point light."""
+
+
+@dataclass(frozen=True)
+class DoubleTorusParams(Placement):
+    """Seed 000, figure 6: a closed genus-2 solid (a double torus, 6,400 triangles) tilted above the ground."""
+
+
+@dataclass(frozen=True)
+class LongGroundParams(Placement):
+    """A 200 x 20 ground with posts (0.4 x 0.4 x 4) every 10 units along both sides, the camera near
+    the ground at one end looking along it: perspective aliasing, the cascades' scene."""
+
+
+@dataclass(frozen=True)
+class TerrainParams(Placement):
+    """A real terrain in metres (dsm.scenes.terrain): 30 x 32 km of the Jacksboro fault DEM, 236 to 1076 m
+    high, 275,772 triangles (every ``stride``-th sample), the camera on a ridge above its
+    south-west, a low sun: cascades and scale on geometry nobody here made."""
+    stride: int = field(default=1, metadata={"min": 1})
+
+
+@dataclass(frozen=True)
+class FileParams(Placement):
+    """A scene file. Meshes (OBJ/PLY) get a ground under them, a default camera and light."""
+    up: str = field(default="y", metadata={"choices": ("x", "y", "z")})
+    ground: str = field(default="yes", metadata={"choices": ("yes", "no")})
+
+
+BUILTINS = {
+    "plane": PlaneParams,
+    "plane_box": PlaneBoxParams,
+    "l_shape": LShapeParams,
+    "floating_plate": FloatingPlateParams,
+    "stacked_plates": StackedPlatesParams,
+    "grazing": GrazingParams,
+    "room": RoomParams,
+    "double_torus": DoubleTorusParams,
+    "long_ground": LongGroundParams,
+    "terrain": TerrainParams,
+}
+
+
+FILE_SUFFIXES = (".xml", ".obj", ".ply")

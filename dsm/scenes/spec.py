@@ -1,0 +1,100 @@
+"""[[scene]] tables into scene specs: a built-in or a file, list-valued parameters swept, checked up front."""
+from __future__ import annotations
+
+from dataclasses import fields
+from pathlib import Path
+
+import numpy as np
+
+from ..types import ConfigError, SceneSpec, sweep_params
+from .builtins import builtin_geometry, scale_range
+from .checks import check_held
+from .params import BUILTINS, FILE_SUFFIXES, FileParams, GrazingParams, PlaneParams
+
+
+def parse_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]:
+    """One [[scene]] table, with list-valued parameters swept, into scene specs."""
+    if ("builtin" in t) == ("file" in t):
+        raise ConfigError(source, where, "a scene needs exactly one of builtin or file", ("builtin", "file"))
+    if "builtin" in t:
+        name = t["builtin"]
+        if not isinstance(name, str) or name not in BUILTINS:
+            raise ConfigError(source, f"{where}.builtin", f"unknown scene {name!r}", list(BUILTINS))
+        specs = sweep_params(BUILTINS[name], t, source, where, skip=("builtin", "closed"))
+        for p in specs:
+            _check_builtin(name, p, source, where)
+        closed = _closed_override(t, source, where)
+        shape_names = list(builtin_geometry(name, specs[0])[0])
+        for shape, _ in closed:
+            if shape not in shape_names:
+                raise ConfigError(source, f"{where}.closed.{shape}", f"no shape named {shape!r} in {name}", shape_names)
+        return [SceneSpec(builtin=name, params=p, label=_label(name, p), closed=closed, source=source, where=where)
+                for p in specs]
+    raw = t["file"]
+    if not isinstance(raw, str):
+        raise ConfigError(source, f"{where}.file", f"expected a path string, got {raw!r}")
+    optional = t.get("optional", False)
+    if not isinstance(optional, bool):
+        raise ConfigError(source, f"{where}.optional", f"expected true or false, got {optional!r}")
+    path = Path(raw).expanduser()
+    if not path.is_absolute():
+        path = (base / path).resolve()
+    if path.suffix.lower() not in FILE_SUFFIXES:
+        raise ConfigError(source, f"{where}.file", f"unsupported file type {path.suffix!r}", FILE_SUFFIXES)
+    if path.is_dir():
+        raise ConfigError(source, f"{where}.file", f"{path} is a folder, not a scene file", FILE_SUFFIXES)
+    if not path.is_file() and not optional:
+        raise ConfigError(source, f"{where}.file", f"no such file: {path} (optional = true skips an absent file)")
+    specs = sweep_params(FileParams, t, source, where, skip=("file", "closed", "optional"))
+    if not path.is_file():
+        return [SceneSpec(file=path, params=p, label=_label(path.stem, p, FileParams()),
+                          missing=f"skipped: {path} is absent (optional scene)", source=source, where=where)
+                for p in specs]
+    closed = _closed_override(t, source, where)
+    if path.suffix.lower() == ".xml" and any(p != FileParams() for p in specs):
+        given = [f.name for f in fields(FileParams) if any(getattr(p, f.name) != getattr(FileParams(), f.name)
+                                                            for p in specs)]
+        raise ConfigError(source, f"{where}.{given[0]}", "an XML scene takes no "
+                          f"{'/'.join(f.name for f in fields(FileParams))} keys: its geometry, camera and lights "
+                          "are the file's, in its own world coordinates", ("file", "closed", "optional"))
+    return [SceneSpec(file=path, params=p, label=_label(path.stem, p, FileParams()), closed=closed, source=source,
+                      where=where) for p in specs]
+
+
+def _closed_override(t, source, where) -> tuple:
+    """``closed = { shape_name = true, ... }``: override detected closedness per shape."""
+    raw = t.get("closed", {})
+    if not isinstance(raw, dict) or not all(isinstance(v, bool) for v in raw.values()):
+        raise ConfigError(source, f"{where}.closed", "expected a table of shape name = true/false")
+    return tuple(sorted(raw.items()))
+
+
+def _check_builtin(name, p, source, where):
+    if isinstance(p, PlaneParams) and not p.tilt < 90:
+        raise ConfigError(source, f"{where}.tilt", f"must be below 90 degrees, got {p.tilt}")
+    if isinstance(p, GrazingParams) and not p.angle < 90:
+        raise ConfigError(source, f"{where}.angle", f"must be below 90 degrees, got {p.angle}")
+    shapes = builtin_geometry(name, p)[0]
+    if p.precision == "world":           # camera-relative: checked where the camera is known (load)
+        v = np.concatenate([np.asarray(v, float).reshape(-1, 3) for v, _ in shapes.values()])
+        check_held(float(np.ptp(v, axis=0).max()) * p.scale, p.translate, source, f"{where}.translate",
+                    "from the origin")
+    lo, hi = scale_range(name, p, shapes)
+    if not lo <= p.scale <= hi:
+        raise ConfigError(source, f"{where}.scale", f"{p.scale:g} is outside {lo:.2g} to {hi:.2g}, the scales at which "
+                          "Mitsuba's float32 triangle normals of this scene neither overflow nor underflow")
+
+
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        return f"{v:g}"
+    if isinstance(v, tuple):
+        return "[" + ",".join(_fmt(x) for x in v) + "]"
+    return str(v)
+
+
+def _label(name, params, defaults=None) -> str:
+    defaults = defaults if defaults is not None else type(params)()
+    diff = [f"{k}={_fmt(getattr(params, k))}" for k in params.__dataclass_fields__
+            if getattr(params, k) != getattr(defaults, k)]
+    return f"{name}({','.join(diff)})" if diff else name
