@@ -31,6 +31,7 @@ from .. import lights as light_types
 from .. import schemes as schemes_mod
 from ..types import DEFAULT_CAMERA, POINT_VIEWS, VIEW_FACES, Config, ConfigError
 from ..maps.shadowmap import MAX_STEPS
+from ..contact import presets as contact_presets
 
 # bytes per pixel / texel, measured with Dr.Jit's allocation watermark on llvm_ad_rgb (the
 # first layer fuses into one kernel: nothing but its outputs is ever stored)
@@ -49,8 +50,9 @@ MOMENT_BYTES = 120
 MIN_TILE = 1 << 16
 # per triangle of the scene: Mitsuba's mesh buffers, Embree's BVH, the loader's temporaries and
 # the kit's per-triangle tables (spawn extents, closedness); measured as the peak RSS growth of
-# `dsm run` on grid meshes of 1e4 to 1e7 triangles (381 to 410 B per triangle at 1e6 and 1e7)
-TRIANGLE_BYTES = 384
+# `dsm run` on grid meshes of 1e4 to 1e7 triangles (381 to 410 B per triangle at 1e6 and 1e7),
+# plus the 28 B of padding in each triangle's 16-float packet of the spawn tables (maps/spawn.py)
+TRIANGLE_BYTES = 412
 # the process itself (Python, Mitsuba, Dr.Jit's LLVM backend, numpy, matplotlib): the peak RSS
 # (VmHWM) of `dsm run` on a 1e4-triangle mesh with a 64^2 camera and a 256^2 map, 129 MiB, less those
 PROCESS_BYTES = 125 << 20
@@ -219,8 +221,8 @@ class Plan:
                          f"({self.frames} x {len(self.maps)} builds, fewer where the fitted projection stays)")
         if self.contact is not None:
             c = self.contact
-            lines.append(f"  contact shadows: a march of {c.steps} samples over {c.length} (thickness {c.thickness}, "
-                         f"jitter {c.jitter:g}) per receiver of each view, through each scene's camera depth buffer")
+            lines.append(f"  contact shadows: a march ({contact_presets.describe(c)}) per receiver of each view, "
+                         "through each scene's camera depth buffer")
         if self.shrink is not None:
             lines.append(f"  caster shrinking: maps cast against a copy of each scene's meshes moved {self.shrink:g} "
                          "inward along their welded vertex normals")
