@@ -1,4 +1,4 @@
-"""PCF filters (seed 000, section 5) and stored depth formats (seed 002, depth-buffer precision)."""
+"""PCF filters (Weiskopf & Ertl 2003, section 5) and stored depth formats (Microsoft's Common Techniques article, depth-buffer precision)."""
 import numpy as np
 import pytest
 

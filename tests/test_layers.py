@@ -1,4 +1,4 @@
-"""Second layer, culling and closedness, against layers traced in float64; seed 000's figure 5 as checked numbers."""
+"""Second layer, culling and closedness, against layers traced in float64; Weiskopf & Ertl's figure 5 as checked numbers."""
 
 import numpy as np
 import pytest
@@ -208,7 +208,7 @@ def test_two_plates_layers_and_midpoint_dual_against_analytic_depths():
     np.testing.assert_array_equal(v_dual == 1.0, dual_lit)
 
 
-# The l_shape scene (seed 000, figure 5) for the tracer: an L-shaped prism, the union of two boxes
+# The l_shape scene (Weiskopf & Ertl 2003, figure 5) for the tracer: an L-shaped prism, the union of two boxes
 # (one closed mesh, no inner face), over the open ground.
 L_BOXES = (([-1.0, -0.8, 0.5], [1.0, 0.8, 0.8]), ([0.7, -0.8, 0.8], [1.0, 0.8, 2.0]))
 

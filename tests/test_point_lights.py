@@ -1,4 +1,4 @@
-"""Point lights: paraboloid, dual-paraboloid and cube views (seed 001; seed 004 section 3.2)."""
+"""Point lights: paraboloid, dual-paraboloid and cube views (Brabec et al. 2002; Dou et al. 2014 section 3.2)."""
 
 import numpy as np
 import pytest
@@ -29,7 +29,7 @@ def _view(kind, light, R, bbox):
 
 def test_every_room_receiver_is_in_exactly_one_map(variant):
     """Each receiver's chosen face holds it (closed domain); no other face holds it in its interior.
-    The domains are recomputed here from seed 001's formulas, independently of dsm.maps.views."""
+    The domains are recomputed here from Brabec et al.'s formulas, independently of dsm.maps.views."""
     import drjit as dr
     import mitsuba as mi
     sd, gb = _room()

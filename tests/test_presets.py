@@ -37,7 +37,7 @@ EXPECTED = {
     "three": {t: ((0.0, W), (0.0, W), 0.0, None) for t in ("directional", "spot", "point")},
     # TheRealMJP/Shadows Shadows/AppSettings.cs: Bias 0.005 (in the cascade's [0, 1] depth), OffsetScale 0
     "mjp_shadows": {t: ((0.0, W), (0.005, R), 0.0, None) for t in ("directional", "spot", "point")},
-    # seed 003: setDepthBias(1, slopeScale: 3, clamp: 1/128)
+    # Salcedo's shadow-map article: setDepthBias(1, slopeScale: 3, clamp: 1/128)
     "metal_api": {t: ((0.0, W), (2.0 ** -24, R), 3.0, (1.0 / 128.0, R)) for t in ("directional", "spot", "point")},
 }
 

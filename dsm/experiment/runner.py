@@ -479,7 +479,7 @@ class Runner:
         if self.cfg.contact is not None:      # screen-space contact shadows after the lookup
             cols, occ = self._contact(sd, gb, setup, rx, v_np)
             m.update(cols)
-        # seed 000's self-unshadowing: pixels in attached shadow (facing away) that the map calls lit
+        # Weiskopf & Ertl's self-unshadowing: pixels in attached shadow (facing away) that the map calls lit
         v_back = look(rx_back)[0].numpy() if rx_back is not None else np.zeros(0)
         if hasattr(view, "cascades"):         # a cascaded map: per cascade, texels per pixel, distance plot
             extra, per, curve, faces = pipeline.cascade_metrics(view, rx, v_np, setup.v_star)

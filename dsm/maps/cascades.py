@@ -1,4 +1,4 @@
-"""Cascaded shadow maps for directional lights (seed 002; the layouts of Bevy, Godot, TheRealMJP's sample).
+"""Cascaded shadow maps for directional lights (Microsoft's Common Techniques article; the layouts of Bevy, Godot, TheRealMJP's sample).
 
 A cascaded view is one view of ``N`` faces, one face per cascade, each an orthographic map of
 the same light direction with its own square extent and near plane. A receiver is looked up
@@ -14,7 +14,7 @@ in the cascade whose range of camera view depth holds its view depth (``face_of`
   ``cascade`` each cascade's slice of the frustum clipped to the scene's bounds. Every fit
   keeps views.MARGIN_TEXELS texels to spare on each side, as the single map does.
 - **Near and far** (``depth_bounds``): ``clipped`` (default) the scene's bounding box clipped to
-  the cascade's light prism (seed 002, "Light Frustum Intersected with Scene"), ``scene`` the
+  the cascade's light prism (Microsoft's Common Techniques article, "Light Frustum Intersected with Scene"), ``scene`` the
   whole box along the light (the naive AABB fit).
 - **Stabilization**: each cascade's extent from a bounding sphere of its fitted points, its
   radius rounded up to a fixed quantum (a power of two near 1/256 of the scene's diagonal), and
@@ -513,7 +513,7 @@ def blended_visibility(scheme, params, rx, smap, filt="nearest", seed=7):
 def texels_per_pixel(view: CascadeView, p: np.ndarray, n: np.ndarray, face: np.ndarray) -> np.ndarray:
     """Shadow-map texels per camera pixel at each receiver: the area of its camera pixel's footprint
     on its surface over the area of its texel's (texel_world^2 / |n . light|). Below 1 one texel
-    covers several pixels (perspective aliasing, seed 002)."""
+    covers several pixels (perspective aliasing, Microsoft's Common Techniques article)."""
     tw = view.extents[face] / view.resolution
     cos_l = np.abs(np.asarray(n, float) @ np.asarray(view.axes_np[2]))
     texel_area = tw ** 2 / np.maximum(cos_l, 1e-12)

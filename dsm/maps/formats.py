@@ -1,4 +1,4 @@
-"""Stored depth formats: the precision of the depth buffer (seed 002, "depth-buffer precision").
+"""Stored depth formats: the precision of the depth buffer (Microsoft's Common Techniques article, "depth-buffer precision").
 
 A format other than ``float32`` quantizes the stored layers (z1, z2) once per map, and the
 lookup compares against the stored value converted back, as hardware converts a stored
@@ -22,7 +22,7 @@ depth before its comparison:
 
 The stored value is decoded (in float64) back to the view's depth, and the scheme compares
 there; decoding is monotonic, so this equals the comparison in the stored representation
-up to float32 rounding of the decoded value. Dou et al.'s adaptive epsilon (seed 004,
+up to float32 rounding of the decoded value. Dou et al.'s adaptive epsilon (Dou et al. 2014,
 eq. 2: f'(x) dx in stored units) is dx in these decoded units.
 
 Quantization runs in float64 (numpy) so that the only error is the format's own. Texels

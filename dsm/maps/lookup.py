@@ -6,7 +6,7 @@ geometric normal, depth and map position in the view, texel world size there); a
 parameters become opaque Dr.Jit values, so a sweep over values reuses one compiled kernel.
 
 Filters (percentage-closer filtering: the scheme's binary test per tap, then a weighted
-mean, so every scheme works with every filter; seed 000, section 5):
+mean, so every scheme works with every filter; Weiskopf & Ertl 2003, section 5):
 
 - ``nearest``: the texel containing the receiver's map position.
 - ``pcf_bilinear``: the four texels whose centres surround the position, weights from the

@@ -7,10 +7,10 @@ extent, resolution) are opaque Dr.Jit values, so one kernel serves every map of 
 
 - ``OrthographicView`` (directional light): depth is the distance along the light
   direction; the map is a square fitted tightly around the receivers in light space, its
-  depth range to the whole scene's bounds (every possible caster), as seed 002 recommends.
+  depth range to the whole scene's bounds (every possible caster), as Microsoft's Common Techniques article recommends.
 - ``PerspectiveView`` (spot light): rays from the light position, depth is the distance
   along the light's axis; the square map covers the cone.
-- Point lights (seed 001): ``ParaboloidView`` (one hemisphere around a main direction, or
+- Point lights (Brabec et al. 2002): ``ParaboloidView`` (one hemisphere around a main direction, or
   two back to back, the map chosen by the sign of z in light space) and ``CubeView`` (six
   90-degree faces on the world axes). Depth is the Euclidean distance to the light.
 
@@ -287,10 +287,10 @@ class PointView(View):
 
 
 class ParaboloidView(PointView):
-    """Paraboloid map(s) of seed 001: direction v -> (vx, vy) / (1 + s vz), s = +1 front, -1 back.
+    """Paraboloid map(s) of Brabec et al. 2002: direction v -> (vx, vy) / (1 + s vz), s = +1 front, -1 back.
 
     The texel ray through (x, y) is the direction the paraboloid reflects toward d0:
-    ``(2x, 2y, s (1 - x^2 - y^2)) / (1 + x^2 + y^2)`` (seed 004, section 3.2). The map is
+    ``(2x, 2y, s (1 - x^2 - y^2)) / (1 + x^2 + y^2)`` (Dou et al. 2014, section 3.2). The map is
     conformal (stereographic), so a texel's footprint is square: (2 / R) (|q| + s qz).
     Single paraboloid: the hemisphere z >= 0 around the main direction; dual: z >= 0 is the
     front map, z < 0 the back map, so the denominator |q| + s qz is never below |q|.

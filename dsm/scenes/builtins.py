@@ -30,7 +30,7 @@ def _plane_box(_p):
 
 def _l_shape(_p):
     """The L-shaped solid over the ground: (shapes, camera, light) at scale 1."""
-    # seed 000, figure 5: an L above the ground, its vertical arm on the right, light from right above
+    # Weiskopf & Ertl 2003, figure 5: an L above the ground, its vertical arm on the right, light from right above
     profile = [(-1, 0.5), (1, 0.5), (1, 2.0), (0.7, 2.0), (0.7, 0.8), (-1, 0.8)]
     shapes = {"ground": _ground(), "l_shape": prism(profile, -0.8, 0.8, fan_center=4)}
     return shapes, ((-2.0, -6.0, 5.0), (0, 0, 0.7)), LightSpec("directional", direction=normalize([-0.35, 0.05, -1]))
@@ -73,7 +73,7 @@ def _room(_p):
 
 def _double_torus(_p):
     """The double torus over the ground: (shapes, camera, light) at scale 1."""
-    # seed 000, figure 6: the double torus over a plane; tilted so the light from above grazes
+    # Weiskopf & Ertl 2003, figure 6: the double torus over a plane; tilted so the light from above grazes
     # its far side and sees into both holes (midpoint's self-unshadowing shows at its lower left)
     v, f = double_torus()
     v = v @ rotation([1, 0.3, 0], 20).T + [0.0, 0.0, 0.9]

@@ -1,4 +1,4 @@
-"""Adaptive depth bias (Dou, Yan, Kerzner, Dai & Wyman, JCGT 2014; seed 004).
+"""Adaptive depth bias (Dou, Yan, Kerzner, Dai & Wyman, JCGT 2014).
 
 The receiver's potential occluder is where the light ray through the texel centre meets the
 receiver's tangent plane; the receiver is moved to that depth and then "just above" it by
@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from .base import no_shift
 
 NAME = "adaptive"
-SOURCE = "Dou et al. 2014; seed 004"
+SOURCE = "Dou et al. 2014"
 NEEDS = frozenset()
 USES_PLANE = True     # compares the receiver plane's depth at the texel centre (lookup.plane_fallbacks)
 

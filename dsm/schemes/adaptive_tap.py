@@ -1,5 +1,5 @@
 """Adaptive depth bias per filter tap, after Ehm et al. 2015 ("Adaptive Depth Bias for Soft
-Shadows"), who extend Dou et al.'s adaptive bias (JCGT 2014; seed 004) to filtered lookups.
+Shadows"), who extend Dou et al.'s adaptive bias (JCGT 2014) to filtered lookups.
 
 What is implemented: for every tap of a filter (PCF, wide PCF, PCSS's blocker search and its
 PCF) the light ray through that tap's texel centre is intersected with the receiver's tangent
@@ -29,7 +29,7 @@ import drjit as dr
 from .base import no_shift
 
 NAME = "adaptive_tap"
-SOURCE = "Ehm et al. 2015 after Dou et al. 2014 (seed 004)"
+SOURCE = "Ehm et al. 2015 after Dou et al. 2014"
 NEEDS = frozenset()
 USES_PLANE = True
 

@@ -1,4 +1,4 @@
-"""Dual depth layers (Weiskopf & Ertl 2003; seed 000).
+"""Dual depth layers (Weiskopf & Ertl 2003).
 
 Lit when ``d <= z1 + min((z2 - z1) / 2, z_offset)``: the midpoint where caster and receiver
 are close, a constant offset where the second surface is far away (which removes midpoint's
@@ -18,7 +18,7 @@ from ..types import CULLINGS as CULLING
 from .base import no_shift
 
 NAME = "dual"
-SOURCE = "Weiskopf & Ertl 2003; seed 000"
+SOURCE = "Weiskopf & Ertl 2003"
 NEEDS = frozenset({"z2"})
 USES_PLANE = False
 

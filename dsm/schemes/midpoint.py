@@ -1,8 +1,8 @@
-"""Midpoint shadow maps (Woo 1992; seed 000).
+"""Midpoint shadow maps (Woo 1992; Weiskopf & Ertl 2003).
 
 Lit when ``d <= (z1 + z2) / 2``: the comparison surface lies halfway between the first and
 second surfaces along the texel's ray, so a lit surface passes by half the thickness of
-whatever lies behind it. Failure modes (seed 000, figures 2 and 4): self-shadowing near
+whatever lies behind it. Failure modes (Weiskopf & Ertl 2003, figures 2 and 4): self-shadowing near
 silhouettes, where front and back faces are close; with back-face culling, self-unshadowing
 where a far background or the far plane drags the midpoint beyond the receiver.
 
@@ -14,7 +14,7 @@ from ..types import CULLINGS as CULLING
 from .base import no_shift
 
 NAME = "midpoint"
-SOURCE = "Woo 1992; seed 000"
+SOURCE = "Woo 1992; Weiskopf & Ertl 2003"
 NEEDS = frozenset({"z2"})
 USES_PLANE = False
 

@@ -1,4 +1,4 @@
-"""Normal-angle bias (Gautron 2013; seed 003).
+"""Normal-angle bias (Gautron 2013; Salcedo's shadow-map article).
 
 Lit when ``d <= z1 + min(max, bias * tan(theta))``, ``theta`` the angle between the
 receiver's geometric normal and the direction to the light. ``tan(theta)`` is the receiver's
@@ -15,7 +15,7 @@ from ..types import Length
 from .base import no_shift
 
 NAME = "normal_angle"
-SOURCE = "Gautron 2013; seed 003"
+SOURCE = "Gautron 2013; Salcedo's shadow-map article"
 NEEDS = frozenset()
 USES_PLANE = False
 

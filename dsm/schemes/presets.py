@@ -144,10 +144,10 @@ PRESETS = {
         "the sample's default path (UsePlaneDepthBias on), which does not apply Bias: a receiver-plane depth bias "
         "(measure it with the receiver_plane scheme)"),
     "metal_api": Preset(
-        "Metal API call of seed 003",
+        "Metal API call of Salcedo's shadow-map article",
         {t: _p(depth_bias=(2.0 ** -24, "range"), slope_scale=3.0, slope_clamp=(1.0 / 128.0, "range"))
          for t in LIGHT_TYPES},
-        (("seed 003", "setDepthBias(1, slopeScale: 3, clamp: 1/128)"),),
+        (("Salcedo's shadow-map article", "setDepthBias(1, slopeScale: 3, clamp: 1/128)"),),
         "1 unit of a 24-bit depth buffer = 2^-24 range; clamp 1/128 range (here on the slope term; the hardware "
         "clamps the sum, a difference of at most 2^-24 range)"),
 }

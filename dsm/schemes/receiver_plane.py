@@ -1,4 +1,4 @@
-"""Receiver plane depth bias (Isidoro 2006; seed 003).
+"""Receiver plane depth bias (Isidoro 2006; Salcedo's shadow-map article).
 
 Compares, at the texel's centre, the depth of the receiver's own plane there instead of the
 receiver's depth: the light ray through the texel centre is intersected with the receiver's
@@ -14,7 +14,7 @@ from ..types import Length
 from .base import no_shift
 
 NAME = "receiver_plane"
-SOURCE = "Isidoro 2006; seed 003"
+SOURCE = "Isidoro 2006; Salcedo's shadow-map article"
 NEEDS = frozenset()
 USES_PLANE = True     # compares the receiver plane's depth at the texel centre (lookup.plane_fallbacks)
 

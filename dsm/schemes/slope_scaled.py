@@ -4,7 +4,7 @@ Lit when ``d <= z1 + min(clamp, bias + slope * m)``, where ``m`` is the caster's
 depth change per texel step, computed from the caster's plane at the texel (as hardware does
 from the triangle's depth gradient), not from neighbouring texels.
 
-Defaults are the API values of seed 003 (``setDepthBias(1, slopeScale: 3, clamp: 1/128)``):
+Defaults are the API values of Salcedo's shadow-map article (``setDepthBias(1, slopeScale: 3, clamp: 1/128)``):
 ``bias`` one unit of a 24-bit depth buffer over the view's depth range (``2^-24 range``),
 ``slope`` 3, ``clamp`` 1/128 of the depth range. Known failure: near-grazing casters reach
 the clamp, which then acts as a large constant bias.
@@ -17,7 +17,7 @@ from ..types import Length
 from .base import no_shift
 
 NAME = "slope_scaled"
-SOURCE = "King 2004; D3D/Vulkan/GL depth bias; seed 003"
+SOURCE = "King 2004; D3D/Vulkan/GL depth bias; Salcedo's shadow-map article"
 NEEDS = frozenset({"slope"})
 USES_PLANE = False
 

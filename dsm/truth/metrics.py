@@ -17,7 +17,7 @@
 | leak_rate                    | n_leak / n_gt_shadowed; peterpan_contact_rate likewise
 
 | backface_lit_rate            | pixels facing away from the light (attached shadow) that the map
-|                              | calls lit, over those pixels: seed 000's self-unshadowing, apart
+|                              | calls lit, over those pixels: Weiskopf & Ertl's self-unshadowing, apart
 |                              | from the receivers' metrics
 
 A value without a defined meaning (a rate whose denominator is empty, the median distance
