@@ -11,6 +11,7 @@ compression.
 """
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -82,11 +83,17 @@ def write_images(out: Path, items: list):
 
 # ------------------------------------------------------------------ drawing primitives
 
-def _figure(ncols, nrows, width=3.7, height=2.5, legend_rows=0, sharey=False):
+LEGEND_Y = -0.22          # where the first entry sits, in the panel's height below it
+
+
+def _figure(ncols, nrows, width=3.7, height=2.5, legend_rows=0, sharey=False, sharex=False):
+    """A figure of nrows x ncols panels, room below them for ``legend_rows`` legend entries;
+    shared axes hide the inner panels' tick labels (fewer texts to lay out and draw)."""
     from matplotlib.figure import Figure
     extra = 0.2 * legend_rows + 0.75
     fig = Figure(figsize=(width * ncols + 0.3, height * nrows + extra))
-    axes = np.array(fig.subplots(nrows, ncols, squeeze=False, sharey="row" if sharey else False))
+    axes = np.array(fig.subplots(nrows, ncols, squeeze=False, sharey="row" if sharey else False,
+                                 sharex="col" if sharex else False))
     fig.subplots_adjust(left=0.55 / (width * ncols + 0.3), right=0.98, top=1 - 0.6 / (height * nrows + extra),
                         bottom=(0.2 * legend_rows + 0.5) / (height * nrows + extra), wspace=0.32, hspace=0.42)
     return fig, axes
@@ -96,16 +103,33 @@ RATE_TICKS = (0, 1e-4, 1e-3, 1e-2, 1e-1, 1)
 RATE_LABELS = ("0", "1e-4", "0.001", "0.01", "0.1", "1")
 
 
+RATE_LABEL_PAD = (26, 15)  # points between a rate axis (y, x) and its label: room for its tick labels
+
+
 def _rate_axis(ax, which="y"):
-    """A rate axis: symlog from 0 to 1, fixed plain tick labels (cheap to draw), no minor ticks."""
-    from matplotlib.ticker import FixedFormatter, FixedLocator, NullLocator
-    set_scale, set_lim = (ax.set_yscale, ax.set_ylim) if which == "y" else (ax.set_xscale, ax.set_xlim)
-    set_scale("symlog", linthresh=LINTHRESH, linscale=0.6)
-    set_lim(0, 1)
-    axis = ax.yaxis if which == "y" else ax.xaxis
-    axis.set_major_locator(FixedLocator(RATE_TICKS))
-    axis.set_major_formatter(FixedFormatter(RATE_LABELS))
+    """A rate axis: symlog from 0 to 1 with fixed plain tick labels, drawn as one line of tick
+    marks and a text per label (on the outer panels only) rather than matplotlib's ticks, five
+    artists each and two fifths of a figure's drawing time."""
+    from matplotlib.lines import Line2D
+    from matplotlib.ticker import NullLocator
+    from matplotlib.transforms import blended_transform_factory
+    y = which == "y"
+    (ax.set_yscale if y else ax.set_xscale)("symlog", linthresh=LINTHRESH, linscale=0.6)
+    (ax.set_ylim if y else ax.set_xlim)(0, 1)
+    axis = ax.yaxis if y else ax.xaxis
+    axis.set_major_locator(NullLocator())
     axis.set_minor_locator(NullLocator())
+    at = blended_transform_factory(ax.transAxes, ax.transData) if y else \
+        blended_transform_factory(ax.transData, ax.transAxes)
+    zeros = [0.0] * len(RATE_TICKS)
+    ax.add_artist(Line2D(zeros if y else RATE_TICKS, RATE_TICKS if y else zeros, transform=at, ls="none",
+                         marker=2 + (not y), ms=3.5, mew=0.8, color="k", clip_on=False))    # TICKLEFT, TICKDOWN
+    spec = ax.get_subplotspec()
+    if spec is None or (spec.is_first_col() if y else spec.is_last_row()):
+        for v, label in zip(RATE_TICKS, RATE_LABELS):
+            ax.text(-0.025 if y else v, v if y else -0.04, label, transform=at, fontsize=6,
+                    ha="right" if y else "center", va="center" if y else "top")
+    axis.labelpad = RATE_LABEL_PAD[0 if y else 1]
 
 
 def _x_scale(ax, xs, log2=False, log=False):
@@ -142,11 +166,67 @@ def _x_scale(ax, xs, log2=False, log=False):
     axis.set_minor_locator(NullLocator())
 
 
-def _legend(ax, ncol=1):
+
+
+LEGEND_FONT = 6           # points
+LEGEND_SPACING = 1.6      # line pitch of a legend, in font sizes (within the 0.2 in per entry _figure leaves)
+
+
+def _legend(ax):
+    """The panel's labelled series below it, one per line: a short stroke of the series' line or
+    marker, then its label. Three artists however many entries (the strokes, their markers, the
+    labels as one text of many lines): matplotlib's Legend lays every entry out as boxes of its
+    own, a third of a figure's drawing time. ``ax.legend_texts`` keeps the labels."""
+    from matplotlib.collections import CircleCollection, LineCollection
     handles, labels = ax.get_legend_handles_labels()
-    if handles:
-        ax.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, -0.22), ncol=ncol, fontsize=6,
-                  frameon=False, handlelength=1.5)
+    ax.legend_texts = list(labels)
+    if not handles:
+        return
+    fig = ax.figure
+    box = ax.get_position()                                  # figure fraction (no layout engine)
+    w_in, h_in = fig.get_size_inches()
+    x0, top = box.x0 * w_in, (box.y0 + LEGEND_Y * box.height) * h_in      # inches
+    pitch = LEGEND_SPACING * LEGEND_FONT * _font_height_em() / 72
+    mid = lambda i: top - (i + 0.5) * pitch                  # the middle of line i
+    styles = [_handle_style(h) for h in handles]
+    strokes = [(i, st) for i, st in enumerate(styles) if st["ls"] not in ("none", "None", "")]
+    fig.add_artist(LineCollection([[(x0 + 0.06, mid(i)), (x0 + 0.3, mid(i))] for i, _ in strokes],
+                                  colors=[st["color"] for _, st in strokes],
+                                  linestyles=[st["ls"] for _, st in strokes],
+                                  linewidths=[st["lw"] for _, st in strokes], transform=fig.dpi_scale_trans))
+    dots = [(i, st) for i, st in enumerate(styles) if st["marker"] not in (None, "none", "None", "")]
+    if dots:
+        fig.add_artist(CircleCollection([st["ms"] ** 2 for _, st in dots], offsets=[(x0 + 0.18, mid(i)) for i, _ in dots],
+                                        offset_transform=fig.dpi_scale_trans, facecolors=[st["face"] for _, st in dots],
+                                        edgecolors=[st["edge"] for _, st in dots], linewidths=0.5))
+    fig.text(x0 + 0.36, top, "\n".join(labels), transform=fig.dpi_scale_trans, fontsize=LEGEND_FONT, va="top",
+             linespacing=LEGEND_SPACING)
+
+
+@functools.lru_cache(maxsize=1)
+def _font_height_em() -> float:
+    """The text font's ascent plus descent in ems (OS/2 table, else hhea): matplotlib's line
+    pitch is that times the font size times the line spacing."""
+    from matplotlib.font_manager import FontProperties, findfont
+    from matplotlib.ft2font import FT2Font
+    font = FT2Font(findfont(FontProperties()))
+    os2 = font.get_sfnt_table("OS/2")
+    if os2 is None:
+        hhea = font.get_sfnt_table("hhea")
+        return (hhea["ascent"] - hhea["descent"]) / font.units_per_EM
+    return (os2["sTypoAscender"] - os2["sTypoDescender"]) / font.units_per_EM
+
+
+def _handle_style(h) -> dict:
+    """A legend entry's stroke: the line's colour, style, width and marker, or a scatter's marker alone."""
+    from matplotlib.lines import Line2D
+    if isinstance(h, Line2D):
+        marker = h.get_marker()
+        return dict(color=h.get_color(), ls=h.get_linestyle(), lw=h.get_linewidth(), marker=marker,
+                    ms=min(h.get_markersize(), 4), face=h.get_markerfacecolor(), edge=h.get_markeredgecolor())
+    face, edge = h.get_facecolor(), h.get_edgecolor()
+    return dict(color="none", ls="none", lw=0, marker="o", ms=3.5, face=face[0] if len(face) else "none",
+                edge=edge[0] if len(edge) else "none")
 
 
 def _title(fig, text):
@@ -156,7 +236,11 @@ def _title(fig, text):
 
 
 def _save(fig, path):
-    _atomic_save(Path(path), lambda f: fig.savefig(f, dpi=DPI, format="png", pil_kwargs=PNG))
+    """The figure as a PNG: glyphs unhinted (FreeType's autohinter is a tenth of the drawing time
+    and sharpens little at 6 points and 72 dpi)."""
+    from matplotlib import rc_context
+    with rc_context({"text.hinting": "no_hinting"}):
+        _atomic_save(Path(path), lambda f: fig.savefig(f, dpi=DPI, format="png", pil_kwargs=PNG))
 
 
 def chunks(items, n=MAX_LEGEND):
@@ -165,33 +249,45 @@ def chunks(items, n=MAX_LEGEND):
     return [items[i:i + n] for i in range(0, len(items), n)] or [[]]
 
 
+def _title_panel(ax, text):
+    """A panel's title at a fixed height (matplotlib would otherwise measure the panel's every
+    tick label to place it: nothing is drawn above a panel here)."""
+    ax.set_title(text, fontsize=7, y=1.0, pad=4)
+
+
+def _line_series(ax, series, styles, i) -> list:
+    """Rate ``i`` of each series of ``series`` against x in ``ax``; returns the x values drawn."""
+    xs = []
+    for k, (label, pts) in enumerate(series.items()):
+        pts = sorted(p for p in pts if metrics.defined(p[1 + i]))    # undefined: left out, not 0
+        if not pts:
+            ax.plot([], [], label=label, **{"color": f"C{k % 10}", "marker": "o", **styles.get(label, {})})
+            continue
+        xs += [p[0] for p in pts]
+        kw = {"color": f"C{k % 10}", "marker": "o", "ms": 3, "lw": 0.9, **styles.get(label, {})}
+        ax.plot([p[0] for p in pts], [p[1 + i] for p in pts], label=label, clip_on=False, **kw)
+    return xs
+
+
 def draw_lines(path, title, columns, ylabels=("acne rate", "peter-panning rate"), xlog2=False):
     """A grid of panels: a row per rate, a column per entry of ``columns`` =
-    [(column title, x label, {label: [(x, rate0, rate1, ...)]}, {label: plot keywords})]."""
+    [(column title, x label, {label: [(x, rate0, rate1, ...)]}, {label: plot keywords})];
+    a column's panels share their x axis (the union of its rates' defined points)."""
     nleg = max(len(c[2]) for c in columns)
-    fig, axes = _figure(len(columns), len(ylabels), legend_rows=nleg, sharey=True)
+    fig, axes = _figure(len(columns), len(ylabels), legend_rows=nleg, sharey=True, sharex=True)
     for j, (ctitle, xlabel, series, styles) in enumerate(columns):
+        xs = []
         for i, ylabel in enumerate(ylabels):
             ax = axes[i, j]
-            xs = []
-            for k, (label, pts) in enumerate(series.items()):
-                pts = sorted(p for p in pts if metrics.defined(p[1 + i]))    # undefined: left out, not 0
-                if not pts:
-                    ax.plot([], [], label=label, **{"color": f"C{k % 10}", "marker": "o", **styles.get(label, {})})
-                    continue
-                xs += [p[0] for p in pts]
-                kw = {"color": f"C{k % 10}", "marker": "o", "ms": 3, "lw": 0.9, **styles.get(label, {})}
-                ax.plot([p[0] for p in pts], [p[1 + i] for p in pts], label=label, clip_on=False, **kw)
+            xs += _line_series(ax, series, styles, i)
             _rate_axis(ax)
-            _x_scale(ax, xs, xlog2)
             if j == 0:
                 ax.set_ylabel(ylabel, fontsize=7)
             ax.tick_params(labelsize=6)
-            if i == 0:
-                ax.set_title(ctitle, fontsize=7)
-            if i == len(ylabels) - 1:
-                ax.set_xlabel(xlabel, fontsize=7)
-                _legend(ax)
+        _x_scale(axes[-1, j], xs, xlog2)       # shared: once per column
+        _title_panel(axes[0, j], ctitle)
+        axes[-1, j].set_xlabel(xlabel, fontsize=7)
+        _legend(axes[-1, j])
     _title(fig, title)
     _save(fig, path)
     return fig
@@ -237,7 +333,7 @@ def draw_tradeoff(path, title, panels):
         ax.set_xlabel("acne rate", fontsize=7)
         if ax is axes[0][0]:
             ax.set_ylabel("peter-panning rate", fontsize=7)
-        ax.set_title(ptitle, fontsize=7)
+        _title_panel(ax, ptitle)
         ax.tick_params(labelsize=6)
         _legend(ax)
     _title(fig, title)
