@@ -383,100 +383,114 @@ def plot_jobs(folder: Path, rows: list, curves: list = ()) -> list:
             vr = [r for r in rs if r["view"] == view]
             tag = slug(f"{scene}_{light}_{view}")
             where = f"{scene}, light {light}, {view}"
-            # rates against the swept parameter, a column per unit, at the largest resolution
-            rmax = max(r["resolution"] for r in vr)
-            units = {}
-            swept = {}
-            for r in vr:
-                if r["resolution"] == rmax and not r["preset"] and r["sweep_key"]:
-                    swept.setdefault((r["scheme"], r["sweep_key"]), set()).add(r["sweep_value"])
-            for r in vr:
-                # schemes whose sweep has one value have no curve: the summary and the other plots show them
-                if r["resolution"] == rmax and not r["preset"] and len(swept.get((r["scheme"], r["sweep_key"]), ())) > 1:
-                    name, unit = _unit(r["sweep_key"])
-                    others = _others(r["params"], name)
-                    lab = f"{r['scheme']}: {name}" + (f" ({others})" if others else "")
-                    lab = " ".join([lab] + [r.get(k, "") for k in multi])[:52]
-                    units.setdefault(unit, {}).setdefault(lab, []).append(
-                        (r["sweep_value"], r["acne_rate"], r["peterpan_rate"]))
-            columns = []
-            for unit, series in sorted(units.items()):
-                series = {k: v for k, v in series.items() if len(v) > 1}
-                if not series:
-                    continue
-                for part in chunks(sorted(series)):
-                    lengths = unit in ("texel", "world", "range")
-                    columns.append((f"lengths in {unit}" if lengths else f"parameter {unit} (no unit)",
-                                    f"parameter value [{unit}]" if lengths else unit, {k: series[k] for k in part}, {}))
-            if columns:
-                jobs.append((draw_lines, (folder / f"vs_bias_{tag}.png",
-                                          f"{where}, R = {rmax}: rates against each scheme's swept parameter "
-                                          "(one column per unit)", columns)))
-            # rates against resolution, per instance
-            series = {}
-            for r in vr:
-                series.setdefault(_label(r, multi), []).append((r["resolution"], r["acne_rate"], r["peterpan_rate"]))
-            series = {k: v for k, v in series.items() if len(v) > 1}
-            if series:
-                columns = [(f"schemes {i + 1} of {len(chunks(series))}" if len(series) > MAX_LEGEND else "schemes",
-                            "map resolution R (R x R texels per face)", {k: series[k] for k in part}, {})
-                           for i, part in enumerate(chunks(series))]
-                jobs.append((draw_lines, (folder / f"vs_resolution_{tag}.png", f"{where}, {_res_text(vr)}",
-                                          columns, ("acne rate", "peter-panning rate"), True)))
-            # the cost of accuracy
-            scored = [r for r in vr if metrics.defined(r["error_rate"])]
-            if scored:
-                schemes = sorted({r["scheme"] for r in scored})
-                panels = []
-                for part in chunks(schemes, MAX_LEGEND - 1):
-                    panels.append({s: (schemes.index(s), [(case_time(r), r["error_rate"]) for r in scored
-                                                          if r["scheme"] == s]) for s in part})
-                front = [(case_time(r), r["error_rate"]) for r in pareto_front(scored)]
-                jobs.append((draw_pareto, (folder / f"pareto_{tag}.png",
-                                           f"{where}, {_res_text(scored)}: error rate against time, every case",
-                                           panels, front)))
-            # the exact trade-off of one bias, with the cases on it
             cs = [c for c in curves if (c[0]["scene"], c[0]["light"], c[0]["view"]) == (scene, light, view)]
-            if cs:
-                panels = []
-                for res in sorted({c[0]["resolution"] for c in cs}):
-                    maps = []
-                    for k, (meta, cw, ck) in enumerate(c for c in cs if c[0]["resolution"] == res):
-                        key = ("culling", "format")
-                        pts = [(r["acne_rate"], r["peterpan_rate"]) for r in vr if r["filter"] == "nearest"
-                               and r["resolution"] == res and all(r[x] == meta[x] for x in key)
-                               and metrics.defined(r["acne_rate"]) and metrics.defined(r["peterpan_rate"])]
-                        lab = f"{meta['format']}" + (f" {meta['culling']}" if meta["culling"] != "none" else "")
-                        maps.append((lab, k, cw, ck, pts))
-                    for i, part in enumerate(chunks(maps, MAX_LEGEND // 2)):
-                        panels.append((f"R = {res}" + (f" ({i + 1})" if len(maps) > MAX_LEGEND // 2 else ""), part))
-                jobs.append((draw_tradeoff, (folder / f"tradeoff_{tag}.png",
-                                             f"{where}: exact trade-off of one bias for the map (lines), nearest "
-                                             "cases (points)", panels)))
+            for kind, job in (("vs_bias", _bias_job(vr, where, multi)), ("vs_resolution", _resolution_job(vr, where, multi)),
+                              ("pareto", _pareto_job(vr, where)), ("tradeoff", _tradeoff_job(vr, where, cs))):
+                if job is not None:
+                    jobs.append((job[0], (folder / f"{kind}_{tag}.png",) + job[1]))
         if len(views) > 1:
-            tex, styles, inst_of = {}, {}, {}
-            insts = sorted({_label(r, multi) for r in rs})
-            for r in rs:
-                lab = f"{r['view']}: {_label(r, multi)}"[:52]
-                inst_of[lab] = _label(r, multi)      # the instance, also when the label was cut
-                tex.setdefault(lab, []).append((r["total_texels"], r["error_rate"], r["seam_error_rate"]))
-                styles[lab] = {"color": f"C{insts.index(_label(r, multi)) % 10}",
-                               "linestyle": ("-", "--", ":", "-.")[views.index(r["view"]) % 4]}
-            # one budget is still a comparison of the views: a point each
-            if tex:
-                # keep an instance's views in one panel
-                by_inst = chunks(insts, max(1, MAX_LEGEND // len(views)))
-                columns = [(f"schemes {i + 1} of {len(by_inst)}", "total texels of the view (all faces)",
-                            {k: v for k, v in tex.items() if inst_of[k] in part}, styles)
-                           for i, part in enumerate(by_inst)]
-                columns = [c for c in columns if c[2]]
-            if tex and columns:
-                jobs.append((draw_lines, (folder / f"vs_texels_{slug(f'{scene}_{light}')}.png",
-                                          f"{scene}, light {light}, views {', '.join(views)}, {_res_text(rs)}: "
-                                          "views at equal memory (colour: scheme, line: view)", columns,
-                                          ("error rate", f"error rate within {metrics.SEAM_TEXELS:g} texels of a "
-                                           "seam"), True)))
+            job = _texels_job(rs, scene, light, views, multi)
+            if job is not None:
+                jobs.append((job[0], (folder / f"vs_texels_{slug(f'{scene}_{light}')}.png",) + job[1]))
     return jobs
+
+
+def _bias_job(vr: list, where: str, multi: tuple):
+    """Rates against the swept parameter, a column per unit, at the view's largest resolution:
+    (draw function, arguments after the path), or None when no scheme sweeps more than one value."""
+    rmax = max(r["resolution"] for r in vr)
+    swept = {}
+    for r in vr:
+        if r["resolution"] == rmax and not r["preset"] and r["sweep_key"]:
+            swept.setdefault((r["scheme"], r["sweep_key"]), set()).add(r["sweep_value"])
+    units = {}
+    for r in vr:
+        # schemes whose sweep has one value have no curve: the summary and the other plots show them
+        if r["resolution"] == rmax and not r["preset"] and len(swept.get((r["scheme"], r["sweep_key"]), ())) > 1:
+            name, unit = _unit(r["sweep_key"])
+            others = _others(r["params"], name)
+            lab = f"{r['scheme']}: {name}" + (f" ({others})" if others else "")
+            lab = " ".join([lab] + [r.get(k, "") for k in multi])[:52]
+            units.setdefault(unit, {}).setdefault(lab, []).append((r["sweep_value"], r["acne_rate"], r["peterpan_rate"]))
+    columns = []
+    for unit, series in sorted(units.items()):
+        series = {k: v for k, v in series.items() if len(v) > 1}
+        lengths = unit in ("texel", "world", "range")
+        for part in (chunks(sorted(series)) if series else []):
+            columns.append((f"lengths in {unit}" if lengths else f"parameter {unit} (no unit)",
+                            f"parameter value [{unit}]" if lengths else unit, {k: series[k] for k in part}, {}))
+    if not columns:
+        return None
+    return draw_lines, (f"{where}, R = {rmax}: rates against each scheme's swept parameter (one column per unit)",
+                        columns)
+
+
+def _resolution_job(vr: list, where: str, multi: tuple):
+    """Rates against map resolution, a series per scheme instance (None: no instance at two resolutions)."""
+    series = {}
+    for r in vr:
+        series.setdefault(_label(r, multi), []).append((r["resolution"], r["acne_rate"], r["peterpan_rate"]))
+    series = {k: v for k, v in series.items() if len(v) > 1}
+    if not series:
+        return None
+    parts = chunks(series)
+    columns = [(f"schemes {i + 1} of {len(parts)}" if len(series) > MAX_LEGEND else "schemes",
+                "map resolution R (R x R texels per face)", {k: series[k] for k in part}, {})
+               for i, part in enumerate(parts)]
+    return draw_lines, (f"{where}, {_res_text(vr)}", columns, ("acne rate", "peter-panning rate"), True)
+
+
+def _pareto_job(vr: list, where: str):
+    """The cost of accuracy: every scored case's error rate against its time, with the frontier."""
+    scored = [r for r in vr if metrics.defined(r["error_rate"])]
+    if not scored:
+        return None
+    schemes = sorted({r["scheme"] for r in scored})
+    panels = [{s: (schemes.index(s), [(case_time(r), r["error_rate"]) for r in scored if r["scheme"] == s])
+               for s in part} for part in chunks(schemes, MAX_LEGEND - 1)]
+    front = [(case_time(r), r["error_rate"]) for r in pareto_front(scored)]
+    return draw_pareto, (f"{where}, {_res_text(scored)}: error rate against time, every case", panels, front)
+
+
+def _tradeoff_job(vr: list, where: str, cs: list):
+    """The exact trade-off of one bias (the oracle's curves ``cs`` of the view), with the nearest cases on it."""
+    if not cs:
+        return None
+    panels = []
+    for res in sorted({c[0]["resolution"] for c in cs}):
+        maps = []
+        for k, (meta, cw, ck) in enumerate(c for c in cs if c[0]["resolution"] == res):
+            pts = [(r["acne_rate"], r["peterpan_rate"]) for r in vr if r["filter"] == "nearest"
+                   and r["resolution"] == res and all(r[x] == meta[x] for x in ("culling", "format"))
+                   and metrics.defined(r["acne_rate"]) and metrics.defined(r["peterpan_rate"])]
+            lab = f"{meta['format']}" + (f" {meta['culling']}" if meta["culling"] != "none" else "")
+            maps.append((lab, k, cw, ck, pts))
+        for i, part in enumerate(chunks(maps, MAX_LEGEND // 2)):
+            panels.append((f"R = {res}" + (f" ({i + 1})" if len(maps) > MAX_LEGEND // 2 else ""), part))
+    return draw_tradeoff, (f"{where}: exact trade-off of one bias for the map (lines), nearest cases (points)",
+                           panels)
+
+
+def _texels_job(rs: list, scene: str, light: str, views: list, multi: tuple):
+    """Views at equal memory: error rates against the view's total texels, colour per instance,
+    line style per view (an instance's views kept in one panel)."""
+    tex, styles, inst_of = {}, {}, {}
+    insts = sorted({_label(r, multi) for r in rs})
+    for r in rs:
+        lab = f"{r['view']}: {_label(r, multi)}"[:52]
+        inst_of[lab] = _label(r, multi)      # the instance, also when the label was cut
+        tex.setdefault(lab, []).append((r["total_texels"], r["error_rate"], r["seam_error_rate"]))
+        styles[lab] = {"color": f"C{insts.index(_label(r, multi)) % 10}",
+                       "linestyle": ("-", "--", ":", "-.")[views.index(r["view"]) % 4]}
+    by_inst = chunks(insts, max(1, MAX_LEGEND // len(views)))
+    columns = [(f"schemes {i + 1} of {len(by_inst)}", "total texels of the view (all faces)",
+                {k: v for k, v in tex.items() if inst_of[k] in part}, styles) for i, part in enumerate(by_inst)]
+    columns = [c for c in columns if c[2]]
+    if not columns:
+        return None
+    return draw_lines, (f"{scene}, light {light}, views {', '.join(views)}, {_res_text(rs)}: views at equal memory "
+                        "(colour: scheme, line: view)", columns,
+                        ("error rate", f"error rate within {metrics.SEAM_TEXELS:g} texels of a seam"), True)
 
 
 # ------------------------------------------------------------------ oracle curves on disk
