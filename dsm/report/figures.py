@@ -259,21 +259,24 @@ def _line_series(ax, series, styles, i) -> list:
     """Rate ``i`` of each series of ``series`` against x in ``ax``; returns the x values drawn."""
     xs = []
     for k, (label, pts) in enumerate(series.items()):
+        style = dict(styles.get(label, {}))
+        shown = style.pop("legend", label)          # its legend entry ('_': none)
         pts = sorted(p for p in pts if metrics.defined(p[1 + i]))    # undefined: left out, not 0
         if not pts:
-            ax.plot([], [], label=label, **{"color": f"C{k % 10}", "marker": "o", **styles.get(label, {})})
+            ax.plot([], [], label=shown, **{"color": f"C{k % 10}", "marker": "o", **style})
             continue
         xs += [p[0] for p in pts]
-        kw = {"color": f"C{k % 10}", "marker": "o", "ms": 3, "lw": 0.9, **styles.get(label, {})}
-        ax.plot([p[0] for p in pts], [p[1 + i] for p in pts], label=label, clip_on=False, **kw)
+        kw = {"color": f"C{k % 10}", "marker": "o", "ms": 3, "lw": 0.9, **style}
+        ax.plot([p[0] for p in pts], [p[1 + i] for p in pts], label=shown, clip_on=False, **kw)
     return xs
 
 
 def draw_lines(path, title, columns, ylabels=("acne rate", "peter-panning rate"), xlog2=False):
     """A grid of panels: a row per rate, a column per entry of ``columns`` =
-    [(column title, x label, {label: [(x, rate0, rate1, ...)]}, {label: plot keywords})];
+    [(column title, x label, {label: [(x, rate0, rate1, ...)]}, {label: plot keywords})] (keyword
+    ``legend``: the series' legend entry in place of its label, '_' for none);
     a column's panels share their x axis (the union of its rates' defined points)."""
-    nleg = max(len(c[2]) for c in columns)
+    nleg = max(sum(1 for k in c[2] if not str(c[3].get(k, {}).get("legend", k)).startswith("_")) for c in columns)
     fig, axes = _figure(len(columns), len(ylabels), legend_rows=nleg, sharey=True, sharex=True)
     for j, (ctitle, xlabel, series, styles) in enumerate(columns):
         xs = []
@@ -316,15 +319,21 @@ def draw_pareto(path, title, panels, front):
     return fig
 
 
+TRADEOFF_KEY = "solid: one world bias, dotted: one k texel"
+
+
 def draw_tradeoff(path, title, panels):
     """Peter-panning rate against acne rate, both symlog: panels = [(panel title, [(label, colour index,
-    world curve (x, y), texel curve (x, y), case points [(x, y)])])]."""
-    fig, axes = _figure(len(panels), 1, width=3.8, height=3.4, legend_rows=max(2 * len(p[1]) for p in panels),
+    world curve (x, y), texel curve (x, y), case points [(x, y)])])]. A map's two curves share its
+    colour (solid: one world bias, dotted: one k texel, the title says so) and one legend entry; a
+    panel whose maps are the previous panel's has no legend of its own."""
+    fig, axes = _figure(len(panels), 1, width=3.8, height=3.4, legend_rows=max(len(p[1]) for p in panels),
                         sharey=True)
+    shown = None
     for ax, (ptitle, maps) in zip(axes[0], panels):
         for label, k, cw, ck, pts in maps:
-            ax.step(cw[0], cw[1], where="post", color=f"C{k % 10}", lw=1.0, label=f"{label}: one world bias")
-            ax.step(ck[0], ck[1], where="post", color=f"C{k % 10}", lw=0.8, ls=":", label=f"{label}: one k texel")
+            ax.step(cw[0], cw[1], where="post", color=f"C{k % 10}", lw=1.0, label=label)
+            ax.step(ck[0], ck[1], where="post", color=f"C{k % 10}", lw=0.8, ls=":")
             if pts:
                 ax.scatter([p[0] for p in pts], [p[1] for p in pts], s=12, color=f"C{k % 10}", edgecolors="k",
                            linewidths=0.3, clip_on=False, zorder=3)
@@ -335,8 +344,11 @@ def draw_tradeoff(path, title, panels):
             ax.set_ylabel("peter-panning rate", fontsize=7)
         _title_panel(ax, ptitle)
         ax.tick_params(labelsize=6)
-        _legend(ax)
-    _title(fig, title)
+        entries = [(m[0], m[1]) for m in maps]
+        if entries != shown:
+            _legend(ax)
+            shown = entries
+    _title(fig, f"{title} ({TRADEOFF_KEY})")
     _save(fig, path)
     return fig
 
@@ -471,25 +483,34 @@ def _tradeoff_job(vr: list, where: str, cs: list):
                            panels)
 
 
+VIEW_LINES = ("-", "--", ":", "-.")
+VIEW_LINE_NAMES = ("solid", "dashed", "dotted", "dash-dot")
+
+
 def _texels_job(rs: list, scene: str, light: str, views: list, multi: tuple):
     """Views at equal memory: error rates against the view's total texels, colour per instance,
     line style per view (an instance's views kept in one panel)."""
     tex, styles, inst_of = {}, {}, {}
     insts = sorted({_label(r, multi) for r in rs})
-    for r in rs:
+    named = {}                               # instance -> its series in the legend: its first view's
+    for r in sorted(rs, key=lambda r: views.index(r["view"])):
         lab = f"{r['view']}: {_label(r, multi)}"[:52]
-        inst_of[lab] = _label(r, multi)      # the instance, also when the label was cut
-        tex.setdefault(lab, []).append((r["total_texels"], r["error_rate"], r["seam_error_rate"]))
-        styles[lab] = {"color": f"C{insts.index(_label(r, multi)) % 10}",
-                       "linestyle": ("-", "--", ":", "-.")[views.index(r["view"]) % 4]}
-    by_inst = chunks(insts, max(1, MAX_LEGEND // len(views)))
+        inst = inst_of[lab] = _label(r, multi)         # the instance, also when the label was cut
+        named.setdefault(inst, lab)
+        styles[lab] = {"color": f"C{insts.index(inst) % 10}", "linestyle": VIEW_LINES[views.index(r["view"]) % 4],
+                       "legend": inst if named[inst] == lab else "_"}
+    for r in rs:                             # the series in the rows' order, as before
+        tex.setdefault(f"{r['view']}: {_label(r, multi)}"[:52], []).append(
+            (r["total_texels"], r["error_rate"], r["seam_error_rate"]))
+    by_inst = chunks(insts, MAX_LEGEND)     # a legend entry per instance, not per view
     columns = [(f"schemes {i + 1} of {len(by_inst)}", "total texels of the view (all faces)",
                 {k: v for k, v in tex.items() if inst_of[k] in part}, styles) for i, part in enumerate(by_inst)]
     columns = [c for c in columns if c[2]]
     if not columns:
         return None
     return draw_lines, (f"{scene}, light {light}, views {', '.join(views)}, {_res_text(rs)}: views at equal memory "
-                        "(colour: scheme, line: view)", columns,
+                        "(colour: scheme; line: " + ", ".join(f"{v} {VIEW_LINE_NAMES[i % 4]}" for i, v in enumerate(views)) + ")",
+                        columns,
                         ("error rate", f"error rate within {metrics.SEAM_TEXELS:g} texels of a seam"), True)
 
 
