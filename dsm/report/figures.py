@@ -32,6 +32,10 @@ LINTHRESH = 1e-4          # symlog: linear below this rate
 MAX_LEGEND = 8            # entries per panel
 DPI = 72
 PNG = {"compress_level": 1}
+# the figures' settings, while making and drawing them: 6-point tick labels (set once, not per
+# panel: tick_params re-styles every tick already made); glyphs unhinted (FreeType's autohinter
+# is a tenth of the drawing time and sharpens little at 6 points and 72 dpi)
+RC = {"xtick.labelsize": 6, "ytick.labelsize": 6, "text.hinting": "no_hinting"}
 
 
 def slug(s: str, keep: str = "-_.") -> str:
@@ -89,11 +93,13 @@ LEGEND_Y = -0.22          # where the first entry sits, in the panel's height be
 def _figure(ncols, nrows, width=3.7, height=2.5, legend_rows=0, sharey=False, sharex=False):
     """A figure of nrows x ncols panels, room below them for ``legend_rows`` legend entries;
     shared axes hide the inner panels' tick labels (fewer texts to lay out and draw)."""
+    from matplotlib import rc_context
     from matplotlib.figure import Figure
     extra = 0.2 * legend_rows + 0.75
     fig = Figure(figsize=(width * ncols + 0.3, height * nrows + extra))
-    axes = np.array(fig.subplots(nrows, ncols, squeeze=False, sharey="row" if sharey else False,
-                                 sharex="col" if sharex else False))
+    with rc_context(RC):
+        axes = np.array(fig.subplots(nrows, ncols, squeeze=False, sharey="row" if sharey else False,
+                                     sharex="col" if sharex else False))
     fig.subplots_adjust(left=0.55 / (width * ncols + 0.3), right=0.98, top=1 - 0.6 / (height * nrows + extra),
                         bottom=(0.2 * legend_rows + 0.5) / (height * nrows + extra), wspace=0.32, hspace=0.42)
     return fig, axes
@@ -236,10 +242,9 @@ def _title(fig, text):
 
 
 def _save(fig, path):
-    """The figure as a PNG: glyphs unhinted (FreeType's autohinter is a tenth of the drawing time
-    and sharpens little at 6 points and 72 dpi)."""
+    """The figure as a PNG, drawn under RC (matplotlib makes most ticks while drawing)."""
     from matplotlib import rc_context
-    with rc_context({"text.hinting": "no_hinting"}):
+    with rc_context(RC):
         _atomic_save(Path(path), lambda f: fig.savefig(f, dpi=DPI, format="png", pil_kwargs=PNG))
 
 
@@ -286,7 +291,6 @@ def draw_lines(path, title, columns, ylabels=("acne rate", "peter-panning rate")
             _rate_axis(ax)
             if j == 0:
                 ax.set_ylabel(ylabel, fontsize=7)
-            ax.tick_params(labelsize=6)
         _x_scale(axes[-1, j], xs, xlog2)       # shared: once per column
         _title_panel(axes[0, j], ctitle)
         axes[-1, j].set_xlabel(xlabel, fontsize=7)
@@ -312,7 +316,6 @@ def draw_pareto(path, title, panels, front):
         ax.set_xlabel("time per case: map build + lookup (ms)", fontsize=7)
         if ax is axes[0][0]:
             ax.set_ylabel("error rate: (acne + peter-pan) / receivers", fontsize=7)
-        ax.tick_params(labelsize=6)
         _legend(ax)
     _title(fig, title)
     _save(fig, path)
@@ -343,7 +346,6 @@ def draw_tradeoff(path, title, panels):
         if ax is axes[0][0]:
             ax.set_ylabel("peter-panning rate", fontsize=7)
         _title_panel(ax, ptitle)
-        ax.tick_params(labelsize=6)
         entries = [(m[0], m[1]) for m in maps]
         if entries != shown:
             _legend(ax)
