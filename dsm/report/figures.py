@@ -170,6 +170,34 @@ def _x_scale(ax, xs, log2=False, log=False):
             axis.set_major_locator(MaxNLocator(4))
     axis.set_major_formatter(plain)
     axis.set_minor_locator(NullLocator())
+    _freeze_x_ticks(ax)
+
+
+def _freeze_x_ticks(ax):
+    """The x ticks the locator gives for the panel's final limits, drawn (on it and the panels
+    sharing its x axis) as one line of tick marks and a text per label on the bottom panels,
+    in place of matplotlib's ticks (five artists each): call once every series is plotted."""
+    from matplotlib.lines import Line2D
+    from matplotlib.ticker import NullLocator
+    from matplotlib.transforms import blended_transform_factory
+    ax.autoscale_view()
+    lo, hi = sorted(ax.get_xlim())
+    axis = ax.xaxis
+    t = lambda v: float(axis.get_transform().transform([v])[0])
+    tol = 1e-9 * abs(t(hi) - t(lo))
+    values = [float(v) for v in axis.get_major_locator().tick_values(lo, hi)
+              if np.isfinite(t(v)) and t(lo) - tol <= t(v) <= t(hi) + tol]
+    labels = [axis.get_major_formatter()(v, i) for i, v in enumerate(values)]
+    axis.set_major_locator(NullLocator())
+    for panel in ax.get_shared_x_axes().get_siblings(ax):
+        at = blended_transform_factory(panel.transData, panel.transAxes)
+        panel.add_artist(Line2D(values, [0.0] * len(values), transform=at, ls="none", marker=3, ms=3.5, mew=0.8,
+                                color="k", clip_on=False))                      # TICKDOWN
+        spec = panel.get_subplotspec()
+        if spec is None or spec.is_last_row():
+            for v, label in zip(values, labels):
+                panel.text(v, -0.04, label, transform=at, fontsize=6, ha="center", va="top")
+        panel.xaxis.labelpad = RATE_LABEL_PAD[1]
 
 
 
