@@ -147,17 +147,54 @@ def test_plots_have_one_unit_per_panel_symlog_rates_and_short_legends(tmp_path):
     fig = fn(*args)
     for ax in fig.axes:
         assert ax.get_yscale() == "symlog" and ax.get_ylim() == (0, 1)
-        leg = ax.get_legend()
-        assert leg is None or len(leg.get_texts()) <= figures.MAX_LEGEND
+        assert len(getattr(ax, "legend_texts", ())) <= figures.MAX_LEGEND
     assert "s, light 0:directional, orthographic, R = 64" in fig._suptitle.get_text()
     fn, args = byname["vs_resolution"]
     fig = fn(*args)
-    legends = [len(ax.get_legend().get_texts()) for ax in fig.axes if ax.get_legend()]
+    legends = [len(ax.legend_texts) for ax in fig.axes if getattr(ax, "legend_texts", None)]
     assert sum(legends) == 10 and max(legends) <= figures.MAX_LEGEND
+    # every series' label is in the figure, drawn (the legend's one text of many lines)
+    drawn = "\n".join(t.get_text() for t in fig.texts)
+    assert all(f"normal_angle bias={k} texel max=8 texel" in drawn for k in range(10))
     fn, args = byname["pareto"]
     fig = fn(*args)
     assert all(ax.get_xscale() == "log" and ax.get_yscale() == "symlog" for ax in fig.axes)
     assert (tmp_path / "vs_bias_s_0_directional_orthographic.png").is_file()
+
+
+def test_consolidated_legends_name_each_map_and_instance_once(tmp_path):
+    """The trade-off figure: one legend entry per map (not one per curve), on the first panel
+    only when every panel holds the same maps; views at equal memory: one entry per instance
+    (not per view), every instance named, the line style of each view said in the title."""
+    from matplotlib.colors import to_rgba
+
+    from dsm.report import figures
+    curve = (np.array([0.0, 0.1, 1.0]), np.array([1.0, 0.01, 0.0]))
+    maps = [("float32", 0, curve, curve, [(0.01, 0.1)]), ("float32 back_closed", 1, curve, curve, [])]
+    fig = figures.draw_tradeoff(tmp_path / "t.png", "s", [("R = 64", maps), ("R = 128", maps)])
+    assert [getattr(ax, "legend_texts", []) for ax in fig.axes] == [["float32", "float32 back_closed"], []]
+    assert "solid: one world bias, dotted: one k texel" in " ".join(fig._suptitle.get_text().split())
+    # a map's two curves share its colour: solid (world) and dotted (texel)
+    lines = [ln for ln in fig.axes[0].get_lines() if ln.get_linestyle() != "None"]      # not the tick marks
+    styles = {(to_rgba(ln.get_color()), ln.get_linestyle()) for ln in lines}
+    assert styles == {(to_rgba(f"C{k}"), ls) for k in (0, 1) for ls in ("-", ":")}
+    rows = []
+    for view in ("cube", "dual_paraboloid"):
+        for k in range(10):
+            for res in (32, 64):
+                rows += _rows([("normal_angle", f"bias={k} texel", "bias [texel]", float(k), 0.01, 0.02, res)])
+                rows[-1].update(view=view, light="0:point", case=f"{len(rows):04d}",
+                                total_texels=res * res * (6 if view == "cube" else 2))
+    jobs = {a[0].name.split("_s_")[0]: (fn, a) for fn, a in figures.plot_jobs(tmp_path, rows)}
+    fn, args = jobs["vs_texels"]
+    fig = fn(*args)
+    named = [t for ax in fig.axes for t in getattr(ax, "legend_texts", [])]
+    assert sorted(named) == sorted(f"normal_angle bias={k} texel" for k in range(10))
+    assert max(len(getattr(ax, "legend_texts", [])) for ax in fig.axes) <= figures.MAX_LEGEND
+    assert "cube solid, dual_paraboloid dashed" in " ".join(fig._suptitle.get_text().split())   # wrapped
+    # both views of every instance drawn: 10 instances x 2 views (the seam row: undefined rates, no line)
+    drawn = [ln for ax in fig.axes for ln in ax.get_lines() if ln.get_linestyle() != "None" and len(ln.get_xdata())]
+    assert len(drawn) == 10 * 2
 
 
 def test_dsm_report_rebuilds_table_md_and_the_page(run, tmp_path):

@@ -11,6 +11,7 @@ compression.
 """
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -31,6 +32,10 @@ LINTHRESH = 1e-4          # symlog: linear below this rate
 MAX_LEGEND = 8            # entries per panel
 DPI = 72
 PNG = {"compress_level": 1}
+# the figures' settings, while making and drawing them: 6-point tick labels (set once, not per
+# panel: tick_params re-styles every tick already made); glyphs unhinted (FreeType's autohinter
+# is a tenth of the drawing time and sharpens little at 6 points and 72 dpi)
+RC = {"xtick.labelsize": 6, "ytick.labelsize": 6, "text.hinting": "no_hinting"}
 
 
 def slug(s: str, keep: str = "-_.") -> str:
@@ -82,11 +87,19 @@ def write_images(out: Path, items: list):
 
 # ------------------------------------------------------------------ drawing primitives
 
-def _figure(ncols, nrows, width=3.7, height=2.5, legend_rows=0, sharey=False):
+LEGEND_Y = -0.22          # where the first entry sits, in the panel's height below it
+
+
+def _figure(ncols, nrows, width=3.7, height=2.5, legend_rows=0, sharey=False, sharex=False):
+    """A figure of nrows x ncols panels, room below them for ``legend_rows`` legend entries;
+    shared axes hide the inner panels' tick labels (fewer texts to lay out and draw)."""
+    from matplotlib import rc_context
     from matplotlib.figure import Figure
     extra = 0.2 * legend_rows + 0.75
     fig = Figure(figsize=(width * ncols + 0.3, height * nrows + extra))
-    axes = np.array(fig.subplots(nrows, ncols, squeeze=False, sharey="row" if sharey else False))
+    with rc_context(RC):
+        axes = np.array(fig.subplots(nrows, ncols, squeeze=False, sharey="row" if sharey else False,
+                                     sharex="col" if sharex else False))
     fig.subplots_adjust(left=0.55 / (width * ncols + 0.3), right=0.98, top=1 - 0.6 / (height * nrows + extra),
                         bottom=(0.2 * legend_rows + 0.5) / (height * nrows + extra), wspace=0.32, hspace=0.42)
     return fig, axes
@@ -96,16 +109,33 @@ RATE_TICKS = (0, 1e-4, 1e-3, 1e-2, 1e-1, 1)
 RATE_LABELS = ("0", "1e-4", "0.001", "0.01", "0.1", "1")
 
 
+RATE_LABEL_PAD = (26, 15)  # points between a rate axis (y, x) and its label: room for its tick labels
+
+
 def _rate_axis(ax, which="y"):
-    """A rate axis: symlog from 0 to 1, fixed plain tick labels (cheap to draw), no minor ticks."""
-    from matplotlib.ticker import FixedFormatter, FixedLocator, NullLocator
-    set_scale, set_lim = (ax.set_yscale, ax.set_ylim) if which == "y" else (ax.set_xscale, ax.set_xlim)
-    set_scale("symlog", linthresh=LINTHRESH, linscale=0.6)
-    set_lim(0, 1)
-    axis = ax.yaxis if which == "y" else ax.xaxis
-    axis.set_major_locator(FixedLocator(RATE_TICKS))
-    axis.set_major_formatter(FixedFormatter(RATE_LABELS))
+    """A rate axis: symlog from 0 to 1 with fixed plain tick labels, drawn as one line of tick
+    marks and a text per label (on the outer panels only) rather than matplotlib's ticks, five
+    artists each and two fifths of a figure's drawing time."""
+    from matplotlib.lines import Line2D
+    from matplotlib.ticker import NullLocator
+    from matplotlib.transforms import blended_transform_factory
+    y = which == "y"
+    (ax.set_yscale if y else ax.set_xscale)("symlog", linthresh=LINTHRESH, linscale=0.6)
+    (ax.set_ylim if y else ax.set_xlim)(0, 1)
+    axis = ax.yaxis if y else ax.xaxis
+    axis.set_major_locator(NullLocator())
     axis.set_minor_locator(NullLocator())
+    at = blended_transform_factory(ax.transAxes, ax.transData) if y else \
+        blended_transform_factory(ax.transData, ax.transAxes)
+    zeros = [0.0] * len(RATE_TICKS)
+    ax.add_artist(Line2D(zeros if y else RATE_TICKS, RATE_TICKS if y else zeros, transform=at, ls="none",
+                         marker=2 + (not y), ms=3.5, mew=0.8, color="k", clip_on=False))    # TICKLEFT, TICKDOWN
+    spec = ax.get_subplotspec()
+    if spec is None or (spec.is_first_col() if y else spec.is_last_row()):
+        for v, label in zip(RATE_TICKS, RATE_LABELS):
+            ax.text(-0.025 if y else v, v if y else -0.04, label, transform=at, fontsize=6,
+                    ha="right" if y else "center", va="center" if y else "top")
+    axis.labelpad = RATE_LABEL_PAD[0 if y else 1]
 
 
 def _x_scale(ax, xs, log2=False, log=False):
@@ -140,13 +170,97 @@ def _x_scale(ax, xs, log2=False, log=False):
             axis.set_major_locator(MaxNLocator(4))
     axis.set_major_formatter(plain)
     axis.set_minor_locator(NullLocator())
+    _freeze_x_ticks(ax)
 
 
-def _legend(ax, ncol=1):
+def _freeze_x_ticks(ax):
+    """The x ticks the locator gives for the panel's final limits, drawn (on it and the panels
+    sharing its x axis) as one line of tick marks and a text per label on the bottom panels,
+    in place of matplotlib's ticks (five artists each): call once every series is plotted."""
+    from matplotlib.lines import Line2D
+    from matplotlib.ticker import NullLocator
+    from matplotlib.transforms import blended_transform_factory
+    ax.autoscale_view()
+    lo, hi = sorted(ax.get_xlim())
+    axis = ax.xaxis
+    t = lambda v: float(axis.get_transform().transform([v])[0])
+    tol = 1e-9 * abs(t(hi) - t(lo))
+    values = [float(v) for v in axis.get_major_locator().tick_values(lo, hi)
+              if np.isfinite(t(v)) and t(lo) - tol <= t(v) <= t(hi) + tol]
+    labels = [axis.get_major_formatter()(v, i) for i, v in enumerate(values)]
+    axis.set_major_locator(NullLocator())
+    for panel in ax.get_shared_x_axes().get_siblings(ax):
+        at = blended_transform_factory(panel.transData, panel.transAxes)
+        panel.add_artist(Line2D(values, [0.0] * len(values), transform=at, ls="none", marker=3, ms=3.5, mew=0.8,
+                                color="k", clip_on=False))                      # TICKDOWN
+        spec = panel.get_subplotspec()
+        if spec is None or spec.is_last_row():
+            for v, label in zip(values, labels):
+                panel.text(v, -0.04, label, transform=at, fontsize=6, ha="center", va="top")
+        panel.xaxis.labelpad = RATE_LABEL_PAD[1]
+
+
+
+
+LEGEND_FONT = 6           # points
+LEGEND_SPACING = 1.6      # line pitch of a legend, in font sizes (within the 0.2 in per entry _figure leaves)
+
+
+def _legend(ax):
+    """The panel's labelled series below it, one per line: a short stroke of the series' line or
+    marker, then its label. Three artists however many entries (the strokes, their markers, the
+    labels as one text of many lines): matplotlib's Legend lays every entry out as boxes of its
+    own, a third of a figure's drawing time. ``ax.legend_texts`` keeps the labels."""
+    from matplotlib.collections import CircleCollection, LineCollection
     handles, labels = ax.get_legend_handles_labels()
-    if handles:
-        ax.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, -0.22), ncol=ncol, fontsize=6,
-                  frameon=False, handlelength=1.5)
+    ax.legend_texts = list(labels)
+    if not handles:
+        return
+    fig = ax.figure
+    box = ax.get_position()                                  # figure fraction (no layout engine)
+    w_in, h_in = fig.get_size_inches()
+    x0, top = box.x0 * w_in, (box.y0 + LEGEND_Y * box.height) * h_in      # inches
+    pitch = LEGEND_SPACING * LEGEND_FONT * _font_height_em() / 72
+    mid = lambda i: top - (i + 0.5) * pitch                  # the middle of line i
+    styles = [_handle_style(h) for h in handles]
+    strokes = [(i, st) for i, st in enumerate(styles) if st["ls"] not in ("none", "None", "")]
+    fig.add_artist(LineCollection([[(x0 + 0.06, mid(i)), (x0 + 0.3, mid(i))] for i, _ in strokes],
+                                  colors=[st["color"] for _, st in strokes],
+                                  linestyles=[st["ls"] for _, st in strokes],
+                                  linewidths=[st["lw"] for _, st in strokes], transform=fig.dpi_scale_trans))
+    dots = [(i, st) for i, st in enumerate(styles) if st["marker"] not in (None, "none", "None", "")]
+    if dots:
+        fig.add_artist(CircleCollection([st["ms"] ** 2 for _, st in dots], offsets=[(x0 + 0.18, mid(i)) for i, _ in dots],
+                                        offset_transform=fig.dpi_scale_trans, facecolors=[st["face"] for _, st in dots],
+                                        edgecolors=[st["edge"] for _, st in dots], linewidths=0.5))
+    fig.text(x0 + 0.36, top, "\n".join(labels), transform=fig.dpi_scale_trans, fontsize=LEGEND_FONT, va="top",
+             linespacing=LEGEND_SPACING)
+
+
+@functools.lru_cache(maxsize=1)
+def _font_height_em() -> float:
+    """The text font's ascent plus descent in ems (OS/2 table, else hhea): matplotlib's line
+    pitch is that times the font size times the line spacing."""
+    from matplotlib.font_manager import FontProperties, findfont
+    from matplotlib.ft2font import FT2Font
+    font = FT2Font(findfont(FontProperties()))
+    os2 = font.get_sfnt_table("OS/2")
+    if os2 is None:
+        hhea = font.get_sfnt_table("hhea")
+        return (hhea["ascent"] - hhea["descent"]) / font.units_per_EM
+    return (os2["sTypoAscender"] - os2["sTypoDescender"]) / font.units_per_EM
+
+
+def _handle_style(h) -> dict:
+    """A legend entry's stroke: the line's colour, style, width and marker, or a scatter's marker alone."""
+    from matplotlib.lines import Line2D
+    if isinstance(h, Line2D):
+        marker = h.get_marker()
+        return dict(color=h.get_color(), ls=h.get_linestyle(), lw=h.get_linewidth(), marker=marker,
+                    ms=min(h.get_markersize(), 4), face=h.get_markerfacecolor(), edge=h.get_markeredgecolor())
+    face, edge = h.get_facecolor(), h.get_edgecolor()
+    return dict(color="none", ls="none", lw=0, marker="o", ms=3.5, face=face[0] if len(face) else "none",
+                edge=edge[0] if len(edge) else "none")
 
 
 def _title(fig, text):
@@ -156,7 +270,10 @@ def _title(fig, text):
 
 
 def _save(fig, path):
-    _atomic_save(Path(path), lambda f: fig.savefig(f, dpi=DPI, format="png", pil_kwargs=PNG))
+    """The figure as a PNG, drawn under RC (matplotlib makes most ticks while drawing)."""
+    from matplotlib import rc_context
+    with rc_context(RC):
+        _atomic_save(Path(path), lambda f: fig.savefig(f, dpi=DPI, format="png", pil_kwargs=PNG))
 
 
 def chunks(items, n=MAX_LEGEND):
@@ -165,33 +282,47 @@ def chunks(items, n=MAX_LEGEND):
     return [items[i:i + n] for i in range(0, len(items), n)] or [[]]
 
 
+def _title_panel(ax, text):
+    """A panel's title at a fixed height (matplotlib would otherwise measure the panel's every
+    tick label to place it: nothing is drawn above a panel here)."""
+    ax.set_title(text, fontsize=7, y=1.0, pad=4)
+
+
+def _line_series(ax, series, styles, i) -> list:
+    """Rate ``i`` of each series of ``series`` against x in ``ax``; returns the x values drawn."""
+    xs = []
+    for k, (label, pts) in enumerate(series.items()):
+        style = dict(styles.get(label, {}))
+        shown = style.pop("legend", label)          # its legend entry ('_': none)
+        pts = sorted(p for p in pts if metrics.defined(p[1 + i]))    # undefined: left out, not 0
+        if not pts:
+            ax.plot([], [], label=shown, **{"color": f"C{k % 10}", "marker": "o", **style})
+            continue
+        xs += [p[0] for p in pts]
+        kw = {"color": f"C{k % 10}", "marker": "o", "ms": 3, "lw": 0.9, **style}
+        ax.plot([p[0] for p in pts], [p[1 + i] for p in pts], label=shown, clip_on=False, **kw)
+    return xs
+
+
 def draw_lines(path, title, columns, ylabels=("acne rate", "peter-panning rate"), xlog2=False):
     """A grid of panels: a row per rate, a column per entry of ``columns`` =
-    [(column title, x label, {label: [(x, rate0, rate1, ...)]}, {label: plot keywords})]."""
-    nleg = max(len(c[2]) for c in columns)
-    fig, axes = _figure(len(columns), len(ylabels), legend_rows=nleg, sharey=True)
+    [(column title, x label, {label: [(x, rate0, rate1, ...)]}, {label: plot keywords})] (keyword
+    ``legend``: the series' legend entry in place of its label, '_' for none);
+    a column's panels share their x axis (the union of its rates' defined points)."""
+    nleg = max(sum(1 for k in c[2] if not str(c[3].get(k, {}).get("legend", k)).startswith("_")) for c in columns)
+    fig, axes = _figure(len(columns), len(ylabels), legend_rows=nleg, sharey=True, sharex=True)
     for j, (ctitle, xlabel, series, styles) in enumerate(columns):
+        xs = []
         for i, ylabel in enumerate(ylabels):
             ax = axes[i, j]
-            xs = []
-            for k, (label, pts) in enumerate(series.items()):
-                pts = sorted(p for p in pts if metrics.defined(p[1 + i]))    # undefined: left out, not 0
-                if not pts:
-                    ax.plot([], [], label=label, **{"color": f"C{k % 10}", "marker": "o", **styles.get(label, {})})
-                    continue
-                xs += [p[0] for p in pts]
-                kw = {"color": f"C{k % 10}", "marker": "o", "ms": 3, "lw": 0.9, **styles.get(label, {})}
-                ax.plot([p[0] for p in pts], [p[1 + i] for p in pts], label=label, clip_on=False, **kw)
+            xs += _line_series(ax, series, styles, i)
             _rate_axis(ax)
-            _x_scale(ax, xs, xlog2)
             if j == 0:
                 ax.set_ylabel(ylabel, fontsize=7)
-            ax.tick_params(labelsize=6)
-            if i == 0:
-                ax.set_title(ctitle, fontsize=7)
-            if i == len(ylabels) - 1:
-                ax.set_xlabel(xlabel, fontsize=7)
-                _legend(ax)
+        _x_scale(axes[-1, j], xs, xlog2)       # shared: once per column
+        _title_panel(axes[0, j], ctitle)
+        axes[-1, j].set_xlabel(xlabel, fontsize=7)
+        _legend(axes[-1, j])
     _title(fig, title)
     _save(fig, path)
     return fig
@@ -213,22 +344,27 @@ def draw_pareto(path, title, panels, front):
         ax.set_xlabel("time per case: map build + lookup (ms)", fontsize=7)
         if ax is axes[0][0]:
             ax.set_ylabel("error rate: (acne + peter-pan) / receivers", fontsize=7)
-        ax.tick_params(labelsize=6)
         _legend(ax)
     _title(fig, title)
     _save(fig, path)
     return fig
 
 
+TRADEOFF_KEY = "solid: one world bias, dotted: one k texel"
+
+
 def draw_tradeoff(path, title, panels):
     """Peter-panning rate against acne rate, both symlog: panels = [(panel title, [(label, colour index,
-    world curve (x, y), texel curve (x, y), case points [(x, y)])])]."""
-    fig, axes = _figure(len(panels), 1, width=3.8, height=3.4, legend_rows=max(2 * len(p[1]) for p in panels),
+    world curve (x, y), texel curve (x, y), case points [(x, y)])])]. A map's two curves share its
+    colour (solid: one world bias, dotted: one k texel, the title says so) and one legend entry; a
+    panel whose maps are the previous panel's has no legend of its own."""
+    fig, axes = _figure(len(panels), 1, width=3.8, height=3.4, legend_rows=max(len(p[1]) for p in panels),
                         sharey=True)
+    shown = None
     for ax, (ptitle, maps) in zip(axes[0], panels):
         for label, k, cw, ck, pts in maps:
-            ax.step(cw[0], cw[1], where="post", color=f"C{k % 10}", lw=1.0, label=f"{label}: one world bias")
-            ax.step(ck[0], ck[1], where="post", color=f"C{k % 10}", lw=0.8, ls=":", label=f"{label}: one k texel")
+            ax.step(cw[0], cw[1], where="post", color=f"C{k % 10}", lw=1.0, label=label)
+            ax.step(ck[0], ck[1], where="post", color=f"C{k % 10}", lw=0.8, ls=":")
             if pts:
                 ax.scatter([p[0] for p in pts], [p[1] for p in pts], s=12, color=f"C{k % 10}", edgecolors="k",
                            linewidths=0.3, clip_on=False, zorder=3)
@@ -237,10 +373,12 @@ def draw_tradeoff(path, title, panels):
         ax.set_xlabel("acne rate", fontsize=7)
         if ax is axes[0][0]:
             ax.set_ylabel("peter-panning rate", fontsize=7)
-        ax.set_title(ptitle, fontsize=7)
-        ax.tick_params(labelsize=6)
-        _legend(ax)
-    _title(fig, title)
+        _title_panel(ax, ptitle)
+        entries = [(m[0], m[1]) for m in maps]
+        if entries != shown:
+            _legend(ax)
+            shown = entries
+    _title(fig, f"{title} ({TRADEOFF_KEY})")
     _save(fig, path)
     return fig
 
@@ -287,100 +425,123 @@ def plot_jobs(folder: Path, rows: list, curves: list = ()) -> list:
             vr = [r for r in rs if r["view"] == view]
             tag = slug(f"{scene}_{light}_{view}")
             where = f"{scene}, light {light}, {view}"
-            # rates against the swept parameter, a column per unit, at the largest resolution
-            rmax = max(r["resolution"] for r in vr)
-            units = {}
-            swept = {}
-            for r in vr:
-                if r["resolution"] == rmax and not r["preset"] and r["sweep_key"]:
-                    swept.setdefault((r["scheme"], r["sweep_key"]), set()).add(r["sweep_value"])
-            for r in vr:
-                # schemes whose sweep has one value have no curve: the summary and the other plots show them
-                if r["resolution"] == rmax and not r["preset"] and len(swept.get((r["scheme"], r["sweep_key"]), ())) > 1:
-                    name, unit = _unit(r["sweep_key"])
-                    others = _others(r["params"], name)
-                    lab = f"{r['scheme']}: {name}" + (f" ({others})" if others else "")
-                    lab = " ".join([lab] + [r.get(k, "") for k in multi])[:52]
-                    units.setdefault(unit, {}).setdefault(lab, []).append(
-                        (r["sweep_value"], r["acne_rate"], r["peterpan_rate"]))
-            columns = []
-            for unit, series in sorted(units.items()):
-                series = {k: v for k, v in series.items() if len(v) > 1}
-                if not series:
-                    continue
-                for part in chunks(sorted(series)):
-                    lengths = unit in ("texel", "world", "range")
-                    columns.append((f"lengths in {unit}" if lengths else f"parameter {unit} (no unit)",
-                                    f"parameter value [{unit}]" if lengths else unit, {k: series[k] for k in part}, {}))
-            if columns:
-                jobs.append((draw_lines, (folder / f"vs_bias_{tag}.png",
-                                          f"{where}, R = {rmax}: rates against each scheme's swept parameter "
-                                          "(one column per unit)", columns)))
-            # rates against resolution, per instance
-            series = {}
-            for r in vr:
-                series.setdefault(_label(r, multi), []).append((r["resolution"], r["acne_rate"], r["peterpan_rate"]))
-            series = {k: v for k, v in series.items() if len(v) > 1}
-            if series:
-                columns = [(f"schemes {i + 1} of {len(chunks(series))}" if len(series) > MAX_LEGEND else "schemes",
-                            "map resolution R (R x R texels per face)", {k: series[k] for k in part}, {})
-                           for i, part in enumerate(chunks(series))]
-                jobs.append((draw_lines, (folder / f"vs_resolution_{tag}.png", f"{where}, {_res_text(vr)}",
-                                          columns, ("acne rate", "peter-panning rate"), True)))
-            # the cost of accuracy
-            scored = [r for r in vr if metrics.defined(r["error_rate"])]
-            if scored:
-                schemes = sorted({r["scheme"] for r in scored})
-                panels = []
-                for part in chunks(schemes, MAX_LEGEND - 1):
-                    panels.append({s: (schemes.index(s), [(case_time(r), r["error_rate"]) for r in scored
-                                                          if r["scheme"] == s]) for s in part})
-                front = [(case_time(r), r["error_rate"]) for r in pareto_front(scored)]
-                jobs.append((draw_pareto, (folder / f"pareto_{tag}.png",
-                                           f"{where}, {_res_text(scored)}: error rate against time, every case",
-                                           panels, front)))
-            # the exact trade-off of one bias, with the cases on it
             cs = [c for c in curves if (c[0]["scene"], c[0]["light"], c[0]["view"]) == (scene, light, view)]
-            if cs:
-                panels = []
-                for res in sorted({c[0]["resolution"] for c in cs}):
-                    maps = []
-                    for k, (meta, cw, ck) in enumerate(c for c in cs if c[0]["resolution"] == res):
-                        key = ("culling", "format")
-                        pts = [(r["acne_rate"], r["peterpan_rate"]) for r in vr if r["filter"] == "nearest"
-                               and r["resolution"] == res and all(r[x] == meta[x] for x in key)
-                               and metrics.defined(r["acne_rate"]) and metrics.defined(r["peterpan_rate"])]
-                        lab = f"{meta['format']}" + (f" {meta['culling']}" if meta["culling"] != "none" else "")
-                        maps.append((lab, k, cw, ck, pts))
-                    for i, part in enumerate(chunks(maps, MAX_LEGEND // 2)):
-                        panels.append((f"R = {res}" + (f" ({i + 1})" if len(maps) > MAX_LEGEND // 2 else ""), part))
-                jobs.append((draw_tradeoff, (folder / f"tradeoff_{tag}.png",
-                                             f"{where}: exact trade-off of one bias for the map (lines), nearest "
-                                             "cases (points)", panels)))
+            for kind, job in (("vs_bias", _bias_job(vr, where, multi)), ("vs_resolution", _resolution_job(vr, where, multi)),
+                              ("pareto", _pareto_job(vr, where)), ("tradeoff", _tradeoff_job(vr, where, cs))):
+                if job is not None:
+                    jobs.append((job[0], (folder / f"{kind}_{tag}.png",) + job[1]))
         if len(views) > 1:
-            tex, styles, inst_of = {}, {}, {}
-            insts = sorted({_label(r, multi) for r in rs})
-            for r in rs:
-                lab = f"{r['view']}: {_label(r, multi)}"[:52]
-                inst_of[lab] = _label(r, multi)      # the instance, also when the label was cut
-                tex.setdefault(lab, []).append((r["total_texels"], r["error_rate"], r["seam_error_rate"]))
-                styles[lab] = {"color": f"C{insts.index(_label(r, multi)) % 10}",
-                               "linestyle": ("-", "--", ":", "-.")[views.index(r["view"]) % 4]}
-            # one budget is still a comparison of the views: a point each
-            if tex:
-                # keep an instance's views in one panel
-                by_inst = chunks(insts, max(1, MAX_LEGEND // len(views)))
-                columns = [(f"schemes {i + 1} of {len(by_inst)}", "total texels of the view (all faces)",
-                            {k: v for k, v in tex.items() if inst_of[k] in part}, styles)
-                           for i, part in enumerate(by_inst)]
-                columns = [c for c in columns if c[2]]
-            if tex and columns:
-                jobs.append((draw_lines, (folder / f"vs_texels_{slug(f'{scene}_{light}')}.png",
-                                          f"{scene}, light {light}, views {', '.join(views)}, {_res_text(rs)}: "
-                                          "views at equal memory (colour: scheme, line: view)", columns,
-                                          ("error rate", f"error rate within {metrics.SEAM_TEXELS:g} texels of a "
-                                           "seam"), True)))
+            job = _texels_job(rs, scene, light, views, multi)
+            if job is not None:
+                jobs.append((job[0], (folder / f"vs_texels_{slug(f'{scene}_{light}')}.png",) + job[1]))
     return jobs
+
+
+def _bias_job(vr: list, where: str, multi: tuple):
+    """Rates against the swept parameter, a column per unit, at the view's largest resolution:
+    (draw function, arguments after the path), or None when no scheme sweeps more than one value."""
+    rmax = max(r["resolution"] for r in vr)
+    swept = {}
+    for r in vr:
+        if r["resolution"] == rmax and not r["preset"] and r["sweep_key"]:
+            swept.setdefault((r["scheme"], r["sweep_key"]), set()).add(r["sweep_value"])
+    units = {}
+    for r in vr:
+        # schemes whose sweep has one value have no curve: the summary and the other plots show them
+        if r["resolution"] == rmax and not r["preset"] and len(swept.get((r["scheme"], r["sweep_key"]), ())) > 1:
+            name, unit = _unit(r["sweep_key"])
+            others = _others(r["params"], name)
+            lab = f"{r['scheme']}: {name}" + (f" ({others})" if others else "")
+            lab = " ".join([lab] + [r.get(k, "") for k in multi])[:52]
+            units.setdefault(unit, {}).setdefault(lab, []).append((r["sweep_value"], r["acne_rate"], r["peterpan_rate"]))
+    columns = []
+    for unit, series in sorted(units.items()):
+        series = {k: v for k, v in series.items() if len(v) > 1}
+        lengths = unit in ("texel", "world", "range")
+        for part in (chunks(sorted(series)) if series else []):
+            columns.append((f"lengths in {unit}" if lengths else f"parameter {unit} (no unit)",
+                            f"parameter value [{unit}]" if lengths else unit, {k: series[k] for k in part}, {}))
+    if not columns:
+        return None
+    return draw_lines, (f"{where}, R = {rmax}: rates against each scheme's swept parameter (one column per unit)",
+                        columns)
+
+
+def _resolution_job(vr: list, where: str, multi: tuple):
+    """Rates against map resolution, a series per scheme instance (None: no instance at two resolutions)."""
+    series = {}
+    for r in vr:
+        series.setdefault(_label(r, multi), []).append((r["resolution"], r["acne_rate"], r["peterpan_rate"]))
+    series = {k: v for k, v in series.items() if len(v) > 1}
+    if not series:
+        return None
+    parts = chunks(series)
+    columns = [(f"schemes {i + 1} of {len(parts)}" if len(series) > MAX_LEGEND else "schemes",
+                "map resolution R (R x R texels per face)", {k: series[k] for k in part}, {})
+               for i, part in enumerate(parts)]
+    return draw_lines, (f"{where}, {_res_text(vr)}", columns, ("acne rate", "peter-panning rate"), True)
+
+
+def _pareto_job(vr: list, where: str):
+    """The cost of accuracy: every scored case's error rate against its time, with the frontier."""
+    scored = [r for r in vr if metrics.defined(r["error_rate"])]
+    if not scored:
+        return None
+    schemes = sorted({r["scheme"] for r in scored})
+    panels = [{s: (schemes.index(s), [(case_time(r), r["error_rate"]) for r in scored if r["scheme"] == s])
+               for s in part} for part in chunks(schemes, MAX_LEGEND - 1)]
+    front = [(case_time(r), r["error_rate"]) for r in pareto_front(scored)]
+    return draw_pareto, (f"{where}, {_res_text(scored)}: error rate against time, every case", panels, front)
+
+
+def _tradeoff_job(vr: list, where: str, cs: list):
+    """The exact trade-off of one bias (the oracle's curves ``cs`` of the view), with the nearest cases on it."""
+    if not cs:
+        return None
+    panels = []
+    for res in sorted({c[0]["resolution"] for c in cs}):
+        maps = []
+        for k, (meta, cw, ck) in enumerate(c for c in cs if c[0]["resolution"] == res):
+            pts = [(r["acne_rate"], r["peterpan_rate"]) for r in vr if r["filter"] == "nearest"
+                   and r["resolution"] == res and all(r[x] == meta[x] for x in ("culling", "format"))
+                   and metrics.defined(r["acne_rate"]) and metrics.defined(r["peterpan_rate"])]
+            lab = f"{meta['format']}" + (f" {meta['culling']}" if meta["culling"] != "none" else "")
+            maps.append((lab, k, cw, ck, pts))
+        for i, part in enumerate(chunks(maps, MAX_LEGEND // 2)):
+            panels.append((f"R = {res}" + (f" ({i + 1})" if len(maps) > MAX_LEGEND // 2 else ""), part))
+    return draw_tradeoff, (f"{where}: exact trade-off of one bias for the map (lines), nearest cases (points)",
+                           panels)
+
+
+VIEW_LINES = ("-", "--", ":", "-.")
+VIEW_LINE_NAMES = ("solid", "dashed", "dotted", "dash-dot")
+
+
+def _texels_job(rs: list, scene: str, light: str, views: list, multi: tuple):
+    """Views at equal memory: error rates against the view's total texels, colour per instance,
+    line style per view (an instance's views kept in one panel)."""
+    tex, styles, inst_of = {}, {}, {}
+    insts = sorted({_label(r, multi) for r in rs})
+    named = {}                               # instance -> its series in the legend: its first view's
+    for r in sorted(rs, key=lambda r: views.index(r["view"])):
+        lab = f"{r['view']}: {_label(r, multi)}"[:52]
+        inst = inst_of[lab] = _label(r, multi)         # the instance, also when the label was cut
+        named.setdefault(inst, lab)
+        styles[lab] = {"color": f"C{insts.index(inst) % 10}", "linestyle": VIEW_LINES[views.index(r["view"]) % 4],
+                       "legend": inst if named[inst] == lab else "_"}
+    for r in rs:                             # the series in the rows' order, as before
+        tex.setdefault(f"{r['view']}: {_label(r, multi)}"[:52], []).append(
+            (r["total_texels"], r["error_rate"], r["seam_error_rate"]))
+    by_inst = chunks(insts, MAX_LEGEND)     # a legend entry per instance, not per view
+    columns = [(f"schemes {i + 1} of {len(by_inst)}", "total texels of the view (all faces)",
+                {k: v for k, v in tex.items() if inst_of[k] in part}, styles) for i, part in enumerate(by_inst)]
+    columns = [c for c in columns if c[2]]
+    if not columns:
+        return None
+    return draw_lines, (f"{scene}, light {light}, views {', '.join(views)}, {_res_text(rs)}: views at equal memory "
+                        "(colour: scheme; line: " + ", ".join(f"{v} {VIEW_LINE_NAMES[i % 4]}" for i, v in enumerate(views)) + ")",
+                        columns,
+                        ("error rate", f"error rate within {metrics.SEAM_TEXELS:g} texels of a seam"), True)
 
 
 # ------------------------------------------------------------------ oracle curves on disk

@@ -275,20 +275,34 @@ def compare(dir_a: Path, dir_b: Path, out: Path) -> dict:
     only_b = sum(1 for r in rows_b if _key(r) not in seen)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    with report_io.atomic(out / "compare.csv") as tmp, open(tmp, "w", newline="") as fh:
+    _write_compare_csv(out / "compare.csv", pairs)
+    desc = lambda run, d: (f"`{d}` ({run.get('experiment', '?')}, {run.get('state', '?')}, commit "
+                           f"{str(run.get('versions', {}).get('dsm_git_commit', '?'))[:10]}, "
+                           f"{run.get('variant', '?')}, {run.get('threads', '?')} threads)")
+    lines = ["# Comparison: B - A", "", f"A: {desc(run_a, dir_a)}", "", f"B: {desc(run_b, dir_b)}", "",
+             f"{len(pairs)} cases in both (matched on {', '.join(KEY)}); {only_a} only in A, {only_b} only in B. "
+             "Differences are B - A; a dash: undefined in either run.", ""]
+    lines += _count_lines(pairs) + _instance_lines(pairs) + _case_lines(pairs)
+    with report_io.atomic(out / "compare.md") as tmp:
+        tmp.write_text("\n".join(lines) + "\n")
+    return {"matched": len(pairs), "only_a": only_a, "only_b": only_b,
+            "identical_counts": sum(1 for a, b in pairs if count_share(a, b) == 0)}
+
+
+def _write_compare_csv(path: Path, pairs: list):
+    """compare.csv: every matched case, its key, both case ids, and a_, b_ and diff_ per compared column."""
+    with report_io.atomic(path) as tmp, open(tmp, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(list(KEY) + ["case_a", "case_b"] + [f"{p}_{c}" for c in COMPARED for p in ("a", "b", "diff")])
         for a, b in pairs:
             w.writerow(list(_key(a)) + [a["case"], b["case"]] + [
                 f"{x:.6g}" if metrics.defined(x) else ""
                 for c in COMPARED for x in (float(a[c]), float(b[c]), _diff(a[c], b[c]))])
-    desc = lambda run, d: (f"`{d}` ({run.get('experiment', '?')}, {run.get('state', '?')}, commit "
-                           f"{str(run.get('versions', {}).get('dsm_git_commit', '?'))[:10]}, "
-                           f"{run.get('variant', '?')}, {run.get('threads', '?')} threads)")
-    lines = ["# Comparison: B - A", "", f"A: {desc(run_a, dir_a)}", "", f"B: {desc(run_b, dir_b)}", "",
-             f"{len(pairs)} cases in both (matched on {', '.join(KEY)}); {only_a} only in A, {only_b} only in B. "
-             "Differences are B - A; a dash: undefined in either run.", ""] + _count_lines(pairs) + [
-             "## Per scheme instance, over the matched cases", "",
+
+
+def _instance_lines(pairs: list) -> list:
+    """compare.md's per-instance section: each run's pooled rates and times over the matched cases."""
+    lines = ["## Per scheme instance, over the matched cases", "",
              "| scheme | params | cases | acne pooled A | B | B - A | peter-pan pooled A | B | B - A | "
              "error pooled A | B | B - A | build ms A | B | lookup ms A | B |", "|---" * 16 + "|"]
     sa = {s["key"][:2]: s for s in summary.per_instance([a for a, _ in pairs])} if pairs else {}
@@ -302,12 +316,17 @@ def compare(dir_a: Path, dir_b: Path, out: Path) -> dict:
             cells += [summary.rate(a[t]), summary.rate(b[t]), _signed(_diff(a[t], b[t]))]
         cells += [f"{a['build_ms']:.2f}", f"{b['build_ms']:.2f}", f"{a['lookup_ms']:.2f}", f"{b['lookup_ms']:.2f}"]
         lines.append("| " + " | ".join(map(str, cells)) + " |")
-    lines += ["", "## Matched cases (largest change in error rate first)", "",
-              "| case A | case B | scene | light | view | scheme | params | R | filter | format | acne A | B | B - A | "
-              "peter-pan A | B | B - A | error A | B | B - A | time ms A | B |", "|---" * 21 + "|"]
-    order = sorted(pairs, key=lambda p: (not metrics.defined(_diff(p[0]["error_rate"], p[1]["error_rate"])),
-                                         -abs(_diff(p[0]["error_rate"], p[1]["error_rate"]))
-                                         if metrics.defined(_diff(p[0]["error_rate"], p[1]["error_rate"])) else 0))
+    return lines
+
+
+def _case_lines(pairs: list) -> list:
+    """compare.md's matched cases, the largest change in error rate first (undefined changes last)."""
+    lines = ["", "## Matched cases (largest change in error rate first)", "",
+             "| case A | case B | scene | light | view | scheme | params | R | filter | format | acne A | B | B - A | "
+             "peter-pan A | B | B - A | error A | B | B - A | time ms A | B |", "|---" * 21 + "|"]
+    change = lambda p: _diff(p[0]["error_rate"], p[1]["error_rate"])
+    order = sorted(pairs, key=lambda p: (not metrics.defined(change(p)),
+                                         -abs(change(p)) if metrics.defined(change(p)) else 0))
     for a, b in order:
         cells = [a["case"], b["case"], a["scene"], a["light"], a["view"], a["scheme"], a["preset"] or a["params"],
                  a["resolution"], a["filter"], a["format"]]
@@ -315,7 +334,4 @@ def compare(dir_a: Path, dir_b: Path, out: Path) -> dict:
             cells += [summary.rate(a[c]), summary.rate(b[c]), _signed(_diff(a[c], b[c]))]
         cells += [f"{report.case_time(a):.2f}", f"{report.case_time(b):.2f}"]
         lines.append("| " + " | ".join(map(str, cells)) + " |")
-    with report_io.atomic(out / "compare.md") as tmp:
-        tmp.write_text("\n".join(lines) + "\n")
-    return {"matched": len(pairs), "only_a": only_a, "only_b": only_b,
-            "identical_counts": sum(1 for a, b in pairs if count_share(a, b) == 0)}
+    return lines
