@@ -4,7 +4,8 @@ from pathlib import Path
 import numpy as np
 from dsm import env; env.use_variant("llvm_ad_rgb")
 import drjit as dr, mitsuba as mi
-from dsm import shadowmap, spawn, scenes, pipeline
+from dsm import shadowmap, spawn, pipeline
+from dsm.scenes import load as scenes
 from dsm.config import SceneSpec, LightSpec
 from dsm.scenes import FileParams, PlaneBoxParams
 spec = importlib.util.spec_from_file_location("oldsm", "/tmp/scale_old_shadowmap.py"); old = importlib.util.module_from_spec(spec); sys.modules["oldsm"] = old; spec.loader.exec_module(old)
