@@ -232,7 +232,7 @@ def test_oracle_outputs(run_dict):
     img = res.images[r["case"]]
     assert (img == metrics.ACNE_RESOLUTION).sum() == r["n_acne_resolution"]
     assert (img == metrics.ACNE).sum() == r["n_acne_bias"]
-    assert len(metrics.CLASS_NAMES) == len(metrics.CLASS_COLORS) == 7
+    assert len(metrics.CLASS_NAMES) == len(metrics.CLASS_COLORS) == 8
     for bad, msg in (({"lambda": -1.0}, ">= 0"), ({"lambda": "one"}, "number"), ({"lam": 1.0}, "unknown key"),
                      ({"lambda": []}, "empty")):
         with pytest.raises(ConfigError, match=msg):

@@ -358,8 +358,11 @@ def test_a_run_of_floating_plate_measures_each_kind_and_vsm_unfiltered_is_a_cons
         assert np.isnan(r["moments_ms"]) == (r["map_kind"] == "depth")
     depth, vsm1 = rows[("constant", "nearest")], rows[("vsm", "box:1")]
     assert depth["n_acne"] == vsm1["n_acne"] and depth["n_peterpan"] == vsm1["n_peterpan"]
+    from dsm.truth import metrics
     from dsm.truth.metrics import base_class
-    assert (base_class(res.images[depth["case"]]) == res.images[vsm1["case"]]).all()   # the same class per pixel
+    assert (base_class(res.images[depth["case"]]) == base_class(res.images[vsm1["case"]])).all()   # the same class
+    assert (res.images[depth["case"]] == metrics.LEAK).sum() == depth["n_leak"]      # the leaks in their own colour
+    assert (res.images[vsm1["case"]] == metrics.LEAK).sum() == vsm1["n_leak"]
     assert vsm1["mean_abs_error"] >= depth["mean_abs_error"]    # V continuous: errs by its soft values too
 
 
@@ -626,3 +629,20 @@ def test_pre_filtered_kinds_refuse_area_lights_and_motion(extra):
     with pytest.raises(config.ConfigError) as e:
         config.parse({"scene": [{"builtin": "plane"}], "map": {"kind": "vsm"}, **extra}, "<test>")
     assert e.value.key == "map.kind"
+
+
+def test_the_error_image_paints_the_leaks_in_their_own_colour(run_dict):
+    """With the leak split, each leaking receiver (peter-panned farther than leak_texels from its
+    occluder) is the LEAK class, one pixel per n_leak, written in LEAK's colour; folded back it is
+    peter-panning, so the image counts stay those of metrics.csv."""
+    from PIL import Image
+    from dsm.report import figures
+    from dsm.truth import metrics
+    res = run_dict(base_config(scene=[{"builtin": "stacked_plates"}], camera={"resolution": [48, 48]},
+                               map={"resolution": 64, "kind": ["depth", "vsm"], "blur": [5]}))
+    (vsm5,) = [r for r in res.rows if r["scheme"] == "vsm"]
+    img = res.images[vsm5["case"]]
+    assert vsm5["n_leak"] > 0 and (img == metrics.LEAK).sum() == vsm5["n_leak"]
+    assert (metrics.base_class(img) == metrics.PETERPAN).sum() == vsm5["n_peterpan"]
+    png = np.asarray(Image.open(res.out / "images" / figures.image_folder(vsm5) / f"{vsm5['case']}_error.png"))
+    assert (png[img == metrics.LEAK] == metrics.CLASS_COLORS[metrics.LEAK]).all()

@@ -453,7 +453,7 @@ class Runner:
             m, occ = self._case_metrics(sd, gb, setup, view, rx, seam, look, rx_back, wrong, v_np, tap_np, meta)
             fallback = fallbacks if uses_plane else metrics.UNDEFINED
             row = self._case_row(meta, setup, m, rx, spec, moment, mt, build, smap, lt, v_np, fallback)
-            self._case_images(meta, gb, setup, v_np, wrong, occ)
+            self._case_images(meta, gb, setup, v_np, wrong, occ, rx)
             # a case without receivers says nothing about the scheme: it is reported as empty
             self.add_case(row, {"what": f"case {case}", **{k: meta[k] for k in ("scene", "light", "view", "scheme",
                                                                                 "params", "resolution")},
@@ -513,11 +513,15 @@ class Runner:
                         "moments_ms": mt.ms if moment is not None else metrics.UNDEFINED})
         return row
 
-    def _case_images(self, meta, gb, setup, v_np, wrong, occ):
+    def _case_images(self, meta, gb, setup, v_np, wrong, occ, rx):
         """The case's images (classes, shading, contact march, area-light V), written now."""
         case = meta["case"]
         classes = np.zeros(gb.width * gb.height, np.uint8)
-        classes[setup.pixels] = pipeline.classify(v_np, setup.v_star, wrong)
+        leak = None
+        if self.cfg.map.leak_split and rx is not None:     # [map] kind given: the leaks in their own colour
+            leak = metrics.leak_mask(v_np, setup.v_star, setup.occluder_dist, rx.texel_world.numpy(),
+                                     self.cfg.map.leak_texels)
+        classes[setup.pixels] = pipeline.classify(v_np, setup.v_star, wrong, leak)
         classes = classes.reshape(gb.height, gb.width)
         t_img = time.perf_counter()              # the case's images: report work, timed apart
         shade = report.shade(classes.shape, gb, setup, v_np, pipeline.is_positional(setup.light)) \

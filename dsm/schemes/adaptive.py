@@ -12,6 +12,7 @@ over-biased (the paper's figure 9), which shading hides but the metrics count.
 """
 from dataclasses import dataclass, field
 from .base import no_shift
+from .receiver_plane import plane_margin
 
 NAME = "adaptive"
 SOURCE = "Dou et al. 2014"
@@ -26,8 +27,8 @@ class Params:
 
 
 def margin(rx, tap, p):
-    """z1 + K * diagonal less the receiver plane's depth at the tap's texel centre (view depth units)."""
-    return tap.z1 + p.K * rx.scene_scale - tap.receiver_plane_depth(rx)
+    """Receiver plane's test with the offset K * diagonal (Dou et al.'s epsilon)."""
+    return plane_margin(rx, tap, p.K * rx.scene_scale)
 
 
 shift = no_shift

@@ -25,9 +25,15 @@ class Params:
     bias: Length = field(default=Length(0.01, "texel"), metadata={"doc": "depth offset added to z1"})
 
 
+def plane_margin(rx, tap, offset):
+    """z1 + ``offset`` less the receiver plane's depth at the tap's texel centre (view depth units):
+    the test receiver_plane and adaptive share, with their own offsets."""
+    return tap.z1 + offset - tap.receiver_plane_depth(rx)
+
+
 def margin(rx, tap, p):
-    """z1 + bias less the receiver plane's depth at the tap's texel centre (view depth units)."""
-    return tap.z1 + p.bias - tap.receiver_plane_depth(rx)
+    """z1 + bias less the receiver plane's depth at the tap's texel centre."""
+    return plane_margin(rx, tap, p.bias)
 
 
 shift = no_shift

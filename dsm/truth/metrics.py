@@ -31,11 +31,13 @@ import numpy as np
 # Classes of the error image, in the order of CLASS_COLORS.
 # The last two: errors the per-texel oracle makes too (the map's resolution's, no bias fixes
 # them; nearest filter only), in a darker shade of their class.
-OUTSIDE, LIT, SHADOW, ACNE, PETERPAN, ACNE_RESOLUTION, PETERPAN_RESOLUTION = range(7)
+# The last: with the leak split ([map] kind given), peter-panning farther than leak_texels from
+# its occluder (light leaking), in its own colour.
+OUTSIDE, LIT, SHADOW, ACNE, PETERPAN, ACNE_RESOLUTION, PETERPAN_RESOLUTION, LEAK = range(8)
 CLASS_NAMES = ("not a receiver", "correct lit", "correct shadow", "acne", "peter-panning",
-               "acne (resolution)", "peter-panning (resolution)")
+               "acne (resolution)", "peter-panning (resolution)", "light leak")
 CLASS_COLORS = np.array([[0, 0, 0], [235, 225, 190], [70, 80, 110], [230, 40, 40], [40, 170, 255],
-                         [120, 15, 15], [15, 80, 140]], np.uint8)
+                         [120, 15, 15], [15, 80, 140], [225, 60, 215]], np.uint8)
 
 
 SEAM_TEXELS = 3.0
@@ -98,16 +100,24 @@ def leak_split(v, v_star, occluder_dist_world, texel_world, leak_texels: float) 
     to n_peterpan; their rates are over n_gt_shadowed (NaN where nothing is shadowed)."""
     v_star = np.asarray(v_star, bool)
     peter = ~v_star & (np.asarray(v, np.float64) >= 0.5)
-    dist_texels = np.asarray(occluder_dist_world, np.float64) / np.asarray(texel_world, np.float64)
-    contact = peter & (dist_texels <= leak_texels)
-    n_contact, n_leak, n_shadow = int(contact.sum()), int((peter & ~contact).sum()), int((~v_star).sum())
+    leak = leak_mask(v, v_star, occluder_dist_world, texel_world, leak_texels)
+    n_contact, n_leak, n_shadow = int((peter & ~leak).sum()), int(leak.sum()), int((~v_star).sum())
     return {"n_peterpan_contact": n_contact, "n_leak": n_leak,
             "peterpan_contact_rate": _rate(n_contact, n_shadow), "leak_rate": _rate(n_leak, n_shadow)}
 
 
-def classify(v, v_star, resolution=None) -> np.ndarray:
+def leak_mask(v, v_star, occluder_dist_world, texel_world, leak_texels: float) -> np.ndarray:
+    """The receivers that leak: peter-panned (V* = 0, V >= 0.5) farther than ``leak_texels``
+    texels at the receiver from their exact occluder."""
+    peter = ~np.asarray(v_star, bool) & (np.asarray(v, np.float64) >= 0.5)
+    dist_texels = np.asarray(occluder_dist_world, np.float64) / np.asarray(texel_world, np.float64)
+    return peter & ~(dist_texels <= leak_texels)
+
+
+def classify(v, v_star, resolution=None, leak=None) -> np.ndarray:
     """Per-receiver class (LIT, SHADOW, ACNE, PETERPAN; with ``resolution``, the receivers the
-    per-texel oracle gets wrong too, errors are ACNE_RESOLUTION and PETERPAN_RESOLUTION)."""
+    per-texel oracle gets wrong too, errors are ACNE_RESOLUTION and PETERPAN_RESOLUTION; with
+    ``leak``, a leak_mask, the leaking peter-panned receivers are LEAK)."""
     v_star = np.asarray(v_star, bool)
     lit = np.asarray(v) >= 0.5
     out = np.where(v_star, np.where(lit, LIT, ACNE), np.where(lit, PETERPAN, SHADOW)).astype(np.uint8)
@@ -115,13 +125,16 @@ def classify(v, v_star, resolution=None) -> np.ndarray:
         res = np.asarray(resolution, bool)
         out[(out == ACNE) & res] = ACNE_RESOLUTION
         out[(out == PETERPAN) & res] = PETERPAN_RESOLUTION
+    if leak is not None:
+        out[np.asarray(leak, bool)] = LEAK
     return out
 
 
 def base_class(classes) -> np.ndarray:
-    """Classes with the resolution-limited errors folded into acne and peter-panning."""
+    """Classes with the resolution-limited errors and the leaks folded into acne and peter-panning."""
     c = np.asarray(classes)
-    return np.where(c == ACNE_RESOLUTION, ACNE, np.where(c == PETERPAN_RESOLUTION, PETERPAN, c)).astype(c.dtype)
+    return np.where(c == ACNE_RESOLUTION, ACNE, np.where(np.isin(c, (PETERPAN_RESOLUTION, LEAK)), PETERPAN,
+                                                         c)).astype(c.dtype)
 
 
 SPLIT_COLUMNS = ("n_acne_resolution", "n_acne_bias", "n_peterpan_resolution", "n_peterpan_bias")
