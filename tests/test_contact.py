@@ -84,13 +84,19 @@ def hand_march(p, to_light=None, reach=None):
     return occ, amb
 
 
-@pytest.fixture(scope="module")
-def plate():
-    """The floating plate at GAP (camera W x H), its setup, a 512 map's view and receivers."""
+def sun_on_plate(resolution: int):
+    """The floating plate at GAP (camera W x H) under the sun L: scene, G-buffer, light set-up and
+    an R x R map's view (test_contact_presets uses it too)."""
     sd = pl.load_scene(pl.scene_spec({"builtin": "floating_plate", "gap": GAP}), (W, H))
     gb = pl.gbuffer(sd)
     setup = pl.light_setup(sd, gb, LightSpec("directional", direction=tuple(L)), "sun")
-    view = pl.make_view(setup.light, 512, pl.points_np(setup.p), sd.bbox)
+    return sd, gb, setup, pl.make_view(setup.light, resolution, pl.points_np(setup.p), sd.bbox)
+
+
+@pytest.fixture(scope="module")
+def plate():
+    """The floating plate at GAP (camera W x H), its setup, a 512 map's view and receivers."""
+    sd, gb, setup, view = sun_on_plate(512)
     smap = pl.store(pl.build_map(sd.scene, view, ()), "float32")
     rx = pl.receivers(view, setup, sd.diagonal)
     return sd, gb, setup, smap, rx

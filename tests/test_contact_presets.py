@@ -11,8 +11,8 @@ from dsm.cli import schemes_text
 from dsm.contact import march as contact
 from dsm.experiment import record
 from dsm.maps.lookup import resolve
-from dsm.types import ContactSpec, Length, LightSpec
-from test_contact import CAM_O, GAP, H, L, W, camera_frame, first_hit, pixel_rays
+from dsm.types import ContactSpec, Length
+from test_contact import CAM_O, GAP, H, L, W, camera_frame, first_hit, pixel_rays, sun_on_plate
 
 # a base length that the depth scale makes 0.35 (the floor) to ~0.45 over the plate scene's receivers
 BASE, STEPS, DEPTH_SCALE, DEPTH_MIN, THICK_PER_LENGTH = 0.1, 8, 0.5, 3.5, 0.25
@@ -50,10 +50,7 @@ def scaled_hand_march(p):
 @pytest.fixture(scope="module")
 def plate():
     """The floating plate at GAP under the sun (camera W x H) and its receivers of a 256 map's view."""
-    sd = pl.load_scene(pl.scene_spec({"builtin": "floating_plate", "gap": GAP}), (W, H))
-    gb = pl.gbuffer(sd)
-    setup = pl.light_setup(sd, gb, LightSpec("directional", direction=tuple(L)), "sun")
-    view = pl.make_view(setup.light, 256, pl.points_np(setup.p), sd.bbox)
+    sd, gb, setup, view = sun_on_plate(256)
     return gb, setup, pl.receivers(view, setup, sd.diagonal)
 
 

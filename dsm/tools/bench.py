@@ -444,13 +444,19 @@ def _md_builds(r) -> list:
              "first / ray_intersect | first / preliminary | two layers ms | two / first | first peak MB | two peak MB "
              "| compile ms |",
              "|---" * 14 + "|"]
-    for b in r["builds"]:
-        lines.append(f"| {b['scene']} | {b['resolution']} | {b['ray_intersect_ms']:.2f} | {b['bare_ms']:.2f} | "
-                     f"{b['bare_coherent_ms']:.2f} | {b['mrays_per_s']:.1f} | {b['first_layer_ms']:.2f} | {b['first_over_ray_intersect']:.2f} | "
-                     f"{b['first_over_bare']:.2f} | {b['two_layer_ms']:.2f} | {b['two_over_first']:.2f} | "
-                     f"{b['first_peak_mb']:.1f} | {b['two_peak_mb']:.1f} | "
-                     f"{b['first_compile_ms']:.0f} / {b['two_compile_ms']:.0f} |")
-    return lines
+    cells = [("ray_intersect_ms", ".2f"), ("bare_ms", ".2f"), ("bare_coherent_ms", ".2f"), ("mrays_per_s", ".1f"),
+             ("first_layer_ms", ".2f"), ("first_over_ray_intersect", ".2f"), ("first_over_bare", ".2f"),
+             ("two_layer_ms", ".2f"), ("two_over_first", ".2f"), ("first_peak_mb", ".1f"), ("two_peak_mb", ".1f"),
+             (lambda b: f"{b['first_compile_ms']:.0f} / {b['two_compile_ms']:.0f}", "")]
+    return lines + _build_rows(r["builds"], cells)
+
+
+def _build_rows(builds, cells) -> list:
+    """One markdown row per build: its scene and R, then each cell, a (key, format) or a (function, "")."""
+    def cell(b, key, fmt):
+        return key(b) if callable(key) else format(b[key], fmt)
+    return ["| " + " | ".join([str(b["scene"]), str(b["resolution"])] + [cell(b, k, f) for k, f in cells]) + " |"
+            for b in builds]
 
 
 def _md_two(r) -> list:
@@ -460,23 +466,20 @@ def _md_two(r) -> list:
               "default); two layers / preliminary <= 2.2.", "",
               "| scene | R | preliminary ms | first ms | two ms | two / first | two / preliminary | "
               "two culled ms | culled / first | culled / preliminary |", "|---" * 10 + "|"]
-    for b in r["builds"]:
-        lines.append(f"| {b['scene']} | {b['resolution']} | {b['bare_ms']:.2f} | {b['first_layer_ms']:.2f} | "
-                     f"{b['two_layer_ms']:.2f} | {b['two_over_first']:.2f} | {b['two_over_bare']:.2f} | "
-                     f"{b['two_culled_ms']:.2f} | {b['two_culled_over_first']:.2f} | "
-                     f"{b['two_culled_over_bare']:.2f} |")
+    lines += _build_rows(r["builds"], [(k, ".2f") for k in ("bare_ms", "first_layer_ms", "two_layer_ms", "two_over_first",
+                                                             "two_over_bare", "two_culled_ms", "two_culled_over_first",
+                                                             "two_culled_over_bare")])
     lines += ["", "The same builds as kernel time (each kernel's own execution time from Dr.Jit's kernel "
               "history, summed over the kernels of one build; Python's tracing and launch overhead excluded). "
               "The four are timed interleaved, one call of each in turn per repeat, so a change of the machine's "
               "load falls on all of them. Goals: first / preliminary <= 1.5, two / preliminary <= 2.5.", "",
               "| scene | R | preliminary ms | first ms | first / preliminary | two ms | two / first | "
               "two / preliminary | two culled ms | culled / first |", "|---" * 10 + "|"]
-    for b in r["builds"]:
-        lines.append(f"| {b['scene']} | {b['resolution']} | {b['kernel_bare_ms']:.3f} | "
-                     f"{b['kernel_first_ms']:.3f} | {b['kernel_first_ms'] / b['kernel_bare_ms']:.2f} | "
-                     f"{b['kernel_two_ms']:.3f} | {b['kernel_two_ms'] / b['kernel_first_ms']:.2f} | "
-                     f"{b['kernel_two_ms'] / b['kernel_bare_ms']:.2f} | {b['kernel_two_culled_ms']:.3f} | "
-                     f"{b['kernel_two_culled_ms'] / b['kernel_first_ms']:.2f} |")
+    ratio = lambda num, den: (lambda b: f"{b[num] / b[den]:.2f}", "")
+    lines += _build_rows(r["builds"], [("kernel_bare_ms", ".3f"), ("kernel_first_ms", ".3f"),
+                                       ratio("kernel_first_ms", "kernel_bare_ms"), ("kernel_two_ms", ".3f"),
+                                       ratio("kernel_two_ms", "kernel_first_ms"), ratio("kernel_two_ms", "kernel_bare_ms"),
+                                       ("kernel_two_culled_ms", ".3f"), ratio("kernel_two_culled_ms", "kernel_first_ms")])
     return lines
 
 
