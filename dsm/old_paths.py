@@ -52,7 +52,7 @@ def forwarder(package: str, homes: tuple):
     """A package's ``__getattr__`` that hands on the names of the flat module the package
     replaced (``dsm.config.parse``, ``dsm.report.case_time``, ...), read from ``homes``."""
     def getattr_(name: str):
-        if importlib.util.find_spec(f"{package}.{name}") is not None if not name.startswith("__") else False:
+        if not name.startswith("__") and importlib.util.find_spec(f"{package}.{name}") is not None:
             # a submodule not imported yet (``from . import exact_frame`` asks here first): imported
             # as itself, not searched for in the homes, which may be half-imported at that moment
             return importlib.import_module(f"{package}.{name}")

@@ -86,11 +86,12 @@ def stored(x: np.ndarray, fmt: str) -> np.ndarray:
     return x.astype(np.float32).astype(np.float64)
 
 
-def box_blur(x: np.ndarray, width: int, faces: int, R: int) -> np.ndarray:
-    """A separable ``width`` x ``width`` box mean of texel values ``x`` (faces * R * R, float64),
-    each face on its own, the window clamped at face edges (edge texels repeat). Summed tap by
-    tap, not by a running sum: an exponential moment spans 30 decades, and a running sum's
-    difference would lose the small values to the large ones."""
+def separable_blur(x: np.ndarray, width: int, faces: int, R: int, combine) -> np.ndarray:
+    """A separable ``width`` x ``width`` window over texel values ``x`` (faces * R * R, float64),
+    each face on its own, the window clamped at face edges (edge texels repeat); ``combine``
+    turns the window's ``width`` shifted copies along one axis into that axis's result. Summed
+    tap by tap, not by a running sum: an exponential moment spans 30 decades, and a running
+    sum's difference would lose the small values to the large ones."""
     if width == 1:
         return x
     h = width // 2
@@ -99,8 +100,13 @@ def box_blur(x: np.ndarray, width: int, faces: int, R: int) -> np.ndarray:
         pad = [(0, 0)] * 3
         pad[axis] = (h, h)
         padded = np.pad(img, pad, mode="edge")
-        img = sum(np.take(padded, np.arange(k, k + R), axis=axis) for k in range(width)) / width
+        img = combine([np.take(padded, np.arange(k, k + R), axis=axis) for k in range(width)])
     return img.reshape(-1)
+
+
+def box_blur(x: np.ndarray, width: int, faces: int, R: int) -> np.ndarray:
+    """The separable ``width`` x ``width`` box mean (separable_blur)."""
+    return separable_blur(x, width, faces, R, lambda taps: sum(taps) / width)
 
 
 def gaussian_weights(width: int) -> np.ndarray:
@@ -113,18 +119,9 @@ def gaussian_weights(width: int) -> np.ndarray:
 
 
 def gaussian_blur(x: np.ndarray, width: int, faces: int, R: int) -> np.ndarray:
-    """A separable ``width`` x ``width`` Gaussian (gaussian_weights) of texel values ``x``, each
-    face on its own, clamped at face edges as box_blur is; summed tap by tap as box_blur is."""
-    if width == 1:
-        return x
-    h, weights = width // 2, gaussian_weights(width)
-    img = x.reshape(faces, R, R)
-    for axis in (1, 2):
-        pad = [(0, 0)] * 3
-        pad[axis] = (h, h)
-        padded = np.pad(img, pad, mode="edge")
-        img = sum(weights[k] * np.take(padded, np.arange(k, k + R), axis=axis) for k in range(width))
-    return img.reshape(-1)
+    """The separable ``width`` x ``width`` Gaussian of gaussian_weights (separable_blur)."""
+    weights = gaussian_weights(width)
+    return separable_blur(x, width, faces, R, lambda taps: sum(w * t for w, t in zip(weights, taps)))
 
 
 BLURS = {"box": box_blur, "gaussian": gaussian_blur}
