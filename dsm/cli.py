@@ -64,20 +64,7 @@ class _Parser(argparse.ArgumentParser):
 def _parser():
     ap = _Parser(prog="dsm", description="Measure shadow-map bias schemes against exact visibility.")
     sub = ap.add_subparsers(dest="cmd", required=True)
-    r = sub.add_parser("run", help="run an experiment config (default: the built-in default experiment)")
-    r.add_argument("config", nargs="?", help="experiment TOML file")
-    r.add_argument("--out", help="results folder (default: runs/<name>-<time>)")
-    r.add_argument("--variant", choices=cfgmod.VARIANTS, help="Mitsuba variant (default llvm_ad_rgb)")
-    r.add_argument("--threads", type=_thread_count, help=f"Dr.Jit worker threads (1 to {MAX_THREADS})")
-    again = r.add_mutually_exclusive_group()
-    again.add_argument("--force", action="store_true",
-                       help="replace a previous dsm run in --out (a folder with its run.json); never other files")
-    again.add_argument("--resume", action="store_true",
-                       help="go on with the dsm run in --out: skip its finished cases that still match the "
-                            "config, run the rest (cases the config no longer names are listed, not deleted)")
-    r.add_argument("--cluster", metavar="ADDRESS",
-                   help="run the map groups as Ray tasks on the cluster at ADDRESS (auto, ray://host:port) or on "
-                        "a Ray instance started here (local); needs pip install 'dsm[cluster]'")
+    _run_parser(sub)
     rp = sub.add_parser("report", help="rebuild a run's table.md, plots and report.html from its files (no "
                         "measuring); with two folders, compare the runs")
     rp.add_argument("dirs", nargs="+", metavar="DIR", help="a results folder, or two to compare (A then B)")
@@ -85,35 +72,65 @@ def _parser():
     p = sub.add_parser("plan", help="print what a config will compute: cases, maps, rays by kind, memory")
     p.add_argument("config", nargs="?", help="experiment TOML file (default: the built-in default experiment)")
     sub.add_parser("schemes", help="list bias schemes, their parameters, defaults and sources")
+    _bench_parser(sub)
+    benchmark_command.add_parser(sub)
+    _tune_parser(sub)
+    return ap
+
+
+def _add_machine(p, variant_help="Mitsuba variant (default llvm_ad_rgb)", threads=True):
+    """--variant and (for commands that measure) --threads, alike in every command."""
+    p.add_argument("--variant", choices=cfgmod.VARIANTS, help=variant_help)
+    if threads:
+        p.add_argument("--threads", type=_thread_count, help=f"Dr.Jit worker threads (1 to {MAX_THREADS})")
+
+
+def _add_again(p, force_help: str, resume_help: str):
+    """--force and --resume, which exclude each other, as run and tune take them."""
+    again = p.add_mutually_exclusive_group()
+    again.add_argument("--force", action="store_true", help=force_help)
+    again.add_argument("--resume", action="store_true", help=resume_help)
+
+
+def _run_parser(sub):
+    r = sub.add_parser("run", help="run an experiment config (default: the built-in default experiment)")
+    r.add_argument("config", nargs="?", help="experiment TOML file")
+    r.add_argument("--out", help="results folder (default: runs/<name>-<time>)")
+    _add_machine(r)
+    _add_again(r, "replace a previous dsm run in --out (a folder with its run.json); never other files",
+               "go on with the dsm run in --out: skip its finished cases that still match the config, run the "
+               "rest (cases the config no longer names are listed, not deleted)")
+    r.add_argument("--cluster", metavar="ADDRESS",
+                   help="run the map groups as Ray tasks on the cluster at ADDRESS (auto, ray://host:port) or on "
+                        "a Ray instance started here (local); needs pip install 'dsm[cluster]'")
+
+
+def _bench_parser(sub):
     b = sub.add_parser("bench", help="benchmark: map build against a bare ray cast, lookup cost per scheme")
     b.add_argument("--out", default="bench", help="folder for bench.md and bench.json (default: bench/)")
     b.add_argument("--resolutions", default="256,512,1024,2048,4096", help="comma-separated map resolutions")
     b.add_argument("--repeats", type=_positive_int, default=5)
     b.add_argument("--meshes", help="folder of the real test meshes (default: the kit's data/meshes)")
-    b.add_argument("--variant", choices=cfgmod.VARIANTS)
-    b.add_argument("--scaling", default="1024,2048,4096,8192",
-                   help="map resolutions of the cost-against-resolution table, tiled within the memory budget "
-                        "('' to skip; default 1024,2048,4096,8192)")
-    b.add_argument("--geometry", default="",
-                   help="triangle counts of the cost-against-geometry table (the DEM terrain resampled; e.g. "
-                        "10000,100000,1000000; default '': skipped, it loads each mesh twice)")
-    b.add_argument("--no-frame", action="store_true",
-                   help="skip the one-frame cost (map and every single-layer lookup, kernel and frozen time)")
-    b.add_argument("--no-sweep", action="store_true",
-                   help="skip the sweep throughput (local run against a local two-worker Ray cluster)")
-    benchmark_command.add_parser(sub)
+    _add_machine(b, variant_help=None, threads=False)
+    tables = {"--scaling": ("1024,2048,4096,8192", "map resolutions of the cost-against-resolution table, tiled "
+                            "within the memory budget ('' to skip; default 1024,2048,4096,8192)"),
+              "--geometry": ("", "triangle counts of the cost-against-geometry table (the DEM terrain resampled; "
+                             "e.g. 10000,100000,1000000; default '': skipped, it loads each mesh twice)")}
+    for flag, (default, text) in tables.items():
+        b.add_argument(flag, default=default, help=text)
+    skips = {"--no-frame": "skip the one-frame cost (map and every single-layer lookup, kernel and frozen time)",
+             "--no-sweep": "skip the sweep throughput (local run against a local two-worker Ray cluster)"}
+    for flag, text in skips.items():
+        b.add_argument(flag, action="store_true", help=text)
+
+
+def _tune_parser(sub):
     t = sub.add_parser("tune", help="tune scheme parameters (and a learned bias map) by gradient: a config's [tune]")
     t.add_argument("config", help="experiment TOML file with a [tune] table")
     t.add_argument("--out", help="results folder (default: runs/<name>-tune-<time>)")
-    tagain = t.add_mutually_exclusive_group()
-    tagain.add_argument("--force", action="store_true", help="replace a previous dsm tune in --out (a folder with "
-                        "its tune.json): its files only, never others")
-    tagain.add_argument("--resume", action="store_true",
-                        help="go on with the dsm tune in --out: keep its finished schemes that still match the "
-                             "config, tune the rest")
-    t.add_argument("--variant", choices=cfgmod.VARIANTS, help="Mitsuba variant (default llvm_ad_rgb)")
-    t.add_argument("--threads", type=_thread_count, help=f"Dr.Jit worker threads (1 to {MAX_THREADS})")
-    return ap
+    _add_again(t, "replace a previous dsm tune in --out (a folder with its tune.json): its files only, never others",
+               "go on with the dsm tune in --out: keep its finished schemes that still match the config, tune the rest")
+    _add_machine(t)
 
 
 def _err(msg: str):

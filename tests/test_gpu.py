@@ -42,40 +42,20 @@ def cuda_device():
         pytest.skip(why)
 
 CONFIG = """
-[experiment]
-name = "gpu_vs_cpu"
-[camera]
-resolution = [256, 256]
+experiment = {{ name = "gpu_vs_cpu" }}
+camera = {{ resolution = [256, 256] }}
+map = {{ resolution = [512, 1024] }}
+timing = {{ repeats = 1 }}
+light = [{{ type = "directional", direction = [-0.4, -0.3, -1.0] }},
+         {{ type = "directional", direction = [0.25, -1.0, 0.15] }}]
+scheme = [  # one entry per scheme instance, as [[scheme]] blocks
+    {{ name = "none" }}, {{ name = "constant", bias = ["1 texel", "3 texel"] }},
+    {{ name = "slope_scaled", bias = "1 texel" }}, {{ name = "normal_offset" }},
+    {{ name = "receiver_plane", bias = "0.5 texel" }}, {{ name = "midpoint" }}, {{ name = "dual" }},
+]
 [[scene]]
 builtin = "plane_box"
 {bunny}
-[[light]]
-type = "directional"
-direction = [-0.4, -0.3, -1.0]
-[[light]]
-type = "directional"
-direction = [0.25, -1.0, 0.15]
-[map]
-resolution = [512, 1024]
-[timing]
-repeats = 1
-[[scheme]]
-name = "none"
-[[scheme]]
-name = "constant"
-bias = ["1 texel", "3 texel"]
-[[scheme]]
-name = "slope_scaled"
-bias = "1 texel"
-[[scheme]]
-name = "normal_offset"
-[[scheme]]
-name = "receiver_plane"
-bias = "0.5 texel"
-[[scheme]]
-name = "midpoint"
-[[scheme]]
-name = "dual"
 """
 BUNNY = """[[scene]]
 file = "{path}"
