@@ -601,9 +601,10 @@ WORKER = "import pickle, sys\nfor fn, args in pickle.loads(open(sys.argv[1], 'rb
 
 
 def run_jobs(jobs: list, pool_min: int = 12) -> int:
-    """Run (function, arguments) jobs: in one worker process per core when there are at least
-    ``pool_min`` of them (a worker costs an interpreter start), else here. Returns the number of
-    workers used (0: none). A worker that fails has its share drawn here, saying so.
+    """Run (function, arguments) jobs: when there are at least ``pool_min`` of them, shared
+    between this process and one worker process per further core (a worker costs an
+    interpreter start, about 1.5 CPU seconds), else all here. Returns the number of processes
+    that drew (0: no pool). A worker that fails has its share drawn here, saying so.
 
     The workers are plain ``python -c`` processes given their jobs in a pickle file, not a
     multiprocessing pool: fork would copy a parent holding Dr.Jit's threads, and spawn (and
@@ -618,12 +619,14 @@ def run_jobs(jobs: list, pool_min: int = 12) -> int:
                PYTHONPATH=os.pathsep.join([p for p in sys.path if p] + [os.environ.get("PYTHONPATH", "")]))
     with tempfile.TemporaryDirectory(prefix="dsm-draw-") as tmp:
         procs = []
-        for i in range(n):
-            part = jobs[i::n]          # interleaved: every worker gets a share of the costly figures
+        for i in range(1, n):
+            part = jobs[i::n]          # interleaved: every process gets a share of the costly figures
             f = Path(tmp) / f"jobs{i}.pickle"
             f.write_bytes(pickle.dumps(part, protocol=pickle.HIGHEST_PROTOCOL))
             procs.append((part, subprocess.Popen([sys.executable, "-c", WORKER, str(f)], env=env,
                                                  stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)))
+        for fn, args in jobs[0::n]:    # this process's share, while the workers draw theirs
+            fn(*args)
         failed = []
         for part, p in procs:
             _, err = p.communicate()
