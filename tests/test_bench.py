@@ -72,3 +72,21 @@ def test_the_resampled_terrain_interpolates_bilinearly_and_writes_its_triangles(
     assert np.isclose(v[123 * cols + 456, 2], z, rtol=0, atol=1e-9)
     assert bench_geometry.write_ply(tmp_path / "t.ply", v[:9], np.array([[0, 1, 2], [3, 4, 5]])) == 2
     assert ply_triangles(tmp_path / "t.ply") == 2
+
+
+def test_kernel_launches_are_counted_apart_inside_and_outside_the_timed_repeats():
+    """One evaluated output is one kernel a call: a measure with 3 repeats is 1 launch outside
+    (the cold call) and 3 inside; kernels launched between measures count outside."""
+    import drjit as dr
+    import mitsuba as mi
+    from dsm.tools import env, timing
+    env.use_variant("llvm_ad_rgb")
+    timing.enable_history()
+    timing.reset_launches()
+    x = dr.arange(mi.Float, 1000)
+    scale = dr.opaque(mi.Float, 2.0)
+    timing.measure(lambda: (x * scale + 1.0,), repeats=3)
+    assert timing.LAUNCHES == {"outside_repeats": 1, "timed_repeats": 3}
+    dr.eval(x * scale - 1.0)
+    dr.eval(x * scale - 2.0)
+    assert timing.drain_launches() == 2 and timing.LAUNCHES["outside_repeats"] == 3

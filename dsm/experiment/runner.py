@@ -110,6 +110,7 @@ class Runner:
         self.record = record.RunRecord()     # everything measured: rows, statuses, maps, rays, oracles ...
         self.images = {}
         self.case_no = 0
+        self.cases_kept = 0           # rows written again from the run being resumed (not measured here)
         self.extents = {}             # per scene: the spawn bound's per-shape extents
         self.versions = env.versions()
         self.state = "running"
@@ -130,6 +131,7 @@ class Runner:
         ``running``, then ``complete``, or ``interrupted`` after Ctrl-C (re-raised once the
         folder says what it holds); a killed run leaves ``running`` and every finished case."""
         timing.enable_history()
+        timing.reset_launches()
         t0, c0 = time.perf_counter(), _cpu()
         self.out.mkdir(parents=True, exist_ok=True)
         if self.resume_previous:
@@ -152,6 +154,7 @@ class Runner:
             self.timing["measure_s"] = time.perf_counter() - t0 - self.timing.get("images_s", 0.0)
             self.timing["measure_cpu_s"] = _cpu() - c0
             self.timing["measure_peak_rss_bytes"] = peak_rss()     # against the plan's peak_bytes_est
+            self.timing["kernel_launches"] = self._launches()
             self._write_run_json()
             publish.write_data(self.out, self.record)
             # the report, after every timed measurement, composed from the run's files alone (as
@@ -166,6 +169,16 @@ class Runner:
             self.timing["report_cpu_s"] = _cpu() - c1
             self._write_run_json()
         return Results(self.out, self.record.rows, self._run_json(), self.images, self.record.oracle_rows, self.record.curves)
+
+    def _launches(self) -> dict:
+        """JIT kernel launches while measuring (Dr.Jit's kernel history, this process only: a
+        cluster run's tasks launch theirs elsewhere, so it is null there), outside and inside
+        the timed repeats, and outside per case run here."""
+        timing.drain_launches()
+        n = len(self.record.rows) - self.cases_kept
+        out = dict(timing.LAUNCHES)
+        out["outside_per_case"] = out["outside_repeats"] / n if n else None
+        return out
 
     def run_maps(self, maps, kept=None):
         """Run only ``maps`` (part of the plan: a Ray task's map group) into this runner's folder,
@@ -434,6 +447,7 @@ class Runner:
             row, st, cascade_rows = self.kept[self.keys[case]]
             self.record.cascade_rows += cascade_rows
             self.add_case(resume.parse_row(row), st)
+            self.cases_kept += 1
             self._write_run_json()
             return
         meta = {"case": case, "scene": sd.label, "light": setup.label, "view": view.kind, "scheme": spec.name,

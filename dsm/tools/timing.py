@@ -38,18 +38,42 @@ def _run(fn):
     return out, (time.perf_counter() - t0) * 1e3
 
 
+# JIT kernels this process launched while the history was on: inside a measured function's timed
+# (warm) repeats, and everywhere else (cold runs, metrics, images: what batching would save)
+LAUNCHES = {"outside_repeats": 0, "timed_repeats": 0}
+
+
+def _jit_kernels() -> list:
+    """The JIT kernels launched since the history was last read (reading it clears it)."""
+    return [k for k in dr.kernel_history() if k.get("type") == dr.KernelType.JIT]
+
+
+def drain_launches() -> int:
+    """Count the kernels launched since the history was last read as outside timed repeats."""
+    n = len(_jit_kernels())
+    LAUNCHES["outside_repeats"] += n
+    return n
+
+
+def reset_launches():
+    """Start counting launches afresh (what came before is read and dropped)."""
+    _jit_kernels()
+    LAUNCHES.update(outside_repeats=0, timed_repeats=0)
+
+
 def measure(fn, repeats: int = 3):
     """Call ``fn`` (returning a tuple of arrays) cold once and warm ``repeats`` times."""
-    dr.kernel_history_clear()
+    drain_launches()
     out, cold = _run(fn)
-    hist = [k for k in dr.kernel_history() if k.get("type") == dr.KernelType.JIT]
+    hist = _jit_kernels()
+    LAUNCHES["outside_repeats"] += len(hist)
     compile_ms = sum(k.get("codegen_time", 0.0) + k.get("backend_time", 0.0) for k in hist)
     misses = sum(1 for k in hist if not k.get("cache_hit", False))
     warm = []
     for _ in range(repeats):
         out, ms = _run(fn)
         warm.append(ms)
-    dr.kernel_history_clear()
+    LAUNCHES["timed_repeats"] += len(_jit_kernels())
     return out, Timing(statistics.median(warm) if warm else cold, compile_ms, cold, len(hist), misses)
 
 
