@@ -99,6 +99,8 @@ def _parser():
                         "10000,100000,1000000; default '': skipped, it loads each mesh twice)")
     b.add_argument("--no-frame", action="store_true",
                    help="skip the one-frame cost (map and every single-layer lookup, kernel and frozen time)")
+    b.add_argument("--no-prefilter", action="store_true",
+                   help="skip the pre-filtered maps' cost (moments, blur and lookup beside PCF at the same width)")
     b.add_argument("--no-sweep", action="store_true",
                    help="skip the sweep throughput (local run against a local two-worker Ray cluster)")
     benchmark_command.add_parser(sub)
@@ -219,7 +221,7 @@ def _bench_held(args, res, scale) -> int:
         return 2
     try:
         run_bench(Path(args.out), res, args.repeats, args.meshes, args.variant, scale, not args.no_sweep,
-                  not args.no_frame, args.geometry_triangles)
+                  not args.no_frame, args.geometry_triangles, not args.no_prefilter)
     except SetupError as e:
         _err(f"setup error: {e}")
         return 3
