@@ -1,5 +1,5 @@
-"""MSM's optimized 16-bit quantization ([map] format = "unorm16", Peters & Klein 2015, section 4.3):
-the transform and its inverse against the published constants in numpy float64, the restored
+"""MSM's optimized 16-bit quantization ([map] format = "unorm16"; Peters & Klein 2015, "Optimized
+Moment Quantization"): the transform and its inverse against the published constants in numpy float64, the restored
 moments' error against the analytic bound of the rounding, the lookup beside float32 on the
 builtin plates (and raw float16 power moments beside it), and what the config refuses."""
 from types import SimpleNamespace

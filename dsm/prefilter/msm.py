@@ -12,7 +12,7 @@ sharpest lower bound on the shadow the four moments allow (Hamburger's moment pr
 V = 1 - that bound, clamped to [0, 1]. Where float32 leaves B singular (the bound is NaN: a
 window of one depth under a small bias), Chebyshev's bound of the biased E[t], E[t^2] stands in.
 
-``format = "unorm16"`` is the paper's optimized moment quantization (section 4.3, "Optimized
+``format = "unorm16"`` is the paper's optimized moment quantization (its section "Optimized
 Moment Quantization"): the power moments go through a fixed affine map, q = b Theta + (0.0359558848,
 0, 0, 0) (b a row vector), whose image of the moments of depths in [0, 1] lies in [0, 1] and
 spreads the four nearly collinear moments over the unit cube, then each q is stored as k / 65535
