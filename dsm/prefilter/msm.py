@@ -72,7 +72,8 @@ def moments(t, params) -> list:
 
 def encode(t, params) -> list:
     """The optimized moments q = b(t) Theta + offset per texel (numpy float64; in [0, 1] for t in
-    [0, 1]), each by Horner's rule in t so that only t and one q are alive at a time."""
+    [0, 1]), each by Horner's rule in t: the four power moments are never held beside them (the
+    build's peak stays that of the float formats' moments, plus the rounding's temporaries)."""
     out = []
     for j in range(4):
         c = QUANTIZATION_MATRIX[:, j]
