@@ -119,6 +119,7 @@ def _bench_parser(sub):
     for flag, (default, text) in tables.items():
         b.add_argument(flag, default=default, help=text)
     skips = {"--no-frame": "skip the one-frame cost (map and every single-layer lookup, kernel and frozen time)",
+             "--no-prefilter": "skip the pre-filtered maps' cost (moments, blur and lookup beside PCF at the same width)",
              "--no-sweep": "skip the sweep throughput (local run against a local two-worker Ray cluster)"}
     for flag, text in skips.items():
         b.add_argument(flag, action="store_true", help=text)
@@ -236,7 +237,7 @@ def _bench_held(args, res, scale) -> int:
         return 2
     try:
         run_bench(Path(args.out), res, args.repeats, args.meshes, args.variant, scale, not args.no_sweep,
-                  not args.no_frame, args.geometry_triangles)
+                  not args.no_frame, args.geometry_triangles, not args.no_prefilter)
     except SetupError as e:
         _err(f"setup error: {e}")
         return 3

@@ -396,6 +396,7 @@ def _parse_cascades(m: dict, source: str) -> tuple:
 def _parse_kinds(m: dict, formats, lights, cascade, source: str) -> tuple:
     """``[map] kind`` (MAP_KINDS, default depth), checked against what a pre-filtered map cannot do."""
     from .. import lights as light_types
+    from .. import prefilter
     from ..prefilter import MOMENT_FORMATS
     kinds = tuple(dict.fromkeys(choice(k, source, "map.kind", MAP_KINDS) for k in as_list(m.get("kind", "depth"))))
     if not kinds:
@@ -408,6 +409,11 @@ def _parse_kinds(m: dict, formats, lights, cascade, source: str) -> tuple:
     bad = [f for f in formats if f not in MOMENT_FORMATS]
     if bad:
         raise ConfigError(source, "map.format", f"{bad[0]!r}: pre-filtered maps store their moments in", MOMENT_FORMATS)
+    for name in (k for k in kinds if k != "depth"):
+        valid = prefilter.formats_of(prefilter.get(name))
+        bad = [f for f in formats if f not in valid]
+        if bad:
+            raise ConfigError(source, "map.format", f"{bad[0]!r}: {name} stores its moments in", valid)
     if cascade:
         raise ConfigError(source, "map.cascades", "pre-filtered maps are built on one map per view; remove "
                           "map.cascades or keep map.kind = depth", ("depth",))

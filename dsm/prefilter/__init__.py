@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 
 from . import esm, evsm, msm, presets, vsm
-from .base import LOG_MAX, MOMENT_FORMATS, MapKind, build as build_map, fetch, normalized_depth
+from .base import LOG_MAX, MOMENT_FORMATS, MapKind, build as build_map, fetch, formats_of, normalized_depth, restored
 from ..maps.lookup import resolve
 from ..types import ConfigError
 
@@ -44,7 +44,7 @@ def check(name: str, params, formats, source: str, where: str):
             raise ConfigError(source, f"{where}.{f.name}", f"unknown value {val!r}", f.metadata["choices"])
     log_max = getattr(get(name), "log_max", None)
     for fmt in formats:
-        if log_max is not None and log_max(params) > LOG_MAX[fmt]:
+        if log_max is not None and fmt in LOG_MAX and log_max(params) > LOG_MAX[fmt]:
             raise ConfigError(source, where, f"{params}: its largest moment exp({log_max(params):g}) overflows "
                               f"{fmt} (at most exp({LOG_MAX[fmt]:.2f})); lower the exponent")
 
@@ -63,4 +63,5 @@ def visibility(spec, rx, mmap):
     """V in [0, 1] per receiver of one instance on its built MomentMap (parameters opaque)."""
     module = get(spec.name)
     prm = resolve(spec.params, rx)
-    return module.visibility(fetch(mmap, rx), normalized_depth(rx.depth, mmap.view), prm)
+    b = restored(module, fetch(mmap, rx), mmap.fmt)
+    return module.visibility(b, normalized_depth(rx.depth, mmap.view), prm)

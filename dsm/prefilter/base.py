@@ -15,8 +15,12 @@ Depth is normalized to the view's range, ``t = (z - near) / (far - near)`` in [0
 linear depth engines write into a moment map; a texel whose ray hit nothing holds ``t = 1``.
 The moments come from the ray-cast ``z1`` of each texel (one sample per texel: no
 supersampling). ``format`` is their storage precision: ``float32`` or ``float16`` (IEEE half,
-rounded to nearest; a value beyond 65504 becomes +inf as a half render target stores it). The
-moments are stored, blurred in float64, and the blurred moments stored again in the format.
+rounded to nearest; a value beyond 65504 becomes +inf as a half render target stores it), or
+``unorm16`` for a kind with an ``encode(t, params)`` / ``decode(q)`` pair (MSM's optimized
+quantization): the encoded moments, clamped to [0, 1], rounded to k / 65535 (half to even), and
+decoded at lookup after the fetch, as a shader decodes what it filtered (:func:`restored`). The
+moments (or encoded moments) are stored, blurred in float64, and the blurred values stored
+again in the format, as a blur pass writes a render target of that format.
 
 The blur is a separable box or Gaussian (``[map] blur_kernel``; sigma (W + 1) / 6, Filament's)
 of odd width ``W`` texels (``W = 1``: the unfiltered fetch). It stays on its face: at a face edge the window is clamped to the face (edge texels repeat), so
@@ -34,7 +38,10 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-MOMENT_FORMATS = ("float32", "float16")
+FLOAT_FORMATS = ("float32", "float16")          # every kind: its moments as floats
+ENCODED_FORMATS = ("unorm16",)                   # a kind with encode / decode: its encoded moments
+MOMENT_FORMATS = FLOAT_FORMATS + ENCODED_FORMATS
+UNORM16_STEPS = 2 ** 16 - 1
 # the largest e-exponent each format holds: ln(FLT_MAX), ln(65504)
 LOG_MAX = {"float32": float(np.log(np.finfo(np.float32).max)), "float16": float(np.log(np.finfo(np.float16).max))}
 
@@ -78,8 +85,15 @@ def normalized_depth(z, view):
     return (z - near) / dr.opaque(mi.Float, float(view.far - view.near))
 
 
+def formats_of(kind) -> tuple:
+    """The moment formats ``kind`` may be stored in: the float ones, and unorm16 if it encodes."""
+    return MOMENT_FORMATS if hasattr(kind, "encode") else FLOAT_FORMATS
+
+
 def stored(x: np.ndarray, fmt: str) -> np.ndarray:
     """``x`` as the format stores it, read back in float64."""
+    if fmt == "unorm16":
+        return np.round(np.clip(x, 0.0, 1.0) * UNORM16_STEPS) / UNORM16_STEPS
     if fmt == "float16":
         with np.errstate(over="ignore"):
             return x.astype(np.float16).astype(np.float64)
@@ -127,13 +141,24 @@ def gaussian_blur(x: np.ndarray, width: int, faces: int, R: int) -> np.ndarray:
 BLURS = {"box": box_blur, "gaussian": gaussian_blur}
 
 
+def texel_values(kind, t: np.ndarray, params, fmt: str) -> list:
+    """What a texel of normalized depth ``t`` holds before storage: the moments, or in an
+    encoded format (ENCODED_FORMATS) the kind's encoded moments."""
+    return kind.encode(t, params) if fmt in ENCODED_FORMATS else kind.moments(t, params)
+
+
+def restored(kind, b: list, fmt: str) -> list:
+    """The moments of fetched values ``b``: decoded in an encoded format, else ``b`` itself."""
+    return kind.decode(b) if fmt in ENCODED_FORMATS else b
+
+
 def build(kind, params, z1_world: np.ndarray, view, fmt: str, blur: int, kernel: str = "box") -> MomentMap:
-    """The moment map of ``kind`` from a depth map's z1 (world, texel order): moments, stored,
-    blurred (``kernel``: box or gaussian, ``blur`` texels wide), stored again."""
+    """The moment map of ``kind`` from a depth map's z1 (world, texel order): moments (encoded in
+    an encoded format), stored, blurred (``kernel``: box or gaussian, ``blur`` texels wide), stored again."""
     t = normalized_depth(z1_world, view)
     b = [stored(BLURS[kernel](stored(m, fmt), blur, view.faces, view.resolution), fmt)
-         for m in kind.moments(t, params)]
-    far_b = [float(stored(m, fmt)[0]) for m in kind.moments(np.ones(1), params)]
+         for m in texel_values(kind, t, params, fmt)]
+    far_b = [float(stored(m, fmt)[0]) for m in texel_values(kind, np.ones(1), params, fmt)]
     return MomentMap(view, [mi.Float(m.astype(np.float32)) for m in b], far_b, fmt, blur)
 
 

@@ -12,19 +12,38 @@ sharpest lower bound on the shadow the four moments allow (Hamburger's moment pr
 V = 1 - that bound, clamped to [0, 1]. Where float32 leaves B singular (the bound is NaN: a
 window of one depth under a small bias), Chebyshev's bound of the biased E[t], E[t^2] stands in.
 
-The 16-bit layout of the paper (its optimized quantization, a 4 x 4 transform before unorm16
-storage) is not implemented: ``float16`` stores the raw power moments as halves.
+``format = "unorm16"`` is the paper's optimized moment quantization (its section "Optimized
+Moment Quantization"): the power moments go through a fixed affine map, q = b Theta + (0.0359558848,
+0, 0, 0) (b a row vector), whose image of the moments of depths in [0, 1] lies in [0, 1] and
+spreads the four nearly collinear moments over the unit cube, then each q is stored as k / 65535
+(:func:`dsm.prefilter.base.stored`); the lookup maps the filtered q back, b = (q - offset)
+Theta^-1, before the bound (:func:`decode`). The constants are those of the paper's code as MJP's
+Shadows sample ships it (github.com/TheRealMJP/Shadows, ``Shadows/MSM.hlsl``, commit 37b61461,
+``GetOptimizedMoments``; Unity's HDRP ``ShadowMoments.hlsl`` ``ShadowMoments_Encode16MSM`` holds
+the same); Theta^-1 is the float64 inverse of that Theta, which agrees with the published
+``ConvertOptimizedMoments`` to its 10 printed digits (a test holds both). ``float16`` stores the
+raw power moments as halves.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 import drjit as dr
+import numpy as np
 
 from .base import chebyshev
 
 NAME = "msm"
 SOURCE = "Peters & Klein 2015 (I3D), Moment Shadow Mapping, algorithm 2 (Hamburger 4MSM)"
+# Theta of the optimized 16-bit quantization, row i the coefficients of b_(i+1) in q_1 .. q_4
+# (HLSL's mul(moments, float4x4(...)) in Shadows/MSM.hlsl, GetOptimizedMoments), and the offset of q
+QUANTIZATION_MATRIX = np.array([[-2.07224649, 13.7948857237, 0.105877704, 9.7924062118],
+                                [32.23703778, -59.4683975703, -1.9077466311, -33.7652110555],
+                                [-68.571074599, 82.0359750338, 9.3496555107, 47.9456096605],
+                                [39.3703274134, -35.364903257, -6.6543490743, -23.9728048165]])
+QUANTIZATION_OFFSET = np.array([0.035955884801, 0.0, 0.0, 0.0])
+# the exact float64 inverse (the published ConvertOptimizedMoments is it to ~1e-10)
+DEQUANTIZATION_MATRIX = np.linalg.inv(QUANTIZATION_MATRIX)
 
 
 @dataclass(frozen=True)
@@ -49,6 +68,24 @@ def moments(t, params) -> list:
     """[t, t^2, t^3, t^4] per texel."""
     t2 = t * t
     return [t, t2, t2 * t, t2 * t2]
+
+
+def encode(t, params) -> list:
+    """The optimized moments q = b(t) Theta + offset per texel (numpy float64; in [0, 1] for t in
+    [0, 1]), each by Horner's rule in t: the four power moments are never held beside them (the
+    build's peak stays that of the float formats' moments, plus the rounding's temporaries)."""
+    out = []
+    for j in range(4):
+        c = QUANTIZATION_MATRIX[:, j]
+        out.append(QUANTIZATION_OFFSET[j] + t * (c[0] + t * (c[1] + t * (c[2] + t * c[3]))))
+    return out
+
+
+def decode(q) -> list:
+    """The power moments b = (q - offset) Theta^-1 of optimized moments ``q`` (numpy or Dr.Jit,
+    one array per component; the lookup runs it in float32, as a shader would)."""
+    d = [qi - float(o) for qi, o in zip(q, QUANTIZATION_OFFSET)]
+    return [sum(float(DEQUANTIZATION_MATRIX[i, j]) * d[i] for i in range(4)) for j in range(4)]
 
 
 def visibility(b, t, prm):

@@ -14,6 +14,9 @@ Definitions (stated in the report, checked by tests/test_report.py against a num
   error rate is the lowest of all instances (ties count for each tied instance).
 - *Best per scene, light and resolution*: the lowest pooled error rate over that group's cases
   (every view), ties broken by the shorter mean time (build + lookup).
+- *Leak pooled* (only in a run with ``[map] kind``, whose rows carry the leak split): sum n_leak /
+  sum n_gt_shadowed, a column of the first table beside peter-panning; a run without it keeps
+  its table byte for byte.
 """
 from __future__ import annotations
 
@@ -34,6 +37,9 @@ DEFINITIONS = (
     "shadowed receiver, or none at all); times are means of the per-case warm medians (ms); *best in*: "
     "the situations (scene, light, view, resolution) where its error rate is the lowest (ties count for "
     "each). Sorted by pooled error rate.")
+
+LEAK_COLUMN_DEFINITION = (" *Leak pooled* ([map] kind runs): sum n_leak / sum n_gt_shadowed, the peter-panning "
+                          "beyond leak_texels texels from its occluder (*Light leaking* below).")
 
 BEST_DEFINITION = ("Per scene, light and resolution: the instance with the lowest pooled error rate over "
                    "that group's cases (every view), ties broken by the shorter mean time (build + lookup); "
@@ -91,9 +97,16 @@ def best_counts(rows, multi=None) -> dict:
     return counts
 
 
+def has_leak_split(rows) -> bool:
+    """Whether the rows carry the leak split (a run with ``[map] kind``: its rows name a map kind)."""
+    return any(r.get("map_kind") for r in rows)
+
+
 def per_instance(rows) -> list:
-    """One dict per scheme instance (see the module's definitions), lowest pooled error first."""
+    """One dict per scheme instance (see the module's definitions), lowest pooled error first;
+    ``leak_pooled`` is NaN in a run without the leak split."""
     multi = _multi(rows)
+    split = has_leak_split(rows)
     groups = {}
     for r in rows:
         groups.setdefault(instance_key(r, multi), []).append(r)
@@ -103,6 +116,8 @@ def per_instance(rows) -> list:
         s = {"key": key, "scheme": key[0], "params": key[1], **dict(zip(multi, key[2:])), "cases": len(rs),
              "acne_pooled": _pooled(sum(r["n_acne"] for r in rs), sum(r["n_gt_lit"] for r in rs)),
              "peterpan_pooled": _pooled(sum(r["n_peterpan"] for r in rs), sum(r["n_gt_shadowed"] for r in rs)),
+             "leak_pooled": _pooled(sum(r["n_leak"] for r in rs), sum(r["n_gt_shadowed"] for r in rs))
+             if split else math.nan,
              "error_pooled": _pooled(sum(r["n_acne"] + r["n_peterpan"] for r in rs),
                                      sum(r["n_receivers"] for r in rs)),
              "build_ms": float(np.mean([r["build_ms"] for r in rs])),
@@ -166,15 +181,18 @@ def summary_md(rows) -> list:
     multi = _multi(rows)
     extra = ", with " + " and ".join(multi) if multi else ""
     head = summary_columns(rows)
-    out = ["## Summary", "", f"**{answer(rows)}**", "", DEFINITIONS.format(extra=extra), "",
+    split = has_leak_split(rows)          # the leak column only where the run has it: others unchanged
+    out = ["## Summary", "", f"**{answer(rows)}**", "",
+           DEFINITIONS.format(extra=extra) + (LEAK_COLUMN_DEFINITION if split else ""), "",
            "| " + " | ".join(head) + " | cases | acne pooled | acne mean / median / max | peter-pan pooled | "
-           "peter-pan mean / median / max | error pooled | error mean / median / max | undefined acne / "
-           "peter-pan / error | build ms | lookup ms | best in |",
-           "|---" * (len(head) + 11) + "|"]
+           "peter-pan mean / median / max | " + ("leak pooled | " if split else "") + "error pooled | "
+           "error mean / median / max | undefined acne / peter-pan / error | build ms | lookup ms | best in |",
+           "|---" * (len(head) + 11 + split) + "|"]
     for s in per_instance(rows):
         trio = lambda t: f"{rate(s[t + '_mean'])} / {rate(s[t + '_median'])} / {rate(s[t + '_max'])}"
+        leak = f"{rate(s['leak_pooled'])} | " if split else ""
         out.append("| " + " | ".join(str(s[h]) for h in head) + f" | {s['cases']} | {rate(s['acne_pooled'])} | "
-                   f"{trio('acne')} | {rate(s['peterpan_pooled'])} | {trio('peterpan')} | "
+                   f"{trio('acne')} | {rate(s['peterpan_pooled'])} | {trio('peterpan')} | {leak}"
                    f"{rate(s['error_pooled'])} | {trio('error')} | {s['acne_undefined']} / "
                    f"{s['peterpan_undefined']} / {s['error_undefined']} | {_ms(s['build_ms'])} | "
                    f"{_ms(s['lookup_ms'])} | {s['best_in']} |")
@@ -192,7 +210,7 @@ LEAK_DEFINITION = ("A run that gives [map] kind splits each case's peter-panning
 
 def leak_md(rows) -> list:
     """Markdown lines of the light-leaking table, for a run whose rows carry the leak split (else none)."""
-    if not any(r.get("map_kind") for r in rows):
+    if not has_leak_split(rows):
         return []
     multi = _multi(rows)
     head = summary_columns(rows)

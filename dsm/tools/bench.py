@@ -13,7 +13,9 @@ and on a local two-worker Ray cluster (``sweep``; needs ``dsm[cluster]``). (6) O
 1024^2 map of the largest scene plus the nearest lookup of every single-layer scheme over the
 visible pixels of a 1024^2 camera, timed three ways: wall clock (Python's tracing included),
 kernel time (the sum of the kernels' own execution times from Dr.Jit's kernel history) and a
-``dr.freeze``-recorded frame replayed (tracing removed), where freezing works.
+``dr.freeze``-recorded frame replayed (tracing removed), where freezing works. (7) Cost against
+triangles (:mod:`dsm.tools.bench_geometry`). (8) Pre-filtered maps (moments and blur, lookup)
+beside PCF at the same kernel width (:mod:`dsm.tools.bench_prefilter`; ``prefilter``).
 A benchmark, not a test: results go to bench.md and bench.json.
 """
 from __future__ import annotations
@@ -286,8 +288,8 @@ def meshes_problem(meshes) -> str | None:
 
 def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int = 5, meshes: Path | None = None,
               variant: str | None = None, scaling_resolutions=(), sweep: bool = False, frame: bool = True,
-              geometry=()) -> dict:
-    """Measure (1) to (7) (scaling, sweep, frame and geometry as asked), write bench.md and bench.json into ``out``; the dict."""
+              geometry=(), prefilter: bool = True) -> dict:
+    """Measure (1) to (8) (scaling, sweep, frame, geometry and prefilter as asked), write bench.md and bench.json into ``out``; the dict."""
     import drjit as dr
 
     from . import env, timing
@@ -314,9 +316,12 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
         result["geometry"] = geometry_cost(out, tuple(geometry), repeats=max(1, min(repeats, 3)))
     if sweep:
         result["sweep"] = sweep_throughput(out)
+    if prefilter:
+        from .bench_prefilter import prefilter_cost
+        result["prefilter"] = prefilter_cost(repeats=repeats)
     out.mkdir(parents=True, exist_ok=True)
     (out / "bench.json").write_text(json.dumps(result, indent=2))
-    (out / "bench.md").write_text(_markdown(result))
+    (out / "bench.md").write_text(markdown(result))
     return result
 
 
@@ -424,11 +429,13 @@ def _lookup_rows(sd, label, view, p, n, ext, repeats) -> list:
     return rows
 
 
-def _markdown(r) -> str:
+def markdown(r) -> str:
     """bench.md: every section measured, in order."""
     from .bench_geometry import markdown as geometry_md
     lines = _md_builds(r) + _md_two(r) + _md_lookups(r) + _md_scaling(r) + _md_frame(r)
+    from .bench_prefilter import markdown as prefilter_md
     lines += geometry_md(r["geometry"]) if r.get("geometry") else []
+    lines += prefilter_md(r["prefilter"]) if r.get("prefilter") else []
     return "\n".join(lines + _md_sweep(r)) + "\n"
 
 
