@@ -590,15 +590,6 @@ def test_a_preset_takes_no_other_keys_and_esm_has_none():
         assert e.value.key == key
 
 
-def test_dsm_tune_refuses_a_config_with_pre_filtered_kinds():
-    from dsm.config import read as config
-    from dsm.tune import tuner as tune
-    cfg = config.parse(base_config(map={"kind": ["depth", "vsm"]}, scheme=[{"name": "constant"}]), "<test>")
-    with pytest.raises(config.ConfigError) as e:
-        tune.parse_tune(cfg)
-    assert e.value.key == "map.kind"
-
-
 def test_the_summary_pools_the_leak_split_per_instance():
     from dsm.report import summary
     base = {"preset": "", "format": "float32", "cascade_layout": ""}

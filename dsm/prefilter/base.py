@@ -9,7 +9,9 @@ module (:class:`MapKind`) has ``NAME``, ``SOURCE``, a frozen ``Params`` dataclas
 (moments per texel), ``moment_key(params)`` (the parameters the moments depend on: maps sharing
 it share one build), ``moments(t, params)`` (numpy float64, one array per moment, from the
 normalized depth ``t``) and ``visibility(b, t, prm)`` (Dr.Jit: the filtered moments ``b`` and
-the receiver's normalized depth ``t`` -> V).
+the receiver's normalized depth ``t`` -> V). A ``Params`` field whose metadata holds ``"tune": (space, lo, hi)``
+is a lookup-time parameter (the moments do not depend on it) that dsm tune fits in that box
+(``space``: ``log`` or ``linear``; dsm.tune.moments).
 
 Depth is normalized to the view's range, ``t = (z - near) / (far - near)`` in [0, 1], the
 linear depth engines write into a moment map; a texel whose ray hit nothing holds ``t = 1``.

@@ -30,8 +30,8 @@ class Params:
     positive: float = field(default=40.0, metadata={"min": 0.0})
     negative: float = field(default=5.0, metadata={"min": 0.0})
     moments: int = field(default=4, metadata={"choices": MOMENT_COUNTS})
-    min_variance: float = field(default=1e-4, metadata={"min": 0.0})
-    bleed: float = field(default=0.0, metadata={"min": 0.0, "max": 0.999})
+    min_variance: float = field(default=1e-4, metadata={"min": 0.0, "tune": ("log", 1e-12, 0.1)})
+    bleed: float = field(default=0.0, metadata={"min": 0.0, "max": 0.999, "tune": ("linear", 0.0, 0.9)})
 
 
 def count(params) -> int:

@@ -50,8 +50,8 @@ DEQUANTIZATION_MATRIX = np.linalg.inv(QUANTIZATION_MATRIX)
 class Params:
     """MSM's moment bias a in [0, 1): b' = (1 - a) b + a (0.5, 0.5, 0.5, 0.5), and its depth bias
     (normalized depth subtracted from the receiver's, as the reference code's ``depthBias``)."""
-    moment_bias: float = field(default=3e-5, metadata={"min": 0.0, "max": 0.999})
-    depth_bias: float = field(default=0.0, metadata={"min": 0.0})
+    moment_bias: float = field(default=3e-5, metadata={"min": 0.0, "max": 0.999, "tune": ("log", 1e-8, 0.1)})
+    depth_bias: float = field(default=0.0, metadata={"min": 0.0, "tune": ("linear", 0.0, 0.1)})
 
 
 def count(params) -> int:

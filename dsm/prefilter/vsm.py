@@ -23,8 +23,8 @@ SOURCE = "Donnelly & Lauritzen 2006 (I3D); light-bleeding reduction: Lauritzen 2
 class Params:
     """VSM's minimum variance (normalized depth squared) and light-bleeding reduction ramp
     [bleed, bleed_high] of Chebyshev's bound."""
-    min_variance: float = field(default=1e-4, metadata={"min": 0.0})
-    bleed: float = field(default=0.0, metadata={"min": 0.0, "max": 0.999})
+    min_variance: float = field(default=1e-4, metadata={"min": 0.0, "tune": ("log", 1e-10, 0.25)})
+    bleed: float = field(default=0.0, metadata={"min": 0.0, "max": 0.999, "tune": ("linear", 0.0, 0.9)})
     bleed_high: float = field(default=1.0, metadata={"max": 1.0, "above": "bleed", "label": "if_set"})
 
 

@@ -32,6 +32,7 @@ class TuneResult:
     tuned_toml: str
     spec: TuneSpec
     resumed: int = 0      # schemes kept from the previous tune in the folder (--resume)
+    moments: list = dataclasses.field(default_factory=list)    # pre-filtered instances tuned (dsm.tune.moments)
 
     def best(self):
         """The tuned scheme with the lowest training objective."""
@@ -59,6 +60,42 @@ def tuned_toml(results) -> str:
     return "\n".join(lines)
 
 
+def moments_toml(entries) -> str:
+    """The tuned pre-filtered instances as ``[map.<kind>]`` tables, one per instance in comments
+    (instances of one kind at other blur widths may want other values: paste the one you run)."""
+    if not entries:
+        return ""
+    lines = ["", "# pre-filtered maps, tuned per instance (the exact values: uncomment the one you run)"]
+    for e in entries:
+        lines.append(f"# {e['label']}: train objective {e['train']:.6f}")
+        lines.append(f"# [map.{e['kind']}]")
+        lines += [f"# {k} = {float(v)!r}" for k, v in e["values"].items()]
+    return "\n".join(lines) + "\n"
+
+
+def moments_table(res) -> list:
+    """table.md's section of the tuned pre-filtered instances (empty without any)."""
+    if not res.moments:
+        return []
+    floor = res.moments[0].get("depth_oracle_train")
+    out = ["", "## pre-filtered maps (lookup-time parameters; dsm.tune.moments)", ""]
+    if floor:
+        out += [f"the depth map's exact oracles on the training views: one world bias {_fmt(floor['world'])}, "
+                f"per texel {_fmt(floor['per_texel'])} (an unfiltered VSM is a depth test with one bias in "
+                "normalized depth per map: on one map its best is the world oracle)", ""]
+    out += [
+           "| instance | tuned | train | held-out | tune ms | grid best | grid train | grid held-out (evals) "
+           "| start train | start held-out | AD / central difference (relative error) |",
+           "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for e in res.moments:
+        g = e["grid"]
+        check = ", ".join(f"{k} {_fmt(c['rel_error'])}" for k, c in (e.get("gradcheck") or {}).items())
+        out.append(f"| {e['label']} | {e['params']} | {_fmt(e['train'])} | {_fmt(e['heldout'])} | {e['tune_ms']:.0f} "
+                   f"| {g['params']} | {_fmt(g['train'])} | {_fmt(g['heldout'])} ({g['evaluations']}) "
+                   f"| {_fmt(e['start_train'])} | {_fmt(e['start_heldout'])} | {check} |")
+    return out
+
+
 # ---------------------------------------------------------------- output folder
 
 def _fmt(x):
@@ -71,8 +108,9 @@ def table_text(res: TuneResult) -> str:
     """The Markdown summary (``table.md``): a row per tuned scheme against grid search and oracle, then the bias map."""
     lam = res.spec.lam
     out = [f"# dsm tune (lambda = {lam:g}; objective (n_acne + lambda n_peterpan) / n_receivers)", "",
-           f"training receivers {res.n_train}, held-out receivers {res.n_heldout}", "",
-           "| scheme | tuned | train | held-out | tune ms (evals; first, median step) | grid best | grid train "
+           f"training receivers {res.n_train}, held-out receivers {res.n_heldout}"]
+    if res.comparison:             # a tune of pre-filtered instances alone has no scheme table
+        out += ["", "| scheme | tuned | train | held-out | tune ms (evals; first, median step) | grid best | grid train "
            "| grid held-out | grid ms (evals) | oracle (train) | start train | start held-out | 1-D scan best "
            "| scan train (evals) | tuned / scan |",
            "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
@@ -121,6 +159,7 @@ def table_text(res: TuneResult) -> str:
                 out.append(f"| in {'trained' if name == 'covered' else 'untrained'} blocks | {r['n_receivers']} "
                            f"| {_fmt(r['map'])} | {_fmt(r['best_global'])} | {_fmt(r['per_texel_oracle'])} "
                            f"| {_fmt(r['gap_closed'])} |")
+    out += moments_table(res)
     if res.notes:
         out += ["", "notes: " + "; ".join(res.notes)]
     return "\n".join(out) + "\n"
@@ -142,6 +181,7 @@ def write(res: TuneResult, out: Path, orc_train=None, orc_held=None):
     doc = {"lambda": res.spec.lam, "n_train": res.n_train, "n_heldout": res.n_heldout, "notes": res.notes,
            "schemes": [{k: v for k, v in e.items() if k not in ("spec",)} for e in res.schemes],
            "comparison": res.comparison, "oracle_train": orc_train, "oracle_heldout": orc_held,
+           "moments": res.moments,
            "bias_map": None if res.bias_map is None else
            {k: v for k, v in res.bias_map.items() if k not in ("steps", "values")}}
     if res.bias_map is not None:

@@ -68,7 +68,8 @@ from .cases import pooled_thresholds, prepare_cases
 from .compare import exact_scan, gradient_check, grid_search
 from .bias_map import heldout_split, map_start, residual_bias_map, tune_bias_map
 from .search import tune_scheme
-from .output import TuneResult, tuned_toml, write
+from .output import TuneResult, moments_toml, tuned_toml, write
+from .moment_search import tune_all
 
 
 @dataclass
@@ -91,7 +92,8 @@ def parse_tune(cfg) -> TuneConfig:
 
 
 def _check_lights_and_kinds(cfg):
-    """The objective and oracles count a hard V*, one ray per receiver, of a depth map's lookup."""
+    """The objective and oracles count a hard V*, one ray per receiver (pre-filtered kinds too:
+    dsm.tune.moments)."""
     from .. import lights as light_types
     src = cfg.source
     for i, light in enumerate(cfg.lights):
@@ -99,9 +101,6 @@ def _check_lights_and_kinds(cfg):
             raise ConfigError(src, f"light[{i}].type", "dsm tune's objective and oracles are those of a hard V* "
                               "(one ray per receiver); an area light's reference is a fraction: remove it (dsm run "
                               "measures it)", tuple(t for t in light_types.REGISTRY if t != light.type))
-    if cfg.map.moments:           # dsm tune's objective relaxes a margin per tap: depth schemes only
-        raise ConfigError(src, "map.kind", "dsm tune tunes depth schemes; remove the pre-filtered kinds from "
-                          "map.kind (dsm run measures them)", ("depth",))
 
 
 def _check_schemes(cfg, spec: TuneSpec):
@@ -175,6 +174,9 @@ def run_tune(tc, out=None, progress: bool = False, resume: bool = False) -> Tune
     orc_train = pl.oracles(th_train, vs_train, ts.lam)["row"]
     orc_held = pl.oracles(*pooled_thresholds(held, groups), ts.lam)["row"] if held else None
     results, steps, comparison, kept = _tune_schemes(tc, train, held, groups, orc_train, out, resume, tick)
+    moments, moment_steps, moment_notes = tune_all(tc, train, held, groups, orc_train, tick)
+    steps += moment_steps
+    notes += moment_notes
     bmap = None
     if ts.bias_map and held:
         bmap = _learned_map(tc, train, held, groups, results, orc_train, orc_held, tick)
@@ -183,7 +185,8 @@ def run_tune(tc, out=None, progress: bool = False, resume: bool = False) -> Tune
         notes.append("no held-out view has a receiver: the learned bias map was not trained")
     if bar:
         bar.close()
-    res = TuneResult(results, steps, comparison, bmap, notes, n_train, n_held, tuned_toml(results), ts, kept)
+    res = TuneResult(results, steps, comparison, bmap, notes, n_train, n_held,
+                     tuned_toml(results) + moments_toml(moments), ts, kept, moments)
     if out is not None:
         write(res, Path(out), orc_train, orc_held)
     return res
@@ -193,7 +196,7 @@ def _progress_bar(tc):
     """A tqdm bar over the run's steps: a scene each, ``steps`` per scheme, an Adam bias map's steps."""
     from tqdm import tqdm
     ts = tc.spec
-    total = len(tc.config.scenes) + ts.steps * len(tc.schemes) + (
+    total = len(tc.config.scenes) + ts.steps * (len(tc.schemes) + len(tc.config.map.moments)) + (
         ts.bias_map.steps if ts.bias_map and ts.bias_map.fit == "adam" else 0)
     return tqdm(total=total, desc="dsm tune", unit="step", leave=False)
 
