@@ -372,9 +372,17 @@ def visibility(spec: SchemeSpec, rx: Receiver, smap, filt: str = "nearest", seed
 moment_key = prefilter.build_key          # (MomentSpec, format) -> what its moment map depends on
 
 
-def moment_map(spec, smap, fmt: str):
-    """The MomentMap of one pre-filtered instance from a depth map's z1 (its float32 build), stored in ``fmt``."""
-    return prefilter.build(spec, smap.z1.numpy(), smap.view, fmt)
+def moment_map(spec, smap, fmt: str, fine=None):
+    """The MomentMap of one pre-filtered instance from a depth map's z1 (its float32 build), stored in
+    ``fmt``; ``fine``: the map of supersampled_map, whose z1 the moments average where ``spec.samples`` > 1."""
+    z1 = (smap if spec.samples == 1 else fine).z1.numpy()
+    return prefilter.build(spec, z1, smap.view, fmt)
+
+
+def supersampled_map(scene, view, samples: int, extents=None):
+    """The first-layer map of ``view`` with ``samples`` x ``samples`` rays a texel (the same frame
+    and extent at ``samples`` times its resolution): the rays a supersampled moment map averages."""
+    return build_map(scene, prefilter.supersampled_view(view, samples), (), "none", None, None, extents)
 
 
 def moment_visibility(spec, rx: Receiver, mmap, smap):

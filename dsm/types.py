@@ -343,11 +343,13 @@ class MomentSpec(ParamsLabel):
     blur: int = 1
     preset: str | None = None
     kernel: str = "box"
+    samples: int = 1      # rays per texel side the moments are averaged over (samples^2 a texel)
 
     @property
     def filter(self) -> str:
-        """The case's filter column: the blur, ``box:W`` or ``gauss:W``."""
-        return f"{BLUR_LABELS[self.kernel]}:{self.blur}"
+        """The case's filter column: the blur, ``box:W`` or ``gauss:W``, then ``/ssN`` where the
+        moments are supersampled N x N a texel (nothing at 1: the labels of one ray a texel)."""
+        return f"{BLUR_LABELS[self.kernel]}:{self.blur}" + (f"/ss{self.samples}" if self.samples > 1 else "")
 
 
 @dataclass(frozen=True)

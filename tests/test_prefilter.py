@@ -637,3 +637,45 @@ def test_the_error_image_paints_the_leaks_in_their_own_colour(run_dict):
     assert (metrics.base_class(img) == metrics.PETERPAN).sum() == vsm5["n_peterpan"]
     png = np.asarray(Image.open(res.out / "images" / figures.image_folder(vsm5) / f"{vsm5['case']}_error.png"))
     assert (png[img == metrics.LEAK] == metrics.CLASS_COLORS[metrics.LEAK]).all()
+
+
+def test_supersampled_moments_are_the_mean_of_each_texel_s_analytic_samples():
+    """``[map] moment_samples = N``: a texel's E[t] is the mean of the normalized depths of N x N
+    rays at its sub-texel centres. On stacked_plates (light straight down) each sample's first hit
+    is the highest of the ground (z 0 over |x|, |y| <= 4; beyond it a miss, t = 1), the low plate (z 0.25 over |x|, |y| <= 0.75) and the high
+    plate (z 2 over -0.75 <= x <= 0, |y| <= 0.75): the expected mean computed in numpy float64 from
+    the view's frame, away from the samples that sit on an edge."""
+    import numpy as np
+    import dsm.pipeline as pl
+    from dsm.config import read as config
+    cfg = pl.prepare(config.parse(base_config(scene=[{"builtin": "stacked_plates"}], map={
+        "resolution": 32, "kind": ["vsm"], "moment_samples": [1, 4]}, scheme=[]), "<test>"))
+    sd = pl.load_scene(cfg.scenes[0], (48, 48))
+    light = sd.lights_for(cfg.lights)[0]
+    view = pl.make_view(light, 32, np.zeros((0, 3)), sd.bbox)
+    smap = pl.build_map(sd.scene, view)
+    one, four = cfg.map.moments
+    assert (one.samples, four.samples, four.filter) == (1, 4, "box:1/ss4")
+    fine = pl.supersampled_map(sd.scene, view, 4)
+    got = pl.moment_map(four, smap, "float32", fine).b[0].numpy().reshape(32, 32)
+    N, R, w = 4, 32, view.extent / 32
+    sub = (np.arange(R * N) + 0.5) / N * w                 # sample positions along ex, ey (world, from the origin)
+    ex, ey, ez = view.axes_np
+    p = view.origin_np + sub[None, :, None] * ex + sub[:, None, None] * ey      # [row (ey), column (ex), xyz]
+    x, y = p[..., 0], p[..., 1]
+    low = (np.abs(x) <= 0.75) & (np.abs(y) <= 0.75)
+    high = (x >= -0.75) & (x <= 0.0) & (np.abs(y) <= 0.75)
+    z = np.where(high, 2.0, np.where(low, 0.25, 0.0))
+    hit = np.concatenate([p[..., :2], z[..., None]], axis=-1)     # straight down to the highest surface
+    depth = (hit - view.origin_np) @ ez
+    ground = (np.abs(x) <= 4.0) & (np.abs(y) <= 4.0)                   # beyond it a ray misses: t = 1
+    t = np.where(ground | low, (depth - view.near) / (view.far - view.near), 1.0)
+    want = t.reshape(R, N, R, N).mean(axis=(1, 3))
+    edge = np.minimum.reduce([np.abs(np.abs(x) - 0.75), np.abs(np.abs(y) - 0.75), np.abs(x),
+                              np.abs(np.abs(x) - 4.0), np.abs(np.abs(y) - 4.0)]) < 1e-4
+    clean = ~edge.reshape(R, N, R, N).any(axis=(1, 3))
+    mixed = clean & (t.reshape(R, N, R, N).std(axis=(1, 3)) > 0)       # texels whose samples see two heights
+    assert mixed.sum() >= 10
+    np.testing.assert_allclose(got[clean], want[clean], atol=2e-6)
+    single = pl.moment_map(one, smap, "float32").b[0].numpy().reshape(32, 32)
+    assert np.abs(single[mixed] - want[mixed]).max() > 0.01      # one ray a texel sees one height of the mix

@@ -77,3 +77,23 @@ def test_kinds_without_a_lookup_time_parameter_are_noted_not_tuned():
     from dsm.tune.tuner import tune
     res = tune(_cfg(["esm"], [1], steps=8))
     assert res.moments == [] and any("esm box:1: no lookup-time parameter" in n for n in res.notes)
+
+
+@pytest.mark.parametrize("map_extra, key", [({"moment_samples": 2}, "map.moment_samples")])
+def test_dsm_tune_refuses_supersampled_moments_before_work(map_extra, key):
+    from dsm.config.read import coerce
+    from dsm.tune import tuner
+    from dsm.types import ConfigError
+    cfg = _cfg(["vsm"], [1])
+    cfg["map"].update(map_extra)
+    with pytest.raises(ConfigError) as e:
+        tuner.parse_tune(coerce(cfg))
+    assert e.value.key == key
+
+
+def test_moment_samples_without_a_pre_filtered_kind_is_refused():
+    from dsm.config import read as config
+    from dsm.types import ConfigError
+    with pytest.raises(ConfigError) as e:
+        config.parse({"experiment": {"name": "x"}, "map": {"moment_samples": 2}}, "<test>")
+    assert e.value.key == "map.moment_samples"

@@ -16,7 +16,7 @@ from ..types import LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, MAP_VIEWS, VARI
 
 # a run's folder is runs/<name>-tune-YYYYmmdd-HHMMSS (21 bytes more) and a file name takes 255 bytes
 NAME_MAX_BYTES = 255 - len("-tune-20240101-120000")
-KIND_KEYS = ("kind", "blur", "blur_kernel", "leak_texels", "vsm", "esm", "evsm", "msm")    # [map] kind and its tables
+KIND_KEYS = ("kind", "blur", "blur_kernel", "moment_samples", "leak_texels", "vsm", "esm", "evsm", "msm")    # [map] kind and its tables
 CASCADE_KEYS = ("cascades", "split", "lambda", "fit", "depth_bounds", "stabilize", "blend", "max_distance")
 
 
@@ -434,12 +434,16 @@ def _parse_moments(m: dict, kinds, formats, source: str) -> tuple:
         raise ConfigError(source, "map.blur", "empty list")
     if any(w % 2 == 0 for w in blurs):
         raise ConfigError(source, "map.blur", f"a box width is odd (centred on the texel), got {blurs}")
-    for key in ("blur", "blur_kernel"):
+    for key in ("blur", "blur_kernel", "moment_samples"):
         if key in m and kinds == ("depth",):
             raise ConfigError(source, f"map.{key}", "blurs moments; map.kind names no pre-filtered map", prefilter.NAMES)
     kernels = tuple(choice(k, source, "map.blur_kernel", BLUR_KERNELS) for k in as_list(m.get("blur_kernel", "box")))
     if not kernels:
         raise ConfigError(source, "map.blur_kernel", "empty list", BLUR_KERNELS)
+    samples = tuple(number(n, source, "map.moment_samples", integer=True, minimum=1, maximum=8)
+                    for n in as_list(m.get("moment_samples", 1)))
+    if not samples:
+        raise ConfigError(source, "map.moment_samples", "empty list")
     out = []
     for name in kinds:
         if name == "depth":
@@ -461,7 +465,7 @@ def _parse_moments(m: dict, kinds, formats, source: str) -> tuple:
             params = sweep_params(prefilter.get(name).Params, t, source, f"map.{name}")
         for p in params:
             prefilter.check(name, p, formats, source, f"map.{name}")
-        out += [MomentSpec(name, p, w, preset, k) for p in params for w in blurs for k in kernels]
+        out += [MomentSpec(name, p, w, preset, k, n) for p in params for w in blurs for k in kernels for n in samples]
     return tuple(out)
 
 

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from ..truth import intervals
 from ..scenes import size as scene_size
 from .. import lights as light_types
+from .. import prefilter
 from .. import schemes as schemes_mod
 from ..types import DEFAULT_CAMERA, POINT_VIEWS, VIEW_FACES, Config, ConfigError
 from ..maps.shadowmap import MAX_STEPS
@@ -78,6 +79,7 @@ class MapPlan:
     light_index: int = 0          # of the scene's lights (the label's number)
     cascade: object = None        # a directional light's CascadeSpec (faces = its count), else None
     moments: tuple = ()           # pre-filtered instances (MomentSpec) built from this map's z1 (culling none)
+    supersampled_rays: int = 0    # rays of the supersampled first layers its moment maps cast (one each)
 
     @property
     def texels(self) -> int:
@@ -106,7 +108,8 @@ class MapPlan:
     def peak_bytes(self) -> int:
         """Estimated peak bytes of the map's build: its stored layers plus one tile's working set
         (and a moment map's build, where the map serves pre-filtered instances)."""
-        moments = self.texels * MOMENT_BYTES if self.moments else 0
+        # a supersampled instance's moments are made of samples^2 values a texel
+        moments = self.texels * MOMENT_BYTES * max(s.samples for s in self.moments) ** 2 if self.moments else 0
         return self.stored_bytes + min(self.tile or self.texels, self.texels) * self.build_bytes_per_texel + moments
 
 
@@ -141,7 +144,7 @@ class Plan:
     def rays(self) -> dict:
         """Exact counts by kind."""
         return {"gbuffer": sum(w * h for _, w, h, _ in self.scenes),
-                "map_texel": sum(m.texels for m in self.maps)}
+                "map_texel": sum(m.texels + m.supersampled_rays for m in self.maps)}
 
     @property
     def rays_bound(self) -> dict:
@@ -539,13 +542,15 @@ def _map_plan(cfg: Config, scene_label, si, label, li, ltype, view, cascade, fac
     if not group and not moments:
         return None
     needs = schemes_mod.needs_of(group)
+    fine = {prefilter.build_key(s, f): faces * (R * s.samples) ** 2 for s in moments for f in cfg.map.format
+            if s.samples > 1}       # one supersampled cast per moment build (dsm.prefilter.build_key)
     return MapPlan(scene_label, label, view, R, faces, culling, tuple(sorted(needs)),
                    "z2" in needs or culling != "none", fmts,
                    [f"{s.name} {s.label}".strip() for s in group]
                    + [f"{s.name} {s.label} {s.filter}" for s in moments],
                    len(group) * per_case + len(moments) * len(cfg.map.format),
                    specs=tuple(group), scene_index=si, light_index=li, cascade=cascade,
-                   moments=moments)
+                   moments=moments, supersampled_rays=sum(fine.values()))
 
 
 def _check_planned(cfg: Config, plan: Plan, views_seen: set):

@@ -376,12 +376,13 @@ class Runner:
             for fmt in self.cfg.map.format:
                 # build_ms: the depth map's first layer, which the moments are made of (moments_ms apart)
                 self._run_case(sd, gb, setup, view, smap, (first_t, first_t), rxs[fmt], seam, spec, spec.filter, fmt,
-                               backs[fmt], None, moment=self._moments(moment_maps, spec, smap, fmt))
+                               backs[fmt], None, moment=self._moments(moment_maps, spec, smap, fmt, sd))
                 self.bar.update(1)
         return first_t
 
-    def _moments(self, cache, spec, smap, fmt):
-        """A function giving (MomentMap, build Timing) of ``spec`` on ``smap``, built (timed) once per moment key."""
+    def _moments(self, cache, spec, smap, fmt, sd):
+        """A function giving (MomentMap, build Timing) of ``spec`` on ``smap``, built (timed) once per
+        moment key; a supersampled instance's build casts its own rays (timed with it)."""
         key = pipeline.moment_key(spec, fmt)
 
         def get():
@@ -389,9 +390,13 @@ class Runner:
             if key not in cache:
                 def build():
                     """The moment map's arrays (evaluated by the clock) and the map."""
-                    mm = pipeline.moment_map(spec, smap, fmt)
+                    fine = None if spec.samples == 1 else pipeline.supersampled_map(
+                        self._casters(sd), smap.view, spec.samples, self.extents[sd.label])
+                    mm = pipeline.moment_map(spec, smap, fmt, fine)
                     return (*mm.b, mm)
                 out, t = timing.measure(build, self.cfg.timing_repeats)
+                if spec.samples > 1:        # one build's rays (the timed repeats cast them again)
+                    self.record.add_rays({"map_texel": smap.view.n_texels * spec.samples ** 2})
                 cache[key] = (out[-1], t)
             return cache[key]
         return get

@@ -10,7 +10,8 @@ from __future__ import annotations
 import dataclasses
 
 from . import esm, evsm, msm, presets, vsm
-from .base import LOG_MAX, MOMENT_FORMATS, MapKind, build as build_map, fetch, formats_of, normalized_depth, restored
+from .base import (LOG_MAX, MOMENT_FORMATS, MapKind, build as build_map, fetch, formats_of, normalized_depth, restored,
+                   supersampled_view)
 from ..maps.lookup import resolve
 from ..types import ConfigError
 
@@ -50,13 +51,14 @@ def check(name: str, params, formats, source: str, where: str):
 
 
 def build(spec, z1_world, view, fmt: str):
-    """The MomentMap of one instance (``spec``: a MomentSpec) from a depth map's z1 (numpy, world)."""
-    return build_map(get(spec.name), spec.params, z1_world, view, fmt, spec.blur, spec.kernel)
+    """The MomentMap of one instance (``spec``: a MomentSpec) from a depth map's z1 (numpy, world;
+    ``spec.samples`` squared values a texel of ``view`` where it supersamples: base.supersampled_view)."""
+    return build_map(get(spec.name), spec.params, z1_world, view, fmt, spec.blur, spec.kernel, spec.samples)
 
 
 def build_key(spec, fmt: str) -> tuple:
     """What a MomentMap of ``spec`` depends on besides its depth map: instances sharing it share a build."""
-    return (spec.name, get(spec.name).moment_key(spec.params), spec.blur, spec.kernel, fmt)
+    return (spec.name, get(spec.name).moment_key(spec.params), spec.blur, spec.kernel, spec.samples, fmt)
 
 
 def visibility(spec, rx, mmap):

@@ -15,8 +15,9 @@ is a lookup-time parameter (the moments do not depend on it) that dsm tune fits 
 
 Depth is normalized to the view's range, ``t = (z - near) / (far - near)`` in [0, 1], the
 linear depth engines write into a moment map; a texel whose ray hit nothing holds ``t = 1``.
-The moments come from the ray-cast ``z1`` of each texel (one sample per texel: no
-supersampling). ``format`` is their storage precision: ``float32`` or ``float16`` (IEEE half,
+The moments come from the ray-cast ``z1`` of each texel, or with ``[map] moment_samples = N``
+from N x N rays at its sub-texel centres (:func:`supersampled_view`), their moments averaged per
+texel (:func:`texel_means`, an MSAA resolve's mean) before storage. ``format`` is their storage precision: ``float32`` or ``float16`` (IEEE half,
 rounded to nearest; a value beyond 65504 becomes +inf as a half render target stores it), or
 ``unorm16`` for a kind with an ``encode(t, params)`` / ``decode(q)`` pair (MSM's optimized
 quantization): the encoded moments, clamped to [0, 1], rounded to k / 65535 (half to even), and
@@ -33,6 +34,7 @@ light's map reads the moments of t = 1 (no caster, as a depth tap reads the far 
 """
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
@@ -154,11 +156,37 @@ def restored(kind, b: list, fmt: str) -> list:
     return kind.decode(b) if fmt in ENCODED_FORMATS else b
 
 
-def build(kind, params, z1_world: np.ndarray, view, fmt: str, blur: int, kernel: str = "box") -> MomentMap:
-    """The moment map of ``kind`` from a depth map's z1 (world, texel order): moments (encoded in
-    an encoded format), stored, blurred (``kernel``: box or gaussian, ``blur`` texels wide), stored again."""
+def supersampled_view(view, samples: int):
+    """``view`` with ``samples`` x ``samples`` texels for each of its texels: the same frame, near,
+    far and extent, its resolution times ``samples``, so texel (i, j) of ``view`` is texels
+    (i N .. i N + N - 1, j N .. j N + N - 1) of the copy (every view maps a texel position through
+    its resolution ``R`` alone: views.View.to_square)."""
+    if samples == 1:
+        return view
+    fine = copy.copy(view)
+    fine.resolution = view.resolution * samples
+    fine.R = dr.opaque(mi.Float, float(fine.resolution))
+    fine.R_u = dr.opaque(mi.UInt32, int(fine.resolution))
+    return fine
+
+
+def texel_means(x: np.ndarray, faces: int, R: int, samples: int) -> np.ndarray:
+    """The mean of each texel's ``samples`` x ``samples`` values of a supersampled map (faces *
+    (R samples)^2 values, face then row-major) as faces * R^2 values: what an MSAA resolve of the
+    moments writes (a mean of moments is the moment of the union of the samples)."""
+    if samples == 1:
+        return x
+    return x.reshape(faces, R, samples, R, samples).mean(axis=(2, 4)).reshape(-1)
+
+
+def build(kind, params, z1_world: np.ndarray, view, fmt: str, blur: int, kernel: str = "box",
+          samples: int = 1) -> MomentMap:
+    """The moment map of ``kind`` from a depth map's z1 (world, texel order; ``samples`` > 1: of
+    supersampled_view(view, samples)): moments (encoded in an encoded format), averaged over each
+    texel's samples, stored, blurred (``kernel``: box or gaussian, ``blur`` texels wide), stored again."""
     t = normalized_depth(z1_world, view)
-    b = [stored(BLURS[kernel](stored(m, fmt), blur, view.faces, view.resolution), fmt)
+    b = [stored(BLURS[kernel](stored(texel_means(m, view.faces, view.resolution, samples), fmt), blur, view.faces,
+                              view.resolution), fmt)
          for m in texel_values(kind, t, params, fmt)]
     far_b = [float(stored(m, fmt)[0]) for m in texel_values(kind, np.ones(1), params, fmt)]
     return MomentMap(view, [mi.Float(m.astype(np.float32)) for m in b], far_b, fmt, blur)
