@@ -95,5 +95,6 @@ def test_moment_samples_without_a_pre_filtered_kind_is_refused():
     from dsm.config import read as config
     from dsm.types import ConfigError
     with pytest.raises(ConfigError) as e:
-        config.parse({"experiment": {"name": "x"}, "map": {"moment_samples": 2}}, "<test>")
+        config.parse({"experiment": {"name": "x"}, "scene": [{"builtin": "plane"}], "map": {"moment_samples": 2}},
+                     "<test>")
     assert e.value.key == "map.moment_samples"
