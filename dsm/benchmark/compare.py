@@ -17,8 +17,9 @@ TIE_MIN = 2                    # receivers
 
 
 def case_key(rec: dict) -> tuple:
-    """A case's identity across runs: (scene, unit, light, contender)."""
-    return rec["scene"], rec["unit"], rec["light"], rec["contender"]
+    """A case's identity across runs: (scene, unit, offset, light, contender); a dsm-bench-1 record,
+    which has no offset, sits at the origin ("0")."""
+    return rec["scene"], rec["unit"], rec.get("offset", "0"), rec["light"], rec["contender"]
 
 
 def tie_tolerance(n_receivers: int) -> float:
