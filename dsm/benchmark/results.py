@@ -1,7 +1,8 @@
 """A benchmark run's results: the suite run through dsm.run, one JSON per run with its provenance.
 
 From dsm-bench-2 on a case's record carries its offset (label and ``translate``), the exact side's
-shadowed count (``n_gt_shadowed``: where the scene sits must not move it) and the mean FLIP of its
+shadowed count (``n_gt_shadowed``: where the scene sits must not move it), the map's float32 headroom
+(``texel_f32_steps``: below 64 the case is precision-limited) and the mean FLIP of its
 shadowed render against the exact render (:mod:`dsm.benchmark.render`, :mod:`dsm.benchmark.perceptual`).
 """
 from __future__ import annotations
@@ -15,7 +16,7 @@ from . import perceptual, render
 from .suite import LATEST, SUITE_FILES, cases, load_suite, suite_sha256
 
 MEASURES = ("n_receivers", "n_gt_shadowed", "n_acne", "n_peterpan", "acne_rate", "peterpan_rate", "error_rate",
-            "texel_size", "build_ms", "lookup_ms")
+            "texel_size", "texel_f32_steps", "build_ms", "lookup_ms")
 ORACLE_MEASURES = ("world_objective", "texel_objective", "per_texel_objective")
 
 
