@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import html
+import math
 from pathlib import Path
 
 from ..report.html import CSS, SCRIPT
@@ -52,7 +53,7 @@ def answer(doc: dict, ranked: list) -> str:
 def far_answer(ranked: list) -> str:
     """The opening's line on the far-from-origin axis: the preset whose error moves least from the origin."""
     pool = [r for r in ranked if r["contender"] in PRESETS and r.get("far_change") is not None
-            and r["far_change"] == r["far_change"]]
+            and not math.isnan(r["far_change"])]
     if not pool:
         return ""
     best = min(pool, key=lambda r: (abs(r["far_change"]), r["error"], r["contender"]))
