@@ -315,7 +315,17 @@ def test_flip_of_identical_renders_is_zero_and_a_pair_is_flip_evaluator_s():
     assert perceptual.mean_flip(a, b, 20.0) != pytest.approx(expect, rel=1e-3)
 
 
-def test_the_renders_are_the_run_s_shadow_image_and_its_exact_twin(tmp_path):
+def _plane_box_spot_at_1e5():
+    """plane_box at 1e5 under the spot at the default size, one contender: its map's view leaves out
+    one of the light's receivers (measured), which the renders must leave out too."""
+    case = _by(suite.cases(suite.load_suite(), "default"), "plane_box", "m", "1e5")
+    cfg = {**case.config, "light": [t for t in case.config["light"] if t["type"] == "spot"],
+           "scheme": [{"preset": "bevy"}], "map": {"resolution": case.config["map"]["resolution"]}}
+    return suite.Case(case.scene, case.unit, case.scale, cfg, case.offset, case.translate)
+
+
+@pytest.mark.parametrize("which", ["bunny_far", "plane_box_spot_far"])
+def test_the_renders_are_the_run_s_shadow_image_and_its_exact_twin(tmp_path, which):
     """A far case run into a folder: the benchmark's render under V is the run's shadow PNG, byte for
     byte (8-bit); the exact render differs from it only on the case's errors (brighter on acne,
     darker on peter-panning); the case's FLIP is flip-evaluator's on these two arrays."""
@@ -325,8 +335,12 @@ def test_the_renders_are_the_run_s_shadow_image_and_its_exact_twin(tmp_path):
     from dsm.benchmark import render, results
     from dsm.report.figures import image_paths, shade_image
     from dsm.truth import metrics
-    case = _by(suite.cases(suite.load_suite(), "test"), "bunny", "m", "1e4")
+    case = _by(suite.cases(suite.load_suite(), "test"), "bunny", "m", "1e4") if which == "bunny_far" \
+        else _plane_box_spot_at_1e5()
     res = dsm.run(case.config, out=tmp_path / "run")
+    if which == "plane_box_spot_far":      # the view's subset is there: fewer case receivers than the light has
+        setups = render.light_setups(case.config)
+        assert res.rows[0]["n_receivers"] < len(setups[(res.rows[0]["scene"], res.rows[0]["light"])][1].pixels)
     setups = render.light_setups(case.config)
     flips = results.case_flips(case, res, 67.0)
     for row in res.rows:

@@ -5,8 +5,11 @@ map's V, ambient elsewhere) to its shadow PNG but keeps only its class image in 
 render under the exact V*. So the benchmark re-traces each scene's G-buffer and light set-ups
 through dsm.pipeline (the same stages, config and seed as the run) and shades both with the
 kit's own ``shade``: under the case's V (read back from its class image: lit where the class is
-lit or peter-panned) and under V*. The class image's V* is checked against the re-traced V*:
-a mismatch is an error, not a silently wrong render.
+lit or peter-panned) and under V*. A case's receivers are the light's less those outside its
+map's view (the runner's ``LightSetup.subset``; measured: one spot receiver of plane_box at 1e5):
+the class image marks them (class 0: not a receiver), so the set-up is cut to them as the run's
+was. The class image's V* is checked against the re-traced V*: a mismatch is an error, not a
+silently wrong render.
 """
 from __future__ import annotations
 
@@ -45,6 +48,8 @@ def shaded(gb, setup, v: np.ndarray) -> np.ndarray:
 def case_renders(setups: dict, row: dict, classes: np.ndarray) -> tuple:
     """(shadowed render under the case's V, exact render under V*) of one metrics row."""
     gb, setup = setups[(row["scene"], row["light"])]
+    in_view = np.asarray(classes).reshape(-1)[setup.pixels] != metrics.OUTSIDE
+    setup = setup.subset(in_view)               # the case's receivers: those inside its map's view
     v, v_star = visibilities(classes, setup.pixels)
     if not np.array_equal(v_star.astype(bool), np.asarray(setup.v_star, bool)):
         raise RuntimeError(f"dsm benchmark: case {row['case']}: the re-traced exact visibility differs from the "
