@@ -15,8 +15,9 @@ from __future__ import annotations
 import math
 from collections import defaultdict
 
+from .suite import ORIGIN
+
 TIE_RATE = 0.001
-ORIGIN = "0"
 
 
 def offset_of(rec: dict) -> str:

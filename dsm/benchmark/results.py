@@ -13,7 +13,7 @@ import platform
 from pathlib import Path
 
 from . import perceptual, render
-from .suite import LATEST, SUITE_FILES, cases, load_suite, suite_sha256
+from .suite import LATEST, ORIGIN, SUITE_FILES, cases, load_suite, suite_sha256
 
 MEASURES = ("n_receivers", "n_gt_shadowed", "n_acne", "n_peterpan", "acne_rate", "peterpan_rate", "error_rate",
             "texel_size", "texel_f32_steps", "build_ms", "lookup_ms")
@@ -85,7 +85,7 @@ def run_suite(size: str = "default", variant: str | None = None, progress=print,
     records, run_variant = [], None
     for i, case in enumerate(todo):
         if progress:
-            where = "" if case.offset == "0" else f" at {case.offset}"
+            where = "" if case.offset == ORIGIN else f" at {case.offset}"
             progress(f"dsm benchmark: {i + 1}/{len(todo)} {case.scene} in {case.unit}{where} (scale {case.scale:g})")
         res = dsm.run(case.config, variant=variant)
         run_variant = res.run.get("variant")
