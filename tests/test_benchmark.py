@@ -1,5 +1,6 @@
-"""dsm benchmark (dsm-bench-1): the suite's hash pin, its scale normalization, the compare rule,
-the leaderboard's ranking and tie rule, the preset bias conversion, and one tiny end-to-end run."""
+"""dsm benchmark (dsm-bench-1 and dsm-bench-2): the suites' hash pins, scale normalization, the
+far-from-origin axis, the compare rule, the leaderboard's ranking and tie rule, the preset bias
+conversion, FLIP, the shaded renders, the scale figure, and one tiny end-to-end run."""
 import json
 
 import numpy as np
@@ -10,29 +11,64 @@ from dsm.benchmark import bias_units, compare, ranking, suite
 from dsm.benchmark.command import SIZE_ENV
 from dsm.types import Length
 
-# the suite's identity: changing suite_1.toml changes this, which makes it dsm-bench-2
+# the suites' identities: changing suite_<n>.toml changes its hash, which makes it a new version
 SUITE_1_SHA256 = "15b8554a6f096049e4da44ba45084ae524f5d93f04380a71907185a990a2ba5c"
+SUITE_2_SHA256 = "ebd3668f4b3bff1df961afae653c8e91018de253cd2df644be3a1c71884b9cd1"
 
 
-def test_suite_hash_is_pinned():
-    assert suite.suite_sha256() == SUITE_1_SHA256
+def test_suite_hashes_are_pinned():
+    assert suite.suite_sha256(suite.SUITE_FILES["dsm-bench-1"]) == SUITE_1_SHA256
+    assert suite.load_suite(suite.SUITE_FILES["dsm-bench-1"])["suite"]["name"] == "dsm-bench-1"
+    # the newest is what dsm benchmark runs by default
+    assert suite.LATEST == "dsm-bench-2" and suite.suite_sha256() == SUITE_2_SHA256
     s = suite.load_suite()
-    assert s["suite"]["name"] == "dsm-bench-1"
+    assert s["suite"]["name"] == "dsm-bench-2" and s["flip"]["ppd"] == 67.0
+
+
+def test_suite_1_still_makes_its_cases_at_the_origin_only():
+    s1 = suite.load_suite(suite.SUITE_FILES["dsm-bench-1"])
+    cs = suite.cases(s1, "default")
+    assert len(cs) == len(s1["scene"]) * 3 and {c.offset for c in cs} == {"0"}
+    assert all("translate" not in c.config["scene"][0] for c in cs)
 
 
 def test_default_size_covers_every_preset_scene_unit_and_light():
     from dsm.schemes.presets import names
     s = suite.load_suite()
     cs = suite.cases(s, "default")
-    assert len(cs) == len(s["scene"]) * 3                     # every scene at cm, m and km
+    assert len(cs) == len(s["scene"]) * (3 + 2)               # every scene at cm, m and km, and at 1e4 and 1e5
     schemes = cs[0].config["scheme"]
     assert sorted(t["preset"] for t in schemes if "preset" in t) == names()
     assert [t["type"] for t in cs[0].config["light"]] == ["scene", "spot", "point"]
     assert cs[0].config["map"]["cascades"] == 4
 
 
-def _by(cs, scene, unit):
-    return next(c for c in cs if c.scene == scene and c.unit == unit)
+def _by(cs, scene, unit, offset="0"):
+    return next(c for c in cs if c.scene == scene and c.unit == unit and c.offset == offset)
+
+
+def test_a_far_case_is_the_metre_case_moved():
+    """A far case's config is its origin case's at the far unit but for the translate (and the name)."""
+    cs = suite.cases(suite.load_suite(), "default")
+    for name in ("bunny", "grazing"):
+        here = _by(cs, name, "m")
+        for offset, translate in (("1e4", [1e4, 5e3, 0.0]), ("1e5", [1e5, 5e4, 0.0])):
+            far = _by(cs, name, "m", offset)
+            assert far.config["scene"][0].pop("translate") == translate and far.translate == tuple(translate)
+            assert far.config["experiment"].pop("name") == f"dsm-bench-2-{name}-m-at-{offset}"
+            assert {**here.config, "experiment": {}} == {**far.config, "experiment": {}}
+    assert {c.unit for c in cs if c.offset != "0"} == {"m"}
+
+
+def test_far_lights_move_with_the_scene():
+    """At 1e4 the loaded point light sits where the origin's does plus the translate (float64)."""
+    cs = suite.cases(suite.load_suite(), "default")
+    sd0, _, _, cfg0 = _loaded(_by(cs, "bunny", "m"))
+    sd1, lo1, hi1, cfg1 = _loaded(_by(cs, "bunny", "m", "1e4"))
+    p0 = [l.position for l in sd0.lights_for(cfg0.lights) if l.type == "point"][0]
+    p1 = [l.position for l in sd1.lights_for(cfg1.lights) if l.type == "point"][0]
+    np.testing.assert_allclose(np.asarray(p1) - np.asarray(p0), [1e4, 5e3, 0.0], rtol=0, atol=1e-9)
+    assert lo1[0] > 9e3 and hi1[0] < 1.1e4
 
 
 def test_configs_scale_by_the_unit_and_factor():
@@ -71,8 +107,8 @@ def test_a_scene_in_cm_is_100_times_the_metre_one():
     np.testing.assert_allclose(np.asarray(p_cm), 100 * np.asarray(p_m), rtol=1e-9)
 
 
-def _rec(contender, unit, n_acne, n_peterpan=0, n_receivers=1000, scene="s", light="directional"):
-    return {"scene": scene, "unit": unit, "light": light, "contender": contender, "n_receivers": n_receivers,
+def _rec(contender, unit, n_acne, n_peterpan=0, n_receivers=1000, scene="s", light="directional", offset="0"):
+    return {"scene": scene, "unit": unit, "offset": offset, "light": light, "contender": contender, "n_receivers": n_receivers,
             "n_acne": n_acne, "n_peterpan": n_peterpan, "acne_rate": n_acne / n_receivers,
             "peterpan_rate": 0.0, "error_rate": (n_acne + n_peterpan) / n_receivers, "texel_size": 0.01,
             "build_ms": 1.0, "lookup_ms": 1.0}
@@ -87,12 +123,15 @@ def test_compare_tells_a_change_from_a_tie():
         _rec("p", "m", 12), _rec("q", "m", 13), _rec("r", "m", 104, n_receivers=5000),
         _rec("t", "m", 94, n_receivers=5000), _rec("new", "m", 0)]}
     diff = compare.compare(a, b)
-    assert [c["case"][3] for c in diff["changed"]] == ["q", "t"]     # moves 3 > 2 and 6 > 5
+    assert [c["case"][4] for c in diff["changed"]] == ["q", "t"]     # moves 3 > 2 and 6 > 5
     assert diff["changed"][0]["moves"] == [["n_acne", 10, 13]]
     assert diff["n_tied"] == 2                                         # p (2 <= 2) and r (4 <= 5)
-    assert diff["added"] == [["s", "m", "directional", "new"]]
-    assert diff["removed"] == [["s", "m", "directional", "gone"]]
+    assert diff["added"] == [["s", "m", "0", "directional", "new"]]
+    assert diff["removed"] == [["s", "m", "0", "directional", "gone"]]
     assert diff["same_suite"]
+    # a dsm-bench-1 record has no offset: it sits at the origin
+    v1 = {k: v for k, v in _rec("p", "m", 10).items() if k != "offset"}
+    assert compare.case_key(v1) == ("s", "m", "0", "directional", "p")
 
 
 def test_compare_command_writes_its_files(tmp_path):
@@ -131,24 +170,121 @@ def test_bias_conversion_to_world_and_texels():
     assert bias_units.scale_free("godot") and not bias_units.scale_free("bevy")
 
 
-def test_benchmark_end_to_end_at_test_size(tmp_path, monkeypatch):
-    monkeypatch.setenv(SIZE_ENV, "test")
-    assert cli.main(["benchmark", "--out", str(tmp_path)]) == 0
-    doc = json.loads((tmp_path / "results.json").read_text())
-    assert doc["suite"] == "dsm-bench-1" and doc["suite_sha256"] == SUITE_1_SHA256 and doc["size"] == "test"
+@pytest.fixture(scope="module")
+def test_run(tmp_path_factory):
+    """dsm benchmark at the test size, once for this module: (its folder, results.json)."""
+    out = tmp_path_factory.mktemp("bench")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv(SIZE_ENV, "test")
+        assert cli.main(["benchmark", "--out", str(out)]) == 0
+    return out, json.loads((out / "results.json").read_text())
+
+
+def test_benchmark_end_to_end_at_test_size(test_run):
+    out, doc = test_run
+    assert doc["suite"] == "dsm-bench-2" and doc["suite_sha256"] == SUITE_2_SHA256 and doc["size"] == "test"
     assert doc["machine"]["cores"] >= 1 and doc["versions"]["dsm_git_commit"]
-    # 2 scenes x 2 units x 1 light x (3 contenders + the oracle)
-    assert len(doc["cases"]) == 16
-    recs = {(r["scene"], r["unit"], r["contender"]): r for r in doc["cases"]}
+    assert doc["far_unit"] == "m" and doc["flip_ppd"] == 67.0
+    # 2 scenes x (2 units + 2 offsets at m) x 1 light x (3 contenders + the oracle)
+    assert len(doc["cases"]) == 32
+    recs = {(r["scene"], r["unit"], r["offset"], r["contender"]): r for r in doc["cases"]}
     for r in doc["cases"]:
         if r["contender"] != "oracle":
             assert r["error_rate"] == pytest.approx((r["n_acne"] + r["n_peterpan"]) / r["n_receivers"])
+            assert 0.0 <= r["flip"] <= 1.0
     # the texel width follows the unit: 100 times wider in cm (the map is fitted to the scene)
-    assert recs[("bunny", "cm", "bevy")]["texel_size"] == pytest.approx(
-        100 * recs[("bunny", "m", "bevy")]["texel_size"], rel=1e-3)
-    page = (tmp_path / "leaderboard.html").read_text()
+    assert recs[("bunny", "cm", "0", "bevy")]["texel_size"] == pytest.approx(
+        100 * recs[("bunny", "m", "0", "bevy")]["texel_size"], rel=1e-3)
+    page = (out / "leaderboard.html").read_text()
     assert "Ranking" in page and "Oracle floor" in page and "three" in page and "http" not in page
     assert "function sortBy" in page and "class=sortable" in page           # report.html's header sort
+    assert "FLIP" in page and "error at 1e5" in page and "far change" in page and "src=scale.png" in page
+
+
+def test_far_cases_keep_the_exact_side_and_lose_only_the_map_s_precision(test_run):
+    """Where the scene sits moves no exact count: receivers and V*'s shadowed receivers are the
+    origin's at 1e4 and 1e5, every contender. The errors may move, and only in cases the map's
+    float32 limits (a texel under 64 float32 steps, design.md's far-from-origin section): measured
+    (test size, bunny at m): receiver_plane's acne 21 at the origin, 135 at 1e4, 150 at 1e5."""
+    from dsm.maps.headroom import FEW_STEPS
+    _, doc = test_run
+    recs = {(r["scene"], r["unit"], r["offset"], r["contender"]): r for r in doc["cases"]}
+    moved = 0
+    for (scene, unit, offset, who), r in recs.items():
+        if offset == "0":
+            continue
+        here = recs[(scene, unit, "0", who)]
+        assert r["n_receivers"] == here["n_receivers"]
+        if who == "oracle":
+            continue
+        assert r["n_gt_shadowed"] == here["n_gt_shadowed"]
+        if compare.case_changes(here, r):
+            moved += 1
+            assert r["texel_f32_steps"] < FEW_STEPS <= here["texel_f32_steps"]
+    assert moved > 0                     # the axis measures something at this size
+    # the ranking's far columns, by a second computation in numpy from the records
+    ranked = {r["contender"]: r for r in ranking.ranking(doc)}
+    for who in ("bevy", "three", "receiver_plane"):
+        far = [recs[(s, "m", "1e5", who)]["error_rate"] - recs[(s, "m", "0", who)]["error_rate"]
+               for s in ("bunny", "grazing")]
+        assert ranked[who]["far_change"] == pytest.approx(float(np.mean(far)), abs=1e-15)
+        assert ranked[who]["far"]["1e4"] == pytest.approx(
+            float(np.mean([recs[(s, "m", "1e4", who)]["error_rate"] for s in ("bunny", "grazing")])), abs=1e-15)
+
+
+def test_far_numbers_come_back_in_camera_relative_precision(test_run):
+    """The far case run as an engine with camera-relative positions counts what the origin
+    counts, contender by contender: the far axis's moves are the map's float32, nothing else."""
+    import dsm
+    _, doc = test_run
+    case = _by(suite.cases(suite.load_suite(), "test"), "grazing", "m", "1e4")
+    case.config["scene"][0]["precision"] = "camera_relative"
+    res = dsm.run(case.config)
+    origin = {(r["contender"]): r for r in doc["cases"] if r["scene"] == "grazing" and r["unit"] == "m"
+              and r["offset"] == "0"}
+    for row in res.rows:
+        here = origin[row["preset"] or row["scheme"]]
+        assert (row["n_receivers"], row["n_acne"], row["n_peterpan"]) == \
+            (here["n_receivers"], here["n_acne"], here["n_peterpan"])
+
+
+def test_the_scale_figure_and_tables_hold_the_results_numbers(test_run):
+    """scale.png is beside the page, draws a curve per contender (and the oracle) with the
+    numbers the page's tables print, which are the records' means (numpy, float64)."""
+    from PIL import Image
+    import re
+    from dsm.benchmark import figure
+    out, doc = test_run
+    with Image.open(out / "scale.png") as im:
+        assert im.format == "PNG" and im.width > 400 and im.height > 150
+        pixels = np.asarray(im.convert("RGB")).reshape(-1, 3).astype(int)
+    who = ["bevy", "oracle", "receiver_plane", "three"]
+    def by_numpy(keep):
+        value = lambda r: r["per_texel_objective"] if r["contender"] == "oracle" else r["error_rate"]
+        return [float(np.mean(np.array([value(r) for r in doc["cases"] if r["contender"] == c and keep(r)],
+                                       np.float64))) for c in who]
+    data = figure.series(doc)
+    assert data["unit"][0] == ["cm", "m"] and data["offset"][0] == ["0", "1e4", "1e5"]
+    for u_i, u in enumerate(["cm", "m"]):
+        expect = by_numpy(lambda r, u=u: r["unit"] == u and r["offset"] == "0")
+        np.testing.assert_allclose([data["unit"][1][c][u_i] for c in who], expect, rtol=1e-12, atol=1e-15)
+    for o_i, o in enumerate(["0", "1e4", "1e5"]):
+        expect = by_numpy(lambda r, o=o: r["unit"] == "m" and r["offset"] == o)
+        np.testing.assert_allclose([data["offset"][1][c][o_i] for c in who], expect, rtol=1e-12, atol=1e-15)
+    fig = figure.draw(data, "m")
+    lines = {(ax.get_xlabel()[:6], ln.get_label()): list(ln.get_ydata()) for ax in fig.axes for ln in ax.get_lines()}
+    assert sorted(label for kind, label in lines if kind == "scene ") == who
+    assert lines[("offset", "receiver_plane")] == data["offset"][1]["receiver_plane"]
+    from matplotlib.colors import to_rgb
+    for ln in fig.axes[0].get_lines():       # each contender's curve is drawn in the PNG, in its colour
+        rgb = np.round(np.array(to_rgb(ln.get_color())) * 255).astype(int)
+        assert (np.abs(pixels - rgb).max(1) <= 8).sum() > 20, ln.get_label()
+    # the page's offset table: a row per contender, the same numbers
+    page = (out / "leaderboard.html").read_text()
+    section = page[page.index("Error rate against the offset"):]
+    row = re.search(r"<tr><td>receiver_plane</td>(.*?)</tr>", section).group(1)
+    cells = [float(v) for v in re.findall(r"data-v='([^']*)'", row)]
+    assert cells == data["offset"][1]["receiver_plane"]
 
 
 def test_a_second_benchmark_into_the_same_folder_is_refused_and_keeps_the_first(tmp_path, capsys):
@@ -162,3 +298,60 @@ def test_a_second_benchmark_into_the_same_folder_is_refused_and_keeps_the_first(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--out" in err[0] and "--force" in err[0] and "results.json" in err[0]
     assert (out / "results.json").read_text() == '{"kept": true}'
+
+
+def test_flip_of_identical_renders_is_zero_and_a_pair_is_flip_evaluator_s():
+    import flip_evaluator
+    from dsm.benchmark import perceptual
+    rng = np.random.default_rng(3)
+    a, b = rng.random((24, 32)), rng.random((24, 32))
+    assert perceptual.mean_flip(a, a, 67.0) == 0.0
+    rgb = lambda g: np.stack([g, g, g], axis=2).astype(np.float32)
+    expect = flip_evaluator.evaluate(rgb(a), rgb(b), "LDR", parameters={"ppd": 67.0})[1]
+    assert perceptual.mean_flip(a, b, 67.0) == pytest.approx(expect, rel=1e-6) and expect > 0.05
+    # the pinned pixels per degree is what FLIP is told
+    assert perceptual.mean_flip(a, b, 20.0) == pytest.approx(
+        flip_evaluator.evaluate(rgb(a), rgb(b), "LDR", parameters={"ppd": 20.0})[1], rel=1e-6)
+    assert perceptual.mean_flip(a, b, 20.0) != pytest.approx(expect, rel=1e-3)
+
+
+def _plane_box_spot_at_1e5():
+    """plane_box at 1e5 under the spot at the default size, one contender: its map's view leaves out
+    one of the light's receivers (measured), which the renders must leave out too."""
+    case = _by(suite.cases(suite.load_suite(), "default"), "plane_box", "m", "1e5")
+    cfg = {**case.config, "light": [t for t in case.config["light"] if t["type"] == "spot"],
+           "scheme": [{"preset": "bevy"}], "map": {"resolution": case.config["map"]["resolution"]}}
+    return suite.Case(case.scene, case.unit, case.scale, cfg, case.offset, case.translate)
+
+
+@pytest.mark.parametrize("which", ["bunny_far", "plane_box_spot_far"])
+def test_the_renders_are_the_run_s_shadow_image_and_its_exact_twin(tmp_path, which):
+    """A far case run into a folder: the benchmark's render under V is the run's shadow PNG, byte for
+    byte (8-bit); the exact render differs from it only on the case's errors (brighter on acne,
+    darker on peter-panning); the case's FLIP is flip-evaluator's on these two arrays."""
+    import dsm
+    import flip_evaluator
+    from PIL import Image
+    from dsm.benchmark import render, results
+    from dsm.report.figures import image_paths, shade_image
+    from dsm.truth import metrics
+    case = _by(suite.cases(suite.load_suite(), "test"), "bunny", "m", "1e4") if which == "bunny_far" \
+        else _plane_box_spot_at_1e5()
+    res = dsm.run(case.config, out=tmp_path / "run")
+    if which == "plane_box_spot_far":      # the view's subset is there: fewer case receivers than the light has
+        setups = render.light_setups(case.config)
+        assert res.rows[0]["n_receivers"] < len(setups[(res.rows[0]["scene"], res.rows[0]["light"])][1].pixels)
+    setups = render.light_setups(case.config)
+    flips = results.case_flips(case, res, 67.0)
+    for row in res.rows:
+        shadowed, exact = render.case_renders(setups, row, res.images[row["case"]])
+        with Image.open(res.out / image_paths(row)[1]) as im:
+            assert np.array_equal(shade_image(shadowed), np.asarray(im))
+        c = metrics.base_class(res.images[row["case"]])
+        acne, peter = c == metrics.ACNE, c == metrics.PETERPAN
+        assert np.array_equal(shadowed[~(acne | peter)], exact[~(acne | peter)])
+        assert (exact[acne] >= shadowed[acne]).all() and (exact[peter] <= shadowed[peter]).all()
+        assert (exact != shadowed).sum() > 0 or row["n_acne"] + row["n_peterpan"] == 0
+        rgb = lambda g: np.repeat(np.clip(g, 0, 1)[..., None], 3, axis=2).astype(np.float32)
+        assert flips[row["case"]] == pytest.approx(
+            flip_evaluator.evaluate(rgb(exact), rgb(shadowed), "LDR", parameters={"ppd": 67.0})[1], rel=1e-6)

@@ -115,8 +115,9 @@ def test_filtering_and_a_case_s_images(page):
 
 
 def test_the_benchmark_leaderboard_sorts_in_the_browser(tmp_path):
-    """dsm benchmark's leaderboard.html from the file system: the answer first, and a click on the
-    error-rate header twice orders the ranking rows by hand-made error rates, largest first."""
+    """dsm benchmark's leaderboard.html from the file system: the answer first, a click on the
+    error-rate header twice orders the ranking rows by hand-made error rates, largest first, and
+    its scale.png shows."""
     from dsm.benchmark import page as bench_page
     rates = {"a": 0.30, "b": 0.10, "c": 0.20}          # one case each at 1000 receivers
     cases = [{"scene": "s", "unit": "m", "light": "directional", "contender": c, "n_receivers": 1000,
@@ -138,5 +139,8 @@ def test_the_benchmark_leaderboard_sorts_in_the_browser(tmp_path):
         order = drv.execute_script("return Array.from(arguments[0].tBodies[0].rows).map(r => r.cells[1].textContent)",
                                    table)
         assert order == ["a", "c", "b"]
+        # the scale figure beside the page loads from the file system (a broken link has no natural width)
+        assert drv.execute_script("const i = document.querySelector('img[src=\"scale.png\"]');"
+                                  "return i !== null && i.complete && i.naturalWidth > 400")
     finally:
         drv.quit()

@@ -1,1 +1,1 @@
-"""dsm benchmark: the frozen shadow-bias suite (dsm-bench-1), its results, comparison and leaderboard."""
+"""dsm benchmark: the frozen shadow-bias suites (dsm-bench-1, dsm-bench-2), their results, comparison and leaderboard."""

@@ -8,6 +8,7 @@ case's, as the kit reports it). A ``range`` term (a fraction of the depth range)
 from __future__ import annotations
 
 from ..schemes.presets import PRESETS
+from .ranking import at_origin
 
 TERMS = ("depth_bias", "normal_offset")
 
@@ -22,10 +23,10 @@ def converted(length, texel_world: float) -> tuple:
 
 
 def bias_rows(doc: dict, scene: str) -> list:
-    """Per preset, light and unit at ``scene``: each term's value as given, in world units and in texels."""
+    """Per preset, light and unit at ``scene`` (at the origin): each term's value as given, in world units and in texels."""
     out = []
     for r in doc["cases"]:
-        if r["scene"] != scene or r["contender"] not in PRESETS:
+        if r["scene"] != scene or r["contender"] not in PRESETS or not at_origin(r):
             continue
         values = PRESETS[r["contender"]].values[r["light"]]
         row = {"preset": r["contender"], "light": r["light"], "unit": r["unit"], "texel_size": r["texel_size"],

@@ -1,4 +1,4 @@
-"""``dsm benchmark``: run the suite (or compare two results) and write results.json and leaderboard.html."""
+"""``dsm benchmark``: run the suite (or compare two results) and write results.json, leaderboard.html and scale.png."""
 from __future__ import annotations
 
 import os
@@ -8,17 +8,20 @@ from pathlib import Path
 from ..config.read import VARIANTS
 from ..experiment import lock
 from . import compare, page, results
+from .suite import LATEST, SUITE_FILES
 
 SIZE_ENV = "DSM_BENCHMARK_SIZE"     # a hidden size for tests: DSM_BENCHMARK_SIZE=test
 
 
 def add_parser(sub):
     """Add the ``benchmark`` subcommand to an argparse subparsers object."""
-    b = sub.add_parser("benchmark", help="run the frozen shadow-bias suite dsm-bench-1: results.json and a "
+    b = sub.add_parser("benchmark", help=f"run the frozen shadow-bias suite ({LATEST}): results.json and a "
                        "leaderboard page; or compare two results")
     b.add_argument("--out", default="benchmark", help="folder for results.json and leaderboard.html (default: benchmark/)")
     b.add_argument("--full", action="store_true", help="the full size (larger resolutions: a GPU or a cluster)")
     b.add_argument("--compare", nargs=2, metavar=("A.json", "B.json"), help="compare two results.json files")
+    b.add_argument("--suite", choices=list(SUITE_FILES), default=LATEST,
+                   help=f"the suite's version (default: the newest, {LATEST}); an older one re-runs its cases")
     b.add_argument("--variant", choices=VARIANTS, help="Mitsuba variant (default llvm_ad_rgb)")
     b.add_argument("--force", action="store_true", help="replace the results a previous run left in --out")
     return b
@@ -53,6 +56,6 @@ def _compare(args, out: Path) -> int:
 
 def _run(args, out: Path) -> int:
     size = "full" if args.full else os.environ.get(SIZE_ENV, "default")
-    doc = results.run_suite(size, args.variant, progress=lambda m: print(m, file=sys.stderr))
+    doc = results.run_suite(size, args.variant, progress=lambda m: print(m, file=sys.stderr), version=args.suite)
     print(f"dsm benchmark: wrote {results.write(doc, out)} and {page.write_page(doc, out)}")
     return 0

@@ -11,14 +11,17 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from .ranking import offset_of
+
 COUNTS = ("n_receivers", "n_acne", "n_peterpan")
 TIE_FRACTION = 0.001           # of the case's receivers
 TIE_MIN = 2                    # receivers
 
 
 def case_key(rec: dict) -> tuple:
-    """A case's identity across runs: (scene, unit, light, contender)."""
-    return rec["scene"], rec["unit"], rec["light"], rec["contender"]
+    """A case's identity across runs: (scene, unit, offset, light, contender); a dsm-bench-1 record,
+    which has no offset, sits at the origin ("0")."""
+    return rec["scene"], rec["unit"], offset_of(rec), rec["light"], rec["contender"]
 
 
 def tie_tolerance(n_receivers: int) -> float:

@@ -1,12 +1,13 @@
-"""The leaderboard page: static HTML next to results.json (no network), sortable like report.html."""
+"""The leaderboard page: static HTML next to results.json and scale.png (no network), sortable like report.html."""
 from __future__ import annotations
 
 import html
+import math
 from pathlib import Path
 
 from ..report.html import CSS, SCRIPT
 from ..schemes.presets import PRESETS
-from . import bias_units, ranking
+from . import bias_units, figure, ranking
 
 SORT_SCRIPT = SCRIPT.split("const cases")[0]      # report.html's header sort, without its case viewer
 
@@ -42,10 +43,24 @@ def answer(doc: dict, ranked: list) -> str:
         robust_text = (f"Most scale-robust preset: {robust['contender']} (mean spread of its error across cm, m and "
                        f"km: {robust['spread']:.4f}; its mean error rate {robust['error']:.4f}: a preset that fails "
                        "alike at every unit is robust by this measure, not good).")
-    return (f"<p class=answer>Ranking (mean error rate over every scene, unit and light): {html.escape(top)}.</p>"
-            f"<p class=answer>{html.escape(robust_text)}</p>"
+    return (f"<p class=answer>Ranking (mean error rate over every scene, unit and light, at the origin): "
+            f"{html.escape(top)}.</p>"
+            f"<p class=answer>{html.escape(robust_text)}</p>" + far_answer(ranked) +
             f"<p class=answer>Oracle floor: per-texel {floor['per_texel_objective']:.2g}, best single world bias "
             f"{floor['world_objective']:.4f}, best single texel bias {floor['texel_objective']:.4f}.</p>")
+
+
+def far_answer(ranked: list) -> str:
+    """The opening's line on the far-from-origin axis: the preset whose error moves least from the origin."""
+    pool = [r for r in ranked if r["contender"] in PRESETS and r.get("far_change") is not None
+            and not math.isnan(r["far_change"])]
+    if not pool:
+        return ""
+    best = min(pool, key=lambda r: (abs(r["far_change"]), r["error"], r["contender"]))
+    text = (f"Far from the origin: {best['contender']} moves least, its error rate {best['far_change']:+.4f} from the "
+            f"origin to {list(best['far'])[-1]} (the map in float32 world coordinates; the exact side is exact; "
+            "a preset that fails alike everywhere moves little: robust by this measure, not good).")
+    return f"<p class=answer>{html.escape(text)}</p>"
 
 
 def grid_section(doc: dict) -> str:
@@ -57,11 +72,20 @@ def grid_section(doc: dict) -> str:
 
 
 def scale_section(doc: dict) -> str:
-    """Per contender: its error rate against the unit, and its spread."""
-    cells = ranking.error_by(doc, lambda r: r["unit"])
-    units = [u for u in ("cm", "m", "km") if any(u in d for d in cells.values())]
-    rows = [[c] + [cells[c].get(u) for u in units] for c in sorted(cells)]
-    return "<h2>Error rate against scale</h2>" + table(["contender"] + units, rows)
+    """Per contender: its error rate against the unit and against the offset, as scale.png and as tables."""
+    data = figure.series(doc)
+    units, by_unit = data["unit"]
+    out = ("<h2>Error rate against scale</h2><p class=note>Mean error rate over the scenes and lights (the oracle: "
+           "its per-texel floor); the figure draws the tables' numbers.</p>"
+           f"<img src={figure.FILE} alt='error rate against the scene unit and offset, per contender'>"
+           + table(["contender"] + units, [[c] + v for c, v in by_unit.items()]))
+    if "offset" in data:
+        offs, by_off = data["offset"]
+        out += (f"<h3>Error rate against the offset (at {html.escape(doc['far_unit'])})</h3><p class=note>Each scene "
+                "moved by the offset (world units), camera and lights with it; the engine holds positions in float32 "
+                "world coordinates, so the map loses precision there; the exact visibility does not move.</p>"
+                + table(["contender"] + offs, [[c] + v for c, v in by_off.items()]))
+    return out
 
 
 def bias_section(doc: dict) -> str:
@@ -80,16 +104,25 @@ def bias_section(doc: dict) -> str:
 def write_page(doc: dict, out: Path) -> Path:
     """Write ``leaderboard.html`` in ``out`` from a result document; returns its path."""
     ranked = ranking.ranking(doc)
-    head = ["rank", "contender", "error rate", "acne rate", "peter-pan rate", "scale spread", "build ms", "lookup ms"]
-    rows = [[r["rank"], r["contender"], r["error"], r["acne"], r["peterpan"], r["spread"], r["build_ms"],
-             r["lookup_ms"]] for r in ranked]
+    far = list(ranked[0]["far"])[1:] if ranked else []
+    head = ["rank", "contender", "error rate", "acne rate", "peter-pan rate", "scale spread", "FLIP"]
+    head += [f"error at {o}" for o in far] + (["far change"] if far else []) + ["build ms", "lookup ms"]
+    rows = [[r["rank"], r["contender"], r["error"], r["acne"], r["peterpan"], r["spread"], r["flip"]]
+            + [r["far"][o] for o in far] + ([r["far_change"]] if far else []) + [r["build_ms"], r["lookup_ms"]]
+            for r in ranked]
     m = doc["machine"]
     meta = (f"{doc['suite']} (sha256 {doc['suite_sha256'][:12]}), size {doc['size']}, dsm {doc['dsm_version']} "
             f"{doc['versions'].get('dsm_git_commit')}, {doc['variant']}, {m['cpu']} ({m['cores']} cores)")
+    flip = (f" FLIP: the mean FLIP error (flip-evaluator, LDR, {doc['flip_ppd']:g} pixels per degree) of the "
+            "shaded render under the contender's visibility against the same render under the exact one."
+            if doc.get("flip_ppd") else "")
     body = (f"<h1>Shadow-bias leaderboard: {html.escape(doc['suite'])}</h1><p class=meta>{html.escape(meta)}</p>"
-            + answer(doc, ranked) + "<h2>Ranking</h2><p class=note>Scores within 0.001 tie (shared rank, by name). "
-            "Click a header to sort.</p>" + table(head, rows) + grid_section(doc) + scale_section(doc)
-            + bias_section(doc))
+            + answer(doc, ranked) + "<h2>Ranking</h2><p class=note>Scores within 0.001 tie (shared rank, by name); "
+            "every column but the offsets' reads the cases at the origin. Far change: the error at the farthest "
+            f"offset less the one at the origin.{html.escape(flip)} Click a header to sort.</p>" + table(head, rows)
+            + grid_section(doc) + scale_section(doc) + bias_section(doc))
+    Path(out).mkdir(parents=True, exist_ok=True)
+    figure.write(doc, out)                      # scale.png, which the page shows
     path = Path(out) / "leaderboard.html"
     path.write_text(f"<!doctype html><html><head><meta charset=utf-8><title>{html.escape(doc['suite'])}</title>"
                     f"<style>{CSS}</style></head><body>{body}<script>{SORT_SCRIPT}</script></body></html>")

@@ -5,14 +5,38 @@ case it ran (scene x unit x light). Two contenders whose scores differ by less t
 of receivers, the machines' rounding, :mod:`dsm.benchmark.compare`) tie: they share a rank
 (competition ranking: 1, 1, 3), listed by name. Scale spread: for each (scene, light), the largest
 minus the smallest error rate over the units, averaged; the smallest spread is the most
-scale-robust.
+scale-robust. The score and the spread read the cases at the origin only; from dsm-bench-2 on the
+far-from-origin cases (every scene at the suite's ``far_unit``, moved by each offset) give each
+contender its error rate per offset and its far change: the mean over (scene, light) of its error
+at the farthest offset less its error at the origin (same unit).
 """
 from __future__ import annotations
 
 import math
 from collections import defaultdict
 
+from .suite import ORIGIN
+
 TIE_RATE = 0.001
+
+
+def offset_of(rec: dict) -> str:
+    """A record's offset label (a dsm-bench-1 record, which has none, sits at the origin)."""
+    return rec.get("offset", ORIGIN)
+
+
+def at_origin(rec: dict) -> bool:
+    """Whether a record's case sits at the origin."""
+    return offset_of(rec) == ORIGIN
+
+
+def offsets(doc: dict) -> list:
+    """The offset labels of a result's cases, the origin first, in the order the cases ran."""
+    out = [ORIGIN]
+    for r in doc["cases"]:
+        if offset_of(r) not in out:
+            out.append(offset_of(r))
+    return out
 
 
 def contender_rows(doc: dict) -> dict:
@@ -38,14 +62,34 @@ def scale_spread(rows: list) -> float:
     return mean(max(v) - min(v) for v in by.values() if len(v) > 1)
 
 
+def far_change(rows: list, far_unit: str, offset: str) -> float:
+    """The mean over (scene, light) of the error rate at ``offset`` less the one at the origin, both at ``far_unit``."""
+    by = defaultdict(dict)
+    for r in rows:
+        if r["unit"] == far_unit:
+            by[(r["scene"], r["light"])][offset_of(r)] = r["error_rate"]
+    return mean(d[offset] - d[ORIGIN] for d in by.values() if offset in d and ORIGIN in d)
+
+
+def scores(name: str, rows: list, far_unit, far: list) -> dict:
+    """One contender's leaderboard numbers from its records: origin means, FLIP, far columns."""
+    here = [r for r in rows if at_origin(r)]
+    out = {"contender": name, "error": mean(r["error_rate"] for r in here),
+           "acne": mean(r["acne_rate"] for r in here), "peterpan": mean(r["peterpan_rate"] for r in here),
+           "spread": scale_spread(here), "build_ms": mean(r["build_ms"] for r in here),
+           "lookup_ms": mean(r["lookup_ms"] for r in here),
+           "flip": mean(r["flip"] for r in here) if all("flip" in r for r in here) else None}
+    out["far"] = {o: mean(r["error_rate"] for r in rows if offset_of(r) == o and r["unit"] == far_unit)
+                  for o in far}
+    out["far_change"] = far_change(rows, far_unit, far[-1]) if len(far) > 1 else None
+    return out
+
+
 def ranking(doc: dict) -> list:
-    """The leaderboard rows, best first: rank, contender, score, acne, peter-pan, scale spread."""
-    scored = []
-    for name, rows in contender_rows(doc).items():
-        scored.append({"contender": name, "error": mean(r["error_rate"] for r in rows),
-                       "acne": mean(r["acne_rate"] for r in rows), "peterpan": mean(r["peterpan_rate"] for r in rows),
-                       "spread": scale_spread(rows), "build_ms": mean(r["build_ms"] for r in rows),
-                       "lookup_ms": mean(r["lookup_ms"] for r in rows)})
+    """The leaderboard rows, best first: rank, contender, score, acne, peter-pan, scale spread, FLIP,
+    error per offset (``far``: offset -> error at the far unit) and the far change."""
+    far = offsets(doc) if doc.get("far_unit") else []
+    scored = [scores(name, rows, doc.get("far_unit"), far) for name, rows in contender_rows(doc).items()]
     scored.sort(key=lambda s: (s["error"], s["contender"]))
     out, lead = [], None
     for i, s in enumerate(scored):
@@ -64,15 +108,18 @@ def most_scale_robust(ranked: list, among=None):
 
 
 def oracle_floor(doc: dict) -> dict:
-    """The oracles' objectives averaged over the cases: world, texel and per-texel."""
-    rows = [r for r in doc["cases"] if r["contender"] == "oracle"]
+    """The oracles' objectives averaged over the cases at the origin: world, texel and per-texel."""
+    rows = [r for r in doc["cases"] if r["contender"] == "oracle" and at_origin(r)]
     return {k: mean(r[k] for r in rows) for k in ("world_objective", "texel_objective", "per_texel_objective")}
 
 
-def error_by(doc: dict, key) -> dict:
-    """Contender -> {key(record): mean error rate}, with the oracle's per-texel floor as ``oracle``."""
+def error_by(doc: dict, key, keep=at_origin) -> dict:
+    """Contender -> {key(record): mean error rate} over the records ``keep`` passes (default: at the
+    origin), with the oracle's per-texel floor as ``oracle``."""
     acc = defaultdict(lambda: defaultdict(list))
     for r in doc["cases"]:
+        if not keep(r):
+            continue
         value = r["per_texel_objective"] if r["contender"] == "oracle" else r["error_rate"]
         acc[r["contender"]][key(r)].append(value)
     return {c: {k: mean(v) for k, v in d.items()} for c, d in acc.items()}

@@ -1,4 +1,10 @@
-"""A benchmark run's results: the suite run through dsm.run, one JSON per run with its provenance."""
+"""A benchmark run's results: the suite run through dsm.run, one JSON per run with its provenance.
+
+From dsm-bench-2 on a case's record carries its offset (label and ``translate``), the exact side's
+shadowed count (``n_gt_shadowed``: where the scene sits must not move it), the map's float32 headroom
+(``texel_f32_steps``: below 64 the case is precision-limited) and the mean FLIP of its
+shadowed render against the exact render (:mod:`dsm.benchmark.render`, :mod:`dsm.benchmark.perceptual`).
+"""
 from __future__ import annotations
 
 import json
@@ -6,10 +12,11 @@ import os
 import platform
 from pathlib import Path
 
-from .suite import cases, load_suite, suite_sha256
+from . import perceptual, render
+from .suite import LATEST, ORIGIN, SUITE_FILES, cases, load_suite, suite_sha256
 
-MEASURES = ("n_receivers", "n_acne", "n_peterpan", "acne_rate", "peterpan_rate", "error_rate", "texel_size",
-            "build_ms", "lookup_ms")
+MEASURES = ("n_receivers", "n_gt_shadowed", "n_acne", "n_peterpan", "acne_rate", "peterpan_rate", "error_rate",
+            "texel_size", "texel_f32_steps", "build_ms", "lookup_ms")
 ORACLE_MEASURES = ("world_objective", "texel_objective", "per_texel_objective")
 
 
@@ -36,40 +43,57 @@ def contender_of(row: dict) -> str:
     return row["preset"] or row["scheme"]
 
 
-def case_records(case, results) -> list:
-    """The suite's records of one (scene, unit) run: one per light and contender, plus its oracle floor."""
+def case_records(case, results, flips=None) -> list:
+    """The suite's records of one (scene, unit, offset) run: one per light and contender (with its
+    FLIP from ``flips``, case id -> mean FLIP, where given), plus its oracle floor."""
     out = []
+    where = {"offset": case.offset, "translate": list(case.translate)}
     for row in results.rows:
-        rec = {"scene": case.scene, "unit": case.unit, "light": light_kind(row["light"]),
+        rec = {"scene": case.scene, "unit": case.unit, **where, "light": light_kind(row["light"]),
                "contender": contender_of(row), "params": row["params"]}
         rec.update({k: row[k] for k in MEASURES})
+        if flips is not None:
+            rec["flip"] = flips[row["case"]]
         out.append(rec)
     for light in sorted({light_kind(o["light"]) for o in results.oracle}):
         rows = [o for o in results.oracle if light_kind(o["light"]) == light]
         best = min(rows, key=lambda o: o["per_texel_objective"])     # the floor over the cullings run
-        rec = {"scene": case.scene, "unit": case.unit, "light": light, "contender": "oracle",
+        rec = {"scene": case.scene, "unit": case.unit, **where, "light": light, "contender": "oracle",
                "n_receivers": best["n_receivers"]}
         rec.update({k: float(min(o[k] for o in rows)) for k in ORACLE_MEASURES})
         out.append(rec)
     return out
 
 
-def run_suite(size: str = "default", variant: str | None = None, progress=print) -> dict:
-    """Run the suite at ``size`` and return its result document (see :func:`write`)."""
+def case_flips(case, res, ppd: float, variant: str | None = None) -> dict:
+    """Case id -> mean FLIP of each row's shadowed render against the exact render, at ``ppd``."""
+    setups = render.light_setups(case.config, variant)
+    out = {}
+    for row in res.rows:
+        shadowed, exact = render.case_renders(setups, row, res.images[row["case"]])
+        out[row["case"]] = perceptual.mean_flip(exact, shadowed, ppd)
+    return out
+
+
+def run_suite(size: str = "default", variant: str | None = None, progress=print, version: str = LATEST) -> dict:
+    """Run suite ``version`` at ``size`` and return its result document (see :func:`write`)."""
     import dsm
     from ..tools.env import versions
-    suite = load_suite()
+    suite = load_suite(SUITE_FILES[version])
+    ppd = suite.get("flip", {}).get("ppd")          # dsm-bench-1 has no FLIP
     todo = cases(suite, size)
     records, run_variant = [], None
     for i, case in enumerate(todo):
         if progress:
-            progress(f"dsm benchmark: {i + 1}/{len(todo)} {case.scene} in {case.unit} (scale {case.scale:g})")
+            where = "" if case.offset == ORIGIN else f" at {case.offset}"
+            progress(f"dsm benchmark: {i + 1}/{len(todo)} {case.scene} in {case.unit}{where} (scale {case.scale:g})")
         res = dsm.run(case.config, variant=variant)
         run_variant = res.run.get("variant")
-        records += case_records(case, res)
-    return {"suite": suite["suite"]["name"], "suite_sha256": suite_sha256(), "size": size,
+        records += case_records(case, res, None if ppd is None else case_flips(case, res, ppd, variant))
+    s = suite["suite"]
+    return {"suite": s["name"], "suite_sha256": suite_sha256(SUITE_FILES[version]), "size": size,
             "dsm_version": dsm.__version__, "versions": versions(), "variant": run_variant,
-            "machine": machine(), "cases": records}
+            "machine": machine(), "far_unit": s.get("far_unit"), "flip_ppd": ppd, "cases": records}
 
 
 def write(doc: dict, out: Path) -> Path:

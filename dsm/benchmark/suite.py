@@ -1,8 +1,9 @@
-"""The frozen suite: its definition (suite_1.toml in the package), its hash, and the run configs it makes.
+"""The frozen suites: their definitions (suite_<n>.toml in the package), their hashes, and the run configs they make.
 
-One config per (scene, unit): the scene at ``scale = factor * unit`` (factor: native units to
-metres; unit: 100 for centimetres, 1 for metres, 0.001 for kilometres), its three lights and every
-contender. Spot and point positions are stated in metres about the scene's centre and handed to
+One config per (scene, unit, offset): the scene at ``scale = factor * unit`` (factor: native units
+to metres; unit: 100 for centimetres, 1 for metres, 0.001 for kilometres), at the origin or, from
+dsm-bench-2 on, moved by an offset's ``translate`` at the suite's ``far_unit``, its three lights and
+every contender. Spot and point positions are stated in metres about the scene's centre and handed to
 the kit in the scene's native units (the kit multiplies a light's position by the scene's scale).
 """
 from __future__ import annotations
@@ -12,7 +13,12 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-SUITE_FILE = Path(__file__).with_name("suite_1.toml")
+# every version, oldest first; the newest is what ``dsm benchmark`` runs unless told otherwise
+SUITE_FILES = {"dsm-bench-1": Path(__file__).with_name("suite_1.toml"),
+               "dsm-bench-2": Path(__file__).with_name("suite_2.toml")}
+LATEST = list(SUITE_FILES)[-1]
+SUITE_FILE = SUITE_FILES[LATEST]
+ORIGIN = "0"              # the offset label of a case at the origin (every case of dsm-bench-1)
 MESHES = Path(__file__).resolve().parents[2] / "data" / "meshes"
 SIZES = ("test", "default", "full")
 LIGHTS = ("directional", "spot", "point")
@@ -20,11 +26,13 @@ LIGHTS = ("directional", "spot", "point")
 
 @dataclass(frozen=True)
 class Case:
-    """One run of the suite: a scene at one unit, with its lights and contenders."""
+    """One run of the suite: a scene at one unit and offset, with its lights and contenders."""
     scene: str
     unit: str
     scale: float          # the config's ``scale``: native units to the unit's world units
     config: dict
+    offset: str = ORIGIN  # the offset's label ("0", "1e4", ...)
+    translate: tuple = (0.0, 0.0, 0.0)    # world units after the scale
 
 
 def suite_sha256(path: Path = SUITE_FILE) -> str:
@@ -46,7 +54,16 @@ def size_of(suite: dict, size: str) -> dict:
     s.setdefault("units", [u for u, _ in suite["suite"]["units"]])
     s.setdefault("lights", list(LIGHTS))
     s.setdefault("contenders", suite["contenders"]["presets"] + suite["contenders"]["schemes"])
+    s.setdefault("offsets", [label for label, _ in suite["suite"].get("offsets", [])])
     return s
+
+
+def axes(suite: dict, s: dict) -> list:
+    """The (unit, offset label, translate) of each run of a scene at size ``s``: every unit at the
+    origin, then each far offset at the suite's ``far_unit``."""
+    translate = {label: tuple(float(c) for c in t) for label, t in suite["suite"].get("offsets", [])}
+    out = [(u, ORIGIN, (0.0, 0.0, 0.0)) for u in s["units"]]
+    return out + [(suite["suite"]["far_unit"], o, translate[o]) for o in s["offsets"] if o != ORIGIN]
 
 
 def contender_tables(suite: dict, names: list) -> list:
@@ -55,12 +72,13 @@ def contender_tables(suite: dict, names: list) -> list:
     return [{"preset": n} if n in presets else {"name": n} for n in names]
 
 
-def scene_table(scene: dict, scale: float) -> dict:
-    """The [[scene]] table of one suite scene at ``scale``."""
+def scene_table(scene: dict, scale: float, translate=(0.0, 0.0, 0.0)) -> dict:
+    """The [[scene]] table of one suite scene at ``scale``, moved by ``translate`` (given only when not the origin)."""
+    where = {"translate": list(translate)} if any(translate) else {}
     if "file" in scene:
-        return {"file": str(MESHES / scene["file"]), "scale": scale, "closed": {"mesh": scene["closed"]}}
+        return {"file": str(MESHES / scene["file"]), "scale": scale, **where, "closed": {"mesh": scene["closed"]}}
     skip = ("name", "factor", "builtin")
-    return {"builtin": scene["builtin"], "scale": scale, **{k: v for k, v in scene.items() if k not in skip}}
+    return {"builtin": scene["builtin"], "scale": scale, **where, **{k: v for k, v in scene.items() if k not in skip}}
 
 
 def light_tables(suite: dict, scene: dict, lights: list) -> list:
@@ -83,22 +101,23 @@ def light_tables(suite: dict, scene: dict, lights: list) -> list:
 
 
 def cases(suite: dict, size: str) -> list:
-    """Every (scene, unit) Case of the suite at ``size``, each with its dsm.run config dict."""
+    """Every (scene, unit, offset) Case of the suite at ``size``, each with its dsm.run config dict."""
     s = size_of(suite, size)
     units = dict((u, f) for u, f in suite["suite"]["units"])
     by_name = {sc["name"]: sc for sc in suite["scene"]}
     out = []
     for name in s["scenes"]:
         scene = by_name[name]
-        for unit in s["units"]:
+        for unit, offset, translate in axes(suite, s):
             scale = scene["factor"] * units[unit]
             mp = {"resolution": s["map"], "view": "cube"}      # cube: the point light's view
             if "directional" in s["lights"]:
                 mp["cascades"] = suite["lights"]["directional"]["cascades"]
-            cfg = {"experiment": {"name": f"{suite['suite']['name']}-{name}-{unit}"},
+            where = "" if offset == ORIGIN else f"-at-{offset}"
+            cfg = {"experiment": {"name": f"{suite['suite']['name']}-{name}-{unit}{where}"},
                    "camera": {"resolution": [s["camera"], s["camera"]]},
-                   "scene": [scene_table(scene, scale)],
+                   "scene": [scene_table(scene, scale, translate)],
                    "light": light_tables(suite, scene, s["lights"]),
                    "map": mp, "scheme": contender_tables(suite, s["contenders"])}
-            out.append(Case(name, unit, scale, cfg))
+            out.append(Case(name, unit, scale, cfg, offset, translate))
     return out
