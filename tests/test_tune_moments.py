@@ -3,6 +3,7 @@ exact world oracle (on one map it is a depth test with one bias), the forward-mo
 against central differences of a numpy float64 loss, never worse than its start nor than a grid of
 as many evaluations, the written values reproducing their objective, kinds without a lookup-time
 parameter noted."""
+import math
 import tomllib
 
 import pytest
@@ -73,10 +74,29 @@ def test_the_written_values_reproduce_their_objective(vsm_run):
         assert objective(moments.hard_counts(spec, cases, mm), 1.0) == e["train"]
 
 
-def test_kinds_without_a_lookup_time_parameter_are_noted_not_tuned():
+def test_esm_exponent_tuned_exactly_to_the_world_oracle_of_its_one_map():
+    """ESM's c shapes the stored moment (a build per value): searched exactly, no gradient. At W = 1
+    V = exp(-c (t - t1)) >= 1/2 iff t - t1 <= ln 2 / c: one bias in normalized depth, so on one map
+    its best is the world oracle where that bias is within the box's reach (ln 2 / 88 to ln 2)."""
     from dsm.tune.tuner import tune
-    res = tune(_cfg(["esm"], [1], steps=8))
-    assert res.moments == [] and any("esm box:1: no lookup-time parameter" in n for n in res.notes)
+    res = tune(_cfg(["esm"], [1], steps=30))
+    (e,) = res.moments
+    assert e["rebuilt"] and e["gradcheck"] == {} and 1.0 <= e["values"]["c"] <= 88.0
+    oracle, two = e["depth_oracle_train"]["world"], 2.0 / res.n_train
+    assert oracle - two <= e["train"] <= oracle * 1.05 + two, (e["train"], oracle)
+    assert e["train"] <= min(e["start_train"], e["grid"]["train"])
+
+
+def test_evsm_exponents_are_not_tuned_its_lookup_parameters_are():
+    from dsm.tune.moments import tunable
+    from dsm.config import read as config
+    cfg = config.parse({"experiment": {"name": "x"}, "scene": [{"builtin": "plane"}],
+                        "map": {"kind": ["evsm", "esm"], "format": "float16", "esm": {"c": 10.0},
+                                "evsm": {"positive": 5.0, "negative": 5.0}}}, "<test>")
+    evsm, esm = cfg.map.moments
+    assert [p.name for p in tunable(evsm, "float16")] == ["min_variance", "bleed"]
+    (c,) = tunable(esm, "float16")
+    assert c.rebuild and c.hi == pytest.approx(math.log(65504.0))      # float16 holds exp(11.09) at most
 
 
 @pytest.mark.parametrize("map_extra, key", [({"moment_samples": 2}, "map.moment_samples")])

@@ -47,7 +47,9 @@ ENCODED_FORMATS = ("unorm16",)                   # a kind with encode / decode: 
 MOMENT_FORMATS = FLOAT_FORMATS + ENCODED_FORMATS
 UNORM16_STEPS = 2 ** 16 - 1
 # the largest e-exponent each format holds: ln(FLT_MAX), ln(65504)
-LOG_MAX = {"float32": float(np.log(np.finfo(np.float32).max)), "float16": float(np.log(np.finfo(np.float16).max))}
+# (the logs taken in float64: np.log of a half is a half, 11.09375, whose exp overflows 65504)
+LOG_MAX = {"float32": float(np.log(float(np.finfo(np.float32).max))),
+           "float16": float(np.log(float(np.finfo(np.float16).max)))}
 
 
 @runtime_checkable

@@ -11,7 +11,7 @@ import mitsuba as mi
 from ..report.tables import objective
 from ..types import describe_params
 from .evaluate import NAN, sync_clock
-from .moments import (LR, TAU, gradient_check, grid_search, hard_counts, loss_and_gradient, moment_maps, tunable,
+from .moments import (LR, TAU, gradient_check, grid_search, hard_counts, loss_and_gradient, map_source, tunable,
                       with_values)
 from .search import BETA1, BETA2, coarse_grid, phase_budgets
 
@@ -50,34 +50,71 @@ def _adam(spec, box, u0: dict, cases, mmaps, steps: int, lam: float, evaluate, r
     return times
 
 
-def tune_instance(spec, cases, mmaps, budget: int, lam: float, tick=None) -> dict:
-    """Within ``budget`` exact evaluations: the start, a coarse grid (a quarter), Adam from the better
-    of the two; the best evaluation is the result."""
-    box = tunable(spec)
+def tune_instance(spec, box, cases, maps_for, budget: int, lam: float, tick=None) -> dict:
+    """Within ``budget`` exact evaluations: the start, a coarse grid, then Adam from the best (a
+    quarter of the budget for the grid) or, for a parameter of the moments (a new build per value:
+    no gradient), golden-section search in the best cell's neighbours (half for the grid); the best
+    evaluation is the result."""
     rows, best = [], [math.inf, None]
 
     def evaluate(values: dict) -> float:
         """The exact training objective at ``values``, kept if it is the best so far."""
-        obj = objective(hard_counts(with_values(spec, values), cases, mmaps), lam)
+        obj = objective(hard_counts(with_values(spec, values), cases, maps_for(values)), lam)
         if obj < best[0]:
             best[:] = [obj, dict(values)]
         if tick:
             tick()
         return obj
 
-    share = phase_budgets(budget)
+    rebuild = any(p.rebuild for p in box)
     t0 = sync_clock()
     start = {p.name: p.start for p in box}
     rows.append(_row(spec, "start", 0, start, evaluate(start)))
-    cells = coarse_grid([_unit_box(p) for p in box], share["coarse"])
+    cells = coarse_grid([_unit_box(p) for p in box], (budget - 1) // 2 if rebuild else phase_budgets(budget)["coarse"])
     for i, u in enumerate(cells):
         values = {p.name: p.value(u[p.name]) for p in box}
         rows.append(_row(spec, "coarse", 1 + i, values, evaluate(values)))
     u0 = {p.name: p.unit(best[1][p.name]) for p in box}
-    n_adam = budget - 1 - len(cells)
-    times = _adam(spec, box, u0, cases, mmaps, n_adam, lam, evaluate, rows, 1 + len(cells))
+    rest = budget - 1 - len(cells)
+    if rebuild:
+        width = 1.0 / max(round(len(cells) ** (1.0 / len(box))), 1)
+        times = _golden(spec, box[0], u0[box[0].name], width, rest, evaluate, rows, 1 + len(cells)) \
+            if len(box) == 1 else []
+    else:
+        times = _adam(spec, box, u0, cases, maps_for({}), rest, lam, evaluate, rows, 1 + len(cells))
     return {"values": best[1], "box": box, "steps": rows, "total_ms": (sync_clock() - t0) * 1e3,
             "step_ms": sorted(times)[len(times) // 2] if times else NAN}
+
+
+GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
+
+
+def _golden(spec, p, u_best: float, width: float, steps: int, evaluate, rows, start_step: int) -> list:
+    """Golden-section search of one parameter in [u_best - width, u_best + width] (its unit
+    coordinate, clipped to the box) with ``steps`` evaluations: for a piecewise-constant
+    objective a local search, kept honest by the best-evaluation rule."""
+    lo, hi = max(u_best - width, 0.0), min(u_best + width, 1.0)
+    times, probe = [], {}
+
+    def at(u: float) -> float:
+        t0 = sync_clock()
+        v = {p.name: p.value(u)}
+        obj = evaluate(v)
+        times.append((sync_clock() - t0) * 1e3)
+        rows.append(_row(spec, "line", start_step + len(times) - 1, v, obj))
+        return obj
+    a, b = hi - GOLDEN * (hi - lo), lo + GOLDEN * (hi - lo)
+    fa, fb = (at(a), at(b)) if steps >= 2 else (math.inf, math.inf)
+    for _ in range(max(steps - 2, 0)):
+        if fa <= fb:
+            hi, b, fb = b, a, fa
+            a = hi - GOLDEN * (hi - lo)
+            fa = at(a)
+        else:
+            lo, a, fa = a, b, fb
+            b = lo + GOLDEN * (hi - lo)
+            fb = at(b)
+    return times
 
 
 def _unit_box(p):
@@ -85,21 +122,21 @@ def _unit_box(p):
 
 
 def tune_all(tc, train, held, groups, orc_train=None, tick=None) -> tuple:
-    """Every pre-filtered instance of the config with lookup-time parameters, tuned, grid-searched and
-    gradient-checked (``orc_train``: the depth map's oracle row of the training views, shown beside
-    them): (result entries, step rows, notes)."""
+    """Every pre-filtered instance of the config with a tuned parameter, tuned, grid-searched and
+    (parameters of the lookup) gradient-checked (``orc_train``: the depth map's oracle row of the
+    training views, shown beside them): (result entries, step rows, notes)."""
     ts, fmt = tc.spec, tc.config.map.format[0]
     entries, steps, notes = [], [], []
     for spec in tc.config.map.moments:
-        if not tunable(spec):
-            notes.append(f"{_label(spec)}: no lookup-time parameter (its exponent shapes the stored moments: "
-                         "sweep it with dsm run)")
+        box = tunable(spec, fmt)
+        if not box:
+            notes.append(f"{_label(spec)}: no tuned parameter (its exponents shape the stored moments: sweep them "
+                         "with dsm run)")
             continue
-        mm_train, mm_held = moment_maps(spec, train, groups, fmt), moment_maps(spec, held, groups, fmt)
-        r = tune_instance(spec, train, mm_train, ts.steps, ts.lam, tick)
-        tuned = with_values(spec, r["values"])
-        g = grid_search(spec, r["box"], train, mm_train, ts.steps, ts.lam)
-        entry = _entry(spec, tuned, r, g, train, held, mm_train, mm_held, ts.lam)
+        src_train, src_held = map_source(spec, box, train, groups, fmt), map_source(spec, box, held, groups, fmt)
+        r = tune_instance(spec, box, train, src_train, ts.steps, ts.lam, tick)
+        g = grid_search(spec, box, train, src_train, ts.steps, ts.lam)
+        entry = _entry(spec, r, g, train, held, src_train, src_held, ts.lam)
         if orc_train:                       # the depth map's exact floors on the same views, for reference
             entry["depth_oracle_train"] = {k: orc_train[f"{k}_objective"] for k in ("world", "per_texel")}
         entries.append(entry)
@@ -107,17 +144,20 @@ def tune_all(tc, train, held, groups, orc_train=None, tick=None) -> tuple:
     return entries, steps, notes
 
 
-def _entry(spec, tuned, r, g, train, held, mm_train, mm_held, lam) -> dict:
+def _entry(spec, r, g, train, held, src_train, src_held, lam) -> dict:
     """One instance's result: values, box, exact objectives of start, tuned and grid on both view sets."""
-    obj = lambda s, cases, mm: objective(hard_counts(s, cases, mm), lam) if cases else NAN
-    grid_spec = with_values(spec, g["values"])
+    def obj(values, cases, src):
+        """The exact objective at ``values`` over ``cases`` (NaN without any)."""
+        return objective(hard_counts(with_values(spec, values), cases, src(values)), lam) if cases else NAN
+    start = {p.name: p.start for p in r["box"]}
+    rebuild = any(p.rebuild for p in r["box"])
     return {"kind": spec.name, "filter": spec.filter, "label": _label(spec), "start": describe_params(spec.params),
-            "params": describe_params(tuned.params), "values": r["values"],
-            "box": {p.name: [p.space, p.lo, p.hi] for p in r["box"]},
-            "train": obj(tuned, train, mm_train), "heldout": obj(tuned, held, mm_held),
-            "start_train": obj(spec, train, mm_train), "start_heldout": obj(spec, held, mm_held),
-            "grid": {"params": describe_params(grid_spec.params), "values": g["values"], "train": g["objective"],
-                     "heldout": obj(grid_spec, held, mm_held), "evaluations": g["evaluations"],
-                     "total_ms": g["total_ms"]},
+            "params": describe_params(with_values(spec, r["values"]).params), "values": r["values"],
+            "box": {p.name: [p.space, p.lo, p.hi] for p in r["box"]}, "rebuilt": rebuild,
+            "train": obj(r["values"], train, src_train), "heldout": obj(r["values"], held, src_held),
+            "start_train": obj(start, train, src_train), "start_heldout": obj(start, held, src_held),
+            "grid": {"params": describe_params(with_values(spec, g["values"]).params), "values": g["values"],
+                     "train": g["objective"], "heldout": obj(g["values"], held, src_held),
+                     "evaluations": g["evaluations"], "total_ms": g["total_ms"]},
             "tune_ms": r["total_ms"], "step_ms": r["step_ms"],
-            "gradcheck": gradient_check(spec, r["box"], train, mm_train, lam)}
+            "gradcheck": {} if rebuild else gradient_check(spec, r["box"], train, src_train({}), lam)}

@@ -3,8 +3,11 @@ fitted by gradient through its continuous V, judged by the exact objective.
 
 A kind's field whose metadata has ``"tune": (space, lo, hi)`` is a lookup-time parameter (VSM's and
 EVSM's minimum variance and bleed reduction, MSM's moment and depth biases): the stored moments do
-not depend on it, so one moment map per (scene, light) serves every evaluation. The exponents of ESM
-and EVSM shape the stored moments (``moment_key``) and are not tuned here: sweep them with dsm run.
+not depend on it, so one moment map per (scene, light) serves every evaluation. ESM's exponent
+(``"tune": (space, lo, hi, "moments")``) shapes the stored moments: each value is a new build, so it
+is searched exactly (a grid, then golden-section search on the best cell: dsm.tune.moment_search),
+without a gradient; its box stops at the largest exponent the format holds. EVSM's exponents are
+not tuned (swept with dsm run).
 Each parameter is searched in a unit coordinate u in [0, 1] over its box, log-spaced (``log``: a
 variance or a bias spanning decades) or linear.
 
@@ -46,6 +49,7 @@ class MomentParam:
     lo: float
     hi: float
     start: float
+    rebuild: bool = False      # the stored moments depend on it: a new moment map per value
 
     def unit(self, x: float) -> float:
         """The value ``x`` as the unit coordinate in [0, 1] of the box."""
@@ -62,14 +66,35 @@ class MomentParam:
         return self.lo + u * (self.hi - self.lo)
 
 
-def tunable(spec) -> list:
-    """The lookup-time parameters of a MomentSpec (fields declaring a ``tune`` box), each at its start."""
+def tunable(spec, fmt: str = "float32") -> list:
+    """The tuned parameters of a MomentSpec (fields declaring a ``tune`` box), each at its start; a
+    parameter of the moments themselves stops at the largest exponent ``fmt`` holds (LOG_MAX)."""
     out = []
     for f in dataclasses.fields(spec.params):
         box = f.metadata.get("tune")
         if box:
-            out.append(MomentParam(f.name, box[0], float(box[1]), float(box[2]), float(getattr(spec.params, f.name))))
+            rebuild = len(box) > 3 and box[3] == "moments"
+            hi = min(float(box[2]), prefilter.LOG_MAX.get(fmt, math.inf)) if rebuild else float(box[2])
+            out.append(MomentParam(f.name, box[0], float(box[1]), hi, float(getattr(spec.params, f.name)), rebuild))
     return out
+
+
+def map_source(spec, box, cases, groups, fmt: str):
+    """A function from parameter values to the moment maps of the cases' groups: one set built once
+    where no tuned parameter shapes the moments, else built per value of those (the last kept)."""
+    if not any(p.rebuild for p in box):
+        fixed = moment_maps(spec, cases, groups, fmt)
+        return lambda values: fixed
+    last = {}
+
+    def maps_for(values: dict) -> dict:
+        """The moment maps of the instance at ``values`` (its moment parameters)."""
+        key = tuple(float(values[p.name]) for p in box if p.rebuild)
+        if key not in last:
+            last.clear()
+            last[key] = moment_maps(with_values(spec, values), cases, groups, fmt)
+        return last[key]
+    return maps_for
 
 
 def with_values(spec, values: dict):
@@ -161,14 +186,15 @@ def gradient_check(spec, box, cases, mmaps, lam: float) -> dict:
     return out
 
 
-def grid_search(spec, box, cases, mmaps, budget: int, lam: float) -> dict:
-    """The best exact evaluation on a regular grid of the unit box with at most ``budget`` points."""
+def grid_search(spec, box, cases, maps_for, budget: int, lam: float) -> dict:
+    """The best exact evaluation on a regular grid of the unit box with at most ``budget`` points
+    (``maps_for``: map_source's function, the moment maps at given values)."""
     t0 = sync_clock()
     pts = coarse_grid([SimpleNamespace(name=p.name, lo=0.0, hi=1.0) for p in box], budget)
     best = None
     for u in pts:
         values = {p.name: p.value(u[p.name]) for p in box}
-        obj = objective(hard_counts(with_values(spec, values), cases, mmaps), lam)
+        obj = objective(hard_counts(with_values(spec, values), cases, maps_for(values)), lam)
         if best is None or obj < best[0]:
             best = (obj, values)
     return {"objective": best[0], "values": best[1], "evaluations": len(pts), "total_ms": (sync_clock() - t0) * 1e3}
