@@ -2,10 +2,11 @@
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 import numpy as np
 
-from . import exact_frame
+from . import exact_frame, xml_scale
 from ..types import DEFAULT_CAMERA, ConfigError, LightSpec
 from .camera import far_bound, look_at_sensor, posed_camera, reposed_sensor, resized_sensor
 from .checks import check_held, check_mesh, source_of
@@ -81,9 +82,8 @@ def _precheck_file(spec):
 
 def load_xml(spec, camera_resolution, camera=None):
     """SceneData of a Mitsuba 3 XML scene: its first sensor (resized, reposed by [camera]), its emitters."""
-    import mitsuba as mi
     _precheck_file(spec)
-    scene = mi.load_file(str(spec.file), optimize=False)
+    scene = load_xml_scene(spec.file, spec.params.scale)
     if not scene.sensors():
         raise ConfigError(source_of(spec), f"{spec.where}.file", f"{spec.file} has no <sensor>: dsm takes the camera "
                           "from an XML scene's first sensor; add one")
@@ -93,7 +93,7 @@ def load_xml(spec, camera_resolution, camera=None):
         lights = [default_light(scene)]
         notes.append(f"no point, spot or directional emitter: dsm added a default {describe_light(lights[0])}")
     sensor = scene.sensors()[0]
-    data = finish(spec.label, scene, lights, 1.0, notes)
+    data = finish(spec.label, scene, lights, spec.params.scale, notes)
     if camera_resolution is not None:
         # [camera] resolution: the sensor re-created at that width, with its film's aspect ratio,
         # transform and field of view; without it the XML's own sensor and film are the camera
@@ -103,6 +103,24 @@ def load_xml(spec, camera_resolution, camera=None):
     if camera is not None:
         data.sensor = reposed_sensor(data.sensor, camera, data.bbox, source_of(spec))
     return data
+
+
+def load_xml_scene(path, scale: float = 1.0):
+    """The Mitsuba scene of an XML file, every element scaled by ``scale`` (xml_scale) when not 1,
+    its relative file names resolved against the file's folder as mi.load_file resolves them."""
+    import mitsuba as mi
+    if scale == 1.0:
+        return mi.load_file(str(path), optimize=False)
+    text = xml_scale.scaled_text(path, scale)
+    resolver = mi.file_resolver()
+    resolver_paths = [str(p) for p in resolver]           # restored after: the resolver is the process's
+    resolver.prepend(str(Path(path).resolve().parent))
+    try:
+        return mi.load_string(text, optimize=False)
+    finally:
+        resolver.clear()
+        for p in resolver_paths:
+            resolver.append(p)
 
 
 def load_mesh_file(spec, width, height, camera=None):

@@ -12,6 +12,8 @@ from .checks import check_held
 from .params import BUILTINS, FILE_SUFFIXES, FileParams, GrazingParams, PlaneParams
 
 
+XML_KEYS = ("scale",)        # what an XML scene takes of FileParams: its units (dsm.scenes.xml_scale)
+
 def parse_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]:
     """One [[scene]] table, with list-valued parameters swept, into scene specs."""
     if ("builtin" in t) == ("file" in t):
@@ -51,12 +53,13 @@ def parse_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]
                           missing=f"skipped: {path} is absent (optional scene)", source=source, where=where)
                 for p in specs]
     closed = _closed_override(t, source, where)
-    if path.suffix.lower() == ".xml" and any(p != FileParams() for p in specs):
-        given = [f.name for f in fields(FileParams) if any(getattr(p, f.name) != getattr(FileParams(), f.name)
-                                                            for p in specs)]
+    given = [f.name for f in fields(FileParams) if f.name not in XML_KEYS and any(
+        getattr(p, f.name) != getattr(FileParams(), f.name) for p in specs)]
+    if path.suffix.lower() == ".xml" and given:
         raise ConfigError(source, f"{where}.{given[0]}", "an XML scene takes no "
-                          f"{'/'.join(f.name for f in fields(FileParams))} keys: its geometry, camera and lights "
-                          "are the file's, in its own world coordinates", ("file", "closed", "optional"))
+                          f"{'/'.join(f.name for f in fields(FileParams) if f.name not in XML_KEYS)} keys: its "
+                          "geometry, camera and lights are the file's, in its own world coordinates (scale: in other "
+                          "units)", ("file", "closed", "optional") + XML_KEYS)
     return [SceneSpec(file=path, params=p, label=_label(path.stem, p, FileParams()), closed=closed, source=source,
                       where=where) for p in specs]
 

@@ -1,0 +1,68 @@
+"""XML scenes in other units (`scale` on an XML [[scene]], dsm.scenes.xml_scale): the Cornell box
+(Mitsuba's, in millimetre-like units, 556 across) scaled by 0.001 has its shapes' bounds, camera
+position and clip planes times 0.001 against the file loaded as is, and a run of it gives the counts
+of the run at scale 1 for every scheme whose bias is in texels or ranges (scale-free), while one
+world bias means another thing."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import MESHES
+
+CBOX = MESHES / "cbox_mitsuba" / "cbox.xml"
+
+
+def test_scaled_xml_loads_the_file_s_scene_times_the_scale():
+    import mitsuba as mi
+    from dsm.scenes import files
+    from dsm.tools import env
+    env.use_variant("llvm_ad_rgb")
+    ref = mi.load_file(str(CBOX), optimize=False)
+    got = files.load_xml_scene(CBOX, 0.001)
+    for a, b in zip(ref.shapes(), got.shapes()):
+        np.testing.assert_allclose(np.array(b.bbox().min), np.array(a.bbox().min) * 0.001, rtol=1e-6, atol=1e-7)
+        np.testing.assert_allclose(np.array(b.bbox().max), np.array(a.bbox().max) * 0.001, rtol=1e-6, atol=1e-7)
+    m_ref = np.array(ref.sensors()[0].world_transform().matrix, float).reshape(4, 4)
+    m_got = np.array(got.sensors()[0].world_transform().matrix, float).reshape(4, 4)
+    np.testing.assert_allclose(m_got[:3, :3], m_ref[:3, :3], atol=1e-6)             # the same orientation
+    np.testing.assert_allclose(m_got[:3, 3], m_ref[:3, 3] * 0.001, rtol=1e-6)         # the position in metres
+    for clip in ("near_clip", "far_clip"):
+        assert getattr(got.sensors()[0], clip)() == pytest.approx(getattr(ref.sensors()[0], clip)() * 0.001, rel=1e-6)
+    assert str(Path(CBOX).parent) not in [str(p) for p in mi.file_resolver()]      # the resolver restored
+
+
+def _cfg(scale):
+    return {"experiment": {"name": f"cb{scale}"}, "camera": {"resolution": [48, 48]},
+            "scene": [{"file": str(CBOX), "scale": scale}],
+            "light": [{"type": "spot", "position": [278.0, 500.0, 200.0], "target": [278.0, 0.0, 280.0], "cutoff": 50},
+                      {"type": "directional", "direction": [-0.3, -1.0, 0.4]}],
+            "map": {"resolution": 96}, "timing": {"repeats": 1},
+            "scheme": [{"name": "none"}, {"name": "constant", "bias": "1 texel"}, {"name": "slope_scaled"},
+                       {"name": "normal_offset"}, {"name": "constant", "bias": 2.0}]}
+
+
+def test_the_cornell_box_in_metres_counts_as_in_its_own_units(tmp_path):
+    """The config's light positions scale with the scene; texel and range biases are scale-free, so
+    every count is the unscaled run's (no bias: its acne, rounding itself, within 2); the world
+    bias of 2 (2 mm or 2 m) is not."""
+    import dsm
+    a = dsm.run(_cfg(1.0), out=tmp_path / "a")
+    b = dsm.run(_cfg(0.001), out=tmp_path / "b")
+    assert len(a.rows) == len(b.rows) == 10 and b.run["n_failed"] == 0
+    for ra, rb in zip(a.rows, b.rows):
+        assert ra["n_receivers"] == rb["n_receivers"] > 0
+        if ra["params"] == "bias=2":
+            assert (ra["n_acne"], ra["n_peterpan"]) != (rb["n_acne"], rb["n_peterpan"])
+        elif ra["scheme"] == "none":         # no bias: its acne is the rounding of a depth against itself
+            assert abs(ra["n_acne"] - rb["n_acne"]) <= 2 and ra["n_peterpan"] == rb["n_peterpan"]
+        else:
+            assert (ra["n_acne"], ra["n_peterpan"]) == (rb["n_acne"], rb["n_peterpan"]), (ra["light"], ra["params"])
+
+
+def test_an_xml_include_refuses_a_scale(tmp_path):
+    from dsm.scenes import xml_scale
+    (tmp_path / "inner.xml").write_text('<scene version="3.0.0"/>')
+    (tmp_path / "outer.xml").write_text('<scene version="3.0.0"><include filename="inner.xml"/></scene>')
+    with pytest.raises(ValueError, match="include"):
+        xml_scale.scaled_text(tmp_path / "outer.xml", 2.0)
