@@ -48,3 +48,20 @@ def test_without_map_kind_the_first_table_is_the_one_without_the_column():
     dropped = [" | ".join(c for i, c in enumerate(x.split(" | ")) if i != col) for x in with_leak]
     dropped[1] = "|---" * (with_leak[1].count("|") - 2) + "|"
     assert dropped == _first_table(plain)
+
+
+def test_report_html_s_summary_shows_the_leak_column_in_a_kind_run_only():
+    """The same pooled values in report.html's per-instance table (its value attribute, exact), and
+    no leak column where the rows carry no map kind."""
+    import re
+    from dsm.report import html
+    page = html.summary_section(ROWS)
+    heads = re.findall(r"<th[^>]*>([^<]*)</th>", page)
+    assert "leak pooled" in heads
+    col = heads.index("leak pooled")
+    rows = re.findall(r"<tr[^>]*>(.*?)</tr>", page)[1:]
+    cells = [re.findall(r"<td([^>]*)>([^<]*)</td>", r) for r in rows]
+    got = {c[0][1]: c[col][1] for c in cells}
+    assert got == {"vsm": "0.015", "constant": "0.02"}
+    plain = [{k: v for k, v in r.items() if k != "map_kind"} for r in ROWS]
+    assert "leak pooled" not in html.summary_section(plain)

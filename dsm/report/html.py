@@ -151,19 +151,24 @@ def _best_section(rows) -> str:
             f"<p class=note>{_e(summary.BEST_DEFINITION)}</p>{_table(head, body)}</section>")
 
 
-def _summary_section(rows) -> str:
+def summary_section(rows) -> str:
+    """The per-instance summary table (dsm.report.summary), leaking beside acne and peter-panning in a
+    run with [map] kind."""
     insts = summary.per_instance(rows)
     cols = summary.summary_columns(rows)
+    split = summary.has_leak_split(rows)      # leaking beside acne and peter-panning, where the run splits it
     head = [(c, "text") for c in cols] + [(h, "num") for h in (
         "cases", "acne pooled", "acne mean", "acne median", "acne max", "peter-pan pooled", "peter-pan mean",
-        "peter-pan median", "peter-pan max", "error pooled", "error mean", "error median", "error max")] + [
+        "peter-pan median", "peter-pan max") + (("leak pooled",) if split else ()) + (
+        "error pooled", "error mean", "error median", "error max")] + [
         ("undefined acne / peter-pan / error", "text")] + [(h, "num") for h in ("build ms", "lookup ms", "best in")]
     body = []
     for s in insts:
         cells = [(s[c], None, False) for c in cols]
         for k in ("cases", "acne_pooled", "acne_mean", "acne_median", "acne_max", "peterpan_pooled", "peterpan_mean",
-                  "peterpan_median", "peterpan_max", "error_pooled", "error_mean", "error_median", "error_max",
-                  "undefined", "build_ms", "lookup_ms", "best_in"):
+                  "peterpan_median", "peterpan_max") + (("leak_pooled",) if split else ()) + (
+                  "error_pooled", "error_mean", "error_median", "error_max", "undefined", "build_ms", "lookup_ms",
+                  "best_in"):
             if k == "undefined":
                 cells.append((f"{s['acne_undefined']} / {s['peterpan_undefined']} / {s['error_undefined']}", None,
                               False))
@@ -173,8 +178,9 @@ def _summary_section(rows) -> str:
         body.append((" class=win" if s is insts[0] else "", cells))
     multi = [c for c in cols if c not in ("scheme", "params")]
     extra = ", with " + " and ".join(multi) if multi else ""
+    note = summary.DEFINITIONS.format(extra=extra) + (summary.LEAK_COLUMN_DEFINITION if split else "")
     return (f"<section id=summary><h2>Per scheme instance (lowest pooled error first)</h2>"
-            f"<p class=note>{_e(summary.DEFINITIONS.format(extra=extra).replace('*', ''))}</p>"
+            f"<p class=note>{_e(note.replace('*', ''))}</p>"
             f"<div class=scroll>{_table(head, body, 'summary-table', True)}</div></section>")
 
 
@@ -269,7 +275,7 @@ def write_html(path: Path, rows: list, run: dict):
             f"<a href=metrics.csv>metrics.csv</a>, <a href=oracle.csv>oracle.csv</a>, <a href=run.json>run.json</a>.</p>"]
     if rows:
         body += [f"<p class=answer id=answer>{_e(summary.answer(rows))}</p>", _best_section(rows),
-                 _summary_section(rows)]
+                 summary_section(rows)]
     body += [_status_section(run)]
     if rows:
         body.append(_case_section(rows, out))
