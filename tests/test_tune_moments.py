@@ -87,16 +87,31 @@ def test_esm_exponent_tuned_exactly_to_the_world_oracle_of_its_one_map():
     assert e["train"] <= min(e["start_train"], e["grid"]["train"])
 
 
-def test_evsm_exponents_are_not_tuned_its_lookup_parameters_are():
+def test_exponent_boxes_stop_where_the_format_overflows():
+    """ESM stores exp(c t): c <= ln 65504 in float16; EVSM stores exp(2 c x) at x = 1: each
+    exponent <= ln(65504) / 2; its minimum variance and bleed are the lookup's (no rebuild)."""
     from dsm.tune.moments import tunable
     from dsm.config import read as config
     cfg = config.parse({"experiment": {"name": "x"}, "scene": [{"builtin": "plane"}],
                         "map": {"kind": ["evsm", "esm"], "format": "float16", "esm": {"c": 10.0},
                                 "evsm": {"positive": 5.0, "negative": 5.0}}}, "<test>")
     evsm, esm = cfg.map.moments
-    assert [p.name for p in tunable(evsm, "float16")] == ["min_variance", "bleed"]
+    box = {p.name: p for p in tunable(evsm, "float16")}
+    assert [n for n, p in box.items() if p.rebuild] == ["positive", "negative"]
+    assert [n for n, p in box.items() if not p.rebuild] == ["min_variance", "bleed"]
+    for n in ("positive", "negative"):
+        assert box[n].hi == pytest.approx(math.log(65504.0) / 2, abs=1e-9)
     (c,) = tunable(esm, "float16")
-    assert c.rebuild and c.hi == pytest.approx(math.log(65504.0))      # float16 holds exp(11.09) at most
+    assert c.rebuild and c.hi == pytest.approx(math.log(65504.0), abs=1e-9)
+
+
+def test_evsm_tuned_with_its_exponents_is_never_worse_than_its_start_nor_its_grid():
+    from dsm.tune.tuner import tune
+    res = tune(_cfg(["evsm"], [3], steps=40))
+    (e,) = res.moments
+    assert e["rebuilt"] and set(e["values"]) == {"positive", "negative", "min_variance", "bleed"}
+    assert e["train"] <= min(e["start_train"], e["grid"]["train"])
+    assert all(0.5 <= e["values"][k] <= 44.0 for k in ("positive", "negative"))
 
 
 @pytest.mark.parametrize("map_extra, key", [({"moment_samples": 2}, "map.moment_samples")])

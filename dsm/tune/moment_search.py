@@ -26,9 +26,12 @@ def _row(spec, phase, step, values, hard, **extra) -> dict:
             "hard_objective": hard, "time_ms": NAN, **{f"param_{k}": v for k, v in values.items()}, **extra}
 
 
-def _adam(spec, box, u0: dict, cases, mmaps, steps: int, lam: float, evaluate, rows, start_step: int):
+def _adam(spec, box, u0: dict, cases, mmaps, steps: int, lam: float, evaluate, rows, start_step: int, base=None):
     """``steps`` Adam steps in the unit box from ``u0`` (loss_and_gradient's derivatives), each
-    followed by an exact evaluation (``evaluate``)."""
+    followed by an exact evaluation (``evaluate``); ``base``: the values of the parameters held
+    (the moments' own, whose maps ``mmaps`` are), evaluated with them."""
+    base = base or {}
+    spec = with_values(spec, base) if base else spec
     opt = mi.ad.Adam(lr=LR, beta_1=BETA1, beta_2=BETA2)
     for p in box:
         opt[p.name] = mi.Float(u0[p.name])
@@ -44,17 +47,17 @@ def _adam(spec, box, u0: dict, cases, mmaps, steps: int, lam: float, evaluate, r
             opt[p.name] = dr.clip(dr.detach(opt[p.name]), 0.0, 1.0)
         u = {p.name: float(opt[p.name][0]) for p in box}
         times.append((sync_clock() - t0) * 1e3)
-        values = {p.name: p.value(u[p.name]) for p in box}
+        values = {**base, **{p.name: p.value(u[p.name]) for p in box}}
         rows.append({**_row(spec, "gradient", start_step + k, values, evaluate(values)),
                      "temperature_texel": tau, "loss": loss, "time_ms": times[-1]})
     return times
 
 
 def tune_instance(spec, box, cases, maps_for, budget: int, lam: float, tick=None) -> dict:
-    """Within ``budget`` exact evaluations: the start, a coarse grid, then Adam from the best (a
-    quarter of the budget for the grid) or, for a parameter of the moments (a new build per value:
-    no gradient), golden-section search in the best cell's neighbours (half for the grid); the best
-    evaluation is the result."""
+    """Within ``budget`` exact evaluations: the start, a coarse grid (a quarter; half where every
+    parameter is the moments' own), then golden-section search of each parameter of the moments (a
+    new build per value: no gradient) near the best, then Adam on the lookup's parameters at the best
+    moments (the rest); the best evaluation is the result."""
     rows, best = [], [math.inf, None]
 
     def evaluate(values: dict) -> float:
@@ -66,7 +69,7 @@ def tune_instance(spec, box, cases, maps_for, budget: int, lam: float, tick=None
             tick()
         return obj
 
-    rebuild = any(p.rebuild for p in box)
+    rebuild = all(p.rebuild for p in box)
     t0 = sync_clock()
     start = {p.name: p.start for p in box}
     rows.append(_row(spec, "start", 0, start, evaluate(start)))
@@ -74,14 +77,19 @@ def tune_instance(spec, box, cases, maps_for, budget: int, lam: float, tick=None
     for i, u in enumerate(cells):
         values = {p.name: p.value(u[p.name]) for p in box}
         rows.append(_row(spec, "coarse", 1 + i, values, evaluate(values)))
-    u0 = {p.name: p.unit(best[1][p.name]) for p in box}
-    rest = budget - 1 - len(cells)
-    if rebuild:
-        width = 1.0 / max(round(len(cells) ** (1.0 / len(box))), 1)
-        times = _golden(spec, box[0], u0[box[0].name], width, rest, evaluate, rows, 1 + len(cells)) \
-            if len(box) == 1 else []
-    else:
-        times = _adam(spec, box, u0, cases, maps_for({}), rest, lam, evaluate, rows, 1 + len(cells))
+    rest, step = budget - 1 - len(cells), 1 + len(cells)
+    width = 1.0 / max(round(len(cells) ** (1.0 / len(box))), 1)        # a coarse cell, in the unit coordinate
+    moment_params = [p for p in box if p.rebuild]
+    lookup_params = [p for p in box if not p.rebuild]
+    times = []
+    for i, p in enumerate(moment_params):        # each of the moments' own, the others at the best so far
+        n = rest // len(moment_params) if not lookup_params else rest // (2 * len(moment_params))
+        times += _golden(spec, p, dict(best[1]), width, n, evaluate, rows, step)
+        step, rest = step + n, rest - n
+    if lookup_params:                            # then Adam on the lookup's, at the best moments
+        held = {p.name: best[1][p.name] for p in moment_params}
+        u0 = {p.name: p.unit(best[1][p.name]) for p in lookup_params}
+        times += _adam(spec, lookup_params, u0, cases, maps_for(held), rest, lam, evaluate, rows, step, held)
     return {"values": best[1], "box": box, "steps": rows, "total_ms": (sync_clock() - t0) * 1e3,
             "step_ms": sorted(times)[len(times) // 2] if times else NAN}
 
@@ -89,16 +97,18 @@ def tune_instance(spec, box, cases, maps_for, budget: int, lam: float, tick=None
 GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
 
 
-def _golden(spec, p, u_best: float, width: float, steps: int, evaluate, rows, start_step: int) -> list:
-    """Golden-section search of one parameter in [u_best - width, u_best + width] (its unit
-    coordinate, clipped to the box) with ``steps`` evaluations: for a piecewise-constant
-    objective a local search, kept honest by the best-evaluation rule."""
+def _golden(spec, p, base: dict, width: float, steps: int, evaluate, rows, start_step: int) -> list:
+    """Golden-section search of parameter ``p`` (the others at ``base``, the best so far) within a
+    coarse cell ``width`` of its best value (its unit coordinate, clipped to the box) with ``steps``
+    evaluations: for a piecewise-constant objective a local search, kept honest by the
+    best-evaluation rule."""
+    u_best = p.unit(base[p.name])
     lo, hi = max(u_best - width, 0.0), min(u_best + width, 1.0)
-    times, probe = [], {}
+    times = []
 
     def at(u: float) -> float:
         t0 = sync_clock()
-        v = {p.name: p.value(u)}
+        v = {**base, p.name: p.value(u)}
         obj = evaluate(v)
         times.append((sync_clock() - t0) * 1e3)
         rows.append(_row(spec, "line", start_step + len(times) - 1, v, obj))
@@ -130,8 +140,7 @@ def tune_all(tc, train, held, groups, orc_train=None, tick=None) -> tuple:
     for spec in tc.config.map.moments:
         box = tunable(spec, fmt)
         if not box:
-            notes.append(f"{_label(spec)}: no tuned parameter (its exponents shape the stored moments: sweep them "
-                         "with dsm run)")
+            notes.append(f"{_label(spec)}: no parameter of its kind declares a tune box (sweep it with dsm run)")
             continue
         src_train, src_held = map_source(spec, box, train, groups, fmt), map_source(spec, box, held, groups, fmt)
         r = tune_instance(spec, box, train, src_train, ts.steps, ts.lam, tick)
@@ -151,6 +160,7 @@ def _entry(spec, r, g, train, held, src_train, src_held, lam) -> dict:
         return objective(hard_counts(with_values(spec, values), cases, src(values)), lam) if cases else NAN
     start = {p.name: p.start for p in r["box"]}
     rebuild = any(p.rebuild for p in r["box"])
+    lookup = [p for p in r["box"] if not p.rebuild]      # the parameters with a gradient, checked at the start
     return {"kind": spec.name, "filter": spec.filter, "label": _label(spec), "start": describe_params(spec.params),
             "params": describe_params(with_values(spec, r["values"]).params), "values": r["values"],
             "box": {p.name: [p.space, p.lo, p.hi] for p in r["box"]}, "rebuilt": rebuild,
@@ -160,4 +170,4 @@ def _entry(spec, r, g, train, held, src_train, src_held, lam) -> dict:
                      "train": g["objective"], "heldout": obj(g["values"], held, src_held),
                      "evaluations": g["evaluations"], "total_ms": g["total_ms"]},
             "tune_ms": r["total_ms"], "step_ms": r["step_ms"],
-            "gradcheck": {} if rebuild else gradient_check(spec, r["box"], train, src_train({}), lam)}
+            "gradcheck": gradient_check(spec, lookup, train, src_train(start), lam) if lookup else {}}

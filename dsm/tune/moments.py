@@ -3,11 +3,10 @@ fitted by gradient through its continuous V, judged by the exact objective.
 
 A kind's field whose metadata has ``"tune": (space, lo, hi)`` is a lookup-time parameter (VSM's and
 EVSM's minimum variance and bleed reduction, MSM's moment and depth biases): the stored moments do
-not depend on it, so one moment map per (scene, light) serves every evaluation. ESM's exponent
-(``"tune": (space, lo, hi, "moments")``) shapes the stored moments: each value is a new build, so it
-is searched exactly (a grid, then golden-section search on the best cell: dsm.tune.moment_search),
-without a gradient; its box stops at the largest exponent the format holds. EVSM's exponents are
-not tuned (swept with dsm run).
+not depend on it, so one moment map per (scene, light) serves every evaluation. The exponents of ESM
+and EVSM (``"tune": (space, lo, hi, "moments")``) shape the stored moments: each value is a new
+build, so they are searched exactly (a grid, then golden-section search near the best:
+dsm.tune.moment_search), without a gradient; a box stops at the largest exponent the format holds.
 Each parameter is searched in a unit coordinate u in [0, 1] over its box, log-spaced (``log``: a
 variance or a bias spanning decades) or linear.
 
@@ -74,9 +73,23 @@ def tunable(spec, fmt: str = "float32") -> list:
         box = f.metadata.get("tune")
         if box:
             rebuild = len(box) > 3 and box[3] == "moments"
-            hi = min(float(box[2]), prefilter.LOG_MAX.get(fmt, math.inf)) if rebuild else float(box[2])
+            hi = _held(spec, f.name, float(box[1]), float(box[2]), fmt) if rebuild else float(box[2])
             out.append(MomentParam(f.name, box[0], float(box[1]), hi, float(getattr(spec.params, f.name)), rebuild))
     return out
+
+
+def _held(spec, name: str, lo: float, hi: float, fmt: str) -> float:
+    """The largest value of parameter ``name`` in [lo, hi] whose moments ``fmt`` holds (the kind's
+    log_max, non-decreasing in an exponent, at most LOG_MAX): bisected."""
+    log_max = getattr(prefilter.get(spec.name), "log_max", None)
+    limit = prefilter.LOG_MAX.get(fmt, math.inf)
+    fits = lambda v: log_max is None or log_max(dataclasses.replace(spec.params, **{name: v})) <= limit
+    if fits(hi):
+        return hi
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if fits(mid) else (lo, mid)
+    return lo
 
 
 def map_source(spec, box, cases, groups, fmt: str):

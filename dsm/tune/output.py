@@ -78,7 +78,8 @@ def moments_table(res) -> list:
     if not res.moments:
         return []
     floor = res.moments[0].get("depth_oracle_train")
-    out = ["", "## pre-filtered maps (dsm.tune.moments; ESM's exponent searched exactly, the others by gradient)", ""]
+    out = ["", "## pre-filtered maps (dsm.tune.moments; the exponents of ESM and EVSM searched exactly, the "
+           "others by gradient)", ""]
     if floor:
         out += [f"the depth map's exact oracles on the training views: one world bias {_fmt(floor['world'])}, "
                 f"per texel {_fmt(floor['per_texel'])} (an unfiltered VSM is a depth test with one bias in "
