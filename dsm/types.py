@@ -344,12 +344,14 @@ class MomentSpec(ParamsLabel):
     preset: str | None = None
     kernel: str = "box"
     samples: int = 1      # rays per texel side the moments are averaged over (samples^2 a texel)
+    mipmaps: bool = False  # a chain of 2 x 2 means read at the receiver's footprint (dsm.prefilter.mipmaps)
 
     @property
     def filter(self) -> str:
         """The case's filter column: the blur, ``box:W`` or ``gauss:W``, then ``/ssN`` where the
         moments are supersampled N x N a texel (nothing at 1: the labels of one ray a texel)."""
-        return f"{BLUR_LABELS[self.kernel]}:{self.blur}" + (f"/ss{self.samples}" if self.samples > 1 else "")
+        return (f"{BLUR_LABELS[self.kernel]}:{self.blur}" + (f"/ss{self.samples}" if self.samples > 1 else "")
+                + ("/mip" if self.mipmaps else ""))
 
 
 @dataclass(frozen=True)

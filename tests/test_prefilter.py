@@ -679,3 +679,82 @@ def test_supersampled_moments_are_the_mean_of_each_texel_s_analytic_samples():
     np.testing.assert_allclose(got[clean], want[clean], atol=2e-6)
     single = pl.moment_map(one, smap, "float32").b[0].numpy().reshape(32, 32)
     assert np.abs(single[mixed] - want[mixed]).max() > 0.01      # one ray a texel sees one height of the mix
+
+
+def test_the_mip_chain_is_each_face_s_two_by_two_means_down_to_one_texel():
+    """Sides 12 -> 6 -> 3 -> 2 (3 padded by its edge texel) -> 1, computed texel by texel in float64."""
+    import numpy as np
+    from dsm.prefilter import mipmaps
+    x = np.random.default_rng(5).random(2 * 12 * 12)
+    levels = mipmaps.chain(x, 2, 12, lambda v: v)
+    assert [r for r, _ in levels] == [6, 3, 2, 1]
+    img = x.reshape(2, 12, 12)
+    for r, vals in levels:
+        n = img.shape[1]
+        pad = np.pad(img, ((0, 0), (0, n % 2), (0, n % 2)), mode="edge")
+        want = np.array([[[pad[f, 2 * j:2 * j + 2, 2 * i:2 * i + 2].mean() for i in range(r)] for j in range(r)]
+                         for f in range(2)])
+        np.testing.assert_allclose(vals.reshape(2, r, r), want, rtol=0, atol=1e-15)
+        img = want
+
+
+def test_a_mipmapped_vsm_reads_the_level_of_each_receiver_s_pixel_footprint():
+    """V of a mipmapped VSM against numpy float64: lambda = log2 of the footprint in texels from the
+    camera's pixel area (dsm.maps.cascades.Camera.pixel_area, a second computation), the two
+    levels' nearest texels (means of the map's 2^l x 2^l blocks) mixed by frac(lambda), then
+    Chebyshev's bound; and without a camera the map itself."""
+    import dataclasses
+    import numpy as np
+    import dsm.pipeline as pl
+    from dsm.config import read as config
+    from dsm.prefilter import mipmaps
+    cfg = pl.prepare(config.parse(base_config(scene=[{"builtin": "stacked_plates"}], map={
+        "resolution": 64, "kind": ["vsm"], "mipmaps": True}, scheme=[]), "<test>"))
+    sd = pl.load_scene(cfg.scenes[0], (24, 24))
+    gb = pl.gbuffer(sd)
+    light = sd.lights_for(cfg.lights)[0]
+    setup = pl.light_setup(sd, gb, light, "sun")
+    view = pl.make_view(light, 64, pl.points_np(setup.p), sd.bbox)
+    rx = pl.receivers(view, setup, sd.diagonal)
+    (spec,) = cfg.map.moments
+    assert spec.filter == "box:1/mip"
+    mm = pl.moment_map(spec, pl.build_map(sd.scene, view), "float32")
+    got = pl.moment_visibility(spec, rx, mm, pl.build_map(sd.scene, view))[0].numpy()
+    p, n = pl.points_np(rx.p_world), pl.points_np(rx.n_world)
+    area = setup.camera.pixel_area(p, n) * np.abs((n * pl.points_np(rx.to_light)).sum(1))
+    lam = np.clip(0.5 * np.log2(np.maximum(area / rx.texel_world.numpy().astype(float) ** 2, 1.0)), 0, 6)
+    assert (lam > 1).mean() > 0.2                      # the camera is coarse: many receivers minify
+    b = [np.asarray(m.numpy(), float).reshape(64, 64) for m in mm.b]
+    levels = [b] + [[v.reshape(r, r) for v in vals] for vals, r in
+                    zip(zip(*[[v for _, v in mipmaps.chain(m.reshape(-1), 1, 64, lambda x: x.astype(np.float32))]
+                              for m in b]), [32, 16, 8, 4, 2, 1])]
+    u, v = rx.u_map.numpy(), rx.v_map.numpy()
+
+    def at(level):
+        side = 64 >> level
+        i = np.clip(np.floor(u / 2 ** level).astype(int), 0, side - 1)
+        j = np.clip(np.floor(v / 2 ** level).astype(int), 0, side - 1)
+        return [m[j, i] for m in levels[level]]
+    l0 = np.floor(lam).astype(int)
+    f = lam - l0
+    lo = np.array([[at(l)[k][r] for r, l in enumerate(l0)] for k in range(2)])
+    hi = np.array([[at(min(l + 1, 6))[k][r] for r, l in enumerate(l0)] for k in range(2)])
+    mean, sq = lo + f * (hi - lo)
+    t = (rx.depth.numpy() - view.near) / (view.far - view.near)
+    var = np.maximum(sq - mean ** 2, spec.params.min_variance)
+    want = np.where(t <= mean, 1.0, var / (var + (t - mean) ** 2))
+    assert np.mean(np.abs(got - want) < 1e-3) > 0.995
+    from dsm import prefilter
+    flat = dataclasses.replace(rx, camera=None)
+    plain_spec = dataclasses.replace(spec, mipmaps=False)
+    plain = pl.moment_map(plain_spec, pl.build_map(sd.scene, view), "float32")
+    np.testing.assert_array_equal(prefilter.visibility(spec, flat, mm).numpy(),
+                                  prefilter.visibility(plain_spec, flat, plain).numpy())
+
+
+@pytest.mark.parametrize("value", ["yes", 1, []])
+def test_mipmaps_takes_booleans_only(value):
+    from dsm.config import read as config
+    with pytest.raises(config.ConfigError) as e:
+        config.parse(base_config(map={"kind": ["vsm"], "mipmaps": value}), "<test>")
+    assert e.value.key == "map.mipmaps"

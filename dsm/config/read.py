@@ -16,7 +16,7 @@ from ..types import LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, MAP_VIEWS, VARI
 
 # a run's folder is runs/<name>-tune-YYYYmmdd-HHMMSS (21 bytes more) and a file name takes 255 bytes
 NAME_MAX_BYTES = 255 - len("-tune-20240101-120000")
-KIND_KEYS = ("kind", "blur", "blur_kernel", "moment_samples", "leak_texels", "vsm", "esm", "evsm", "msm")    # [map] kind and its tables
+KIND_KEYS = ("kind", "blur", "blur_kernel", "moment_samples", "mipmaps", "leak_texels", "vsm", "esm", "evsm", "msm")    # [map] kind and its tables
 CASCADE_KEYS = ("cascades", "split", "lambda", "fit", "depth_bounds", "stabilize", "blend", "max_distance")
 
 
@@ -434,7 +434,7 @@ def _parse_moments(m: dict, kinds, formats, source: str) -> tuple:
         raise ConfigError(source, "map.blur", "empty list")
     if any(w % 2 == 0 for w in blurs):
         raise ConfigError(source, "map.blur", f"a box width is odd (centred on the texel), got {blurs}")
-    for key in ("blur", "blur_kernel", "moment_samples"):
+    for key in ("blur", "blur_kernel", "moment_samples", "mipmaps"):
         if key in m and kinds == ("depth",):
             raise ConfigError(source, f"map.{key}", "blurs moments; map.kind names no pre-filtered map", prefilter.NAMES)
     kernels = tuple(choice(k, source, "map.blur_kernel", BLUR_KERNELS) for k in as_list(m.get("blur_kernel", "box")))
@@ -444,6 +444,10 @@ def _parse_moments(m: dict, kinds, formats, source: str) -> tuple:
                     for n in as_list(m.get("moment_samples", 1)))
     if not samples:
         raise ConfigError(source, "map.moment_samples", "empty list")
+    mips = tuple(as_list(m.get("mipmaps", False)))
+    if not mips or not all(isinstance(x, bool) for x in mips):
+        raise ConfigError(source, "map.mipmaps", f"expected true, false or a list of them, got {m.get('mipmaps')!r}",
+                          ("true", "false"))
     out = []
     for name in kinds:
         if name == "depth":
@@ -465,7 +469,8 @@ def _parse_moments(m: dict, kinds, formats, source: str) -> tuple:
             params = sweep_params(prefilter.get(name).Params, t, source, f"map.{name}")
         for p in params:
             prefilter.check(name, p, formats, source, f"map.{name}")
-        out += [MomentSpec(name, p, w, preset, k, n) for p in params for w in blurs for k in kernels for n in samples]
+        out += [MomentSpec(name, p, w, preset, k, n, mp) for p in params for w in blurs for k in kernels
+                for n in samples for mp in mips]
     return tuple(out)
 
 

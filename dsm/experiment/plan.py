@@ -109,7 +109,10 @@ class MapPlan:
         """Estimated peak bytes of the map's build: its stored layers plus one tile's working set
         (and a moment map's build, where the map serves pre-filtered instances)."""
         # a supersampled instance's moments are made of samples^2 values a texel
-        moments = self.texels * MOMENT_BYTES * max(s.samples for s in self.moments) ** 2 if self.moments else 0
+        # a mip chain adds a third (dsm.prefilter.mipmaps)
+        moments = self.texels * MOMENT_BYTES * max(s.samples ** 2 * (4 / 3 if s.mipmaps else 1) for s in self.moments) \
+            if self.moments else 0
+        moments = int(moments)
         return self.stored_bytes + min(self.tile or self.texels, self.texels) * self.build_bytes_per_texel + moments
 
 

@@ -53,12 +53,13 @@ def check(name: str, params, formats, source: str, where: str):
 def build(spec, z1_world, view, fmt: str):
     """The MomentMap of one instance (``spec``: a MomentSpec) from a depth map's z1 (numpy, world;
     ``spec.samples`` squared values a texel of ``view`` where it supersamples: base.supersampled_view)."""
-    return build_map(get(spec.name), spec.params, z1_world, view, fmt, spec.blur, spec.kernel, spec.samples)
+    return build_map(get(spec.name), spec.params, z1_world, view, fmt, spec.blur, spec.kernel, spec.samples,
+                     spec.mipmaps)
 
 
 def build_key(spec, fmt: str) -> tuple:
     """What a MomentMap of ``spec`` depends on besides its depth map: instances sharing it share a build."""
-    return (spec.name, get(spec.name).moment_key(spec.params), spec.blur, spec.kernel, spec.samples, fmt)
+    return (spec.name, get(spec.name).moment_key(spec.params), spec.blur, spec.kernel, spec.samples, spec.mipmaps, fmt)
 
 
 def visibility(spec, rx, mmap):

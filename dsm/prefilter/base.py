@@ -81,6 +81,7 @@ class MomentMap:
     far_b: list
     fmt: str
     blur: int
+    mips: tuple | None = None      # mipmaps.packed() of the levels after 0 ([map] mipmaps), None: none
 
 
 def normalized_depth(z, view):
@@ -182,16 +183,21 @@ def texel_means(x: np.ndarray, faces: int, R: int, samples: int) -> np.ndarray:
 
 
 def build(kind, params, z1_world: np.ndarray, view, fmt: str, blur: int, kernel: str = "box",
-          samples: int = 1) -> MomentMap:
+          samples: int = 1, mip: bool = False) -> MomentMap:
     """The moment map of ``kind`` from a depth map's z1 (world, texel order; ``samples`` > 1: of
     supersampled_view(view, samples)): moments (encoded in an encoded format), averaged over each
-    texel's samples, stored, blurred (``kernel``: box or gaussian, ``blur`` texels wide), stored again."""
+    texel's samples, stored, blurred (``kernel``: box or gaussian, ``blur`` texels wide), stored again;
+    ``mip``: with the chain of 2 x 2 means of that (dsm.prefilter.mipmaps)."""
     t = normalized_depth(z1_world, view)
     b = [stored(BLURS[kernel](stored(texel_means(m, view.faces, view.resolution, samples), fmt), blur, view.faces,
                               view.resolution), fmt)
          for m in texel_values(kind, t, params, fmt)]
     far_b = [float(stored(m, fmt)[0]) for m in texel_values(kind, np.ones(1), params, fmt)]
-    return MomentMap(view, [mi.Float(m.astype(np.float32)) for m in b], far_b, fmt, blur)
+    mips = None
+    if mip and view.resolution > 1:
+        from . import mipmaps
+        mips = mipmaps.packed([mipmaps.chain(m, view.faces, view.resolution, lambda x: stored(x, fmt)) for m in b])
+    return MomentMap(view, [mi.Float(m.astype(np.float32)) for m in b], far_b, fmt, blur, mips)
 
 
 def fetch(mmap: MomentMap, rx):
@@ -202,6 +208,10 @@ def fetch(mmap: MomentMap, rx):
     j = mi.Int32(dr.floor(rx.v_map))
     out = (i < 0) | (j < 0) | (i > R1) | (j > R1)
     idx = (rx.face * view.R_u + mi.UInt32(dr.clip(j, 0, R1))) * view.R_u + mi.UInt32(dr.clip(i, 0, R1))
+    if mmap.mips is not None:            # [map] mipmaps: the level of the receiver's footprint
+        from . import mipmaps
+        b = mipmaps.blend(mmap.mips, rx, [dr.gather(mi.Float, b, idx) for b in mmap.b])
+        return [dr.select(out, dr.opaque(mi.Float, f), x) for x, f in zip(b, mmap.far_b)]
     return [dr.select(out, dr.opaque(mi.Float, f), dr.gather(mi.Float, b, idx)) for b, f in zip(mmap.b, mmap.far_b)]
 
 
