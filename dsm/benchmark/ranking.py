@@ -8,7 +8,9 @@ minus the smallest error rate over the units, averaged; the smallest spread is t
 scale-robust. The score and the spread read the cases at the origin only; from dsm-bench-2 on the
 far-from-origin cases (every scene at the suite's ``far_unit``, moved by each offset) give each
 contender its error rate per offset and its far change: the mean over (scene, light) of its error
-at the farthest offset less its error at the origin (same unit).
+at the farthest offset less its error at the origin (same unit). From dsm-bench-3 on a pre-filtered
+contender also has its pooled leak rate: its n_leak summed over the cases at the origin over their
+summed n_gt_shadowed (a depth contender: None).
 """
 from __future__ import annotations
 
@@ -71,6 +73,15 @@ def far_change(rows: list, far_unit: str, offset: str) -> float:
     return mean(d[offset] - d[ORIGIN] for d in by.values() if offset in d and ORIGIN in d)
 
 
+def pooled_leak(rows: list):
+    """Sum of n_leak over sum of n_gt_shadowed of ``rows`` (None unless every row has a leak count; NaN
+    when none is shadowed)."""
+    if not rows or not all("n_leak" in r for r in rows):
+        return None
+    shadowed = sum(r["n_gt_shadowed"] for r in rows)
+    return sum(r["n_leak"] for r in rows) / shadowed if shadowed else float("nan")
+
+
 def scores(name: str, rows: list, far_unit, far: list) -> dict:
     """One contender's leaderboard numbers from its records: origin means, FLIP, far columns."""
     here = [r for r in rows if at_origin(r)]
@@ -78,7 +89,8 @@ def scores(name: str, rows: list, far_unit, far: list) -> dict:
            "acne": mean(r["acne_rate"] for r in here), "peterpan": mean(r["peterpan_rate"] for r in here),
            "spread": scale_spread(here), "build_ms": mean(r["build_ms"] for r in here),
            "lookup_ms": mean(r["lookup_ms"] for r in here),
-           "flip": mean(r["flip"] for r in here) if all("flip" in r for r in here) else None}
+           "flip": mean(r["flip"] for r in here) if all("flip" in r for r in here) else None,
+           "leak": pooled_leak(here)}
     out["far"] = {o: mean(r["error_rate"] for r in rows if offset_of(r) == o and r["unit"] == far_unit)
                   for o in far}
     out["far_change"] = far_change(rows, far_unit, far[-1]) if len(far) > 1 else None
