@@ -14,7 +14,7 @@ from dsm.types import Length
 # the suites' identities: changing suite_<n>.toml changes its hash, which makes it a new version
 SUITE_1_SHA256 = "15b8554a6f096049e4da44ba45084ae524f5d93f04380a71907185a990a2ba5c"
 SUITE_2_SHA256 = "ebd3668f4b3bff1df961afae653c8e91018de253cd2df644be3a1c71884b9cd1"
-SUITE_3_SHA256 = "af7c1f43471679a9cb62b156e6d175f8757ef735a3a71f4b156d918d361344b1"
+SUITE_3_SHA256 = "15c2062cc4a5b7b25fe9a2aea34d1091032c4a346a1123e84538a21054aac680"
 
 
 def test_suite_hashes_are_pinned():
@@ -190,8 +190,9 @@ def test_benchmark_end_to_end_at_test_size(test_run):
     assert doc["suite"] == "dsm-bench-3" and doc["suite_sha256"] == SUITE_3_SHA256 and doc["size"] == "test"
     assert doc["machine"]["cores"] >= 1 and doc["versions"]["dsm_git_commit"]
     assert doc["far_unit"] == "m" and doc["flip_ppd"] == 67.0
-    # 2 scenes x (2 units + 2 offsets at m) x 1 light x (3 contenders + the oracle + 2 pre-filtered kinds)
-    assert len(doc["cases"]) == 48
+    # 2 scenes x (2 units + 2 offsets at m) x 1 light x (3 contenders + the tuned one + the oracle
+    # + 2 pre-filtered kinds)
+    assert len(doc["cases"]) == 56
     recs = {(r["scene"], r["unit"], r["offset"], r["contender"]): r for r in doc["cases"]}
     for r in doc["cases"]:
         if r["contender"] != "oracle":
@@ -248,7 +249,7 @@ def test_far_numbers_come_back_in_camera_relative_precision(test_run):
     origin = {(r["contender"]): r for r in doc["cases"] if r["scene"] == "grazing" and r["unit"] == "m"
               and r["offset"] == "0"}
     for row in res.rows:
-        here = origin[row["preset"] or row["scheme"]]
+        here = origin[results.contender_of(row, suite.tuned_labels(suite.load_suite()))]
         assert (row["n_receivers"], row["n_acne"], row["n_peterpan"]) == \
             (here["n_receivers"], here["n_acne"], here["n_peterpan"])
 
@@ -263,7 +264,7 @@ def test_the_scale_figure_and_tables_hold_the_results_numbers(test_run):
     with Image.open(out / "scale.png") as im:
         assert im.format == "PNG" and im.width > 400 and im.height > 150
         pixels = np.asarray(im.convert("RGB")).reshape(-1, 3).astype(int)
-    who = ["bevy", "msm box:5", "oracle", "receiver_plane", "three", "vsm box:5"]
+    who = ["bevy", "msm box:5", "oracle", "receiver_plane", "three", "tuned_normal_angle", "vsm box:5"]
     def by_numpy(keep):
         value = lambda r: r["per_texel_objective"] if r["contender"] == "oracle" else r["error_rate"]
         return [float(np.mean(np.array([value(r) for r in doc["cases"] if r["contender"] == c and keep(r)],
@@ -428,3 +429,28 @@ def test_prefiltered_contenders_carry_leaks_and_their_pooled_leak_rate(test_run)
     assert sum(r["n_leak"] for r in pre) > 0                # leaking is measured here, not all zero
     page = (out / "leaderboard.html").read_text()
     assert "leak rate" in page and "Best pre-filtered map" in page
+
+
+def test_the_tuned_contender_is_the_tune_s_result_exactly():
+    """suite_3's tuned_normal_angle holds the values of the tune it names (dsm/benchmark/tune_3.json,
+    the stored tune.json): the same scheme, numbers and units, and it was that tune's best scheme."""
+    from pathlib import Path
+    from dsm.config.read import parse_scheme
+    from dsm.schemes import ALL, PRESETS
+    from dsm.types import Length
+    stored = json.loads((Path(suite.__file__).with_name("tune_3.json")).read_text())
+    best = min(stored["schemes"], key=lambda e: e["train"]["objective"])
+    t = suite.load_suite()["contenders"]["tuned"]["tuned_normal_angle"]
+    assert best["scheme"] == t["name"] == "normal_angle"
+    spec, = parse_scheme(dict(t), "<suite>", "t", ALL, PRESETS)
+    for k, v in best["values"].items():
+        assert getattr(spec.params, k) == Length(v, best["units"][k])       # exactly: no rounding on the way
+    assert suite.tuned_labels(suite.load_suite()) == {("normal_angle", spec.label): "tuned_normal_angle"}
+
+
+def test_the_tuned_contender_runs_under_its_own_name(test_run):
+    out, doc = test_run
+    tuned = [r for r in doc["cases"] if r["contender"] == "tuned_normal_angle"]
+    assert len(tuned) == 8 and {r["params"] for r in tuned} == {"bias=1.21429 texel max=12 texel"}
+    assert doc["tuned"]["tuned_normal_angle"]["bias"] == "1.2142857142857142 texel"
+    assert "Best tuned scheme: tuned_normal_angle" in (out / "leaderboard.html").read_text()

@@ -49,7 +49,7 @@ def answer(doc: dict, ranked: list) -> str:
                        "alike at every unit is robust by this measure, not good).")
     return (f"<p class=answer>Ranking (mean error rate over every scene, unit and light, at the origin): "
             f"{html.escape(top)}.</p>"
-            f"<p class=answer>{html.escape(robust_text)}</p>" + far_answer(ranked) + prefiltered_answer(ranked) +
+            f"<p class=answer>{html.escape(robust_text)}</p>" + far_answer(ranked) + prefiltered_answer(ranked) + tuned_answer(doc, ranked) +
             f"<p class=answer>Oracle floor: per-texel {floor['per_texel_objective']:.2g}, best single world bias "
             f"{floor['world_objective']:.4f}, best single texel bias {floor['texel_objective']:.4f}.</p>")
 
@@ -75,6 +75,19 @@ def prefiltered_answer(ranked: list) -> str:
     best = pool[0]                      # ranked is best first
     text = (f"Best pre-filtered map: {best['contender']} (rank {best['rank']}, error rate {best['error']:.4f}, "
             f"leak rate {best['leak']:.4f}, at the kind's defaults).")
+    return f"<p class=answer>{html.escape(text)}</p>"
+
+
+def tuned_answer(doc: dict, ranked: list) -> str:
+    """The opening's line on the best tuned scheme: its frozen values, rank and error."""
+    pool = [r for r in ranked if r["contender"] in doc.get("tuned", {})]
+    if not pool:
+        return ""
+    best, t = pool[0], doc["tuned"][pool[0]["contender"]]
+    values = ", ".join(f"{k} = {v}" for k, v in t.items() if k != "name")
+    text = (f"Best tuned scheme: {best['contender']} ({t['name']} with {values}; rank {best['rank']}, error rate "
+            f"{best['error']:.4f}), tuned once on the suite's training views (its built-in scenes at metres under its "
+            "three lights, from two cameras that are not the suite's) and frozen into the suite.")
     return f"<p class=answer>{html.escape(text)}</p>"
 
 

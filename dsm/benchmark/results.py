@@ -16,7 +16,7 @@ import platform
 from pathlib import Path
 
 from . import perceptual, render
-from .suite import LATEST, ORIGIN, SUITE_FILES, cases, load_suite, suite_sha256
+from .suite import LATEST, ORIGIN, SUITE_FILES, cases, load_suite, suite_sha256, tuned_labels
 
 MEASURES = ("n_receivers", "n_gt_shadowed", "n_acne", "n_peterpan", "acne_rate", "peterpan_rate", "error_rate",
             "texel_size", "texel_f32_steps", "build_ms", "lookup_ms")
@@ -47,22 +47,25 @@ def is_prefiltered(row: dict) -> bool:
     return row.get("map_kind") not in (None, "", "depth")
 
 
-def contender_of(row: dict) -> str:
+def contender_of(row: dict, tuned: dict | None = None) -> str:
     """The contender a metrics row belongs to: a pre-filtered kind and its filter (``vsm box:5``), else its
-    preset's name, else its scheme's."""
+    preset's name, else a tuned contender's (``tuned``: :func:`dsm.benchmark.suite.tuned_labels`), else its scheme's."""
     if is_prefiltered(row):
         return f"{row['scheme']} {row['filter']}"
+    if not row["preset"] and tuned and (row["scheme"], row["params"]) in tuned:
+        return tuned[(row["scheme"], row["params"])]
     return row["preset"] or row["scheme"]
 
 
-def case_records(case, results, flips=None, oracle=True) -> list:
+def case_records(case, results, flips=None, oracle=True, tuned=None) -> list:
     """The suite's records of one (scene, unit, offset) run: one per light and contender (with its
-    FLIP from ``flips``, case id -> mean FLIP, where given), plus its oracle floor (if ``oracle``)."""
+    FLIP from ``flips``, case id -> mean FLIP, where given; ``tuned``: the suite's tuned labels), plus its
+    oracle floor (if ``oracle``)."""
     out = []
     where = {"offset": case.offset, "translate": list(case.translate)}
     for row in results.rows:
         rec = {"scene": case.scene, "unit": case.unit, **where, "light": light_kind(row["light"]),
-               "contender": contender_of(row), "params": row["params"]}
+               "contender": contender_of(row, tuned), "params": row["params"]}
         rec.update({k: row[k] for k in MEASURES})
         if is_prefiltered(row):
             rec.update({"map_kind": row["map_kind"], **{k: row[k] for k in LEAK_MEASURES}})
@@ -90,13 +93,13 @@ def case_flips(case, res, ppd: float, variant: str | None = None, setups=None) -
     return out
 
 
-def run_case(case, ppd, variant: str | None = None) -> tuple:
+def run_case(case, ppd, variant: str | None = None, tuned=None) -> tuple:
     """(records, the variant run) of one case: its depth config's records (with the oracle), then its
     pre-filtered config's if any."""
     import dsm
     res = dsm.run(case.config, variant=variant)
     setups = None if ppd is None else render.light_setups(case.config, variant)    # shared: same scene and lights
-    out = case_records(case, res, None if ppd is None else case_flips(case, res, ppd, variant, setups))
+    out = case_records(case, res, None if ppd is None else case_flips(case, res, ppd, variant, setups), tuned=tuned)
     if case.prefiltered is not None:
         pre = dsm.run(case.prefiltered, variant=variant)
         out += case_records(case, pre, None if ppd is None else case_flips(case, pre, ppd, variant, setups), oracle=False)
@@ -109,18 +112,19 @@ def run_suite(size: str = "default", variant: str | None = None, progress=print,
     from ..tools.env import versions
     suite = load_suite(SUITE_FILES[version])
     ppd = suite.get("flip", {}).get("ppd")          # dsm-bench-1 has no FLIP
-    todo = cases(suite, size)
+    todo, tuned = cases(suite, size), tuned_labels(suite)
     records, run_variant = [], None
     for i, case in enumerate(todo):
         if progress:
             where = "" if case.offset == ORIGIN else f" at {case.offset}"
             progress(f"dsm benchmark: {i + 1}/{len(todo)} {case.scene} in {case.unit}{where} (scale {case.scale:g})")
-        recs, run_variant = run_case(case, ppd, variant)
+        recs, run_variant = run_case(case, ppd, variant, tuned)
         records += recs
     s = suite["suite"]
     return {"suite": s["name"], "suite_sha256": suite_sha256(SUITE_FILES[version]), "size": size,
             "dsm_version": dsm.__version__, "versions": versions(), "variant": run_variant,
-            "machine": machine(), "far_unit": s.get("far_unit"), "flip_ppd": ppd, "cases": records}
+            "machine": machine(), "far_unit": s.get("far_unit"), "flip_ppd": ppd,
+            "tuned": suite["contenders"].get("tuned", {}), "cases": records}
 
 
 def write(doc: dict, out: Path) -> Path:

@@ -10,7 +10,9 @@ From dsm-bench-3 on a scene may name its own ``lights`` (a subset of the suite's
 and ``point`` (the Cornell box: inside the box), may stay off the far axis (``far = false``: an XML
 scene takes no translate), and a case carries a second config, ``prefiltered``: the suite's
 pre-filtered map kinds on the same scene and lights, without cascades (a kind refuses them) and
-without [[scheme]] (which belongs to the depth map).
+without [[scheme]] (which belongs to the depth map). Its tuned contenders (``[contenders.tuned.<name>]``:
+a scheme's table with the values a tune froze) run as [[scheme]] tables among the others; their rows
+are told from the same scheme at its defaults by their parameters' label (:func:`tuned_labels`).
 """
 from __future__ import annotations
 
@@ -61,7 +63,8 @@ def size_of(suite: dict, size: str) -> dict:
     s.setdefault("scenes", [sc["name"] for sc in suite["scene"]])
     s.setdefault("units", [u for u, _ in suite["suite"]["units"]])
     s.setdefault("lights", list(LIGHTS))
-    s.setdefault("contenders", suite["contenders"]["presets"] + suite["contenders"]["schemes"])
+    s.setdefault("contenders", suite["contenders"]["presets"] + suite["contenders"]["schemes"]
+                 + list(suite["contenders"].get("tuned", {})))
     s.setdefault("offsets", [label for label, _ in suite["suite"].get("offsets", [])])
     s.setdefault("prefiltered", suite.get("prefiltered", {}).get("kinds", []))
     return s
@@ -78,9 +81,25 @@ def axes(suite: dict, s: dict, scene: dict | None = None) -> list:
 
 
 def contender_tables(suite: dict, names: list) -> list:
-    """The [[scheme]] tables of the contenders ``names``: presets by name, kit schemes at their defaults."""
-    presets = set(suite["contenders"]["presets"])
-    return [{"preset": n} if n in presets else {"name": n} for n in names]
+    """The [[scheme]] tables of the contenders ``names``: presets by name, tuned ones with their frozen
+    values, kit schemes at their defaults."""
+    presets, tuned = set(suite["contenders"]["presets"]), suite["contenders"].get("tuned", {})
+    return [{"preset": n} if n in presets else dict(tuned[n]) if n in tuned else {"name": n} for n in names]
+
+
+def tuned_labels(suite: dict) -> dict:
+    """(scheme name, parameters label) -> tuned contender name, the label as a run's ``params`` column
+    writes it; refused where a tuned table's label is its scheme's default's (its rows would be the same)."""
+    from ..config.read import parse_scheme
+    from ..schemes import ALL, PRESETS
+    out = {}
+    for name, t in suite["contenders"].get("tuned", {}).items():
+        spec, = parse_scheme(dict(t), "<suite>", f"contenders.tuned.{name}", ALL, PRESETS)
+        default, = parse_scheme({"name": t["name"]}, "<suite>", "default", ALL, PRESETS)
+        if spec.label == default.label:
+            raise ValueError(f"contenders.tuned.{name}: its values are {t['name']}'s defaults")
+        out[(t["name"], spec.label)] = name
+    return out
 
 
 def scene_table(scene: dict, scale: float, translate=(0.0, 0.0, 0.0)) -> dict:
