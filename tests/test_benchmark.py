@@ -14,7 +14,7 @@ from dsm.types import Length
 # the suites' identities: changing suite_<n>.toml changes its hash, which makes it a new version
 SUITE_1_SHA256 = "15b8554a6f096049e4da44ba45084ae524f5d93f04380a71907185a990a2ba5c"
 SUITE_2_SHA256 = "ebd3668f4b3bff1df961afae653c8e91018de253cd2df644be3a1c71884b9cd1"
-SUITE_3_SHA256 = "15c2062cc4a5b7b25fe9a2aea34d1091032c4a346a1123e84538a21054aac680"
+SUITE_3_SHA256 = "5582fcb3e08f61997b71398424ea90d81b26e8c56d66886b835a18bbdad60677"
 
 
 def test_suite_hashes_are_pinned():
@@ -454,3 +454,29 @@ def test_the_tuned_contender_runs_under_its_own_name(test_run):
     assert len(tuned) == 8 and {r["params"] for r in tuned} == {"bias=1.21429 texel max=12 texel"}
     assert doc["tuned"]["tuned_normal_angle"]["bias"] == "1.2142857142857142 texel"
     assert "Best tuned scheme: tuned_normal_angle" in (out / "leaderboard.html").read_text()
+
+
+def test_flicker_is_frames_csv_s_recomputed(test_run):
+    """Each flicker record's flicker_rate is the mean over frame pairs of n_flicker / n_pairs_eligible
+    of its case's rows in its frames.csv (numpy, float64; the first frame has no pair); the leaderboard's
+    flicker is the mean of a contender's records; the depth contenders have one per light, the
+    pre-filtered none."""
+    import csv
+    out, doc = test_run
+    fl = doc["flicker"]
+    depth = {"bevy", "three", "receiver_plane", "tuned_normal_angle"}
+    assert {r["contender"] for r in fl} == depth and len(fl) == 4           # grazing at m, the directional light
+    assert all(r["scene"] == "grazing" and r["unit"] == "m" and r["frames"] == 6 for r in fl)
+    for r in fl:
+        with open(out / r["frames_csv"]) as f:
+            frames = [x for x in csv.DictReader(f) if x["case"] == r["case"]]
+        assert [int(x["frame"]) for x in frames] == list(range(6))
+        pairs = [(int(x["n_flicker"]), int(x["n_pairs_eligible"])) for x in frames[1:]]
+        assert all(e > 0 for _, e in pairs)
+        expect = float(np.mean(np.array([n / e for n, e in pairs], np.float64)))
+        assert r["flicker_rate"] == pytest.approx(expect, rel=1e-12, abs=1e-15)
+    ranked = {r["contender"]: r for r in ranking.ranking(doc)}
+    for r in fl:
+        assert ranked[r["contender"]]["flicker"] == pytest.approx(r["flicker_rate"], abs=1e-15)
+    assert ranked["vsm box:5"]["flicker"] is None
+    assert "no oracle floor" in (out / "leaderboard.html").read_text()

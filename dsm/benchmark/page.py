@@ -13,6 +13,10 @@ LEAK_NOTE = (" Leak rate (pre-filtered maps only, '-' for the depth map's conten
              "from their occluder (n_leak) summed over the cases at the origin, over the summed shadowed receivers "
              "of V*. A pre-filtered contender (kind and blur, at the kind's defaults) has no cascades: its directional "
              "light gets one map.")
+FLICKER_NOTE = (" Flicker (depth contenders, on the suite's flicker scenes at metres): the mean over scenes, lights "
+                "and frame pairs of the fraction of fixed surface points whose map class toggles while their exact "
+                "visibility does not, as the camera dollies 0.25 m over 6 frames; it has no oracle floor (the oracles "
+                "are per view); the pre-filtered maps refuse a motion ('-').")
 SORT_SCRIPT = SCRIPT.split("const cases")[0]      # report.html's header sort, without its case viewer
 
 
@@ -133,9 +137,9 @@ def write_page(doc: dict, out: Path) -> Path:
     """Write ``leaderboard.html`` in ``out`` from a result document; returns its path."""
     ranked = ranking.ranking(doc)
     far = list(ranked[0]["far"])[1:] if ranked else []
-    head = ["rank", "contender", "error rate", "acne rate", "peter-pan rate", "scale spread", "FLIP", "leak rate"]
+    head = ["rank", "contender", "error rate", "acne rate", "peter-pan rate", "scale spread", "FLIP", "leak rate", "flicker"]
     head += [f"error at {o}" for o in far] + (["far change"] if far else []) + ["build ms", "lookup ms"]
-    rows = [[r["rank"], r["contender"], r["error"], r["acne"], r["peterpan"], r["spread"], r["flip"], r.get("leak")]
+    rows = [[r["rank"], r["contender"], r["error"], r["acne"], r["peterpan"], r["spread"], r["flip"], r.get("leak"), r.get("flicker")]
             + [r["far"][o] for o in far] + ([r["far_change"]] if far else []) + [r["build_ms"], r["lookup_ms"]]
             for r in ranked]
     m = doc["machine"]
@@ -147,7 +151,7 @@ def write_page(doc: dict, out: Path) -> Path:
     body = (f"<h1>Shadow-bias leaderboard: {html.escape(doc['suite'])}</h1><p class=meta>{html.escape(meta)}</p>"
             + answer(doc, ranked) + "<h2>Ranking</h2><p class=note>Scores within 0.001 tie (shared rank, by name); "
             "every column but the offsets' reads the cases at the origin. Far change: the error at the farthest "
-            f"offset less the one at the origin.{html.escape(flip)}{html.escape(LEAK_NOTE)} Click a header to sort.</p>" + table(head, rows)
+            f"offset less the one at the origin.{html.escape(flip)}{html.escape(LEAK_NOTE)}{html.escape(FLICKER_NOTE)} Click a header to sort.</p>" + table(head, rows)
             + grid_section(doc) + scale_section(doc) + bias_section(doc))
     Path(out).mkdir(parents=True, exist_ok=True)
     figure.write(doc, out)                      # scale.png, which the page shows

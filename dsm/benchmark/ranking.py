@@ -10,7 +10,8 @@ far-from-origin cases (every scene at the suite's ``far_unit``, moved by each of
 contender its error rate per offset and its far change: the mean over (scene, light) of its error
 at the farthest offset less its error at the origin (same unit). From dsm-bench-3 on a pre-filtered
 contender also has its pooled leak rate: its n_leak summed over the cases at the origin over their
-summed n_gt_shadowed (a depth contender: None).
+summed n_gt_shadowed (a depth contender: None), and a depth contender its flicker: the mean flicker_rate
+of its records in the document's ``flicker`` list (None without any; no oracle floor).
 """
 from __future__ import annotations
 
@@ -97,11 +98,21 @@ def scores(name: str, rows: list, far_unit, far: list) -> dict:
     return out
 
 
+def flicker_by(doc: dict) -> dict:
+    """Contender -> the mean flicker_rate of its flicker records (over scenes and lights)."""
+    acc = defaultdict(list)
+    for r in doc.get("flicker", []):
+        acc[r["contender"]].append(r["flicker_rate"])
+    return {c: mean(v) for c, v in acc.items()}
+
+
 def ranking(doc: dict) -> list:
     """The leaderboard rows, best first: rank, contender, score, acne, peter-pan, scale spread, FLIP,
     error per offset (``far``: offset -> error at the far unit) and the far change."""
     far = offsets(doc) if doc.get("far_unit") else []
-    scored = [scores(name, rows, doc.get("far_unit"), far) for name, rows in contender_rows(doc).items()]
+    flick = flicker_by(doc)
+    scored = [{**scores(name, rows, doc.get("far_unit"), far), "flicker": flick.get(name)}
+              for name, rows in contender_rows(doc).items()]
     scored.sort(key=lambda s: (s["error"], s["contender"]))
     out, lead = [], None
     for i, s in enumerate(scored):

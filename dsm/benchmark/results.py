@@ -6,7 +6,10 @@ shadowed count (``n_gt_shadowed``: where the scene sits must not move it), the m
 shadowed render against the exact render (:mod:`dsm.benchmark.render`, :mod:`dsm.benchmark.perceptual`).
 From dsm-bench-3 on a case also runs its pre-filtered config (:func:`dsm.benchmark.suite.prefiltered_config`):
 those records are named by kind and filter (``vsm box:5``), carry ``map_kind`` and the leak split
-(``n_leak``, ``leak_rate``), and add no oracle (the depth config's is the case's floor).
+(``n_leak``, ``leak_rate``), and add no oracle (the depth config's is the case's floor). A case with a
+flicker config (:func:`dsm.benchmark.suite.motion_config`) runs it into ``flicker/<its name>/`` of the
+benchmark's folder (frames.csv kept there) and adds one flicker record per light and contender to the
+document's ``flicker`` list (not to ``cases``: its counts are a motion's, summed over frames).
 """
 from __future__ import annotations
 
@@ -21,6 +24,8 @@ from .suite import LATEST, ORIGIN, SUITE_FILES, cases, load_suite, suite_sha256,
 MEASURES = ("n_receivers", "n_gt_shadowed", "n_acne", "n_peterpan", "acne_rate", "peterpan_rate", "error_rate",
             "texel_size", "texel_f32_steps", "build_ms", "lookup_ms")
 LEAK_MEASURES = ("n_leak", "leak_rate")      # a pre-filtered record's: peter-panning far from the occluder
+FLICKER_MEASURES = ("frames", "flicker_rate", "flicker_ever", "flicker_magnitude", "flicker_within_rate",
+                    "flicker_change_rate")
 ORACLE_MEASURES = ("world_objective", "texel_objective", "per_texel_objective")
 
 
@@ -93,38 +98,59 @@ def case_flips(case, res, ppd: float, variant: str | None = None, setups=None) -
     return out
 
 
-def run_case(case, ppd, variant: str | None = None, tuned=None) -> tuple:
-    """(records, the variant run) of one case: its depth config's records (with the oracle), then its
-    pre-filtered config's if any."""
+def flicker_records(case, res, folder: str, tuned=None) -> list:
+    """The flicker records of a case's motion run: one per light and contender, its frames.csv's folder
+    ``folder`` (relative to the benchmark's) and case id with it."""
+    return [{"scene": case.scene, "unit": case.unit, "offset": case.offset, "light": light_kind(row["light"]),
+             "contender": contender_of(row, tuned), "params": row["params"], "frames_csv": f"{folder}/frames.csv",
+             "case": row["case"], **{k: row[k] for k in FLICKER_MEASURES}} for row in res.rows]
+
+
+def run_case(case, ppd, variant: str | None = None, tuned=None, out: Path | None = None) -> tuple:
+    """(records, flicker records, the variant run) of one case: its depth config's records (with the
+    oracle), then its pre-filtered config's if any; its motion config's flicker, run into ``out``."""
     import dsm
     res = dsm.run(case.config, variant=variant)
     setups = None if ppd is None else render.light_setups(case.config, variant)    # shared: same scene and lights
-    out = case_records(case, res, None if ppd is None else case_flips(case, res, ppd, variant, setups), tuned=tuned)
+    records = case_records(case, res, None if ppd is None else case_flips(case, res, ppd, variant, setups), tuned=tuned)
     if case.prefiltered is not None:
         pre = dsm.run(case.prefiltered, variant=variant)
-        out += case_records(case, pre, None if ppd is None else case_flips(case, pre, ppd, variant, setups), oracle=False)
-    return out, res.run.get("variant")
+        records += case_records(case, pre, None if ppd is None else case_flips(case, pre, ppd, variant, setups),
+                                oracle=False)
+    flicker = []
+    if case.motion is not None:
+        folder = f"flicker/{case.motion['experiment']['name']}"
+        # force: the folder is the benchmark's, which holds its lock and refused an earlier run's results
+        mo = dsm.run(case.motion, variant=variant, out=Path(out) / folder, force=True)
+        flicker = flicker_records(case, mo, folder, tuned)
+    return records, flicker, res.run.get("variant")
 
 
-def run_suite(size: str = "default", variant: str | None = None, progress=print, version: str = LATEST) -> dict:
-    """Run suite ``version`` at ``size`` and return its result document (see :func:`write`)."""
+def run_suite(size: str = "default", variant: str | None = None, progress=print, version: str = LATEST,
+              out: Path | None = None) -> dict:
+    """Run suite ``version`` at ``size`` and return its result document (see :func:`write`); the flicker
+    runs' folders go under ``out`` (a temporary folder, removed, when None)."""
+    if out is None:
+        import tempfile
+        with tempfile.TemporaryDirectory() as tmp:
+            return run_suite(size, variant, progress, version, Path(tmp))
     import dsm
     from ..tools.env import versions
     suite = load_suite(SUITE_FILES[version])
     ppd = suite.get("flip", {}).get("ppd")          # dsm-bench-1 has no FLIP
     todo, tuned = cases(suite, size), tuned_labels(suite)
-    records, run_variant = [], None
+    records, flicker, run_variant = [], [], None
     for i, case in enumerate(todo):
         if progress:
             where = "" if case.offset == ORIGIN else f" at {case.offset}"
             progress(f"dsm benchmark: {i + 1}/{len(todo)} {case.scene} in {case.unit}{where} (scale {case.scale:g})")
-        recs, run_variant = run_case(case, ppd, variant, tuned)
-        records += recs
+        recs, flick, run_variant = run_case(case, ppd, variant, tuned, out)
+        records, flicker = records + recs, flicker + flick
     s = suite["suite"]
     return {"suite": s["name"], "suite_sha256": suite_sha256(SUITE_FILES[version]), "size": size,
             "dsm_version": dsm.__version__, "versions": versions(), "variant": run_variant,
             "machine": machine(), "far_unit": s.get("far_unit"), "flip_ppd": ppd,
-            "tuned": suite["contenders"].get("tuned", {}), "cases": records}
+            "tuned": suite["contenders"].get("tuned", {}), "flicker": flicker, "cases": records}
 
 
 def write(doc: dict, out: Path) -> Path:

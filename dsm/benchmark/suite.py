@@ -12,7 +12,9 @@ scene takes no translate), and a case carries a second config, ``prefiltered``: 
 pre-filtered map kinds on the same scene and lights, without cascades (a kind refuses them) and
 without [[scheme]] (which belongs to the depth map). Its tuned contenders (``[contenders.tuned.<name>]``:
 a scheme's table with the values a tune froze) run as [[scheme]] tables among the others; their rows
-are told from the same scheme at its defaults by their parameters' label (:func:`tuned_labels`).
+are told from the same scheme at its defaults by their parameters' label (:func:`tuned_labels`). A case of
+one of its ``[flicker]`` scenes at the flicker unit, at the origin, carries a third config, ``motion``:
+the depth config with the suite's [[motion]] camera move.
 """
 from __future__ import annotations
 
@@ -43,6 +45,7 @@ class Case:
     offset: str = ORIGIN  # the offset's label ("0", "1e4", ...)
     translate: tuple = (0.0, 0.0, 0.0)    # world units after the scale
     prefiltered: dict | None = None       # the pre-filtered kinds' config of the case (dsm-bench-3 on)
+    motion: dict | None = None            # the flicker config of the case (dsm-bench-3 on, a few scenes)
 
 
 def suite_sha256(path: Path = SUITE_FILE) -> str:
@@ -67,6 +70,7 @@ def size_of(suite: dict, size: str) -> dict:
                  + list(suite["contenders"].get("tuned", {})))
     s.setdefault("offsets", [label for label, _ in suite["suite"].get("offsets", [])])
     s.setdefault("prefiltered", suite.get("prefiltered", {}).get("kinds", []))
+    s.setdefault("flicker", suite.get("flicker", {}).get("scenes", []))
     return s
 
 
@@ -147,6 +151,12 @@ def prefiltered_config(suite: dict, cfg: dict, kinds: list) -> dict | None:
     return {**{k: v for k, v in cfg.items() if k != "scheme"}, "experiment": {"name": name}, "map": mp}
 
 
+def motion_config(suite: dict, cfg: dict) -> dict:
+    """The flicker config of a case's depth config ``cfg``: the same with the suite's [[motion]]."""
+    name = cfg["experiment"]["name"] + "-flicker"
+    return {**cfg, "experiment": {"name": name}, "motion": [dict(suite["flicker"]["motion"])]}
+
+
 def cases(suite: dict, size: str) -> list:
     """Every (scene, unit, offset) Case of the suite at ``size``, each with its dsm.run config dict."""
     s = size_of(suite, size)
@@ -166,5 +176,7 @@ def cases(suite: dict, size: str) -> list:
                    "scene": [scene_table(scene, scale, translate)],
                    "light": light_tables(suite, scene, s["lights"]),
                    "map": mp, "scheme": contender_tables(suite, s["contenders"])}
-            out.append(Case(name, unit, scale, cfg, offset, translate, prefiltered_config(suite, cfg, s["prefiltered"])))
+            flicker = name in s["flicker"] and unit == suite["flicker"]["unit"] and offset == ORIGIN
+            out.append(Case(name, unit, scale, cfg, offset, translate, prefiltered_config(suite, cfg, s["prefiltered"]),
+                            motion_config(suite, cfg) if flicker else None))
     return out
