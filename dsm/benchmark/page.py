@@ -76,7 +76,7 @@ def prefiltered_answer(ranked: list) -> str:
     pool = [r for r in ranked if r.get("leak") is not None]
     if not pool:
         return ""
-    best = pool[0]                      # ranked is best first
+    best = min(pool, key=lambda r: (r["error"], r["contender"]))    # a tie's rows are listed by name
     text = (f"Best pre-filtered map: {best['contender']} (rank {best['rank']}, error rate {best['error']:.4f}, "
             f"leak rate {best['leak']:.4f}, at the kind's defaults).")
     return f"<p class=answer>{html.escape(text)}</p>"
@@ -87,7 +87,8 @@ def tuned_answer(doc: dict, ranked: list) -> str:
     pool = [r for r in ranked if r["contender"] in doc.get("tuned", {})]
     if not pool:
         return ""
-    best, t = pool[0], doc["tuned"][pool[0]["contender"]]
+    best = min(pool, key=lambda r: (r["error"], r["contender"]))
+    t = doc["tuned"][best["contender"]]
     values = ", ".join(f"{k} = {v}" for k, v in t.items() if k != "name")
     text = (f"Best tuned scheme: {best['contender']} ({t['name']} with {values}; rank {best['rank']}, error rate "
             f"{best['error']:.4f}), tuned once on the suite's training views (its built-in scenes at metres under its "
