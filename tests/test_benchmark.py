@@ -1,4 +1,4 @@
-"""dsm benchmark (dsm-bench-1 and dsm-bench-2): the suites' hash pins, scale normalization, the
+"""dsm benchmark (dsm-bench-1, -2 and -3): the suites' hash pins, scale normalization, the
 far-from-origin axis, the compare rule, the leaderboard's ranking and tie rule, the preset bias
 conversion, FLIP, the shaded renders, the scale figure, and one tiny end-to-end run."""
 import json
@@ -7,22 +7,25 @@ import numpy as np
 import pytest
 
 from dsm import cli
-from dsm.benchmark import bias_units, compare, ranking, suite
+from dsm.benchmark import bias_units, compare, ranking, results, suite
 from dsm.benchmark.command import SIZE_ENV
 from dsm.types import Length
 
 # the suites' identities: changing suite_<n>.toml changes its hash, which makes it a new version
 SUITE_1_SHA256 = "15b8554a6f096049e4da44ba45084ae524f5d93f04380a71907185a990a2ba5c"
 SUITE_2_SHA256 = "ebd3668f4b3bff1df961afae653c8e91018de253cd2df644be3a1c71884b9cd1"
+SUITE_3_SHA256 = "5582fcb3e08f61997b71398424ea90d81b26e8c56d66886b835a18bbdad60677"
 
 
 def test_suite_hashes_are_pinned():
     assert suite.suite_sha256(suite.SUITE_FILES["dsm-bench-1"]) == SUITE_1_SHA256
     assert suite.load_suite(suite.SUITE_FILES["dsm-bench-1"])["suite"]["name"] == "dsm-bench-1"
+    assert suite.suite_sha256(suite.SUITE_FILES["dsm-bench-2"]) == SUITE_2_SHA256
+    assert suite.load_suite(suite.SUITE_FILES["dsm-bench-2"])["suite"]["name"] == "dsm-bench-2"
     # the newest is what dsm benchmark runs by default
-    assert suite.LATEST == "dsm-bench-2" and suite.suite_sha256() == SUITE_2_SHA256
+    assert suite.LATEST == "dsm-bench-3" and suite.suite_sha256() == SUITE_3_SHA256
     s = suite.load_suite()
-    assert s["suite"]["name"] == "dsm-bench-2" and s["flip"]["ppd"] == 67.0
+    assert s["suite"]["name"] == "dsm-bench-3" and s["flip"]["ppd"] == 67.0
 
 
 def test_suite_1_still_makes_its_cases_at_the_origin_only():
@@ -36,7 +39,9 @@ def test_default_size_covers_every_preset_scene_unit_and_light():
     from dsm.schemes.presets import names
     s = suite.load_suite()
     cs = suite.cases(s, "default")
-    assert len(cs) == len(s["scene"]) * (3 + 2)               # every scene at cm, m and km, and at 1e4 and 1e5
+    # every scene at cm, m and km, and but the Cornell box (an XML scene takes no translate) at 1e4 and 1e5
+    assert len(cs) == len(s["scene"]) * (3 + 2) - 2
+    assert sorted((c.unit, c.offset) for c in cs if c.scene == "cbox") == [("cm", "0"), ("km", "0"), ("m", "0")]
     schemes = cs[0].config["scheme"]
     assert sorted(t["preset"] for t in schemes if "preset" in t) == names()
     assert [t["type"] for t in cs[0].config["light"]] == ["scene", "spot", "point"]
@@ -55,7 +60,7 @@ def test_a_far_case_is_the_metre_case_moved():
         for offset, translate in (("1e4", [1e4, 5e3, 0.0]), ("1e5", [1e5, 5e4, 0.0])):
             far = _by(cs, name, "m", offset)
             assert far.config["scene"][0].pop("translate") == translate and far.translate == tuple(translate)
-            assert far.config["experiment"].pop("name") == f"dsm-bench-2-{name}-m-at-{offset}"
+            assert far.config["experiment"].pop("name") == f"dsm-bench-3-{name}-m-at-{offset}"
             assert {**here.config, "experiment": {}} == {**far.config, "experiment": {}}
     assert {c.unit for c in cs if c.offset != "0"} == {"m"}
 
@@ -182,11 +187,12 @@ def test_run(tmp_path_factory):
 
 def test_benchmark_end_to_end_at_test_size(test_run):
     out, doc = test_run
-    assert doc["suite"] == "dsm-bench-2" and doc["suite_sha256"] == SUITE_2_SHA256 and doc["size"] == "test"
+    assert doc["suite"] == "dsm-bench-3" and doc["suite_sha256"] == SUITE_3_SHA256 and doc["size"] == "test"
     assert doc["machine"]["cores"] >= 1 and doc["versions"]["dsm_git_commit"]
     assert doc["far_unit"] == "m" and doc["flip_ppd"] == 67.0
-    # 2 scenes x (2 units + 2 offsets at m) x 1 light x (3 contenders + the oracle)
-    assert len(doc["cases"]) == 32
+    # 2 scenes x (2 units + 2 offsets at m) x 1 light x (3 contenders + the tuned one + the oracle
+    # + 2 pre-filtered kinds)
+    assert len(doc["cases"]) == 56
     recs = {(r["scene"], r["unit"], r["offset"], r["contender"]): r for r in doc["cases"]}
     for r in doc["cases"]:
         if r["contender"] != "oracle":
@@ -243,7 +249,7 @@ def test_far_numbers_come_back_in_camera_relative_precision(test_run):
     origin = {(r["contender"]): r for r in doc["cases"] if r["scene"] == "grazing" and r["unit"] == "m"
               and r["offset"] == "0"}
     for row in res.rows:
-        here = origin[row["preset"] or row["scheme"]]
+        here = origin[results.contender_of(row, suite.tuned_labels(suite.load_suite()))]
         assert (row["n_receivers"], row["n_acne"], row["n_peterpan"]) == \
             (here["n_receivers"], here["n_acne"], here["n_peterpan"])
 
@@ -258,7 +264,7 @@ def test_the_scale_figure_and_tables_hold_the_results_numbers(test_run):
     with Image.open(out / "scale.png") as im:
         assert im.format == "PNG" and im.width > 400 and im.height > 150
         pixels = np.asarray(im.convert("RGB")).reshape(-1, 3).astype(int)
-    who = ["bevy", "oracle", "receiver_plane", "three"]
+    who = ["bevy", "msm box:5", "oracle", "receiver_plane", "three", "tuned_normal_angle", "vsm box:5"]
     def by_numpy(keep):
         value = lambda r: r["per_texel_objective"] if r["contender"] == "oracle" else r["error_rate"]
         return [float(np.mean(np.array([value(r) for r in doc["cases"] if r["contender"] == c and keep(r)],
@@ -355,3 +361,123 @@ def test_the_renders_are_the_run_s_shadow_image_and_its_exact_twin(tmp_path, whi
         rgb = lambda g: np.repeat(np.clip(g, 0, 1)[..., None], 3, axis=2).astype(np.float32)
         assert flips[row["case"]] == pytest.approx(
             flip_evaluator.evaluate(rgb(exact), rgb(shadowed), "LDR", parameters={"ppd": 67.0})[1], rel=1e-6)
+
+
+def test_the_cornell_box_is_in_millimetres_and_off_the_far_axis():
+    """Its scale is factor x unit (0.001 x 100, x 1, x 0.001); at metres the box is 0.556 m wide (the
+    file's 556 units, its Cornell-data millimetres); only spot and point, both inside the box."""
+    import mitsuba as mi
+    from dsm.config.read import parse
+    from dsm.scenes.load import load
+    mi.set_variant("llvm_ad_rgb")
+    cs = {c.unit: c for c in suite.cases(suite.load_suite(), "default") if c.scene == "cbox"}
+    assert sorted(cs) == ["cm", "km", "m"] and all(c.offset == "0" for c in cs.values())
+    for unit, scale in (("cm", 0.1), ("m", 0.001), ("km", 1e-6)):
+        assert cs[unit].scale == pytest.approx(scale, rel=1e-12) and cs[unit].config["scene"][0]["scale"] == cs[unit].scale
+    cfg = parse(cs["m"].config, "<benchmark>")
+    sd = load(cfg.scenes[0], (16, 16))
+    lo, hi = np.array(sd.scene.bbox().min, float), np.array(sd.scene.bbox().max, float)
+    np.testing.assert_allclose(hi - lo, [0.556, 0.5488, 0.5592], rtol=1e-5)
+    lights = sd.lights_for(cfg.lights)
+    assert [l.type for l in lights] == ["spot", "point"] and "cascades" not in cs["m"].config["map"]
+    for l in lights:
+        assert (lo < np.asarray(l.position)).all() and (np.asarray(l.position) < hi).all()
+
+
+def test_the_cornell_box_counts_alike_in_cm_and_m_for_scale_free_contenders():
+    """The kit's scale independence on the XML scene: every preset whose terms are in texels or depth
+    range, the texel-unit schemes and a pre-filtered kind (normalized depth) count the same receivers,
+    acne and peter-panning at cm as at m (measured at 32^2, map 256: all of them equal; bevy's world
+    bias and dual's back-face pass move by a receiver or more)."""
+    import dsm
+    from dsm.schemes.presets import names
+    free = [n for n in names() if bias_units.scale_free(n)]
+    assert len(free) >= 4
+    cs = {c.unit: c for c in suite.cases(suite.load_suite(), "default") if c.scene == "cbox"}
+    counts = {}
+    for unit in ("cm", "m"):
+        c = cs[unit]
+        small = {"camera": {"resolution": [32, 32]}, "map": {**c.config["map"], "resolution": 256}}
+        cfg = {**c.config, **small, "scheme": suite.contender_tables(
+            suite.load_suite(), free + ["constant", "normal_offset", "receiver_plane"])}
+        pre = {**c.prefiltered, **small, "map": {**c.prefiltered["map"], "resolution": 256, "kind": ["vsm"]}}
+        rows = dsm.run(cfg).rows + dsm.run(pre).rows
+        counts[unit] = {(r["light"], results.contender_of(r)): (r["n_receivers"], r["n_acne"], r["n_peterpan"])
+                        for r in rows}
+    assert len(counts["m"]) == 2 * (len(free) + 3 + 1)
+    assert counts["cm"] == counts["m"]
+    assert min(n for n, _, _ in counts["m"].values()) > 400
+
+
+def test_prefiltered_contenders_carry_leaks_and_their_pooled_leak_rate(test_run):
+    """Each pre-filtered record has n_leak <= n_peterpan and leak_rate = n_leak / n_gt_shadowed; the
+    leaderboard's leak rate is sum n_leak / sum n_gt_shadowed over the origin cases (numpy, int64);
+    a depth contender has none; the page prints it."""
+    out, doc = test_run
+    pre = [r for r in doc["cases"] if r.get("map_kind") in ("vsm", "msm")]
+    assert {r["contender"] for r in pre} == {"vsm box:5", "msm box:5"} and len(pre) == 16
+    for r in pre:
+        assert 0 <= r["n_leak"] <= r["n_peterpan"] and r["leak_rate"] == pytest.approx(r["n_leak"] / r["n_gt_shadowed"])
+        assert "texel_f32_steps" in r and 0.0 <= r["flip"] <= 1.0
+    ranked = {r["contender"]: r for r in ranking.ranking(doc)}
+    for who in ("vsm box:5", "msm box:5"):
+        here = [r for r in pre if r["contender"] == who and r["offset"] == "0"]
+        expect = np.sum(np.array([r["n_leak"] for r in here], np.int64)) / \
+            np.sum(np.array([r["n_gt_shadowed"] for r in here], np.int64))
+        assert ranked[who]["leak"] == pytest.approx(float(expect), abs=1e-15)
+    assert ranked["bevy"]["leak"] is None and not any("n_leak" in r for r in doc["cases"] if "map_kind" not in r)
+    assert sum(r["n_leak"] for r in pre) > 0                # leaking is measured here, not all zero
+    page = (out / "leaderboard.html").read_text()
+    best = min(("vsm box:5", "msm box:5"), key=lambda c: (ranked[c]["error"], c))    # the lower error, not the name
+    assert "leak rate" in page and f"Best pre-filtered map: {best} (" in page
+
+
+def test_the_tuned_contender_is_the_tune_s_result_exactly():
+    """suite_3's tuned_normal_angle holds the values of the tune it names (dsm/benchmark/tune_3.json,
+    the stored tune.json): the same scheme, numbers and units, and it was that tune's best scheme."""
+    from pathlib import Path
+    from dsm.config.read import parse_scheme
+    from dsm.schemes import ALL, PRESETS
+    from dsm.types import Length
+    stored = json.loads((Path(suite.__file__).with_name("tune_3.json")).read_text())
+    best = min(stored["schemes"], key=lambda e: e["train"]["objective"])
+    t = suite.load_suite()["contenders"]["tuned"]["tuned_normal_angle"]
+    assert best["scheme"] == t["name"] == "normal_angle"
+    spec, = parse_scheme(dict(t), "<suite>", "t", ALL, PRESETS)
+    for k, v in best["values"].items():
+        assert getattr(spec.params, k) == Length(v, best["units"][k])       # exactly: no rounding on the way
+    assert suite.tuned_labels(suite.load_suite()) == {("normal_angle", spec.label): "tuned_normal_angle"}
+
+
+def test_the_tuned_contender_runs_under_its_own_name(test_run):
+    out, doc = test_run
+    tuned = [r for r in doc["cases"] if r["contender"] == "tuned_normal_angle"]
+    assert len(tuned) == 8 and {r["params"] for r in tuned} == {"bias=1.21429 texel max=12 texel"}
+    assert doc["tuned"]["tuned_normal_angle"]["bias"] == "1.2142857142857142 texel"
+    assert "Best tuned scheme: tuned_normal_angle" in (out / "leaderboard.html").read_text()
+
+
+def test_flicker_is_frames_csv_s_recomputed(test_run):
+    """Each flicker record's flicker_rate is the mean over frame pairs of n_flicker / n_pairs_eligible
+    of its case's rows in its frames.csv (numpy, float64; the first frame has no pair); the leaderboard's
+    flicker is the mean of a contender's records; the depth contenders have one per light, the
+    pre-filtered none."""
+    import csv
+    out, doc = test_run
+    fl = doc["flicker"]
+    depth = {"bevy", "three", "receiver_plane", "tuned_normal_angle"}
+    assert {r["contender"] for r in fl} == depth and len(fl) == 4           # grazing at m, the directional light
+    assert all(r["scene"] == "grazing" and r["unit"] == "m" and r["frames"] == 6 for r in fl)
+    for r in fl:
+        with open(out / r["frames_csv"]) as f:
+            frames = [x for x in csv.DictReader(f) if x["case"] == r["case"]]
+        assert [int(x["frame"]) for x in frames] == list(range(6))
+        pairs = [(int(x["n_flicker"]), int(x["n_pairs_eligible"])) for x in frames[1:]]
+        assert all(e > 0 for _, e in pairs)
+        expect = float(np.mean(np.array([n / e for n, e in pairs], np.float64)))
+        assert r["flicker_rate"] == pytest.approx(expect, rel=1e-12, abs=1e-15)
+    ranked = {r["contender"]: r for r in ranking.ranking(doc)}
+    for r in fl:
+        assert ranked[r["contender"]]["flicker"] == pytest.approx(r["flicker_rate"], abs=1e-15)
+    assert ranked["vsm box:5"]["flicker"] is None
+    assert "no oracle floor" in (out / "leaderboard.html").read_text()

@@ -56,6 +56,7 @@ def _compare(args, out: Path) -> int:
 
 def _run(args, out: Path) -> int:
     size = "full" if args.full else os.environ.get(SIZE_ENV, "default")
-    doc = results.run_suite(size, args.variant, progress=lambda m: print(m, file=sys.stderr), version=args.suite)
+    doc = results.run_suite(size, args.variant, progress=lambda m: print(m, file=sys.stderr), version=args.suite,
+                             out=out)
     print(f"dsm benchmark: wrote {results.write(doc, out)} and {page.write_page(doc, out)}")
     return 0

@@ -9,6 +9,14 @@ from ..report.html import CSS, SCRIPT
 from ..schemes.presets import PRESETS
 from . import bias_units, figure, ranking
 
+LEAK_NOTE = (" Leak rate (pre-filtered maps only, '-' for the depth map's contenders): their receivers lit far "
+             "from their occluder (n_leak) summed over the cases at the origin, over the summed shadowed receivers "
+             "of V*. A pre-filtered contender (kind and blur, at the kind's defaults) has no cascades: its directional "
+             "light gets one map.")
+FLICKER_NOTE = (" Flicker (depth contenders, on the suite's flicker scenes at metres): the mean over scenes, lights "
+                "and frame pairs of the fraction of fixed surface points whose map class toggles while their exact "
+                "visibility does not, as the camera dollies 0.25 m over 6 frames; it has no oracle floor (the oracles "
+                "are per view); the pre-filtered maps refuse a motion ('-').")
 SORT_SCRIPT = SCRIPT.split("const cases")[0]      # report.html's header sort, without its case viewer
 
 
@@ -45,7 +53,7 @@ def answer(doc: dict, ranked: list) -> str:
                        "alike at every unit is robust by this measure, not good).")
     return (f"<p class=answer>Ranking (mean error rate over every scene, unit and light, at the origin): "
             f"{html.escape(top)}.</p>"
-            f"<p class=answer>{html.escape(robust_text)}</p>" + far_answer(ranked) +
+            f"<p class=answer>{html.escape(robust_text)}</p>" + far_answer(ranked) + prefiltered_answer(ranked) + tuned_answer(doc, ranked) +
             f"<p class=answer>Oracle floor: per-texel {floor['per_texel_objective']:.2g}, best single world bias "
             f"{floor['world_objective']:.4f}, best single texel bias {floor['texel_objective']:.4f}.</p>")
 
@@ -60,6 +68,31 @@ def far_answer(ranked: list) -> str:
     text = (f"Far from the origin: {best['contender']} moves least, its error rate {best['far_change']:+.4f} from the "
             f"origin to {list(best['far'])[-1]} (the map in float32 world coordinates; the exact side is exact; "
             "a preset that fails alike everywhere moves little: robust by this measure, not good).")
+    return f"<p class=answer>{html.escape(text)}</p>"
+
+
+def prefiltered_answer(ranked: list) -> str:
+    """The opening's line on the pre-filtered maps: the best of them, its rank and leak rate."""
+    pool = [r for r in ranked if r.get("leak") is not None]
+    if not pool:
+        return ""
+    best = min(pool, key=lambda r: (r["error"], r["contender"]))    # a tie's rows are listed by name
+    text = (f"Best pre-filtered map: {best['contender']} (rank {best['rank']}, error rate {best['error']:.4f}, "
+            f"leak rate {best['leak']:.4f}, at the kind's defaults).")
+    return f"<p class=answer>{html.escape(text)}</p>"
+
+
+def tuned_answer(doc: dict, ranked: list) -> str:
+    """The opening's line on the best tuned scheme: its frozen values, rank and error."""
+    pool = [r for r in ranked if r["contender"] in doc.get("tuned", {})]
+    if not pool:
+        return ""
+    best = min(pool, key=lambda r: (r["error"], r["contender"]))
+    t = doc["tuned"][best["contender"]]
+    values = ", ".join(f"{k} = {v}" for k, v in t.items() if k != "name")
+    text = (f"Best tuned scheme: {best['contender']} ({t['name']} with {values}; rank {best['rank']}, error rate "
+            f"{best['error']:.4f}), tuned once on the suite's training views (its built-in scenes at metres under its "
+            "three lights, from two cameras that are not the suite's) and frozen into the suite.")
     return f"<p class=answer>{html.escape(text)}</p>"
 
 
@@ -105,9 +138,9 @@ def write_page(doc: dict, out: Path) -> Path:
     """Write ``leaderboard.html`` in ``out`` from a result document; returns its path."""
     ranked = ranking.ranking(doc)
     far = list(ranked[0]["far"])[1:] if ranked else []
-    head = ["rank", "contender", "error rate", "acne rate", "peter-pan rate", "scale spread", "FLIP"]
+    head = ["rank", "contender", "error rate", "acne rate", "peter-pan rate", "scale spread", "FLIP", "leak rate", "flicker"]
     head += [f"error at {o}" for o in far] + (["far change"] if far else []) + ["build ms", "lookup ms"]
-    rows = [[r["rank"], r["contender"], r["error"], r["acne"], r["peterpan"], r["spread"], r["flip"]]
+    rows = [[r["rank"], r["contender"], r["error"], r["acne"], r["peterpan"], r["spread"], r["flip"], r.get("leak"), r.get("flicker")]
             + [r["far"][o] for o in far] + ([r["far_change"]] if far else []) + [r["build_ms"], r["lookup_ms"]]
             for r in ranked]
     m = doc["machine"]
@@ -119,7 +152,7 @@ def write_page(doc: dict, out: Path) -> Path:
     body = (f"<h1>Shadow-bias leaderboard: {html.escape(doc['suite'])}</h1><p class=meta>{html.escape(meta)}</p>"
             + answer(doc, ranked) + "<h2>Ranking</h2><p class=note>Scores within 0.001 tie (shared rank, by name); "
             "every column but the offsets' reads the cases at the origin. Far change: the error at the farthest "
-            f"offset less the one at the origin.{html.escape(flip)} Click a header to sort.</p>" + table(head, rows)
+            f"offset less the one at the origin.{html.escape(flip)}{html.escape(LEAK_NOTE)}{html.escape(FLICKER_NOTE)} Click a header to sort.</p>" + table(head, rows)
             + grid_section(doc) + scale_section(doc) + bias_section(doc))
     Path(out).mkdir(parents=True, exist_ok=True)
     figure.write(doc, out)                      # scale.png, which the page shows

@@ -8,7 +8,10 @@ minus the smallest error rate over the units, averaged; the smallest spread is t
 scale-robust. The score and the spread read the cases at the origin only; from dsm-bench-2 on the
 far-from-origin cases (every scene at the suite's ``far_unit``, moved by each offset) give each
 contender its error rate per offset and its far change: the mean over (scene, light) of its error
-at the farthest offset less its error at the origin (same unit).
+at the farthest offset less its error at the origin (same unit). From dsm-bench-3 on a pre-filtered
+contender also has its pooled leak rate: its n_leak summed over the cases at the origin over their
+summed n_gt_shadowed (a depth contender: None), and a depth contender its flicker: the mean flicker_rate
+of its records in the document's ``flicker`` list (None without any; no oracle floor).
 """
 from __future__ import annotations
 
@@ -71,6 +74,15 @@ def far_change(rows: list, far_unit: str, offset: str) -> float:
     return mean(d[offset] - d[ORIGIN] for d in by.values() if offset in d and ORIGIN in d)
 
 
+def pooled_leak(rows: list):
+    """Sum of n_leak over sum of n_gt_shadowed of ``rows`` (None unless every row has a leak count; NaN
+    when none is shadowed)."""
+    if not rows or not all("n_leak" in r for r in rows):
+        return None
+    shadowed = sum(r["n_gt_shadowed"] for r in rows)
+    return sum(r["n_leak"] for r in rows) / shadowed if shadowed else float("nan")
+
+
 def scores(name: str, rows: list, far_unit, far: list) -> dict:
     """One contender's leaderboard numbers from its records: origin means, FLIP, far columns."""
     here = [r for r in rows if at_origin(r)]
@@ -78,18 +90,29 @@ def scores(name: str, rows: list, far_unit, far: list) -> dict:
            "acne": mean(r["acne_rate"] for r in here), "peterpan": mean(r["peterpan_rate"] for r in here),
            "spread": scale_spread(here), "build_ms": mean(r["build_ms"] for r in here),
            "lookup_ms": mean(r["lookup_ms"] for r in here),
-           "flip": mean(r["flip"] for r in here) if all("flip" in r for r in here) else None}
+           "flip": mean(r["flip"] for r in here) if all("flip" in r for r in here) else None,
+           "leak": pooled_leak(here)}
     out["far"] = {o: mean(r["error_rate"] for r in rows if offset_of(r) == o and r["unit"] == far_unit)
                   for o in far}
     out["far_change"] = far_change(rows, far_unit, far[-1]) if len(far) > 1 else None
     return out
 
 
+def flicker_by(doc: dict) -> dict:
+    """Contender -> the mean flicker_rate of its flicker records (over scenes and lights)."""
+    acc = defaultdict(list)
+    for r in doc.get("flicker", []):
+        acc[r["contender"]].append(r["flicker_rate"])
+    return {c: mean(v) for c, v in acc.items()}
+
+
 def ranking(doc: dict) -> list:
     """The leaderboard rows, best first: rank, contender, score, acne, peter-pan, scale spread, FLIP,
     error per offset (``far``: offset -> error at the far unit) and the far change."""
     far = offsets(doc) if doc.get("far_unit") else []
-    scored = [scores(name, rows, doc.get("far_unit"), far) for name, rows in contender_rows(doc).items()]
+    flick = flicker_by(doc)
+    scored = [{**scores(name, rows, doc.get("far_unit"), far), "flicker": flick.get(name)}
+              for name, rows in contender_rows(doc).items()]
     scored.sort(key=lambda s: (s["error"], s["contender"]))
     out, lead = [], None
     for i, s in enumerate(scored):

@@ -4,6 +4,12 @@ From dsm-bench-2 on a case's record carries its offset (label and ``translate``)
 shadowed count (``n_gt_shadowed``: where the scene sits must not move it), the map's float32 headroom
 (``texel_f32_steps``: below 64 the case is precision-limited) and the mean FLIP of its
 shadowed render against the exact render (:mod:`dsm.benchmark.render`, :mod:`dsm.benchmark.perceptual`).
+From dsm-bench-3 on a case also runs its pre-filtered config (:func:`dsm.benchmark.suite.prefiltered_config`):
+those records are named by kind and filter (``vsm box:5``), carry ``map_kind`` and the leak split
+(``n_leak``, ``leak_rate``), and add no oracle (the depth config's is the case's floor). A case with a
+flicker config (:func:`dsm.benchmark.suite.motion_config`) runs it into ``flicker/<its name>/`` of the
+benchmark's folder (frames.csv kept there) and adds one flicker record per light and contender to the
+document's ``flicker`` list (not to ``cases``: its counts are a motion's, summed over frames).
 """
 from __future__ import annotations
 
@@ -13,10 +19,13 @@ import platform
 from pathlib import Path
 
 from . import perceptual, render
-from .suite import LATEST, ORIGIN, SUITE_FILES, cases, load_suite, suite_sha256
+from .suite import LATEST, ORIGIN, SUITE_FILES, cases, load_suite, suite_sha256, tuned_labels
 
 MEASURES = ("n_receivers", "n_gt_shadowed", "n_acne", "n_peterpan", "acne_rate", "peterpan_rate", "error_rate",
             "texel_size", "texel_f32_steps", "build_ms", "lookup_ms")
+LEAK_MEASURES = ("n_leak", "leak_rate")      # a pre-filtered record's: peter-panning far from the occluder
+FLICKER_MEASURES = ("frames", "flicker_rate", "flicker_ever", "flicker_magnitude", "flicker_within_rate",
+                    "flicker_change_rate")
 ORACLE_MEASURES = ("world_objective", "texel_objective", "per_texel_objective")
 
 
@@ -38,24 +47,37 @@ def light_kind(light_label: str) -> str:
     return light_label.split(":", 1)[-1]
 
 
-def contender_of(row: dict) -> str:
-    """The contender a metrics row belongs to: its preset's name, else its scheme's."""
+def is_prefiltered(row: dict) -> bool:
+    """Whether a metrics row is a pre-filtered map kind's (not the depth map's)."""
+    return row.get("map_kind") not in (None, "", "depth")
+
+
+def contender_of(row: dict, tuned: dict | None = None) -> str:
+    """The contender a metrics row belongs to: a pre-filtered kind and its filter (``vsm box:5``), else its
+    preset's name, else a tuned contender's (``tuned``: :func:`dsm.benchmark.suite.tuned_labels`), else its scheme's."""
+    if is_prefiltered(row):
+        return f"{row['scheme']} {row['filter']}"
+    if not row["preset"] and tuned and (row["scheme"], row["params"]) in tuned:
+        return tuned[(row["scheme"], row["params"])]
     return row["preset"] or row["scheme"]
 
 
-def case_records(case, results, flips=None) -> list:
+def case_records(case, results, flips=None, oracle=True, tuned=None) -> list:
     """The suite's records of one (scene, unit, offset) run: one per light and contender (with its
-    FLIP from ``flips``, case id -> mean FLIP, where given), plus its oracle floor."""
+    FLIP from ``flips``, case id -> mean FLIP, where given; ``tuned``: the suite's tuned labels), plus its
+    oracle floor (if ``oracle``)."""
     out = []
     where = {"offset": case.offset, "translate": list(case.translate)}
     for row in results.rows:
         rec = {"scene": case.scene, "unit": case.unit, **where, "light": light_kind(row["light"]),
-               "contender": contender_of(row), "params": row["params"]}
+               "contender": contender_of(row, tuned), "params": row["params"]}
         rec.update({k: row[k] for k in MEASURES})
+        if is_prefiltered(row):
+            rec.update({"map_kind": row["map_kind"], **{k: row[k] for k in LEAK_MEASURES}})
         if flips is not None:
             rec["flip"] = flips[row["case"]]
         out.append(rec)
-    for light in sorted({light_kind(o["light"]) for o in results.oracle}):
+    for light in sorted({light_kind(o["light"]) for o in results.oracle} if oracle else ()):
         rows = [o for o in results.oracle if light_kind(o["light"]) == light]
         best = min(rows, key=lambda o: o["per_texel_objective"])     # the floor over the cullings run
         rec = {"scene": case.scene, "unit": case.unit, **where, "light": light, "contender": "oracle",
@@ -65,9 +87,10 @@ def case_records(case, results, flips=None) -> list:
     return out
 
 
-def case_flips(case, res, ppd: float, variant: str | None = None) -> dict:
-    """Case id -> mean FLIP of each row's shadowed render against the exact render, at ``ppd``."""
-    setups = render.light_setups(case.config, variant)
+def case_flips(case, res, ppd: float, variant: str | None = None, setups=None) -> dict:
+    """Case id -> mean FLIP of each row's shadowed render against the exact render, at ``ppd`` (``setups``:
+    the case's :func:`dsm.benchmark.render.light_setups`, traced here when not given)."""
+    setups = render.light_setups(case.config, variant) if setups is None else setups
     out = {}
     for row in res.rows:
         shadowed, exact = render.case_renders(setups, row, res.images[row["case"]])
@@ -75,25 +98,59 @@ def case_flips(case, res, ppd: float, variant: str | None = None) -> dict:
     return out
 
 
-def run_suite(size: str = "default", variant: str | None = None, progress=print, version: str = LATEST) -> dict:
-    """Run suite ``version`` at ``size`` and return its result document (see :func:`write`)."""
+def flicker_records(case, res, folder: str, tuned=None) -> list:
+    """The flicker records of a case's motion run: one per light and contender, its frames.csv's folder
+    ``folder`` (relative to the benchmark's) and case id with it."""
+    return [{"scene": case.scene, "unit": case.unit, "offset": case.offset, "light": light_kind(row["light"]),
+             "contender": contender_of(row, tuned), "params": row["params"], "frames_csv": f"{folder}/frames.csv",
+             "case": row["case"], **{k: row[k] for k in FLICKER_MEASURES}} for row in res.rows]
+
+
+def run_case(case, ppd, variant: str | None = None, tuned=None, out: Path | None = None) -> tuple:
+    """(records, flicker records, the variant run) of one case: its depth config's records (with the
+    oracle), then its pre-filtered config's if any; its motion config's flicker, run into ``out``."""
+    import dsm
+    res = dsm.run(case.config, variant=variant)
+    setups = None if ppd is None else render.light_setups(case.config, variant)    # shared: same scene and lights
+    records = case_records(case, res, None if ppd is None else case_flips(case, res, ppd, variant, setups), tuned=tuned)
+    if case.prefiltered is not None:
+        pre = dsm.run(case.prefiltered, variant=variant)
+        records += case_records(case, pre, None if ppd is None else case_flips(case, pre, ppd, variant, setups),
+                                oracle=False)
+    flicker = []
+    if case.motion is not None:
+        folder = f"flicker/{case.motion['experiment']['name']}"
+        # force: the folder is the benchmark's, which holds its lock and refused an earlier run's results
+        mo = dsm.run(case.motion, variant=variant, out=Path(out) / folder, force=True)
+        flicker = flicker_records(case, mo, folder, tuned)
+    return records, flicker, res.run.get("variant")
+
+
+def run_suite(size: str = "default", variant: str | None = None, progress=print, version: str = LATEST,
+              out: Path | None = None) -> dict:
+    """Run suite ``version`` at ``size`` and return its result document (see :func:`write`); the flicker
+    runs' folders go under ``out`` (a temporary folder, removed, when None)."""
+    if out is None:
+        import tempfile
+        with tempfile.TemporaryDirectory() as tmp:
+            return run_suite(size, variant, progress, version, Path(tmp))
     import dsm
     from ..tools.env import versions
     suite = load_suite(SUITE_FILES[version])
     ppd = suite.get("flip", {}).get("ppd")          # dsm-bench-1 has no FLIP
-    todo = cases(suite, size)
-    records, run_variant = [], None
+    todo, tuned = cases(suite, size), tuned_labels(suite)
+    records, flicker, run_variant = [], [], None
     for i, case in enumerate(todo):
         if progress:
             where = "" if case.offset == ORIGIN else f" at {case.offset}"
             progress(f"dsm benchmark: {i + 1}/{len(todo)} {case.scene} in {case.unit}{where} (scale {case.scale:g})")
-        res = dsm.run(case.config, variant=variant)
-        run_variant = res.run.get("variant")
-        records += case_records(case, res, None if ppd is None else case_flips(case, res, ppd, variant))
+        recs, flick, run_variant = run_case(case, ppd, variant, tuned, out)
+        records, flicker = records + recs, flicker + flick
     s = suite["suite"]
     return {"suite": s["name"], "suite_sha256": suite_sha256(SUITE_FILES[version]), "size": size,
             "dsm_version": dsm.__version__, "versions": versions(), "variant": run_variant,
-            "machine": machine(), "far_unit": s.get("far_unit"), "flip_ppd": ppd, "cases": records}
+            "machine": machine(), "far_unit": s.get("far_unit"), "flip_ppd": ppd,
+            "tuned": suite["contenders"].get("tuned", {}), "flicker": flicker, "cases": records}
 
 
 def write(doc: dict, out: Path) -> Path:

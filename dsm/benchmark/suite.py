@@ -5,6 +5,16 @@ to metres; unit: 100 for centimetres, 1 for metres, 0.001 for kilometres), at th
 dsm-bench-2 on, moved by an offset's ``translate`` at the suite's ``far_unit``, its three lights and
 every contender. Spot and point positions are stated in metres about the scene's centre and handed to
 the kit in the scene's native units (the kit multiplies a light's position by the scene's scale).
+
+From dsm-bench-3 on a scene may name its own ``lights`` (a subset of the suite's) and its own ``spot``
+and ``point`` (the Cornell box: inside the box), may stay off the far axis (``far = false``: an XML
+scene takes no translate), and a case carries a second config, ``prefiltered``: the suite's
+pre-filtered map kinds on the same scene and lights, without cascades (a kind refuses them) and
+without [[scheme]] (which belongs to the depth map). Its tuned contenders (``[contenders.tuned.<name>]``:
+a scheme's table with the values a tune froze) run as [[scheme]] tables among the others; their rows
+are told from the same scheme at its defaults by their parameters' label (:func:`tuned_labels`). A case of
+one of its ``[flicker]`` scenes at the flicker unit, at the origin, carries a third config, ``motion``:
+the depth config with the suite's [[motion]] camera move.
 """
 from __future__ import annotations
 
@@ -15,7 +25,8 @@ from pathlib import Path
 
 # every version, oldest first; the newest is what ``dsm benchmark`` runs unless told otherwise
 SUITE_FILES = {"dsm-bench-1": Path(__file__).with_name("suite_1.toml"),
-               "dsm-bench-2": Path(__file__).with_name("suite_2.toml")}
+               "dsm-bench-2": Path(__file__).with_name("suite_2.toml"),
+               "dsm-bench-3": Path(__file__).with_name("suite_3.toml")}
 LATEST = list(SUITE_FILES)[-1]
 SUITE_FILE = SUITE_FILES[LATEST]
 ORIGIN = "0"              # the offset label of a case at the origin (every case of dsm-bench-1)
@@ -33,6 +44,8 @@ class Case:
     config: dict
     offset: str = ORIGIN  # the offset's label ("0", "1e4", ...)
     translate: tuple = (0.0, 0.0, 0.0)    # world units after the scale
+    prefiltered: dict | None = None       # the pre-filtered kinds' config of the case (dsm-bench-3 on)
+    motion: dict | None = None            # the flicker config of the case (dsm-bench-3 on, a few scenes)
 
 
 def suite_sha256(path: Path = SUITE_FILE) -> str:
@@ -53,43 +66,70 @@ def size_of(suite: dict, size: str) -> dict:
     s.setdefault("scenes", [sc["name"] for sc in suite["scene"]])
     s.setdefault("units", [u for u, _ in suite["suite"]["units"]])
     s.setdefault("lights", list(LIGHTS))
-    s.setdefault("contenders", suite["contenders"]["presets"] + suite["contenders"]["schemes"])
+    s.setdefault("contenders", suite["contenders"]["presets"] + suite["contenders"]["schemes"]
+                 + list(suite["contenders"].get("tuned", {})))
     s.setdefault("offsets", [label for label, _ in suite["suite"].get("offsets", [])])
+    s.setdefault("prefiltered", suite.get("prefiltered", {}).get("kinds", []))
+    s.setdefault("flicker", suite.get("flicker", {}).get("scenes", []))
     return s
 
 
-def axes(suite: dict, s: dict) -> list:
+def axes(suite: dict, s: dict, scene: dict | None = None) -> list:
     """The (unit, offset label, translate) of each run of a scene at size ``s``: every unit at the
-    origin, then each far offset at the suite's ``far_unit``."""
+    origin, then each far offset at the suite's ``far_unit`` (none for a scene with ``far = false``)."""
     translate = {label: tuple(float(c) for c in t) for label, t in suite["suite"].get("offsets", [])}
     out = [(u, ORIGIN, (0.0, 0.0, 0.0)) for u in s["units"]]
+    if scene is not None and not scene.get("far", True):
+        return out
     return out + [(suite["suite"]["far_unit"], o, translate[o]) for o in s["offsets"] if o != ORIGIN]
 
 
 def contender_tables(suite: dict, names: list) -> list:
-    """The [[scheme]] tables of the contenders ``names``: presets by name, kit schemes at their defaults."""
-    presets = set(suite["contenders"]["presets"])
-    return [{"preset": n} if n in presets else {"name": n} for n in names]
+    """The [[scheme]] tables of the contenders ``names``: presets by name, tuned ones with their frozen
+    values, kit schemes at their defaults."""
+    presets, tuned = set(suite["contenders"]["presets"]), suite["contenders"].get("tuned", {})
+    return [{"preset": n} if n in presets else dict(tuned[n]) if n in tuned else {"name": n} for n in names]
+
+
+def tuned_labels(suite: dict) -> dict:
+    """(scheme name, parameters label) -> tuned contender name, the label as a run's ``params`` column
+    writes it; refused where a tuned table's label is its scheme's default's (its rows would be the same)."""
+    from ..config.read import parse_scheme
+    from ..schemes import ALL, PRESETS
+    out = {}
+    for name, t in suite["contenders"].get("tuned", {}).items():
+        spec, = parse_scheme(dict(t), "<suite>", f"contenders.tuned.{name}", ALL, PRESETS)
+        default, = parse_scheme({"name": t["name"]}, "<suite>", "default", ALL, PRESETS)
+        if spec.label == default.label:
+            raise ValueError(f"contenders.tuned.{name}: its values are {t['name']}'s defaults")
+        out[(t["name"], spec.label)] = name
+    return out
 
 
 def scene_table(scene: dict, scale: float, translate=(0.0, 0.0, 0.0)) -> dict:
     """The [[scene]] table of one suite scene at ``scale``, moved by ``translate`` (given only when not the origin)."""
     where = {"translate": list(translate)} if any(translate) else {}
-    if "file" in scene:
-        return {"file": str(MESHES / scene["file"]), "scale": scale, **where, "closed": {"mesh": scene["closed"]}}
+    if "file" in scene:      # closed: the mesh's, where the suite states it (an XML scene's shapes are detected)
+        closed = {"closed": {"mesh": scene["closed"]}} if "closed" in scene else {}
+        return {"file": str(MESHES / scene["file"]), "scale": scale, **where, **closed}
     skip = ("name", "factor", "builtin")
     return {"builtin": scene["builtin"], "scale": scale, **where, **{k: v for k, v in scene.items() if k not in skip}}
+
+
+def scene_lights(scene: dict, lights: list) -> list:
+    """The lights of ``lights`` a scene runs under: those its own ``lights`` names (default: all), in order."""
+    return [kind for kind in lights if kind in scene.get("lights", lights)]
 
 
 def light_tables(suite: dict, scene: dict, lights: list) -> list:
     """The [[light]] tables of one scene, positions in its native units (metres / factor)."""
     out = []
-    for kind in lights:
+    for kind in scene_lights(scene, lights):
         if kind == "directional":
             out.append({"type": "scene"})
             continue
-        if "file" in scene:           # metres about the mesh's centre, to native units
-            t = dict(suite["lights"]["mesh"][kind])
+        if "file" in scene:           # metres about the mesh's centre (the scene's own light, else the suite's)
+            t = dict(scene.get(kind, suite["lights"]["mesh"][kind]))
             c = scene["centre"]
             t["position"] = [(ci + pi) / scene["factor"] for ci, pi in zip(c, t["position"])]
             if kind == "spot":
@@ -100,6 +140,23 @@ def light_tables(suite: dict, scene: dict, lights: list) -> list:
     return out
 
 
+def prefiltered_config(suite: dict, cfg: dict, kinds: list) -> dict | None:
+    """The pre-filtered kinds' config of a case's depth config ``cfg``: its scene, camera and lights,
+    the map without cascades, ``kinds`` at their defaults with the suite's blur; None without kinds."""
+    if not kinds:
+        return None
+    mp = {k: v for k, v in cfg["map"].items() if k != "cascades"}
+    mp.update({"kind": list(kinds), "blur": list(suite["prefiltered"]["blur"])})
+    name = cfg["experiment"]["name"] + "-prefiltered"
+    return {**{k: v for k, v in cfg.items() if k != "scheme"}, "experiment": {"name": name}, "map": mp}
+
+
+def motion_config(suite: dict, cfg: dict) -> dict:
+    """The flicker config of a case's depth config ``cfg``: the same with the suite's [[motion]]."""
+    name = cfg["experiment"]["name"] + "-flicker"
+    return {**cfg, "experiment": {"name": name}, "motion": [dict(suite["flicker"]["motion"])]}
+
+
 def cases(suite: dict, size: str) -> list:
     """Every (scene, unit, offset) Case of the suite at ``size``, each with its dsm.run config dict."""
     s = size_of(suite, size)
@@ -108,10 +165,10 @@ def cases(suite: dict, size: str) -> list:
     out = []
     for name in s["scenes"]:
         scene = by_name[name]
-        for unit, offset, translate in axes(suite, s):
+        for unit, offset, translate in axes(suite, s, scene):
             scale = scene["factor"] * units[unit]
             mp = {"resolution": s["map"], "view": "cube"}      # cube: the point light's view
-            if "directional" in s["lights"]:
+            if "directional" in scene_lights(scene, s["lights"]):
                 mp["cascades"] = suite["lights"]["directional"]["cascades"]
             where = "" if offset == ORIGIN else f"-at-{offset}"
             cfg = {"experiment": {"name": f"{suite['suite']['name']}-{name}-{unit}{where}"},
@@ -119,5 +176,7 @@ def cases(suite: dict, size: str) -> list:
                    "scene": [scene_table(scene, scale, translate)],
                    "light": light_tables(suite, scene, s["lights"]),
                    "map": mp, "scheme": contender_tables(suite, s["contenders"])}
-            out.append(Case(name, unit, scale, cfg, offset, translate))
+            flicker = name in s["flicker"] and unit == suite["flicker"]["unit"] and offset == ORIGIN
+            out.append(Case(name, unit, scale, cfg, offset, translate, prefiltered_config(suite, cfg, s["prefiltered"]),
+                            motion_config(suite, cfg) if flicker else None))
     return out
