@@ -184,3 +184,15 @@ def test_no_folder_shadows_a_public_name():
     public = {n for n in dir(dsm) if not n.startswith("_") and callable(getattr(dsm, n))
               and not isinstance(getattr(dsm, n), type(dsm))}
     assert "run" in public and not folders & public
+
+
+def test_pyproject_ships_every_data_file_of_the_package():
+    """Each TOML and JSON file under dsm/ (default.toml, the benchmark's suites and its tune) is in
+    pyproject's package-data for its package: a wheel without one fails where it is read."""
+    import tomllib
+    data = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]
+    files = [p for ext in ("toml", "json") for p in (ROOT / "dsm").rglob(f"*.{ext}")]
+    assert files
+    for p in files:
+        pkg = ".".join(p.parent.relative_to(ROOT).parts)
+        assert p.name in data.get(pkg, []), (pkg, p.name)
