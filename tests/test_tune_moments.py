@@ -62,10 +62,13 @@ def test_the_written_values_reproduce_their_objective(vsm_run):
     from dsm.tune import cases as tcase, moments, tuner
     res, out = vsm_run
     text = (out / "tuned.toml").read_text()
-    blocks = text.split("# vsm ")[1:]
+    blocks = text.split("# [map.vsm]\n")[1:]
+    assert len(blocks) == len(res.moments) == 2
     for block, e in zip(blocks, res.moments):
-        values = tomllib.loads("\n".join(l[2:] for l in block.splitlines() if " = " in l))
-        assert values == e["values"]
+        lines = [l[2:] for l in block.splitlines() if l.startswith("# ") and " = " in l and "objective" not in l]
+        values = tomllib.loads("\n".join(lines))
+        assert set(values) == {"min_variance", "bleed", "bleed_high"}       # every parameter, pasted whole
+        assert {k: values[k] for k in e["values"]} == e["values"]
         tc = tuner.parse_tune(coerce(_cfg(["vsm"], [int(e["filter"].split(":")[1])], vsm=values)))
         tc.config = pl.prepare(tc.config)
         groups, cases, _ = tcase.prepare_cases(tc)
@@ -133,3 +136,21 @@ def test_moment_samples_without_a_pre_filtered_kind_is_refused():
         config.parse({"experiment": {"name": "x"}, "scene": [{"builtin": "plane"}], "map": {"moment_samples": 2}},
                      "<test>")
     assert e.value.key == "map.moment_samples"
+
+
+@pytest.mark.parametrize("kind, table", [("esm", {"c": 0.5}), ("evsm", {"positive": 0.0})])
+def test_an_exponent_that_cannot_shadow_is_refused(kind, table):
+    """Below ln 2 an ESM never shadows (V = exp(-c (t - z)) >= 1/2 for t - z <= 1): c >= 1 and EVSM's >= 0.5."""
+    from dsm.config import read as config
+    from dsm.types import ConfigError
+    with pytest.raises(ConfigError) as e:
+        config.parse({"experiment": {"name": "x"}, "scene": [{"builtin": "plane"}],
+                      "map": {"kind": [kind], kind: table}}, "<test>")
+    assert e.value.key.startswith(f"map.{kind}.")
+
+
+def test_a_tune_of_pre_filtered_maps_alone_resumes(tmp_path):
+    from dsm.tune.tuner import tune
+    first = tune(_cfg(["vsm"], [1], steps=6), out=tmp_path)
+    again = tune(_cfg(["vsm"], [1], steps=6), out=tmp_path, resume=True)
+    assert [e["values"] for e in again.moments] == [e["values"] for e in first.moments]

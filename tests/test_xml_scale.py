@@ -66,3 +66,20 @@ def test_an_xml_include_refuses_a_scale(tmp_path):
     (tmp_path / "outer.xml").write_text('<scene version="3.0.0"><include filename="inner.xml"/></scene>')
     with pytest.raises(ValueError, match="include"):
         xml_scale.scaled_text(tmp_path / "outer.xml", 2.0)
+
+
+def test_a_broken_xml_with_a_scale_is_one_config_error(tmp_path):
+    """Not a traceback: the same one line as the file loaded at scale 1."""
+    import shutil
+    from dsm.config import read as config
+    from dsm import pipeline
+    from dsm.types import ConfigError
+    folder = tmp_path / "cb"
+    shutil.copytree(CBOX.parent, folder)
+    text = (folder / "cbox.xml").read_text()
+    (folder / "broken.xml").write_text(text[:len(text) // 2])
+    cfg = config.parse({"experiment": {"name": "b"}, "scene": [{"file": str(folder / "broken.xml"), "scale": 0.01}],
+                        "map": {"resolution": 16}, "scheme": [{"name": "none"}]}, "<test>")
+    with pytest.raises(ConfigError) as e:
+        pipeline.prepare(cfg)
+    assert e.value.key == "scene[0].file" and "pars" in str(e.value).lower() and "\n" not in str(e.value)

@@ -413,7 +413,7 @@ def _parse_kinds(m: dict, formats, lights, cascade, source: str) -> tuple:
         valid = prefilter.formats_of(prefilter.get(name))
         bad = [f for f in formats if f not in valid]
         if bad:
-            raise ConfigError(source, "map.format", f"{bad[0]!r}: {name} stores its moments in", valid)
+            raise ConfigError(source, "map.format", f"{bad[0]!r} is not a storage format of {name}'s moments", valid)
     if cascade:
         raise ConfigError(source, "map.cascades", "pre-filtered maps are built on one map per view; remove "
                           "map.cascades or keep map.kind = depth", ("depth",))
@@ -421,6 +421,10 @@ def _parse_kinds(m: dict, formats, lights, cascade, source: str) -> tuple:
         raise ConfigError(source, "map.kind", "pre-filtered maps are measured against one exact ray per receiver; "
                           "an area light's reference is a fraction: remove it or keep map.kind = depth", ("depth",))
     return kinds
+
+
+KIND_KEY_ROLES = {"blur": "blurs moments", "blur_kernel": "blurs moments", "moment_samples": "supersamples moments",
+                  "mipmaps": "mipmaps moments"}
 
 
 def _parse_moments(m: dict, kinds, formats, source: str) -> tuple:
@@ -436,7 +440,8 @@ def _parse_moments(m: dict, kinds, formats, source: str) -> tuple:
         raise ConfigError(source, "map.blur", f"a box width is odd (centred on the texel), got {blurs}")
     for key in ("blur", "blur_kernel", "moment_samples", "mipmaps"):
         if key in m and kinds == ("depth",):
-            raise ConfigError(source, f"map.{key}", "blurs moments; map.kind names no pre-filtered map", prefilter.NAMES)
+            raise ConfigError(source, f"map.{key}", f"{KIND_KEY_ROLES[key]}; map.kind names no pre-filtered map",
+                              prefilter.NAMES)
     kernels = tuple(choice(k, source, "map.blur_kernel", BLUR_KERNELS) for k in as_list(m.get("blur_kernel", "box")))
     if not kernels:
         raise ConfigError(source, "map.blur_kernel", "empty list", BLUR_KERNELS)

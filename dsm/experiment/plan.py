@@ -48,6 +48,9 @@ STORED_BYTES = 4           # per texel and stored layer (z1, shape, slope, z2)
 # a pre-filtered map's build per texel: numpy's float64 moments and blur (peak 104 B/texel for
 # four moments at W = 9, tracemalloc, R = 1024) and the four float32 moments on the device
 MOMENT_BYTES = 120
+# a supersampled moment build per ray (its first-layer cast, z1, and the float64 moments before their
+# per-texel mean): 28 B measured as the peak of R = 512 with 8 x 8 rays a texel (472 MB), rounded up
+SUPERSAMPLE_BYTES = 32
 MIN_TILE = 1 << 16
 # per triangle of the scene: Mitsuba's mesh buffers, Embree's BVH, the loader's temporaries and
 # the kit's per-triangle tables (spawn extents, closedness); measured as the peak RSS growth of
@@ -109,10 +112,10 @@ class MapPlan:
         """Estimated peak bytes of the map's build: its stored layers plus one tile's working set
         (and a moment map's build, where the map serves pre-filtered instances)."""
         # a supersampled instance's moments are made of samples^2 values a texel
-        # a mip chain adds a third (dsm.prefilter.mipmaps)
-        moments = self.texels * MOMENT_BYTES * max(s.samples ** 2 * (4 / 3 if s.mipmaps else 1) for s in self.moments) \
-            if self.moments else 0
-        moments = int(moments)
+        # a mip chain adds a third (dsm.prefilter.mipmaps); a supersampled build its rays' working set
+        moments = int(self.texels * max(MOMENT_BYTES * (4 / 3 if s.mipmaps else 1)
+                                        + (SUPERSAMPLE_BYTES * s.samples ** 2 if s.samples > 1 else 0)
+                                        for s in self.moments)) if self.moments else 0
         return self.stored_bytes + min(self.tile or self.texels, self.texels) * self.build_bytes_per_texel + moments
 
 

@@ -21,7 +21,7 @@ SOURCE = "Annen et al. 2008 (Graphics Interface), Exponential Shadow Maps"
 @dataclass(frozen=True)
 class Params:
     """ESM's exponent c (per normalized depth)."""
-    c: float = field(default=80.0, metadata={"min": 0.0, "tune": ("linear", 1.0, 88.0, "moments")})
+    c: float = field(default=80.0, metadata={"min": 1.0, "tune": ("linear", 1.0, 88.0, "moments")})
 
 
 def count(params) -> int:

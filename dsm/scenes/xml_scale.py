@@ -22,8 +22,10 @@ SENSOR_CLIPS = {"near_clip": 1e-2, "far_clip": 1e4}     # Mitsuba's perspective 
 
 def scaled_text(path: Path, scale: float) -> str:
     """The XML of ``path`` with every top-level shape, sensor and emitter scaled by ``scale``."""
-    tree = ET.parse(path)
-    root = tree.getroot()
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as e:          # said as Mitsuba's loader says it (the caller names the file)
+        raise ValueError(f"parsing of the XML file failed: {e}") from None
     if root.find(".//include") is not None:
         raise ValueError("an <include> would keep its elements in the file's units: inline it to give a scale")
     s = repr(float(scale))

@@ -2,6 +2,7 @@
 loss, the best exact evaluation; then every instance of ``[map] kind`` with its comparisons."""
 from __future__ import annotations
 
+import dataclasses
 import math
 from types import SimpleNamespace
 
@@ -17,8 +18,8 @@ from .search import BETA1, BETA2, coarse_grid, phase_budgets
 
 
 def _label(spec) -> str:
-    """The instance as steps.csv and table.md name it: kind, filter, parameters."""
-    return f"{spec.name} {spec.filter}"
+    """The instance as steps.csv and table.md name it: kind, its start (preset or parameters), filter."""
+    return " ".join(x for x in (spec.name, spec.preset or spec.label, spec.filter) if x)
 
 
 def _row(spec, phase, step, values, hard, **extra) -> dict:
@@ -163,6 +164,7 @@ def _entry(spec, r, g, train, held, src_train, src_held, lam) -> dict:
     lookup = [p for p in r["box"] if not p.rebuild]      # the parameters with a gradient, checked at the start
     return {"kind": spec.name, "filter": spec.filter, "label": _label(spec), "start": describe_params(spec.params),
             "params": describe_params(with_values(spec, r["values"]).params), "values": r["values"],
+            "all_values": dataclasses.asdict(with_values(spec, r["values"]).params),
             "box": {p.name: [p.space, p.lo, p.hi] for p in r["box"]}, "rebuilt": rebuild,
             "train": obj(r["values"], train, src_train), "heldout": obj(r["values"], held, src_held),
             "start_train": obj(start, train, src_train), "start_heldout": obj(start, held, src_held),

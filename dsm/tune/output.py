@@ -65,11 +65,12 @@ def moments_toml(entries) -> str:
     (instances of one kind at other blur widths may want other values: paste the one you run)."""
     if not entries:
         return ""
-    lines = ["", "# pre-filtered maps, tuned per instance (the exact values: uncomment the one you run)"]
+    lines = ["", "# pre-filtered maps, tuned per instance (every parameter, the tuned ones exactly; a preset's "
+             "values spelled out: uncomment the one you run)"]
     for e in entries:
         lines.append(f"# {e['label']}: train objective {e['train']:.6f}")
         lines.append(f"# [map.{e['kind']}]")
-        lines += [f"# {k} = {float(v)!r}" for k, v in e["values"].items()]
+        lines += [f"# {k} = {v!r}" for k, v in e["all_values"].items()]
     return "\n".join(lines) + "\n"
 
 
@@ -88,12 +89,16 @@ def moments_table(res) -> list:
            "| instance | tuned | train | held-out | tune ms | grid best | grid train | grid held-out (evals) "
            "| start train | start held-out | AD / central difference (relative error) |",
            "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    above = [e["label"] for e in res.moments if e["train"] > e["grid"]["train"]]
     for e in res.moments:
         g = e["grid"]
         check = ", ".join(f"{k} {_fmt(c['rel_error'])}" for k, c in (e.get("gradcheck") or {}).items())
         out.append(f"| {e['label']} | {e['params']} | {_fmt(e['train'])} | {_fmt(e['heldout'])} | {e['tune_ms']:.0f} "
                    f"| {g['params']} | {_fmt(g['train'])} | {_fmt(g['heldout'])} ({g['evaluations']}) "
                    f"| {_fmt(e['start_train'])} | {_fmt(e['start_heldout'])} | {check} |")
+    if above:       # the search is held to its grid, not guaranteed below it: say where it is not
+        out += ["", f"above its grid (the search's share of {res.spec.steps} evaluations found less than a grid of "
+                f"all of them; more steps): {', '.join(above)}"]
     return out
 
 

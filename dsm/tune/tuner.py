@@ -177,6 +177,8 @@ def run_tune(tc, out=None, progress: bool = False, resume: bool = False) -> Tune
     orc_train = pl.oracles(th_train, vs_train, ts.lam)["row"]
     orc_held = pl.oracles(*pooled_thresholds(held, groups), ts.lam)["row"] if held else None
     results, steps, comparison, kept = _tune_schemes(tc, train, held, groups, orc_train, out, resume, tick)
+    if out is not None and not tc.schemes:     # a tune of pre-filtered instances alone: --resume finds it
+        tune_resume.write_state(out, tc.config.name, [])
     moments, moment_steps, moment_notes = tune_all(tc, train, held, groups, orc_train, tick)
     steps += moment_steps
     notes += moment_notes
