@@ -12,12 +12,12 @@ over-biased (the paper's figure 9), which shading hides but the metrics count.
 """
 from dataclasses import dataclass, field
 from .base import no_shift
-from .receiver_plane import plane_margin
+# the receiver plane's test with another offset, so it declares what that scheme declares (USES_PLANE)
+from .receiver_plane import USES_PLANE, plane_margin
 
 NAME = "adaptive"
 SOURCE = "Dou et al. 2014"
 NEEDS = frozenset()
-USES_PLANE = True     # compares the receiver plane's depth at the texel centre (lookup.plane_fallbacks)
 
 
 @dataclass(frozen=True)
