@@ -481,3 +481,22 @@ def test_flicker_is_frames_csv_s_recomputed(test_run):
         assert ranked[r["contender"]]["flicker"] == pytest.approx(r["flicker_rate"], abs=1e-15)
     assert ranked["vsm box:5"]["flicker"] is None
     assert "no oracle floor" in (out / "leaderboard.html").read_text()
+
+
+def test_the_benchmark_on_a_local_ray_cluster_counts_as_here(test_run, tmp_path, monkeypatch):
+    """dsm benchmark --cluster local: every case's counts those of the run here (the map groups are
+    Ray tasks; the motion runs stay here), and results.json says where it ran."""
+    ray = pytest.importorskip("ray", reason="Ray is not installed (pip install 'dsm[cluster]')")
+    _, here = test_run
+    monkeypatch.setenv(SIZE_ENV, "test")
+    try:
+        assert cli.main(["benchmark", "--out", str(tmp_path), "--cluster", "local"]) == 0
+    finally:
+        ray.shutdown()
+    doc = json.loads((tmp_path / "results.json").read_text())
+    assert doc["backend"] == {"name": "ray", "address": "local"} and here["backend"] == {"name": "local"}
+    key = lambda r: (r["scene"], r["unit"], r["offset"], r["light"], r["contender"], r.get("params", ""))
+    counts = ("n_receivers", "n_acne", "n_peterpan", "n_gt_shadowed", "flip")     # FLIP from the PNGs read back
+    want = {key(r): tuple(r.get(k) for k in counts) for r in here["cases"]}
+    got = {key(r): tuple(r.get(k) for k in counts) for r in doc["cases"]}
+    assert got == want and len(got) == len(here["cases"])

@@ -24,6 +24,9 @@ def add_parser(sub):
                    help=f"the suite's version (default: the newest, {LATEST}); an older one re-runs its cases")
     b.add_argument("--variant", choices=VARIANTS, help="Mitsuba variant (default llvm_ad_rgb)")
     b.add_argument("--force", action="store_true", help="replace the results a previous run left in --out")
+    b.add_argument("--cluster", metavar="ADDRESS",
+                   help="run each case's map groups as Ray tasks on the cluster at ADDRESS (auto, ray://host:port) "
+                        "or on a Ray instance started here (local); needs pip install 'dsm[cluster]'")
     return b
 
 
@@ -56,7 +59,16 @@ def _compare(args, out: Path) -> int:
 
 def _run(args, out: Path) -> int:
     size = "full" if args.full else os.environ.get(SIZE_ENV, "default")
+    if args.cluster:                   # reach the cluster before any case runs
+        from ..experiment import cluster
+        from ..tools.env import SetupError
+        from ..types import ConfigError
+        try:
+            cluster.connect(args.cluster)
+        except (SetupError, ConfigError) as e:
+            print(f"dsm benchmark: --cluster {args.cluster}: {e}", file=sys.stderr)
+            return 3
     doc = results.run_suite(size, args.variant, progress=lambda m: print(m, file=sys.stderr), version=args.suite,
-                             out=out)
+                             out=out, cluster=args.cluster)
     print(f"dsm benchmark: wrote {results.write(doc, out)} and {page.write_page(doc, out)}")
     return 0

@@ -18,6 +18,10 @@ import os
 import platform
 from pathlib import Path
 
+import numpy as np
+
+from ..report import figures
+from ..truth import metrics
 from . import perceptual, render
 from .suite import LATEST, ORIGIN, SUITE_FILES, cases, load_suite, suite_sha256, tuned_labels
 
@@ -106,15 +110,47 @@ def flicker_records(case, res, folder: str, tuned=None) -> list:
              "case": row["case"], **{k: row[k] for k in FLICKER_MEASURES}} for row in res.rows]
 
 
-def run_case(case, ppd, variant: str | None = None, tuned=None, out: Path | None = None) -> tuple:
-    """(records, flicker records, the variant run) of one case: its depth config's records (with the
-    oracle), then its pre-filtered config's if any; its motion config's flicker, run into ``out``."""
+def measured(config, variant: str | None = None, cluster: str | None = None):
+    """The Results of one of a case's configs: dsm.run here, or with ``cluster`` (a Ray address, already
+    connected by the command) its map groups as Ray tasks (dsm.experiment.cluster), into a temporary folder."""
     import dsm
-    res = dsm.run(case.config, variant=variant)
+    if cluster is None:
+        return dsm.run(config, variant=variant)
+    import tempfile
+    from .. import pipeline
+    from ..experiment import cluster as ray_run
+    cfg = pipeline.prepare(config, variant)
+    out = Path(tempfile.mkdtemp(prefix=f"dsm-{cfg.name}-"))
+    res = ray_run.run(cfg, out, cluster, variant, progress=False)
+    for row in res.rows:          # the tasks keep no class image in memory: read back from its PNG (FLIP's V)
+        res.images.setdefault(row["case"], class_image(out / figures.image_paths(row)[0]))
+    return res
+
+
+def class_image(path: Path) -> np.ndarray:
+    """The per-pixel classes of a case's error PNG (metrics.CLASS_COLORS, one colour each)."""
+    from PIL import Image
+    rgb = np.asarray(Image.open(path).convert("RGB"))
+    code = lambda c: (c[..., 0].astype(np.int64) << 16) | (c[..., 1].astype(np.int64) << 8) | c[..., 2]
+    palette = code(metrics.CLASS_COLORS)
+    order = np.argsort(palette)
+    idx = order[np.searchsorted(palette[order], code(rgb))]
+    if not (palette[idx] == code(rgb)).all():
+        raise ValueError(f"{path}: a pixel of no class colour")
+    return idx.astype(np.uint8)
+
+
+def run_case(case, ppd, variant: str | None = None, tuned=None, out: Path | None = None,
+             cluster: str | None = None) -> tuple:
+    """(records, flicker records, the variant run) of one case: its depth config's records (with the
+    oracle), then its pre-filtered config's if any (both on ``cluster`` when given); its motion
+    config's flicker, run here into ``out`` (a motion run's frames are one sequence: not split in tasks)."""
+    import dsm
+    res = measured(case.config, variant, cluster)
     setups = None if ppd is None else render.light_setups(case.config, variant)    # shared: same scene and lights
     records = case_records(case, res, None if ppd is None else case_flips(case, res, ppd, variant, setups), tuned=tuned)
     if case.prefiltered is not None:
-        pre = dsm.run(case.prefiltered, variant=variant)
+        pre = measured(case.prefiltered, variant, cluster)
         records += case_records(case, pre, None if ppd is None else case_flips(case, pre, ppd, variant, setups),
                                 oracle=False)
     flicker = []
@@ -127,13 +163,14 @@ def run_case(case, ppd, variant: str | None = None, tuned=None, out: Path | None
 
 
 def run_suite(size: str = "default", variant: str | None = None, progress=print, version: str = LATEST,
-              out: Path | None = None) -> dict:
+              out: Path | None = None, cluster: str | None = None) -> dict:
     """Run suite ``version`` at ``size`` and return its result document (see :func:`write`); the flicker
-    runs' folders go under ``out`` (a temporary folder, removed, when None)."""
+    runs' folders go under ``out`` (a temporary folder, removed, when None); ``cluster``: a connected
+    Ray address the cases' map groups run on (dsm benchmark --cluster)."""
     if out is None:
         import tempfile
         with tempfile.TemporaryDirectory() as tmp:
-            return run_suite(size, variant, progress, version, Path(tmp))
+            return run_suite(size, variant, progress, version, Path(tmp), cluster)
     import dsm
     from ..tools.env import versions
     suite = load_suite(SUITE_FILES[version])
@@ -144,13 +181,14 @@ def run_suite(size: str = "default", variant: str | None = None, progress=print,
         if progress:
             where = "" if case.offset == ORIGIN else f" at {case.offset}"
             progress(f"dsm benchmark: {i + 1}/{len(todo)} {case.scene} in {case.unit}{where} (scale {case.scale:g})")
-        recs, flick, run_variant = run_case(case, ppd, variant, tuned, out)
+        recs, flick, run_variant = run_case(case, ppd, variant, tuned, out, cluster)
         records, flicker = records + recs, flicker + flick
     s = suite["suite"]
     return {"suite": s["name"], "suite_sha256": suite_sha256(SUITE_FILES[version]), "size": size,
             "dsm_version": dsm.__version__, "versions": versions(), "variant": run_variant,
             "machine": machine(), "far_unit": s.get("far_unit"), "flip_ppd": ppd,
-            "tuned": suite["contenders"].get("tuned", {}), "flicker": flicker, "cases": records}
+            "tuned": suite["contenders"].get("tuned", {}), "flicker": flicker, "cases": records,
+            "backend": {"name": "ray", "address": cluster} if cluster else {"name": "local"}}
 
 
 def write(doc: dict, out: Path) -> Path:
