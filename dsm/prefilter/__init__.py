@@ -8,6 +8,7 @@ receiver (:func:`visibility`): a continuous V, not a margin per tap (:mod:`dsm.p
 from __future__ import annotations
 
 import dataclasses
+from types import SimpleNamespace
 
 from . import esm, evsm, msm, presets, vsm
 from .base import (LOG_MAX, MOMENT_FORMATS, MapKind, build as build_map, fetch, formats_of, normalized_depth, restored,
@@ -62,9 +63,12 @@ def build_key(spec, fmt: str) -> tuple:
     return (spec.name, get(spec.name).moment_key(spec.params), spec.blur, spec.kernel, spec.samples, spec.mipmaps, fmt)
 
 
-def visibility(spec, rx, mmap):
-    """V in [0, 1] per receiver of one instance on its built MomentMap (parameters opaque)."""
+def visibility(spec, rx, mmap, values=None):
+    """V in [0, 1] per receiver of one instance on its built MomentMap (parameters opaque;
+    ``values``: parameters replaced by these Dr.Jit values, as dsm tune differentiates them)."""
     module = get(spec.name)
     prm = resolve(spec.params, rx)
+    if values:
+        prm = SimpleNamespace(**{**vars(prm), **values})
     b = restored(module, fetch(mmap, rx), mmap.fmt)
     return module.visibility(b, normalized_depth(rx.depth, mmap.view), prm)

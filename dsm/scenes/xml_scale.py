@@ -28,27 +28,27 @@ def scaled_text(path: Path, scale: float) -> str:
         raise ValueError(f"parsing of the XML file failed: {e}") from None
     if root.find(".//include") is not None:
         raise ValueError("an <include> would keep its elements in the file's units: inline it to give a scale")
-    s = repr(float(scale))
+    scale = float(scale)
     for el in root:
         if el.tag == "shape" and el.get("type") != "shapegroup":
-            _scale_transform(el, s)
+            _scale_transform(el, scale)
         elif el.tag == "sensor":
-            _scale_transform(el, s, conjugate=True)
-            _scale_clips(el, float(scale))
+            _scale_transform(el, scale, conjugate=True)
+            _scale_clips(el, scale)
         elif el.tag == "emitter":
-            _scale_emitter(el, s, float(scale))
+            _scale_emitter(el, scale)
     return ET.tostring(root, encoding="unicode")
 
 
-def _scale_transform(el, s: str, conjugate: bool = False):
+def _scale_transform(el, scale: float, conjugate: bool = False):
     """Append a uniform scale to ``el``'s to_world (made when absent); ``conjugate``: its inverse
     first too, so a frame (camera, light) moves without being scaled."""
     t = next((c for c in el.findall("transform") if c.get("name") == "to_world"), None)
     if t is None:
         t = ET.SubElement(el, "transform", {"name": "to_world"})
     if conjugate:
-        t.insert(0, ET.Element("scale", {"value": repr(1.0 / float(s))}))
-    ET.SubElement(t, "scale", {"value": s})
+        t.insert(0, ET.Element("scale", {"value": repr(1.0 / scale)}))
+    ET.SubElement(t, "scale", {"value": repr(scale)})
 
 
 def _scale_clips(el, scale: float):
@@ -60,7 +60,7 @@ def _scale_clips(el, scale: float):
         f.set("value", repr(float(f.get("value")) * scale))
 
 
-def _scale_emitter(el, s: str, scale: float):
+def _scale_emitter(el, scale: float):
     """A point light's position (or any emitter's to_world) scaled; directions and environments kept."""
     kind = el.get("type")
     if kind in ("directional", "constant", "envmap", "sunsky", "sky", "sun"):
@@ -70,4 +70,4 @@ def _scale_emitter(el, s: str, scale: float):
         for k in ("x", "y", "z"):
             pos.set(k, repr(float(pos.get(k)) * scale))
         return
-    _scale_transform(el, s, conjugate=True)
+    _scale_transform(el, scale, conjugate=True)

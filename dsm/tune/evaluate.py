@@ -26,11 +26,15 @@ def with_values(spec: SchemeSpec, values: dict) -> SchemeSpec:
 
 def hard_counts(spec: SchemeSpec, cases, groups) -> dict:
     """Exact counts of one scheme instance over ``cases`` with the kit's nearest lookup."""
-    acne = pp = n = lit = 0
     culling = pl.culling_of(spec.params)
+    return counted(cases, lambda c: pl.visibility(spec, c.rx, groups[c.group].maps[culling])[0])
+
+
+def counted(cases, visibility) -> dict:
+    """Exact counts over ``cases`` of the V ``visibility(case)`` gives (Dr.Jit; lit: V >= 0.5)."""
+    acne = pp = n = lit = 0
     for c in cases:
-        v, _ = pl.visibility(spec, c.rx, groups[c.group].maps[culling])
-        on = v.numpy() >= 0.5
+        on = visibility(c).numpy() >= 0.5
         acne += int((c.v_star & ~on).sum())
         pp += int((~c.v_star & on).sum())
         n += c.n

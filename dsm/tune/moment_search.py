@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from types import SimpleNamespace
 
 import drjit as dr
 import mitsuba as mi
@@ -13,7 +12,7 @@ from ..report.tables import objective
 from ..types import describe_params
 from .evaluate import NAN, sync_clock
 from .moments import (LR, TAU, gradient_check, grid_search, hard_counts, loss_and_gradient, map_source, tunable,
-                      with_values)
+                      unit_box, with_values)
 from .search import BETA1, BETA2, coarse_grid, phase_budgets
 
 
@@ -74,7 +73,7 @@ def tune_instance(spec, box, cases, maps_for, budget: int, lam: float, tick=None
     t0 = sync_clock()
     start = {p.name: p.start for p in box}
     rows.append(_row(spec, "start", 0, start, evaluate(start)))
-    cells = coarse_grid([_unit_box(p) for p in box], (budget - 1) // 2 if rebuild else phase_budgets(budget)["coarse"])
+    cells = coarse_grid(unit_box(box), (budget - 1) // 2 if rebuild else phase_budgets(budget)["coarse"])
     for i, u in enumerate(cells):
         values = {p.name: p.value(u[p.name]) for p in box}
         rows.append(_row(spec, "coarse", 1 + i, values, evaluate(values)))
@@ -126,10 +125,6 @@ def _golden(spec, p, base: dict, width: float, steps: int, evaluate, rows, start
             b = lo + GOLDEN * (hi - lo)
             fb = at(b)
     return times
-
-
-def _unit_box(p):
-    return SimpleNamespace(name=p.name, lo=0.0, hi=1.0)
 
 
 def tune_all(tc, train, held, groups, orc_train=None, tick=None) -> tuple:

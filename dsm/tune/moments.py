@@ -30,9 +30,8 @@ import numpy as np
 
 from .. import pipeline as pl
 from .. import prefilter
-from ..maps.lookup import resolve
 from ..report.tables import objective
-from .evaluate import counts, sync_clock
+from .evaluate import counted, sync_clock
 from .search import coarse_grid
 
 TAU = (0.1, 0.005)        # the sigmoid's width in V, first and last Adam step
@@ -120,24 +119,9 @@ def moment_maps(spec, cases, groups, fmt: str) -> dict:
     return {g: pl.moment_map(spec, groups[g].maps["none"], fmt) for g in sorted({c.group for c in cases})}
 
 
-def _visibility(spec, values: dict, rx, mmap):
-    """V per receiver with the tuned parameters replaced by ``values`` (Dr.Jit Floats, differentiable)."""
-    module = prefilter.get(spec.name)
-    prm = SimpleNamespace(**{**vars(resolve(spec.params, rx)), **values})
-    b = prefilter.restored(module, prefilter.fetch(mmap, rx), mmap.fmt)
-    return module.visibility(b, prefilter.normalized_depth(rx.depth, mmap.view), prm)
-
-
 def hard_counts(spec, cases, mmaps) -> dict:
     """Exact counts of one instance over ``cases``: the kit's own pre-filtered lookup (lit: V >= 0.5)."""
-    acne = pp = n = lit = 0
-    for c in cases:
-        on = prefilter.visibility(spec, c.rx, mmaps[c.group]).numpy() >= 0.5
-        acne += int((c.v_star & ~on).sum())
-        pp += int((~c.v_star & on).sum())
-        n += c.n
-        lit += int(c.v_star.sum())
-    return counts(acne, pp, n, lit)
+    return counted(cases, lambda c: prefilter.visibility(spec, c.rx, mmaps[c.group]))
 
 
 def loss_and_gradient(spec, box, u: dict, cases, mmaps, tau: float, lam: float) -> tuple:
@@ -152,7 +136,7 @@ def loss_and_gradient(spec, box, u: dict, cases, mmaps, tau: float, lam: float) 
         for k, p in enumerate(box):
             uf = {q.name: dr.opaque(mi.Float, u[q.name]) for q in box}
             dr.enable_grad(uf[p.name])
-            v = _visibility(spec, {q.name: q.value(uf[q.name]) for q in box}, c.rx, mmaps[c.group])
+            v = prefilter.visibility(spec, c.rx, mmaps[c.group], {q.name: q.value(uf[q.name]) for q in box})
             dr.forward(uf[p.name])
             dv = dr.grad(v)
             v = dr.detach(v)
@@ -199,11 +183,16 @@ def gradient_check(spec, box, cases, mmaps, lam: float) -> dict:
     return out
 
 
+def unit_box(box) -> list:
+    """The search box in the unit coordinate, [0, 1] per parameter (search.coarse_grid's boxes)."""
+    return [SimpleNamespace(name=p.name, lo=0.0, hi=1.0) for p in box]
+
+
 def grid_search(spec, box, cases, maps_for, budget: int, lam: float) -> dict:
     """The best exact evaluation on a regular grid of the unit box with at most ``budget`` points
     (``maps_for``: map_source's function, the moment maps at given values)."""
     t0 = sync_clock()
-    pts = coarse_grid([SimpleNamespace(name=p.name, lo=0.0, hi=1.0) for p in box], budget)
+    pts = coarse_grid(unit_box(box), budget)
     best = None
     for u in pts:
         values = {p.name: p.value(u[p.name]) for p in box}
