@@ -611,15 +611,60 @@ def test_the_summary_pools_the_leak_split_per_instance():
     assert summary.leak_md([{k: v for k, v in r.items() if k != "map_kind"} for r in rows]) == []
 
 
-@pytest.mark.parametrize("extra", [
-    {"light": [{"type": "area", "shape": "rectangle", "position": [0, 0, 3], "direction": [0, 0, -1], "size": 1.0}]},
-    {"motion": [{"frames": 3, "camera": "dolly", "offset": [0, 1, 0]}]},
-], ids=["area light", "motion"])
-def test_pre_filtered_kinds_refuse_area_lights_and_motion(extra):
+@pytest.mark.parametrize("extra,key", [
+    ({"light": [{"type": "area", "shape": "rectangle", "position": [0, 0, 3], "direction": [0, 0, -1],
+                 "size": 1.0}]}, "map.kind"),
+    ({"map": {"kind": "vsm", "moment_samples": 2}, "motion": [{"frames": 3, "camera": "dolly", "offset": [0, 1, 0]}]},
+     "map.moment_samples"),
+    ({"map": {"kind": "vsm", "mipmaps": True}, "motion": [{"frames": 3, "camera": "dolly", "offset": [0, 1, 0]}]},
+     "map.mipmaps"),
+], ids=["area light", "motion supersampled", "motion mipmapped"])
+def test_pre_filtered_kinds_refuse_area_lights_and_what_motion_cannot_rebuild(extra, key):
     from dsm.config import read as config
     with pytest.raises(config.ConfigError) as e:
         config.parse({"scene": [{"builtin": "plane"}], "map": {"kind": "vsm"}, **extra}, "<test>")
-    assert e.value.key == "map.kind"
+    assert e.value.key == key
+
+
+def test_motion_of_a_pre_filtered_map_frame_by_frame_equals_still_runs_at_each_camera(run_dict):
+    """[[motion]] with [map] kind: each frame's moments are built from that frame's map (re-fitted to
+    the frame's receivers), so a frame's counts (frames.csv) equal those of a still run (the runner's
+    path: a second computation) with the camera where the frame puts it; the case's counts are the
+    frames' sums."""
+    import csv
+    import math
+    import mitsuba as mi
+    from dsm.maps.cascades import Camera
+    from dsm.scenes.camera import look_at_sensor
+    poses = [([2.0, -2.5, 2.2], [0.0, 0.0, 0.2]), ([2.6, -1.5, 2.0], [0.2, 0.1, 0.0])]
+    mp = {"resolution": 128, "kind": ["depth", "vsm", "evsm"], "blur": [1, 3]}
+    common = dict(scene=[{"builtin": "floating_plate"}], map=mp, scheme=[{"name": "constant"}])
+    clips = {"near": 0.01, "far": 100.0}
+    keys = [{"position": p, "target": t} for p, t in poses]
+    moved = run_dict(base_config(camera={"resolution": [40, 40], "position": poses[0][0], "target": poses[0][1],
+                                         "fov": 50, **clips}, **common,
+                                 motion=[{"frames": 2, "camera": "keyframes", "keys": keys, "points": 400}]), "moved")
+    with open(moved.out / "frames.csv", newline="") as fh:
+        frames = list(csv.DictReader(fh))
+    label = lambda r: (r["scheme"], r["filter"])
+    assert sorted({label(r) for r in moved.rows}) == sorted([("constant", "nearest"), ("vsm", "box:1"),
+                                                             ("vsm", "box:3"), ("evsm", "box:1"), ("evsm", "box:3")])
+    # the frames' sensors keep frame 0's film, fov, clips and (orthonormalized) up: the still runs too
+    base = Camera.from_sensor(mi.load_dict(look_at_sensor(*poses[0], [0, 0, 1], 50, 40, 40, **clips)))
+    fov, up = math.degrees(2 * math.atan(base.tan_x)), [float(c) for c in base.up]
+    for t, (pos, tgt) in enumerate(poses):
+        cam = {"resolution": [40, 40], "position": pos, "target": tgt, "fov": fov, "up": up, **clips}
+        still = run_dict(base_config(camera=cam, **common), f"still{t}")
+        at_t = {label(f): f for f in frames if int(f["frame"]) == t}
+        for r in still.rows:
+            f = at_t[label(r)]
+            assert int(f["n_receivers"]) == r["n_receivers"] > 100, (t, label(r))
+            n_wrong = round(float(f["error_rate"]) * r["n_receivers"])    # frames.csv holds 6 digits
+            assert n_wrong == r["n_acne"] + r["n_peterpan"], (t, label(r))
+    for r in moved.rows:
+        n = sum(int(f["n_receivers"]) for f in frames if label(f) == label(r))
+        assert r["n_receivers"] == n and r["map_kind"] == ("depth" if r["scheme"] == "constant" else r["scheme"])
+        assert r["n_leak"] <= r["n_peterpan"]
 
 
 def test_the_error_image_paints_the_leaks_in_their_own_colour(run_dict):

@@ -83,3 +83,40 @@ def test_a_broken_xml_with_a_scale_is_one_config_error(tmp_path):
     with pytest.raises(ConfigError) as e:
         pipeline.prepare(cfg)
     assert e.value.key == "scene[0].file" and "pars" in str(e.value).lower() and "\n" not in str(e.value)
+
+
+def test_a_moved_xml_scene_holds_its_shapes_and_camera_at_scale_times_file_plus_translate():
+    """``translate`` after ``scale``: every shape's bounds and the camera's position are the file's times
+    the scale plus the move (numpy float64), the camera's orientation the file's."""
+    import mitsuba as mi
+    from dsm.scenes import files
+    from dsm.tools import env
+    env.use_variant("llvm_ad_rgb")
+    move = np.array([300.0, -20.0, 7.5])
+    ref = mi.load_file(str(CBOX), optimize=False)
+    got = files.load_xml_scene(CBOX, 0.01, tuple(move))
+    for a, b in zip(ref.shapes(), got.shapes()):
+        for end in ("min", "max"):
+            want = np.array(getattr(a.bbox(), end), float) * 0.01 + move
+            np.testing.assert_allclose(np.array(getattr(b.bbox(), end), float), want, rtol=0, atol=1e-4)
+    m_ref = np.array(ref.sensors()[0].world_transform().matrix, float).reshape(4, 4)
+    m_got = np.array(got.sensors()[0].world_transform().matrix, float).reshape(4, 4)
+    np.testing.assert_allclose(m_got[:3, :3], m_ref[:3, :3], atol=1e-6)
+    np.testing.assert_allclose(m_got[:3, 3], m_ref[:3, 3] * 0.01 + move, rtol=0, atol=1e-4)
+
+
+def test_the_cornell_box_far_from_the_origin_keeps_its_exact_side(tmp_path):
+    """At 1e4 and 1e5 from the origin (metres) the exact side is traced in a frame centred on the box
+    (dsm.scenes.exact_frame): every case's receivers and exact shadowed count are the origin's, while
+    the map, held in float32 world coordinates, loses headroom (texel_f32_steps) as the offset grows."""
+    import dsm
+    rows = {}
+    for x in (0.0, 1e4, 1e5):
+        cfg = {**_cfg(0.001), "scene": [{"file": str(CBOX), "scale": 0.001, "translate": [x, x / 2, 0.0]}]}
+        cfg["light"] = cfg["light"][:1]
+        rows[x] = dsm.run(cfg, out=tmp_path / f"at{x:g}").rows
+    for x in (1e4, 1e5):
+        for a, b in zip(rows[0.0], rows[x]):
+            assert (a["n_receivers"], a["n_gt_shadowed"]) == (b["n_receivers"], b["n_gt_shadowed"]), (x, a["params"])
+    steps = [float(np.median([r["texel_f32_steps"] for r in rows[x]])) for x in (0.0, 1e4, 1e5)]
+    assert steps[0] > 100 * steps[1] and steps[1] > 4 * steps[2]      # float32 steps: 2^3 coarser at 1e5 than 1e4

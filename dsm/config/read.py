@@ -120,9 +120,7 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     budget, repeats, lambdas, report_images = _parse_run_tables(raw, source)
     motion = tuple(_parse_motion(t, source, f"motion[{i}]") for i, t in enumerate(_array_of_tables(raw, "motion", source)))
     _check_motion_lights(motion, lights, source)
-    if motion and mapspec.moments:
-        raise ConfigError(source, "map.kind", "pre-filtered maps are measured on still frames; remove [[motion]] "
-                          "or keep map.kind = depth", ("depth",))
+    _check_motion_moments(motion, mapspec, source)
     contact = _parse_contact(raw, source, bool(motion))
     shrink = _parse_shrink(m, source, bool(motion))
     from .tune import parse_tune                 # [tune]: dsm tune's, checked here so a bad key fails at load
@@ -598,6 +596,15 @@ def _parse_light(t: dict, source: str, where: str) -> LightSpec:
     if kind is None:
         raise ConfigError(source, f"{where}.type", "missing", lights.TYPES)
     return lights.get(kind).parse(t, source, where)
+
+
+def _check_motion_moments(motion, mapspec, source):
+    """[[motion]] re-builds a pre-filtered map's moments per frame from the frame's first layer: a
+    supersampled or mipmapped instance (which casts or reads what a frame's map does not hold) is refused."""
+    for key, what in (("moment_samples", lambda s: s.samples > 1), ("mipmaps", lambda s: s.mipmaps)):
+        if motion and any(what(s) for s in mapspec.moments):
+            raise ConfigError(source, f"map.{key}", f"[[motion]] measures pre-filtered maps built from each frame's "
+                              f"first layer; remove [[motion]] or {key}", ("moment_samples = 1", "mipmaps = false"))
 
 
 def _check_motion_lights(motion, lights_of_config, source):

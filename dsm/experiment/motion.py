@@ -47,6 +47,7 @@ from ..truth import metrics
 from ..scenes.camera import look_at_sensor
 from ..tools import timing
 from ..maps.cascades import Camera
+from ..types import MomentSpec
 
 FRAME_COLUMNS = ("case", "motion", "scene", "light", "cascade_layout", "scheme", "params", "resolution", "filter",
                  "format", "frame", "map_built", "n_points_visible", "n_pairs_eligible", "n_flicker", "flicker_rate",
@@ -323,6 +324,8 @@ class _MapFrames:
     vstar: dict = dataclasses.field(default_factory=dict)     # {light: the fixed points' V*}
     signature: object = None                                  # the last map's projection
     smap: object = None
+    moments: dict = dataclasses.field(default_factory=dict)   # {moment key: MomentMap} of the current map
+    moments_ms: dict = dataclasses.field(default_factory=dict)  # {moment key: [build ms per map built]}
     built: list = dataclasses.field(default_factory=list)     # per frame: the map was built (not reused)
     build_ms: list = dataclasses.field(default_factory=list)
     tight: dict = dataclasses.field(default_factory=lambda: headroom.headroom(math.nan, math.nan))
@@ -334,6 +337,7 @@ def _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents,
     cfg = runner.cfg
     specs = [pipeline.preset_for_light(s, light_frames[0].type) for s in m.specs]
     keys = [(s, filt, fmt) for s in specs for filt in cfg.map.filter for fmt in cfg.map.format]
+    keys += [(s, s.filter, fmt) for s in m.moments for fmt in cfg.map.format]     # pre-filtered instances
     per = {k: {"v": [], "vstar": [], "elig": [], "face": [], "frames": [], "images": [], "metrics": []} for k in keys}
     state = _MapFrames()
     for t, ((o, tg, up), light) in enumerate(zip(poses, light_frames)):
@@ -371,6 +375,7 @@ def _frame_map(runner, state: _MapFrames, sd, m, view, closed, extents):
             return (*shadowmap.arrays(sm), sm)       # the arrays, so the timing waits for them
         out, tm = timing.measure(build, 0)
         state.smap = out[-1]
+        state.moments = {}                        # a new first layer: new moments
         state.build_ms.append(tm.ms)
         state.built.append(True)
         runner.record.add_rays({"map_texel": state.smap.rays.get("map_texel", 0)})
@@ -379,6 +384,30 @@ def _frame_map(runner, state: _MapFrames, sd, m, view, closed, extents):
         state.built.append(False)
     state.signature = sig
     return state.smap
+
+
+def _frame_moments(state: _MapFrames, spec, fmt: str):
+    """The MomentMap of pre-filtered instance ``spec`` on the frame's map, built (timed) once per
+    map and moment key; its build time is kept per key."""
+    key = pipeline.moment_key(spec, fmt)
+    if key not in state.moments:
+        def build():
+            """The moment map's arrays (evaluated by the clock) and the map."""
+            mm = pipeline.moment_map(spec, state.smap, fmt)
+            return (*mm.b, mm)
+        out, tm = timing.measure(build, 0)
+        state.moments[key] = out[-1]
+        state.moments_ms.setdefault(key, []).append(tm.ms)
+    return state.moments[key]
+
+
+def _frame_lookup(state: _MapFrames, spec, filt: str, fmt: str, stored: dict, seed: int):
+    """The frame's lookup of one case: receivers -> (V, tap shapes), a depth scheme on the map as
+    ``fmt`` stores it, or a pre-filtered instance on its moments (of the float32 first layer)."""
+    if isinstance(spec, MomentSpec):
+        mmap = _frame_moments(state, spec, fmt)
+        return lambda r: pipeline.moment_visibility(spec, r, mmap, state.smap)
+    return lambda r: pipeline.visibility(spec, r, stored[fmt], filt, seed)
 
 
 def _run_frame(runner, state: _MapFrames, keys, per, t, sd, m, base, pose, light, pts, closed, extents, magnitude):
@@ -403,17 +432,20 @@ def _run_frame(runner, state: _MapFrames, keys, per, t, sd, m, base, pose, light
             state.tight = hr
     for (spec, filt, fmt) in keys:
         d = per[(spec, filt, fmt)]
-        sm = stored[fmt]
+        look = _frame_lookup(state, spec, filt, fmt, stored, cfg.seed)
         rx_pts, rx = rx_of[fmt]
-        v_pts = np.asarray(pipeline.visibility(spec, rx_pts, sm, filt, cfg.seed)[0].numpy(), np.float64)
+        v_pts = np.asarray(look(rx_pts)[0].numpy(), np.float64)
         face = np.asarray(rx_pts.face.numpy(), np.int64)
         if has_rx:
-            (v, tap), lt = timing.measure(lambda: pipeline.visibility(spec, rx, sm, filt, cfg.seed), 0)
+            (v, tap), lt = timing.measure(lambda: look(rx), 0)
             v_np, tap_np = v.numpy(), tap.numpy()
             d_lookup = lt.ms
         else:
             v_np, tap_np, d_lookup = np.zeros(0), np.zeros(0, np.uint32), float("nan")
         mt = pipeline.metrics(v_np, setup, tap_np, None, False)
+        if cfg.map.leak_split:       # [map] kind given: the frame's leak split, as a still case's
+            texel_np = rx.texel_world.numpy() if has_rx else np.zeros(0)
+            mt = {**mt, **metrics.leak_split(v_np, setup.v_star, setup.occluder_dist, texel_np, cfg.map.leak_texels)}
         classes = np.zeros(gb.width * gb.height, np.uint8)
         classes[setup.pixels] = pipeline.classify(v_np, setup.v_star)
         d["v"].append(v_pts)
@@ -447,6 +479,8 @@ def _write_case(runner, state: _MapFrames, sd, m, mo, spec, filt, fmt, d):
         row[k] = int(sum(x[k] for x in d["metrics"]))       # summed over the frames
     for k in ("acne_rate", "peterpan_rate", "error_rate", "mean_abs_error"):
         row[k] = _mean([x[k] for x in d["metrics"]])          # the mean over the frames
+    if runner.cfg.map.leak_split:
+        row.update(_leak_columns(state, spec, fmt, d["metrics"]))
     row.update({"flicker_rate": _mean([p["flicker_rate"] for p in pairs]), "flicker_ever": ever,
                 "flicker_magnitude": _mean([p["flicker_magnitude"] for p in pairs]),
                 "flicker_within_rate": _mean([p["flicker_within_rate"] for p in pairs]),
@@ -465,6 +499,18 @@ def _write_case(runner, state: _MapFrames, sd, m, mo, spec, filt, fmt, d):
     runner.case_done(row, {"what": f"case {case}", "scene": sd.label, "light": m.light, "view": m.view,
                            "scheme": spec.name, "params": spec.label, "resolution": m.resolution,
                            "status": "ok" if row["n_receivers"] else "empty"})
+
+
+def _leak_columns(state: _MapFrames, spec, fmt: str, frame_metrics: list) -> dict:
+    """A motion case's leak split (counts summed over the frames, rates their mean), its map kind and
+    its moments' median build time (undefined for a depth scheme)."""
+    out = {"map_kind": spec.name if isinstance(spec, MomentSpec) else "depth"}
+    for k in metrics.LEAK_COLUMNS:
+        vals = [x[k] for x in frame_metrics]
+        out[k] = int(sum(vals)) if k.startswith("n_") else _mean(vals)
+    ms = state.moments_ms.get(pipeline.moment_key(spec, fmt)) if isinstance(spec, MomentSpec) else None
+    out["moments_ms"] = float(np.median(ms)) if ms else metrics.UNDEFINED
+    return out
 
 
 def _write_gif(path, images):

@@ -53,10 +53,15 @@ class SceneData:
         centre = exact_frame.centre_for(self.bbox)
         if centre is None:
             return
-        self.centre, self.exact_scene = centre, _moved_scene(shapes64, centre)
+        self.use_exact_scene(centre, _moved_scene(shapes64, centre))
+
+    def use_exact_scene(self, centre: np.ndarray, exact_scene):
+        """Trace the exact side in ``exact_scene``: the world scene's shapes, in its order, moved by minus
+        ``centre`` (float64, world) before their rounding to float32."""
         ids = [sh.id() for sh in self.scene.shapes()]
-        if ids != [sh.id() for sh in self.exact_scene.shapes()]:
+        if ids != [sh.id() for sh in exact_scene.shapes()]:
             raise RuntimeError(f"scene {self.label!r}: the centred frame's shapes are not in the world's order")
+        self.centre, self.exact_scene = centre, exact_scene
 
     @property
     def diagonal(self) -> float:

@@ -83,7 +83,7 @@ def _precheck_file(spec):
 def load_xml(spec, camera_resolution, camera=None):
     """SceneData of a Mitsuba 3 XML scene: its first sensor (resized, reposed by [camera]), its emitters."""
     _precheck_file(spec)
-    scene = load_xml_scene(spec.file, spec.params.scale)
+    scene = load_xml_scene(spec.file, spec.params.scale, spec.params.translate)
     if not scene.sensors():
         raise ConfigError(source_of(spec), f"{spec.where}.file", f"{spec.file} has no <sensor>: dsm takes the camera "
                           "from an XML scene's first sensor; add one")
@@ -94,6 +94,8 @@ def load_xml(spec, camera_resolution, camera=None):
         notes.append(f"no point, spot or directional emitter: dsm added a default {describe_light(lights[0])}")
     sensor = scene.sensors()[0]
     data = finish(spec.label, scene, lights, spec.params.scale, notes)
+    if any(spec.params.translate):
+        _moved_xml(data, spec)
     if camera_resolution is not None:
         # [camera] resolution: the sensor re-created at that width, with its film's aspect ratio,
         # transform and field of view; without it the XML's own sensor and film are the camera
@@ -102,16 +104,38 @@ def load_xml(spec, camera_resolution, camera=None):
         data.sensor = resized_sensor(sensor, width, max(1, round(width * film[1] / film[0])))
     if camera is not None:
         data.sensor = reposed_sensor(data.sensor, camera, data.bbox, source_of(spec))
+        data.camera_pose = None           # the reposed sensor's own matrix, not the file's pose
     return data
 
 
-def load_xml_scene(path, scale: float = 1.0):
-    """The Mitsuba scene of an XML file, every element scaled by ``scale`` (xml_scale) when not 1,
-    its relative file names resolved against the file's folder as mi.load_file resolves them."""
+def _moved_xml(data, spec):
+    """An XML scene given a ``translate``: its offset (the [[light]] positions move with it), its
+    extent checked against float32 at the offset, and, far from the origin, the exact side traced in
+    the same file loaded moved by translate minus the scene's centre (float64: its vertices rounded
+    near the origin, the shapes in the same order)."""
+    p = data.offset = tuple(float(c) for c in spec.params.translate)
+    check_held(float(np.max(data.bbox[1] - data.bbox[0])), p, source_of(spec), f"{spec.where}.translate",
+               "from the origin")
+    centre = exact_frame.centre_for(data.bbox)
+    if centre is not None:
+        local = load_xml_scene(spec.file, spec.params.scale, tuple(np.asarray(p, np.float64) - centre))
+        data.use_exact_scene(centre, local)
+        # the camera's pose in float64 from the moved file's sensor (its matrix rounded near the origin,
+        # not at the offset); a mirrored frame, which look_at cannot rebuild, keeps the world matrix
+        m = np.array(local.sensors()[0].world_transform().matrix, np.float64).reshape(4, 4)
+        if np.linalg.det(m[:3, :3]) > 0:
+            o = m[:3, 3] + centre
+            data.camera_pose = (o, o + m[:3, 2], m[:3, 1])
+
+
+def load_xml_scene(path, scale: float = 1.0, translate=(0.0, 0.0, 0.0)):
+    """The Mitsuba scene of an XML file, every element scaled by ``scale`` then moved by ``translate``
+    (xml_scale) when not the identity, its relative file names resolved against the file's folder as
+    mi.load_file resolves them."""
     import mitsuba as mi
-    if scale == 1.0:
+    if scale == 1.0 and not any(translate):
         return mi.load_file(str(path), optimize=False)
-    text = xml_scale.scaled_text(path, scale)
+    text = xml_scale.scaled_text(path, scale, translate)
     resolver = mi.file_resolver()
     resolver_paths = [str(p) for p in resolver]           # restored after: the resolver is the process's
     resolver.prepend(str(Path(path).resolve().parent))

@@ -12,7 +12,7 @@ from .checks import check_held
 from .params import BUILTINS, FILE_SUFFIXES, FileParams, GrazingParams, PlaneParams
 
 
-XML_KEYS = ("scale",)        # what an XML scene takes of FileParams: its units (dsm.scenes.xml_scale)
+XML_KEYS = ("scale", "translate")   # what an XML scene takes of FileParams: its units and place (dsm.scenes.xml_scale)
 
 def parse_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]:
     """One [[scene]] table, with list-valued parameters swept, into scene specs."""
@@ -59,7 +59,7 @@ def parse_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]
         raise ConfigError(source, f"{where}.{given[0]}", "an XML scene takes no "
                           f"{'/'.join(f.name for f in fields(FileParams) if f.name not in XML_KEYS)} keys: its "
                           "geometry, camera and lights are the file's, in its own world coordinates (scale: in other "
-                          "units)", ("file", "closed", "optional") + XML_KEYS)
+                          "units; translate: elsewhere)", ("file", "closed", "optional") + XML_KEYS)
     return [SceneSpec(file=path, params=p, label=_label(path.stem, p, FileParams()), closed=closed, source=source,
                       where=where) for p in specs]
 
