@@ -1,4 +1,4 @@
-"""dsm benchmark (dsm-bench-1, -2 and -3): the suites' hash pins, scale normalization, the
+"""dsm benchmark (dsm-bench-1 to -4): the suites' hash pins, scale normalization, the
 far-from-origin axis, the compare rule, the leaderboard's ranking and tie rule, the preset bias
 conversion, FLIP, the shaded renders, the scale figure, and one tiny end-to-end run."""
 import json
@@ -15,6 +15,7 @@ from dsm.types import Length
 SUITE_1_SHA256 = "15b8554a6f096049e4da44ba45084ae524f5d93f04380a71907185a990a2ba5c"
 SUITE_2_SHA256 = "ebd3668f4b3bff1df961afae653c8e91018de253cd2df644be3a1c71884b9cd1"
 SUITE_3_SHA256 = "5582fcb3e08f61997b71398424ea90d81b26e8c56d66886b835a18bbdad60677"
+SUITE_4_SHA256 = "196f379d78e7a92dd254aabdb5fa6894bb58e74bf7a4d064f6fdeeea94af22b1"
 
 
 def test_suite_hashes_are_pinned():
@@ -22,10 +23,12 @@ def test_suite_hashes_are_pinned():
     assert suite.load_suite(suite.SUITE_FILES["dsm-bench-1"])["suite"]["name"] == "dsm-bench-1"
     assert suite.suite_sha256(suite.SUITE_FILES["dsm-bench-2"]) == SUITE_2_SHA256
     assert suite.load_suite(suite.SUITE_FILES["dsm-bench-2"])["suite"]["name"] == "dsm-bench-2"
+    assert suite.suite_sha256(suite.SUITE_FILES["dsm-bench-3"]) == SUITE_3_SHA256
+    assert suite.load_suite(suite.SUITE_FILES["dsm-bench-3"])["suite"]["name"] == "dsm-bench-3"
     # the newest is what dsm benchmark runs by default
-    assert suite.LATEST == "dsm-bench-3" and suite.suite_sha256() == SUITE_3_SHA256
+    assert suite.LATEST == "dsm-bench-4" and suite.suite_sha256() == SUITE_4_SHA256
     s = suite.load_suite()
-    assert s["suite"]["name"] == "dsm-bench-3" and s["flip"]["ppd"] == 67.0
+    assert s["suite"]["name"] == "dsm-bench-4" and s["flip"]["ppd"] == 67.0
 
 
 def test_suite_1_still_makes_its_cases_at_the_origin_only():
@@ -39,9 +42,13 @@ def test_default_size_covers_every_preset_scene_unit_and_light():
     from dsm.schemes.presets import names
     s = suite.load_suite()
     cs = suite.cases(s, "default")
-    # every scene at cm, m and km, and but the Cornell box (an XML scene takes no translate) at 1e4 and 1e5
-    assert len(cs) == len(s["scene"]) * (3 + 2) - 2
-    assert sorted((c.unit, c.offset) for c in cs if c.scene == "cbox") == [("cm", "0"), ("km", "0"), ("m", "0")]
+    # every scene at cm, m and km, and at 1e4 and 1e5 (the Cornell box too: an XML scene takes translate)
+    assert len(cs) == len(s["scene"]) * (3 + 2)
+    assert sorted((c.unit, c.offset) for c in cs if c.scene == "cbox") == [("cm", "0"), ("km", "0"), ("m", "0"),
+                                                                           ("m", "1e4"), ("m", "1e5")]
+    # dsm-bench-3 kept the box at the origin
+    cs3 = suite.cases(suite.load_suite(suite.SUITE_FILES["dsm-bench-3"]), "default")
+    assert sorted((c.unit, c.offset) for c in cs3 if c.scene == "cbox") == [("cm", "0"), ("km", "0"), ("m", "0")]
     schemes = cs[0].config["scheme"]
     assert sorted(t["preset"] for t in schemes if "preset" in t) == names()
     assert [t["type"] for t in cs[0].config["light"]] == ["scene", "spot", "point"]
@@ -55,12 +62,12 @@ def _by(cs, scene, unit, offset="0"):
 def test_a_far_case_is_the_metre_case_moved():
     """A far case's config is its origin case's at the far unit but for the translate (and the name)."""
     cs = suite.cases(suite.load_suite(), "default")
-    for name in ("bunny", "grazing"):
+    for name in ("bunny", "grazing", "cbox"):
         here = _by(cs, name, "m")
         for offset, translate in (("1e4", [1e4, 5e3, 0.0]), ("1e5", [1e5, 5e4, 0.0])):
             far = _by(cs, name, "m", offset)
             assert far.config["scene"][0].pop("translate") == translate and far.translate == tuple(translate)
-            assert far.config["experiment"].pop("name") == f"dsm-bench-3-{name}-m-at-{offset}"
+            assert far.config["experiment"].pop("name") == f"dsm-bench-4-{name}-m-at-{offset}"
             assert {**here.config, "experiment": {}} == {**far.config, "experiment": {}}
     assert {c.unit for c in cs if c.offset != "0"} == {"m"}
 
@@ -139,6 +146,28 @@ def test_compare_tells_a_change_from_a_tie():
     assert compare.case_key(v1) == ("s", "m", "0", "directional", "p")
 
 
+def test_compare_tells_flip_and_flicker_changes_from_ties():
+    """FLIP moves beyond 0.001 and flicker rates beyond 0.002 are changes; smaller ones (and a FLIP
+    missing on one side) are ties; a flicker record in one file only is added or removed."""
+    fa, fb = _rec("p", "m", 10), _rec("p", "m", 10)
+    fa["flip"], fb["flip"] = 0.0500, 0.0515            # moved 0.0015 > 0.001
+    ta, tb = _rec("q", "m", 10), _rec("q", "m", 10)
+    ta["flip"], tb["flip"] = 0.0500, 0.0509            # 0.0009: a tie
+    fl = lambda c, rate: {"scene": "g", "unit": "m", "offset": "0", "light": "directional", "contender": c,
+                          "flicker_rate": rate}
+    a = {"suite": "dsm-bench-4", "suite_sha256": "x", "cases": [fa, ta],
+         "flicker": [fl("p", 0.100), fl("q", 0.100), fl("gone", 0.0)]}
+    b = {"suite": "dsm-bench-4", "suite_sha256": "x", "cases": [fb, tb],
+         "flicker": [fl("p", 0.1025), fl("q", 0.1015), fl("new", 0.0)]}
+    diff = compare.compare(a, b)
+    assert [c["case"][4] for c in diff["changed"]] == ["p"] and diff["changed"][0]["moves"] == [["flip", 0.05, 0.0515]]
+    assert diff["n_tied"] == 1
+    f = diff["flicker"]
+    assert [c["case"][4] for c in f["changed"]] == ["p"] and f["n_tied"] == 1      # 0.0025 > 0.002; 0.0015 ties
+    assert f["added"] == [["g", "m", "0", "directional", "new"]] and f["removed"] == [["g", "m", "0", "directional", "gone"]]
+    assert "flicker: 1 records changed, 1 tied, 1 added, 1 removed" in compare.text(diff)
+
+
 def test_compare_command_writes_its_files(tmp_path):
     a = {"suite": "dsm-bench-1", "suite_sha256": "x", "cases": [_rec("p", "m", 10)]}
     b = {"suite": "dsm-bench-1", "suite_sha256": "y", "cases": [_rec("p", "m", 20)]}
@@ -187,12 +216,12 @@ def test_run(tmp_path_factory):
 
 def test_benchmark_end_to_end_at_test_size(test_run):
     out, doc = test_run
-    assert doc["suite"] == "dsm-bench-3" and doc["suite_sha256"] == SUITE_3_SHA256 and doc["size"] == "test"
+    assert doc["suite"] == "dsm-bench-4" and doc["suite_sha256"] == SUITE_4_SHA256 and doc["size"] == "test"
     assert doc["machine"]["cores"] >= 1 and doc["versions"]["dsm_git_commit"]
     assert doc["far_unit"] == "m" and doc["flip_ppd"] == 67.0
     # 2 scenes x (2 units + 2 offsets at m) x 1 light x (3 contenders + the tuned one + the oracle
-    # + 2 pre-filtered kinds)
-    assert len(doc["cases"]) == 56
+    # + 2 pre-filtered kinds at their defaults + their presets: vsm three, msm mjp)
+    assert len(doc["cases"]) == 72
     recs = {(r["scene"], r["unit"], r["offset"], r["contender"]): r for r in doc["cases"]}
     for r in doc["cases"]:
         if r["contender"] != "oracle":
@@ -264,7 +293,8 @@ def test_the_scale_figure_and_tables_hold_the_results_numbers(test_run):
     with Image.open(out / "scale.png") as im:
         assert im.format == "PNG" and im.width > 400 and im.height > 150
         pixels = np.asarray(im.convert("RGB")).reshape(-1, 3).astype(int)
-    who = ["bevy", "msm box:5", "oracle", "receiver_plane", "three", "tuned_normal_angle", "vsm box:5"]
+    who = ["bevy", "msm box:5", "msm mjp box:5", "oracle", "receiver_plane", "three", "tuned_normal_angle", "vsm box:5",
+           "vsm three box:5"]
     def by_numpy(keep):
         value = lambda r: r["per_texel_objective"] if r["contender"] == "oracle" else r["error_rate"]
         return [float(np.mean(np.array([value(r) for r in doc["cases"] if r["contender"] == c and keep(r)],
@@ -363,15 +393,17 @@ def test_the_renders_are_the_run_s_shadow_image_and_its_exact_twin(tmp_path, whi
             flip_evaluator.evaluate(rgb(exact), rgb(shadowed), "LDR", parameters={"ppd": 67.0})[1], rel=1e-6)
 
 
-def test_the_cornell_box_is_in_millimetres_and_off_the_far_axis():
+def test_the_cornell_box_is_in_millimetres_and_on_the_far_axis():
     """Its scale is factor x unit (0.001 x 100, x 1, x 0.001); at metres the box is 0.556 m wide (the
-    file's 556 units, its Cornell-data millimetres); only spot and point, both inside the box."""
+    file's 556 units, its Cornell-data millimetres); only spot and point, both inside the box; at 1e4 its
+    bounds are the origin's plus the translate."""
     import mitsuba as mi
     from dsm.config.read import parse
     from dsm.scenes.load import load
     mi.set_variant("llvm_ad_rgb")
-    cs = {c.unit: c for c in suite.cases(suite.load_suite(), "default") if c.scene == "cbox"}
-    assert sorted(cs) == ["cm", "km", "m"] and all(c.offset == "0" for c in cs.values())
+    every = [c for c in suite.cases(suite.load_suite(), "default") if c.scene == "cbox"]
+    cs = {c.unit: c for c in every if c.offset == "0"}
+    assert sorted(cs) == ["cm", "km", "m"]
     for unit, scale in (("cm", 0.1), ("m", 0.001), ("km", 1e-6)):
         assert cs[unit].scale == pytest.approx(scale, rel=1e-12) and cs[unit].config["scene"][0]["scale"] == cs[unit].scale
     cfg = parse(cs["m"].config, "<benchmark>")
@@ -382,6 +414,10 @@ def test_the_cornell_box_is_in_millimetres_and_off_the_far_axis():
     assert [l.type for l in lights] == ["spot", "point"] and "cascades" not in cs["m"].config["map"]
     for l in lights:
         assert (lo < np.asarray(l.position)).all() and (np.asarray(l.position) < hi).all()
+    far = next(c for c in every if c.offset == "1e4")
+    sd_far = load(parse(far.config, "<benchmark>").scenes[0], (16, 16))
+    np.testing.assert_allclose(np.array(sd_far.scene.bbox().min, float), lo + [1e4, 5e3, 0.0], rtol=0, atol=2e-3)
+    assert sd_far.centre is not None            # traced in the frame centred on the box
 
 
 def test_the_cornell_box_counts_alike_in_cm_and_m_for_scale_free_contenders():
@@ -393,14 +429,16 @@ def test_the_cornell_box_counts_alike_in_cm_and_m_for_scale_free_contenders():
     from dsm.schemes.presets import names
     free = [n for n in names() if bias_units.scale_free(n)]
     assert len(free) >= 4
-    cs = {c.unit: c for c in suite.cases(suite.load_suite(), "default") if c.scene == "cbox"}
+    cs = {c.unit: c for c in suite.cases(suite.load_suite(), "default") if c.scene == "cbox" and c.offset == "0"}
     counts = {}
     for unit in ("cm", "m"):
         c = cs[unit]
         small = {"camera": {"resolution": [32, 32]}, "map": {**c.config["map"], "resolution": 256}}
         cfg = {**c.config, **small, "scheme": suite.contender_tables(
             suite.load_suite(), free + ["constant", "normal_offset", "receiver_plane"])}
-        pre = {**c.prefiltered, **small, "map": {**c.prefiltered["map"], "resolution": 256, "kind": ["vsm"]}}
+        kinds_off = ("evsm", "msm", "vsm")          # vsm at its defaults: its presets' tables left out too
+        pre_map = {k: v for k, v in c.prefiltered["map"].items() if k not in kinds_off}
+        pre = {**c.prefiltered, **small, "map": {**pre_map, "resolution": 256, "kind": ["vsm"]}}
         rows = dsm.run(cfg).rows + dsm.run(pre).rows
         counts[unit] = {(r["light"], results.contender_of(r)): (r["n_receivers"], r["n_acne"], r["n_peterpan"])
                         for r in rows}
@@ -415,12 +453,13 @@ def test_prefiltered_contenders_carry_leaks_and_their_pooled_leak_rate(test_run)
     a depth contender has none; the page prints it."""
     out, doc = test_run
     pre = [r for r in doc["cases"] if r.get("map_kind") in ("vsm", "msm")]
-    assert {r["contender"] for r in pre} == {"vsm box:5", "msm box:5"} and len(pre) == 16
+    assert {r["contender"] for r in pre} == {"vsm box:5", "vsm three box:5", "msm box:5", "msm mjp box:5"}
+    assert len(pre) == 32
     for r in pre:
         assert 0 <= r["n_leak"] <= r["n_peterpan"] and r["leak_rate"] == pytest.approx(r["n_leak"] / r["n_gt_shadowed"])
         assert "texel_f32_steps" in r and 0.0 <= r["flip"] <= 1.0
     ranked = {r["contender"]: r for r in ranking.ranking(doc)}
-    for who in ("vsm box:5", "msm box:5"):
+    for who in ("vsm box:5", "vsm three box:5", "msm box:5", "msm mjp box:5"):
         here = [r for r in pre if r["contender"] == who and r["offset"] == "0"]
         expect = np.sum(np.array([r["n_leak"] for r in here], np.int64)) / \
             np.sum(np.array([r["n_gt_shadowed"] for r in here], np.int64))
@@ -428,7 +467,8 @@ def test_prefiltered_contenders_carry_leaks_and_their_pooled_leak_rate(test_run)
     assert ranked["bevy"]["leak"] is None and not any("n_leak" in r for r in doc["cases"] if "map_kind" not in r)
     assert sum(r["n_leak"] for r in pre) > 0                # leaking is measured here, not all zero
     page = (out / "leaderboard.html").read_text()
-    best = min(("vsm box:5", "msm box:5"), key=lambda c: (ranked[c]["error"], c))    # the lower error, not the name
+    best = min(("vsm box:5", "vsm three box:5", "msm box:5", "msm mjp box:5"),
+               key=lambda c: (ranked[c]["error"], c))                               # the lowest error, not the name
     assert "leak rate" in page and f"Best pre-filtered map: {best} (" in page
 
 
@@ -460,13 +500,14 @@ def test_the_tuned_contender_runs_under_its_own_name(test_run):
 def test_flicker_is_frames_csv_s_recomputed(test_run):
     """Each flicker record's flicker_rate is the mean over frame pairs of n_flicker / n_pairs_eligible
     of its case's rows in its frames.csv (numpy, float64; the first frame has no pair); the leaderboard's
-    flicker is the mean of a contender's records; the depth contenders have one per light, the
-    pre-filtered none."""
+    flicker is the mean of a contender's records; every contender, pre-filtered ones included, has one per
+    light."""
     import csv
     out, doc = test_run
     fl = doc["flicker"]
-    depth = {"bevy", "three", "receiver_plane", "tuned_normal_angle"}
-    assert {r["contender"] for r in fl} == depth and len(fl) == 4           # grazing at m, the directional light
+    every = {"bevy", "three", "receiver_plane", "tuned_normal_angle", "vsm box:5", "vsm three box:5", "msm box:5",
+             "msm mjp box:5"}
+    assert {r["contender"] for r in fl} == every and len(fl) == 8           # grazing at m, the directional light
     assert all(r["scene"] == "grazing" and r["unit"] == "m" and r["frames"] == 6 for r in fl)
     for r in fl:
         with open(out / r["frames_csv"]) as f:
@@ -479,8 +520,8 @@ def test_flicker_is_frames_csv_s_recomputed(test_run):
     ranked = {r["contender"]: r for r in ranking.ranking(doc)}
     for r in fl:
         assert ranked[r["contender"]]["flicker"] == pytest.approx(r["flicker_rate"], abs=1e-15)
-    assert ranked["vsm box:5"]["flicker"] is None
-    assert "no oracle floor" in (out / "leaderboard.html").read_text()
+    page = (out / "leaderboard.html").read_text()
+    assert "no oracle floor" in page and "while the sun turns 2 degrees" in page and "every contender" in page
 
 
 def test_the_benchmark_on_a_local_ray_cluster_counts_as_here(test_run, tmp_path, monkeypatch):

@@ -590,6 +590,25 @@ def test_a_preset_takes_no_other_keys_and_esm_has_none():
         assert e.value.key == key
 
 
+def test_a_list_of_presets_sweeps_them_and_default_is_the_kinds_defaults():
+    """``preset = ["default", "three", "mjp"]``: one instance each, in that order, with the values of
+    prefilter.presets (and of a table without keys for "default")."""
+    from dsm import prefilter
+    from dsm.config import read as config
+    cfg = config.parse(base_config(map={"kind": ["depth", "vsm"], "vsm": {"preset": ["default", "three", "mjp"]},
+                                        "blur": [1, 5]}), "<test>")
+    plain = config.parse(base_config(map={"kind": ["depth", "vsm"], "blur": [1, 5]}), "<test>")
+    got = [(s.preset, s.params, s.blur) for s in cfg.map.moments]
+    want = [(None, plain.map.moments[0].params, 1), (None, plain.map.moments[0].params, 5),
+            ("three", prefilter.presets.PRESETS["vsm"]["three"], 1), ("three", prefilter.presets.PRESETS["vsm"]["three"], 5),
+            ("mjp", prefilter.presets.PRESETS["vsm"]["mjp"], 1), ("mjp", prefilter.presets.PRESETS["vsm"]["mjp"], 5)]
+    assert got == want
+    for bad in ([], ["three", "unreal"]):
+        with pytest.raises(config.ConfigError) as e:
+            config.parse(base_config(map={"kind": ["depth", "vsm"], "vsm": {"preset": bad}}), "<test>")
+        assert e.value.key == "map.vsm.preset" and "default" in e.value.choices
+
+
 def test_the_summary_pools_the_leak_split_per_instance():
     from dsm.report import summary
     base = {"preset": "", "format": "float32", "cascade_layout": ""}

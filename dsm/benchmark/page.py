@@ -11,12 +11,23 @@ from . import bias_units, figure, ranking
 
 LEAK_NOTE = (" Leak rate (pre-filtered maps only, '-' for the depth map's contenders): their receivers lit far "
              "from their occluder (n_leak) summed over the cases at the origin, over the summed shadowed receivers "
-             "of V*. A pre-filtered contender (kind and blur, at the kind's defaults) has no cascades: its directional "
-             "light gets one map.")
-FLICKER_NOTE = (" Flicker (depth contenders, on the suite's flicker scenes at metres): the mean over scenes, lights "
-                "and frame pairs of the fraction of fixed surface points whose map class toggles while their exact "
-                "visibility does not, as the camera dollies 0.25 m over 6 frames; it has no oracle floor (the oracles "
-                "are per view); the pre-filtered maps refuse a motion ('-').")
+             "of V*. A pre-filtered contender (kind, an engine's preset of it where named, and blur; else the kind's "
+             "defaults) has no cascades: its directional light gets one map.")
+
+
+def flicker_note(doc: dict) -> str:
+    """The leaderboard's sentence on flicker: its motion as the result's suite ran it, and whether the
+    pre-filtered maps are in it (from dsm-bench-4 on)."""
+    mo = doc.get("flicker_motion") or {"offset": [0.25, 0.0, 0.0], "frames": 6}
+    move = f"the camera dollies {math.hypot(*mo['offset']):g} m over {mo['frames']} frames"
+    if mo.get("light") == "turn":
+        move += f" while the sun turns {mo['light_angle']:g} degrees"
+    pre = any(r["contender"].split()[0] in ("vsm", "esm", "evsm", "msm") for r in doc.get("flicker", []))
+    who = "every contender" if pre else "depth contenders"
+    tail = "" if pre else "; the pre-filtered maps refuse a motion ('-')"
+    return (f" Flicker ({who}, on the suite's flicker scenes at metres): the mean over scenes, lights and frame pairs "
+            "of the fraction of fixed surface points whose map class toggles while their exact visibility does not, "
+            f"as {move}; it has no oracle floor (the oracles are per view){tail}.")
 SORT_SCRIPT = SCRIPT.split("const cases")[0]      # report.html's header sort, without its case viewer
 
 
@@ -152,7 +163,7 @@ def write_page(doc: dict, out: Path) -> Path:
     body = (f"<h1>Shadow-bias leaderboard: {html.escape(doc['suite'])}</h1><p class=meta>{html.escape(meta)}</p>"
             + answer(doc, ranked) + "<h2>Ranking</h2><p class=note>Scores within 0.001 tie (shared rank, by name); "
             "every column but the offsets' reads the cases at the origin. Far change: the error at the farthest "
-            f"offset less the one at the origin.{html.escape(flip)}{html.escape(LEAK_NOTE)}{html.escape(FLICKER_NOTE)} Click a header to sort.</p>" + table(head, rows)
+            f"offset less the one at the origin.{html.escape(flip)}{html.escape(LEAK_NOTE)}{html.escape(flicker_note(doc))} Click a header to sort.</p>" + table(head, rows)
             + grid_section(doc) + scale_section(doc) + bias_section(doc))
     Path(out).mkdir(parents=True, exist_ok=True)
     figure.write(doc, out)                      # scale.png, which the page shows

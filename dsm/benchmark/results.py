@@ -59,8 +59,8 @@ def is_prefiltered(row: dict) -> bool:
 def contender_of(row: dict, tuned: dict | None = None) -> str:
     """The contender a metrics row belongs to: a pre-filtered kind and its filter (``vsm box:5``), else its
     preset's name, else a tuned contender's (``tuned``: :func:`dsm.benchmark.suite.tuned_labels`), else its scheme's."""
-    if is_prefiltered(row):
-        return f"{row['scheme']} {row['filter']}"
+    if is_prefiltered(row):           # an engine's preset of the kind (dsm-bench-4 on) between them
+        return " ".join(x for x in (row["scheme"], row.get("preset") or "", row["filter"]) if x)
     if not row["preset"] and tuned and (row["scheme"], row["params"]) in tuned:
         return tuned[(row["scheme"], row["params"])]
     return row["preset"] or row["scheme"]
@@ -154,11 +154,11 @@ def run_case(case, ppd, variant: str | None = None, tuned=None, out: Path | None
         records += case_records(case, pre, None if ppd is None else case_flips(case, pre, ppd, variant, setups),
                                 oracle=False)
     flicker = []
-    if case.motion is not None:
-        folder = f"flicker/{case.motion['experiment']['name']}"
+    for motion in (m for m in (case.motion, case.prefiltered_motion) if m is not None):
+        folder = f"flicker/{motion['experiment']['name']}"
         # force: the folder is the benchmark's, which holds its lock and refused an earlier run's results
-        mo = dsm.run(case.motion, variant=variant, out=Path(out) / folder, force=True)
-        flicker = flicker_records(case, mo, folder, tuned)
+        mo = dsm.run(motion, variant=variant, out=Path(out) / folder, force=True)
+        flicker += flicker_records(case, mo, folder, tuned)
     return records, flicker, res.run.get("variant")
 
 
@@ -188,6 +188,7 @@ def run_suite(size: str = "default", variant: str | None = None, progress=print,
             "dsm_version": dsm.__version__, "versions": versions(), "variant": run_variant,
             "machine": machine(), "far_unit": s.get("far_unit"), "flip_ppd": ppd,
             "tuned": suite["contenders"].get("tuned", {}), "flicker": flicker, "cases": records,
+            "flicker_motion": suite.get("flicker", {}).get("motion"),
             "backend": {"name": "ray", "address": cluster} if cluster else {"name": "local"}}
 
 

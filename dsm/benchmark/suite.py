@@ -15,6 +15,10 @@ a scheme's table with the values a tune froze) run as [[scheme]] tables among th
 are told from the same scheme at its defaults by their parameters' label (:func:`tuned_labels`). A case of
 one of its ``[flicker]`` scenes at the flicker unit, at the origin, carries a third config, ``motion``:
 the depth config with the suite's [[motion]] camera move.
+
+From dsm-bench-4 on ``[prefiltered] presets`` adds each kind's engine presets (after its defaults) and
+``[flicker] prefiltered = true`` gives such a case a fourth config, ``prefiltered_motion``: the
+pre-filtered config with the same [[motion]]. An XML scene takes ``translate``: no scene is off the far axis.
 """
 from __future__ import annotations
 
@@ -26,7 +30,8 @@ from pathlib import Path
 # every version, oldest first; the newest is what ``dsm benchmark`` runs unless told otherwise
 SUITE_FILES = {"dsm-bench-1": Path(__file__).with_name("suite_1.toml"),
                "dsm-bench-2": Path(__file__).with_name("suite_2.toml"),
-               "dsm-bench-3": Path(__file__).with_name("suite_3.toml")}
+               "dsm-bench-3": Path(__file__).with_name("suite_3.toml"),
+               "dsm-bench-4": Path(__file__).with_name("suite_4.toml")}
 LATEST = list(SUITE_FILES)[-1]
 SUITE_FILE = SUITE_FILES[LATEST]
 ORIGIN = "0"              # the offset label of a case at the origin (every case of dsm-bench-1)
@@ -46,6 +51,7 @@ class Case:
     translate: tuple = (0.0, 0.0, 0.0)    # world units after the scale
     prefiltered: dict | None = None       # the pre-filtered kinds' config of the case (dsm-bench-3 on)
     motion: dict | None = None            # the flicker config of the case (dsm-bench-3 on, a few scenes)
+    prefiltered_motion: dict | None = None  # the pre-filtered kinds' flicker config (dsm-bench-4 on)
 
 
 def suite_sha256(path: Path = SUITE_FILE) -> str:
@@ -147,6 +153,8 @@ def prefiltered_config(suite: dict, cfg: dict, kinds: list) -> dict | None:
         return None
     mp = {k: v for k, v in cfg["map"].items() if k != "cascades"}
     mp.update({"kind": list(kinds), "blur": list(suite["prefiltered"]["blur"])})
+    presets = suite["prefiltered"].get("presets", {})
+    mp.update({k: {"preset": ["default", *presets[k]]} for k in kinds if presets.get(k)})
     name = cfg["experiment"]["name"] + "-prefiltered"
     return {**{k: v for k, v in cfg.items() if k != "scheme"}, "experiment": {"name": name}, "map": mp}
 
@@ -177,6 +185,8 @@ def cases(suite: dict, size: str) -> list:
                    "light": light_tables(suite, scene, s["lights"]),
                    "map": mp, "scheme": contender_tables(suite, s["contenders"])}
             flicker = name in s["flicker"] and unit == suite["flicker"]["unit"] and offset == ORIGIN
-            out.append(Case(name, unit, scale, cfg, offset, translate, prefiltered_config(suite, cfg, s["prefiltered"]),
-                            motion_config(suite, cfg) if flicker else None))
+            pre = prefiltered_config(suite, cfg, s["prefiltered"])
+            pre_flicker = flicker and pre is not None and suite["flicker"].get("prefiltered", False)
+            out.append(Case(name, unit, scale, cfg, offset, translate, pre, motion_config(suite, cfg) if flicker else None,
+                            motion_config(suite, pre) if pre_flicker else None))
     return out

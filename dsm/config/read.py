@@ -458,23 +458,35 @@ def _parse_moments(m: dict, kinds, formats, source: str) -> tuple:
         t = m.get(name, {})
         if not isinstance(t, dict):
             raise ConfigError(source, f"map.{name}", f"expected a table [map.{name}]")
-        preset = None
         if "preset" in t and not prefilter.presets.names(name):
             raise ConfigError(source, f"map.{name}.preset", f"{name} has no engine presets (dsm schemes lists them)",
                               sorted(k for k in prefilter.presets.PRESETS))
         if "preset" in t:
-            preset = choice(t["preset"], source, f"map.{name}.preset", prefilter.presets.names(name))
-            if set(t) != {"preset"}:
-                raise ConfigError(source, f"map.{name}.{sorted(set(t) - {'preset'})[0]}", "a preset takes no other keys",
-                                  ("preset",))
-            params = [prefilter.presets.PRESETS[name][preset]]
+            presets = _kind_presets(name, t, source)
         else:
-            params = sweep_params(prefilter.get(name).Params, t, source, f"map.{name}")
-        for p in params:
+            presets = [(None, p) for p in sweep_params(prefilter.get(name).Params, t, source, f"map.{name}")]
+        for _, p in presets:
             prefilter.check(name, p, formats, source, f"map.{name}")
-        out += [MomentSpec(name, p, w, preset, k, n, mp) for p in params for w in blurs for k in kernels
+        out += [MomentSpec(name, p, w, preset, k, n, mp) for preset, p in presets for w in blurs for k in kernels
                 for n in samples for mp in mips]
     return tuple(out)
+
+
+def _kind_presets(name: str, t: dict, source: str) -> list:
+    """[(preset name or None, Params)] of ``[map.<kind>] preset`` (a name or a list of them, which sweeps;
+    ``"default"``: the kind's documented defaults, as a table without keys)."""
+    from .. import prefilter
+    if set(t) != {"preset"}:
+        raise ConfigError(source, f"map.{name}.{sorted(set(t) - {'preset'})[0]}", "a preset takes no other keys",
+                          ("preset",))
+    names = as_list(t["preset"])
+    if not names:
+        raise ConfigError(source, f"map.{name}.preset", "empty list", ("default",) + prefilter.presets.names(name))
+    out = []
+    for n in names:
+        n = choice(n, source, f"map.{name}.preset", ("default",) + prefilter.presets.names(name))
+        out.append((None, prefilter.get(name).Params()) if n == "default" else (n, prefilter.presets.PRESETS[name][n]))
+    return out
 
 
 def _parse_motion(t: dict, source: str, where: str) -> MotionSpec:
