@@ -244,7 +244,7 @@ def _light_setup(sd, gb, light, label, repeats: int = 0, seed: int = 7) -> Light
     p = dr.gather(mi.Point3f, gb.p, idx)
     n = dr.gather(mi.Vector3f, gb.n, idx)
     magnitude = scene_magnitude(bbox_x)
-    (vis, dist), t = timing.measure(lambda: reference.visibility(sd.exact, si, light_x, magnitude), repeats)
+    (vis, dist), t = timing.measure_kernel(lambda: reference.visibility(sd.exact, si, light_x, magnitude), repeats)
     dr.eval(p, n)
     return LightSetup(label, light, pixels, p, n, gb.shape.numpy()[pixels], vis.numpy().astype(bool),
                       dist.numpy(), exclusions, t.ms, si, back_p, back_n)
@@ -393,6 +393,11 @@ def moment_visibility(spec, rx: Receiver, mmap, smap):
 
 cascade_metrics = cascades_mod.case_metrics     # (view, rx, v, V*) -> (columns, per-cascade rows, curve, faces)
 split_distances = cascades_mod.split_distances
+
+
+def plane_misses(spec: SchemeSpec, rx: Receiver, smap):
+    """Per receiver (lazy Bool), whether its texel ray misses its tangent plane; None without a plane."""
+    return lookup.plane_misses(schemes.get(spec.name), spec.params, rx, smap)
 
 
 def plane_fallbacks(spec: SchemeSpec, rx: Receiver, smap) -> int:

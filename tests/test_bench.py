@@ -90,3 +90,24 @@ def test_kernel_launches_are_counted_apart_inside_and_outside_the_timed_repeats(
     dr.eval(x * scale - 1.0)
     dr.eval(x * scale - 2.0)
     assert timing.drain_launches() == 2 and timing.LAUNCHES["outside_repeats"] == 3
+
+
+def test_measure_kernel_times_every_call_and_leaves_no_cold_call_outside():
+    """measure_kernel with 3 repeats: 3 launches, all timed, none outside (the old measure: one cold
+    call outside and 3 timed); its output the last call's; the first call's kernel count and cold wall
+    apart; a kernel's execution time (the median) below the first call's wall clock, which adds its
+    tracing and compilation to its own kernel."""
+    import drjit as dr
+    import mitsuba as mi
+    from dsm.tools import env, timing
+    env.use_variant("llvm_ad_rgb")
+    timing.enable_history()
+    timing.reset_launches()
+    x = dr.arange(mi.Float, 100_000)
+    scale = dr.opaque(mi.Float, 3.0)
+    (y,), t = timing.measure_kernel(lambda: (x * scale + 1.0,), repeats=3)
+    assert timing.LAUNCHES == {"outside_repeats": 0, "timed_repeats": 3}
+    assert t.kernels == 1 and 0 < t.ms < t.cold_ms
+    np.testing.assert_array_equal(y.numpy(), np.arange(100_000, dtype=np.float32) * 3.0 + 1.0)
+    timing.measure_kernel(lambda: (x * scale - 1.0,), repeats=1)      # one call: it is the timed one
+    assert timing.LAUNCHES == {"outside_repeats": 0, "timed_repeats": 4}

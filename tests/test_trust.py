@@ -163,3 +163,33 @@ def test_far_from_the_origin_the_counts_hold(run_dict, translate):
         assert abs(a["n_gt_shadowed"] - b["n_gt_shadowed"]) <= 0.01 * a["n_gt_shadowed"]
         for col in ("acne_rate", "peterpan_rate", "error_rate"):
             assert abs(a[col] - b[col]) <= 0.01, (translate, a["params"], col, a[col], b[col])
+
+
+def test_the_map_wavefront_gives_each_case_what_its_own_lookups_give(run_dict):
+    """The runner evaluates every depth case's attached-shadow lookup and plane-fallback mask of a map
+    in one wavefront; each case's backface_lit_rate and n_plane_fallback must be what the pipeline's
+    stages give for that case alone (the per-case path, stage by stage: a second computation)."""
+    import dsm.pipeline as pl
+    schemes = [{"name": "receiver_plane"}, {"name": "adaptive"}, {"name": "constant", "bias": ["1 texel", "3 texel"]},
+               {"name": "normal_offset"}]
+    cfg = base_config(scene=[{"builtin": "l_shape"}], camera={"resolution": [64, 64]},
+                      map={"resolution": 64, "filter": ["nearest", "pcf_jitter4x4"]}, scheme=schemes)
+    res = run_dict(cfg)
+    sd = pl.load_scene(pl.scene_spec({"builtin": "l_shape"}), (64, 64))
+    gb = pl.gbuffer(sd)
+    setup = pl.light_setup(sd, gb, sd.own_lights[0], "0:directional")
+    view = pl.make_view(setup.light, 64, pl.points_np(setup.p), sd.bbox)
+    setup = setup.subset(view.inside(setup.p).numpy().astype(bool))
+    specs = [s for t in schemes for s in pl.scheme_specs(t)]
+    smap = pl.store(pl.build_map(sd.scene, view, pl.needs_of(specs)), "float32")
+    rx = pl.receivers(smap.view, setup, sd.diagonal)
+    bp, bn = setup.backfacing_inside(view)
+    back = pl.Receiver.make(smap.view, bp, bn, sd.diagonal, setup.camera)
+    assert len(res.rows) == 10
+    for row in res.rows:
+        spec = next(s for s in specs if s.name == row["scheme"] and s.label == row["params"])
+        v_back = pl.visibility(spec, back, smap, row["filter"], 7)[0].numpy()
+        assert row["n_backfacing"] == v_back.size > 50
+        assert row["backface_lit_rate"] == float((v_back >= 0.5).mean()), (row["scheme"], row["filter"])
+        want = pl.plane_fallbacks(spec, rx, smap) if spec.name in ("receiver_plane", "adaptive") else None
+        assert (row["n_plane_fallback"] if want is not None else None) == want

@@ -317,8 +317,8 @@ class Runner:
         closed = self._closed(sd) if culling != "none" else None
         extents = self.extents[sd.label]
         casters = self._casters(sd)
-        return timing.measure(lambda: _map_arrays(casters, view, needs, culling, closed, tile, extents),
-                              self.cfg.timing_repeats)
+        return timing.measure_kernel(lambda: _map_arrays(casters, view, needs, culling, closed, tile, extents),
+                                     self.cfg.timing_repeats)
 
     def _casters(self, sd):
         """The scene the maps are cast against: the scene, or its copy shrunk by ``[map] shrink`` (once per scene)."""
@@ -360,8 +360,9 @@ class Runner:
             # the first layer alone, so a case's extra layers show as build_ms - build_first_ms
             first_t = bt if m.culling == "none" and not m.needs else self._build(sd, view, set(), "none", m.tile)[1]
         self.case_no = self.first_case[self.plan.maps.index(m)]     # case ids from the plan
-        for spec in m.specs:
-            spec = pipeline.preset_for_light(spec, setup.light.type)   # a preset's values for this light
+        specs = [pipeline.preset_for_light(spec, setup.light.type) for spec in m.specs]   # a preset's values here
+        extras = self._extras(specs, stored, rxs, backs)
+        for spec in specs:
             own = frozenset(pipeline.needs_of([spec]))                  # this instance's own layers, for build_ms
             if own not in build_times:
                 # the build of exactly what this scheme needs (its data comes from the shared map)
@@ -369,7 +370,8 @@ class Runner:
             for filt in self.cfg.map.filter:
                 for fmt in self.cfg.map.format:
                     self._run_case(sd, gb, setup, view, stored[fmt], (build_times[own], first_t), rxs[fmt], seam,
-                                   spec, filt, fmt, backs[fmt], wrong[fmt] if filt == "nearest" else None)
+                                   spec, filt, fmt, backs[fmt], wrong[fmt] if filt == "nearest" else None,
+                                   extra=extras.get((spec, filt, fmt)))
                     self.bar.update(1)
         moment_maps = {}              # instances sharing their moments share one build (dsm.prefilter)
         for spec in m.moments:
@@ -379,6 +381,29 @@ class Runner:
                                backs[fmt], None, moment=self._moments(moment_maps, spec, smap, fmt, sd))
                 self.bar.update(1)
         return first_t
+
+    def _extras(self, specs, stored, rxs, backs) -> dict:
+        """(spec, filter, format) -> (V of the attached-shadow receivers, plane fallbacks) of every depth
+        case of one map, evaluated together (one wavefront of launches, not one per case; numpy out).
+        A case whose expressions fail here is left out: its own lookups then run (and fail) in its case."""
+        lazy = {}
+        for spec in specs:
+            for filt in self.cfg.map.filter:
+                for fmt in self.cfg.map.format:
+                    try:
+                        back = backs[fmt]
+                        v_back = None if back is None else pipeline.visibility(spec, back, stored[fmt], filt,
+                                                                               self.cfg.seed)[0]
+                        miss = None if rxs[fmt] is None else pipeline.plane_misses(spec, rxs[fmt], stored[fmt])
+                        lazy[(spec, filt, fmt)] = (v_back, miss)
+                    except Exception:
+                        continue
+        try:
+            dr.eval(*[x for pair in lazy.values() for x in pair if x is not None])
+        except Exception:
+            return {}
+        return {k: (np.zeros(0) if v is None else v.numpy(), 0 if miss is None else int(np.count_nonzero(miss.numpy())))
+                for k, (v, miss) in lazy.items()}
 
     def _moments(self, cache, spec, smap, fmt, sd):
         """A function giving (MomentMap, build Timing) of ``spec`` on ``smap``, built (timed) once per
@@ -444,9 +469,10 @@ class Runner:
                                 f"after {shadowmap.MAX_STEPS} surfaces"})
 
     def _run_case(self, sd, gb, setup, view, smap, build, rx, seam, spec, filt, fmt, rx_back=None, wrong=None,
-                  moment=None):
+                  moment=None, extra=None):
         """One case: a scheme instance and filter on a stored depth map, or (``moment``: its
-        MomentMap's builder) a pre-filtered instance on the depth map's moments."""
+        MomentMap's builder) a pre-filtered instance on the depth map's moments; ``extra``: its
+        attached-shadow V and plane fallbacks from the map's wavefront (else looked up here)."""
         case = self.next_case()
         if self.keys.get(case) in self.kept:          # finished by the run being resumed: its row again
             row, st, cascade_rows = self.kept[self.keys[case]]
@@ -468,8 +494,11 @@ class Runner:
                 mmap, mt = moment()
                 look = lambda r: pipeline.moment_visibility(spec, r, mmap, smap)
             uses_plane = moment is None and pipeline.scheme_module(spec.name).USES_PLANE
-            v_np, tap_np, lt, fallbacks = self._looked_up(spec, smap, rx, look, uses_plane)
-            m, occ = self._case_metrics(sd, gb, setup, view, rx, seam, look, rx_back, wrong, v_np, tap_np, meta)
+            v_np, tap_np, lt, fallbacks = self._looked_up(spec, smap, rx, look, uses_plane and extra is None)
+            if extra is not None:
+                fallbacks = extra[1]
+            v_back = extra[0] if extra is not None else look(rx_back)[0].numpy() if rx_back is not None else np.zeros(0)
+            m, occ = self._case_metrics(sd, gb, setup, view, rx, seam, v_back, wrong, v_np, tap_np, meta)
             fallback = fallbacks if uses_plane else metrics.UNDEFINED
             row = self._case_row(meta, setup, m, rx, spec, moment, mt, build, smap, lt, v_np, fallback)
             self._case_images(meta, gb, setup, v_np, wrong, occ, rx)
@@ -485,21 +514,19 @@ class Runner:
         """(visibility, tap shapes (numpy), the lookup's Timing, plane fallbacks) of receivers ``rx``."""
         if rx is None:
             return np.zeros(0), np.zeros(0, np.uint32), timing.Timing(0.0, 0.0, 0.0, 0, 0), 0
-        (v, tap_shape), lt = timing.measure(lambda: look(rx), self.cfg.timing_repeats)
+        (v, tap_shape), lt = timing.measure_kernel(lambda: look(rx), self.cfg.timing_repeats)
         fallbacks = pipeline.plane_fallbacks(spec, rx, smap) if uses_plane else 0
         return v.numpy(), tap_shape.numpy(), lt, fallbacks
 
-    def _case_metrics(self, sd, gb, setup, view, rx, seam, look, rx_back, wrong, v_np, tap_np, meta) -> tuple:
-        """(the case's counts and rates, the contact march's occlusion or None); a cascaded map's
-        per-cascade rows, curve and index image recorded on the way."""
+    def _case_metrics(self, sd, gb, setup, view, rx, seam, v_back, wrong, v_np, tap_np, meta) -> tuple:
+        """(the case's counts and rates, the contact march's occlusion or None; ``v_back``: V of the
+        attached-shadow receivers); a cascaded map's per-cascade rows, curve and index image recorded on the way."""
         m = pipeline.metrics(v_np, setup, tap_np, seam, view.has_seams)
         m.update(pipeline.split(v_np, setup.v_star, wrong))     # NaN unless nearest (the oracles' lookup)
         occ = None
         if self.cfg.contact is not None:      # screen-space contact shadows after the lookup
             cols, occ = self._contact(sd, gb, setup, rx, v_np)
             m.update(cols)
-        # Weiskopf & Ertl's self-unshadowing: pixels in attached shadow (facing away) that the map calls lit
-        v_back = look(rx_back)[0].numpy() if rx_back is not None else np.zeros(0)
         if hasattr(view, "cascades"):         # a cascaded map: per cascade, texels per pixel, distance plot
             extra, per, curve, faces = pipeline.cascade_metrics(view, rx, v_np, setup.v_star)
             m.update(extra)
@@ -508,6 +535,7 @@ class Runner:
             folder = self.out / "images" / figures.image_folder(meta)
             folder.mkdir(parents=True, exist_ok=True)
             cascades.write_index_image(folder / f"{meta['case']}_cascade.png", setup.pixels, faces, gb.width, gb.height)
+        # Weiskopf & Ertl's self-unshadowing: pixels in attached shadow (facing away) that the map calls lit
         m["n_backfacing"] = int(v_back.size)
         m["backface_lit_rate"] = float((v_back >= 0.5).mean()) if v_back.size else metrics.UNDEFINED
         return m, occ

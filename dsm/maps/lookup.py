@@ -246,15 +246,21 @@ def resolve(params, rx: Receiver):
     return SimpleNamespace(**out)
 
 
-def plane_fallbacks(scheme, params, rx: Receiver, smap) -> int:
-    """Receivers whose nearest texel's ray misses their tangent plane (schemes that compare the
-    receiver's plane depth: ``USES_PLANE``); 0 for other schemes."""
+def plane_misses(scheme, params, rx: Receiver, smap):
+    """Per receiver (lazy Bool), whether its nearest texel's ray misses its tangent plane (schemes
+    that compare the receiver's plane depth: ``USES_PLANE``); None for other schemes."""
     if not scheme.USES_PLANE:
-        return 0
+        return None
     rx = scheme.shift(rx, resolve(params, rx))
     tap = nearest_tap(rx, smap)
     _, met = rx.view.plane_hit(tap.cu_map, tap.cv_map, rx.p_world, rx.n_world, tap.face)
-    return int(dr.count(~met).numpy().ravel()[0])
+    return ~met
+
+
+def plane_fallbacks(scheme, params, rx: Receiver, smap) -> int:
+    """How many receivers :func:`plane_misses` names (0 for a scheme without a plane)."""
+    miss = plane_misses(scheme, params, rx, smap)
+    return 0 if miss is None else int(dr.count(miss).numpy().ravel()[0])
 
 
 def visibility(scheme, params, rx: Receiver, smap, filt: str = "nearest", seed: int = 7):

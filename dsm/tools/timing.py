@@ -77,6 +77,26 @@ def measure(fn, repeats: int = 3):
     return out, Timing(statistics.median(warm) if warm else cold, compile_ms, cold, len(hist), misses)
 
 
+def measure_kernel(fn, repeats: int = 3):
+    """Call ``fn`` (returning a tuple of arrays) ``repeats`` times (at least once), every call a timed
+    repeat: the reported ms is the median over the calls of the summed execution time of the kernels
+    each call launched (Dr.Jit's kernel history: the device's own time, without compilation, Python's
+    tracing or launch overhead). The first call compiles: its code generation and backend time is
+    ``compile_ms`` and its wall clock ``cold_ms``. No untimed cold call: the outputs are the last call's."""
+    drain_launches()
+    kernel, cold, compile_ms, n_kernels, misses, out = [], 0.0, 0.0, 0, 0, None
+    for i in range(max(1, repeats)):
+        out, ms = _run(fn)
+        hist = _jit_kernels()
+        LAUNCHES["timed_repeats"] += len(hist)
+        kernel.append(sum(k.get("execution_time", 0.0) for k in hist))
+        if i == 0:
+            cold, n_kernels = ms, len(hist)
+            compile_ms = sum(k.get("codegen_time", 0.0) + k.get("backend_time", 0.0) for k in hist)
+            misses = sum(1 for k in hist if not k.get("cache_hit", False))
+    return out, Timing(statistics.median(kernel), compile_ms, cold, n_kernels, misses)
+
+
 def kernel_ms(fn, repeats: int = 3):
     """(median over warm calls of the summed execution time of the kernels one call of ``fn``
     launches, ms; kernels per call): the device's own time, without Python's tracing or launch
