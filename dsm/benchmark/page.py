@@ -88,8 +88,10 @@ def prefiltered_answer(ranked: list) -> str:
     if not pool:
         return ""
     best = min(pool, key=lambda r: (r["error"], r["contender"]))    # a tie's rows are listed by name
+    words = best["contender"].split()          # kind, [an engine's preset,] filter
+    what = f"{words[1]}'s preset of {words[0]}" if len(words) == 3 else "at the kind's defaults"
     text = (f"Best pre-filtered map: {best['contender']} (rank {best['rank']}, error rate {best['error']:.4f}, "
-            f"leak rate {best['leak']:.4f}, at the kind's defaults).")
+            f"leak rate {best['leak']:.4f}, {what}).")
     return f"<p class=answer>{html.escape(text)}</p>"
 
 
