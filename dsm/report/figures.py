@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ..truth import metrics
+from . import canvas
 from .io import atomic
 from .tables import case_time, pareto_front
 
@@ -272,6 +273,7 @@ def _title(fig, text):
 def _save(fig, path):
     """The figure as a PNG, drawn under RC (matplotlib makes most ticks while drawing)."""
     from matplotlib import rc_context
+    canvas.canvas(fig)
     with rc_context(RC):
         _atomic_save(Path(path), lambda f: fig.savefig(f, dpi=DPI, format="png", pil_kwargs=PNG))
 
