@@ -9,6 +9,7 @@ whole pixels. Mathtext (``$...$``) and TeX are drawn by matplotlib as before.
 """
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 
@@ -92,3 +93,62 @@ def _canvas_class():
 def canvas(fig):
     """An Agg canvas for ``fig`` (set as its canvas: savefig draws on it) whose renderer caches text bitmaps."""
     return _canvas_class()(fig)
+
+
+# ------------------------------------------------------------------ one Figure per layout
+
+# while reusing(): layout key -> (Figure, axes) this process drew before; None: every figure new
+_POOL = {"figures": None}
+
+
+@contextlib.contextmanager
+def reusing():
+    """Within it, figures of one layout (pooled()'s key) are drawn on one Figure, cleared of the
+    last figure's artists: building a panel's Axes is a fifth of a figure's drawing time, and a
+    run's figures have a few layouts. Outside it, each figure is new (a caller may keep it)."""
+    before = _POOL["figures"]
+    _POOL["figures"] = {} if before is None else before
+    try:
+        yield
+    finally:
+        _POOL["figures"] = before
+
+
+def pooled(key, make):
+    """(Figure, axes) for layout ``key``: the pooled one, cleared (see reusing()), else ``make()``'s."""
+    pool = _POOL["figures"]
+    if pool is None:
+        return make()
+    if key in pool:
+        fig, axes = pool[key]
+        clear(fig, axes)
+        return fig, axes
+    pool[key] = make()
+    return pool[key]
+
+
+def clear(fig, axes):
+    """Take every artist a drawing added off ``fig`` and its ``axes`` (an array of Axes), and put
+    their scales, limits, labels and colour cycle back as a new figure's (the suptitle is kept:
+    drawing sets its text)."""
+    import matplotlib
+    from matplotlib.transforms import Bbox
+    for ax in np.ravel(axes):
+        for a in [*ax.lines, *ax.collections, *ax.texts, *ax.artists, *ax.patches, *ax.images, *ax.tables]:
+            a.remove()
+        ax.set_title("")
+        ax.set_xlabel("")
+        ax.set_ylabel("")
+        ax.set_prop_cycle(None)
+        ax.set_xscale("linear")
+        ax.set_yscale("linear")
+        ax.set_autoscalex_on(True)
+        ax.set_autoscaley_on(True)
+        ax.dataLim = Bbox.null()          # a panel left empty must not keep the last figure's extent
+        ax.ignore_existing_data_limits = True
+        ax.xaxis.labelpad = ax.yaxis.labelpad = matplotlib.rcParams["axes.labelpad"]
+        ax.__dict__.pop("legend_texts", None)
+    keep = getattr(fig, "_suptitle", None)
+    for a in [*fig.texts, *fig.artists, *fig.lines, *fig.patches, *fig.images]:
+        if a is not keep:
+            a.remove()

@@ -97,10 +97,15 @@ def _figure(ncols, nrows, width=3.7, height=2.5, legend_rows=0, sharey=False, sh
     from matplotlib import rc_context
     from matplotlib.figure import Figure
     extra = 0.2 * legend_rows + 0.75
-    fig = Figure(figsize=(width * ncols + 0.3, height * nrows + extra))
-    with rc_context(RC):
-        axes = np.array(fig.subplots(nrows, ncols, squeeze=False, sharey="row" if sharey else False,
-                                     sharex="col" if sharex else False))
+
+    def make():
+        fig = Figure(figsize=(width * ncols + 0.3, height * nrows + extra))
+        with rc_context(RC):
+            return fig, np.array(fig.subplots(nrows, ncols, squeeze=False, sharey="row" if sharey else False,
+                                              sharex="col" if sharex else False))
+    # one Figure per layout while run_jobs draws (canvas.reusing): the legend's rows only resize it
+    fig, axes = canvas.pooled((ncols, nrows, width, height, sharey, sharex), make)
+    fig.set_size_inches(width * ncols + 0.3, height * nrows + extra)
     fig.subplots_adjust(left=0.55 / (width * ncols + 0.3), right=0.98, top=1 - 0.6 / (height * nrows + extra),
                         bottom=(0.2 * legend_rows + 0.5) / (height * nrows + extra), wspace=0.32, hspace=0.42)
     return fig, axes
@@ -599,7 +604,8 @@ def workers() -> int:
 
 
 # a worker: a fresh interpreter running its share of the jobs, pickled into a file
-WORKER = "import pickle, sys\nfor fn, args in pickle.loads(open(sys.argv[1], 'rb').read()):\n    fn(*args)\n"
+WORKER = ("import pickle, sys\nfrom dsm.report import canvas\nwith canvas.reusing():\n"
+          "    for fn, args in pickle.loads(open(sys.argv[1], 'rb').read()):\n        fn(*args)\n")
 
 
 def run_jobs(jobs: list, pool_min: int = 12) -> int:
@@ -614,8 +620,9 @@ def run_jobs(jobs: list, pool_min: int = 12) -> int:
     without an ``if __name__ == "__main__"`` guard."""
     n = min(workers(), len(jobs))
     if n < 2 or len(jobs) < pool_min:
-        for fn, args in jobs:
-            fn(*args)
+        with canvas.reusing():
+            for fn, args in jobs:
+                fn(*args)
         return 0
     env = dict(os.environ, MPLBACKEND="Agg",
                PYTHONPATH=os.pathsep.join([p for p in sys.path if p] + [os.environ.get("PYTHONPATH", "")]))
@@ -627,8 +634,9 @@ def run_jobs(jobs: list, pool_min: int = 12) -> int:
             f.write_bytes(pickle.dumps(part, protocol=pickle.HIGHEST_PROTOCOL))
             procs.append((part, subprocess.Popen([sys.executable, "-c", WORKER, str(f)], env=env,
                                                  stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)))
-        for fn, args in jobs[0::n]:    # this process's share, while the workers draw theirs
-            fn(*args)
+        with canvas.reusing():
+            for fn, args in jobs[0::n]:    # this process's share, while the workers draw theirs
+                fn(*args)
         failed = []
         for part, p in procs:
             _, err = p.communicate()
@@ -636,6 +644,7 @@ def run_jobs(jobs: list, pool_min: int = 12) -> int:
                 failed.append((part, err.decode(errors="replace").strip().splitlines()[-1:] or ["no message"]))
     for part, why in failed:
         print(f"dsm: a drawing worker failed ({why[0]}); drawing its {len(part)} figures here", file=sys.stderr)
-        for fn, args in part:
-            fn(*args)
+        with canvas.reusing():
+            for fn, args in part:
+                fn(*args)
     return n
