@@ -91,8 +91,11 @@ def _canvas_class():
 
 
 def canvas(fig):
-    """An Agg canvas for ``fig`` (set as its canvas: savefig draws on it) whose renderer caches text bitmaps."""
-    return _canvas_class()(fig)
+    """An Agg canvas for ``fig`` (set as its canvas: savefig draws on it) whose renderer caches
+    text bitmaps; a figure drawn again (a pooled one) keeps its canvas, so its renderer and the
+    text metrics matplotlib keeps per renderer."""
+    cls = _canvas_class()
+    return fig.canvas if type(fig.canvas) is cls else cls(fig)
 
 
 # ------------------------------------------------------------------ one Figure per layout
