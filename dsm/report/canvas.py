@@ -117,23 +117,24 @@ def reusing():
         _POOL["figures"] = before
 
 
-def pooled(key, make):
-    """(Figure, axes) for layout ``key``: the pooled one, cleared (see reusing()), else ``make()``'s."""
+def pooled(key, make, scales: bool = True):
+    """(Figure, axes) for layout ``key``: the pooled one, cleared (see reusing(); ``scales``
+    False: its axes keep their scales, for a caller that sets every one), else ``make()``'s."""
     pool = _POOL["figures"]
     if pool is None:
         return make()
     if key in pool:
         fig, axes = pool[key]
-        clear(fig, axes)
+        clear(fig, axes, scales)
         return fig, axes
     pool[key] = make()
     return pool[key]
 
 
-def clear(fig, axes):
+def clear(fig, axes, scales: bool = True):
     """Take every artist a drawing added off ``fig`` and its ``axes`` (an array of Axes), and put
-    their scales, limits, labels and colour cycle back as a new figure's (the suptitle is kept:
-    drawing sets its text)."""
+    their limits, labels, colour cycle and (``scales``) scales back as a new figure's (the
+    suptitle is kept: drawing sets its text)."""
     import matplotlib
     from matplotlib.transforms import Bbox
     for ax in np.ravel(axes):
@@ -143,8 +144,10 @@ def clear(fig, axes):
         ax.set_xlabel("")
         ax.set_ylabel("")
         ax.set_prop_cycle(None)
-        ax.set_xscale("linear")
-        ax.set_yscale("linear")
+        if scales and ax.get_xscale() != "linear":
+            ax.set_xscale("linear")
+        if scales and ax.get_yscale() != "linear":
+            ax.set_yscale("linear")
         ax.set_autoscalex_on(True)
         ax.set_autoscaley_on(True)
         ax.dataLim = Bbox.null()          # a panel left empty must not keep the last figure's extent

@@ -104,11 +104,27 @@ def _figure(ncols, nrows, width=3.7, height=2.5, legend_rows=0, sharey=False, sh
             return fig, np.array(fig.subplots(nrows, ncols, squeeze=False, sharey="row" if sharey else False,
                                               sharex="col" if sharex else False))
     # one Figure per layout while run_jobs draws (canvas.reusing): the legend's rows only resize it
-    fig, axes = canvas.pooled((ncols, nrows, width, height, sharey, sharex), make)
+    fig, axes = canvas.pooled((ncols, nrows, width, height, sharey, sharex), make, scales=False)
     fig.set_size_inches(width * ncols + 0.3, height * nrows + extra)
     fig.subplots_adjust(left=0.55 / (width * ncols + 0.3), right=0.98, top=1 - 0.6 / (height * nrows + extra),
                         bottom=(0.2 * legend_rows + 0.5) / (height * nrows + extra), wspace=0.32, hspace=0.42)
     return fig, axes
+
+
+SCALE_DEFAULTS = {"linear": {}, "log": {"base": 10}, "symlog": {"base": 10, "linscale": 1}}
+
+
+def set_scale(ax, which: str, name: str, **params):
+    """``ax.set_xscale`` (which "x") or ``set_yscale`` (name, params), unless the axis has that
+    scale with those parameters already (a pooled figure's panel: a scale set anew is a new
+    Scale object and its axis reset, a tenth of a pooled figure's cost). Every axis of
+    ``_figure``'s panels is set by this (canvas.pooled leaves the last figure's scales)."""
+    axis = ax.xaxis if which == "x" else ax.yaxis
+    want = {**SCALE_DEFAULTS[name], **params}
+    t = axis.get_transform()
+    if axis.get_scale() == name and all(getattr(t, k, None) == v for k, v in want.items()):
+        return
+    (ax.set_xscale if which == "x" else ax.set_yscale)(name, **params)
 
 
 RATE_TICKS = (0, 1e-4, 1e-3, 1e-2, 1e-1, 1)
@@ -126,7 +142,7 @@ def _rate_axis(ax, which="y"):
     from matplotlib.ticker import NullLocator
     from matplotlib.transforms import blended_transform_factory
     y = which == "y"
-    (ax.set_yscale if y else ax.set_xscale)("symlog", linthresh=LINTHRESH, linscale=0.6)
+    set_scale(ax, which, "symlog", linthresh=LINTHRESH, linscale=0.6)
     (ax.set_ylim if y else ax.set_xlim)(0, 1)
     axis = ax.yaxis if y else ax.xaxis
     axis.set_major_locator(NullLocator())
@@ -152,7 +168,7 @@ def _x_scale(ax, xs, log2=False, log=False):
     plain = FuncFormatter(lambda v, _: f"{v:g}")
     axis = ax.xaxis
     if log2:
-        ax.set_xscale("log", base=2)
+        set_scale(ax, "x", "log", base=2)
         values = sorted(set(xs.tolist()))
         if len(values) <= 4 and all(v == 2 ** round(math.log2(v)) for v in values if v > 0):
             axis.set_major_locator(FixedLocator(values))     # resolutions: each one labelled
@@ -160,19 +176,21 @@ def _x_scale(ax, xs, log2=False, log=False):
             axis.set_major_locator(LogLocator(base=2, numticks=6))
             plain = FuncFormatter(lambda v, _: f"2^{math.log2(v):.0f}" if v > 0 else "0")
     elif log:
-        ax.set_xscale("log")
+        set_scale(ax, "x", "log")
         axis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0), numticks=8))
     elif np.unique(xs).size == 1:
+        set_scale(ax, "x", "linear")
         axis.set_major_locator(FixedLocator([float(xs[0])]))
     else:
         pos = xs[xs > 0]
         if pos.size >= 2 and pos.max() / pos.min() > 50:
             if (xs <= 0).any():
-                ax.set_xscale("symlog", linthresh=float(pos.min()))
+                set_scale(ax, "x", "symlog", linthresh=float(pos.min()))
             else:
-                ax.set_xscale("log")
+                set_scale(ax, "x", "log")
             axis.set_major_locator(LogLocator(numticks=5))
         else:
+            set_scale(ax, "x", "linear")
             axis.set_major_locator(MaxNLocator(4))
     axis.set_major_formatter(plain)
     axis.set_minor_locator(NullLocator())
