@@ -5,9 +5,10 @@ Every rate axis is symlog (linear below 1e-4, so a zero and 1e-4 are both visibl
 a rate-against-parameter figure has a column of panels per parameter unit (texel, world,
 range, K, ...); time axes are log; every figure names its scene, light, view and resolution;
 no panel's legend has more than eight entries (more series are spread over more panels).
-Figures are drawn with matplotlib's Agg canvas (no pyplot: a notebook's backend stays as it is)
-and case images written with Pillow (matplotlib's own PNG writer), both with fast PNG
-compression.
+Figures are drawn with matplotlib's Agg canvas (no pyplot: a notebook's backend stays as it is;
+dsm/report/canvas.py: texts as cached whole-string bitmaps, one Figure per layout while
+run_jobs draws) and case images written with Pillow (matplotlib's own PNG writer), both with
+fast PNG compression.
 """
 from __future__ import annotations
 
