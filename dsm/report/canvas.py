@@ -53,6 +53,7 @@ def _renderer_class():
             """``s`` at (x, y) (pixels, y down: the text's baseline start), rotated by ``angle`` degrees."""
             if ismath:
                 return super().draw_text(gc, x, y, s, prop, angle, ismath, mtext)
+            # hash(prop): family, style, weight, size, file: a snapshot (a FontProperties is mutable)
             key = (s, hash(prop), self.dpi, bool(gc.get_antialiased()))
             got = bitmaps.get(key)
             if got is None:
@@ -67,7 +68,8 @@ def _renderer_class():
             image, xo, yo, descent = got
             if not image.size:
                 return
-            # the bitmap's lower left corner: the descent turns with the text (matplotlib 3.9's placement)
+            # the bitmap's lower left corner: the descent turns with the text (as matplotlib placed a
+            # whole string's bitmap before it drew glyph by glyph)
             xd, yd = descent * math.sin(math.radians(angle)), descent * math.cos(math.radians(angle))
             self._renderer.draw_text_image(image, round(x + xo + xd), round(y + yo + yd) + 1, angle, gc)
 
