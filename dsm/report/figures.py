@@ -5,9 +5,10 @@ Every rate axis is symlog (linear below 1e-4, so a zero and 1e-4 are both visibl
 a rate-against-parameter figure has a column of panels per parameter unit (texel, world,
 range, K, ...); time axes are log; every figure names its scene, light, view and resolution;
 no panel's legend has more than eight entries (more series are spread over more panels).
-Figures are drawn with matplotlib's Agg canvas (no pyplot: a notebook's backend stays as it is)
-and case images written with Pillow (matplotlib's own PNG writer), both with fast PNG
-compression.
+Figures are drawn with matplotlib's Agg canvas (no pyplot: a notebook's backend stays as it is;
+dsm/report/canvas.py: texts as cached whole-string bitmaps, one Figure per layout while
+run_jobs draws) and case images written with Pillow (matplotlib's own PNG writer), both with
+fast PNG compression.
 """
 from __future__ import annotations
 
@@ -25,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..truth import metrics
+from . import canvas
 from .io import atomic
 from .tables import case_time, pareto_front
 
@@ -96,13 +98,34 @@ def _figure(ncols, nrows, width=3.7, height=2.5, legend_rows=0, sharey=False, sh
     from matplotlib import rc_context
     from matplotlib.figure import Figure
     extra = 0.2 * legend_rows + 0.75
-    fig = Figure(figsize=(width * ncols + 0.3, height * nrows + extra))
-    with rc_context(RC):
-        axes = np.array(fig.subplots(nrows, ncols, squeeze=False, sharey="row" if sharey else False,
-                                     sharex="col" if sharex else False))
+
+    def make():
+        fig = Figure(figsize=(width * ncols + 0.3, height * nrows + extra))
+        with rc_context(RC):
+            return fig, np.array(fig.subplots(nrows, ncols, squeeze=False, sharey="row" if sharey else False,
+                                              sharex="col" if sharex else False))
+    # one Figure per layout while run_jobs draws (canvas.reusing): the legend's rows only resize it
+    fig, axes = canvas.pooled((ncols, nrows, width, height, sharey, sharex), make, scales=False)
+    fig.set_size_inches(width * ncols + 0.3, height * nrows + extra)
     fig.subplots_adjust(left=0.55 / (width * ncols + 0.3), right=0.98, top=1 - 0.6 / (height * nrows + extra),
                         bottom=(0.2 * legend_rows + 0.5) / (height * nrows + extra), wspace=0.32, hspace=0.42)
     return fig, axes
+
+
+SCALE_DEFAULTS = {"linear": {}, "log": {"base": 10}, "symlog": {"base": 10, "linscale": 1}}
+
+
+def set_scale(ax, which: str, name: str, **params):
+    """``ax.set_xscale`` (which "x") or ``set_yscale`` (name, params), unless the axis has that
+    scale with those parameters already (a pooled figure's panel: a scale set anew is a new
+    Scale object and its axis reset, a tenth of a pooled figure's cost). Every axis of
+    ``_figure``'s panels is set by this (canvas.pooled leaves the last figure's scales)."""
+    axis = ax.xaxis if which == "x" else ax.yaxis
+    want = {**SCALE_DEFAULTS[name], **params}
+    t = axis.get_transform()
+    if axis.get_scale() == name and all(getattr(t, k, None) == v for k, v in want.items()):
+        return
+    (ax.set_xscale if which == "x" else ax.set_yscale)(name, **params)
 
 
 RATE_TICKS = (0, 1e-4, 1e-3, 1e-2, 1e-1, 1)
@@ -120,7 +143,7 @@ def _rate_axis(ax, which="y"):
     from matplotlib.ticker import NullLocator
     from matplotlib.transforms import blended_transform_factory
     y = which == "y"
-    (ax.set_yscale if y else ax.set_xscale)("symlog", linthresh=LINTHRESH, linscale=0.6)
+    set_scale(ax, which, "symlog", linthresh=LINTHRESH, linscale=0.6)
     (ax.set_ylim if y else ax.set_xlim)(0, 1)
     axis = ax.yaxis if y else ax.xaxis
     axis.set_major_locator(NullLocator())
@@ -146,7 +169,7 @@ def _x_scale(ax, xs, log2=False, log=False):
     plain = FuncFormatter(lambda v, _: f"{v:g}")
     axis = ax.xaxis
     if log2:
-        ax.set_xscale("log", base=2)
+        set_scale(ax, "x", "log", base=2)
         values = sorted(set(xs.tolist()))
         if len(values) <= 4 and all(v == 2 ** round(math.log2(v)) for v in values if v > 0):
             axis.set_major_locator(FixedLocator(values))     # resolutions: each one labelled
@@ -154,19 +177,21 @@ def _x_scale(ax, xs, log2=False, log=False):
             axis.set_major_locator(LogLocator(base=2, numticks=6))
             plain = FuncFormatter(lambda v, _: f"2^{math.log2(v):.0f}" if v > 0 else "0")
     elif log:
-        ax.set_xscale("log")
+        set_scale(ax, "x", "log")
         axis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0), numticks=8))
     elif np.unique(xs).size == 1:
+        set_scale(ax, "x", "linear")
         axis.set_major_locator(FixedLocator([float(xs[0])]))
     else:
         pos = xs[xs > 0]
         if pos.size >= 2 and pos.max() / pos.min() > 50:
             if (xs <= 0).any():
-                ax.set_xscale("symlog", linthresh=float(pos.min()))
+                set_scale(ax, "x", "symlog", linthresh=float(pos.min()))
             else:
-                ax.set_xscale("log")
+                set_scale(ax, "x", "log")
             axis.set_major_locator(LogLocator(numticks=5))
         else:
+            set_scale(ax, "x", "linear")
             axis.set_major_locator(MaxNLocator(4))
     axis.set_major_formatter(plain)
     axis.set_minor_locator(NullLocator())
@@ -272,6 +297,7 @@ def _title(fig, text):
 def _save(fig, path):
     """The figure as a PNG, drawn under RC (matplotlib makes most ticks while drawing)."""
     from matplotlib import rc_context
+    canvas.canvas(fig)
     with rc_context(RC):
         _atomic_save(Path(path), lambda f: fig.savefig(f, dpi=DPI, format="png", pil_kwargs=PNG))
 
@@ -328,6 +354,10 @@ def draw_lines(path, title, columns, ylabels=("acne rate", "peter-panning rate")
     return fig
 
 
+# points are Line2D markers, not scatter()'s PathCollection (a tenth of the cost to make and draw)
+POINT_MS = 4.7            # a case's point, in points (scatter's s=10 and its 1.5-point edge)
+
+
 def draw_pareto(path, title, panels, front):
     """Error rate (symlog) against time (log): panels = [{scheme: [(time, error)]}], each with the
     frontier ``front`` [(time, error)] over every case."""
@@ -335,10 +365,11 @@ def draw_pareto(path, title, panels, front):
                         sharey=True)
     for ax, series in zip(axes[0], panels):
         for label, (k, pts) in series.items():
-            ax.scatter([p[0] for p in pts], [p[1] for p in pts], s=10, color=f"C{k % 10}", label=label, clip_on=False)
+            ax.plot([p[0] for p in pts], [p[1] for p in pts], ls="none", marker="o", ms=POINT_MS, mew=0,
+                    color=f"C{k % 10}", label=label, clip_on=False)
         ax.plot([p[0] for p in front], [p[1] for p in front], "k-", lw=0.8, label="non-dominated (all schemes)")
-        ax.scatter([p[0] for p in front], [p[1] for p in front], s=40, facecolors="none", edgecolors="k", lw=0.6,
-                   clip_on=False)
+        ax.plot([p[0] for p in front], [p[1] for p in front], ls="none", marker="o", ms=6.3, mfc="none", mec="k",
+                mew=0.6, clip_on=False)
         _x_scale(ax, [], log=True)
         _rate_axis(ax)
         ax.set_xlabel("time per case: map build + lookup (ms)", fontsize=7)
@@ -366,8 +397,8 @@ def draw_tradeoff(path, title, panels):
             ax.step(cw[0], cw[1], where="post", color=f"C{k % 10}", lw=1.0, label=label)
             ax.step(ck[0], ck[1], where="post", color=f"C{k % 10}", lw=0.8, ls=":")
             if pts:
-                ax.scatter([p[0] for p in pts], [p[1] for p in pts], s=12, color=f"C{k % 10}", edgecolors="k",
-                           linewidths=0.3, clip_on=False, zorder=3)
+                ax.plot([p[0] for p in pts], [p[1] for p in pts], ls="none", marker="o", ms=3.5, mfc=f"C{k % 10}",
+                        mec="k", mew=0.3, clip_on=False, zorder=3)
         _rate_axis(ax, "x")
         _rate_axis(ax, "y")
         ax.set_xlabel("acne rate", fontsize=7)
@@ -597,7 +628,8 @@ def workers() -> int:
 
 
 # a worker: a fresh interpreter running its share of the jobs, pickled into a file
-WORKER = "import pickle, sys\nfor fn, args in pickle.loads(open(sys.argv[1], 'rb').read()):\n    fn(*args)\n"
+WORKER = ("import pickle, sys\nfrom dsm.report import canvas\nwith canvas.reusing():\n"
+          "    for fn, args in pickle.loads(open(sys.argv[1], 'rb').read()):\n        fn(*args)\n")
 
 
 def run_jobs(jobs: list, pool_min: int = 12) -> int:
@@ -612,8 +644,9 @@ def run_jobs(jobs: list, pool_min: int = 12) -> int:
     without an ``if __name__ == "__main__"`` guard."""
     n = min(workers(), len(jobs))
     if n < 2 or len(jobs) < pool_min:
-        for fn, args in jobs:
-            fn(*args)
+        with canvas.reusing():
+            for fn, args in jobs:
+                fn(*args)
         return 0
     env = dict(os.environ, MPLBACKEND="Agg",
                PYTHONPATH=os.pathsep.join([p for p in sys.path if p] + [os.environ.get("PYTHONPATH", "")]))
@@ -625,8 +658,9 @@ def run_jobs(jobs: list, pool_min: int = 12) -> int:
             f.write_bytes(pickle.dumps(part, protocol=pickle.HIGHEST_PROTOCOL))
             procs.append((part, subprocess.Popen([sys.executable, "-c", WORKER, str(f)], env=env,
                                                  stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)))
-        for fn, args in jobs[0::n]:    # this process's share, while the workers draw theirs
-            fn(*args)
+        with canvas.reusing():
+            for fn, args in jobs[0::n]:    # this process's share, while the workers draw theirs
+                fn(*args)
         failed = []
         for part, p in procs:
             _, err = p.communicate()
@@ -634,6 +668,7 @@ def run_jobs(jobs: list, pool_min: int = 12) -> int:
                 failed.append((part, err.decode(errors="replace").strip().splitlines()[-1:] or ["no message"]))
     for part, why in failed:
         print(f"dsm: a drawing worker failed ({why[0]}); drawing its {len(part)} figures here", file=sys.stderr)
-        for fn, args in part:
-            fn(*args)
+        with canvas.reusing():
+            for fn, args in part:
+                fn(*args)
     return n

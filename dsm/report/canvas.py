@@ -1,0 +1,167 @@
+"""What the report's figures are drawn on: matplotlib's Agg canvas with two shortcuts.
+
+A text is rendered as one bitmap of its whole string (FreeType lays it out in C) and kept, so a
+label drawn again (the rate tick labels, legends and axis labels recur in every figure of a run)
+costs one blit: matplotlib 3.11's Agg renderer draws each glyph as a Python step (a transform
+matrix built in numpy, one FreeType render, one blit), a quarter of a figure's drawing time. The
+string's bitmap is what its earlier versions drew, at the same size and font, placed on whole
+pixels. Mathtext (``$...$``) and TeX are drawn by matplotlib as before.
+
+While ``reusing()`` (the report's drawing, figures.run_jobs), figures of one layout are drawn on
+one Figure (``pooled``), cleared of the last figure's artists (``clear``), not built anew:
+building a panel's Axes was a fifth of a figure's cost. A figure drawn so equals, pixel for
+pixel, the same figure drawn on a new Figure (tests/test_report_canvas.py).
+"""
+from __future__ import annotations
+
+import contextlib
+import functools
+import math
+
+import numpy as np
+
+MAX_CACHED = 20000        # strings kept per process (a bitmap of a label is a few hundred bytes)
+
+
+def _renderer_class():
+    """RendererAgg with cached string bitmaps and metrics (made on first use: matplotlib is
+    imported only when a figure is drawn)."""
+    from matplotlib.backends.backend_agg import RendererAgg, get_hinting_flag
+
+    bitmaps, metrics = {}, {}
+
+    class CachedTextRenderer(RendererAgg):
+        """RendererAgg drawing each plain text as one cached bitmap of the whole string."""
+
+        def get_text_width_height_descent(self, s, prop, ismath):
+            """Width, height and descent of ``s`` in pixels (cached per string, font and dpi)."""
+            if ismath:
+                return super().get_text_width_height_descent(s, prop, ismath)
+            key = (s, hash(prop), self.dpi)
+            got = metrics.get(key)
+            if got is None:
+                font = self._prepare_font(prop)
+                font.set_text(s, 0.0, flags=get_hinting_flag())
+                w, h = font.get_width_height()
+                got = (w / 64.0, h / 64.0, font.get_descent() / 64.0)
+                if len(metrics) > MAX_CACHED:
+                    metrics.clear()
+                metrics[key] = got
+            return got
+
+        def draw_text(self, gc, x, y, s, prop, angle, ismath=False, mtext=None):
+            """``s`` at (x, y) (pixels, y down: the text's baseline start), rotated by ``angle`` degrees."""
+            if ismath:
+                return super().draw_text(gc, x, y, s, prop, angle, ismath, mtext)
+            # hash(prop): family, style, weight, size, file: a snapshot (a FontProperties is mutable)
+            key = (s, hash(prop), self.dpi, bool(gc.get_antialiased()))
+            got = bitmaps.get(key)
+            if got is None:
+                font = self._prepare_font(prop)
+                font.set_text(s, 0.0, flags=get_hinting_flag())
+                font.draw_glyphs_to_bitmap(antialiased=key[3])
+                xo, yo = font.get_bitmap_offset()
+                got = (np.array(font.get_image(), dtype=np.uint8), xo / 64.0, yo / 64.0, font.get_descent() / 64.0)
+                if len(bitmaps) > MAX_CACHED:
+                    bitmaps.clear()
+                bitmaps[key] = got
+            image, xo, yo, descent = got
+            if not image.size:
+                return
+            # the bitmap's lower left corner: the descent turns with the text (as matplotlib placed a
+            # whole string's bitmap before it drew glyph by glyph)
+            xd, yd = descent * math.sin(math.radians(angle)), descent * math.cos(math.radians(angle))
+            self._renderer.draw_text_image(image, round(x + xo + xd), round(y + yo + yd) + 1, angle, gc)
+
+    return CachedTextRenderer
+
+
+@functools.lru_cache(maxsize=1)
+def _canvas_class():
+    """FigureCanvasAgg with the cached-text renderer (made once, on first use)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    renderer_class = _renderer_class()
+
+    class CachedTextCanvas(FigureCanvasAgg):
+        """FigureCanvasAgg drawing with CachedTextRenderer."""
+
+        def get_renderer(self):
+            """The renderer for the figure's current size and dpi (kept while they stay)."""
+            w, h = self.get_width_height(physical=True)
+            key = w, h, self.figure.dpi
+            if self._lastKey != key:
+                self.renderer = renderer_class(w, h, self.figure.dpi)
+                self._lastKey = key
+            return self.renderer
+
+    return CachedTextCanvas
+
+
+def canvas(fig):
+    """An Agg canvas for ``fig`` (set as its canvas: savefig draws on it) whose renderer caches
+    text bitmaps; a figure drawn again (a pooled one) keeps its canvas, so its renderer and the
+    text metrics matplotlib keeps per renderer."""
+    cls = _canvas_class()
+    return fig.canvas if type(fig.canvas) is cls else cls(fig)
+
+
+# ------------------------------------------------------------------ one Figure per layout
+
+# while reusing(): layout key -> (Figure, axes) this process drew before; None: every figure new
+_POOL = {"figures": None}
+
+
+@contextlib.contextmanager
+def reusing():
+    """Within it, figures of one layout (pooled()'s key) are drawn on one Figure, cleared of the
+    last figure's artists: building a panel's Axes is a fifth of a figure's drawing time, and a
+    run's figures have a few layouts. Outside it, each figure is new (a caller may keep it)."""
+    before = _POOL["figures"]
+    _POOL["figures"] = {} if before is None else before
+    try:
+        yield
+    finally:
+        _POOL["figures"] = before
+
+
+def pooled(key, make, scales: bool = True):
+    """(Figure, axes) for layout ``key``: the pooled one, cleared (see reusing(); ``scales``
+    False: its axes keep their scales, for a caller that sets every one), else ``make()``'s."""
+    pool = _POOL["figures"]
+    if pool is None:
+        return make()
+    if key in pool:
+        fig, axes = pool[key]
+        clear(fig, axes, scales)
+        return fig, axes
+    pool[key] = make()
+    return pool[key]
+
+
+def clear(fig, axes, scales: bool = True):
+    """Take every artist a drawing added off ``fig`` and its ``axes`` (an array of Axes), and put
+    their limits, labels, colour cycle and (``scales``) scales back as a new figure's (the
+    suptitle is kept: drawing sets its text)."""
+    import matplotlib
+    from matplotlib.transforms import Bbox
+    for ax in np.ravel(axes):
+        for a in [*ax.lines, *ax.collections, *ax.texts, *ax.artists, *ax.patches, *ax.images, *ax.tables]:
+            a.remove()
+        ax.set_title("")
+        ax.set_xlabel("")
+        ax.set_ylabel("")
+        ax.set_prop_cycle(None)
+        if scales and ax.get_xscale() != "linear":
+            ax.set_xscale("linear")
+        if scales and ax.get_yscale() != "linear":
+            ax.set_yscale("linear")
+        ax.set_autoscalex_on(True)
+        ax.set_autoscaley_on(True)
+        ax.dataLim = Bbox.null()          # a panel left empty must not keep the last figure's extent
+        ax.ignore_existing_data_limits = True
+        ax.xaxis.labelpad = ax.yaxis.labelpad = matplotlib.rcParams["axes.labelpad"]
+        ax.__dict__.pop("legend_texts", None)
+    keep = getattr(fig, "_suptitle", None)
+    for a in [*fig.texts, *fig.artists, *fig.lines, *fig.patches, *fig.images]:
+        if a is not keep:
+            a.remove()
