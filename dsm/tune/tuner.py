@@ -66,7 +66,7 @@ from .evaluate import NAN, hard_counts, with_values
 from ..config.tune import TuneSpec, tunable, tune_spec
 from .cases import pooled_thresholds, prepare_cases
 from .compare import exact_scan, gradient_check, grid_search
-from .bias_map import heldout_split, map_start, residual_bias_map, tune_bias_map
+from .bias_map import edge_bias_map, heldout_split, map_start, residual_bias_map, tune_bias_map
 from .search import tune_scheme
 from .output import TuneResult, moments_toml, tuned_toml, write
 from .moment_search import tune_all
@@ -276,8 +276,9 @@ def _learned_map(tc, train, held, groups, results, orc_train, orc_held, tick) ->
     const = [e for e in results if e["scheme"] == "constant"]
     best_const = min(const, key=lambda e: e["train"]["objective"]) if const else None
     best = min(results, key=lambda e: e["train"]["objective"]) if results else None
-    if ts.bias_map.fit == "residual" and best is not None:
-        bmap = residual_bias_map(tc, train, held, groups, best)
+    if ts.bias_map.fit in ("residual", "edge") and best is not None:
+        fitted = residual_bias_map if ts.bias_map.fit == "residual" else edge_bias_map
+        bmap = fitted(tc, train, held, groups, best)
         bmap["init_from"] = bmap["base"]
     else:
         init = map_start(tc, train, groups, best_const)
