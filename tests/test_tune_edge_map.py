@@ -134,3 +134,33 @@ def test_edge_defaults():
            "tune": {"camera": CAMS, "bias_map": {"fit": "edge"}}}
     bm = tu.parse_tune(coerce(cfg)).spec.bias_map
     assert (bm.fit, bm.block, bm.widths[0], len(bm.clips), bm.grazings[0]) == ("edge", 2, 1.0, 5, 0.0)
+
+
+def test_edge_map_in_a_tune_run(tmp_path):
+    """dsm tune with fit = "edge": the held-out split recounted from the fitted model on the 3 x 3
+    margins of the best scheme, and the model written into table.md and tune.json."""
+    import json
+    from dsm.tune import tuner as tu
+    from dsm.tune.bias_map import neighbour_margins
+    cfg = {"experiment": {"name": "t"}, "camera": {"resolution": [32, 32]}, "scene": [{"builtin": "floating_plate"}],
+           "map": {"resolution": 32}, "scheme": [{"name": "constant", "bias": 0.02}],
+           "tune": {"steps": 8, "camera": CAMS, "bias_map": {"fit": "edge", "width": [1.0, 1.5], "clip": [1.0],
+                                                              "grazing": [0.0, 0.5]}}}
+    res = tu.tune(cfg, out=tmp_path)
+    bm = res.bias_map
+    assert bm["fit"] == "edge" and len(bm["candidates"]) == 4
+    import dsm.pipeline as pl
+    from dsm.config.read import coerce
+    from dsm.tune import cases as tcase
+    tc = tu.parse_tune(coerce(cfg))
+    tc.config = pl.prepare(tc.config)
+    groups, cases, _ = tcase.prepare_cases(tc)
+    held = [c for c in cases if c.role == "heldout"]
+    rx = neighbour_margins(res.schemes[0]["spec"], held, groups)
+    on = em.lit(rx, bm["model"])
+    assert bm["heldout"]["n_acne"] == int((~on & rx["v_star"]).sum())
+    assert bm["heldout"]["n_peterpan"] == int((on & ~rx["v_star"]).sum())
+    split = bm["heldout_split"]
+    assert split["covered"]["n_receivers"] + split["uncovered"]["n_receivers"] == rx["v_star"].size
+    assert "an edge map over constant" in (tmp_path / "table.md").read_text()
+    assert json.loads((tmp_path / "tune.json").read_text())["bias_map"]["model"] == pytest.approx(bm["model"])
