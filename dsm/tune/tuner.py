@@ -38,7 +38,8 @@ point the search saw (the relaxed loss only steers; it can rise where the exact 
 falls, so it never picks the result).
 
 **Learned bias map** (``[tune.bias_map]``, ``fit = "adam"``; ``fit = "residual"``: a residual over
-the best tuned scheme, dsm.tune.residual_map): one bias per block of ``block x block`` texels
+the best tuned scheme, dsm.tune.residual_map; ``fit = "edge"``: predicted per receiver from the
+map's 3 x 3 texels around it, dsm.tune.edge_map): one bias per block of ``block x block`` texels
 of the light's map, the map fitted once to the union of every camera's receivers (training and
 held-out) so the grid is the same for all views. Trained on the training cameras (started from
 the tuned constant bias when one was tuned in the same unit), judged on the held-out cameras
