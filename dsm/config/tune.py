@@ -245,8 +245,8 @@ def _bias_map(b, src: str, steps: int, lr: float, cams: tuple) -> BiasMapSpec:
             raise ConfigError(src, f"tune.bias_map.{key}", "only with fit = \"edge\"", MAP_FITS)
     for key in ("unit", "init", "steps", "lr"):     # the residual and edge maps are fitted exactly: no Adam
         if key in b and fit in ("residual", "edge"):
-            raise ConfigError(src, f"tune.bias_map.{key}", "only with fit = \"adam\" (a residual map is in "
-                              "texels, fitted exactly per block)", MAP_FITS)
+            raise ConfigError(src, f"tune.bias_map.{key}", "only with fit = \"adam\" (the residual and edge "
+                              "maps are fitted exactly, no Adam)", MAP_FITS)
     bmap = BiasMapSpec(blocks[0], unit, init,
                        number(b.get("steps", steps), src, "tune.bias_map.steps", integer=True, minimum=1,
                               maximum=100000),
