@@ -14,8 +14,9 @@ TUNE_KEYS = ("lambda", "steps", "lr", "temperature", "schedule", "seed", "batch"
 CAMERA_KEYS = ("name", "position", "target", "up", "fov", "role")
 ROLES = ("train", "heldout")
 SCHEDULES = ("geometric", "linear")
-MAP_KEYS = ("block", "unit", "init", "steps", "lr", "fit", "radius", "min_gain", "margin")
-MAP_FITS = ("adam", "residual")
+MAP_KEYS = ("block", "unit", "init", "steps", "lr", "fit", "radius", "min_gain", "margin", "width", "clip", "grazing")
+MAP_FITS = ("adam", "residual", "edge")
+EDGE_KEYS = ("width", "clip", "grazing")
 MAP_UNITS = ("world", "texel")
 
 
@@ -57,6 +58,9 @@ class BiasMapSpec:
     radii: tuple = (0, 1, 2)
     gains: tuple = (1, 2, 3)
     margin: float = 0.5               # residual: texels kept inside a block's optimal interval
+    widths: tuple = (1.0, 1.125, 1.25, 1.375, 1.5)     # edge: tent half-widths (texels), see dsm.tune.edge_map
+    clips: tuple = (0.5, 1.0, 2.0, 4.0, 8.0)           # edge: margins (texels) a vote saturates at
+    grazings: tuple = (0.0, 0.125, 0.25, 0.375, 0.5, 0.75, 1.0)   # edge: the threshold's rise per (1 - cos)
 
 
 @dataclass(frozen=True)
@@ -229,23 +233,27 @@ def _bias_map(b, src: str, steps: int, lr: float, cams: tuple) -> BiasMapSpec:
         raise ConfigError(src, "tune.bias_map.init", f"give the start in the map's unit ({unit})", MAP_UNITS)
     fit = choice(b.get("fit", "adam"), src, "tune.bias_map.fit", MAP_FITS)
     ints = lambda key, default, lo: _map_ints(b, src, key, default, lo)
-    blocks = ints("block", BiasMapSpec.blocks if fit == "residual" else [1], 1)
-    if fit == "adam" and len(blocks) != 1:
-        raise ConfigError(src, "tune.bias_map.block", "Adam fits one block size: give one number (a list is "
+    blocks = ints("block", BiasMapSpec.blocks if fit == "residual" else [2] if fit == "edge" else [1], 1)
+    if fit in ("adam", "edge") and len(blocks) != 1:
+        raise ConfigError(src, "tune.bias_map.block", f"{fit} takes one block size: give one number (a list is "
                           "validated with fit = \"residual\")", MAP_FITS)
     for key in ("radius", "min_gain", "margin"):
         if key in b and fit != "residual":
             raise ConfigError(src, f"tune.bias_map.{key}", "only with fit = \"residual\"", MAP_FITS)
-    for key in ("unit", "init", "steps", "lr"):     # the residual is in texels, fitted exactly: no Adam
-        if key in b and fit == "residual":
-            raise ConfigError(src, f"tune.bias_map.{key}", "only with fit = \"adam\" (a residual map is in "
-                              "texels, fitted exactly per block)", MAP_FITS)
+    for key in EDGE_KEYS:
+        if key in b and fit != "edge":
+            raise ConfigError(src, f"tune.bias_map.{key}", "only with fit = \"edge\"", MAP_FITS)
+    for key in ("unit", "init", "steps", "lr"):     # the residual and edge maps are fitted exactly: no Adam
+        if key in b and fit in ("residual", "edge"):
+            raise ConfigError(src, f"tune.bias_map.{key}", "only with fit = \"adam\" (the residual and edge "
+                              "maps are fitted exactly, no Adam)", MAP_FITS)
     bmap = BiasMapSpec(blocks[0], unit, init,
                        number(b.get("steps", steps), src, "tune.bias_map.steps", integer=True, minimum=1,
                               maximum=100000),
                        number(b.get("lr", lr), src, "tune.bias_map.lr", positive=True), fit, blocks,
                        ints("radius", BiasMapSpec.radii, 0), ints("min_gain", BiasMapSpec.gains, 1),
-                       number(b.get("margin", BiasMapSpec.margin), src, "tune.bias_map.margin", minimum=0))
+                       number(b.get("margin", BiasMapSpec.margin), src, "tune.bias_map.margin", minimum=0),
+                       *_edge_candidates(b, src))
     if fit == "residual" and sum(c.role == "train" for c in cams) < 2:
         raise ConfigError(src, "tune.camera", "a residual map chooses its block size by leaving one training "
                           "camera out: give at least two [[tune.camera]] with role = \"train\"", ROLES)
@@ -253,6 +261,21 @@ def _bias_map(b, src: str, steps: int, lr: float, cams: tuple) -> BiasMapSpec:
         raise ConfigError(src, "tune.camera", "a learned bias map is judged on held-out views: add a "
                           "[[tune.camera]] with role = \"heldout\"", ROLES)
     return bmap
+
+
+def _edge_candidates(b: dict, src: str) -> tuple:
+    """The edge map's candidate lists (width within 0.5 to 1.5 texels: the 3 x 3 taps; clip above 0; grazing >= 0)."""
+    out = []
+    for key, lo, hi, pos in (("width", 0.5, 1.5, True), ("clip", None, None, True), ("grazing", 0.0, None, False)):
+        vals = as_list(b.get(key, list(getattr(BiasMapSpec, key + "s"))))
+        if not vals:
+            raise ConfigError(src, f"tune.bias_map.{key}", "empty list: give at least one value")
+        nums = tuple(number(x, src, f"tune.bias_map.{key}", positive=pos, minimum=lo, maximum=hi) for x in vals)
+        if key == "width" and min(nums) <= 0.5:
+            raise ConfigError(src, "tune.bias_map.width", "a tent of half-width 0.5 texel or less can miss every tap: "
+                              "give widths above 0.5 (1: bilinear)")
+        out.append(nums)
+    return tuple(out)
 
 
 def _map_ints(b: dict, src: str, key: str, default, lo: int) -> tuple:

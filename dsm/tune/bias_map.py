@@ -1,4 +1,5 @@
-"""The learned bias map: one bias per block of map texels, by Adam or as a residual over the best scheme."""
+"""The learned bias map: one bias per block of map texels, by Adam or as a residual over the best scheme, or
+predicted per receiver from the map around it (dsm.tune.edge_map)."""
 from __future__ import annotations
 
 import dataclasses
@@ -181,6 +182,57 @@ def residual_bias_map(tc, train, held, groups, base) -> dict:
             "blocks_trained": int(fit["keys"].size), "blocks_moved": int((moved != 0).sum()), "steps": [],
             "train": counted(m_tr, rx_tr["v_star"]), "heldout": counted(m_he, rx_he["v_star"]),
             "heldout_lit": np.split(m_he >= 0, split), "heldout_covered": np.split(covered, split),
+            "heldout_covered_fraction": float(covered.mean()) if covered.size else NAN,
+            "init": [], "total_ms": (sync_clock() - t0) * 1e3}
+
+
+def neighbour_margins(spec: SchemeSpec, cases, groups) -> dict:
+    """What the edge map reads, per receiver over ``cases`` (numpy): the scheme's margin with the z1
+    of each of the 3 x 3 texels around its (shifted) lookup point (``m9``, world units, columns in
+    edge_map.OFFSETS order), that point from its texel's centre (``fx, fy``, texels), ``unit`` =
+    texel_world, ``cos`` (normal to light), ``v_star``, and block keys' inputs (texel, group, resolution)."""
+    from .edge_map import OFFSETS
+    mod, culling = get_scheme(spec.name), pl.culling_of(spec.params)
+    acc = {k: [] for k in ("m9", "fx", "fy", "cos")}
+    for c in cases:
+        smap = groups[c.group].maps[culling]
+        prm = lookup.resolve(spec.params, c.rx)
+        rx2 = mod.shift(c.rx, prm)
+        i0, j0 = dr.floor(rx2.u_map), dr.floor(rx2.v_map)
+        taps = [lookup.tap_at(rx2, smap, i0 + 0.5 + a, j0 + 0.5 + b) for a, b in OFFSETS]
+        acc["m9"].append(np.stack([np.asarray(mod.margin(rx2, t, prm).numpy(), np.float64) for t in taps], 1))
+        acc["fx"].append(np.asarray((rx2.u_map - i0).numpy(), np.float64) - 0.5)
+        acc["fy"].append(np.asarray((rx2.v_map - j0).numpy(), np.float64) - 0.5)
+        n, l = c.rx.n_world, c.rx.to_light
+        acc["cos"].append(np.asarray(dr.dot(n, l).numpy(), np.float64))
+    out = {k: np.concatenate(v) if v else np.zeros((0, 9) if k == "m9" else 0) for k, v in acc.items()}
+    base = margin_arrays(spec, cases, groups)
+    return {**out, **{k: base[k] for k in ("unit", "v_star", "texel", "group", "resolution")}}
+
+
+def edge_bias_map(tc, train, held, groups, base) -> dict:
+    """The edge map over the best global scheme (``base``, a result entry): its shape parameters
+    and threshold fitted exactly to the training receivers (dsm.tune.edge_map); its counts on the
+    training and held-out views, held-out receivers counted as covered where their ``block``
+    block saw training receivers (the other fits' split, so the three compare)."""
+    from . import edge_map as em
+    from . import residual_map as rm
+    bm, lam = tc.spec.bias_map, tc.spec.lam
+    t0 = sync_clock()
+    rx_tr, rx_he = neighbour_margins(base["spec"], train, groups), neighbour_margins(base["spec"], held, groups)
+    model = em.fit(rx_tr, bm.widths, bm.clips, bm.grazings, lam)
+    lit_tr, lit_he = em.lit(rx_tr, model), em.lit(rx_he, model)
+    keys = lambda rx: rm.block_keys(rx["texel"], rx["group"], rx["resolution"], bm.block)
+    covered = np.isin(keys(rx_he), keys(rx_tr))
+    counted = lambda on, v: counts(int((~on & v).sum()), int((on & ~v).sum()), int(v.size), int(v.sum()))
+    split = np.cumsum([c.n for c in held])[:-1]
+    params = {k: model[k] for k in ("width", "clip", "grazing", "threshold")}
+    return {"fit": "edge", "base": f"{base['scheme']} {base['params']}", "block": bm.block, "model": params,
+            "candidates": model["scores"], "unit": "score",
+            "values": np.array([params[k] for k in ("width", "clip", "grazing", "threshold")]),
+            "blocks": 0, "blocks_trained": 0, "steps": [],
+            "train": counted(lit_tr, rx_tr["v_star"]), "heldout": counted(lit_he, rx_he["v_star"]),
+            "heldout_lit": np.split(lit_he, split), "heldout_covered": np.split(covered, split),
             "heldout_covered_fraction": float(covered.mean()) if covered.size else NAN,
             "init": [], "total_ms": (sync_clock() - t0) * 1e3}
 

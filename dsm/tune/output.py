@@ -145,6 +145,13 @@ def table_text(res: TuneResult) -> str:
                    f"beat it leaving one training camera out ({b['validation']['none']:g} errors; best candidate "
                    f"{min((s['errors'] for s in b['validation']['scores']), default=float('nan')):g})")
             head = f"{how}; {_fmt(b['heldout_covered_fraction'])} of held-out receivers fall in trained blocks"
+        elif b.get("fit") == "edge":
+            m = b["model"]
+            head = (f"an edge map over {b['base']}: lit where the tent (half-width {m['width']:g} texel) mean of the "
+                    f"3 x 3 taps' margins clipped at {m['clip']:g} texel is at least {m['threshold']:.4g} + "
+                    f"{m['grazing']:g} (1 - cos), fitted exactly to the training receivers ({len(b['candidates'])} "
+                    f"candidates); {_fmt(b['heldout_covered_fraction'])} of held-out receivers fall in "
+                    f"{b['block']} x {b['block']} blocks with training receivers")
         else:
             head = (f"{b['blocks']} blocks of {b['block']} x {b['block']} texels ({b['blocks_trained']} with training "
                     f"receivers; {_fmt(b['heldout_covered_fraction'])} of held-out receivers fall in them), unit "

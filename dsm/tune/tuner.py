@@ -38,7 +38,8 @@ point the search saw (the relaxed loss only steers; it can rise where the exact 
 falls, so it never picks the result).
 
 **Learned bias map** (``[tune.bias_map]``, ``fit = "adam"``; ``fit = "residual"``: a residual over
-the best tuned scheme, dsm.tune.residual_map): one bias per block of ``block x block`` texels
+the best tuned scheme, dsm.tune.residual_map; ``fit = "edge"``: predicted per receiver from the
+map's 3 x 3 texels around it, dsm.tune.edge_map): one bias per block of ``block x block`` texels
 of the light's map, the map fitted once to the union of every camera's receivers (training and
 held-out) so the grid is the same for all views. Trained on the training cameras (started from
 the tuned constant bias when one was tuned in the same unit), judged on the held-out cameras
@@ -66,7 +67,7 @@ from .evaluate import NAN, hard_counts, with_values
 from ..config.tune import TuneSpec, tunable, tune_spec
 from .cases import pooled_thresholds, prepare_cases
 from .compare import exact_scan, gradient_check, grid_search
-from .bias_map import heldout_split, map_start, residual_bias_map, tune_bias_map
+from .bias_map import edge_bias_map, heldout_split, map_start, residual_bias_map, tune_bias_map
 from .search import tune_scheme
 from .output import TuneResult, moments_toml, tuned_toml, write
 from .moment_search import tune_all
@@ -276,8 +277,9 @@ def _learned_map(tc, train, held, groups, results, orc_train, orc_held, tick) ->
     const = [e for e in results if e["scheme"] == "constant"]
     best_const = min(const, key=lambda e: e["train"]["objective"]) if const else None
     best = min(results, key=lambda e: e["train"]["objective"]) if results else None
-    if ts.bias_map.fit == "residual" and best is not None:
-        bmap = residual_bias_map(tc, train, held, groups, best)
+    if ts.bias_map.fit in ("residual", "edge") and best is not None:
+        fitted = residual_bias_map if ts.bias_map.fit == "residual" else edge_bias_map
+        bmap = fitted(tc, train, held, groups, best)
         bmap["init_from"] = bmap["base"]
     else:
         init = map_start(tc, train, groups, best_const)

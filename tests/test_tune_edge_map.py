@@ -1,0 +1,166 @@
+"""The edge bias map (dsm.tune.edge_map): its tent score against bilinear interpolation written out
+in numpy float64, its exact threshold and candidate fit against brute-force scans, the 3 x 3 taps'
+margins against the depth test recomputed from the map's z1, and the [tune.bias_map] keys it refuses."""
+import numpy as np
+import pytest
+
+from dsm.tune import edge_map as em
+
+CAMS = [{"position": [3.0, -5.0, 4.0], "target": [0.0, 0.0, 0.0]},
+        {"position": [-4.0, -3.0, 5.0], "target": [0.0, 0.0, 0.0], "role": "heldout"}]
+
+
+def _random_rx(n, seed):
+    rng = np.random.default_rng(seed)
+    tw = rng.uniform(0.5, 2.0, n)
+    m9 = rng.normal(0, 3, (n, 9)) * tw[:, None]
+    fx, fy = rng.uniform(-0.5, 0.5, n), rng.uniform(-0.5, 0.5, n)
+    cos = rng.uniform(0, 1, n)
+    v = rng.random(n) < 0.5 + 0.4 * np.tanh(m9[:, 4] / tw)
+    return {"m9": m9, "fx": fx, "fy": fy, "unit": tw, "cos": cos, "v_star": v}
+
+
+def test_tent_of_half_width_one_is_bilinear_on_the_votes():
+    """Width 1: the 2 x 2 taps around the receiver, bilinear weights (written out per quadrant)."""
+    rx = _random_rx(500, 1)
+    clip = 1.5
+    got = em.tent_score(rx["m9"], rx["fx"], rx["fy"], rx["unit"], 1.0, clip)
+    votes = np.clip(rx["m9"] / (clip * rx["unit"][:, None]), -1, 1)
+    for r in range(500):
+        fx, fy = rx["fx"][r], rx["fy"][r]
+        a, b = (1 if fx >= 0 else -1), (1 if fy >= 0 else -1)
+        wx, wy = abs(fx), abs(fy)
+        col = lambda i, j: votes[r, (j + 1) * 3 + (i + 1)]
+        ref = ((1 - wx) * (1 - wy) * col(0, 0) + wx * (1 - wy) * col(a, 0) + (1 - wx) * wy * col(0, b)
+               + wx * wy * col(a, b))
+        assert got[r] == pytest.approx(ref, abs=1e-12)
+
+
+def test_agreeing_taps_keep_the_base_answer():
+    """Where every tap's margin has one sign beyond the clip, the score is +-1 whatever the width."""
+    rx = _random_rx(200, 2)
+    sign = np.where(rx["m9"][:, 4] >= 0, 1.0, -1.0)
+    m9 = sign[:, None] * (5.0 + np.abs(rx["m9"])) * rx["unit"][:, None]
+    for width in (0.75, 1.0, 1.5):
+        s = em.tent_score(m9, rx["fx"], rx["fy"], rx["unit"], width, 4.0)
+        assert np.array_equal(s, sign)
+
+
+@pytest.mark.parametrize("lam", [1.0, 2.5])
+def test_exact_threshold_is_the_brute_force_optimum(lam):
+    rng = np.random.default_rng(3)
+    x = np.round(rng.normal(0, 0.5, 300), 2)          # ties on purpose
+    v = rng.random(300) < 0.5 + 0.4 * np.tanh(3 * x)
+    t, e = em.exact_threshold(x, v, lam)
+    cands = np.concatenate([np.unique(x) - 1e-9, np.unique(x) + 1e-9, [x.min() - 1, x.max() + 1]])
+    errs = [((x < c) & v).sum() + lam * ((x >= c) & ~v).sum() for c in cands]
+    assert e == pytest.approx(min(errs))
+    assert ((x < t) & v).sum() + lam * ((x >= t) & ~v).sum() == pytest.approx(e)
+
+
+def test_fit_picks_the_fewest_training_errors_of_the_grid():
+    rx = _random_rx(400, 4)
+    widths, clips, grazings = (1.0, 1.5), (0.5, 4.0), (0.0, 0.5)
+    model = em.fit(rx, widths, clips, grazings, 1.0)
+    assert len(model["scores"]) == 8
+    brute = []
+    for w in widths:
+        for c in clips:
+            for g in grazings:
+                x = em.tent_score(rx["m9"], rx["fx"], rx["fy"], rx["unit"], w, c) - g * (1 - rx["cos"])
+                thr = np.unique(x)
+                brute.append(min(((x < t) & rx["v_star"]).sum() + ((x >= t) & ~rx["v_star"]).sum()
+                                 for t in np.concatenate([thr, [thr.max() + 1]])))
+    assert model["errors"] == min(brute)
+    assert (em.lit(rx, model) != rx["v_star"]).sum() == model["errors"]
+
+
+def test_neighbour_margins_are_the_depth_test_at_each_tap():
+    """A constant world bias, no shift: the margin with tap (a, b) is z1 of texel (i + a, j + b) + bias
+    - depth, recomputed from the map's z1 (float64) where the 3 x 3 lies inside the face."""
+    import dsm.pipeline as pl
+    from dsm.tune import tuner as tu, cases as tcase
+    from dsm.tune.bias_map import margin_arrays, neighbour_margins
+    from dsm.config.read import coerce
+    cfg = {"experiment": {"name": "t"}, "camera": {"resolution": [32, 32]}, "scene": [{"builtin": "floating_plate"}],
+           "map": {"resolution": 32}, "scheme": [{"name": "constant", "bias": 0.02}], "tune": {"camera": CAMS}}
+    tc = tu.parse_tune(coerce(cfg))
+    tc.config = pl.prepare(tc.config)
+    groups, cases, _ = tcase.prepare_cases(tc)
+    spec = tc.schemes[0]
+    rx = neighbour_margins(spec, cases, groups)
+    assert np.array_equal(rx["m9"][:, 4], margin_arrays(spec, cases, groups)["m"])
+    R = groups[0].view.resolution
+    z1 = np.asarray(groups[0].maps["none"].z1.numpy(), np.float64)
+    u = np.concatenate([np.asarray(c.rx.u_map.numpy(), np.float64) for c in cases])
+    v = np.concatenate([np.asarray(c.rx.v_map.numpy(), np.float64) for c in cases])
+    d = np.concatenate([np.asarray(c.rx.depth.numpy(), np.float64) for c in cases])
+    i, j = np.floor(u).astype(int), np.floor(v).astype(int)
+    inside = (i >= 1) & (i <= R - 2) & (j >= 1) & (j <= R - 2)
+    assert inside.sum() > 100
+    assert np.allclose(rx["fx"], u - i - 0.5, atol=1e-6)
+    for k, (a, b) in enumerate(em.OFFSETS):
+        ref = z1[(j + b).clip(0, R - 1) * R + (i + a).clip(0, R - 1)] + 0.02 - d
+        ok = inside & np.isfinite(ref)
+        assert np.allclose(rx["m9"][ok, k], ref[ok], rtol=0, atol=1e-5), (a, b)
+
+
+@pytest.mark.parametrize("bias_map,key", [
+    ({"width": [1.0]}, "tune.bias_map.width"),                          # edge keys only with fit = "edge"
+    ({"fit": "residual", "grazing": [0.5]}, "tune.bias_map.grazing"),
+    ({"fit": "edge", "width": [0.5]}, "tune.bias_map.width"),           # could miss every tap
+    ({"fit": "edge", "width": [2.0]}, "tune.bias_map.width"),           # beyond the 3 x 3 taps
+    ({"fit": "edge", "clip": []}, "tune.bias_map.clip"),
+    ({"fit": "edge", "clip": [0]}, "tune.bias_map.clip"),
+    ({"fit": "edge", "grazing": [-1]}, "tune.bias_map.grazing"),
+    ({"fit": "edge", "block": [1, 2]}, "tune.bias_map.block"),          # one block: the held-out split's
+    ({"fit": "edge", "steps": 5}, "tune.bias_map.steps"),               # fitted exactly: no Adam
+])
+def test_edge_keys_are_refused_before_work(bias_map, key):
+    from dsm import ConfigError
+    from dsm.config.read import coerce
+    from dsm.tune import tuner as tu
+    cfg = {"experiment": {"name": "t"}, "scene": [{"builtin": "plane"}], "scheme": [{"name": "constant"}],
+           "tune": {"camera": CAMS, "bias_map": bias_map}}
+    with pytest.raises(ConfigError) as e:
+        tu.parse_tune(coerce(cfg))
+    assert e.value.key == key
+
+
+def test_edge_defaults():
+    from dsm.config.read import coerce
+    from dsm.tune import tuner as tu
+    cfg = {"experiment": {"name": "t"}, "scene": [{"builtin": "plane"}], "scheme": [{"name": "constant"}],
+           "tune": {"camera": CAMS, "bias_map": {"fit": "edge"}}}
+    bm = tu.parse_tune(coerce(cfg)).spec.bias_map
+    assert (bm.fit, bm.block, bm.widths[0], len(bm.clips), bm.grazings[0]) == ("edge", 2, 1.0, 5, 0.0)
+
+
+def test_edge_map_in_a_tune_run(tmp_path):
+    """dsm tune with fit = "edge": the held-out split recounted from the fitted model on the 3 x 3
+    margins of the best scheme, and the model written into table.md and tune.json."""
+    import json
+    from dsm.tune import tuner as tu
+    from dsm.tune.bias_map import neighbour_margins
+    cfg = {"experiment": {"name": "t"}, "camera": {"resolution": [32, 32]}, "scene": [{"builtin": "floating_plate"}],
+           "map": {"resolution": 32}, "scheme": [{"name": "constant", "bias": 0.02}],
+           "tune": {"steps": 8, "camera": CAMS, "bias_map": {"fit": "edge", "width": [1.0, 1.5], "clip": [1.0],
+                                                              "grazing": [0.0, 0.5]}}}
+    res = tu.tune(cfg, out=tmp_path)
+    bm = res.bias_map
+    assert bm["fit"] == "edge" and len(bm["candidates"]) == 4
+    import dsm.pipeline as pl
+    from dsm.config.read import coerce
+    from dsm.tune import cases as tcase
+    tc = tu.parse_tune(coerce(cfg))
+    tc.config = pl.prepare(tc.config)
+    groups, cases, _ = tcase.prepare_cases(tc)
+    held = [c for c in cases if c.role == "heldout"]
+    rx = neighbour_margins(res.schemes[0]["spec"], held, groups)
+    on = em.lit(rx, bm["model"])
+    assert bm["heldout"]["n_acne"] == int((~on & rx["v_star"]).sum())
+    assert bm["heldout"]["n_peterpan"] == int((on & ~rx["v_star"]).sum())
+    split = bm["heldout_split"]
+    assert split["covered"]["n_receivers"] + split["uncovered"]["n_receivers"] == rx["v_star"].size
+    assert "an edge map over constant" in (tmp_path / "table.md").read_text()
+    assert json.loads((tmp_path / "tune.json").read_text())["bias_map"]["model"] == pytest.approx(bm["model"])
