@@ -213,7 +213,7 @@ def _case_section(rows, out: Path) -> str:
     return (f"<section id=cases><h2>Cases (<span id=shown>{len(rows)}</span> of {len(rows)} shown)</h2>"
             f"<p class=note>Click a header to sort (undefined values, '-', last), a row to see its error and shadow "
             f"images below the table. Rates: acne = n_acne / n_gt_lit, peter-pan = n_peterpan / n_gt_shadowed, "
-            f"error = (acne + peter-pan) / receivers; times are warm medians (ms).</p>"
+            f"error = (acne + peter-pan) / receivers; times are kernel-time medians of the timed repeats (ms).</p>"
             f"<div class=filters>{''.join(selects)}<label>text <input id=filter-text size=18></label></div>"
             f"<div class=scroll>{_table(head, body, 'case-table', True)}</div>"
             f"<div id=viewer><p class=note>Error image colours: {legend}</p></div></section>")

@@ -34,7 +34,7 @@ DEFINITIONS = (
     "sum n_acne / sum n_gt_lit; peter-pan: sum n_peterpan / sum n_gt_shadowed; error: sum (n_acne + "
     "n_peterpan) / sum n_receivers); *mean / median / max* are over the per-case rates where they are "
     "defined, and *undefined* counts the cases left out (an empty denominator: no truly lit, no truly "
-    "shadowed receiver, or none at all); times are means of the per-case warm medians (ms); *best in*: "
+    "shadowed receiver, or none at all); times are means of the per-case kernel-time medians (ms); *best in*: "
     "the situations (scene, light, view, resolution) where its error rate is the lowest (ties count for "
     "each). Sorted by pooled error rate.")
 

@@ -198,7 +198,8 @@ def write_table(path: Path, rows: list, name: str, source: str, status=None, ora
              "the same with a sortable case table, the images and the plots.", "",
              *summary.summary_md(rows), *status_md(status), *precision_md(rows), "", "## Cases", "",
              "self/edge: acne counts on the receiver's own shape / at another shape's edge; pp dist: median "
-             "distance from a peter-panned receiver to its true occluder (world units). Times are warm medians.",
+             "distance from a peter-panned receiver to its true occluder (world units). Times are medians over the "
+             "timed repeats of the kernels' own time (Dr.Jit's kernel history).",
              "", legend_md(), "",
              "| case | " + " | ".join(h for _, h in TABLE_COLUMNS) + " |",
              "|---" * (len(TABLE_COLUMNS) + 1) + "|"]
@@ -270,7 +271,8 @@ def pareto_md(rows: list) -> list:
         return []
     out = ["", "## Cost of accuracy: the Pareto frontier", "",
            "Per scene, light and view: the cases no other case beats on both error rate and time "
-           "(map build + lookup, warm medians), over every scheme, resolution, filter and format. "
+           "(map build + lookup, kernel-time medians of the timed repeats), over every scheme, resolution, filter "
+           "and format. "
            "plots/pareto_*.png plots all cases with the frontier marked.", "",
            "| scene | light | view | scheme | params | R | filter | format | error rate | time ms |",
            "|---" * 10 + "|"]

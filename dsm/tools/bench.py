@@ -114,7 +114,8 @@ def sweep_throughput(out: Path, workers: int = 2) -> dict:
     t0 = time.perf_counter()
     local = Runner(cfg, out / "sweep_local", progress=False, keep_images=False).run()
     local_s = time.perf_counter() - t0
-    row = {"cases": len(local.rows), "local_s": local_s, "local_cases_per_s": len(local.rows) / local_s}
+    row = {"cases": len(local.rows), "local_s": local_s, "local_cases_per_s": len(local.rows) / local_s,
+           "kernel_launches": local.run["timing"]["kernel_launches"]}    # issue 33's count, in this run
     try:
         import ray
     except ImportError:
@@ -552,6 +553,10 @@ def _md_sweep(r) -> list:
     if r.get("sweep"):
         w = r["sweep"]
         lines += ["", "## (5) Sweep throughput: a local run against a local Ray cluster", ""]
+        kl = w.get("kernel_launches")
+        if kl:
+            lines += [f"Kernel launches of the local run (Dr.Jit's kernel history): {kl['outside_repeats']} outside the "
+                      f"timed repeats ({kl['outside_per_case']:.2f} a case), {kl['timed_repeats']} inside them.", ""]
         if "ray_s" in w:
             lines += [f"{w['cases']} cases. Local: {w['local_s']:.1f} s ({w['local_cases_per_s']:.2f} cases/s). "
                       f"Ray, {w['workers']} workers: {w['ray_s']:.1f} s ({w['ray_cases_per_s']:.2f} cases/s), "
