@@ -87,7 +87,9 @@ def run_peak(ply: Path, work: Path) -> dict:
 
 def markdown(g: dict) -> list:
     """The bench.md lines of section (7)."""
-    lines = ["", "## (7) Cost against geometry: the DEM terrain resampled to 1e4-1e6 triangles", "",
+    tris = [r["triangles"] for r in g["rows"]]
+    span = f"{min(tris):.0e}-{max(tris):.0e}".replace("e+0", "e") if tris else "no"
+    lines = ["", f"## (7) Cost against geometry: the DEM terrain resampled to {span} triangles", "",
              "Build: the first layer of a 1024^2 map; frame: that map with the slope layer plus every "
              "single-layer scheme's lookup over the camera's visible pixels (as (6)). Kernel time: the kernels' "
              "own execution time; wall: Python's tracing included. Peak: a one-case `dsm run` on the mesh "
