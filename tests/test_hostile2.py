@@ -259,9 +259,10 @@ CBOX = Path(__file__).resolve().parent.parent / "data" / "meshes" / "cbox_mitsub
 
 
 @pytest.mark.parametrize("key,value", [("precision", '"camera_relative"'), ("precision", '["world", "camera_relative"]'),
-                                       ("translate", "[1e5, 0, 0]")])
+                                       ("up", '"z"')])
 def test_a_placement_key_on_an_xml_scene_names_that_key(tmp_path, capsys, key, value):
-    """The error named scene[0] and "scale/translate/up/ground", not precision, which was the key given."""
+    """The error named scene[0] and "up/ground/...", not the key given (an XML scene takes scale and
+    translate only)."""
     path = tmp_path / "c.toml"
     path.write_text(f'[experiment]\nname = "x"\n[[scene]]\nfile = "{CBOX}"\n{key} = {value}\n'
                     '[map]\nresolution = 16\n[[scheme]]\nname = "none"\n')
