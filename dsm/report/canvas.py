@@ -15,6 +15,7 @@ pixel, the same figure drawn on a new Figure (tests/test_report_canvas.py).
 from __future__ import annotations
 
 import contextlib
+import warnings
 import functools
 import math
 
@@ -119,7 +120,12 @@ def reusing():
     before = _POOL["figures"]
     _POOL["figures"] = {} if before is None else before
     try:
-        yield
+        with warnings.catch_warnings():
+            # a pooled panel keeps the last figure's (log) scale while the next one's data, which may
+            # hold no positive value, is plotted; figures.set_scale then sets the scale it wants, so
+            # matplotlib's warning about the scale it is leaving says nothing about the figure
+            warnings.filterwarnings("ignore", message="Data has no positive values", category=UserWarning)
+            yield
     finally:
         _POOL["figures"] = before
 
