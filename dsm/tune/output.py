@@ -110,6 +110,30 @@ def _fmt(x):
     return str(x)
 
 
+def _bias_map_head(b: dict) -> str:
+    """table.md's sentence on the learned bias map: its fit, what it is over, its coverage."""
+    if b.get("fit") == "residual":
+        how = (f"a residual in texels over {b['base']}, blocks of {b['block']} x {b['block']} texels fitted "
+               f"exactly to the training receivers of the blocks within {b['radius']} of each, moved where they "
+               f"gain at least {b['min_gain']} errors ({b['blocks_moved']} of {b['blocks']} blocks moved)"
+               if b["chosen"] else f"no residual over {b['base']}: no candidate (block, radius, min_gain) "
+               f"beat it leaving one training camera out ({b['validation']['none']:g} errors; best candidate "
+               f"{min((s['errors'] for s in b['validation']['scores']), default=float('nan')):g})")
+        return f"{how}; {_fmt(b['heldout_covered_fraction'])} of held-out receivers fall in trained blocks"
+    elif b.get("fit") == "edge":
+        m = b["model"]
+        return (f"an edge map over {b['base']}: lit where the tent (half-width {m['width']:g} texel) mean of the "
+                f"3 x 3 taps' margins clipped at {m['clip']:g} texel is at least {m['threshold']:.4g} + "
+                f"{m['grazing']:g} (1 - cos), fitted exactly to the training receivers ({len(b['candidates'])} "
+                f"candidates); {_fmt(b['heldout_covered_fraction'])} of held-out receivers fall in "
+                f"{b['block']} x {b['block']} blocks with training receivers")
+    else:
+        return (f"{b['blocks']} blocks of {b['block']} x {b['block']} texels ({b['blocks_trained']} with training "
+                f"receivers; {_fmt(b['heldout_covered_fraction'])} of held-out receivers fall in them), unit "
+                f"{b['unit']}, started from {b['init_from']} (per map: "
+                f"{', '.join(f'{x:.4g}' for x in b['init'])})")
+
+
 def table_text(res: TuneResult) -> str:
     """The Markdown summary (``table.md``): a row per tuned scheme against grid search and oracle, then the bias map."""
     lam = res.spec.lam
@@ -137,26 +161,7 @@ def table_text(res: TuneResult) -> str:
     if res.bias_map:
         b = res.bias_map
         bg = b["best_global"]
-        if b.get("fit") == "residual":
-            how = (f"a residual in texels over {b['base']}, blocks of {b['block']} x {b['block']} texels fitted "
-                   f"exactly to the training receivers of the blocks within {b['radius']} of each, moved where they "
-                   f"gain at least {b['min_gain']} errors ({b['blocks_moved']} of {b['blocks']} blocks moved)"
-                   if b["chosen"] else f"no residual over {b['base']}: no candidate (block, radius, min_gain) "
-                   f"beat it leaving one training camera out ({b['validation']['none']:g} errors; best candidate "
-                   f"{min((s['errors'] for s in b['validation']['scores']), default=float('nan')):g})")
-            head = f"{how}; {_fmt(b['heldout_covered_fraction'])} of held-out receivers fall in trained blocks"
-        elif b.get("fit") == "edge":
-            m = b["model"]
-            head = (f"an edge map over {b['base']}: lit where the tent (half-width {m['width']:g} texel) mean of the "
-                    f"3 x 3 taps' margins clipped at {m['clip']:g} texel is at least {m['threshold']:.4g} + "
-                    f"{m['grazing']:g} (1 - cos), fitted exactly to the training receivers ({len(b['candidates'])} "
-                    f"candidates); {_fmt(b['heldout_covered_fraction'])} of held-out receivers fall in "
-                    f"{b['block']} x {b['block']} blocks with training receivers")
-        else:
-            head = (f"{b['blocks']} blocks of {b['block']} x {b['block']} texels ({b['blocks_trained']} with training "
-                    f"receivers; {_fmt(b['heldout_covered_fraction'])} of held-out receivers fall in them), unit "
-                    f"{b['unit']}, started from {b['init_from']} (per map: "
-                    f"{', '.join(f'{x:.4g}' for x in b['init'])})")
+        head = _bias_map_head(b)
         out += ["", "## learned bias map", "", head, "",
                 "| | train | held-out |", "| --- | --- | --- |",
                 f"| learned map | {_fmt(b['train']['objective'])} | {_fmt(b['heldout']['objective'])} |",
