@@ -203,6 +203,11 @@ def main(argv=None) -> int:
                 where += f"; `dsm run ... --out {out} --resume` runs the rest"
         print(f"{chr(10) if sys.stderr.isatty() else ''}dsm: interrupted{where}", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # `dsm ... | head`: the reader of stdout left; every file the command wrote stands. Later
+        # writes (Python's own flush at exit) go to /dev/null instead of a second traceback
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 def _bench(args) -> int:

@@ -94,3 +94,19 @@ def test_ctrl_c_while_the_report_is_written_says_how_to_finish_it(tmp_path, monk
         assert len(list(csv.DictReader(fh))) == 2
     monkeypatch.setattr(publish, "write_report", real)
     assert cli.main(["report", str(out)]) == 0 and (out / "table.md").is_file() and (out / "report.html").is_file()
+
+
+def test_a_reader_that_leaves_early_ends_the_command_quietly():
+    """`dsm schemes | head -1`: stdout's reader is gone (here: closed before the command starts, so its
+    first write fails); the command exits 0 without a BrokenPipeError traceback."""
+    import os
+    import subprocess
+    import sys
+    r, w = os.pipe()
+    os.close(r)
+    try:
+        p = subprocess.run([sys.executable, "-m", "dsm", "schemes"], stdout=w, stderr=subprocess.PIPE, text=True,
+                           timeout=120)
+    finally:
+        os.close(w)
+    assert p.returncode == 0 and "Traceback" not in p.stderr and "BrokenPipe" not in p.stderr, p.stderr
