@@ -494,10 +494,11 @@ class Runner:
                 mmap, mt = moment()
                 look = lambda r: pipeline.moment_visibility(spec, r, mmap, smap)
             uses_plane = moment is None and pipeline.scheme_module(spec.name).USES_PLANE
-            v_np, tap_np, lt, fallbacks = self._looked_up(spec, smap, rx, look, uses_plane and extra is None)
-            if extra is not None:
-                fallbacks = extra[1]
-            v_back = extra[0] if extra is not None else look(rx_back)[0].numpy() if rx_back is not None else np.zeros(0)
+            v_np, tap_np, lt = self._looked_up(rx, look)
+            if extra is None:         # not in a map's wavefront (pre-filtered, or its tracing failed there)
+                extra = (look(rx_back)[0].numpy() if rx_back is not None else np.zeros(0),
+                         pipeline.plane_fallbacks(spec, rx, smap) if uses_plane and rx is not None else 0)
+            v_back, fallbacks = extra
             m, occ = self._case_metrics(sd, gb, setup, view, rx, seam, v_back, wrong, v_np, tap_np, meta)
             fallback = fallbacks if uses_plane else metrics.UNDEFINED
             row = self._case_row(meta, setup, m, rx, spec, moment, mt, build, smap, lt, v_np, fallback)
@@ -510,13 +511,12 @@ class Runner:
         except Exception as e:
             self._fail(f"case {case} ({sd.label}, {setup.label}, {spec.name} {spec.label}, R={view.resolution})", e)
 
-    def _looked_up(self, spec, smap, rx, look, uses_plane) -> tuple:
-        """(visibility, tap shapes (numpy), the lookup's Timing, plane fallbacks) of receivers ``rx``."""
+    def _looked_up(self, rx, look) -> tuple:
+        """(visibility, tap shapes (numpy), the lookup's Timing) of receivers ``rx``."""
         if rx is None:
-            return np.zeros(0), np.zeros(0, np.uint32), timing.Timing(0.0, 0.0, 0.0, 0, 0), 0
+            return np.zeros(0), np.zeros(0, np.uint32), timing.Timing(0.0, 0.0, 0.0, 0, 0)
         (v, tap_shape), lt = timing.measure_kernel(lambda: look(rx), self.cfg.timing_repeats)
-        fallbacks = pipeline.plane_fallbacks(spec, rx, smap) if uses_plane else 0
-        return v.numpy(), tap_shape.numpy(), lt, fallbacks
+        return v.numpy(), tap_shape.numpy(), lt
 
     def _case_metrics(self, sd, gb, setup, view, rx, seam, v_back, wrong, v_np, tap_np, meta) -> tuple:
         """(the case's counts and rates, the contact march's occlusion or None; ``v_back``: V of the

@@ -61,14 +61,19 @@ def reset_launches():
     LAUNCHES.update(outside_repeats=0, timed_repeats=0)
 
 
+def _compiled(hist) -> tuple:
+    """(code generation + backend ms, kernels not found in Dr.Jit's caches) of a call's kernel history."""
+    return (sum(k.get("codegen_time", 0.0) + k.get("backend_time", 0.0) for k in hist),
+            sum(1 for k in hist if not k.get("cache_hit", False)))
+
+
 def measure(fn, repeats: int = 3):
     """Call ``fn`` (returning a tuple of arrays) cold once and warm ``repeats`` times."""
     drain_launches()
     out, cold = _run(fn)
     hist = _jit_kernels()
     LAUNCHES["outside_repeats"] += len(hist)
-    compile_ms = sum(k.get("codegen_time", 0.0) + k.get("backend_time", 0.0) for k in hist)
-    misses = sum(1 for k in hist if not k.get("cache_hit", False))
+    compile_ms, misses = _compiled(hist)
     warm = []
     for _ in range(repeats):
         out, ms = _run(fn)
@@ -92,8 +97,7 @@ def measure_kernel(fn, repeats: int = 3):
         kernel.append(sum(k.get("execution_time", 0.0) for k in hist))
         if i == 0:
             cold, n_kernels = ms, len(hist)
-            compile_ms = sum(k.get("codegen_time", 0.0) + k.get("backend_time", 0.0) for k in hist)
-            misses = sum(1 for k in hist if not k.get("cache_hit", False))
+            compile_ms, misses = _compiled(hist)
     return out, Timing(statistics.median(kernel), compile_ms, cold, n_kernels, misses)
 
 
