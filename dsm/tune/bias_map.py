@@ -174,16 +174,13 @@ def residual_bias_map(tc, train, held, groups, base) -> dict:
     m_he, covered = rm.apply(fit, gain, rx_he, block)
     moved = rm.residuals(fit, gain)
     counted = lambda m, v: counts(int(((m < 0) & v).sum()), int(((m >= 0) & ~v).sum()), int(v.size), int(v.sum()))
-    split = np.cumsum([c.n for c in held])[:-1]
     return {"fit": "residual", "base": f"{base['scheme']} {base['params']}", "block": block, "radius": radius,
             "min_gain": gain if ch["chosen"] else None, "chosen": ch["chosen"] is not None,
             "validation": {"none": ch["none"], "scores": ch["scores"]}, "unit": "texel",
             "values": np.stack([fit["keys"].astype(np.float64), moved]), "blocks": int(fit["keys"].size),
             "blocks_trained": int(fit["keys"].size), "blocks_moved": int((moved != 0).sum()), "steps": [],
             "train": counted(m_tr, rx_tr["v_star"]), "heldout": counted(m_he, rx_he["v_star"]),
-            "heldout_lit": np.split(m_he >= 0, split), "heldout_covered": np.split(covered, split),
-            "heldout_covered_fraction": float(covered.mean()) if covered.size else NAN,
-            "init": [], "total_ms": (sync_clock() - t0) * 1e3}
+            **_heldout_fields(m_he >= 0, covered, held, t0)}
 
 
 def neighbour_margins(spec: SchemeSpec, cases, groups) -> dict:
@@ -225,14 +222,20 @@ def edge_bias_map(tc, train, held, groups, base) -> dict:
     keys = lambda rx: rm.block_keys(rx["texel"], rx["group"], rx["resolution"], bm.block)
     covered = np.isin(keys(rx_he), keys(rx_tr))
     counted = lambda on, v: counts(int((~on & v).sum()), int((on & ~v).sum()), int(v.size), int(v.sum()))
-    split = np.cumsum([c.n for c in held])[:-1]
     params = {k: model[k] for k in ("width", "clip", "grazing", "threshold")}
     return {"fit": "edge", "base": f"{base['scheme']} {base['params']}", "block": bm.block, "model": params,
             "candidates": model["scores"], "unit": "score",
             "values": np.array([params[k] for k in ("width", "clip", "grazing", "threshold")]),
             "blocks": 0, "blocks_trained": 0, "steps": [],
             "train": counted(lit_tr, rx_tr["v_star"]), "heldout": counted(lit_he, rx_he["v_star"]),
-            "heldout_lit": np.split(lit_he, split), "heldout_covered": np.split(covered, split),
+            **_heldout_fields(lit_he, covered, held, t0)}
+
+
+def _heldout_fields(lit_he, covered, held, t0) -> dict:
+    """An exactly fitted map's held-out verdicts and coverage per held-out case (split as ``held``), the
+    covered share, and its time since ``t0`` (no Adam start: ``init`` empty)."""
+    split = np.cumsum([c.n for c in held])[:-1]
+    return {"heldout_lit": np.split(lit_he, split), "heldout_covered": np.split(covered, split),
             "heldout_covered_fraction": float(covered.mean()) if covered.size else NAN,
             "init": [], "total_ms": (sync_clock() - t0) * 1e3}
 
