@@ -5,6 +5,7 @@ import html
 import math
 from pathlib import Path
 
+from .. import prefilter
 from ..report.html import CSS, SCRIPT
 from ..schemes.presets import PRESETS
 from . import bias_units, figure, ranking
@@ -22,7 +23,7 @@ def flicker_note(doc: dict) -> str:
     move = f"the camera dollies {math.hypot(*mo['offset']):g} m over {mo['frames']} frames"
     if mo.get("light") == "turn":
         move += f" while the sun turns {mo['light_angle']:g} degrees"
-    pre = any(r["contender"].split()[0] in ("vsm", "esm", "evsm", "msm") for r in doc.get("flicker", []))
+    pre = any(r["contender"].split()[0] in prefilter.NAMES for r in doc.get("flicker", []))
     who = "every contender" if pre else "depth contenders"
     tail = "" if pre else "; the pre-filtered maps refuse a motion ('-')"
     return (f" Flicker ({who}, on the suite's flicker scenes at metres): the mean over scenes, lights and frame pairs "

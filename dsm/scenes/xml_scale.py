@@ -4,12 +4,13 @@ scaled about the origin, then moved, before loading, so an XML scene takes ``sca
 
 Mitsuba applies a ``<transform>``'s children in the order listed (each one left-multiplies what
 came before), so appending ``<scale value="s"/>`` to a shape's ``to_world`` scales it after its
-own placement: world' = S world (then ``<translate>``: world' = T S world). A sensor or an emitter may not carry a scale (Mitsuba refuses it
-in a camera's transform), so theirs is conjugated, T S M S^-1: the same orientation, its position
-times s, then moved. An element without a ``to_world`` gets one holding only the scale (and move);
-a point emitter given by ``position`` has that point scaled and moved instead; a sensor's near and far clip
-planes are distances and are scaled with it (Mitsuba's defaults, 0.01 and 10000, where the file
-gives none). A directional emitter's direction and an environment's infinite extent do not change.
+own placement: world' = S world (then ``<translate>``: world' = T S world). A sensor or an
+emitter may not carry a scale (Mitsuba refuses it in a camera's transform), so theirs is
+conjugated, T S M S^-1: the same orientation, its position times s, then moved. An element
+without a ``to_world`` gets one holding only the scale (and move); a point emitter given by
+``position`` has that point scaled and moved instead; a sensor's near and far clip planes are
+distances and are scaled with it (Mitsuba's defaults, 0.01 and 10000, where the file gives none).
+A directional emitter's direction and an environment's infinite extent do not change.
 Shape groups are left alone (their instances carry the transforms) and an ``<include>`` is refused:
 its elements would stay in the file's units.
 """
