@@ -17,6 +17,7 @@ SCHEDULES = ("geometric", "linear")
 MAP_KEYS = ("block", "unit", "init", "steps", "lr", "fit", "radius", "min_gain", "margin", "width", "clip", "grazing")
 MAP_FITS = ("adam", "residual", "edge")
 EDGE_KEYS = ("width", "clip", "grazing")
+EDGE_WIDTH_TEXELS = (0.5, 1.5)    # the edge map's tent half-widths: wider than 1.5 reaches beyond its 3 x 3 taps
 MAP_UNITS = ("world", "texel")
 
 
@@ -266,12 +267,13 @@ def _bias_map(b, src: str, steps: int, lr: float, cams: tuple) -> BiasMapSpec:
 def _edge_candidates(b: dict, src: str) -> tuple:
     """The edge map's candidate lists (width within 0.5 to 1.5 texels: the 3 x 3 taps; clip above 0; grazing >= 0)."""
     out = []
-    for key, lo, hi, pos in (("width", 0.5, 1.5, True), ("clip", None, None, True), ("grazing", 0.0, None, False)):
+    for key, lo, hi, pos in (("width", *EDGE_WIDTH_TEXELS, True), ("clip", None, None, True),
+                             ("grazing", 0.0, None, False)):
         vals = as_list(b.get(key, list(getattr(BiasMapSpec, key + "s"))))
         if not vals:
             raise ConfigError(src, f"tune.bias_map.{key}", "empty list: give at least one value")
         nums = tuple(number(x, src, f"tune.bias_map.{key}", positive=pos, minimum=lo, maximum=hi) for x in vals)
-        if key == "width" and min(nums) <= 0.5:
+        if key == "width" and min(nums) <= EDGE_WIDTH_TEXELS[0]:
             raise ConfigError(src, "tune.bias_map.width", "a tent of half-width 0.5 texel or less can miss every tap: "
                               "give widths above 0.5 (1: bilinear)")
         out.append(nums)

@@ -35,7 +35,6 @@ import numpy as np
 from .residual_map import fit_blocks
 
 OFFSETS = tuple((a, b) for b in (-1, 0, 1) for a in (-1, 0, 1))   # the 3 x 3 taps, (i, j) texels; centre 4
-WIDTH_RANGE = (0.5, 1.5)          # a tent wider than 1.5 texels would reach beyond the 3 x 3 taps
 THRESHOLD_MARGIN = 0.02           # score units kept inside the threshold's optimal interval
 
 
