@@ -26,6 +26,7 @@ AREA_SHAPES = ("rectangle", "disk", "sphere", "emitter")
 VARIANTS = ("llvm_ad_rgb", "cuda_ad_rgb")
 # [report] images: error and shadow images per case, error images only, or none
 REPORT_IMAGES = ("all", "errors", "none")
+LOOKUP_MODES = ("wavefront", "per_case")   # [timing] lookups (dsm.experiment.wavefront)
 
 
 class ConfigError(ValueError):
@@ -415,6 +416,7 @@ class Config:
     map: MapSpec = field(default_factory=MapSpec)
     schemes: tuple = ()
     timing_repeats: int = 3
+    timing_lookups: str = "wavefront"       # [timing] lookups: a map's cases in one wavefront, or "per_case"
     memory_budget_mb: float | None = None   # None: a quarter of this machine's memory
     oracle: "OracleSpec" = field(default_factory=lambda: OracleSpec())
     report_images: str = "all"              # [report] images (REPORT_IMAGES)

@@ -301,8 +301,10 @@ def test_plan_counts_the_camera_buffers():
                                     "map": {"resolution": 32}, "scheme": [{"name": "none"}]}))
     big = plan.make(config.parse({"camera": {"resolution": [2048, 2048]}, "scene": [{"builtin": "plane"}],
                                   "map": {"resolution": 32}, "scheme": [{"name": "none"}]}))
-    # G-buffer (150 B/px measured), reference and host images per pixel
-    assert big.peak_bytes() - small.peak_bytes() == (2048 ** 2 - 64 ** 2) * plan.PIXEL_BYTES
+    # G-buffer (150 B/px measured), reference and host images per pixel, and the one case's
+    # lookup wave (its outputs on the device and their numpy copies)
+    per_pixel = plan.PIXEL_BYTES + 2 * plan.WAVE_RECEIVER_BYTES
+    assert big.peak_bytes() - small.peak_bytes() == (2048 ** 2 - 64 ** 2) * per_pixel
     assert plan.PIXEL_BYTES >= plan.GBUFFER_BYTES + plan.REFERENCE_BYTES
 
 

@@ -52,6 +52,13 @@ MOMENT_BYTES = 120
 # per-texel mean): 28 B measured as the peak of R = 512 with 8 x 8 rays a texel (472 MB), rounded up
 SUPERSAMPLE_BYTES = 32
 MIN_TILE = 1 << 16
+# a map's lookup wavefront (dsm.experiment.wavefront) holds every case's outputs at once: per
+# receiver V (4 B), the nearest tap's shape (4 B) and the plane-miss mask (1 B), per back-facing
+# receiver V (4 B); a wave holds at most WAVE_BYTES of them (more cases go into further waves),
+# twice over while they are copied to numpy
+WAVE_RECEIVER_BYTES = 9
+WAVE_BACK_BYTES = 4
+WAVE_BYTES = 128 << 20
 # per triangle of the scene: Mitsuba's mesh buffers, Embree's BVH, the loader's temporaries and
 # the kit's per-triangle tables (spawn extents, closedness); measured as the peak RSS growth of
 # `dsm run` on grid meshes of 1e4 to 1e7 triangles (381 to 410 B per triangle at 1e6 and 1e7),
@@ -60,6 +67,12 @@ TRIANGLE_BYTES = 412
 # the process itself (Python, Mitsuba, Dr.Jit's LLVM backend, numpy, matplotlib): the peak RSS
 # (VmHWM) of `dsm run` on a 1e4-triangle mesh with a 64^2 camera and a 256^2 map, 129 MiB, less those
 PROCESS_BYTES = 125 << 20
+
+
+def wave_cases(receivers: int, back_receivers: int = 0) -> int:
+    """How many cases of one map a lookup wavefront holds within ``WAVE_BYTES`` (at least one)."""
+    per_case = receivers * WAVE_RECEIVER_BYTES + back_receivers * WAVE_BACK_BYTES
+    return max(1, WAVE_BYTES // per_case) if per_case else 1 << 30
 
 
 @dataclass
@@ -134,6 +147,7 @@ class Plan:
     frames: int = 0                                 # [[motion]]: frames over all paths (maps built per frame, at most)
     contact: object = None                          # [contact]: the ContactSpec of every case's march, None: none
     shrink: float | None = None                     # [map] shrink: casters moved inward (world units), None: off
+    lookups: str = "wavefront"                      # [timing] lookups (dsm.experiment.wavefront)
 
     @property
     def oracle_receivers(self) -> int:
@@ -167,12 +181,16 @@ class Plan:
         return max((self._scene_peak(s)[0] for s in self.scenes), default=0)
 
     def _scene_peak(self, scene) -> tuple:
-        """(peak bytes, parts) of one scene: the process, its pixels' buffers, its geometry and its
-        largest map; parts names the last three ({"camera", "geometry", "map"}: bytes)."""
+        """(peak bytes, parts) of one scene: the process, its pixels' buffers, its geometry, its
+        largest map and its largest lookup wave; parts names the last four ({"camera", "geometry",
+        "map", "lookups"}: bytes; a wave's receivers, front and back, at most the camera's pixels)."""
         label, w, h, _ = scene
+        wave = 2 * w * h * WAVE_RECEIVER_BYTES
         parts = {"camera": w * h * PIXEL_BYTES,
                  "geometry": self.triangles.get(label, (0, ""))[0] * TRIANGLE_BYTES,
-                 "map": max((m.peak_bytes for m in self.maps if m.scene == label), default=0)}
+                 "map": max((m.peak_bytes for m in self.maps if m.scene == label), default=0),
+                 "lookups": max((min(m.cases, wave_cases(w * h)) * wave for m in self.maps
+                                 if m.scene == label), default=0) if self.lookups == "wavefront" else 0}
         return PROCESS_BYTES + sum(parts.values()), parts
 
     def warnings(self) -> list:
@@ -235,10 +253,21 @@ class Plan:
         if self.shrink is not None:
             lines.append(f"  caster shrinking: maps cast against a copy of each scene's meshes moved {self.shrink:g} "
                          "inward along their welded vertex normals")
+        lines.append(self._lookups_line())
         lines.append(f"  estimated peak memory: {self.peak_bytes() * mb:.1f} MB (the process "
-                     f"{PROCESS_BYTES * mb:.0f} MB, camera buffers, geometry and the largest map of a scene)")
+                     f"{PROCESS_BYTES * mb:.0f} MB, camera buffers, geometry, the largest map and lookup wave "
+                     "of a scene)")
         lines += [f"  warning: {w}" for w in self.warnings()]
         return "\n".join(lines)
+
+    def _lookups_line(self) -> str:
+        """How the cases' lookups run ([timing] lookups): per case, or each map's in waves of how many."""
+        if self.lookups != "wavefront":
+            return "  lookups: each case's alone (timed per case)"
+        px = {label: w * h for label, w, h, _ in self.scenes}
+        waves = sum(-(-m.cases // wave_cases(px.get(m.scene, 0))) for m in self.maps if m.cases)
+        return (f"  lookups: each map's cases in one wavefront (at most {waves} waves for {len(self.maps)} maps, at most "
+                f"{WAVE_BYTES >> 20} MB of outputs a wave), each kernel timed alone once")
 
     def as_dict(self) -> dict:
         """The plan's counts and per-map rows as a JSON-ready dict."""
@@ -301,6 +330,9 @@ def check_memory(plan: "Plan", source: str = "<config>", available: int | None =
         elif cause == "geometry":
             tris, key = plan.triangles[label]
             what = f"{tris:,} triangles x {TRIANGLE_BYTES} B = {parts['geometry'] * gb:.1f} GiB"
+        elif cause == "lookups":
+            key, what = "timing.lookups", (f"a lookup wavefront's outputs = {parts['lookups'] * gb:.1f} GiB "
+                                           "(\"per_case\" holds one case's)")
         else:
             m = max((m for m in plan.maps if m.scene == label), key=lambda m: m.peak_bytes)
             key, what = "map.resolution", (f"the {m.view} map at R={m.resolution} with {'+'.join(m.layers)} "
@@ -474,7 +506,8 @@ def make(cfg: Config) -> Plan:
     from ..config.read import absent_files
     check_emitters(cfg)
     plan = Plan(cfg.source, budget_bytes=memory_budget(cfg), absent=absent_files(cfg),
-                lambdas=len(cfg.oracle.lambdas), contact=getattr(cfg, "contact", None), shrink=getattr(cfg, "shrink", None))
+                lambdas=len(cfg.oracle.lambdas), contact=getattr(cfg, "contact", None), shrink=getattr(cfg, "shrink", None),
+                lookups=getattr(cfg, "timing_lookups", "wavefront"))
     groups = _culling_groups(cfg)
     used, views_seen = set(), set()        # the scheme instances some map reads; the views the lights get
     for si, sc in enumerate(cfg.scenes):

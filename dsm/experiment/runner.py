@@ -27,7 +27,7 @@ from ..maps import cascades, headroom, shadowmap
 from ..tools import env, timing
 from ..report import figures, publish, tables as report, io as report_io
 from ..truth import metrics
-from . import motion, record, resume
+from . import motion, record, resume, wavefront
 from .. import pipeline
 from ..report.sections import soft as soft_report
 from ..contact import march as contact
@@ -361,7 +361,7 @@ class Runner:
             first_t = bt if m.culling == "none" and not m.needs else self._build(sd, view, set(), "none", m.tile)[1]
         self.case_no = self.first_case[self.plan.maps.index(m)]     # case ids from the plan
         specs = [pipeline.preset_for_light(spec, setup.light.type) for spec in m.specs]   # a preset's values here
-        extras = self._extras(specs, stored, rxs, backs)
+        extras, looked = self._lookups(specs, stored, rxs, backs)
         for spec in specs:
             own = frozenset(pipeline.needs_of([spec]))                  # this instance's own layers, for build_ms
             if own not in build_times:
@@ -371,7 +371,7 @@ class Runner:
                 for fmt in self.cfg.map.format:
                     self._run_case(sd, gb, setup, view, stored[fmt], (build_times[own], first_t), rxs[fmt], seam,
                                    spec, filt, fmt, backs[fmt], wrong[fmt] if filt == "nearest" else None,
-                                   extra=extras.get((spec, filt, fmt)))
+                                   extra=extras.get((spec, filt, fmt)), looked=looked.get((spec, filt, fmt)))
                     self.bar.update(1)
         moment_maps = {}              # instances sharing their moments share one build (dsm.prefilter)
         for spec in m.moments:
@@ -382,22 +382,32 @@ class Runner:
                 self.bar.update(1)
         return first_t
 
-    def _extras(self, specs, stored, rxs, backs) -> dict:
-        """(spec, filter, format) -> (V of the attached-shadow receivers, plane fallbacks) of every depth
-        case of one map, evaluated together (one wavefront of launches, not one per case; numpy out).
+    def _lookups(self, specs, stored, rxs, backs) -> tuple:
+        """(extras, looked) of one map's depth cases not kept from a resumed run, by (spec, filter,
+        format): with ``[timing] lookups = "wavefront"`` every lookup from the map's wavefront
+        (dsm.experiment.wavefront; its wave time into the map's record), else each case times its
+        own lookup and only its attached-shadow V and plane fallbacks come from one wavefront."""
+        family = [(spec, filt, fmt) for spec in specs for filt in self.cfg.map.filter for fmt in self.cfg.map.format]
+        cases = [c for i, c in enumerate(family, self.case_no + 1) if self.keys.get(f"{i:04d}") not in self.kept]
+        if self.cfg.timing_lookups == "per_case":
+            return self._extras(cases, stored, rxs, backs), {}
+        looked, wave = wavefront.run(cases, stored, rxs, backs, self.cfg.seed, self.cfg.timing_repeats, family)
+        self.record.maps[-1].update(wave)
+        return {}, looked
+
+    def _extras(self, cases, stored, rxs, backs) -> dict:
+        """(spec, filter, format) -> (V of the attached-shadow receivers, plane fallbacks) of the depth
+        cases ``cases`` of one map, evaluated together (one wavefront of launches, not one per case; numpy out).
         A case whose expressions fail here is left out: its own lookups then run (and fail) in its case."""
         lazy = {}
-        for spec in specs:
-            for filt in self.cfg.map.filter:
-                for fmt in self.cfg.map.format:
-                    try:
-                        back = backs[fmt]
-                        v_back = None if back is None else pipeline.visibility(spec, back, stored[fmt], filt,
-                                                                               self.cfg.seed)[0]
-                        miss = None if rxs[fmt] is None else pipeline.plane_misses(spec, rxs[fmt], stored[fmt])
-                        lazy[(spec, filt, fmt)] = (v_back, miss)
-                    except Exception:
-                        continue
+        for spec, filt, fmt in cases:
+            try:
+                back = backs[fmt]
+                v_back = None if back is None else pipeline.visibility(spec, back, stored[fmt], filt, self.cfg.seed)[0]
+                miss = None if rxs[fmt] is None else pipeline.plane_misses(spec, rxs[fmt], stored[fmt])
+                lazy[(spec, filt, fmt)] = (v_back, miss)
+            except Exception:
+                continue
         try:
             dr.eval(*[x for pair in lazy.values() for x in pair if x is not None])
         except Exception:
@@ -469,10 +479,11 @@ class Runner:
                                 f"after {shadowmap.MAX_STEPS} surfaces"})
 
     def _run_case(self, sd, gb, setup, view, smap, build, rx, seam, spec, filt, fmt, rx_back=None, wrong=None,
-                  moment=None, extra=None):
+                  moment=None, extra=None, looked=None):
         """One case: a scheme instance and filter on a stored depth map, or (``moment``: its
         MomentMap's builder) a pre-filtered instance on the depth map's moments; ``extra``: its
-        attached-shadow V and plane fallbacks from the map's wavefront (else looked up here)."""
+        attached-shadow V and plane fallbacks from the map's wavefront, ``looked``: all its lookups
+        from there (dsm.experiment.wavefront.Looked; else looked up here)."""
         case = self.next_case()
         if self.keys.get(case) in self.kept:          # finished by the run being resumed: its row again
             row, st, cascade_rows = self.kept[self.keys[case]]
@@ -494,7 +505,10 @@ class Runner:
                 mmap, mt = moment()
                 look = lambda r: pipeline.moment_visibility(spec, r, mmap, smap)
             uses_plane = moment is None and pipeline.scheme_module(spec.name).USES_PLANE
-            v_np, tap_np, lt = self._looked_up(rx, look)
+            if looked is not None:
+                v_np, tap_np, lt, extra = looked.v, looked.tap_shape, looked.timing, (looked.v_back, looked.misses)
+            else:
+                v_np, tap_np, lt = self._looked_up(rx, look)
             if extra is None:         # not in a map's wavefront (pre-filtered, or its tracing failed there)
                 extra = (look(rx_back)[0].numpy() if rx_back is not None else np.zeros(0),
                          pipeline.plane_fallbacks(spec, rx, smap) if uses_plane and rx is not None else 0)
@@ -502,6 +516,7 @@ class Runner:
             m, occ = self._case_metrics(sd, gb, setup, view, rx, seam, v_back, wrong, v_np, tap_np, meta)
             fallback = fallbacks if uses_plane else metrics.UNDEFINED
             row = self._case_row(meta, setup, m, rx, spec, moment, mt, build, smap, lt, v_np, fallback)
+            row["lookup_shared"] = looked.shared if looked is not None else 1
             self._case_images(meta, gb, setup, v_np, wrong, occ, rx)
             # a case without receivers says nothing about the scheme: it is reported as empty
             self.add_case(row, {"what": f"case {case}", **{k: meta[k] for k in ("scene", "light", "view", "scheme",

@@ -316,7 +316,9 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
     if geometry:
         result["geometry"] = geometry_cost(out, tuple(geometry), repeats=max(1, min(repeats, 3)))
     if sweep:
+        from .bench_lookups import lookup_modes
         result["sweep"] = sweep_throughput(out)
+        result["lookup_modes"] = lookup_modes(out)
     if prefilter:
         from .bench_prefilter import prefilter_cost
         result["prefilter"] = prefilter_cost(repeats=repeats)
@@ -437,7 +439,9 @@ def markdown(r) -> str:
     from .bench_prefilter import markdown as prefilter_md
     lines += geometry_md(r["geometry"]) if r.get("geometry") else []
     lines += prefilter_md(r["prefilter"]) if r.get("prefilter") else []
-    return "\n".join(lines + _md_sweep(r)) + "\n"
+    from .bench_lookups import markdown as lookups_md
+    lines += _md_sweep(r) + (lookups_md(r["lookup_modes"]) if r.get("lookup_modes") else [])
+    return "\n".join(lines) + "\n"
 
 
 def _md_builds(r) -> list:
