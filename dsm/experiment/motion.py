@@ -373,7 +373,7 @@ def _frame_map(runner, state: _MapFrames, sd, m, view, closed, extents):
             sm = pipeline.build_map(sd.scene, view, set(m.needs), m.culling,
                                     closed if m.culling != "none" else None, m.tile, extents)
             return (*shadowmap.arrays(sm), sm)       # the arrays, so the timing waits for them
-        out, tm = timing.measure(build, 0)
+        out, tm = timing.measure_kernel(build, 1)      # a frame's build once, in kernel time (as a still map's)
         state.smap = out[-1]
         state.moments = {}                        # a new first layer: new moments
         state.build_ms.append(tm.ms)
@@ -437,7 +437,7 @@ def _run_frame(runner, state: _MapFrames, keys, per, t, sd, m, base, pose, light
         v_pts = np.asarray(look(rx_pts)[0].numpy(), np.float64)
         face = np.asarray(rx_pts.face.numpy(), np.int64)
         if has_rx:
-            (v, tap), lt = timing.measure(lambda: look(rx), 0)
+            (v, tap), lt = timing.measure_kernel(lambda: look(rx), 1)    # kernel time, compile apart
             v_np, tap_np = v.numpy(), tap.numpy()
             d_lookup = lt.ms
         else:
