@@ -199,6 +199,8 @@ def _parse_map(m: dict, lights, source: str) -> MapSpec:
                       ("map.view", views)):
         if not vals:
             raise ConfigError(source, key, "empty list")
+        once(vals, source, key)
+    once(texels, source, "map.texels")
     _check_map_lights(m, views, lights, source)
     cascade = _parse_cascades(m, source)
     if cascade and all(l.type not in ("directional", "scene") for l in lights):
@@ -212,6 +214,16 @@ def _parse_map(m: dict, lights, source: str) -> MapSpec:
     return MapSpec(resolutions, filters, formats, views, texels, cascade, kinds,
                    _parse_moments(m, kinds, formats, source),
                    "kind" in m, number(m.get("leak_texels", 2.0), source, "map.leak_texels", minimum=0.0))
+
+
+def once(values, source: str, key: str):
+    """ConfigError where a list of case dimension ``key`` gives a value twice (a repeat would run
+    the same cases twice, under two ids)."""
+    seen = set()
+    for v in values:
+        if v in seen:
+            raise ConfigError(source, key, f"{v} is given twice: give each value once")
+        seen.add(v)
 
 
 def _check_map_lights(m: dict, views, lights, source: str):
@@ -234,9 +246,15 @@ def _parse_schemes(raw: dict, mapspec: MapSpec, source: str) -> list:
                           "add depth to map.kind or remove them", MAP_KINDS)
     if not scheme_tables and "depth" in mapspec.kind:
         raise ConfigError(source, "scheme", "at least one [[scheme]] is required", [s.NAME for s in REGISTRY])
-    schemes = []
+    schemes, where = [], {}
     for i, t in enumerate(scheme_tables):
-        schemes += parse_scheme(t, source, f"scheme[{i}]", REGISTRY, PRESETS)
+        for spec in parse_scheme(t, source, f"scheme[{i}]", REGISTRY, PRESETS):
+            if spec in where:           # the same instance twice would run (and report) the same cases twice
+                again = "given twice in its sweep" if where[spec] == f"scheme[{i}]" else f"already {where[spec]}'s"
+                raise ConfigError(source, f"scheme[{i}]", f"{spec.name} {spec.label} is {again}: give each "
+                                  "instance once")
+            where[spec] = f"scheme[{i}]"
+            schemes.append(spec)
     if view_mismatch(schemes, mapspec.view):
         raise ConfigError(source, "map.view", view_mismatch(schemes, mapspec.view), MAP_VIEWS)
     return schemes
