@@ -394,3 +394,22 @@ def test_an_obj_cut_mid_record_is_refused_naming_the_line(tmp_path, capsys, tail
     rc, err = _cli(capsys, "run", cfg, "--out", tmp_path / "o")
     assert rc == 2
     _one_line(err, "scene[0].file", "line 6", what)
+
+
+@pytest.mark.parametrize("over, key, words", [
+    ({"map": {"resolution": [64, 128, 64]}}, "map.resolution", ("64 is given twice",)),
+    ({"map": {"resolution": 64, "filter": ["nearest", "pcss", "nearest"]}}, "map.filter", ("nearest is given twice",)),
+    ({"map": {"resolution": 64, "format": ["unorm16", "unorm16"]}}, "map.format", ("unorm16 is given twice",)),
+    # "1 texel" and "1.0 texel" are one length: the same instance twice
+    ({"scheme": [{"name": "constant", "bias": ["1 texel", "2 texel", "1.0 texel"]}]}, "scheme[0]",
+     ("constant bias=1 texel", "given twice in its sweep")),
+    ({"scheme": [{"name": "none"}, {"name": "constant", "bias": 0.1}, {"name": "constant", "bias": [0.2, 0.1]}]},
+     "scheme[2]", ("constant bias=0.1", "already scheme[1]'s")),
+])
+def test_a_repeated_case_dimension_is_refused(over, key, words):
+    """A value given twice in a case dimension would run the same cases twice under two ids (and a
+    resumed run could not tell them apart): refused, naming the key and the repeated value."""
+    with pytest.raises(ConfigError) as e:
+        config.parse(base_config(**over))
+    msg = str(e.value)
+    assert key in msg and all(w in msg for w in words), msg
