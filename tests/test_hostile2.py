@@ -413,3 +413,23 @@ def test_a_repeated_case_dimension_is_refused(over, key, words):
         config.parse(base_config(**over))
     msg = str(e.value)
     assert key in msg and all(w in msg for w in words), msg
+
+
+def test_an_xml_scene_scaled_past_float32_names_the_scale_not_the_file(tmp_path, capsys):
+    """The Cornell box at scale 1e20 fails in Mitsuba's OBJ loader (its normals overflow float32);
+    the file loads unscaled, so the message names scene[0].scale (it named scene[0].file)."""
+    from conftest import MESHES
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[[scene]]\nfile = "{MESHES / "cbox_mitsuba" / "cbox.xml"}"\nscale = 1e20\n'
+                   '[[scheme]]\nname = "none"\n')
+    rc, err = _cli(capsys, "run", cfg, "--out", tmp_path / "o")
+    assert rc == 2
+    _one_line(err, "scene[0].scale", "scaled by 1e+20", "it loads unscaled")
+    assert not (tmp_path / "o").exists()
+    # a file that does not load at all still names the file
+    bad = tmp_path / "bad.xml"
+    bad.write_text('<scene version="3.0.0"><shape type="nosuch"/></scene>')
+    cfg.write_text(f'[[scene]]\nfile = "{bad}"\nscale = 1e20\n[[scheme]]\nname = "none"\n')
+    rc, err = _cli(capsys, "run", cfg, "--out", tmp_path / "o")
+    assert rc == 2
+    _one_line(err, "scene[0].file")

@@ -25,8 +25,25 @@ def load_file(spec, camera_resolution=None, camera=None):
     except ConfigError:
         raise
     except (RuntimeError, ValueError, OSError) as e:      # Mitsuba's loaders raise RuntimeError
-        raise ConfigError(source_of(spec), f"{spec.where}.file", f"cannot load {spec.file}: "
-                          f"{mitsuba_message(e, spec.file.suffix.lower() != '.xml')}") from None
+        scale = float(getattr(spec.params, "scale", 1.0) or 1.0)
+        # a file that loads unscaled and fails scaled (float32 overflows in its normals): the scale's fault
+        at_scale = scale != 1.0 and _loads_unscaled(spec)
+        raise ConfigError(source_of(spec), f"{spec.where}.{'scale' if at_scale else 'file'}",
+                          f"cannot load {spec.file}" + (f" scaled by {scale:g} (it loads unscaled)" if at_scale else "")
+                          + f": {mitsuba_message(e, spec.file.suffix.lower() != '.xml')}") from None
+
+
+def _loads_unscaled(spec) -> bool:
+    """Whether Mitsuba loads the file of ``spec`` at scale 1, where it is where it was put."""
+    import mitsuba as mi
+    try:
+        if spec.file.suffix.lower() == ".xml":
+            load_xml_scene(spec.file)
+        else:
+            mi.load_dict({"type": spec.file.suffix.lower()[1:], "filename": str(spec.file)})
+        return True
+    except (RuntimeError, ValueError, OSError):
+        return False
 
 
 def mitsuba_message(e, mesh_file: bool = False) -> str:
