@@ -424,12 +424,13 @@ def test_an_xml_scene_scaled_past_float32_names_the_scale_not_the_file(tmp_path,
                    '[[scheme]]\nname = "none"\n')
     rc, err = _cli(capsys, "run", cfg, "--out", tmp_path / "o")
     assert rc == 2
-    _one_line(err, "scene[0].scale", "scaled by 1e+20", "it loads unscaled")
+    _one_line(err, "scene[0].scale", "scaled by 1e+20", "it loads as it is")
     assert not (tmp_path / "o").exists()
-    # a file that does not load at all still names the file
+    # a file that does not load at all still names the file, and the line of the file as it is (the
+    # scaled text Mitsuba read has its lines moved by the inserted transforms)
     bad = tmp_path / "bad.xml"
-    bad.write_text('<scene version="3.0.0"><shape type="nosuch"/></scene>')
+    bad.write_text('<scene version="3.0.0">\n  <shape type="rectangle"/>\n  <shape type="nosuch"/>\n</scene>\n')
     cfg.write_text(f'[[scene]]\nfile = "{bad}"\nscale = 1e20\n[[scheme]]\nname = "none"\n')
     rc, err = _cli(capsys, "run", cfg, "--out", tmp_path / "o")
     assert rc == 2
-    _one_line(err, "scene[0].file")
+    _one_line(err, "scene[0].file", "line 3,", "nosuch")

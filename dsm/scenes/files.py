@@ -25,25 +25,38 @@ def load_file(spec, camera_resolution=None, camera=None):
     except ConfigError:
         raise
     except (RuntimeError, ValueError, OSError) as e:      # Mitsuba's loaders raise RuntimeError
-        scale = float(getattr(spec.params, "scale", 1.0) or 1.0)
-        # a file that loads unscaled and fails scaled (float32 overflows in its normals): the scale's fault
-        at_scale = scale != 1.0 and _loads_unscaled(spec)
-        raise ConfigError(source_of(spec), f"{spec.where}.{'scale' if at_scale else 'file'}",
-                          f"cannot load {spec.file}" + (f" scaled by {scale:g} (it loads unscaled)" if at_scale else "")
-                          + f": {mitsuba_message(e, spec.file.suffix.lower() != '.xml')}") from None
+        raise _load_error(spec, e) from None
 
 
-def _loads_unscaled(spec) -> bool:
-    """Whether Mitsuba loads the file of ``spec`` at scale 1, where it is where it was put."""
+def _load_error(spec, e) -> ConfigError:
+    """The ConfigError of a file Mitsuba failed to load (``e``). A scaled or moved file is loaded
+    again as it is: where that fails too, its own error (an XML's lines are the file's, not those of
+    the rewritten text) names the file; where it loads, the scale (or translate) is at fault."""
+    mesh = spec.file.suffix.lower() != ".xml"
+    scale = float(getattr(spec.params, "scale", 1.0) or 1.0)
+    moved = any(float(c) for c in getattr(spec.params, "translate", (0.0, 0.0, 0.0)) or (0.0, 0.0, 0.0))
+    if scale == 1.0 and not moved:
+        return ConfigError(source_of(spec), f"{spec.where}.file", f"cannot load {spec.file}: {mitsuba_message(e, mesh)}")
+    plain = _plain_load_error(spec)
+    if plain is not None:
+        return ConfigError(source_of(spec), f"{spec.where}.file", f"cannot load {spec.file}: "
+                           f"{mitsuba_message(plain, mesh)}")
+    key, how = ("scale", f"scaled by {scale:g}") if scale != 1.0 else ("translate", "moved")
+    return ConfigError(source_of(spec), f"{spec.where}.{key}", f"cannot load {spec.file} {how} (it loads as it "
+                       f"is): {mitsuba_message(e, mesh)}")
+
+
+def _plain_load_error(spec):
+    """Mitsuba's error loading the file of ``spec`` unscaled and unmoved, None where it loads."""
     import mitsuba as mi
     try:
         if spec.file.suffix.lower() == ".xml":
             load_xml_scene(spec.file)
         else:
             mi.load_dict({"type": spec.file.suffix.lower()[1:], "filename": str(spec.file)})
-        return True
-    except (RuntimeError, ValueError, OSError):
-        return False
+        return None
+    except (RuntimeError, ValueError, OSError) as e:
+        return e
 
 
 def mitsuba_message(e, mesh_file: bool = False) -> str:
