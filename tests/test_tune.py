@@ -434,6 +434,15 @@ def test_cli_tune_resume_keeps_finished_schemes_and_tunes_the_rest(tmp_path, cap
     assert "resumed: 1 finished schemes kept, 1 tuned" in capsys.readouterr().err
     changed = json.loads((out / "tune.json").read_text())
     assert changed["schemes"][1]["start"] == "bias=0.5 texel" and changed["schemes"][0] == again["schemes"][0]
+    # a changed pre-filtered instance ([map.vsm]) is no depth scheme's input: both kept
+    vsm = '[map]\nresolution = 32\nkind = ["depth", "vsm"]\n[map.vsm]\nmin_variance = '
+    changed_cfg = RESUME_CFG.replace('name = "receiver_plane"', 'name = "receiver_plane"\nbias = "0.5 texel"')
+    cfg.write_text(changed_cfg.replace('[map]\nresolution = 32\n', vsm + '1e-4\n'))
+    assert cli.main(["tune", str(cfg), "--out", str(out), "--force"]) == 0
+    cfg.write_text(changed_cfg.replace('[map]\nresolution = 32\n', vsm + '1e-3\n'))
+    capsys.readouterr()
+    assert cli.main(["tune", str(cfg), "--out", str(out), "--resume"]) == 0
+    assert "resumed: 2 finished schemes kept, 0 tuned" in capsys.readouterr().err
     assert cli.main(["tune", str(cfg), "--out", str(out), "--resume", "--force"]) == 2
     assert "not allowed with argument" in capsys.readouterr().err
     other = tmp_path / "other"

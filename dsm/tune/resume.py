@@ -8,7 +8,7 @@ result and rows are kept, times included), the others are tuned; the scenes, map
 are always rebuilt (the bias map and held-out evaluation need them), and the learned bias map
 is trained again (it starts from the tuned results). A scheme's key hashes everything its
 result depends on: the kit's version, the scenes (with their input files' hashes), lights,
-map, camera and pose, variant, the ``[tune]`` table but its ``bias_map``, and the scheme
+map (but its pre-filtered kinds and their instances, which no depth scheme reads), camera and pose, variant, the ``[tune]`` table but its ``bias_map``, and the scheme
 instance, so a changed config tunes again what it changes and keeps the rest.
 """
 from __future__ import annotations
@@ -28,8 +28,11 @@ KIND = "dsm tune state"
 def shared_identity(tc, version: str | None = None) -> dict:
     """What every tuned scheme's result depends on: kit, scenes, lights, map, cameras, [tune]."""
     cfg = tc.config
+    # the pre-filtered kinds and their instances ([map] kind, [map.<kind>]) are no depth scheme's input
+    # (and are tuned again on every run): a changed [map.vsm] keeps the finished depth schemes
+    depth_map = dataclasses.replace(cfg.map, kind=(), moments=())
     return {"version": kit_version() if version is None else version,
-            "scenes": [scene_identity(s) for s in cfg.scenes], "lights": repr(cfg.lights), "map": repr(cfg.map),
+            "scenes": [scene_identity(s) for s in cfg.scenes], "lights": repr(cfg.lights), "map": repr(depth_map),
             "camera": repr(cfg.camera_resolution), "pose": repr(getattr(cfg, "camera", None)),
             "variant": cfg.variant, "seed": cfg.seed, "tune": repr(dataclasses.replace(tc.spec, bias_map=None))}
 
