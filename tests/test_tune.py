@@ -54,8 +54,17 @@ GRAD_CASES = [
 @pytest.fixture(scope="module")
 def grad_setup():
     """The L-shape over the ground (every scheme's term active somewhere), one camera."""
-    schemes = [{"name": n, **p} for n, p, _ in GRAD_CASES]
+    schemes = _grad_schemes()
     return _prepared(_cfg({"builtin": "l_shape"}, schemes, R=48, cam=40))
+
+
+def _grad_schemes() -> list:
+    """GRAD_CASES' instances, each once (two parameters of one instance are checked on one spec)."""
+    out = []
+    for n, p, _ in GRAD_CASES:
+        if {"name": n, **p} not in out:
+            out.append({"name": n, **p})
+    return out
 
 
 @pytest.mark.parametrize("i", range(len(GRAD_CASES)), ids=[f"{n}.{p}" for n, _, p in GRAD_CASES])
@@ -65,7 +74,8 @@ def test_ad_gradient_matches_central_differences(grad_setup, i):
     from dsm.tune import relax as trx, search as tsr
     from dsm.schemes import get
     tc, groups, cases = grad_setup
-    spec = tc.schemes[i]
+    n, p, _ = GRAD_CASES[i]
+    spec = tc.schemes[_grad_schemes().index({"name": n, **p})]
     name = GRAD_CASES[i][2]
     mod = get(spec.name)
     cur = getattr(spec.params, name)
@@ -475,3 +485,18 @@ def test_gradient_check_is_reported_per_scheme_and_parameter():
             assert abs(fd) > 1e-4 and abs(g["ad"] - fd) <= 0.01 * abs(fd), (spec.name, name, g, fd)
             assert abs(g["fd"] - fd) <= 0.01 * abs(fd) and g["rel_error"] <= 0.01
             assert f"| {spec.name} | {name} |" in text
+
+
+def test_gradient_check_flags_a_kink_within_its_step():
+    """compare.differences: for f(x) = x^2 at 1 (smooth) the central difference is exact (2) and no
+    kink is flagged; for f(x) = max(x, 0) + x at 0 the one-sided slopes are 1 and 2, a kink, and the
+    central difference (1.5) disagrees with either one-sided derivative AD would give."""
+    from dsm.tune.compare import differences
+    h = 1e-2
+    f = lambda x: x * x
+    d = differences(f(1 - h), f(1), f(1 + h), h, 2.0)
+    assert abs(d["fd"] - 2.0) < 1e-12 and d["rel_error"] < 1e-12 and not d["kink"]
+    g = lambda x: max(x, 0.0) + x
+    d = differences(g(-h), g(0.0), g(h), h, 2.0)
+    assert d["kink"] and abs(d["left"] - 1.0) < 1e-12 and abs(d["right"] - 2.0) < 1e-12
+    assert abs(d["fd"] - 1.5) < 1e-12 and abs(d["rel_error"] - 1 / 3) < 1e-12

@@ -67,7 +67,20 @@ def gradient_check(tc, spec: SchemeSpec, box, train, groups) -> dict:
     for p in box:
         h = GRADCHECK_STEP * p.scale
         f = lambda v: relaxed_loss_np(mod, spec.params, {**start, p.name: v}, train, groups, ts.temperature[0], ts.lam)
-        fd = (f(p.start + h) - f(p.start - h)) / (2 * h)
+        lo, mid, hi = f(p.start - h), f(p.start), f(p.start + h)
         ad = float(dr.grad(x[p.name]).numpy().ravel()[0])
-        out[p.name] = {"ad": ad, "fd": fd, "rel_error": abs(ad - fd) / abs(fd) if fd else NAN}
+        out[p.name] = {"ad": ad, **differences(lo, mid, hi, h, ad)}
     return out
+
+
+KINK_RATIO = 0.1    # one-sided differences further apart than this (relative): a kink within the step
+
+
+def differences(lo: float, mid: float, hi: float, h: float, ad: float) -> dict:
+    """The central difference of f(x - h), f(x), f(x + h) against ``ad`` (rel_error), and the one-sided
+    differences: where they disagree by more than KINK_RATIO the loss has a kink (a max, a clamp)
+    within the step, so the central difference straddles two slopes and says nothing of AD."""
+    fd, left, right = (hi - lo) / (2 * h), (mid - lo) / h, (hi - mid) / h
+    scale = max(abs(left), abs(right))
+    return {"fd": fd, "left": left, "right": right, "rel_error": abs(ad - fd) / abs(fd) if fd else NAN,
+            "kink": bool(scale > 0 and abs(right - left) > KINK_RATIO * scale)}

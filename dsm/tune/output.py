@@ -104,6 +104,13 @@ def moments_table(res) -> list:
 
 # ---------------------------------------------------------------- output folder
 
+def _sides(g: dict) -> str:
+    """A gradient check's one-sided differences, and *kink* where they disagree (compare.differences)."""
+    if "left" not in g:
+        return "-"
+    return f"{g['left']:.6g} / {g['right']:.6g}" + (" *kink*" if g.get("kink") else "")
+
+
 def _fmt(x):
     if isinstance(x, float):
         return "-" if math.isnan(x) else f"{x:.5f}"
@@ -156,8 +163,14 @@ def table_text(res: TuneResult) -> str:
     if checks:
         out += ["", f"## gradient check (relaxed loss at the start, temperature {res.spec.temperature[0]:g} texel; "
                 f"central difference, half step {GRADCHECK_STEP:g} texel's worth, numpy float64)", "",
-                "| scheme | parameter | AD | central difference | relative error |", "| --- | --- | --- | --- | --- |"]
-        out += [f"| {n} | {k} | {g['ad']:.6g} | {g['fd']:.6g} | {_fmt(g['rel_error'])} |" for n, k, g in checks]
+                "| scheme | parameter | AD | central difference | relative error | left / right difference |",
+                "| --- | --- | --- | --- | --- | --- |"]
+        out += [f"| {n} | {k} | {g['ad']:.6g} | {g['fd']:.6g} | {_fmt(g['rel_error'])} | {_sides(g)} |"
+                for n, k, g in checks]
+        if any(g.get("kink") for _, _, g in checks):
+            out += ["", "*kink*: the one-sided differences disagree, so the loss bends within the step (a max or a "
+                    "clamp of the scheme) and the central difference averages two slopes: its disagreement there is no "
+                    "evidence against AD."]
     if res.bias_map:
         b = res.bias_map
         bg = b["best_global"]
