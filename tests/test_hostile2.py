@@ -434,3 +434,15 @@ def test_an_xml_scene_scaled_past_float32_names_the_scale_not_the_file(tmp_path,
     rc, err = _cli(capsys, "run", cfg, "--out", tmp_path / "o")
     assert rc == 2
     _one_line(err, "scene[0].file", "line 3,", "nosuch")
+
+
+def test_an_unknown_key_of_an_xml_scene_lists_the_keys_an_xml_scene_takes(tmp_path, capsys):
+    """An XML scene's unknown key lists what an XML scene takes (it listed a mesh file's keys, such
+    as ground and up, which an XML scene refuses)."""
+    from conftest import MESHES
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[[scene]]\nfile = "{MESHES / "cbox_mitsuba" / "cbox.xml"}"\nbogus = 1\n[[scheme]]\nname = "none"\n')
+    rc, err = _cli(capsys, "plan", cfg)
+    assert rc == 2
+    _one_line(err, "scene[0].bogus", "unknown key", "scale", "translate")
+    assert "ground" not in err[0] and "up," not in err[0]

@@ -47,6 +47,10 @@ def parse_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]
         raise ConfigError(source, f"{where}.file", f"{path} is a folder, not a scene file", FILE_SUFFIXES)
     if not path.is_file() and not optional:
         raise ConfigError(source, f"{where}.file", f"no such file: {path} (optional = true skips an absent file)")
+    unknown = sorted(k for k in t if k not in {f.name for f in fields(FileParams)} | {"file", "closed", "optional"})
+    if path.suffix.lower() == ".xml" and unknown:
+        # an XML scene's valid keys, not a mesh file's (those it takes, it refuses below by name)
+        raise ConfigError(source, f"{where}.{unknown[0]}", "unknown key", ("file", "closed", "optional") + XML_KEYS)
     specs = sweep_params(FileParams, t, source, where, skip=("file", "closed", "optional"))
     if not path.is_file():
         return [SceneSpec(file=path, params=p, label=_label(path.stem, p, FileParams()),
