@@ -446,3 +446,25 @@ def test_an_unknown_key_of_an_xml_scene_lists_the_keys_an_xml_scene_takes(tmp_pa
     assert rc == 2
     _one_line(err, "scene[0].bogus", "unknown key", "scale", "translate")
     assert "ground" not in err[0] and "up," not in err[0]
+
+
+def test_an_xml_moved_too_far_is_measured_near_the_origin(tmp_path, capsys):
+    """The Cornell box at 1e9: the limit is computed from its size measured near the origin (the
+    file loaded as it is), not from bounds rounded to float32's steps of 64 there."""
+    import re
+
+    import mitsuba as mi
+    import numpy as np
+    from conftest import MESHES
+    xml = MESHES / "cbox_mitsuba" / "cbox.xml"
+    bb = mi.load_file(str(xml)).bbox()
+    size = float(np.max(np.array(bb.max, np.float64) - np.array(bb.min, np.float64)))
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[[scene]]\nfile = "{xml}"\ntranslate = [1e9, 0, 0]\n[[scheme]]\nname = "none"\n')
+    rc, err = _cli(capsys, "plan", cfg)
+    assert rc == 2
+    _one_line(err, "scene[0].translate", "steps of 64")
+    said = float(re.search(r"the scene is ([0-9.e+]+) across", err[0]).group(1))
+    assert abs(said - size) <= 0.005 * size, (said, size)
+    limit = float(re.search(r"below ([0-9.e+]+)\)", err[0]).group(1))
+    assert abs(limit - size / 64 * 2 ** 23) <= 0.005 * limit

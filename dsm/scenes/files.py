@@ -144,11 +144,14 @@ def _moved_xml(data, spec):
     the same file loaded moved by translate minus the scene's centre (float64: its vertices rounded
     near the origin, the shapes in the same order)."""
     p = data.offset = tuple(float(c) for c in spec.params.translate)
-    check_held(float(np.max(data.bbox[1] - data.bbox[0])), p, source_of(spec), f"{spec.where}.translate",
-               "from the origin")
     centre = exact_frame.centre_for(data.bbox)
+    size = float(np.max(data.bbox[1] - data.bbox[0]))
     if centre is not None:
         local = load_xml_scene(spec.file, spec.params.scale, tuple(np.asarray(p, np.float64) - centre))
+        # its size from the copy near the origin: the bounds at the offset are rounded to its steps
+        size = float(np.max(np.array(local.bbox().max, np.float64) - np.array(local.bbox().min, np.float64)))
+    check_held(size, p, source_of(spec), f"{spec.where}.translate", "from the origin")
+    if centre is not None:
         data.use_exact_scene(centre, local)
         # the camera's pose in float64 from the moved file's sensor (its matrix rounded near the origin,
         # not at the offset); a mirrored frame, which look_at cannot rebuild, keeps the world matrix
