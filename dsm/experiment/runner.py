@@ -390,30 +390,10 @@ class Runner:
         family = [(spec, filt, fmt) for spec in specs for filt in self.cfg.map.filter for fmt in self.cfg.map.format]
         cases = [c for i, c in enumerate(family, self.case_no + 1) if self.keys.get(f"{i:04d}") not in self.kept]
         if self.cfg.timing_lookups == "per_case":
-            return self._extras(cases, stored, rxs, backs), {}
+            return wavefront.attached_only(cases, stored, rxs, backs, self.cfg.seed), {}
         looked, wave = wavefront.run(cases, stored, rxs, backs, self.cfg.seed, self.cfg.timing_repeats, family)
         self.record.maps[-1].update(wave)
         return {}, looked
-
-    def _extras(self, cases, stored, rxs, backs) -> dict:
-        """(spec, filter, format) -> (V of the attached-shadow receivers, plane fallbacks) of the depth
-        cases ``cases`` of one map, evaluated together (one wavefront of launches, not one per case; numpy out).
-        A case whose expressions fail here is left out: its own lookups then run (and fail) in its case."""
-        lazy = {}
-        for spec, filt, fmt in cases:
-            try:
-                back = backs[fmt]
-                v_back = None if back is None else pipeline.visibility(spec, back, stored[fmt], filt, self.cfg.seed)[0]
-                miss = None if rxs[fmt] is None else pipeline.plane_misses(spec, rxs[fmt], stored[fmt])
-                lazy[(spec, filt, fmt)] = (v_back, miss)
-            except Exception:
-                continue
-        try:
-            dr.eval(*[x for pair in lazy.values() for x in pair if x is not None])
-        except Exception:
-            return {}
-        return {k: (np.zeros(0) if v is None else v.numpy(), 0 if miss is None else int(np.count_nonzero(miss.numpy())))
-                for k, (v, miss) in lazy.items()}
 
     def _moments(self, cache, spec, smap, fmt, sd):
         """A function giving (MomentMap, build Timing) of ``spec`` on ``smap``, built (timed) once per

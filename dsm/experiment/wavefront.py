@@ -19,6 +19,7 @@ A wavefront's outputs are held at once: a map's cases are cut into waves of at m
 from __future__ import annotations
 
 import dataclasses
+from collections import Counter
 from dataclasses import dataclass
 
 import drjit as dr
@@ -56,12 +57,40 @@ def kernel_key(spec, filt: str, fmt: str) -> tuple:
     return spec.name, tuple(kinds), filt, fmt
 
 
+def _attached(spec, filt, fmt, stored, rxs, backs, seed) -> tuple:
+    """The lazy (V of the back-facing receivers, plane misses) of one case, each None where it has none."""
+    back = backs[fmt]
+    v_back = None if back is None else pipeline.visibility(spec, back, stored[fmt], filt, seed)[0]
+    return v_back, None if rxs[fmt] is None else pipeline.plane_misses(spec, rxs[fmt], stored[fmt])
+
+
+def _numpy(v_back, miss) -> tuple:
+    """(V of the back-facing receivers, how many plane misses) of evaluated :func:`_attached` outputs."""
+    return np.zeros(0) if v_back is None else v_back.numpy(), 0 if miss is None else int(np.count_nonzero(miss.numpy()))
+
+
 def _trace(spec, filt, fmt, stored, rxs, backs, seed) -> tuple:
     """The lazy (V, tap shape, V of the back-facing receivers or None, plane misses or None) of one case."""
     v, tap = pipeline.visibility(spec, rxs[fmt], stored[fmt], filt, seed)
-    back = backs[fmt]
-    v_back = None if back is None else pipeline.visibility(spec, back, stored[fmt], filt, seed)[0]
-    return v, tap, v_back, pipeline.plane_misses(spec, rxs[fmt], stored[fmt])
+    return v, tap, *_attached(spec, filt, fmt, stored, rxs, backs, seed)
+
+
+def attached_only(cases, stored, rxs, backs, seed) -> dict:
+    """``lookups = "per_case"``: {(spec, filter, format): (V of the back-facing receivers, plane
+    misses)} of ``cases``, evaluated together (one launch per array size, not two per case), each
+    case timing its own lookup in the runner; a case whose expressions fail here is left out (its own
+    lookups then run, and fail, in its case), and all are where the evaluation fails."""
+    lazy = {}
+    for c in cases:
+        try:
+            lazy[c] = _attached(*c, stored, rxs, backs, seed)
+        except Exception:
+            continue
+    try:
+        dr.eval(*[x for pair in lazy.values() for x in pair if x is not None])
+    except Exception:
+        return {}
+    return {c: _numpy(*pair) for c, pair in lazy.items()}
 
 
 def _evaluated(cases, stored, rxs, backs, seed, repeats) -> tuple:
@@ -82,9 +111,7 @@ def _evaluated(cases, stored, rxs, backs, seed, repeats) -> tuple:
         _, t = timing.measure_kernel(wave, repeats)
     except Exception:
         return {}, None
-    out = {c: (v.numpy(), tap.numpy(), np.zeros(0) if vb is None else vb.numpy(),
-               0 if miss is None else int(np.count_nonzero(miss.numpy())))
-           for c, (v, tap, vb, miss) in traced.items()}
+    out = {c: (v.numpy(), tap.numpy(), *_numpy(vb, miss)) for c, (v, tap, vb, miss) in traced.items()}
     return out, t
 
 
@@ -112,9 +139,7 @@ def run(cases: list, stored: dict, rxs: dict, backs: dict, seed: int, repeats: i
                 solo[key] = timing.measure_kernel(
                     lambda: pipeline.visibility(spec, rxs[fmt], stored[fmt], filt, seed), repeats)[1]
             looked[c] = Looked(v, tap, v_back, misses, solo[key], 0)
-    shared = {}
-    for c in family:
-        shared[kernel_key(*c)] = shared.get(kernel_key(*c), 0) + 1
+    shared = Counter(kernel_key(*c) for c in family)
     for c, lk in looked.items():
         lk.shared = shared[kernel_key(*c)]
     return looked, {"lookup_wave_ms": wave_ms if waves else None, "waves": waves, "wave_cases": len(looked)}
