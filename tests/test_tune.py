@@ -500,3 +500,47 @@ def test_gradient_check_flags_a_kink_within_its_step():
     d = differences(g(-h), g(0.0), g(h), h, 2.0)
     assert d["kink"] and abs(d["left"] - 1.0) < 1e-12 and abs(d["right"] - 2.0) < 1e-12
     assert abs(d["fd"] - 1.5) < 1e-12 and abs(d["rel_error"] - 1 / 3) < 1e-12
+
+
+def test_relaxed_tap_reads_z1_and_slope_bilinearly():
+    """While tuning a moved lookup point, z1 and the slope layer are read bilinearly between the
+    four texel centres around it (combined's slope term read at the nearest texel would jump at
+    every texel edge, where AD sees nothing): both against a numpy float64 bilinear interpolation of
+    the map's layers, on a curved caster whose slope changes from texel to texel."""
+    from pathlib import Path
+    from dsm.tune import relax as trx
+    import dsm.pipeline as pl
+    bunny = Path(__file__).resolve().parents[1] / "data" / "meshes" / "mitsuba_bunny.ply"
+    scheme = {"name": "combined", "normal_offset": "1 texel", "slope_scale": 0.5, "slope_clamp": "4 texel"}
+    tc, groups, cases = _prepared(_cfg({"file": str(bunny)}, [scheme], R=64, cam=48,
+                                       tune={"camera": [{"position": [-0.30, 0.34, 0.17], "target": [0.0, 0.09, 0.0],
+                                                         "up": [0.0, 1.0, 0.0]}]}))
+    c = cases[0]
+    smap = groups[c.group].maps[pl.culling_of(tc.schemes[0].params)]
+    R = smap.view.resolution
+    tap = trx.bilinear_tap(c.rx, smap)
+    u, v = (np.asarray(a.numpy(), np.float64) - 0.5 for a in (c.rx.u_map, c.rx.v_map))
+    inside = (u >= 0) & (v >= 0) & (u < R - 1) & (v < R - 1)        # four texels on the map
+    i0, j0 = np.floor(u[inside]).astype(int), np.floor(v[inside]).astype(int)
+    fx, fy = u[inside] - i0, v[inside] - j0
+    for layer, got in (("z1", tap.z1), ("slope", tap.slope)):
+        img = np.asarray(getattr(smap, layer).numpy(), np.float64).reshape(R, R)
+        want = (img[j0, i0] * (1 - fx) * (1 - fy) + img[j0, i0 + 1] * fx * (1 - fy)
+                + img[j0 + 1, i0] * (1 - fx) * fy + img[j0 + 1, i0 + 1] * fx * fy)
+        got = np.asarray(got.numpy(), np.float64)[inside]
+        scale = np.abs(img).max()
+        assert np.abs(got - want).max() <= 1e-5 * scale, layer
+        if layer == "slope":       # the nearest texel's slope differs: the test tells the two reads apart
+            assert np.abs(img[np.rint(v[inside]).astype(int).clip(0, R - 1), np.rint(u[inside]).astype(int).clip(0, R - 1)]
+                          - want).max() > 1e-3 * scale
+
+
+def test_central_difference_at_two_steps():
+    """compare.central: the central difference and its relative error against AD, computed by hand
+    for f(x) = x^3 at 1 (f' = 3): a step h errs by h^2 (3 + h^2 against 3), a quarter step by a sixteenth."""
+    from dsm.tune.compare import central
+    f = lambda x: x ** 3
+    for h in (0.1, 0.025):
+        c = central(f(1 - h), f(1 + h), h, 3.0)
+        assert c["fd"] == pytest.approx(3.0 + h * h, rel=1e-12)
+        assert c["rel_error"] == pytest.approx(h * h / (3.0 + h * h), rel=1e-9)

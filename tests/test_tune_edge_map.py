@@ -162,5 +162,13 @@ def test_edge_map_in_a_tune_run(tmp_path):
     assert bm["heldout"]["n_peterpan"] == int((on & ~rx["v_star"]).sum())
     split = bm["heldout_split"]
     assert split["covered"]["n_receivers"] + split["uncovered"]["n_receivers"] == rx["v_star"].size
+    # receivers per texel recounted from (map, texel) pairs, the oracle's strength beside the gap closed
+    from dsm.tune.residual_map import block_keys
+    rx_tr = neighbour_margins(res.schemes[0]["spec"], [c for c in cases if c.role == "train"], groups)
+    keys = lambda r: block_keys(r["texel"], r["group"], r["resolution"], bm["block"])
+    cov = np.isin(keys(rx), keys(rx_tr))
+    assert cov.sum() == split["covered"]["n_receivers"]
+    pairs = {(int(g), int(t)) for g, t in zip(rx["group"][cov], rx["texel"][cov])}
+    assert split["covered"]["receivers_per_texel"] == pytest.approx(cov.sum() / len(pairs))
     assert "an edge map over constant" in (tmp_path / "table.md").read_text()
     assert json.loads((tmp_path / "tune.json").read_text())["bias_map"]["model"] == pytest.approx(bm["model"])

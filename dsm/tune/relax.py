@@ -19,20 +19,24 @@ CLIP = 30.0              # |margin / T| beyond which the sigmoid is flat (its de
 
 # ---------------------------------------------------------------- the relaxed loss
 
-def _bilinear_z1(rx, smap):
-    """z1 interpolated between the four texel centres around the receiver's map position
-    (each read as the nearest lookup would read that texel: clamped to the face, the far
-    bound beyond a directional map), continuous in the lookup point."""
+def bilinear_tap(rx, smap):
+    """The nearest tap with z1 and the slope layer (where the map has one) interpolated between
+    the four texel centres around the receiver's map position (each read as the nearest lookup
+    would read that texel: clamped to the face, the far bound beyond a directional map), so the
+    margin is continuous in the lookup point. A slope read at the nearest texel would jump where
+    the point crosses a texel's edge: AD sees no jump, a finite difference does (combined's
+    normal offset differed from its central difference by 19 % on the meshes with it)."""
     x, y = rx.u_map - 0.5, rx.v_map - 0.5
     i0, j0 = dr.floor(dr.detach(x)), dr.floor(dr.detach(y))
     fx, fy = x - i0, y - j0
-    z = 0
+    z, slope = 0, 0
     for a in (0, 1):
         for b in (0, 1):
             t = lookup.tap_at(rx, smap, i0 + 0.5 + a, j0 + 0.5 + b)
             w = (fx if a else 1.0 - fx) * (fy if b else 1.0 - fy)
             z = z + w * t.z1
-    return z
+            slope = slope + w * t.slope if t.slope is not None else None
+    return dataclasses.replace(lookup.nearest_tap(rx, smap), z1=z, slope=slope)
 
 
 def _resolved(module, params, values: dict, rx):
@@ -52,12 +56,10 @@ def _resolved(module, params, values: dict, rx):
 
 def margins(module, params, values, rx, smap, relax: bool):
     """The scheme's signed margin per receiver with ``values`` substituted (differentiable);
-    ``relax``: z1 read bilinearly (for parameters that move the lookup point)."""
+    ``relax``: z1 and slope read bilinearly (for parameters that move the lookup point)."""
     prm = _resolved(module, params, values, rx)
     rx2 = module.shift(rx, prm)
-    tap = lookup.nearest_tap(rx2, smap)
-    if relax:
-        tap = dataclasses.replace(tap, z1=_bilinear_z1(rx2, smap))
+    tap = bilinear_tap(rx2, smap) if relax else lookup.nearest_tap(rx2, smap)
     return module.margin(rx2, tap, prm)
 
 
