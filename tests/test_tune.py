@@ -544,3 +544,33 @@ def test_central_difference_at_two_steps():
         c = central(f(1 - h), f(1 + h), h, 3.0)
         assert c["fd"] == pytest.approx(3.0 + h * h, rel=1e-12)
         assert c["rel_error"] == pytest.approx(h * h / (3.0 + h * h), rel=1e-9)
+
+
+def test_line_reach_is_the_least_best_value_along_a_parameter():
+    """refine.line_reach: along receiver_plane's bias (a margin affine in it) the least value where
+    the exact objective is least, against a numpy float64 sweep of the margins evaluated at two
+    biases (no AD); the default search box reaches twice it."""
+    import mitsuba as mi
+    from dsm.schemes import get
+    from dsm.tune import relax as trx, search as tsr
+    from dsm.tune.refine import line_reach
+    import dsm.pipeline as pl
+    tc, groups, cases = _prepared(_cfg({"builtin": "l_shape"}, [{"name": "receiver_plane", "bias": "1 texel"}], R=48, cam=40))
+    spec, mod = tc.schemes[0], get("receiver_plane")
+    reach = line_reach(mod, spec, {"bias": 1.0}, "bias", 0.0, cases, groups, 1.0)
+    smap = lambda c: groups[c.group].maps[pl.culling_of(spec.params)]
+    at = lambda k: np.concatenate([np.asarray(trx.margins(mod, spec.params, {"bias": mi.Float(k)}, c.rx, smap(c),
+                                                          False).numpy(), np.float64) for c in cases])
+    m0, m8 = at(0.0), at(8.0)
+    g = (m8 - m0) / 8.0                                # per texel of offset: the receiver's texel width
+    v = np.concatenate([c.v_star for c in cases])
+    flips = np.unique(-m0[g > 0] / g[g > 0])
+    flips = flips[flips > 0]
+    ks = np.concatenate([[0.0], 0.5 * (flips[:-1] + flips[1:]), [flips[-1] + 1.0]])
+    errs = np.array([((m0 + k * g < 0) & v).sum() + ((m0 + k * g >= 0) & ~v).sum() for k in ks])
+    first = int(np.argmax(errs == errs.min()))
+    lo_k = flips[first - 1] if first > 0 else 0.0
+    hi_k = flips[first] if first < flips.size else np.inf
+    assert lo_k <= reach <= hi_k, (reach, lo_k, hi_k)
+    box = tsr._param_box(tc, spec, tsr.texel_sizes(cases, groups), None, {"bias": reach})
+    assert box[0].hi >= 2 * reach and box[0].hi >= 1.0 + tsr.BOX_TEXELS

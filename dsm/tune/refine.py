@@ -30,11 +30,12 @@ def margin_line(module, params, values: dict, direction: dict, cases, groups) ->
     return np.concatenate(m_all), np.concatenate(g_all)
 
 
-def line_objective(m, g, v_star, lam, a_lo: float, a_hi: float) -> tuple:
+def line_objective(m, g, v_star, lam, a_lo: float, a_hi: float, nearest: bool = False) -> tuple:
     """The exact objective of margins that are affine in a step ``a`` (``m + a g``), at its best
     over ``[a_lo, a_hi]``: each receiver flips at ``a = -m / g``; counted at the ends and at the
     midpoints between consecutive flips by sorted counts (the threshold sweep of the exact
-    oracles, along any line). (best step, its objective); ties: the widest interval's midpoint."""
+    oracles, along any line). (best step, its objective); ties: the widest interval's midpoint,
+    or with ``nearest`` the best candidate nearest ``a_lo``."""
     with np.errstate(divide="ignore", invalid="ignore"):
         flip = -m / g
     up, down, flat = g > 0, g < 0, g == 0
@@ -52,8 +53,25 @@ def line_objective(m, g, v_star, lam, a_lo: float, a_hi: float) -> tuple:
     err += float(((m[flat] < 0) & v_star[flat]).sum() + lam * ((m[flat] >= 0) & ~v_star[flat]).sum())
     obj = err / max(m.size, 1)
     best = np.flatnonzero(obj == obj.min())
-    i = best[np.argmax(width[best])]
+    i = best[0] if nearest else best[np.argmax(width[best])]
     return float(cands[i]), float(obj[i])
+
+
+def line_reach(module, spec, values: dict, name: str, lo: float, train, groups, lam) -> float:
+    """The value of parameter ``name`` (others at ``values``) where the exact objective is least
+    along the whole line from ``lo`` up, under the receivers' margins linearised there (forward
+    AD; exact where the margin is affine in it, as for every constant-like term): the least such
+    value of the optimal flips, which a search box must hold. NaN where no receiver flips."""
+    m, g = margin_line(module, spec.params, values, {name: 1.0}, train, groups)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        flip = values[name] - m / g
+    flip = flip[np.isfinite(flip) & (flip > lo)]
+    if flip.size == 0:
+        return float("nan")
+    v_star = np.concatenate([c.v_star for c in train])
+    a_hi = float(flip.max()) - values[name] + 1.0          # one unit past the last flip
+    a, _ = line_objective(m, g, v_star, lam, lo - values[name], a_hi, nearest=True)
+    return values[name] + a
 
 
 def line_search(module, spec, box, best, train, groups, lam, p) -> dict:

@@ -12,7 +12,7 @@ from ..report.tables import objective
 from ..types import Length, SchemeSpec
 from .evaluate import NAN, hard_counts, sync_clock, with_values
 from .relax import relaxed_loss
-from .refine import exact_refinement
+from .refine import exact_refinement, line_reach
 from ..config.tune import TuneSpec, valid_min
 
 
@@ -51,11 +51,12 @@ def texel_sizes(train, groups) -> dict:
     return {"texel": 1.0, "world": tw, "range": tw / rng, "diagonal": tw / diag, "": 1.0}
 
 
-def _param_box(tc, spec, sizes, oracle_best=None) -> list:
+def _param_box(tc, spec, sizes, oracle_best=None, line_best=None) -> list:
     """Each tuned parameter: its start, its step scale (one texel's worth in its unit; 1 for
-    factors on the slope) and its search range. ``oracle_best``: the exact oracle's best constant
-    bias of the training views per unit (world, texel), from the thresholds: constant's default
-    range reaches twice it, so it always holds the best value."""
+    factors on the slope) and its search range. The default range reaches twice the best value
+    the thresholds give, so it holds it: ``oracle_best``, the exact oracle's best constant bias of
+    the training views per unit (world, texel); ``line_best``, per parameter the best along its
+    line from the start (refine.line_reach)."""
     from ..schemes import get
     mod = get(spec.name)
     out = []
@@ -66,13 +67,25 @@ def _param_box(tc, spec, sizes, oracle_best=None) -> list:
         scale = sizes["diagonal" if (spec.name, name) in DIAGONAL_FRACTIONS else unit]
         vmin = valid_min(mod, name)
         best = (oracle_best or {}).get(unit) if (spec.name, name) == ("constant", "bias") else None
-        reach = 2.0 * best if best is not None and math.isfinite(best) else 0.0
+        bests = [b for b in (best, (line_best or {}).get(name)) if b is not None and math.isfinite(b)]
+        reach = 2.0 * max(bests) if bests else 0.0
         lo, hi = tc.spec.ranges.get((spec.name, name), (0.0 if vmin is None else vmin,
                                                         max(max(v, 0.0) + BOX_TEXELS * scale, reach)))
         if vmin is not None:
             lo = max(lo, vmin)
         out.append(Param(name, unit, min(max(v, lo), hi), scale, lo, hi))
     return out
+
+
+def _line_bests(tc, spec, train, groups) -> dict:
+    """Per tuned parameter without a range of the user's, the best value along its line from the
+    start (the others at their starts), from the receivers' flips (refine.line_reach)."""
+    from ..schemes import get
+    mod = get(spec.name)
+    start = {n: (lambda c: c.value if isinstance(c, Length) else float(c))(getattr(spec.params, n))
+             for n in tc.spec.params[spec.name]}
+    return {n: line_reach(mod, spec, start, n, valid_min(mod, n) or 0.0, train, groups, tc.spec.lam)
+            for n in start if (spec.name, n) not in tc.spec.ranges}
 
 
 def temperature_at(spec: TuneSpec, step: int, steps: int) -> float:
@@ -123,7 +136,7 @@ def tune_scheme(tc, spec: SchemeSpec, train, groups, progress=None, oracle_best=
     worse than the start or any point the search saw. Per evaluation its phase, the loss,
     the exact objective and the step's time."""
     ts = tc.spec
-    box = _param_box(tc, spec, texel_sizes(train, groups), oracle_best)
+    box = _param_box(tc, spec, texel_sizes(train, groups), oracle_best, _line_bests(tc, spec, train, groups))
     exact = lambda vals: objective(hard_counts(with_values(spec, vals), train, groups), ts.lam)
     budget = phase_budgets(ts.steps)
     start = {p.name: p.start for p in box}
