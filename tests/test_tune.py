@@ -557,7 +557,7 @@ def test_line_reach_is_the_least_best_value_along_a_parameter():
     import dsm.pipeline as pl
     tc, groups, cases = _prepared(_cfg({"builtin": "l_shape"}, [{"name": "receiver_plane", "bias": "1 texel"}], R=48, cam=40))
     spec, mod = tc.schemes[0], get("receiver_plane")
-    reach = line_reach(mod, spec, {"bias": 1.0}, "bias", 0.0, cases, groups, 1.0)
+    reach = line_reach(mod, spec, {"bias": 1.0}, "bias", 0.0, 1.0, cases, groups, 1.0)
     smap = lambda c: groups[c.group].maps[pl.culling_of(spec.params)]
     at = lambda k: np.concatenate([np.asarray(trx.margins(mod, spec.params, {"bias": mi.Float(k)}, c.rx, smap(c),
                                                           False).numpy(), np.float64) for c in cases])
@@ -572,5 +572,24 @@ def test_line_reach_is_the_least_best_value_along_a_parameter():
     lo_k = flips[first - 1] if first > 0 else 0.0
     hi_k = flips[first] if first < flips.size else np.inf
     assert lo_k <= reach <= hi_k, (reach, lo_k, hi_k)
-    box = tsr._param_box(tc, spec, tsr.texel_sizes(cases, groups), None, {"bias": reach})
+    box = tsr.search_box(tc, spec, tsr.texel_sizes(cases, groups), None, {"bias": reach})
     assert box[0].hi >= 2 * reach and box[0].hi >= 1.0 + tsr.BOX_TEXELS
+
+
+def test_tuning_does_not_depend_on_the_scene_scale():
+    """The same built-in at scale 1, 1024 and 1e-3 (cameras and lights move with it): every scheme's
+    tuned training objective is equal, texel-unit values agree, and a world-unit bias scales with the
+    scene (search boxes come from texels' worth and the receivers' flips, never from a fixed length)."""
+    from dsm.tune import tuner as tu
+    results = {}
+    for s in (1.0, 1024.0, 1e-3):
+        schemes = [{"name": "constant", "bias": "1 texel"}, {"name": "constant", "bias": 0.02 * s},
+                   {"name": "dual", "z_offset": "2 texel"}, {"name": "normal_angle"}]
+        cfg = _cfg({"builtin": "l_shape", "scale": s}, schemes, {"steps": 12, "camera": CAMS}, R=48, cam=40)
+        results[s] = tu.tune(cfg).schemes
+    for s in (1024.0, 1e-3):
+        for a, b in zip(results[1.0], results[s]):
+            assert b["train"]["objective"] == a["train"]["objective"], (s, a["scheme"])
+            for name, va in a["values"].items():
+                world = a["scheme"] == "constant" and name == "bias" and a is results[1.0][1]
+                assert b["values"][name] == pytest.approx(va * (s if world else 1.0), rel=1e-4), (s, a["scheme"], name)

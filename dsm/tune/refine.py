@@ -57,11 +57,12 @@ def line_objective(m, g, v_star, lam, a_lo: float, a_hi: float, nearest: bool = 
     return float(cands[i]), float(obj[i])
 
 
-def line_reach(module, spec, values: dict, name: str, lo: float, train, groups, lam) -> float:
+def line_reach(module, spec, values: dict, name: str, lo: float, scale: float, train, groups, lam) -> float:
     """The value of parameter ``name`` (others at ``values``) where the exact objective is least
     along the whole line from ``lo`` up, under the receivers' margins linearised there (forward
     AD; exact where the margin is affine in it, as for every constant-like term): the least such
-    value of the optimal flips, which a search box must hold. NaN where no receiver flips."""
+    value of the optimal flips, which a search box must hold (``scale``: one texel's worth in the
+    parameter's unit, how far past the last flip the line is counted). NaN where no receiver flips."""
     m, g = margin_line(module, spec.params, values, {name: 1.0}, train, groups)
     with np.errstate(divide="ignore", invalid="ignore"):
         flip = values[name] - m / g
@@ -69,7 +70,7 @@ def line_reach(module, spec, values: dict, name: str, lo: float, train, groups, 
     if flip.size == 0:
         return float("nan")
     v_star = np.concatenate([c.v_star for c in train])
-    a_hi = float(flip.max()) - values[name] + 1.0          # one unit past the last flip
+    a_hi = float(flip.max()) - values[name] + scale        # a texel's worth past the last flip
     a, _ = line_objective(m, g, v_star, lam, lo - values[name], a_hi, nearest=True)
     return values[name] + a
 

@@ -51,7 +51,7 @@ def texel_sizes(train, groups) -> dict:
     return {"texel": 1.0, "world": tw, "range": tw / rng, "diagonal": tw / diag, "": 1.0}
 
 
-def _param_box(tc, spec, sizes, oracle_best=None, line_best=None) -> list:
+def search_box(tc, spec, sizes, oracle_best=None, line_best=None) -> list:
     """Each tuned parameter: its start, its step scale (one texel's worth in its unit; 1 for
     factors on the slope) and its search range. The default range reaches twice the best value
     the thresholds give, so it holds it: ``oracle_best``, the exact oracle's best constant bias of
@@ -77,14 +77,18 @@ def _param_box(tc, spec, sizes, oracle_best=None, line_best=None) -> list:
     return out
 
 
-def _line_bests(tc, spec, train, groups) -> dict:
+def _line_bests(tc, spec, train, groups, sizes) -> dict:
     """Per tuned parameter without a range of the user's, the best value along its line from the
     start (the others at their starts), from the receivers' flips (refine.line_reach)."""
     from ..schemes import get
     mod = get(spec.name)
-    start = {n: (lambda c: c.value if isinstance(c, Length) else float(c))(getattr(spec.params, n))
-             for n in tc.spec.params[spec.name]}
-    return {n: line_reach(mod, spec, start, n, valid_min(mod, n) or 0.0, train, groups, tc.spec.lam)
+    start, scale = {}, {}
+    for name in tc.spec.params[spec.name]:
+        cur = getattr(spec.params, name)
+        start[name] = cur.value if isinstance(cur, Length) else float(cur)
+        unit = cur.unit if isinstance(cur, Length) else ""
+        scale[name] = sizes["diagonal" if (spec.name, name) in DIAGONAL_FRACTIONS else unit]
+    return {n: line_reach(mod, spec, start, n, valid_min(mod, n) or 0.0, scale[n], train, groups, tc.spec.lam)
             for n in start if (spec.name, n) not in tc.spec.ranges}
 
 
@@ -136,7 +140,8 @@ def tune_scheme(tc, spec: SchemeSpec, train, groups, progress=None, oracle_best=
     worse than the start or any point the search saw. Per evaluation its phase, the loss,
     the exact objective and the step's time."""
     ts = tc.spec
-    box = _param_box(tc, spec, texel_sizes(train, groups), oracle_best, _line_bests(tc, spec, train, groups))
+    sizes = texel_sizes(train, groups)
+    box = search_box(tc, spec, sizes, oracle_best, _line_bests(tc, spec, train, groups, sizes))
     exact = lambda vals: objective(hard_counts(with_values(spec, vals), train, groups), ts.lam)
     budget = phase_budgets(ts.steps)
     start = {p.name: p.start for p in box}
