@@ -150,6 +150,21 @@ def _config_error(e: cfgmod.ConfigError, command: str = "run") -> int:
     return 2
 
 
+def _fresh_folder(prefix: str) -> Path:
+    """A new folder runs/<prefix>-<time>[-n], made here, so two commands started in the same second
+    never share the default folder (mkdir is atomic: the second takes the next suffix)."""
+    base = Path("runs") / f"{prefix}-{time.strftime('%Y%m%d-%H%M%S')}"
+    base.parent.mkdir(parents=True, exist_ok=True)
+    for n in range(1, 1000):
+        path = base if n == 1 else base.with_name(f"{base.name}-{n}")
+        try:
+            path.mkdir()
+            return path
+        except FileExistsError:
+            continue
+    return base          # a thousand in one second: the folder lock refuses the rest, naming the holder
+
+
 def _terminated(signum, frame):
     """SIGTERM (a scheduler's stop, ``kill``) ends a command as Ctrl-C does."""
     raise KeyboardInterrupt
@@ -180,11 +195,11 @@ def main(argv=None) -> int:
             return _config_error(e)
         if args.cmd == "plan":
             return _plan(cfg)
-        if args.cmd == "tune":
-            out = Path(args.out) if args.out else Path("runs") / f"{cfg.name}-tune-{time.strftime('%Y%m%d-%H%M%S')}"
-            return _tune(cfg, args, out)
-        out = Path(args.out) if args.out else Path("runs") / f"{cfg.name}-{time.strftime('%Y%m%d-%H%M%S')}"
-        return _run(cfg, args, out)
+        if getattr(args, "out", None) is not None and not str(args.out).strip():
+            _err("--out: an empty path (leave --out out for runs/<name>-<time>/)")
+            return 2
+        out = Path(args.out) if args.out else _fresh_folder(f"{cfg.name}-tune" if args.cmd == "tune" else cfg.name)
+        return _tune(cfg, args, out) if args.cmd == "tune" else _run(cfg, args, out)
     except KeyboardInterrupt:
         # as the command (not main([...]) from Python): a second Ctrl-C, or one passed on while Ray shuts
         # down, must not break the exit's clean-up (tqdm's and Ray's atexit handlers) into a traceback
@@ -201,6 +216,8 @@ def main(argv=None) -> int:
                          "writes table.md, plots/ and report.html")
             else:
                 where += f"; `dsm run ... --out {out} --resume` runs the rest"
+        elif where and args.cmd == "tune" and (out / "tune_state.json").is_file():
+            where = f" (finished schemes in {out}/tune_state.json; `dsm tune ... --out {out} --resume` tunes the rest)"
         print(f"{chr(10) if sys.stderr.isatty() else ''}dsm: interrupted{where}", file=sys.stderr)
         return 130
     except BrokenPipeError:
@@ -654,7 +671,7 @@ def _tune_held(tc, out: Path, force: bool = False, resume: bool = False) -> int:
     if resuming:
         print(f"dsm: resumed: {res.resumed} finished schemes kept, {len(res.schemes) - res.resumed} tuned",
               file=sys.stderr)
-    print(f"dsm: tuned {len(res.schemes)} schemes" + (f" and {len(res.moments)} pre-filtered instances" if res.moments else "") + f" in {time.perf_counter() - t0:.1f} s -> {out}/ (tuned.toml, "
+    print(f"dsm: {'wrote' if res.resumed else 'tuned'} {len(res.schemes)} schemes" + (f" and {len(res.moments)} pre-filtered instances" if res.moments else "") + f" in {time.perf_counter() - t0:.1f} s -> {out}/ (tuned.toml, "
           "table.md, steps.csv, tune.json, plots/)")
     return 0
 

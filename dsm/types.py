@@ -93,6 +93,11 @@ class Length:
 
 # ---------------------------------------------------------------- value checks
 
+LAMBDA_MAX = 1e6      # the objective's weight on peter-panning: beyond this acne counts for nothing, and the
+                      # tuner's relaxed loss (float32) overflows near 1e25
+SEED_MAX = 2 ** 63 - 1    # seeds are non-negative (numpy's generators refuse negatives) and fit a 64-bit state
+
+
 def number(raw, source, key, *, integer=False, positive=False, minimum=None, maximum=None):
     """``raw`` as a finite number (an ``int`` if ``integer``) within the bounds; else a ConfigError at ``key``."""
     if isinstance(raw, bool) or not isinstance(raw, (int, float)) or (integer and not isinstance(raw, int)):

@@ -295,8 +295,8 @@ def test_a_name_over_255_bytes_is_one_line(tmp_path, capsys, cfg_file, monkeypat
     assert rc == 2
     _one_line(err, "experiment.name", "240 bytes")
     assert not (tmp_path / "runs").exists()
-    named.write_text(_tiny(name="e" * 234))             # the longest name a run folder takes
-    assert config.load(named).name == "e" * 234
+    named.write_text(_tiny(name="e" * 230))             # the longest name a run folder takes (suffix -n included)
+    assert config.load(named).name == "e" * 230
 
 
 # ---------------------------------------------------------------- 15: light directions beyond float32

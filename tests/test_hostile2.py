@@ -3,6 +3,7 @@ replicates, pre-filtered maps, contact shadows and shrinking, voxelized shadow v
 scan and residual map): each input that gave a traceback, a silently empty or meaningless result,
 or a misleading message, with the answer it now gets. Expected values are derived here (counts
 of cases by hand, the same case measured another way), not read from the kit."""
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -468,3 +469,78 @@ def test_an_xml_moved_too_far_is_measured_near_the_origin(tmp_path, capsys):
     assert abs(said - size) <= 0.005 * size, (said, size)
     limit = float(re.search(r"below ([0-9.e+]+)\)", err[0]).group(1))
     assert abs(limit - size / 64 * 2 ** 23) <= 0.005 * limit
+
+
+# ---------------------------------------------------------------- dsm tune's hostile tour (issue 29)
+
+TUNE_CAMS = ('[[tune.camera]]\nposition = [3.0, -5.0, 4.0]\ntarget = [0.0, 0.0, 0.0]\n'
+             '[[tune.camera]]\nposition = [-4.0, -3.0, 5.0]\ntarget = [0.0, 0.0, 0.0]\nrole = "heldout"\n')
+
+
+@pytest.mark.parametrize("extra, key, words", [
+    ("[tune]\nseed = -7\n", "tune.seed", ">= 0"),
+    ("[tune]\nlambda = 1e30\n", "tune.lambda", "<= 1000000"),
+    ("[oracle]\nlambda = [1.0, 1e9]\n", "oracle.lambda", "<= 1000000"),
+    ('[tune]\n' + TUNE_CAMS + '[[tune.camera]]\nposition = [3.0, -5.0, 4.0]\ntarget = [0.0, 0.0, 0.0]\n'
+     'role = "heldout"\nname = "twin"\n', "tune.camera[2]", "same pose"),
+])
+def test_tune_refuses_absurd_values_before_any_work(tmp_path, capsys, extra, key, words):
+    """A negative seed (numpy refuses it mid-run), a weight that overflows the relaxed loss, a held-out
+    camera on a training camera's pose: one line naming the key, exit 2, nothing written."""
+    cfg = tmp_path / "t.toml"
+    cfg.write_text('[experiment]\nname = "t"\n[[scene]]\nbuiltin = "l_shape"\n[[scheme]]\nname = "constant"\n' + extra)
+    rc, err = _cli(capsys, "tune", cfg, "--out", tmp_path / "o")
+    assert rc == 2
+    _one_line(err, key, words)
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_negative_experiment_seed_is_refused(tmp_path, capsys):
+    cfg = tmp_path / "t.toml"
+    cfg.write_text('[experiment]\nname = "t"\nseed = -3\n[[scene]]\nbuiltin = "plane"\n[[scheme]]\nname = "none"\n')
+    rc, err = _cli(capsys, "plan", cfg)
+    assert rc == 2
+    _one_line(err, "experiment.seed", ">= 0")
+
+
+def test_an_empty_out_is_refused_and_default_folders_never_collide(tmp_path, capsys, monkeypatch):
+    """--out '' is a mistake, not the default; two default folders made in one second differ."""
+    from dsm import cli
+    cfg = tmp_path / "t.toml"
+    cfg.write_text('[experiment]\nname = "t"\n[[scene]]\nbuiltin = "plane"\n[[scheme]]\nname = "none"\n')
+    rc, err = _cli(capsys, "run", cfg, "--out", "")
+    assert rc == 2
+    _one_line(err, "--out", "empty")
+    monkeypatch.chdir(tmp_path)
+    a, b = cli._fresh_folder("t"), cli._fresh_folder("t")
+    assert a != b and a.is_dir() and b.is_dir() and a.parent == b.parent == Path("runs")
+
+
+def test_a_start_outside_its_range_is_noted(tmp_path):
+    """[tune.range] that leaves out a scheme's start: the search begins from the start clipped into the
+    box, and the notes say so (the result may be worse than the start)."""
+    from dsm.tune import tuner as tu
+    cfg = tomllib.loads('[experiment]\nname = "t"\n[camera]\nresolution = [32, 32]\n[[scene]]\nbuiltin = "l_shape"\n'
+                        '[map]\nresolution = 32\n[[scheme]]\nname = "constant"\nbias = "1 texel"\n'
+                        '[tune]\nsteps = 6\nrange.constant = { bias = [3.0, 4.0] }\n')
+    res = tu.tune(cfg)
+    assert res.schemes[0]["start_outside_box"] == ["bias"]
+    assert 3.0 <= res.schemes[0]["values"]["bias"] <= 4.0
+    assert any("outside its [tune.range] box" in n for n in res.notes)
+    assert any("no [[tune.camera]]" in n for n in res.notes)
+
+
+def test_a_one_point_grid_is_the_box_centre_and_said(tmp_path):
+    """steps below 2^p leave the grid one point a parameter: the box's centre (not its lower corner,
+    all zeros), and table.md says it compares nothing."""
+    from dsm.tune import tuner as tu
+    from dsm.tune.output import table_text
+    cfg = tomllib.loads('[experiment]\nname = "t"\n[camera]\nresolution = [32, 32]\n[[scene]]\nbuiltin = "l_shape"\n'
+                        '[map]\nresolution = 32\n[[scheme]]\nname = "combined"\nnormal_offset = "1 texel"\n'
+                        'depth_bias = "0.5 texel"\nslope_scale = 0.5\nslope_clamp = "4 texel"\n[tune]\nsteps = 6\n')
+    res = tu.tune(cfg)
+    e = res.schemes[0]
+    assert e["grid"]["points_per_parameter"] == 1
+    for name, (lo, hi) in e["box"].items():
+        assert e["grid"]["values"][name] == pytest.approx(0.5 * (lo + hi))
+    assert "a grid of one point per parameter" in table_text(res)

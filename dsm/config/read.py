@@ -12,10 +12,10 @@ import tomllib
 from dataclasses import replace
 from pathlib import Path
 
-from ..types import LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, MAP_VIEWS, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA, REPORT_IMAGES, LOOKUP_MODES, ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params, SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec, CameraSpec, CascadeSpec, CASCADE_SPLITS, CASCADE_FITS, DEPTH_BOUNDS, MAX_CASCADES, MotionSpec, CAMERA_PATHS, LIGHT_PATHS, MAP_KINDS, MomentSpec, ContactSpec, BLUR_KERNELS
+from ..types import LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, MAP_VIEWS, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA, REPORT_IMAGES, LOOKUP_MODES, LAMBDA_MAX, SEED_MAX, ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params, SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec, CameraSpec, CascadeSpec, CASCADE_SPLITS, CASCADE_FITS, DEPTH_BOUNDS, MAX_CASCADES, MotionSpec, CAMERA_PATHS, LIGHT_PATHS, MAP_KINDS, MomentSpec, ContactSpec, BLUR_KERNELS
 
-# a run's folder is runs/<name>-tune-YYYYmmdd-HHMMSS (21 bytes more) and a file name takes 255 bytes
-NAME_MAX_BYTES = 255 - len("-tune-20240101-120000")
+# a run's folder is runs/<name>-tune-YYYYmmdd-HHMMSS[-n] (at most 25 bytes more) and a file name takes 255 bytes
+NAME_MAX_BYTES = 255 - len("-tune-20240101-120000-999")
 KIND_KEYS = ("kind", "blur", "blur_kernel", "moment_samples", "mipmaps", "leak_texels", "vsm", "esm", "evsm", "msm")    # [map] kind and its tables
 CASCADE_KEYS = ("cascades", "split", "lambda", "fit", "depth_bounds", "stabilize", "blend", "max_distance")
 
@@ -138,7 +138,7 @@ def _parse_experiment(raw: dict, source: str) -> tuple:
     exp = _table(raw, "experiment", source)
     check_keys(exp, ("name", "seed", "variant"), source, "experiment")
     name = _plain_name(exp.get("name", Path(source).stem if not source.startswith("<") else "experiment"), source)
-    seed = number(exp.get("seed", 7), source, "experiment.seed", integer=True)
+    seed = number(exp.get("seed", 7), source, "experiment.seed", integer=True, minimum=0, maximum=SEED_MAX)
     variant = exp.get("variant")
     if variant is not None:
         choice(variant, source, "experiment.variant", VARIANTS)
@@ -276,7 +276,7 @@ def _parse_run_tables(raw: dict, source: str) -> tuple:
     lambdas = as_list(orc.get("lambda", 1.0))
     if not lambdas:
         raise ConfigError(source, "oracle.lambda", "empty list")
-    lambdas = tuple(dict.fromkeys(number(x, source, "oracle.lambda", minimum=0) for x in lambdas))
+    lambdas = tuple(dict.fromkeys(number(x, source, "oracle.lambda", minimum=0, maximum=LAMBDA_MAX) for x in lambdas))
     rep = _table(raw, "report", source)
     check_keys(rep, ("images",), source, "report")
     report_images = choice(rep.get("images", "all"), source, "report.images", REPORT_IMAGES)

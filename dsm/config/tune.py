@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..types import ConfigError, Length, as_list, check_keys, choice, number, vec3
+from ..types import LAMBDA_MAX, SEED_MAX, ConfigError, Length, as_list, check_keys, choice, number, vec3
 
 
 TUNE_KEYS = ("lambda", "steps", "lr", "temperature", "schedule", "seed", "batch", "params", "range", "camera",
@@ -96,12 +96,12 @@ def tune_spec(t, src: str, seed: int, schemes: tuple) -> TuneSpec:
     if not isinstance(t, dict):
         raise ConfigError(src, "tune", "expected a table [tune]")
     check_keys(t, TUNE_KEYS, src, "tune")
-    lam = number(t.get("lambda", 1.0), src, "tune.lambda", minimum=0)
+    lam = number(t.get("lambda", 1.0), src, "tune.lambda", minimum=0, maximum=LAMBDA_MAX)
     steps = number(t.get("steps", 100), src, "tune.steps", integer=True, minimum=1, maximum=100000)
     lr = number(t.get("lr", TuneSpec.lr), src, "tune.lr", positive=True)
     temp = _temperature(t, src)
     schedule = choice(t.get("schedule", "geometric"), src, "tune.schedule", SCHEDULES)
-    seed = number(t.get("seed", seed), src, "tune.seed", integer=True)
+    seed = number(t.get("seed", seed), src, "tune.seed", integer=True, minimum=0, maximum=SEED_MAX)
     batch = number(t.get("batch", 1.0), src, "tune.batch", positive=True, maximum=1.0)
     scan = number(t.get("scan", 0), src, "tune.scan", integer=True, minimum=0, maximum=100000)
     if scan == 1:                 # evenly spaced with both ends of the box: one point holds only the low end
@@ -197,6 +197,12 @@ def _cameras(t: dict, src: str) -> tuple:
         raise ConfigError(src, "tune.camera", "camera names must differ")
     if cams and not any(c.role == "train" for c in cams):
         raise ConfigError(src, "tune.camera", "no camera has role = \"train\"", ROLES)
+    pose = lambda c: (c.position, c.target, c.up, c.fov)
+    for i, c in enumerate(cams):
+        twin = next((d for d in cams[:i] if pose(d) == pose(c)), None)
+        if twin is not None:        # a held-out view equal to a training view measures nothing held out
+            raise ConfigError(src, f"tune.camera[{i}]", f"the same pose as camera {twin.name!r}: give each "
+                              "camera its own position, target, up or fov")
     return tuple(cams)
 
 

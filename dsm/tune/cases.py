@@ -98,6 +98,9 @@ def prepare_cases(tc, progress=None):
                 dr.eval(rx.depth, rx.u_map, rx.v_map, rx.face, rx.texel_world, rx.to_light)
                 th = pl.thresholds(rx, smap)
                 cases.append(Case(sd.label, label, name, role, g, s, rx, s.v_star.copy(), mi.Bool(s.v_star), th))
+                if not s.v_star.any():
+                    notes.append(f"{sd.label} / {label} / {name}: every receiver is in shadow (a camera inside a "
+                                 "closed mesh sees only its inside)")
             if progress:
                 progress(f"{sd.label} / {label}")
     return groups, cases, notes

@@ -19,7 +19,8 @@ def grid_search(tc, spec: SchemeSpec, box, train, groups, budget: int) -> dict:
     ``budget`` evaluations (points per parameter: floor(budget^(1/p)))."""
     p = len(box)
     k = max(1, int(math.floor(budget ** (1.0 / p) + 1e-9)))
-    axes = [np.linspace(b.lo, b.hi, k) for b in box]
+    # one point a parameter (steps < 2^p): the box's centre, not its lower corner
+    axes = [np.linspace(b.lo, b.hi, k) if k > 1 else np.array([0.5 * (b.lo + b.hi)]) for b in box]
     best, evals = None, 0
     t0 = sync_clock()
     for combo in np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, p):

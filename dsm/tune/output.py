@@ -170,6 +170,10 @@ def table_text(res: TuneResult) -> str:
                    f"| {_fmt(r['oracle'])} | {_fmt(r['start_train'])} | {_fmt(r['start_heldout'])} "
                    f"| {r['scan_params']} | {_fmt(r['scan_train'])} ({r['scan_evaluations']}) "
                    f"| {_fmt(r['tuned_train'] / r['scan_train']) if r['scan_train'] > 0 else '-'} |")
+    thin = [e["scheme"] for e in res.schemes if (e.get("grid") or {}).get("points_per_parameter", 2) < 2]
+    if thin:        # a grid of one point (the box's centre) compares nothing
+        out += ["", f"a grid of one point per parameter (steps {res.spec.steps} < 2^parameters; its box's centre): "
+                f"{', '.join(thin)}: give more steps for a comparison"]
     checks = [(e["scheme"], k, g) for e in res.schemes for k, g in (e.get("gradcheck") or {}).items()]
     if checks:
         out += ["", f"## gradient check (relaxed loss at the start, temperature {res.spec.temperature[0]:g} texel; "

@@ -158,8 +158,9 @@ def tune_scheme(tc, spec: SchemeSpec, train, groups, progress=None, oracle_best=
     # a coarse grid may hold fewer points than its share (k^p <= share): Adam takes the rest
     adam = _adam(tc, spec, box, train, groups, best[1], ts.steps - len(rows) - budget["refine"], len(rows), progress)
     for r in adam["rows"]:
-        if r["hard_objective"] < best[0]:
-            best = (r["hard_objective"], {p.name: r[f"param_{p.name}"] for p in box})
+        vals = {p.name: r[f"param_{p.name}"] for p in box}
+        if r["hard_objective"] < best[0] and all(math.isfinite(v) for v in vals.values()):
+            best = (r["hard_objective"], vals)        # a diverged step (NaN) is never a result
     rows += adam["rows"]
     k = max(1, round(len(grid) ** (1.0 / len(box)))) if grid else 1
     ref = exact_refinement(spec, box, best, train, groups, ts.lam, exact, ts.steps - len(rows), k)

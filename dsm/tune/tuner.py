@@ -169,6 +169,8 @@ def run_tune(tc, out=None, progress: bool = False, resume: bool = False) -> Tune
     bar = _progress_bar(tc) if progress else None
     tick = (lambda *a: bar.update(1)) if bar else None
     groups, cases, notes = prepare_cases(tc, tick)
+    if not tc.spec.cameras:
+        notes.insert(0, "no [[tune.camera]]: the scene's own camera is the one training view, nothing is held out")
     train = [c for c in cases if c.role == "train"]
     held = [c for c in cases if c.role == "heldout"]
     if not train:
@@ -178,6 +180,9 @@ def run_tune(tc, out=None, progress: bool = False, resume: bool = False) -> Tune
     orc_train = pl.oracles(th_train, vs_train, ts.lam)["row"]
     orc_held = pl.oracles(*pooled_thresholds(held, groups), ts.lam)["row"] if held else None
     results, steps, comparison, kept = _tune_schemes(tc, train, held, groups, orc_train, out, resume, tick)
+    notes += [f"{e['scheme']} {e['start']}: the start of {', '.join(e['start_outside_box'])} lies outside its "
+              "[tune.range] box, so the search began from it clipped into the box and may end worse than the start"
+              for e in results if e.get("start_outside_box")]
     if out is not None and not tc.schemes:     # a tune of pre-filtered instances alone: --resume finds it
         tune_resume.write_state(out, tc.config.name, [])
     moments, moment_steps, moment_notes = tune_all(tc, train, held, groups, orc_train, tick)
@@ -255,7 +260,7 @@ def _scheme_entry(tc, spec, train, held, groups, orc_train, tick) -> tuple:
              "heldout": _with_obj(hard_counts(tuned, held, groups), ts.lam) if held else None,
              "start_train": _with_obj(hard_counts(spec, train, groups), ts.lam),
              "start_heldout": _with_obj(hard_counts(spec, held, groups), ts.lam)["objective"] if held else NAN,
-             "gradcheck": check,
+             "gradcheck": check, "start_outside_box": _outside_box(spec, r["box"]),
              "scan": None if scan is None else {**scan, "params": describe_params(with_values(spec, scan["values"]).params)},
              "first_step_ms": r["first_step_ms"], "step_ms": r["step_ms"], "tune_ms": r["total_ms"],
              "grid": {**g, "params": describe_params(grid_spec.params),
@@ -268,6 +273,13 @@ def _scheme_entry(tc, spec, train, held, groups, orc_train, tick) -> tuple:
             entry["oracle"] = {"kind": tag, "objective": orc_train[f"{tag}_objective"],
                                "bias": orc_train["best_k" if tag == "texel" else "best_b"]}
     return entry, r["steps"]
+
+
+def _outside_box(spec, box) -> list:
+    """The tuned parameters whose start lies outside their search box ([tune.range]): the search
+    starts from the start clipped into the box, so the result may be worse than the start."""
+    val = lambda c: c.value if isinstance(c, Length) else float(c)
+    return [p.name for p in box if not p.lo <= val(getattr(spec.params, p.name)) <= p.hi]
 
 
 def _learned_map(tc, train, held, groups, results, orc_train, orc_held, tick) -> dict:
