@@ -544,3 +544,22 @@ def test_a_one_point_grid_is_the_box_centre_and_said(tmp_path):
     for name, (lo, hi) in e["box"].items():
         assert e["grid"]["values"][name] == pytest.approx(0.5 * (lo + hi))
     assert "a grid of one point per parameter" in table_text(res)
+
+
+def test_ctrl_c_while_the_command_starts_is_one_line(monkeypatch, capsys):
+    """The dsm command's entry point (dsm.launch): a Ctrl-C while the command line's modules import
+    ends it with one line and exit 130, not a traceback."""
+    import builtins
+    import sys
+    from dsm import launch
+    real = builtins.__import__
+
+    def interrupted(name, globals=None, locals=None, fromlist=(), level=0):
+        if (level == 1 and name == "cli") or name == "dsm.cli":
+            raise KeyboardInterrupt
+        return real(name, globals, locals, fromlist, level)
+    monkeypatch.delitem(sys.modules, "dsm.cli", raising=False)
+    monkeypatch.setattr(builtins, "__import__", interrupted)
+    assert launch.main() == 130
+    err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert err == ["dsm: interrupted (while starting)"]
