@@ -150,7 +150,7 @@ def _config_error(e: cfgmod.ConfigError, command: str = "run") -> int:
     return 2
 
 
-def _fresh_folder(prefix: str) -> Path:
+def fresh_folder(prefix: str) -> Path:
     """A new folder runs/<prefix>-<time>[-n], made here, so two commands started in the same second
     never share the default folder (mkdir is atomic: the second takes the next suffix)."""
     base = Path("runs") / f"{prefix}-{time.strftime('%Y%m%d-%H%M%S')}"
@@ -198,7 +198,7 @@ def main(argv=None) -> int:
         if getattr(args, "out", None) is not None and not str(args.out).strip():
             _err("--out: an empty path (leave --out out for runs/<name>-<time>/)")
             return 2
-        out = Path(args.out) if args.out else _fresh_folder(f"{cfg.name}-tune" if args.cmd == "tune" else cfg.name)
+        out = Path(args.out) if args.out else fresh_folder(f"{cfg.name}-tune" if args.cmd == "tune" else cfg.name)
         return _tune(cfg, args, out) if args.cmd == "tune" else _run(cfg, args, out)
     except KeyboardInterrupt:
         # as the command (not main([...]) from Python): a second Ctrl-C, or one passed on while Ray shuts

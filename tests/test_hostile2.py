@@ -512,7 +512,7 @@ def test_an_empty_out_is_refused_and_default_folders_never_collide(tmp_path, cap
     assert rc == 2
     _one_line(err, "--out", "empty")
     monkeypatch.chdir(tmp_path)
-    a, b = cli._fresh_folder("t"), cli._fresh_folder("t")
+    a, b = cli.fresh_folder("t"), cli.fresh_folder("t")
     assert a != b and a.is_dir() and b.is_dir() and a.parent == b.parent == Path("runs")
 
 
