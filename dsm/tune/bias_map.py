@@ -249,8 +249,7 @@ def heldout_split(held, groups, lit_map, covered, best_spec, lam) -> dict:
     culling = pl.culling_of(best_spec.params)
     lit_best = np.concatenate([pl.visibility(best_spec, c.rx, groups[c.group].maps[culling])[0].numpy() >= 0.5
                                for c in held])
-    th, vs = pooled_thresholds(held, groups)
-    texel_keys = _texel_keys(held, groups)
+    th, vs = pooled_thresholds(held, groups)          # th.texel: texel ids unique over the maps
     out = {}
     for name, sel in (("covered", covered), ("uncovered", ~covered)):
         n = int(sel.sum())
@@ -259,14 +258,7 @@ def heldout_split(held, groups, lit_map, covered, best_spec, lam) -> dict:
         orc = pl.oracles(sub, vs[sel], lam)["row"]["per_texel_objective"] if n else NAN
         g, m = obj(lit_best), obj(lit_map)
         out[name] = {"n_receivers": n, "map": m, "best_global": g, "per_texel_oracle": orc,
-                     "receivers_per_texel": n / np.unique(texel_keys[sel]).size if n else NAN,
+                     "receivers_per_texel": n / np.unique(th.texel[sel]).size if n else NAN,
                      "gap_closed": (g - m) / (g - orc) if n and g > orc else NAN}
     return out
 
-
-def _texel_keys(cases, groups) -> np.ndarray:
-    """Per receiver of ``cases`` a key of its map texel, unique over the maps (groups) and faces."""
-    from .residual_map import block_keys
-    cat = lambda f: np.concatenate([f(c) for c in cases]) if cases else np.zeros(0, np.int64)
-    return block_keys(cat(lambda c: c.th.texel), cat(lambda c: np.full(c.n, c.group)),
-                      cat(lambda c: np.full(c.n, groups[c.group].view.resolution)), 1)

@@ -94,7 +94,7 @@ def differences(lo: float, mid: float, hi: float, h: float, ad: float) -> dict:
     """The central difference of f(x - h), f(x), f(x + h) against ``ad`` (rel_error), and the one-sided
     differences: where they disagree by more than KINK_RATIO the loss has a kink (a max, a clamp)
     within the step, so the central difference straddles two slopes and says nothing of AD."""
-    fd, left, right = (hi - lo) / (2 * h), (mid - lo) / h, (hi - mid) / h
+    left, right = (mid - lo) / h, (hi - mid) / h
     scale = max(abs(left), abs(right))
-    return {"fd": fd, "left": left, "right": right, "rel_error": abs(ad - fd) / abs(fd) if fd else NAN,
+    return {**central(lo, hi, h, ad), "left": left, "right": right,
             "kink": bool(scale > 0 and abs(right - left) > KINK_RATIO * scale)}

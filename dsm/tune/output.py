@@ -125,6 +125,7 @@ def _fmt(x):
 
 
 def _fmt2(x: float) -> str:
+    """A ratio to two decimals, "-" where undefined."""
     return "-" if math.isnan(x) else f"{x:.2f}"
 
 
@@ -154,9 +155,20 @@ def _bias_map_head(b: dict) -> str:
 
 def table_text(res: TuneResult) -> str:
     """The Markdown summary (``table.md``): a row per tuned scheme against grid search and oracle, then the bias map."""
-    lam = res.spec.lam
-    out = [f"# dsm tune (lambda = {lam:g}; objective (n_acne + lambda n_peterpan) / n_receivers)", "",
+    out = [f"# dsm tune (lambda = {res.spec.lam:g}; objective (n_acne + lambda n_peterpan) / n_receivers)", "",
            f"training receivers {res.n_train}, held-out receivers {res.n_heldout}"]
+    out += _scheme_section(res) + _gradcheck_section(res)
+    if res.bias_map:
+        out += _bias_map_section(res.bias_map)
+    out += moments_table(res)
+    if res.notes:
+        out += ["", "notes: " + "; ".join(res.notes)]
+    return "\n".join(out) + "\n"
+
+
+def _scheme_section(res: TuneResult) -> list:
+    """table.md's row per tuned scheme (tuned, grid, oracle, start, scan) and the note on one-point grids."""
+    out = []
     if res.comparison:             # a tune of pre-filtered instances alone has no scheme table
         out += ["", "| scheme | tuned | train | held-out | tune ms (evals; first, median step) | grid best | grid train "
            "| grid held-out | grid ms (evals) | oracle (train) | start train | start held-out | 1-D scan best "
@@ -174,47 +186,53 @@ def table_text(res: TuneResult) -> str:
     if thin:        # a grid of one point (the box's centre) compares nothing
         out += ["", f"a grid of one point per parameter (steps {res.spec.steps} < 2^parameters; its box's centre): "
                 f"{', '.join(thin)}: give more steps for a comparison"]
+    return out
+
+
+def _gradcheck_section(res: TuneResult) -> list:
+    """table.md's gradient check: AD against central differences at two steps, per scheme and parameter."""
     checks = [(e["scheme"], k, g) for e in res.schemes for k, g in (e.get("gradcheck") or {}).items()]
-    if checks:
-        out += ["", f"## gradient check (relaxed loss at the start, temperature {res.spec.temperature[0]:g} texel; "
-                f"central difference, half step {GRADCHECK_STEP:g} texel's worth, numpy float64)", "",
-                "| scheme | parameter | AD | central difference | relative error | left / right difference "
-                f"| central, step / {FINE} | relative error |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
-        out += [f"| {n} | {k} | {g['ad']:.6g} | {g['fd']:.6g} | {_fmt(g['rel_error'])} | {_sides(g)} "
-                f"| {_fine(g)} |" for n, k, g in checks]
-        out += ["", f"*central, step / {FINE}*: the same difference at a quarter of the step. Where the loss sums "
-                "receivers that each bend somewhere (a bilinear z1 bends at texel centres), a step straddles fewer "
-                "bends as it shrinks, so an error that falls with the step is the difference's, not AD's."]
-        if any(g.get("kink") for _, _, g in checks):
-            out += ["", "*kink*: the one-sided differences disagree, so the loss bends within the step (a max or a "
-                    "clamp of the scheme) and the central difference averages two slopes: its disagreement there is no "
-                    "evidence against AD."]
-    if res.bias_map:
-        b = res.bias_map
-        bg = b["best_global"]
-        head = _bias_map_head(b)
-        out += ["", "## learned bias map", "", head, "",
-                "| | train | held-out |", "| --- | --- | --- |",
-                f"| learned map | {_fmt(b['train']['objective'])} | {_fmt(b['heldout']['objective'])} |",
-                f"| per-texel oracle (of those views) | {_fmt(b['per_texel_oracle_train'])} "
-                f"| {_fmt(b['per_texel_oracle_heldout'])} |"]
-        if bg:
-            out.append(f"| best tuned global ({bg['scheme']} {bg['params']}) | {_fmt(bg['train'])} "
-                       f"| {_fmt(bg['heldout'])} |")
-        if b.get("heldout_split"):
-            out += ["", "| held-out receivers | n | per texel | learned map | best tuned global | per-texel oracle "
-                    "| gap closed |", "| --- | --- | --- | --- | --- | --- | --- |"]
-            for name, r in b["heldout_split"].items():
-                out.append(f"| in {'trained' if name == 'covered' else 'untrained'} blocks | {r['n_receivers']} "
-                           f"| {_fmt2(r.get('receivers_per_texel', math.nan))} | {_fmt(r['map'])} | {_fmt(r['best_global'])} "
-                           f"| {_fmt(r['per_texel_oracle'])} | {_fmt(r['gap_closed'])} |")
-            out += ["", "*per texel*: receivers per map texel they fall in. The per-texel oracle gives each texel "
-                    "its best bias for those very receivers, so with about one receiver a texel it classifies nearly "
-                    "every receiver right and the gap is widest; the gap closed depends on it."]
-    out += moments_table(res)
-    if res.notes:
-        out += ["", "notes: " + "; ".join(res.notes)]
-    return "\n".join(out) + "\n"
+    if not checks:
+        return []
+    out = ["", f"## gradient check (relaxed loss at the start, temperature {res.spec.temperature[0]:g} texel; "
+           f"central difference, half step {GRADCHECK_STEP:g} texel's worth, numpy float64)", "",
+           "| scheme | parameter | AD | central difference | relative error | left / right difference "
+           f"| central, step / {FINE} | relative error |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    out += [f"| {n} | {k} | {g['ad']:.6g} | {g['fd']:.6g} | {_fmt(g['rel_error'])} | {_sides(g)} "
+            f"| {_fine(g)} |" for n, k, g in checks]
+    out += ["", f"*central, step / {FINE}*: the same difference at a quarter of the step. Where the loss sums "
+            "receivers that each bend somewhere (a bilinear z1 bends at texel centres), a step straddles fewer "
+            "bends as it shrinks, so an error that falls with the step is the difference's, not AD's."]
+    if any(g.get("kink") for _, _, g in checks):
+        out += ["", "*kink*: the one-sided differences disagree, so the loss bends within the step (a max or a "
+                "clamp of the scheme) and the central difference averages two slopes: its disagreement there is no "
+                "evidence against AD."]
+    return out
+
+
+def _bias_map_section(b: dict) -> list:
+    """table.md's learned bias map: its train and held-out objectives beside the oracle and the best global
+    scheme, and the held-out split by trained blocks."""
+    bg = b["best_global"]
+    out = ["", "## learned bias map", "", _bias_map_head(b), "",
+           "| | train | held-out |", "| --- | --- | --- |",
+           f"| learned map | {_fmt(b['train']['objective'])} | {_fmt(b['heldout']['objective'])} |",
+           f"| per-texel oracle (of those views) | {_fmt(b['per_texel_oracle_train'])} "
+           f"| {_fmt(b['per_texel_oracle_heldout'])} |"]
+    if bg:
+        out.append(f"| best tuned global ({bg['scheme']} {bg['params']}) | {_fmt(bg['train'])} "
+                   f"| {_fmt(bg['heldout'])} |")
+    if b.get("heldout_split"):
+        out += ["", "| held-out receivers | n | per texel | learned map | best tuned global | per-texel oracle "
+                "| gap closed |", "| --- | --- | --- | --- | --- | --- | --- |"]
+        for name, r in b["heldout_split"].items():
+            out.append(f"| in {'trained' if name == 'covered' else 'untrained'} blocks | {r['n_receivers']} "
+                       f"| {_fmt2(r.get('receivers_per_texel', math.nan))} | {_fmt(r['map'])} | {_fmt(r['best_global'])} "
+                       f"| {_fmt(r['per_texel_oracle'])} | {_fmt(r['gap_closed'])} |")
+        out += ["", "*per texel*: receivers per map texel they fall in. The per-texel oracle gives each texel "
+                "its best bias for those very receivers, so with about one receiver a texel it classifies nearly "
+                "every receiver right and the gap is widest; the gap closed depends on it."]
+    return out
 
 
 def write(res: TuneResult, out: Path, orc_train=None, orc_held=None):

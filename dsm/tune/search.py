@@ -51,6 +51,19 @@ def texel_sizes(train, groups) -> dict:
     return {"texel": 1.0, "world": tw, "range": tw / rng, "diagonal": tw / diag, "": 1.0}
 
 
+def start_value(spec, name: str) -> float:
+    """A scheme instance's value of parameter ``name`` in its own unit (a Length's number, or the number)."""
+    cur = getattr(spec.params, name)
+    return cur.value if isinstance(cur, Length) else float(cur)
+
+
+def _unit_and_scale(spec, name: str, sizes) -> tuple:
+    """Parameter ``name``'s unit ("" for a plain number) and one texel's worth in it (``sizes``: texel_sizes)."""
+    cur = getattr(spec.params, name)
+    unit = cur.unit if isinstance(cur, Length) else ""
+    return unit, sizes["diagonal" if (spec.name, name) in DIAGONAL_FRACTIONS else unit]
+
+
 def search_box(tc, spec, sizes, oracle_best=None, line_best=None) -> list:
     """Each tuned parameter: its start, its step scale (one texel's worth in its unit; 1 for
     factors on the slope) and its search range. The default range reaches twice the best value
@@ -61,10 +74,8 @@ def search_box(tc, spec, sizes, oracle_best=None, line_best=None) -> list:
     mod = get(spec.name)
     out = []
     for name in tc.spec.params[spec.name]:
-        cur = getattr(spec.params, name)
-        v = cur.value if isinstance(cur, Length) else float(cur)
-        unit = cur.unit if isinstance(cur, Length) else ""
-        scale = sizes["diagonal" if (spec.name, name) in DIAGONAL_FRACTIONS else unit]
+        v = start_value(spec, name)
+        unit, scale = _unit_and_scale(spec, name, sizes)
         vmin = valid_min(mod, name)
         best = (oracle_best or {}).get(unit) if (spec.name, name) == ("constant", "bias") else None
         bests = [b for b in (best, (line_best or {}).get(name)) if b is not None and math.isfinite(b)]
@@ -82,14 +93,11 @@ def _line_bests(tc, spec, train, groups, sizes) -> dict:
     start (the others at their starts), from the receivers' flips (refine.line_reach)."""
     from ..schemes import get
     mod = get(spec.name)
-    start, scale = {}, {}
-    for name in tc.spec.params[spec.name]:
-        cur = getattr(spec.params, name)
-        start[name] = cur.value if isinstance(cur, Length) else float(cur)
-        unit = cur.unit if isinstance(cur, Length) else ""
-        scale[name] = sizes["diagonal" if (spec.name, name) in DIAGONAL_FRACTIONS else unit]
-    return {n: line_reach(mod, spec, start, n, valid_min(mod, n) or 0.0, scale[n], train, groups, tc.spec.lam)
-            for n in start if (spec.name, n) not in tc.spec.ranges}
+    names = tc.spec.params[spec.name]
+    start = {n: start_value(spec, n) for n in names}
+    return {n: line_reach(mod, spec, start, n, valid_min(mod, n) or 0.0, _unit_and_scale(spec, n, sizes)[1],
+                          train, groups, tc.spec.lam)
+            for n in names if (spec.name, n) not in tc.spec.ranges}
 
 
 def temperature_at(spec: TuneSpec, step: int, steps: int) -> float:

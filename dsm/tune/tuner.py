@@ -68,7 +68,7 @@ from ..config.tune import TuneSpec, tunable, tune_spec
 from .cases import pooled_thresholds, prepare_cases
 from .compare import exact_scan, gradient_check, grid_search
 from .bias_map import edge_bias_map, heldout_split, map_start, residual_bias_map, tune_bias_map
-from .search import tune_scheme
+from .search import start_value, tune_scheme
 from .output import TuneResult, moments_toml, tuned_toml, write
 from .moment_search import tune_all
 
@@ -278,8 +278,7 @@ def _scheme_entry(tc, spec, train, held, groups, orc_train, tick) -> tuple:
 def _outside_box(spec, box) -> list:
     """The tuned parameters whose start lies outside their search box ([tune.range]): the search
     starts from the start clipped into the box, so the result may be worse than the start."""
-    val = lambda c: c.value if isinstance(c, Length) else float(c)
-    return [p.name for p in box if not p.lo <= val(getattr(spec.params, p.name)) <= p.hi]
+    return [p.name for p in box if not p.lo <= start_value(spec, p.name) <= p.hi]
 
 
 def _learned_map(tc, train, held, groups, results, orc_train, orc_held, tick) -> dict:
