@@ -593,3 +593,26 @@ def test_tuning_does_not_depend_on_the_scene_scale():
             for name, va in a["values"].items():
                 world = a["scheme"] == "constant" and name == "bias" and a is results[1.0][1]
                 assert b["values"][name] == pytest.approx(va * (s if world else 1.0), rel=1e-4), (s, a["scheme"], name)
+
+
+def test_an_absent_optional_scene_is_left_out_with_a_note_and_alone_is_nothing_to_tune(tmp_path, capsys):
+    """An optional file that is absent (Sponza in experiments/tune_sponza.toml) is not tuned: with
+    other scenes beside it they are tuned and the note names it; alone, `dsm tune` exits 1 saying
+    so, before any folder is made."""
+    import json
+    from dsm.cli import main
+    absent = tmp_path / "absent.ply"
+    head = f'[[scene]]\nfile = "{absent}"\noptional = true\n'
+    rest = ('[map]\nresolution = 16\n[camera]\nresolution = 16\n[[scheme]]\nname = "constant"\n'
+            '[tune]\nsteps = 2\n')
+    both = tmp_path / "both.toml"
+    both.write_text('[[scene]]\nbuiltin = "plane_box"\n' + head + rest)
+    assert main(["tune", str(both), "--out", str(tmp_path / "o")]) == 0
+    notes = json.loads((tmp_path / "o" / "tune.json").read_text())["notes"]
+    assert any(f"{absent} is absent (optional scene)" in n for n in notes), notes
+    alone = tmp_path / "alone.toml"
+    alone.write_text(head + rest)
+    capsys.readouterr()
+    assert main(["tune", str(alone), "--out", str(tmp_path / "o2")]) == 1
+    assert "nothing to run: every scene is an absent optional file (absent.ply" in capsys.readouterr().err
+    assert not (tmp_path / "o2").exists()

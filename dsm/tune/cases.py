@@ -72,6 +72,9 @@ def prepare_cases(tc, progress=None):
     needs.setdefault("none", set())
     groups, cases, notes = [], [], []
     for spec in cfg.scenes:
+        if spec.missing:            # an absent optional file: the others are tuned, the note says which
+            notes.append(f"{spec.label}: {spec.missing}")
+            continue
         sd = pl.load_scene(spec, cfg.camera_resolution, getattr(cfg, "camera", None))   # [camera] pose, if any
         lights = sd.lights_for(cfg.lights)
         closed = pl.closedness(sd)[0] if any(c != "none" for c in needs) else None
