@@ -89,7 +89,7 @@ def main():
     for ax, (scheme, params) in zip(axes, pick):
         r = next(r for r in rows if (r["scene"], r["light"], r["view"], r["resolution"], r["scheme"], r["params"]) ==
                  ("room", "0:point", "cube", 512, scheme, params))
-        ax.imshow(np.asarray(Image.open(out / figures.image_paths(r)[0])))
+        ax.imshow(np.asarray(Image.open(out / figures.image_paths(r)[0]).convert("RGB")))
         ax.set_title(f"{scheme} {params}\nacne {r['acne_rate']:.3f}, peter-panning {r['peterpan_rate']:.3f}", fontsize=9)
         ax.axis("off")
     from matplotlib.patches import Patch

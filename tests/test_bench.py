@@ -111,3 +111,15 @@ def test_measure_kernel_times_every_call_and_leaves_no_cold_call_outside():
     np.testing.assert_array_equal(y.numpy(), np.arange(100_000, dtype=np.float32) * 3.0 + 1.0)
     timing.measure_kernel(lambda: (x * scale - 1.0,), repeats=1)      # one call: it is the timed one
     assert timing.LAUNCHES == {"outside_repeats": 0, "timed_repeats": 4}
+
+
+def test_measure_kernel_reports_the_warm_calls_median(monkeypatch):
+    """The first call's kernel time (memory touched for the first time) stays out of the median
+    when there are later calls, and is the time when it is the only call."""
+    from dsm.tools import timing
+    times = iter([[], [100.0], [1.0], [3.0], [], [7.0]])      # each call drains the history first
+    monkeypatch.setattr(timing, "_run", lambda fn: ((), 0.0))
+    monkeypatch.setattr(timing, "_jit_kernels", lambda: [{"execution_time": t} for t in next(times)])
+    monkeypatch.setattr(timing, "_compiled", lambda hist: (0.0, 0))
+    assert timing.measure_kernel(lambda: (), repeats=3)[1].ms == 2.0       # median of 1 and 3, not of 100, 1, 3
+    assert timing.measure_kernel(lambda: (), repeats=1)[1].ms == 7.0

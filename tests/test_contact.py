@@ -228,7 +228,7 @@ def test_run_writes_the_contact_group_only_when_asked(run_dict):
         from PIL import Image
         from dsm.report.sections import contact_images
         from dsm.report import figures
-        img = np.asarray(Image.open(with_c.out / "images" / figures.image_folder(r) / f"{r['case']}_contact.png"))
+        img = np.asarray(Image.open(with_c.out / "images" / figures.image_folder(r) / f"{r['case']}_contact.png").convert("RGB"))
         count = lambda k: int((img.reshape(-1, 3) == contact_images.CONTACT_COLORS[k]).all(1).sum())
         assert (count(3), count(4), count(5)) == (r["n_contact_recovered"], r["n_contact_false"],
                                                   r["n_contact_missed"])

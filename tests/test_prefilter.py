@@ -699,7 +699,7 @@ def test_the_error_image_paints_the_leaks_in_their_own_colour(run_dict):
     img = res.images[vsm5["case"]]
     assert vsm5["n_leak"] > 0 and (img == metrics.LEAK).sum() == vsm5["n_leak"]
     assert (metrics.base_class(img) == metrics.PETERPAN).sum() == vsm5["n_peterpan"]
-    png = np.asarray(Image.open(res.out / "images" / figures.image_folder(vsm5) / f"{vsm5['case']}_error.png"))
+    png = np.asarray(Image.open(res.out / "images" / figures.image_folder(vsm5) / f"{vsm5['case']}_error.png").convert("RGB"))
     assert (png[img == metrics.LEAK] == metrics.CLASS_COLORS[metrics.LEAK]).all()
 
 

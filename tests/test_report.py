@@ -375,5 +375,5 @@ def test_drawing_in_a_process_pool_writes_what_drawing_here_writes(tmp_path):
     from PIL import Image
     for err, classes, shadow, grey in items:
         for base in ("pool", "here"):
-            assert (np.asarray(Image.open(tmp_path / base / err)) == metrics.CLASS_COLORS[classes]).all()
+            assert (np.asarray(Image.open(tmp_path / base / err).convert("RGB")) == metrics.CLASS_COLORS[classes]).all()
             assert (np.asarray(Image.open(tmp_path / base / shadow)) == grey).all()

@@ -123,6 +123,7 @@ class Runner:
         self.kept, self.stale = {}, []
         self.depth_buffers = {}       # [contact]: the current scene's camera depth buffer (made when a case asks)
         self.marches = {}             # [contact]: per receiver set, (receivers, occluded, timing) of its march
+        self.cosines = (None, None)   # the shadow images' receiver set and its cosines to the light
         self.shrunk = (None, None)    # [map] shrink: (scene label, its shrunk copy)
 
     # ------------------------------------------------------------ top level
@@ -152,7 +153,7 @@ class Runner:
             self.bar.close()
             # the case images are written as cases finish (so a killed run keeps them): report time
             self.timing["measure_s"] = time.perf_counter() - t0 - self.timing.get("images_s", 0.0)
-            self.timing["measure_cpu_s"] = _cpu() - c0
+            self.timing["measure_cpu_s"] = _cpu() - c0 - self.timing.get("images_cpu_s", 0.0)
             self.timing["measure_peak_rss_bytes"] = peak_rss()     # against the plan's peak_bytes_est
             self.timing["kernel_launches"] = self._launches()
             self._write_run_json()
@@ -166,7 +167,7 @@ class Runner:
             except Exception as e:          # the measurements are saved; the report can be rebuilt
                 self._fail("report (dsm report rebuilds it)", e)
             self.timing["report_s"] = time.perf_counter() - t1 + self.timing.get("images_s", 0.0)
-            self.timing["report_cpu_s"] = _cpu() - c1
+            self.timing["report_cpu_s"] = _cpu() - c1 + self.timing.get("images_cpu_s", 0.0)
             self._write_run_json()
         return Results(self.out, self.record.rows, self._run_json(), self.images, self.record.oracle_rows, self.record.curves)
 
@@ -557,6 +558,9 @@ class Runner:
 
     def _case_images(self, meta, gb, setup, v_np, wrong, occ, rx):
         """The case's images (classes, shading, contact march, area-light V), written now."""
+        # the case's images: report work, timed apart; its CPU is this thread's (the images are drawn
+        # here, single-threaded), so Dr.Jit's workers winding down the case's kernels stay measuring's
+        t_img, c_img = time.perf_counter(), time.thread_time()
         case = meta["case"]
         classes = np.zeros(gb.width * gb.height, np.uint8)
         leak = None
@@ -565,9 +569,8 @@ class Runner:
                                      self.cfg.map.leak_texels)
         classes[setup.pixels] = pipeline.classify(v_np, setup.v_star, wrong, leak)
         classes = classes.reshape(gb.height, gb.width)
-        t_img = time.perf_counter()              # the case's images: report work, timed apart
-        shade = report.shade(classes.shape, gb, setup, v_np, pipeline.is_positional(setup.light)) \
-            if self.cfg.report_images == "all" else None
+        shade = report.shade(classes.shape, gb, setup, v_np, pipeline.is_positional(setup.light),
+                             self._cosines(setup)) if self.cfg.report_images == "all" else None
         item = publish.image_item(meta, classes, shade, self.cfg.report_images)
         if item is not None:        # written now (Pillow, ~1 ms, between timings): a killed run keeps them
             figures.write_images(self.out, [item])
@@ -580,8 +583,18 @@ class Runner:
             soft_report.write_images(self.out, [soft_report.image_item(meta, gb.width, gb.height, setup.pixels,
                                                                        v_np, setup.v_frac)])
         self.timing["images_s"] = self.timing.get("images_s", 0.0) + time.perf_counter() - t_img
+        self.timing["images_cpu_s"] = self.timing.get("images_cpu_s", 0.0) + time.thread_time() - c_img
         if self.keep_images:
             self.images[case] = classes
+
+    def _cosines(self, setup):
+        """The receivers' cosines to the light for the shadow images, once per receiver set (every
+        case of a map shares its set; the set is kept so its id stays its own)."""
+        if setup.n is None:
+            return None
+        if self.cosines[0] is not setup:
+            self.cosines = (setup, report.receiver_cosines(setup, pipeline.is_positional(setup.light)))
+        return self.cosines[1]
 
     def _contact(self, sd, gb, setup, rx, v_np) -> tuple:
         """(columns, occluded per receiver) of one case's contact step: its receivers' march (once per

@@ -44,17 +44,24 @@ def sweep_of(spec, all_specs) -> tuple[str, float]:
 
 # ------------------------------------------------------------------ images
 
-def shade(classes_shape, gb, setup, v: np.ndarray, positional: bool) -> np.ndarray:
+def shade(classes_shape, gb, setup, v: np.ndarray, positional: bool, cosines=None) -> np.ndarray:
     """The shadow-mapped render of one case (H, W) in [0, 1]: Lambert under the light with the
     map's visibility, ambient elsewhere. ``positional``: the light sits at its position (else it
-    shines along its direction; dsm.lights)."""
+    shines along its direction; dsm.lights). ``cosines``: receiver_cosines(setup, positional),
+    given when the caller keeps it for the many cases of one set of receivers."""
     out = np.zeros(gb.width * gb.height)
     out[gb.hit] = 0.12
     if setup.n is not None:
-        n = np.stack([c.numpy() for c in (setup.n.x, setup.n.y, setup.n.z)], 1)
-        to_light = _to_light_np(setup, n.shape[0], positional)
-        out[setup.pixels] = 0.12 + 0.88 * np.clip((n * to_light).sum(1), 0, 1) * v
+        cos = receiver_cosines(setup, positional) if cosines is None else cosines
+        out[setup.pixels] = 0.12 + 0.88 * cos * v
     return out.reshape(classes_shape)
+
+
+def receiver_cosines(setup, positional: bool) -> np.ndarray:
+    """Each receiver's cosine to the light, clipped at 0 (float64, per receiver)."""
+    n = np.stack([c.numpy() for c in (setup.n.x, setup.n.y, setup.n.z)], 1)
+    to_light = _to_light_np(setup, n.shape[0], positional)
+    return np.clip((n * to_light).sum(1), 0, 1)
 
 
 def _to_light_np(setup, count, positional):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..io import atomic
+from .. import png
 
 # the classes, in the order of their colours (index 0: a pixel that is not a receiver)
 CONTACT_CLASSES = ("not a receiver", "lit, right", "shadowed, right", "recovered (peter-pan the march shadows)",
@@ -25,8 +25,6 @@ def classes(v, v_star, occluded) -> np.ndarray:
 
 def write_image(path, pixels, cls, width: int, height: int):
     """The contact image of one case: each receiver's class colour (black: not a receiver)."""
-    from PIL import Image
     img = np.zeros(width * height, np.uint8)
     img[pixels] = cls
-    with atomic(path) as tmp:
-        Image.fromarray(CONTACT_COLORS[img.reshape(height, width)]).save(tmp, format="png")
+    png.write(path, img.reshape(height, width), CONTACT_COLORS)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import figures, tables as report, io as report_io
+from .. import figures, png, tables as report, io as report_io
 
 IMAGES = (("v", "viridis"), ("vstar", "viridis"), ("abserr", "magma"))
 
@@ -24,7 +24,6 @@ def image_item(row: dict, width: int, height: int, pixels, v, v_star):
 def write_images(out: Path, items: list):
     """``<case>_v.png``, ``_vstar.png`` (viridis), ``_abserr.png`` (magma): black outside the receivers."""
     from matplotlib import colormaps
-    from PIL import Image
     for base, w, h, pixels, v, v_star in items:
         for name, cmap in IMAGES:
             values = {"v": v, "vstar": v_star, "abserr": np.abs(v - v_star)}[name]
@@ -32,8 +31,7 @@ def write_images(out: Path, items: list):
             rgb[pixels] = np.round(colormaps[cmap](np.clip(values, 0, 1))[:, :3] * 255).astype(np.uint8)
             p = Path(out) / f"{base}_{name}.png"
             p.parent.mkdir(parents=True, exist_ok=True)
-            img = rgb.reshape(h, w, 3)
-            report_io.save_png(p, lambda f, fmt, img=img: Image.fromarray(img).save(f, format=fmt))
+            png.write(p, rgb.reshape(h, w, 3))
 
 
 def plot_jobs(folder: Path, rows: list) -> list:
