@@ -28,19 +28,12 @@ def _run_in(config, out, variant, progress, force, resume):
     config = pipeline.prepare(config, variant)
     held, problem = cli.claim(out)
     if problem:
-        raise ConfigError("dsm.experiment", "out", _api_words(problem))
+        raise ConfigError("dsm.experiment", "out", cli.api_words(problem))
     with held:
         problem, resuming = cli.folder_problem(out, config, force, resume)
         if problem:
-            raise ConfigError("dsm.experiment", "out", _api_words(problem))
+            raise ConfigError("dsm.experiment", "out", cli.api_words(problem))
         return Runner(config, out, variant, progress, resume_previous=resuming).run()
-
-
-def _api_words(problem: str) -> str:
-    # the command line's wording, in dsm.run's arguments
-    for flag, arg in (("--out", "out"), ("--force", "force=True"), ("--resume", "resume=True")):
-        problem = problem.replace(flag, arg)
-    return problem
 
 
 def register():

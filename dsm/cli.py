@@ -129,7 +129,8 @@ def _tune_parser(sub):
     t = sub.add_parser("tune", help="tune scheme parameters (and a learned bias map) by gradient: a config's [tune]")
     t.add_argument("config", help="experiment TOML file with a [tune] table")
     t.add_argument("--out", help="results folder (default: runs/<name>-tune-<time>)")
-    _add_again(t, "replace a previous dsm tune in --out (a folder with its tune.json): its files only, never others",
+    _add_again(t, "replace a previous dsm tune in --out (a folder with its tune.json or, stopped, its tune_state.json): "
+               "its files only, never others",
                "go on with the dsm tune in --out: keep its finished schemes that still match the config, tune the rest")
     _add_machine(t)
 
@@ -639,26 +640,36 @@ TUNE_FILES = ("tuned.toml", "table.md", "steps.csv", "tune.json", "plots/tune_lo
               "tune_state.json")   # what dsm tune writes
 
 
-def _tune_held(tc, out: Path, force: bool = False, resume: bool = False) -> int:
-    from .tune import tuner as tunemod
+def api_words(problem: str) -> str:
+    """A folder problem in the command line's words (--out, --force, --resume) in the Python
+    API's (out, force=True, resume=True): dsm.run and dsm.tune.tuner.tune raise it so."""
+    for flag, arg in (("--out", "out"), ("--force", "force=True"), ("--resume", "resume=True")):
+        problem = problem.replace(flag, arg)
+    return problem
+
+
+def tune_folder(out: Path, name: str, force: bool = False, resume: bool = False) -> tuple:
+    """(why dsm tune cannot write into the claimed folder ``out`` or None, whether it resumes the tune
+    there); a previous tune that ``force`` replaces has its files removed (only those)."""
     from .tune import resume as tune_resume
-    from .tune.output import table_text
     resuming = resume and bool(entries(out))
     if resuming:
-        problem = tune_resume.state_problem(out, tc.config.name)
-        if problem:
-            _err(problem)
-            return 2
-    elif entries(out):
+        return tune_resume.state_problem(out, name), True
+    if entries(out):
         if not force:
-            _err(f"--out {out}: is not an empty folder; choose another --out, or pass --resume (goes on with a dsm "
-                 "tune there, keeping its finished schemes) or --force (replaces a previous dsm tune there)")
-            return 2
+            return (f"--out {out}: is not an empty folder; choose another --out, or pass --resume (goes on with a dsm "
+                    "tune there, keeping its finished schemes) or --force (replaces a previous dsm tune there)"), False
         if not ((out / "tune.json").is_file() or (out / "tune_state.json").is_file()):     # a stopped tune: its state
-            _err(f"--out {out}: --force replaces a previous dsm tune (a folder with its tune.json); this one holds none")
-            return 2
+            return (f"--out {out}: --force replaces a previous dsm tune (a folder with its tune.json or "
+                    "tune_state.json); this one holds neither"), False
         _clear([out / f for f in TUNE_FILES if (out / f).is_file()])
-    problem = _unwritable(out)          # before the tuning, not when its results are written
+    return _unwritable(out), False       # before the tuning, not when its results are written
+
+
+def _tune_held(tc, out: Path, force: bool = False, resume: bool = False) -> int:
+    from .tune import tuner as tunemod
+    from .tune.output import table_text
+    problem, resuming = tune_folder(out, tc.config.name, force, resume)
     if problem:
         _err(problem)
         return 2

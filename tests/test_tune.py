@@ -616,3 +616,58 @@ def test_an_absent_optional_scene_is_left_out_with_a_note_and_alone_is_nothing_t
     assert main(["tune", str(alone), "--out", str(tmp_path / "o2")]) == 1
     assert "nothing to run: every scene is an absent optional file (absent.ply" in capsys.readouterr().err
     assert not (tmp_path / "o2").exists()
+
+
+def test_resume_keeps_every_finished_scheme_when_schemes_are_added_removed_or_changed(tmp_path, capsys):
+    """--resume after a changed first scheme: the state lists the kept second one too (it once
+    listed only what was tuned, so the next resume tuned it again); a scheme added in front, or
+    another removed, keeps the rest; a state entry without its values is tuned again, no traceback."""
+    import json
+    from dsm import cli
+    cfg, out = tmp_path / "t.toml", tmp_path / "o"
+    cfg.write_text(RESUME_CFG)
+    assert cli.main(["tune", str(cfg), "--out", str(out)]) == 0
+    changed = RESUME_CFG.replace('bias = "0.5 texel"', 'bias = "0.75 texel"')
+    cfg.write_text(changed)
+    capsys.readouterr()
+    assert cli.main(["tune", str(cfg), "--out", str(out), "--resume"]) == 0
+    assert "resumed: 1 finished schemes kept, 1 tuned" in capsys.readouterr().err
+    state = json.loads((out / "tune_state.json").read_text())
+    assert sorted(s["entry"]["scheme"] for s in state["schemes"]) == ["constant", "receiver_plane"]
+    cfg.write_text(changed.replace("[[scheme]]\nname = \"constant\"", "[[scheme]]\nname = \"adaptive\"\n"
+                                   "[[scheme]]\nname = \"constant\"", 1))
+    assert cli.main(["tune", str(cfg), "--out", str(out), "--resume"]) == 0
+    assert "resumed: 2 finished schemes kept, 1 tuned" in capsys.readouterr().err
+    cfg.write_text(changed.replace('[[scheme]]\nname = "receiver_plane"\n', ""))
+    assert cli.main(["tune", str(cfg), "--out", str(out), "--resume"]) == 0
+    assert "resumed: 1 finished schemes kept, 0 tuned" in capsys.readouterr().err
+    state = json.loads((out / "tune_state.json").read_text())
+    state["schemes"][0]["entry"] = {}                           # a damaged entry: tuned again
+    (out / "tune_state.json").write_text(json.dumps(state))
+    assert cli.main(["tune", str(cfg), "--out", str(out), "--resume"]) == 0
+    assert "resumed: 0 finished schemes kept, 1 tuned" in capsys.readouterr().err
+
+
+def test_the_python_api_keeps_dsm_tunes_folder_rules(tmp_path):
+    """dsm.tune.tuner.tune(out=...) refuses a folder holding another run as dsm tune does (it once
+    wrote its table.md over a dsm run's), replaces a previous tune with force=True, goes on with
+    resume=True, and refuses both at once."""
+    from dsm.tune import tuner
+    from dsm.types import ConfigError
+    cfg = tmp_path / "t.toml"
+    cfg.write_text(RESUME_CFG)
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "table.md").write_text("a dsm run's table")
+    with pytest.raises(ConfigError, match="is not an empty folder; choose another out, or pass resume=True"):
+        tuner.tune(cfg, out=run)
+    with pytest.raises(ConfigError, match="force=True replaces a previous dsm tune"):
+        tuner.tune(cfg, out=run, force=True)
+    assert (run / "table.md").read_text() == "a dsm run's table" and len(list(run.iterdir())) == 1
+    out = tmp_path / "o"
+    first = tuner.tune(cfg, out=out)
+    again = tuner.tune(cfg, out=out, resume=True)
+    assert again.resumed == 2 and [e["values"] for e in again.schemes] == [e["values"] for e in first.schemes]
+    assert tuner.tune(cfg, out=out, force=True).resumed == 0
+    with pytest.raises(ConfigError, match="give one"):
+        tuner.tune(cfg, out=out, force=True, resume=True)

@@ -8,8 +8,10 @@ result and rows are kept, times included), the others are tuned; the scenes, map
 are always rebuilt (the bias map and held-out evaluation need them), and the learned bias map
 is trained again (it starts from the tuned results). A scheme's key hashes everything its
 result depends on: the kit's version, the scenes (with their input files' hashes), lights,
-map (but its pre-filtered kinds and their instances, which no depth scheme reads), camera and pose, variant, the ``[tune]`` table but its ``bias_map``, and the scheme
-instance, so a changed config tunes again what it changes and keeps the rest.
+map (but its pre-filtered kinds and their instances, which no depth scheme reads), camera and pose,
+variant, the ``[tune]`` table but its ``bias_map`` and the other schemes' ``params`` and ``range``
+entries, and the scheme instance (not its position), so a changed config tunes again what it
+changes and keeps the rest: a scheme added, removed or moved leaves the others' results.
 """
 from __future__ import annotations
 
@@ -34,15 +36,24 @@ def shared_identity(tc, version: str | None = None) -> dict:
     return {"version": kit_version() if version is None else version,
             "scenes": [scene_identity(s) for s in cfg.scenes], "lights": repr(cfg.lights), "map": repr(depth_map),
             "camera": repr(cfg.camera_resolution), "pose": repr(getattr(cfg, "camera", None)),
-            "variant": cfg.variant, "seed": cfg.seed, "tune": repr(dataclasses.replace(tc.spec, bias_map=None))}
+            "variant": cfg.variant, "seed": cfg.seed}
+
+
+def _tune_identity(spec, name: str) -> str:
+    """The [tune] settings one scheme's result depends on: all but the learned map and the other
+    schemes' [tune.params] and [tune.range] entries (adding, removing or changing another scheme
+    keeps this one's result)."""
+    return repr(dataclasses.replace(spec, bias_map=None, params={k: v for k, v in spec.params.items() if k == name},
+                                    ranges={k: v for k, v in spec.ranges.items() if k[0] == name}))
 
 
 def scheme_keys(tc, version: str | None = None) -> list:
-    """One key per tuned scheme instance of ``tc``, in order (the position counts: two equal
-    instances are two results)."""
+    """One key per tuned scheme instance of ``tc``, in order. The position does not count: the
+    search of an instance depends on its own values and the shared settings alone (the seed is
+    the same for every scheme), so two equal instances share one result."""
     shared = shared_identity(tc, version)
-    return [hashlib.sha256(json.dumps({**shared, "index": i, "scheme": repr(s)}, sort_keys=True, default=str)
-                           .encode()).hexdigest()[:24] for i, s in enumerate(tc.schemes)]
+    return [hashlib.sha256(json.dumps({**shared, "tune": _tune_identity(tc.spec, s.name), "scheme": repr(s)},
+                                      sort_keys=True, default=str).encode()).hexdigest()[:24] for s in tc.schemes]
 
 
 def read_state(out: Path) -> dict:
@@ -56,7 +67,13 @@ def read_state(out: Path) -> dict:
         return {}
     if not isinstance(doc, dict) or doc.get("kind") != KIND:
         return {}
-    return {s["key"]: s for s in doc.get("schemes", []) if isinstance(s, dict) and "key" in s}
+    return {s["key"]: s for s in doc.get("schemes", []) if _whole(s)}
+
+
+def _whole(s) -> bool:
+    """A state entry with what --resume reads from it (a hand-edited or foreign one is tuned again)."""
+    return (isinstance(s, dict) and isinstance(s.get("key"), str) and isinstance(s.get("steps"), list)
+            and isinstance(s.get("entry"), dict) and isinstance(s["entry"].get("values"), dict))
 
 
 def state_problem(out: Path, name: str) -> str | None:

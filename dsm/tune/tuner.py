@@ -151,15 +151,31 @@ def _tunable_names():
 
 # ---------------------------------------------------------------- the whole run
 
-def tune(config, out=None, progress: bool = False, variant: str | None = None, resume: bool = False) -> TuneResult:
+def tune(config, out=None, progress: bool = False, variant: str | None = None, resume: bool = False,
+         force: bool = False) -> TuneResult:
     """Tune every ``[[scheme]]`` of ``config`` (a Config, dict or TOML path with a ``[tune]``
-    table) on its training views; write the results into ``out`` when given (``resume``: keep
-    the schemes the tune already in ``out`` finished with the same input)."""
+    table) on its training views; write the results into ``out`` when given, under dsm tune's
+    rules for ``--out`` (locked; a non-empty folder refused unless ``resume`` goes on with the
+    tune there, keeping its finished schemes, or ``force`` replaces a previous tune)."""
+    from pathlib import Path
     from ..config.read import coerce
+    from .. import cli
+    if force and resume:
+        raise ConfigError("dsm.tune", "force", "force=True replaces a tune and resume=True goes on with it: give one")
     config = coerce(config)
     tc = parse_tune(config)                   # the [tune] table checked before any scene loads
     tc.config = pl.prepare(config, variant)
-    return run_tune(tc, out, progress, resume)
+    if out is None:
+        return run_tune(tc, None, progress)
+    out = Path(out)
+    held, problem = cli.claim(out)
+    if problem:
+        raise ConfigError("dsm.tune", "out", cli.api_words(problem))
+    with held:
+        problem, resuming = cli.tune_folder(out, tc.config.name, force, resume)
+        if problem:
+            raise ConfigError("dsm.tune", "out", cli.api_words(problem))
+        return run_tune(tc, out, progress, resuming)
 
 
 def run_tune(tc, out=None, progress: bool = False, resume: bool = False) -> TuneResult:
@@ -228,6 +244,8 @@ def _tune_schemes(tc, train, held, groups, orc_train, out, resume, tick) -> tupl
             comparison.append(_comparison_row(entry, ts.steps))
             finished.append(previous[key])
             kept += 1
+            if out is not None:             # the state lists every finished scheme, kept ones too
+                tune_resume.write_state(out, tc.config.name, finished)
             if tick:
                 for _ in range(ts.steps):
                     tick()
