@@ -671,3 +671,48 @@ def test_the_python_api_keeps_dsm_tunes_folder_rules(tmp_path):
     assert tuner.tune(cfg, out=out, force=True).resumed == 0
     with pytest.raises(ConfigError, match="give one"):
         tuner.tune(cfg, out=out, force=True, resume=True)
+
+
+LAMBDA_CFG = {"experiment": {"name": "lam"}, "camera": {"resolution": [48, 48]},
+              "scene": [{"builtin": "plane_box"}, {"builtin": "l_shape"}], "light": [{"type": "scene"}],
+              "map": {"resolution": 128},
+              "scheme": [{"name": "constant", "bias": "1 texel"}, {"name": "normal_offset"},
+                         {"name": "combined", "normal_offset": "2.545584412271571 texel", "depth_bias": 0.02,
+                          "slope_scale": 0.5, "slope_clamp": "4 texel"}],
+              "tune": {"steps": 100, "camera": [
+                  {"name": "a", "position": [2.6, -2.6, 2.5], "target": [0.0, 0.0, 0.4], "fov": 60},
+                  {"name": "b", "position": [-2.6, -2.2, 2.6], "target": [0.0, 0.0, 0.4], "fov": 60}]}}
+
+
+@pytest.mark.parametrize("lam", [30.0, 1000.0])
+def test_away_from_lambda_one_tuned_stays_at_or_below_its_grid_and_reaches_a_negative_oracle(lam):
+    """lambda weighs peter-panning against acne. At 1000 the exact oracle's best constant bias is
+    below zero (acne is cheaper than any peter-panning): the search box reaches it (it stopped at 0)
+    and the tuned constant meets the oracle; at 30 and 1000 every scheme is at or below a grid of
+    as many evaluations (normal offset and combined once lost to it)."""
+    from dsm.tune import tuner
+    cfg = {**LAMBDA_CFG, "tune": {**LAMBDA_CFG["tune"], "lambda": lam}}
+    res = tuner.tune(cfg)
+    for e in res.schemes:
+        assert e["train"]["objective"] <= e["grid"]["objective"] + 1e-12, e["scheme"]
+    const = res.schemes[0]
+    assert const["train"]["objective"] == pytest.approx(const["oracle"]["objective"], abs=1e-12)
+    if lam == 1000.0:
+        assert const["values"]["bias"] < 0 and const["box"]["bias"][0] < const["values"]["bias"]
+
+
+def test_steps_name_each_instance_and_a_batch_below_one_receiver_is_refused(tmp_path):
+    """steps.csv tells two instances of one scheme apart (a texel and a world constant shared one
+    label, and the loss plot drew them as one line); a batch that draws no receiver a step (the
+    gradient phase then does nothing) is refused naming tune.batch."""
+    import csv
+    from dsm.tune import tuner
+    from dsm.types import ConfigError
+    cfg = _cfg({"builtin": "plane_box"}, [{"name": "constant", "bias": "1 texel"}, {"name": "constant", "bias": 0.02}],
+               {"steps": 8}, R=32, cam=32)
+    tuner.tune(cfg, out=tmp_path / "o")
+    rows = list(csv.DictReader(open(tmp_path / "o" / "steps.csv")))
+    assert {r["instance"] for r in rows} == {"0: constant bias=1 texel", "1: constant bias=0.02"}
+    assert sum(r["instance"].startswith("0:") for r in rows) == 8
+    with pytest.raises(ConfigError, match=r"tune\.batch: 1e-09 of the \d+ training receivers is less than one"):
+        tuner.tune({**cfg, "tune": {"steps": 8, "batch": 1e-9}})

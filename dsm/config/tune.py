@@ -108,7 +108,7 @@ def tune_spec(t, src: str, seed: int, schemes: tuple) -> TuneSpec:
         raise ConfigError(src, "tune.scan", "a scan takes both ends of the search box: give 0 (no scan) or at least 2")
     gradcheck = t.get("gradcheck", False)
     if not isinstance(gradcheck, bool):
-        raise ConfigError(src, "tune.gradcheck", f"expected true or false, got {gradcheck!r}", (True, False))
+        raise ConfigError(src, "tune.gradcheck", f"expected true or false, got {gradcheck!r}", ("true", "false"))
     names = tuned_names(schemes)
     params = _params(t, src, names)
     ranges = _ranges(t, src, names, params)

@@ -280,22 +280,21 @@ def _json_default(o):
 
 
 def plot(res: TuneResult, folder: Path):
-    """Plot each scheme's relaxed loss and hard objective per step into ``folder``/tune_loss.png."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    """Plot each scheme instance's relaxed loss and hard objective per step into ``folder``/tune_loss.png
+    (on a Figure of its own: no pyplot, so a notebook's backend stays as it is)."""
+    from matplotlib.figure import Figure
     folder.mkdir(parents=True, exist_ok=True)
-    names = list(dict.fromkeys(r["scheme"] for r in res.steps))
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
-    for name in names:
-        rows = [r for r in res.steps if r["scheme"] == name]
+    label = lambda r: r.get("instance") or r["scheme"]
+    fig = Figure(figsize=(10, 3.6))
+    axes = fig.subplots(1, 2)
+    for name in dict.fromkeys(label(r) for r in res.steps):
+        rows = [r for r in res.steps if label(r) == name]
         s = [r["step"] for r in rows]
-        axes[0].plot(s, [r["loss"] for r in rows], label=name)
-        axes[1].plot(s, [r["hard_objective"] for r in rows], label=name)
+        axes[0].plot(s, [r["loss"] for r in rows], label=name[:48])
+        axes[1].plot(s, [r["hard_objective"] for r in rows], label=name[:48])
     axes[0].set(title="relaxed loss", xlabel="step")
     axes[1].set(title=f"hard objective (lambda = {res.spec.lam:g})", xlabel="step")
-    axes[1].legend(fontsize=7)
+    axes[1].legend(fontsize=6)
     fig.tight_layout()
     with atomic(folder / "tune_loss.png") as tmp:
         fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)

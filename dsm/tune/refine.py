@@ -57,18 +57,21 @@ def line_objective(m, g, v_star, lam, a_lo: float, a_hi: float, nearest: bool = 
     return float(cands[i]), float(obj[i])
 
 
-def line_reach(module, spec, values: dict, name: str, lo: float, scale: float, train, groups, lam) -> float:
+def line_reach(module, spec, values: dict, name: str, lo, scale: float, train, groups, lam) -> float:
     """The value of parameter ``name`` (others at ``values``) where the exact objective is least
-    along the whole line from ``lo`` up, under the receivers' margins linearised there (forward
-    AD; exact where the margin is affine in it, as for every constant-like term): the least such
-    value of the optimal flips, which a search box must hold (``scale``: one texel's worth in the
-    parameter's unit, how far past the last flip the line is counted). NaN where no receiver flips."""
+    along the whole line from ``lo`` up (None: a parameter without a minimum, from a texel's worth
+    below the first flip), under the receivers' margins linearised there (forward AD; exact where
+    the margin is affine in it, as for every constant-like term): the least such value of the
+    optimal flips, which a search box must hold (``scale``: one texel's worth in the parameter's
+    unit, how far past the last flip the line is counted). NaN where no receiver flips."""
     m, g = margin_line(module, spec.params, values, {name: 1.0}, train, groups)
     with np.errstate(divide="ignore", invalid="ignore"):
         flip = values[name] - m / g
-    flip = flip[np.isfinite(flip) & (flip > lo)]
+    flip = flip[np.isfinite(flip) & (flip > (-np.inf if lo is None else lo))]
     if flip.size == 0:
         return float("nan")
+    if lo is None:                    # the best may be a negative offset (a large lambda prefers acne)
+        lo = min(float(flip.min()) - scale, 0.0)
     v_star = np.concatenate([c.v_star for c in train])
     a_hi = float(flip.max()) - values[name] + scale        # a texel's worth past the last flip
     a, _ = line_objective(m, g, v_star, lam, lo - values[name], a_hi, nearest=True)

@@ -38,7 +38,9 @@ class Param:
 
 # parameters that are lengths without being Lengths: K multiplies the scene's diagonal (adaptive)
 DIAGONAL_FRACTIONS = {("adaptive", "K")}
-BOX_TEXELS = 16.0         # the default search range: [valid minimum or 0, start + 16 texels' worth]
+DEPTH_OFFSETS = ("bias", "depth_bias")     # parameters added to the receiver's depth as they are
+BOX_TEXELS = 16.0         # the default search range: [valid minimum or 0, start + 16 texels' worth], widened
+                          # to twice the thresholds' best values (search_box)
 
 
 def texel_sizes(train, groups) -> dict:
@@ -80,8 +82,10 @@ def search_box(tc, spec, sizes, oracle_best=None, line_best=None) -> list:
         best = (oracle_best or {}).get(unit) if (spec.name, name) == ("constant", "bias") else None
         bests = [b for b in (best, (line_best or {}).get(name)) if b is not None and math.isfinite(b)]
         reach = 2.0 * max(bests) if bests else 0.0
-        lo, hi = tc.spec.ranges.get((spec.name, name), (0.0 if vmin is None else vmin,
-                                                        max(max(v, 0.0) + BOX_TEXELS * scale, reach)))
+        # below 0 only for a depth offset (no minimum, affine in the margin, so its line best is
+        # exact) whose best is negative (a large lambda prefers acne to peter-panning): twice that
+        low = vmin if vmin is not None else min([0.0] + [2.0 * b for b in bests]) if name in DEPTH_OFFSETS else 0.0
+        lo, hi = tc.spec.ranges.get((spec.name, name), (min(low, v), max(max(v, 0.0) + BOX_TEXELS * scale, reach)))
         if vmin is not None:
             lo = max(lo, vmin)
         out.append(Param(name, unit, min(max(v, lo), hi), scale, lo, hi))
@@ -95,7 +99,8 @@ def _line_bests(tc, spec, train, groups, sizes) -> dict:
     mod = get(spec.name)
     names = tc.spec.params[spec.name]
     start = {n: start_value(spec, n) for n in names}
-    return {n: line_reach(mod, spec, start, n, valid_min(mod, n) or 0.0, _unit_and_scale(spec, n, sizes)[1],
+    low = lambda n: valid_min(mod, n) if valid_min(mod, n) is not None or n in DEPTH_OFFSETS else 0.0
+    return {n: line_reach(mod, spec, start, n, low(n), _unit_and_scale(spec, n, sizes)[1],
                           train, groups, tc.spec.lam)
             for n in names if (spec.name, n) not in tc.spec.ranges}
 
@@ -156,15 +161,23 @@ def tune_scheme(tc, spec: SchemeSpec, train, groups, progress=None, oracle_best=
     best = (exact(start), start)
     rows = [_evaluation_row(spec, "start", 0, start, best[0])]
     grid = coarse_grid(box, budget["coarse"])
+    corner, anchor = _anchor_points(box, oracle_best)
+    extra = [v for v in (corner, anchor) if v is not None and v != start]
+    grid = grid[:max(len(grid) - len(extra), 0) if len(grid) + len(extra) > budget["coarse"] else len(grid)] + extra
+    origin = best                       # Adam's: the best but the oracle's anchor (a basin of its own)
     for vals in grid:
         rows.append(_evaluation_row(spec, "coarse", len(rows), vals, exact(vals)))
         if rows[-1]["hard_objective"] < best[0]:
             best = (rows[-1]["hard_objective"], vals)
+        if rows[-1]["hard_objective"] < origin[0] and vals is not anchor:
+            origin = (rows[-1]["hard_objective"], vals)
     for _ in rows:
         if progress:
             progress()
     # a coarse grid may hold fewer points than its share (k^p <= share): Adam takes the rest
-    adam = _adam(tc, spec, box, train, groups, best[1], ts.steps - len(rows) - budget["refine"], len(rows), progress)
+    # (the anchor's evaluation is taken from the refinement's share: Adam's schedule stays the grid's)
+    n_adam = ts.steps - len(rows) - budget["refine"] + (anchor is not None and anchor in grid)
+    adam = _adam(tc, spec, box, train, groups, origin[1], n_adam, len(rows), progress)
     for r in adam["rows"]:
         vals = {p.name: r[f"param_{p.name}"] for p in box}
         if r["hard_objective"] < best[0] and all(math.isfinite(v) for v in vals.values()):
@@ -181,6 +194,22 @@ def tune_scheme(tc, spec: SchemeSpec, train, groups, progress=None, oracle_best=
     return {"values": best[1], "box": box, "steps": rows, "relaxed_lookup": adam["relax"],
             "first_step_ms": times[0], "step_ms": float(np.median(times[1:])) if len(times) > 1 else times[0],
             "total_ms": float(sum(times)) + ref["ms"], "refine_ms": ref["ms"], "evaluations": len(rows)}
+
+
+def _anchor_points(box, oracle_best) -> tuple:
+    """Two points the coarse grid's cell centres never reach, evaluated in place of its last cells:
+    the box's lower corner (every term at its least: a term is often best off) and, for a scheme
+    with a depth offset in a unit the exact oracle answers (world, texel), that corner with the
+    offset at the oracle's best constant bias (else None), the oracle's own answer wherever the
+    other terms at their least add nothing (normal offset 0, slope scale 0). The anchor is a
+    candidate for the result and the refinement, not Adam's start: from it Adam stays in the
+    constant bias's basin where the grid's best leads elsewhere (lambda = 1000)."""
+    corner = {p.name: p.lo for p in box}
+    for p in box:
+        best = (oracle_best or {}).get(p.unit)
+        if p.name in DEPTH_OFFSETS and best is not None and math.isfinite(best):
+            return corner, {**corner, p.name: min(max(best, p.lo), p.hi)}
+    return corner, None
 
 
 def _adam(tc, spec, box, train, groups, origin: dict, steps: int, first: int, progress=None) -> dict:

@@ -192,6 +192,9 @@ def run_tune(tc, out=None, progress: bool = False, resume: bool = False) -> Tune
     if not train:
         raise ConfigError(tc.config.source, "tune.camera", "no training view has a receiver")
     n_train, n_held = sum(c.n for c in train), sum(c.n for c in held)
+    if ts.batch * n_train < 1.0:            # every Adam step would draw no receiver: a gradient of 0
+        raise ConfigError(tc.config.source, "tune.batch", f"{ts.batch:g} of the {n_train} training receivers is "
+                          f"less than one a step: at least {1.0 / n_train:.3g} (1 draws them all)")
     th_train, vs_train = pooled_thresholds(train, groups)
     orc_train = pl.oracles(th_train, vs_train, ts.lam)["row"]
     orc_held = pl.oracles(*pooled_thresholds(held, groups), ts.lam)["row"] if held else None
@@ -199,6 +202,7 @@ def run_tune(tc, out=None, progress: bool = False, resume: bool = False) -> Tune
     notes += [f"{e['scheme']} {e['start']}: the start of {', '.join(e['start_outside_box'])} lies outside its "
               "[tune.range] box, so the search began from it clipped into the box and may end worse than the start"
               for e in results if e.get("start_outside_box")]
+    notes += _against_references(results)
     if out is not None and not tc.schemes:     # a tune of pre-filtered instances alone: --resume finds it
         tune_resume.write_state(out, tc.config.name, [])
     moments, moment_steps, moment_notes = tune_all(tc, train, held, groups, orc_train, tick)
@@ -219,6 +223,21 @@ def run_tune(tc, out=None, progress: bool = False, resume: bool = False) -> Tune
     return res
 
 
+def _against_references(results) -> list:
+    """A note for each scheme whose tuned values end above its grid on the training views, or above
+    its start on the held-out views (the search is local; held-out views are not what it minimises)."""
+    notes = []
+    for e in results:
+        grid, held, start = e["grid"]["objective"], e.get("heldout"), e.get("start_heldout")
+        if e["train"]["objective"] > grid:
+            notes.append(f"{e['scheme']} {e['start']}: tuned {e['train']['objective']:.5f} on the training views, "
+                         f"above its grid's {grid:.5f}")
+        if held and start is not None and held["objective"] > start:
+            notes.append(f"{e['scheme']} {e['start']}: tuned {held['objective']:.5f} on the held-out views, above "
+                         f"its start's {start:.5f} (fitted to the training views)")
+    return notes
+
+
 def _progress_bar(tc):
     """A tqdm bar over the run's steps: a scene each, ``steps`` per scheme, an Adam bias map's steps."""
     from tqdm import tqdm
@@ -236,11 +255,14 @@ def _tune_schemes(tc, train, held, groups, orc_train, out, resume, tick) -> tupl
     keys = tune_resume.scheme_keys(tc)
     previous = tune_resume.read_state(out) if (resume and out is not None) else {}
     finished, kept = [], 0
-    for spec, key in zip(tc.schemes, keys):
+    for i, (spec, key) in enumerate(zip(tc.schemes, keys)):
+        # steps.csv's instance column: two instances of one scheme (texel and world constants) apart
+        tag = lambda rows: [{"instance": f"{i}: {spec.name} {describe_params(spec.params)}".strip(), **r}
+                            for r in rows]
         if key in previous:                 # finished by the tune in ``out`` with this very input
             entry = {**previous[key]["entry"], "spec": with_values(spec, previous[key]["entry"]["values"])}
             results.append(entry)
-            steps += previous[key]["steps"]
+            steps += tag(previous[key]["steps"])
             comparison.append(_comparison_row(entry, ts.steps))
             finished.append(previous[key])
             kept += 1
@@ -252,7 +274,7 @@ def _tune_schemes(tc, train, held, groups, orc_train, out, resume, tick) -> tupl
             continue
         entry, rows = _scheme_entry(tc, spec, train, held, groups, orc_train, tick)
         results.append(entry)
-        steps += rows
+        steps += tag(rows)
         comparison.append(_comparison_row(entry, ts.steps))
         if out is not None:                 # after each scheme, so a stopped tune resumes from here
             finished.append({"key": key, "entry": {k: v for k, v in entry.items() if k != "spec"},
