@@ -1,13 +1,15 @@
 """``dsm bench`` (7): what a map build and one frame cost against the scene's triangles.
 
 The meshes are the real terrain of :mod:`dsm.scenes.terrain` (the Jacksboro fault DEM)
-resampled bilinearly to grids of about 1e4 to 1e6 triangles, written as binary PLY and loaded
+resampled bilinearly to grids of about 1e4 to 1e6 triangles by default (``--geometry`` takes any
+sizes; docs/bench/cpu-llvm-geometry goes to 1e7), written as binary PLY and loaded
 as a user's mesh file (here). Per mesh: the first-layer build and one frame (:func:`bench.frame_cost`:
 the map plus every single-layer lookup) as kernel and wall time, in the bench's process
 (:func:`dsm.tools.bench.geometry_cost`); and the peak
-resident memory (Linux's VmHWM) of a one-case ``dsm run`` on the mesh in its own process,
-against ``dsm plan``'s estimate for the same config (run.json's ``peak_bytes_est``). The
-exponent of time against triangles is fitted in log-log as for resolutions.
+resident memory (Linux's VmHWM) of one-case ``dsm run``s on the mesh in their own processes,
+against ``dsm plan``'s estimate for the same config (run.json's ``peak_bytes_est``), at the
+set-up the plan's constants were fitted to and at one they never saw. The exponent of time
+against triangles is fitted in log-log as for resolutions, with the slope between consecutive sizes.
 """
 from __future__ import annotations
 
@@ -64,25 +66,40 @@ def write_ply(path: Path, verts: np.ndarray, faces: np.ndarray) -> int:
     return len(faces)
 
 
-RUN_CONFIG = ('[experiment]\nname = "bench_geometry"\n[camera]\nresolution = [64, 64]\n[[scene]]\n'
-              'file = "{file}"\nup = "z"\nground = "no"\n[map]\nresolution = 256\n[[scheme]]\nname = "constant"\n'
+RUN_CONFIG = ('[experiment]\nname = "bench_geometry"\n[camera]\nresolution = [{camera}, {camera}]\n[[scene]]\n'
+              'file = "{file}"\nup = "z"\nground = "no"\n[map]\nresolution = {R}\n[[scheme]]\nname = "constant"\n'
               '[timing]\nrepeats = 1\n[report]\nimages = "none"\n')
+# (camera, map resolution) of the two runs: the first is the set-up dsm plan's per-triangle and
+# per-process constants were fitted to (experiment/plan.py), so it checks the fit; the second, a
+# camera and a map 16x larger, is a check the constants never saw
+FITTED, HELD_OUT = (64, 256), (256, 1024)
 
 
 def run_peak(ply: Path, work: Path) -> dict:
-    """A one-case ``dsm run`` on ``ply`` in its own process: its measured peak resident memory
-    and ``dsm plan``'s estimate of it (MB), from run.json."""
-    cfg, run_dir = work / f"{ply.stem}.toml", work / f"run_{ply.stem}"
-    cfg.write_text(RUN_CONFIG.format(file=ply.resolve().as_posix()))
-    p = subprocess.run([sys.executable, "-m", "dsm", "run", str(cfg), "--out", str(run_dir), "--force"],
-                       capture_output=True, text=True, timeout=1800)
-    if p.returncode != 0:
-        return {"run_error": p.stderr.strip().splitlines()[-1][:200] if p.stderr.strip() else f"exit {p.returncode}"}
-    run = json.loads((run_dir / "run.json").read_text())
-    shutil.rmtree(run_dir)                     # the bench keeps its figures, not the run
-    cfg.unlink()
-    est, peak = run["plan"]["peak_bytes_est"], run["timing"]["measure_peak_rss_bytes"]
-    return {"peak_mb": peak / 2 ** 20, "plan_peak_mb": est / 2 ** 20, "plan_over_peak": est / peak}
+    """One-case ``dsm run``s on ``ply``, each in its own process, at the FITTED and HELD_OUT set-ups:
+    their measured peak resident memory and ``dsm plan``'s estimate of it (MB), from run.json."""
+    out = {}
+    for tag, (camera, R) in (("", FITTED), ("check_", HELD_OUT)):
+        cfg, run_dir = work / f"{ply.stem}.toml", work / f"run_{ply.stem}"
+        cfg.write_text(RUN_CONFIG.format(file=ply.resolve().as_posix(), camera=camera, R=R))
+        p = subprocess.run([sys.executable, "-m", "dsm", "run", str(cfg), "--out", str(run_dir), "--force"],
+                           capture_output=True, text=True, timeout=1800)
+        cfg.unlink()
+        if p.returncode != 0:
+            out[f"{tag}run_error"] = (p.stderr.strip().splitlines()[-1][:200] if p.stderr.strip()
+                                      else f"exit {p.returncode}")
+            continue
+        run = json.loads((run_dir / "run.json").read_text())
+        shutil.rmtree(run_dir)                     # the bench keeps its figures, not the run
+        est, peak = run["plan"]["peak_bytes_est"], run["timing"]["measure_peak_rss_bytes"]
+        out.update({f"{tag}peak_mb": peak / 2 ** 20, f"{tag}plan_peak_mb": est / 2 ** 20, f"{tag}plan_over_peak": est / peak})
+    return out
+
+
+def decade_slopes(triangles, ms) -> list:
+    """The log-log slope between consecutive sizes: where one fitted exponent hides a bend."""
+    t, m = np.log10(np.asarray(triangles, float)), np.log10(np.asarray(ms, float))
+    return [float((m[i + 1] - m[i]) / (t[i + 1] - t[i])) for i in range(len(t) - 1)]
 
 
 def markdown(g: dict) -> list:
@@ -92,17 +109,25 @@ def markdown(g: dict) -> list:
     lines = ["", f"## (7) Cost against geometry: the DEM terrain resampled to {span} triangles", "",
              "Build: the first layer of a 1024^2 map; frame: that map with the slope layer plus every "
              "single-layer scheme's lookup over the camera's visible pixels (as (6)). Kernel time: the kernels' "
-             "own execution time; wall: Python's tracing included. Peak: a one-case `dsm run` on the mesh "
-             "(64^2 camera, 256^2 map) in its own process, Linux's VmHWM, against `dsm plan`'s estimate.", "",
+             "own execution time; wall: Python's tracing included (kernel and wall are medians of separate "
+             "calls, so on a quiet machine the wall median can fall below the kernel one). Peak: a one-case "
+             f"`dsm run` on the mesh in its own process, Linux's VmHWM, against `dsm plan`'s estimate: at "
+             f"{FITTED[0]}^2 camera and {FITTED[1]}^2 map, the set-up the plan's constants were fitted to, and at "
+             f"{HELD_OUT[0]}^2 and {HELD_OUT[1]}^2 (*check*), one they never saw.", "",
              "| triangles | bare cast kernel ms | build kernel ms | build wall ms | frame kernel ms | "
-             "frame wall ms | run peak MB | plan estimate MB | estimate / peak |", "|---" * 9 + "|"]
+             "frame wall ms | run peak MB | plan estimate MB | estimate / peak | check peak MB | check estimate MB "
+             "| check estimate / peak |", "|---" * 12 + "|"]
     for r in g["rows"]:
-        mem = (f"{r['peak_mb']:.0f} | {r['plan_peak_mb']:.0f} | {r['plan_over_peak']:.2f}" if "peak_mb" in r
-               else f"{r.get('run_error', 'not measured')} | | ")
+        mem = " | ".join(f"{r[t + 'peak_mb']:.0f} | {r[t + 'plan_peak_mb']:.0f} | {r[t + 'plan_over_peak']:.2f}"
+                         if t + "peak_mb" in r else f"{r.get(t + 'run_error', 'not measured')} | | " for t in ("", "check_"))
         lines.append(f"| {r['triangles']:,} | {r['bare_kernel_ms']:.2f} | {r['build_kernel_ms']:.2f} | "
                      f"{r['build_wall_ms']:.2f} | {r['frame_kernel_ms']:.2f} | {r['frame_wall_ms']:.2f} | {mem} |")
-    e = g["exponents"]
+    e, d = g["exponents"], g.get("decade_slopes", {})
     lines += ["", "Fitted exponent of time against triangles (log-log least squares; 0: independent of the "
               f"geometry): build {e['build_kernel_ms']:.3f} (kernel), {e['build_wall_ms']:.3f} (wall); frame "
               f"{e['frame_kernel_ms']:.3f} (kernel), {e['frame_wall_ms']:.3f} (wall)."]
+    if d:
+        lines += ["", "Slope between consecutive sizes (kernel time; a bend the one exponent hides): build "
+                  + ", ".join(f"{x:.2f}" for x in d["build_kernel_ms"]) + "; frame "
+                  + ", ".join(f"{x:.2f}" for x in d["frame_kernel_ms"]) + "."]
     return lines
