@@ -716,3 +716,17 @@ def test_steps_name_each_instance_and_a_batch_below_one_receiver_is_refused(tmp_
     assert sum(r["instance"].startswith("0:") for r in rows) == 8
     with pytest.raises(ConfigError, match=r"tune\.batch: 1e-09 of the \d+ training receivers is less than one"):
         tuner.tune({**cfg, "tune": {"steps": 8, "batch": 1e-9}})
+
+
+@pytest.mark.parametrize("steps", [1, 2, 5, 13])
+def test_every_scheme_spends_exactly_its_budget_of_exact_evaluations(steps):
+    """`steps` exact evaluations a scheme, as its grid has at most (the anchors come out of the
+    coarse grid's share, so a small budget is not overrun by them)."""
+    from dsm.tune import tuner
+    schemes = [{"name": "constant", "bias": "1 texel"}, {"name": "combined", "normal_offset": "1 texel",
+                                                         "depth_bias": 0.02, "slope_scale": 0.5, "slope_clamp": "4 texel"}]
+    res = tuner.tune(_cfg({"builtin": "plane_box"}, schemes, {"steps": steps}, R=32, cam=32))
+    for e in res.schemes:
+        rows = [r for r in res.steps if r.get("instance", "").split(": ")[1].startswith(e["scheme"])]
+        assert len(rows) == steps, (e["scheme"], [r["phase"] for r in rows])
+        assert e["grid"]["evaluations"] <= steps

@@ -162,8 +162,8 @@ def tune_scheme(tc, spec: SchemeSpec, train, groups, progress=None, oracle_best=
     rows = [_evaluation_row(spec, "start", 0, start, best[0])]
     grid = coarse_grid(box, budget["coarse"])
     corner, anchor = _anchor_points(box, oracle_best)
-    extra = [v for v in (corner, anchor) if v is not None and v != start]
-    grid = grid[:max(len(grid) - len(extra), 0) if len(grid) + len(extra) > budget["coarse"] else len(grid)] + extra
+    extra = [v for v in (corner, anchor) if v is not None and v != start][:budget["coarse"]]
+    grid = grid[:min(len(grid), budget["coarse"] - len(extra))] + extra      # the coarse share holds them all
     origin = best                       # Adam's: the best but the oracle's anchor (a basin of its own)
     for vals in grid:
         rows.append(_evaluation_row(spec, "coarse", len(rows), vals, exact(vals)))
