@@ -23,16 +23,17 @@ def _run_in(config, out, variant, progress, force, resume):
     # force replaces it or resume goes on with it, the config checked before the folder is touched
     from pathlib import Path
     from . import cli, pipeline
+    from .experiment.lock import api_words, claim
     from .experiment.runner import Runner
     out = Path(out)
     config = pipeline.prepare(config, variant)
-    held, problem = cli.claim(out)
+    held, problem = claim(out)
     if problem:
-        raise ConfigError("dsm.experiment", "out", cli.api_words(problem))
+        raise ConfigError("dsm.experiment", "out", api_words(problem))
     with held:
         problem, resuming = cli.folder_problem(out, config, force, resume)
         if problem:
-            raise ConfigError("dsm.experiment", "out", cli.api_words(problem))
+            raise ConfigError("dsm.experiment", "out", api_words(problem))
         return Runner(config, out, variant, progress, resume_previous=resuming).run()
 
 

@@ -23,6 +23,7 @@ from .config import read as cfgmod
 from .report import figures
 from .maps import headroom
 from .experiment import lock, resume
+from .experiment.lock import claim, entries, name_problem, unwritable
 from .tools.env import MAX_THREADS, SetupError
 
 DEFAULT_CONFIG = Path(__file__).parent / "config" / "default.toml"
@@ -31,7 +32,6 @@ RUN_OUTPUTS = ("run.json", "metrics.csv", "oracle.csv", "table.md", "images", "p
                "oracle_curves.npz", "cascades.csv", "cascades.md", "frames.csv")
 # left by a killed run (report.atomic)
 RUN_TEMP = re.compile(r"\.(?:run\.json|metrics\.csv|oracle\.csv|table\.md|report\.html|oracle_curves\.npz)\.\d+\.tmp")
-NAME_MAX = 255       # bytes in one file name on Linux's file systems (ext4, xfs, btrfs, tmpfs)
 
 
 def _positive_int(text):
@@ -374,40 +374,6 @@ def _plan(cfg) -> int:
     return 0
 
 
-def name_problem(path: Path, flag: str = "--out") -> str | None:
-    """Why ``path`` cannot be made (None if it can): a component longer than NAME_MAX bytes."""
-    for part in Path(path).parts:
-        n = len(os.fsencode(part))
-        if n > NAME_MAX:
-            return (f"{flag} {str(path)[:60]}...: the name {part[:24]!r}... is {n} bytes long; a file "
-                    f"name takes at most {NAME_MAX} bytes: choose a shorter one")
-    return None
-
-
-def claim(out: Path, flag: str = "--out"):
-    """(the lock on ``out``, None), or (None, why it cannot be had): one writer per folder (dsm.experiment.lock)."""
-    problem = name_problem(out, flag)
-    if problem is None and out.is_symlink() and not out.is_dir():
-        problem = f"{flag} {out}: a broken symbolic link"
-    elif problem is None and out.exists() and not out.is_dir():
-        problem = f"{flag} {out}: is a file, not a folder; choose another {flag}"
-    if problem:
-        return None, problem
-    try:
-        return lock.acquire(out), None
-    except lock.Busy as e:
-        return None, f"{flag} {e}"
-    except OSError as e:
-        return None, f"{flag} {out}: cannot write there: {e.strerror or e}"
-
-
-def entries(out: Path) -> list:
-    """What ``out`` holds, the lock file aside (None if it is no folder)."""
-    if not out.is_dir():
-        return None
-    return [p for p in out.iterdir() if p.name != lock.LOCK_NAME]
-
-
 def out_problem(out: Path, force: bool, bench: bool = False) -> str | None:
     """Why ``out`` cannot take the results (None if it can); with ``force``, a previous dsm run
     in it is cleared first. Leaves the folder created and empty (or as bench found it)."""
@@ -438,7 +404,7 @@ def out_problem(out: Path, force: bool, bench: bool = False) -> str | None:
             _clear(held)
         except OSError as e:
             return f"--force: cannot clear {out}: {e.strerror or e}"
-    return _unwritable(out)
+    return unwritable(out)
 
 
 # what a run writes inside images/ (<scene>_<light>/<case>_<kind>, also under stale/) and plots/
@@ -470,17 +436,6 @@ def _clear_written(folder: Path, pattern):
         folder.rmdir()
 
 
-def _unwritable(out: Path) -> str | None:
-    """Why files cannot be written into ``out`` (None if they can), made if missing."""
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=out):
-            pass
-    except OSError as e:
-        return f"--out {out}: cannot write there: {e.strerror or e}"
-    return None
-
-
 def resume_problem(out: Path, cfg=None) -> str | None:
     """Why ``--resume`` cannot go on with the run in ``out`` (None if it can): no dsm run there,
     or the run of another experiment (``[experiment] name`` differs from ``cfg``'s: resuming it
@@ -499,7 +454,7 @@ def resume_problem(out: Path, cfg=None) -> str | None:
     if cfg is not None and prev.get("experiment") not in (None, cfg.name):
         return (f"--resume: {out} holds experiment {prev['experiment']!r} (config {prev.get('config_file') or '?'}), "
                 f"not {cfg.name!r} ({cfg.source}); resume it with its own config or choose another --out")
-    return _unwritable(out)
+    return unwritable(out)
 
 
 def folder_problem(out: Path, cfg, force: bool = False, resume: bool = False):
@@ -636,38 +591,9 @@ def _tune(cfg, args, out: Path) -> int:
         return _tune_held(tc, out, getattr(args, "force", False), getattr(args, "resume", False))
 
 
-TUNE_FILES = ("tuned.toml", "table.md", "steps.csv", "tune.json", "plots/tune_loss.png", "bias_map.npy",
-              "tune_state.json")   # what dsm tune writes
-
-
-def api_words(problem: str) -> str:
-    """A folder problem in the command line's words (--out, --force, --resume) in the Python
-    API's (out, force=True, resume=True): dsm.run and dsm.tune.tuner.tune raise it so."""
-    for flag, arg in (("--out", "out"), ("--force", "force=True"), ("--resume", "resume=True")):
-        problem = problem.replace(flag, arg)
-    return problem
-
-
-def tune_folder(out: Path, name: str, force: bool = False, resume: bool = False) -> tuple:
-    """(why dsm tune cannot write into the claimed folder ``out`` or None, whether it resumes the tune
-    there); a previous tune that ``force`` replaces has its files removed (only those)."""
-    from .tune import resume as tune_resume
-    resuming = resume and bool(entries(out))
-    if resuming:
-        return tune_resume.state_problem(out, name), True
-    if entries(out):
-        if not force:
-            return (f"--out {out}: is not an empty folder; choose another --out, or pass --resume (goes on with a dsm "
-                    "tune there, keeping its finished schemes) or --force (replaces a previous dsm tune there)"), False
-        if not ((out / "tune.json").is_file() or (out / "tune_state.json").is_file()):     # a stopped tune: its state
-            return (f"--out {out}: --force replaces a previous dsm tune (a folder with its tune.json or "
-                    "tune_state.json); this one holds neither"), False
-        _clear([out / f for f in TUNE_FILES if (out / f).is_file()])
-    return _unwritable(out), False       # before the tuning, not when its results are written
-
-
 def _tune_held(tc, out: Path, force: bool = False, resume: bool = False) -> int:
     from .tune import tuner as tunemod
+    from .tune.folder import tune_folder
     from .tune.output import table_text
     problem, resuming = tune_folder(out, tc.config.name, force, resume)
     if problem:

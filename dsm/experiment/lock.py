@@ -4,14 +4,20 @@ The lock is ``fcntl.flock`` on an open file, not the file's existence: the kerne
 the holder's last descriptor closes, so a run killed with SIGKILL leaves the folder free (the
 file may stay behind; the next holder takes it over). Two ``dsm run`` into one ``--out`` would
 otherwise write both runs' rows into one metrics.csv.
+
+Beside the lock, what any results folder must be to take one (``claim``: a name the file system
+can make, a folder and not a file; ``unwritable``; ``entries``), for the command line and the
+Python API (``dsm.run``, ``dsm.tune.tuner.tune``) alike, and the API's wording of a problem.
 """
 from __future__ import annotations
 
 import fcntl
 import os
+import tempfile
 from pathlib import Path
 
 LOCK_NAME = ".dsm-lock"
+NAME_MAX = 255       # bytes in one file name on Linux's file systems (ext4, xfs, btrfs, tmpfs)
 
 
 class Busy(RuntimeError):
@@ -88,3 +94,58 @@ def _same_file(fd: int, path: Path) -> bool:
     except FileNotFoundError:
         return False
     return (a.st_dev, a.st_ino) == (b.st_dev, b.st_ino)
+
+
+# ---------------------------------------------------------------- what a results folder can take
+
+def name_problem(path: Path, flag: str = "--out") -> str | None:
+    """Why ``path`` cannot be made (None if it can): a component longer than NAME_MAX bytes."""
+    for part in Path(path).parts:
+        n = len(os.fsencode(part))
+        if n > NAME_MAX:
+            return (f"{flag} {str(path)[:60]}...: the name {part[:24]!r}... is {n} bytes long; a file "
+                    f"name takes at most {NAME_MAX} bytes: choose a shorter one")
+    return None
+
+
+def claim(out: Path, flag: str = "--out"):
+    """(the lock on ``out``, None), or (None, why it cannot be had): one writer per folder (dsm.experiment.lock)."""
+    problem = name_problem(out, flag)
+    if problem is None and out.is_symlink() and not out.is_dir():
+        problem = f"{flag} {out}: a broken symbolic link"
+    elif problem is None and out.exists() and not out.is_dir():
+        problem = f"{flag} {out}: is a file, not a folder; choose another {flag}"
+    if problem:
+        return None, problem
+    try:
+        return acquire(out), None
+    except Busy as e:
+        return None, f"{flag} {e}"
+    except OSError as e:
+        return None, f"{flag} {out}: cannot write there: {e.strerror or e}"
+
+
+def entries(out: Path) -> list:
+    """What ``out`` holds, the lock file aside (None if it is no folder)."""
+    if not out.is_dir():
+        return None
+    return [p for p in out.iterdir() if p.name != LOCK_NAME]
+
+
+def unwritable(out: Path) -> str | None:
+    """Why files cannot be written into ``out`` (None if they can), made if missing."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as e:
+        return f"--out {out}: cannot write there: {e.strerror or e}"
+    return None
+
+
+def api_words(problem: str) -> str:
+    """A folder problem in the command line's words (--out, --force, --resume) in the Python
+    API's (out, force=True, resume=True): dsm.run and dsm.tune.tuner.tune raise it so."""
+    for flag, arg in (("--out", "out"), ("--force", "force=True"), ("--resume", "resume=True")):
+        problem = problem.replace(flag, arg)
+    return problem

@@ -159,7 +159,8 @@ def tune(config, out=None, progress: bool = False, variant: str | None = None, r
     tune there, keeping its finished schemes, or ``force`` replaces a previous tune)."""
     from pathlib import Path
     from ..config.read import coerce
-    from .. import cli
+    from ..experiment.lock import api_words, claim
+    from .folder import tune_folder
     if force and resume:
         raise ConfigError("dsm.tune", "force", "force=True replaces a tune and resume=True goes on with it: give one")
     config = coerce(config)
@@ -168,13 +169,13 @@ def tune(config, out=None, progress: bool = False, variant: str | None = None, r
     if out is None:
         return run_tune(tc, None, progress)
     out = Path(out)
-    held, problem = cli.claim(out)
+    held, problem = claim(out)
     if problem:
-        raise ConfigError("dsm.tune", "out", cli.api_words(problem))
+        raise ConfigError("dsm.tune", "out", api_words(problem))
     with held:
-        problem, resuming = cli.tune_folder(out, tc.config.name, force, resume)
+        problem, resuming = tune_folder(out, tc.config.name, force, resume)
         if problem:
-            raise ConfigError("dsm.tune", "out", cli.api_words(problem))
+            raise ConfigError("dsm.tune", "out", api_words(problem))
         return run_tune(tc, out, progress, resuming)
 
 
