@@ -45,7 +45,10 @@ def run_all(out: Path):
         cfg = config.load(path)
         if cfg.raw.get("tune"):
             from dsm.tune.tuner import tune
-            tune(cfg, out=out / f"tune-{path.stem}")
+            try:
+                tune(cfg, out=out / f"tune-{path.stem}")
+            except Exception as e:                 # noqa: BLE001 (every scene absent: recorded)
+                print(f"{path.name}: {type(e).__name__}: {e}", file=sys.stderr)
             continue
         try:
             dsm.run(_smoke(cfg), out=out / f"smoke-{path.stem}")

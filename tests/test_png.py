@@ -19,19 +19,29 @@ def test_pillow_decodes_every_pixel(shape, mode):
         assert im.info["dpi"] == pytest.approx((72, 72), abs=0.01)
 
 
-def test_an_indexed_image_decodes_to_its_palette_colours(tmp_path):
-    colours = RNG.integers(0, 256, (6, 3)).astype(np.uint8)
-    idx = RNG.integers(0, 6, (13, 8)).astype(np.uint8)
-    png.write(tmp_path / "p.png", idx, colours)
+def test_write_leaves_only_the_file(tmp_path):
+    px = RNG.integers(0, 256, (13, 8, 3)).astype(np.uint8)
+    png.write(tmp_path / "p.png", px)
     with Image.open(tmp_path / "p.png") as im:
-        assert im.mode == "P" and np.array_equal(np.asarray(im), idx)
-        assert np.array_equal(np.asarray(im.convert("RGB")), colours[idx])
+        assert np.array_equal(np.asarray(im), px)
     assert [p.name for p in tmp_path.iterdir()] == ["p.png"]        # no temporary file left
 
 
-@pytest.mark.parametrize("px,palette", [(np.zeros((2, 2), np.float32), None), (np.zeros((2, 2, 2), np.uint8), None),
-                                        (np.full((2, 2), 3, np.uint8), np.zeros((3, 3), np.uint8)),
-                                        (np.zeros((2, 2, 3), np.uint8), np.zeros((3, 3), np.uint8))])
-def test_what_it_cannot_store_is_refused(px, palette):
+@pytest.mark.parametrize("px", [np.zeros((2, 2), np.float32), np.zeros((2, 2, 2), np.uint8),
+                                np.zeros((0, 3), np.uint8), np.zeros((3, 0, 3), np.uint8)])
+def test_what_it_cannot_store_is_refused(px):
     with pytest.raises(ValueError, match="expected"):
-        png.encode(px, palette)
+        png.encode(px)
+
+
+def test_a_figure_is_written_at_72_dpi_and_keeps_its_own(tmp_path):
+    """figures._save draws at figures.DPI and writes the canvas's pixels; the figure returned to a
+    caller keeps its dpi, as savefig leaves it."""
+    from dsm.report import figures
+    fig = figures.draw_lines(tmp_path / "f.png", "t", [("c", "x", {"a": [(1, 0.1, 0.2), (2, 0.2, 0.1)]}, {})])
+    dpi = fig.dpi
+    with Image.open(tmp_path / "f.png") as im:
+        w, h = fig.get_size_inches()
+        assert im.mode == "RGBA" and im.size == (round(w * figures.DPI), round(h * figures.DPI))
+        assert np.asarray(im)[0, 0].tolist() == [255, 255, 255, 255]       # an opaque white background
+    assert dpi != figures.DPI and fig.dpi == dpi

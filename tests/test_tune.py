@@ -642,7 +642,7 @@ def test_resume_keeps_every_finished_scheme_when_schemes_are_added_removed_or_ch
     assert cli.main(["tune", str(cfg), "--out", str(out), "--resume"]) == 0
     assert "resumed: 1 finished schemes kept, 0 tuned" in capsys.readouterr().err
     state = json.loads((out / "tune_state.json").read_text())
-    state["schemes"][0]["entry"] = {}                           # a damaged entry: tuned again
+    state["schemes"][0]["entry"] = {"values": state["schemes"][0]["entry"]["values"]}   # damaged: tuned again
     (out / "tune_state.json").write_text(json.dumps(state))
     assert cli.main(["tune", str(cfg), "--out", str(out), "--resume"]) == 0
     assert "resumed: 0 finished schemes kept, 1 tuned" in capsys.readouterr().err

@@ -16,6 +16,7 @@ import itertools
 import sys
 import time
 import traceback
+import weakref
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -123,7 +124,7 @@ class Runner:
         self.kept, self.stale = {}, []
         self.depth_buffers = {}       # [contact]: the current scene's camera depth buffer (made when a case asks)
         self.marches = {}             # [contact]: per receiver set, (receivers, occluded, timing) of its march
-        self.cosines = (None, None)   # the shadow images' receiver set and its cosines to the light
+        self.cosines = (None, None)   # the shadow images' receiver set (weakly: never kept alive) and its cosines
         self.shrunk = (None, None)    # [map] shrink: (scene label, its shrunk copy)
 
     # ------------------------------------------------------------ top level
@@ -589,11 +590,12 @@ class Runner:
 
     def _cosines(self, setup):
         """The receivers' cosines to the light for the shadow images, once per receiver set (every
-        case of a map shares its set; the set is kept so its id stays its own)."""
+        case of a map shares its set)."""
         if setup.n is None:
             return None
-        if self.cosines[0] is not setup:
-            self.cosines = (setup, report.receiver_cosines(setup, pipeline.is_positional(setup.light)))
+        held = self.cosines[0]() if self.cosines[0] is not None else None
+        if held is not setup:
+            self.cosines = (weakref.ref(setup), report.receiver_cosines(setup, pipeline.is_positional(setup.light)))
         return self.cosines[1]
 
     def _contact(self, sd, gb, setup, rx, v_np) -> tuple:

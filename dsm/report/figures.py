@@ -83,8 +83,7 @@ def write_images(out: Path, items: list):
                 continue
             p = Path(out) / path
             p.parent.mkdir(parents=True, exist_ok=True)
-            # the error image indexed (its pixels are CLASS_COLORS[classes], a third the bytes)
-            png.write(p, img, metrics.CLASS_COLORS if img is classes else None)
+            png.write(p, metrics.CLASS_COLORS[img] if img is classes else img)
 
 
 # ------------------------------------------------------------------ drawing primitives
@@ -298,10 +297,14 @@ def _save(fig, path):
     """The figure as a PNG, drawn under RC (matplotlib makes most ticks while drawing)."""
     from matplotlib import rc_context
     cv = canvas.canvas(fig)
+    dpi = fig.dpi
     with rc_context(RC):
         fig.set_dpi(DPI)             # what savefig(dpi=DPI) draws at; its PNG writer is Pillow's (png.py says why not)
-        cv.draw()
-        png.write(Path(path), np.asarray(cv.buffer_rgba()), dpi=DPI)
+        try:
+            cv.draw()
+            png.write(Path(path), np.asarray(cv.buffer_rgba()), dpi=DPI)
+        finally:
+            fig.set_dpi(dpi)         # as savefig leaves it: a figure returned to a caller keeps its own
 
 
 def chunks(items, n=MAX_LEGEND):

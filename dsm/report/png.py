@@ -5,7 +5,8 @@ images (flat colours, a few antialiased edges) that choice is about three quarte
 and buys nothing: zlib alone at level 1 gives files of the same size (a figure: 30.9 against
 31.1 KB) in a third of the time (2.6 against 8.9 ms). Pillow offers no way to turn the search
 off, so the few lines of the format (PNG specification, 2nd edition, sections 5 and 11) are here.
-Any PNG reader decodes them (tests/test_png.py decodes them with Pillow).
+Any PNG reader decodes them (tests/test_png.py decodes them with Pillow): RGB, RGBA or grey, as
+before.
 """
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ import numpy as np
 from .io import atomic
 
 SIGNATURE = b"\x89PNG\r\n\x1a\n"
-COLOUR_TYPE = {1: 0, 3: 2, 4: 6}       # channels -> grey, RGB, RGBA; 3 is indexed (a palette)
+COLOUR_TYPE = {1: 0, 3: 2, 4: 6}       # channels -> grey, RGB, RGBA (PNG colour types)
 LEVEL = 1                               # zlib's fastest level: the report's images are flat colours
 
 
@@ -26,25 +27,19 @@ def _chunk(tag: bytes, data: bytes) -> bytes:
     return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data))
 
 
-def encode(pixels: np.ndarray, palette: np.ndarray | None = None, dpi: float | None = None) -> bytes:
-    """An 8-bit PNG of ``pixels``: (H, W) grey, (H, W, 3) RGB or (H, W, 4) RGBA uint8, or (H, W)
-    indices into ``palette`` ((n, 3) uint8, n <= 256); ``dpi`` is stored as the pixel density."""
+def encode(pixels: np.ndarray, dpi: float | None = None) -> bytes:
+    """An 8-bit PNG of ``pixels``: (H, W) grey, (H, W, 3) RGB or (H, W, 4) RGBA uint8; ``dpi`` is
+    stored as the pixel density."""
     px = np.asarray(pixels)
-    if px.dtype != np.uint8 or px.ndim not in (2, 3) or (px.ndim == 3 and px.shape[2] not in COLOUR_TYPE):
-        raise ValueError(f"expected (H, W), (H, W, 3) or (H, W, 4) uint8 pixels, got {px.dtype} {px.shape}")
+    if (px.dtype != np.uint8 or px.ndim not in (2, 3) or (px.ndim == 3 and px.shape[2] not in COLOUR_TYPE)
+            or 0 in px.shape[:2]):          # the format has no empty image (IHDR: width and height >= 1)
+        raise ValueError(f"expected (H, W), (H, W, 3) or (H, W, 4) uint8 pixels, H and W >= 1, got {px.dtype} "
+                         f"{px.shape}")
     h, w = px.shape[:2]
     channels = 1 if px.ndim == 2 else px.shape[2]
     rows = np.zeros((h, w * channels + 1), np.uint8)        # each row: filter type 0 (none), its bytes
     rows[:, 1:] = px.reshape(h, -1)
-    out = [SIGNATURE]
-    if palette is None:
-        out.append(_chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, COLOUR_TYPE[channels], 0, 0, 0)))
-    else:
-        pal = np.asarray(palette, np.uint8).reshape(-1, 3)
-        if channels != 1 or not 0 < len(pal) <= 256 or (h and w and int(px.max()) >= len(pal)):
-            raise ValueError(f"expected (H, W) indices below a palette of 1 to 256 colours, got {px.shape} "
-                             f"and {len(pal)} colours")
-        out += [_chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 3, 0, 0, 0)), _chunk(b"PLTE", pal.tobytes())]
+    out = [SIGNATURE, _chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, COLOUR_TYPE[channels], 0, 0, 0))]
     if dpi:
         per_metre = int(round(dpi / 0.0254))
         out.append(_chunk(b"pHYs", struct.pack(">IIB", per_metre, per_metre, 1)))
@@ -52,8 +47,8 @@ def encode(pixels: np.ndarray, palette: np.ndarray | None = None, dpi: float | N
     return b"".join(out)
 
 
-def write(path: Path, pixels: np.ndarray, palette: np.ndarray | None = None, dpi: float | None = None):
+def write(path: Path, pixels: np.ndarray, dpi: float | None = None):
     """encode()'s PNG into ``path`` atomically (a reader never sees half a file)."""
-    data = encode(pixels, palette, dpi)
+    data = encode(pixels, dpi)
     with atomic(path) as tmp:
         Path(tmp).write_bytes(data)

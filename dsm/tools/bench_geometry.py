@@ -97,9 +97,10 @@ def run_peak(ply: Path, work: Path) -> dict:
 
 
 def decade_slopes(triangles, ms) -> list:
-    """The log-log slope between consecutive sizes: where one fitted exponent hides a bend."""
+    """The log-log slope between consecutive sizes: where one fitted exponent hides a bend (None
+    between two sizes that resampled to one triangle count)."""
     t, m = np.log10(np.asarray(triangles, float)), np.log10(np.asarray(ms, float))
-    return [float((m[i + 1] - m[i]) / (t[i + 1] - t[i])) for i in range(len(t) - 1)]
+    return [float((m[i + 1] - m[i]) / (t[i + 1] - t[i])) if t[i + 1] != t[i] else None for i in range(len(t) - 1)]
 
 
 def markdown(g: dict) -> list:
@@ -128,6 +129,6 @@ def markdown(g: dict) -> list:
               f"{e['frame_kernel_ms']:.3f} (kernel), {e['frame_wall_ms']:.3f} (wall)."]
     if d:
         lines += ["", "Slope between consecutive sizes (kernel time; a bend the one exponent hides): build "
-                  + ", ".join(f"{x:.2f}" for x in d["build_kernel_ms"]) + "; frame "
-                  + ", ".join(f"{x:.2f}" for x in d["frame_kernel_ms"]) + "."]
+                  + ", ".join("-" if x is None else f"{x:.2f}" for x in d["build_kernel_ms"]) + "; frame "
+                  + ", ".join("-" if x is None else f"{x:.2f}" for x in d["frame_kernel_ms"]) + "."]
     return lines

@@ -19,7 +19,7 @@ def tune_folder(out: Path, name: str, force: bool = False, resume: bool = False)
     there); a previous tune that ``force`` replaces has its files removed (only those)."""
     resuming = resume and bool(entries(out))
     if resuming:
-        return tune_resume.state_problem(out, name), True
+        return tune_resume.state_problem(out, name) or unwritable(out), True
     if entries(out):
         if not force:
             return (f"--out {out}: is not an empty folder; choose another --out, or pass --resume (goes on with a dsm "

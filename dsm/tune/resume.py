@@ -72,8 +72,12 @@ def read_state(out: Path) -> dict:
 
 def _whole(s) -> bool:
     """A state entry with what --resume reads from it (a hand-edited or foreign one is tuned again)."""
-    return (isinstance(s, dict) and isinstance(s.get("key"), str) and isinstance(s.get("steps"), list)
-            and isinstance(s.get("entry"), dict) and isinstance(s["entry"].get("values"), dict))
+    e = s.get("entry") if isinstance(s, dict) else None
+    return (isinstance(s.get("key") if isinstance(s, dict) else None, str) and isinstance(s.get("steps"), list)
+            and isinstance(e, dict) and isinstance(e.get("values"), dict)
+            and all(isinstance(e.get(k), str) for k in ("scheme", "start", "params"))
+            and all(isinstance(e.get(k), dict) and isinstance(e[k].get("objective"), (int, float))
+                    for k in ("train", "grid")))
 
 
 def state_problem(out: Path, name: str) -> str | None:
