@@ -102,8 +102,8 @@ def prepare_cases(tc, progress=None):
                 th = pl.thresholds(rx, smap)
                 cases.append(Case(sd.label, label, name, role, g, s, rx, s.v_star.copy(), mi.Bool(s.v_star), th))
                 if not s.v_star.any():
-                    notes.append(f"{sd.label} / {label} / {name}: every receiver is in shadow (a camera inside a "
-                                 "closed mesh sees only its inside)")
+                    notes.append(f"{sd.label} / {label} / {name}: every receiver is in shadow (it sees shadowed "
+                                 "surfaces only: a wall or floor out of the light, or a closed mesh from inside)")
             if progress:
                 progress(f"{sd.label} / {label}")
     return groups, cases, notes
