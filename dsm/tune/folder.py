@@ -17,10 +17,10 @@ TUNE_FILES = ("tuned.toml", "table.md", "steps.csv", "tune.json", "plots/tune_lo
 def tune_folder(out: Path, name: str, force: bool = False, resume: bool = False) -> tuple:
     """(why dsm tune cannot write into the claimed folder ``out`` or None, whether it resumes the tune
     there); a previous tune that ``force`` replaces has its files removed (only those)."""
-    resuming = resume and bool(entries(out))
-    if resuming:
+    held = entries(out)
+    if resume and held:
         return tune_resume.state_problem(out, name) or unwritable(out), True
-    if entries(out):
+    if held:
         if not force:
             return (f"--out {out}: is not an empty folder; choose another --out, or pass --resume (goes on with a dsm "
                     "tune there, keeping its finished schemes) or --force (replaces a previous dsm tune there)"), False

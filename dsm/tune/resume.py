@@ -72,8 +72,10 @@ def read_state(out: Path) -> dict:
 
 def _whole(s) -> bool:
     """A state entry with what --resume reads from it (a hand-edited or foreign one is tuned again)."""
-    e = s.get("entry") if isinstance(s, dict) else None
-    return (isinstance(s.get("key") if isinstance(s, dict) else None, str) and isinstance(s.get("steps"), list)
+    if not isinstance(s, dict):
+        return False
+    e = s.get("entry")
+    return (isinstance(s.get("key"), str) and isinstance(s.get("steps"), list)
             and isinstance(e, dict) and isinstance(e.get("values"), dict)
             and all(isinstance(e.get(k), str) for k in ("scheme", "start", "params"))
             and all(isinstance(e.get(k), dict) and isinstance(e[k].get("objective"), (int, float))

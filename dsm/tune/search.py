@@ -66,6 +66,16 @@ def _unit_and_scale(spec, name: str, sizes) -> tuple:
     return unit, sizes["diagonal" if (spec.name, name) in DIAGONAL_FRACTIONS else unit]
 
 
+def _line_floor(module, name: str):
+    """Where a parameter's values start: its valid minimum; None (unbounded) for a depth offset
+    without one (affine in the margin, so its line best is exact, and a large lambda, preferring
+    acne to peter-panning, can put it below 0); else 0."""
+    vmin = valid_min(module, name)
+    if vmin is not None:
+        return vmin
+    return None if name in DEPTH_OFFSETS else 0.0
+
+
 def search_box(tc, spec, sizes, oracle_best=None, line_best=None) -> list:
     """Each tuned parameter: its start, its step scale (one texel's worth in its unit; 1 for
     factors on the slope) and its search range. The default range reaches twice the best value
@@ -82,9 +92,8 @@ def search_box(tc, spec, sizes, oracle_best=None, line_best=None) -> list:
         best = (oracle_best or {}).get(unit) if (spec.name, name) == ("constant", "bias") else None
         bests = [b for b in (best, (line_best or {}).get(name)) if b is not None and math.isfinite(b)]
         reach = 2.0 * max(bests) if bests else 0.0
-        # below 0 only for a depth offset (no minimum, affine in the margin, so its line best is
-        # exact) whose best is negative (a large lambda prefers acne to peter-panning): twice that
-        low = vmin if vmin is not None else min([0.0] + [2.0 * b for b in bests]) if name in DEPTH_OFFSETS else 0.0
+        floor = _line_floor(mod, name)           # None: below 0 to twice a negative best
+        low = floor if floor is not None else min([0.0] + [2.0 * b for b in bests])
         lo, hi = tc.spec.ranges.get((spec.name, name), (min(low, v), max(max(v, 0.0) + BOX_TEXELS * scale, reach)))
         if vmin is not None:
             lo = max(lo, vmin)
@@ -99,8 +108,7 @@ def _line_bests(tc, spec, train, groups, sizes) -> dict:
     mod = get(spec.name)
     names = tc.spec.params[spec.name]
     start = {n: start_value(spec, n) for n in names}
-    low = lambda n: valid_min(mod, n) if valid_min(mod, n) is not None or n in DEPTH_OFFSETS else 0.0
-    return {n: line_reach(mod, spec, start, n, low(n), _unit_and_scale(spec, n, sizes)[1],
+    return {n: line_reach(mod, spec, start, n, _line_floor(mod, n), _unit_and_scale(spec, n, sizes)[1],
                           train, groups, tc.spec.lam)
             for n in names if (spec.name, n) not in tc.spec.ranges}
 

@@ -157,7 +157,6 @@ def tune(config, out=None, progress: bool = False, variant: str | None = None, r
     table) on its training views; write the results into ``out`` when given, under dsm tune's
     rules for ``--out`` (locked; a non-empty folder refused unless ``resume`` goes on with the
     tune there, keeping its finished schemes, or ``force`` replaces a previous tune)."""
-    from pathlib import Path
     from ..config.read import coerce
     from ..experiment.lock import api_words, claim
     from .folder import tune_folder
