@@ -170,5 +170,36 @@ def test_edge_map_in_a_tune_run(tmp_path):
     assert cov.sum() == split["covered"]["n_receivers"]
     pairs = {(int(g), int(t)) for g, t in zip(rx["group"][cov], rx["texel"][cov])}
     assert split["covered"]["receivers_per_texel"] == pytest.approx(cov.sum() / len(pairs))
+    for name, sel in (("covered", cov), ("uncovered", ~cov)):      # the ceiling: a refit never above the map
+        assert split[name]["ceiling"] <= split[name]["map"]
     assert "an edge map over constant" in (tmp_path / "table.md").read_text()
+    assert "(ceiling)" in (tmp_path / "table.md").read_text()
     assert json.loads((tmp_path / "tune.json").read_text())["bias_map"]["model"] == pytest.approx(bm["model"])
+
+
+def test_edge_ceiling_is_the_family_minimum_on_each_held_out_subset():
+    """The ceiling refits the edge map to held-out receivers: on each subset its objective is the
+    fewest errors over every candidate and every threshold, found here by a brute-force scan of all
+    thresholds in float64, and never above a model fitted elsewhere (the trained map)."""
+    from types import SimpleNamespace
+    from dsm.tune.bias_map import edge_ceiling
+    rx = _random_rx(400, 5)
+    covered = np.random.default_rng(6).random(400) < 0.6
+    bm = SimpleNamespace(widths=[1.0, 1.5], clips=[0.5, 2.0], grazings=[0.0, 0.5])
+    lam = 2.0
+    got = edge_ceiling(rx, covered, bm, lam)
+    trained = em.fit(_random_rx(400, 7), bm.widths, bm.clips, bm.grazings, lam)
+    for name, sel in (("covered", covered), ("uncovered", ~covered)):
+        v = rx["v_star"][sel]
+        best = np.inf
+        for w in bm.widths:
+            for c in bm.clips:
+                s = em.tent_score(rx["m9"][sel], rx["fx"][sel], rx["fy"][sel], rx["unit"][sel], w, c)
+                for g in bm.grazings:
+                    x = em.needed(s, rx["cos"][sel], g)
+                    for t in np.append(np.unique(x), np.inf):
+                        lit = x >= t
+                        best = min(best, (v & ~lit).sum() + lam * (~v & lit).sum())
+        assert got[name]["objective"] == pytest.approx(best / sel.sum(), abs=1e-12)
+        on = em.lit({k: np.asarray(a)[sel] for k, a in rx.items()}, trained)
+        assert got[name]["objective"] <= ((v & ~on).sum() + lam * (~v & on).sum()) / sel.sum()

@@ -224,11 +224,28 @@ def edge_bias_map(tc, train, held, groups, base) -> dict:
     counted = lambda on, v: counts(int((~on & v).sum()), int((on & ~v).sum()), int(v.size), int(v.sum()))
     params = {k: model[k] for k in ("width", "clip", "grazing", "threshold")}
     return {"fit": "edge", "base": f"{base['scheme']} {base['params']}", "block": bm.block, "model": params,
+            "ceiling": edge_ceiling(rx_he, covered, bm, lam),
             "candidates": model["scores"], "unit": "score",
             "values": np.array([params[k] for k in ("width", "clip", "grazing", "threshold")]),
             "blocks": 0, "blocks_trained": 0, "steps": [],
             "train": counted(lit_tr, rx_tr["v_star"]), "heldout": counted(lit_he, rx_he["v_star"]),
             **_heldout_fields(lit_he, covered, held, t0)}
+
+
+def edge_ceiling(rx_he: dict, covered, bm, lam: float) -> dict:
+    """Per held-out subset (covered: in trained blocks; uncovered) the edge map refitted to those very
+    receivers over the same candidates: the fewest errors any model of the family reaches there, so
+    what the trained map leaves above it is generalization and what it leaves below the per-texel
+    oracle is the model's (objective, the model; NaN for an empty subset)."""
+    from . import edge_map as em
+    out = {}
+    for name, sel in (("covered", covered), ("uncovered", ~covered)):
+        n = int(sel.sum())
+        sub = {k: np.asarray(v)[sel] for k, v in rx_he.items()}
+        fit = em.fit(sub, bm.widths, bm.clips, bm.grazings, lam) if n else None
+        out[name] = {"objective": fit["errors"] / n if n else NAN,
+                     "model": {k: fit[k] for k in ("width", "clip", "grazing", "threshold")} if n else None}
+    return out
 
 
 def _heldout_fields(lit_he, covered, held, t0) -> dict:
@@ -240,10 +257,11 @@ def _heldout_fields(lit_he, covered, held, t0) -> dict:
             "init": [], "total_ms": (sync_clock() - t0) * 1e3}
 
 
-def heldout_split(held, groups, lit_map, covered, best_spec, lam) -> dict:
+def heldout_split(held, groups, lit_map, covered, best_spec, lam, ceiling=None) -> dict:
     """The learned map against the best global scheme and the per-texel oracle over the held-out
     receivers whose block saw training receivers (``covered``) and over the rest, with the share
-    of the gap to the oracle the map closes: (global - map) / (global - oracle)."""
+    of the gap to the oracle the map closes: (global - map) / (global - oracle); with an edge map's
+    ``ceiling`` (edge_ceiling), the share its refit to those receivers closes beside it."""
     v = np.concatenate([c.v_star for c in held])
     lit_map, covered = np.concatenate(lit_map), np.concatenate(covered).astype(bool)
     culling = pl.culling_of(best_spec.params)
@@ -257,8 +275,12 @@ def heldout_split(held, groups, lit_map, covered, best_spec, lam) -> dict:
         sub = pl.Thresholds(**{f.name: getattr(th, f.name)[sel] for f in dataclasses.fields(th)})
         orc = pl.oracles(sub, vs[sel], lam)["row"]["per_texel_objective"] if n else NAN
         g, m = obj(lit_best), obj(lit_map)
+        closed = lambda x: (g - x) / (g - orc) if n and g > orc else NAN
         out[name] = {"n_receivers": n, "map": m, "best_global": g, "per_texel_oracle": orc,
                      "receivers_per_texel": n / np.unique(th.texel[sel]).size if n else NAN,
-                     "gap_closed": (g - m) / (g - orc) if n and g > orc else NAN}
+                     "gap_closed": closed(m)}
+        if ceiling is not None:
+            c = ceiling[name]["objective"]
+            out[name].update(ceiling=c, ceiling_gap_closed=closed(c), ceiling_model=ceiling[name]["model"])
     return out
 
