@@ -203,3 +203,13 @@ def test_edge_ceiling_is_the_family_minimum_on_each_held_out_subset():
         assert got[name]["objective"] == pytest.approx(best / sel.sum(), abs=1e-12)
         on = em.lit({k: np.asarray(a)[sel] for k, a in rx.items()}, trained)
         assert got[name]["objective"] <= ((v & ~on).sum() + lam * (~v & on).sum()) / sel.sum()
+
+
+def test_edge_ceiling_of_an_empty_subset_is_undefined():
+    """Every held-out receiver in trained blocks: the rest has no ceiling (NaN, no model), not 0."""
+    from types import SimpleNamespace
+    from dsm.tune.bias_map import edge_ceiling
+    rx = _random_rx(50, 8)
+    got = edge_ceiling(rx, np.ones(50, bool), SimpleNamespace(widths=[1.0], clips=[1.0], grazings=[0.0]), 1.0)
+    assert np.isnan(got["uncovered"]["objective"]) and got["uncovered"]["model"] is None
+    assert got["covered"]["objective"] >= 0.0 and got["covered"]["model"]["width"] == 1.0
