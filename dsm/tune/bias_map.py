@@ -223,13 +223,13 @@ def edge_bias_map(tc, train, held, groups, base) -> dict:
     covered = np.isin(keys(rx_he), keys(rx_tr))
     counted = lambda on, v: counts(int((~on & v).sum()), int((on & ~v).sum()), int(v.size), int(v.sum()))
     params = {k: model[k] for k in ("width", "clip", "grazing", "threshold")}
+    fitted = _heldout_fields(lit_he, covered, held, t0)      # its time before the ceiling's refit
     return {"fit": "edge", "base": f"{base['scheme']} {base['params']}", "block": bm.block, "model": params,
             "ceiling": edge_ceiling(rx_he, covered, bm, lam),
             "candidates": model["scores"], "unit": "score",
             "values": np.array([params[k] for k in ("width", "clip", "grazing", "threshold")]),
             "blocks": 0, "blocks_trained": 0, "steps": [],
-            "train": counted(lit_tr, rx_tr["v_star"]), "heldout": counted(lit_he, rx_he["v_star"]),
-            **_heldout_fields(lit_he, covered, held, t0)}
+            "train": counted(lit_tr, rx_tr["v_star"]), "heldout": counted(lit_he, rx_he["v_star"]), **fitted}
 
 
 def edge_ceiling(rx_he: dict, covered, bm, lam: float) -> dict:
