@@ -170,24 +170,25 @@ def test_edge_map_in_a_tune_run(tmp_path):
     assert cov.sum() == split["covered"]["n_receivers"]
     pairs = {(int(g), int(t)) for g, t in zip(rx["group"][cov], rx["texel"][cov])}
     assert split["covered"]["receivers_per_texel"] == pytest.approx(cov.sum() / len(pairs))
-    for name, sel in (("covered", cov), ("uncovered", ~cov)):      # the ceiling: a refit never above the map
-        assert split[name]["ceiling"] <= split[name]["map"]
+    for name, sel in (("covered", cov), ("uncovered", ~cov)):      # the in-sample refit: never above the map
+        assert split[name]["refit"] <= split[name]["map"]
     assert "an edge map over constant" in (tmp_path / "table.md").read_text()
-    assert "(ceiling)" in (tmp_path / "table.md").read_text()
+    assert "(in-sample)" in (tmp_path / "table.md").read_text()
     assert json.loads((tmp_path / "tune.json").read_text())["bias_map"]["model"] == pytest.approx(bm["model"])
 
 
-def test_edge_ceiling_is_the_family_minimum_on_each_held_out_subset():
-    """The ceiling refits the edge map to held-out receivers: on each subset its objective is the
-    fewest errors over every candidate and every threshold, found here by a brute-force scan of all
-    thresholds in float64, and never above a model fitted elsewhere (the trained map)."""
+def test_edge_refit_is_the_family_minimum_on_each_held_out_subset():
+    """The in-sample refit fits the edge map to held-out receivers: on each subset its objective is
+    the fewest errors over every candidate and every threshold, found here by a brute-force scan of
+    all thresholds in float64, and never above a model fitted elsewhere (the trained map)."""
     from types import SimpleNamespace
-    from dsm.tune.bias_map import edge_ceiling
+    from dsm.tune.bias_map import edge_refits
     rx = _random_rx(400, 5)
+    rx.update(texel=np.arange(400) // 2, group=np.zeros(400, np.int64))
     covered = np.random.default_rng(6).random(400) < 0.6
     bm = SimpleNamespace(widths=[1.0, 1.5], clips=[0.5, 2.0], grazings=[0.0, 0.5])
     lam = 2.0
-    got = edge_ceiling(rx, covered, bm, lam)
+    got = edge_refits(rx, covered, bm, lam)
     trained = em.fit(_random_rx(400, 7), bm.widths, bm.clips, bm.grazings, lam)
     for name, sel in (("covered", covered), ("uncovered", ~covered)):
         v = rx["v_star"][sel]
@@ -200,16 +201,53 @@ def test_edge_ceiling_is_the_family_minimum_on_each_held_out_subset():
                     for t in np.append(np.unique(x), np.inf):
                         lit = x >= t
                         best = min(best, (v & ~lit).sum() + lam * (~v & lit).sum())
-        assert got[name]["objective"] == pytest.approx(best / sel.sum(), abs=1e-12)
+        assert got[name]["refit"] == pytest.approx(best / sel.sum(), abs=1e-12)
         on = em.lit({k: np.asarray(a)[sel] for k, a in rx.items()}, trained)
-        assert got[name]["objective"] <= ((v & ~on).sum() + lam * (~v & on).sum()) / sel.sum()
+        assert got[name]["refit"] <= ((v & ~on).sum() + lam * (~v & on).sum()) / sel.sum()
 
 
-def test_edge_ceiling_of_an_empty_subset_is_undefined():
-    """Every held-out receiver in trained blocks: the rest has no ceiling (NaN, no model), not 0."""
+def test_edge_crossfit_counts_each_half_with_the_other_halfs_fit():
+    """Cross-fitted by halves: each halving of the texels recomputed here in Python's integers (a
+    splitmix-style hash of texel, group and the halving's number, its top bit), the receivers of one
+    texel always in one half, each half counted under the model fitted on the other, the count
+    averaged over the halvings."""
     from types import SimpleNamespace
-    from dsm.tune.bias_map import edge_ceiling
+    from dsm.tune.bias_map import CROSSFIT_SPLITS, edge_refits, texel_fold
+    M = 2 ** 64
+    rx = _random_rx(600, 9)
+    rng = np.random.default_rng(10)
+    rx.update(texel=rng.integers(0, 200, 600), group=rng.integers(0, 2, 600))
+    bm = SimpleNamespace(widths=[1.0, 1.25], clips=[1.0, 4.0], grazings=[0.0, 0.25])
+    lam = 1.5
+    want = []
+    for split in range(CROSSFIT_SPLITS):
+        fold = []
+        for t, g in zip(rx["texel"], rx["group"]):
+            k = (int(t) * 0x9E3779B97F4A7C15 + int(g) * 0xBF58476D1CE4E5B9 + split * 0x94D049BB133111EB) % M
+            k = ((k ^ (k >> 31)) * 0xD6E8FEB86659FD93) % M
+            fold.append(k >> 63)
+        fold = np.array(fold)
+        assert np.array_equal(texel_fold(rx["texel"], rx["group"], split), fold)
+        assert 0.3 < fold.mean() < 0.7
+        total = 0.0
+        for f in (0, 1):
+            a = {k: np.asarray(x)[fold == f] for k, x in rx.items()}
+            b = {k: np.asarray(x)[fold != f] for k, x in rx.items()}
+            on = em.lit(b, em.fit(a, bm.widths, bm.clips, bm.grazings, lam))
+            total += (b["v_star"] & ~on).sum() + lam * (~b["v_star"] & on).sum()
+        want.append(total)
+    got = edge_refits(rx, np.ones(600, bool), bm, lam)["covered"]
+    assert got["crossfit"] == pytest.approx(np.mean(want) / 600, abs=1e-12)
+
+
+def test_edge_refit_of_an_empty_subset_is_undefined():
+    """Every held-out receiver in trained blocks: the rest has no refit (NaN, no model), not 0; one
+    texel alone leaves a fold empty, so its cross-fit is undefined too."""
+    from types import SimpleNamespace
+    from dsm.tune.bias_map import edge_refits
     rx = _random_rx(50, 8)
-    got = edge_ceiling(rx, np.ones(50, bool), SimpleNamespace(widths=[1.0], clips=[1.0], grazings=[0.0]), 1.0)
-    assert np.isnan(got["uncovered"]["objective"]) and got["uncovered"]["model"] is None
-    assert got["covered"]["objective"] >= 0.0 and got["covered"]["model"]["width"] == 1.0
+    rx.update(texel=np.zeros(50, np.int64), group=np.zeros(50, np.int64))
+    got = edge_refits(rx, np.ones(50, bool), SimpleNamespace(widths=[1.0], clips=[1.0], grazings=[0.0]), 1.0)
+    assert np.isnan(got["uncovered"]["refit"]) and got["uncovered"]["refit_model"] is None
+    assert np.isnan(got["uncovered"]["crossfit"]) and np.isnan(got["covered"]["crossfit"])
+    assert got["covered"]["refit"] >= 0.0 and got["covered"]["refit_model"]["width"] == 1.0

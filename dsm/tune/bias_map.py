@@ -223,29 +223,71 @@ def edge_bias_map(tc, train, held, groups, base) -> dict:
     covered = np.isin(keys(rx_he), keys(rx_tr))
     counted = lambda on, v: counts(int((~on & v).sum()), int((on & ~v).sum()), int(v.size), int(v.sum()))
     params = {k: model[k] for k in ("width", "clip", "grazing", "threshold")}
-    fitted = _heldout_fields(lit_he, covered, held, t0)      # its time before the ceiling's refit
+    fitted = _heldout_fields(lit_he, covered, held, t0)      # its time before the refits
     return {"fit": "edge", "base": f"{base['scheme']} {base['params']}", "block": bm.block, "model": params,
-            "ceiling": edge_ceiling(rx_he, covered, bm, lam),
+            "refits": edge_refits(rx_he, covered, bm, lam),
             "candidates": model["scores"], "unit": "score",
             "values": np.array([params[k] for k in ("width", "clip", "grazing", "threshold")]),
             "blocks": 0, "blocks_trained": 0, "steps": [],
             "train": counted(lit_tr, rx_tr["v_star"]), "heldout": counted(lit_he, rx_he["v_star"]), **fitted}
 
 
-def edge_ceiling(rx_he: dict, covered, bm, lam: float) -> dict:
-    """Per held-out subset (covered: in trained blocks; uncovered) the edge map refitted to those very
-    receivers over the same candidates: the fewest errors any model of the family reaches there, so
-    what the trained map leaves above it is generalization and what it leaves below the per-texel
-    oracle is the model's (objective, the model; NaN for an empty subset)."""
-    from . import edge_map as em
+REFIT_KEYS = ("width", "clip", "grazing", "threshold")
+CROSSFIT_SPLITS = 4          # hashed halvings averaged: one halving's count moves by a few receivers
+
+
+def edge_refits(rx_he: dict, covered, bm, lam: float) -> dict:
+    """Per held-out subset (covered: in trained blocks; uncovered) the edge map's family fitted to
+    those very receivers: ``refit``, fitted and counted on all of them (in-sample, so optimistic:
+    the fewest errors any model of the family makes there), and ``crossfit``, fitted on the
+    receivers of half the texels and counted on the other half, both ways, averaged over
+    CROSSFIT_SPLITS halvings (what the family reaches with data from the judged views themselves).
+    Objectives; NaN for an empty subset or fold."""
     out = {}
     for name, sel in (("covered", covered), ("uncovered", ~covered)):
         n = int(sel.sum())
         sub = {k: np.asarray(v)[sel] for k, v in rx_he.items()}
-        fit = em.fit(sub, bm.widths, bm.clips, bm.grazings, lam) if n else None
-        out[name] = {"objective": fit["errors"] / n if n else NAN,
-                     "model": {k: fit[k] for k in ("width", "clip", "grazing", "threshold")} if n else None}
+        fit = _edge_fit(sub, bm, lam) if n else None
+        out[name] = {"refit": fit["errors"] / n if n else NAN,
+                     "refit_model": {k: fit[k] for k in REFIT_KEYS} if n else None,
+                     "crossfit": _crossfit_errors(sub, bm, lam) / n if n else NAN}
     return out
+
+
+def _edge_fit(rx: dict, bm, lam: float) -> dict:
+    from . import edge_map as em
+    return em.fit(rx, bm.widths, bm.clips, bm.grazings, lam)
+
+
+def texel_fold(texel, group, split: int = 0) -> np.ndarray:
+    """0 or 1 per receiver from its (map, texel) pair: halving ``split`` of the texels, a fixed
+    pseudo-random one (a mixing hash's top bit), so receivers of one texel fall in one fold."""
+    with np.errstate(over="ignore"):
+        k = (np.asarray(texel).astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
+             + np.asarray(group).astype(np.uint64) * np.uint64(0xBF58476D1CE4E5B9)
+             + np.uint64(split) * np.uint64(0x94D049BB133111EB))
+        k = k ^ (k >> np.uint64(31))
+        k = k * np.uint64(0xD6E8FEB86659FD93)
+    return (k >> np.uint64(63)).astype(np.int64)
+
+
+def _crossfit_errors(rx: dict, bm, lam: float) -> float:
+    """Errors of the family fitted on one fold of ``rx``'s texels and counted on the other, summed
+    both ways, averaged over CROSSFIT_SPLITS halvings (NaN when a fold is empty)."""
+    from . import edge_map as em
+    totals = []
+    for split in range(CROSSFIT_SPLITS):
+        fold = texel_fold(rx["texel"], rx["group"], split)
+        total = 0.0
+        for f in (0, 1):
+            fit_on = {k: np.asarray(v)[fold == f] for k, v in rx.items()}
+            judge = {k: np.asarray(v)[fold != f] for k, v in rx.items()}
+            if not fit_on["v_star"].size or not judge["v_star"].size:
+                return NAN
+            on, v = em.lit(judge, _edge_fit(fit_on, bm, lam)), judge["v_star"]
+            total += float((v & ~on).sum() + lam * (~v & on).sum())
+        totals.append(total)
+    return float(np.mean(totals))
 
 
 def _heldout_fields(lit_he, covered, held, t0) -> dict:
@@ -257,11 +299,11 @@ def _heldout_fields(lit_he, covered, held, t0) -> dict:
             "init": [], "total_ms": (sync_clock() - t0) * 1e3}
 
 
-def heldout_split(held, groups, lit_map, covered, best_spec, lam, ceiling=None) -> dict:
+def heldout_split(held, groups, lit_map, covered, best_spec, lam, refits=None) -> dict:
     """The learned map against the best global scheme and the per-texel oracle over the held-out
     receivers whose block saw training receivers (``covered``) and over the rest, with the share
     of the gap to the oracle the map closes: (global - map) / (global - oracle); with an edge map's
-    ``ceiling`` (edge_ceiling), the share its refit to those receivers closes beside it."""
+    ``refits`` (edge_refits), the shares its family refitted to those receivers closes beside it."""
     v = np.concatenate([c.v_star for c in held])
     lit_map, covered = np.concatenate(lit_map), np.concatenate(covered).astype(bool)
     culling = pl.culling_of(best_spec.params)
@@ -279,8 +321,9 @@ def heldout_split(held, groups, lit_map, covered, best_spec, lam, ceiling=None) 
         out[name] = {"n_receivers": n, "map": m, "best_global": g, "per_texel_oracle": orc,
                      "receivers_per_texel": n / np.unique(th.texel[sel]).size if n else NAN,
                      "gap_closed": closed(m)}
-        if ceiling is not None:
-            c = ceiling[name]["objective"]
-            out[name].update(ceiling=c, ceiling_gap_closed=closed(c), ceiling_model=ceiling[name]["model"])
+        if refits is not None:
+            r = refits[name]
+            out[name].update(refit=r["refit"], refit_gap_closed=closed(r["refit"]), refit_model=r["refit_model"],
+                             crossfit=r["crossfit"], crossfit_gap_closed=closed(r["crossfit"]))
     return out
 
