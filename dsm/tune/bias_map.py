@@ -243,20 +243,24 @@ def edge_refits(rx_he: dict, covered, bm, lam: float) -> dict:
     receivers of half the texels and counted on the other half, both ways, averaged over
     CROSSFIT_SPLITS halvings (what the family reaches with data from the judged views themselves).
     Objectives; NaN for an empty subset or fold."""
+    from . import edge_map as em
     out = {}
     for name, sel in (("covered", covered), ("uncovered", ~covered)):
         n = int(sel.sum())
-        sub = {k: np.asarray(v)[sel] for k, v in rx_he.items()}
-        fit = _edge_fit(sub, bm, lam) if n else None
-        out[name] = {"refit": fit["errors"] / n if n else NAN,
-                     "refit_model": {k: fit[k] for k in REFIT_KEYS} if n else None,
-                     "crossfit": _crossfit_errors(sub, bm, lam) / n if n else NAN}
+        if not n:
+            out[name] = {"refit": NAN, "refit_model": None, "crossfit": NAN}
+            continue
+        sub = _rows(rx_he, sel)
+        tents = em.tent_scores(sub, bm.widths, bm.clips)     # shared by the refit and every fold's fit
+        fit = em.fit(sub, bm.widths, bm.clips, bm.grazings, lam, tents)
+        out[name] = {"refit": fit["errors"] / n, "refit_model": {k: fit[k] for k in REFIT_KEYS},
+                     "crossfit": _crossfit_errors(sub, tents, bm, lam) / n}
     return out
 
 
-def _edge_fit(rx: dict, bm, lam: float) -> dict:
-    from . import edge_map as em
-    return em.fit(rx, bm.widths, bm.clips, bm.grazings, lam)
+def _rows(rx: dict, sel) -> dict:
+    """The receivers ``sel`` (a mask) of per-receiver arrays ``rx``."""
+    return {k: np.asarray(v)[sel] for k, v in rx.items()}
 
 
 def texel_fold(texel, group, split: int = 0) -> np.ndarray:
@@ -271,20 +275,23 @@ def texel_fold(texel, group, split: int = 0) -> np.ndarray:
     return (k >> np.uint64(63)).astype(np.int64)
 
 
-def _crossfit_errors(rx: dict, bm, lam: float) -> float:
+def _crossfit_errors(rx: dict, tents: dict, bm, lam: float) -> float:
     """Errors of the family fitted on one fold of ``rx``'s texels and counted on the other, summed
-    both ways, averaged over CROSSFIT_SPLITS halvings (NaN when a fold is empty)."""
+    both ways, averaged over CROSSFIT_SPLITS halvings (NaN when a fold is empty); ``tents``: the
+    candidates' tent scores of ``rx``'s receivers (edge_map.tent_scores)."""
     from . import edge_map as em
     totals = []
     for split in range(CROSSFIT_SPLITS):
         fold = texel_fold(rx["texel"], rx["group"], split)
         total = 0.0
         for f in (0, 1):
-            fit_on = {k: np.asarray(v)[fold == f] for k, v in rx.items()}
-            judge = {k: np.asarray(v)[fold != f] for k, v in rx.items()}
-            if not fit_on["v_star"].size or not judge["v_star"].size:
+            on_fold = fold == f
+            if on_fold.all() or not on_fold.any():
                 return NAN
-            on, v = em.lit(judge, _edge_fit(fit_on, bm, lam)), judge["v_star"]
+            model = em.fit(_rows(rx, on_fold), bm.widths, bm.clips, bm.grazings, lam,
+                           {k: t[on_fold] for k, t in tents.items()})
+            judge = _rows(rx, ~on_fold)
+            on, v = em.lit(judge, model), judge["v_star"]
             total += float((v & ~on).sum() + lam * (~v & on).sum())
         totals.append(total)
     return float(np.mean(totals))

@@ -73,13 +73,21 @@ def lit(rx: dict, model: dict) -> np.ndarray:
     return needed(s, rx["cos"], model["grazing"]) >= model["threshold"]
 
 
-def fit(rx: dict, widths, clips, grazings, lam: float) -> dict:
+def tent_scores(rx: dict, widths, clips) -> dict:
+    """Each (width, clip) candidate's tent score of every receiver of ``rx`` (arrays m9, fx, fy, unit)."""
+    return {(w, c): tent_score(rx["m9"], rx["fx"], rx["fy"], rx["unit"], w, c)
+            for w, c in itertools.product(widths, clips)}
+
+
+def fit(rx: dict, widths, clips, grazings, lam: float, tents: dict | None = None) -> dict:
     """The model (width, clip, grazing, threshold) with the fewest training errors over the
-    candidates, and every candidate's score (``rx``: arrays m9, fx, fy, unit, cos, v_star)."""
+    candidates, and every candidate's score (``rx``: arrays m9, fx, fy, unit, cos, v_star;
+    ``tents``: their tent_scores when already made, then only cos and v_star are read)."""
     v = np.asarray(rx["v_star"], bool)
+    tents = tent_scores(rx, widths, clips) if tents is None else tents
     scores = []
     for width, clip in itertools.product(widths, clips):
-        s = tent_score(rx["m9"], rx["fx"], rx["fy"], rx["unit"], width, clip)
+        s = tents[(width, clip)]
         for g in grazings:
             t, e = exact_threshold(needed(s, rx["cos"], g), v, lam)
             scores.append({"width": float(width), "clip": float(clip), "grazing": float(g), "threshold": t,
