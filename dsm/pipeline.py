@@ -329,12 +329,18 @@ def build_map(scene, view, needs=(), culling: str = "none", closed=None, tile: i
     """The map of ``view``: z1 and shape ids, plus the layers ``needs`` names (slope, z2),
     under ``culling`` (``closed``: per-shape closedness, see :func:`closedness`; ``extents``:
     :func:`spawn_extents` of the scene, else computed in each layered build)."""
+    return shadowmap.build(scene, view, set(needs), culling, map_cull_modes(scene, view, culling, closed), tile, extents)
+
+
+def map_cull_modes(scene, view, culling: str = "none", closed=None):
+    """Per-shape CULL_* of a map of ``view`` under ``culling`` (None: nothing culled), an area
+    light's own luminaire (``view.exclude``) stepped over."""
     modes = cull_modes(culling, closed) if culling != "none" else None
     exclude = getattr(view, "exclude", ())      # an area light's own luminaire: stepped over
     if exclude:
         modes = np.zeros(len(scene.shapes()), np.uint32) if modes is None else np.array(modes, np.uint32)
         modes[list(exclude)] = shadowmap.CULL_ALL
-    return shadowmap.build(scene, view, set(needs), culling, modes, tile, extents)
+    return modes
 
 
 def shrunk_scene(scene, distance: float):

@@ -27,6 +27,7 @@ VARIANTS = ("llvm_ad_rgb", "cuda_ad_rgb")
 # [report] images: error and shadow images per case, error images only, or none
 REPORT_IMAGES = ("all", "errors", "none")
 LOOKUP_MODES = ("wavefront", "per_case")   # [timing] lookups (dsm.experiment.wavefront)
+BUILD_MODES = ("alone", "together")        # [timing] builds: each map timed alone, or a sweep's small maps stacked
 
 
 class ConfigError(ValueError):
@@ -422,6 +423,7 @@ class Config:
     schemes: tuple = ()
     timing_repeats: int = 3
     timing_lookups: str = "wavefront"       # [timing] lookups: a map's cases in one wavefront, or "per_case"
+    timing_builds: str = "alone"            # [timing] builds: "together" stacks a sweep's small maps (dsm.maps.stacked)
     memory_budget_mb: float | None = None   # None: a quarter of this machine's memory
     oracle: "OracleSpec" = field(default_factory=lambda: OracleSpec())
     report_images: str = "all"              # [report] images (REPORT_IMAGES)

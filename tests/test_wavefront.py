@@ -133,14 +133,14 @@ def test_an_unknown_lookup_mode_is_refused_before_any_work(tmp_path):
 def test_bench_compares_the_modes_on_a_sweep(tmp_path, monkeypatch):
     """dsm bench (5b): on a sweep whose cases share kernels, the wavefront launches fewer timed
     kernels than one lookup per case (a count, not a clock), and every row is equal."""
-    from dsm.tools import bench_lookups
-    small = {**bench_lookups.LOOKUP_SWEEP, "camera": {"resolution": [48, 48]},
+    from dsm.tools import bench_modes
+    small = {**bench_modes.LOOKUP_SWEEP, "camera": {"resolution": [48, 48]},
              "map": {"resolution": [64], "filter": ["nearest"]}, "timing": {"repeats": 2}}
-    monkeypatch.setattr(bench_lookups, "LOOKUP_SWEEP", small)
-    r = bench_lookups.lookup_modes(tmp_path)
+    monkeypatch.setattr(bench_modes, "LOOKUP_SWEEP", small)
+    r = bench_modes.lookup_modes(tmp_path)
     assert r["rows_equal"] and r["cases"] == 2 * (8 + 4 + 6)      # two scenes
     # per case: 36 cases x 2 repeats; wavefront: per map 3 kernels (constant, normal_offset, slope_scaled) x 2,
     # plus the wave's
     assert r["per_case"]["launches"]["timed_repeats"] >= 36 * 2
     assert r["wavefront"]["launches"]["timed_repeats"] < r["per_case"]["launches"]["timed_repeats"] / 2
-    assert "(5b)" in "\n".join(bench_lookups.markdown(r))
+    assert "(5b)" in "\n".join(bench_modes.markdown(r))

@@ -12,7 +12,7 @@ import tomllib
 from dataclasses import replace
 from pathlib import Path
 
-from ..types import LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, MAP_VIEWS, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA, REPORT_IMAGES, LOOKUP_MODES, LAMBDA_MAX, SEED_MAX, ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params, SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec, CameraSpec, CascadeSpec, CASCADE_SPLITS, CASCADE_FITS, DEPTH_BOUNDS, MAX_CASCADES, MotionSpec, CAMERA_PATHS, LIGHT_PATHS, MAP_KINDS, MomentSpec, ContactSpec, BLUR_KERNELS
+from ..types import LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, MAP_VIEWS, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA, REPORT_IMAGES, LOOKUP_MODES, BUILD_MODES, LAMBDA_MAX, SEED_MAX, ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params, SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec, CameraSpec, CascadeSpec, CASCADE_SPLITS, CASCADE_FITS, DEPTH_BOUNDS, MAX_CASCADES, MotionSpec, CAMERA_PATHS, LIGHT_PATHS, MAP_KINDS, MomentSpec, ContactSpec, BLUR_KERNELS
 
 # a run's folder is runs/<name>-tune-YYYYmmdd-HHMMSS[-n] (at most 25 bytes more) and a file name takes 255 bytes
 NAME_MAX_BYTES = 255 - len("-tune-20240101-120000-999")
@@ -117,7 +117,7 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     m = _table(raw, "map", source)
     mapspec = _parse_map(m, lights, source)
     schemes = _parse_schemes(raw, mapspec, source)
-    budget, (repeats, lookups), lambdas, report_images = _parse_run_tables(raw, source)
+    budget, (repeats, lookups, builds), lambdas, report_images = _parse_run_tables(raw, source)
     motion = tuple(_parse_motion(t, source, f"motion[{i}]") for i, t in enumerate(_array_of_tables(raw, "motion", source)))
     _check_motion_lights(motion, lights, source)
     _check_motion_moments(motion, mapspec, source)
@@ -128,7 +128,7 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     return Config(name=name, source=source, seed=seed, variant=variant, camera_resolution=camera_resolution,
                   camera=camera, motion=motion,
                   scenes=tuple(scenes), lights=tuple(lights), map=mapspec, schemes=tuple(schemes),
-                  timing_repeats=repeats, timing_lookups=lookups, memory_budget_mb=budget, oracle=OracleSpec(lambdas),
+                  timing_repeats=repeats, timing_lookups=lookups, timing_builds=builds, memory_budget_mb=budget, oracle=OracleSpec(lambdas),
                   report_images=report_images, raw=raw, contact=contact, shrink=shrink, tune=tune,
                   execution=_parse_execution(_table(raw, "execution", source), source))
 
@@ -261,16 +261,17 @@ def _parse_schemes(raw: dict, mapspec: MapSpec, source: str) -> list:
 
 
 def _parse_run_tables(raw: dict, source: str) -> tuple:
-    """``[memory]``, ``[timing]``, ``[oracle]`` and ``[report]``: (budget MB or None, (repeats, lookups),
+    """``[memory]``, ``[timing]``, ``[oracle]`` and ``[report]``: (budget MB or None, (repeats, lookups, builds),
     lambdas, images)."""
     mem = _table(raw, "memory", source)
     check_keys(mem, ("budget_mb",), source, "memory")
     budget = (number(mem["budget_mb"], source, "memory.budget_mb", positive=True)
               if "budget_mb" in mem else None)
     tim = _table(raw, "timing", source)
-    check_keys(tim, ("repeats", "lookups"), source, "timing")
+    check_keys(tim, ("repeats", "lookups", "builds"), source, "timing")
     repeats = number(tim.get("repeats", 3), source, "timing.repeats", integer=True, minimum=1, maximum=100)
     lookups = choice(tim.get("lookups", "wavefront"), source, "timing.lookups", LOOKUP_MODES)
+    builds = choice(tim.get("builds", "alone"), source, "timing.builds", BUILD_MODES)
     orc = _table(raw, "oracle", source)
     check_keys(orc, ("lambda",), source, "oracle")
     lambdas = as_list(orc.get("lambda", 1.0))
@@ -280,7 +281,7 @@ def _parse_run_tables(raw: dict, source: str) -> tuple:
     rep = _table(raw, "report", source)
     check_keys(rep, ("images",), source, "report")
     report_images = choice(rep.get("images", "all"), source, "report.images", REPORT_IMAGES)
-    return budget, (repeats, lookups), lambdas, report_images
+    return budget, (repeats, lookups, builds), lambdas, report_images
 
 CONTACT_MAX_STEPS = 256
 

@@ -59,6 +59,10 @@ MIN_TILE = 1 << 16
 WAVE_RECEIVER_BYTES = 9
 WAVE_BACK_BYTES = 4
 WAVE_BYTES = 128 << 20
+# [timing] builds = "together": a sweep's small maps (one light and view kind, straight-line
+# builds of the same layers) are built as one wavefront (dsm.maps.stacked) while their estimated
+# peaks add up to at most STACK_BYTES; they stay in memory together until their cases have run
+STACK_BYTES = 64 << 20
 # per triangle of the scene: Mitsuba's mesh buffers, Embree's BVH, the loader's temporaries and
 # the kit's per-triangle tables (spawn extents, closedness); measured as the peak RSS growth of
 # `dsm run` on grid meshes of 1e4 to 1e7 triangles (381 to 410 B per triangle at 1e6 and 1e7),
@@ -148,6 +152,7 @@ class Plan:
     contact: object = None                          # [contact]: the ContactSpec of every case's march, None: none
     shrink: float | None = None                     # [map] shrink: casters moved inward (world units), None: off
     lookups: str = "wavefront"                      # [timing] lookups (dsm.experiment.wavefront)
+    stacks: list = field(default_factory=list)      # [timing] builds = "together": lists of maps built together
 
     @property
     def oracle_receivers(self) -> int:
@@ -188,7 +193,8 @@ class Plan:
         wave = 2 * w * h * WAVE_RECEIVER_BYTES
         parts = {"camera": w * h * PIXEL_BYTES,
                  "geometry": self.triangles.get(label, (0, ""))[0] * TRIANGLE_BYTES,
-                 "map": max((m.peak_bytes for m in self.maps if m.scene == label), default=0),
+                 "map": max([m.peak_bytes for m in self.maps if m.scene == label]
+                            + [sum(m.peak_bytes for m in st) for st in self.stacks if st[0].scene == label], default=0),
                  "lookups": max((min(m.cases, wave_cases(w * h)) * wave for m in self.maps
                                  if m.scene == label), default=0) if self.lookups == "wavefront" else 0}
         return PROCESS_BYTES + sum(parts.values()), parts
@@ -254,6 +260,7 @@ class Plan:
             lines.append(f"  caster shrinking: maps cast against a copy of each scene's meshes moved {self.shrink:g} "
                          "inward along their welded vertex normals")
         lines.append(self._lookups_line())
+        lines.append(self._builds_line())
         lines.append(f"  estimated peak memory: {self.peak_bytes() * mb:.1f} MB (the process "
                      f"{PROCESS_BYTES * mb:.0f} MB, camera buffers, geometry, the largest map and lookup wave "
                      "of a scene)")
@@ -269,12 +276,27 @@ class Plan:
         return (f"  lookups: each map's cases in one wavefront (at most {waves} waves for {len(self.maps)} maps, at most "
                 f"{WAVE_BYTES >> 20} MB of outputs a wave), each kernel timed alone once")
 
+    def stack_indices(self) -> list:
+        """The stacks as lists of indices into ``maps`` (by identity: maps compare by value)."""
+        at = {id(m): i for i, m in enumerate(self.maps)}
+        return [[at[id(m)] for m in st] for st in self.stacks]
+
+    def _builds_line(self) -> str:
+        """How the maps are built ([timing] builds): each alone, or a sweep's small maps stacked."""
+        if not self.stacks:
+            return "  builds: each map alone (its build_ms measured alone)"
+        n = sum(len(st) for st in self.stacks)
+        return (f"  builds: {n} maps in {len(self.stacks)} stacks, each stack one wavefront timed as a whole "
+                f"(at most {STACK_BYTES >> 20} MB a stack; a map's build_ms is its share of texels), "
+                f"{len(self.maps) - n} maps alone")
+
     def as_dict(self) -> dict:
         """The plan's counts and per-map rows as a JSON-ready dict."""
         return {"cases": self.cases, "rays": self.rays, "rays_bound": self.rays_bound,
                 "oracle_receivers_bound": self.oracle_receivers,
                 "peak_bytes_est": self.peak_bytes(), "budget_bytes": self.budget_bytes,
                 "triangles": {label: t for label, (t, _) in self.triangles.items()},
+                "stacks": self.stack_indices(),
                 "maps": [{"scene": m.scene, "light": m.light, "view": m.view, "resolution": m.resolution,
                           "culling": m.culling, "layers": list(m.layers), "layered": m.layered,
                           "formats": list(m.formats), "texels": m.texels, "tile": m.tile, "cases": m.cases,
@@ -524,7 +546,29 @@ def make(cfg: Config) -> Plan:
         room = plan.budget_bytes - base - m.stored_bytes
         fit = max(room // max(m.build_bytes_per_texel, 1), MIN_TILE)
         m.tile = int(min(m.texels, fit))
+    if getattr(cfg, "timing_builds", "alone") == "together" and not cfg.motion:
+        plan.stacks = stacks(plan)
     return plan
+
+
+def stacks(plan: Plan) -> list:
+    """The maps of ``plan`` built together (lists of two or more, in plan order): maps of one scene,
+    light, single view kind (no cascade) and culling that need the same layers and are not tiled,
+    while their estimated peaks add up to at most STACK_BYTES (then a new stack starts)."""
+    out, open_ = [], {}
+    for m in plan.maps:
+        if not (m.cascade is None and m.tile >= m.texels and m.view not in schemes_mod.EXCLUSIVE_VIEWS
+                and m.peak_bytes <= STACK_BYTES):
+            continue
+        key = (m.scene_index, m.light_index, m.view, m.culling, m.needs)
+        run = open_.setdefault(key, [])
+        if run and sum(x.peak_bytes for x in run) + m.peak_bytes > STACK_BYTES:
+            out.append(run)
+            run = open_[key] = []
+        run.append(m)
+    out += open_.values()
+    at = {id(m): i for i, m in enumerate(plan.maps)}
+    return sorted((st for st in out if len(st) > 1), key=lambda st: at[id(st[0])])
 
 
 def _culling_groups(cfg: Config) -> dict:

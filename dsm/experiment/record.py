@@ -57,7 +57,7 @@ _ORDER = (
     "build_first_ms build_compile_ms build_peak_mb lookup_ms lookup_compile_ms lookup_kernels_compiled "
     "reference_ms sweep_key sweep_value").split() + list(SOFT_COLUMNS) + ["f32_step", "texel_f32_steps", "map_kind",
                                                                          *LEAK_COLUMNS, "moments_ms"] + CONTACT_COLUMNS + [
-    "lookup_shared"]
+    "lookup_shared", "build_shared"]
 
 _GROUPS = (
     _cols("core", "case:t scene:t light:t view:t scheme:t preset:t params:t culling:t resolution:i total_texels:i "
@@ -67,7 +67,7 @@ _GROUPS = (
                   "reference_ms sweep_key:t sweep_value")
     + _cols("map", "n_pixels n_excluded_nohit n_excluded_backfacing n_excluded_outside n_acne_resolution n_acne_bias "
                    "n_peterpan_resolution n_peterpan_bias n_plane_fallback n_backfacing backface_lit_rate "
-                   "build_compile_ms build_peak_mb lookup_compile_ms lookup_kernels_compiled:i lookup_shared:i")
+                   "build_compile_ms build_peak_mb lookup_compile_ms lookup_kernels_compiled:i lookup_shared:i build_shared:i")
     + _cols("cascade", "texels_per_pixel fit_ms")
     + _cols("motion", "motion:t frames:i flicker_rate flicker_ever flicker_magnitude flicker_within_rate "
                       "flicker_change_rate maps_built:i")

@@ -28,7 +28,7 @@ from ..maps import cascades, headroom, shadowmap
 from ..tools import env, timing
 from ..report import figures, publish, tables as report, io as report_io
 from ..truth import metrics
-from . import motion, record, resume, wavefront
+from . import motion, record, resume, stacks, wavefront
 from .. import pipeline
 from ..report.sections import soft as soft_report
 from ..contact import march as contact
@@ -219,8 +219,9 @@ class Runner:
                     setup = self._light(sd, gb, lights, li, light_maps)
                 except StageFailed:
                     continue
+                built = self._stacks(sd, setup, light_maps)
                 for _, view_maps in itertools.groupby(light_maps, key=lambda m: (m.view, m.resolution, m.cascade)):
-                    self._run_view(sd, gb, setup, list(view_maps))
+                    self._run_view(sd, gb, setup, list(view_maps), built)
             self._write_run_json()
 
     # ------------------------------------------------------------ failure policy
@@ -277,14 +278,49 @@ class Runner:
             self.record.reference_regions.append({"scene": sd.label, "light": label, **out.ref.stats()})
         return out
 
-    def _run_view(self, sd, gb, setup, maps):
-        """One view and resolution of a light: its receivers, then each of its maps (one per culling)."""
+    def _stacks(self, sd, setup, light_maps) -> dict:
+        """The light's maps that the plan builds together ([timing] builds = "together"), built and
+        timed (dsm.experiment.stacks): {id(map plan): (view, Built)}. A stack that fails is noted
+        and its maps are built alone."""
+        out, ids = {}, {id(m) for m in light_maps}
+        for st in self.plan.stacks:
+            if not all(id(m) in ids for m in st):
+                continue
+            try:
+                out.update({id(m): vb for m, vb in zip(st, self._build_stack(sd, setup, st))})
+            except (KeyboardInterrupt, StageFailed):
+                raise
+            except Exception as e:
+                self.record.status.append({"what": f"scene {sd.label} light {setup.label} view {st[0].view} maps "
+                                           + "+".join(str(m.resolution) for m in st) + " built together",
+                                           "status": "note", "error": f"{type(e).__name__}: {e}; built alone"})
+        return out
+
+    def _build_stack(self, sd, setup, st) -> list:
+        """(view, Built) of each map of stack ``st``: the views fitted as :meth:`_run_view` fits them."""
+        pts = pipeline.points_np(setup.p) if setup.p is not None else np.zeros((0, 3))
+        views = [pipeline.make_view(setup.light, m.resolution, pts, sd.bbox, m.view, m.cascade, sd.sensor, sd.scale)
+                 for m in st]
+        own = {frozenset()} | {frozenset(pipeline.needs_of([pipeline.preset_for_light(spec, setup.light.type)]))
+                               for m in st for spec in m.specs}
+        casters = self._casters(sd)
+        modes = pipeline.map_cull_modes(casters, views[0], st[0].culling, self._closed(sd) if st[0].culling != "none" else None)
+        built = stacks.build(casters, views, st[0].needs, st[0].culling, modes, own, self.extents[sd.label],
+                             self.cfg.timing_repeats)
+        return list(zip(views, built))
+
+    def _run_view(self, sd, gb, setup, maps, built=None):
+        """One view and resolution of a light: its receivers, then each of its maps (one per culling);
+        ``built``: maps built together beforehand, {id(map plan): (view, Built)}."""
         kind, R = maps[0].view, maps[0].resolution
+        built = built or {}
+        ready = [built[id(m)][0] for m in maps if id(m) in built]
 
         def receivers():
             """(view, setup, rx, seam, back): the fitted view, the receivers inside it, their lookups and seams."""
             pts = pipeline.points_np(setup.p) if setup.p is not None else np.zeros((0, 3))
-            view = pipeline.make_view(setup.light, R, pts, sd.bbox, kind, maps[0].cascade, sd.sensor, sd.scale)
+            view = ready[0] if ready else pipeline.make_view(setup.light, R, pts, sd.bbox, kind, maps[0].cascade,
+                                                             sd.sensor, sd.scale)
             s = setup.subset(view.inside(setup.p).numpy().astype(bool)) if setup.p is not None else setup
             rx = seam = None
             if s.p is not None and len(s.pixels):
@@ -301,7 +337,7 @@ class Runner:
         first_t = None
         for m in maps:
             try:
-                first_t = self._run_map(sd, gb, setup, view, rx, seam, back, m, first_t)
+                first_t = self._run_map(sd, gb, setup, view, rx, seam, back, m, first_t, built.get(id(m), (0, None))[1])
             except StageFailed:
                 continue
 
@@ -330,21 +366,26 @@ class Runner:
             self.shrunk = (sd.label, pipeline.shrunk_scene(sd.scene, self.cfg.shrink))
         return self.shrunk[1]
 
-    def _run_map(self, sd, gb, setup, view, rx, seam, back, m, first_t):
+    def _run_map(self, sd, gb, setup, view, rx, seam, back, m, first_t, built=None):
         """Build one map (the plan's layers, culling and tile), store its formats, run its cases.
-        Returns the first-layer build time (measured on the view's first map)."""
+        ``first_t``: (the first layer's build time, maps sharing it) from the view's first map, or None;
+        ``built``: the map built in a stack (dsm.experiment.stacks), or None. Returns ``first_t``."""
         what = f"scene {sd.label} light {setup.label} view {view.kind} map {m.resolution} culling {m.culling}"
 
         def build():
             """(map, build time, stored): the map built (timed, with its peak bytes) and its copy per stored format."""
-            timing.reset_peak()
-            smap, bt = self._build(sd, view, set(m.needs), m.culling, m.tile)
-            smap = smap[-1]
-            smap.peak_bytes = timing.peak_bytes()
+            if built is not None:
+                smap, bt = built.smap, built.times[frozenset(m.needs)]
+            else:
+                timing.reset_peak()
+                smap, bt = self._build(sd, view, set(m.needs), m.culling, m.tile)
+                smap = smap[-1]
+                smap.peak_bytes = timing.peak_bytes()
             stored = {fmt: pipeline.store(smap, fmt) for fmt in self.cfg.map.format}
             return smap, bt, stored
         smap, bt, stored = self._stage(what, [m], build)
         self._record_map(sd, setup, view, m, smap)
+        self.record.maps[-1]["build_ms"] = bt.ms      # its layers' build, kernel time (a stack's: its share)
         self.record.quantized += sum(1 for fmt in self.cfg.map.format if fmt != "float32")
         # receivers in the depth function each stored format compares in (formats.stored_view)
         bp, bn = back
@@ -357,10 +398,14 @@ class Runner:
         rxs = {fmt: by_view[id(stored[fmt].view)][0] for fmt in stored}
         backs = {fmt: by_view[id(stored[fmt].view)][1] for fmt in stored}
         wrong = {fmt: self._oracles(sd, setup, view, m, stored[fmt], rxs[fmt], fmt) for fmt in stored}
-        build_times = {frozenset(m.needs): bt}
-        if first_t is None:
-            # the first layer alone, so a case's extra layers show as build_ms - build_first_ms
-            first_t = bt if m.culling == "none" and not m.needs else self._build(sd, view, set(), "none", m.tile)[1]
+        build_times = dict(built.times) if built is not None else {frozenset(m.needs): bt}
+        if first_t is None or (built is None and first_t[1] > 1):
+            # the first layer without culling, so a case's extra layers show as build_ms - build_first_ms
+            if built is not None and m.culling == "none":
+                first_t = (built.times[frozenset()], built.shared)
+            else:
+                first_t = (bt if m.culling == "none" and not m.needs else
+                           self._build(sd, view, set(), "none", m.tile)[1], 1)
         self.case_no = self.first_case[self.plan.maps.index(m)]     # case ids from the plan
         specs = [pipeline.preset_for_light(spec, setup.light.type) for spec in m.specs]   # a preset's values here
         extras, looked = self._lookups(specs, stored, rxs, backs)
@@ -371,7 +416,7 @@ class Runner:
                 build_times[own] = self._build(sd, view, own, m.culling, m.tile)[1]
             for filt in self.cfg.map.filter:
                 for fmt in self.cfg.map.format:
-                    self._run_case(sd, gb, setup, view, stored[fmt], (build_times[own], first_t), rxs[fmt], seam,
+                    self._run_case(sd, gb, setup, view, stored[fmt], (build_times[own], first_t[0]), rxs[fmt], seam,
                                    spec, filt, fmt, backs[fmt], wrong[fmt] if filt == "nearest" else None,
                                    extra=extras.get((spec, filt, fmt)), looked=looked.get((spec, filt, fmt)))
                     self.bar.update(1)
@@ -379,7 +424,7 @@ class Runner:
         for spec in m.moments:
             for fmt in self.cfg.map.format:
                 # build_ms: the depth map's first layer, which the moments are made of (moments_ms apart)
-                self._run_case(sd, gb, setup, view, smap, (first_t, first_t), rxs[fmt], seam, spec, spec.filter, fmt,
+                self._run_case(sd, gb, setup, view, smap, (first_t[0], first_t[0]), rxs[fmt], seam, spec, spec.filter, fmt,
                                backs[fmt], None, moment=self._moments(moment_maps, spec, smap, fmt, sd))
                 self.bar.update(1)
         return first_t
@@ -450,7 +495,7 @@ class Runner:
         self.record.maps.append({"scene": sd.label, "light": setup.label, "view": view.kind, "resolution": m.resolution,
                           "culling": m.culling, "layers": ["z1", "shape"] + [k for k in shadowmap.LAYERS
                                                                            if getattr(smap, k) is not None],
-                          "tiles": smap.tiles, "rays": dict(smap.rays), "rehits": smap.rehits,
+                          "tiles": smap.tiles, "rays": dict(smap.rays), "rehits": smap.rehits, "build_shared": smap.shared,
                           "build_peak_bytes": smap.peak_bytes, "build_peak_bytes_est": m.peak_bytes,
                           "formats": list(m.formats)})
         for k, v in smap.rays.items():
@@ -547,6 +592,7 @@ class Runner:
         row = {**meta, **setup.exclusions, **m, **headroom.headroom(extent, texel), "texel_size": texel,
                "n_plane_fallback": fallback,
                "build_ms": bt.ms, "build_first_ms": first_t.ms, "build_compile_ms": bt.compile_ms, "build_peak_mb": smap.peak_bytes / 2 ** 20,
+               "build_shared": smap.shared,
                "lookup_ms": lt.ms, "lookup_compile_ms": lt.compile_ms, "lookup_kernels_compiled": lt.cache_misses,
                "reference_ms": setup.reference_ms, "sweep_key": sweep_key, "sweep_value": sweep_value}
         if self.cfg.map.leak_split:          # [map] kind given: every case's leak split (dsm.truth.metrics)

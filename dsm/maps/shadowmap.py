@@ -53,6 +53,7 @@ class ShadowMap:
     rays: dict = field(default_factory=dict)   # rays cast, by kind
     tiles: int = 1                              # passes the build took (wavefront sizing)
     peak_bytes: int = 0                         # allocation watermark of the build (set by the runner)
+    shared: int = 1                             # maps built in one launch with it (dsm.maps.stacked)
 
     @property
     def resolution(self) -> int:
@@ -178,6 +179,7 @@ class Layers(NamedTuple):
     rays: dict                  # {"map_texel": n, "map_continue": continuation rays}
     unfinished: int             # texels still searching after MAX_STEPS
     rehits: int                 # continuation rays that hit the triangle they left again
+    lanes: dict = None          # per texel (mi.UInt32): "rays" cast, "rehit" re-hits, "searching" (1: unfinished)
 
 
 def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool, first: int = 0,
@@ -211,20 +213,23 @@ def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool
             full["p1"], full["n1"] = p1, n1
         dr.eval(*full.values(), rehit)
         total, rehits, left = n + _count(full["found"] > 0), _count(rehit), 0
+        lanes = {"rays": 1 + full["found"], "rehit": mi.UInt32(rehit), "searching": dr.zeros(mi.UInt32, n)}
     else:
         modes = mi.UInt32(np.asarray(cull_modes, np.uint32))
         full, total, rehits, left = _search(scene, view, ray, modes, culls, 2 if want_z2 else 1, want_slope,
                                             extents, magnitude)
+        lanes = {"rays": full["cast1"] + full["cast2"], "rehit": full["rehit"], "searching": mi.UInt32(full["active"])}
     rays = {"map_texel": n, "map_continue": total - n}
     slope = plane_slope(view, full["p1"], full["n1"], full["z1"], full["found"] > 0, first) if want_slope else None
-    return Layers(full["z1"], full["shape1"], slope, (full["z2"] if want_z2 else None), rays, left, rehits)
+    return Layers(full["z1"], full["shape1"], slope, (full["z2"] if want_z2 else None), rays, left, rehits, lanes)
 
 
 def _search(scene, view, ray, modes, culls: bool, need: int, want_slope: bool, extents, magnitude) -> tuple:
     """The stepped search of :func:`layered`: (working state per texel, rays cast, re-hits,
     texels still searching), in rounds of ROUND traced steps with the searching texels compacted."""
     n, none = dr.width(ray.d), 0xFFFFFFFF
-    full = {"o": ray.o, "z1": dr.full(mi.Float, view.far, n), "z2": dr.full(mi.Float, view.far, n),
+    # + view.far: a stacked view's far is per lane (dsm.maps.stacked)
+    full = {"o": ray.o, "z1": dr.zeros(mi.Float, n) + view.far, "z2": dr.zeros(mi.Float, n) + view.far,
             "shape1": dr.full(mi.UInt32, none, n), "p1": dr.zeros(mi.Point3f, n), "n1": dr.zeros(mi.Vector3f, n),
             "found": dr.zeros(mi.UInt32, n), "active": dr.full(mi.Bool, True, n), "cast1": dr.zeros(mi.UInt32, n),
             "cast2": dr.zeros(mi.UInt32, n), "rehit": dr.zeros(mi.UInt32, n),
@@ -250,6 +255,7 @@ def _search(scene, view, ray, modes, culls: bool, need: int, want_slope: bool, e
         where = pick if where is None else dr.gather(mi.UInt32, where, pick)
         work = {k: dr.gather(type(v), v, pick) for k, v in work.items()}
         d = dr.gather(type(d), d, pick)
+        view = view.lanes(pick)                 # a stacked view's per-lane values follow its texels
         dr.eval(*work.values(), d, where)
     dr.eval(*full.values())
     total = int(dr.sum(full["cast1"] + full["cast2"]).numpy().ravel()[0])
@@ -263,17 +269,24 @@ def is_layered(needs, cull_modes) -> bool:
     return bool(culls or "z2" in needs)
 
 
-def _build_range(scene, view, needs, modes, first, count, extents=None):
-    """(arrays by name, rays by kind, unfinished texels, re-hits) for one range of texels."""
+def build_range(scene, view, needs, modes, first, count, extents=None, lanes: bool = False):
+    """(arrays by name, rays by kind, unfinished texels, re-hits) for one range of texels;
+    ``lanes``: the arrays include ``lane_rays``, ``lane_rehit`` and ``lane_searching`` (per texel:
+    rays cast, re-hits, 1 where it is still searching), for a caller that splits the range."""
     if not is_layered(needs, modes):
         z1, shape, (p, n, valid), rays = first_layer(scene, view, first, count, extents)
         out = {"z1": z1, "shape": shape}
+        if lanes:
+            out.update(lane_rays=dr.full(mi.UInt32, 1, count), lane_rehit=dr.zeros(mi.UInt32, count),
+                       lane_searching=dr.zeros(mi.UInt32, count))
         if "slope" in needs:
             out["slope"] = plane_slope(view, p, n, z1, valid, first)
         return out, {"map_texel": count, "map_continue": 0}, 0, 0
     modes = modes if modes is not None else np.zeros(len(scene.shapes()), np.uint32)
     lay = layered(scene, view, modes, "z2" in needs, "slope" in needs, first, count, extents)
     out = {"z1": lay.z1, "shape": lay.shape, "slope": lay.slope, "z2": lay.z2}
+    if lanes:
+        out.update({f"lane_{k}": v for k, v in lay.lanes.items()})
     return {k: v for k, v in out.items() if v is not None}, lay.rays, lay.unfinished, lay.rehits
 
 
@@ -294,13 +307,13 @@ def build(scene, view, needs, culling: str = "none", cull_modes=None, tile: int 
     n = view.n_texels
     tile = n if not tile or tile >= n else int(tile)
     if tile == n:
-        out, rays, unfinished, rehits = _build_range(scene, view, needs, cull_modes, 0, n, extents)
+        out, rays, unfinished, rehits = build_range(scene, view, needs, cull_modes, 0, n, extents)
         tiles = 1
     else:
         out, rays, unfinished, rehits, tiles = {}, {"map_texel": 0, "map_continue": 0}, 0, 0, 0
         for first in range(0, n, tile):
             count = min(tile, n - first)
-            part, r, u, h = _build_range(scene, view, needs, cull_modes, first, count, extents)
+            part, r, u, h = build_range(scene, view, needs, cull_modes, first, count, extents)
             idx = dr.arange(mi.UInt32, first, first + count)
             for k, v in part.items():
                 if k not in out:

@@ -132,15 +132,22 @@ class View:
 
     def texel_coords(self, idx):
         """(face, centre u, centre v) of texel indices ``idx``."""
-        RR = self.R_u * self.R_u
+        # at least 1: a stacked view's resolution is gathered per lane (dsm.maps.stacked), and the
+        # lanes of a CPU packet past the array's end gather 0, an integer division that traps
+        R = dr.maximum(self.R_u, 1)
+        RR = R * R
         face, rest = idx // RR, idx % RR
-        return face, mi.Float(rest % self.R_u) + 0.5, mi.Float(rest // self.R_u) + 0.5
+        return face, mi.Float(rest % R) + 0.5, mi.Float(rest // R) + 0.5
 
     def texel_rays(self, first: int, count: int) -> mi.Ray3f:
         """Rays through the centres of texels ``first .. first + count - 1`` (face, then row-major)."""
         face, cu, cv = self.texel_coords(dr.arange(mi.UInt32, first, first + count))
         o, d = self.ray_at(cu, cv, face)
         return mi.Ray3f(o, d)
+
+    def lanes(self, idx):
+        """The view as lanes ``idx`` of a build see it: itself (a stacked view, dsm.maps.stacked, gathers its per-lane values)."""
+        return self
 
     def inside(self, p):
         """Whether world points ``p`` are covered by the map: every point on the base view."""

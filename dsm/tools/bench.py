@@ -316,9 +316,10 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
     if geometry:
         result["geometry"] = geometry_cost(out, tuple(geometry), repeats=max(1, min(repeats, 3)))
     if sweep:
-        from .bench_lookups import lookup_modes
+        from .bench_modes import build_modes, lookup_modes
         result["sweep"] = sweep_throughput(out)
         result["lookup_modes"] = lookup_modes(out)
+        result["build_modes"] = build_modes(out)
     if prefilter:
         from .bench_prefilter import prefilter_cost
         result["prefilter"] = prefilter_cost(repeats=repeats)
@@ -440,8 +441,9 @@ def markdown(r) -> str:
     from .bench_prefilter import markdown as prefilter_md
     lines += geometry_md(r["geometry"]) if r.get("geometry") else []
     lines += prefilter_md(r["prefilter"]) if r.get("prefilter") else []
-    from .bench_lookups import markdown as lookups_md
+    from .bench_modes import markdown as lookups_md, markdown_builds
     lines += _md_sweep(r) + (lookups_md(r["lookup_modes"]) if r.get("lookup_modes") else [])
+    lines += markdown_builds(r["build_modes"]) if r.get("build_modes") else []
     return "\n".join(lines) + "\n"
 
 
