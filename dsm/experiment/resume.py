@@ -12,8 +12,9 @@ oracle rows, trade-off curves and map records of the report) but skips each case
 matches a finished case, writing that case's previous row again, under the plan's case id.
 A case whose key changed runs again; a case of DIR that the config no longer names is listed
 (on stderr and in run.json's ``stale_cases``, its images moved to ``images/stale/``), never
-deleted. Since run.json is rewritten atomically after each case and a case's row is written
-before it, a run stopped at any point (Ctrl-C, kill -9, a lost worker) resumes to the same rows.
+deleted. Since run.json is rewritten atomically (after a case, at most once a second) and a
+case's row is written before the run.json that lists it, a run stopped at any point (Ctrl-C,
+kill -9, a lost worker) resumes to the same rows: a case finished after the last write runs again.
 """
 from __future__ import annotations
 

@@ -8,11 +8,13 @@ format on a map) as a lookup, metrics, an error image and a row of metrics.csv.
 
 Failure policy: a stage that fails is recorded in run.json (and printed, and listed in
 table.md) with the cases it would have fed, and the rest still run; rows are written as they
-finish and run.json after each case, so nothing done is lost.
+finish and run.json at most every RUN_JSON_EVERY_S after a case, so nothing done is lost
+(a case finished after the last write of a killed run is run again by ``--resume``).
 """
 from __future__ import annotations
 
 import itertools
+import math
 import sys
 import time
 import traceback
@@ -94,6 +96,9 @@ class Results:
         return len(self.rows)
 
 
+RUN_JSON_EVERY_S = 1.0
+
+
 class StageFailed(Exception):
     """A stage failed and was recorded; the cases it feeds are skipped."""
 
@@ -117,6 +122,8 @@ class Runner:
         self.state = "running"
         self.bar = None
         self.timing = {}              # seconds measuring and writing the report
+        self.plan_dict = None         # run.json's plan, made once
+        self.run_json_at = -math.inf  # when run.json was last written (perf_counter seconds)
         # case ids and identity keys from the plan (dsm.experiment.resume); a resumed run reuses matching cases
         self.keys = dict(resume.case_keys(config, self.plan, "git:" + self.versions["dsm_git_commit"]))
         self.first_case = list(itertools.accumulate((m.cases for m in self.plan.maps), initial=0))
@@ -129,9 +136,10 @@ class Runner:
 
     # ------------------------------------------------------------ top level
     def run(self) -> Results:
-        """Run every case. run.json is rewritten (atomically) after each case with the run's state:
-        ``running``, then ``complete``, or ``interrupted`` after Ctrl-C (re-raised once the
-        folder says what it holds); a killed run leaves ``running`` and every finished case."""
+        """Run every case. run.json is rewritten (atomically) with the run's state: ``running``
+        (after a case, at most every RUN_JSON_EVERY_S), then ``complete``, or ``interrupted`` after
+        Ctrl-C (re-raised once the folder says what it holds); a killed run leaves ``running`` and
+        every case finished by its last write (``--resume`` runs the rest)."""
         timing.enable_history()
         timing.reset_launches()
         t0, c0 = time.perf_counter(), _cpu()
@@ -684,7 +692,9 @@ class Runner:
         info["state"] = self.state
         info["scenes"] = self.record.scene_info
         info["gbuffer_ms"] = self.record.gbuffer_ms     # one cold pass per scene (compile included)
-        info["plan"] = self.plan.as_dict()
+        if self.plan_dict is None:            # the plan does not change while it runs
+            self.plan_dict = self.plan.as_dict()
+        info["plan"] = self.plan_dict
         info["maps"] = self.record.maps
         info["quantized_copies"] = self.record.quantized
         info["reference_regions"] = self.record.reference_regions
@@ -698,7 +708,13 @@ class Runner:
     def _write_run_json(self):
         if self.state == "task":      # one map group of a cluster run: its driver writes run.json
             return
-        # after every case (compact), indented once the run has ended
+        # while running, at most every RUN_JSON_EVERY_S (compact): each write is the whole record,
+        # and after every case they took a third of the default experiment's measuring time;
+        # indented once the run has ended
+        now = time.perf_counter()
+        if self.state == "running" and now - self.run_json_at < RUN_JSON_EVERY_S:
+            return
+        self.run_json_at = now
         report_io.write_json(self.out / "run.json", self._run_json(), None if self.state == "running" else 1)
 
 
