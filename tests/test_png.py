@@ -45,19 +45,3 @@ def test_a_figure_is_written_at_72_dpi_and_keeps_its_own(tmp_path):
         assert im.mode == "RGBA" and im.size == (round(w * figures.DPI), round(h * figures.DPI))
         assert np.asarray(im)[0, 0].tolist() == [255, 255, 255, 255]       # an opaque white background
     assert dpi != figures.DPI and fig.dpi == dpi
-
-
-def test_an_indexed_png_decodes_to_its_palette_colours(tmp_path):
-    """A palette PNG (the case error images) decodes, in Pillow, to palette[index] at every pixel;
-    an index beyond the palette or a palette of the wrong shape is refused."""
-    from dsm.truth import metrics
-    rng = np.random.default_rng(3)
-    idx = rng.integers(0, len(metrics.CLASS_COLORS), (7, 11)).astype(np.uint8)
-    png.write(tmp_path / "i.png", idx, palette=metrics.CLASS_COLORS)
-    with Image.open(tmp_path / "i.png") as im:
-        assert im.mode == "P"
-        assert np.array_equal(np.asarray(im.convert("RGB")), metrics.CLASS_COLORS[idx])
-    with pytest.raises(ValueError):
-        png.encode(np.full((2, 2), len(metrics.CLASS_COLORS), np.uint8), palette=metrics.CLASS_COLORS)
-    with pytest.raises(ValueError):
-        png.encode(idx, palette=np.zeros((4, 4), np.uint8))

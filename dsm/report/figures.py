@@ -82,13 +82,12 @@ def write_images(out: Path, items: list):
             if img is None:
                 continue
             p = Path(out) / path
-            # the classes as an indexed PNG of CLASS_COLORS: a quarter of an RGB image's writing time
-            palette = metrics.CLASS_COLORS if img is classes else None
+            pixels = metrics.CLASS_COLORS[img] if img is classes else img     # RGB, as readers of a PNG expect
             try:
-                png.write(p, img, palette=palette)
+                png.write(p, pixels)
             except FileNotFoundError:           # its folder (one per scene and light) made on first use
                 p.parent.mkdir(parents=True, exist_ok=True)
-                png.write(p, img, palette=palette)
+                png.write(p, pixels)
 
 
 # ------------------------------------------------------------------ drawing primitives

@@ -19,7 +19,7 @@ import numpy as np
 from .io import atomic
 
 SIGNATURE = b"\x89PNG\r\n\x1a\n"
-COLOUR_TYPE = {1: 0, 3: 2, 4: 6}       # channels -> grey, RGB, RGBA (PNG colour types; 3: indexed)
+COLOUR_TYPE = {1: 0, 3: 2, 4: 6}       # channels -> grey, RGB, RGBA (PNG colour types)
 LEVEL = 1                               # zlib's fastest level: the report's images are flat colours
 
 
@@ -27,10 +27,9 @@ def _chunk(tag: bytes, data: bytes) -> bytes:
     return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data))
 
 
-def encode(pixels: np.ndarray, dpi: float | None = None, palette: np.ndarray | None = None) -> bytes:
+def encode(pixels: np.ndarray, dpi: float | None = None) -> bytes:
     """An 8-bit PNG of ``pixels``: (H, W) grey, (H, W, 3) RGB or (H, W, 4) RGBA uint8; ``dpi`` is
-    stored as the pixel density. With ``palette`` ((N, 3) uint8 RGB, N <= 256), (H, W) pixels are
-    indices into it (an indexed PNG: a third of an RGB image's bytes to compress)."""
+    stored as the pixel density."""
     px = np.asarray(pixels)
     if (px.dtype != np.uint8 or px.ndim not in (2, 3) or (px.ndim == 3 and px.shape[2] not in COLOUR_TYPE)
             or 0 in px.shape[:2]):          # the format has no empty image (IHDR: width and height >= 1)
@@ -40,16 +39,7 @@ def encode(pixels: np.ndarray, dpi: float | None = None, palette: np.ndarray | N
     channels = 1 if px.ndim == 2 else px.shape[2]
     rows = np.zeros((h, w * channels + 1), np.uint8)        # each row: filter type 0 (none), its bytes
     rows[:, 1:] = px.reshape(h, -1)
-    kind = COLOUR_TYPE[channels]
-    if palette is not None:
-        pal = np.asarray(palette, np.uint8)
-        if channels != 1 or pal.ndim != 2 or pal.shape[1] != 3 or not 0 < len(pal) <= 256 or px.max() >= len(pal):
-            raise ValueError(f"an indexed PNG takes (H, W) indices into an (N, 3) palette of N <= 256 colours, got "
-                             f"{px.shape} indices up to {px.max()} and a palette of shape {pal.shape}")
-        kind = 3
-    out = [SIGNATURE, _chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, kind, 0, 0, 0))]
-    if palette is not None:
-        out.append(_chunk(b"PLTE", pal.tobytes()))
+    out = [SIGNATURE, _chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, COLOUR_TYPE[channels], 0, 0, 0))]
     if dpi:
         per_metre = int(round(dpi / 0.0254))
         out.append(_chunk(b"pHYs", struct.pack(">IIB", per_metre, per_metre, 1)))
@@ -57,8 +47,8 @@ def encode(pixels: np.ndarray, dpi: float | None = None, palette: np.ndarray | N
     return b"".join(out)
 
 
-def write(path: Path, pixels: np.ndarray, dpi: float | None = None, palette: np.ndarray | None = None):
+def write(path: Path, pixels: np.ndarray, dpi: float | None = None):
     """encode()'s PNG into ``path`` atomically (a reader never sees half a file)."""
-    data = encode(pixels, dpi, palette)
+    data = encode(pixels, dpi)
     with atomic(path) as tmp:
         Path(tmp).write_bytes(data)

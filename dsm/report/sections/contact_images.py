@@ -27,4 +27,4 @@ def write_image(path, pixels, cls, width: int, height: int):
     """The contact image of one case: each receiver's class colour (black: not a receiver)."""
     img = np.zeros(width * height, np.uint8)
     img[pixels] = cls
-    png.write(path, img.reshape(height, width), palette=CONTACT_COLORS)      # an indexed PNG of the classes
+    png.write(path, CONTACT_COLORS[img.reshape(height, width)])
