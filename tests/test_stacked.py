@@ -130,6 +130,47 @@ def test_a_stacked_map_gets_its_share_of_texels(both):
         assert by_r[128]["build_ms"] > 0
 
 
+def test_a_stacked_maps_first_layer_is_its_share_whatever_the_order(both):
+    """build_first_ms of a stacked map is its share of its stack's first layer without culling, also
+    where the view group's first map is a culled one (second_depth's front_closed and dual's
+    back_closed maps are planned beside the culling-none map): constant, which needs no layer but
+    the first, has build_ms == build_first_ms on the culling-none maps (one measurement), and every
+    case of a map has the build_first_ms of that map's own stack."""
+    rows = both["together"].rows
+    for r in rows:
+        if r["scheme"] == "constant":
+            assert r["build_ms"] == r["build_first_ms"], r
+    by_map = {}
+    for r in rows:
+        by_map.setdefault((r["light"], r["culling"], r["resolution"]), set()).add(r["build_first_ms"])
+    assert all(len(v) == 1 for v in by_map.values())
+    for light in {r["light"] for r in rows}:
+        for culling in ("none", "back_closed", "front_closed"):
+            first = {R: by_map[(light, culling, R)].pop() for R in (32, 64, 128)}
+            assert first[128] == pytest.approx(first[32] * 16, rel=1e-9) and first[64] == pytest.approx(first[32] * 4)
+
+
+def test_every_stack_layout_runs_one_compiled_kernel(room):
+    """The per-lane values come from host arrays, not literals: stacks of other resolutions (and
+    counts of maps) launch the same kernel (its hash in Dr.Jit's kernel history), compiled once."""
+    import drjit as dr
+    from dsm.maps import stacked
+    from dsm.tools import timing
+    sd, lights, _, _ = room
+    timing.enable_history()
+    hashes = set()
+    for sizes in ((8, 13, 24), (8, 16, 24), (9, 13), (24, 8, 13)):
+        from dsm import pipeline
+        pts = np.array([[-0.5, -0.5, 0.0], [0.5, 0.6, 0.3]])
+        lane = stacked.stack_view([pipeline.make_view(lights[0], R, pts, sd.bbox) for R in sizes])
+        dr.sync_thread()
+        dr.kernel_history_clear()
+        dr.eval(*stacked.build_arrays(sd.scene, lane, {"slope"}).values())
+        dr.sync_thread()
+        hashes |= {k["hash"] for k in dr.kernel_history() if k.get("type") == dr.KernelType.JIT}
+    assert len(hashes) == 1
+
+
 def test_builds_choice_is_checked(tmp_path):
     """A [timing] builds value outside the choices is one line naming the file, the key and the choices."""
     from dsm.config import read as config

@@ -125,6 +125,7 @@ class ClusterRunner(Runner):
     def __init__(self, config, out, address=None, variant=None, progress=True, resume_previous=False,
                  local_cpus: int | None = None):
         super().__init__(config, out, variant, progress, keep_images=False, resume_previous=resume_previous)
+        self.plan.stacks = []       # a Ray task runs one map: [timing] builds = "together" stacks nothing here
         self.address = address if address is not None else (config.execution.address or "local")
         self.local_cpus = local_cpus
         self.nodes = {}

@@ -193,11 +193,27 @@ class Plan:
         wave = 2 * w * h * WAVE_RECEIVER_BYTES
         parts = {"camera": w * h * PIXEL_BYTES,
                  "geometry": self.triangles.get(label, (0, ""))[0] * TRIANGLE_BYTES,
-                 "map": max([m.peak_bytes for m in self.maps if m.scene == label]
-                            + [sum(m.peak_bytes for m in st) for st in self.stacks if st[0].scene == label], default=0),
+                 "map": self._maps_peak(label),
                  "lookups": max((min(m.cases, wave_cases(w * h)) * wave for m in self.maps
                                  if m.scene == label), default=0) if self.lookups == "wavefront" else 0}
         return PROCESS_BYTES + sum(parts.values()), parts
+
+    def _maps_peak(self, label) -> int:
+        """The most map memory of scene ``label`` at once: its largest map; where maps are built
+        together, a light's stacked maps' stored layers (each kept until its cases have run) plus the
+        largest build of that light (a stack's working set, or a map alone)."""
+        mine = [m for m in self.maps if m.scene == label]
+        worst = max((m.peak_bytes for m in mine), default=0)
+        by_light = {}
+        for st in self.stacks:
+            if st[0].scene == label:
+                by_light.setdefault(st[0].light, []).append(st)
+        for light, sts in by_light.items():
+            stored = sum(m.stored_bytes for st in sts for m in st)
+            build = max([sum(m.peak_bytes - m.stored_bytes for m in st) for st in sts]
+                        + [m.peak_bytes for m in mine if m.light == light])
+            worst = max(worst, stored + build)
+        return worst
 
     def warnings(self) -> list:
         """One line per thing a user should know before running: maps cast in tiles to stay
@@ -260,7 +276,7 @@ class Plan:
             lines.append(f"  caster shrinking: maps cast against a copy of each scene's meshes moved {self.shrink:g} "
                          "inward along their welded vertex normals")
         lines.append(self._lookups_line())
-        lines.append(self._builds_line())
+        lines += self._builds_lines()
         lines.append(f"  estimated peak memory: {self.peak_bytes() * mb:.1f} MB (the process "
                      f"{PROCESS_BYTES * mb:.0f} MB, camera buffers, geometry, the largest map and lookup wave "
                      "of a scene)")
@@ -281,14 +297,16 @@ class Plan:
         at = {id(m): i for i, m in enumerate(self.maps)}
         return [[at[id(m)] for m in st] for st in self.stacks]
 
-    def _builds_line(self) -> str:
-        """How the maps are built ([timing] builds): each alone, or a sweep's small maps stacked."""
+    def _builds_lines(self) -> list:
+        """How the maps are built ([timing] builds): each alone, or a sweep's small maps stacked (a line each)."""
         if not self.stacks:
-            return "  builds: each map alone (its build_ms measured alone)"
+            return ["  builds: each map alone (its build_ms measured alone)"]
         n = sum(len(st) for st in self.stacks)
-        return (f"  builds: {n} maps in {len(self.stacks)} stacks, each stack one wavefront timed as a whole "
+        return [f"  builds: {n} maps in {len(self.stacks)} stacks, each stack one wavefront timed as a whole "
                 f"(at most {STACK_BYTES >> 20} MB a stack; a map's build_ms is its share of texels), "
-                f"{len(self.maps) - n} maps alone")
+                f"{len(self.maps) - n} maps alone:"] + [
+            f"    {st[0].scene[:18]:18s} {st[0].light[:12]:12s} {st[0].view:16s} culling {st[0].culling:12s} "
+            "R = " + " + ".join(str(m.resolution) for m in st) for st in self.stacks]
 
     def as_dict(self) -> dict:
         """The plan's counts and per-map rows as a JSON-ready dict."""

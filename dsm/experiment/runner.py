@@ -99,6 +99,21 @@ class Results:
 RUN_JSON_EVERY_S = 1.0
 
 
+@dataclass
+class LightMaps:
+    """One light's views and maps built together while its maps run ([timing] builds = "together")."""
+    stack_of: dict                                  # id(map plan) -> its stack (all of it among the light's maps)
+    views: dict = field(default_factory=dict)       # (view kind, R) -> the view, fitted once (no cascades)
+    built: dict = field(default_factory=dict)       # id(map plan) -> stacks.Built, until its cases run
+    tried: set = field(default_factory=set)         # id of each stack's first map, built (or failed) once
+
+    @classmethod
+    def of(cls, plan_stacks, light_maps) -> "LightMaps":
+        """The light's record: the plan's stacks whose maps are all among ``light_maps``."""
+        ids = {id(m) for m in light_maps}
+        return cls({id(m): st for st in plan_stacks if all(id(x) in ids for x in st) for m in st})
+
+
 class StageFailed(Exception):
     """A stage failed and was recorded; the cases it feeds are skipped."""
 
@@ -165,7 +180,7 @@ class Runner:
             self.timing["measure_cpu_s"] = _cpu() - c0 - self.timing.get("images_cpu_s", 0.0)
             self.timing["measure_peak_rss_bytes"] = peak_rss()     # against the plan's peak_bytes_est
             self.timing["kernel_launches"] = self._launches()
-            self._write_run_json()
+            self._write_run_json(force=True)      # a run ended by an error other than Ctrl-C is still "running"
             publish.write_data(self.out, self.record)
             # the report, after every timed measurement, composed from the run's files alone (as
             # dsm report does): figures, table.md, cascades.md, report.html
@@ -177,7 +192,7 @@ class Runner:
                 self._fail("report (dsm report rebuilds it)", e)
             self.timing["report_s"] = time.perf_counter() - t1 + self.timing.get("images_s", 0.0)
             self.timing["report_cpu_s"] = _cpu() - c1 + self.timing.get("images_cpu_s", 0.0)
-            self._write_run_json()
+            self._write_run_json(force=True)
         return Results(self.out, self.record.rows, self._run_json(), self.images, self.record.oracle_rows, self.record.curves)
 
     def _launches(self) -> dict:
@@ -227,9 +242,9 @@ class Runner:
                     setup = self._light(sd, gb, lights, li, light_maps)
                 except StageFailed:
                     continue
-                built = self._stacks(sd, setup, light_maps)
+                light = LightMaps.of(self.plan.stacks, light_maps)
                 for _, view_maps in itertools.groupby(light_maps, key=lambda m: (m.view, m.resolution, m.cascade)):
-                    self._run_view(sd, gb, setup, list(view_maps), built)
+                    self._run_view(sd, gb, setup, list(view_maps), light)
             self._write_run_json()
 
     # ------------------------------------------------------------ failure policy
@@ -286,49 +301,55 @@ class Runner:
             self.record.reference_regions.append({"scene": sd.label, "light": label, **out.ref.stats()})
         return out
 
-    def _stacks(self, sd, setup, light_maps) -> dict:
-        """The light's maps that the plan builds together ([timing] builds = "together"), built and
-        timed (dsm.experiment.stacks): {id(map plan): (view, Built)}. A stack that fails is noted
-        and its maps are built alone."""
-        out, ids = {}, {id(m) for m in light_maps}
-        for st in self.plan.stacks:
-            if not all(id(m) in ids for m in st):
-                continue
+    def _view(self, sd, setup, light, m):
+        """The view of map plan ``m`` fitted to the light's receivers: once per kind and resolution of
+        the light (a stacked map's and its view group's are one object), a cascaded view each time."""
+        key = (m.view, m.resolution)
+        if m.cascade is None and key in light.views:
+            return light.views[key]
+        pts = pipeline.points_np(setup.p) if setup.p is not None else np.zeros((0, 3))
+        view = pipeline.make_view(setup.light, m.resolution, pts, sd.bbox, m.view, m.cascade, sd.sensor, sd.scale)
+        if m.cascade is None:
+            light.views[key] = view
+        return view
+
+    def _built(self, sd, setup, light, m):
+        """Map plan ``m``'s Built when the plan stacks it ([timing] builds = "together"), its stack built
+        when its first map comes up; None: built alone (a stack that fails is noted, its maps built alone)."""
+        st = light.stack_of.get(id(m))
+        if st is None:
+            return None
+        if id(st[0]) not in light.tried:
+            light.tried.add(id(st[0]))
             try:
-                out.update({id(m): vb for m, vb in zip(st, self._build_stack(sd, setup, st))})
-            except (KeyboardInterrupt, StageFailed):
+                light.built.update(zip(map(id, st), self._build_stack(sd, setup, light, st)))
+            except KeyboardInterrupt:
                 raise
             except Exception as e:
                 self.record.status.append({"what": f"scene {sd.label} light {setup.label} view {st[0].view} maps "
-                                           + "+".join(str(m.resolution) for m in st) + " built together",
+                                           + "+".join(str(x.resolution) for x in st) + " built together",
                                            "status": "note", "error": f"{type(e).__name__}: {e}; built alone"})
-        return out
+        return light.built.pop(id(m), None)          # the map's own from here: freed after its cases
 
-    def _build_stack(self, sd, setup, st) -> list:
-        """(view, Built) of each map of stack ``st``: the views fitted as :meth:`_run_view` fits them."""
-        pts = pipeline.points_np(setup.p) if setup.p is not None else np.zeros((0, 3))
-        views = [pipeline.make_view(setup.light, m.resolution, pts, sd.bbox, m.view, m.cascade, sd.sensor, sd.scale)
-                 for m in st]
-        own = {frozenset()} | {frozenset(pipeline.needs_of([pipeline.preset_for_light(spec, setup.light.type)]))
-                               for m in st for spec in m.specs}
+    def _build_stack(self, sd, setup, light, st) -> list:
+        """Each map of stack ``st`` built together and timed (dsm.experiment.stacks.Built)."""
+        views = [self._view(sd, setup, light, m) for m in st]
+        own = {frozenset(pipeline.needs_of([pipeline.preset_for_light(spec, setup.light.type)]))
+               for m in st for spec in m.specs}
         casters = self._casters(sd)
-        modes = pipeline.map_cull_modes(casters, views[0], st[0].culling, self._closed(sd) if st[0].culling != "none" else None)
-        built = stacks.build(casters, views, st[0].needs, st[0].culling, modes, own, self.extents[sd.label],
-                             self.cfg.timing_repeats)
-        return list(zip(views, built))
+        culling = st[0].culling
+        modes = (culling, pipeline.map_cull_modes(casters, views[0], culling, self._closed(sd) if culling != "none"
+                                                  else None), pipeline.map_cull_modes(casters, views[0]))
+        return stacks.build(casters, views, st[0].needs, modes, own, self.extents[sd.label], self.cfg.timing_repeats)
 
-    def _run_view(self, sd, gb, setup, maps, built=None):
+    def _run_view(self, sd, gb, setup, maps, light):
         """One view and resolution of a light: its receivers, then each of its maps (one per culling);
-        ``built``: maps built together beforehand, {id(map plan): (view, Built)}."""
+        ``light``: the light's views and maps built together (LightMaps)."""
         kind, R = maps[0].view, maps[0].resolution
-        built = built or {}
-        ready = [built[id(m)][0] for m in maps if id(m) in built]
 
         def receivers():
             """(view, setup, rx, seam, back): the fitted view, the receivers inside it, their lookups and seams."""
-            pts = pipeline.points_np(setup.p) if setup.p is not None else np.zeros((0, 3))
-            view = ready[0] if ready else pipeline.make_view(setup.light, R, pts, sd.bbox, kind, maps[0].cascade,
-                                                             sd.sensor, sd.scale)
+            view = self._view(sd, setup, light, maps[0])
             s = setup.subset(view.inside(setup.p).numpy().astype(bool)) if setup.p is not None else setup
             rx = seam = None
             if s.p is not None and len(s.pixels):
@@ -345,7 +366,7 @@ class Runner:
         first_t = None
         for m in maps:
             try:
-                first_t = self._run_map(sd, gb, setup, view, rx, seam, back, m, first_t, built.get(id(m), (0, None))[1])
+                first_t = self._run_map(sd, gb, setup, view, rx, seam, back, m, first_t, self._built(sd, setup, light, m))
             except StageFailed:
                 continue
 
@@ -374,14 +395,11 @@ class Runner:
             self.shrunk = (sd.label, pipeline.shrunk_scene(sd.scene, self.cfg.shrink))
         return self.shrunk[1]
 
-    def _run_map(self, sd, gb, setup, view, rx, seam, back, m, first_t, built=None):
-        """Build one map (the plan's layers, culling and tile), store its formats, run its cases.
-        ``first_t``: (the first layer's build time, maps sharing it) from the view's first map, or None;
-        ``built``: the map built in a stack (dsm.experiment.stacks), or None. Returns ``first_t``."""
-        what = f"scene {sd.label} light {setup.label} view {view.kind} map {m.resolution} culling {m.culling}"
-
+    def _map_build(self, sd, setup, view, m, built) -> tuple:
+        """(map, build Timing, stored copy per format) of map plan ``m``: built and timed alone (with its
+        peak bytes), or ``built`` in a stack (dsm.experiment.stacks); a failure is the map's stage's."""
         def build():
-            """(map, build time, stored): the map built (timed, with its peak bytes) and its copy per stored format."""
+            """(map, build time, stored): the map and its copy per stored format."""
             if built is not None:
                 smap, bt = built.smap, built.times[frozenset(m.needs)]
             else:
@@ -389,11 +407,16 @@ class Runner:
                 smap, bt = self._build(sd, view, set(m.needs), m.culling, m.tile)
                 smap = smap[-1]
                 smap.peak_bytes = timing.peak_bytes()
-            stored = {fmt: pipeline.store(smap, fmt) for fmt in self.cfg.map.format}
-            return smap, bt, stored
-        smap, bt, stored = self._stage(what, [m], build)
-        self._record_map(sd, setup, view, m, smap)
-        self.record.maps[-1]["build_ms"] = bt.ms      # its layers' build, kernel time (a stack's: its share)
+            return smap, bt, {fmt: pipeline.store(smap, fmt) for fmt in self.cfg.map.format}
+        what = f"scene {sd.label} light {setup.label} view {view.kind} map {m.resolution} culling {m.culling}"
+        return self._stage(what, [m], build)
+
+    def _run_map(self, sd, gb, setup, view, rx, seam, back, m, first_t, built=None):
+        """Build one map (the plan's layers, culling and tile), store its formats, run its cases.
+        ``first_t``: (the first layer's build time, maps sharing it) from the view's first map, or None;
+        ``built``: the map built in a stack (dsm.experiment.stacks), or None. Returns ``first_t``."""
+        smap, bt, stored = self._map_build(sd, setup, view, m, built)
+        self._record_map(sd, setup, view, m, smap, bt)
         self.record.quantized += sum(1 for fmt in self.cfg.map.format if fmt != "float32")
         # receivers in the depth function each stored format compares in (formats.stored_view)
         bp, bn = back
@@ -407,13 +430,12 @@ class Runner:
         backs = {fmt: by_view[id(stored[fmt].view)][1] for fmt in stored}
         wrong = {fmt: self._oracles(sd, setup, view, m, stored[fmt], rxs[fmt], fmt) for fmt in stored}
         build_times = dict(built.times) if built is not None else {frozenset(m.needs): bt}
-        if first_t is None or (built is None and first_t[1] > 1):
-            # the first layer without culling, so a case's extra layers show as build_ms - build_first_ms
-            if built is not None and m.culling == "none":
-                first_t = (built.times[frozenset()], built.shared)
-            else:
-                first_t = (bt if m.culling == "none" and not m.needs else
-                           self._build(sd, view, set(), "none", m.tile)[1], 1)
+        # the first layer without culling, so a case's extra layers show as build_ms - build_first_ms:
+        # a stacked map's share of its stack's; a map alone its own, measured once a view group
+        if built is not None:
+            first_t = (built.first, built.shared)
+        elif first_t is None or first_t[1] > 1:
+            first_t = (bt if m.culling == "none" and not m.needs else self._build(sd, view, set(), "none", m.tile)[1], 1)
         self.case_no = self.first_case[self.plan.maps.index(m)]     # case ids from the plan
         specs = [pipeline.preset_for_light(spec, setup.light.type) for spec in m.specs]   # a preset's values here
         extras, looked = self._lookups(specs, stored, rxs, backs)
@@ -499,11 +521,12 @@ class Runner:
                        f"culling {m.culling} format {fmt}", e)
             return None
 
-    def _record_map(self, sd, setup, view, m, smap):
+    def _record_map(self, sd, setup, view, m, smap, bt):
         self.record.maps.append({"scene": sd.label, "light": setup.label, "view": view.kind, "resolution": m.resolution,
                           "culling": m.culling, "layers": ["z1", "shape"] + [k for k in shadowmap.LAYERS
                                                                            if getattr(smap, k) is not None],
                           "tiles": smap.tiles, "rays": dict(smap.rays), "rehits": smap.rehits, "build_shared": smap.shared,
+                          "build_ms": bt.ms,      # its layers' build, kernel time (a stacked map's: its share)
                           "build_peak_bytes": smap.peak_bytes, "build_peak_bytes_est": m.peak_bytes,
                           "formats": list(m.formats)})
         for k, v in smap.rays.items():
@@ -705,14 +728,16 @@ class Runner:
             info["stale_cases"] = self.stale       # cases of the folder the config no longer names (kept)
         return info
 
-    def _write_run_json(self):
+    def _write_run_json(self, force: bool = False):
+        """run.json now: ``force`` (a run's end, whatever its state), else while running at most every
+        RUN_JSON_EVERY_S."""
         if self.state == "task":      # one map group of a cluster run: its driver writes run.json
             return
         # while running, at most every RUN_JSON_EVERY_S (compact): each write is the whole record,
         # and after every case they took a third of the default experiment's measuring time;
         # indented once the run has ended
         now = time.perf_counter()
-        if self.state == "running" and now - self.run_json_at < RUN_JSON_EVERY_S:
+        if self.state == "running" and not force and now - self.run_json_at < RUN_JSON_EVERY_S:
             return
         self.run_json_at = now
         report_io.write_json(self.out / "run.json", self._run_json(), None if self.state == "running" else 1)

@@ -1,16 +1,19 @@
 """A stack's build stage (``[timing] builds = "together"``): a sweep's small maps built as one wavefront.
 
-The plan (:func:`dsm.experiment.plan.stacks`) names the maps built together; here each stack is
-built (:mod:`dsm.maps.stacked`, the same bits as each map alone) and timed as a whole, once for the
-layers its maps store and once for every smaller set of layers one of their scheme instances
-needs (that instance's ``build_ms``), as the runner times a map alone.
+The plan (:func:`dsm.experiment.plan.stacks`) names the maps built together; the runner builds a
+stack when the first of its maps comes up (:mod:`dsm.maps.stacked`, the same bits as each map
+alone) and keeps each map until its cases have run. A stack is timed as a whole, as the runner
+times a map alone: once for the layers its maps store, once for every other set of layers one of
+their scheme instances needs (that instance's ``build_ms``), and once for the first layer without
+culling (``build_first_ms``).
 
-**How a map's time is attributed:** a stack is one launch a timed call, which no clock can split
-by map. Each map's ``build_ms``, ``build_first_ms`` and ``build_compile_ms`` are the stack's times
-times the map's share of the stack's texels (its first-layer rays; a continuation ray is cast
-for a hit texel of either map alike), and its row's ``build_shared`` says how many maps shared
-the launch (1: built and timed alone). A user comparing the cost of resolutions measures them
-alone (the default, ``builds = "alone"``), where ``build_ms`` is each map's own kernel time.
+**How a map's time is attributed:** a stack's timed call is one launch (a culled search: one a
+round), which no clock can split by map. Each map's ``build_ms``, ``build_first_ms`` and
+``build_compile_ms`` are the stack's times times the map's share of the stack's texels (its
+first-layer rays; a continuation ray is cast for a hit texel of either map alike), and its row's
+``build_shared`` says how many maps shared the launch (1: built and timed alone). A user comparing
+the cost of resolutions measures them alone (the default, ``builds = "alone"``), where
+``build_ms`` is each map's own kernel time.
 """
 from __future__ import annotations
 
@@ -22,9 +25,10 @@ from ..tools import timing
 
 
 class Built(NamedTuple):
-    """One map of a stack: the map, its attributed build time per set of layers, and its stack's size."""
+    """One map of a stack: the map, its attributed build times, and its stack's size."""
     smap: object
-    times: dict                 # frozenset of layers -> attributed Timing (frozenset(): the first layer)
+    times: dict                 # frozenset of layers -> attributed Timing, under the stack's culling
+    first: object               # attributed Timing of the first layer without culling
     shared: int                 # maps built in the stack
 
 
@@ -34,29 +38,37 @@ def share(t: timing.Timing, fraction: float) -> timing.Timing:
                                cold_ms=t.cold_ms * fraction)
 
 
-def build(scene, views, needs, culling: str, cull_modes, own_sets, extents, repeats: int) -> list:
-    """Build ``views`` (one kind) together with layers ``needs`` under ``culling`` (per-shape
-    ``cull_modes``), timed; time the stacked build of every layer set in ``own_sets`` too (under
-    the same culling, as the runner times an instance's own layers). One :class:`Built` per view."""
+def build(scene, views, needs, modes: tuple, own_sets, extents, repeats: int) -> list:
+    """Build ``views`` (one kind) together with layers ``needs``, timed; time the stacked build of
+    every layer set in ``own_sets`` and of the first layer without culling too. ``modes``: (culling,
+    its per-shape cull modes, the cull modes without culling: an area light's luminaire stepped
+    over, else None). One :class:`Built` per view, in order."""
+    culling, cull_modes, plain_modes = modes
     if not stacked.stackable(views[0]):
         raise ValueError(f"a {views[0].kind} view with cascades is built alone")
     lane = stacked.stack_view(views)
 
-    def cast(layers):
-        """The stack's arrays for ``layers``, and the arrays by name (the timed call's result)."""
-        out = stacked.build_arrays(scene, lane, layers, cull_modes, extents)
-        return (*out.values(), out)
+    def timed(layers, modes_):
+        """(arrays by name, Timing) of the stack's build of ``layers`` under ``modes_``."""
+        out, t = timing.measure_kernel(lambda: _arrays(scene, lane, layers, modes_, extents), repeats)
+        return out[-1], t
     timing.reset_peak()
-    result, t_full = timing.measure_kernel(lambda: cast(set(needs)), repeats)
+    result, t_full = timed(set(needs), cull_modes)
     peak = timing.peak_bytes()
     times = {frozenset(needs): t_full}
     for own in own_sets:
         if own not in times:
-            times[own] = timing.measure_kernel(lambda: cast(set(own)), repeats)[1]
-    maps = stacked.split(views, result[-1], culling)
+            times[own] = timed(set(own), cull_modes)[1]
+    first = times[frozenset()] if culling == "none" and frozenset() in times else timed(set(), plain_modes)[1]
     total = sum(v.n_texels for v in views)
     out = []
-    for v, smap in zip(views, maps):
-        smap.peak_bytes = peak
-        out.append(Built(smap, {k: share(t, v.n_texels / total) for k, t in times.items()}, len(views)))
+    for v, smap in zip(views, stacked.split(views, result, culling)):
+        smap.peak_bytes = peak          # the stack's: its maps are built at once
+        part = v.n_texels / total
+        out.append(Built(smap, {k: share(t, part) for k, t in times.items()}, share(first, part), len(views)))
     return out
+
+
+def _arrays(scene, lane, layers, cull_modes, extents) -> tuple:
+    arrays = stacked.build_arrays(scene, lane, layers, cull_modes, extents)
+    return (*arrays.values(), arrays)

@@ -68,10 +68,9 @@ def stack_view(views):
                          + ", ".join(sorted({v.kind for v in views})))
     sizes = np.array([v.n_texels for v in views], np.int64)
     first = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    idx = dr.arange(mi.UInt32, int(sizes.sum()))
-    which = dr.zeros(mi.UInt32, int(sizes.sum()))
-    for f in first[1:]:
-        which += dr.select(idx >= int(f), 1, 0)
+    # each lane's map, from the host (4 B a texel): offsets traced as literals would make every
+    # stack layout a kernel of its own, compiled again (an OptiX compile on a GPU)
+    which = mi.UInt32(np.repeat(np.arange(len(views), dtype=np.uint32), sizes))
     lane = copy.copy(views[0])
     lane.__class__ = type(f"Stacked{cls.__name__}", (_LaneTexels, cls), {})
     lane.per_lane = [name for name, value in vars(views[0]).items()
@@ -83,6 +82,7 @@ def stack_view(views):
     lane.lane_first = dr.gather(mi.UInt32, mi.UInt32(first.astype(np.uint32)), which)
     lane.per_lane += ["far", "lane_first"]
     lane.stack_texels = int(sizes.sum())
+    dr.eval(*(getattr(lane, name) for name in lane.per_lane))
     return lane
 
 
