@@ -65,11 +65,14 @@ def _dsm(*args, **kw):
 
 def test_a_killed_run_resumes_to_the_rows_of_an_uninterrupted_run(tmp_path):
     cfg = tmp_path / "resume.toml"
-    cfg.write_text(CONFIG)
+    # cases enough that the kill lands while measuring, not in the report after it (a case is ~5 ms)
+    biases = ", ".join(f"{0.001 * k:g}" for k in range(1, 21))
+    cfg.write_text(CONFIG.replace("resolution = [24, 32]", "resolution = [24, 32, 48, 64, 96, 128]")
+                   .replace("bias = [0.001, 0.003, 0.01, 0.03, 0.1]", f"bias = [{biases}]"))
     whole = _dsm("run", cfg, "--out", tmp_path / "whole")
     assert whole.returncode == 0, whole.stderr[-2000:]
     total = len(_rows(tmp_path / "whole" / "metrics.csv"))
-    assert total == 2 * 8
+    assert total == 6 * 23
 
     out = tmp_path / "killed"
     proc = subprocess.Popen([sys.executable, "-m", "dsm", "run", str(cfg), "--out", str(out)], env=_env(),

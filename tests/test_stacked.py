@@ -171,6 +171,30 @@ def test_every_stack_layout_runs_one_compiled_kernel(room):
     assert len(hashes) == 1
 
 
+def test_what_the_plan_stacks():
+    """Stacks hold one light, view kind and culling with the same layers; their estimated peaks fit
+    the memory budget beyond the camera's buffers (a small budget splits them as it tiles a map);
+    a cluster run stacks nothing (a Ray task runs one map); a case's key tells the modes apart."""
+    from dsm import pipeline
+    from dsm.experiment import plan as planmod, resume
+    cfg = base_config(scene=[{"builtin": "plane_box"}], light=LIGHTS, camera={"resolution": [48, 48]},
+                      map={"resolution": [32, 64, 128, 256], "view": ["cube"]}, scheme=[{"name": "midpoint"}],
+                      timing={"repeats": 1, "builds": "together"})
+    plan = planmod.make(pipeline.prepare(cfg))
+    assert [[m.resolution for m in st] for st in plan.stacks] == [[32, 64, 128, 256]] * 3
+    for st in plan.stacks:
+        assert len({(m.scene, m.light, m.view, m.culling, m.needs) for m in st}) == 1
+    small = planmod.make(pipeline.prepare({**cfg, "memory": {"budget_mb": 4}}))
+    base = 48 * 48 * planmod.PIXEL_BYTES
+    assert small.stacks and all(sum(m.peak_bytes for m in st) <= small.budget_bytes - base for st in small.stacks)
+    assert sum(len(st) for st in small.stacks) < sum(len(st) for st in plan.stacks)
+    ray = pipeline.prepare({**cfg, "execution": {"backend": "ray"}})
+    assert planmod.make(ray).stacks == []
+    alone = pipeline.prepare({**cfg, "timing": {"repeats": 1}})
+    keys = lambda c: [k for _, k in resume.case_keys(c, planmod.make(c), "v")]
+    assert set(keys(pipeline.prepare(cfg))).isdisjoint(keys(alone))
+
+
 def test_builds_choice_is_checked(tmp_path):
     """A [timing] builds value outside the choices is one line naming the file, the key and the choices."""
     from dsm.config import read as config

@@ -153,6 +153,7 @@ class Plan:
     shrink: float | None = None                     # [map] shrink: casters moved inward (world units), None: off
     lookups: str = "wavefront"                      # [timing] lookups (dsm.experiment.wavefront)
     stacks: list = field(default_factory=list)      # [timing] builds = "together": lists of maps built together
+    builds: str = "alone"                           # [timing] builds
 
     @property
     def oracle_receivers(self) -> int:
@@ -300,10 +301,14 @@ class Plan:
     def _builds_lines(self) -> list:
         """How the maps are built ([timing] builds): each alone, or a sweep's small maps stacked (a line each)."""
         if not self.stacks:
-            return ["  builds: each map alone (its build_ms measured alone)"]
+            why = ("" if self.builds == "alone" else " ([timing] builds = \"together\" found no two maps to stack: "
+                   "a motion or cluster run, cascades, tiled maps or one map a light, view and culling)")
+            return [f"  builds: each map alone (its build_ms measured alone){why}"]
         n = sum(len(st) for st in self.stacks)
-        return [f"  builds: {n} maps in {len(self.stacks)} stacks, each stack one wavefront timed as a whole "
-                f"(at most {STACK_BYTES >> 20} MB a stack; a map's build_ms is its share of texels), "
+        return [f"  builds: {n} maps in {len(self.stacks)} stack{'s' if len(self.stacks) > 1 else ''}, each stack "
+                "one wavefront timed as a whole "
+                f"(at most {STACK_BYTES >> 20} MB a stack, within the memory budget; a map's build_ms is its share of "
+                f"texels), "
                 f"{len(self.maps) - n} maps alone:"] + [
             f"    {st[0].scene[:18]:18s} {st[0].light[:12]:12s} {st[0].view:16s} culling {st[0].culling:12s} "
             "R = " + " + ".join(str(m.resolution) for m in st) for st in self.stacks]
@@ -564,23 +569,27 @@ def make(cfg: Config) -> Plan:
         room = plan.budget_bytes - base - m.stored_bytes
         fit = max(room // max(m.build_bytes_per_texel, 1), MIN_TILE)
         m.tile = int(min(m.texels, fit))
-    if getattr(cfg, "timing_builds", "alone") == "together" and not cfg.motion:
-        plan.stacks = stacks(plan)
+    plan.builds = getattr(cfg, "timing_builds", "alone")
+    # a motion run builds its maps per frame, a Ray task runs one map: neither stacks
+    if plan.builds == "together" and not cfg.motion and cfg.execution.backend != "ray":
+        plan.stacks = stacks(plan, max(plan.budget_bytes - base, 0))
     return plan
 
 
-def stacks(plan: Plan) -> list:
+def stacks(plan: Plan, room: int = STACK_BYTES) -> list:
     """The maps of ``plan`` built together (lists of two or more, in plan order): maps of one scene,
     light, single view kind (no cascade) and culling that need the same layers and are not tiled,
-    while their estimated peaks add up to at most STACK_BYTES (then a new stack starts)."""
+    while their estimated peaks add up to at most STACK_BYTES and ``room`` (the memory budget
+    beyond the camera's buffers, which tiles a map alone), then a new stack starts."""
+    cap = min(STACK_BYTES, room)
     out, open_ = [], {}
     for m in plan.maps:
         if not (m.cascade is None and m.tile >= m.texels and m.view not in schemes_mod.EXCLUSIVE_VIEWS
-                and m.peak_bytes <= STACK_BYTES):
+                and m.peak_bytes <= cap):
             continue
         key = (m.scene_index, m.light_index, m.view, m.culling, m.needs)
         run = open_.setdefault(key, [])
-        if run and sum(x.peak_bytes for x in run) + m.peak_bytes > STACK_BYTES:
+        if run and sum(x.peak_bytes for x in run) + m.peak_bytes > cap:
             out.append(run)
             run = open_[key] = []
         run.append(m)

@@ -124,6 +124,8 @@ def case_keys(cfg, plan, version: str | None = None) -> list:
     for opt in ("contact", "shrink"):     # opt-in steps enter a case's identity only when asked (old keys stay)
         if getattr(cfg, opt, None) is not None:
             shared[opt] = _plain(getattr(cfg, opt))
+    if getattr(cfg, "timing_builds", "alone") != "alone":     # build_ms is then a share of a stack's
+        shared["builds"] = cfg.timing_builds
     scenes = [scene_identity(s) for s in cfg.scenes]
     out = []
     n = 0
