@@ -369,6 +369,13 @@ def _title_panel(ax, text):
     ax.set_title(text, fontsize=7, y=1.0, pad=4)
 
 
+def _line(ax, x, y, **kw):
+    """A Line2D of (x, y) added to ``ax`` as ``ax.plot`` adds it, without plot's parsing of its
+    arguments (a third of a series' cost); the caller sets the axes' limits."""
+    from matplotlib.lines import Line2D
+    return ax.add_line(Line2D(x, y, **kw))
+
+
 def _line_series(ax, series, styles, i) -> list:
     """Rate ``i`` of each series of ``series`` against x in ``ax``; returns the x values drawn."""
     xs = []
@@ -377,11 +384,11 @@ def _line_series(ax, series, styles, i) -> list:
         shown = style.pop("legend", label)          # its legend entry ('_': none)
         pts = sorted(p for p in pts if metrics.defined(p[1 + i]))    # undefined: left out, not 0
         if not pts:
-            ax.plot([], [], label=shown, **{"color": f"C{k % 10}", "marker": "o", **style})
+            _line(ax, [], [], label=shown, **{"color": f"C{k % 10}", "marker": "o", **style})
             continue
         xs += [p[0] for p in pts]
         kw = {"color": f"C{k % 10}", "marker": "o", "ms": 3, "lw": 0.9, **style}
-        ax.plot([p[0] for p in pts], [p[1 + i] for p in pts], label=shown, clip_on=False, **kw)
+        _line(ax, [p[0] for p in pts], [p[1 + i] for p in pts], label=shown, clip_on=False, **kw)
     return xs
 
 
@@ -420,11 +427,12 @@ def draw_pareto(path, title, panels, front):
                         sharey=True)
     for ax, series in zip(axes[0], panels):
         for label, (k, pts) in series.items():
-            ax.plot([p[0] for p in pts], [p[1] for p in pts], ls="none", marker="o", ms=POINT_MS, mew=0,
-                    color=f"C{k % 10}", label=label, clip_on=False)
-        ax.plot([p[0] for p in front], [p[1] for p in front], "k-", lw=0.8, label="non-dominated (all schemes)")
-        ax.plot([p[0] for p in front], [p[1] for p in front], ls="none", marker="o", ms=6.3, mfc="none", mec="k",
-                mew=0.6, clip_on=False)
+            _line(ax, [p[0] for p in pts], [p[1] for p in pts], ls="none", marker="o", ms=POINT_MS, mew=0,
+                  color=f"C{k % 10}", label=label, clip_on=False)
+        _line(ax, [p[0] for p in front], [p[1] for p in front], color="k", ls="-", lw=0.8,
+              label="non-dominated (all schemes)")
+        _line(ax, [p[0] for p in front], [p[1] for p in front], ls="none", marker="o", ms=6.3, mfc="none", mec="k",
+              mew=0.6, clip_on=False)
         _x_scale(ax, [], log=True)
         _rate_axis(ax)
         ax.set_xlabel("time per case: map build + lookup (ms)", fontsize=7)
@@ -449,11 +457,11 @@ def draw_tradeoff(path, title, panels):
     shown = None
     for ax, (ptitle, maps) in zip(axes[0], panels):
         for label, k, cw, ck, pts in maps:
-            ax.step(cw[0], cw[1], where="post", color=f"C{k % 10}", lw=1.0, label=label)
-            ax.step(ck[0], ck[1], where="post", color=f"C{k % 10}", lw=0.8, ls=":")
+            _line(ax, cw[0], cw[1], drawstyle="steps-post", color=f"C{k % 10}", lw=1.0, label=label)
+            _line(ax, ck[0], ck[1], drawstyle="steps-post", color=f"C{k % 10}", lw=0.8, ls=":")
             if pts:
-                ax.plot([p[0] for p in pts], [p[1] for p in pts], ls="none", marker="o", ms=3.5, mfc=f"C{k % 10}",
-                        mec="k", mew=0.3, clip_on=False, zorder=3)
+                _line(ax, [p[0] for p in pts], [p[1] for p in pts], ls="none", marker="o", ms=3.5, mfc=f"C{k % 10}",
+                      mec="k", mew=0.3, clip_on=False, zorder=3)
         _rate_axis(ax, "x")
         _rate_axis(ax, "y")
         ax.set_xlabel("acne rate", fontsize=7)

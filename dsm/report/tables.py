@@ -161,8 +161,11 @@ def oracle_md(rows: list, oracle_rows: list) -> list:
         out.append(f"| {scheme} | {params} | {len(rs)} | {e:.4f} | {ow:.4f} | {ok:.4f} | {op:.4f} | {e - ow:+.4f} |")
     out += ["", "| scene | light | view | R | culling | format | best b | E world | best k | E texel | "
                 "E per texel | best case | its E |", "|---" * 13 + "|"]
+    by_map = {}
+    for r in near:
+        by_map.setdefault(_map_key(r), []).append(r)
     for key, o in orc.items():
-        rs = [r for r in near if _map_key(r) == key]
+        rs = by_map.get(key, [])
         bc = min(rs, key=lambda r: objective(r, lam)) if rs else None
         out.append(f"| {' | '.join(map(str, key))} | {o['best_b']:.4g} | {_cell(o['world_objective'])} | "
                    f"{o['best_k']:.4g} | {_cell(o['texel_objective'])} | {_cell(o['per_texel_objective'])} | "
