@@ -72,19 +72,28 @@ def build_modes(out: Path) -> dict:
     return _alternate(BUILD_SWEEP, "timing_builds", ("alone", "together"), out)
 
 
+def _section(title: str, intro: str, columns: list, rows: list) -> list:
+    """A bench.md section: its title, what it measured, and a table of ``columns`` and ``rows`` (cells as text)."""
+    return (["", f"## {title}", "", intro, "", "| " + " | ".join(columns) + " |", "| --- " * len(columns) + "|"]
+            + ["| " + " | ".join(map(str, row)) + " |" for row in rows])
+
+
+def _launches(x: dict) -> list:
+    """A run's launches outside and inside the timed repeats."""
+    return [x["launches"]["outside_repeats"], x["launches"]["timed_repeats"]]
+
+
 def markdown(r: dict) -> list:
     """Section (5b)'s lines."""
     pc, wf = r["per_case"], r["wavefront"]
-    lines = ["", "## (5b) Lookups per case against a map's wavefront", "",
-             "The same sweep (`dsm.tools.bench_modes.LOOKUP_SWEEP`, many parameter values per scheme) run with "
-             "`[timing] lookups = \"per_case\"` and `\"wavefront\"`, each twice in turn; the second run of each. "
-             "Launches from Dr.Jit's kernel history; times are the process's wall clock and CPU seconds measuring.",
-             "", "| lookups | launches outside the timed repeats | launches in them | measuring s (wall) | "
-                 "measuring CPU s |", "| --- | --- | --- | --- | --- |"]
-    for name, x in (("per_case", pc), ("wavefront", wf)):
-        kl = x["launches"]
-        lines.append(f"| {name} | {kl['outside_repeats']} | {kl['timed_repeats']} | {x['measure_s']:.1f} | "
-                     f"{x['measure_cpu_s']:.1f} |")
+    lines = _section(
+        "(5b) Lookups per case against a map's wavefront",
+        "The same sweep (`dsm.tools.bench_modes.LOOKUP_SWEEP`, many parameter values per scheme) run with "
+        "`[timing] lookups = \"per_case\"` and `\"wavefront\"`, each twice in turn; the second run of each. "
+        "Launches from Dr.Jit's kernel history; times are the process's wall clock and CPU seconds measuring.",
+        ["lookups", "launches outside the timed repeats", "launches in them", "measuring s (wall)", "measuring CPU s"],
+        [[name, *_launches(x), f"{x['measure_s']:.1f}", f"{x['measure_cpu_s']:.1f}"]
+         for name, x in (("per_case", pc), ("wavefront", wf))])
     lines += ["", f"Kernel time of every case's lookup, summed: {pc['case_kernel_ms']:.1f} ms one case at a "
                   f"time (per_case), {wf['wave_kernel_ms']:.1f} ms as the maps' wavefronts (their outputs also hold "
                   "each case's attached-shadow lookup and plane mask)."]
@@ -97,18 +106,17 @@ def markdown(r: dict) -> list:
 def markdown_builds(r: dict) -> list:
     """Section (5c)'s lines."""
     al, tg = r["alone"], r["together"]
-    lines = ["", "## (5c) Maps built alone against a sweep's small maps built together", "",
-             "The same sweep (`dsm.tools.bench_modes.BUILD_SWEEP`: two scenes, a directional, spot and point light, "
-             "dual-paraboloid and cube views, R = 64 to 512, with and without culling) run with `[timing] builds = "
-             "\"alone\"` and `\"together\"`, each twice in turn; the second run of each. Launches from Dr.Jit's "
-             "kernel history; build kernel time summed over the maps (a stacked map's is its share of its stack's); "
-             "measuring times are the process's wall clock and CPU seconds.",
-             "", "| builds | maps stacked | launches outside the timed repeats | launches in them | build kernel ms, "
-                 "summed | measuring s (wall) | measuring CPU s |", "| --- | --- | --- | --- | --- | --- | --- |"]
-    for name, x in (("alone", al), ("together", tg)):
-        kl = x["launches"]
-        lines.append(f"| {name} | {x['stacked_maps']} of {x['maps']} | {kl['outside_repeats']} | {kl['timed_repeats']} "
-                     f"| {x['build_kernel_ms']:.1f} | {x['measure_s']:.1f} | {x['measure_cpu_s']:.1f} |")
+    lines = _section(
+        "(5c) Maps built alone against a sweep's small maps built together",
+        "The same sweep (`dsm.tools.bench_modes.BUILD_SWEEP`: two scenes, a directional, spot and point light, "
+        "dual-paraboloid and cube views, R = 64 to 512, with and without culling) run with `[timing] builds = "
+        "\"alone\"` and `\"together\"`, each twice in turn; the second run of each. Launches from Dr.Jit's "
+        "kernel history; build kernel time summed over the maps (a stacked map's is its share of its stack's); "
+        "measuring times are the process's wall clock and CPU seconds.",
+        ["builds", "maps stacked", "launches outside the timed repeats", "launches in them",
+         "build kernel ms, summed", "measuring s (wall)", "measuring CPU s"],
+        [[name, f"{x['stacked_maps']} of {x['maps']}", *_launches(x), f"{x['build_kernel_ms']:.1f}",
+          f"{x['measure_s']:.1f}", f"{x['measure_cpu_s']:.1f}"] for name, x in (("alone", al), ("together", tg))])
     lines += ["", f"{r['cases']} cases. Timed launches alone / together: "
                   f"{al['launches']['timed_repeats'] / max(1, tg['launches']['timed_repeats']):.2f}x; build kernel "
                   f"time {al['build_kernel_ms'] / max(tg['build_kernel_ms'], 1e-9):.2f}x; measuring CPU "
