@@ -15,6 +15,7 @@ SIZES = (8, 13, 24)      # 13: lanes past the end of a CPU packet (where a per-l
 
 @pytest.fixture(scope="module")
 def room():
+    """plane_box loaded with a directional, spot and point light: (scene, lights, spawn extents, closedness)."""
     from dsm import pipeline
     from dsm.config import read as config
     from dsm.scenes import load as scenes
@@ -71,6 +72,7 @@ def test_a_first_layer_stack_is_one_launch(room):
     timing.enable_history()
 
     def launches(fn):
+        """JIT kernels launched evaluating fn()'s arrays."""
         dr.sync_thread()
         dr.kernel_history_clear()
         dr.eval(*fn())
@@ -92,6 +94,7 @@ def _config(builds: str):
 
 @pytest.fixture(scope="module")
 def both(tmp_path_factory):
+    """_config run with builds = "alone" and "together": {mode: Results}."""
     import dsm
     out = tmp_path_factory.mktemp("stack")
     return {mode: dsm.run(_config(mode), out=out / mode) for mode in ("alone", "together")}
