@@ -44,8 +44,6 @@ def build(scene, views, needs, modes: tuple, own_sets, extents, repeats: int) ->
     its per-shape cull modes, the cull modes without culling: an area light's luminaire stepped
     over, else None). One :class:`Built` per view, in order."""
     culling, cull_modes, plain_modes = modes
-    if not stacked.stackable(views[0]):
-        raise ValueError(f"a {views[0].kind} view with cascades is built alone")
     lane = stacked.stack_view(views)
 
     def timed(layers, modes_):

@@ -23,11 +23,6 @@ import numpy as np
 from . import shadowmap, spawn
 
 
-def stackable(view) -> bool:
-    """Whether a build of ``view`` may join a stack: a single view's (no cascades)."""
-    return not hasattr(view, "cascades")
-
-
 class _LaneTexels:
     """Mixed into a stacked view's class: texel indices are global over the stack, each lane's
     map resolution and frame are its own (per-lane attributes)."""
@@ -66,6 +61,8 @@ def stack_view(views):
     if any(type(v) is not cls or v.kind != views[0].kind for v in views):
         raise ValueError("stacked maps must share one view kind: "
                          + ", ".join(sorted({v.kind for v in views})))
+    if hasattr(views[0], "cascades"):     # each cascade its own fit, held in tables wider than a lane's value
+        raise ValueError(f"a {views[0].kind} view with cascades is built alone, not stacked")
     sizes = np.array([v.n_texels for v in views], np.int64)
     first = np.concatenate([[0], np.cumsum(sizes)[:-1]])
     # each lane's map, from the host (4 B a texel): offsets traced as literals would make every

@@ -159,7 +159,8 @@ def _rate_axis(ax, which="y"):
     spec = ax.get_subplotspec()
     if spec is None or (spec.is_first_col() if y else spec.is_last_row()):
         xy = [(-0.025, v) if y else (v, -0.04) for v in RATE_TICKS]
-        ax.add_artist(tick_labels(xy, RATE_LABELS, at, "right" if y else "center", "center" if y else "top"))
+        ax.add_artist(canvas.tick_labels(xy, RATE_LABELS, at, "right" if y else "center", "center" if y else "top",
+                                         RC["ytick.labelsize"]))
     axis.labelpad = RATE_LABEL_PAD[0 if y else 1]
 
 
@@ -200,54 +201,6 @@ def _x_scale(ax, xs, log2=False, log=False):
     _freeze_x_ticks(ax)
 
 
-TICK_FONT = 6             # points
-
-
-def tick_labels(xy, texts, transform, ha: str, va: str):
-    """Tick labels ``texts`` at points ``xy`` of ``transform`` as one artist (TickLabels)."""
-    return _tick_label_class()(xy, texts, transform, ha, va)
-
-
-@functools.lru_cache(maxsize=1)
-def _tick_label_class():
-    """TickLabels (made on first use: matplotlib is imported only when a figure is drawn)."""
-    from matplotlib.artist import Artist
-    from matplotlib.font_manager import FontProperties
-
-    class TickLabels(Artist):
-        """Single-line labels at points of one transform, laid out as matplotlib lays out a Text (its
-        box aligned by ``ha`` and ``va``, a line at least as tall as "lp") and drawn straight from the
-        renderer: a Text per tick label is laid out and drawn as an artist of its own, the larger
-        part of a figure's text time."""
-
-        def __init__(self, xy, texts, transform, ha, va):
-            super().__init__()
-            self.xy, self.texts, self.ha, self.va = np.asarray(xy, float).reshape(-1, 2), list(texts), ha, va
-            self.prop = FontProperties(size=TICK_FONT)
-            self.set_transform(transform)
-            self.set_clip_on(False)
-
-        def draw(self, renderer):
-            """Each label at its point, black, antialiased."""
-            if not self.get_visible() or not self.texts:
-                return
-            gc = renderer.new_gc()
-            gc.set_foreground((0.0, 0.0, 0.0, 1.0), isRGBA=True)
-            gc.set_antialiased(True)
-            _, lp_h, lp_d = renderer.get_text_width_height_descent("lp", self.prop, ismath=False)
-            height = renderer.get_canvas_width_height()[1]
-            for (x, y), s in zip(self.get_transform().transform(self.xy), self.texts):
-                w, h, d = renderer.get_text_width_height_descent(s, self.prop, ismath=False)
-                h, d = max(h, lp_h), max(d, lp_d)
-                x += {"left": 0.0, "center": -w / 2, "right": -w}[self.ha]
-                y += {"baseline": 0.0, "bottom": d, "center": d - h / 2, "top": d - h}[self.va]
-                renderer.draw_text(gc, x, height - y if renderer.flipy() else y, s, self.prop, 0.0)
-            gc.restore()
-            self.stale = False
-
-    return TickLabels
-
-
 def _freeze_x_ticks(ax):
     """The x ticks the locator gives for the panel's final limits, drawn (on it and the panels
     sharing its x axis) as one line of tick marks and a text per label on the bottom panels,
@@ -270,7 +223,8 @@ def _freeze_x_ticks(ax):
                                 color="k", clip_on=False))                      # TICKDOWN
         spec = panel.get_subplotspec()
         if spec is None or spec.is_last_row():
-            panel.add_artist(tick_labels([(v, -0.04) for v in values], labels, at, "center", "top"))
+            panel.add_artist(canvas.tick_labels([(v, -0.04) for v in values], labels, at, "center", "top",
+                                                RC["xtick.labelsize"]))
         panel.xaxis.labelpad = RATE_LABEL_PAD[1]
 
 
