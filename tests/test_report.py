@@ -4,7 +4,9 @@ metrics.csv, pooled against mean, undefined rates left out and counted, one unit
 import csv
 import json
 import math
+import os
 import shutil
+import time
 
 import numpy as np
 import pytest
@@ -363,15 +365,41 @@ def test_images_sit_in_one_folder_per_scene_and_light(run):
             assert (run.out / p).is_file()
 
 
-def test_drawing_in_a_process_pool_writes_what_drawing_here_writes(tmp_path):
-    from dsm.report import figures
+def _unlike_in_a_fork(parent_pid: int, path, how: str):
+    """Writes ``path`` in the parent; in a forked child fails (``how`` "raise") or never returns ("hang")."""
+    if os.getpid() != parent_pid:
+        if how == "hang":
+            time.sleep(3600)
+        raise RuntimeError("only the parent can draw this")
+    path.write_text("drawn")
+
+
+@pytest.mark.parametrize("how", ["raise", "hang"])
+def test_a_forked_share_that_fails_or_hangs_is_drawn_here(tmp_path, monkeypatch, capsys, how):
+    from dsm.report import jobs as draw_jobs
+    if not hasattr(os, "fork"):
+        pytest.skip("no os.fork on this platform")
+    monkeypatch.setattr(draw_jobs, "HANG_S", 1.0)
+    monkeypatch.setattr(draw_jobs, "workers", lambda: 2)
+    jobs = [(_unlike_in_a_fork, (os.getpid(), tmp_path / f"{i}.txt", how)) for i in range(2)]
+    assert draw_jobs.run_jobs(jobs, pool_min=1, fork=True) == 2
+    assert [(tmp_path / f"{i}.txt").read_text() for i in range(2)] == ["drawn", "drawn"]
+    why = "RuntimeError: only the parent can draw this" if how == "raise" else "no answer 1 s after"
+    assert f"a drawing worker failed ({why}" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("fork", [True, False])
+def test_drawing_in_a_process_pool_writes_what_drawing_here_writes(tmp_path, fork):
+    from dsm.report import figures, jobs as draw_jobs
     from dsm.truth import metrics
+    if fork and not hasattr(os, "fork"):
+        pytest.skip("no os.fork on this platform: the started workers serve")
     rng = np.random.default_rng(3)
     items = [(f"images/a/{i}_error.png", rng.integers(0, len(metrics.CLASS_COLORS), (8, 9)).astype(np.uint8),
               f"images/a/{i}_shadow.png", rng.integers(0, 256, (8, 9)).astype(np.uint8)) for i in range(4)]
     jobs = [(figures.write_images, (tmp_path / "pool", items[:2])), (figures.write_images, (tmp_path / "pool", items[2:]))]
-    assert figures.run_jobs(jobs, pool_min=1) == (2 if figures.workers() >= 2 else 0)
-    figures.run_jobs([(figures.write_images, (tmp_path / "here", items))], pool_min=10)
+    assert draw_jobs.run_jobs(jobs, pool_min=1, fork=fork) == (2 if draw_jobs.workers() >= 2 else 0)
+    draw_jobs.run_jobs([(figures.write_images, (tmp_path / "here", items))], pool_min=10)
     from PIL import Image
     for err, classes, shadow, grey in items:
         for base in ("pool", "here"):

@@ -10,7 +10,7 @@ pixels. Mathtext (``$...$``) and TeX are drawn by matplotlib as before.
 A panel's tick labels are one artist (``tick_labels``), laid out as matplotlib lays out a Text and
 drawn from those bitmaps: a Text per label was the larger part of a figure's text time.
 
-While ``reusing()`` (the report's drawing, figures.run_jobs), figures of one layout are drawn on
+While ``reusing()`` (the report's drawing, jobs.run_jobs), figures of one layout are drawn on
 one Figure (``pooled``), cleared of the last figure's artists (``clear``), not built anew:
 building a panel's Axes was a fifth of a figure's cost. A figure drawn so equals, pixel for
 pixel, the same figure drawn on a new Figure (tests/test_report_canvas.py).

@@ -7,7 +7,7 @@ range, K, ...); time axes are log; every figure names its scene, light, view and
 no panel's legend has more than eight entries (more series are spread over more panels).
 Figures are drawn with matplotlib's Agg canvas (no pyplot: a notebook's backend stays as it is;
 dsm/report/canvas.py: texts as cached whole-string bitmaps, one Figure per layout while
-run_jobs draws); figures and case images are written by dsm/report/png.py (zlib level 1, no row
+jobs.run_jobs draws); figures and case images are written by dsm/report/png.py (zlib level 1, no row
 filters: a third of Pillow's time for files of the same size).
 """
 from __future__ import annotations
@@ -15,12 +15,7 @@ from __future__ import annotations
 import functools
 import json
 import math
-import os
 import re
-import pickle
-import subprocess
-import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -107,7 +102,7 @@ def _figure(ncols, nrows, width=3.7, height=2.5, legend_rows=0, sharey=False, sh
         with rc_context(RC):
             return fig, np.array(fig.subplots(nrows, ncols, squeeze=False, sharey="row" if sharey else False,
                                               sharex="col" if sharex else False))
-    # one Figure per layout while run_jobs draws (canvas.reusing): the legend's rows only resize it
+    # one Figure per layout while jobs.run_jobs draws (canvas.reusing): the legend's rows only resize it
     fig, axes = canvas.pooled((ncols, nrows, width, height, sharey, sharex), make, scales=False)
     fig.set_size_inches(width * ncols + 0.3, height * nrows + extra)
     fig.subplots_adjust(left=0.55 / (width * ncols + 0.3), right=0.98, top=1 - 0.6 / (height * nrows + extra),
@@ -632,60 +627,3 @@ def load_curves(path: Path) -> list:
     with np.load(path) as z:
         meta = json.loads(str(z["meta"]))
         return [(m, (z[f"w{i}_x"], z[f"w{i}_y"]), (z[f"k{i}_x"], z[f"k{i}_y"])) for i, m in enumerate(meta)]
-
-
-# ------------------------------------------------------------------ running the jobs
-
-def workers() -> int:
-    """The CPUs this process may run on (at least 1)."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:
-        return max(1, os.cpu_count() or 1)
-
-
-# a worker: a fresh interpreter running its share of the jobs, pickled into a file
-WORKER = ("import pickle, sys\nfrom dsm.report import canvas\nwith canvas.reusing():\n"
-          "    for fn, args in pickle.loads(open(sys.argv[1], 'rb').read()):\n        fn(*args)\n")
-
-
-def run_jobs(jobs: list, pool_min: int = 12) -> int:
-    """Run (function, arguments) jobs: when there are at least ``pool_min`` of them, shared
-    between this process and one worker process per further core (a worker costs an
-    interpreter start, about 1.5 CPU seconds), else all here. Returns the number of processes
-    that drew (0: no pool). A worker that fails has its share drawn here, saying so.
-
-    The workers are plain ``python -c`` processes given their jobs in a pickle file, not a
-    multiprocessing pool: fork would copy a parent holding Dr.Jit's threads, and spawn (and
-    forkserver) re-import the parent's main script, which re-runs a script that calls dsm.run
-    without an ``if __name__ == "__main__"`` guard."""
-    n = min(workers(), len(jobs))
-    if n < 2 or len(jobs) < pool_min:
-        with canvas.reusing():
-            for fn, args in jobs:
-                fn(*args)
-        return 0
-    env = dict(os.environ, MPLBACKEND="Agg",
-               PYTHONPATH=os.pathsep.join([p for p in sys.path if p] + [os.environ.get("PYTHONPATH", "")]))
-    with tempfile.TemporaryDirectory(prefix="dsm-draw-") as tmp:
-        procs = []
-        for i in range(1, n):
-            part = jobs[i::n]          # interleaved: every process gets a share of the costly figures
-            f = Path(tmp) / f"jobs{i}.pickle"
-            f.write_bytes(pickle.dumps(part, protocol=pickle.HIGHEST_PROTOCOL))
-            procs.append((part, subprocess.Popen([sys.executable, "-c", WORKER, str(f)], env=env,
-                                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)))
-        with canvas.reusing():
-            for fn, args in jobs[0::n]:    # this process's share, while the workers draw theirs
-                fn(*args)
-        failed = []
-        for part, p in procs:
-            _, err = p.communicate()
-            if p.returncode:
-                failed.append((part, err.decode(errors="replace").strip().splitlines()[-1:] or ["no message"]))
-    for part, why in failed:
-        print(f"dsm: a drawing worker failed ({why[0]}); drawing its {len(part)} figures here", file=sys.stderr)
-        with canvas.reusing():
-            for fn, args in part:
-                fn(*args)
-    return n

@@ -8,7 +8,7 @@ report, and it reads nothing but those files, so :func:`rebuild` (``dsm report D
 same report from the same folder: table.md, cascades.md, the figures (the oracles' trade-off
 plots, the cascades' distance plots, the flicker plots, the soft-shadow plots) and report.html.
 The figures are drawn after the timed work (in worker processes when there are enough, see
-``figures.run_jobs``), so no drawing overlaps a timed build or lookup.
+``jobs.run_jobs``), so no drawing overlaps a timed build or lookup.
 """
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 
 from ..maps import cascades
-from . import figures, html as htmlpage, tables as report, io as report_io, summary
+from . import figures, html as htmlpage, jobs as draw_jobs, tables as report, io as report_io, summary
 from ..truth import metrics
 from ..experiment import motion
 from .sections import soft as soft_report
@@ -187,7 +187,7 @@ def write_report(out: Path, images=(), curves=None, plots: bool = True) -> dict:
     for its in by_folder.values():
         jobs += [(figures.write_images, (out, its[i:i + IMAGES_PER_JOB])) for i in range(0, len(its), IMAGES_PER_JOB)]
     t1 = time.perf_counter()
-    pool = figures.run_jobs(jobs)
+    pool = draw_jobs.run_jobs(jobs)
     t2 = time.perf_counter()
     report.write_table(out / "table.md", rows, run.get("experiment", out.name), run.get("config_file", ""),
                        run.get("status", []), oracle_rows, _texels(run), state=run.get("state"),

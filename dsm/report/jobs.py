@@ -1,0 +1,170 @@
+"""The report's drawing jobs, shared between this process and one more per further core.
+
+A job is ``(function, arguments)``: a figure or a batch of images written to files. With at
+least ``pool_min`` jobs and two or more cores they are dealt out interleaved (every process gets
+a share of the costly figures) and drawn at once.
+
+**Forked, not started.** On Linux the other processes are forks of this one, made after its
+first figure: a fork costs no interpreter start and no import of matplotlib (about 0.7 CPU
+seconds a worker, a tenth of the default experiment's report), and it inherits the drawn
+layouts' Figures and the cached text bitmaps (dsm/report/canvas.py). Forking a process whose
+other threads (Dr.Jit's workers, idle once every measurement is done) are left behind is safe
+for a child that touches none of their state: it only draws with numpy and matplotlib and
+leaves with ``os._exit``, so no exit handler of the parent (Dr.Jit's would join threads the
+child does not have) runs in it. A child that fails, or has not finished ``HANG_S`` seconds
+after this process finished its own share, is stopped and its share drawn here, saying so.
+Elsewhere (no ``fork``), each worker is a fresh ``python -c`` given its jobs in a pickle file:
+a multiprocessing pool would re-import the caller's main script, which re-runs a script that
+calls dsm.run without an ``if __name__ == "__main__"`` guard.
+"""
+from __future__ import annotations
+
+import os
+import pickle
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+from . import canvas
+
+HANG_S = 120.0          # how long a forked share may run past this process's own (a stuck child, not a slow one)
+POLL_S = 0.01
+
+
+def workers() -> int:
+    """The CPUs this process may run on (at least 1)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:
+        return max(1, os.cpu_count() or 1)
+
+
+def run_jobs(jobs: list, pool_min: int = 12, fork: bool | None = None) -> int:
+    """Run (function, arguments) jobs: when there are at least ``pool_min`` of them, shared
+    between this process and one process per further core, else all here. ``fork``: None
+    forks where the platform can (Linux), False starts fresh interpreters. Returns the number
+    of processes that drew (0: no pool). A worker that fails has its share drawn here, saying so."""
+    n = min(workers(), len(jobs))
+    if n < 2 or len(jobs) < pool_min:
+        _draw(jobs)
+        return 0
+    fork = hasattr(os, "fork") and sys.platform.startswith("linux") if fork is None else fork
+    shares = [jobs[i::n] for i in range(n)]
+    failed = _forked(shares) if fork else _started(shares)
+    for part, why in failed:
+        print(f"dsm: a drawing worker failed ({why}); drawing its {len(part)} figures here", file=sys.stderr)
+        _draw(part)
+    return n
+
+
+def _draw(jobs):
+    with canvas.reusing():
+        for fn, args in jobs:
+            fn(*args)
+
+
+def _forked(shares: list) -> list:
+    """Draw shares[0] here and every other share in a fork of this process; [(share, why)] of
+    those that failed."""
+    mine = shares[0]
+    children, failed = [], []
+    with canvas.reusing():
+        mine[0][0](*mine[0][1])           # first, so the forks inherit its Figure and text bitmaps
+        try:
+            children = [[part, *_fork(part)] for part in shares[1:]]
+            for fn, args in mine[1:]:
+                fn(*args)
+            deadline = time.monotonic() + HANG_S
+            for child in children:
+                part, pid, _ = child
+                why = _wait(pid, child[2], deadline)
+                child[1] = None                  # reaped: its pid may belong to another process now
+                if why:
+                    failed.append((part, why))
+            return failed
+        finally:
+            for _, pid, pipe in children:      # interrupted: no child outlives this call
+                if pid is not None:
+                    _reap(pid, kill=True)
+                os.close(pipe)
+
+
+def _fork(part) -> tuple:
+    """(pid, read end of its message pipe) of a fork drawing ``part``."""
+    r, w = os.pipe()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    with warnings.catch_warnings():       # Python 3.12 warns on any fork of a threaded process (see above)
+        warnings.simplefilter("ignore", DeprecationWarning)
+        pid = os.fork()
+    if pid == 0:
+        code = 1
+        try:
+            os.close(r)
+            for fn, args in part:
+                fn(*args)
+            code = 0
+        except BaseException as e:        # Ctrl-C too: the child never returns into its parent's code
+            try:
+                os.write(w, f"{type(e).__name__}: {e}".encode(errors="replace")[:2000])
+            except BaseException:
+                pass
+        finally:
+            os._exit(code)
+    os.close(w)
+    return pid, r
+
+
+def _wait(pid: int, pipe: int, deadline: float) -> str | None:
+    """None once child ``pid`` has drawn its share; else why not (its error, or stuck past ``deadline``)."""
+    while True:
+        got, status = os.waitpid(pid, os.WNOHANG)
+        if got:
+            break
+        if time.monotonic() > deadline:
+            _reap(pid, kill=True)
+            return f"no answer {HANG_S:g} s after this process's share"
+        time.sleep(POLL_S)
+    if os.waitstatus_to_exitcode(status) == 0:
+        return None
+    msg = os.read(pipe, 4096).decode(errors="replace").strip()
+    return msg or f"exit status {os.waitstatus_to_exitcode(status)}"
+
+
+def _reap(pid: int, kill: bool):
+    """Wait for child ``pid`` (not yet waited for), stopping it first when ``kill``."""
+    try:
+        if kill:
+            os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+    except (ProcessLookupError, ChildProcessError):     # already reaped
+        pass
+
+
+# a started worker: a fresh interpreter running its share of the jobs, pickled into a file
+WORKER = ("import pickle, sys\nfrom dsm.report import canvas\nwith canvas.reusing():\n"
+          "    for fn, args in pickle.loads(open(sys.argv[1], 'rb').read()):\n        fn(*args)\n")
+
+
+def _started(shares: list) -> list:
+    """Draw shares[0] here and every other share in a fresh interpreter; [(share, why)] of those that failed."""
+    env = dict(os.environ, MPLBACKEND="Agg",
+               PYTHONPATH=os.pathsep.join([p for p in sys.path if p] + [os.environ.get("PYTHONPATH", "")]))
+    with tempfile.TemporaryDirectory(prefix="dsm-draw-") as tmp:
+        procs = []
+        for i, part in enumerate(shares[1:], 1):
+            f = Path(tmp) / f"jobs{i}.pickle"
+            f.write_bytes(pickle.dumps(part, protocol=pickle.HIGHEST_PROTOCOL))
+            procs.append((part, subprocess.Popen([sys.executable, "-c", WORKER, str(f)], env=env,
+                                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)))
+        _draw(shares[0])                    # this process's share, while the workers draw theirs
+        failed = []
+        for part, p in procs:
+            _, err = p.communicate()
+            if p.returncode:
+                failed.append((part, (err.decode(errors="replace").strip().splitlines()[-1:] or ["no message"])[0]))
+    return failed
