@@ -164,6 +164,19 @@ def test_plots_have_one_unit_per_panel_symlog_rates_and_short_legends(tmp_path):
     assert (tmp_path / "vs_bias_s_0_directional_orthographic.png").is_file()
 
 
+def _strokes(ax) -> list:
+    """(RGBA colour, vertices, dashed) of every curve drawn in ``ax``: its lines and line collections
+    (not the tick marks, which are markers without a line)."""
+    from matplotlib.collections import LineCollection
+    out = [(ln.get_color(), ln.get_xydata(), ln.get_linestyle() not in ("-", "solid"))
+           for ln in ax.get_lines() if ln.get_linestyle() != "None"]
+    for col in ax.collections:
+        if isinstance(col, LineCollection):
+            styles = col.get_linestyle() * len(col.get_segments()) if len(col.get_linestyle()) == 1 else col.get_linestyle()
+            out += [(c, seg, dash[1] is not None) for c, seg, dash in zip(col.get_colors(), col.get_segments(), styles)]
+    return out
+
+
 def test_consolidated_legends_name_each_map_and_instance_once(tmp_path):
     """The trade-off figure: one legend entry per map (not one per curve), on the first panel
     only when every panel holds the same maps; views at equal memory: one entry per instance
@@ -177,9 +190,8 @@ def test_consolidated_legends_name_each_map_and_instance_once(tmp_path):
     assert [getattr(ax, "legend_texts", []) for ax in fig.axes] == [["float32", "float32 back_closed"], []]
     assert "solid: one world bias, dotted: one k texel" in " ".join(fig._suptitle.get_text().split())
     # a map's two curves share its colour: solid (world) and dotted (texel)
-    lines = [ln for ln in fig.axes[0].get_lines() if ln.get_linestyle() != "None"]      # not the tick marks
-    styles = {(to_rgba(ln.get_color()), ln.get_linestyle()) for ln in lines}
-    assert styles == {(to_rgba(f"C{k}"), ls) for k in (0, 1) for ls in ("-", ":")}
+    styles = {(tuple(c), dashed) for c, _, dashed in _strokes(fig.axes[0])}
+    assert styles == {(to_rgba(f"C{k}"), dashed) for k in (0, 1) for dashed in (False, True)}
     rows = []
     for view in ("cube", "dual_paraboloid"):
         for k in range(10):
@@ -195,8 +207,10 @@ def test_consolidated_legends_name_each_map_and_instance_once(tmp_path):
     assert max(len(getattr(ax, "legend_texts", [])) for ax in fig.axes) <= figures.MAX_LEGEND
     assert "cube solid, dual_paraboloid dashed" in " ".join(fig._suptitle.get_text().split())   # wrapped
     # both views of every instance drawn: 10 instances x 2 views (the seam row: undefined rates, no line)
-    drawn = [ln for ax in fig.axes for ln in ax.get_lines() if ln.get_linestyle() != "None" and len(ln.get_xdata())]
+    drawn = [st for ax in fig.axes for st in _strokes(ax) if len(st[1])]
     assert len(drawn) == 10 * 2
+    assert {(tuple(c), dashed) for c, _, dashed in drawn} == {
+        (to_rgba(f"C{k}"), dashed) for k in range(10) for dashed in (False, True)}
 
 
 def test_dsm_report_rebuilds_table_md_and_the_page(run, tmp_path):

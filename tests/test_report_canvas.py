@@ -96,5 +96,6 @@ def test_the_points_of_the_pareto_and_trade_off_figures_are_every_case(tmp_path)
     curve = (np.array([0.0, 1.0]), np.array([1.0, 0.0]))
     cases = [(0.01, 0.2), (0.5, 0.003)]
     fig = figures.draw_tradeoff(tmp_path / "t.png", "t", [("R = 1", [("f", 0, curve, curve, cases)])])
-    (ln,) = [ln for ln in fig.axes[0].get_lines() if ln.get_marker() == "o"]
-    assert np.array_equal(np.column_stack([ln.get_xdata(), ln.get_ydata()]), np.array(cases))
+    from matplotlib.collections import CircleCollection
+    (dots,) = [c for c in fig.axes[0].collections if isinstance(c, CircleCollection)]
+    assert np.array_equal(dots.get_offsets(), np.array(cases))

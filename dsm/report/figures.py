@@ -34,6 +34,9 @@ PNG = {"compress_level": 1}
 # panel: tick_params re-styles every tick already made); glyphs unhinted (FreeType's autohinter
 # is a tenth of the drawing time and sharpens little at 6 points and 72 dpi)
 RC = {"xtick.labelsize": 6, "ytick.labelsize": 6, "text.hinting": "no_hinting"}
+# matplotlib's default colour cycle ("C0" .. "C9"), resolved once: a "CN" colour is looked up in
+# the rc cycle each time it is converted
+CYCLE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf")
 
 
 def slug(s: str, keep: str = "-_.") -> str:
@@ -235,9 +238,14 @@ def _legend(ax):
     labels as one text of many lines): matplotlib's Legend lays every entry out as boxes of its
     own, a third of a figure's drawing time. ``ax.legend_texts`` keeps the labels."""
     from matplotlib.collections import CircleCollection, LineCollection
-    handles, labels = ax.get_legend_handles_labels()
+    entries = ax.__dict__.pop("legend_entries", None)       # set by _line_series for this figure only
+    if entries is None:
+        handles, labels = ax.get_legend_handles_labels()
+        styles = [_handle_style(h) for h in handles]
+    else:
+        styles, labels = [e[0] for e in entries], [e[1] for e in entries]
     ax.legend_texts = list(labels)
-    if not handles:
+    if not labels:
         return
     fig = ax.figure
     box = ax.get_position()                                  # figure fraction (no layout engine)
@@ -245,7 +253,6 @@ def _legend(ax):
     x0, top = box.x0 * w_in, (box.y0 + LEGEND_Y * box.height) * h_in      # inches
     pitch = LEGEND_SPACING * LEGEND_FONT * _font_height_em() / 72
     mid = lambda i: top - (i + 0.5) * pitch                  # the middle of line i
-    styles = [_handle_style(h) for h in handles]
     strokes = [(i, st) for i, st in enumerate(styles) if st["ls"] not in ("none", "None", "")]
     fig.add_artist(LineCollection([[(x0 + 0.06, mid(i)), (x0 + 0.3, mid(i))] for i, _ in strokes],
                                   colors=[st["color"] for _, st in strokes],
@@ -325,19 +332,41 @@ def _line(ax, x, y, **kw):
     return ax.add_line(Line2D(x, y, **kw))
 
 
+SERIES_MS = 3             # a series' marker diameter, in points (as Line2D's markersize)
+
+
 def _line_series(ax, series, styles, i) -> list:
-    """Rate ``i`` of each series of ``series`` against x in ``ax``; returns the x values drawn."""
-    xs = []
+    """Rate ``i`` of each series of ``series`` against x in ``ax``; returns the x values drawn.
+    Every series' line is one LineCollection and every marker one CircleCollection (drawn over
+    the lines): two artists a panel, not a Line2D per series (a Line2D's making and drawing was
+    the larger part of these figures' cost); the legend reads ``ax.legend_entries``."""
+    from matplotlib.collections import CircleCollection, LineCollection
+    from matplotlib.colors import to_rgba
+    xs, lines, dots, entries = [], [], [], []
     for k, (label, pts) in enumerate(series.items()):
         style = dict(styles.get(label, {}))
         shown = style.pop("legend", label)          # its legend entry ('_': none)
+        color = to_rgba(style.get("color", CYCLE[k % len(CYCLE)]))
+        ls, lw = style.get("linestyle", style.get("ls", "-")), style.get("lw", 0.9)
+        if not str(shown).startswith("_"):
+            entries.append((dict(color=color, ls=ls, lw=lw, marker="o", ms=SERIES_MS, face=color, edge=color), shown))
         pts = sorted(p for p in pts if metrics.defined(p[1 + i]))    # undefined: left out, not 0
-        if not pts:
-            _line(ax, [], [], label=shown, **{"color": f"C{k % 10}", "marker": "o", **style})
-            continue
         xs += [p[0] for p in pts]
-        kw = {"color": f"C{k % 10}", "marker": "o", "ms": 3, "lw": 0.9, **style}
-        _line(ax, [p[0] for p in pts], [p[1 + i] for p in pts], label=shown, clip_on=False, **kw)
+        if pts:
+            lines.append(([(p[0], p[1 + i]) for p in pts], color, ls, lw))
+            dots += [((p[0], p[1 + i]), color) for p in pts]
+    if lines:
+        ax.add_collection(LineCollection([ln[0] for ln in lines], colors=[ln[1] for ln in lines],
+                                         linestyles=[ln[2] for ln in lines], linewidths=[ln[3] for ln in lines],
+                                         capstyle="projecting", joinstyle="round", clip_on=False), autolim=False)
+        # the data limits from the points themselves (the x axis autoscales to them): add_collection
+        # would find them by transforming every path through the axes' scales
+        ax.update_datalim([d[0] for d in dots])
+        ax.add_collection(CircleCollection([math.pi / 4 * SERIES_MS ** 2] * len(dots), offsets=[d[0] for d in dots],
+                                           offset_transform=ax.transData, facecolors=[d[1] for d in dots],
+                                           edgecolors=[d[1] for d in dots], linewidths=1.0, clip_on=False,
+                                           zorder=2.01, snap=True), autolim=False)
+    ax.legend_entries = entries
     return xs
 
 
@@ -396,6 +425,35 @@ def draw_pareto(path, title, panels, front):
 TRADEOFF_KEY = "solid: one world bias, dotted: one k texel"
 
 
+def _steps_post(x, y) -> np.ndarray:
+    """The vertices of a steps-post curve through (x, y), as Line2D's ``drawstyle="steps-post"`` draws it."""
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    v = np.empty((max(2 * x.size - 1, 0), 2))
+    v[0::2, 0], v[0::2, 1] = x, y
+    v[1::2, 0], v[1::2, 1] = x[1:], y[:-1]
+    return v
+
+
+def _tradeoff_maps(ax, maps):
+    """Each map's two curves and its case points in ``ax`` as three collections (solid, dotted,
+    points), with a legend entry per map (its colour, the solid stroke)."""
+    from matplotlib.collections import CircleCollection, LineCollection
+    from matplotlib.colors import to_rgba
+    colours = [to_rgba(CYCLE[k % len(CYCLE)]) for _, k, _, _, _ in maps]
+    for i, (lw, ls, cap) in enumerate(((1.0, "-", "projecting"), (0.8, ":", "butt"))):
+        ax.add_collection(LineCollection([_steps_post(*m[2 + i]) for m in maps], colors=colours, linewidths=lw,
+                                         linestyles=ls, capstyle=cap, joinstyle="round"),
+                          autolim=False)            # _rate_axis sets both limits
+    pts = [(p, c) for m, c in zip(maps, colours) for p in m[4]]
+    if pts:
+        ax.add_collection(CircleCollection([math.pi / 4 * 3.5 ** 2] * len(pts), offsets=[p for p, _ in pts],
+                                           offset_transform=ax.transData, facecolors=[c for _, c in pts],
+                                           edgecolors="k", linewidths=0.3, clip_on=False, zorder=3, snap=True),
+                          autolim=False)
+    ax.legend_entries = [(dict(color=c, ls="-", lw=1.0, marker="None", ms=4, face=c, edge=c), m[0])
+                         for m, c in zip(maps, colours)]
+
+
 def draw_tradeoff(path, title, panels):
     """Peter-panning rate against acne rate, both symlog: panels = [(panel title, [(label, colour index,
     world curve (x, y), texel curve (x, y), case points [(x, y)])])]. A map's two curves share its
@@ -405,12 +463,7 @@ def draw_tradeoff(path, title, panels):
                         sharey=True)
     shown = None
     for ax, (ptitle, maps) in zip(axes[0], panels):
-        for label, k, cw, ck, pts in maps:
-            _line(ax, cw[0], cw[1], drawstyle="steps-post", color=f"C{k % 10}", lw=1.0, label=label)
-            _line(ax, ck[0], ck[1], drawstyle="steps-post", color=f"C{k % 10}", lw=0.8, ls=":")
-            if pts:
-                _line(ax, [p[0] for p in pts], [p[1] for p in pts], ls="none", marker="o", ms=3.5, mfc=f"C{k % 10}",
-                      mec="k", mew=0.3, clip_on=False, zorder=3)
+        _tradeoff_maps(ax, maps)
         _rate_axis(ax, "x")
         _rate_axis(ax, "y")
         ax.set_xlabel("acne rate", fontsize=7)
