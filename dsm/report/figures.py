@@ -4,7 +4,7 @@ there is enough to draw), so drawing never overlaps a timed build or lookup.
 Every rate axis is symlog (linear below 1e-4, so a zero and 1e-4 are both visible) from 0 to 1;
 a rate-against-parameter figure has a column of panels per parameter unit (texel, world,
 range, K, ...); time axes are log; every figure names its scene, light, view and resolution;
-no panel's legend has more than eight entries (more series are spread over more panels).
+no panel's legend has more than MAX_LEGEND (13) entries (more series are spread over more panels).
 Figures are drawn with matplotlib's Agg canvas (no pyplot: a notebook's backend stays as it is;
 dsm/report/canvas.py: texts as cached whole-string bitmaps, one Figure per layout while
 jobs.run_jobs draws); figures and case images are written by dsm/report/png.py (zlib level 1, no row
