@@ -7,6 +7,7 @@ import math
 import os
 import shutil
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -400,6 +401,51 @@ def test_a_forked_share_that_fails_or_hangs_is_drawn_here(tmp_path, monkeypatch,
     assert [(tmp_path / f"{i}.txt").read_text() for i in range(2)] == ["drawn", "drawn"]
     why = "RuntimeError: only the parent can draw this" if how == "raise" else "no answer 1 s after"
     assert f"a drawing worker failed ({why}" in capsys.readouterr().err
+
+
+KILLED_PARENT = """
+import os, sys, time
+from pathlib import Path
+from dsm.report import jobs
+def job(folder, who):
+    Path(folder, who + ".pid").write_text(str(os.getpid()))
+    time.sleep(3600)
+jobs.workers = lambda: 2
+# shares dealt interleaved: this process draws jobs 0 and 2 (the first before it forks), the fork job 1
+jobs.run_jobs([(print, ()), (job, (sys.argv[1], "child")), (job, (sys.argv[1], "parent"))], pool_min=1, fork=True)
+"""
+
+
+def test_a_forked_drawing_worker_dies_with_its_parent(tmp_path):
+    """kill -9 of the run while a fork draws: the fork must not live on (it holds the run folder's
+    lock and would keep writing into it)."""
+    import signal
+    import subprocess
+    import sys
+    if not sys.platform.startswith("linux"):
+        pytest.skip("forked workers are Linux's")
+    p = subprocess.Popen([sys.executable, "-c", KILLED_PARENT, str(tmp_path)])
+    pids = [tmp_path / "parent.pid", tmp_path / "child.pid"]
+    deadline = time.monotonic() + 60
+    while not all(f.is_file() and f.read_text() for f in pids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    child = int(pids[1].read_text())
+    try:
+        assert int(pids[0].read_text()) == p.pid != child
+        os.kill(p.pid, signal.SIGKILL)
+        p.wait()
+        state = lambda: (Path(f"/proc/{child}/stat").read_text().split(")")[-1].split()[0]
+                         if Path(f"/proc/{child}").exists() else "gone")
+        deadline = time.monotonic() + 10
+        while state() not in ("Z", "X", "gone") and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert state() in ("Z", "X", "gone")     # killed (a zombie until its new parent reaps it)
+    finally:
+        for pid in (p.pid, child):               # a failed test leaves no sleeper behind
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
 
 
 @pytest.mark.parametrize("fork", [True, False])

@@ -11,8 +11,9 @@ layouts' Figures and the cached text bitmaps (dsm/report/canvas.py). Forking a p
 other threads (Dr.Jit's workers, idle once every measurement is done) are left behind is safe
 for a child that touches none of their state: it only draws with numpy and matplotlib and
 leaves with ``os._exit``, so no exit handler of the parent (Dr.Jit's would join threads the
-child does not have) runs in it. A child that fails, or has not finished ``HANG_S`` seconds
-after this process finished its own share, is stopped and its share drawn here, saying so.
+child does not have) runs in it, and the kernel stops it if this process dies (a kill -9). A child
+that fails, or has not finished ``HANG_S`` seconds after this process finished its own share, is
+stopped and its share drawn here, saying so.
 Elsewhere (no ``fork``), each worker is a fresh ``python -c`` given its jobs in a pickle file:
 a multiprocessing pool would re-import the caller's main script, which re-runs a script that
 calls dsm.run without an ``if __name__ == "__main__"`` guard.
@@ -33,6 +34,7 @@ from . import canvas
 
 HANG_S = 120.0          # how long a forked share may run past this process's own (a stuck child, not a slow one)
 POLL_S = 0.01
+PR_SET_PDEATHSIG = 1    # linux/prctl.h
 
 
 def workers() -> int:
@@ -98,12 +100,14 @@ def _fork(part) -> tuple:
     r, w = os.pipe()
     sys.stdout.flush()
     sys.stderr.flush()
+    parent = os.getpid()
     with warnings.catch_warnings():       # Python 3.12 warns on any fork of a threaded process (see above)
         warnings.simplefilter("ignore", DeprecationWarning)
         pid = os.fork()
     if pid == 0:
         code = 1
         try:
+            _die_with(parent)
             os.close(r)
             for fn, args in part:
                 fn(*args)
@@ -117,6 +121,18 @@ def _fork(part) -> tuple:
             os._exit(code)
     os.close(w)
     return pid, r
+
+
+def _die_with(parent: int):
+    """Have the kernel stop this child when its parent dies (a kill -9 of the run: the child holds
+    the run folder's lock, inherited, and would keep drawing into it)."""
+    import ctypes
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    except (OSError, AttributeError):     # no prctl: the child finishes its share, then leaves
+        pass
+    if os.getppid() != parent:            # the parent died before prctl took effect
+        os._exit(1)
 
 
 def _wait(pid: int, pipe: int, deadline: float) -> str | None:
