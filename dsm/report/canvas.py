@@ -215,6 +215,7 @@ def clear(fig, axes, scales: bool = True):
         ax.ignore_existing_data_limits = True
         ax.xaxis.labelpad = ax.yaxis.labelpad = matplotlib.rcParams["axes.labelpad"]
         ax.__dict__.pop("legend_texts", None)
+        ax.__dict__.pop("legend_entries", None)
     keep = getattr(fig, "_suptitle", None)
     for a in [*fig.texts, *fig.artists, *fig.lines, *fig.patches, *fig.images]:
         if a is not keep:

@@ -346,19 +346,26 @@ def _line_series(ax, series, styles, i) -> list:
     for k, (label, pts) in enumerate(series.items()):
         style = dict(styles.get(label, {}))
         shown = style.pop("legend", label)          # its legend entry ('_': none)
-        color = to_rgba(style.get("color", CYCLE[k % len(CYCLE)]))
-        ls, lw = style.get("linestyle", style.get("ls", "-")), style.get("lw", 0.9)
+        color = to_rgba(style.pop("color", CYCLE[k % len(CYCLE)]))
+        ls, lw = style.pop("linestyle", style.pop("ls", "-")), style.pop("lw", 0.9)
+        if style:
+            raise ValueError(f"series {label!r}: unknown style keys {sorted(style)} (color, linestyle, lw, legend)")
         if not str(shown).startswith("_"):
             entries.append((dict(color=color, ls=ls, lw=lw, marker="o", ms=SERIES_MS, face=color, edge=color), shown))
         pts = sorted(p for p in pts if metrics.defined(p[1 + i]))    # undefined: left out, not 0
         xs += [p[0] for p in pts]
-        if pts:
+        if len(pts) > 1 and ls not in ("none", "None", ""):
             lines.append(([(p[0], p[1 + i]) for p in pts], color, ls, lw))
-            dots += [((p[0], p[1 + i]), color) for p in pts]
-    if lines:
-        ax.add_collection(LineCollection([ln[0] for ln in lines], colors=[ln[1] for ln in lines],
-                                         linestyles=[ln[2] for ln in lines], linewidths=[ln[3] for ln in lines],
-                                         capstyle="projecting", joinstyle="round", clip_on=False), autolim=False)
+        dots += [((p[0], p[1 + i]), color) for p in pts]
+    # Line2D's caps: projecting on a solid line, butt on a dashed one (projecting caps would
+    # lengthen every dash by a line width and nearly close the gaps of a dotted line)
+    for cap, group in (("projecting", [ln for ln in lines if ln[2] in ("-", "solid")]),
+                       ("butt", [ln for ln in lines if ln[2] not in ("-", "solid")])):
+        if group:
+            ax.add_collection(LineCollection([ln[0] for ln in group], colors=[ln[1] for ln in group],
+                                             linestyles=[ln[2] for ln in group], linewidths=[ln[3] for ln in group],
+                                             capstyle=cap, joinstyle="round", clip_on=False), autolim=False)
+    if dots:
         # the data limits from the points themselves (the x axis autoscales to them): add_collection
         # would find them by transforming every path through the axes' scales
         ax.update_datalim([d[0] for d in dots])
@@ -406,7 +413,7 @@ def draw_pareto(path, title, panels, front):
     for ax, series in zip(axes[0], panels):
         for label, (k, pts) in series.items():
             _line(ax, [p[0] for p in pts], [p[1] for p in pts], ls="none", marker="o", ms=POINT_MS, mew=0,
-                  color=f"C{k % 10}", label=label, clip_on=False)
+                  color=CYCLE[k % len(CYCLE)], label=label, clip_on=False)
         _line(ax, [p[0] for p in front], [p[1] for p in front], color="k", ls="-", lw=0.8,
               label="non-dominated (all schemes)")
         _line(ax, [p[0] for p in front], [p[1] for p in front], ls="none", marker="o", ms=6.3, mfc="none", mec="k",
@@ -623,7 +630,7 @@ def _texels_job(rs: list, scene: str, light: str, views: list, multi: tuple):
         lab = f"{r['view']}: {_label(r, multi)}"[:52]
         inst = inst_of[lab] = _label(r, multi)         # the instance, also when the label was cut
         named.setdefault(inst, lab)
-        styles[lab] = {"color": f"C{insts.index(inst) % 10}", "linestyle": VIEW_LINES[views.index(r["view"]) % 4],
+        styles[lab] = {"color": CYCLE[insts.index(inst) % len(CYCLE)], "linestyle": VIEW_LINES[views.index(r["view"]) % 4],
                        "legend": inst if named[inst] == lab else "_"}
     for r in rs:                             # the series in the rows' order, as before
         tex.setdefault(f"{r['view']}: {_label(r, multi)}"[:52], []).append(

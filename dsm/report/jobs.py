@@ -20,6 +20,7 @@ calls dsm.run without an ``if __name__ == "__main__"`` guard.
 """
 from __future__ import annotations
 
+import gc
 import os
 import pickle
 import signal
@@ -34,6 +35,7 @@ from . import canvas
 
 HANG_S = 120.0          # how long a forked share may run past this process's own (a stuck child, not a slow one)
 POLL_S = 0.01
+STOP_GRACE_S = 1.0      # a stopped child's time to remove its half-written file before SIGKILL
 PR_SET_PDEATHSIG = 1    # linux/prctl.h
 
 
@@ -71,56 +73,76 @@ def _draw(jobs):
 
 def _forked(shares: list) -> list:
     """Draw shares[0] here and every other share in a fork of this process; [(share, why)] of
-    those that failed."""
+    those that failed (a fork the system refused included)."""
     mine = shares[0]
     children, failed = [], []
     with canvas.reusing():
         mine[0][0](*mine[0][1])           # first, so the forks inherit its Figure and text bitmaps
         try:
-            children = [[part, *_fork(part)] for part in shares[1:]]
+            for part in shares[1:]:
+                try:
+                    children.append((part, *_fork(part)))
+                except OSError as e:      # no memory or process left for a fork: drawn here
+                    failed.append((part, f"fork refused: {e}"))
             for fn, args in mine[1:]:
                 fn(*args)
             deadline = time.monotonic() + HANG_S
-            for child in children:
-                part, pid, _ = child
-                why = _wait(pid, child[2], deadline)
-                child[1] = None                  # reaped: its pid may belong to another process now
-                if why:
-                    failed.append((part, why))
+            failed += [(part, why) for part, pid, pipe in children if (why := _wait(pid, pipe, deadline))]
             return failed
         finally:
             for _, pid, pipe in children:      # interrupted: no child outlives this call
-                if pid is not None:
-                    _reap(pid, kill=True)
+                _stop(pid)
                 os.close(pipe)
 
 
 def _fork(part) -> tuple:
     """(pid, read end of its message pipe) of a fork drawing ``part``."""
-    r, w = os.pipe()
     sys.stdout.flush()
     sys.stderr.flush()
+    r, w = os.pipe()
     parent = os.getpid()
-    with warnings.catch_warnings():       # Python 3.12 warns on any fork of a threaded process (see above)
-        warnings.simplefilter("ignore", DeprecationWarning)
-        pid = os.fork()
-    if pid == 0:
-        code = 1
+    held = {signal.SIGINT, signal.SIGTERM}
+    try:
+        # signals held over the fork: one arriving in the child before its try would raise in
+        # its parent's code; uncollected garbage frozen, so the child never finalizes the parent's
+        # objects (Dr.Jit arrays among them, whose threads the child does not have)
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+        gc.freeze()
         try:
-            _die_with(parent)
-            os.close(r)
-            for fn, args in part:
-                fn(*args)
-            code = 0
-        except BaseException as e:        # Ctrl-C too: the child never returns into its parent's code
-            try:
-                os.write(w, f"{type(e).__name__}: {e}".encode(errors="replace")[:2000])
-            except BaseException:
-                pass
+            with warnings.catch_warnings():   # Python 3.12 warns on any fork of a threaded process (see above)
+                warnings.simplefilter("ignore", DeprecationWarning)
+                pid = os.fork()
         finally:
-            os._exit(code)
+            if os.getpid() == parent:
+                gc.unfreeze()
+                signal.pthread_sigmask(signal.SIG_SETMASK, old)
+    except BaseException:
+        os.close(r)
+        os.close(w)
+        raise
+    if pid == 0:
+        _child(part, parent, r, w, old)
     os.close(w)
     return pid, r
+
+
+def _child(part, parent: int, r: int, w: int, mask):
+    """A fork's life: draw ``part``, write why not to ``w`` if it fails, and leave."""
+    code = 1
+    try:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+        _die_with(parent)
+        os.close(r)
+        for fn, args in part:
+            fn(*args)
+        code = 0
+    except BaseException as e:        # Ctrl-C too: the child never returns into its parent's code
+        try:
+            os.write(w, f"{type(e).__name__}: {e}".encode(errors="replace")[:2000])
+        except BaseException:
+            pass
+    finally:
+        os._exit(code)
 
 
 def _die_with(parent: int):
@@ -128,7 +150,8 @@ def _die_with(parent: int):
     the run folder's lock, inherited, and would keep drawing into it)."""
     import ctypes
     try:
-        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+        ctypes.CDLL(None).prctl(ctypes.c_int(PR_SET_PDEATHSIG), ctypes.c_ulong(signal.SIGKILL),
+                                ctypes.c_ulong(0), ctypes.c_ulong(0), ctypes.c_ulong(0))
     except (OSError, AttributeError):     # no prctl: the child finishes its share, then leaves
         pass
     if os.getppid() != parent:            # the parent died before prctl took effect
@@ -142,7 +165,7 @@ def _wait(pid: int, pipe: int, deadline: float) -> str | None:
         if got:
             break
         if time.monotonic() > deadline:
-            _reap(pid, kill=True)
+            _stop(pid)
             return f"no answer {HANG_S:g} s after this process's share"
         time.sleep(POLL_S)
     if os.waitstatus_to_exitcode(status) == 0:
@@ -151,13 +174,22 @@ def _wait(pid: int, pipe: int, deadline: float) -> str | None:
     return msg or f"exit status {os.waitstatus_to_exitcode(status)}"
 
 
-def _reap(pid: int, kill: bool):
-    """Wait for child ``pid`` (not yet waited for), stopping it first when ``kill``."""
+def _stop(pid: int):
+    """Stop child ``pid`` if it still runs (SIGTERM, so it removes its half-written file; SIGKILL
+    after ``STOP_GRACE_S``) and reap it. Only a child not yet reaped is signalled: once reaped its
+    number may belong to another process, and waitpid then says it is no child of ours."""
     try:
-        if kill:
-            os.kill(pid, signal.SIGKILL)
+        if os.waitpid(pid, os.WNOHANG)[0]:
+            return
+        os.kill(pid, signal.SIGTERM)
+        end = time.monotonic() + STOP_GRACE_S
+        while time.monotonic() < end:
+            if os.waitpid(pid, os.WNOHANG)[0]:
+                return
+            time.sleep(POLL_S)
+        os.kill(pid, signal.SIGKILL)
         os.waitpid(pid, 0)
-    except (ProcessLookupError, ChildProcessError):     # already reaped
+    except ChildProcessError:             # reaped already (a wait interrupted before it could say so)
         pass
 
 
@@ -170,17 +202,22 @@ def _started(shares: list) -> list:
     """Draw shares[0] here and every other share in a fresh interpreter; [(share, why)] of those that failed."""
     env = dict(os.environ, MPLBACKEND="Agg",
                PYTHONPATH=os.pathsep.join([p for p in sys.path if p] + [os.environ.get("PYTHONPATH", "")]))
+    failed, procs = [], []
     with tempfile.TemporaryDirectory(prefix="dsm-draw-") as tmp:
-        procs = []
-        for i, part in enumerate(shares[1:], 1):
-            f = Path(tmp) / f"jobs{i}.pickle"
-            f.write_bytes(pickle.dumps(part, protocol=pickle.HIGHEST_PROTOCOL))
-            procs.append((part, subprocess.Popen([sys.executable, "-c", WORKER, str(f)], env=env,
-                                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)))
-        _draw(shares[0])                    # this process's share, while the workers draw theirs
-        failed = []
-        for part, p in procs:
-            _, err = p.communicate()
-            if p.returncode:
-                failed.append((part, (err.decode(errors="replace").strip().splitlines()[-1:] or ["no message"])[0]))
+        try:
+            for i, part in enumerate(shares[1:], 1):
+                f = Path(tmp) / f"jobs{i}.pickle"
+                f.write_bytes(pickle.dumps(part, protocol=pickle.HIGHEST_PROTOCOL))
+                procs.append((part, subprocess.Popen([sys.executable, "-c", WORKER, str(f)], env=env,
+                                                     stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)))
+            _draw(shares[0])                # this process's share, while the workers draw theirs
+            for part, p in procs:
+                _, err = p.communicate()
+                if p.returncode:
+                    failed.append((part, (err.decode(errors="replace").strip().splitlines()[-1:] or ["no message"])[0]))
+        finally:
+            for _, p in procs:              # interrupted: no worker outlives this call
+                if p.poll() is None:
+                    p.kill()
+                    p.wait()
     return failed
