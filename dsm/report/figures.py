@@ -332,6 +332,28 @@ def _line(ax, x, y, **kw):
     return ax.add_line(Line2D(x, y, **kw))
 
 
+def _strokes(ax, lines, clip_on: bool):
+    """Polylines ``lines`` = [(vertices, colour, line style, width)] in ``ax`` as LineCollections
+    (no data limits taken), with Line2D's caps: projecting on solid lines, butt on dashed ones
+    (projecting caps would lengthen every dash by a line width and nearly close a dotted line's gaps)."""
+    from matplotlib.collections import LineCollection
+    for cap, group in (("projecting", [ln for ln in lines if ln[2] in ("-", "solid")]),
+                       ("butt", [ln for ln in lines if ln[2] not in ("-", "solid")])):
+        if group:
+            ax.add_collection(LineCollection([ln[0] for ln in group], colors=[ln[1] for ln in group],
+                                             linestyles=[ln[2] for ln in group], linewidths=[ln[3] for ln in group],
+                                             capstyle=cap, joinstyle="round", clip_on=clip_on), autolim=False)
+
+
+def _dots(ax, xy, ms: float, faces, edges, lw: float, zorder: float):
+    """Round markers at data points ``xy`` as one CircleCollection, sized as Line2D's ``markersize``
+    ``ms`` (a diameter in points; the collection takes an area), unclipped, on whole pixels as Line2D's."""
+    from matplotlib.collections import CircleCollection
+    ax.add_collection(CircleCollection([math.pi / 4 * ms ** 2] * len(xy), offsets=xy, offset_transform=ax.transData,
+                                       facecolors=faces, edgecolors=edges, linewidths=lw, clip_on=False,
+                                       zorder=zorder, snap=True), autolim=False)
+
+
 SERIES_MS = 3             # a series' marker diameter, in points (as Line2D's markersize)
 
 
@@ -340,7 +362,6 @@ def _line_series(ax, series, styles, i) -> list:
     Every series' line is one LineCollection and every marker one CircleCollection (drawn over
     the lines): two artists a panel, not a Line2D per series (a Line2D's making and drawing was
     the larger part of these figures' cost); the legend reads ``ax.legend_entries``."""
-    from matplotlib.collections import CircleCollection, LineCollection
     from matplotlib.colors import to_rgba
     xs, lines, dots, entries = [], [], [], []
     for k, (label, pts) in enumerate(series.items()):
@@ -357,22 +378,12 @@ def _line_series(ax, series, styles, i) -> list:
         if len(pts) > 1 and ls not in ("none", "None", ""):
             lines.append(([(p[0], p[1 + i]) for p in pts], color, ls, lw))
         dots += [((p[0], p[1 + i]), color) for p in pts]
-    # Line2D's caps: projecting on a solid line, butt on a dashed one (projecting caps would
-    # lengthen every dash by a line width and nearly close the gaps of a dotted line)
-    for cap, group in (("projecting", [ln for ln in lines if ln[2] in ("-", "solid")]),
-                       ("butt", [ln for ln in lines if ln[2] not in ("-", "solid")])):
-        if group:
-            ax.add_collection(LineCollection([ln[0] for ln in group], colors=[ln[1] for ln in group],
-                                             linestyles=[ln[2] for ln in group], linewidths=[ln[3] for ln in group],
-                                             capstyle=cap, joinstyle="round", clip_on=False), autolim=False)
+    _strokes(ax, lines, clip_on=False)
     if dots:
         # the data limits from the points themselves (the x axis autoscales to them): add_collection
         # would find them by transforming every path through the axes' scales
         ax.update_datalim([d[0] for d in dots])
-        ax.add_collection(CircleCollection([math.pi / 4 * SERIES_MS ** 2] * len(dots), offsets=[d[0] for d in dots],
-                                           offset_transform=ax.transData, facecolors=[d[1] for d in dots],
-                                           edgecolors=[d[1] for d in dots], linewidths=1.0, clip_on=False,
-                                           zorder=2.01, snap=True), autolim=False)
+        _dots(ax, [d[0] for d in dots], SERIES_MS, [d[1] for d in dots], [d[1] for d in dots], 1.0, 2.01)
     ax.legend_entries = entries
     return xs
 
@@ -443,20 +454,14 @@ def _steps_post(x, y) -> np.ndarray:
 
 def _tradeoff_maps(ax, maps):
     """Each map's two curves and its case points in ``ax`` as three collections (solid, dotted,
-    points), with a legend entry per map (its colour, the solid stroke)."""
-    from matplotlib.collections import CircleCollection, LineCollection
+    points), with a legend entry per map (its colour, the solid stroke); _rate_axis sets both limits."""
     from matplotlib.colors import to_rgba
     colours = [to_rgba(CYCLE[k % len(CYCLE)]) for _, k, _, _, _ in maps]
-    for i, (lw, ls, cap) in enumerate(((1.0, "-", "projecting"), (0.8, ":", "butt"))):
-        ax.add_collection(LineCollection([_steps_post(*m[2 + i]) for m in maps], colors=colours, linewidths=lw,
-                                         linestyles=ls, capstyle=cap, joinstyle="round"),
-                          autolim=False)            # _rate_axis sets both limits
+    _strokes(ax, [(_steps_post(*m[2 + i]), c, ls, lw) for i, (lw, ls) in enumerate(((1.0, "-"), (0.8, ":")))
+                  for m, c in zip(maps, colours)], clip_on=True)
     pts = [(p, c) for m, c in zip(maps, colours) for p in m[4]]
     if pts:
-        ax.add_collection(CircleCollection([math.pi / 4 * 3.5 ** 2] * len(pts), offsets=[p for p, _ in pts],
-                                           offset_transform=ax.transData, facecolors=[c for _, c in pts],
-                                           edgecolors="k", linewidths=0.3, clip_on=False, zorder=3, snap=True),
-                          autolim=False)
+        _dots(ax, [p for p, _ in pts], 3.5, [c for _, c in pts], "k", 0.3, 3)
     ax.legend_entries = [(dict(color=c, ls="-", lw=1.0, marker="None", ms=4, face=c, edge=c), m[0])
                          for m, c in zip(maps, colours)]
 
