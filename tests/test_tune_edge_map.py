@@ -157,7 +157,16 @@ def test_edge_map_in_a_tune_run(tmp_path):
     groups, cases, _ = tcase.prepare_cases(tc)
     held = [c for c in cases if c.role == "heldout"]
     rx = neighbour_margins(res.schemes[0]["spec"], held, groups)
-    on = em.lit(rx, bm["model"])
+    from dsm.tune.residual_map import block_keys
+    shared = em.lit(rx, bm["model"])
+    assert bm["heldout_shared"]["n_acne"] == int((~shared & rx["v_star"]).sum())
+    assert bm["heldout_shared"]["n_peterpan"] == int((shared & ~rx["v_star"]).sum())
+    # the per-texel offsets as texel_offsets.npy holds them (texel key, offset), each receiver's read by its texel
+    keys_fit, offsets = np.load(tmp_path / "texel_offsets.npy")
+    assert bm["offsets"]["n_samples"] > 0 and bm["offsets"]["texels"] == keys_fit.size
+    table = dict(zip(keys_fit.astype(np.int64).tolist(), offsets.tolist()))
+    mine = np.array([table.get(int(k), 0.0) for k in block_keys(rx["texel"], rx["group"], rx["resolution"], 1)])
+    on = em.over_threshold(rx, bm["model"]) + mine >= 0
     assert bm["heldout"]["n_acne"] == int((~on & rx["v_star"]).sum())
     assert bm["heldout"]["n_peterpan"] == int((on & ~rx["v_star"]).sum())
     split = bm["heldout_split"]
@@ -173,6 +182,7 @@ def test_edge_map_in_a_tune_run(tmp_path):
     for name, sel in (("covered", cov), ("uncovered", ~cov)):      # the in-sample refit: never above the map
         assert split[name]["refit"] <= split[name]["map"]
     assert "an edge map over constant" in (tmp_path / "table.md").read_text()
+    assert "per-texel offset fitted exactly to" in (tmp_path / "table.md").read_text()
     assert "(in-sample)" in (tmp_path / "table.md").read_text()
     assert json.loads((tmp_path / "tune.json").read_text())["bias_map"]["model"] == pytest.approx(bm["model"])
 
@@ -251,3 +261,76 @@ def test_edge_refit_of_an_empty_subset_is_undefined():
     assert np.isnan(got["uncovered"]["refit"]) and got["uncovered"]["refit_model"] is None
     assert np.isnan(got["uncovered"]["crossfit"]) and np.isnan(got["covered"]["crossfit"])
     assert got["covered"]["refit"] >= 0.0 and got["covered"]["refit_model"]["width"] == 1.0
+
+
+def test_edge_samples_keys():
+    """samples and layers: integers in range, samples 0 turning the offsets off; refused with another fit."""
+    from dsm import ConfigError
+    from dsm.config.read import coerce
+    from dsm.tune import tuner as tu
+    base = {"experiment": {"name": "t"}, "scene": [{"builtin": "plane"}], "scheme": [{"name": "constant"}]}
+    parse = lambda bmap: tu.parse_tune(coerce({**base, "tune": {"camera": CAMS, "bias_map": bmap}})).spec.bias_map
+    assert (parse({"fit": "edge", "samples": 0}).samples, parse({"fit": "edge", "layers": 3}).layers) == (0, 3)
+    for bmap, key in (({"fit": "edge", "samples": -1}, "tune.bias_map.samples"),
+                      ({"fit": "edge", "samples": 17}, "tune.bias_map.samples"),
+                      ({"fit": "edge", "samples": 2.5}, "tune.bias_map.samples"),
+                      ({"fit": "edge", "layers": 0}, "tune.bias_map.layers"),
+                      ({"fit": "residual", "samples": 2}, "tune.bias_map.samples"),
+                      ({"samples": 2}, "tune.bias_map.samples")):
+        with pytest.raises(ConfigError) as e:
+            parse(bmap)
+        assert e.value.key == key
+
+
+def test_texel_offsets_are_each_texels_exact_optimum():
+    """fit_offsets against a brute-force scan per texel in float64: every offset reaches the fewest
+    errors of "lit iff x + r >= 0" over all r, and lies within THRESHOLD_MARGIN of 0 wherever 0 already
+    reaches them (kept that far inside its interval); a texel without samples reads 0."""
+    rng = np.random.default_rng(3)
+    n = 3000
+    keys = rng.integers(0, 60, n) * 7 + 5
+    x = rng.normal(0, 0.6, n)
+    v = rng.random(n) < 1 / (1 + np.exp(-4 * (x + rng.normal(0, 0.3, 60)[keys // 7])))
+    lam = 1.5
+    keys_fit, off = em.fit_offsets(x, v, keys, lam)
+    assert np.array_equal(keys_fit, np.unique(keys))
+    for k, r in zip(keys_fit, off):
+        sel = keys == k
+        err = lambda rr: (v[sel] & (x[sel] + rr < 0)).sum() + lam * (~v[sel] & (x[sel] + rr >= 0)).sum()
+        cuts = np.unique(-x[sel])
+        best = min(err(c) for c in np.r_[cuts - 1.0, cuts, cuts + 1e-9])
+        assert err(r) == best
+        if err(0.0) == best:
+            assert abs(r) <= em.THRESHOLD_MARGIN
+    assert (off != 0).any()
+    got = em.offset_at(keys_fit, off, np.array([keys_fit[3], 4, keys_fit[-1] + 1]))
+    assert list(got) == [off[3], 0.0, 0.0]
+
+
+def test_light_samples_of_the_floating_plate_match_its_shadow():
+    """The floating plate's light samples (2 x 2 rays a texel): on the ground a sample is in shadow
+    exactly where its ray to the light crosses the 1.5 x 1.5 plate at z = 0.2 (projected in float64
+    here, samples within 1e-4 of the shadow's edge skipped), and the plate's samples are lit."""
+    import dsm.pipeline as pl
+    from dsm.config.read import coerce
+    from dsm.tune import cases as tcase, light_samples
+    from dsm.tune import tuner as tu
+    cfg = {"experiment": {"name": "t"}, "camera": {"resolution": [32, 32]}, "scene": [{"builtin": "floating_plate"}],
+           "map": {"resolution": 32}, "scheme": [{"name": "constant", "bias": 0.02}],
+           "tune": {"steps": 8, "camera": CAMS, "bias_map": {"fit": "edge"}}}
+    tc = tu.parse_tune(coerce(cfg))
+    tc.config = pl.prepare(tc.config)
+    groups, _, _ = tcase.prepare_cases(tc)
+    cases = light_samples.sample_cases(groups[0], 0, 2, 4)
+    p = np.concatenate([pl.points_np(c.setup.p) for c in cases])
+    v = np.concatenate([c.v_star for c in cases])
+    assert p.shape[0] == v.size > 1000 and all(c.role == "light" for c in cases)
+    d = np.array([0.2, 0.1, -1.0]) / np.linalg.norm([0.2, 0.1, -1.0])
+    ground, plate = np.abs(p[:, 2]) < 1e-4, np.abs(p[:, 2] - 0.2) < 1e-4
+    assert (ground | plate).all()
+    q = p[ground, :2] - (0.2 / -d[2]) * d[:2]           # along -d up to the plate's height
+    inside = (np.abs(q) < 0.75).all(1)
+    clear = np.min(np.abs(np.abs(q) - 0.75), axis=1) > 1e-4
+    assert np.array_equal(v[ground][clear], ~inside[clear])
+    assert v[plate].all()
+    assert (~v[ground][clear]).sum() >= 50           # the comparison above is not vacuous: the shadow is sampled

@@ -14,9 +14,11 @@ TUNE_KEYS = ("lambda", "steps", "lr", "temperature", "schedule", "seed", "batch"
 CAMERA_KEYS = ("name", "position", "target", "up", "fov", "role")
 ROLES = ("train", "heldout")
 SCHEDULES = ("geometric", "linear")
-MAP_KEYS = ("block", "unit", "init", "steps", "lr", "fit", "radius", "min_gain", "margin", "width", "clip", "grazing")
+MAP_KEYS = ("block", "unit", "init", "steps", "lr", "fit", "radius", "min_gain", "margin", "width", "clip", "grazing",
+            "samples", "layers")
 MAP_FITS = ("adam", "residual", "edge")
-EDGE_KEYS = ("width", "clip", "grazing")
+EDGE_KEYS = ("width", "clip", "grazing", "samples", "layers")
+MAX_SAMPLES = 16                  # light rays a texel side: 16^2 rays a texel already costs 256 maps' casts
 EDGE_WIDTH_TEXELS = (0.5, 1.5)    # the edge map's tent half-widths: wider than 1.5 reaches beyond its 3 x 3 taps
 MAP_UNITS = ("world", "texel")
 
@@ -62,6 +64,8 @@ class BiasMapSpec:
     widths: tuple = (1.0, 1.125, 1.25, 1.375, 1.5)     # edge: tent half-widths (texels), see dsm.tune.edge_map
     clips: tuple = (0.5, 1.0, 2.0, 4.0, 8.0)           # edge: margins (texels) a vote saturates at
     grazings: tuple = (0.0, 0.125, 0.25, 0.375, 0.5, 0.75, 1.0)   # edge: the threshold's rise per (1 - cos)
+    samples: int = 4                  # edge: light rays a texel side for its per-texel offsets (0: shared threshold only)
+    layers: int = 8                   # edge: surfaces followed along each light ray
 
 
 @dataclass(frozen=True)
@@ -260,7 +264,11 @@ def _bias_map(b, src: str, steps: int, lr: float, cams: tuple) -> BiasMapSpec:
                        number(b.get("lr", lr), src, "tune.bias_map.lr", positive=True), fit, blocks,
                        ints("radius", BiasMapSpec.radii, 0), ints("min_gain", BiasMapSpec.gains, 1),
                        number(b.get("margin", BiasMapSpec.margin), src, "tune.bias_map.margin", minimum=0),
-                       *_edge_candidates(b, src))
+                       *_edge_candidates(b, src),
+                       number(b.get("samples", BiasMapSpec.samples), src, "tune.bias_map.samples", integer=True,
+                              minimum=0, maximum=MAX_SAMPLES),
+                       number(b.get("layers", BiasMapSpec.layers), src, "tune.bias_map.layers", integer=True,
+                              minimum=1, maximum=64))
     if fit == "residual" and sum(c.role == "train" for c in cams) < 2:
         raise ConfigError(src, "tune.camera", "a residual map chooses its block size by leaving one training "
                           "camera out: give at least two [[tune.camera]] with role = \"train\"", ROLES)

@@ -209,27 +209,71 @@ def neighbour_margins(spec: SchemeSpec, cases, groups) -> dict:
 
 def edge_bias_map(tc, train, held, groups, base) -> dict:
     """The edge map over the best global scheme (``base``, a result entry): its shape parameters
-    and threshold fitted exactly to the training receivers (dsm.tune.edge_map); its counts on the
-    training and held-out views, held-out receivers counted as covered where their ``block``
-    block saw training receivers (the other fits' split, so the three compare)."""
+    and threshold fitted exactly to the training receivers (dsm.tune.edge_map), then per texel an
+    offset fitted to the light's own samples (``samples`` > 0); its counts on the training and
+    held-out views with and without the offsets, held-out receivers counted as covered where their
+    ``block`` block saw training receivers (the other fits' split, so the three compare)."""
     from . import edge_map as em
     from . import residual_map as rm
     bm, lam = tc.spec.bias_map, tc.spec.lam
     t0 = sync_clock()
     rx_tr, rx_he = neighbour_margins(base["spec"], train, groups), neighbour_margins(base["spec"], held, groups)
     model = em.fit(rx_tr, bm.widths, bm.clips, bm.grazings, lam)
-    lit_tr, lit_he = em.lit(rx_tr, model), em.lit(rx_he, model)
+    x_tr, x_he = em.over_threshold(rx_tr, model), em.over_threshold(rx_he, model)
+    offsets = light_offsets(tc, groups, base, model) if bm.samples else None
+    texel = lambda rx: rm.block_keys(rx["texel"], rx["group"], rx["resolution"], 1)
+    shift = (lambda rx: em.offset_at(offsets["keys"], offsets["offsets"], texel(rx))) if offsets and \
+        offsets["keys"].size else (lambda rx: np.zeros(rx["v_star"].size))
+    lit_tr, lit_he = x_tr + shift(rx_tr) >= 0, x_he + shift(rx_he) >= 0
     keys = lambda rx: rm.block_keys(rx["texel"], rx["group"], rx["resolution"], bm.block)
     covered = np.isin(keys(rx_he), keys(rx_tr))
     counted = lambda on, v: counts(int((~on & v).sum()), int((on & ~v).sum()), int(v.size), int(v.sum()))
     params = {k: model[k] for k in ("width", "clip", "grazing", "threshold")}
     fitted = _heldout_fields(lit_he, covered, held, t0)      # its time before the refits
+    split = np.cumsum([c.n for c in held])[:-1]
     return {"fit": "edge", "base": f"{base['scheme']} {base['params']}", "block": bm.block, "model": params,
             "refits": edge_refits(rx_he, covered, bm, lam),
             "candidates": model["scores"], "unit": "score",
             "values": np.array([params[k] for k in ("width", "clip", "grazing", "threshold")]),
             "blocks": 0, "blocks_trained": 0, "steps": [],
-            "train": counted(lit_tr, rx_tr["v_star"]), "heldout": counted(lit_he, rx_he["v_star"]), **fitted}
+            "offsets": None if offsets is None else {k: v for k, v in offsets.items() if k not in ("keys", "offsets")},
+            "texel_offsets": None if not offsets else np.stack([offsets["keys"].astype(np.float64), offsets["offsets"]]),
+            "train": counted(lit_tr, rx_tr["v_star"]), "heldout": counted(lit_he, rx_he["v_star"]),
+            "train_shared": counted(x_tr >= 0, rx_tr["v_star"]), "heldout_shared": counted(x_he >= 0, rx_he["v_star"]),
+            "heldout_lit_shared": np.split(x_he >= 0, split), **fitted}
+
+
+def light_offsets(tc, groups, base, model) -> dict:
+    """The edge map's per-texel offsets fitted to every group's light samples (dsm.tune.light_samples;
+    an area light's group has none: its V* is Monte Carlo, a sample's verdict uncertain): sorted texel
+    keys (residual_map.block_keys, block 1), offsets, and what was sampled, with a note where none could be."""
+    from . import edge_map as em
+    from . import light_samples
+    from . import residual_map as rm
+    from .. import lights
+    bm = tc.spec.bias_map
+    t0 = sync_clock()
+    xs, vs, ks, notes = [], [], [], []
+    for g, grp in enumerate(groups):
+        if lights.is_soft(grp.light_spec):
+            notes.append(f"{grp.scene} / {grp.light}: an area light, no light samples (the shared threshold only)")
+            continue
+        for c in light_samples.sample_cases(grp, g, bm.samples, bm.layers):
+            try:
+                rx = neighbour_margins(base["spec"], [c], groups)
+            except ValueError as e:          # a scheme that reads the camera seeing the receivers: light samples have none
+                return {"keys": np.zeros(0, np.int64), "offsets": np.zeros(0), "note": str(e), "samples": bm.samples,
+                        "layers": bm.layers, "n_samples": 0, "n_shadowed": 0, "texels": 0, "texels_moved": 0,
+                        "ms": (sync_clock() - t0) * 1e3}
+            xs.append(em.over_threshold(rx, model))
+            vs.append(rx["v_star"])
+            ks.append(rm.block_keys(rx["texel"], rx["group"], rx["resolution"], 1))
+    cat = lambda a, t: np.concatenate(a) if a else np.zeros(0, t)
+    x, v, k = cat(xs, np.float64), cat(vs, bool), cat(ks, np.int64)
+    keys, off = em.fit_offsets(x, v, k, tc.spec.lam) if x.size else (np.zeros(0, np.int64), np.zeros(0))
+    return {"keys": keys, "offsets": off, "note": "; ".join(notes), "samples": bm.samples, "layers": bm.layers,
+            "n_samples": int(x.size), "n_shadowed": int((~v).sum()), "texels": int(keys.size),
+            "texels_moved": int((off != 0).sum()), "ms": (sync_clock() - t0) * 1e3}
 
 
 REFIT_KEYS = ("width", "clip", "grazing", "threshold")
@@ -306,13 +350,15 @@ def _heldout_fields(lit_he, covered, held, t0) -> dict:
             "init": [], "total_ms": (sync_clock() - t0) * 1e3}
 
 
-def heldout_split(held, groups, lit_map, covered, best_spec, lam, refits=None) -> dict:
+def heldout_split(held, groups, lit_map, covered, best_spec, lam, refits=None, lit_shared=None) -> dict:
     """The learned map against the best global scheme and the per-texel oracle over the held-out
     receivers whose block saw training receivers (``covered``) and over the rest, with the share
     of the gap to the oracle the map closes: (global - map) / (global - oracle); with an edge map's
-    ``refits`` (edge_refits), the shares its family refitted to those receivers closes beside it."""
+    ``refits`` (edge_refits), the shares its family refitted to those receivers closes beside it, and with
+    ``lit_shared`` (its verdicts without per-texel offsets) that map's."""
     v = np.concatenate([c.v_star for c in held])
     lit_map, covered = np.concatenate(lit_map), np.concatenate(covered).astype(bool)
+    lit_shared = None if lit_shared is None else np.concatenate(lit_shared)
     culling = pl.culling_of(best_spec.params)
     lit_best = np.concatenate([pl.visibility(best_spec, c.rx, groups[c.group].maps[culling])[0].numpy() >= 0.5
                                for c in held])
@@ -328,6 +374,8 @@ def heldout_split(held, groups, lit_map, covered, best_spec, lam, refits=None) -
         out[name] = {"n_receivers": n, "map": m, "best_global": g, "per_texel_oracle": orc,
                      "receivers_per_texel": n / np.unique(th.texel[sel]).size if n else NAN,
                      "gap_closed": closed(m)}
+        if lit_shared is not None:
+            out[name].update(shared_map=obj(lit_shared), shared_gap_closed=closed(obj(lit_shared)))
         if refits is not None:
             r = refits[name]
             out[name].update(refit=r["refit"], refit_gap_closed=closed(r["refit"]), refit_model=r["refit_model"],

@@ -42,6 +42,8 @@ class Group:
     maps: dict                 # culling -> stored map
     n_texels: int
     diagonal: float
+    scene_data: object = None  # SceneData (dsm.scenes.data): what light samples are traced in
+    light_spec: object = None  # LightSpec: the light that labels them
 
 
 def _cameras(tc, sd):
@@ -89,7 +91,7 @@ def prepare_cases(tc, progress=None):
             maps = {c: pl.store(pl.build_map(sd.scene, view, sorted(nd), c, closed, extents=extents), fmt)
                     for c, nd in needs.items()}
             g = len(groups)
-            groups.append(Group(sd.label, label, view, maps, view.n_texels, sd.diagonal))
+            groups.append(Group(sd.label, label, view, maps, view.n_texels, sd.diagonal, sd, light))
             for name, role, s in setups:
                 if s.p is not None:
                     s = s.subset(view.inside(s.p).numpy().astype(bool))

@@ -25,6 +25,14 @@ oracle's sweep, dsm.tune.residual_map.fit_blocks with one block), the optimum ne
 ``THRESHOLD_MARGIN`` inside its interval; the candidate with the fewest training errors wins
 (ties: less grazing, width nearer 1, larger clip). Three shape parameters and one threshold over
 every training receiver: nothing is per texel, so nothing is left to memorise a view.
+
+**Per-texel offsets** (``samples`` > 0). The shared threshold places an edge inside a texel where
+the tent's interpolation of the taps puts it; the light's own rays through the texel
+(dsm.tune.light_samples, ``samples`` x ``samples`` a texel, every surface they meet) say where it
+passes. Per texel an offset ``r`` is fitted exactly to those samples (lit where ``score - needed +
+r >= 0``; the same sort per texel, the optimum nearest 0, so near 0 wherever the shared threshold
+is already best): one number per texel, fitted to the scene and light rather than to a view, so it
+carries to views no training camera saw.
 """
 from __future__ import annotations
 
@@ -94,3 +102,27 @@ def fit(rx: dict, widths, clips, grazings, lam: float, tents: dict | None = None
                            "errors": e})
     best = min(scores, key=lambda c: (c["errors"], c["grazing"], abs(c["width"] - 1.0), -c["clip"]))
     return {**best, "scores": scores}
+
+
+# ---------------------------------------------------------------- per-texel offsets (light samples)
+
+def over_threshold(rx: dict, model: dict) -> np.ndarray:
+    """Each receiver's score less what it needs under ``model``: lit where at least 0 (before offsets)."""
+    s = tent_score(rx["m9"], rx["fx"], rx["fy"], rx["unit"], model["width"], model["clip"])
+    return needed(s, rx["cos"], model["grazing"]) - model["threshold"]
+
+
+def fit_offsets(x, v_star, keys, lam: float) -> dict:
+    """Per texel (``keys``, one per receiver) the offset ``r`` minimising its receivers' acne + lambda
+    peter-panning of "lit iff x + r >= 0" exactly (the optimum nearest 0, ``THRESHOLD_MARGIN`` inside its
+    interval: within that of 0 wherever 0 is optimal): (sorted keys, offsets)."""
+    x = np.asarray(x, np.float64)
+    fit = fit_blocks(x, v_star, np.ones_like(x), np.asarray(keys, np.int64), lam, THRESHOLD_MARGIN)
+    return fit["keys"], fit["rho"]
+
+
+def offset_at(keys_fit, offsets, keys) -> np.ndarray:
+    """The offset of each receiver's texel (``keys``), 0 for a texel no light sample fell in."""
+    i = np.clip(np.searchsorted(keys_fit, keys), 0, max(len(keys_fit) - 1, 0))
+    hit = keys_fit[i] == keys if len(keys_fit) else np.zeros(len(keys), bool)
+    return np.where(hit, offsets[i] if len(keys_fit) else 0.0, 0.0)

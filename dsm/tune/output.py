@@ -143,14 +143,29 @@ def _bias_map_head(b: dict) -> str:
         m = b["model"]
         return (f"an edge map over {b['base']}: lit where the tent (half-width {m['width']:g} texel) mean of the "
                 f"3 x 3 taps' margins clipped at {m['clip']:g} texel is at least {m['threshold']:.4g} + "
-                f"{m['grazing']:g} (1 - cos), fitted exactly to the training receivers ({len(b['candidates'])} "
-                f"candidates); {_fmt(b['heldout_covered_fraction'])} of held-out receivers fall in "
-                f"{b['block']} x {b['block']} blocks with training receivers")
+                f"{m['grazing']:g} (1 - cos){_offsets_clause(b)}, fitted exactly to the training receivers "
+                f"({len(b['candidates'])} candidates); {_fmt(b['heldout_covered_fraction'])} of held-out receivers "
+                f"fall in {b['block']} x {b['block']} blocks with training receivers")
     else:
         return (f"{b['blocks']} blocks of {b['block']} x {b['block']} texels ({b['blocks_trained']} with training "
                 f"receivers; {_fmt(b['heldout_covered_fraction'])} of held-out receivers fall in them), unit "
                 f"{b['unit']}, started from {b['init_from']} (per map: "
                 f"{', '.join(f'{x:.4g}' for x in b['init'])})")
+
+
+def _offsets_clause(b: dict) -> str:
+    """table.md's words on an edge map's per-texel offsets (light samples), with the training cameras' check."""
+    o = b.get("offsets")
+    if not o:
+        return " (no per-texel offsets: samples = 0)"
+    if not o["n_samples"]:
+        return f" (no per-texel offsets: {o['note'] or 'no light sample fell in the maps'})"
+    tr, sh = b["train"], b["train_shared"]
+    return (f" minus a per-texel offset fitted exactly to {o['n_samples']} light samples ({o['samples']} x "
+            f"{o['samples']} rays a texel, up to {o['layers']} surfaces each; {o['n_shadowed']} in shadow; "
+            f"{o['texels_moved']} of {o['texels']} texels moved; {o['ms'] / 1e3:.1f} s), which no camera sees: "
+            f"on the training cameras {tr['n_acne'] + tr['n_peterpan']} errors with the offsets, "
+            f"{sh['n_acne'] + sh['n_peterpan']} without{'; ' + o['note'] if o['note'] else ''})")
 
 
 def table_text(res: TuneResult) -> str:
@@ -230,19 +245,27 @@ def _bias_map_section(b: dict) -> list:
 def _split_table(split: dict) -> list:
     """table.md's held-out split by trained blocks, with the edge map's refits where it has them."""
     refit = all("refit" in r for r in split.values())
+    shared = all("shared_map" in r for r in split.values())
     extra = ((" family refitted to them (in-sample) | its gap closed | cross-fitted by halves | its gap closed |",
               " --- | --- | --- | --- |") if refit else ("", ""))
+    mid = (" shared threshold (no offsets) | its gap closed |", " --- | --- |") if shared else ("", "")
     out = ["", "| held-out receivers | n | per texel | learned map | best tuned global | per-texel oracle "
-           "| gap closed |" + extra[0], "| --- | --- | --- | --- | --- | --- | --- |" + extra[1]]
+           "| gap closed |" + mid[0] + extra[0], "| --- | --- | --- | --- | --- | --- | --- |" + mid[1] + extra[1]]
     for name, r in split.items():
         row = (f"| in {'trained' if name == 'covered' else 'untrained'} blocks | {r['n_receivers']} "
                f"| {_fmt2(r.get('receivers_per_texel', math.nan))} | {_fmt(r['map'])} | {_fmt(r['best_global'])} "
                f"| {_fmt(r['per_texel_oracle'])} | {_fmt(r['gap_closed'])} |")
+        row += f" {_fmt(r['shared_map'])} | {_fmt(r['shared_gap_closed'])} |" if shared else ""
         out.append(row + (f" {_fmt(r['refit'])} | {_fmt(r['refit_gap_closed'])} | {_fmt(r['crossfit'])} "
                           f"| {_fmt(r['crossfit_gap_closed'])} |" if refit else ""))
     out += ["", "*per texel*: receivers per map texel they fall in. The per-texel oracle gives each texel "
             "its best bias for those very receivers, so with about one receiver a texel it classifies nearly "
             "every receiver right and the gap is widest; the gap closed depends on it."]
+    if shared:
+        out += ["", "*trained blocks* are the training cameras'; the per-texel offsets are fitted to light samples, "
+                "which reach every texel the light sees. The oracle is the best constant bias a texel, and an offset "
+                "moves a threshold on a score that varies inside the texel, so the map may pass the oracle "
+                "(a gap closed above 1)."]
     if refit:
         out += ["", "*in-sample*: the edge map's candidates, each with its exact threshold, fitted and counted on "
                 "those very held-out receivers: the fewest errors any one map of the family makes there, an "
@@ -273,9 +296,11 @@ def write(res: TuneResult, out: Path, orc_train=None, orc_held=None):
            "comparison": res.comparison, "oracle_train": orc_train, "oracle_heldout": orc_held,
            "moments": res.moments,
            "bias_map": None if res.bias_map is None else
-           {k: v for k, v in res.bias_map.items() if k not in ("steps", "values")}}
+           {k: v for k, v in res.bias_map.items() if k not in ("steps", "values", "texel_offsets")}}
     if res.bias_map is not None:
         np.save(out / "bias_map.npy", res.bias_map["values"])
+        if res.bias_map.get("texel_offsets") is not None:      # rows: texel key (residual_map.block_keys), offset
+            np.save(out / "texel_offsets.npy", res.bias_map["texel_offsets"])
     (out / "tune.json").write_text(json.dumps(_no_nan(doc), indent=1, default=_json_default))
     plot(res, out / "plots")
 

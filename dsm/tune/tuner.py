@@ -339,8 +339,12 @@ def _learned_map(tc, train, held, groups, results, orc_train, orc_held, tick) ->
     bmap["train"] = _with_obj(bmap["train"], ts.lam)
     bmap["heldout"] = _with_obj(bmap["heldout"], ts.lam)
     lit, covered = bmap.pop("heldout_lit"), bmap.pop("heldout_covered")
+    if "train_shared" in bmap:
+        bmap["train_shared"] = _with_obj(bmap["train_shared"], ts.lam)
+        bmap["heldout_shared"] = _with_obj(bmap["heldout_shared"], ts.lam)
     if best is not None:
-        bmap["heldout_split"] = heldout_split(held, groups, lit, covered, best["spec"], ts.lam, bmap.pop("refits", None))
+        bmap["heldout_split"] = heldout_split(held, groups, lit, covered, best["spec"], ts.lam, bmap.pop("refits", None),
+                                              bmap.pop("heldout_lit_shared", None))
     bmap["per_texel_oracle_heldout"] = orc_held["per_texel_objective"]
     bmap["per_texel_oracle_train"] = orc_train["per_texel_objective"]
     bmap["best_global"] = ({"scheme": best["scheme"], "params": best["params"],
