@@ -244,25 +244,22 @@ def edge_bias_map(tc, train, held, groups, base) -> dict:
 
 
 def light_offsets(tc, groups, base, model) -> dict:
-    """The edge map's per-texel offsets fitted to every group's light samples (dsm.tune.light_samples;
-    an area light's group has none: its V* is Monte Carlo, a sample's verdict uncertain): sorted texel
-    keys (residual_map.block_keys, block 1), offsets, and what was sampled, with a note where none could be."""
+    """The edge map's per-texel offsets fitted to every group's light samples (dsm.tune.light_samples; dsm
+    tune's lights are hard, so a sample's V* is one exact ray): sorted texel keys (residual_map.block_keys,
+    block 1), offsets, and what was sampled, with a note where nothing could be."""
     from . import edge_map as em
     from . import light_samples
     from . import residual_map as rm
-    from .. import lights
     bm = tc.spec.bias_map
     t0 = sync_clock()
-    xs, vs, ks, notes = [], [], [], []
+    xs, vs, ks = [], [], []
     for g, grp in enumerate(groups):
-        if lights.is_soft(grp.light_spec):
-            notes.append(f"{grp.scene} / {grp.light}: an area light, no light samples (the shared threshold only)")
-            continue
         for c in light_samples.sample_cases(grp, g, bm.samples, bm.layers):
             try:
                 rx = neighbour_margins(base["spec"], [c], groups)
             except ValueError as e:          # a scheme that reads the camera seeing the receivers: light samples have none
-                return {"keys": np.zeros(0, np.int64), "offsets": np.zeros(0), "note": str(e), "samples": bm.samples,
+                note = f"the base scheme reads the camera that sees each receiver, and light samples have none ({e})"
+                return {"keys": np.zeros(0, np.int64), "offsets": np.zeros(0), "note": note, "samples": bm.samples,
                         "layers": bm.layers, "n_samples": 0, "n_shadowed": 0, "texels": 0, "texels_moved": 0,
                         "ms": (sync_clock() - t0) * 1e3}
             xs.append(em.over_threshold(rx, model))
@@ -271,7 +268,7 @@ def light_offsets(tc, groups, base, model) -> dict:
     cat = lambda a, t: np.concatenate(a) if a else np.zeros(0, t)
     x, v, k = cat(xs, np.float64), cat(vs, bool), cat(ks, np.int64)
     keys, off = em.fit_offsets(x, v, k, tc.spec.lam) if x.size else (np.zeros(0, np.int64), np.zeros(0))
-    return {"keys": keys, "offsets": off, "note": "; ".join(notes), "samples": bm.samples, "layers": bm.layers,
+    return {"keys": keys, "offsets": off, "note": "", "samples": bm.samples, "layers": bm.layers,
             "n_samples": int(x.size), "n_shadowed": int((~v).sum()), "texels": int(keys.size),
             "texels_moved": int((off != 0).sum()), "ms": (sync_clock() - t0) * 1e3}
 

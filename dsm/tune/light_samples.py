@@ -89,7 +89,7 @@ def layer_gbuffers(group, samples: int, layers: int) -> list:
 
 def sample_cases(group, g: int, samples: int, layers: int) -> list:
     """The light samples of group ``g`` as tune cases (role ``light``, one per layer), each receiver's
-    V* the kit's exact visibility; none for an area light (its V* is Monte Carlo: see edge_map)."""
+    V* the kit's exact visibility (dsm tune's lights are hard)."""
     sd, light = group.scene_data, group.light_spec
     smap = group.maps["none"]
     out = []
