@@ -321,7 +321,7 @@ def test_light_samples_of_the_floating_plate_match_its_shadow():
     tc = tu.parse_tune(coerce(cfg))
     tc.config = pl.prepare(tc.config)
     groups, _, _ = tcase.prepare_cases(tc)
-    cases = light_samples.sample_cases(groups[0], 0, 2, 4)
+    cases = list(light_samples.sample_cases(groups[0], 0, 2, 4))
     p = np.concatenate([pl.points_np(c.setup.p) for c in cases])
     v = np.concatenate([c.v_star for c in cases])
     assert p.shape[0] == v.size > 1000 and all(c.role == "light" for c in cases)

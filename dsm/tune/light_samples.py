@@ -58,14 +58,13 @@ def _seen_hits(scene, ray, table):
     return hit & front, shape, si, hit
 
 
-def layer_gbuffers(group, samples: int, layers: int) -> list:
+def layer_gbuffers(group, samples: int, layers: int):
     """Per layer (the k-th surface along each light ray) a G-buffer of its hits whose face is toward
-    the light; positions in world."""
+    the light, positions in world; yielded one at a time, so a layer's arrays go once used."""
     sd = group.scene_data
     scene = sd.exact
     table = spawn.shape_table(scene)
     ray = light_rays(group, samples)
-    out = []
     for _ in range(layers):
         keep, shape, si, hit = _seen_hits(scene, ray, table)
         idx = np.flatnonzero(keep).astype(np.uint32)
@@ -78,21 +77,19 @@ def layer_gbuffers(group, samples: int, layers: int) -> list:
             n = mi.Vector3f(si_k.n)
             p = si_k.p if sd.centre is None else exact_frame.to_world(si_k.p, sd.centre)
             dr.eval(si_k, n, p)
-            out.append(GBuffer(len(idx), 1, si_k, mi.Point3f(p), n, n, mi.UInt32(shape[idx].astype(np.uint32)),
-                               np.ones(len(idx), bool)))
+            yield GBuffer(len(idx), 1, si_k, mi.Point3f(p), n, n, mi.UInt32(shape[idx].astype(np.uint32)),
+                          np.ones(len(idx), bool))
         if not hit.any():
             break
         ray = si.spawn_ray(ray.d)
         ray.maxt = dr.select(mi.Bool(hit), ray.maxt, 0.0)     # a ray that left the scene stays out
-    return out
 
 
-def sample_cases(group, g: int, samples: int, layers: int) -> list:
-    """The light samples of group ``g`` as tune cases (role ``light``, one per layer), each receiver's
-    V* the kit's exact visibility (dsm tune's lights are hard)."""
+def sample_cases(group, g: int, samples: int, layers: int):
+    """The light samples of group ``g`` as tune cases (role ``light``, one per layer, yielded one at a
+    time), each receiver's V* the kit's exact visibility (dsm tune's lights are hard)."""
     sd, light = group.scene_data, group.light_spec
     smap = group.maps["none"]
-    out = []
     for k, gb in enumerate(layer_gbuffers(group, samples, layers)):
         s = pl.light_setup(sd, gb, light, group.light)
         if s.p is not None:
@@ -101,6 +98,5 @@ def sample_cases(group, g: int, samples: int, layers: int) -> list:
             continue
         rx = pl.receivers(smap.view, s, sd.diagonal)
         dr.eval(rx.depth, rx.u_map, rx.v_map, rx.face, rx.texel_world, rx.to_light)
-        out.append(Case(group.scene, group.light, f"light layer {k}", ROLE, g, s, rx, s.v_star.copy(),
-                        mi.Bool(s.v_star), pl.thresholds(rx, smap)))
-    return out
+        yield Case(group.scene, group.light, f"light layer {k}", ROLE, g, s, rx, s.v_star.copy(),
+                   mi.Bool(s.v_star), pl.thresholds(rx, smap))
