@@ -334,3 +334,18 @@ def test_light_samples_of_the_floating_plate_match_its_shadow():
     assert np.array_equal(v[ground][clear], ~inside[clear])
     assert v[plate].all()
     assert (~v[ground][clear]).sum() >= 50           # the comparison above is not vacuous: the shadow is sampled
+
+
+def test_a_base_scheme_that_reads_the_camera_gets_no_offsets(tmp_path):
+    """distance_normal scales its offset by the distance to the camera that sees each receiver; light
+    samples have no camera, so the edge map over it keeps its shared threshold: its verdicts with and
+    without offsets are the same, and table.md says why."""
+    from dsm.tune import tuner as tu
+    cfg = {"experiment": {"name": "t"}, "camera": {"resolution": [32, 32]}, "scene": [{"builtin": "floating_plate"}],
+           "map": {"resolution": 32}, "scheme": [{"name": "distance_normal"}],
+           "tune": {"steps": 8, "camera": CAMS, "bias_map": {"fit": "edge", "width": [1.0], "clip": [1.0],
+                                                              "grazing": [0.0]}}}
+    bm = tu.tune(cfg, out=tmp_path).bias_map
+    assert bm["offsets"]["n_samples"] == 0 and bm["offsets"]["texels"] == 0
+    assert bm["heldout"] == bm["heldout_shared"] and bm["train"] == bm["train_shared"]
+    assert "light samples have none" in (tmp_path / "table.md").read_text()

@@ -221,15 +221,14 @@ def edge_bias_map(tc, train, held, groups, base) -> dict:
     model = em.fit(rx_tr, bm.widths, bm.clips, bm.grazings, lam)
     x_tr, x_he = em.over_threshold(rx_tr, model), em.over_threshold(rx_he, model)
     offsets = light_offsets(tc, groups, base, model) if bm.samples else None
-    texel = lambda rx: rm.block_keys(rx["texel"], rx["group"], rx["resolution"], 1)
-    shift = (lambda rx: em.offset_at(offsets["keys"], offsets["offsets"], texel(rx))) if offsets and \
-        offsets["keys"].size else (lambda rx: np.zeros(rx["v_star"].size))
+    fitted_keys, fitted = (offsets["keys"], offsets["offsets"]) if offsets else (np.zeros(0, np.int64), np.zeros(0))
+    shift = lambda rx: em.offset_at(fitted_keys, fitted, rm.block_keys(rx["texel"], rx["group"], rx["resolution"], 1))
     lit_tr, lit_he = x_tr + shift(rx_tr) >= 0, x_he + shift(rx_he) >= 0
     keys = lambda rx: rm.block_keys(rx["texel"], rx["group"], rx["resolution"], bm.block)
     covered = np.isin(keys(rx_he), keys(rx_tr))
     counted = lambda on, v: counts(int((~on & v).sum()), int((on & ~v).sum()), int(v.size), int(v.sum()))
     params = {k: model[k] for k in ("width", "clip", "grazing", "threshold")}
-    fitted = _heldout_fields(lit_he, covered, held, t0)      # its time before the refits
+    judged = _heldout_fields(lit_he, covered, held, t0)      # its time before the refits
     split = np.cumsum([c.n for c in held])[:-1]
     return {"fit": "edge", "base": f"{base['scheme']} {base['params']}", "block": bm.block, "model": params,
             "refits": edge_refits(rx_he, covered, bm, lam),
@@ -240,7 +239,7 @@ def edge_bias_map(tc, train, held, groups, base) -> dict:
             "texel_offsets": None if not offsets else np.stack([offsets["keys"].astype(np.float64), offsets["offsets"]]),
             "train": counted(lit_tr, rx_tr["v_star"]), "heldout": counted(lit_he, rx_he["v_star"]),
             "train_shared": counted(x_tr >= 0, rx_tr["v_star"]), "heldout_shared": counted(x_he >= 0, rx_he["v_star"]),
-            "heldout_lit_shared": np.split(x_he >= 0, split), **fitted}
+            "heldout_lit_shared": np.split(x_he >= 0, split), **judged}
 
 
 def light_offsets(tc, groups, base, model) -> dict:
@@ -258,17 +257,22 @@ def light_offsets(tc, groups, base, model) -> dict:
             try:
                 rx = neighbour_margins(base["spec"], [c], groups)
             except ValueError as e:          # a scheme that reads the camera seeing the receivers: light samples have none
-                note = f"the base scheme reads the camera that sees each receiver, and light samples have none ({e})"
-                return {"keys": np.zeros(0, np.int64), "offsets": np.zeros(0), "note": note, "samples": bm.samples,
-                        "layers": bm.layers, "n_samples": 0, "n_shadowed": 0, "texels": 0, "texels_moved": 0,
-                        "ms": (sync_clock() - t0) * 1e3}
+                return _offsets_record(bm, np.zeros(0), np.zeros(0, bool), np.zeros(0, np.int64), t0, tc.spec.lam,
+                                       f"the base scheme reads the camera that sees each receiver, and light samples "
+                                       f"have none ({e})")
             xs.append(em.over_threshold(rx, model))
             vs.append(rx["v_star"])
             ks.append(rm.block_keys(rx["texel"], rx["group"], rx["resolution"], 1))
     cat = lambda a, t: np.concatenate(a) if a else np.zeros(0, t)
-    x, v, k = cat(xs, np.float64), cat(vs, bool), cat(ks, np.int64)
-    keys, off = em.fit_offsets(x, v, k, tc.spec.lam) if x.size else (np.zeros(0, np.int64), np.zeros(0))
-    return {"keys": keys, "offsets": off, "note": "", "samples": bm.samples, "layers": bm.layers,
+    return _offsets_record(bm, cat(xs, np.float64), cat(vs, bool), cat(ks, np.int64), t0, tc.spec.lam, "")
+
+
+def _offsets_record(bm, x, v, k, t0, lam: float, note: str) -> dict:
+    """The offsets fitted to light samples (``x`` over the threshold, ``v`` V*, ``k`` texel keys; none: no
+    offset anywhere) and what was sampled, timed since ``t0``."""
+    from . import edge_map as em
+    keys, off = em.fit_offsets(x, v, k, lam) if x.size else (np.zeros(0, np.int64), np.zeros(0))
+    return {"keys": keys, "offsets": off, "note": note, "samples": bm.samples, "layers": bm.layers,
             "n_samples": int(x.size), "n_shadowed": int((~v).sum()), "texels": int(keys.size),
             "texels_moved": int((off != 0).sum()), "ms": (sync_clock() - t0) * 1e3}
 
