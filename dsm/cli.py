@@ -608,7 +608,7 @@ def _tune_held(tc, out: Path, force: bool = False, resume: bool = False) -> int:
     if resuming:
         print(f"dsm: resumed: {res.resumed} finished schemes kept, {len(res.schemes) - res.resumed} tuned",
               file=sys.stderr)
-    print(f"dsm: {'wrote' if res.resumed else 'tuned'} {len(res.schemes)} schemes" + (f" and {len(res.moments)} pre-filtered instances" if res.moments else "") + f" in {time.perf_counter() - t0:.1f} s -> {out}/ (tuned.toml, "
+    print(f"dsm: {'wrote' if res.resumed else 'tuned'} {len(res.schemes)} scheme{'s' * (len(res.schemes) != 1)}" + (f" and {len(res.moments)} pre-filtered instance{'s' * (len(res.moments) != 1)}" if res.moments else "") + f" in {time.perf_counter() - t0:.1f} s -> {out}/ (tuned.toml, "
           "table.md, steps.csv, tune.json, plots/)")
     return 0
 

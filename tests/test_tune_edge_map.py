@@ -348,4 +348,39 @@ def test_a_base_scheme_that_reads_the_camera_gets_no_offsets(tmp_path):
     bm = tu.tune(cfg, out=tmp_path).bias_map
     assert bm["offsets"]["n_samples"] == 0 and bm["offsets"]["texels"] == 0
     assert bm["heldout"] == bm["heldout_shared"] and bm["train"] == bm["train_shared"]
-    assert "light samples have none" in (tmp_path / "table.md").read_text()
+    assert "which light samples lack" in (tmp_path / "table.md").read_text()
+    assert not (tmp_path / "texel_offsets.npy").exists()
+
+
+def test_force_without_offsets_leaves_no_stale_offsets_file(tmp_path):
+    """A tune with offsets, then one without into the same folder with force: texel_offsets.npy goes
+    with the rest of the previous tune's files (tune.json says no offsets; the file must not say otherwise)."""
+    import json
+    from dsm.tune import tuner as tu
+    cfg = {"experiment": {"name": "t"}, "camera": {"resolution": [32, 32]}, "scene": [{"builtin": "floating_plate"}],
+           "map": {"resolution": 32}, "scheme": [{"name": "constant", "bias": 0.02}],
+           "tune": {"steps": 8, "camera": CAMS, "bias_map": {"fit": "edge", "width": [1.0], "clip": [1.0],
+                                                              "grazing": [0.0], "samples": 2}}}
+    tu.tune(cfg, out=tmp_path)
+    assert (tmp_path / "texel_offsets.npy").exists()
+    cfg["tune"]["bias_map"]["samples"] = 0
+    tu.tune(cfg, out=tmp_path, force=True)
+    assert json.loads((tmp_path / "tune.json").read_text())["bias_map"]["offsets"] is None
+    assert not (tmp_path / "texel_offsets.npy").exists()
+
+
+def test_samples_beyond_the_ray_budget_are_refused_before_tuning(tmp_path):
+    """samples = 16 on the room's 256^2 cube map: 6 x 256^2 x 16^2 = 100,663,296 light rays, above
+    MAX_RAYS (2^26): refused naming tune.bias_map.samples and the most that fits, floor(sqrt(2^26 /
+    393,216)) = 13, and nothing written."""
+    from dsm import ConfigError
+    from dsm.tune import light_samples
+    from dsm.tune import tuner as tu
+    assert light_samples.MAX_RAYS == 2 ** 26
+    cfg = {"experiment": {"name": "t"}, "camera": {"resolution": [32, 32]}, "scene": [{"builtin": "room"}],
+           "map": {"resolution": 256, "view": "cube"}, "scheme": [{"name": "constant", "bias": 0.02}],
+           "tune": {"steps": 8, "camera": CAMS, "bias_map": {"fit": "edge", "samples": 16}}}
+    with pytest.raises(ConfigError) as e:
+        tu.tune(cfg, out=tmp_path / "out")
+    assert e.value.key == "tune.bias_map.samples" and "samples = 13 or fewer" in str(e.value)
+    assert not (tmp_path / "out" / "tune.json").exists()

@@ -207,12 +207,13 @@ def neighbour_margins(spec: SchemeSpec, cases, groups) -> dict:
     return {**out, **{k: base[k] for k in ("unit", "v_star", "texel", "group", "resolution")}}
 
 
-def edge_bias_map(tc, train, held, groups, base) -> dict:
+def edge_bias_map(tc, train, held, groups, base, tick=None) -> dict:
     """The edge map over the best global scheme (``base``, a result entry): its shape parameters
     and threshold fitted exactly to the training receivers (dsm.tune.edge_map), then per texel an
     offset fitted to the light's own samples (``samples`` > 0); its counts on the training and
     held-out views with and without the offsets, held-out receivers counted as covered where their
-    ``block`` block saw training receivers (the other fits' split, so the three compare)."""
+    ``block`` block saw training receivers (the other fits' split, so the three compare); ``tick`` after
+    each chunk of light samples."""
     from . import edge_map as em
     from . import residual_map as rm
     bm, lam = tc.spec.bias_map, tc.spec.lam
@@ -220,7 +221,7 @@ def edge_bias_map(tc, train, held, groups, base) -> dict:
     rx_tr, rx_he = neighbour_margins(base["spec"], train, groups), neighbour_margins(base["spec"], held, groups)
     model = em.fit(rx_tr, bm.widths, bm.clips, bm.grazings, lam)
     x_tr, x_he = em.over_threshold(rx_tr, model), em.over_threshold(rx_he, model)
-    offsets = light_offsets(tc, groups, base, model) if bm.samples else None
+    offsets = light_offsets(tc, groups, base, model, tick) if bm.samples else None
     fitted_keys, fitted = (offsets["keys"], offsets["offsets"]) if offsets else (np.zeros(0, np.int64), np.zeros(0))
     shift = lambda rx: em.offset_at(fitted_keys, fitted, rm.block_keys(rx["texel"], rx["group"], rx["resolution"], 1))
     lit_tr, lit_he = x_tr + shift(rx_tr) >= 0, x_he + shift(rx_he) >= 0
@@ -236,16 +237,16 @@ def edge_bias_map(tc, train, held, groups, base) -> dict:
             "values": np.array([params[k] for k in ("width", "clip", "grazing", "threshold")]),
             "blocks": 0, "blocks_trained": 0, "steps": [],
             "offsets": None if offsets is None else {k: v for k, v in offsets.items() if k not in ("keys", "offsets")},
-            "texel_offsets": None if not offsets else np.stack([offsets["keys"].astype(np.float64), offsets["offsets"]]),
+            "texel_offsets": np.stack([fitted_keys.astype(np.float64), fitted]) if fitted_keys.size else None,
             "train": counted(lit_tr, rx_tr["v_star"]), "heldout": counted(lit_he, rx_he["v_star"]),
             "train_shared": counted(x_tr >= 0, rx_tr["v_star"]), "heldout_shared": counted(x_he >= 0, rx_he["v_star"]),
-            "heldout_lit_shared": np.split(x_he >= 0, split), **judged}
+            "heldout_lit_shared": np.split(x_he >= 0, split) if offsets else None, **judged}
 
 
-def light_offsets(tc, groups, base, model) -> dict:
+def light_offsets(tc, groups, base, model, tick=None) -> dict:
     """The edge map's per-texel offsets fitted to every group's light samples (dsm.tune.light_samples; dsm
     tune's lights are hard, so a sample's V* is one exact ray): sorted texel keys (residual_map.block_keys,
-    block 1), offsets, and what was sampled, with a note where nothing could be."""
+    block 1), offsets, and what was sampled, with a note where nothing could be; ``tick`` after each chunk."""
     from . import edge_map as em
     from . import light_samples
     from . import residual_map as rm
@@ -253,13 +254,13 @@ def light_offsets(tc, groups, base, model) -> dict:
     t0 = sync_clock()
     xs, vs, ks = [], [], []
     for g, grp in enumerate(groups):
-        for c in light_samples.sample_cases(grp, g, bm.samples, bm.layers):
+        for c in light_samples.sample_cases(grp, g, bm.samples, bm.layers, tick):
             try:
                 rx = neighbour_margins(base["spec"], [c], groups)
             except ValueError as e:          # a scheme that reads the camera seeing the receivers: light samples have none
                 return _offsets_record(bm, np.zeros(0), np.zeros(0, bool), np.zeros(0, np.int64), t0, tc.spec.lam,
-                                       f"the base scheme reads the camera that sees each receiver, and light samples "
-                                       f"have none ({e})")
+                                       f"the base scheme reads the camera that sees each receiver, which light "
+                                       f"samples lack: {e}")
             xs.append(em.over_threshold(rx, model))
             vs.append(rx["v_star"])
             ks.append(rm.block_keys(rx["texel"], rx["group"], rx["resolution"], 1))

@@ -17,7 +17,7 @@ inside of its shell (in shadow, and thin at the silhouette, where the grazing te
 offsets of those texels: on experiments/tune_meshes.toml 47 held-out errors in trained blocks
 against 39 with front faces only. A surface modelled facing away from its light gets no samples,
 so its texels keep the shared threshold. A scene far from the origin is traced in its exact frame,
-as the G-buffer is."""
+as the G-buffer is, from rays made in world float32 as the map's own texel rays are."""
 from __future__ import annotations
 
 import drjit as dr
@@ -30,21 +30,51 @@ from ..maps.shadowmap import COHERENT
 from ..prefilter.base import supersampled_view
 from ..scenes import exact_frame
 from ..scenes.gbuffer import GBuffer
+from ..types import ConfigError
 from .cases import Case
 
 ROLE = "light"                    # the role of a light-sample case (not a camera's train or heldout)
 
 
-def light_rays(group, samples: int) -> mi.Ray3f:
-    """``samples`` x ``samples`` rays through each texel of the group's map (world, or the exact frame of
-    a scene far from the origin): the texel centres of a view ``samples`` times finer."""
-    fine = supersampled_view(group.view, samples)
-    ray = fine.texel_rays(0, fine.n_texels)
+CHUNK_RAYS = 1 << 19              # light rays traced at once, whatever the map and samples; no result depends on it
+MAX_RAYS = 1 << 26                # light rays of one tune: the exact per-texel fit sorts every sample kept, about
+                                  # 130 bytes of peak memory a ray (tune.toml: 11.5 M rays, 2.4 GB), so some 9 GB here
+
+
+def check_budget(groups, samples: int, source: str):
+    """Refuse, before the tuning, a ``samples`` whose light rays over every map exceed MAX_RAYS (ConfigError
+    naming tune.bias_map.samples and the most that fits)."""
+    texels = sum(g.view.n_texels for g in groups)
+    if texels * samples * samples > MAX_RAYS:
+        fits = int((MAX_RAYS / texels) ** 0.5)
+        raise ConfigError(source, "tune.bias_map.samples", f"{samples} x {samples} light rays a texel over the maps' "
+                          f"{texels} texels is {texels * samples * samples} rays, above the {MAX_RAYS} a tune traces "
+                          f"(its exact per-texel fit holds every sample in memory): give samples = {fits} or fewer, "
+                          "or a smaller [map] resolution")
+
+
+def chunks(group, samples: int) -> list:
+    """(first, count) of each chunk of the group's ``samples`` x ``samples`` rays a texel (fine texels, face then row-major)."""
+    n = group.view.n_texels * samples * samples
+    return [(f, min(CHUNK_RAYS, n - f)) for f in range(0, n, CHUNK_RAYS)]
+
+
+def light_rays(group, samples: int, first: int, count: int) -> mi.Ray3f:
+    """Rays ``first .. first + count - 1`` of ``samples`` x ``samples`` through each texel of the group's map:
+    the texel centres of a view ``samples`` times finer, made in world float32 as the map's own texel rays
+    are (far from the origin their origins are rounded like the map's), moved into the exact frame there."""
+    ray = supersampled_view(group.view, samples).texel_rays(first, count)
     centre = group.scene_data.centre
-    if centre is None:
-        return ray
-    o = pl.points_np(ray.o) - np.asarray(centre, np.float64)
-    return mi.Ray3f(mi.Point3f(*(mi.Float(o[:, k].astype(np.float32)) for k in range(3))), ray.d)
+    o = pl.points_np(ray.o) - (0.0 if centre is None else np.asarray(centre, np.float64))
+    return _ray_np(o, pl.points_np(ray.d))
+
+
+def _ray_np(o: np.ndarray, d: np.ndarray) -> mi.Ray3f:
+    """A ray array from (n, 3) numpy origins and directions: built from plain buffers, not gathered
+    from a traced one (gathering a layer's rays and tracing them again corrupted memory now and then
+    on the room's cube map under the LLVM backend)."""
+    f32 = lambda a, k: mi.Float(np.ascontiguousarray(a[:, k], np.float32))
+    return mi.Ray3f(mi.Point3f(f32(o, 0), f32(o, 1), f32(o, 2)), mi.Vector3f(f32(d, 0), f32(d, 1), f32(d, 2)))
 
 
 def _seen_hits(scene, ray, table):
@@ -58,21 +88,20 @@ def _seen_hits(scene, ray, table):
     return hit & front, shape, si, hit
 
 
-def layer_gbuffers(group, samples: int, layers: int):
-    """Per layer (the k-th surface along each light ray) a G-buffer of its hits whose face is toward
-    the light, positions in world; yielded one at a time, so a layer's arrays go once used."""
+def layer_gbuffers(group, samples: int, layers: int, first: int, count: int):
+    """Per layer (the k-th surface along each light ray of one chunk) a G-buffer of its hits whose face is
+    toward the light, positions in world; yielded one at a time, so a layer's arrays go once used."""
     sd = group.scene_data
     scene = sd.exact
     table = spawn.shape_table(scene)
-    ray = light_rays(group, samples)
+    ray = light_rays(group, samples, first, count)
     for _ in range(layers):
         keep, shape, si, hit = _seen_hits(scene, ray, table)
-        idx = np.flatnonzero(keep).astype(np.uint32)
+        idx = np.flatnonzero(keep)
         if len(idx):
-            ii = mi.UInt32(idx)
             # the kept rays traced again rather than their interactions gathered: one array per field, and
             # the same hit (a ray's hit does not depend on the rays beside it: COHERENT off)
-            sub = mi.Ray3f(dr.gather(mi.Point3f, ray.o, ii), dr.gather(mi.Vector3f, ray.d, ii))
+            sub = _ray_np(pl.points_np(ray.o)[idx], pl.points_np(ray.d)[idx])
             si_k = scene.ray_intersect_preliminary(sub, coherent=COHERENT).compute_surface_interaction(sub)
             n = mi.Vector3f(si_k.n)
             p = si_k.p if sd.centre is None else exact_frame.to_world(si_k.p, sd.centre)
@@ -83,20 +112,25 @@ def layer_gbuffers(group, samples: int, layers: int):
             break
         ray = si.spawn_ray(ray.d)
         ray.maxt = dr.select(mi.Bool(hit), ray.maxt, 0.0)     # a ray that left the scene stays out
+        dr.eval(ray)
 
 
-def sample_cases(group, g: int, samples: int, layers: int):
-    """The light samples of group ``g`` as tune cases (role ``light``, one per layer, yielded one at a
-    time), each receiver's V* the kit's exact visibility (dsm tune's lights are hard)."""
+def sample_cases(group, g: int, samples: int, layers: int, tick=None):
+    """The light samples of group ``g`` as tune cases (role ``light``, one per chunk and layer, yielded one
+    at a time), each receiver's V* the kit's exact visibility (dsm tune's lights are hard); ``tick``
+    called after each chunk."""
     sd, light = group.scene_data, group.light_spec
     smap = group.maps["none"]
-    for k, gb in enumerate(layer_gbuffers(group, samples, layers)):
-        s = pl.light_setup(sd, gb, light, group.light)
-        if s.p is not None:
-            s = s.subset(group.view.inside(s.p).numpy().astype(bool))
-        if s.p is None or len(s.pixels) == 0:
-            continue
-        rx = pl.receivers(smap.view, s, sd.diagonal)
-        dr.eval(rx.depth, rx.u_map, rx.v_map, rx.face, rx.texel_world, rx.to_light)
-        yield Case(group.scene, group.light, f"light layer {k}", ROLE, g, s, rx, s.v_star.copy(),
-                   mi.Bool(s.v_star), pl.thresholds(rx, smap))
+    for first, count in chunks(group, samples):
+        for k, gb in enumerate(layer_gbuffers(group, samples, layers, first, count)):
+            s = pl.light_setup(sd, gb, light, group.light)
+            if s.p is not None:
+                s = s.subset(group.view.inside(s.p).numpy().astype(bool))
+            if s.p is None or len(s.pixels) == 0:
+                continue
+            rx = pl.receivers(smap.view, s, sd.diagonal)
+            dr.eval(rx.depth, rx.u_map, rx.v_map, rx.face, rx.texel_world, rx.to_light)
+            yield Case(group.scene, group.light, f"light layer {k}", ROLE, g, s, rx, s.v_star.copy(),
+                       mi.Bool(s.v_star), pl.thresholds(rx, smap))
+        if tick:
+            tick()

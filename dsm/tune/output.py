@@ -160,12 +160,13 @@ def _offsets_clause(b: dict) -> str:
         return " (no per-texel offsets: samples = 0)"
     if not o["n_samples"]:
         return f" (no per-texel offsets: {o['note'] or 'no light sample fell in the maps'})"
-    tr, sh = b["train"], b["train_shared"]
-    return (f" minus a per-texel offset fitted exactly to {o['n_samples']} light samples ({o['samples']} x "
-            f"{o['samples']} rays a texel, up to {o['layers']} surfaces each; {o['n_shadowed']} in shadow; "
-            f"{o['texels_moved']} of {o['texels']} texels moved; {o['ms'] / 1e3:.1f} s), which no camera sees: "
-            f"on the training cameras {tr['n_acne'] + tr['n_peterpan']} errors with the offsets, "
-            f"{sh['n_acne'] + sh['n_peterpan']} without{'; ' + o['note'] if o['note'] else ''})")
+    errors = lambda c: c["n_acne"] + c["n_peterpan"]
+    n = lambda k, word: f"{k} {word}{'s' * (k != 1)}"
+    return (f" minus a per-texel offset fitted exactly to {n(o['n_samples'], 'light sample')} ({o['samples']} x "
+            f"{o['samples']} rays a texel, up to {n(o['layers'], 'surface')} each; {o['n_shadowed']} in shadow; "
+            f"{o['texels_moved']} of {n(o['texels'], 'texel')} moved; {o['ms'] / 1e3:.1f} s), which no camera sees: "
+            f"on the training cameras {n(errors(b['train']), 'error')} with the offsets, "
+            f"{errors(b['train_shared'])} without{'; ' + o['note'] if o['note'] else ''})")
 
 
 def table_text(res: TuneResult) -> str:

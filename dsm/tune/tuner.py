@@ -67,6 +67,7 @@ from .evaluate import NAN, hard_counts, with_values
 from ..config.tune import TuneSpec, tunable, tune_spec
 from .cases import pooled_thresholds, prepare_cases
 from .compare import exact_scan, gradient_check, grid_search
+from . import light_samples
 from .bias_map import edge_bias_map, heldout_split, map_start, residual_bias_map, tune_bias_map
 from .search import start_value, tune_scheme
 from .output import TuneResult, moments_toml, tuned_toml, write
@@ -189,6 +190,8 @@ def run_tune(tc, out=None, progress: bool = False, resume: bool = False) -> Tune
         notes.insert(0, "no [[tune.camera]]: the scene's own camera is the one training view, nothing is held out")
     train = [c for c in cases if c.role == "train"]
     held = [c for c in cases if c.role == "heldout"]
+    if ts.bias_map and ts.bias_map.fit == "edge" and ts.bias_map.samples:
+        light_samples.check_budget(groups, ts.bias_map.samples, tc.config.source)
     if not train:
         raise ConfigError(tc.config.source, "tune.camera", "no training view has a receiver")
     n_train, n_held = sum(c.n for c in train), sum(c.n for c in held)
@@ -210,6 +213,9 @@ def run_tune(tc, out=None, progress: bool = False, resume: bool = False) -> Tune
     notes += moment_notes
     bmap = None
     if ts.bias_map and held:
+        if bar and ts.bias_map.fit == "edge" and ts.bias_map.samples:    # a step per chunk of light samples
+            bar.total += sum(len(light_samples.chunks(g, ts.bias_map.samples)) for g in groups)
+            bar.refresh()
         bmap = _learned_map(tc, train, held, groups, results, orc_train, orc_held, tick)
         steps += bmap["steps"]
     elif ts.bias_map:
@@ -329,8 +335,8 @@ def _learned_map(tc, train, held, groups, results, orc_train, orc_held, tick) ->
     best_const = min(const, key=lambda e: e["train"]["objective"]) if const else None
     best = min(results, key=lambda e: e["train"]["objective"]) if results else None
     if ts.bias_map.fit in ("residual", "edge") and best is not None:
-        fitted = residual_bias_map if ts.bias_map.fit == "residual" else edge_bias_map
-        bmap = fitted(tc, train, held, groups, best)
+        bmap = (residual_bias_map(tc, train, held, groups, best) if ts.bias_map.fit == "residual"
+                else edge_bias_map(tc, train, held, groups, best, tick))
         bmap["init_from"] = bmap["base"]
     else:
         init = map_start(tc, train, groups, best_const)
