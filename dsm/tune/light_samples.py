@@ -37,8 +37,8 @@ ROLE = "light"                    # the role of a light-sample case (not a camer
 
 
 CHUNK_RAYS = 1 << 19              # light rays traced at once, whatever the map and samples; no result depends on it
-MAX_RAYS = 1 << 26                # light rays of one tune: the exact per-texel fit sorts every sample kept, about
-                                  # 130 bytes of peak memory a ray (tune.toml: 11.5 M rays, 2.4 GB), so some 9 GB here
+MAX_RAYS = 1 << 26                # light rays of one tune: the exact per-texel fit sorts every sample kept, 150 to
+                                  # 200 bytes of peak memory a ray (tune.toml: 11.5 M rays, 2.3 GB), so 10 to 13 GB here
 
 
 def check_budget(groups, samples: int, source: str):
