@@ -291,6 +291,11 @@ def test_texel_offsets_are_each_texels_exact_optimum():
     keys = rng.integers(0, 60, n) * 7 + 5
     x = rng.normal(0, 0.6, n)
     v = rng.random(n) < 1 / (1 + np.exp(-4 * (x + rng.normal(0, 0.3, 60)[keys // 7])))
+    # two texels every sample of which is in shadow, below the threshold: 0 is optimal, and below every cut
+    x = np.r_[x, -0.5, -0.3, -0.01]
+    v = np.r_[v, False, False, False]
+    keys = np.r_[keys, 1000, 1000, 1001]
+    n = x.size
     lam = 1.5
     keys_fit, off = em.fit_offsets(x, v, keys, lam)
     assert np.array_equal(keys_fit, np.unique(keys))
@@ -303,6 +308,10 @@ def test_texel_offsets_are_each_texels_exact_optimum():
         if err(0.0) == best:
             assert abs(r) <= em.THRESHOLD_MARGIN
     assert (off != 0).any()
+    # every sample shadowed: 0 where it lies THRESHOLD_MARGIN inside the interval below the first cut,
+    # else the margin's edge (1001's cut is 0.01 above 0: -0.01)
+    assert off[keys_fit == 1000][0] == 0.0
+    assert off[keys_fit == 1001][0] == pytest.approx(0.01 - em.THRESHOLD_MARGIN, abs=1e-12)
     got = em.offset_at(keys_fit, off, np.array([keys_fit[3], 4, keys_fit[-1] + 1]))
     assert list(got) == [off[3], 0.0, 0.0]
 
@@ -334,6 +343,17 @@ def test_light_samples_of_the_floating_plate_match_its_shadow():
     assert np.array_equal(v[ground][clear], ~inside[clear])
     assert v[plate].all()
     assert (~v[ground][clear]).sum() >= 50           # the comparison above is not vacuous: the shadow is sampled
+    # traced in other chunks (997 rays, splitting texels and layers), the same samples with the same labels
+    import dsm.tune.light_samples as ls
+    small = pytest.MonkeyPatch()
+    small.setattr(ls, "CHUNK_RAYS", 997)
+    try:
+        again = list(ls.sample_cases(groups[0], 0, 2, 4))
+    finally:
+        small.undo()
+    rows = lambda cs: np.unique(np.c_[np.concatenate([pl.points_np(c.setup.p) for c in cs]),
+                                     np.concatenate([c.v_star for c in cs])], axis=0)
+    assert len(again) > len(cases) and np.array_equal(rows(again), rows(cases))
 
 
 def test_a_base_scheme_that_reads_the_camera_gets_no_offsets(tmp_path):
@@ -349,6 +369,7 @@ def test_a_base_scheme_that_reads_the_camera_gets_no_offsets(tmp_path):
     assert bm["offsets"]["n_samples"] == 0 and bm["offsets"]["texels"] == 0
     assert bm["heldout"] == bm["heldout_shared"] and bm["train"] == bm["train_shared"]
     assert "which light samples lack" in (tmp_path / "table.md").read_text()
+    assert "shared threshold (no offsets)" not in (tmp_path / "table.md").read_text()
     assert not (tmp_path / "texel_offsets.npy").exists()
 
 
@@ -377,9 +398,11 @@ def test_samples_beyond_the_ray_budget_are_refused_before_tuning(tmp_path):
     from dsm.tune import light_samples
     from dsm.tune import tuner as tu
     assert light_samples.MAX_RAYS == 2 ** 26
+    inside = [{"position": [2.8, -2.8, 2.7], "target": [-0.6, 0.6, 0.4], "fov": 75.0},
+              {"position": [-2.8, 2.8, 2.7], "target": [0.6, -0.6, 0.4], "fov": 75.0, "role": "heldout"}]
     cfg = {"experiment": {"name": "t"}, "camera": {"resolution": [32, 32]}, "scene": [{"builtin": "room"}],
            "map": {"resolution": 256, "view": "cube"}, "scheme": [{"name": "constant", "bias": 0.02}],
-           "tune": {"steps": 8, "camera": CAMS, "bias_map": {"fit": "edge", "samples": 16}}}
+           "tune": {"steps": 8, "camera": inside, "bias_map": {"fit": "edge", "samples": 16}}}
     with pytest.raises(ConfigError) as e:
         tu.tune(cfg, out=tmp_path / "out")
     assert e.value.key == "tune.bias_map.samples" and "samples = 13 or fewer" in str(e.value)

@@ -35,6 +35,7 @@ NAME = "distance_normal"
 SOURCE = "Unreal Engine 5 virtual shadow maps, r.Shadow.Virtual.NormalBias (approximation)"
 NEEDS = frozenset()
 USES_PLANE = False
+READS_CAMERA = True          # the receivers' camera (Receiver.camera): dsm tune's light samples have none
 
 
 @dataclass(frozen=True)

@@ -223,8 +223,8 @@ def edge_bias_map(tc, train, held, groups, base, tick=None) -> dict:
     x_tr, x_he = em.over_threshold(rx_tr, model), em.over_threshold(rx_he, model)
     offsets = light_offsets(tc, groups, base, model, tick) if bm.samples else None
     fitted_keys, fitted = (offsets["keys"], offsets["offsets"]) if offsets else (np.zeros(0, np.int64), np.zeros(0))
-    shift = lambda rx: em.offset_at(fitted_keys, fitted, rm.block_keys(rx["texel"], rx["group"], rx["resolution"], 1))
-    lit_tr, lit_he = x_tr + shift(rx_tr) >= 0, x_he + shift(rx_he) >= 0
+    offset_of = lambda rx: em.offset_at(fitted_keys, fitted, rm.block_keys(rx["texel"], rx["group"], rx["resolution"], 1))
+    lit_tr, lit_he = x_tr + offset_of(rx_tr) >= 0, x_he + offset_of(rx_he) >= 0
     keys = lambda rx: rm.block_keys(rx["texel"], rx["group"], rx["resolution"], bm.block)
     covered = np.isin(keys(rx_he), keys(rx_tr))
     counted = lambda on, v: counts(int((~on & v).sum()), int((on & ~v).sum()), int(v.size), int(v.sum()))
@@ -240,7 +240,7 @@ def edge_bias_map(tc, train, held, groups, base, tick=None) -> dict:
             "texel_offsets": np.stack([fitted_keys.astype(np.float64), fitted]) if fitted_keys.size else None,
             "train": counted(lit_tr, rx_tr["v_star"]), "heldout": counted(lit_he, rx_he["v_star"]),
             "train_shared": counted(x_tr >= 0, rx_tr["v_star"]), "heldout_shared": counted(x_he >= 0, rx_he["v_star"]),
-            "heldout_lit_shared": np.split(x_he >= 0, split) if offsets else None, **judged}
+            "heldout_lit_shared": np.split(x_he >= 0, split) if fitted_keys.size else None, **judged}
 
 
 def light_offsets(tc, groups, base, model, tick=None) -> dict:
@@ -253,19 +253,22 @@ def light_offsets(tc, groups, base, model, tick=None) -> dict:
     bm = tc.spec.bias_map
     t0 = sync_clock()
     xs, vs, ks = [], [], []
+    if reads_camera(base["spec"]):
+        return _offsets_record(bm, np.zeros(0), np.zeros(0, bool), np.zeros(0, np.int64), t0, tc.spec.lam,
+                               f"{base['scheme']} reads the camera that sees each receiver, which light samples lack")
     for g, grp in enumerate(groups):
         for c in light_samples.sample_cases(grp, g, bm.samples, bm.layers, tick):
-            try:
-                rx = neighbour_margins(base["spec"], [c], groups)
-            except ValueError as e:          # a scheme that reads the camera seeing the receivers: light samples have none
-                return _offsets_record(bm, np.zeros(0), np.zeros(0, bool), np.zeros(0, np.int64), t0, tc.spec.lam,
-                                       f"the base scheme reads the camera that sees each receiver, which light "
-                                       f"samples lack: {e}")
+            rx = neighbour_margins(base["spec"], [c], groups)
             xs.append(em.over_threshold(rx, model))
             vs.append(rx["v_star"])
             ks.append(rm.block_keys(rx["texel"], rx["group"], rx["resolution"], 1))
     cat = lambda a, t: np.concatenate(a) if a else np.zeros(0, t)
     return _offsets_record(bm, cat(xs, np.float64), cat(vs, bool), cat(ks, np.int64), t0, tc.spec.lam, "")
+
+
+def reads_camera(spec: SchemeSpec) -> bool:
+    """Whether a scheme instance reads the camera that sees each receiver (distance_normal), which light samples lack."""
+    return bool(getattr(get_scheme(spec.name), "READS_CAMERA", False))
 
 
 def _offsets_record(bm, x, v, k, t0, lam: float, note: str) -> dict:

@@ -24,7 +24,7 @@ so the training errors as a function of the threshold are minimised by one sort 
 oracle's sweep, dsm.tune.residual_map.fit_blocks with one block), the optimum nearest 0 kept
 ``THRESHOLD_MARGIN`` inside its interval; the candidate with the fewest training errors wins
 (ties: less grazing, width nearer 1, larger clip). Three shape parameters and one threshold over
-every training receiver: nothing is per texel, so nothing is left to memorise a view.
+every training receiver: nothing fitted to a view is per texel, so nothing is left to memorise it.
 
 **Per-texel offsets** (``samples`` > 0). The shared threshold places an edge inside a texel where
 the tent's interpolation of the taps puts it; the light's own rays through the texel

@@ -15,8 +15,9 @@ face the light, and the light-facing side of a back face is the inside of a shel
 above a ground sees. That holds for open meshes too: the bunny's base is open, and counting the
 inside of its shell (in shadow, and thin at the silhouette, where the grazing texels are) moved the
 offsets of those texels: on experiments/tune_meshes.toml 47 held-out errors in trained blocks
-against 39 with front faces only. A surface modelled facing away from its light gets no samples,
-so its texels keep the shared threshold. A scene far from the origin is traced in its exact frame,
+against 39 with front faces only. A surface modelled facing away from its light gets no samples:
+its receivers take the offsets other surfaces' samples fitted in their texels, and the shared
+threshold where none fell. A scene far from the origin is traced in its exact frame,
 as the G-buffer is, from rays made in world float32 as the map's own texel rays are."""
 from __future__ import annotations
 
@@ -37,8 +38,9 @@ ROLE = "light"                    # the role of a light-sample case (not a camer
 
 
 CHUNK_RAYS = 1 << 19              # light rays traced at once, whatever the map and samples; no result depends on it
-MAX_RAYS = 1 << 26                # light rays of one tune: the exact per-texel fit sorts every sample kept, 150 to
-                                  # 200 bytes of peak memory a ray (tune.toml: 11.5 M rays, 2.3 GB), so 10 to 13 GB here
+MAX_RAYS = 1 << 26                # light rays of one tune: the exact per-texel fit sorts every sample kept (a ray
+                                  # keeps one a light-facing surface it meets: about one on these scenes), 150 to 200
+                                  # bytes of peak memory a ray (tune.toml: 11.5 M rays, 2.3 GB), so 10 to 13 GB here
 
 
 def check_budget(groups, samples: int, source: str):

@@ -54,7 +54,8 @@ def fit_blocks(m, v_star, unit, keys, lam: float, margin: float) -> dict:
     nxt = np.where(last, np.inf, np.r_[fs[1:], np.inf])
     half = np.minimum(margin, 0.5 * (nxt - fs))
     rho = np.clip(0.0, fs + half, nxt - half)
-    below_err, below_rho = Ltot.astype(np.float64), fs[start] - margin       # every receiver shadowed
+    # every receiver shadowed: any residual below the block's first cut; the one nearest 0 of them
+    below_err, below_rho = Ltot.astype(np.float64), np.minimum(0.0, fs[start] - margin)
     e0 = np.add.reduceat(((fs > 0) & vs) + lam * ((fs <= 0) & ~vs), start).astype(np.float64)
     best = np.minimum(np.minimum.reduceat(err, start), below_err)
     # among the optima the residual nearest 0

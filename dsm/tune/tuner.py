@@ -68,7 +68,7 @@ from ..config.tune import TuneSpec, tunable, tune_spec
 from .cases import pooled_thresholds, prepare_cases
 from .compare import exact_scan, gradient_check, grid_search
 from . import light_samples
-from .bias_map import edge_bias_map, heldout_split, map_start, residual_bias_map, tune_bias_map
+from .bias_map import edge_bias_map, heldout_split, map_start, reads_camera, residual_bias_map, tune_bias_map
 from .search import start_value, tune_scheme
 from .output import TuneResult, moments_toml, tuned_toml, write
 from .moment_search import tune_all
@@ -190,7 +190,7 @@ def run_tune(tc, out=None, progress: bool = False, resume: bool = False) -> Tune
         notes.insert(0, "no [[tune.camera]]: the scene's own camera is the one training view, nothing is held out")
     train = [c for c in cases if c.role == "train"]
     held = [c for c in cases if c.role == "heldout"]
-    if ts.bias_map and ts.bias_map.fit == "edge" and ts.bias_map.samples:
+    if ts.bias_map and ts.bias_map.fit == "edge" and ts.bias_map.samples and held:
         light_samples.check_budget(groups, ts.bias_map.samples, tc.config.source)
     if not train:
         raise ConfigError(tc.config.source, "tune.camera", "no training view has a receiver")
@@ -213,10 +213,7 @@ def run_tune(tc, out=None, progress: bool = False, resume: bool = False) -> Tune
     notes += moment_notes
     bmap = None
     if ts.bias_map and held:
-        if bar and ts.bias_map.fit == "edge" and ts.bias_map.samples:    # a step per chunk of light samples
-            bar.total += sum(len(light_samples.chunks(g, ts.bias_map.samples)) for g in groups)
-            bar.refresh()
-        bmap = _learned_map(tc, train, held, groups, results, orc_train, orc_held, tick)
+        bmap = _learned_map(tc, train, held, groups, results, orc_train, orc_held, bar)
         steps += bmap["steps"]
     elif ts.bias_map:
         notes.append("no held-out view has a receiver: the learned bias map was not trained")
@@ -327,13 +324,19 @@ def _outside_box(spec, box) -> list:
     return [p.name for p in box if not p.lo <= start_value(spec, p.name) <= p.hi]
 
 
-def _learned_map(tc, train, held, groups, results, orc_train, orc_held, tick) -> dict:
+def _learned_map(tc, train, held, groups, results, orc_train, orc_held, bar) -> dict:
     """The learned bias map (a residual over the best tuned scheme, or Adam from the best tuned
-    constant) with its counts, the held-out split and the oracles and best global scheme it is judged by."""
+    constant) with its counts, the held-out split and the oracles and best global scheme it is judged by;
+    ``bar``: the run's progress bar or None (a step per Adam step, or per chunk of light samples)."""
     ts = tc.spec
+    tick = (lambda *a: bar.update(1)) if bar else None
     const = [e for e in results if e["scheme"] == "constant"]
     best_const = min(const, key=lambda e: e["train"]["objective"]) if const else None
     best = min(results, key=lambda e: e["train"]["objective"]) if results else None
+    if bar and best is not None and ts.bias_map.fit == "edge" and ts.bias_map.samples and \
+            not reads_camera(best["spec"]):
+        bar.total += sum(len(light_samples.chunks(g, ts.bias_map.samples)) for g in groups)
+        bar.refresh()
     if ts.bias_map.fit in ("residual", "edge") and best is not None:
         bmap = (residual_bias_map(tc, train, held, groups, best) if ts.bias_map.fit == "residual"
                 else edge_bias_map(tc, train, held, groups, best, tick))
