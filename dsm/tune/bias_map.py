@@ -252,10 +252,10 @@ def light_offsets(tc, groups, base, model, tick=None) -> dict:
     from . import residual_map as rm
     bm = tc.spec.bias_map
     t0 = sync_clock()
-    xs, vs, ks = [], [], []
     if reads_camera(base["spec"]):
         return _offsets_record(bm, np.zeros(0), np.zeros(0, bool), np.zeros(0, np.int64), t0, tc.spec.lam,
                                f"{base['scheme']} reads the camera that sees each receiver, which light samples lack")
+    xs, vs, ks = [], [], []
     for g, grp in enumerate(groups):
         for c in light_samples.sample_cases(grp, g, bm.samples, bm.layers, tick):
             rx = neighbour_margins(base["spec"], [c], groups)

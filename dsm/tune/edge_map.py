@@ -40,7 +40,7 @@ import itertools
 
 import numpy as np
 
-from .residual_map import fit_blocks
+from .residual_map import fit_blocks, residual_at
 
 OFFSETS = tuple((a, b) for b in (-1, 0, 1) for a in (-1, 0, 1))   # the 3 x 3 taps, (i, j) texels; centre 4
 THRESHOLD_MARGIN = 0.02           # score units kept inside the threshold's optimal interval
@@ -112,7 +112,7 @@ def over_threshold(rx: dict, model: dict) -> np.ndarray:
     return needed(s, rx["cos"], model["grazing"]) - model["threshold"]
 
 
-def fit_offsets(x, v_star, keys, lam: float) -> dict:
+def fit_offsets(x, v_star, keys, lam: float) -> tuple:
     """Per texel (``keys``, one per receiver) the offset ``r`` minimising its receivers' acne + lambda
     peter-panning of "lit iff x + r >= 0" exactly (the optimum nearest 0, ``THRESHOLD_MARGIN`` inside its
     interval: within that of 0 wherever 0 is optimal): (sorted keys, offsets)."""
@@ -123,6 +123,4 @@ def fit_offsets(x, v_star, keys, lam: float) -> dict:
 
 def offset_at(keys_fit, offsets, keys) -> np.ndarray:
     """The offset of each receiver's texel (``keys``), 0 for a texel no light sample fell in."""
-    i = np.clip(np.searchsorted(keys_fit, keys), 0, max(len(keys_fit) - 1, 0))
-    hit = keys_fit[i] == keys if len(keys_fit) else np.zeros(len(keys), bool)
-    return np.where(hit, offsets[i] if len(keys_fit) else 0.0, 0.0)
+    return residual_at(keys_fit, offsets, keys)[0]
