@@ -2,7 +2,8 @@
 
 ``run OUT``: in the current checkout (put it first on PYTHONPATH), run every experiment at its
 smoke size, the default experiment, a tiled run, a run under ``--cluster local`` and
-``dsm tune experiments/tune.toml`` into OUT/<name>/.
+``dsm tune experiments/tune.toml`` into OUT/<name>/, and ``dsm benchmark`` at its test size
+(its cases written as OUT/benchmark/cases.csv).
 ``compare A B``: the same runs of two checkouts, every CSV column compared row by row except
 what depends on the machine or the kernel cache; prints one line per run and the differences.
 """
@@ -10,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -62,6 +64,24 @@ def run_all(out: Path):
     cmd = [sys.executable, "-m", "dsm.cli", "run", "experiments/point_views.toml", "--out", str(out / "cluster"),
            "--cluster", "local"]
     subprocess.run(cmd, check=False)
+    # dsm benchmark at its test size: its cases as a CSV, so they compare as every run does
+    bench = out / "benchmark"
+    subprocess.run([sys.executable, "-m", "dsm.cli", "benchmark", "--out", str(bench / "run")], check=False,
+                   env={**os.environ, "DSM_BENCHMARK_SIZE": "test"})
+    _cases_csv(bench / "run" / "results.json", bench / "cases.csv")
+
+
+def _cases_csv(results_json: Path, csv_path: Path):
+    """The benchmark's cases (results.json) as a CSV with one row per case (nothing when absent)."""
+    import json
+    if not results_json.exists():
+        return
+    cases = json.loads(results_json.read_text())["cases"]
+    cols = sorted({k for c in cases for k in c if not isinstance(c[k], (dict, list))})
+    with open(csv_path, "w", newline="") as f:
+        w = csv.DictWriter(f, cols, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(cases)
 
 
 def _rows(path: Path) -> list:
