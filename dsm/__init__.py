@@ -1,9 +1,6 @@
 """dsm: measure shadow-map bias schemes against exact ray-traced visibility (Mitsuba 3, Dr.Jit)."""
 from .config.read import load as load_config, parse as parse_config
-from .types import ConfigError, Length
-from . import old_paths
-
-old_paths.install()          # dsm.truth.metrics, dsm.report.figures, ...: the flat paths, for one release
+from .core.types import ConfigError, Length
 
 __version__ = "0.1.0"
 
@@ -39,7 +36,7 @@ def _run_in(config, out, variant, progress, force, resume):
 
 def register():
     """Register the Mitsuba integrator plugins dsm_shadow and dsm_error for the current variant."""
-    from .tools.env import register_plugins
+    from .core.env import register_plugins
     return register_plugins()
 
 

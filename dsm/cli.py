@@ -24,7 +24,7 @@ from .report import figures
 from .maps import headroom
 from .experiment import lock, resume
 from .experiment.lock import claim, entries, name_problem, unwritable
-from .tools.env import MAX_THREADS, SetupError
+from .core.env import MAX_THREADS, SetupError
 
 DEFAULT_CONFIG = Path(__file__).parent / "config" / "default.toml"
 # what a dsm run writes into its folder: --force clears a folder holding nothing else
@@ -229,7 +229,7 @@ def main(argv=None) -> int:
 
 
 def _bench(args) -> int:
-    from .tools.bench import meshes_problem
+    from .perf.bench import meshes_problem
     try:
         res = [int(x) for x in args.resolutions.split(",")]
         scale = [int(x) for x in args.scaling.split(",") if x.strip()]
@@ -253,7 +253,7 @@ def _bench(args) -> int:
 
 
 def _bench_held(args, res, scale) -> int:
-    from .tools.bench import run_bench
+    from .perf.bench import run_bench
     problem = out_problem(Path(args.out), force=True, bench=True)
     if problem:
         _err(problem)
@@ -343,11 +343,11 @@ def _compare_out_problem(out: Path) -> str | None:
 
 
 def _plan(cfg) -> int:
-    from .experiment import plan as planmod
+    from .config import plan as planmod
     from .scenes import load as scenes
     # which scenes cannot be read: load them (on the CPU: no GPU needed to plan)
     try:
-        from .tools import env
+        from .core import env
         env.use_variant(None if (cfg.variant or "").startswith("cuda") else cfg.variant)
         loadable = True
     except SetupError as e:

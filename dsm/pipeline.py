@@ -31,20 +31,24 @@ import numpy as np
 from .maps import cascades as cascades_mod
 from .truth import area, reference
 from .scenes import exact_frame, load as scenes
-from .scenes.emitters import emitter_to_light
+from .scenes.emitters import emitter_lights, emitter_to_light
+from .lights import area_surface
 from .scenes.spec import parse_scene
-from .maps import formats, lookup, shadowmap, spawn
+from .maps import formats, lookup, shadowmap
+from .scenes import spawn
 from . import lights, prefilter, schemes
-from .tools import timing
+from .core import timing
 from .truth import oracle as oracle_mod
 from .scenes import gbuffer as gbuffer_mod
 from .maps import shrink as shrink_mod
 from .truth import metrics as metrics_mod
+from .truth import cascades as cascade_metrics_mod
+from .scenes.camera import Camera
 from .scenes.closedness import shape_closedness
-from .tools.env import exact_math
+from .core.env import exact_math
 from .config.read import parse_scheme
-from .maps.lookup import Receiver
-from .types import VARIANTS, ConfigError, LightSpec, SchemeSpec
+from .maps.receiver import Receiver
+from .core.types import VARIANTS, ConfigError, LightSpec, SchemeSpec
 
 # ---------------------------------------------------------------- config
 
@@ -54,8 +58,8 @@ def prepare(config, variant: str | None = None, threads: int | None = None):
     Mitsuba variant (and Dr.Jit's thread count, before any scene loads). Raises ConfigError
     (one line naming file, key and choices; NothingToRun), SetupError or TypeError."""
     from .config import read as cfgmod
-    from .tools import env
-    from .experiment import plan as planmod
+    from .core import env
+    from .config import plan as planmod
     config = cfgmod.coerce(config)
     cfgmod.check_runnable(config)            # NothingToRun: every scene an absent optional file
     if variant is not None and variant not in VARIANTS:     # an argument's mistake, as the TOML key's
@@ -73,8 +77,8 @@ scene_from_mitsuba = scenes.from_mitsuba  # an already loaded mi.Scene (the plug
 emitter_light = emitter_to_light           # a Mitsuba emitter as a LightSpec (None: not mapped)
 scene_magnitude = reference.scene_magnitude
 exact_visibility = reference.visibility   # (scene, interactions, light, magnitude) -> (V*, occluder distance)
-area_emitter_lights = area.emitter_lights  # (mi.Scene, area LightSpec) -> one area light per area emitter
-area_geometry = area.geometry              # (area LightSpec, mi.Scene) -> its surface (sampling)
+area_emitter_lights = emitter_lights  # (mi.Scene, area LightSpec) -> one area light per area emitter
+area_geometry = area_surface.geometry              # (area LightSpec, mi.Scene) -> its surface (sampling)
 area_sample_visibility = area.sample_visibility   # one area sample's visibility per interaction
 
 
@@ -145,7 +149,7 @@ class LightSetup:
         if self.p is None or not len(self.pixels):
             return math.nan
         return float(np.abs(points_np(self.p)).max())
-    camera: object = None         # the pinhole camera of the G-buffer (cascades.Camera); None: not a perspective sensor
+    camera: Camera | None = None  # the pinhole camera of the G-buffer; None: not a perspective sensor
 
     @property
     def v_frac(self):
@@ -191,7 +195,7 @@ def make_view(light, R, receivers_world, bbox, kind=None, cascade=None, sensor=N
     """The view of ``light`` at resolution R. A directional light with ``cascade`` (a CascadeSpec)
     gets a cascaded view for the camera ``sensor`` (dsm.maps.cascades; ``scale``: the scene's, which
     multiplies the layout's distances), else one map fitted to the receivers; an area light
-    its view from its centre (:func:`dsm.truth.area.make_view`)."""
+    its view from its centre (:func:`dsm.lights.area_surface.make_view`)."""
     return lights.get(light.type).make_view(light, R, receivers_world, bbox, kind, cascade, sensor, scale)
 
 
@@ -209,8 +213,8 @@ def light_setup(sd, gb, light, label, repeats: int = 0, seed: int = 7) -> LightS
 
 
 def pinhole_camera(sensor):
-    """The pinhole camera of a perspective sensor (dsm.maps.cascades.Camera; at its film's size), None for any other."""
-    return cascades_mod.Camera.from_sensor(sensor) if "x_fov" in mi.traverse(sensor) else None
+    """The pinhole camera of a perspective sensor (dsm.scenes.camera.Camera; at its film's size), None for any other."""
+    return Camera.from_sensor(sensor) if "x_fov" in mi.traverse(sensor) else None
 
 
 def _light_setup(sd, gb, light, label, repeats: int = 0, seed: int = 7) -> LightSetup:
@@ -262,7 +266,7 @@ def area_setup(sd, gb, light, label, repeats: int = 0, seed: int = 7) -> LightSe
     in front of a one-sided light) and the Monte Carlo reference V* (:mod:`dsm.truth.area`). No
     attached-shadow pixels are kept (``backface_lit_rate`` is undefined for area lights)."""
     light_x, bbox_x = exact_side(sd, light)
-    geom = area.geometry(light_x, sd.exact)
+    geom = area_surface.geometry(light_x, sd.exact)
     hit = gb.hit
     idx_hit = np.flatnonzero(hit).astype(np.uint32)
     keep = np.zeros(hit.shape, bool)
@@ -397,7 +401,7 @@ def moment_visibility(spec, rx: Receiver, mmap, smap):
     return prefilter.visibility(spec, rx, mmap), lookup.nearest_tap(rx, smap).shape
 
 
-cascade_metrics = cascades_mod.case_metrics     # (view, rx, v, V*) -> (columns, per-cascade rows, curve, faces)
+cascade_metrics = cascade_metrics_mod.case_metrics     # (view, rx, v, V*) -> (columns, per-cascade rows, curve, faces)
 split_distances = cascades_mod.split_distances
 
 

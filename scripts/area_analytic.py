@@ -13,12 +13,12 @@ from pathlib import Path
 import mitsuba as mi
 import numpy as np
 
-from dsm.tools import env
+from dsm.core import env
 
 env.use_variant("llvm_ad_rgb")
 import dsm.pipeline as pl                                   # noqa: E402
 from dsm.scenes import camera as scene_camera, geometry as scene_geometry
-from dsm.types import LightSpec
+from dsm.core.types import LightSpec
 
 A, H, B, HS = 1.0, 4.0, 1.0, 2.0
 W = 256

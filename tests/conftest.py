@@ -10,7 +10,7 @@ MESHES = ROOT / "data" / "meshes"          # the real test meshes, shipped with 
 @pytest.fixture(scope="session", autouse=True)
 def variant():
     """One variant for the session (llvm_ad_rgb unless DSM_VARIANT says otherwise)."""
-    from dsm.tools import env
+    from dsm.core import env
     v = env.use_variant(os.environ.get("DSM_VARIANT"))
     yield v
     import drjit as dr

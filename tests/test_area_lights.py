@@ -8,11 +8,12 @@ import numpy as np
 import pytest
 
 from dsm.truth import area, intervals, metrics
+from dsm.lights import area_surface
 from dsm.config import read as config
 from dsm.maps import lookup
 from dsm import pipeline, schemes
 from dsm.scenes import geometry as scene_geometry
-from dsm.types import ConfigError, LightSpec
+from dsm.core.types import ConfigError, LightSpec
 
 from conftest import MESHES, base_config
 
@@ -55,7 +56,7 @@ def analytic_scene(variant):
     step = xs[1] - xs[0]
     corners = [_region(_analytic(q + np.array([dx, dy]) * step / 2)) for dx in (-1, 1) for dy in (-1, 1)]
     straddles = np.any([c != _region(_analytic(q)) for c in corners], axis=0)
-    return scene, si, n, area.geometry(light), _analytic(q), straddles
+    return scene, si, n, area_surface.geometry(light), _analytic(q), straddles
 
 
 def test_student_t_quantiles_match_the_tables():
@@ -152,16 +153,16 @@ def test_sample_maps_are_uniform_by_area(variant):
     rng = np.random.default_rng(3)
     u, v = (mi.Float(rng.random(200000).astype(np.float32)) for _ in range(2))
     p = dr.zeros(mi.Point3f, 200000) + mi.Point3f(0.0, 0.0, -5.0)
-    disk = area.geometry(LightSpec("area", position=(0, 0, 0), direction=(0, 0, 1), shape="disk", size=(2.0,)))
+    disk = area_surface.geometry(LightSpec("area", position=(0, 0, 0), direction=(0, 0, 1), shape="disk", size=(2.0,)))
     x, _ = disk.sample(u, v, p)
     r2 = x.x.numpy() ** 2 + x.y.numpy() ** 2
     assert np.mean(r2) == pytest.approx(0.5, abs=0.01)         # uniform disk of radius 1: E[r^2] = 1/2
-    rect = area.geometry(LightSpec("area", position=(0, 0, 0), direction=(0, 0, 1), shape="rectangle",
+    rect = area_surface.geometry(LightSpec("area", position=(0, 0, 0), direction=(0, 0, 1), shape="rectangle",
                                    size=(2.0, 1.0)))
     x, _ = rect.sample(u, v, p)
     ext = sorted([np.ptp(x.x.numpy()), np.ptp(x.y.numpy())])
     assert ext == pytest.approx([1.0, 2.0], abs=1e-3)
-    sph = area.geometry(LightSpec("area", position=(0, 0, 0), shape="sphere", size=(2.0,)))
+    sph = area_surface.geometry(LightSpec("area", position=(0, 0, 0), shape="sphere", size=(2.0,)))
     x, _ = sph.sample(u, v, p)
     z = x.z.numpy()
     # the cap seen from distance 5: cos >= 1/5, z uniform on [-1, -1/5] (Archimedes)

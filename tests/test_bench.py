@@ -7,7 +7,7 @@ import numpy as np
 
 
 def test_fitted_exponent_recovers_a_power_law():
-    from dsm.tools.bench import fitted_exponent
+    from dsm.perf.bench import fitted_exponent
     texels = np.array([1024, 2048, 4096, 8192], float) ** 2
     assert math.isclose(fitted_exponent(texels, 3e-6 * texels), 1.0, rel_tol=1e-9)
     assert math.isclose(fitted_exponent(texels, 0.5 * texels ** 0.75), 0.75, rel_tol=1e-9)
@@ -17,7 +17,7 @@ def test_fitted_exponent_recovers_a_power_law():
 def test_kernel_ms_counts_the_kernels_of_one_call():
     import drjit as dr
     import mitsuba as mi
-    from dsm.tools import timing
+    from dsm.core import timing
     timing.enable_history()
     x = dr.arange(mi.Float, 100_000)
     dr.eval(x)
@@ -34,7 +34,8 @@ def test_kernel_ms_counts_the_kernels_of_one_call():
 def test_the_frozen_frame_replays_the_traced_frame():
     """The frame (map and every single-layer lookup) recorded by dr.freeze and replayed gives the
     traced frame's bits: every Dr.Jit value it reads is one of its inputs."""
-    from dsm.tools import bench, timing
+    from dsm.perf import bench
+    from dsm.core import timing
     from dsm.config.read import LightSpec, SceneSpec
     from dsm.scenes.params import PlaneBoxParams
     timing.enable_history()
@@ -49,7 +50,7 @@ def test_the_resampled_terrain_at_the_dem_s_own_size_is_the_terrain():
     """Resampled to the DEM's own 344 x 403 grid (275,772 triangles), the bench's terrain is the
     scene's terrain vertex for vertex and face for face (the bilinear weights are 0 or 1)."""
     from dsm.scenes import terrain
-    from dsm.tools import bench_geometry
+    from dsm.perf import bench_geometry
     verts, faces = terrain.mesh(1)
     v, f = bench_geometry.resampled_terrain(len(faces))
     np.testing.assert_array_equal(v, verts)
@@ -61,7 +62,7 @@ def test_the_resampled_terrain_interpolates_bilinearly_and_writes_its_triangles(
     DEM's grid; the PLY written holds the triangles asked for (read back from its header)."""
     from dsm.scenes import terrain
     from dsm.scenes.size import ply_triangles
-    from dsm.tools import bench_geometry
+    from dsm.perf import bench_geometry
     verts, _ = terrain.mesh(1)
     z0 = verts[:, 2].reshape(344, 403)
     v, f = bench_geometry.resampled_terrain(1_000_000)
@@ -81,7 +82,7 @@ def test_kernel_launches_are_counted_apart_inside_and_outside_the_timed_repeats(
     (the cold call) and 3 inside; kernels launched between measures count outside."""
     import drjit as dr
     import mitsuba as mi
-    from dsm.tools import env, timing
+    from dsm.core import env, timing
     env.use_variant("llvm_ad_rgb")
     timing.enable_history()
     timing.reset_launches()
@@ -101,7 +102,7 @@ def test_measure_kernel_times_every_call_and_leaves_no_cold_call_outside():
     tracing and compilation to its own kernel."""
     import drjit as dr
     import mitsuba as mi
-    from dsm.tools import env, timing
+    from dsm.core import env, timing
     env.use_variant("llvm_ad_rgb")
     timing.enable_history()
     timing.reset_launches()
@@ -121,7 +122,7 @@ def test_measure_kernel_times_every_call_and_leaves_no_cold_call_outside():
 def test_measure_kernel_reports_the_warm_calls_median(monkeypatch):
     """The first call's kernel time (memory touched for the first time) stays out of the median
     when there are later calls, and is the time when it is the only call."""
-    from dsm.tools import timing
+    from dsm.core import timing
     times = iter([[], [100.0], [1.0], [3.0], [], [7.0]])      # each call drains the history first
     monkeypatch.setattr(timing, "_run", lambda fn: ((), 0.0))
     monkeypatch.setattr(timing, "_jit_kernels", lambda: [{"execution_time": t} for t in next(times)])

@@ -1,4 +1,4 @@
-"""``dsm bench`` (8), pre-filtered maps beside PCF (dsm.tools.bench_prefilter): its rows, the maps
+"""``dsm bench`` (8), pre-filtered maps beside PCF (dsm.perf.bench_prefilter): its rows, the maps
 it times (the run's own, bit for bit), and its section of bench.md."""
 import math
 
@@ -6,7 +6,7 @@ import numpy as np
 
 
 def test_the_table_has_one_row_per_resolution_kind_and_width_and_pcf_shared_per_width():
-    from dsm.tools import bench_prefilter as bp
+    from dsm.perf import bench_prefilter as bp
     kinds, widths, res = ("vsm", "msm"), (1, 3), (32, 48)
     p = bp.prefilter_cost(resolutions=res, widths=widths, kinds=kinds, repeats=1, camera=48)
     rows = p["rows"]
@@ -34,7 +34,7 @@ def test_the_bench_times_the_runs_moment_map_bit_for_bit():
     import dsm.pipeline as pl
     from dsm import prefilter
     from dsm.prefilter import base
-    from dsm.tools import bench_prefilter as bp
+    from dsm.perf import bench_prefilter as bp
     sd, setup = bp.plates(32)
     view, smap, _ = bp.depth_map(sd, setup, 32)
     for kind in bp.KINDS:
@@ -50,7 +50,7 @@ def test_the_bench_times_the_runs_moment_map_bit_for_bit():
 
 def test_dsm_bench_takes_no_prefilter_and_bench_md_keeps_its_sections_without_it(capsys):
     from dsm import cli
-    from dsm.tools import bench
+    from dsm.perf import bench
     assert cli.main(["bench", "--help"]) == 0
     assert "--no-prefilter" in capsys.readouterr().out
     r = {"variant": "llvm_ad_rgb", "threads": 2, "repeats": 1, "builds": [], "lookups": [],

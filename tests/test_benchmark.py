@@ -9,7 +9,7 @@ import pytest
 from dsm import cli
 from dsm.benchmark import bias_units, compare, ranking, results, suite
 from dsm.benchmark.command import SIZE_ENV
-from dsm.types import Length
+from dsm.core.types import Length
 
 # the suites' identities: changing suite_<n>.toml changes its hash, which makes it a new version
 SUITE_1_SHA256 = "15b8554a6f096049e4da44ba45084ae524f5d93f04380a71907185a990a2ba5c"
@@ -478,7 +478,7 @@ def test_the_tuned_contender_is_the_tune_s_result_exactly():
     from pathlib import Path
     from dsm.config.read import parse_scheme
     from dsm.schemes import ALL, PRESETS
-    from dsm.types import Length
+    from dsm.core.types import Length
     stored = json.loads((Path(suite.__file__).with_name("tune_3.json")).read_text())
     best = min(stored["schemes"], key=lambda e: e["train"]["objective"])
     t = suite.load_suite()["contenders"]["tuned"]["tuned_normal_angle"]

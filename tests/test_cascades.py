@@ -12,7 +12,7 @@ LIGHT = {"type": "directional", "direction": [0.2, -0.5, -0.6]}
 
 def _setup(builtin="long_ground", res=64, camera=None, light=LIGHT, **params):
     import dsm.pipeline as pl
-    from dsm.types import CameraSpec, LightSpec
+    from dsm.core.types import CameraSpec, LightSpec
     sd = pl.load_scene(pl.scene_spec({"builtin": builtin, **params}), (res, res),
                        CameraSpec(**camera) if camera else None)
     gb = pl.gbuffer(sd)
@@ -21,7 +21,7 @@ def _setup(builtin="long_ground", res=64, camera=None, light=LIGHT, **params):
 
 
 def _view(pl, sd, setup, R=128, **spec):
-    from dsm.types import CascadeSpec
+    from dsm.core.types import CascadeSpec
     return pl.make_view(setup.light, R, pl.points_np(setup.p), sd.bbox, None, CascadeSpec(**spec), sd.sensor, sd.scale)
 
 
@@ -248,8 +248,8 @@ def test_camera_pose_overrides_and_far_plane_is_the_farthest_corner():
 
 def test_cascades_without_a_directional_light_is_a_config_error():
     from dsm.config import read as config
-    from dsm.experiment import plan
-    from dsm.types import ConfigError
+    from dsm.config import plan
+    from dsm.core.types import ConfigError
     spot = {"type": "spot", "position": [0, 0, 4], "target": [0, 0, 0]}
     with pytest.raises(ConfigError) as e:
         config.parse(base_config(light=[spot], map={"cascades": 4}), "t.toml")

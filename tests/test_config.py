@@ -56,7 +56,7 @@ def test_good_config_sweeps(tmp_path):
 
 def test_xml_without_usable_emitter_gets_a_default_light(tmp_path, run_dict):
     """An area-lit XML scene gets a point light at its luminaire, said in run.json; the plan agrees."""
-    from dsm.experiment import plan
+    from dsm.config import plan
     xml = tmp_path / "area.xml"
     xml.write_text('<scene version="3.0.0"><sensor type="perspective"><transform name="to_world">'
                    '<lookat origin="0, -4, 3" target="0, 0, 0" up="0, 0, 1"/></transform>'

@@ -9,8 +9,8 @@ import dsm
 import dsm.pipeline as pl
 from conftest import ROOT, base_config
 from dsm.contact import march as contact
-from dsm.experiment import record
-from dsm.types import ConfigError, ContactSpec, Length, LightSpec
+from dsm.core import record
+from dsm.core.types import ConfigError, ContactSpec, Length, LightSpec
 
 ROOT_DATA = ROOT / "tests" / "data"
 W, H = 128, 96
@@ -243,16 +243,16 @@ def test_run_writes_the_contact_group_only_when_asked(run_dict):
                                         ({"march": 3}, "contact.march")])
 def test_bad_contact_values_are_config_errors(table, key):
     with pytest.raises(ConfigError) as e:
-        dsm.config.parse(base_config(contact=table), "<t>")
+        dsm.parse_config(base_config(contact=table), "<t>")
     assert e.value.key == key and "\n" not in str(e.value)
 
 
 def test_bevy_preset_is_its_source_values():
-    cfg = dsm.config.parse(base_config(contact={"preset": "bevy"}), "<t>")
+    cfg = dsm.parse_config(base_config(contact={"preset": "bevy"}), "<t>")
     assert cfg.contact == ContactSpec(Length(0.3, "world"), 16, Length(0.1, "world"), 0.0)
     for table, key in (({"preset": "unreal"}, "contact.preset"), ({"preset": "bevy", "steps": 4}, "contact.steps")):
         with pytest.raises(ConfigError) as e:
-            dsm.config.parse(base_config(contact=table), "<t>")
+            dsm.parse_config(base_config(contact=table), "<t>")
         assert e.value.key == key
 
 
@@ -269,12 +269,13 @@ def test_largest_bias_within_the_tolerance():
 
 
 def test_contact_and_shrink_enter_the_case_keys_only_when_asked():
-    from dsm.experiment import plan, resume
-    cfg = dsm.config.parse(base_config(), "<t>")
+    from dsm.config import plan
+    from dsm.experiment import resume
+    cfg = dsm.parse_config(base_config(), "<t>")
     keys = resume.case_keys(cfg, plan.make(cfg), "v")
-    with_c = dsm.config.parse(base_config(contact={"steps": 4}), "<t>")
+    with_c = dsm.parse_config(base_config(contact={"steps": 4}), "<t>")
     assert keys != resume.case_keys(with_c, plan.make(with_c), "v")
-    again = dsm.config.parse(base_config(), "<t>")
+    again = dsm.parse_config(base_config(), "<t>")
     assert keys == resume.case_keys(again, plan.make(again), "v")
 
 

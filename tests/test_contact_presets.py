@@ -9,9 +9,9 @@ import dsm.pipeline as pl
 from conftest import base_config
 from dsm.cli import schemes_text
 from dsm.contact import march as contact
-from dsm.experiment import record
+from dsm.core import record
 from dsm.maps.lookup import resolve
-from dsm.types import ContactSpec, Length
+from dsm.core.types import ContactSpec, Length
 from test_contact import CAM_O, GAP, H, L, W, camera_frame, first_hit, pixel_rays, sun_on_plate
 
 # a base length that the depth scale makes 0.35 (the floor) to ~0.45 over the plate scene's receivers
@@ -86,7 +86,7 @@ def test_options_off_leave_the_march_as_it_was(plate):
 def test_hdrp_preset_is_its_source_values():
     """ContactShadows.cs's defaults: length 0.15, distanceScaleFactor 0.5, sampleCount 8, thicknessScale
     0.15 (x 10 on the C# side); the shader's max(0.5, depth x scale) and 2 x thickness x max(0.07, 1/8)."""
-    cfg = dsm.config.parse(base_config(contact={"preset": "hdrp"}), "<t>")
+    cfg = dsm.parse_config(base_config(contact={"preset": "hdrp"}), "<t>")
     c = cfg.contact
     assert (c.length, c.steps, c.jitter) == (Length(0.15, "world"), 8, 0.0)
     assert (c.length_depth_scale, c.length_depth_min) == (0.5, 0.5)
@@ -118,12 +118,12 @@ def test_hdrp_preset_runs_end_to_end(run_dict):
 
 
 def test_depth_scaled_keys_parse_and_negative_values_are_config_errors():
-    from dsm.types import ConfigError
-    cfg = dsm.config.parse(base_config(contact={"length": 0.1, "length_depth_scale": 0.5, "length_depth_min": 2,
+    from dsm.core.types import ConfigError
+    cfg = dsm.parse_config(base_config(contact={"length": 0.1, "length_depth_scale": 0.5, "length_depth_min": 2,
                                                 "thickness_per_length": 0.3}), "<t>")
     assert (cfg.contact.length_depth_scale, cfg.contact.length_depth_min, cfg.contact.thickness_per_length) == \
         (0.5, 2.0, 0.3)
     for key in ("length_depth_scale", "length_depth_min", "thickness_per_length"):
         with pytest.raises(ConfigError) as e:
-            dsm.config.parse(base_config(contact={key: -1}), "<t>")
+            dsm.parse_config(base_config(contact={key: -1}), "<t>")
         assert e.value.key == f"contact.{key}"

@@ -171,7 +171,7 @@ def test_camera_relative_map_keeps_its_counts_far_away_and_world_precision_is_fl
 
 def test_precision_choices_are_checked():
     from dsm.config import read as config
-    from dsm.types import ConfigError
+    from dsm.core.types import ConfigError
     with pytest.raises(ConfigError) as e:
         config.parse({"scene": [{"builtin": "plane", "precision": "double"}], "scheme": [{"name": "none"}]}, "x.toml")
     assert e.value.key == "scene[0].precision" and "camera_relative" in str(e.value)

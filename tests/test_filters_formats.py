@@ -39,7 +39,7 @@ def test_bilinear_pcf_rises_linearly_across_one_texel(variant):
     sd, view, smap, p, n, vstar = _edge_setup()
     rx = Receiver.make(view, p, n, sd.diagonal)
     const = schemes.get("constant")
-    prm = const.Params(bias=__import__("dsm").config.Length(0.05, "world"))
+    prm = const.Params(bias=__import__("dsm").Length(0.05, "world"))
     v_bil = visibility(const, prm, rx, smap, "pcf_bilinear")[0].numpy()
     v_near = visibility(const, prm, rx, smap, "nearest")[0].numpy()
     u = rx.u_map.numpy()

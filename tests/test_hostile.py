@@ -269,7 +269,7 @@ def test_an_absurd_thread_count_is_one_line(tmp_path, capsys, cfg_file):
         assert rc == 2
         _one_line(err, "--threads", "1024", n)
     assert not (tmp_path / "o").exists()
-    from dsm.tools import env
+    from dsm.core import env
     with pytest.raises(env.SetupError, match="1 to 1024"):
         env.use_variant(None, 100000)
 
@@ -694,12 +694,12 @@ def test_an_unknown_variant_argument_is_a_config_error_as_the_toml_key_is(tmp_pa
 def test_a_cuda_variant_without_a_gpu_leaves_dsm_importable_and_names_the_variant(tmp_path):
     """Item 13: Mitsuba's own set_variant("cuda_ad_rgb") fails without a GPU; `import dsm` still
     works after it, and the first call that needs the GPU raises the kit's SetupError naming it."""
-    from dsm.tools import env
+    from dsm.core import env
     if env.has_cuda():
         pytest.skip("this machine has a CUDA GPU")
     code = ("import mitsuba as mi\n"
             "try:\n    mi.set_variant('cuda_ad_rgb')\nexcept Exception as e:\n    print('mitsuba:', type(e).__name__)\n"
-            "import dsm\nfrom dsm.tools.env import SetupError\n"
+            "import dsm\nfrom dsm.core.env import SetupError\n"
             "try:\n    dsm.run({'scene': [{'builtin': 'plane'}], 'scheme': [{'name': 'none'}]}, "
             f"out={str(tmp_path / 'o')!r}, variant='cuda_ad_rgb')\n"
             "except SetupError as e:\n    print('SetupError:', e)\n")

@@ -10,7 +10,7 @@ import pytest
 
 from conftest import cli_run as _cli, one_line as _one_line, base_config
 from dsm.config import read as config
-from dsm.experiment import plan
+from dsm.config import plan
 from dsm.config.read import ConfigError
 
 

@@ -17,7 +17,7 @@ from conftest import cli_run as _cli
 
 from dsm import cli
 from dsm.config import read as config
-from dsm.experiment import plan
+from dsm.config import plan
 from dsm.scenes import builtins as scene_builtins, geometry, load as scenes, params as scene_params
 from dsm.config.read import ConfigError, Length
 

@@ -264,7 +264,7 @@ def assert_layers_match(smap, expected, ok, l_index):
     """z1, z2 and the first hit's shape of a map against the tracer's. A float32 hit is a few ulps
     off its surface, which moves it along a ray meeting the surface at |cos| = |n . d| by that
     over |cos|; z2 is found from a continuation ray that starts delta = 32 u (max|p| + extent)
-    (dsm.maps.spawn, under 1e-5 in these scenes) off the first hit along its normal, a ray parallel to
+    (dsm.scenes.spawn, under 1e-5 in these scenes) off the first hit along its normal, a ray parallel to
     the texel's, which moves it by at most delta (1 + 1 / |cos2|)."""
     z1, is_l, z2, cos1, cos2 = expected
     tol1 = 1e-6 + 4e-6 / cos1
@@ -380,7 +380,7 @@ def test_hit_shape_by_registry_id_equals_embree_shape_index():
     registry-id table must give the index into scene.shapes() that Embree's ``shape_index`` gives,
     for meshes and analytic shapes in any order, and NO_SHAPE on a miss."""
     import mitsuba as mi
-    from dsm.maps import spawn
+    from dsm.scenes import spawn
     xs = {"s": -6.0, "a": -3.0, "r": 0.0, "b": 3.0, "c": 6.0}      # one shape per x, each hit head-on
     scene = mi.load_dict({"type": "scene",
                           "s": {"type": "sphere", "center": [xs["s"], 0, 0], "radius": 1.0},
@@ -405,7 +405,7 @@ def test_a_hit_inside_an_instance_names_the_instance():
     """Two instances of one shape group: each hit names its own instance's index in
     scene.shapes() (Embree's shape_index gives the group's inner shape, OptiX's 0)."""
     import mitsuba as mi
-    from dsm.maps import spawn
+    from dsm.scenes import spawn
     T = mi.ScalarTransform4f()
     scene = mi.load_dict({"type": "scene",
                           "grp": {"type": "shapegroup", "c": {"type": "cube"}},
@@ -449,7 +449,7 @@ def test_a_hit_from_the_triangle_tables_is_the_surface_interaction_bit_for_bit()
     triangle's nine coordinates at TRI_STRIDE, as numpy reads them from the meshes' buffers."""
     import drjit as dr
     import mitsuba as mi
-    from dsm.maps import spawn
+    from dsm.scenes import spawn
     scene = mi.load_dict({"type": "scene", "a": {"type": "cube"},
                           "b": {"type": "cube", "to_world": mi.ScalarTransform4f().translate([0, 0, 4])
                                 @ mi.ScalarTransform4f().rotate([1, 1, 0], 30)}})

@@ -18,7 +18,7 @@ def _room_cube(res=48):
     from dsm.config import read as config
     from dsm.scenes import load as scenes
     from dsm.pipeline import make_view
-    from dsm.types import LightSpec
+    from dsm.core.types import LightSpec
     sd = scenes.load(config.parse(base_config(scene=[{"builtin": "room"}]), "<test>").scenes[0], (16, 16))
     view = make_view(LightSpec("point", position=(0.2, 0.1, 1.8), direction=(0, 0, -1.0)), res, None, sd.bbox, "cube")
     return sd, view

@@ -97,8 +97,8 @@ def test_fixed_points_exact_visibility_does_not_depend_on_the_camera():
     import dsm.pipeline as pl
     from dsm.experiment import motion
     from dsm.truth import reference
-    from dsm.maps.cascades import Camera
-    from dsm.types import LightSpec, MotionSpec
+    from dsm.scenes.camera import Camera
+    from dsm.core.types import LightSpec, MotionSpec
     sd = pl.load_scene(pl.scene_spec({"builtin": "plane_box"}), (48, 48))
     light = LightSpec("directional", direction=(-0.4, -0.3, -1.0))
     fp = motion.sample_points(sd.scene, 2000, 7, sd.diagonal)
@@ -121,7 +121,7 @@ def test_fixed_points_exact_visibility_does_not_depend_on_the_camera():
 
 def test_motion_config_errors_name_the_key():
     from dsm.config import read as config
-    from dsm.types import ConfigError
+    from dsm.core.types import ConfigError
     for motion, key in (({"frames": 1}, "motion[0].frames"), ({"camera": "dolly"}, "motion[0].offset"),
                         ({"camera": "zoom"}, "motion[0].camera"), ({"light": "turn"}, "motion[0].light_angle"),
                         ({"camera": "keyframes", "keys": [{"position": [0, 0, 1]}]}, "motion[0].keys"),
@@ -165,8 +165,8 @@ def test_moving_point_light_exact_visibility_matches_the_segment_test(scale, tra
     scaled and moved as the scene; points within 1e-3 of the box's silhouette are left out)."""
     import dsm.pipeline as pl
     from dsm.experiment import motion
-    from dsm.maps.cascades import Camera
-    from dsm.types import LightSpec, MotionSpec
+    from dsm.scenes.camera import Camera
+    from dsm.core.types import LightSpec, MotionSpec
     sd = pl.load_scene(pl.scene_spec({"builtin": "plane_box", "scale": scale, "translate": translate}), (48, 48))
     light = sd.lights_for([LightSpec("point", position=(-1.5, 0.0, 2.5))])[0]
     spec = MotionSpec(frames=5, light="move", light_offset=(3.0, 0.8, 0.0))
@@ -228,7 +228,7 @@ def test_still_light_given_as_a_zero_move_flickers_zero_and_builds_once(run_dict
 
 def test_light_move_config_errors_name_the_key():
     from dsm.config import read as config
-    from dsm.types import ConfigError
+    from dsm.core.types import ConfigError
     for motion, key in (({"light": "move"}, "motion[0].light_offset"),
                         ({"light": "keyframes"}, "motion[0].light_keys"),
                         ({"light": "keyframes", "light_keys": [{"position": [0, 0, 1]}]}, "motion[0].light_keys"),
@@ -260,7 +260,7 @@ def test_light_keyframes_interpolate_positions_and_a_spots_aim():
     as the scene); without targets a spot keeps its direction, with targets it aims at the
     interpolated target; a directional light stays still."""
     from dsm.experiment import motion
-    from dsm.types import LightSpec, MotionSpec
+    from dsm.core.types import LightSpec, MotionSpec
     spot = LightSpec("spot", position=(0.0, 0.0, 3.0), target=(1.0, 0.0, 0.0), cutoff=40.0)
     keys = (((0.0, 0.0, 3.0), None), ((2.0, 0.0, 3.0), None), ((2.0, 2.0, 5.0), None))
     s, t = 3.0, np.array([10.0, 0.0, -1.0])

@@ -87,7 +87,7 @@ def _plate_lookups(scene, blur, R=128, cam=128):
     """V per receiver of msm (default bias 3e-5) in each moment format, and V* (one scene, its sun)."""
     import dsm.pipeline as pl
     from dsm.prefilter import msm
-    from dsm.types import MomentSpec
+    from dsm.core.types import MomentSpec
     sd = pl.load_scene(pl.scene_spec({"builtin": scene}), (cam, cam))
     setup = pl.light_setup(sd, pl.gbuffer(sd), sd.own_lights[0], "sun")
     view = pl.make_view(setup.light, R, pl.points_np(setup.p), sd.bbox)
@@ -133,7 +133,8 @@ def test_unorm16_msm_is_planned_and_run_and_the_depth_cases_keep_their_unorm16(r
     """[map] format = ["float32", "unorm16"] with depth and msm: the depth cases quantize the depth
     as before, the msm cases store the optimized moments; each row checks and names its format."""
     from dsm.config import read as config
-    from dsm.experiment import plan, record
+    from dsm.config import plan
+    from dsm.core import record
     cfg = base_config(scene=[{"builtin": "floating_plate"}], camera={"resolution": [32, 32]},
                       map={"resolution": 32, "kind": ["depth", "msm"], "blur": [1, 3], "format": ["float32", "unorm16"]})
     assert plan.make(config.parse(cfg, "<test>")).cases == 2 + 2 * 2

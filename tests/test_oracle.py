@@ -218,7 +218,7 @@ def test_oracle_outputs(run_dict):
     from dsm.config import read as config
     from dsm.truth import metrics
     from dsm.report import io as report
-    from dsm.types import ConfigError
+    from dsm.core.types import ConfigError
     res = run_dict(base_config(scene=[{"builtin": "floating_plate"}], camera={"resolution": [64, 64]},
                                map={"resolution": 64, "format": ["float32", "unorm16"]},
                                scheme=[{"name": "constant", "bias": [0.0, 0.02]}], oracle={"lambda": [0.5, 1.0]}))
@@ -243,7 +243,7 @@ def test_oracle_outputs(run_dict):
 
 def test_plan_counts_the_oracles_sorts():
     from dsm.config import read as config
-    from dsm.experiment import plan
+    from dsm.config import plan
     cfg = config.parse(base_config(camera={"resolution": [64, 32]}, map={"resolution": [64, 128],
                                    "format": ["float32", "unorm16"]}, oracle={"lambda": [1.0, 2.0]}), "<t>")
     p = plan.make(cfg)

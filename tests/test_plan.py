@@ -22,7 +22,7 @@ CONFIGS = {
 @pytest.mark.parametrize("name", sorted(CONFIGS))
 def test_plan_ray_counts_equal_what_the_run_casts(run_dict, name):
     from dsm.config import read as config
-    from dsm.experiment import plan
+    from dsm.config import plan
     raw = base_config(camera={"resolution": [64, 48]}, **CONFIGS[name])
     raw.setdefault("map", {"resolution": 64})
     p = plan.make(config.parse(raw, "<test>"))
@@ -50,7 +50,7 @@ def test_plan_ray_counts_equal_what_the_run_casts(run_dict, name):
 
 def test_constant_and_none_build_nothing_more(run_dict):
     from dsm.config import read as config
-    from dsm.experiment import plan
+    from dsm.config import plan
     raw = base_config(scheme=[{"name": "none"}, {"name": "constant", "bias": [0.01, "1 texel"]}],
                       map={"resolution": [32, 64]})
     p = plan.make(config.parse(raw, "<test>"))

@@ -217,7 +217,7 @@ def _synthetic(R):
 def _vsm_map(z1, R, blur, mv, receiver_t):
     from dsm import prefilter
     from dsm.prefilter import vsm
-    from dsm.types import MomentSpec
+    from dsm.core.types import MomentSpec
     view, rx = _synthetic(R)
     rx.depth = _f(np.full(R * R, receiver_t))
     spec = MomentSpec("vsm", vsm.Params(min_variance=mv), blur)
@@ -314,7 +314,8 @@ def test_schemes_belong_to_the_depth_kind():
 
 def test_plan_counts_the_moment_cases_and_resume_keys_them():
     from dsm.config import read as config
-    from dsm.experiment import plan, resume
+    from dsm.config import plan
+    from dsm.experiment import resume
     cfg = config.parse(base_config(map={"resolution": 32, "kind": ["depth", "vsm", "msm"], "blur": [1, 3],
                                         "format": ["float32", "float16"], "vsm": {"min_variance": [1e-4, 1e-3]},
                                         "filter": ["nearest", "pcf_bilinear"]},
@@ -329,7 +330,7 @@ def test_plan_counts_the_moment_cases_and_resume_keys_them():
 
 def test_without_kind_the_plan_and_rows_are_unchanged():
     from dsm.config import read as config
-    from dsm.experiment import plan
+    from dsm.config import plan
     cfg = config.parse(base_config(), "<test>")
     assert cfg.map.kind == ("depth",) and not cfg.map.leak_split and cfg.map.moments == ()
     assert all(m.moments == () for m in plan.make(cfg).maps)
@@ -343,7 +344,7 @@ def test_a_run_of_floating_plate_measures_each_kind_and_vsm_unfiltered_is_a_cons
     receiver g behind its texel exactly when g^2 <= min_variance (normalized depth): the depth
     test with a constant bias of sqrt(min_variance) depth ranges, here 0.01 range, so the two
     cases classify every pixel alike."""
-    from dsm.experiment import record
+    from dsm.core import record
     res = run_dict(base_config(scene=[{"builtin": "floating_plate"}], camera={"resolution": [64, 64]},
                                map={"resolution": 64, "kind": ["depth", "vsm", "esm", "evsm", "msm"], "blur": [1, 5],
                                     "vsm": {"min_variance": 1e-4}, "esm": {"c": 40}, "evsm": {"positive": 20}},
@@ -371,7 +372,7 @@ def test_unfiltered_vsm_is_the_constant_bias_receiver_by_receiver_and_lights_not
     sqrt(min_variance) ranges lights it; among the receivers the exact visibility shadows whose
     nearest texel is the plate (its gap 0.2 world is > sqrt(min_variance) ranges), none is lit."""
     import dsm.pipeline as pl
-    from dsm.types import MomentSpec
+    from dsm.core.types import MomentSpec
     from dsm.prefilter import vsm
     sd = pl.load_scene(pl.scene_spec({"builtin": "floating_plate", "gap": 0.2}), (64, 64))
     setup = pl.light_setup(sd, pl.gbuffer(sd), sd.own_lights[0], "sun")
@@ -403,7 +404,7 @@ def test_stacked_plates_leak_in_the_one_texel_column_derived_by_hand():
     plate, about 10 texels), not contact."""
     import dsm.pipeline as pl
     from dsm.truth import metrics
-    from dsm.types import MomentSpec
+    from dsm.core.types import MomentSpec
     from dsm.prefilter import vsm
     sd = pl.load_scene(pl.scene_spec({"builtin": "stacked_plates"}), (160, 160))
     setup = pl.light_setup(sd, pl.gbuffer(sd), sd.own_lights[0], "sun")
@@ -567,7 +568,7 @@ def test_vsm_bleed_high_above_bleed_and_the_old_label_kept():
     with pytest.raises(config.ConfigError) as e:
         config.parse(base_config(map={"kind": ["depth", "vsm"], "vsm": {"bleed": 0.4, "bleed_high": 0.4}}), "<test>")
     assert e.value.key == "map.vsm.bleed_high"
-    from dsm.types import describe_params
+    from dsm.core.types import describe_params
     assert "bleed_high" not in describe_params(vsm.Params()) and "bleed_high=0.95" in describe_params(
         _preset("vsm", "three"))
 
@@ -764,7 +765,7 @@ def test_the_mip_chain_is_each_face_s_two_by_two_means_down_to_one_texel():
 
 def test_a_mipmapped_vsm_reads_the_level_of_each_receiver_s_pixel_footprint():
     """V of a mipmapped VSM against numpy float64: lambda = log2 of the footprint in texels from the
-    camera's pixel area (dsm.maps.cascades.Camera.pixel_area, a second computation), the two
+    camera's pixel area (dsm.scenes.camera.Camera.pixel_area, a second computation), the two
     levels' nearest texels (means of the map's 2^l x 2^l blocks) mixed by frac(lambda), then
     Chebyshev's bound; and without a camera the map itself."""
     import dataclasses

@@ -3,7 +3,7 @@ import math
 
 import pytest
 
-from dsm.types import ConfigError, Length
+from dsm.core.types import ConfigError, Length
 
 S2 = math.sqrt(2.0)
 W, T, R = "world", "texel", "range"
@@ -108,7 +108,7 @@ def test_combined_needs_slope_only_with_a_slope_term():
 
 def test_plan_resolves_presets_per_light():
     from dsm.config.read import parse
-    from dsm.experiment import plan
+    from dsm.config import plan
     cfg = parse({"scene": [{"builtin": "plane_box"}],
                  "light": [{"type": "directional", "direction": [0.2, 0.1, -1.0]},
                            {"type": "point", "position": [0.5, -0.5, 3.0]}],

@@ -1,4 +1,4 @@
-"""The run record (dsm.experiment.record) and the one report composer (dsm.report.publish): a row that does not fit
+"""The run record (dsm.core.record) and the one report composer (dsm.report.publish): a row that does not fit
 metrics.csv's schema is refused, and `dsm report DIR` rebuilds exactly what `dsm run` wrote."""
 import csv
 import json
@@ -15,14 +15,14 @@ DATA = {"metrics.csv", "oracle.csv", "oracle_curves.npz", "cascades.csv", "casca
 
 
 def _row(**over):
-    from dsm.experiment import record
+    from dsm.core import record
     row = {c: ("x" if c in record.TEXT_COLUMNS else 1) for c in record.GROUPS["core"]}
     row.update(over)
     return row
 
 
 def test_a_row_must_fit_the_schema(tmp_path):
-    from dsm.experiment import record
+    from dsm.core import record
     from dsm.report import io as report
     w = report.CsvWriter(tmp_path / "metrics.csv")
     w.write(_row(case="0001"))                                   # core columns alone: a row
@@ -39,7 +39,7 @@ def test_a_row_must_fit_the_schema(tmp_path):
 
 
 def test_every_row_a_run_writes_fits_and_the_groups_are_the_kinds_of_case(run_dict):
-    from dsm.experiment import record
+    from dsm.core import record
     res = run_dict(base_config(scene=[{"builtin": "plane_box"}], map={"resolution": 32},
                                scheme=[{"name": "constant"}, {"name": "dual"}]))
     for r in res.rows:
@@ -103,7 +103,7 @@ def test_merge_folds_a_tasks_record_once_per_scene_and_light():
     """Two Ray tasks of one scene and light: rows and cases from both (tagged with their node),
     the scene's note, G-buffer and reference rays once, every map's own rays, the area light's
     reference regions (which the hand packing of old dropped)."""
-    from dsm.experiment.record import RunRecord
+    from dsm.core.record import RunRecord
     driver, seen = RunRecord(), set()
     for i in range(2):
         task = RunRecord(rows=[{"case": f"000{i}"}], status=[{"what": f"case 000{i}", "status": "ok"},

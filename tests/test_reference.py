@@ -9,7 +9,7 @@ import pytest
 from dsm.config import read as config
 from dsm.scenes import camera as scene_camera, gbuffer, geometry, load as scenes, spec as scene_spec
 from dsm.truth import reference
-from dsm.maps import spawn
+from dsm.scenes import spawn
 from dsm.config.read import LightSpec
 
 DATA = Path(__file__).parent / "data"

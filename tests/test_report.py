@@ -352,7 +352,7 @@ def test_report_images_key(tmp_path):
     import dsm
     from dsm.config import read as config
     from dsm.report import figures
-    from dsm.types import ConfigError
+    from dsm.core.types import ConfigError
     with pytest.raises(ConfigError, match=r"<t>: report\.images: unknown value 'some' \(valid: all, errors, none\)"):
         config.parse(base_config(report={"images": "some"}), "<t>")
     with pytest.raises(ConfigError, match=r"report\.image: unknown key \(valid: images\)"):

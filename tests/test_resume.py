@@ -142,7 +142,8 @@ def test_an_edited_config_reruns_changed_cases_and_lists_stale_ones(tmp_path):
 
 def test_a_case_key_changes_with_its_input_file_and_the_kit_version(tmp_path):
     from dsm.config import read as cfgmod
-    from dsm.experiment import plan as planmod, resume
+    from dsm.config import plan as planmod
+    from dsm.experiment import resume
     mesh = tmp_path / "tri.obj"
     mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     raw = {"experiment": {"name": "k"}, "scene": [{"file": str(mesh)}], "light": [{"type": "directional",

@@ -6,7 +6,7 @@ import pytest
 import dsm.pipeline as pl
 from conftest import base_config
 from dsm.maps import shrink
-from dsm.types import ConfigError, LightSpec
+from dsm.core.types import ConfigError, LightSpec
 
 R, D = 1.0, 0.1
 
@@ -89,7 +89,7 @@ def test_shrink_is_planned_and_moves_only_the_casters(run_dict):
 def test_bad_shrink_is_a_config_error(value):
     import dsm
     with pytest.raises(ConfigError) as e:
-        dsm.config.parse(base_config(map={"resolution": 64, "shrink": value}), "<t>")
+        dsm.parse_config(base_config(map={"resolution": 64, "shrink": value}), "<t>")
     assert e.value.key == "map.shrink"
 
 

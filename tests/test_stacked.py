@@ -66,7 +66,7 @@ def test_a_first_layer_stack_is_one_launch(room):
     """Three maps' first layers: three kernels built alone, one built together (Dr.Jit's kernel history)."""
     import drjit as dr
     from dsm.maps import shadowmap, stacked
-    from dsm.tools import timing
+    from dsm.core import timing
     sd, lights, ext, _ = room
     views = _views(lights[0], None, sd)
     timing.enable_history()
@@ -158,7 +158,7 @@ def test_every_stack_layout_runs_one_compiled_kernel(room):
     counts of maps) launch the same kernel (its hash in Dr.Jit's kernel history), compiled once."""
     import drjit as dr
     from dsm.maps import stacked
-    from dsm.tools import timing
+    from dsm.core import timing
     sd, lights, _, _ = room
     timing.enable_history()
     hashes = set()
@@ -179,7 +179,8 @@ def test_what_the_plan_stacks():
     the memory budget beyond the camera's buffers (a small budget splits them as it tiles a map);
     a cluster run stacks nothing (a Ray task runs one map); a case's key tells the modes apart."""
     from dsm import pipeline
-    from dsm.experiment import plan as planmod, resume
+    from dsm.config import plan as planmod
+    from dsm.experiment import resume
     cfg = base_config(scene=[{"builtin": "plane_box"}], light=LIGHTS, camera={"resolution": [48, 48]},
                       map={"resolution": [32, 64, 128, 256], "view": ["cube"]}, scheme=[{"name": "midpoint"}],
                       timing={"repeats": 1, "builds": "together"})
@@ -201,7 +202,7 @@ def test_what_the_plan_stacks():
 def test_builds_choice_is_checked(tmp_path):
     """A [timing] builds value outside the choices is one line naming the file, the key and the choices."""
     from dsm.config import read as config
-    from dsm.types import ConfigError
+    from dsm.core.types import ConfigError
     with pytest.raises(ConfigError) as e:
         config.parse({**base_config(), "timing": {"builds": "sometimes"}}, "exp.toml")
     msg = str(e.value)
@@ -212,7 +213,7 @@ def test_bench_compares_the_build_modes(tmp_path, monkeypatch):
     """dsm bench (5c): a light's resolution sweep built together launches fewer timed kernels than
     each map alone (a count, not a clock: alone, one first-layer build per map and repeat), every
     row equal."""
-    from dsm.tools import bench_modes
+    from dsm.perf import bench_modes
     small = {**bench_modes.BUILD_SWEEP, "scene": [{"builtin": "plane_box"}], "camera": {"resolution": [32, 32]},
              "light": [{"type": "scene"}], "map": {"resolution": [16, 32, 64]},
              "scheme": [{"name": "constant"}], "timing": {"repeats": 2}}

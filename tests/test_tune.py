@@ -653,7 +653,7 @@ def test_the_python_api_keeps_dsm_tunes_folder_rules(tmp_path):
     wrote its table.md over a dsm run's), replaces a previous tune with force=True, goes on with
     resume=True, and refuses both at once."""
     from dsm.tune import tuner
-    from dsm.types import ConfigError
+    from dsm.core.types import ConfigError
     cfg = tmp_path / "t.toml"
     cfg.write_text(RESUME_CFG)
     run = tmp_path / "run"
@@ -707,7 +707,7 @@ def test_steps_name_each_instance_and_a_batch_below_one_receiver_is_refused(tmp_
     gradient phase then does nothing) is refused naming tune.batch."""
     import csv
     from dsm.tune import tuner
-    from dsm.types import ConfigError
+    from dsm.core.types import ConfigError
     cfg = _cfg({"builtin": "plane_box"}, [{"name": "constant", "bias": "1 texel"}, {"name": "constant", "bias": 0.02}],
                {"steps": 8}, R=32, cam=32)
     tuner.tune(cfg, out=tmp_path / "o")

@@ -121,7 +121,7 @@ def test_evsm_tuned_with_its_exponents_is_never_worse_than_its_start_nor_its_gri
 def test_dsm_tune_refuses_supersampled_moments_before_work(map_extra, key):
     from dsm.config.read import coerce
     from dsm.tune import tuner
-    from dsm.types import ConfigError
+    from dsm.core.types import ConfigError
     cfg = _cfg(["vsm"], [1])
     cfg["map"].update(map_extra)
     with pytest.raises(ConfigError) as e:
@@ -131,7 +131,7 @@ def test_dsm_tune_refuses_supersampled_moments_before_work(map_extra, key):
 
 def test_moment_samples_without_a_pre_filtered_kind_is_refused():
     from dsm.config import read as config
-    from dsm.types import ConfigError
+    from dsm.core.types import ConfigError
     with pytest.raises(ConfigError) as e:
         config.parse({"experiment": {"name": "x"}, "scene": [{"builtin": "plane"}], "map": {"moment_samples": 2}},
                      "<test>")
@@ -142,7 +142,7 @@ def test_moment_samples_without_a_pre_filtered_kind_is_refused():
 def test_an_exponent_that_cannot_shadow_is_refused(kind, table):
     """Below ln 2 an ESM never shadows (V = exp(-c (t - z)) >= 1/2 for t - z <= 1): c >= 1 and EVSM's >= 0.5."""
     from dsm.config import read as config
-    from dsm.types import ConfigError
+    from dsm.core.types import ConfigError
     with pytest.raises(ConfigError) as e:
         config.parse({"experiment": {"name": "x"}, "scene": [{"builtin": "plane"}],
                       "map": {"kind": [kind], kind: table}}, "<test>")

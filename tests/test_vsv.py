@@ -225,7 +225,7 @@ def test_plan_pairs_each_view_with_its_own_lookups_and_a_spot_gets_a_grid(run_di
     """A VSV grid is read by the vsv lookups only, a depth map by the shadow-map schemes only; a
     spot light with view = ["vsv"] gets its perspective map and a grid over the same cone."""
     from dsm.config import read as config
-    from dsm.experiment import plan
+    from dsm.config import plan
     cfg = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [64, 64]},
                       light=[{"type": "spot", "position": [2, -2, 4], "target": [0, 0, 0], "cutoff": 35}],
                       map={"resolution": 32, "view": ["vsv"]},

@@ -100,7 +100,7 @@ def test_a_map_cut_into_waves_gives_the_same_rows(both, tmp_path, monkeypatch):
     """With room for one case a wave, each of a map's 48 cases runs in its own wave, and every row
     is the same as in one wave."""
     import dsm
-    from dsm.experiment import plan
+    from dsm.config import plan
     monkeypatch.setattr(plan, "WAVE_BYTES", 1)
     cfg = _config("wavefront")
     cfg["map"]["resolution"] = [64]
@@ -113,7 +113,7 @@ def test_a_map_cut_into_waves_gives_the_same_rows(both, tmp_path, monkeypatch):
 
 def test_wave_cases_fit_the_budget():
     """wave_cases: as many cases as fit WAVE_BYTES (at least one), by the outputs' bytes per case."""
-    from dsm.experiment import plan
+    from dsm.config import plan
     per = 1000 * plan.WAVE_RECEIVER_BYTES + 200 * plan.WAVE_BACK_BYTES
     assert plan.wave_cases(1000, 200) == plan.WAVE_BYTES // per
     assert plan.wave_cases(plan.WAVE_BYTES, 0) == 1
@@ -122,7 +122,7 @@ def test_wave_cases_fit_the_budget():
 
 def test_an_unknown_lookup_mode_is_refused_before_any_work(tmp_path):
     import dsm
-    from dsm.types import ConfigError
+    from dsm.core.types import ConfigError
     with pytest.raises(ConfigError) as e:
         dsm.run(_config("fused"), out=tmp_path / "x")
     msg = str(e.value)
@@ -133,7 +133,7 @@ def test_an_unknown_lookup_mode_is_refused_before_any_work(tmp_path):
 def test_bench_compares_the_modes_on_a_sweep(tmp_path, monkeypatch):
     """dsm bench (5b): on a sweep whose cases share kernels, the wavefront launches fewer timed
     kernels than one lookup per case (a count, not a clock), and every row is equal."""
-    from dsm.tools import bench_modes
+    from dsm.perf import bench_modes
     small = {**bench_modes.LOOKUP_SWEEP, "camera": {"resolution": [48, 48]},
              "map": {"resolution": [64], "filter": ["nearest"]}, "timing": {"repeats": 2}}
     monkeypatch.setattr(bench_modes, "LOOKUP_SWEEP", small)

@@ -16,7 +16,7 @@ CBOX = MESHES / "cbox_mitsuba" / "cbox.xml"
 def test_scaled_xml_loads_the_file_s_scene_times_the_scale():
     import mitsuba as mi
     from dsm.scenes import files
-    from dsm.tools import env
+    from dsm.core import env
     env.use_variant("llvm_ad_rgb")
     ref = mi.load_file(str(CBOX), optimize=False)
     got = files.load_xml_scene(CBOX, 0.001)
@@ -73,7 +73,7 @@ def test_a_broken_xml_with_a_scale_is_one_config_error(tmp_path):
     import shutil
     from dsm.config import read as config
     from dsm import pipeline
-    from dsm.types import ConfigError
+    from dsm.core.types import ConfigError
     folder = tmp_path / "cb"
     shutil.copytree(CBOX.parent, folder)
     text = (folder / "cbox.xml").read_text()
@@ -90,7 +90,7 @@ def test_a_moved_xml_scene_holds_its_shapes_and_camera_at_scale_times_file_plus_
     the scale plus the move (numpy float64), the camera's orientation the file's."""
     import mitsuba as mi
     from dsm.scenes import files
-    from dsm.tools import env
+    from dsm.core import env
     env.use_variant("llvm_ad_rgb")
     move = np.array([300.0, -20.0, 7.5])
     ref = mi.load_file(str(CBOX), optimize=False)

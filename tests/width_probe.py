@@ -32,7 +32,7 @@ def arrays() -> dict:
     from dsm.scenes import gbuffer, load as scenes
     from dsm.maps import shadowmap
     from dsm.pipeline import make_view
-    from dsm.types import LightSpec
+    from dsm.core.types import LightSpec
     raw = {"experiment": {"name": "w"}, "scene": [{"builtin": "room"}], "scheme": [{"name": "none"}]}
     sd = scenes.load(config.parse(raw, "<probe>").scenes[0], (64, 64))
     view = make_view(LightSpec("point", position=(0.2, 0.1, 1.8), direction=(0, 0, -1.0)), 48, None, sd.bbox, "cube")
@@ -53,6 +53,6 @@ if __name__ == "__main__":
     import numpy as np
     mi.set_variant("llvm_ad_rgb")          # the LLVM backend up, no kernel compiled yet
     width = force_width(int(sys.argv[1]))
-    from dsm.tools import env
+    from dsm.core import env
     env.use_variant("llvm_ad_rgb")
     np.savez(sys.argv[2], width=width, **arrays())

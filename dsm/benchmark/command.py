@@ -61,8 +61,8 @@ def _run(args, out: Path) -> int:
     size = "full" if args.full else os.environ.get(SIZE_ENV, "default")
     if args.cluster:                   # reach the cluster before any case runs
         from ..experiment import cluster
-        from ..tools.env import SetupError
-        from ..types import ConfigError
+        from ..core.env import SetupError
+        from ..core.types import ConfigError
         try:
             cluster.connect(args.cluster)
         except (SetupError, ConfigError) as e:

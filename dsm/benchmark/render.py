@@ -28,7 +28,7 @@ def light_setups(config, variant: str | None = None) -> dict:
         sd = pipeline.load_scene(spec, cfg.camera_resolution, cfg.camera)
         gb = pipeline.gbuffer(sd)
         for i, light in enumerate(sd.lights_for(cfg.lights)):
-            label = f"{i}:{light.type}"          # dsm.experiment.plan.scene_lights' labels
+            label = f"{i}:{light.type}"          # dsm.config.plan.scene_lights' labels
             out[(sd.label, label)] = (gb, pipeline.light_setup(sd, gb, light, label, 0, cfg.seed))
     return out
 

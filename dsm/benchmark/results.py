@@ -172,7 +172,7 @@ def run_suite(size: str = "default", variant: str | None = None, progress=print,
         with tempfile.TemporaryDirectory() as tmp:
             return run_suite(size, variant, progress, version, Path(tmp), cluster)
     import dsm
-    from ..tools.env import versions
+    from ..core.env import versions
     suite = load_suite(SUITE_FILES[version])
     ppd = suite.get("flip", {}).get("ppd")          # dsm-bench-1 has no FLIP
     todo, tuned = cases(suite, size), tuned_labels(suite)

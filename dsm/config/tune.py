@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..types import LAMBDA_MAX, SEED_MAX, ConfigError, Length, as_list, check_keys, choice, number, vec3
+from ..core.types import LAMBDA_MAX, SEED_MAX, ConfigError, Length, as_list, check_keys, choice, number, vec3
 
 
 TUNE_KEYS = ("lambda", "steps", "lr", "temperature", "schedule", "seed", "batch", "params", "range", "camera",

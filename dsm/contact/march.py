@@ -4,7 +4,7 @@ Engines restore the contact shadow a shadow map's bias removes (peter-panning) w
 ray march in the camera's depth buffer after the shadow lookup: Unreal's contact shadows
 (and the screen ray of its virtual shadow maps), Unity HDRP's contact shadows, Bevy's
 (bevyengine/bevy#22382). This module is that step, applied after any scheme's lookup
-(``[contact]``, :class:`dsm.types.ContactSpec`):
+(``[contact]``, :class:`dsm.core.types.ContactSpec`):
 
 - the depth buffer is the G-buffer's: per camera pixel, the view depth (along the camera's
   axis) of its primary hit through the pixel centre; a pixel without a hit holds +inf;
@@ -42,7 +42,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..truth import metrics as metrics_mod
-from ..maps.cascades import Camera
+from ..scenes.camera import Camera
 from ..maps.lookup import Receiver, position_key, resolve
 
 

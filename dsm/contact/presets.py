@@ -7,7 +7,7 @@ a preset's engine does that the march does not is named in its note.
 """
 from __future__ import annotations
 
-from ..types import ContactSpec, Length
+from ..core.types import ContactSpec, Length
 
 HDRP = "Unity-Technologies/Graphics com.unity.render-pipelines.high-definition/Runtime"
 # HDRP's depth-compare threshold is ``thicknessScale * 10`` (the C# side) times ``max(0.07, 1 / sampleCount)``

@@ -35,7 +35,7 @@ def _ray():
     try:
         import ray
     except ImportError:
-        from ..tools.env import SetupError
+        from ..core.env import SetupError
         raise SetupError("Ray is not installed: pip install 'dsm[cluster]' (or pip install ray)") from None
     return ray
 
@@ -58,8 +58,8 @@ def connect(address: str | None, cpus: int | None = None, source: str = "argumen
     """Start (``local``) or join the Ray cluster at ``address`` before any work, so that a wrong
     address is one line (a ConfigError of ``source`` naming ``key``; Ray's client package missing
     is a SetupError) instead of a traceback after the results folder is written. Returns ray."""
-    from ..tools.env import SetupError
-    from ..types import ConfigError
+    from ..core.env import SetupError
+    from ..core.types import ConfigError
     ray = _ray()
     if address not in (None, "local", "auto") and not ray.is_initialized():
         # Ray retries an unreachable host:port for minutes: knock once first
@@ -88,7 +88,7 @@ def check_resources(execution, variant: str, source: str):
     """SetupError naming the key and what the cluster has when one task asks for more CPUs or
     GPUs than the whole cluster holds (Ray would wait for them forever); Ray is shut down first,
     so no process is left behind."""
-    from ..tools.env import SetupError
+    from ..core.env import SetupError
     ray = _ray()
     have = ray.cluster_resources()
     gpus = execution.gpus_per_task or (1.0 if (variant or "").startswith("cuda") else 0.0)
@@ -103,7 +103,7 @@ def check_resources(execution, variant: str, source: str):
 def run_group(cfg, index: int, variant, threads: int, kept: dict) -> dict:
     """One map group of the plan, run in this process (a Ray worker): the runner's own stages on
     a temporary folder, returned as plain data for the driver."""
-    from ..tools import env
+    from ..core import env
     env.use_variant(variant, max(1, threads))
     with tempfile.TemporaryDirectory(prefix="dsm-task-") as tmp:
         r = Runner(cfg, Path(tmp), variant, progress=False, keep_images=False)

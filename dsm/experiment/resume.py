@@ -35,7 +35,7 @@ _FILE_HASHES: dict = {}
 
 def kit_version() -> str:
     """The kit's git commit (with ``+dirty`` for uncommitted edits), else its installed version."""
-    from ..tools import env
+    from ..core import env
     commit = env.git_commit()
     if commit and commit != "unknown":
         return "git:" + commit

@@ -1,6 +1,6 @@
 """The runner: a loop over the plan's maps, with the failure policy, timing and the report.
 
-The plan (:mod:`dsm.experiment.plan`) lists the maps in order: scene, light, view, resolution, culling.
+The plan (:mod:`dsm.config.plan`) lists the maps in order: scene, light, view, resolution, culling.
 The runner walks it, doing each shared stage once through :mod:`dsm.pipeline` (the G-buffer
 per scene, receivers and the exact reference per light, receivers per view, one map per
 culling choice with the layers its schemes need) and each case (a scheme instance, filter and
@@ -27,16 +27,17 @@ import numpy as np
 
 from ..config import read as cfgmod
 from ..maps import cascades, headroom, shadowmap
-from ..tools import env, timing
+from ..core import env, timing
 from ..report import figures, publish, tables as report, io as report_io
 from ..truth import metrics
-from . import motion, record, resume, stacks, wavefront
+from . import motion, resume, stacks, wavefront
+from ..core import record
 from .. import pipeline
-from ..report.sections import soft as soft_report
+from ..report.sections import cascades as cascade_files, soft as soft_report
 from ..contact import march as contact
 from ..report.sections import contact_images
-from . import plan as planmod
-from ..maps.lookup import Receiver
+from ..config import plan as planmod
+from ..maps.receiver import Receiver
 
 
 @dataclass
@@ -53,7 +54,7 @@ class Results:
         """The results whose rows have every given column at the given value."""
         unknown = sorted(set(kw) - set(report.COLUMNS))
         if unknown:
-            raise KeyError(f"Results.where: no column {', '.join(unknown)} (columns: see dsm.experiment.record.NAMES, "
+            raise KeyError(f"Results.where: no column {', '.join(unknown)} (columns: see dsm.core.record.NAMES, "
                            "e.g. scheme, params, scene, light, view, resolution, filter, format)")
         rows = [r for r in self.rows if all(r.get(k) == v for k, v in kw.items())]
         return Results(self.out, rows, self.run, {r["case"]: self.images.get(r["case"]) for r in rows},
@@ -62,7 +63,7 @@ class Results:
     def column(self, name) -> np.ndarray:
         """The values of column ``name`` over the rows, as a numpy array (a KeyError names the columns)."""
         if name not in report.COLUMNS:
-            raise KeyError(f"Results.column: no column {name!r} (columns: see dsm.experiment.record.NAMES, e.g. acne_rate, "
+            raise KeyError(f"Results.column: no column {name!r} (columns: see dsm.core.record.NAMES, e.g. acne_rate, "
                            "peterpan_rate, error_rate, n_receivers)")
         return np.array([r[name] for r in self.rows])
 
@@ -607,7 +608,7 @@ class Runner:
             self.record.cascade_curves.append((meta, curve))
             folder = self.out / "images" / figures.image_folder(meta)
             folder.mkdir(parents=True, exist_ok=True)
-            cascades.write_index_image(folder / f"{meta['case']}_cascade.png", setup.pixels, faces, gb.width, gb.height)
+            cascade_files.write_index_image(folder / f"{meta['case']}_cascade.png", setup.pixels, faces, gb.width, gb.height)
         # Weiskopf & Ertl's self-unshadowing: pixels in attached shadow (facing away) that the map calls lit
         m["n_backfacing"] = int(v_back.size)
         m["backface_lit_rate"] = float((v_back >= 0.5).mean()) if v_back.size else metrics.UNDEFINED

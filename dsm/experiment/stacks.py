@@ -1,6 +1,6 @@
 """A stack's build stage (``[timing] builds = "together"``): a sweep's small maps built as one wavefront.
 
-The plan (:func:`dsm.experiment.plan.stacks`) names the maps built together; the runner builds a
+The plan (:func:`dsm.config.plan.stacks`) names the maps built together; the runner builds a
 stack when the first of its maps comes up (:mod:`dsm.maps.stacked`, the same bits as each map
 alone) and keeps each map until its cases have run. A stack is timed as a whole, as the runner
 times a map alone: once for the layers its maps store, once for every other set of layers one of
@@ -21,7 +21,7 @@ import dataclasses
 from typing import NamedTuple
 
 from ..maps import stacked
-from ..tools import timing
+from ..core import timing
 
 
 class Built(NamedTuple):

@@ -14,7 +14,7 @@ as its own lookup gives (tests/test_wavefront.py). ``lookups = "per_case"`` time
 own lookup instead (the kit's earlier behaviour).
 
 A wavefront's outputs are held at once: a map's cases are cut into waves of at most
-:func:`dsm.experiment.plan.wave_cases` cases, so one wave's outputs fit ``WAVE_BYTES``.
+:func:`dsm.config.plan.wave_cases` cases, so one wave's outputs fit ``WAVE_BYTES``.
 """
 from __future__ import annotations
 
@@ -26,9 +26,9 @@ import drjit as dr
 import numpy as np
 
 from .. import pipeline
-from ..tools import timing
-from ..types import Length
-from . import plan as planmod
+from ..core import timing
+from ..core.types import Length
+from ..config import plan as planmod
 
 
 @dataclass

@@ -2,8 +2,8 @@
 cast from its centre and its exact visibility a Monte Carlo estimate."""
 from __future__ import annotations
 
-from ..truth import area
-from ..types import AREA_SHAPES, ConfigError, LightSpec, as_list, check_keys, choice, number, vec3
+from . import area_surface
+from ..core.types import AREA_SHAPES, ConfigError, LightSpec, as_list, check_keys, choice, number, vec3
 from .base import unit_direction
 
 TYPE = "area"
@@ -70,5 +70,5 @@ def views(point_views: tuple, shape: str) -> tuple:
 
 
 def make_view(light, R, receivers_world, bbox, kind, cascade, sensor, scale):
-    """The view from the luminaire's centre (:func:`dsm.truth.area.make_view`)."""
-    return area.make_view(light, R, receivers_world, bbox, kind)
+    """The view from the luminaire's centre (:func:`dsm.lights.area_surface.make_view`)."""
+    return area_surface.make_view(light, R, receivers_world, bbox, kind)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from typing import Any, Protocol, runtime_checkable
 
-from ..types import ConfigError, vec3
+from ..core.types import ConfigError, vec3
 
 
 @runtime_checkable

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from ..maps import cascades
-from ..types import LightSpec, check_keys
+from ..core.types import LightSpec, check_keys
 from ..maps.views import OrthographicView
 from .base import required, unit_direction
 

@@ -1,7 +1,7 @@
 """A point light: paraboloid, dual paraboloid or cube maps around its position, or a voxelized shadow volume."""
 from __future__ import annotations
 
-from ..types import LightSpec, check_keys, vec3
+from ..core.types import LightSpec, check_keys, vec3
 from ..maps.vsv import EpipolarView, camera_pose
 from ..maps.views import CubeView, ParaboloidView
 from .base import required, unit_direction

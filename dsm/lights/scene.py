@@ -2,7 +2,7 @@
 a mesh file's default sun), each then of its own type."""
 from __future__ import annotations
 
-from ..types import LightSpec, check_keys
+from ..core.types import LightSpec, check_keys
 
 TYPE = "scene"
 POSITIONAL = False

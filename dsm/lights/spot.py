@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..types import ConfigError, LightSpec, check_keys, number, vec3
+from ..core.types import ConfigError, LightSpec, check_keys, number, vec3
 from ..maps.vsv import EpipolarView, camera_pose
 from ..maps.views import PerspectiveView
 from .base import required, unit_direction

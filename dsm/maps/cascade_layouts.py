@@ -6,7 +6,7 @@ per cascade needs no layout: a ``k texel`` bias is in the receiver's own cascade
 """
 from __future__ import annotations
 
-from ..types import CascadeSpec
+from ..core.types import CascadeSpec
 
 # name -> (CascadeSpec, source files, what was read, what is not modelled)
 LAYOUTS = {

@@ -31,77 +31,19 @@ One depth function for the whole view: the distance along the light from one ref
 """
 from __future__ import annotations
 
-import csv
 
 import dataclasses
 import math
 import time
-from dataclasses import dataclass
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..report import figures, io as report
 from . import lookup
-from ..truth import metrics
-from ..types import CascadeSpec
+from ..core.types import CascadeSpec
+from ..scenes.camera import Camera
 from .views import MARGIN_TEXELS, View, light_frame
-
-# ---------------------------------------------------------------- camera
-
-
-@dataclass
-class Camera:
-    """A pinhole camera in world space (float64): the sensor's pose, field of view and clip planes."""
-    origin: np.ndarray
-    forward: np.ndarray
-    up: np.ndarray
-    left: np.ndarray
-    tan_x: float        # tan of half the horizontal field of view
-    tan_y: float
-    near: float
-    far: float
-    width: int
-    height: int
-
-    @staticmethod
-    def from_sensor(sensor) -> "Camera":
-        """The Camera of a Mitsuba sensor: its world pose, horizontal fov (default 40), clip planes and film size."""
-        m = np.array(sensor.world_transform().matrix.numpy(), float).reshape(4, 4)
-        params = mi.traverse(sensor)
-        fov = float(params["x_fov"][0]) if "x_fov" in params else 40.0
-        W, H = (int(x) for x in sensor.film().size())
-        near = float(np.ravel(params["near_clip"])[0]) if "near_clip" in params else 1e-2
-        far = float(np.ravel(params["far_clip"])[0]) if "far_clip" in params else 1e4
-        unit = lambda v: v / np.linalg.norm(v)
-        tx = math.tan(math.radians(fov) / 2)
-        return Camera(m[:3, 3].copy(), unit(m[:3, 2]), unit(m[:3, 1]), unit(m[:3, 0]), tx, tx * H / W, near, far, W, H)
-
-    def depth(self, p: np.ndarray) -> np.ndarray:
-        """View depth (along the camera's axis) of world points (n, 3), float64."""
-        return (np.asarray(p, float).reshape(-1, 3) - self.origin) @ self.forward
-
-    def frustum(self, d0: float, d1: float) -> np.ndarray:
-        """The 8 corners of the view frustum between view depths d0 and d1 (corner i: bit 0 left/right,
-        bit 1 down/up, bit 2 near/far)."""
-        out = []
-        for i in range(8):
-            d = (d0, d1)[i >> 2 & 1]
-            sx, sy = (-1.0, 1.0)[i & 1], (-1.0, 1.0)[i >> 1 & 1]
-            out.append(self.origin + self.forward * d + self.left * (sx * self.tan_x * d) + self.up * (sy * self.tan_y * d))
-        return np.array(out)
-
-    def pixel_area(self, p: np.ndarray, n: np.ndarray) -> np.ndarray:
-        """World area of each receiver's camera pixel footprint on its surface (p, n: (k, 3)):
-        the pixel's solid angle (2 tan_x / W)^2 cos^3(alpha) times distance^2 over |cos| to the normal."""
-        q = np.asarray(p, float) - self.origin
-        dist = np.linalg.norm(q, axis=1)
-        cos_a = (q @ self.forward) / dist
-        omega = (2.0 * self.tan_x / self.width) ** 2 * cos_a ** 3
-        cos_n = np.abs((np.asarray(n, float) * q).sum(1)) / dist
-        return omega * dist ** 2 / np.maximum(cos_n, 1e-12)
-
 
 # ---------------------------------------------------------------- splits
 
@@ -508,8 +450,6 @@ def blended_visibility(scheme, params, rx, smap, filt="nearest", seed=7):
     return v1 * (1.0 - w) + v2 * w, shape
 
 
-# ---------------------------------------------------------------- metrics per cascade
-
 def texels_per_pixel(view: CascadeView, p: np.ndarray, n: np.ndarray, face: np.ndarray) -> np.ndarray:
     """Shadow-map texels per camera pixel at each receiver: the area of its camera pixel's footprint
     on its surface over the area of its texel's (texel_world^2 / |n . light|). Below 1 one texel
@@ -518,142 +458,3 @@ def texels_per_pixel(view: CascadeView, p: np.ndarray, n: np.ndarray, face: np.n
     cos_l = np.abs(np.asarray(n, float) @ np.asarray(view.axes_np[2]))
     texel_area = tw ** 2 / np.maximum(cos_l, 1e-12)
     return view.camera.pixel_area(p, n) / texel_area
-
-
-def _np3(v) -> np.ndarray:
-    return np.stack([np.asarray(c.numpy(), np.float64) for c in (v.x, v.y, v.z)], axis=1)
-
-
-def case_metrics(view: CascadeView, rx, v: np.ndarray, v_star: np.ndarray) -> tuple:
-    """(per-case columns, per-cascade rows, distance curve, cascade index per receiver) of one case."""
-    if rx is None or len(v) == 0:
-        return {"texels_per_pixel": metrics.UNDEFINED, "fit_ms": view.fit_ms}, [], None, np.zeros(0, int)
-    p, n = _np3(rx.p_world), _np3(rx.n_world)
-    face = np.asarray(rx.face.numpy(), int)
-    tpp = texels_per_pixel(view, p, n, face)
-    dist = np.linalg.norm(p - view.camera.origin, axis=1)
-    v_star = np.asarray(v_star, bool)
-    lit = np.asarray(v) >= 0.5
-    acne, peter = v_star & ~lit, ~v_star & lit
-    rows = []
-    for c in view.describe():
-        k = c["cascade"]
-        s = face == k
-        nl, ns = int((v_star & s).sum()), int((~v_star & s).sum())
-        na, npp = int((acne & s).sum()), int((peter & s).sum())
-        rows.append({**c, "n_receivers": int(s.sum()), "n_acne": na, "n_peterpan": npp,
-                     "acne_rate": na / nl if nl else metrics.UNDEFINED,
-                     "peterpan_rate": npp / ns if ns else metrics.UNDEFINED,
-                     "error_rate": (na + npp) / int(s.sum()) if s.any() else metrics.UNDEFINED,
-                     "texels_per_pixel_median": float(np.median(tpp[s])) if s.any() else metrics.UNDEFINED})
-    # error and texels per pixel against distance from the camera: log-spaced bins
-    lo, hi = max(dist.min(), 1e-30), max(dist.max(), 1e-30)
-    edges = np.geomspace(lo, hi * (1 + 1e-9), 17) if hi > lo else np.array([lo, hi * (1 + 1e-9) + 1e-30])
-    b = np.clip(np.searchsorted(edges, dist, side="right") - 1, 0, len(edges) - 2)
-    curve = []
-    for i in range(len(edges) - 1):
-        s = b == i
-        if s.any():
-            curve.append((float(np.sqrt(edges[i] * edges[i + 1])), float((acne | peter)[s].mean()),
-                          float(np.median(tpp[s]))))
-    return {"texels_per_pixel": float(np.median(tpp)), "fit_ms": view.fit_ms}, rows, curve, face
-
-
-CSV_COLUMNS = ("case", "scene", "light", "cascade_layout", "scheme", "params", "resolution", "filter", "format",
-               "cascade", "split_near", "split_far", "extent", "texel_size", "near", "far", "n_receivers", "n_acne",
-               "n_peterpan", "acne_rate", "peterpan_rate", "error_rate", "texels_per_pixel_median")
-
-
-def write_csv(path, rows: list):
-    """cascades.csv: one row per case and cascade (undefined values: empty cells)."""
-    report.write_csv(path, CSV_COLUMNS, rows)
-
-
-def write_table(path, rows: list):
-    """cascades.md from cascades.csv's rows (dsm.report.publish composes it, for a run and a rebuild)."""
-    lines = ["# Cascades", "", "Per case and cascade (cascades.csv): its range of camera view depth, texel size, "
-             "receivers, error rates and the median shadow-map texels per camera pixel (below 1: perspective "
-             "aliasing). Undefined values: -.", "",
-             "| case | scene | layout | scheme | params | R | filter | format | cascade | view depth | texel | "
-             "receivers | acne | peter-pan | error | texels/pixel |", "|---" * 16 + "|"]
-    cell = lambda x: ("-" if not metrics.defined(x) else f"{x:.4g}") if isinstance(x, float) else str(x)
-    for r in rows:
-        lines.append("| " + " | ".join(cell(r.get(k, "")) for k in (
-            "case", "scene", "cascade_layout", "scheme", "params", "resolution", "filter", "format", "cascade"))
-            + f" | {r['split_near']:.3g} to {r['split_far']:.3g} | " + " | ".join(cell(r[k]) for k in (
-                "texel_size", "n_receivers", "acne_rate", "peterpan_rate", "error_rate", "texels_per_pixel_median"))
-            + " |")
-    with report.atomic(path) as tmp:
-        tmp.write_text("\n".join(lines) + "\n")
-
-
-CURVE_META = ("case", "scene", "light", "cascade_layout", "scheme", "params", "resolution", "filter", "format")
-CURVE_COLUMNS = CURVE_META + ("distance", "error_rate", "texels_per_pixel")
-
-
-def write_curves_csv(path, curves: list):
-    """cascade_curves.csv: each case's error rate and texels per pixel against camera distance (the
-    points of plots/cascades_*.png), floats written exactly (repr) so a rebuild draws the same."""
-    with report.atomic(path) as tmp, open(tmp, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(CURVE_COLUMNS)
-        for meta, curve in curves:
-            for point in curve:
-                w.writerow([meta.get(k, "") for k in CURVE_META] + [repr(float(x)) for x in point])
-
-
-def read_curves_csv(path) -> list:
-    """(case meta, [(distance, error rate, texels per pixel)]) per case, in the file's order."""
-    out, index = [], {}
-    for r in report.read_csv(path):
-        if r["case"] not in index:
-            index[r["case"]] = len(out)
-            out.append(({k: r[k] for k in CURVE_META}, []))
-        out[index[r["case"]]][1].append(tuple(float(r[k]) for k in ("distance", "error_rate", "texels_per_pixel")))
-    return out
-
-
-CASCADE_COLORS = np.array([[0, 0, 0], [228, 26, 28], [55, 126, 184], [77, 175, 74], [152, 78, 163],
-                           [255, 127, 0], [255, 255, 51], [166, 86, 40], [247, 129, 191]], np.uint8)
-
-
-def write_index_image(path, pixels: np.ndarray, face: np.ndarray, width: int, height: int):
-    """images/<scene>_<light>/<case>_cascade.png: each receiver coloured by its cascade (black: not a receiver)."""
-    from matplotlib.image import imsave
-    img = np.zeros(width * height, np.uint8)
-    img[pixels] = np.asarray(face, int) + 1
-    with report.atomic(path) as tmp:
-        imsave(tmp, CASCADE_COLORS[img.reshape(height, width)], format="png")
-
-
-def write_plots(folder, curves: list):
-    """plots/cascades_<scene>_<light>.png: error rate and texels per pixel against distance from the
-    camera, one line per cascade layout, resolution, scheme, filter and format."""
-    if not curves:
-        return
-    from matplotlib.figure import Figure
-    folder.mkdir(exist_ok=True)
-    groups = {}
-    for meta, curve in curves:
-        if curve:
-            groups.setdefault((meta["scene"], meta["light"]), []).append((meta, curve))
-    for (scene, light), items in groups.items():
-        fig = Figure(figsize=(11, 4))
-        a1, a2 = fig.subplots(1, 2)
-        for meta, curve in items:
-            x = [c[0] for c in curve]
-            lab = f"{meta['cascade_layout']} R={meta['resolution']} {meta['scheme']} {meta['params']}".strip()
-            a1.plot(x, [c[1] for c in curve], ".-", lw=0.8, label=lab)
-            a2.plot(x, [c[2] for c in curve], ".-", lw=0.8, label=lab)
-        for ax, what in ((a1, "error rate"), (a2, "texels per camera pixel (median)")):
-            ax.set_xscale("log")
-            ax.set_xlabel("distance from the camera")
-            ax.set_ylabel(what)
-        a2.set_yscale("log")
-        a2.axhline(1.0, color="k", lw=0.5)
-        fig.suptitle(f"{scene}, light {light}: cascades against distance", fontsize=9)
-        fig.subplots_adjust(left=0.06, right=0.66, bottom=0.13, top=0.9, wspace=0.3)
-        h, l = a1.get_legend_handles_labels()
-        fig.legend(h, l, loc="center left", bbox_to_anchor=(0.67, 0.5), fontsize=5, frameon=False)
-        with report.atomic(folder / f"cascades_{figures.slug(f'{scene}_{light}', keep='-_')}.png") as tmp:
-            fig.savefig(tmp, dpi=80, format="png")

@@ -36,7 +36,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..types import FORMATS
+from ..core.types import FORMATS
 
 BITS = {"unorm16": 16, "unorm24": 24, "ndc24": 24}
 

@@ -36,38 +36,13 @@ from types import SimpleNamespace
 import drjit as dr
 import mitsuba as mi
 
-from ..schemes.base import lit
-from ..types import Length
+from ..core.types import Length
+from .receiver import Receiver   # noqa: F401  (read by the lookup's callers with its functions)
 
 
-@dataclass
-class Receiver:
-    """What a scheme may read about the shaded points; names carry their frame."""
-    view: object
-    p_world: object      # mi.Point3f, world
-    n_world: object      # geometric normal (the visible side), world
-    to_light: object     # unit vector toward the light, world
-    depth: object        # depth in the view's one depth function (world units)
-    u_map: object        # map position, texel units of the receiver's face
-    v_map: object
-    face: object         # mi.UInt32, the view's face (map) the receiver falls in
-    texel_world: object  # world width of one texel at the receiver
-    scene_scale: object  # the scene's bounding-box diagonal (opaque scalar)
-    camera: object = None  # the pinhole camera that sees the receivers (dsm.maps.cascades.Camera), None: not known
-
-    @staticmethod
-    def make(view, p_world, n_world, scene_scale: float, camera=None) -> "Receiver":
-        """The Receiver of world points ``p_world`` (normals ``n_world``) in ``view``; ``scene_scale``: the
-        diagonal; ``camera``: the camera that sees them (schemes scaled by the distance to it read it)."""
-        u, v, face = view.project(p_world)
-        return Receiver(view, p_world, n_world, view.to_light(p_world), view.depth(p_world), u, v, face,
-                        view.texel_world(p_world), dr.opaque(mi.Float, scene_scale), camera)
-
-    def moved(self, p2_world) -> "Receiver":
-        """The same receiver looked up from another point (normal offset)."""
-        u, v, face = self.view.project(p2_world)
-        return dataclasses.replace(self, p_world=p2_world, depth=self.view.depth(p2_world), u_map=u, v_map=v,
-                                   face=face)
+def lit(scheme, rx, tap, params):
+    """The scheme's binary test: its margin is >= 0."""
+    return scheme.margin(rx, tap, params) >= 0
 
 
 @dataclass

@@ -7,7 +7,7 @@ built. Extra attributes are built only when a scheme in the plan needs them:
 - ``slope``: the caster's largest depth change per texel step, from the caster's plane at
   the texel (its geometric normal), as rasterizer depth bias computes it.
 - ``z2``: the second surface along the texel's ray, found by continuing past the first hit
-  from just beyond the bound on its floating-point error (:mod:`dsm.maps.spawn`); the view's far
+  from just beyond the bound on its floating-point error (:mod:`dsm.scenes.spawn`); the view's far
   bound where there is none (without culling its depth is taken at ``o + t d`` of the
   continuation ray). A continuation that hits the triangle it left again is counted
   (``rehits``; 0 when the bound holds).
@@ -25,14 +25,10 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import spawn
-from ..types import CULLINGS
+from ..scenes import spawn
+from ..scenes.spawn import COHERENT
+from ..core.types import CULLINGS
 
-# Embree's coherent traversal resolves a ray near a silhouette differently depending on which
-# rays share its packet (the tile it was cast in, the compaction of a layered search, the
-# CPU's vector width); its incoherent traversal gives every ray the same hit wherever it is
-# cast (docs/design.md, *Results that do not depend on the machine*).
-COHERENT = False
 
 LAYERS = ("slope", "z2")   # optional attributes a scheme may need (besides z1 and shape)
 CULL_NONE, CULL_BACK, CULL_FRONT, CULL_ALL = 0, 1, 2, 3   # CULL_ALL: an area light's luminaire, stepped over
@@ -63,9 +59,9 @@ class ShadowMap:
 
 def hit_geometry(pi, ray, valid, shape, tables=None):
     """(p, n) of each valid hit: the point interpolated on the triangle and its geometric
-    normal. From the meshes' buffers where ``tables`` (:func:`dsm.maps.spawn.shape_extents`) has
+    normal. From the meshes' buffers where ``tables`` (:func:`dsm.scenes.spawn.shape_extents`) has
     them (every shape a mesh), else from a minimal surface interaction: the same bits.
-    ``shape``: each hit's index into ``scene.shapes()`` (:func:`dsm.maps.spawn.hit_shape`)."""
+    ``shape``: each hit's index into ``scene.shapes()`` (:func:`dsm.scenes.spawn.hit_shape`)."""
     if tables is not None and getattr(tables, "tri_pos", None) is not None:
         return spawn.mesh_hit(pi, shape, tables, valid)
     si = pi.compute_surface_interaction(ray, ray_flags=mi.RayFlags.Minimal, active=valid)
@@ -196,7 +192,7 @@ def layered(scene, view, cull_modes: np.ndarray, want_z2: bool, want_slope: bool
     A step's arithmetic per texel is the same wherever it runs, so the layers are the same bits
     as a search evaluated step by step.
 
-    ``extents``: :func:`dsm.maps.spawn.shape_extents` of the scene, computed once per scene by the
+    ``extents``: :func:`dsm.scenes.spawn.shape_extents` of the scene, computed once per scene by the
     caller so that a timed build holds no pass over the meshes (:func:`build` makes them if absent).
     """
     bb = scene.bbox()

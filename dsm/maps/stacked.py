@@ -20,7 +20,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import shadowmap, spawn
+from . import shadowmap
+from ..scenes import spawn
 
 
 class _LaneTexels:

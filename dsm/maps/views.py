@@ -30,7 +30,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..types import VIEW_FACES
+from ..core.types import VIEW_FACES
 
 
 def light_frame(direction) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -14,7 +14,7 @@ from . import esm, evsm, msm, presets, vsm
 from .base import (LOG_MAX, MOMENT_FORMATS, MapKind, build as build_map, fetch, formats_of, normalized_depth, restored,
                    supersampled_view)
 from ..maps.lookup import resolve
-from ..types import ConfigError
+from ..core.types import ConfigError
 
 REGISTRY = (vsm, esm, evsm, msm)
 _broken = [m.NAME for m in REGISTRY if not isinstance(m, MapKind)]

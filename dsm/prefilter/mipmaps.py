@@ -7,7 +7,7 @@ A level halves the previous one per side (an odd side padded by its edge texel),
 (no mean crosses a cube seam), down to one texel, each level stored in the map's format. The level
 of a receiver is lambda = log2 of its footprint in texels: its camera pixel's area on its surface
 (the pinhole's solid angle (2 tan_x / W)^2 cos^3 over the surface's cosine to the view ray, as
-dsm.maps.cascades.Camera.pixel_area), projected along the light onto the map (times |n . l|),
+dsm.scenes.camera.Camera.pixel_area), projected along the light onto the map (times |n . l|),
 over the texel's area at the receiver, square-rooted; below one texel lambda is 0 (the map
 itself). Moments are linear, so the blend of two levels' moments is the moments of the blend.
 Receivers without a known camera (rx.camera None) read level 0.

@@ -7,10 +7,10 @@ import json
 import os
 from pathlib import Path
 
-from ..experiment import record
+from ..core import record
 from ..truth import metrics
 
-COLUMNS = record.NAMES          # metrics.csv's columns: the run record's schema (dsm.experiment.record)
+COLUMNS = record.NAMES          # metrics.csv's columns: the run record's schema (dsm.core.record)
 TEXT_COLUMNS = record.TEXT_COLUMNS
 INT_COLUMNS = record.INT_COLUMNS
 

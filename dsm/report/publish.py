@@ -18,10 +18,9 @@ import math
 import time
 from pathlib import Path
 
-from ..maps import cascades
 from . import figures, html as htmlpage, jobs as draw_jobs, tables as report, io as report_io, summary
 from ..truth import metrics
-from ..experiment import motion
+from .sections import cascades, motion
 from .sections import soft as soft_report
 
 PLOT_PREFIXES = ("vs_bias_", "vs_resolution_", "vs_texels_", "pareto_", "tradeoff_", "soft_", "cascades_", "flicker_")
@@ -95,7 +94,7 @@ def _note_missing(out: Path, run: dict, rows: list, notes: list):
 
 
 def write_data(out: Path, rec):
-    """The run's data files beside metrics.csv and run.json, from its record (dsm.experiment.record): what
+    """The run's data files beside metrics.csv and run.json, from its record (dsm.core.record): what
     the report is composed from."""
     out = Path(out)
     report.write_oracle_csv(out / "oracle.csv", rec.oracle_rows)
@@ -123,7 +122,7 @@ RATES = (("acne_rate", "n_acne", "n_gt_lit"), ("peterpan_rate", "n_peterpan", "n
 def _check_metrics(path: Path, rows: list):
     """NotARun unless every row has the core columns and rates that are their counts' (within
     the 6 significant digits metrics.csv keeps): an edited or foreign file is not reported on."""
-    from ..experiment.record import GROUPS
+    from ..core.record import GROUPS
     missing = sorted(GROUPS["core"] - set(rows[0])) if rows else []
     if missing:
         raise NotARun(f"{path}: not a dsm metrics.csv (no {', '.join(missing)} column)")

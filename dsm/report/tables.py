@@ -15,10 +15,10 @@ import numpy as np
 from .sections import contact as contact_report
 from ..maps import headroom
 from ..truth import metrics
-from ..experiment import record
+from ..core import record
 from . import io as report_io, summary
 
-COLUMNS = record.NAMES          # metrics.csv's columns: the run record's schema (dsm.experiment.record)
+COLUMNS = record.NAMES          # metrics.csv's columns: the run record's schema (dsm.core.record)
 
 
 

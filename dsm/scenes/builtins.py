@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 
-from ..types import LightSpec
+from ..core.types import LightSpec
 from .geometry import (CROSS_MAX, CROSS_MIN, box, cross_lengths, double_torus, normalize, prism, quad,
                        rotation)
 

@@ -1,9 +1,13 @@
 """Camera poses and sensors: the [camera] keys over a scene's own pose, clip planes, Mitsuba sensor dicts."""
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+
+import mitsuba as mi
 import numpy as np
 
-from ..types import ConfigError
+from ..core.types import ConfigError
 from .params import ORIGIN
 
 
@@ -124,3 +128,55 @@ def resized_sensor(sensor, width, height):
         if k in params:
             d[k] = float(np.ravel(params[k])[0])
     return mi.load_dict(d)
+
+
+@dataclass
+class Camera:
+    """A pinhole camera in world space (float64): the sensor's pose, field of view and clip planes."""
+    origin: np.ndarray
+    forward: np.ndarray
+    up: np.ndarray
+    left: np.ndarray
+    tan_x: float        # tan of half the horizontal field of view
+    tan_y: float
+    near: float
+    far: float
+    width: int
+    height: int
+
+    @staticmethod
+    def from_sensor(sensor) -> "Camera":
+        """The Camera of a Mitsuba sensor: its world pose, horizontal fov (default 40), clip planes and film size."""
+        m = np.array(sensor.world_transform().matrix.numpy(), float).reshape(4, 4)
+        params = mi.traverse(sensor)
+        fov = float(params["x_fov"][0]) if "x_fov" in params else 40.0
+        W, H = (int(x) for x in sensor.film().size())
+        near = float(np.ravel(params["near_clip"])[0]) if "near_clip" in params else 1e-2
+        far = float(np.ravel(params["far_clip"])[0]) if "far_clip" in params else 1e4
+        unit = lambda v: v / np.linalg.norm(v)
+        tx = math.tan(math.radians(fov) / 2)
+        return Camera(m[:3, 3].copy(), unit(m[:3, 2]), unit(m[:3, 1]), unit(m[:3, 0]), tx, tx * H / W, near, far, W, H)
+
+    def depth(self, p: np.ndarray) -> np.ndarray:
+        """View depth (along the camera's axis) of world points (n, 3), float64."""
+        return (np.asarray(p, float).reshape(-1, 3) - self.origin) @ self.forward
+
+    def frustum(self, d0: float, d1: float) -> np.ndarray:
+        """The 8 corners of the view frustum between view depths d0 and d1 (corner i: bit 0 left/right,
+        bit 1 down/up, bit 2 near/far)."""
+        out = []
+        for i in range(8):
+            d = (d0, d1)[i >> 2 & 1]
+            sx, sy = (-1.0, 1.0)[i & 1], (-1.0, 1.0)[i >> 1 & 1]
+            out.append(self.origin + self.forward * d + self.left * (sx * self.tan_x * d) + self.up * (sy * self.tan_y * d))
+        return np.array(out)
+
+    def pixel_area(self, p: np.ndarray, n: np.ndarray) -> np.ndarray:
+        """World area of each receiver's camera pixel footprint on its surface (p, n: (k, 3)):
+        the pixel's solid angle (2 tan_x / W)^2 cos^3(alpha) times distance^2 over |cos| to the normal."""
+        q = np.asarray(p, float) - self.origin
+        dist = np.linalg.norm(q, axis=1)
+        cos_a = (q @ self.forward) / dist
+        omega = (2.0 * self.tan_x / self.width) ** 2 * cos_a ** 3
+        cos_n = np.abs((np.asarray(n, float) * q).sum(1)) / dist
+        return omega * dist ** 2 / np.maximum(cos_n, 1e-12)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..types import ConfigError
+from ..core.types import ConfigError
 from .geometry import CROSS_MAX, CROSS_MIN, cross_lengths
 
 

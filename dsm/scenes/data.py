@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import exact_frame
-from ..types import LightSpec
+from ..core.types import LightSpec
 from .geometry import make_mesh
 from .params import ORIGIN
 
@@ -77,7 +77,7 @@ class SceneData:
             if spec.type == "scene":
                 out += self.own_lights
             elif spec.type == "area" and spec.shape == "emitter":
-                from ..truth.area import emitter_lights
+                from .emitters import emitter_lights
                 out += emitter_lights(self.scene, spec)     # the scene's own luminaires, as they are
             else:
                 out.append(scale_light(spec, self.scale, self.offset))

@@ -2,10 +2,11 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
-from ..types import ConfigError, LightSpec
+from ..core.types import ConfigError, LightSpec
 from .checks import source_of
 from .geometry import normalize
 
@@ -105,3 +106,32 @@ def emitter_to_light(e):
                else np.array(e.world_transform() @ mi.Point3f(0, 0, 0), float).ravel())
         return LightSpec("point", position=tuple(float(c) for c in pos), direction=(0.0, 0.0, -1.0), label="point")
     return None
+
+
+def emitter_lights(scene, spec) -> list:
+    """One LightSpec per area emitter of ``scene`` (a mesh carrying an area emitter): centre
+    (the area-weighted centroid), normal (the area-weighted winding normal), size (the square
+    root of its area) and its shape index, which its map excludes. ``spec``: the config's
+    ``shape = "emitter"`` light, whose sampling settings they keep."""
+    out = []
+    for i, shape in enumerate(scene.shapes()):
+        if not (shape.is_mesh() and shape.is_emitter()):
+            continue
+        tri = mesh_triangles(shape)
+        cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        area = 0.5 * np.linalg.norm(cross, axis=1)
+        total = float(area.sum())
+        if not total > 0:
+            continue
+        centre = (tri.mean(axis=1) * area[:, None]).sum(0) / total
+        normal = normalize(cross.sum(0)) if np.linalg.norm(cross.sum(0)) > 0 else np.array([0.0, 0.0, -1.0])
+        out.append(replace(spec, position=tuple(map(float, centre)), direction=tuple(map(float, normal)),
+                           size=(math.sqrt(total),), emitter_shapes=(i,), label="area"))
+    return out
+
+
+def mesh_triangles(shape) -> np.ndarray:
+    """A mesh's triangles as (n, 3, 3) world positions, float64."""
+    v = np.asarray(shape.vertex_positions_buffer(), np.float64).reshape(-1, 3)
+    f = np.asarray(shape.faces_buffer(), np.int64).reshape(-1, 3)
+    return v[f]

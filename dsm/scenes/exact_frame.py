@@ -3,7 +3,7 @@
 An engine renders a scene at 1e6 from the origin in float32 world coordinates, and the kit
 simulates that for the map. The exact side (the G-buffer's hit points and the reference's shadow
 rays) must not inherit those roundings: at 1e6 a float32 step is 0.06 and the spawn bound of a
-hit there (:mod:`dsm.maps.spawn`, 32 u |p|) is 1.9 units, more than a 1-unit box. So, for a scene
+hit there (:mod:`dsm.scenes.spawn`, 32 u |p|) is 1.9 units, more than a 1-unit box. So, for a scene
 whose bounding box lies farther from the origin than ``FAR_RATIO`` times its diagonal, the kit
 builds a second Mitsuba scene of the same shapes, in the same order, with every vertex moved by
 minus the scene's centre in float64 before rounding to float32 (the built-ins' and mesh files'

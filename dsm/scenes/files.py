@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from . import exact_frame, xml_scale
-from ..types import DEFAULT_CAMERA, ConfigError, LightSpec
+from ..core.types import DEFAULT_CAMERA, ConfigError, LightSpec
 from .camera import far_bound, look_at_sensor, posed_camera, reposed_sensor, resized_sensor
 from .checks import check_held, check_mesh, source_of
 from .data import finish

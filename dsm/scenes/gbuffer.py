@@ -11,8 +11,9 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..maps import spawn
-from ..maps.shadowmap import COHERENT
+from . import spawn
+from .camera import Camera
+from .spawn import COHERENT
 
 
 @dataclass
@@ -27,7 +28,7 @@ class GBuffer:
     shape: object         # mi.UInt32 index into scene.shapes(); 0xFFFFFFFF on a miss
     hit: np.ndarray       # bool per pixel
     ms: float = 0.0
-    camera: object = None  # the sensor's pinhole camera (dsm.maps.cascades.Camera); None: not a perspective sensor
+    camera: Camera | None = None  # the sensor's pinhole camera; None: not a perspective sensor
 
 
 def primary_hits(scene, sensor, width: int, height: int, pixels):

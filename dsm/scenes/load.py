@@ -18,7 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..types import DEFAULT_CAMERA, ConfigError, SceneSpec
+from ..core.types import DEFAULT_CAMERA, ConfigError, SceneSpec
 from .builtins import builtin_geometry
 from .camera import far_bound, look_at_sensor, posed_camera
 from .checks import check_held, check_loaded, check_options, source_of
@@ -27,7 +27,7 @@ from .emitters import lights_of
 from .files import load_file
 from .geometry import make_mesh
 from .params import ORIGIN
-# read here by callers not yet moved to the names' homes (dsm/tools/bench.py; dsm/tune/tuner.py reads
+# read here by callers not yet moved to the names' homes (dsm/perf/bench.py; dsm/tune/tuner.py reads
 # look_at_sensor, imported above): kept for them, not used by this module
 from .params import FileParams, PlaneBoxParams, TerrainParams  # noqa: F401
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..types import ConfigError, SceneSpec, sweep_params
+from ..core.types import ConfigError, SceneSpec, sweep_params
 from .builtins import builtin_geometry, scale_range
 from .checks import check_held
 from .params import BUILTINS, FILE_SUFFIXES, FileParams, GrazingParams, PlaneParams

@@ -16,7 +16,7 @@ is every scheme a config may name; ``REGISTRY`` stays the shadow-map schemes.
 """
 
 from . import adaptive, adaptive_tap, combined, constant, distance_normal, dual, midpoint, none, normal_angle, normal_offset, receiver_plane, second_depth, slope_scaled, vsv, vsv_adaptive, vsv_epsilon
-from ..types import Length, describe_params
+from ..core.types import Length, describe_params
 
 from .base import Scheme
 

@@ -38,6 +38,3 @@ def no_shift(rx, params):
     return rx
 
 
-def lit(scheme, rx, tap, params):
-    """The scheme's binary test: its margin is >= 0."""
-    return scheme.margin(rx, tap, params) >= 0

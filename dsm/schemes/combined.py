@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import drjit as dr
 
-from ..types import Length
+from ..core.types import Length
 
 NAME = "combined"
 SOURCE = "engine defaults: normal offset + constant + slope-scaled depth bias"

@@ -8,7 +8,7 @@ Parameters: ``bias`` (length, default ``"1 texel"``).
 """
 from dataclasses import dataclass, field
 
-from ..types import Length
+from ..core.types import Length
 from .base import no_shift
 
 NAME = "constant"

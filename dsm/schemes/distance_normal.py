@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import drjit as dr
 import mitsuba as mi
 
-from ..types import Length
+from ..core.types import Length
 
 NAME = "distance_normal"
 SOURCE = "Unreal Engine 5 virtual shadow maps, r.Shadow.Virtual.NormalBias (approximation)"

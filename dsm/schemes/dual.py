@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 
 import drjit as dr
 
-from ..types import Length
-from ..types import CULLINGS as CULLING
+from ..core.types import Length
+from ..core.types import CULLINGS as CULLING
 from .base import no_shift
 
 NAME = "dual"

@@ -10,7 +10,7 @@ Parameters: ``culling`` (none | back | front | back_closed, default none).
 """
 from dataclasses import dataclass, field
 
-from ..types import CULLINGS as CULLING
+from ..core.types import CULLINGS as CULLING
 from .base import no_shift
 
 NAME = "midpoint"

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import drjit as dr
 
-from ..types import Length
+from ..core.types import Length
 from .base import no_shift
 
 NAME = "normal_angle"

@@ -9,7 +9,7 @@ Parameters: ``offset`` (length, default ``"1 texel"``), ``bias`` (length, defaul
 """
 from dataclasses import dataclass, field
 
-from ..types import Length
+from ..core.types import Length
 
 NAME = "normal_offset"
 SOURCE = "three.js, Bevy, Godot, Unity (normal bias)"

@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from ..types import Length, SchemeSpec, describe_params
+from ..core.types import Length, SchemeSpec, describe_params
 
 LIGHT_TYPES = ("directional", "spot", "point")
 SQRT2 = math.sqrt(2.0)

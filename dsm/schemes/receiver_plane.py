@@ -10,7 +10,7 @@ Parameters: ``bias`` (length, default ``"0.01 texel"``).
 """
 from dataclasses import dataclass, field
 
-from ..types import Length
+from ..core.types import Length
 from .base import no_shift
 
 NAME = "receiver_plane"

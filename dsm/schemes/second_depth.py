@@ -11,7 +11,7 @@ Parameters: ``bias`` (length, default 0), ``culling`` (front | front_closed, def
 """
 from dataclasses import dataclass, field
 
-from ..types import Length
+from ..core.types import Length
 from .base import no_shift
 
 NAME = "second_depth"

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import drjit as dr
 
-from ..types import Length
+from ..core.types import Length
 from .base import no_shift
 
 NAME = "slope_scaled"

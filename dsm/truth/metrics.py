@@ -28,6 +28,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.record import LEAK_COLUMNS, SOFT_COLUMNS   # the columns leak_split and soft fill
+
 # Classes of the error image, in the order of CLASS_COLORS.
 # The last two: errors the per-texel oracle makes too (the map's resolution's, no bias fixes
 # them; nearest filter only), in a darker shade of their class.
@@ -91,7 +93,6 @@ def compute(v: np.ndarray, v_star: np.ndarray, rx_shape: np.ndarray, tap_shape: 
     }
 
 
-LEAK_COLUMNS = ("n_peterpan_contact", "n_leak", "peterpan_contact_rate", "leak_rate")
 
 
 def leak_split(v, v_star, occluder_dist_world, texel_world, leak_texels: float) -> dict:
@@ -155,8 +156,6 @@ def split(v, v_star, resolution=None) -> dict:
 
 
 SOFT_REGIONS = ("umbra", "penumbra", "lit")
-SOFT_COLUMNS = ("n_umbra", "n_penumbra", "n_lit", "rmse", "mae_umbra", "mae_penumbra", "mae_lit", "rmse_umbra",
-                "rmse_penumbra", "rmse_lit", "ref_half_width_mean", "ref_half_width_max", "ref_samples_mean")
 
 
 def soft(v, hits, samples, half, rx_shape, tap_shape) -> dict:

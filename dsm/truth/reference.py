@@ -1,11 +1,11 @@
 """Exact visibility V* of each receiver from a light, by shadow rays (once per scene/light).
 
 Rays leave the receiver just beyond a bound on its hit point's floating-point error
-(:mod:`dsm.maps.spawn`: a few float32 ulps of the coordinates and of the triangle the hit was
+(:mod:`dsm.scenes.spawn`: a few float32 ulps of the coordinates and of the triangle the hit was
 interpolated from, pbrt-v4's approach), toward the side the ray leaves by; a ray to a point
 light stops that far short of it. The offset never grows with a hand-set constant times the
 distance from the origin, so a scene moved far from the origin keeps its exact visibility as
-long as float32 still resolves its gaps (see :mod:`dsm.maps.spawn` for the limit).
+long as float32 still resolves its gaps (see :mod:`dsm.scenes.spawn` for the limit).
 ``mitsuba_spawn=True`` uses Mitsuba's own ``spawn_ray`` / ``spawn_ray_to`` instead (for
 comparison in tests).
 
@@ -19,7 +19,7 @@ import mitsuba as mi
 import numpy as np
 
 from .. import lights
-from ..maps import spawn
+from ..scenes import spawn
 
 
 def shadow_rays(si, light, magnitude: float = 1.0, mitsuba_spawn: bool = False):
@@ -42,7 +42,7 @@ def shadow_rays(si, light, magnitude: float = 1.0, mitsuba_spawn: bool = False):
 
 
 def hit_error(si, magnitude: float):
-    """The spawn offset of each receiver (:func:`dsm.maps.spawn.error_bound`)."""
+    """The spawn offset of each receiver (:func:`dsm.scenes.spawn.error_bound`)."""
     return spawn.error_bound(si, dr.opaque(mi.Float, float(magnitude)))
 
 

@@ -1,7 +1,9 @@
-"""Tuning by gradient (dsm tune): relaxed objective, search, bias maps, resume."""
-from ..old_paths import forwarder
+"""Tuning by gradient (dsm tune): relaxed objective, search, bias maps, resume.
 
-# the names of the module this folder replaced (dsm/tune.py, then tuner.py, split into these),
-# kept as an alias for one release
-__getattr__ = forwarder(__name__, ('tuner', 'output', 'search', 'refine', 'compare', 'relax', 'evaluate', 'cases',
-                                   'bias_map'))
+The Python API: ``dsm.tune.tune(config, out=None, ...)`` runs it (:func:`dsm.tune.tuner.tune`)
+and ``dsm.tune.table_text(result)`` gives its table.md as text (:func:`dsm.tune.output.table_text`).
+"""
+from .output import table_text
+from .tuner import tune
+
+__all__ = ["tune", "table_text"]

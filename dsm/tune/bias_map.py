@@ -13,7 +13,7 @@ from ..maps import lookup
 from ..report.tables import objective
 from .. import pipeline as pl
 from ..schemes import get as get_scheme
-from ..types import SchemeSpec
+from ..core.types import SchemeSpec
 from .evaluate import NAN, counts, sync_clock
 from .relax import margins, relaxed_sum
 from .cases import pooled_thresholds

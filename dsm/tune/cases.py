@@ -8,7 +8,7 @@ import mitsuba as mi
 import numpy as np
 
 from .. import pipeline as pl
-from ..types import DEFAULT_CAMERA
+from ..core.types import DEFAULT_CAMERA
 
 
 # ---------------------------------------------------------------- cases: receivers of every view

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..report.tables import objective
 from ..schemes import get as get_scheme
-from ..types import SchemeSpec
+from ..core.types import SchemeSpec
 from .evaluate import NAN, hard_counts, sync_clock, with_values
 from .relax import relaxed_loss, relaxed_loss_np
 

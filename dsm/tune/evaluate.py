@@ -7,7 +7,7 @@ import time
 import drjit as dr
 
 from .. import pipeline as pl
-from ..types import Length, SchemeSpec
+from ..core.types import Length, SchemeSpec
 
 
 NAN = float("nan")       # one object: lists of rows compare equal where both hold it

@@ -26,12 +26,12 @@ import mitsuba as mi
 import numpy as np
 
 from .. import pipeline as pl
-from ..maps import spawn
-from ..maps.shadowmap import COHERENT
+from ..scenes import spawn
+from ..scenes.spawn import COHERENT
 from ..prefilter.base import supersampled_view
 from ..scenes import exact_frame
 from ..scenes.gbuffer import GBuffer
-from ..types import ConfigError
+from ..core.types import ConfigError
 from .cases import Case
 
 ROLE = "light"                    # the role of a light-sample case (not a camera's train or heldout)

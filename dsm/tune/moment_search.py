@@ -9,7 +9,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..report.tables import objective
-from ..types import describe_params
+from ..core.types import describe_params
 from .evaluate import NAN, sync_clock
 from .moments import (LR, TAU, gradient_check, grid_search, hard_counts, loss_and_gradient, map_source, tunable,
                       unit_box, with_values)

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..report.io import atomic
-from ..types import Length
+from ..core.types import Length
 from .compare import FINE, GRADCHECK_STEP
 from .search import Param
 from ..config.tune import TuneSpec

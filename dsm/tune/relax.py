@@ -11,7 +11,7 @@ import numpy as np
 from ..maps import lookup
 from .. import pipeline as pl
 from ..schemes.base import no_shift
-from ..types import Length
+from ..core.types import Length
 
 
 CLIP = 30.0              # |margin / T| beyond which the sigmoid is flat (its derivative below 1e-13)

@@ -9,7 +9,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..report.tables import objective
-from ..types import Length, SchemeSpec
+from ..core.types import Length, SchemeSpec
 from .evaluate import NAN, hard_counts, sync_clock, with_values
 from .relax import relaxed_loss
 from .refine import exact_refinement, line_reach

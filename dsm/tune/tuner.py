@@ -62,7 +62,7 @@ from pathlib import Path
 from . import resume as tune_resume
 from ..report.tables import objective
 from .. import pipeline as pl
-from ..types import ConfigError, Length, describe_params
+from ..core.types import ConfigError, Length, describe_params
 from .evaluate import NAN, hard_counts, with_values
 from ..config.tune import TuneSpec, tunable, tune_spec
 from .cases import pooled_thresholds, prepare_cases

@@ -3,7 +3,7 @@
 A package of its own, installed with the kit, depending on ``dsm.pipeline`` only. The kit
 finds it through the entry-point group ``dsm.plugins``: :func:`register` (an explicit list,
 as Mitsuba registers its own) runs when ``import dsm`` finds a variant set and when
-:func:`dsm.tools.env.use_variant` sets one. Both plugins run the same view, map, scheme, filter,
+:func:`dsm.core.env.use_variant` sets one. Both plugins run the same view, map, scheme, filter,
 format and metric stages as the experiment runner.
 """
 from __future__ import annotations

@@ -16,7 +16,7 @@ the first). ``dsm_shadow`` with ``aovs = true`` (a boolean: ``<boolean>`` in XML
 ``true``/``false``/``1``/``0``) adds two channels per sample: ``dsm.V`` (the map's
 visibility) and ``dsm.Vstar`` (exact visibility), so a user can see where they differ.
 
-A bad property raises :class:`~dsm.config.ConfigError` as one line naming it (Mitsuba shows
+A bad property raises :class:`~dsm.ConfigError` as one line naming it (Mitsuba shows
 ``... failed to instantiate ...: ConfigError: <integrator type="dsm_error">: scheme: unknown
 value 'foo' (valid: ...)``); a ``light`` index the scene does not have fails at the start of
 rendering, listing the scene's point, spot and directional emitters.
@@ -37,7 +37,7 @@ import mitsuba as mi
 import numpy as np
 
 import dsm.pipeline as pl
-from dsm import types as cfgmod
+from dsm.core import types as cfgmod
 from dsm.pipeline import Receiver
 
 OWN_KEYS = ("scheme", "resolution", "view", "filter", "format", "light", "seed", "area", "samples")
@@ -59,7 +59,7 @@ def _boolean(raw, source, key):
 
 class Options:
     """The plugin's properties, checked like a config: a mistake raises one
-    :class:`~dsm.config.ConfigError` line naming the property as the user wrote it
+    :class:`~dsm.ConfigError` line naming the property as the user wrote it
     (``scheme``, ``bias``, ``resolution``), the bad value and the valid choices."""
 
     def __init__(self, props, plugin: str, all_lights: bool):
@@ -115,7 +115,7 @@ class Options:
 
 
 def clean_config_errors(fn):
-    """Re-raise a :class:`~dsm.config.ConfigError` from ``fn`` without its traceback.
+    """Re-raise a :class:`~dsm.ConfigError` from ``fn`` without its traceback.
 
     Mitsuba reports an exception raised in a plugin's constructor as the text of its whole
     Python traceback followed by the message; without a traceback that text is the one line

@@ -5,7 +5,7 @@ resampled bilinearly to grids of about 1e4 to 1e6 triangles by default (``--geom
 sizes; docs/bench/cpu-llvm-geometry goes to 1e7), written as binary PLY and loaded
 as a user's mesh file (here). Per mesh: the first-layer build and one frame (:func:`bench.frame_cost`:
 the map plus every single-layer lookup) as kernel and wall time, in the bench's process
-(:func:`dsm.tools.bench.geometry_cost`); and the peak
+(:func:`dsm.perf.bench.geometry_cost`); and the peak
 resident memory (Linux's VmHWM) of one-case ``dsm run``s on the mesh in their own processes,
 against ``dsm plan``'s estimate for the same config (run.json's ``peak_bytes_est``), at the
 set-up the plan's constants were fitted to and at one they never saw. The exponent of time

@@ -8,7 +8,7 @@ kernel runs but the copy) and the lookup (:func:`dsm.prefilter.visibility`: the 
 moments and the kind's bound), beside the ``pcf_wide:W`` lookup of constant bias on the same
 depth map. Lookups are given as wall clock (Python's tracing included) and kernel time (the
 kernels' own execution, Dr.Jit's history), both warm medians of the repeats with
-``dr.sync_thread()`` around every clock read (:mod:`dsm.tools.timing`); the cold call's JIT
+``dr.sync_thread()`` around every clock read (:mod:`dsm.core.timing`); the cold call's JIT
 compile time is reported apart. The PCF times depend on W and R only: one measurement per
 (R, W), repeated on each kind's row.
 """
@@ -38,13 +38,13 @@ def depth_map(sd, setup, R: int) -> tuple:
 def moment_spec(kind: str, width: int):
     """The MomentSpec of ``kind`` at its default parameters, a box blur ``width`` texels wide."""
     from .. import prefilter
-    from ..types import MomentSpec
+    from ..core.types import MomentSpec
     return MomentSpec(kind, prefilter.get(kind).Params(), width)
 
 
 def lookup_cost(fn, repeats: int) -> dict:
     """{wall ms, kernel ms, compile ms} of a lookup ``fn`` (returning one array): warm medians."""
-    from . import timing
+    from ..core import timing
     wall = timing.measure(lambda: (fn(),), repeats)[1]
     return {"ms": wall.ms, "kernel_ms": timing.kernel_ms(lambda: (fn(),), repeats)[0], "compile_ms": wall.compile_ms}
 
@@ -62,7 +62,7 @@ def kind_row(kind: str, width: int, smap, rx, repeats: int) -> dict:
     """One kind at one width: its moments-and-blur build (wall ms) and its lookup's costs."""
     from .. import pipeline as pl
     from .. import prefilter
-    from . import timing
+    from ..core import timing
     spec = moment_spec(kind, width)
 
     def build_map():

@@ -20,9 +20,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ..truth.metrics import LEAK_COLUMNS, SOFT_COLUMNS
-
 TEXT, INT, FLOAT = "text", "int", "float"
+
+# the leak split's columns (dsm.truth.metrics.leak_split) and an area light's (dsm.truth.metrics.soft)
+LEAK_COLUMNS = ("n_peterpan_contact", "n_leak", "peterpan_contact_rate", "leak_rate")
+SOFT_COLUMNS = ("n_umbra", "n_penumbra", "n_lit", "rmse", "mae_umbra", "mae_penumbra", "mae_lit", "rmse_umbra",
+                "rmse_penumbra", "rmse_lit", "ref_half_width_mean", "ref_half_width_max", "ref_samples_mean")
 
 
 @dataclass(frozen=True)
@@ -94,7 +97,7 @@ def check_row(row: dict) -> dict:
     unknown = sorted(set(row) - set(_BY_NAME))
     if unknown:
         raise SchemaError(f"case row with columns metrics.csv does not have: {', '.join(unknown)} "
-                          "(add them to dsm.experiment.record.COLUMNS)")
+                          "(add them to dsm.core.record.COLUMNS)")
     for group, names in GROUPS.items():
         have = names & set(row)
         if (have or group == "core") and have != names:

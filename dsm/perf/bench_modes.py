@@ -88,7 +88,7 @@ def markdown(r: dict) -> list:
     pc, wf = r["per_case"], r["wavefront"]
     lines = _section(
         "(5b) Lookups per case against a map's wavefront",
-        "The same sweep (`dsm.tools.bench_modes.LOOKUP_SWEEP`, many parameter values per scheme) run with "
+        "The same sweep (`dsm.perf.bench_modes.LOOKUP_SWEEP`, many parameter values per scheme) run with "
         "`[timing] lookups = \"per_case\"` and `\"wavefront\"`, each twice in turn; the second run of each. "
         "Launches from Dr.Jit's kernel history; times are the process's wall clock and CPU seconds measuring.",
         ["lookups", "launches outside the timed repeats", "launches in them", "measuring s (wall)", "measuring CPU s"],
@@ -108,7 +108,7 @@ def markdown_builds(r: dict) -> list:
     al, tg = r["alone"], r["together"]
     lines = _section(
         "(5c) Maps built alone against a sweep's small maps built together",
-        "The same sweep (`dsm.tools.bench_modes.BUILD_SWEEP`: two scenes, a directional, spot and point light, "
+        "The same sweep (`dsm.perf.bench_modes.BUILD_SWEEP`: two scenes, a directional, spot and point light, "
         "dual-paraboloid and cube views, R = 64 to 512, with and without culling) run with `[timing] builds = "
         "\"alone\"` and `\"together\"`, each twice in turn; the second run of each. Launches from Dr.Jit's "
         "kernel history; build kernel time summed over the maps (a stacked map's is its share of its stack's); "

@@ -38,7 +38,7 @@ def use_variant(variant: str | None = None, threads: int | None = None) -> str:
     """Set the Mitsuba variant (default llvm_ad_rgb) once; later calls must agree."""
     import drjit as dr
     import mitsuba as mi
-    from ..types import VARIANTS
+    from .types import VARIANTS
     variant = variant or os.environ.get("DSM_VARIANT") or "llvm_ad_rgb"
     if variant not in VARIANTS:
         raise SetupError(f"variant {variant!r} is not supported: dsm runs vectorized Dr.Jit code "

@@ -14,8 +14,8 @@ and on a local two-worker Ray cluster (``sweep``; needs ``dsm[cluster]``). (6) O
 visible pixels of a 1024^2 camera, timed three ways: wall clock (Python's tracing included),
 kernel time (the sum of the kernels' own execution times from Dr.Jit's kernel history) and a
 ``dr.freeze``-recorded frame replayed (tracing removed), where freezing works. (7) Cost against
-triangles (:mod:`dsm.tools.bench_geometry`). (8) Pre-filtered maps (moments and blur, lookup)
-beside PCF at the same kernel width (:mod:`dsm.tools.bench_prefilter`; ``prefilter``).
+triangles (:mod:`dsm.perf.bench_geometry`). (8) Pre-filtered maps (moments and blur, lookup)
+beside PCF at the same kernel width (:mod:`dsm.perf.bench_prefilter`; ``prefilter``).
 A benchmark, not a test: results go to bench.md and bench.json.
 """
 from __future__ import annotations
@@ -58,8 +58,8 @@ def _peak(timing, fn, repeats):
 
 def tile_for(texels: int, layered: bool, budget: int) -> int:
     """The texels per pass that keep a first-layer or two-layer build within ``budget`` bytes,
-    by the plan's own estimate (dsm.experiment.plan.MapPlan)."""
-    from ..experiment.plan import MIN_TILE, MapPlan
+    by the plan's own estimate (dsm.config.plan.MapPlan)."""
+    from ..config.plan import MIN_TILE, MapPlan
     m = MapPlan("", "", "orthographic", int(round(texels ** 0.5)), 1, "none", ("z2",) if layered else (), layered,
                 (), [], 0)
     room = budget - m.stored_bytes
@@ -76,7 +76,7 @@ def fitted_exponent(texels, ms) -> float:
 def scaling(sd, view_for, resolutions, repeats, ext, budget) -> list:
     """(4): first and two-layer build time per resolution, tiled within the budget."""
     from ..maps import shadowmap
-    from . import timing
+    from ..core import timing
     rows = []
     for R in resolutions:
         view = view_for(R)
@@ -148,10 +148,11 @@ def frame_cost(spec, light, R: int = 1024, camera: int = 1024, repeats: int = 5,
     import drjit as dr
     import mitsuba as mi
 
-    from ..maps import shadowmap, spawn
+    from ..maps import shadowmap
+    from ..scenes import spawn
     from ..scenes import load as scenes
     from .. import schemes
-    from . import timing
+    from ..core import timing
     from ..scenes.gbuffer import cast
     from ..pipeline import make_view, points_np
     sd = scenes.load(spec, (camera, camera))
@@ -167,7 +168,7 @@ def frame_cost(spec, light, R: int = 1024, camera: int = 1024, repeats: int = 5,
 
     def bare():
         """The bare cast: the preliminary intersection of every texel ray (distances only)."""
-        return (sd.scene.ray_intersect_preliminary(rays, coherent=shadowmap.COHERENT).t,)
+        return (sd.scene.ray_intersect_preliminary(rays, coherent=spawn.COHERENT).t,)
 
     ext = spawn.shape_extents(sd.scene)                   # made once per scene, as the runner does
     frame, state = _frame_fn(sd, view, mods, needs, ext)
@@ -192,7 +193,8 @@ def _frame_fn(sd, view, mods, needs, ext) -> tuple:
 
     import drjit as dr
 
-    from ..maps import lookup, shadowmap, spawn
+    from ..maps import lookup, shadowmap
+    from ..scenes import spawn
     prms = [m.Params() for m in mods]
     state = {k: v for k, v in vars(view).items() if dr.is_array_v(v)}
     state["tables"] = {"pair": tuple(ext), **{k: getattr(ext, k) for k in TABLE_FIELDS}}
@@ -253,7 +255,7 @@ def mesh_cost(ply: Path, label: str, triangles: int, R: int, camera: int, repeat
 
 def geometry_cost(out: Path, triangles=None, R: int = 1024, camera: int = 512, repeats: int = 3,
                   memory: bool = True) -> dict:
-    """(7) (:mod:`dsm.tools.bench_geometry`): rows per mesh size (default TRIANGLES) and the
+    """(7) (:mod:`dsm.perf.bench_geometry`): rows per mesh size (default TRIANGLES) and the
     exponents of build and frame time against triangles."""
     from .bench_geometry import TRIANGLES, decade_slopes, resampled_terrain, run_peak, write_ply
     triangles = TRIANGLES if triangles is None else triangles
@@ -293,8 +295,8 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
     """Measure (1) to (8) (scaling, sweep, frame, geometry and prefilter as asked), write bench.md and bench.json into ``out``; the dict."""
     import drjit as dr
 
-    from . import env, timing
-    from ..experiment.plan import physical_memory
+    from ..core import env, timing
+    from ..config.plan import physical_memory
 
     problem = meshes_problem(meshes)
     if problem:          # the real-mesh rows would be dropped without a word
@@ -344,7 +346,7 @@ def _scene_bench(spec, resolutions, repeats, scaling_resolutions, budget) -> tup
     import drjit as dr
     import mitsuba as mi
 
-    from ..maps import spawn
+    from ..scenes import spawn
     from ..scenes import load as scenes
     from ..pipeline import closedness, cull_modes, make_view, points_np
     from ..scenes.gbuffer import cast
@@ -376,16 +378,17 @@ def _build_row(sd, label, view, R, repeats, ext, per_shape) -> dict:
     import mitsuba as mi
 
     from ..maps import shadowmap
-    from . import timing
+    from ..scenes import spawn
+    from ..core import timing
     rays = view.texel_rays(0, R * R)
     dr.eval(rays)
 
     def full_cast():
         """A full ``ray_intersect`` of the texel rays (the build's baseline): t, p, n."""
-        si = sd.scene.ray_intersect(rays, mi.RayFlags.All, shadowmap.COHERENT)
+        si = sd.scene.ray_intersect(rays, mi.RayFlags.All, spawn.COHERENT)
         return si.t, si.p, si.n
 
-    def bare_cast(coherent=shadowmap.COHERENT):
+    def bare_cast(coherent=spawn.COHERENT):
         """The preliminary intersection of the texel rays (what the build casts), distances only."""
         return (sd.scene.ray_intersect_preliminary(rays, coherent=coherent).t,)
     full = timing.measure(full_cast, repeats)[1]
@@ -418,7 +421,7 @@ def _lookup_rows(sd, label, view, p, n, ext, repeats) -> list:
 
     from ..maps import lookup, shadowmap
     from .. import schemes
-    from . import timing
+    from ..core import timing
     smap = shadowmap.build(sd.scene, view, {"z2", "slope"}, extents=ext)
     rx = lookup.Receiver.make(view, p, n, sd.diagonal)
     dr.eval(rx.depth, rx.u_map, rx.v_map, rx.texel_world, rx.to_light)

@@ -34,6 +34,12 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+# Embree's coherent traversal resolves a ray near a silhouette differently depending on which
+# rays share its packet (the tile it was cast in, the compaction of a layered search, the
+# CPU's vector width); its incoherent traversal gives every ray the same hit wherever it is
+# cast (docs/design.md, *Results that do not depend on the machine*).
+COHERENT = False     # the map's, the G-buffer's and the light samples' casts
+
 U32 = 2.0 ** -24     # float32 unit roundoff
 SAFETY = 32.0
 

@@ -30,7 +30,7 @@ from ..scenes import size as scene_size
 from .. import lights as light_types
 from .. import prefilter
 from .. import schemes as schemes_mod
-from ..types import DEFAULT_CAMERA, POINT_VIEWS, VIEW_FACES, Config, ConfigError
+from ..core.types import DEFAULT_CAMERA, POINT_VIEWS, VIEW_FACES, Config, ConfigError
 from ..maps.shadowmap import MAX_STEPS
 from ..contact import presets as contact_presets
 
@@ -498,7 +498,7 @@ def _layouts(views, cascade_specs):
 def check_emitters(cfg: Config):
     """ConfigError naming the light and the scene where an area light of ``shape = "emitter"``
     applies to a scene without an area emitter (it would give that scene no case, silently)."""
-    from ..types import AREA_SHAPES
+    from ..core.types import AREA_SHAPES
     for i, light in enumerate(cfg.lights):
         if light.type != "area" or light.shape != "emitter":
             continue
@@ -548,7 +548,7 @@ def _check_every_scheme_read(cfg: Config, used: set, views_seen: set):
 
 def make(cfg: Config) -> Plan:
     """The Plan of ``cfg``: a MapPlan per scene/light/view/resolution/culling, each tiled to fit the budget."""
-    from ..config.read import absent_files
+    from .read import absent_files
     check_emitters(cfg)
     plan = Plan(cfg.source, budget_bytes=memory_budget(cfg), absent=absent_files(cfg),
                 lambdas=len(cfg.oracle.lambdas), contact=getattr(cfg, "contact", None), shrink=getattr(cfg, "shrink", None),

@@ -1,1 +1,0 @@
-"""Around the stages: the benchmark (dsm bench), the environment and plugins, clock reads."""
