@@ -1,4 +1,4 @@
-"""Command line: ``dsm run``, ``dsm plan``, ``dsm report``, ``dsm schemes``, ``dsm bench``, ``dsm tune``.
+"""Command line: ``dsm run``, ``dsm plan``, ``dsm report``, ``dsm schemes``, ``dsm perf``, ``dsm benchmark``, ``dsm tune``.
 
 Every bad input is one or two lines on stderr, never a traceback, before any work starts:
 exit 2 for a mistake in the config or the arguments, 3 for the machine's set-up (libLLVM, no
@@ -106,8 +106,10 @@ def _run_parser(sub):
 
 
 def _bench_parser(sub):
-    b = sub.add_parser("bench", help="benchmark: map build against a bare ray cast, lookup cost per scheme")
-    b.add_argument("--out", default="bench", help="folder for bench.md and bench.json (default: bench/)")
+    # "bench" is the name before 0.2.0, kept as an alias that says it is one (dsm perf is not dsm benchmark)
+    b = sub.add_parser("perf", aliases=["bench"], help="speed: map build against a bare ray cast, lookup cost per "
+                       "scheme, memory (dsm bench: its old name)")
+    b.add_argument("--out", help="folder for bench.md and bench.json (default: perf/)")
     b.add_argument("--resolutions", default="256,512,1024,2048,4096", help="comma-separated map resolutions")
     b.add_argument("--repeats", type=_positive_int, default=5)
     b.add_argument("--meshes", help="folder of the real test meshes (default: the kit's data/meshes)")
@@ -184,7 +186,11 @@ def main(argv=None) -> int:
         if args.cmd == "schemes":
             print(schemes_text())
             return 0
-        if args.cmd == "bench":
+        if args.cmd in ("perf", "bench"):
+            if args.cmd == "bench":
+                print("dsm: `dsm bench` is an alias of `dsm perf` (renamed in 0.2.0, so it is not confused with "
+                      "`dsm benchmark`); its default --out stays bench/", file=sys.stderr)
+            args.out = args.out if args.out is not None else args.cmd
             return _bench(args)
         if args.cmd == "benchmark":
             return benchmark_command.main(args)

@@ -1,4 +1,4 @@
-"""dsm bench's arithmetic and its frozen frame (times are measured, never asserted)."""
+"""dsm perf's arithmetic and its frozen frame (times are measured, never asserted)."""
 import math
 
 import time

@@ -1,4 +1,4 @@
-"""``dsm bench`` (8), pre-filtered maps beside PCF (dsm.perf.bench_prefilter): its rows, the maps
+"""``dsm perf`` (8), pre-filtered maps beside PCF (dsm.perf.bench_prefilter): its rows, the maps
 it times (the run's own, bit for bit), and its section of bench.md."""
 import math
 
@@ -51,7 +51,7 @@ def test_the_bench_times_the_runs_moment_map_bit_for_bit():
 def test_dsm_bench_takes_no_prefilter_and_bench_md_keeps_its_sections_without_it(capsys):
     from dsm import cli
     from dsm.perf import bench
-    assert cli.main(["bench", "--help"]) == 0
+    assert cli.main(["perf", "--help"]) == 0
     assert "--no-prefilter" in capsys.readouterr().out
     r = {"variant": "llvm_ad_rgb", "threads": 2, "repeats": 1, "builds": [], "lookups": [],
          "dou_table1_ms": bench.DOU_TABLE1}

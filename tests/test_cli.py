@@ -6,6 +6,7 @@ import sys
 
 from dsm.report import figures, tables as report
 from dsm.schemes import REGISTRY
+from conftest import ROOT
 
 
 def test_default_experiment_writes_the_report(tmp_path):
@@ -110,3 +111,22 @@ def test_a_reader_that_leaves_early_ends_the_command_quietly():
     finally:
         os.close(w)
     assert p.returncode == 0 and "Traceback" not in p.stderr and "BrokenPipe" not in p.stderr, p.stderr
+
+
+def test_an_experiment_renamed_in_0_2_0_is_pointed_to_by_its_old_name(tmp_path, capsys):
+    """experiments/seed002_fit.toml is now common_techniques_fit.toml: the old path's error names it."""
+    from dsm import cli
+    old = ROOT / "experiments" / "seed002_fit.toml"
+    assert not old.exists() and (ROOT / "experiments" / "common_techniques_fit.toml").is_file()
+    assert cli.main(["run", str(old), "--out", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err
+    assert "renamed in 0.2.0" in err and "common_techniques_fit.toml" in err and not (tmp_path / "r").exists()
+
+
+def test_dsm_bench_is_an_alias_of_dsm_perf_that_says_so(tmp_path, capsys):
+    """The old name runs the same command (here its argument check) and says it is an alias; perf does not."""
+    from dsm import cli
+    for name in ("bench", "perf"):
+        assert cli.main([name, "--resolutions", "x", "--out", str(tmp_path / name)]) == 2
+        err = capsys.readouterr().err
+        assert "--resolutions" in err and ("alias of `dsm perf`" in err) == (name == "bench"), err

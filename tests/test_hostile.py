@@ -102,7 +102,7 @@ def test_tune_bench_and_report_refuse_a_held_folder(tmp_path, capsys, holder):
     tune_cfg.write_text(_tiny('[tune]\nsteps = 2\n', 'builtin = "plane_box"').replace('"none"', '"constant"'))
     a = tmp_path / "a"
     assert _cli(capsys, "run", tune_cfg, "--out", a)[0] == 0
-    for args in (["tune", tune_cfg, "--out"], ["bench", "--resolutions", "32", "--scaling", "", "--repeats", "1",
+    for args in (["tune", tune_cfg, "--out"], ["perf", "--resolutions", "32", "--scaling", "", "--repeats", "1",
                                               "--no-sweep", "--no-frame", "--out"], ["report", a, a, "--out"]):
         out = tmp_path / args[0]
         h = holder(out)
@@ -327,12 +327,12 @@ def test_a_light_direction_is_a_float64_unit_vector():
 # ---------------------------------------------------------------- 20: bench --meshes
 
 def test_bench_with_a_missing_meshes_folder_is_one_line(tmp_path, capsys):
-    rc, err = _cli(capsys, "bench", "--meshes", tmp_path / "nonexistent", "--out", tmp_path / "b")
+    rc, err = _cli(capsys, "perf", "--meshes", tmp_path / "nonexistent", "--out", tmp_path / "b")
     assert rc == 2
     _one_line(err, "--meshes", str(tmp_path / "nonexistent"), "no such folder")
     assert not (tmp_path / "b").exists()
     (tmp_path / "file").write_text("")
-    rc, err = _cli(capsys, "bench", "--meshes", tmp_path / "file", "--out", tmp_path / "b")
+    rc, err = _cli(capsys, "perf", "--meshes", tmp_path / "file", "--out", tmp_path / "b")
     assert rc == 2 and "not a folder" in err[0]
 
 

@@ -328,7 +328,7 @@ def _fig5_expected(sd, R, tr, light):
 
 
 def test_weiskopf_fig5_against_the_tracer(tmp_path):
-    """Seed 000, figure 5 as numbers. Every case's classes and counts against an independent
+    """Weiskopf & Ertl 2003, figure 5 as numbers. Every case's classes and counts against an independent
     computation: the tracer's receivers and V*, the L's layers along each texel ray in float64
     (entries and exits of the union of its boxes; back_closed drops its exits) and the schemes'
     tests on those depths. Then the paper's claims that the per-receiver metric can see on these

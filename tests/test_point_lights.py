@@ -271,7 +271,7 @@ def test_equal_memory_budgets(run_dict):
 
 
 def test_paraboloid_texel_rays_are_dou_et_als_reflected_rays(variant):
-    """Seed 004, section 3.2: R = 2 (d0 . N) N - d0, N the paraboloid normal (x_c, y_c, 1) normalized,
+    """Dou et al. 2014, section 3.2: R = 2 (d0 . N) N - d0, N the paraboloid normal (x_c, y_c, 1) normalized,
     through the texel centre (x_c, y_c); and projecting R's direction gives the centre back."""
     import mitsuba as mi
     R = 64

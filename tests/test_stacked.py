@@ -210,7 +210,7 @@ def test_builds_choice_is_checked(tmp_path):
 
 
 def test_bench_compares_the_build_modes(tmp_path, monkeypatch):
-    """dsm bench (5c): a light's resolution sweep built together launches fewer timed kernels than
+    """dsm perf (5c): a light's resolution sweep built together launches fewer timed kernels than
     each map alone (a count, not a clock: alone, one first-layer build per map and repeat), every
     row equal."""
     from dsm.perf import bench_modes

@@ -50,7 +50,7 @@ def test_inward_wound_room_is_not_culled(run_dict):
 
 
 def test_backface_lit_rate_orders_dual_before_midpoint_with_culling(run_dict):
-    """Seed 000, figure 5: with back faces of closed meshes culled, midpoint's second layer lies
+    """Weiskopf & Ertl 2003, figure 5: with back faces of closed meshes culled, midpoint's second layer lies
     behind the L's far side, so the L's own back-facing pixels (attached shadow) read lit;
     dual's z_offset caps that. Back-facing pixels are not receivers: backface_lit_rate sees it."""
     cfg = base_config(scene=[{"builtin": "l_shape"}], camera={"resolution": [128, 128]}, map={"resolution": 512},

@@ -131,7 +131,7 @@ def test_an_unknown_lookup_mode_is_refused_before_any_work(tmp_path):
 
 
 def test_bench_compares_the_modes_on_a_sweep(tmp_path, monkeypatch):
-    """dsm bench (5b): on a sweep whose cases share kernels, the wavefront launches fewer timed
+    """dsm perf (5b): on a sweep whose cases share kernels, the wavefront launches fewer timed
     kernels than one lookup per case (a count, not a clock), and every row is equal."""
     from dsm.perf import bench_modes
     small = {**bench_modes.LOOKUP_SWEEP, "camera": {"resolution": [48, 48]},

@@ -24,6 +24,11 @@ TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing",
             "execution", "tune", "contact")    # [tune]: read by dsm.tune (dsm tune), ignored by dsm run
 
 
+# the shipped experiments named after a source's file number before 0.2.0 (CHANGELOG.md)
+RENAMED_EXPERIMENTS = {"seed002_fit.toml": "common_techniques_fit.toml",
+                       "seed002_shimmer.toml": "common_techniques_shimmer.toml"}
+
+
 def load(path) -> Config:
     """The Config read from TOML file ``path``; ConfigError for a missing, unreadable or invalid file."""
     path = Path(path)
@@ -31,7 +36,9 @@ def load(path) -> Config:
     if path.is_dir():
         raise ConfigError(source, "file", "is a folder, not a config file")
     if not path.is_file():
-        raise ConfigError(source, "file", "no such config file")
+        moved = RENAMED_EXPERIMENTS.get(path.name)
+        raise ConfigError(source, "file", "no such config file" + (
+            f"; renamed in 0.2.0 to {path.with_name(moved)} (experiments are named by their paper)" if moved else ""))
     try:
         with open(path, "rb") as fh:
             raw = tomllib.load(fh)

@@ -1,4 +1,4 @@
-"""``dsm bench``: what a map build and a lookup cost, as ratios measured in one run.
+"""``dsm perf``: what a map build and a lookup cost, as ratios measured in one run.
 
 (1) Map build time (first layer; two layers for dual) over the time of a bare
 ``scene.ray_intersect`` of the same texel rays (and of the cheaper
@@ -452,7 +452,7 @@ def markdown(r) -> str:
 
 def _md_builds(r) -> list:
     """Section (1): builds against a full and a bare cast, wall clock."""
-    lines = [f"# dsm bench ({r['variant']}, {r['threads']} threads, median of {r['repeats']} warm runs; "
+    lines = [f"# dsm perf ({r['variant']}, {r['threads']} threads, median of {r['repeats']} warm runs; "
              f"(4) and (7): of {max(1, min(r['repeats'], 3))}; (6): of {max(r['repeats'], 5)})", "",
              "## (1) Map build against a bare ray cast of the same texel rays", "",
              "Goals (kernel time, the second table of (1b)): first layer / preliminary <= 1.5, two layers / "

@@ -1,4 +1,4 @@
-"""``dsm bench`` (7): what a map build and one frame cost against the scene's triangles.
+"""``dsm perf`` (7): what a map build and one frame cost against the scene's triangles.
 
 The meshes are the real terrain of :mod:`dsm.scenes.terrain` (the Jacksboro fault DEM)
 resampled bilinearly to grids of about 1e4 to 1e6 triangles by default (``--geometry`` takes any

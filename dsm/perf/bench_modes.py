@@ -1,4 +1,4 @@
-"""``dsm bench`` (5b) and (5c): a sweep run in two ``[timing]`` modes in one bench run, each
+"""``dsm perf`` (5b) and (5c): a sweep run in two ``[timing]`` modes in one bench run, each
 twice in turn so that both read warm kernel caches: kernel launches, measuring time (wall and
 CPU) and the rows compared count for count. (5b): ``lookups = "per_case"`` against
 ``"wavefront"`` (dsm.experiment.wavefront); (5c): ``builds = "alone"`` against ``"together"``

@@ -1,4 +1,4 @@
-"""``dsm bench`` (8): what a pre-filtered map costs beside PCF at the same kernel width.
+"""``dsm perf`` (8): what a pre-filtered map costs beside PCF at the same kernel width.
 
 On the builtin ``stacked_plates`` under its own sun (a 512^2 camera's receivers), per map
 resolution, kind (vsm, esm, evsm, msm at their defaults, float32) and blur width W: the

@@ -4,7 +4,7 @@ A mesh is closed when, after welding vertices that share a position, every edge 
 exactly two triangles that traverse it in opposite directions (a consistently wound,
 manifold surface without boundary). Anything else is open, with the reason reported:
 boundary edges, non-manifold edges (three or more triangles, or duplicated triangles) or
-inconsistent winding. Seed 000 culls back faces of closed meshes only.
+inconsistent winding. Weiskopf & Ertl 2003 cull back faces of closed meshes only.
 
 A closed mesh wound inward (negative enclosed volume, like a room's walls seen from inside)
 is reported as such: to back-face culling its solid is everything outside it, so a light

@@ -37,7 +37,7 @@ class PlaneBoxParams(Placement):
 
 @dataclass(frozen=True)
 class LShapeParams(Placement):
-    """Seed 000, figure 5: a closed L-shaped solid above the ground, light from right above."""
+    """Weiskopf & Ertl 2003, figure 5: a closed L-shaped solid above the ground, light from right above."""
 
 
 @dataclass(frozen=True)
@@ -62,12 +62,12 @@ class GrazingParams(Placement):
 
 @dataclass(frozen=True)
 class RoomParams(Placement):
-    """Seed 001, figure 3: a closed 6 x 6 x 3 room (walls facing in) with objects around a point light."""
+    """Brabec et al. 2002, figure 3: a closed 6 x 6 x 3 room (walls facing in) with objects around a point light."""
 
 
 @dataclass(frozen=True)
 class DoubleTorusParams(Placement):
-    """Seed 000, figure 6: a closed genus-2 solid (a double torus, 6,400 triangles) tilted above the ground."""
+    """Weiskopf & Ertl 2003, figure 6: a closed genus-2 solid (a double torus, 6,400 triangles) tilted above the ground."""
 
 
 @dataclass(frozen=True)
