@@ -340,7 +340,7 @@ def map_cull_modes(scene, view, culling: str = "none", closed=None):
     """Per-shape CULL_* of a map of ``view`` under ``culling`` (None: nothing culled), an area
     light's own luminaire (``view.exclude``) stepped over."""
     modes = cull_modes(culling, closed) if culling != "none" else None
-    exclude = getattr(view, "exclude", ())      # an area light's own luminaire: stepped over
+    exclude = view.exclude      # an area light's own luminaire: stepped over
     if exclude:
         modes = np.zeros(len(scene.shapes()), np.uint32) if modes is None else np.array(modes, np.uint32)
         modes[list(exclude)] = shadowmap.CULL_ALL
@@ -372,7 +372,7 @@ def receivers(view, setup, diagonal: float) -> Receiver:
 def visibility(spec: SchemeSpec, rx: Receiver, smap, filt: str = "nearest", seed: int = 7):
     """(V in [0, 1] per receiver, shape index of the nearest texel) of one scheme instance (on a
     cascaded view with a blend band, mixed with the next cascade's over the band)."""
-    if getattr(rx.view, "blend", 0.0) > 0:
+    if rx.view.blend > 0:
         return cascades_mod.blended_visibility(schemes.get(spec.name), spec.params, rx, smap, filt, seed)
     return lookup.visibility(schemes.get(spec.name), spec.params, rx, smap, filt, seed)
 

@@ -74,3 +74,57 @@ def test_margin_sign_is_the_sources_test(variant, name):
     np.testing.assert_array_equal(margin[clear] >= 0, want[clear])
     if name not in ("normal_offset", "combined", "distance_normal"):
         assert scheme.shift(rx, prm) is rx           # the default shift does nothing
+
+
+# the contract fields every module declares, as the sources state them: the VSV lookups read the
+# voxel grid alone, distance_normal the receivers' camera (UE5's distance-scaled normal bias)
+VSV_LOOKUPS = {"vsv", "vsv_epsilon", "vsv_adaptive"}
+CAMERA_READERS = {"distance_normal"}
+
+
+def test_every_scheme_declares_views_camera_and_needs():
+    from dsm.schemes import ALL
+    assert VSV_LOOKUPS <= {m.NAME for m in ALL}
+    for m in ALL:
+        assert m.VIEWS == (("vsv",) if m.NAME in VSV_LOOKUPS else None), m.NAME
+        assert m.READS_CAMERA is (m.NAME in CAMERA_READERS), m.NAME
+        got = m.needs(m.Params())
+        assert isinstance(got, frozenset) and got <= m.NEEDS, m.NAME
+
+
+def test_combined_needs_the_slope_layer_only_with_its_slope_term():
+    from dsm.schemes import combined
+    assert combined.needs(combined.Params()) == frozenset()
+    assert combined.needs(combined.Params(slope_scale=2.0)) == frozenset({"slope"})
+
+
+def test_a_module_without_a_contract_field_is_not_a_scheme():
+    from dsm.schemes import base, constant
+    fields = {k: v for k, v in vars(constant).items() if not k.startswith("__")}
+    assert isinstance(SimpleNamespace(**fields), base.Scheme)
+    for name in ("READS_CAMERA", "VIEWS", "needs"):
+        assert not isinstance(SimpleNamespace(**{k: v for k, v in fields.items() if k != name}), base.Scheme), name
+
+
+def test_every_map_kind_declares_log_max_and_its_encoding():
+    from dsm import prefilter
+    from dsm.prefilter import base
+    exponential = {"esm", "evsm"}          # an exp(c t) moment, which a format can overflow
+    encoded = {"msm"}                      # Peters & Klein's optimized 16-bit quantization
+    for m in prefilter.REGISTRY:
+        top = m.log_max(m.Params())
+        assert (type(top) is float) if m.NAME in exponential else top is None, m.NAME
+        assert (m.encode is not None and m.decode is not None) is (m.NAME in encoded), m.NAME
+        assert ("unorm16" in base.formats_of(m)) is (m.NAME in encoded), m.NAME
+    fields = {k: v for k, v in vars(prefilter.vsm).items() if not k.startswith("__") and k != "log_max"}
+    assert not isinstance(SimpleNamespace(**fields), base.MapKind)
+
+
+def test_views_declare_what_their_readers_read():
+    """The view fields read across the kit have a default on View and their kinds' own values."""
+    from dsm.maps.cascades import CascadeView
+    from dsm.maps.views import OrthographicView, View
+    from dsm.maps.vsv import EpipolarView
+    assert (View.depth_oracles, View.cascaded, View.blend, View.light_size, View.exclude) == (True, False, 0.0, 0.0, ())
+    assert CascadeView.cascaded and not OrthographicView.cascaded
+    assert not EpipolarView.depth_oracles

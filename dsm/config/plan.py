@@ -538,7 +538,7 @@ def _check_every_scheme_read(cfg: Config, used: set, views_seen: set):
     for s in cfg.schemes:
         if id(s) in used:
             continue
-        own = getattr(schemes_mod.get(s.name), "VIEWS", None)
+        own = schemes_mod.get(s.name).VIEWS
         why = (f"it reads only a {' or '.join(own)} grid, which point and spot lights get"
                if own is not None else "it reads a depth map: add a depth view to map.view")
         raise ConfigError(cfg.source, "map.view", f"scheme {s.name} {s.label}".rstrip() + " reads no map of this "

@@ -126,7 +126,7 @@ def tuned_names(schemes: tuple) -> list:
     continuous parameter (dsm tune refuses the others, naming them)."""
     from ..schemes import get
     return sorted({s.name for s in schemes
-                   if getattr(get(s.name), "VIEWS", None) is None and tunable(get(s.name))})
+                   if get(s.name).VIEWS is None and tunable(get(s.name))})
 
 
 def _temperature(t: dict, src: str) -> tuple:

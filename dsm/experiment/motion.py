@@ -275,14 +275,7 @@ def _view_signature(view) -> bytes:
     """What a map's texels depend on: the frame, extents, offsets, depth origin and far bound."""
     parts = [np.asarray(view.origin_np, np.float32), np.asarray(view.axes_np, np.float32),
              np.float32([view.far, view.near, view.resolution])]
-    for name in ("extents", "face_near", "face_far", "rects"):
-        if hasattr(view, name):
-            parts.append(np.asarray(getattr(view, name), np.float32))
-    if hasattr(view, "NU"):
-        parts += [np.asarray(view.A.numpy(), np.float32), np.asarray(view.NU.numpy(), np.float32),
-                  np.asarray(view.NV.numpy(), np.float32)]
-    if hasattr(view, "extent"):
-        parts.append(np.float32([view.extent]))
+    parts += view.signature_arrays()
     return b"".join(p.tobytes() for p in parts)
 
 

@@ -500,7 +500,7 @@ class Runner:
         gets it wrong (the resolution's share of a nearest case's errors), None on failure."""
         if rx is None:
             return np.zeros(0, bool)
-        if setup.ref is not None or not getattr(view, "depth_oracles", True):
+        if setup.ref is not None or not view.depth_oracles:
             return None               # an area light (the oracles are a hard V*'s); a VSV grid (no depth bias)
         meta = {"scene": sd.label, "light": setup.label, "view": view.kind, "resolution": m.resolution,
                 "culling": m.culling, "format": fmt}
@@ -555,7 +555,7 @@ class Runner:
                 "culling": smap.culling,
                 "preset": spec.preset or "", "params": spec.label, "resolution": view.resolution,
                 "total_texels": view.n_texels,
-                "filter": filt, "format": fmt, "cascade_layout": view.spec.label if hasattr(view, "spec") else ""}
+                "filter": filt, "format": fmt, "cascade_layout": view.spec.label if view.cascaded else ""}
         try:
             mt = None
             if moment is None:
@@ -601,7 +601,7 @@ class Runner:
         if self.cfg.contact is not None:      # screen-space contact shadows after the lookup
             cols, occ = self._contact(sd, gb, setup, rx, v_np)
             m.update(cols)
-        if hasattr(view, "cascades"):         # a cascaded map: per cascade, texels per pixel, distance plot
+        if view.cascaded:         # a cascaded map: per cascade, texels per pixel, distance plot
             extra, per, curve, faces = pipeline.cascade_metrics(view, rx, v_np, setup.v_star)
             m.update(extra)
             self.record.cascade_rows += [{**meta, **r} for r in per]

@@ -151,6 +151,7 @@ def _opaque_vectors(pts):
 class CascadeView(View):
     """A directional light's cascaded map: one orthographic face per cascade (see the module's notes)."""
     kind = "orthographic"
+    cascaded = True
 
     def __init__(self, direction, spec: CascadeSpec, camera: Camera, receivers_world, scene_bbox, resolution: int,
                  scale: float = 1.0, receivers_f32=None):
@@ -405,6 +406,12 @@ class CascadeView(View):
         """Per texel: the near and far of its cascade (the stored formats' range)."""
         n = self.resolution ** 2
         return np.repeat(self.face_near, n), np.repeat(self.face_far, n)
+
+    def signature_arrays(self) -> list:
+        """Each cascade's extent, near, far and rectangle, its square's origin and offsets, and the first extent."""
+        out = [np.asarray(x, np.float32) for x in (self.extents, self.face_near, self.face_far, self.rects)]
+        out += [np.asarray(x.numpy(), np.float32) for x in (self.A, self.NU, self.NV)]
+        return out + [np.float32([self.extent])]
 
     def texel_size(self, k: int) -> float:
         """World width of one texel of cascade k (float64)."""

@@ -85,17 +85,16 @@ def _texel_axis_cosine(view) -> np.ndarray:
 
 def ndc_near(view) -> float:
     """ndc24's near distance ``n``: the light's distance to the scene's bounds, at least far / 1000."""
-    return max(float(getattr(view, "nearest_scene_depth", 0.0)), view.far * 1e-3)
+    return max(float(view.nearest_scene_depth), view.far * 1e-3)
 
 
-def quantize_np(z: np.ndarray, view, fmt: str) -> np.ndarray:
-    """World depths ``z`` as stored in ``fmt`` and read back (float64 math)."""
+def quantize_np(z: np.ndarray, view, fmt: str, bounds=None) -> np.ndarray:
+    """World depths ``z`` as stored in ``fmt`` and read back (float64 math); ``bounds``: (near,
+    far) per value (a cascaded map's View.texel_bounds), None: the view's."""
     if fmt == "float32":
         return z
     z = np.asarray(z, np.float64)
-    near, far = float(view.near), float(view.far)
-    if hasattr(view, "texel_bounds") and z.shape == (view.n_texels,):
-        near, far = view.texel_bounds()          # a cascaded map: each cascade's own near and far
+    near, far = (float(view.near), float(view.far)) if bounds is None else bounds
     if fmt == "float16":
         t = np.clip((z - near) / (far - near), 0.0, 1.0)
         return near + t.astype(np.float16).astype(np.float64) * (far - near)
@@ -125,7 +124,9 @@ def store(smap, fmt: str):
         zn = z.numpy().astype(np.float64)
         keep = zn >= smap.view.far          # misses stay at the far bound
         za = zn * cos if cos is not None else zn
-        q = quantize_np(za, smap.view, fmt)
+        # a cascaded map: each cascade's own near and far
+        bounds = smap.view.texel_bounds() if za.shape == (smap.view.n_texels,) else None
+        q = quantize_np(za, smap.view, fmt, bounds)
         out[name] = mi.Float(np.where(keep, zn, q).astype(np.float32))
     if cos is not None and smap.slope is not None:
         out["slope"] = mi.Float((smap.slope.numpy() * cos).astype(np.float32))

@@ -168,9 +168,9 @@ def pcss_estimate(scheme, prm, rx: Receiver, smap):
     penumbra is ``w = L (d - z_b) / z_b`` wide (world, similar triangles), ``w / texel_world``
     texels. Returns (z_b, penumbra width in texels, any blocker found)."""
     view = smap.view
-    L = dr.opaque(mi.Float, float(getattr(view, "light_size", 0.0) or 0.0))
+    L = dr.opaque(mi.Float, float(view.light_size))
     d = rx.depth
-    z_n = dr.maximum(dr.opaque(mi.Float, float(getattr(view, "nearest_scene_depth", 0.0))), PCSS_NEAR * d)
+    z_n = dr.maximum(dr.opaque(mi.Float, float(view.nearest_scene_depth)), PCSS_NEAR * d)
     search = dr.clip(L * (d - z_n) / (z_n * rx.texel_world), 1.0, PCSS_MAX_TEXELS)
     total = dr.zeros(mi.Float, dr.width(d))
     count = dr.zeros(mi.Float, dr.width(d))

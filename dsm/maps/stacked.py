@@ -62,7 +62,7 @@ def stack_view(views):
     if any(type(v) is not cls or v.kind != views[0].kind for v in views):
         raise ValueError("stacked maps must share one view kind: "
                          + ", ".join(sorted({v.kind for v in views})))
-    if hasattr(views[0], "cascades"):     # each cascade its own fit, held in tables wider than a lane's value
+    if views[0].cascaded:     # each cascade its own fit, held in tables wider than a lane's value
         raise ValueError(f"a {views[0].kind} view with cascades is built alone, not stacked")
     sizes = np.array([v.n_texels for v in views], np.int64)
     first = np.concatenate([[0], np.cumsum(sizes)[:-1]])

@@ -58,6 +58,13 @@ class View:
 
     kind = "view"
     has_seams = False     # seams between faces or at a rim (paraboloid and cube views)
+    # the defaults of what some views set (the readers take every view as one type):
+    depth_oracles = True        # the oracles' depth biases apply (a VSV grid, dsm.maps.vsv, has none)
+    cascaded = False            # one fit per cascade (dsm.maps.cascades: cascades, spec); built alone, never stacked
+    blend = 0.0                 # the cascades' blend band (dsm.maps.cascades); 0: no blended lookup
+    light_size = 0.0            # an area light's width, world, for PCSS (dsm.lights.area_surface); 0: none
+    exclude = ()                # shapes the map steps over: an area light's own luminaire (dsm.lights.area_surface)
+    nearest_scene_depth = 0.0   # the light's distance to the scene's bounds (spot and point views), ndc24's and PCSS's near
 
     @property
     def faces(self) -> int:
@@ -145,6 +152,16 @@ class View:
         o, d = self.ray_at(cu, cv, face)
         return mi.Ray3f(o, d)
 
+    def texel_bounds(self):
+        """Per texel, (near, far) of a map whose texels differ in range (a cascaded map); None: the
+        view's own near and far for every texel."""
+        return None
+
+    def signature_arrays(self) -> list:
+        """What the map's texels depend on beyond the frame, near, far and resolution (float32
+        arrays, in a fixed order; a moving camera's frames rebuild the map when they change)."""
+        return []
+
     def lanes(self, idx):
         """The view as lanes ``idx`` of a build see it: itself (a stacked view, dsm.maps.stacked, gathers its per-lane values)."""
         return self
@@ -192,6 +209,10 @@ class OrthographicView(View):
         self.extent = float(extent)
         super().__init__(origin, ex, ey, ez, resolution, near=0.0, far=float(zs.max() - z0 + margin))
         self.L = dr.opaque(mi.Float, self.extent)
+
+    def signature_arrays(self) -> list:
+        """The fitted square's side (the frame holds its corner)."""
+        return [np.float32([self.extent])]
 
     def project_on(self, p, face=None):
         """(u, v) in texels of world points ``p`` on the single map (``face`` ignored)."""

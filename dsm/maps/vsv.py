@@ -142,6 +142,10 @@ class EpipolarView(View):
         self.P0, self.dP = (dr.opaque(mi.Float, x) for x in (self.phi0, self.phi_span / R))
         self.A0, self.A_inv = dr.opaque(mi.Float, self.alpha0), dr.opaque(mi.Float, 1.0 / self.alpha_span)
 
+    def signature_arrays(self) -> list:
+        """The grid's fitted angle and alpha ranges and the eye's distance (``extents``)."""
+        return [np.asarray(self.extents, np.float32)]
+
     def angles(self, p):
         """(theta, phi, alpha) of world points ``p`` (Dr.Jit; theta in [0, 2 pi))."""
         x, y, z = self.local(p)

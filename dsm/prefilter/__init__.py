@@ -44,10 +44,10 @@ def check(name: str, params, formats, source: str, where: str):
                               f"got {val!r}")
         if "choices" in f.metadata and val not in f.metadata["choices"]:
             raise ConfigError(source, f"{where}.{f.name}", f"unknown value {val!r}", f.metadata["choices"])
-    log_max = getattr(get(name), "log_max", None)
+    log_max = get(name).log_max(params)
     for fmt in formats:
-        if log_max is not None and fmt in LOG_MAX and log_max(params) > LOG_MAX[fmt]:
-            raise ConfigError(source, where, f"{params}: its largest moment exp({log_max(params):g}) overflows "
+        if log_max is not None and fmt in LOG_MAX and log_max > LOG_MAX[fmt]:
+            raise ConfigError(source, where, f"{params}: its largest moment exp({log_max:g}) overflows "
                               f"{fmt} (at most exp({LOG_MAX[fmt]:.2f})); lower the exponent")
 
 

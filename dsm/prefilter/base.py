@@ -5,8 +5,9 @@ Depth-compare schemes (:mod:`dsm.schemes.base`) give a signed margin per filter 
 filter averages their binary tests. A pre-filtered map gives a *continuous V per receiver*
 instead: its texels store moments of the depth (statistics a linear filter may average), and
 its lookup turns the filtered moments at the receiver into a visibility in [0, 1]. A kind
-module (:class:`MapKind`) has ``NAME``, ``SOURCE``, a frozen ``Params`` dataclass, ``COUNT(params)``
-(moments per texel), ``moment_key(params)`` (the parameters the moments depend on: maps sharing
+module (:class:`MapKind`) has ``NAME``, ``SOURCE``, a frozen ``Params`` dataclass, ``count(params)``
+(moments per texel), ``log_max(params)`` (an exponential moment's largest log, or None),
+``moment_key(params)`` (the parameters the moments depend on: maps sharing
 it share one build), ``moments(t, params)`` (numpy float64, one array per moment, from the
 normalized depth ``t``) and ``visibility(b, t, prm)`` (Dr.Jit: the filtered moments ``b`` and
 the receiver's normalized depth ``t`` -> V). A ``Params`` field whose metadata holds ``"tune": (space, lo, hi)``
@@ -19,8 +20,8 @@ The moments come from the ray-cast ``z1`` of each texel, or with ``[map] moment_
 from N x N rays at its sub-texel centres (:func:`supersampled_view`), their moments averaged per
 texel (:func:`texel_means`, an MSAA resolve's mean) before storage. ``format`` is their storage precision: ``float32`` or ``float16`` (IEEE half,
 rounded to nearest; a value beyond 65504 becomes +inf as a half render target stores it), or
-``unorm16`` for a kind with an ``encode(t, params)`` / ``decode(q)`` pair (MSM's optimized
-quantization): the encoded moments, clamped to [0, 1], rounded to k / 65535 (half to even), and
+``unorm16`` for a kind with an ``encode(t, params)`` / ``decode(q)`` pair, None in the others (MSM's
+optimized quantization): the encoded moments, clamped to [0, 1], rounded to k / 65535 (half to even), and
 decoded at lookup after the fetch, as a shader decodes what it filtered (:func:`restored`). The
 moments (or encoded moments) are stored, blurred in float64, and the blurred values stored
 again in the format, as a blur pass writes a render target of that format.
@@ -36,7 +37,7 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, Callable, Protocol, runtime_checkable
 
 import drjit as dr
 import mitsuba as mi
@@ -58,9 +59,17 @@ class MapKind(Protocol):
     NAME: str
     SOURCE: str
     Params: type
+    # encode(t, params) -> list: the moments as ENCODED_FORMATS store them, in [0, 1] (numpy);
+    # decode(q) -> list: their inverse at lookup. None (both): stored as floats only (FLOAT_FORMATS)
+    encode: Callable | None
+    decode: Callable | None
 
     def count(self, params: Any) -> int:
         """Moments stored per texel."""
+
+    def log_max(self, params: Any) -> float | None:
+        """The largest natural log of a stored moment (checked against LOG_MAX); None: no
+        exponential moment that can overflow."""
 
     def moment_key(self, params: Any) -> tuple:
         """The parameters the stored moments depend on (equal keys: one build)."""
@@ -94,7 +103,7 @@ def normalized_depth(z, view):
 
 def formats_of(kind) -> tuple:
     """The moment formats ``kind`` may be stored in: the float ones, and unorm16 if it encodes."""
-    return MOMENT_FORMATS if hasattr(kind, "encode") else FLOAT_FORMATS
+    return MOMENT_FORMATS if kind.encode is not None else FLOAT_FORMATS
 
 
 def stored(x: np.ndarray, fmt: str) -> np.ndarray:

@@ -16,6 +16,7 @@ import numpy as np
 
 NAME = "esm"
 SOURCE = "Annen et al. 2008 (Graphics Interface), Exponential Shadow Maps"
+encode = decode = None      # stored as floats only (base.FLOAT_FORMATS)
 
 
 @dataclass(frozen=True)

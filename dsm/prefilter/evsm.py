@@ -21,6 +21,7 @@ from .base import chebyshev, linstep
 
 NAME = "evsm"
 SOURCE = "Lauritzen & McCool 2008 (Graphics Interface), Layered Variance Shadow Maps, exponential warp"
+encode = decode = None      # stored as floats only (base.FLOAT_FORMATS)
 MOMENT_COUNTS = (2, 4)
 
 

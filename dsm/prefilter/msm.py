@@ -64,6 +64,11 @@ def moment_key(params) -> tuple:
     return ()
 
 
+def log_max(params) -> None:
+    """None: no exponential moment, nothing a format could overflow."""
+    return None
+
+
 def moments(t, params) -> list:
     """[t, t^2, t^3, t^4] per texel."""
     t2 = t * t

@@ -17,6 +17,7 @@ from .base import chebyshev, linstep
 
 NAME = "vsm"
 SOURCE = "Donnelly & Lauritzen 2006 (I3D); light-bleeding reduction: Lauritzen 2007 (GPU Gems 3, ch. 8)"
+encode = decode = None      # stored as floats only (base.FLOAT_FORMATS)
 
 
 @dataclass(frozen=True)
@@ -36,6 +37,11 @@ def count(params) -> int:
 def moment_key(params) -> tuple:
     """The moments do not depend on VSM's parameters."""
     return ()
+
+
+def log_max(params) -> None:
+    """None: no exponential moment, nothing a format could overflow."""
+    return None
 
 
 def moments(t, params) -> list:

@@ -2,9 +2,10 @@
 
 Each module has ``NAME``, ``SOURCE``, ``NEEDS`` (the map attributes it reads), a frozen
 ``Params`` dataclass with defaults and units, a signed ``margin(rx, tap, params) -> Float``
-over Dr.Jit arrays (lit where >= 0) and ``shift(rx, params) -> Receiver`` (the identity,
-:func:`base.no_shift`, but for schemes that move the lookup point). A module may add
-``needs(params) -> frozenset``: an instance's own layers, a subset of ``NEEDS`` (:func:`needs_of`).
+over Dr.Jit arrays (lit where >= 0), ``shift(rx, params) -> Receiver`` (the identity,
+:func:`base.no_shift`, but for schemes that move the lookup point), ``needs(params) ->
+frozenset`` (an instance's own layers, a subset of ``NEEDS``: :func:`needs_of`), ``VIEWS`` and
+``READS_CAMERA`` (:class:`base.Scheme`).
 
 Engine presets (:mod:`.presets`) are :mod:`combined` instances per light type:
 :func:`preset_for_light` resolves one for a light.
@@ -43,7 +44,7 @@ def get(name: str):
 def reads_view(spec, view: str) -> bool:
     """Whether a scheme instance reads maps of view kind ``view``: its own ``VIEWS``, else every
     view but the exclusive ones (a voxel grid is no depth map)."""
-    own = getattr(get(spec.name), "VIEWS", None)
+    own = get(spec.name).VIEWS
     return view in own if own is not None else view not in EXCLUSIVE_VIEWS
 
 
@@ -56,9 +57,7 @@ def needs_of(scheme_specs) -> set:
     """The map attributes (beyond z1 and shape ids) a group of scheme instances reads."""
     out = set()
     for s in scheme_specs:
-        module = get(s.name)
-        own = getattr(module, "needs", None)
-        out |= set(own(s.params) if own is not None else module.NEEDS)
+        out |= set(get(s.name).needs(s.params))
     return out
 
 
@@ -66,7 +65,7 @@ def view_mismatch(specs, views) -> str:
     """What a config's scheme instances and ``[map] view`` choices leave unmatched, in words
     ('' when nothing): a lookup whose views none names, or an exclusive view no lookup reads."""
     for s in specs:
-        own = getattr(get(s.name), "VIEWS", None)
+        own = get(s.name).VIEWS
         if own is not None and not set(own) & set(views):
             return f"scheme {s.name} reads only a {' or '.join(own)} view: add it to map.view"
     for v in sorted(set(views) & EXCLUSIVE_VIEWS):

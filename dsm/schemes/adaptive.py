@@ -11,13 +11,16 @@ Known failure: receivers whose tangent plane is almost parallel to the light ray
 over-biased (the paper's figure 9), which shading hides but the metrics count.
 """
 from dataclasses import dataclass, field
-from .base import no_shift
+from .base import fixed_needs, no_shift
 # the receiver plane's test with another offset, so it declares what that scheme declares (USES_PLANE)
 from .receiver_plane import USES_PLANE, plane_margin
 
 NAME = "adaptive"
 SOURCE = "Dou et al. 2014"
 NEEDS = frozenset()
+VIEWS = None          # every view but the exclusive ones (a depth-map scheme)
+READS_CAMERA = False
+needs = fixed_needs(NEEDS)
 
 
 @dataclass(frozen=True)

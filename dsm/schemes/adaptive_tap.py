@@ -26,12 +26,15 @@ from dataclasses import dataclass, field
 
 import drjit as dr
 
-from .base import no_shift
+from .base import fixed_needs, no_shift
 
 NAME = "adaptive_tap"
 SOURCE = "Ehm et al. 2015 after Dou et al. 2014"
 NEEDS = frozenset()
 USES_PLANE = True
+VIEWS = None          # every view but the exclusive ones (a depth-map scheme)
+READS_CAMERA = False
+needs = fixed_needs(NEEDS)
 
 
 @dataclass(frozen=True)

@@ -2,6 +2,7 @@
 
 A scheme is a module: ``NAME``, ``SOURCE``, ``NEEDS`` (map layers beyond z1 and shape ids),
 ``USES_PLANE`` (whether it reads the receiver plane, whose fallbacks are counted),
+``VIEWS`` (the view kinds it reads, or None), ``READS_CAMERA``, ``needs(params) -> frozenset``,
 a frozen ``Params`` dataclass, ``margin(rx, tap, params) -> Float`` and ``shift(rx, params)
 -> Receiver``. The margin is signed, in the view's depth units: the receiver is lit by a tap
 when it is >= 0 (``lit``). Filters apply it per tap; tuning by gradient relaxes it.
@@ -24,7 +25,14 @@ class Scheme(Protocol):
     SOURCE: str
     NEEDS: frozenset
     USES_PLANE: bool        # compares the receiver plane's depth at the texel centre (lookup.plane_fallbacks)
+    # the view kinds it reads (a VSV lookup: ("vsv",)); None: every view but the exclusive ones
+    VIEWS: tuple | None
+    # reads the camera that sees each receiver (Receiver.camera), which dsm tune's light samples lack
+    READS_CAMERA: bool
     Params: type
+
+    def needs(self, params: Any) -> frozenset:
+        """The map layers an instance reads (beyond z1 and shape ids): a subset of ``NEEDS``."""
 
     def margin(self, rx: Any, tap: Any, params: Any) -> Any:
         """Signed margin per receiver (Dr.Jit Float): lit where >= 0."""
@@ -38,3 +46,9 @@ def no_shift(rx, params):
     return rx
 
 
+def fixed_needs(layers: frozenset):
+    """A ``needs`` for a scheme whose every instance reads the same ``layers`` (its ``NEEDS``)."""
+    def needs(params) -> frozenset:
+        """The map layers this instance reads: the scheme's ``NEEDS``, whatever its parameters."""
+        return layers
+    return needs

@@ -25,6 +25,8 @@ NAME = "combined"
 SOURCE = "engine defaults: normal offset + constant + slope-scaled depth bias"
 NEEDS = frozenset({"slope"})
 USES_PLANE = False
+VIEWS = None          # every view but the exclusive ones (a depth-map scheme)
+READS_CAMERA = False
 
 
 @dataclass(frozen=True)

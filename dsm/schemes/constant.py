@@ -9,12 +9,15 @@ Parameters: ``bias`` (length, default ``"1 texel"``).
 from dataclasses import dataclass, field
 
 from ..core.types import Length
-from .base import no_shift
+from .base import fixed_needs, no_shift
 
 NAME = "constant"
 SOURCE = "Williams 1978"
 NEEDS = frozenset()
 USES_PLANE = False
+VIEWS = None          # every view but the exclusive ones (a depth-map scheme)
+READS_CAMERA = False
+needs = fixed_needs(NEEDS)
 
 
 @dataclass(frozen=True)

@@ -30,12 +30,15 @@ import drjit as dr
 import mitsuba as mi
 
 from ..core.types import Length
+from .base import fixed_needs
 
 NAME = "distance_normal"
 SOURCE = "Unreal Engine 5 virtual shadow maps, r.Shadow.Virtual.NormalBias (approximation)"
 NEEDS = frozenset()
 USES_PLANE = False
 READS_CAMERA = True          # the receivers' camera (Receiver.camera): dsm tune's light samples have none
+VIEWS = None          # every view but the exclusive ones (a depth-map scheme)
+needs = fixed_needs(NEEDS)
 
 
 @dataclass(frozen=True)

@@ -15,12 +15,15 @@ import drjit as dr
 
 from ..core.types import Length
 from ..core.types import CULLINGS as CULLING
-from .base import no_shift
+from .base import fixed_needs, no_shift
 
 NAME = "dual"
 SOURCE = "Weiskopf & Ertl 2003"
 NEEDS = frozenset({"z2"})
 USES_PLANE = False
+VIEWS = None          # every view but the exclusive ones (a depth-map scheme)
+READS_CAMERA = False
+needs = fixed_needs(NEEDS)
 
 
 @dataclass(frozen=True)

@@ -11,12 +11,15 @@ Parameters: ``culling`` (none | back | front | back_closed, default none).
 from dataclasses import dataclass, field
 
 from ..core.types import CULLINGS as CULLING
-from .base import no_shift
+from .base import fixed_needs, no_shift
 
 NAME = "midpoint"
 SOURCE = "Woo 1992; Weiskopf & Ertl 2003"
 NEEDS = frozenset({"z2"})
 USES_PLANE = False
+VIEWS = None          # every view but the exclusive ones (a depth-map scheme)
+READS_CAMERA = False
+needs = fixed_needs(NEEDS)
 
 
 @dataclass(frozen=True)

@@ -6,12 +6,15 @@ tilted against the light about half of its receivers fall below their texel's sa
 Kept as the baseline every other scheme is measured against.
 """
 from dataclasses import dataclass
-from .base import no_shift
+from .base import fixed_needs, no_shift
 
 NAME = "none"
 SOURCE = "Williams 1978"
 NEEDS = frozenset()
 USES_PLANE = False
+VIEWS = None          # every view but the exclusive ones (a depth-map scheme)
+READS_CAMERA = False
+needs = fixed_needs(NEEDS)
 
 
 @dataclass(frozen=True)

@@ -12,12 +12,15 @@ from dataclasses import dataclass, field
 import drjit as dr
 
 from ..core.types import Length
-from .base import no_shift
+from .base import fixed_needs, no_shift
 
 NAME = "normal_angle"
 SOURCE = "Gautron 2013; Salcedo's shadow-map article"
 NEEDS = frozenset()
 USES_PLANE = False
+VIEWS = None          # every view but the exclusive ones (a depth-map scheme)
+READS_CAMERA = False
+needs = fixed_needs(NEEDS)
 
 
 @dataclass(frozen=True)

@@ -10,11 +10,15 @@ Parameters: ``offset`` (length, default ``"1 texel"``), ``bias`` (length, defaul
 from dataclasses import dataclass, field
 
 from ..core.types import Length
+from .base import fixed_needs
 
 NAME = "normal_offset"
 SOURCE = "three.js, Bevy, Godot, Unity (normal bias)"
 NEEDS = frozenset()
 USES_PLANE = False
+VIEWS = None          # every view but the exclusive ones (a depth-map scheme)
+READS_CAMERA = False
+needs = fixed_needs(NEEDS)
 
 
 @dataclass(frozen=True)

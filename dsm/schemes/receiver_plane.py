@@ -11,12 +11,15 @@ Parameters: ``bias`` (length, default ``"0.01 texel"``).
 from dataclasses import dataclass, field
 
 from ..core.types import Length
-from .base import no_shift
+from .base import fixed_needs, no_shift
 
 NAME = "receiver_plane"
 SOURCE = "Isidoro 2006; Salcedo's shadow-map article"
 NEEDS = frozenset()
 USES_PLANE = True     # compares the receiver plane's depth at the texel centre (lookup.plane_fallbacks)
+VIEWS = None          # every view but the exclusive ones (a depth-map scheme)
+READS_CAMERA = False
+needs = fixed_needs(NEEDS)
 
 
 @dataclass(frozen=True)

@@ -12,13 +12,16 @@ Parameters: ``bias`` (length, default 0), ``culling`` (front | front_closed, def
 from dataclasses import dataclass, field
 
 from ..core.types import Length
-from .base import no_shift
+from .base import fixed_needs, no_shift
 
 NAME = "second_depth"
 SOURCE = "Wang & Molnar 1994"
 NEEDS = frozenset()
 USES_PLANE = False
 CULLING = ("front", "front_closed")
+VIEWS = None          # every view but the exclusive ones (a depth-map scheme)
+READS_CAMERA = False
+needs = fixed_needs(NEEDS)
 
 
 @dataclass(frozen=True)

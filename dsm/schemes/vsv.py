@@ -14,13 +14,15 @@ from dataclasses import dataclass, field
 import drjit as dr
 
 from ..maps.vsv import MAX_ALPHA, OCCUPANCY, voxel_lit
-from .base import no_shift
+from .base import fixed_needs, no_shift
 
 NAME = "vsv"
 SOURCE = "Wyman 2011; Dou et al. 2014 sec. 3.3"
 NEEDS = frozenset()
 USES_PLANE = False
 VIEWS = ("vsv",)      # reads a voxelized shadow volume's grid, no depth map
+READS_CAMERA = False
+needs = fixed_needs(NEEDS)
 
 
 @dataclass(frozen=True)

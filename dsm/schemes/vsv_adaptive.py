@@ -19,13 +19,15 @@ import drjit as dr
 
 from ..maps.vsv import voxel_lit
 from .vsv import Params as GridParams
-from .base import no_shift
+from .base import fixed_needs, no_shift
 
 NAME = "vsv_adaptive"
 SOURCE = "Dou et al. 2014 sec. 3.3, Algorithm 2"
 NEEDS = frozenset()
 USES_PLANE = True     # the cell's ray against the receiver's tangent plane (lookup.plane_fallbacks)
 VIEWS = ("vsv",)
+READS_CAMERA = False
+needs = fixed_needs(NEEDS)
 
 
 @dataclass(frozen=True)

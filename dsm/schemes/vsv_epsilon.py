@@ -17,13 +17,15 @@ import drjit as dr
 
 from ..maps.vsv import voxel_lit
 from .vsv import Params as GridParams
-from .base import no_shift
+from .base import fixed_needs, no_shift
 
 NAME = "vsv_epsilon"
 SOURCE = "Dou et al. 2014 sec. 3.3 (constant epsilon)"
 NEEDS = frozenset()
 USES_PLANE = False
 VIEWS = ("vsv",)
+READS_CAMERA = False
+needs = fixed_needs(NEEDS)
 
 
 @dataclass(frozen=True)

@@ -268,7 +268,7 @@ def light_offsets(tc, groups, base, model, tick=None) -> dict:
 
 def reads_camera(spec: SchemeSpec) -> bool:
     """Whether a scheme instance reads the camera that sees each receiver (distance_normal), which light samples lack."""
-    return bool(getattr(get_scheme(spec.name), "READS_CAMERA", False))
+    return get_scheme(spec.name).READS_CAMERA
 
 
 def _offsets_record(bm, x, v, k, t0, lam: float, note: str) -> dict:

@@ -80,9 +80,13 @@ def tunable(spec, fmt: str = "float32") -> list:
 def _held(spec, name: str, lo: float, hi: float, fmt: str) -> float:
     """The largest value of parameter ``name`` in [lo, hi] whose moments ``fmt`` holds (the kind's
     log_max, non-decreasing in an exponent, at most LOG_MAX): bisected."""
-    log_max = getattr(prefilter.get(spec.name), "log_max", None)
+    log_max = prefilter.get(spec.name).log_max
     limit = prefilter.LOG_MAX.get(fmt, math.inf)
-    fits = lambda v: log_max is None or log_max(dataclasses.replace(spec.params, **{name: v})) <= limit
+
+    def fits(v) -> bool:
+        top = log_max(dataclasses.replace(spec.params, **{name: v}))
+        return top is None or top <= limit
+
     if fits(hi):
         return hi
     for _ in range(60):

@@ -113,7 +113,7 @@ def _check_schemes(cfg, spec: TuneSpec):
         if s.preset is not None:
             raise ConfigError(src, f"scheme[{i}].preset", "dsm tune tunes scheme parameters, not presets: give "
                               "the combined scheme with the preset's values (dsm schemes lists them)")
-        if getattr(get(s.name), "VIEWS", None) is not None:      # a VSV lookup (dsm.maps.vsv): no depth map to tune on
+        if get(s.name).VIEWS is not None:      # a VSV lookup (dsm.maps.vsv): no depth map to tune on
             raise ConfigError(src, f"scheme[{i}].name", f"{s.name} reads a voxelized shadow volume; dsm tune tunes "
                               "shadow-map schemes", _tunable_names())
         if not tunable(get(s.name)):
