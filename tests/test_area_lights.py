@@ -11,6 +11,7 @@ from dsm.truth import area, intervals, metrics
 from dsm.lights import area_surface
 from dsm.config import read as config
 from dsm.maps import lookup
+from dsm.maps.receiver import Receiver
 from dsm import pipeline, schemes
 from dsm.scenes import geometry as scene_geometry
 from dsm.core.types import ConfigError, LightSpec
@@ -184,7 +185,7 @@ def test_pcss_penumbra_width_matches_similar_triangles_within_a_texel(variant):
     assert view.kind == "perspective"
     view = pipeline.make_view(light, R, np.array([[3.0, 3.0, 0.0], [-3, -3, 0]]), bbox, "fitted")  # a wider field
     smap = pipeline.build_map(scene, view)
-    rx = lookup.Receiver.make(view, p, n, 8.0)
+    rx = Receiver.make(view, p, n, 8.0)
     spec = pipeline.scheme_spec({"name": "constant", "bias": 0.01})
     z_b, width, found = lookup.pcss_estimate(schemes.get("constant"), lookup.resolve(spec.params, rx), rx, smap)
     assert found.numpy().all()

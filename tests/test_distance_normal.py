@@ -8,7 +8,7 @@ import pytest
 import dsm.pipeline as pl
 from dsm.maps import lookup
 from dsm import schemes
-from dsm.maps.lookup import Receiver
+from dsm.maps.receiver import Receiver
 from dsm.core.types import LightSpec
 
 CAM_O, CAM_T = np.array([5.0, -7.0, 6.0]), np.array([0.0, 0.0, 0.3])     # plane_box's camera, fov 40

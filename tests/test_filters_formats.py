@@ -35,7 +35,8 @@ def _edge_setup(R=60):
 
 def test_bilinear_pcf_rises_linearly_across_one_texel(variant):
     from dsm import schemes
-    from dsm.maps.lookup import Receiver, visibility
+    from dsm.maps.lookup import visibility
+    from dsm.maps.receiver import Receiver
     sd, view, smap, p, n, vstar = _edge_setup()
     rx = Receiver.make(view, p, n, sd.diagonal)
     const = schemes.get("constant")

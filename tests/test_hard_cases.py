@@ -313,7 +313,8 @@ def test_receivers_exactly_on_texel_boundaries():
     from dsm.scenes import load as scenes
     from dsm.maps import shadowmap
     from dsm.config.read import parse
-    from dsm.maps.lookup import Receiver, tap_at
+    from dsm.maps.lookup import tap_at
+    from dsm.maps.receiver import Receiver
     from dsm.maps.views import OrthographicView
     cfg = parse(base_config(), "<test>")                 # a 4 x 4 plane tilted 45 degrees about x
     sd = scenes.load(cfg.scenes[0], (32, 32))

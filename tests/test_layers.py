@@ -156,7 +156,8 @@ def test_two_plates_layers_and_midpoint_dual_against_analytic_depths():
     from dsm import schemes
     from dsm.maps import shadowmap
     from dsm.config.read import Length, parse
-    from dsm.maps.lookup import Receiver, visibility
+    from dsm.maps.lookup import visibility
+    from dsm.maps.receiver import Receiver
     from dsm.maps.views import OrthographicView
     gap, R = 0.6, 160
     sd = scenes.load(parse(base_config(scene=[{"builtin": "floating_plate", "gap": gap}]), "<test>").scenes[0],

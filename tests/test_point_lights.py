@@ -163,7 +163,8 @@ def test_points_exactly_on_singular_directions(variant):
     from dsm.config import read as config
     from dsm.scenes import load as scenes
     from dsm.maps import shadowmap
-    from dsm.maps.lookup import Receiver, nearest_tap
+    from dsm.maps.lookup import nearest_tap
+    from dsm.maps.receiver import Receiver
     cfg = config.parse(base_config(scene=[{"builtin": "plane_box"}]), "<test>")
     sd = scenes.load(cfg.scenes[0], (32, 32))
     light = np.array([0.0, 0.0, 2.0])

@@ -70,7 +70,8 @@ def test_jitter_is_seeded_by_the_receiver_itself():
     import numpy as np
     from dsm.scenes import gbuffer, load as scenes, spec as scene_spec
     from dsm.maps import shadowmap
-    from dsm.maps.lookup import Receiver, visibility
+    from dsm.maps.lookup import visibility
+    from dsm.maps.receiver import Receiver
     from dsm.pipeline import make_view, points_np as _points_np
     from dsm.schemes import constant
     from dsm.config.read import LightSpec, Length

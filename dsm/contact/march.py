@@ -43,7 +43,8 @@ import numpy as np
 
 from ..truth import metrics as metrics_mod
 from ..scenes.camera import Camera
-from ..maps.lookup import Receiver, position_key, resolve
+from ..maps.lookup import position_key, resolve
+from ..maps.receiver import Receiver
 
 
 @dataclass

@@ -37,7 +37,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..core.types import Length
-from .receiver import Receiver   # noqa: F401  (read by the lookup's callers with its functions)
+from .receiver import Receiver
 
 
 def lit(scheme, rx, tap, params):

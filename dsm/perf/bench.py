@@ -194,6 +194,7 @@ def _frame_fn(sd, view, mods, needs, ext) -> tuple:
     import drjit as dr
 
     from ..maps import lookup, shadowmap
+    from ..maps.receiver import Receiver
     from ..scenes import spawn
     prms = [m.Params() for m in mods]
     state = {k: v for k, v in vars(view).items() if dr.is_array_v(v)}
@@ -209,7 +210,7 @@ def _frame_fn(sd, view, mods, needs, ext) -> tuple:
         for k in TABLE_FIELDS:
             setattr(tables, k, tab[k])
         smap = shadowmap.build(scene, v, needs, extents=tables)
-        rx = lookup.Receiver.make(v, p, n, sd.diagonal)
+        rx = Receiver.make(v, p, n, sd.diagonal)
         return tuple(lookup.visibility(m, prm, rx, smap)[0] for m, prm in zip(mods, prms)) + (smap.z1,)
     return frame, state
 
@@ -420,10 +421,11 @@ def _lookup_rows(sd, label, view, p, n, ext, repeats) -> list:
     import drjit as dr
 
     from ..maps import lookup, shadowmap
+    from ..maps.receiver import Receiver
     from .. import schemes
     from ..core import timing
     smap = shadowmap.build(sd.scene, view, {"z2", "slope"}, extents=ext)
-    rx = lookup.Receiver.make(view, p, n, sd.diagonal)
+    rx = Receiver.make(view, p, n, sd.diagonal)
     dr.eval(rx.depth, rx.u_map, rx.v_map, rx.texel_world, rx.to_light)
     rows, base = [], None
     for name in ("constant", "slope_scaled", "adaptive", "dual", "receiver_plane", "normal_offset", "midpoint",
