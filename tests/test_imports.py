@@ -133,6 +133,7 @@ LAYERS = (
     ("contact",),                    # screen-space contact shadows
     ("config",),                     # the TOML read into specs, the plan
     ("pipeline",),                   # the stages, one public function each
+    ("case",),                       # a case as a value: its context, evaluation and row
     ("report",),                     # the run's files, tables, figures, report.html
     ("experiment",),                 # the runner, resume, motion, the cluster, the folder lock
     ("tune", "benchmark", "perf"),   # dsm tune, dsm benchmark, dsm perf
@@ -190,7 +191,7 @@ def test_the_layer_check_sees_an_upward_and_a_sideways_import():
     assert layer_violations({"dsm.maps.cascades": {"dsm.report.io", "dsm.core.types"},
                              "dsm.lights.area": {"dsm.schemes.base"}, "dsm.report.io": {"dsm.core.record"}}) == [
         "dsm.lights.area -> dsm.schemes.base (dsm.lights at level 3, dsm.schemes at 3)",
-        "dsm.maps.cascades -> dsm.report.io (dsm.maps at level 2, dsm.report at 9)"]
+        "dsm.maps.cascades -> dsm.report.io (dsm.maps at level 2, dsm.report at 10)"]
 
 
 def test_no_import_circles():
@@ -211,10 +212,11 @@ def test_the_checker_sees_a_circle_and_a_private_reach_in():
     assert names == ["_parse_scheme"]
 
 
-def test_plugins_depend_on_the_pipeline_only():
+def test_plugins_depend_on_the_pipeline_and_the_case_only():
+    """The plugins use the stages and the case's evaluation (their class image is the runner's), nothing else."""
     edges, _, _ = _graph()
     kit = {d for m, deps in edges.items() if m.startswith("dsm_plugins") for d in deps if d.startswith("dsm.")}
-    assert kit <= {"dsm.pipeline", "dsm.core.types", "dsm"}, kit
+    assert kit <= {"dsm.pipeline", "dsm.case", "dsm.core.types", "dsm"}, kit
     assert not any(d.startswith("dsm_plugins") for m, deps in edges.items() if m.startswith("dsm.") or m == "dsm"
                    for d in deps)
 

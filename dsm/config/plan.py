@@ -23,6 +23,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import xml.etree.ElementTree as ET
+from typing import NamedTuple
 from dataclasses import dataclass, field
 
 from ..truth import intervals
@@ -629,16 +630,29 @@ def _plan_scene(plan: Plan, cfg: Config, si: int, sc, groups: dict, used: set, v
         for view, cascade in _layouts(views_for(ltype, cfg.map.view, shape), cfg.map.cascade):
             faces = cascade.count if cascade is not None else VIEW_FACES[view]
             for R in cfg.map.resolutions_for(faces):
+                slot = _Slot(sc.label, si, label, li, ltype, view, cascade, faces, R)
                 for culling, config_group in groups.items():
-                    m = _map_plan(cfg, sc.label, si, label, li, ltype, view, cascade, faces, R, culling, config_group,
-                                  used, views_seen)
+                    m = _map_plan(cfg, slot, culling, config_group, used, views_seen)
                     if m is not None:
                         plan.maps.append(m)
 
 
-def _map_plan(cfg: Config, scene_label, si, label, li, ltype, view, cascade, faces, R, culling, config_group,
-              used: set, views_seen: set):
-    """The MapPlan of one scene, light, view, resolution and culling; None where no scheme reads it."""
+class _Slot(NamedTuple):
+    """One scene, light, view and resolution of the plan, before its cullings."""
+    scene_label: str
+    scene_index: int
+    light_label: str
+    light_index: int
+    light_type: str
+    view: str
+    cascade: object
+    faces: int
+    resolution: int
+
+
+def _map_plan(cfg: Config, slot: _Slot, culling: str, config_group, used: set, views_seen: set):
+    """The MapPlan of one slot (scene, light, view, resolution) and culling; None where no scheme reads it."""
+    view, faces, R, ltype = slot.view, slot.faces, slot.resolution, slot.light_type
     per_case = len(cfg.map.filter) * len(cfg.map.format)
     fmts = tuple(f for f in cfg.map.format if f != "float32")
     # engine presets are combined instances per light type, resolved here
@@ -654,12 +668,12 @@ def _map_plan(cfg: Config, scene_label, si, label, li, ltype, view, cascade, fac
     needs = schemes_mod.needs_of(group)
     fine = {prefilter.build_key(s, f): faces * (R * s.samples) ** 2 for s in moments for f in cfg.map.format
             if s.samples > 1}       # one supersampled cast per moment build (dsm.prefilter.build_key)
-    return MapPlan(scene_label, label, view, R, faces, culling, tuple(sorted(needs)),
+    return MapPlan(slot.scene_label, slot.light_label, view, R, faces, culling, tuple(sorted(needs)),
                    "z2" in needs or culling != "none", fmts,
                    [f"{s.name} {s.label}".strip() for s in group]
                    + [f"{s.name} {s.label} {s.filter}" for s in moments],
                    len(group) * per_case + len(moments) * len(cfg.map.format),
-                   specs=tuple(group), scene_index=si, light_index=li, cascade=cascade,
+                   specs=tuple(group), scene_index=slot.scene_index, light_index=slot.light_index, cascade=slot.cascade,
                    moments=moments, supersampled_rays=sum(fine.values()))
 
 

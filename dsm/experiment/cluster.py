@@ -178,7 +178,7 @@ class ClusterRunner(Runner):
             with report.atomic(self.out / "images" / name) as tmp:
                 tmp.write_bytes(data)
         for row in task.rows:
-            self.csv.write(row)
+            self.sink.csv.write(row)
         self.record.merge(task, node, res["pid"], self.seen, m.scene, (m.scene, m.light))
         per = self.nodes.setdefault(node, {"rays": {}, "cases": 0, "groups": 0})
         for k, v in task.rays.items():

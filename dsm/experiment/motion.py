@@ -40,7 +40,9 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..report import figures, io as report
+from ..case import Case, MapContext, Where, evaluate, row as case_row
+from ..case.evaluation import lookup
+from ..report import io as report
 from ..maps import headroom, shadowmap
 from ..scenes import spawn
 from .. import lights, pipeline
@@ -48,7 +50,6 @@ from ..truth import metrics
 from ..scenes.camera import look_at_sensor
 from ..core import timing
 from ..scenes.camera import Camera
-from ..core.types import MomentSpec
 
 # ---------------------------------------------------------------- paths
 
@@ -259,16 +260,6 @@ def flicker(v, vstar, eligible, face) -> tuple:
     return pairs, (float(ever[seen].mean()) if seen.any() else metrics.UNDEFINED)
 
 
-def _median(xs):
-    xs = [x for x in xs if metrics.defined(x)]
-    return float(np.median(xs)) if xs else metrics.UNDEFINED
-
-
-def _mean(xs):
-    xs = [x for x in xs if metrics.defined(x)]
-    return float(np.mean(xs)) if xs else metrics.UNDEFINED
-
-
 # ---------------------------------------------------------------- the frame loop
 
 def _view_signature(view) -> bytes:
@@ -279,34 +270,76 @@ def _view_signature(view) -> bytes:
     return b"".join(p.tobytes() for p in parts)
 
 
-def run_scene(runner, sd, lights, maps, closed, extents):
+@dataclasses.dataclass
+class SceneFrames:
+    """What every motion path over one scene shares."""
+    data: object              # dsm.scenes.data.SceneData
+    base: Camera              # the scene's camera, which the paths move
+    points: FixedPoints       # the most points any path asks for
+    closed: list              # per-shape closedness (culling)
+    extents: object           # per-shape error extents (map builds)
+    magnitude: float          # the scene's magnitude (exact shadow rays)
+
+
+@dataclasses.dataclass
+class PathFrames:
+    """One [[motion]] path over one light: the camera pose and the light of each frame, and its fixed points."""
+    motion: object            # MotionSpec
+    poses: list               # (origin, target, up) per frame
+    lights: list              # LightSpec per frame
+    points: FixedPoints
+
+
+def run_scene(runner, scene, maps, closed, extents):
     """The frame loop of every [[motion]] path over one scene's maps of the plan (called by the
-    runner for a config with [[motion]]): rows of metrics.csv (per-case means) and of frames.csv
-    (into ``runner.record``), an animated error image per case
-    (images/<scene>_<light>/<case>_frames.gif; none with [report] images = "none")."""
-    cfg = runner.cfg
-    base = Camera.from_sensor(sd.sensor)
-    fp = sample_points(sd.scene, max(mo.points for mo in cfg.motion), cfg.seed, sd.diagonal)
-    magnitude = pipeline.scene_magnitude(sd.bbox)
+    runner for a config with [[motion]]; ``scene``: its SceneRun): rows of metrics.csv (per-case
+    means) into the runner's sink and of frames.csv into its record, an animated error image per
+    case (images/<scene>_<light>/<case>_frames.gif; none with [report] images = "none")."""
+    cfg, data = runner.cfg, scene.data
+    fp = sample_points(data.scene, max(mo.points for mo in cfg.motion), cfg.seed, data.diagonal)
+    shared = SceneFrames(data, Camera.from_sensor(data.sensor), fp, closed, extents,
+                         pipeline.scene_magnitude(data.bbox))
     for mo in cfg.motion:
-        use = min(mo.points, fp.count)
-        pts = fp
-        if use < fp.count:
-            idx = mi.UInt32(np.arange(use, dtype=np.uint32))
-            pts = FixedPoints(dr.gather(mi.SurfaceInteraction3f, fp.si, idx), dr.gather(mi.Point3f, fp.p, idx),
-                              dr.gather(mi.Vector3f, fp.n, idx), fp.shape[:use], fp.prim[:use], fp.table)
-        poses = camera_path(mo, base, sd.bbox, sd.scale, sd.offset)
+        pts = _first_points(fp, min(mo.points, fp.count))
+        poses = camera_path(mo, shared.base, data.bbox, data.scale, data.offset)
         for m in maps:
-            if m.light_index >= len(lights):
+            if m.light_index >= len(scene.lights):
                 continue
-            light_frames = light_path(mo, lights[m.light_index], sd.scale, sd.offset)
-            _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents, magnitude)
+            path = PathFrames(mo, poses, light_path(mo, scene.lights[m.light_index], data.scale, data.offset), pts)
+            _run_map(runner, shared, path, m)
+
+
+def _first_points(fp: FixedPoints, use: int) -> FixedPoints:
+    """The first ``use`` fixed points (a path asking for fewer than the scene sampled)."""
+    if use >= fp.count:
+        return fp
+    idx = mi.UInt32(np.arange(use, dtype=np.uint32))
+    return FixedPoints(dr.gather(mi.SurfaceInteraction3f, fp.si, idx), dr.gather(mi.Point3f, fp.p, idx),
+                       dr.gather(mi.Vector3f, fp.n, idx), fp.shape[:use], fp.prim[:use], fp.table)
+
+
+@dataclasses.dataclass
+class _CaseFrames:
+    """One motion case's frames as they come: the fixed points' V, V*, eligibility and cascade,
+    the frame rows, class images, evaluated metrics and lookup times."""
+    v: list = dataclasses.field(default_factory=list)
+    vstar: list = dataclasses.field(default_factory=list)
+    eligible: list = dataclasses.field(default_factory=list)
+    face: list = dataclasses.field(default_factory=list)
+    frames: list = dataclasses.field(default_factory=list)
+    images: list = dataclasses.field(default_factory=list)
+    metrics: list = dataclasses.field(default_factory=list)
+    lookup_ms: list = dataclasses.field(default_factory=list)
 
 
 @dataclasses.dataclass
 class _MapFrames:
     """What the frames of one planned map share while camera, light or projection stay: the
     G-buffer, the receivers' set-up, the fixed points' V*, the map; and what they add up."""
+    scene: SceneFrames
+    path: PathFrames
+    map_plan: object
+    cases: dict                                               # Case (its id given when written) -> _CaseFrames
     gb: dict = dataclasses.field(default_factory=dict)        # {camera pose: G-buffer}
     setup: dict = dataclasses.field(default_factory=dict)     # {(camera pose, light): LightSetup}
     vstar: dict = dataclasses.field(default_factory=dict)     # {light: the fixed points' V*}
@@ -319,47 +352,48 @@ class _MapFrames:
     tight: dict = dataclasses.field(default_factory=lambda: headroom.headroom(math.nan, math.nan))
 
 
-def _run_map(runner, sd, m, mo, base, poses, light_frames, pts, closed, extents, magnitude):
-    """Every frame of [[motion]] path ``mo`` on planned map ``m``, then one case row per scheme
-    instance, filter and format (its counts summed over the frames, rates and flicker averaged)."""
+def _run_map(runner, shared: SceneFrames, path: PathFrames, m):
+    """Every frame of a path on planned map ``m``, then one case row per scheme instance, filter
+    and format (its counts summed over the frames, rates and flicker averaged)."""
     cfg = runner.cfg
-    specs = [pipeline.preset_for_light(s, light_frames[0].type) for s in m.specs]
+    specs = [pipeline.preset_for_light(s, path.lights[0].type) for s in m.specs]
     keys = [(s, filt, fmt) for s in specs for filt in cfg.map.filter for fmt in cfg.map.format]
     keys += [(s, s.filter, fmt) for s in m.moments for fmt in cfg.map.format]     # pre-filtered instances
-    per = {k: {"v": [], "vstar": [], "elig": [], "face": [], "frames": [], "images": [], "metrics": []} for k in keys}
-    state = _MapFrames()
-    for t, ((o, tg, up), light) in enumerate(zip(poses, light_frames)):
-        _run_frame(runner, state, keys, per, t, sd, m, base, (o, tg, up), light, pts, closed, extents, magnitude)
-    for (spec, filt, fmt), d in per.items():
-        _write_case(runner, state, sd, m, mo, spec, filt, fmt, d)
+    state = _MapFrames(shared, path, m, {Case("", *k): _CaseFrames() for k in keys})
+    for t in range(len(path.poses)):
+        _run_frame(runner, state, t)
+    for case, frames in state.cases.items():
+        _write_case(runner, state, dataclasses.replace(case, id=runner.next_case()), frames)
 
 
-def _frame_view(state: _MapFrames, sd, m, base, pose, light):
-    """(sensor, camera, G-buffer, receivers' set-up inside the view, view) of one frame."""
-    o, tg, up = pose
+def _frame_view(state: _MapFrames, t: int):
+    """(camera, G-buffer, receivers' set-up inside the view, view) of frame ``t``."""
+    data, m, light = state.scene.data, state.map_plan, state.path.lights[t]
+    o, tg, up = state.path.poses[t]
     pose_key = (tuple(np.round(o, 12)), tuple(np.round(tg, 12)), tuple(np.round(up, 12)))
-    sensor = sensor_at(base, o, tg, up)
+    sensor = sensor_at(state.scene.base, o, tg, up)
     cam = Camera.from_sensor(sensor)
     if pose_key not in state.gb:                 # the G-buffer is shared while the camera stays
-        state.gb = {pose_key: pipeline.gbuffer(sd, sensor=sensor)}
+        state.gb = {pose_key: pipeline.gbuffer(data, sensor=sensor)}
     gb = state.gb[pose_key]
     if (pose_key, light) not in state.setup:     # receivers and their V*: shared while camera and light stay
-        state.setup = {(pose_key, light): pipeline.light_setup(sd, gb, light, m.light)}
+        state.setup = {(pose_key, light): pipeline.light_setup(data, gb, light, m.light)}
     setup = state.setup[(pose_key, light)]
     rpts = pipeline.points_np(setup.p) if setup.p is not None else np.zeros((0, 3))
-    view = pipeline.make_view(light, m.resolution, rpts, sd.bbox, m.view, m.cascade, sensor, sd.scale)
+    view = pipeline.make_view(light, m.resolution, rpts, data.bbox, m.view, m.cascade, sensor, data.scale)
     setup = setup.subset(view.inside(setup.p).numpy().astype(bool)) if setup.p is not None else setup
     return cam, gb, setup, view
 
 
-def _frame_map(runner, state: _MapFrames, sd, m, view, closed, extents):
+def _frame_map(runner, state: _MapFrames, view):
     """The frame's ShadowMap: built where the view's projection changed, else the last one re-viewed."""
     sig = _view_signature(view)
+    m, shared = state.map_plan, state.scene
     if sig != state.signature or state.smap is None:          # the map is shared while its projection stays
         def build():
             """The frame's map built (the plan's layers, culling and tile): its arrays, then the ShadowMap."""
-            sm = pipeline.build_map(sd.scene, view, set(m.needs), m.culling,
-                                    closed if m.culling != "none" else None, m.tile, extents)
+            sm = pipeline.build_map(shared.data.scene, view, set(m.needs), m.culling,
+                                    shared.closed if m.culling != "none" else None, m.tile, shared.extents)
             return (*shadowmap.arrays(sm), sm)       # the arrays, so the timing waits for them
         out, tm = timing.measure_kernel(build, 1)      # a frame's build once, in kernel time (as a still map's)
         state.smap = out[-1]
@@ -374,9 +408,9 @@ def _frame_map(runner, state: _MapFrames, sd, m, view, closed, extents):
     return state.smap
 
 
-def _frame_moments(state: _MapFrames, spec, fmt: str):
-    """The MomentMap of pre-filtered instance ``spec`` on the frame's map, built (timed) once per
-    map and moment key; its build time is kept per key."""
+def _frame_moments(state: _MapFrames, spec, fmt: str) -> tuple:
+    """(MomentMap, None) of pre-filtered instance ``spec`` on the frame's map, built (timed) once
+    per map and moment key; its build time is kept per key (a motion case's is their median)."""
     key = pipeline.moment_key(spec, fmt)
     if key not in state.moments:
         def build():
@@ -386,118 +420,116 @@ def _frame_moments(state: _MapFrames, spec, fmt: str):
         out, tm = timing.measure(build, 0)
         state.moments[key] = out[-1]
         state.moments_ms.setdefault(key, []).append(tm.ms)
-    return state.moments[key]
+    return state.moments[key], None
 
 
-def _frame_lookup(state: _MapFrames, spec, filt: str, fmt: str, stored: dict, seed: int):
-    """The frame's lookup of one case: receivers -> (V, tap shapes), a depth scheme on the map as
-    ``fmt`` stores it, or a pre-filtered instance on its moments (of the float32 first layer)."""
-    if isinstance(spec, MomentSpec):
-        mmap = _frame_moments(state, spec, fmt)
-        return lambda r: pipeline.moment_visibility(spec, r, mmap, state.smap)
-    return lambda r: pipeline.visibility(spec, r, stored[fmt], filt, seed)
-
-
-def _run_frame(runner, state: _MapFrames, keys, per, t, sd, m, base, pose, light, pts, closed, extents, magnitude):
-    """Frame ``t``: its view and map, then every (scheme instance, filter, format) of ``keys`` looked
-    up at the fixed points and the frame's receivers, into ``per``."""
-    cfg = runner.cfg
-    cam, gb, setup, view = _frame_view(state, sd, m, base, pose, light)
-    smap = _frame_map(runner, state, sd, m, view, closed, extents)
-    elig, vstar_pts, n_cam = points_frame(sd.scene, pts, cam, light, view, magnitude, state.vstar.get(light))
-    state.vstar = {light: vstar_pts}             # the fixed points' V*: shared while the light stays
+def _frame_context(runner, state: _MapFrames, t: int) -> tuple:
+    """(the frame's MapContext, its camera, the fixed points' receivers per format): view, map and
+    receivers of frame ``t`` (a lookup timed once, the counts and the leak split as a still case's)."""
+    cfg, data, m = runner.cfg, state.scene.data, state.map_plan
+    cam, gb, setup, view = _frame_view(state, t)
+    smap = _frame_map(runner, state, view)
     stored = {fmt: pipeline.store(smap, fmt) for fmt in cfg.map.format}
-    # per stored format (its depth function): the fixed points and the frame's receivers, as
-    # lazy expressions (each lookup below still computes them in its own, timed, kernel)
     has_rx = setup.p is not None and len(setup.pixels)
-    rx_of = {fmt: (pipeline.receivers(sm.view, dataclasses.replace(setup, p=pts.p, n=n_cam), sd.diagonal),
-                   pipeline.receivers(sm.view, setup, sd.diagonal) if has_rx else None)
-             for fmt, sm in stored.items()}
-    if has_rx:               # the map's float32 headroom at this frame's receivers (dsm.maps.headroom)
-        hr = headroom.headroom(setup.max_abs_coordinate,
-                               float(np.median(rx_of[cfg.map.format[0]][1].texel_world.numpy())))
+    receivers = {fmt: pipeline.receivers(sm.view, setup, data.diagonal) if has_rx else None
+                 for fmt, sm in stored.items()}
+    where = Where(data.label, m.light, m.view, m.resolution, m.texels, m.culling,
+                  m.cascade.label if m.cascade else "")
+    ctx = MapContext(where, data, gb, setup, view, smap, stored, receivers, cfg.seed, 1,
+                     frozenset({"leak"}) if cfg.map.leak_split else frozenset(), leak_texels=cfg.map.leak_texels,
+                     moments=lambda spec, fmt: _frame_moments(state, spec, fmt))
+    return ctx, cam
+
+
+def _run_frame(runner, state: _MapFrames, t: int):
+    """Frame ``t``: its view and map, then every case evaluated at the frame's receivers
+    (dsm.case.evaluate) and looked up at the fixed points, into ``state.cases``."""
+    ctx, cam = _frame_context(runner, state, t)
+    pts, light = state.path.points, state.path.lights[t]
+    elig, vstar_pts, n_cam = points_frame(state.scene.data.scene, pts, cam, light, ctx.view, state.scene.magnitude,
+                                          state.vstar.get(light))
+    state.vstar = {light: vstar_pts}             # the fixed points' V*: shared while the light stays
+    rx_pts = {fmt: pipeline.receivers(sm.view, dataclasses.replace(ctx.setup, p=pts.p, n=n_cam), ctx.scene.diagonal)
+              for fmt, sm in ctx.stored.items()}
+    first = ctx.receivers[runner.cfg.map.format[0]]
+    if first is not None:         # the map's float32 headroom at this frame's receivers (dsm.maps.headroom)
+        hr = headroom.headroom(ctx.setup.max_abs_coordinate, float(np.median(first.texel_world.numpy())))
         if math.isnan(state.tight["texel_f32_steps"]) or hr["texel_f32_steps"] < state.tight["texel_f32_steps"]:
             state.tight = hr
-    for (spec, filt, fmt) in keys:
-        d = per[(spec, filt, fmt)]
-        look = _frame_lookup(state, spec, filt, fmt, stored, cfg.seed)
-        rx_pts, rx = rx_of[fmt]
-        v_pts = np.asarray(look(rx_pts)[0].numpy(), np.float64)
-        face = np.asarray(rx_pts.face.numpy(), np.int64)
-        if has_rx:
-            (v, tap), lt = timing.measure_kernel(lambda: look(rx), 1)    # kernel time, compile apart
-            v_np, tap_np = v.numpy(), tap.numpy()
-            d_lookup = lt.ms
-        else:
-            v_np, tap_np, d_lookup = np.zeros(0), np.zeros(0, np.uint32), float("nan")
-        mt = pipeline.metrics(v_np, setup, tap_np, None, False)
-        if cfg.map.leak_split:       # [map] kind given: the frame's leak split, as a still case's
-            texel_np = rx.texel_world.numpy() if has_rx else np.zeros(0)
-            mt = {**mt, **metrics.leak_split(v_np, setup.v_star, setup.occluder_dist, texel_np, cfg.map.leak_texels)}
-        classes = np.zeros(gb.width * gb.height, np.uint8)
-        classes[setup.pixels] = pipeline.classify(v_np, setup.v_star)
-        d["v"].append(v_pts)
-        d["vstar"].append(vstar_pts)
-        d["elig"].append(elig)
-        d["face"].append(face)
-        if cfg.report_images != "none":          # [report] images = "none": no GIF either
-            d["images"].append(classes.reshape(gb.height, gb.width))
-        d["metrics"].append(mt)
-        d.setdefault("lookup_ms", []).append(d_lookup)
-        d["frames"].append({"frame": t, "map_built": state.built[-1], "n_points_visible": int(elig.sum()),
-                            "n_receivers": mt["n_receivers"], "acne_rate": mt["acne_rate"],
-                            "peterpan_rate": mt["peterpan_rate"], "error_rate": mt["error_rate"]})
+    for case, frames in state.cases.items():
+        result = evaluate(ctx, case)
+        frames.v.append(np.asarray(lookup(ctx, case)(rx_pts[case.format])[0].numpy(), np.float64))
+        frames.face.append(np.asarray(rx_pts[case.format].face.numpy(), np.int64))
+        frames.vstar.append(vstar_pts)
+        frames.eligible.append(elig)
+        if runner.cfg.report_images != "none":          # [report] images = "none": no GIF either
+            frames.images.append(result.classes)
+        mt = result.measured
+        frames.metrics.append(mt)
+        frames.lookup_ms.append(result.lookup.ms if ctx.receivers[case.format] is not None else math.nan)
+        frames.frames.append({"frame": t, "map_built": state.built[-1], "n_points_visible": int(elig.sum()),
+                              "n_receivers": mt["n_receivers"], "acne_rate": mt["acne_rate"],
+                              "peterpan_rate": mt["peterpan_rate"], "error_rate": mt["error_rate"]})
 
 
-def _write_case(runner, state: _MapFrames, sd, m, mo, spec, filt, fmt, d):
+def _write_case(runner, state: _MapFrames, case: Case, frames: _CaseFrames):
     """One motion case: its frames into frames.csv, its row (frames summed and averaged), its GIF."""
-    case = runner.next_case()
-    pairs, ever = flicker(np.array(d["v"]), np.array(d["vstar"]), np.array(d["elig"]), np.array(d["face"]))
-    meta = {"case": case, "motion": mo.label, "scene": sd.label, "light": m.light,
-            "cascade_layout": m.cascade.label if m.cascade else "", "scheme": spec.name, "params": spec.label,
-            "resolution": m.resolution, "filter": filt, "format": fmt}
-    for fr, pr in zip(d["frames"], [{}] + pairs):          # frame t carries the pair (t - 1, t)
+    mo, m = state.path.motion, state.map_plan
+    pairs, ever = flicker(np.array(frames.v), np.array(frames.vstar), np.array(frames.eligible),
+                          np.array(frames.face))
+    where = Where(state.scene.data.label, m.light, m.view, m.resolution, m.texels, m.culling,
+                  m.cascade.label if m.cascade else "")
+    ident = case_row.identity(where, case)
+    meta = {"motion": mo.label, **{k: ident[k] for k in FRAME_KEYS}}
+    for fr, pr in zip(frames.frames, [{}] + pairs):          # frame t carries the pair (t - 1, t)
         runner.record.motion_frames.append({**meta, **fr, **pr})
-    last = d["metrics"][-1]
-    row = {**last, "case": case, "scene": sd.label, "light": m.light, "view": m.view, "scheme": spec.name,
-           "culling": m.culling, "preset": spec.preset or "", "params": spec.label, "resolution": m.resolution,
-           "total_texels": m.texels, "filter": filt, "format": fmt, "cascade_layout": meta["cascade_layout"],
-           "motion": mo.label, "frames": mo.frames}
-    for k in ("n_receivers", "n_gt_lit", "n_gt_shadowed", "n_acne", "n_acne_self", "n_acne_edge", "n_peterpan"):
-        row[k] = int(sum(x[k] for x in d["metrics"]))       # summed over the frames
-    for k in ("acne_rate", "peterpan_rate", "error_rate", "mean_abs_error"):
-        row[k] = _mean([x[k] for x in d["metrics"]])          # the mean over the frames
+    measured = _over_frames(frames.metrics)
     if runner.cfg.map.leak_split:
-        row.update(_leak_columns(state, spec, fmt, d["metrics"]))
-    row.update({"flicker_rate": _mean([p["flicker_rate"] for p in pairs]), "flicker_ever": ever,
-                "flicker_magnitude": _mean([p["flicker_magnitude"] for p in pairs]),
-                "flicker_within_rate": _mean([p["flicker_within_rate"] for p in pairs]),
-                "flicker_change_rate": _mean([p["flicker_change_rate"] for p in pairs]),
-                "maps_built": int(sum(state.built)), "build_ms": float(np.median(state.build_ms)),
-                "build_first_ms": float("nan"),
-                "lookup_ms": _median(d.get("lookup_ms", [])), "reference_ms": float("nan"), "sweep_key": "",
-                "sweep_value": float("nan"), "texel_size": float("nan"), **state.tight})
-    for k, val in list(row.items()):
-        if isinstance(val, float) and not metrics.defined(val):
-            row[k] = metrics.UNDEFINED
-    if d["images"]:
-        folder = runner.out / "images" / figures.image_folder(meta)
-        folder.mkdir(parents=True, exist_ok=True)
-        _write_gif(folder / f"{case}_frames.gif", d["images"])
-    runner.case_done(row, {"what": f"case {case}", "scene": sd.label, "light": m.light, "view": m.view,
-                           "scheme": spec.name, "params": spec.label, "resolution": m.resolution,
+        measured.update(_leak_columns(frames.metrics))
+        ms = state.moments_ms.get(pipeline.moment_key(case.spec, case.format)) if case.prefiltered else None
+        measured.update(case_row.map_kind_columns(case, float(np.median(ms)) if ms else metrics.UNDEFINED))
+    measured.update(_flicker_columns(pairs, ever))
+    costs = {"maps_built": int(sum(state.built)), "build_ms": float(np.median(state.build_ms)),
+             "build_first_ms": float("nan"), "lookup_ms": case_row.median_defined(frames.lookup_ms),
+             "reference_ms": float("nan"), "sweep_key": "", "sweep_value": float("nan"), "texel_size": float("nan"),
+             **state.tight}
+    row = case_row.row({**ident, "motion": mo.label, "frames": mo.frames}, measured, costs)
+    if frames.images:
+        _write_gif(runner.sink.folder(meta) / f"{case.id}_frames.gif", frames.images)
+    runner.case_done(row, {"what": f"case {case.id}", "scene": ident["scene"], "light": m.light, "view": m.view,
+                           "scheme": case.spec.name, "params": case.spec.label, "resolution": m.resolution,
                            "status": "ok" if row["n_receivers"] else "empty"})
 
 
-def _leak_columns(state: _MapFrames, spec, fmt: str, frame_metrics: list) -> dict:
-    """A motion case's leak split (counts summed over the frames, rates their mean), its map kind and
-    its moments' median build time (undefined for a depth scheme)."""
-    out = {"map_kind": spec.name if isinstance(spec, MomentSpec) else "depth"}
+FRAME_KEYS = ("case", "scene", "light", "cascade_layout", "scheme", "params", "resolution", "filter", "format")
+SUMMED = ("n_receivers", "n_gt_lit", "n_gt_shadowed", "n_acne", "n_acne_self", "n_acne_edge", "n_peterpan")
+AVERAGED = ("acne_rate", "peterpan_rate", "error_rate", "mean_abs_error")
+
+
+def _over_frames(frame_metrics: list) -> dict:
+    """A motion case's measured columns: the last frame's, with the counts summed over the frames
+    and the rates their mean."""
+    out = dict(frame_metrics[-1])
+    for k in SUMMED:
+        out[k] = int(sum(x[k] for x in frame_metrics))
+    for k in AVERAGED:
+        out[k] = case_row.mean_defined([x[k] for x in frame_metrics])
+    return out
+
+
+def _flicker_columns(pairs: list, ever: float) -> dict:
+    """A motion case's flicker: each rate the mean over the pairs of frames, and flicker_ever."""
+    out = {k: case_row.mean_defined([p[k] for p in pairs])
+           for k in ("flicker_rate", "flicker_magnitude", "flicker_within_rate", "flicker_change_rate")}
+    return {**out, "flicker_ever": ever}
+
+
+def _leak_columns(frame_metrics: list) -> dict:
+    """A motion case's leak split: counts summed over the frames, rates their mean."""
+    out = {}
     for k in metrics.LEAK_COLUMNS:
         vals = [x[k] for x in frame_metrics]
-        out[k] = int(sum(vals)) if k.startswith("n_") else _mean(vals)
-    ms = state.moments_ms.get(pipeline.moment_key(spec, fmt)) if isinstance(spec, MomentSpec) else None
-    out["moments_ms"] = float(np.median(ms)) if ms else metrics.UNDEFINED
+        out[k] = int(sum(vals)) if k.startswith("n_") else case_row.mean_defined(vals)
     return out
 
 

@@ -4,7 +4,8 @@ The plan (:mod:`dsm.config.plan`) lists the maps in order: scene, light, view, r
 The runner walks it, doing each shared stage once through :mod:`dsm.pipeline` (the G-buffer
 per scene, receivers and the exact reference per light, receivers per view, one map per
 culling choice with the layers its schemes need) and each case (a scheme instance, filter and
-format on a map) as a lookup, metrics, an error image and a row of metrics.csv.
+format on a map) as a value: :func:`dsm.case.evaluate` gives its lookup, counts and class
+image, :mod:`dsm.case.row` its row, and the run's sink (:mod:`dsm.experiment.sink`) writes them.
 
 Failure policy: a stage that fails is recorded in run.json (and printed, and listed in
 table.md) with the cases it would have fed, and the rest still run; rows are written as they
@@ -18,83 +19,25 @@ import math
 import sys
 import time
 import traceback
-import weakref
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import drjit as dr
 import numpy as np
 
-from ..config import read as cfgmod
-from ..maps import cascades, headroom, shadowmap
-from ..core import env, timing
-from ..report import figures, publish, tables as report, io as report_io
-from ..truth import metrics
-from . import motion, resume, stacks, wavefront
-from ..core import record
 from .. import pipeline
-from ..report.sections import cascades as cascade_files, soft as soft_report
+from ..case import Case, MapContext, Where, evaluate, row as case_row
+from ..case.row import BuildCost
+from ..config import plan as planmod, read as cfgmod
 from ..contact import march as contact
-from ..report.sections import contact_images
-from ..config import plan as planmod
+from ..core import env, record, timing
+from ..maps import headroom, shadowmap
 from ..maps.receiver import Receiver
-
-
-@dataclass
-class Results:
-    """What a run produced: the rows of metrics.csv, run.json's content and the images."""
-    out: Path
-    rows: list
-    run: dict
-    images: dict = field(default_factory=dict)   # case id -> class image (H, W) uint8
-    oracle: list = field(default_factory=list)   # the rows of oracle.csv (per map, format and lambda)
-    curves: list = field(default_factory=list)   # per map and format: (row, world Curve, texel Curve)
-
-    def where(self, **kw) -> "Results":
-        """The results whose rows have every given column at the given value."""
-        unknown = sorted(set(kw) - set(report.COLUMNS))
-        if unknown:
-            raise KeyError(f"Results.where: no column {', '.join(unknown)} (columns: see dsm.core.record.NAMES, "
-                           "e.g. scheme, params, scene, light, view, resolution, filter, format)")
-        rows = [r for r in self.rows if all(r.get(k) == v for k, v in kw.items())]
-        return Results(self.out, rows, self.run, {r["case"]: self.images.get(r["case"]) for r in rows},
-                       self.oracle, self.curves)
-
-    def column(self, name) -> np.ndarray:
-        """The values of column ``name`` over the rows, as a numpy array (a KeyError names the columns)."""
-        if name not in report.COLUMNS:
-            raise KeyError(f"Results.column: no column {name!r} (columns: see dsm.core.record.NAMES, e.g. acne_rate, "
-                           "peterpan_rate, error_rate, n_receivers)")
-        return np.array([r[name] for r in self.rows])
-
-    def rgb(self, case) -> np.ndarray:
-        """The case's error image as (H, W, 3) uint8 in the report's colours."""
-        if isinstance(case, dict):
-            case = case["case"]
-        if case not in self.images or self.images[case] is None:
-            ids = sorted(k for k, v in self.images.items() if v is not None)
-            raise KeyError(f"Results.rgb: no image of case {case!r} (cases are ids like {ids[0]!r} to {ids[-1]!r}, "
-                           "or rows)" if ids else f"Results.rgb: no image of case {case!r}: this run kept no images")
-        return metrics.CLASS_COLORS[self.images[case]]
-
-    def table(self, columns=("scheme", "params", "resolution", "acne_rate", "peterpan_rate", "error_rate",
-                             "build_ms", "lookup_ms")) -> str:
-        """The rows as a Markdown table of the chosen columns (for notebooks and terminals)."""
-        fmt = lambda v: f"{v:.4f}" if isinstance(v, float) and abs(v) < 10 else (f"{v:.1f}" if isinstance(v, float) else str(v))
-        lines = ["| " + " | ".join(columns) + " |", "|---" * len(columns) + "|"]
-        lines += ["| " + " | ".join(fmt(r.get(c, "")) for c in columns) + " |" for r in self.rows]
-        return "\n".join(lines)
-
-    def _repr_markdown_(self):
-        return self.table()
-
-    def __getattr__(self, name):
-        if name in report.COLUMNS:
-            return self.column(name)
-        raise AttributeError(name)
-
-    def __len__(self):
-        return len(self.rows)
+from ..report import publish, tables as report, io as report_io
+from . import motion, resume, wavefront
+from .builds import Builds
+from .results import Results
+from .sink import Sink
 
 
 RUN_JSON_EVERY_S = 1.0
@@ -119,21 +62,39 @@ class StageFailed(Exception):
     """A stage failed and was recorded; the cases it feeds are skipped."""
 
 
+@dataclass
+class SceneRun:
+    """One loaded scene as its maps share it: its data, the camera's G-buffer and its usable lights."""
+    data: object          # dsm.scenes.data.SceneData
+    gbuffer: object       # dsm.scenes.gbuffer.GBuffer
+    lights: list          # LightSpec per usable light
+
+
+@dataclass
+class ViewRun:
+    """One view and resolution of a light, as its maps share it."""
+    view: object
+    setup: object                 # the light set-up inside the view
+    receivers: Receiver | None    # in the view's depth function; None without receivers
+    seam_texels: np.ndarray | None
+    backfacing: tuple             # the attached-shadow pixels inside the view: (positions, normals) or (None, None)
+
+
 class Runner:
-    """Runs a config's plan into folder ``out``: each shared stage once, then each case's lookup, metrics and row."""
+    """Runs a config's plan into folder ``out``: each shared stage once, then each case through
+    :func:`dsm.case.evaluate` into the run's sink (dsm.experiment.sink)."""
     def __init__(self, config: cfgmod.Config, out: Path, variant: str | None = None, progress: bool = True,
                  keep_images: bool = True, resume_previous: bool = False):
         self.cfg = config
         self.out = Path(out)
         self.variant = env.use_variant(variant or config.variant)
         self.progress = progress
-        self.keep_images = keep_images
         self.plan = planmod.make(config)
         self.record = record.RunRecord()     # everything measured: rows, statuses, maps, rays, oracles ...
-        self.images = {}
+        self.sink = Sink(self.out, self.record, config.report_images, keep_images)
+        self.builds = Builds(config, self.record)
         self.case_no = 0
         self.cases_kept = 0           # rows written again from the run being resumed (not measured here)
-        self.extents = {}             # per scene: the spawn bound's per-shape extents
         self.versions = env.versions()
         self.state = "running"
         self.bar = None
@@ -145,10 +106,8 @@ class Runner:
         self.first_case = list(itertools.accumulate((m.cases for m in self.plan.maps), initial=0))
         self.resume_previous = resume_previous
         self.kept, self.stale = {}, []
-        self.depth_buffers = {}       # [contact]: the current scene's camera depth buffer (made when a case asks)
-        self.marches = {}             # [contact]: per receiver set, (receivers, occluded, timing) of its march
-        self.cosines = (None, None)   # the shadow images' receiver set (weakly: never kept alive) and its cosines
-        self.shrunk = (None, None)    # [map] shrink: (scene label, its shrunk copy)
+        self.depth_buffer = (None, None)   # [contact]: (scene label, its camera depth buffer), made when a case asks
+        self.march = (None, None)          # [contact]: (receivers, (occluded, Timing)) of the last march
 
     # ------------------------------------------------------------ top level
     def run(self) -> Results:
@@ -162,8 +121,7 @@ class Runner:
         self.out.mkdir(parents=True, exist_ok=True)
         if self.resume_previous:
             self.kept, self.stale = resume.Previous(self.out).arrange(list(self.keys.items()))
-        (self.out / "images").mkdir(exist_ok=True)
-        self.csv = report_io.CsvWriter(self.out / "metrics.csv")
+        self.sink.open()
         self.state = "running"
         self._write_run_json()
         self.bar = report.progress(total=self.plan.cases, enabled=self.progress)
@@ -176,25 +134,33 @@ class Runner:
             self.state = "complete"
         finally:
             self.bar.close()
-            # the case images are written as cases finish (so a killed run keeps them): report time
-            self.timing["measure_s"] = time.perf_counter() - t0 - self.timing.get("images_s", 0.0)
-            self.timing["measure_cpu_s"] = _cpu() - c0 - self.timing.get("images_cpu_s", 0.0)
-            self.timing["measure_peak_rss_bytes"] = peak_rss()     # against the plan's peak_bytes_est
-            self.timing["kernel_launches"] = self._launches()
+            self._measured(t0, c0)
             self._write_run_json(force=True)      # a run ended by an error other than Ctrl-C is still "running"
             publish.write_data(self.out, self.record)
-            # the report, after every timed measurement, composed from the run's files alone (as
-            # dsm report does): figures, table.md, cascades.md, report.html
-            t1, c1 = time.perf_counter(), _cpu()
-            try:
-                self.timing["report_parts"] = publish.write_report(self.out, (), self.record.curves,
-                                                                   plots=self.state == "complete")
-            except Exception as e:          # the measurements are saved; the report can be rebuilt
-                self._fail("report (dsm report rebuilds it)", e)
-            self.timing["report_s"] = time.perf_counter() - t1 + self.timing.get("images_s", 0.0)
-            self.timing["report_cpu_s"] = _cpu() - c1 + self.timing.get("images_cpu_s", 0.0)
+            self._report()
             self._write_run_json(force=True)
-        return Results(self.out, self.record.rows, self._run_json(), self.images, self.record.oracle_rows, self.record.curves)
+        return Results(self.out, self.record.rows, self._run_json(), self.sink.images, self.record.oracle_rows,
+                       self.record.curves)
+
+    def _measured(self, t0: float, c0: float):
+        """run.json's measuring time, CPU, peak memory and kernel launches (the case images
+        are drawn as cases finish, so a killed run keeps them: their time is the report's)."""
+        self.timing["measure_s"] = time.perf_counter() - t0 - self.sink.images_s
+        self.timing["measure_cpu_s"] = _cpu() - c0 - self.sink.images_cpu_s
+        self.timing["measure_peak_rss_bytes"] = peak_rss()     # against the plan's peak_bytes_est
+        self.timing["kernel_launches"] = self._launches()
+
+    def _report(self):
+        """The report, after every timed measurement, composed from the run's files alone (as
+        dsm report does): figures, table.md, cascades.md, report.html."""
+        t1, c1 = time.perf_counter(), _cpu()
+        try:
+            self.timing["report_parts"] = publish.write_report(self.out, (), self.record.curves,
+                                                               plots=self.state == "complete")
+        except Exception as e:          # the measurements are saved; the report can be rebuilt
+            self._fail("report (dsm report rebuilds it)", e)
+        self.timing["report_s"] = time.perf_counter() - t1 + self.sink.images_s
+        self.timing["report_cpu_s"] = _cpu() - c1 + self.sink.images_cpu_s
 
     def _launches(self) -> dict:
         """JIT kernel launches while measuring (Dr.Jit's kernel history, this process only: a
@@ -210,9 +176,7 @@ class Runner:
         """Run only ``maps`` (part of the plan: a Ray task's map group) into this runner's folder,
         without run.json or the report; ``kept``: finished cases to write again (key -> (row, status)).
         The rows, status, oracle rows, curves and map records stay on the runner."""
-        self.out.mkdir(parents=True, exist_ok=True)
-        (self.out / "images").mkdir(exist_ok=True)
-        self.csv = report_io.CsvWriter(self.out / "metrics.csv")
+        self.sink.open()
         self.bar = report.progress(total=sum(m.cases for m in maps), enabled=False)
         self.kept = kept or {}
         self.state = "task"
@@ -226,27 +190,32 @@ class Runner:
         for si, scene_maps in itertools.groupby(maps, key=lambda m: m.scene_index):
             scene_maps = list(scene_maps)
             try:
-                sd, gb, lights = self._scene(self.cfg.scenes[si], scene_maps)
+                scene = self._scene(self.cfg.scenes[si], scene_maps)
             except StageFailed:
                 continue
             if self.cfg.motion:                 # camera and light paths: dsm.experiment.motion's frame loop
-                try:
-                    self._stage(f"motion of scene {sd.label}", scene_maps, lambda: motion.run_scene(
-                        self, sd, lights, scene_maps, self._closed(sd), self.extents[sd.label]))
-                except StageFailed:
-                    pass
-                self._write_run_json()
+                self._run_motion(scene, scene_maps)
                 continue
             for li, light_maps in itertools.groupby(scene_maps, key=lambda m: m.light_index):
                 light_maps = list(light_maps)
                 try:
-                    setup = self._light(sd, gb, lights, li, light_maps)
+                    setup = self._light(scene, li, light_maps)
                 except StageFailed:
                     continue
                 light = LightMaps.of(self.plan.stacks, light_maps)
                 for _, view_maps in itertools.groupby(light_maps, key=lambda m: (m.view, m.resolution, m.cascade)):
-                    self._run_view(sd, gb, setup, list(view_maps), light)
+                    self._run_view(scene, setup, list(view_maps), light)
             self._write_run_json()
+
+    def _run_motion(self, scene: SceneRun, maps):
+        """Every [[motion]] path over one scene's maps (dsm.experiment.motion), a failure the scene's."""
+        label = scene.data.label
+        try:
+            self._stage(f"motion of scene {label}", maps, lambda: motion.run_scene(
+                self, scene, maps, self.builds.closed(scene.data), self.builds.extents[label]))
+        except StageFailed:
+            pass
+        self._write_run_json()
 
     # ------------------------------------------------------------ failure policy
     def _fail(self, what, exc, skipped_maps=()):
@@ -268,223 +237,215 @@ class Runner:
             raise StageFailed(what) from None
 
     # ------------------------------------------------------------ stages
-    def _scene(self, spec, maps):
+    def _scene(self, spec, maps) -> SceneRun:
         def load():
             """The scene loaded, its G-buffer (timed) and its usable lights; ValueError when it has none."""
-            sd = pipeline.load_scene(spec, self.cfg.camera_resolution, self.cfg.camera)
-            gb, t = timing.measure(lambda: (pipeline.gbuffer(sd),), 0)
-            gb = gb[-1]
-            gb.ms = t.ms
-            lights = sd.lights_for(self.cfg.lights)
+            data = pipeline.load_scene(spec, self.cfg.camera_resolution, self.cfg.camera)
+            out, t = timing.measure(lambda: (pipeline.gbuffer(data),), 0)
+            gbuffer = out[-1]
+            gbuffer.ms = t.ms
+            lights = data.lights_for(self.cfg.lights)
             if not lights:
                 raise ValueError("the scene has no usable point/spot/directional emitter and the config names "
                                  "no [[light]]")
-            return sd, gb, lights
-        sd, gb, lights = self._stage(f"scene {spec.label}", maps, load)
-        self.record.gbuffer_ms[sd.label] = gb.ms
-        self.extents[sd.label] = pipeline.spawn_extents(sd.scene)   # once per scene, outside the timed builds
-        self.record.rays["gbuffer"] += gb.width * gb.height
-        if sd.notes:
-            self.record.status.append({"what": f"scene {sd.label}", "status": "note", "error": "; ".join(sd.notes)})
-        return sd, gb, lights
+            return SceneRun(data, gbuffer, lights)
+        scene = self._stage(f"scene {spec.label}", maps, load)
+        data, gbuffer = scene.data, scene.gbuffer
+        self.record.gbuffer_ms[data.label] = gbuffer.ms
+        self.builds.scene_loaded(data)
+        self.record.rays["gbuffer"] += gbuffer.width * gbuffer.height
+        if data.notes:
+            self.record.status.append({"what": f"scene {data.label}", "status": "note", "error": "; ".join(data.notes)})
+        return scene
 
-    def _light(self, sd, gb, lights, li, maps):
-        label = maps[0].light
+    def _light(self, scene: SceneRun, li: int, maps):
+        label, data = maps[0].light, scene.data
 
         def setup():
             """The light setup (receivers and exact reference) of light ``li`` of the loaded scene."""
-            if li >= len(lights):
-                raise ValueError(f"the plan expects light {label} but the loaded scene has {len(lights)} lights")
-            return pipeline.light_setup(sd, gb, lights[li], label, self.cfg.timing_repeats, self.cfg.seed)
-        out = self._stage(f"scene {sd.label} light {label}", maps, setup)
+            if li >= len(scene.lights):
+                raise ValueError(f"the plan expects light {label} but the loaded scene has {len(scene.lights)} lights")
+            return pipeline.light_setup(data, scene.gbuffer, scene.lights[li], label, self.cfg.timing_repeats,
+                                        self.cfg.seed)
+        out = self._stage(f"scene {data.label} light {label}", maps, setup)
         self.record.rays["reference"] += out.reference_rays       # one per receiver, or an area light's samples
         if out.ref is not None:
-            self.record.reference_regions.append({"scene": sd.label, "light": label, **out.ref.stats()})
+            self.record.reference_regions.append({"scene": data.label, "light": label, **out.ref.stats()})
         return out
 
-    def _view(self, sd, setup, light, m):
+    def _view(self, scene: SceneRun, setup, light, m):
         """The view of map plan ``m`` fitted to the light's receivers: once per kind and resolution of
         the light (a stacked map's and its view group's are one object), a cascaded view each time."""
         key = (m.view, m.resolution)
         if m.cascade is None and key in light.views:
             return light.views[key]
+        data = scene.data
         pts = pipeline.points_np(setup.p) if setup.p is not None else np.zeros((0, 3))
-        view = pipeline.make_view(setup.light, m.resolution, pts, sd.bbox, m.view, m.cascade, sd.sensor, sd.scale)
+        view = pipeline.make_view(setup.light, m.resolution, pts, data.bbox, m.view, m.cascade, data.sensor, data.scale)
         if m.cascade is None:
             light.views[key] = view
         return view
 
-    def _built(self, sd, setup, light, m):
+    def _built(self, scene: SceneRun, setup, light, m):
         """Map plan ``m``'s Built when the plan stacks it ([timing] builds = "together"), its stack built
         when its first map comes up; None: built alone (a stack that fails is noted, its maps built alone)."""
-        st = light.stack_of.get(id(m))
-        if st is None:
+        stack_plans = light.stack_of.get(id(m))
+        if stack_plans is None:
             return None
-        if id(st[0]) not in light.tried:
-            light.tried.add(id(st[0]))
+        if id(stack_plans[0]) not in light.tried:
+            light.tried.add(id(stack_plans[0]))
             try:
-                light.built.update(zip(map(id, st), self._build_stack(sd, setup, light, st)))
+                views = [self._view(scene, setup, light, x) for x in stack_plans]
+                light.built.update(zip(map(id, stack_plans),
+                                       self.builds.stack(scene.data, views, stack_plans, setup.light.type)))
             except KeyboardInterrupt:
                 raise
             except Exception as e:
-                self.record.status.append({"what": f"scene {sd.label} light {setup.label} view {st[0].view} maps "
-                                           + "+".join(str(x.resolution) for x in st) + " built together",
+                self.record.status.append({"what": f"scene {scene.data.label} light {setup.label} view "
+                                           f"{stack_plans[0].view} maps "
+                                           + "+".join(str(x.resolution) for x in stack_plans) + " built together",
                                            "status": "note", "error": f"{type(e).__name__}: {e}; built alone"})
         return light.built.pop(id(m), None)          # the map's own from here: freed after its cases
 
-    def _build_stack(self, sd, setup, light, st) -> list:
-        """Each map of stack ``st`` built together and timed (dsm.experiment.stacks.Built)."""
-        views = [self._view(sd, setup, light, m) for m in st]
-        own = {frozenset(pipeline.needs_of([pipeline.preset_for_light(spec, setup.light.type)]))
-               for m in st for spec in m.specs}
-        casters = self._casters(sd)
-        culling = st[0].culling
-        modes = (culling, pipeline.map_cull_modes(casters, views[0], culling, self._closed(sd) if culling != "none"
-                                                  else None), pipeline.map_cull_modes(casters, views[0]))
-        return stacks.build(casters, views, st[0].needs, modes, own, self.extents[sd.label], self.cfg.timing_repeats)
-
-    def _run_view(self, sd, gb, setup, maps, light):
+    def _run_view(self, scene: SceneRun, setup, maps, light):
         """One view and resolution of a light: its receivers, then each of its maps (one per culling);
         ``light``: the light's views and maps built together (LightMaps)."""
         kind, R = maps[0].view, maps[0].resolution
 
-        def receivers():
-            """(view, setup, rx, seam, back): the fitted view, the receivers inside it, their lookups and seams."""
-            view = self._view(sd, setup, light, maps[0])
-            s = setup.subset(view.inside(setup.p).numpy().astype(bool)) if setup.p is not None else setup
+        def receivers() -> ViewRun:
+            """The fitted view, the receivers inside it, their lookups and seams, the attached-shadow pixels."""
+            view = self._view(scene, setup, light, maps[0])
+            inside = setup.subset(view.inside(setup.p).numpy().astype(bool)) if setup.p is not None else setup
             rx = seam = None
-            if s.p is not None and len(s.pixels):
-                rx = pipeline.receivers(view, s, sd.diagonal)
+            if inside.p is not None and len(inside.pixels):
+                rx = pipeline.receivers(view, inside, scene.data.diagonal)
                 seam = view.seam_distance(rx.u_map, rx.v_map, rx.face)
                 dr.eval(rx.depth, rx.u_map, rx.v_map, rx.face, rx.texel_world, rx.to_light, seam)
                 seam = seam.numpy()
-            return view, s, rx, seam, s.backfacing_inside(view)
+            return ViewRun(view, inside, rx, seam, inside.backfacing_inside(view))
         try:
-            view, setup, rx, seam, back = self._stage(f"scene {sd.label} light {setup.label} view {kind} map {R}",
-                                                      maps, receivers)
+            where = f"scene {scene.data.label} light {setup.label} view {kind} map {R}"
+            view_run = self._stage(where, maps, receivers)
         except StageFailed:
             return
-        first_t = None
+        first_layer = None
         for m in maps:
             try:
-                first_t = self._run_map(sd, gb, setup, view, rx, seam, back, m, first_t, self._built(sd, setup, light, m))
+                # a stack's other views are fitted to the receivers inside this one
+                built = self._built(scene, view_run.setup, light, m)
+                first_layer = self._run_map(scene, view_run, m, first_layer, built)
             except StageFailed:
                 continue
 
-    def _closed(self, sd):
-        """Per-shape closedness, computed once per scene and recorded in run.json."""
-        for info in self.record.scene_info:
-            if info["scene"] == sd.label:
-                return [s["closed"] for s in info["shapes"]]
-        closed, why = pipeline.closedness(sd)
-        self.record.scene_info.append({"scene": sd.label, "shapes": [
-            {"name": n, "closed": c, "why": w} for n, c, w in zip(sd.shape_names, closed, why)]})
-        return closed
-
-    def _build(self, sd, view, needs, culling, tile):
-        closed = self._closed(sd) if culling != "none" else None
-        extents = self.extents[sd.label]
-        casters = self._casters(sd)
-        return timing.measure_kernel(lambda: _map_arrays(casters, view, needs, culling, closed, tile, extents),
-                                     self.cfg.timing_repeats)
-
-    def _casters(self, sd):
-        """The scene the maps are cast against: the scene, or its copy shrunk by ``[map] shrink`` (once per scene)."""
-        if self.cfg.shrink is None:
-            return sd.scene
-        if self.shrunk[0] != sd.label:
-            self.shrunk = (sd.label, pipeline.shrunk_scene(sd.scene, self.cfg.shrink))
-        return self.shrunk[1]
-
-    def _map_build(self, sd, setup, view, m, built) -> tuple:
+    # ------------------------------------------------------------ one map
+    def _map_build(self, scene: SceneRun, view_run: ViewRun, m, built) -> tuple:
         """(map, build Timing, stored copy per format) of map plan ``m``: built and timed alone (with its
         peak bytes), or ``built`` in a stack (dsm.experiment.stacks); a failure is the map's stage's."""
         def build():
             """(map, build time, stored): the map and its copy per stored format."""
             if built is not None:
-                smap, bt = built.smap, built.times[frozenset(m.needs)]
+                smap, build_time = built.smap, built.times[frozenset(m.needs)]
             else:
-                timing.reset_peak()
-                smap, bt = self._build(sd, view, set(m.needs), m.culling, m.tile)
-                smap = smap[-1]
-                smap.peak_bytes = timing.peak_bytes()
-            return smap, bt, {fmt: pipeline.store(smap, fmt) for fmt in self.cfg.map.format}
-        what = f"scene {sd.label} light {setup.label} view {view.kind} map {m.resolution} culling {m.culling}"
+                smap, build_time = self.builds.alone(scene.data, view_run.view, m)
+            return smap, build_time, {fmt: pipeline.store(smap, fmt) for fmt in self.cfg.map.format}
+        what = (f"scene {scene.data.label} light {view_run.setup.label} view {view_run.view.kind} map {m.resolution} "
+                f"culling {m.culling}")
         return self._stage(what, [m], build)
 
-    def _run_map(self, sd, gb, setup, view, rx, seam, back, m, first_t, built=None):
+    def _run_map(self, scene: SceneRun, view_run: ViewRun, m, first_layer, built=None):
         """Build one map (the plan's layers, culling and tile), store its formats, run its cases.
-        ``first_t``: (the first layer's build time, maps sharing it) from the view's first map, or None;
-        ``built``: the map built in a stack (dsm.experiment.stacks), or None. Returns ``first_t``."""
-        smap, bt, stored = self._map_build(sd, setup, view, m, built)
-        self._record_map(sd, setup, view, m, smap, bt)
+        ``first_layer``: (the first layer's build time, maps sharing it) from the view's first map, or
+        None; ``built``: the map built in a stack (dsm.experiment.stacks), or None. Returns ``first_layer``."""
+        smap, build_time, stored = self._map_build(scene, view_run, m, built)
+        self._record_map(scene.data, view_run, m, smap, build_time)
         self.record.quantized += sum(1 for fmt in self.cfg.map.format if fmt != "float32")
-        # receivers in the depth function each stored format compares in (formats.stored_view)
-        bp, bn = back
-        by_view = {}                  # formats sharing a depth function share their receivers
-        for fmt in stored:
-            v = stored[fmt].view
-            if id(v) not in by_view:
-                front = rx if rx is None or v is view else Receiver.make(v, setup.p, setup.n, sd.diagonal, setup.camera)
-                by_view[id(v)] = (front, Receiver.make(v, bp, bn, sd.diagonal, setup.camera) if bp is not None else None)
-        rxs = {fmt: by_view[id(stored[fmt].view)][0] for fmt in stored}
-        backs = {fmt: by_view[id(stored[fmt].view)][1] for fmt in stored}
-        wrong = {fmt: self._oracles(sd, setup, view, m, stored[fmt], rxs[fmt], fmt) for fmt in stored}
-        build_times = dict(built.times) if built is not None else {frozenset(m.needs): bt}
+        ctx = self._context(scene, view_run, m, smap, stored)
+        build_times = dict(built.times) if built is not None else {frozenset(m.needs): build_time}
         # the first layer without culling, so a case's extra layers show as build_ms - build_first_ms:
         # a stacked map's share of its stack's; a map alone its own, measured once a view group
         if built is not None:
-            first_t = (built.first, built.shared)
-        elif first_t is None or first_t[1] > 1:
-            first_t = (bt if m.culling == "none" and not m.needs else self._build(sd, view, set(), "none", m.tile)[1], 1)
+            first_layer = (built.first, built.shared)
+        elif first_layer is None or first_layer[1] > 1:
+            first_layer = (build_time if m.culling == "none" and not m.needs
+                           else self.builds.timed(scene.data, view_run.view, set(), "none", m.tile)[1], 1)
         self.case_no = self.first_case[self.plan.maps.index(m)]     # case ids from the plan
-        specs = [pipeline.preset_for_light(spec, setup.light.type) for spec in m.specs]   # a preset's values here
-        extras, looked = self._lookups(specs, stored, rxs, backs)
-        for spec in specs:
+        specs = [pipeline.preset_for_light(spec, view_run.setup.light.type) for spec in m.specs]   # a preset's values here
+        depth = {spec: [self._next(spec, filt, fmt) for filt in self.cfg.map.filter for fmt in self.cfg.map.format]
+                 for spec in specs}
+        attached, looked = self._lookups(ctx, [c for cases in depth.values() for c in cases])
+        for spec, cases in depth.items():
             own = frozenset(pipeline.needs_of([spec]))                  # this instance's own layers, for build_ms
             if own not in build_times:
                 # the build of exactly what this scheme needs (its data comes from the shared map)
-                build_times[own] = self._build(sd, view, own, m.culling, m.tile)[1]
-            for filt in self.cfg.map.filter:
-                for fmt in self.cfg.map.format:
-                    self._run_case(sd, gb, setup, view, stored[fmt], (build_times[own], first_t[0]), rxs[fmt], seam,
-                                   spec, filt, fmt, backs[fmt], wrong[fmt] if filt == "nearest" else None,
-                                   extra=extras.get((spec, filt, fmt)), looked=looked.get((spec, filt, fmt)))
-                    self.bar.update(1)
-        moment_maps = {}              # instances sharing their moments share one build (dsm.prefilter)
+                build_times[own] = self.builds.timed(scene.data, view_run.view, own, m.culling, m.tile)[1]
+            cost = BuildCost(build_times[own], first_layer[0], smap.peak_bytes, smap.shared)
+            for case in cases:
+                self._run_case(ctx, case, cost, looked.get(case.lookup_key), attached.get(case.lookup_key))
+                self.bar.update(1)
+        # a pre-filtered instance's build_ms: the depth map's first layer, which its moments are made of
+        cost = BuildCost(first_layer[0], first_layer[0], smap.peak_bytes, smap.shared)
         for spec in m.moments:
             for fmt in self.cfg.map.format:
-                # build_ms: the depth map's first layer, which the moments are made of (moments_ms apart)
-                self._run_case(sd, gb, setup, view, smap, (first_t[0], first_t[0]), rxs[fmt], seam, spec, spec.filter, fmt,
-                               backs[fmt], None, moment=self._moments(moment_maps, spec, smap, fmt, sd))
+                self._run_case(ctx, self._next(spec, spec.filter, fmt), cost)
                 self.bar.update(1)
-        return first_t
+        return first_layer
 
-    def _lookups(self, specs, stored, rxs, backs) -> tuple:
-        """(extras, looked) of one map's depth cases not kept from a resumed run, by (spec, filter,
+    def _next(self, spec, filt: str, fmt: str) -> Case:
+        """The next case of the plan: its id counted."""
+        self.case_no += 1
+        return Case(f"{self.case_no:04d}", spec, filt, fmt)
+
+    def _context(self, scene: SceneRun, view_run: ViewRun, m, smap, stored) -> MapContext:
+        """What the map's cases share: receivers in the depth function each stored format compares
+        in (formats.stored_view; formats sharing one share them), the oracles, moments and march."""
+        data, setup, view = scene.data, view_run.setup, view_run.view
+        back_p, back_n = view_run.backfacing
+        by_view = {}
+        for fmt in stored:
+            v = stored[fmt].view
+            if id(v) not in by_view:
+                front = (view_run.receivers if view_run.receivers is None or v is view
+                         else Receiver.make(v, setup.p, setup.n, data.diagonal, setup.camera))
+                back = Receiver.make(v, back_p, back_n, data.diagonal, setup.camera) if back_p is not None else None
+                by_view[id(v)] = (front, back)
+        cascade_layout = view.spec.label if view.cascaded else ""
+        where = Where(data.label, setup.label, view.kind, view.resolution, view.n_texels, smap.culling, cascade_layout)
+        measures = {"seams", "split", "attached", "cascade"} | ({"contact"} if self.cfg.contact is not None else set())
+        ctx = MapContext(where, data, scene.gbuffer, setup, view, smap, stored,
+                         {fmt: by_view[id(stored[fmt].view)][0] for fmt in stored}, self.cfg.seed,
+                         self.cfg.timing_repeats, frozenset(measures | ({"leak"} if self.cfg.map.leak_split else set())),
+                         backfacing={fmt: by_view[id(stored[fmt].view)][1] for fmt in stored},
+                         seam_texels=view_run.seam_texels, leak_texels=self.cfg.map.leak_texels,
+                         moments=self._moments(scene.data, smap), march=lambda rx: self._march(scene, setup, rx))
+        ctx.wrong = {fmt: self._oracles(ctx, m, fmt) for fmt in stored}
+        return ctx
+
+    def _lookups(self, ctx: MapContext, cases: list) -> tuple:
+        """(attached, looked) of one map's depth cases not kept from a resumed run, by (spec, filter,
         format): with ``[timing] lookups = "wavefront"`` every lookup from the map's wavefront
         (dsm.experiment.wavefront; its wave time into the map's record), else each case times its
         own lookup and only its attached-shadow V and plane fallbacks come from one wavefront."""
-        family = [(spec, filt, fmt) for spec in specs for filt in self.cfg.map.filter for fmt in self.cfg.map.format]
-        cases = [c for i, c in enumerate(family, self.case_no + 1) if self.keys.get(f"{i:04d}") not in self.kept]
+        family = [c.lookup_key for c in cases]
+        todo = [c.lookup_key for c in cases if self.keys.get(c.id) not in self.kept]
         if self.cfg.timing_lookups == "per_case":
-            return wavefront.attached_only(cases, stored, rxs, backs, self.cfg.seed), {}
-        looked, wave = wavefront.run(cases, stored, rxs, backs, self.cfg.seed, self.cfg.timing_repeats, family)
+            return wavefront.attached_only(todo, ctx.stored, ctx.receivers, ctx.backfacing, ctx.seed), {}
+        looked, wave = wavefront.run(todo, ctx.stored, ctx.receivers, ctx.backfacing, ctx.seed, ctx.repeats, family)
         self.record.maps[-1].update(wave)
         return {}, looked
 
-    def _moments(self, cache, spec, smap, fmt, sd):
-        """A function giving (MomentMap, build Timing) of ``spec`` on ``smap``, built (timed) once per
+    def _moments(self, scene, smap):
+        """A function (spec, format) -> (MomentMap, build Timing) on ``smap``, built (timed) once per
         moment key; a supersampled instance's build casts its own rays (timed with it)."""
-        key = pipeline.moment_key(spec, fmt)
+        cache = {}                    # instances sharing their moments share one build (dsm.prefilter)
 
-        def get():
+        def get(spec, fmt):
             """The cached build, made on first use (inside the case's failure policy)."""
+            key = pipeline.moment_key(spec, fmt)
             if key not in cache:
                 def build():
                     """The moment map's arrays (evaluated by the clock) and the map."""
                     fine = None if spec.samples == 1 else pipeline.supersampled_map(
-                        self._casters(sd), smap.view, spec.samples, self.extents[sd.label])
+                        self.builds.casters(scene), smap.view, spec.samples, self.builds.extents[scene.label])
                     mm = pipeline.moment_map(spec, smap, fmt, fine)
                     return (*mm.b, mm)
                 out, t = timing.measure(build, self.cfg.timing_repeats)
@@ -494,18 +455,31 @@ class Runner:
             return cache[key]
         return get
 
-    def _oracles(self, sd, setup, view, m, smap, rx, fmt):
+    def _march(self, scene: SceneRun, setup, rx) -> tuple:
+        """(occluded per receiver, its Timing) of the contact march of receivers ``rx``: once per
+        receiver set (the march reads receivers and light only: every case of them shares it)."""
+        if self.depth_buffer[0] != scene.data.label:     # the current scene's only: the runner walks scene by scene
+            self.depth_buffer = (scene.data.label, contact.depth_buffer(scene.gbuffer))
+        if self.march[0] is not rx:      # the receivers kept: their id stays theirs
+            light_world = setup.light.position if pipeline.is_positional(setup.light) else None
+            out, t = timing.measure(lambda: (contact.march(self.depth_buffer[1], rx, self.cfg.contact, self.cfg.seed,
+                                                           light_world),), self.cfg.timing_repeats)
+            self.march = (rx, (out[-1].numpy().astype(bool), t))
+        return self.march[1]
+
+    def _oracles(self, ctx: MapContext, m, fmt: str):
         """The oracles of one map and stored format over the view's receivers (oracle.csv, the
         trade-off curves); returns per receiver whether the per-texel oracle at the first lambda
         gets it wrong (the resolution's share of a nearest case's errors), None on failure."""
+        rx, setup, view = ctx.receivers[fmt], ctx.setup, ctx.view
         if rx is None:
             return np.zeros(0, bool)
         if setup.ref is not None or not view.depth_oracles:
             return None               # an area light (the oracles are a hard V*'s); a VSV grid (no depth bias)
-        meta = {"scene": sd.label, "light": setup.label, "view": view.kind, "resolution": m.resolution,
+        meta = {"scene": ctx.where.scene, "light": setup.label, "view": view.kind, "resolution": m.resolution,
                 "culling": m.culling, "format": fmt}
         try:
-            th = pipeline.thresholds(rx, smap)
+            th = pipeline.thresholds(rx, ctx.stored[fmt])
             wrong = None
             for lam in self.cfg.oracle.lambdas:
                 o = pipeline.oracles(th, setup.v_star, lam)
@@ -518,197 +492,67 @@ class Runner:
         except (KeyboardInterrupt, StageFailed):
             raise
         except Exception as e:
-            self._fail(f"oracles of scene {sd.label} light {setup.label} view {view.kind} map {m.resolution} "
+            self._fail(f"oracles of scene {ctx.where.scene} light {setup.label} view {view.kind} map {m.resolution} "
                        f"culling {m.culling} format {fmt}", e)
             return None
 
-    def _record_map(self, sd, setup, view, m, smap, bt):
-        self.record.maps.append({"scene": sd.label, "light": setup.label, "view": view.kind, "resolution": m.resolution,
-                          "culling": m.culling, "layers": ["z1", "shape"] + [k for k in shadowmap.LAYERS
-                                                                           if getattr(smap, k) is not None],
-                          "tiles": smap.tiles, "rays": dict(smap.rays), "rehits": smap.rehits, "build_shared": smap.shared,
-                          "build_ms": bt.ms,      # its layers' build, kernel time (a stacked map's: its share)
-                          "build_peak_bytes": smap.peak_bytes, "build_peak_bytes_est": m.peak_bytes,
-                          "formats": list(m.formats)})
-        for k, v in smap.rays.items():
-            self.record.rays[k] = self.record.rays.get(k, 0) + v
+    def _record_map(self, scene, view_run: ViewRun, m, smap, build_time):
+        """The map's record in run.json (its layers, tiles, rays, build) and its rays counted."""
+        self.record.maps.append({"scene": scene.label, "light": view_run.setup.label, "view": view_run.view.kind,
+                                 "resolution": m.resolution, "culling": m.culling,
+                                 "layers": ["z1", "shape"] + [k for k in shadowmap.LAYERS if getattr(smap, k) is not None],
+                                 "tiles": smap.tiles, "rays": dict(smap.rays), "rehits": smap.rehits,
+                                 "build_shared": smap.shared,
+                                 "build_ms": build_time.ms,      # its layers' build, kernel time (a stacked map's: its share)
+                                 "build_peak_bytes": smap.peak_bytes, "build_peak_bytes_est": m.peak_bytes,
+                                 "formats": list(m.formats)})
+        self.record.add_rays(smap.rays)
         if smap.unfinished:
-            self.record.status.append({"what": f"map {sd.label} {setup.label} R={m.resolution} culling={m.culling}",
-                                "status": "warning", "error": f"{smap.unfinished} texels still searching "
-                                f"after {shadowmap.MAX_STEPS} surfaces"})
+            self.record.status.append({"what": f"map {scene.label} {view_run.setup.label} R={m.resolution} "
+                                               f"culling={m.culling}",
+                                       "status": "warning", "error": f"{smap.unfinished} texels still searching "
+                                       f"after {shadowmap.MAX_STEPS} surfaces"})
 
-    def _run_case(self, sd, gb, setup, view, smap, build, rx, seam, spec, filt, fmt, rx_back=None, wrong=None,
-                  moment=None, extra=None, looked=None):
-        """One case: a scheme instance and filter on a stored depth map, or (``moment``: its
-        MomentMap's builder) a pre-filtered instance on the depth map's moments; ``extra``: its
-        attached-shadow V and plane fallbacks from the map's wavefront, ``looked``: all its lookups
-        from there (dsm.experiment.wavefront.Looked; else looked up here)."""
-        case = self.next_case()
-        if self.keys.get(case) in self.kept:          # finished by the run being resumed: its row again
-            row, st, cascade_rows = self.kept[self.keys[case]]
+    # ------------------------------------------------------------ one case
+    def _run_case(self, ctx: MapContext, case: Case, cost: BuildCost, looked=None, attached=None):
+        """One case evaluated (dsm.case.evaluate) into the sink, or its row again when the run being
+        resumed finished it; ``looked``/``attached``: its lookups from the map's wavefront."""
+        if self.keys.get(case.id) in self.kept:          # finished by the run being resumed: its row again
+            row, status, cascade_rows = self.kept[self.keys[case.id]]
             self.record.cascade_rows += cascade_rows
-            self.add_case(resume.parse_row(row), st)
+            self.sink.add(resume.parse_row(row), status)
             self.cases_kept += 1
             self._write_run_json()
             return
-        meta = {"case": case, "scene": sd.label, "light": setup.label, "view": view.kind, "scheme": spec.name,
-                "culling": smap.culling,
-                "preset": spec.preset or "", "params": spec.label, "resolution": view.resolution,
-                "total_texels": view.n_texels,
-                "filter": filt, "format": fmt, "cascade_layout": view.spec.label if view.cascaded else ""}
+        ident = case_row.identity(ctx.where, case)
         try:
-            mt = None
-            if moment is None:
-                look = lambda r: pipeline.visibility(spec, r, smap, filt, self.cfg.seed)
-            else:
-                mmap, mt = moment()
-                look = lambda r: pipeline.moment_visibility(spec, r, mmap, smap)
-            uses_plane = moment is None and pipeline.scheme_module(spec.name).USES_PLANE
-            if looked is not None:
-                v_np, tap_np, lt, extra = looked.v, looked.tap_shape, looked.timing, (looked.v_back, looked.misses)
-            else:
-                v_np, tap_np, lt = self._looked_up(rx, look)
-            if extra is None:         # not in a map's wavefront (pre-filtered, or its tracing failed there)
-                extra = (look(rx_back)[0].numpy() if rx_back is not None else np.zeros(0),
-                         pipeline.plane_fallbacks(spec, rx, smap) if uses_plane and rx is not None else 0)
-            v_back, fallbacks = extra
-            m, occ = self._case_metrics(sd, gb, setup, view, rx, seam, v_back, wrong, v_np, tap_np, meta)
-            fallback = fallbacks if uses_plane else metrics.UNDEFINED
-            row = self._case_row(meta, setup, m, rx, spec, moment, mt, build, smap, lt, v_np, fallback)
-            row["lookup_shared"] = looked.shared if looked is not None else 1
-            self._case_images(meta, gb, setup, v_np, wrong, occ, rx)
+            result = evaluate(ctx, case, looked, attached)
+            sweep = self.cfg.map.moments if case.prefiltered else self.cfg.schemes
+            extra = case_row.sweep_columns(case.spec, sweep)
+            if self.cfg.map.leak_split:          # [map] kind given: every case's map kind
+                extra.update(case_row.map_kind_columns(case, result.moments.ms if result.moments else None))
+            row = case_row.row(ident, case_row.still_measured(ctx, result),
+                               {**case_row.still_costs(ctx, result, cost), **extra})
+            self.sink.still_case(ctx, ident, result)
             # a case without receivers says nothing about the scheme: it is reported as empty
-            self.add_case(row, {"what": f"case {case}", **{k: meta[k] for k in ("scene", "light", "view", "scheme",
-                                                                                "params", "resolution")},
-                                "status": "ok" if m["n_receivers"] else "empty", "key": self.keys.get(case)})
+            status = {k: ident[k] for k in ("scene", "light", "view", "scheme", "params", "resolution")}
+            self.sink.add(row, {"what": f"case {case.id}", **status, "status": "ok" if result.n_receivers else "empty",
+                                "key": self.keys.get(case.id)})
             self._write_run_json()
         except Exception as e:
-            self._fail(f"case {case} ({sd.label}, {setup.label}, {spec.name} {spec.label}, R={view.resolution})", e)
-
-    def _looked_up(self, rx, look) -> tuple:
-        """(visibility, tap shapes (numpy), the lookup's Timing) of receivers ``rx``."""
-        if rx is None:
-            return np.zeros(0), np.zeros(0, np.uint32), timing.Timing(0.0, 0.0, 0.0, 0, 0)
-        (v, tap_shape), lt = timing.measure_kernel(lambda: look(rx), self.cfg.timing_repeats)
-        return v.numpy(), tap_shape.numpy(), lt
-
-    def _case_metrics(self, sd, gb, setup, view, rx, seam, v_back, wrong, v_np, tap_np, meta) -> tuple:
-        """(the case's counts and rates, the contact march's occlusion or None; ``v_back``: V of the
-        attached-shadow receivers); a cascaded map's per-cascade rows, curve and index image recorded on the way."""
-        m = pipeline.metrics(v_np, setup, tap_np, seam, view.has_seams)
-        m.update(pipeline.split(v_np, setup.v_star, wrong))     # NaN unless nearest (the oracles' lookup)
-        occ = None
-        if self.cfg.contact is not None:      # screen-space contact shadows after the lookup
-            cols, occ = self._contact(sd, gb, setup, rx, v_np)
-            m.update(cols)
-        if view.cascaded:         # a cascaded map: per cascade, texels per pixel, distance plot
-            extra, per, curve, faces = pipeline.cascade_metrics(view, rx, v_np, setup.v_star)
-            m.update(extra)
-            self.record.cascade_rows += [{**meta, **r} for r in per]
-            self.record.cascade_curves.append((meta, curve))
-            folder = self.out / "images" / figures.image_folder(meta)
-            folder.mkdir(parents=True, exist_ok=True)
-            cascade_files.write_index_image(folder / f"{meta['case']}_cascade.png", setup.pixels, faces, gb.width, gb.height)
-        # Weiskopf & Ertl's self-unshadowing: pixels in attached shadow (facing away) that the map calls lit
-        m["n_backfacing"] = int(v_back.size)
-        m["backface_lit_rate"] = float((v_back >= 0.5).mean()) if v_back.size else metrics.UNDEFINED
-        return m, occ
-
-    def _case_row(self, meta, setup, m, rx, spec, moment, mt, build, smap, lt, v_np, fallback) -> dict:
-        """The case's metrics.csv row: its keys, exclusions, metrics, headroom, timings and sweep
-        (``fallback``: its plane fallbacks, or UNDEFINED for a scheme without a plane)."""
-        bt, first_t = build
-        texel = float(np.median(rx.texel_world.numpy())) if rx is not None else metrics.UNDEFINED
-        sweep_key, sweep_value = report.sweep_of(spec, self.cfg.schemes if moment is None else self.cfg.map.moments)
-        extent = setup.max_abs_coordinate if rx is not None else metrics.UNDEFINED
-        row = {**meta, **setup.exclusions, **m, **headroom.headroom(extent, texel), "texel_size": texel,
-               "n_plane_fallback": fallback,
-               "build_ms": bt.ms, "build_first_ms": first_t.ms, "build_compile_ms": bt.compile_ms, "build_peak_mb": smap.peak_bytes / 2 ** 20,
-               "build_shared": smap.shared,
-               "lookup_ms": lt.ms, "lookup_compile_ms": lt.compile_ms, "lookup_kernels_compiled": lt.cache_misses,
-               "reference_ms": setup.reference_ms, "sweep_key": sweep_key, "sweep_value": sweep_value}
-        if self.cfg.map.leak_split:          # [map] kind given: every case's leak split (dsm.truth.metrics)
-            texel_np = rx.texel_world.numpy() if rx is not None else np.zeros(0)
-            row.update({"map_kind": spec.name if moment is not None else "depth",
-                        **metrics.leak_split(v_np, setup.v_star, setup.occluder_dist, texel_np,
-                                             self.cfg.map.leak_texels),
-                        "moments_ms": mt.ms if moment is not None else metrics.UNDEFINED})
-        return row
-
-    def _case_images(self, meta, gb, setup, v_np, wrong, occ, rx):
-        """The case's images (classes, shading, contact march, area-light V), written now."""
-        # the case's images: report work, timed apart; its CPU is this thread's (the images are drawn
-        # here, single-threaded), so Dr.Jit's workers winding down the case's kernels stay measuring's
-        t_img, c_img = time.perf_counter(), time.thread_time()
-        case = meta["case"]
-        classes = np.zeros(gb.width * gb.height, np.uint8)
-        leak = None
-        if self.cfg.map.leak_split and rx is not None:     # [map] kind given: the leaks in their own colour
-            leak = metrics.leak_mask(v_np, setup.v_star, setup.occluder_dist, rx.texel_world.numpy(),
-                                     self.cfg.map.leak_texels)
-        classes[setup.pixels] = pipeline.classify(v_np, setup.v_star, wrong, leak)
-        classes = classes.reshape(gb.height, gb.width)
-        shade = report.shade(classes.shape, gb, setup, v_np, pipeline.is_positional(setup.light),
-                             self._cosines(setup)) if self.cfg.report_images == "all" else None
-        item = publish.image_item(meta, classes, shade, self.cfg.report_images)
-        if item is not None:        # written now (Pillow, ~1 ms, between timings): a killed run keeps them
-            figures.write_images(self.out, [item])
-        if occ is not None and self.cfg.report_images != "none":         # what the contact march did
-            folder = self.out / "images" / figures.image_folder(meta)
-            folder.mkdir(parents=True, exist_ok=True)
-            contact_images.write_image(folder / f"{case}_contact.png", setup.pixels,
-                                       contact_images.classes(v_np, setup.v_star, occ), gb.width, gb.height)
-        if setup.ref is not None and self.cfg.report_images != "none":    # area light: V, V*, |V - V*|
-            soft_report.write_images(self.out, [soft_report.image_item(meta, gb.width, gb.height, setup.pixels,
-                                                                       v_np, setup.v_frac)])
-        self.timing["images_s"] = self.timing.get("images_s", 0.0) + time.perf_counter() - t_img
-        self.timing["images_cpu_s"] = self.timing.get("images_cpu_s", 0.0) + time.thread_time() - c_img
-        if self.keep_images:
-            self.images[case] = classes
-
-    def _cosines(self, setup):
-        """The receivers' cosines to the light for the shadow images, once per receiver set (every
-        case of a map shares its set)."""
-        if setup.n is None:
-            return None
-        held = self.cosines[0]() if self.cosines[0] is not None else None
-        if held is not setup:
-            self.cosines = (weakref.ref(setup), report.receiver_cosines(setup, pipeline.is_positional(setup.light)))
-        return self.cosines[1]
-
-    def _contact(self, sd, gb, setup, rx, v_np) -> tuple:
-        """(columns, occluded per receiver) of one case's contact step: its receivers' march (once per
-        receiver set, timed) applied to the case's V."""
-        if rx is None:
-            none = np.zeros(0, bool)
-            return {**contact.case_metrics(v_np, setup.v_star, none), "contact_ms": 0.0}, none
-        if sd.label not in self.depth_buffers:     # the current scene's only: the runner walks scene by scene
-            self.depth_buffers = {sd.label: contact.depth_buffer(gb)}
-        db = self.depth_buffers[sd.label]
-        if id(rx) not in self.marches:    # the march reads receivers and light only: every case of them shares it
-            light_world = setup.light.position if pipeline.is_positional(setup.light) else None
-            out, t = timing.measure(lambda: (contact.march(db, rx, self.cfg.contact, self.cfg.seed, light_world),),
-                                    self.cfg.timing_repeats)
-            self.marches = {id(rx): (rx, out[-1].numpy().astype(bool), t)}    # the receivers kept: their id stays theirs
-        _, occ, t = self.marches[id(rx)]
-        return {**contact.case_metrics(v_np, setup.v_star, occ, setup.v_frac), "contact_ms": t.ms}, occ
+            spec = case.spec
+            self._fail(f"case {case.id} ({ctx.where.scene}, {ctx.setup.label}, {spec.name} {spec.label}, "
+                       f"R={ctx.view.resolution})", e)
 
     def next_case(self) -> str:
-        """The next case's id ("0001", ...), counted."""
+        """The next case's id ("0001", ...), counted (motion's cases, in the plan's order)."""
         self.case_no += 1
         return f"{self.case_no:04d}"
 
     def case_done(self, row: dict, status: dict):
-        """A finished case's row and status recorded, and the progress bar moved on by one."""
-        self.add_case(row, status)
+        """A finished case's row and status into the sink, and the progress bar moved on by one."""
+        self.sink.add(row, status)
         self.bar.update(1)
-
-    def add_case(self, row: dict, status: dict):
-        """One finished case: its row into metrics.csv (refused unless it fits the schema,
-        record.check_row) and the record, and its status."""
-        self.csv.write(row)
-        self.record.rows.append(row)
-        self.record.status.append(status)
 
     # ------------------------------------------------------------ run.json
     def _run_json(self):
@@ -764,11 +608,6 @@ def _cpu() -> float:
     import resource
     ru = resource.getrusage(resource.RUSAGE_CHILDREN)
     return time.process_time() + ru.ru_utime + ru.ru_stime
-
-
-def _map_arrays(scene, view, needs, culling="none", closed=None, tile=None, extents=None):
-    smap = pipeline.build_map(scene, view, needs, culling, closed, tile, extents)
-    return (*shadowmap.arrays(smap), smap)
 
 
 def run(config, out=None, variant=None, progress=False) -> Results:

@@ -2,11 +2,6 @@
 dsm.report.figures', report.html dsm.report.html's, and dsm.report.publish writes them all after a run."""
 from __future__ import annotations
 
-import contextlib
-import csv
-import dataclasses
-import json
-import os
 import sys
 from pathlib import Path
 
@@ -21,25 +16,10 @@ from . import io as report_io, summary
 COLUMNS = record.NAMES          # metrics.csv's columns: the run record's schema (dsm.core.record)
 
 
-
-
 def progress(total: int, enabled: bool):
     """A tqdm bar over ``total`` cases, shown only when ``enabled`` and stderr is a terminal."""
     from tqdm import tqdm
     return tqdm(total=total, unit="case", disable=not enabled or not sys.stderr.isatty(), dynamic_ncols=True)
-
-
-def sweep_of(spec, all_specs) -> tuple[str, float]:
-    """The numeric parameter a scheme's sweep varies (or its first one) and this case's value of it."""
-    fields = [f.name for f in dataclasses.fields(spec.params)
-              if isinstance(getattr(spec.params, f.name), (int, float)) or hasattr(getattr(spec.params, f.name), "unit")]
-    if not fields:
-        return "", 0.0
-    siblings = [s.params for s in all_specs if s.name == spec.name and s.preset is None]
-    key = next((k for k in fields if len({getattr(p, k) for p in siblings}) > 1), fields[0])
-    val = getattr(spec.params, key)
-    unit = getattr(val, "unit", "")
-    return (f"{key} [{unit}]" if unit else key), float(getattr(val, "value", val))
 
 
 # ------------------------------------------------------------------ images

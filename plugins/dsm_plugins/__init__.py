@@ -1,6 +1,6 @@
 """Mitsuba integrator plugins: ``dsm_shadow`` and ``dsm_error``.
 
-A package of its own, installed with the kit, depending on ``dsm.pipeline`` only. The kit
+A package of its own, installed with the kit, depending on ``dsm.pipeline`` and ``dsm.case`` only. The kit
 finds it through the entry-point group ``dsm.plugins``: :func:`register` (an explicit list,
 as Mitsuba registers its own) runs when ``import dsm`` finds a variant set and when
 :func:`dsm.core.env.use_variant` sets one. Both plugins run the same view, map, scheme, filter,

@@ -23,7 +23,7 @@ rendering, listing the scene's point, spot and directional emitters.
 
 Before rendering, each plugin casts the same pixel-centre G-buffer as the runner, builds the
 map with exactly the layers the scheme needs, and (``dsm_error``) classifies each receiver
-pixel as the runner does (a directional light's map fitted to those receivers): the image's
+pixel as the runner does (:func:`dsm.case.evaluate`; a directional light's map fitted to those receivers): the image's
 class counts are the runner's counts for that case. ``dsm_shadow`` samples anywhere inside
 a pixel, so its directional maps are fitted to the hit points of the pixel corners as well
 (a point outside such a map, where no caster was recorded, reads as lit). The prepared maps
@@ -37,6 +37,7 @@ import mitsuba as mi
 import numpy as np
 
 import dsm.pipeline as pl
+from dsm.case import Case, MapContext, Where, evaluate
 from dsm.core import types as cfgmod
 from dsm.pipeline import Receiver
 
@@ -293,36 +294,40 @@ def _srgb_to_linear(c):
 CLASS_LINEAR = _srgb_to_linear(pl.CLASS_COLORS).astype(np.float32)
 
 
+def evaluated(prep: dict, opts: Options):
+    """The first prepared light's case as the runner evaluates it (dsm.case.evaluate): its V,
+    counts and class image over the pixel-centre receivers (with the nearest filter, the errors
+    the per-texel oracle makes too, at lambda 1 as the runner's default)."""
+    lp, sd = prep["lights"][0], prep["sd"]
+    st = lp.setup
+    rx = None
+    if st.p is not None and len(st.pixels):
+        rx = Receiver.make(lp.view, st.p, st.n, sd.diagonal, st.camera)
+    wrong = None
+    if rx is not None and opts.filter == "nearest" and st.ref is None:
+        wrong = pl.oracles(pl.thresholds(rx, lp.smap), st.v_star)["wrong"]
+    where = Where("mitsuba", lp.label, lp.view.kind, opts.resolution, lp.view.n_texels, pl.culling_of(lp.spec.params))
+    ctx = MapContext(where, sd, prep["gb"], st, lp.view, lp.smap, {opts.format: lp.smap}, {opts.format: rx},
+                     opts.seed, 0, wrong={opts.format: wrong})
+    return evaluate(ctx, Case("0001", lp.spec, opts.filter, opts.format))
+
+
 def abs_error_image(prep: dict, opts: Options) -> np.ndarray:
     """(H, W, 3) linear RGB of |V - V*| of the first prepared (area) light, magma colours as the
     runner's ``<case>_abserr.png``; black outside the receivers."""
     from matplotlib import colormaps
     W, H = prep["size"]
-    lp = prep["lights"][0]
-    st = lp.setup
+    st = prep["lights"][0].setup
     img = np.zeros((W * H, 3), np.float32)
     if st.p is not None and len(st.pixels):
-        rx = Receiver.make(lp.view, st.p, st.n, prep["sd"].diagonal, st.camera)
-        v, _ = pl.visibility(lp.spec, rx, lp.smap, opts.filter, opts.seed)
-        err = np.abs(v.numpy() - st.v_frac)
+        err = np.abs(evaluated(prep, opts).v - st.v_frac)
         img[st.pixels] = _srgb_to_linear(np.round(colormaps["magma"](np.clip(err, 0, 1))[:, :3] * 255))
     return img.reshape(H, W, 3)
 
 
 def classes_image(prep: dict, opts: Options) -> np.ndarray:
     """(H, W) classes of the first prepared light, exactly as the runner classifies the case."""
-    W, H = prep["size"]
-    lp = prep["lights"][0]
-    classes = np.zeros(W * H, np.uint8)
-    st = lp.setup
-    if st.p is not None and len(st.pixels):
-        rx = Receiver.make(lp.view, st.p, st.n, prep["sd"].diagonal, st.camera)
-        v, _ = pl.visibility(lp.spec, rx, lp.smap, opts.filter, opts.seed)
-        # nearest: errors the per-texel oracle makes too in their darker shade (lambda 1, as the runner's default)
-        wrong = (pl.oracles(pl.thresholds(rx, lp.smap), st.v_star)["wrong"]
-                 if opts.filter == "nearest" and st.ref is None else None)
-        classes[st.pixels] = pl.classify(v.numpy(), st.v_star, wrong)
-    return classes.reshape(H, W)
+    return evaluated(prep, opts).classes
 
 
 class DsmError(mi.SamplingIntegrator):
