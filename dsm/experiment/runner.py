@@ -26,16 +26,15 @@ import drjit as dr
 import numpy as np
 
 from .. import pipeline
-from ..case import Case, MapContext, Where, evaluate, row as case_row
+from ..case import Case, MapContext, evaluate, row as case_row
 from ..case.row import BuildCost
 from ..config import plan as planmod, read as cfgmod
-from ..contact import march as contact
 from ..core import env, record, timing
 from ..maps import headroom, shadowmap
-from ..maps.receiver import Receiver
 from ..report import publish, tables as report, io as report_io
 from . import motion, resume, wavefront
 from .builds import Builds
+from .contexts import Contexts, SceneRun, ViewRun
 from .results import Results
 from .sink import Sink
 
@@ -60,24 +59,6 @@ class LightMaps:
 
 class StageFailed(Exception):
     """A stage failed and was recorded; the cases it feeds are skipped."""
-
-
-@dataclass
-class SceneRun:
-    """One loaded scene as its maps share it: its data, the camera's G-buffer and its usable lights."""
-    data: object          # dsm.scenes.data.SceneData
-    gbuffer: object       # dsm.scenes.gbuffer.GBuffer
-    lights: list          # LightSpec per usable light
-
-
-@dataclass
-class ViewRun:
-    """One view and resolution of a light, as its maps share it."""
-    view: object
-    setup: object                 # the light set-up inside the view
-    receivers: Receiver | None    # in the view's depth function; None without receivers
-    seam_texels: np.ndarray | None
-    backfacing: tuple             # the attached-shadow pixels inside the view: (positions, normals) or (None, None)
 
 
 class Runner:
@@ -106,8 +87,7 @@ class Runner:
         self.first_case = list(itertools.accumulate((m.cases for m in self.plan.maps), initial=0))
         self.resume_previous = resume_previous
         self.kept, self.stale = {}, []
-        self.depth_buffer = (None, None)   # [contact]: (scene label, its camera depth buffer), made when a case asks
-        self.march = (None, None)          # [contact]: (receivers, (occluded, Timing)) of the last march
+        self.contexts = Contexts(config, self.record, self.builds, self._fail)
 
     # ------------------------------------------------------------ top level
     def run(self) -> Results:
@@ -359,7 +339,7 @@ class Runner:
         smap, build_time, stored = self._map_build(scene, view_run, m, built)
         self._record_map(scene.data, view_run, m, smap, build_time)
         self.record.quantized += sum(1 for fmt in self.cfg.map.format if fmt != "float32")
-        ctx = self._context(scene, view_run, m, smap, stored)
+        ctx = self.contexts.make(scene, view_run, m, smap, stored)
         build_times = dict(built.times) if built is not None else {frozenset(m.needs): build_time}
         # the first layer without culling, so a case's extra layers show as build_ms - build_first_ms:
         # a stacked map's share of its stack's; a map alone its own, measured once a view group
@@ -395,31 +375,6 @@ class Runner:
         self.case_no += 1
         return Case(f"{self.case_no:04d}", spec, filt, fmt)
 
-    def _context(self, scene: SceneRun, view_run: ViewRun, m, smap, stored) -> MapContext:
-        """What the map's cases share: receivers in the depth function each stored format compares
-        in (formats.stored_view; formats sharing one share them), the oracles, moments and march."""
-        data, setup, view = scene.data, view_run.setup, view_run.view
-        back_p, back_n = view_run.backfacing
-        by_view = {}
-        for fmt in stored:
-            v = stored[fmt].view
-            if id(v) not in by_view:
-                front = (view_run.receivers if view_run.receivers is None or v is view
-                         else Receiver.make(v, setup.p, setup.n, data.diagonal, setup.camera))
-                back = Receiver.make(v, back_p, back_n, data.diagonal, setup.camera) if back_p is not None else None
-                by_view[id(v)] = (front, back)
-        cascade_layout = view.spec.label if view.cascaded else ""
-        where = Where(data.label, setup.label, view.kind, view.resolution, view.n_texels, smap.culling, cascade_layout)
-        measures = {"seams", "split", "attached", "cascade"} | ({"contact"} if self.cfg.contact is not None else set())
-        ctx = MapContext(where, data, scene.gbuffer, setup, view, smap, stored,
-                         {fmt: by_view[id(stored[fmt].view)][0] for fmt in stored}, self.cfg.seed,
-                         self.cfg.timing_repeats, frozenset(measures | ({"leak"} if self.cfg.map.leak_split else set())),
-                         backfacing={fmt: by_view[id(stored[fmt].view)][1] for fmt in stored},
-                         seam_texels=view_run.seam_texels, leak_texels=self.cfg.map.leak_texels,
-                         moments=self._moments(scene.data, smap), march=lambda rx: self._march(scene, setup, rx))
-        ctx.wrong = {fmt: self._oracles(ctx, m, fmt) for fmt in stored}
-        return ctx
-
     def _lookups(self, ctx: MapContext, cases: list) -> tuple:
         """(attached, looked) of one map's depth cases not kept from a resumed run, by (spec, filter,
         format): with ``[timing] lookups = "wavefront"`` every lookup from the map's wavefront
@@ -432,69 +387,6 @@ class Runner:
         looked, wave = wavefront.run(todo, ctx.stored, ctx.receivers, ctx.backfacing, ctx.seed, ctx.repeats, family)
         self.record.maps[-1].update(wave)
         return {}, looked
-
-    def _moments(self, scene, smap):
-        """A function (spec, format) -> (MomentMap, build Timing) on ``smap``, built (timed) once per
-        moment key; a supersampled instance's build casts its own rays (timed with it)."""
-        cache = {}                    # instances sharing their moments share one build (dsm.prefilter)
-
-        def get(spec, fmt):
-            """The cached build, made on first use (inside the case's failure policy)."""
-            key = pipeline.moment_key(spec, fmt)
-            if key not in cache:
-                def build():
-                    """The moment map's arrays (evaluated by the clock) and the map."""
-                    fine = None if spec.samples == 1 else pipeline.supersampled_map(
-                        self.builds.casters(scene), smap.view, spec.samples, self.builds.extents[scene.label])
-                    mm = pipeline.moment_map(spec, smap, fmt, fine)
-                    return (*mm.b, mm)
-                out, t = timing.measure(build, self.cfg.timing_repeats)
-                if spec.samples > 1:        # one build's rays (the timed repeats cast them again)
-                    self.record.add_rays({"map_texel": smap.view.n_texels * spec.samples ** 2})
-                cache[key] = (out[-1], t)
-            return cache[key]
-        return get
-
-    def _march(self, scene: SceneRun, setup, rx) -> tuple:
-        """(occluded per receiver, its Timing) of the contact march of receivers ``rx``: once per
-        receiver set (the march reads receivers and light only: every case of them shares it)."""
-        if self.depth_buffer[0] != scene.data.label:     # the current scene's only: the runner walks scene by scene
-            self.depth_buffer = (scene.data.label, contact.depth_buffer(scene.gbuffer))
-        if self.march[0] is not rx:      # the receivers kept: their id stays theirs
-            light_world = setup.light.position if pipeline.is_positional(setup.light) else None
-            out, t = timing.measure(lambda: (contact.march(self.depth_buffer[1], rx, self.cfg.contact, self.cfg.seed,
-                                                           light_world),), self.cfg.timing_repeats)
-            self.march = (rx, (out[-1].numpy().astype(bool), t))
-        return self.march[1]
-
-    def _oracles(self, ctx: MapContext, m, fmt: str):
-        """The oracles of one map and stored format over the view's receivers (oracle.csv, the
-        trade-off curves); returns per receiver whether the per-texel oracle at the first lambda
-        gets it wrong (the resolution's share of a nearest case's errors), None on failure."""
-        rx, setup, view = ctx.receivers[fmt], ctx.setup, ctx.view
-        if rx is None:
-            return np.zeros(0, bool)
-        if setup.ref is not None or not view.depth_oracles:
-            return None               # an area light (the oracles are a hard V*'s); a VSV grid (no depth bias)
-        meta = {"scene": ctx.where.scene, "light": setup.label, "view": view.kind, "resolution": m.resolution,
-                "culling": m.culling, "format": fmt}
-        try:
-            th = pipeline.thresholds(rx, ctx.stored[fmt])
-            wrong = None
-            for lam in self.cfg.oracle.lambdas:
-                o = pipeline.oracles(th, setup.v_star, lam)
-                row = {**meta, **o["row"]}
-                self.record.oracle_rows.append(row)
-                if wrong is None:
-                    wrong = o["wrong"]
-                    self.record.curves.append((row, o["curve_world"], o["curve_texel"]))
-            return wrong
-        except (KeyboardInterrupt, StageFailed):
-            raise
-        except Exception as e:
-            self._fail(f"oracles of scene {ctx.where.scene} light {setup.label} view {view.kind} map {m.resolution} "
-                       f"culling {m.culling} format {fmt}", e)
-            return None
 
     def _record_map(self, scene, view_run: ViewRun, m, smap, build_time):
         """The map's record in run.json (its layers, tiles, rays, build) and its rays counted."""
