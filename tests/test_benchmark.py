@@ -541,3 +541,94 @@ def test_the_benchmark_on_a_local_ray_cluster_counts_as_here(test_run, tmp_path,
     want = {key(r): tuple(r.get(k) for k in counts) for r in here["cases"]}
     got = {key(r): tuple(r.get(k) for k in counts) for r in doc["cases"]}
     assert got == want and len(got) == len(here["cases"])
+
+
+def _suite_process(out, *flags):
+    """``python -m dsm benchmark --out OUT`` at the test size, as a user starts it."""
+    import os
+    import subprocess
+    import sys
+    env = {**os.environ, SIZE_ENV: "test"}
+    return subprocess.Popen([sys.executable, "-m", "dsm", "benchmark", "--out", str(out), *flags], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _wait_for_cases(out, more_than: int, proc, timeout_s: float = 900.0) -> int:
+    """Block until ``out/cases/`` holds more than ``more_than`` finished cases (the trigger is the
+    record appearing, not a timer); returns how many it holds."""
+    import time
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout_s:
+        n = len(list((out / "cases").glob("[0-9]*.json")))
+        if n > more_than:
+            return n
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.05)
+    raise AssertionError("no case finished")
+
+
+def _counts(doc) -> dict:
+    key = lambda r: (r["scene"], r["unit"], r["offset"], r["light"], r["contender"], r.get("params", ""))
+    cols = ("n_receivers", "n_acne", "n_peterpan", "n_gt_shadowed", "flip", "n_leak", "per_texel_objective")
+    cases = {key(r): tuple(r.get(k) for k in cols) for r in doc["cases"]}
+    flick = {key(r): (r["flicker_rate"], r["flicker_ever"], r["flicker_magnitude"]) for r in doc["flicker"]}
+    return {"cases": cases, "flicker": flick, "n": (len(doc["cases"]), len(doc["flicker"]))}
+
+
+def test_ctrl_c_and_kill_keep_finished_cases_and_resume_counts_as_uninterrupted(test_run, tmp_path):
+    """Ctrl-C once the first case is kept: exit 130, a line saying what is kept and how to go on.
+    --resume, killed (SIGKILL) once another case is kept, then --resume to the end: every count,
+    FLIP and flicker rate that of the uninterrupted run, and the kept cases not run again."""
+    import signal
+    _, whole = test_run
+    out = tmp_path / "bm"
+    proc = _suite_process(out)
+    _wait_for_cases(out, 0, proc)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 130, err
+    assert "interrupted" in err and "--resume" in err and "Traceback" not in err
+    kept = len(list((out / "cases").glob("[0-9]*.json")))
+    assert kept >= 1 and not (out / "results.json").exists()
+    assert cli.main(["benchmark", "--out", str(out)]) == 2        # a plain run into it is refused: it names --resume
+    proc = _suite_process(out, "--resume")
+    _wait_for_cases(out, kept, proc)
+    proc.kill()
+    proc.wait()
+    kept = len(list((out / "cases").glob("[0-9]*.json")))
+    proc = _suite_process(out, "--resume")
+    stdout, err = proc.communicate(timeout=1800)
+    assert proc.returncode == 0, err
+    ran = [line for line in err.splitlines() if line.startswith("dsm benchmark: ") and "/8 " in line]
+    assert len(ran) == 8 - kept                                    # the kept cases are not run again
+    doc = json.loads((out / "results.json").read_text())
+    assert _counts(doc) == _counts(whole)
+    assert not (out / "cases").exists() and (out / "leaderboard.html").is_file()
+
+
+def test_page_rebuilds_the_leaderboard_from_results_alone(test_run, tmp_path):
+    import shutil
+    out, _ = test_run
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    shutil.copy(out / "results.json", copy / "results.json")
+    assert cli.main(["benchmark", "--page", str(copy)]) == 0
+    assert (copy / "leaderboard.html").read_text() == (out / "leaderboard.html").read_text()
+    assert (copy / "scale.png").read_bytes() == (out / "scale.png").read_bytes()
+
+
+def test_force_replaces_every_file_of_the_previous_run_and_keeps_the_user_s(tmp_path, monkeypatch):
+    """--force after a run of another suite: its flicker runs, case files, page and figure are gone
+    (none is stale beside the new results); a file the user put there stays."""
+    out = tmp_path / "bm"
+    for name in ("flicker/dsm-bench-4-x-flicker/frames.csv", "cases/0003.json", "cases/run.json", "scale.png",
+                 "leaderboard.html", "results.json", "notes.txt"):
+        (out / name).parent.mkdir(parents=True, exist_ok=True)
+        (out / name).write_text("old")
+    monkeypatch.setenv(SIZE_ENV, "test")
+    assert cli.main(["benchmark", "--out", str(out), "--suite", "dsm-bench-1", "--force"]) == 0
+    assert not (out / "flicker").exists() and not (out / "cases").exists()
+    assert (out / "notes.txt").read_text() == "old"
+    doc = json.loads((out / "results.json").read_text())
+    assert doc["suite"] == "dsm-bench-1" and doc["results_version"] == 2
+    assert (out / "leaderboard.html").read_text() != "old" and (out / "scale.png").read_bytes() != b"old"

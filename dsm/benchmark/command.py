@@ -1,16 +1,25 @@
-"""``dsm benchmark``: run the suite (or compare two results) and write results.json, leaderboard.html and scale.png."""
+"""``dsm benchmark``: run the suite (or compare two results, or rebuild the page) and write
+results.json, leaderboard.html and scale.png.
+
+Exit status as ``dsm run``'s: 0 done, 2 a user's mistake (a flag, a file, a folder), 3 a missing
+set-up (a variant this machine cannot run, Ray's client), 130 interrupted (its finished cases
+kept: ``--resume`` goes on).
+"""
 from __future__ import annotations
 
 import os
+import shutil
 import sys
 from pathlib import Path
 
 from ..config.read import VARIANTS
 from ..experiment import lock
-from . import compare, page, results
+from . import caselog, compare, document, page, results
 from .suite import LATEST, SUITE_FILES
 
 SIZE_ENV = "DSM_BENCHMARK_SIZE"     # a hidden size for tests: DSM_BENCHMARK_SIZE=test
+# what a run writes into --out: --force removes these (and nothing else a user keeps there)
+WRITTEN = ("results.json", "leaderboard.html", "scale.png", "flicker", caselog.FOLDER)
 
 
 def add_parser(sub):
@@ -20,55 +29,176 @@ def add_parser(sub):
     b.add_argument("--out", default="benchmark", help="folder for results.json and leaderboard.html (default: benchmark/)")
     b.add_argument("--full", action="store_true", help="the full size (larger resolutions: a GPU or a cluster)")
     b.add_argument("--compare", nargs=2, metavar=("A.json", "B.json"), help="compare two results.json files")
-    b.add_argument("--suite", choices=list(SUITE_FILES), default=LATEST,
+    b.add_argument("--page", metavar="DIR", help="rebuild leaderboard.html and scale.png in DIR from its results.json")
+    b.add_argument("--suite", choices=list(SUITE_FILES), default=None,
                    help=f"the suite's version (default: the newest, {LATEST}); an older one re-runs its cases")
     b.add_argument("--variant", choices=VARIANTS, help="Mitsuba variant (default llvm_ad_rgb)")
-    b.add_argument("--force", action="store_true", help="replace the results a previous run left in --out")
+    b.add_argument("--force", action="store_true", help="replace everything a previous run left in --out")
+    b.add_argument("--resume", action="store_true", help="go on with the run interrupted in --out (its finished "
+                   "cases kept)")
     b.add_argument("--cluster", metavar="ADDRESS",
                    help="run each case's map groups as Ray tasks on the cluster at ADDRESS (auto, ray://host:port) "
                         "or on a Ray instance started here (local); needs pip install 'dsm[cluster]'")
     return b
 
 
+def _err(msg: str) -> int:
+    print(f"dsm benchmark: {msg}", file=sys.stderr)
+    return 2
+
+
+def flag_problem(args) -> str | None:
+    """The first flag that cannot be used as given, in one line; None when they can."""
+    if str(args.out) == "":
+        return "--out is empty: give a folder"
+    if args.cluster is not None and not args.cluster.strip():
+        return "--cluster is empty: give local, auto or a Ray address host:port"
+    run_flags = [f for f, on in (("--full", args.full), ("--suite", args.suite is not None),
+                                 ("--cluster", args.cluster is not None), ("--variant", args.variant is not None),
+                                 ("--resume", args.resume)) if on]
+    for mode, on in (("--compare", args.compare), ("--page", args.page)):
+        if on and run_flags:
+            return f"{mode} runs no case: {run_flags[0]} does not apply to it"
+    if args.compare and args.page:
+        return "--compare and --page are two commands: give one"
+    if args.page and args.force:
+        return "--page rewrites only the page: --force does not apply to it"
+    if args.resume and args.force:
+        return "--resume goes on with a run and --force replaces it: give one"
+    return None
+
+
 def main(args) -> int:
     """Run ``dsm benchmark`` from its parsed arguments; returns the exit status."""
+    problem = flag_problem(args)
+    if problem:
+        return _err(problem)
+    if args.page:
+        return _page(Path(args.page))
     out = Path(args.out)
-    kept = out / ("compare.json" if args.compare else "results.json")
-    if kept.exists() and not args.force:       # a previous run's results are never overwritten silently
-        print(f"dsm benchmark: --out {out}: holds {kept.name} of an earlier run; give another --out, or --force "
-              "to replace it", file=sys.stderr)
-        return 2
     if out.exists() and not out.is_dir():
-        print(f"dsm benchmark: --out {out}: is a file, not a folder; choose another --out", file=sys.stderr)
-        return 2
+        return _err(f"--out {out}: is a file, not a folder; choose another --out")
+    if args.compare:
+        return _held(out, lambda: _compare(args, out))
+    problem = folder_problem(out, args.force, args.resume)
+    if problem:
+        return _err(problem)
+    if args.variant:                 # a variant this machine cannot run: one line before any work
+        from ..core import env
+        try:
+            env.use_variant(args.variant)
+        except env.SetupError as e:
+            print(f"dsm benchmark: setup error: {e}", file=sys.stderr)
+            return 3
+    if args.cluster:                   # reach the cluster before the folder is touched
+        problem = _connect(args.cluster)
+        if problem is not None:
+            return problem
+    return _held(out, lambda: _run(args, out))
+
+
+def _connect(address: str) -> int | None:
+    """Join (or start) the Ray cluster; the exit status of a failure (2: the address, 3: Ray's set-up), else None."""
+    from ..core.env import SetupError
+    from ..core.types import ConfigError
+    from ..experiment import cluster
     try:
-        held = lock.acquire(out)               # one writer per folder, as dsm run
+        cluster.connect(address)
+    except SetupError as e:
+        print(f"dsm benchmark: setup error: {e}", file=sys.stderr)
+        return 3
+    except ConfigError as e:
+        return _err(str(e).removeprefix(f"{e.source}: "))
+    return None
+
+
+def folder_problem(out: Path, force: bool, resume: bool) -> str | None:
+    """Why a run may not write into ``out`` as asked (in one line), None when it may."""
+    done = (out / "results.json").exists()
+    partial = caselog.progress(out)
+    if resume:
+        if done:
+            return (f"--out {out}: its run is complete (results.json); --page {out} rebuilds the page, --force "
+                    "runs it again")
+        if partial is None:
+            return f"--out {out}: holds no interrupted run to resume; run without --resume"
+        return None
+    if force:
+        return None
+    if done:
+        return f"--out {out}: holds results.json of an earlier run; give another --out, or --force to replace it"
+    if partial is not None:
+        return (f"--out {out}: holds an interrupted run ({partial[0]} of {partial[1]} cases finished); --resume "
+                "goes on with it, --force starts again")
+    return None
+
+
+def _held(out: Path, fn) -> int:
+    """``fn()`` holding the folder's lock (one writer per folder, as dsm run)."""
+    try:
+        held = lock.acquire(out)
     except (lock.Busy, OSError) as e:
-        print(f"dsm benchmark: --out {e}", file=sys.stderr)
-        return 2
+        return _err(f"--out {e}")
     with held:
-        return _compare(args, out) if args.compare else _run(args, out)
+        return fn()
 
 
 def _compare(args, out: Path) -> int:
-    diff = compare.compare(results.read(args.compare[0]), results.read(args.compare[1]))
+    try:
+        a, b = (document.read(p) for p in args.compare)
+    except document.NotResults as e:
+        return _err(f"--compare {e}")
+    diff = compare.compare(a, b)
     print(compare.text(diff))
     print(f"dsm benchmark: wrote {compare.write(diff, out)}")
     return 0
 
 
+def _page(folder: Path) -> int:
+    """leaderboard.html and scale.png rebuilt from ``folder``'s results.json alone."""
+    try:
+        doc = document.read(folder / "results.json")
+    except document.NotResults as e:
+        return _err(f"--page {e}")
+    missing = [k for k in ("suite_sha256", "size", "dsm_version", "versions", "variant", "machine") if k not in doc]
+    if missing:
+        return _err(f"--page {folder / 'results.json'}: has no {missing[0]} (the page states it)")
+    print(f"dsm benchmark: wrote {page.write_page(doc, folder)}")
+    return 0
+
+
 def _run(args, out: Path) -> int:
     size = "full" if args.full else os.environ.get(SIZE_ENV, "default")
-    if args.cluster:                   # reach the cluster before any case runs
-        from ..experiment import cluster
-        from ..core.env import SetupError
-        from ..core.types import ConfigError
-        try:
-            cluster.connect(args.cluster)
-        except (SetupError, ConfigError) as e:
-            print(f"dsm benchmark: --cluster {args.cluster}: {e}", file=sys.stderr)
-            return 3
-    doc = results.run_suite(size, args.variant, progress=lambda m: print(m, file=sys.stderr), version=args.suite,
-                             out=out, cluster=args.cluster)
-    print(f"dsm benchmark: wrote {results.write(doc, out)} and {page.write_page(doc, out)}")
+    if args.force:
+        _clear(out)
+    try:
+        doc = results.run_suite(size, args.variant, progress=lambda m: print(m, file=sys.stderr),
+                                version=args.suite or LATEST, out=out, cluster=args.cluster, resume=args.resume)
+    except caselog.Mismatch as e:
+        return _err(f"--out {out}: cannot resume: {e}; --force starts again")
+    except KeyboardInterrupt:
+        kept = caselog.progress(out)
+        n = f"{kept[0]} of {kept[1]} cases" if kept else "no case"
+        print(f"dsm benchmark: interrupted; {n} finished and kept in {out / caselog.FOLDER}/: "
+              f"dsm benchmark --out {out} --resume goes on", file=sys.stderr)
+        return 130
+    written = results.write(doc, out)
+    caselog.CaseLog(out, {}).clear()
+    try:
+        print(f"dsm benchmark: wrote {written} and {page.write_page(doc, out)}")
+    except KeyboardInterrupt:
+        print(f"dsm benchmark: interrupted while writing the page; {written} is whole: dsm benchmark --page {out} "
+              "rebuilds the page", file=sys.stderr)
+        return 130
     return 0
+
+
+def _clear(out: Path):
+    """--force: everything an earlier run wrote into ``out`` removed (its results, page, figure,
+    flicker runs and finished cases), so no stale file sits beside the new results."""
+    for name in WRITTEN:
+        path = out / name
+        if path.is_dir():
+            shutil.rmtree(path)
+        elif path.exists():
+            path.unlink()

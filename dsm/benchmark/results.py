@@ -20,9 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..report import figures
+from ..report import figures, io as report_io
 from ..truth import metrics
-from . import perceptual, render
+from . import caselog, perceptual, render
+from .document import RESULTS_VERSION
 from .suite import LATEST, ORIGIN, SUITE_FILES, cases, load_suite, suite_sha256, tuned_labels
 
 MEASURES = ("n_receivers", "n_gt_shadowed", "n_acne", "n_peterpan", "acne_rate", "peterpan_rate", "error_rate",
@@ -163,31 +164,50 @@ def run_case(case, ppd, variant: str | None = None, tuned=None, out: Path | None
 
 
 def run_suite(size: str = "default", variant: str | None = None, progress=print, version: str = LATEST,
-              out: Path | None = None, cluster: str | None = None) -> dict:
-    """Run suite ``version`` at ``size`` and return its result document (see :func:`write`); the flicker
-    runs' folders go under ``out`` (a temporary folder, removed, when None); ``cluster``: a connected
-    Ray address the cases' map groups run on (dsm benchmark --cluster)."""
+              out: Path | None = None, cluster: str | None = None, resume: bool = False) -> dict:
+    """Run suite ``version`` at ``size`` and return its result document (see :func:`write`); each
+    finished case is kept under ``out/cases/`` as it finishes (dsm.benchmark.caselog), and the
+    flicker runs' folders go under ``out`` (a temporary folder, removed, when None); ``resume``:
+    the cases the folder's run in progress finished are taken from there (caselog.Mismatch where
+    it measured another suite, size, variant or backend); ``cluster``: a connected Ray address
+    the cases' map groups run on (dsm benchmark --cluster)."""
     if out is None:
         import tempfile
         with tempfile.TemporaryDirectory() as tmp:
             return run_suite(size, variant, progress, version, Path(tmp), cluster)
-    import dsm
-    from ..core.env import versions
     suite = load_suite(SUITE_FILES[version])
     ppd = suite.get("flip", {}).get("ppd")          # dsm-bench-1 has no FLIP
     todo, tuned = cases(suite, size), tuned_labels(suite)
-    records, flicker, run_variant = [], [], None
+    header = {"suite": suite["suite"]["name"], "suite_sha256": suite_sha256(SUITE_FILES[version]), "size": size,
+              "variant": variant, "cluster": cluster, "cases": len(todo)}
+    log = caselog.CaseLog(out, header)
+    done = log.start(resume)
+    entries = []
     for i, case in enumerate(todo):
+        kept = done.get(i)
+        if kept is not None and kept["case"] == caselog.case_key(case):
+            entries.append(kept)
+            continue
         if progress:
             where = "" if case.offset == ORIGIN else f" at {case.offset}"
             progress(f"dsm benchmark: {i + 1}/{len(todo)} {case.scene} in {case.unit}{where} (scale {case.scale:g})")
         recs, flick, run_variant = run_case(case, ppd, variant, tuned, out, cluster)
-        records, flicker = records + recs, flicker + flick
+        log.keep(i, case, recs, flick, run_variant)
+        entries.append({"records": recs, "flicker": flick, "variant": run_variant})
+    return document(suite, version, size, entries, cluster)
+
+
+def document(suite: dict, version: str, size: str, entries: list, cluster: str | None) -> dict:
+    """The result document of a run from its cases' entries (records, flicker records, variant), in the suite's order."""
+    import dsm
+    from ..core.env import versions
     s = suite["suite"]
-    return {"suite": s["name"], "suite_sha256": suite_sha256(SUITE_FILES[version]), "size": size,
-            "dsm_version": dsm.__version__, "versions": versions(), "variant": run_variant,
-            "machine": machine(), "far_unit": s.get("far_unit"), "flip_ppd": ppd,
-            "tuned": suite["contenders"].get("tuned", {}), "flicker": flicker, "cases": records,
+    return {"results_version": RESULTS_VERSION, "suite": s["name"], "suite_sha256": suite_sha256(SUITE_FILES[version]),
+            "size": size, "dsm_version": dsm.__version__, "versions": versions(),
+            "variant": entries[-1]["variant"] if entries else None,
+            "machine": machine(), "far_unit": s.get("far_unit"), "flip_ppd": suite.get("flip", {}).get("ppd"),
+            "tuned": suite["contenders"].get("tuned", {}), "flicker": [f for e in entries for f in e["flicker"]],
+            "cases": [r for e in entries for r in e["records"]],
             "flicker_motion": suite.get("flicker", {}).get("motion"),
             "backend": {"name": "ray", "address": cluster} if cluster else {"name": "local"}}
 
@@ -197,10 +217,6 @@ def write(doc: dict, out: Path) -> Path:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "results.json"
-    path.write_text(json.dumps(doc, indent=1))
+    with report_io.atomic(path) as tmp:          # a Ctrl-C while writing leaves the file whole or absent
+        tmp.write_text(json.dumps(doc, indent=1))
     return path
-
-
-def read(path: Path) -> dict:
-    """A result document from its JSON file."""
-    return json.loads(Path(path).read_text())

@@ -23,6 +23,11 @@ import itertools
 
 import numpy as np
 
+from ..core.types import ConfigError
+
+# a smoothed fit holds (2 radius + 1)^2 copies of every training receiver (its key, margin, unit and
+# V*, about 64 bytes with the sort's work): at most this many, about 2 GB
+MAX_RECEIVER_COPIES = 32_000_000
 FACE_BITS = 8           # faces per map below 2^8; blocks per side below 2^16
 SIDE = 1 << 16
 
@@ -75,6 +80,18 @@ def residual_at(fit_keys, rho, keys) -> tuple:
     i = np.clip(np.searchsorted(fit_keys, keys), 0, max(len(fit_keys) - 1, 0))
     hit = (fit_keys[i] == keys) if len(fit_keys) else np.zeros(len(keys), bool)
     return np.where(hit, rho[i] if len(fit_keys) else 0.0, 0.0), hit
+
+
+def check_budget(n_train: int, radii, source: str):
+    """Refuse, before any fit, a radius whose smoothed fit would hold more than MAX_RECEIVER_COPIES
+    copies of the ``n_train`` training receivers (ConfigError naming tune.bias_map.radius and the
+    largest radius that fits)."""
+    worst = max(radii)
+    if (2 * worst + 1) ** 2 * n_train > MAX_RECEIVER_COPIES:
+        fits = max(0, int(((MAX_RECEIVER_COPIES / max(n_train, 1)) ** 0.5 - 1) // 2))
+        raise ConfigError(source, "tune.bias_map.radius", f"{worst} fits each block to (2 x {worst} + 1)^2 blocks: "
+                          f"{(2 * worst + 1) ** 2} copies of the {n_train} training receivers, above the "
+                          f"{MAX_RECEIVER_COPIES} a fit holds in memory; give radii of {fits} or less")
 
 
 def smoothed_fit(rx: dict, block: int, radius: int, lam: float, margin: float) -> dict:

@@ -67,7 +67,7 @@ from .evaluate import NAN, hard_counts, with_values
 from ..config.tune import TuneSpec, tunable, tune_spec
 from .cases import pooled_thresholds, prepare_cases
 from .compare import exact_scan, gradient_check, grid_search
-from . import light_samples
+from . import light_samples, residual_map
 from .bias_map import edge_bias_map, heldout_split, map_start, reads_camera, residual_bias_map, tune_bias_map
 from .search import start_value, tune_scheme
 from .output import TuneResult, moments_toml, tuned_toml, write
@@ -195,6 +195,8 @@ def run_tune(tc, out=None, progress: bool = False, resume: bool = False) -> Tune
     if not train:
         raise ConfigError(tc.config.source, "tune.camera", "no training view has a receiver")
     n_train, n_held = sum(c.n for c in train), sum(c.n for c in held)
+    if ts.bias_map and ts.bias_map.fit == "residual":
+        residual_map.check_budget(n_train, ts.bias_map.radii, tc.config.source)
     if ts.batch * n_train < 1.0:            # every Adam step would draw no receiver: a gradient of 0
         raise ConfigError(tc.config.source, "tune.batch", f"{ts.batch:g} of the {n_train} training receivers is "
                           f"less than one a step: at least {1.0 / n_train:.3g} (1 draws them all)")

@@ -1,0 +1,83 @@
+"""A benchmark run in progress: each finished suite case kept as it finishes, so that Ctrl-C or
+kill -9 loses at most the case that was running, and ``dsm benchmark --resume`` goes on.
+
+``<out>/cases/run.json`` says what the run measures (suite, its hash, size, variant, backend, the
+number of cases); ``<out>/cases/<index>.json`` holds one finished case (its records, flicker
+records and the variant it ran on), each written atomically. A resumed run takes a case from its
+file only where the file names the same case of the same run; results.json, written at the end
+from every case, makes the folder complete.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+from ..report import io as report_io
+
+FOLDER = "cases"
+
+
+class Mismatch(ValueError):
+    """The folder's run in progress measures something else than the run asked for."""
+
+
+def case_key(case) -> list:
+    """What names a suite case: [scene, unit, offset]."""
+    return [case.scene, case.unit, case.offset]
+
+
+class CaseLog:
+    """The finished cases of one run under ``out/cases/``."""
+
+    def __init__(self, out: Path, header: dict):
+        self.folder = Path(out) / FOLDER
+        self.header = header
+
+    def start(self, resume: bool) -> dict:
+        """Begin the run; with ``resume``, the finished cases kept by the folder's run ({index: entry}),
+        Mismatch where that run measured something else. Without, the folder's run is replaced."""
+        done = self.finished() if resume else {}
+        if not resume and self.folder.exists():
+            shutil.rmtree(self.folder)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        report_io.write_json(self.folder / "run.json", self.header, 1)
+        return done
+
+    def finished(self) -> dict:
+        """{index: entry} of the folder's finished cases (none without a run in progress)."""
+        try:
+            held = json.loads((self.folder / "run.json").read_text())
+        except (OSError, ValueError):
+            return {}
+        differs = [k for k in sorted(self.header) if held.get(k) != self.header[k]]
+        if differs:
+            k = differs[0]
+            raise Mismatch(f"its run in progress has {k} = {held.get(k)!r}, this run {self.header[k]!r}")
+        out = {}
+        for path in sorted(self.folder.glob("[0-9]*.json")):
+            try:
+                entry = json.loads(path.read_text())
+                out[int(entry["index"])] = entry
+            except (OSError, ValueError, KeyError, TypeError):
+                continue            # not one of ours, or damaged by hand: that case runs again
+        return out
+
+    def keep(self, index: int, case, records: list, flicker: list, variant):
+        """One finished case, written atomically."""
+        entry = {"index": index, "case": case_key(case), "records": records, "flicker": flicker, "variant": variant}
+        report_io.write_json(self.folder / f"{index:04d}.json", entry)
+
+    def clear(self):
+        """The run is complete (results.json holds every case): its case files go."""
+        shutil.rmtree(self.folder, ignore_errors=True)
+
+
+def progress(out: Path) -> tuple | None:
+    """(finished cases, cases) of the run in progress in ``out``, None without one."""
+    folder = Path(out) / FOLDER
+    try:
+        total = json.loads((folder / "run.json").read_text())["cases"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    return len(list(folder.glob("[0-9]*.json"))), total

@@ -1,0 +1,104 @@
+"""A benchmark result document (results.json) read back and checked before any use.
+
+``results_version`` 2 is what this dsm writes; a document without it is version 1 (written by dsm
+0.2.0 and earlier, the same fields) and is read the same. A newer version, and anything that is
+not a results document, is refused in one line naming the file and what is wrong with it.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+RESULTS_VERSION = 2
+READS = (1, 2)                 # the versions this dsm reads
+NAMES = ("scene", "unit", "light", "contender")          # a record's identity (offset: optional, "0")
+COUNTS = ("n_receivers", "n_acne", "n_peterpan")          # integers where present (an oracle's: receivers only)
+
+
+class NotResults(ValueError):
+    """A file that is not a readable dsm benchmark results.json: the message names it and the problem."""
+
+
+def read(path) -> dict:
+    """The checked result document in file ``path`` (NotResults, one line, where it is not one)."""
+    path = Path(path)
+    if path.is_dir():
+        raise NotResults(f"{path}: is a folder; give its results.json")
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise NotResults(f"{path}: no such file") from None
+    except OSError as e:
+        raise NotResults(f"{path}: cannot be read ({e.strerror or e})") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        raise NotResults(f"{path}: is not UTF-8 text (a binary file, or another encoding such as UTF-16); "
+                         "dsm benchmark writes results.json as UTF-8 JSON") from None
+    if not text.strip():
+        raise NotResults(f"{path}: is empty")
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise NotResults(f"{path}: is not JSON (line {e.lineno}, column {e.colno}: {e.msg}); a truncated or "
+                         "damaged file?") from None
+    return check(doc, path)
+
+
+def check(doc, path="<document>") -> dict:
+    """``doc`` unchanged when it is a result document this dsm reads, else NotResults."""
+    where = str(path)
+    if not isinstance(doc, dict):
+        raise NotResults(f"{where}: holds {_kind(doc)}, not a dsm benchmark results document (a JSON object)")
+    if "suite" not in doc or "cases" not in doc:
+        hint = " (it looks like a dsm run's run.json)" if "scheme_instances" in doc or "plan" in doc else ""
+        raise NotResults(f"{where}: is not a dsm benchmark results.json: it has no "
+                         f"{'suite' if 'suite' not in doc else 'cases'}{hint}")
+    version = doc.get("results_version", 1)
+    if version not in READS:
+        raise NotResults(f"{where}: results_version {version!r}; this dsm reads versions "
+                         f"{', '.join(map(str, READS))} (a newer dsm wrote it: upgrade to compare)")
+    if not isinstance(doc["suite"], str):
+        raise NotResults(f"{where}: suite is {_kind(doc['suite'])}, not a suite's name")
+    _records(doc.get("cases"), where, "cases", COUNTS)
+    _records(doc.get("flicker", []), where, "flicker", ())
+    for i, rec in enumerate(doc.get("flicker", [])):
+        if "flicker_rate" not in rec:
+            raise NotResults(f"{where}: flicker[{i}] has no flicker_rate")
+        _number(rec["flicker_rate"], where, f"flicker[{i}].flicker_rate")
+    return doc
+
+
+def _records(recs, where: str, key: str, counts: tuple):
+    """Every record of list ``key`` names its case and holds whole counts."""
+    if not isinstance(recs, list):
+        raise NotResults(f"{where}: {key} is {_kind(recs)}, not a list of records")
+    for i, rec in enumerate(recs):
+        if not isinstance(rec, dict):
+            raise NotResults(f"{where}: {key}[{i}] is {_kind(rec)}, not a record (an object)")
+        missing = [n for n in NAMES if not isinstance(rec.get(n), str)]
+        if missing:
+            raise NotResults(f"{where}: {key}[{i}] has no text {missing[0]} (a record names scene, unit, light and "
+                             "contender)")
+        for c in counts:
+            if c in rec and not (isinstance(rec[c], int) and not isinstance(rec[c], bool) and rec[c] >= 0):
+                raise NotResults(f"{where}: {key}[{i}].{c} is {rec[c]!r}, not a count (a whole number >= 0)")
+        if "flip" in rec and rec["flip"] is not None:
+            _number(rec["flip"], where, f"{key}[{i}].flip")
+
+
+def _number(x, where: str, name: str):
+    """A rate: a number (NaN, written for an undefined one, included) or null."""
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        raise NotResults(f"{where}: {name} is {x!r}, not a number")
+
+
+def _kind(x) -> str:
+    """What a JSON value is, in words."""
+    if x is None:
+        return "null"
+    return {bool: "a boolean", int: "a number", float: "a number", str: "a string", list: "a list",
+            dict: "an object"}.get(type(x), type(x).__name__)
