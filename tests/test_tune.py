@@ -730,3 +730,15 @@ def test_every_scheme_spends_exactly_its_budget_of_exact_evaluations(steps):
         rows = [r for r in res.steps if r.get("instance", "").split(": ")[1].startswith(e["scheme"])]
         assert len(rows) == steps, (e["scheme"], [r["phase"] for r in rows])
         assert e["grid"]["evaluations"] <= steps
+
+
+def test_a_residual_map_s_radius_is_bounded_before_any_fit():
+    """A smoothed fit holds (2 r + 1)^2 copies of the training receivers: with 1000 of them and
+    32e6 copies at most, r = 88 fits (177^2 = 31329 copies each) and 89 does not (179^2 = 32041)."""
+    from dsm import ConfigError
+    from dsm.tune import residual_map
+    residual_map.check_budget(1000, (0, 88), "t.toml")
+    for radii in ((89,), (0, 1_000_000)):
+        with pytest.raises(ConfigError) as e:
+            residual_map.check_budget(1000, radii, "t.toml")
+        assert e.value.key == "tune.bias_map.radius" and "88 or less" in str(e.value)

@@ -164,8 +164,8 @@ def write_page(doc: dict, out: Path) -> Path:
             "shaded render under the contender's visibility against the same render under the exact one."
             if doc.get("flip_ppd") else "")
     body = (f"<h1>Shadow-bias leaderboard: {html.escape(doc['suite'])}</h1><p class=meta>{html.escape(meta)}</p>"
-            + answer(doc, ranked) + "<h2>Ranking</h2><p class=note>Scores within 0.001 tie (shared rank, by name); "
-            "every column but the offsets' reads the cases at the origin. Far change: the error at the farthest "
+            + answer(doc, ranked) + "<h2>Ranking</h2><p class=note>" + html.escape(ranking.RULE_TEXT) + " "
+            "Every column but the offsets' reads the cases at the origin. Far change: the error at the farthest "
             f"offset less the one at the origin.{html.escape(flip)}{html.escape(LEAK_NOTE)}{html.escape(flicker_note(doc))} Click a header to sort.</p>" + table(head, rows)
             + grid_section(doc) + scale_section(doc) + bias_section(doc))
     Path(out).mkdir(parents=True, exist_ok=True)

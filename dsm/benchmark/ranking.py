@@ -1,9 +1,12 @@
 """The leaderboard's numbers: the ranking with its tie rule, scale robustness, the oracle floor.
 
 A contender's score is its error rate (acne and peter-panning over receivers) averaged over every
-case it ran (scene x unit x light). Two contenders whose scores differ by less than 0.001 (0.1 %
-of receivers, the machines' rounding, :mod:`dsm.benchmark.compare`) tie: they share a rank
-(competition ranking: 1, 1, 3), listed by name. Scale spread: for each (scene, light), the largest
+case it ran (scene x unit x light). Two contenders run on the same cases, so they are compared case
+by case: a rank is shared where the data cannot tell them apart, that is where the bootstrap
+interval (RESAMPLES resamples of the cases both ran, with replacement, numpy's PCG64 seeded with
+SEED) of the mean per-case difference of their error rates, at CONFIDENCE, contains 0. Contenders
+are taken best score first; each is compared with the first of the current rank, and joins it or
+opens the next (competition ranking: 1, 1, 3); a rank's rows are listed by score, then by name. Scale spread: for each (scene, light), the largest
 minus the smallest error rate over the units, averaged; the smallest spread is the most
 scale-robust. The score and the spread read the cases at the origin only; from dsm-bench-2 on the
 far-from-origin cases (every scene at the suite's ``far_unit``, moved by each offset) give each
@@ -18,9 +21,19 @@ from __future__ import annotations
 import math
 from collections import defaultdict
 
+import numpy as np
+
 from .suite import ORIGIN
 
-TIE_RATE = 0.001
+SEED = 0
+RESAMPLES = 2000
+CONFIDENCE = 0.95
+RULE = {"test": "paired bootstrap of the mean per-case error-rate difference over the cases both ran at the origin",
+        "resamples": RESAMPLES, "seed": SEED, "confidence": CONFIDENCE}
+RULE_TEXT = (f"Two contenders share a rank where the data cannot tell them apart: the {CONFIDENCE:.0%} bootstrap "
+             f"interval ({RESAMPLES} resamples of the cases both ran at the origin, seed {SEED}) of the mean "
+             "per-case difference of their error rates contains 0; each contender is compared with the first of "
+             "its rank, and a rank's rows are listed by error rate.")
 
 
 def offset_of(rec: dict) -> str:
@@ -106,20 +119,42 @@ def flicker_by(doc: dict) -> dict:
     return {c: mean(v) for c, v in acc.items()}
 
 
+def paired_interval(a_rows: list, b_rows: list):
+    """(low, high): the bootstrap interval at CONFIDENCE of the mean over the cases both ran at the
+    origin (with a defined error rate) of b's error rate less a's; None without a shared case."""
+    key = lambda r: (r["scene"], r["unit"], r["light"])
+    a = {key(r): r["error_rate"] for r in a_rows if at_origin(r) and r["error_rate"] == r["error_rate"]}
+    b = {key(r): r["error_rate"] for r in b_rows if at_origin(r) and r["error_rate"] == r["error_rate"]}
+    shared = sorted(set(a) & set(b))
+    if not shared:
+        return None
+    d = np.array([b[k] - a[k] for k in shared], np.float64)
+    means = d[np.random.default_rng(SEED).integers(0, d.size, (RESAMPLES, d.size))].mean(axis=1)
+    low, high = np.quantile(means, [(1 - CONFIDENCE) / 2, (1 + CONFIDENCE) / 2])
+    return float(low), float(high)
+
+
+def apart(a_rows: list, b_rows: list) -> bool:
+    """Whether the cases tell b from a (the paired interval excludes 0); without a shared case, no."""
+    interval = paired_interval(a_rows, b_rows)
+    return interval is not None and (interval[0] > 0 or interval[1] < 0)
+
+
 def ranking(doc: dict) -> list:
-    """The leaderboard rows, best first: rank, contender, score, acne, peter-pan, scale spread, FLIP,
-    error per offset (``far``: offset -> error at the far unit) and the far change."""
+    """The leaderboard rows, best first: rank (RULE_TEXT), contender, score, acne, peter-pan, scale
+    spread, FLIP, error per offset (``far``: offset -> error at the far unit) and the far change."""
     far = offsets(doc) if doc.get("far_unit") else []
     flick = flicker_by(doc)
+    by_name = contender_rows(doc)
     scored = [{**scores(name, rows, doc.get("far_unit"), far), "flicker": flick.get(name)}
-              for name, rows in contender_rows(doc).items()]
+              for name, rows in by_name.items()]
     scored.sort(key=lambda s: (s["error"], s["contender"]))
     out, lead = [], None
     for i, s in enumerate(scored):
-        if lead is None or s["error"] - lead["error"] >= TIE_RATE:
+        if lead is None or apart(by_name[lead["contender"]], by_name[s["contender"]]):
             lead = {**s, "rank": i + 1}
         out.append({**s, "rank": lead["rank"]})
-    out.sort(key=lambda s: (s["rank"], s["contender"]))
+    out.sort(key=lambda s: (s["rank"], s["error"], s["contender"]))
     return out
 
 

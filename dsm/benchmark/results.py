@@ -22,7 +22,7 @@ import numpy as np
 
 from ..report import figures, io as report_io
 from ..truth import metrics
-from . import caselog, perceptual, render
+from . import caselog, perceptual, ranking, render
 from .document import RESULTS_VERSION
 from .suite import LATEST, ORIGIN, SUITE_FILES, cases, load_suite, suite_sha256, tuned_labels
 
@@ -112,15 +112,17 @@ def flicker_records(case, res, folder: str, tuned=None) -> list:
 
 
 def measured(config, variant: str | None = None, cluster: str | None = None):
-    """The Results of one of a case's configs: dsm.run here, or with ``cluster`` (a Ray address, already
-    connected by the command) its map groups as Ray tasks (dsm.experiment.cluster), into a temporary folder."""
-    import dsm
-    if cluster is None:
-        return dsm.run(config, variant=variant)
+    """The Results of one of a case's configs: run here in a temporary folder, removed after, with no
+    file but metrics.csv and run.json (the classes stay in memory for FLIP), or with ``cluster`` (a Ray
+    address, already connected by the command) its map groups as Ray tasks (dsm.experiment.cluster)."""
     import tempfile
     from .. import pipeline
-    from ..experiment import cluster as ray_run
     cfg = pipeline.prepare(config, variant)
+    if cluster is None:
+        from ..experiment.runner import Runner
+        with tempfile.TemporaryDirectory(prefix=f"dsm-{cfg.name}-") as tmp:
+            return Runner(cfg, Path(tmp), variant, progress=False, files=False).run()
+    from ..experiment import cluster as ray_run
     out = Path(tempfile.mkdtemp(prefix=f"dsm-{cfg.name}-"))
     res = ray_run.run(cfg, out, cluster, variant, progress=False)
     for row in res.rows:          # the tasks keep no class image in memory: read back from its PNG (FLIP's V)
@@ -209,7 +211,8 @@ def document(suite: dict, version: str, size: str, entries: list, cluster: str |
             "tuned": suite["contenders"].get("tuned", {}), "flicker": [f for e in entries for f in e["flicker"]],
             "cases": [r for e in entries for r in e["records"]],
             "flicker_motion": suite.get("flicker", {}).get("motion"),
-            "backend": {"name": "ray", "address": cluster} if cluster else {"name": "local"}}
+            "backend": {"name": "ray", "address": cluster} if cluster else {"name": "local"},
+            "ranking": ranking.RULE}
 
 
 def write(doc: dict, out: Path) -> Path:

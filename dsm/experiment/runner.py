@@ -65,14 +65,17 @@ class Runner:
     """Runs a config's plan into folder ``out``: each shared stage once, then each case through
     :func:`dsm.case.evaluate` into the run's sink (dsm.experiment.sink)."""
     def __init__(self, config: cfgmod.Config, out: Path, variant: str | None = None, progress: bool = True,
-                 keep_images: bool = True, resume_previous: bool = False):
+                 keep_images: bool = True, resume_previous: bool = False, files: bool = True):
         self.cfg = config
         self.out = Path(out)
         self.variant = env.use_variant(variant or config.variant)
         self.progress = progress
         self.plan = planmod.make(config)
         self.record = record.RunRecord()     # everything measured: rows, statuses, maps, rays, oracles ...
-        self.sink = Sink(self.out, self.record, config.report_images, keep_images)
+        # files=False: metrics.csv and run.json only (no image, data file or report): a caller that
+        # reads the Results and throws the folder away (dsm benchmark's cases)
+        self.files = files
+        self.sink = Sink(self.out, self.record, config.report_images, keep_images, files)
         self.builds = Builds(config, self.record)
         self.case_no = 0
         self.cases_kept = 0           # rows written again from the run being resumed (not measured here)
@@ -116,9 +119,10 @@ class Runner:
             self.bar.close()
             self._measured(t0, c0)
             self._write_run_json(force=True)      # a run ended by an error other than Ctrl-C is still "running"
-            publish.write_data(self.out, self.record)
-            self._report()
-            self._write_run_json(force=True)
+            if self.files:
+                publish.write_data(self.out, self.record)
+                self._report()
+                self._write_run_json(force=True)
         return Results(self.out, self.record.rows, self._run_json(), self.sink.images, self.record.oracle_rows,
                        self.record.curves)
 

@@ -22,10 +22,12 @@ class Sink:
     """Rows into metrics.csv and the record as cases finish; each case's images written at once
     (so a killed run keeps them), their time kept apart from measuring's."""
 
-    def __init__(self, out: Path, run_record: record.RunRecord, images_mode: str, keep_images: bool = True):
+    def __init__(self, out: Path, run_record: record.RunRecord, images_mode: str, keep_images: bool = True,
+                 files: bool = True):
         self.out = Path(out)
         self.record = run_record
-        self.images_mode = images_mode          # [report] images: "all", "errors" or "none"
+        self.files = files                      # False: no image file at all (a caller that keeps the results only)
+        self.images_mode = images_mode if files else "none"     # [report] images: "all", "errors" or "none"
         self.keep_images = keep_images
         self.images = {}                        # case id -> (H, W) class image (Results.rgb)
         self.images_s = self.images_cpu_s = 0.0  # drawing the case images: report work, not measuring
@@ -52,6 +54,7 @@ class Sink:
             per, curve, faces = result.cascades
             self.record.cascade_rows += [{**ident, **r} for r in per]
             self.record.cascade_curves.append((ident, curve))
+        if result.cascades is not None and self.files:
             folder = self.folder(ident)
             cascade_files.write_index_image(folder / f"{ident['case']}_cascade.png", ctx.setup.pixels, faces,
                                             *ctx.image_size)

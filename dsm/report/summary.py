@@ -11,9 +11,11 @@ Definitions (stated in the report, checked by tests/test_report.py against a num
 - *Mean, median, max*: of the per-case rates where the rate is defined; the undefined ones (an
   empty denominator) are left out and counted.
 - *Best in*: the number of situations (scene, light, view, resolution) where the instance's
-  error rate is the lowest of all instances (ties count for each tied instance).
+  error rate is lower than every other instance's: an outright win (a tie is no one's win).
 - *Best per scene, light and resolution*: the lowest pooled error rate over that group's cases
-  (every view), ties broken by the shorter mean time (build + lookup).
+  (every view). Instances equal on it are one answer, a tie, named in the order of their labels;
+  time never breaks a tie (a time is a measurement with noise, the counts are not).
+- Every ordering here reads counts, then labels: two identical runs say the same, word for word.
 - *Leak pooled* (only in a run with ``[map] kind``, whose rows carry the leak split): sum n_leak /
   sum n_gt_shadowed, a column of the first table beside peter-panning; a run without it keeps
   its table byte for byte.
@@ -35,15 +37,16 @@ DEFINITIONS = (
     "n_peterpan) / sum n_receivers); *mean / median / max* are over the per-case rates where they are "
     "defined, and *undefined* counts the cases left out (an empty denominator: no truly lit, no truly "
     "shadowed receiver, or none at all); times are means of the per-case kernel-time medians (ms); *best in*: "
-    "the situations (scene, light, view, resolution) where its error rate is the lowest (ties count for "
-    "each). Sorted by pooled error rate.")
+    "the situations (scene, light, view, resolution) where its error rate is lower than every other "
+    "instance's (a tie is no one's win). Sorted by pooled error rate, then by label.")
 
 LEAK_COLUMN_DEFINITION = (" *Leak pooled* ([map] kind runs): sum n_leak / sum n_gt_shadowed, the peter-panning "
                           "beyond leak_texels texels from its occluder (*Light leaking* below).")
 
 BEST_DEFINITION = ("Per scene, light and resolution: the instance with the lowest pooled error rate over "
-                   "that group's cases (every view), ties broken by the shorter mean time (build + lookup); "
-                   "its pooled error rate in brackets, and how many instances tie at it.")
+                   "that group's cases (every view), its pooled error rate in brackets. Instances equal on it "
+                   "are a tie, said as one (how many, the first by label); time never breaks a tie.")
+TIE_NAMES = 2          # a tie's cell names its first instances by label, then how many more
 
 
 def varies(rows, key) -> bool:
@@ -81,7 +84,8 @@ def _pooled(num, den):
 
 
 def best_counts(rows, multi=None) -> dict:
-    """instance key -> the number of situations where its error rate is the lowest (ties count)."""
+    """instance key -> the number of situations where its error rate is lower than every other
+    instance's (an outright win; a tie at the lowest is no one's)."""
     multi = _multi(rows) if multi is None else multi
     groups = {}
     for r in rows:
@@ -92,7 +96,9 @@ def best_counts(rows, multi=None) -> dict:
         if not scored:
             continue
         low = min(r["error_rate"] for r in scored)
-        for key in {instance_key(r, multi) for r in scored if r["error_rate"] == low}:
+        winners = {instance_key(r, multi) for r in scored if r["error_rate"] == low}
+        if len(winners) == 1:
+            key = winners.pop()
             counts[key] = counts.get(key, 0) + 1
     return counts
 
@@ -128,13 +134,14 @@ def per_instance(rows) -> list:
                 s[f"{tag}_{k}"] = v
         out.append(s)
     out.sort(key=lambda s: (not defined(s["error_pooled"]), s["error_pooled"] if defined(s["error_pooled"]) else 0,
-                            s["build_ms"] + s["lookup_ms"]))
+                            instance_label(s["key"])))
     return out
 
 
 def best_per_group(rows) -> list:
-    """Per (scene, light, resolution): the best instance by pooled error rate (ties: shorter mean time);
-    dicts with scene, light, resolution, label, error (its pooled rate), tied (how many others tie)."""
+    """Per (scene, light, resolution): the best instance by pooled error rate; dicts with scene,
+    light, resolution, label (the first by label of those at the lowest rate), error (that rate),
+    tied (how many others are at it) and labels (every one at it, by label)."""
     multi = _multi(rows)
     groups = {}
     for r in rows:
@@ -146,14 +153,15 @@ def best_per_group(rows) -> list:
         for key, rs in inst.items():
             e = _pooled(sum(r["n_acne"] + r["n_peterpan"] for r in rs), sum(r["n_receivers"] for r in rs))
             if defined(e):
-                scored.append((e, float(np.mean([r["build_ms"] + r["lookup_ms"] for r in rs])), key))
+                scored.append((e, instance_label(key)))
         if not scored:
-            out.append({"scene": scene, "light": light, "resolution": res, "label": "-", "error": math.nan, "tied": 0})
+            out.append({"scene": scene, "light": light, "resolution": res, "label": "-", "error": math.nan, "tied": 0,
+                        "labels": []})
             continue
-        scored.sort(key=lambda t: (t[0], t[1]))
-        e, _, key = scored[0]
-        out.append({"scene": scene, "light": light, "resolution": res, "label": instance_label(key), "error": e,
-                    "tied": sum(1 for t in scored[1:] if t[0] == e)})
+        e = min(t[0] for t in scored)
+        labels = sorted(label for x, label in scored if x == e)
+        out.append({"scene": scene, "light": light, "resolution": res, "label": labels[0], "error": e,
+                    "tied": len(labels) - 1, "labels": labels})
     return out
 
 
@@ -248,23 +256,38 @@ def best_pivot(rows):
 
 
 def best_cell(b) -> str:
-    """A best-per-group cell: the instance, its pooled error rate and how many tied; '' for none."""
+    """A best-per-group cell: the instance and its pooled error rate, or a tie said as one; '' for none."""
     if b is None:
         return ""
-    tied = f"; the fastest of {b['tied'] + 1} tied" if b["tied"] else ""
-    return f"{b['label']} ({rate(b['error'])}{tied})"
+    if not b["tied"]:
+        return f"{b['label']} ({rate(b['error'])})"
+    return f"{b['tied'] + 1} tied ({rate(b['error'])}): {names(b['labels'])}"
+
+
+def names(labels: list) -> str:
+    """Labels as words: all of them up to TIE_NAMES + 1, else the first TIE_NAMES and how many more."""
+    if len(labels) <= TIE_NAMES + 1:
+        return ", ".join(labels[:-1]) + " and " + labels[-1] if len(labels) > 1 else labels[0]
+    return ", ".join(labels[:TIE_NAMES]) + f" and {len(labels) - TIE_NAMES} more"
 
 
 def answer(rows) -> str:
-    """One sentence: the lowest pooled error rate over the run, and the instance most often best."""
+    """Two sentences: the lowest pooled error rate over the run (a tie said as one), and the
+    instances alone the best in the most situations (outright wins only)."""
     insts = [s for s in per_instance(rows) if defined(s["error_pooled"])]
     if not insts:
         return "No case of this run has a defined error rate."
-    low, most = insts[0], max(insts, key=lambda s: s["best_in"])
+    low = [instance_label(s["key"]) for s in insts if s["error_pooled"] == insts[0]["error_pooled"]]
+    first = (f"Lowest pooled error rate over all {len(rows)} cases: {low[0]} ({rate(insts[0]['error_pooled'])})."
+             if len(low) == 1 else f"Lowest pooled error rate over all {len(rows)} cases "
+             f"({rate(insts[0]['error_pooled'])}): a tie of {len(low)}, {names(sorted(low))}.")
     n = len({tuple(r[k] for k in SITUATION) for r in rows})
-    return (f"Lowest pooled error rate over all {len(rows)} cases: {instance_label(low['key'])} "
-            f"({rate(low['error_pooled'])}). Most often the best: {instance_label(most['key'])} "
-            f"(in {most['best_in']} of {n} situations).")
+    most = max(s["best_in"] for s in insts)
+    if most == 0:
+        return first + f" No instance is alone the best in any of the {n} situations (each best is a tie)."
+    top = sorted(instance_label(s["key"]) for s in insts if s["best_in"] == most)
+    return first + (f" Most often alone the best: {names(top)} (in {most} of {n} situations"
+                    + (" each)." if len(top) > 1 else ")."))
 
 
 def best_md(rows) -> list:
