@@ -130,13 +130,23 @@ def separable_blur(x: np.ndarray, width: int, faces: int, R: int, combine) -> np
         pad = [(0, 0)] * 3
         pad[axis] = (h, h)
         padded = np.pad(img, pad, mode="edge")
-        img = combine([np.take(padded, np.arange(k, k + R), axis=axis) for k in range(width)])
+        # the shifted copies as views of the padded image (slices, not gathered copies)
+        img = combine([padded[:, k:k + R, :] if axis == 1 else padded[:, :, k:k + R] for k in range(width)])
     return img.reshape(-1)
+
+
+def tap_sum(taps, weights=None) -> np.ndarray:
+    """0 + taps[0] + taps[1] + ... (each times its weight where given), added in place tap by tap:
+    the same additions in the same order as Python's ``sum``, without a new array per tap."""
+    acc = np.add(0, taps[0] if weights is None else weights[0] * taps[0])
+    for i in range(1, len(taps)):
+        acc += taps[i] if weights is None else weights[i] * taps[i]
+    return acc
 
 
 def box_blur(x: np.ndarray, width: int, faces: int, R: int) -> np.ndarray:
     """The separable ``width`` x ``width`` box mean (separable_blur)."""
-    return separable_blur(x, width, faces, R, lambda taps: sum(taps) / width)
+    return separable_blur(x, width, faces, R, lambda taps: tap_sum(taps) / width)
 
 
 def gaussian_weights(width: int) -> np.ndarray:
@@ -151,7 +161,7 @@ def gaussian_weights(width: int) -> np.ndarray:
 def gaussian_blur(x: np.ndarray, width: int, faces: int, R: int) -> np.ndarray:
     """The separable ``width`` x ``width`` Gaussian of gaussian_weights (separable_blur)."""
     weights = gaussian_weights(width)
-    return separable_blur(x, width, faces, R, lambda taps: sum(w * t for w, t in zip(weights, taps)))
+    return separable_blur(x, width, faces, R, lambda taps: tap_sum(taps, weights))
 
 
 BLURS = {"box": box_blur, "gaussian": gaussian_blur}
