@@ -41,7 +41,7 @@ from .core import timing
 from .truth import oracle as oracle_mod
 from .scenes import gbuffer as gbuffer_mod
 from .maps import shrink as shrink_mod
-from .truth import metrics as metrics_mod
+from .truth import leak as leak_mod, metrics as metrics_mod
 from .truth import cascades as cascade_metrics_mod
 from .scenes.camera import Camera
 from .scenes.closedness import shape_closedness
@@ -186,9 +186,10 @@ class LightSetup:
                               camera=self.camera)
         idx = mi.UInt32(np.flatnonzero(keep).astype(np.uint32))
         p, n = dr.gather(mi.Point3f, self.p, idx), dr.gather(mi.Vector3f, self.n, idx)
-        dr.eval(p, n)
+        si = None if self.si is None else dr.gather(mi.SurfaceInteraction3f, self.si, idx)
+        dr.eval(p, n, si)
         return LightSetup(self.label, self.light, self.pixels[keep], p, n, self.shape[keep], self.v_star[keep],
-                          self.occluder_dist[keep], ex, self.reference_ms, ref=ref, camera=self.camera)
+                          self.occluder_dist[keep], ex, self.reference_ms, si, ref=ref, camera=self.camera)
 
 
 def make_view(light, R, receivers_world, bbox, kind=None, cascade=None, sensor=None, scale: float = 1.0):
@@ -446,6 +447,28 @@ def oracles(th: Thresholds, v_star: np.ndarray, lam: float = 1.0) -> dict:
     b and k, objectives and rates), ``curve_world``, ``curve_texel`` and ``wrong`` (per receiver,
     wrong under the per-texel oracle: the resolution's share of the errors)."""
     return oracle_mod.oracles(th.tau, th.kappa, v_star, th.texel, lam)
+
+
+# ---------------------------------------------------------------- light leaking
+
+def deep_in_shadow(sd, setup: LightSetup, texel_world: np.ndarray, k_texels: float):
+    """Per receiver of ``setup``: whether it lies at least ``k_texels`` texels (``texel_world``:
+    a texel's size at each receiver) inside the exact shadow on its own surface (:mod:`dsm.truth.leak`,
+    traced on the exact side); False where V* lights it. None for an area light: a soft shadow's
+    inside is not one ray's."""
+    if setup.ref is not None:
+        return None
+    out = np.zeros(len(setup.pixels), bool)
+    idx = np.flatnonzero(~np.asarray(setup.v_star, bool))
+    if not len(idx) or setup.si is None:
+        return out
+    light_x, bbox_x = exact_side(sd, setup.light)
+    sel = mi.UInt32(idx.astype(np.uint32))
+    p_exact = points_np(dr.gather(mi.Point3f, setup.si.p, sel))
+    normal = points_np(dr.gather(mi.Vector3f, setup.n, sel))
+    out[idx] = leak_mod.deep_in_shadow(sd.exact, p_exact, normal, np.asarray(setup.shape)[idx],
+                                       np.asarray(texel_world)[idx], k_texels, light_x, scene_magnitude(bbox_x))
+    return out
 
 
 # ---------------------------------------------------------------- classification and metrics

@@ -38,7 +38,7 @@ def test_evaluated_counts_and_class_image_match_numpy_on_its_own_v(bias):
     assert m["n_receivers"] == v.size == len(ctx.setup.pixels)
     assert (m["n_acne"], m["n_peterpan"], m["n_gt_lit"]) == (acne.sum(), peter.sum(), v_star.sum())
     assert m["error_rate"] == pytest.approx((acne.sum() + peter.sum()) / v.size, rel=1e-12)
-    assert m["n_peterpan_contact"] + m["n_leak"] == m["n_peterpan"]
+    assert m["n_peterpan_edge"] + m["n_leak"] == m["n_peterpan"]
     # the class image: every receiver pixel carries its class, and nothing else is drawn
     classes = res.classes.ravel()
     assert res.classes.shape == (64, 64)

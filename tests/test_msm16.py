@@ -143,4 +143,4 @@ def test_unorm16_msm_is_planned_and_run_and_the_depth_cases_keep_their_unorm16(r
     assert got == sorted([("depth", "nearest", f) for f in ("float32", "unorm16")]
                          + [("msm", f"box:{w}", f) for w in (1, 3) for f in ("float32", "unorm16")])
     for r in res.rows:
-        assert record.check_row(r) is r and r["n_peterpan_contact"] + r["n_leak"] == r["n_peterpan"]
+        assert record.check_row(r) is r and r["n_peterpan_edge"] + r["n_leak"] == r["n_peterpan"]

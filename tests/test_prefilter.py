@@ -261,17 +261,18 @@ def test_unfiltered_vsm_under_one_planar_occluder_does_not_leak():
 
 # ---------------------------------------------------------------- the leak split
 
-def test_leak_split_by_the_distance_to_the_occluder_in_texels():
+def test_leak_split_by_where_the_false_light_is_in_the_shadow():
     from dsm.truth import metrics
     v = np.array([1.0, 0.6, 0.7, 0.2, 1.0, 0.0])
     v_star = np.array([False, False, False, False, True, False])
-    dist = np.array([0.05, 0.5, 0.21, 5.0, np.inf, 0.01])      # world
-    texel = np.full(6, 0.1)                                     # world per texel: 0.5, 5, 2.1, 50 texels
-    out = metrics.leak_split(v, v_star, dist, texel, 2.0)
-    # false light: receivers 0 (0.5 texel: contact), 1 (5 texels: leak), 2 (2.1: leak)
-    assert out == {"n_peterpan_contact": 1, "n_leak": 2, "peterpan_contact_rate": 1 / 5, "leak_rate": 2 / 5}
-    none = metrics.leak_split(v[4:5], v_star[4:5], dist[4:5], texel[4:5], 2.0)
+    deep = np.array([False, True, True, True, False, True])      # inside the exact shadow by k texels or more
+    out = metrics.leak_split(v, v_star, deep)
+    # false light: receivers 0 (at the shadow's edge), 1 and 2 (deep: leaks); 3 and 5 are dark, 4 truly lit
+    assert out == {"n_peterpan_edge": 1, "n_leak": 2, "peterpan_edge_rate": 1 / 5, "leak_rate": 2 / 5}
+    none = metrics.leak_split(v[4:5], v_star[4:5], deep[4:5])
     assert np.isnan(none["leak_rate"]) and none["n_leak"] == 0   # nothing shadowed: the rate is undefined
+    soft = metrics.leak_split(v, v_star, None)                    # an area light: undefined, not 0
+    assert all(np.isnan(x) for x in soft.values())
 
 
 # ---------------------------------------------------------------- config
@@ -354,7 +355,7 @@ def test_a_run_of_floating_plate_measures_each_kind_and_vsm_unfiltered_is_a_cons
     for r in res.rows:
         assert record.check_row(r) is r
         assert set(r) == record.GROUPS["core"] | record.GROUPS["map"] | record.GROUPS["prefilter"] | record.GROUPS["precision"]
-        assert r["n_peterpan_contact"] + r["n_leak"] == r["n_peterpan"]
+        assert r["n_peterpan_edge"] + r["n_leak"] == r["n_peterpan"]
         assert (r["map_kind"] == "depth") == (r["scheme"] == "constant")
         assert np.isnan(r["moments_ms"]) == (r["map_kind"] == "depth")
     depth, vsm1 = rows[("constant", "nearest")], rows[("vsm", "box:1")]
@@ -400,8 +401,8 @@ def test_stacked_plates_leak_in_the_one_texel_column_derived_by_hand():
     i.e. 2 f^2 - (1 - 2r) f + r^2 <= 0: f in [0.031, 0.326]. The window of column i_h + k (i_h:
     the last column whose centre ray meets the high plate) holds 3 - k high columns of 5: f = 0.4
     at k = 1 (not lit), f = 0.2 at k = 2 (lit), 0 beyond. So within rows and columns clear of the
-    other edges, the leak is the column i_h + 2 exactly, and it is a leak (0.25 world from the low
-    plate, about 10 texels), not contact."""
+    other edges, the leak is the column i_h + 2 exactly, and it is a leak (30 texels inside the
+    exact shadow the low plate casts), not the shadow's edge."""
     import dsm.pipeline as pl
     from dsm.truth import metrics
     from dsm.core.types import MomentSpec
@@ -425,9 +426,105 @@ def test_stacked_plates_leak_in_the_one_texel_column_derived_by_hand():
     assert region.sum() > 30 and (col[region] == i_h + 2).sum() > 3
     lit = v >= 0.5
     assert (lit[region] == (col[region] == i_h + 2)).all()
-    split = metrics.leak_split(v[region], setup.v_star[region], setup.occluder_dist[region],
-                               rx.texel_world.numpy()[region], 2.0)
-    assert split["n_leak"] == (col[region] == i_h + 2).sum() and split["n_peterpan_contact"] == 0
+    deep = pl.deep_in_shadow(sd, setup, rx.texel_world.numpy(), 2.0)
+    assert deep[region].all()                   # the ground under the low plate, 30 texels from its edges
+    split = metrics.leak_split(v[region], setup.v_star[region], deep[region])
+    assert split["n_leak"] == (col[region] == i_h + 2).sum() and split["n_peterpan_edge"] == 0
+
+
+def _plates_region(low: float, high: float, R: int = 256):
+    """stacked_plates at ``low`` and ``high``, light straight down: (scene, set-up, view, map,
+    receivers, column, i_h, ground under the low plate alone clear of its other edges)."""
+    import dsm.pipeline as pl
+    sd = pl.load_scene(pl.scene_spec({"builtin": "stacked_plates", "low": low, "high": high}), (160, 160))
+    setup = pl.light_setup(sd, pl.gbuffer(sd), sd.own_lights[0], "sun")
+    view = pl.make_view(setup.light, R, pl.points_np(setup.p), sd.bbox)
+    smap = pl.build_map(sd.scene, view)
+    rx = pl.receivers(view, setup, sd.diagonal)
+    col, row = np.floor(rx.u_map.numpy()), np.floor(rx.v_map.numpy())
+    u0, u1 = (float(view.project(mi.Point3f(x, 0.0, 0.0))[0].numpy()[0]) for x in (0.0, 0.75))
+    v_lo, v_hi = sorted(float(view.project(mi.Point3f(0.0, y, 0.0))[1].numpy()[0]) for y in (-0.75, 0.75))
+    i_h = np.ceil(u0 - 0.5) - 1
+    ground = setup.shape == sd.shape_names.index("ground")
+    region = ground & ~setup.v_star & (col > i_h) & (col < np.floor(u1) - 6) & (row > v_lo + 6) & (row < v_hi - 6)
+    return sd, setup, smap, rx, col, i_h, region
+
+
+def chebyshev_band(low: float, high: float):
+    """The window fractions f of high-plate texels that light a ground receiver under the low plate
+    alone: Chebyshev's bound with two depths z1 < z2 (D = z2 - z1) and the receiver g behind z2 is
+    V = f(1-f) D^2 / (f(1-f) D^2 + (g + f D)^2) >= 0.5 exactly when 2 f^2 - (1 - 2r) f + r^2 <= 0,
+    r = g / D (the depth normalization cancels); (f_lo, f_hi), or None where it has no solution
+    (D / g < 2 + 2 sqrt 2)."""
+    r = low / (high - low)
+    disc = (1 - 2 * r) ** 2 - 8 * r * r
+    if disc < 0:
+        return None
+    return ((1 - 2 * r) - np.sqrt(disc)) / 4, ((1 - 2 * r) + np.sqrt(disc)) / 4
+
+
+@pytest.mark.parametrize("low, high, W", [(0.25, 2.0, 5), (0.25, 2.0, 9), (0.1, 2.0, 15), (1.0, 2.0, 9),
+                                          (0.5, 2.0, 9)])
+def test_the_vsm_leak_is_chebyshevs_band_and_nothing_where_the_band_has_no_solution(low, high, W):
+    """The ground receivers under the low plate alone that VSM lights and the probes find deep in
+    the exact shadow: their columns are those whose W-window holds a fraction f_j = ((W+1)/2 - j)/W
+    of high-plate columns (column i_h + j) inside the derived band, to within one column at either
+    edge; where the band has no solution (D / g = 1 and 3 here) no receiver leaks."""
+    import dsm.pipeline as pl
+    from dsm.core.types import MomentSpec
+    from dsm.prefilter import vsm
+    from dsm.truth import metrics
+    sd, setup, smap, rx, col, i_h, region = _plates_region(low, high)
+    spec = MomentSpec("vsm", vsm.Params(min_variance=1e-4), W)
+    v, _ = pl.moment_visibility(spec, rx, pl.moment_map(spec, smap, "float32"), smap)
+    deep = pl.deep_in_shadow(sd, setup, rx.texel_world.numpy(), 2.0)
+    leak = metrics.leak_mask(v.numpy(), setup.v_star, deep)
+    assert region.sum() > 100 and deep[region].all()
+    got = sorted({int(c - i_h) for c in col[region & leak]})
+    band = chebyshev_band(low, high)
+    if band is None:
+        assert got == [] and high / low - 1 < 2 + 2 * np.sqrt(2)
+        return
+    want = [j for j in range(1, (W + 1) // 2 + 1) if band[0] <= ((W + 1) / 2 - j) / W <= band[1]]
+    assert want and got, (band, want, got)
+    assert abs(got[0] - want[0]) <= 1 and abs(got[-1] - want[-1]) <= 1, (band, want, got)
+
+
+@pytest.mark.parametrize("kind, params", [("esm", {}), ("evsm", {}), ("msm", {})])
+def test_esm_evsm_and_msm_do_not_leak_where_vsm_does(kind, params):
+    """The same two occluders (D / g = 7, VSM's band f in [0.031, 0.326]): ESM's bound
+    (f e^(c z1) + (1 - f) e^(c z2)) e^(-c t) <= e^(-c g) is below 0.5 once c g > ln 2 (c = 80, g
+    about 0.1 normalized: 8); EVSM's warp e^(c z) stretches g against D (r = g_w / D_w >> 1, no
+    solution); MSM's four moments hold both depths, both in front of the receiver (V 0 up to its
+    moment bias). None of the three lights a receiver deep in this shadow."""
+    import dsm.pipeline as pl
+    from dsm.core.types import MomentSpec
+    from dsm.prefilter import get
+    from dsm.truth import metrics
+    sd, setup, smap, rx, col, i_h, region = _plates_region(0.25, 2.0)
+    spec = MomentSpec(kind, get(kind).Params(**params), 9)
+    v, _ = pl.moment_visibility(spec, rx, pl.moment_map(spec, smap, "float32"), smap)
+    deep = pl.deep_in_shadow(sd, setup, rx.texel_world.numpy(), 2.0)
+    leak = metrics.leak_mask(v.numpy(), setup.v_star, deep)
+    assert region.sum() > 100 and not leak[region].any()
+
+
+def test_an_outline_error_of_a_depth_map_is_never_a_leak(run_dict):
+    """Schemes without bias and with biases below the occluders' gaps (0.2 and 0.25 world), nearest
+    and PCF, on the plates (whose high plate's shadow outline runs along the low plate's own edge)
+    and the floating plate (its occluder far above the ground: the old distance-to-occluder split
+    called every outline error there a leak): a depth map's peter-panning is at the shadow's edge,
+    never leak. A bias beyond the gap (0.3) lights the ground deep inside the shadow: that is leak."""
+    res = run_dict(base_config(scene=[{"builtin": "stacked_plates"}, {"builtin": "floating_plate"}],
+                               camera={"resolution": [64, 64]},
+                               map={"resolution": [64, 256], "kind": ["depth"], "filter": ["nearest", "pcf_bilinear"]},
+                               scheme=[{"name": "constant", "bias": [0.0, 0.1, 0.3]}, {"name": "normal_offset"},
+                                       {"name": "receiver_plane"}, {"name": "slope_scaled"}]))
+    within = [r for r in res.rows if r["params"] != "bias=0.3"]
+    assert sum(r["n_peterpan"] for r in within) > 20          # outline errors there are, and none leaks
+    assert all(r["n_leak"] == 0 and r["n_peterpan_edge"] == r["n_peterpan"] for r in within)
+    beyond = [r for r in res.rows if r["params"] == "bias=0.3" and r["resolution"] == 256]
+    assert all(r["n_leak"] > 0 for r in beyond)
 
 
 def test_msm_where_float32_leaves_the_system_singular_falls_back_to_chebyshev():
@@ -614,13 +711,13 @@ def test_the_summary_pools_the_leak_split_per_instance():
     from dsm.report import summary
     base = {"preset": "", "format": "float32", "cascade_layout": ""}
     rows = [{**base, "scheme": "vsm", "params": "min_variance=0.0001", "filter": "box:3", "map_kind": "vsm",
-             "n_gt_shadowed": 100, "n_peterpan": 10, "n_peterpan_contact": 4, "n_leak": 6, "mean_abs_error": 0.02,
+             "n_gt_shadowed": 100, "n_peterpan": 10, "n_peterpan_edge": 4, "n_leak": 6, "mean_abs_error": 0.02,
              "moments_ms": 3.0},
             {**base, "scheme": "vsm", "params": "min_variance=0.0001", "filter": "box:3", "map_kind": "vsm",
-             "n_gt_shadowed": 300, "n_peterpan": 2, "n_peterpan_contact": 2, "n_leak": 0, "mean_abs_error": 0.04,
+             "n_gt_shadowed": 300, "n_peterpan": 2, "n_peterpan_edge": 2, "n_leak": 0, "mean_abs_error": 0.04,
              "moments_ms": 5.0},
             {**base, "scheme": "constant", "params": "bias=1 texel", "filter": "nearest", "map_kind": "depth",
-             "n_gt_shadowed": 50, "n_peterpan": 1, "n_peterpan_contact": 1, "n_leak": 0, "mean_abs_error": 0.01,
+             "n_gt_shadowed": 50, "n_peterpan": 1, "n_peterpan_edge": 1, "n_leak": 0, "mean_abs_error": 0.01,
              "moments_ms": float("nan")}]
     lines = summary.leak_md(rows)
     # vsm: leak 6 / 400 = 0.015, contact 6 / 400, peter-pan 12 / 400 = 0.03, mae (0.02 + 0.04) / 2, moments 4 ms
@@ -688,8 +785,8 @@ def test_motion_of_a_pre_filtered_map_frame_by_frame_equals_still_runs_at_each_c
 
 
 def test_the_error_image_paints_the_leaks_in_their_own_colour(run_dict):
-    """With the leak split, each leaking receiver (peter-panned farther than leak_texels from its
-    occluder) is the LEAK class, one pixel per n_leak, written in LEAK's colour; folded back it is
+    """With the leak split, each leaking receiver (peter-panned at least leak_texels inside the
+    exact shadow) is the LEAK class, one pixel per n_leak, written in LEAK's colour; folded back it is
     peter-panning, so the image counts stay those of metrics.csv."""
     from PIL import Image
     from dsm.report import figures
@@ -823,3 +920,29 @@ def test_mipmaps_takes_booleans_only(value):
     with pytest.raises(config.ConfigError) as e:
         config.parse(base_config(map={"kind": ["vsm"], "mipmaps": value}), "<test>")
     assert e.value.key == "map.mipmaps"
+
+
+def test_the_box_blur_is_the_clamped_window_mean_tap_by_tap_to_the_bit():
+    """The separable box blur against its definition written out here: per axis, each texel's
+    window of W texels (clamped at the face's edge) summed from 0 in window order, then / W; 30
+    decades of values and signed zeros, as the exponential moments hold them."""
+    from dsm.prefilter import base
+    rng = np.random.default_rng(3)
+    faces, R, W = 2, 9, 5
+    x = np.exp(rng.normal(0, 20, faces * R * R))
+    x[::5] = -x[::5]
+    x[::7] = -0.0
+    h = W // 2
+    img = x.reshape(faces, R, R).copy()
+    for axis in (1, 2):
+        out = np.empty_like(img)
+        for f in range(faces):
+            for i in range(R):
+                for j in range(R):
+                    acc = 0
+                    for k in range(-h, h + 1):
+                        ii, jj = (min(max(i + k, 0), R - 1), j) if axis == 1 else (i, min(max(j + k, 0), R - 1))
+                        acc = acc + img[f, ii, jj]
+                    out[f, i, j] = acc / W
+        img = out
+    assert base.box_blur(x, W, faces, R).tobytes() == img.reshape(-1).tobytes()

@@ -8,7 +8,7 @@ COMMON = {"preset": "", "format": "float32", "cascade_layout": "", "scene": "sta
 def _row(scheme, params, filt, kind, shadowed, peterpan, leak):
     """A result row with the counts the summary reads; its rates from those counts."""
     r = {**COMMON, "scheme": scheme, "params": params, "filter": filt, "map_kind": kind, "n_gt_shadowed": shadowed,
-         "n_peterpan": peterpan, "n_peterpan_contact": peterpan - leak, "n_leak": leak, "mean_abs_error": 0.01,
+         "n_peterpan": peterpan, "n_peterpan_edge": peterpan - leak, "n_leak": leak, "mean_abs_error": 0.01,
          "moments_ms": 2.0 if kind != "depth" else float("nan"), "n_receivers": 200 + shadowed}
     r.update(acne_rate=r["n_acne"] / r["n_gt_lit"], peterpan_rate=peterpan / shadowed,
              error_rate=(r["n_acne"] + peterpan) / r["n_receivers"])

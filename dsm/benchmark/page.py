@@ -10,8 +10,9 @@ from ..report.html import CSS, SCRIPT
 from ..schemes.presets import PRESETS
 from . import bias_units, figure, ranking
 
-LEAK_NOTE = (" Leak rate (pre-filtered maps only, '-' for the depth map's contenders): their receivers lit far "
-             "from their occluder (n_leak) summed over the cases at the origin, over the summed shadowed receivers "
+LEAK_NOTE = (" Leak rate (pre-filtered maps only, '-' for the depth map's contenders): their receivers lit at "
+             "least 2 texels inside the exact shadow on their own surface (n_leak; an outline error is never "
+             "a leak) summed over the cases at the origin, over the summed shadowed receivers "
              "of V*. A pre-filtered contender (kind, an engine's preset of it where named, and blur; else the kind's "
              "defaults) has no cascades: its directional light gets one map.")
 

@@ -14,7 +14,7 @@ from ..core.types import MomentSpec
 #   attached  the attached-shadow receivers' V (backface_lit_rate) and the plane fallbacks
 #   contact   the screen-space contact march after the lookup ([contact])
 #   cascade   per cascade: counts, texels per pixel, the distance curve
-#   leak      peter-panning split into contact and leak ([map] kind given)
+#   leak      peter-panning split into the shadow's edge and leak deep inside it ([map] kind given)
 MEASURES = frozenset({"seams", "split", "attached", "contact", "cascade", "leak"})
 
 
@@ -68,7 +68,8 @@ class MapContext:
     backfacing: dict = field(default_factory=dict)   # format -> attached-shadow Receiver, or None
     seam_texels: np.ndarray | None = None            # texels to a face seam per receiver
     wrong: dict = field(default_factory=dict)        # format -> wrong under the per-texel oracle, or None
-    leak_texels: float = float("nan")                # [map] leak_texels: contact within, leak beyond
+    leak_texels: float = float("nan")                # [map] leak_texels: an edge within, leak deeper inside
+    deep: dict = field(default_factory=dict)         # format -> deep in the exact shadow per receiver (made once)
     moments: Callable | None = None   # (MomentSpec, format) -> (MomentMap, its build Timing or None)
     march: Callable | None = None     # Receiver -> (occluded per receiver, the march's Timing)
 

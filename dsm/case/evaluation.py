@@ -70,10 +70,10 @@ def evaluate(ctx: MapContext, case: Case, looked=None, attached=None) -> CaseRes
     measured["texel_size"] = float(np.median(texel_world)) if receivers is not None else metrics.UNDEFINED
     leak = None
     if "leak" in ctx.measures:
-        s = ctx.setup
-        measured.update(metrics.leak_split(v, s.v_star, s.occluder_dist, texel_world, ctx.leak_texels))
-        if receivers is not None:      # the leaks in their own colour
-            leak = metrics.leak_mask(v, s.v_star, s.occluder_dist, texel_world, ctx.leak_texels)
+        deep = _deep(ctx, case.format, texel_world)
+        measured.update(metrics.leak_split(v, ctx.setup.v_star, deep))
+        if receivers is not None and deep is not None:      # the leaks in their own colour
+            leak = metrics.leak_mask(v, ctx.setup.v_star, deep)
     result.classes = _class_image(ctx, v, _wrong(ctx, case), leak)
     return result
 
@@ -133,6 +133,14 @@ def _attached(ctx: MapContext, case: Case, look, attached) -> dict:
     return {"n_backfacing": int(v_back.size),
             "backface_lit_rate": float((v_back >= 0.5).mean()) if v_back.size else metrics.UNDEFINED,
             "n_plane_fallback": fallbacks if uses_plane else metrics.UNDEFINED}
+
+
+def _deep(ctx: MapContext, fmt: str, texel_world: np.ndarray):
+    """Per receiver, deep in the exact shadow (dsm.truth.leak): probed once per stored format's
+    receivers (every case of the map shares them), None for an area light."""
+    if fmt not in ctx.deep:
+        ctx.deep[fmt] = pipeline.deep_in_shadow(ctx.scene, ctx.setup, texel_world, ctx.leak_texels)
+    return ctx.deep[fmt]
 
 
 def _class_image(ctx: MapContext, v, wrong, leak) -> np.ndarray:

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 TEXT, INT, FLOAT = "text", "int", "float"
 
 # the leak split's columns (dsm.truth.metrics.leak_split) and an area light's (dsm.truth.metrics.soft)
-LEAK_COLUMNS = ("n_peterpan_contact", "n_leak", "peterpan_contact_rate", "leak_rate")
+LEAK_COLUMNS = ("n_peterpan_edge", "n_leak", "peterpan_edge_rate", "leak_rate")
 SOFT_COLUMNS = ("n_umbra", "n_penumbra", "n_lit", "rmse", "mae_umbra", "mae_penumbra", "mae_lit", "rmse_umbra",
                 "rmse_penumbra", "rmse_lit", "ref_half_width_mean", "ref_half_width_max", "ref_samples_mean")
 

@@ -315,7 +315,7 @@ class MapSpec:
     kind: tuple = ("depth",)    # map kinds (MAP_KINDS): depth runs the [[scheme]]s, the others their moments
     moments: tuple = ()         # MomentSpec instances of the pre-filtered kinds (dsm.prefilter)
     leak_split: bool = False    # kind given: every case splits its peter-panning into contact and leak
-    leak_texels: float = 2.0    # the split: peter-panning farther than this from its occluder is a leak
+    leak_texels: float = 2.0    # the split: peter-panning this many texels inside the exact shadow is a leak
 
     def resolutions_for(self, faces: int) -> tuple:
         """Per-face resolutions of a view with ``faces`` faces (from ``texels`` when given)."""

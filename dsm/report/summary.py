@@ -40,8 +40,8 @@ DEFINITIONS = (
     "the situations (scene, light, view, resolution) where its error rate is lower than every other "
     "instance's (a tie is no one's win). Sorted by pooled error rate, then by label.")
 
-LEAK_COLUMN_DEFINITION = (" *Leak pooled* ([map] kind runs): sum n_leak / sum n_gt_shadowed, the peter-panning "
-                          "beyond leak_texels texels from its occluder (*Light leaking* below).")
+LEAK_COLUMN_DEFINITION = (" *Leak pooled* ([map] kind runs): sum n_leak / sum n_gt_shadowed, the false light at "
+                          "least leak_texels texels inside the exact shadow (*Light leaking* below).")
 
 BEST_DEFINITION = ("Per scene, light and resolution: the instance with the lowest pooled error rate over "
                    "that group's cases (every view), its pooled error rate in brackets. Instances equal on it "
@@ -209,8 +209,11 @@ def summary_md(rows) -> list:
     return out
 
 
-LEAK_DEFINITION = ("A run that gives [map] kind splits each case's peter-panning by the receiver's distance to "
-                   "its exact occluder: *contact* within leak_texels texels, *leak* beyond (light leaking). Per "
+LEAK_DEFINITION = ("A run that gives [map] kind splits each case's peter-panning by where it is in the exact "
+                   "shadow: *edge* within leak_texels texels of an exactly lit point of the receiver's own surface "
+                   "(the shadow's outline, which resolution and bias decide), *leak* deeper inside (light leaking: "
+                   "false light the filtered statistics let through; exact shadow rays around the receiver tell "
+                   "the two). Per "
                    "scheme instance (a pre-filtered kind's filter is its blur box:W): pooled over its cases, each "
                    "over sum n_gt_shadowed; mean abs error: the mean of the cases' mean |V - V*|; moments ms: the "
                    "mean build of a pre-filtered map's moments and blur. Sorted by pooled leak rate.")
@@ -231,13 +234,13 @@ def leak_md(rows) -> list:
         s = {"scheme": key[0], "params": key[1], **dict(zip(multi, key[2:]))}
         table.append(([str(s[h]) for h in head], rs[0]["map_kind"], len(rs),
                       _pooled(sum(r["n_peterpan"] for r in rs), shadowed),
-                      _pooled(sum(r["n_peterpan_contact"] for r in rs), shadowed),
+                      _pooled(sum(r["n_peterpan_edge"] for r in rs), shadowed),
                       _pooled(sum(r["n_leak"] for r in rs), shadowed),
                       _stats([r["mean_abs_error"] for r in rs])["mean"],
                       _stats([r["moments_ms"] for r in rs])["mean"]))
     table.sort(key=lambda t: (not defined(t[5]), t[5] if defined(t[5]) else 0))
     out = ["", "## Light leaking", "", LEAK_DEFINITION, "",
-           "| " + " | ".join(head) + " | map kind | cases | peter-pan pooled | contact pooled | leak pooled | "
+           "| " + " | ".join(head) + " | map kind | cases | peter-pan pooled | edge pooled | leak pooled | "
            "mean abs error | moments ms |", "|---" * (len(head) + 7) + "|"]
     for cells, kind, n, pp, contact, leak, mae, mom in table:
         out.append("| " + " | ".join(cells) + f" | {kind} | {n} | {rate(pp)} | {rate(contact)} | {rate(leak)} | "

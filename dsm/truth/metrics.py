@@ -95,24 +95,26 @@ def compute(v: np.ndarray, v_star: np.ndarray, rx_shape: np.ndarray, tap_shape: 
 
 
 
-def leak_split(v, v_star, occluder_dist_world, texel_world, leak_texels: float) -> dict:
-    """A case's peter-panning (V* = 0, V >= 0.5) split by the distance to the exact occluder
-    in texels at the receiver: contact within ``leak_texels``, leak beyond it. The two add up
-    to n_peterpan; their rates are over n_gt_shadowed (NaN where nothing is shadowed)."""
+def leak_split(v, v_star, deep) -> dict:
+    """A case's peter-panning (V* = 0, V >= 0.5) split by where it is in the exact shadow: *edge*
+    within leak_texels texels of an exactly lit point of the receiver's own surface, *leak* deeper
+    inside (``deep``: :func:`dsm.pipeline.deep_in_shadow` per receiver; None, an area light's
+    soft shadow: undefined). The two add up to n_peterpan; their rates are over n_gt_shadowed
+    (NaN where nothing is shadowed)."""
+    if deep is None:
+        return {k: UNDEFINED for k in LEAK_COLUMNS}
     v_star = np.asarray(v_star, bool)
     peter = ~v_star & (np.asarray(v, np.float64) >= 0.5)
-    leak = leak_mask(v, v_star, occluder_dist_world, texel_world, leak_texels)
-    n_contact, n_leak, n_shadow = int((peter & ~leak).sum()), int(leak.sum()), int((~v_star).sum())
-    return {"n_peterpan_contact": n_contact, "n_leak": n_leak,
-            "peterpan_contact_rate": _rate(n_contact, n_shadow), "leak_rate": _rate(n_leak, n_shadow)}
+    leak = leak_mask(v, v_star, deep)
+    n_edge, n_leak, n_shadow = int((peter & ~leak).sum()), int(leak.sum()), int((~v_star).sum())
+    return {"n_peterpan_edge": n_edge, "n_leak": n_leak,
+            "peterpan_edge_rate": _rate(n_edge, n_shadow), "leak_rate": _rate(n_leak, n_shadow)}
 
 
-def leak_mask(v, v_star, occluder_dist_world, texel_world, leak_texels: float) -> np.ndarray:
-    """The receivers that leak: peter-panned (V* = 0, V >= 0.5) farther than ``leak_texels``
-    texels at the receiver from their exact occluder."""
+def leak_mask(v, v_star, deep) -> np.ndarray:
+    """The receivers that leak: peter-panned (V* = 0, V >= 0.5) and deep in the exact shadow."""
     peter = ~np.asarray(v_star, bool) & (np.asarray(v, np.float64) >= 0.5)
-    dist_texels = np.asarray(occluder_dist_world, np.float64) / np.asarray(texel_world, np.float64)
-    return peter & ~(dist_texels <= leak_texels)
+    return peter & np.asarray(deep, bool)
 
 
 def classify(v, v_star, resolution=None, leak=None) -> np.ndarray:
