@@ -51,6 +51,14 @@ def test_a_local_two_worker_cluster_writes_the_rows_of_a_local_run(tmp_path):
     assert files(tmp_path / "ray") == files(tmp_path / "local") and len(files(tmp_path / "local")) == 2 * 16
     assert (tmp_path / "ray" / "oracle.csv").read_text().count("\n") == \
         (tmp_path / "local" / "oracle.csv").read_text().count("\n")
+    # what accuracy costs in time survives the tasks: every time the local run measured, the tasks measured
+    import csv
+    with open(tmp_path / "ray" / "metrics.csv", newline="") as fh:
+        ray_rows = {r["case"]: r for r in csv.DictReader(fh)}
+    for r in local.rows:
+        for col in ("build_ms", "build_first_ms", "lookup_ms", "reference_ms"):
+            if r[col] > 0:
+                assert float(ray_rows[r["case"]][col]) > 0, (r["case"], col)
 
 
 def test_the_execution_table_is_checked():

@@ -402,8 +402,8 @@ def test_an_obj_cut_mid_record_is_refused_naming_the_line(tmp_path, capsys, tail
     ({"map": {"resolution": 64, "filter": ["nearest", "pcss", "nearest"]}}, "map.filter", ("nearest is given twice",)),
     ({"map": {"resolution": 64, "format": ["unorm16", "unorm16"]}}, "map.format", ("unorm16 is given twice",)),
     # "1 texel" and "1.0 texel" are one length: the same instance twice
-    ({"scheme": [{"name": "constant", "bias": ["1 texel", "2 texel", "1.0 texel"]}]}, "scheme[0]",
-     ("constant bias=1 texel", "given twice in its sweep")),
+    ({"scheme": [{"name": "constant", "bias": ["1 texel", "2 texel", "1.0 texel"]}]}, "scheme[0].bias",
+     ("'1.0 texel' is given twice", "as '1 texel'")),
     ({"scheme": [{"name": "none"}, {"name": "constant", "bias": 0.1}, {"name": "constant", "bias": [0.2, 0.1]}]},
      "scheme[2]", ("constant bias=0.1", "already scheme[1]'s")),
 ])

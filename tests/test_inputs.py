@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import cli_run as _cli
+from conftest import base_config, cli_run as _cli
 
 from dsm import cli
 from dsm.config import read as config
@@ -489,3 +489,62 @@ def test_scale_beyond_float32_normals_is_refused(run_dict):
     res = run_dict({**base, "scene": [{"builtin": "plane_box", "scale": [1.0, 1e8]}]})
     a, b = res.rows
     assert a["n_receivers"] > 500 and abs(a["n_receivers"] - b["n_receivers"]) <= 5
+
+
+@pytest.mark.parametrize("over, key", [
+    ({"map": {"resolution": 32, "kind": ["depth", "vsm"], "blur": [3, 3]}}, "map.blur"),
+    ({"map": {"resolution": 32, "kind": ["depth", "vsm"], "vsm": {"preset": ["three", "three"]}}}, "map.vsm.preset"),
+    ({"map": {"resolution": 32, "kind": ["depth", "vsm"], "vsm": {"min_variance": [1e-4, 1e-4]}}},
+     "map.vsm.min_variance"),
+    ({"scene": [{"builtin": "plane_box", "translate": [[0, 0, 0], [0, 0, 0]]}]}, "scene[0].translate"),
+    ({"map": {"resolution": 32, "kind": ["depth", "evsm"], "evsm": {"moments": 2, "negative": 10}}},
+     "map.evsm.negative"),
+    ({"map": {"resolution": 32, "kind": ["depth", "vsm"], "vsm": {"min_variance": 1e39}}}, "map.vsm.min_variance"),
+    ({"contact": {"length": 0.1, "length_depth_min": 0.5}}, "contact.length_depth_min"),
+])
+def test_silent_input_is_refused_naming_the_key(over, key):
+    """A value given twice would run and pool the same cases twice; a key the chosen mode does not
+    read, or a minimum variance no depth distribution on [0, 1] reaches (V NaN), would pass unseen."""
+    from dsm.config import read as config
+    with pytest.raises(config.ConfigError) as e:
+        config.parse(base_config(**over), "<test>")
+    assert e.value.key == key and "\n" not in str(e.value), str(e.value)
+
+
+ORTHO_XML = """<scene version="3.0.0">
+  <sensor type="orthographic">
+    <transform name="to_world"><scale x="3" y="3"/><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="32"/><integer name="height" value="24"/></film>
+  </sensor>
+  <emitter type="directional"><vector name="direction" x="0.2" y="0.1" z="-1"/></emitter>
+  <shape type="rectangle"><transform name="to_world"><scale value="4"/></transform></shape>
+  <shape type="cube"><transform name="to_world"><scale value="0.5"/><translate z="0.6"/></transform></shape>
+</scene>
+"""
+
+
+def test_an_orthographic_sensor_keeps_its_projection_or_is_refused(tmp_path):
+    """[camera] resolution keeps an XML scene's orthographic sensor orthographic (every pixel's ray
+    along one direction); the pose keys, which aim a pinhole camera, are refused naming the key."""
+    import numpy as np
+    from dsm import pipeline as pl
+    from dsm.config import read as config
+    xml = tmp_path / "ortho.xml"
+    xml.write_text(ORTHO_XML)
+    sd = pl.load_scene(pl.scene_spec({"file": str(xml)}), (64, 64))
+    assert "Orthographic" in str(sd.sensor) and tuple(sd.sensor.film().size()) == (64, 48)
+    gb = pl.gbuffer(sd)
+    hit = np.flatnonzero(gb.hit)
+    p = pl.points_np(gb.p)[hit]
+    col, row = hit % gb.width, hit // gb.width
+    # parallel rays straight down: a hit's x and y are linear in its pixel's column and row whatever its
+    # height (fitted on the ground, the cube's top follows the same line; a pinhole's would not)
+    top, ground = p[:, 2] > 0.5, p[:, 2] < 0.01
+    assert top.sum() > 20 and ground.sum() > 100
+    for coord, pix in ((0, col), (1, row)):
+        a, b = np.polyfit(pix[ground], p[ground, coord], 1)
+        assert np.abs(a * pix[top] + b - p[top, coord]).max() < 1e-4
+    cfg = base_config(scene=[{"file": str(xml)}], camera={"resolution": [32, 32], "position": [0, -4, 3]})
+    with pytest.raises(config.ConfigError) as e:
+        pl.prepare(config.parse(cfg, "<test>"))
+    assert e.value.key == "camera.position" and "orthographic" in str(e.value)

@@ -167,7 +167,7 @@ def test_bias_map_and_output_folder(tmp_path):
     from dsm.tune import tuner as tu
     cfg = _cfg({"builtin": "floating_plate"}, [{"name": "constant", "bias": 0.02},
                                                {"name": "normal_offset", "offset": "1 texel", "bias": 0.01}],
-               {"steps": 15, "camera": CAMS, "bias_map": {"block": 2, "steps": 15}}, R=32, cam=32)
+               {"steps": 15, "camera": CAMS, "bias_map": {"fit": "adam", "block": 2, "steps": 15}}, R=32, cam=32)
     res = tu.tune(cfg, out=tmp_path)
     bm = res.bias_map
     # no bias per texel beats the per-texel oracle of the same views

@@ -106,7 +106,7 @@ def test_neighbour_margins_are_the_depth_test_at_each_tap():
 
 
 @pytest.mark.parametrize("bias_map,key", [
-    ({"width": [1.0]}, "tune.bias_map.width"),                          # edge keys only with fit = "edge"
+    ({"fit": "adam", "width": [1.0]}, "tune.bias_map.width"),           # edge keys only with fit = "edge"
     ({"fit": "residual", "grazing": [0.5]}, "tune.bias_map.grazing"),
     ({"fit": "edge", "width": [0.5]}, "tune.bias_map.width"),           # could miss every tap
     ({"fit": "edge", "width": [2.0]}, "tune.bias_map.width"),           # beyond the 3 x 3 taps
@@ -276,7 +276,7 @@ def test_edge_samples_keys():
                       ({"fit": "edge", "samples": 2.5}, "tune.bias_map.samples"),
                       ({"fit": "edge", "layers": 0}, "tune.bias_map.layers"),
                       ({"fit": "residual", "samples": 2}, "tune.bias_map.samples"),
-                      ({"samples": 2}, "tune.bias_map.samples")):
+                      ({"fit": "adam", "samples": 2}, "tune.bias_map.samples")):
         with pytest.raises(ConfigError) as e:
             parse(bmap)
         assert e.value.key == key

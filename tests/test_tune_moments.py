@@ -154,3 +154,23 @@ def test_a_tune_of_pre_filtered_maps_alone_resumes(tmp_path):
     first = tune(_cfg(["vsm"], [1], steps=6), out=tmp_path)
     again = tune(_cfg(["vsm"], [1], steps=6), out=tmp_path, resume=True)
     assert [e["values"] for e in again.moments] == [e["values"] for e in first.moments]
+
+
+def test_a_learned_map_over_the_best_depth_scheme_is_refused_without_one_and_edge_is_the_default():
+    """The edge and residual maps are fitted over the best tuned depth scheme: a tune of pre-filtered
+    instances alone has none, and was silently given the Adam map; now it is refused naming the key.
+    [tune.bias_map] without fit is the edge map (the fit that beats the best global scheme held out)."""
+    from dsm import ConfigError
+    from dsm.config.read import coerce
+    from dsm.tune.tuner import parse_tune, tune
+    cams = [{"position": [2.5, -3.0, 2.0], "target": [0, 0, 0.3]}, {"position": [3.0, 2.5, 2.0], "target": [0, 0, 0.3]},
+            {"position": [-2.5, -3.0, 2.0], "target": [0, 0, 0.3], "role": "heldout"}]
+    cfg = _cfg(["vsm"], [1])
+    cfg["tune"]["camera"] = cams
+    cfg["tune"]["bias_map"] = {}
+    assert parse_tune(coerce(cfg)).spec.bias_map.fit == "edge"
+    for fit in ("edge", "residual"):
+        cfg["tune"]["bias_map"] = {"fit": fit}
+        with pytest.raises(ConfigError) as e:
+            tune(cfg)
+        assert e.value.key == "tune.bias_map.fit" and "depth scheme" in str(e.value)

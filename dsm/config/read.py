@@ -308,6 +308,10 @@ def _parse_contact(raw: dict, source: str, motion: bool):
     for k, v in t.items():
         if isinstance(v, list):
             raise ConfigError(source, f"contact.{k}", f"give one value (contact parameters are not swept), got {v!r}")
+    if "length_depth_min" in t and "length_depth_scale" not in t:     # read only where the length grows with depth
+        raise ConfigError(source, "contact.length_depth_min", "is read only with length_depth_scale > 0 (the length "
+                          "grows with depth): give length_depth_scale, or remove length_depth_min",
+                          ("length_depth_scale",))
     spec = sweep_params(ContactSpec, t, source, "contact")[0]
     if spec.steps > CONTACT_MAX_STEPS:
         raise ConfigError(source, "contact.steps", f"must be <= {CONTACT_MAX_STEPS}, got {spec.steps}")
@@ -464,6 +468,7 @@ def _parse_moments(m: dict, kinds, formats, source: str) -> tuple:
         raise ConfigError(source, "map.blur", "empty list")
     if any(w % 2 == 0 for w in blurs):
         raise ConfigError(source, "map.blur", f"a box width is odd (centred on the texel), got {blurs}")
+    once(blurs, source, "map.blur")
     for key in ("blur", "blur_kernel", "moment_samples", "mipmaps"):
         if key in m and kinds == ("depth",):
             raise ConfigError(source, f"map.{key}", f"{KIND_KEY_ROLES[key]}; map.kind names no pre-filtered map",
@@ -479,6 +484,8 @@ def _parse_moments(m: dict, kinds, formats, source: str) -> tuple:
     if not mips or not all(isinstance(x, bool) for x in mips):
         raise ConfigError(source, "map.mipmaps", f"expected true, false or a list of them, got {m.get('mipmaps')!r}",
                           ("true", "false"))
+    for key, vals in (("map.blur_kernel", kernels), ("map.moment_samples", samples), ("map.mipmaps", mips)):
+        once(vals, source, key)
     out = []
     for name in kinds:
         if name == "depth":
@@ -495,9 +502,22 @@ def _parse_moments(m: dict, kinds, formats, source: str) -> tuple:
             presets = [(None, p) for p in sweep_params(prefilter.get(name).Params, t, source, f"map.{name}")]
         for _, p in presets:
             prefilter.check(name, p, formats, source, f"map.{name}")
+            _check_read(t, p, source, f"map.{name}")
         out += [MomentSpec(name, p, w, preset, k, n, mp) for preset, p in presets for w in blurs for k in kernels
                 for n in samples for mp in mips]
     return tuple(out)
+
+
+def _check_read(table: dict, params, source: str, where: str):
+    """ConfigError for a key ``table`` gives that ``params`` does not read (its field's ``read_when``:
+    (another field, the value under which it is read))."""
+    import dataclasses
+    for f in dataclasses.fields(params):
+        when = f.metadata.get("read_when")
+        if when is not None and f.name in table and getattr(params, when[0]) != when[1]:
+            raise ConfigError(source, f"{where}.{f.name}", f"is read only with {when[0]} = {when[1]!r} (this "
+                              f"instance has {when[0]} = {getattr(params, when[0])!r}): remove it or set {when[0]}",
+                              (when[0],))
 
 
 def _kind_presets(name: str, t: dict, source: str) -> list:
@@ -510,6 +530,7 @@ def _kind_presets(name: str, t: dict, source: str) -> list:
     names = as_list(t["preset"])
     if not names:
         raise ConfigError(source, f"map.{name}.preset", "empty list", ("default",) + prefilter.presets.names(name))
+    once(names, source, f"map.{name}.preset")
     out = []
     for n in names:
         n = choice(n, source, f"map.{name}.preset", ("default",) + prefilter.presets.names(name))

@@ -56,7 +56,8 @@ class BiasMapSpec:
     init: Length = Length(0.0, "world")
     steps: int = 100
     lr: float = 0.5
-    fit: str = "adam"                 # adam: a bias per block by Adam; residual: see dsm.tune.residual_map
+    fit: str = "edge"                 # edge (dsm.tune.edge_map, the fit that beats the best global scheme on
+                                      # held-out views); adam: a bias per block by Adam; residual: dsm.tune.residual_map
     blocks: tuple = (1, 2, 4)         # residual: the candidates of validation (block, radius, min_gain)
     radii: tuple = (0, 1, 2)
     gains: tuple = (1, 2, 3)
@@ -234,7 +235,8 @@ def _camera(c: dict, src: str, i: int) -> TuneCamera:
 
 
 def _bias_map(b, src: str, steps: int, lr: float, cams: tuple) -> BiasMapSpec:
-    """[tune.bias_map]: the fit (adam or residual) and its keys, Adam's defaulting to [tune]'s steps and lr."""
+    """[tune.bias_map]: the fit (edge, the default; adam or residual, baselines) and its keys, Adam's
+    defaulting to [tune]'s steps and lr."""
     if not isinstance(b, dict):
         raise ConfigError(src, "tune.bias_map", "expected a table [tune.bias_map]")
     check_keys(b, MAP_KEYS, src, "tune.bias_map")
@@ -242,7 +244,7 @@ def _bias_map(b, src: str, steps: int, lr: float, cams: tuple) -> BiasMapSpec:
     init = Length.parse(b.get("init", f"0 {unit}" if unit != "world" else 0.0), src, "tune.bias_map.init")
     if init.unit != unit:
         raise ConfigError(src, "tune.bias_map.init", f"give the start in the map's unit ({unit})", MAP_UNITS)
-    fit = choice(b.get("fit", "adam"), src, "tune.bias_map.fit", MAP_FITS)
+    fit = choice(b.get("fit", BiasMapSpec.fit), src, "tune.bias_map.fit", MAP_FITS)
     ints = lambda key, default, lo: _map_ints(b, src, key, default, lo)
     blocks = ints("block", BiasMapSpec.blocks if fit == "residual" else [2] if fit == "edge" else [1], 1)
     if fit in ("adam", "edge") and len(blocks) != 1:

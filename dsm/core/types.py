@@ -181,6 +181,11 @@ def sweep_params(cls, table: dict, source: str, where: str, skip=()) -> list:
             raise ConfigError(source, f"{where}.{k}", "empty list")
         names.append(k)
         options.append([coerce_field(fields[k], v, source, f"{where}.{k}") for v in values])
+        for i, v in enumerate(options[-1]):         # a value twice would run (and pool) the same cases twice
+            if v in options[-1][:i]:
+                first = values[options[-1][:i].index(v)]
+                raise ConfigError(source, f"{where}.{k}", f"{values[i]!r} is given twice (the same value as "
+                                  f"{first!r}): give each value once")
     return [cls(**dict(zip(names, combo))) for combo in itertools.product(*options)]
 
 

@@ -160,6 +160,7 @@ class Runner:
         """Run only ``maps`` (part of the plan: a Ray task's map group) into this runner's folder,
         without run.json or the report; ``kept``: finished cases to write again (key -> (row, status)).
         The rows, status, oracle rows, curves and map records stay on the runner."""
+        timing.enable_history()        # a task's kernel times come from its own process's kernel history
         self.sink.open()
         self.bar = report.progress(total=sum(m.cases for m in maps), enabled=False)
         self.kept = kept or {}

@@ -29,7 +29,8 @@ MOMENT_COUNTS = (2, 4)
 class Params:
     """EVSM's positive and negative exponents, moments (2 or 4), minimum variance and bleed reduction."""
     positive: float = field(default=40.0, metadata={"min": 0.5, "tune": ("linear", 0.5, 44.0, "moments")})
-    negative: float = field(default=5.0, metadata={"min": 0.5, "tune": ("linear", 0.5, 44.0, "moments")})
+    negative: float = field(default=5.0, metadata={"min": 0.5, "tune": ("linear", 0.5, 44.0, "moments"),
+                                                   "read_when": ("moments", 4)})
     moments: int = field(default=4, metadata={"choices": MOMENT_COUNTS})
     min_variance: float = field(default=1e-4, metadata={"min": 0.0, "tune": ("log", 1e-12, 0.1)})
     bleed: float = field(default=0.0, metadata={"min": 0.0, "max": 0.999, "tune": ("linear", 0.0, 0.9)})

@@ -24,7 +24,8 @@ encode = decode = None      # stored as floats only (base.FLOAT_FORMATS)
 class Params:
     """VSM's minimum variance (normalized depth squared) and light-bleeding reduction ramp
     [bleed, bleed_high] of Chebyshev's bound."""
-    min_variance: float = field(default=1e-4, metadata={"min": 0.0, "tune": ("log", 1e-10, 0.25)})
+    # at most 0.25: no depth distribution on [0, 1] has a larger variance (and 1e39 made V NaN)
+    min_variance: float = field(default=1e-4, metadata={"min": 0.0, "max": 0.25, "tune": ("log", 1e-10, 0.25)})
     bleed: float = field(default=0.0, metadata={"min": 0.0, "max": 0.999, "tune": ("linear", 0.0, 0.9)})
     bleed_high: float = field(default=1.0, metadata={"max": 1.0, "above": "bleed", "label": "if_set"})
 

@@ -92,8 +92,17 @@ def posed_camera(default, camera, scale=1.0, offset=ORIGIN, source="<config>"):
 
 
 def reposed_sensor(sensor, camera, bbox, source="<config>"):
-    """An XML scene's sensor with the [camera] pose: its film (size) kept, the keys given replaced."""
+    """An XML scene's sensor with the [camera] pose: its film (size) kept, the keys given replaced.
+    A sensor that is not perspective is refused (the pose keys aim a pinhole camera: an
+    orthographic sensor would become a perspective one)."""
     import mitsuba as mi
+    kind = projection(sensor)
+    if kind != "perspective":
+        given = next((k for k in ("position", "target", "up", "fov", "near", "far") if getattr(camera, k, None) is not None),
+                     "position")
+        raise ConfigError(source, f"camera.{given}", f"the scene's sensor is {kind}: [camera] re-aims a perspective "
+                          "camera only, and would turn it into one; remove the [camera] pose keys (resolution keeps "
+                          "the projection), or give the scene a perspective sensor")
     params = mi.traverse(sensor)
     m = np.array(sensor.world_transform().matrix.numpy(), float).reshape(4, 4)
     o = m[:3, 3]
@@ -114,12 +123,23 @@ def reposed_sensor(sensor, camera, bbox, source="<config>"):
     return mi.load_dict(d)
 
 
+def projection(sensor) -> str:
+    """A sensor's projection: "perspective" (it has a field of view), "orthographic", or its class name."""
+    import mitsuba as mi
+    if "x_fov" in mi.traverse(sensor):
+        return "perspective"
+    name = type(sensor).__name__.lower()
+    return "orthographic" if "ortho" in name or "ortho" in str(sensor).lower()[:40] else name
+
+
 def resized_sensor(sensor, width, height):
-    """A perspective sensor of the same transform, field of view and clips at width x height."""
+    """The sensor at width x height: the same projection (perspective or orthographic), transform,
+    field of view and clips."""
     import mitsuba as mi
     params = mi.traverse(sensor)
     m = np.array(sensor.world_transform().matrix.numpy(), float).reshape(4, 4)
-    d = {"type": "perspective", "to_world": mi.ScalarTransform4f(m),
+    kind = projection(sensor)
+    d = {"type": kind if kind == "orthographic" else "perspective", "to_world": mi.ScalarTransform4f(m),
          "film": {"type": "hdrfilm", "width": int(width), "height": int(height)}}
     if "x_fov" in params:
         d["fov"] = float(params["x_fov"][0])

@@ -185,6 +185,11 @@ def run_tune(tc, out=None, progress: bool = False, resume: bool = False) -> Tune
     ts = tc.spec
     bar = _progress_bar(tc) if progress else None
     tick = (lambda *a: bar.update(1)) if bar else None
+    if ts.bias_map and ts.bias_map.fit in ("residual", "edge") and not tc.schemes:
+        # its base is the best tuned depth scheme: pre-filtered instances alone have none
+        raise ConfigError(tc.config.source, "tune.bias_map.fit", f"{ts.bias_map.fit} learns a map over the best tuned "
+                          "depth scheme and this tune has none ([[scheme]] or [tune.params] of a depth scheme): add "
+                          "one, or give fit = \"adam\"", ("adam",))
     groups, cases, notes = prepare_cases(tc, tick)
     if not tc.spec.cameras:
         notes.insert(0, "no [[tune.camera]]: the scene's own camera is the one training view, nothing is held out")
