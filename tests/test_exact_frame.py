@@ -175,3 +175,50 @@ def test_precision_choices_are_checked():
     with pytest.raises(ConfigError) as e:
         config.parse({"scene": [{"builtin": "plane", "precision": "double"}], "scheme": [{"name": "none"}]}, "x.toml")
     assert e.value.key == "scene[0].precision" and "camera_relative" in str(e.value)
+
+
+def _far_authored_scene(folder, at: float):
+    """An XML scene whose OBJ holds a unit box on an 8 x 8 ground, both authored at (at, at, 0) in the
+    file's own coordinates (multiples of 1/16: exact in float32 up to 1e6), its camera and light too."""
+    v = [(x, y, 0.0) for x, y in ((-4, -4), (4, -4), (4, 4), (-4, 4))]
+    v += [(x, y, z) for z in (0.0, 1.0) for x, y in ((-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5))]
+    faces = [(1, 2, 3), (1, 3, 4)]
+    quads = [(5, 8, 7, 6), (9, 10, 11, 12), (5, 6, 10, 9), (6, 7, 11, 10), (7, 8, 12, 11), (8, 5, 9, 12)]
+    faces += [f for a, b, c, d in quads for f in ((a, b, c), (a, c, d))]
+    obj = "".join(f"v {x + at} {y + at} {z}\n" for x, y, z in v) + "".join(f"f {a} {b} {c}\n" for a, b, c in faces)
+    (folder / "far.obj").write_text(obj)
+    (folder / "far.xml").write_text(f"""<scene version="3.0.0">
+  <sensor type="perspective"><float name="fov" value="45"/>
+    <transform name="to_world"><lookat origin="{at + 3}, {at - 5}, 4" target="{at}, {at}, 0" up="0, 0, 1"/></transform>
+    <film type="hdrfilm"><integer name="width" value="128"/><integer name="height" value="128"/></film></sensor>
+  <emitter type="directional"><vector name="direction" x="0.3" y="0.2" z="-1"/></emitter>
+  <shape type="obj"><string name="filename" value="far.obj"/></shape>
+</scene>
+""")
+    return folder / "far.xml"
+
+
+def test_a_scene_authored_far_from_the_origin_in_its_own_file_is_exact(tmp_path):
+    """The same box and ground authored at 1e6 in their own OBJ (no translate) shadow the ground as
+    at the origin: the exact side is traced in the frame centred on the scene (before, its shadow
+    rays left the surfaces by 1e6's float32 error and the reference found none of them shadowed).
+    At 1e9 float32 cannot hold the 8-unit scene (steps of 64): refused naming the file."""
+    import dsm
+    from dsm.core.types import ConfigError
+    counts = {}
+    for at in (0.0, 1e6):
+        folder = tmp_path / f"at{at:g}"
+        folder.mkdir()
+        res = dsm.run({"experiment": {"name": "far"}, "scene": [{"file": str(_far_authored_scene(folder, at))}],
+                       "map": {"resolution": 256}, "scheme": [{"name": "constant", "bias": "2 texel"}],
+                       "timing": {"repeats": 1}}, out=folder / "run")
+        (row,) = res.rows
+        counts[at] = (row["n_receivers"], row["n_gt_shadowed"])
+    assert counts[0.0][1] > 60                                    # the box's shadow on the ground
+    assert counts[1e6] == counts[0.0]
+    folder = tmp_path / "at1e9"
+    folder.mkdir()
+    with pytest.raises(ConfigError) as e:
+        dsm.run({"experiment": {"name": "far"}, "scene": [{"file": str(_far_authored_scene(folder, 1e9))}],
+                 "scheme": [{"name": "constant"}]}, out=folder / "run")
+    assert e.value.key == "scene[0].file" and "1e+09" in str(e.value)

@@ -124,8 +124,8 @@ def load_xml(spec, camera_resolution, camera=None):
         notes.append(f"no point, spot or directional emitter: dsm added a default {describe_light(lights[0])}")
     sensor = scene.sensors()[0]
     data = finish(spec.label, scene, lights, spec.params.scale, notes)
-    if any(spec.params.translate):
-        _moved_xml(data, spec)
+    if any(spec.params.translate) or exact_frame.centre_for(data.bbox) is not None:
+        _moved_xml(data, spec)          # moved by translate, or authored far from the origin in its own file
     if camera_resolution is not None:
         # [camera] resolution: the sensor re-created at that width, with its film's aspect ratio,
         # transform and field of view; without it the XML's own sensor and film are the camera
@@ -150,7 +150,11 @@ def _moved_xml(data, spec):
         local = load_xml_scene(spec.file, spec.params.scale, tuple(np.asarray(p, np.float64) - centre))
         # its size from the copy near the origin: the bounds at the offset are rounded to its steps
         size = float(np.max(np.array(local.bbox().max, np.float64) - np.array(local.bbox().min, np.float64)))
-    check_held(size, p, source_of(spec), f"{spec.where}.translate", "from the origin")
+    if any(p):
+        check_held(size, p, source_of(spec), f"{spec.where}.translate", "from the origin")
+    elif centre is not None:            # authored far away: its own coordinates hold it, or not
+        check_held(size, centre, source_of(spec), f"{spec.where}.file", f"from the origin (where {spec.file} "
+                   "puts it),", "the scene's own coordinates")
     if centre is not None:
         data.use_exact_scene(centre, local)
         # the camera's pose in float64 from the moved file's sensor (its matrix rounded near the origin,
@@ -202,8 +206,12 @@ def load_mesh_file(spec, width, height, camera=None):
         lo, hi = mesh64[0].min(0), mesh64[0].max(0)
     center, size = (lo + hi) / 2, float(np.linalg.norm(hi - lo))
     if p.precision == "world":       # the mesh and its ground (3 diagonals across) rounded at the offset
-        check_held(max(float(np.max(hi - lo)), 3 * size if p.ground == "yes" else 0.0), p.translate, source_of(spec),
-                    f"{spec.where}.translate", "from the origin")
+        held = max(float(np.max(hi - lo)), 3 * size if p.ground == "yes" else 0.0)
+        if any(p.translate):
+            check_held(held, p.translate, source_of(spec), f"{spec.where}.translate", "from the origin")
+        else:                        # authored far away in the file: its own coordinates, as a translate's
+            check_held(held, center, source_of(spec), f"{spec.where}.file", f"from the origin (where {spec.file} "
+                       "puts it),", "the file's own coordinates")
     a, b = [np.eye(3)[k] for k in range(3) if k != "xyz".index(p.up)]
     if np.dot(np.cross(a, b), up) < 0:
         a, b = b, a
