@@ -545,6 +545,9 @@ def _run_held(cfg, args, out: Path, clustered: bool) -> int:
             print(f"dsm: kept, not in the config any more: case {s['case']} ({s['scene']}, {s['light']}, "
                   f"{s['scheme']} {s['params']}, R={s['resolution']}; see run.json stale_cases)", file=sys.stderr)
     t = res.run["timing"]
+    from .report import summary
+    for line in summary.terminal_answer(res.rows):      # the first answer, before where the files are
+        print(f"dsm: {line}")
     print(f"dsm: {len(res.rows)} cases in {time.perf_counter() - t0:.1f} s (measuring {t['measure_s']:.1f} s, "
           f"report {t['report_s']:.1f} s) -> {out}/ (report.html, table.md, metrics.csv, oracle.csv, images/, "
           "plots/, run.json)")

@@ -604,6 +604,7 @@ def test_ctrl_c_and_kill_keep_finished_cases_and_resume_counts_as_uninterrupted(
     doc = json.loads((out / "results.json").read_text())
     assert _counts(doc) == _counts(whole)
     assert not (out / "cases").exists() and (out / "leaderboard.html").is_file()
+    assert "dsm benchmark: rank 1: " in stdout                     # the leaderboard's top, in the terminal
 
 
 def test_page_rebuilds_the_leaderboard_from_results_alone(test_run, tmp_path):

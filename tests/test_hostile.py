@@ -375,7 +375,7 @@ def test_report_refuses_a_metrics_csv_without_a_core_column_or_with_rates_not_it
 
 def test_results_name_an_unknown_column_and_a_missing_case(tmp_path):
     res = _small_run(tmp_path)
-    with pytest.raises(KeyError, match="no column schem"):
+    with pytest.raises(KeyError, match="no column or scheme parameter schem"):
         res.where(schem="constant")
     assert len(res.where(scheme="constant")) == len(res.rows) == 1
     with pytest.raises(KeyError, match="no image of case 999.*'0001'"):

@@ -136,8 +136,8 @@ LAYERS = (
     ("case",),                       # a case as a value: its context, evaluation and row
     ("report",),                     # the run's files, tables, figures, report.html
     ("experiment",),                 # the runner, resume, motion, the cluster, the folder lock
-    ("tune", "benchmark", "perf"),   # dsm tune, dsm benchmark, dsm perf
-    ("cli",),                        # the command line
+    ("tune", "benchmark", "perf", "testing"),   # dsm tune, dsm benchmark, dsm perf; a user's threshold asserts
+    ("cli", "pytest_plugin"),        # the command line; the pytest plugin (its fixture)
     ("launch", "__main__", ""),      # its entry points and the package's facade (dsm/__init__: dsm.run, ...)
 )
 

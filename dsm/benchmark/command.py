@@ -184,6 +184,9 @@ def _run(args, out: Path) -> int:
         return 130
     written = results.write(doc, out)
     caselog.CaseLog(out, {}).clear()
+    from . import ranking
+    for r in ranking.ranking(doc)[:5]:       # the top of the leaderboard, before where the files are
+        print(f"dsm benchmark: rank {r['rank']}: {r['contender']} (error rate {r['error']:.4f})")
     try:
         print(f"dsm benchmark: wrote {written} and {page.write_page(doc, out)}")
     except KeyboardInterrupt:

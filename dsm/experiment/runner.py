@@ -508,9 +508,17 @@ def _cpu() -> float:
 
 
 def run(config, out=None, variant=None, progress=False) -> Results:
-    """Run an experiment (a Config, a dict or a path to a TOML file) and return its Results."""
+    """Run an experiment (a Config, a dict or a path to a TOML file) and return its Results; without
+    ``out``, in a temporary folder removed once the Results is no longer referenced."""
     config = pipeline.prepare(config, variant)
     if out is None:
+        # a folder of its own, kept while the Results lives (its images are what a failing test names)
+        # and removed with it: no folder per call left behind; Results.out says where it is
+        import shutil
         import tempfile
+        import weakref
         out = Path(tempfile.mkdtemp(prefix=f"dsm-{config.name}-"))
+        res = Runner(config, out, variant, progress).run()
+        weakref.finalize(res, shutil.rmtree, out, True)
+        return res
     return Runner(config, Path(out), variant, progress).run()

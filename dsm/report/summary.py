@@ -301,3 +301,22 @@ def best_md(rows) -> list:
     for scene, light, cells in pivot:
         out.append(f"| {scene} | {light} | " + " | ".join(best_cell(cells.get(r)) for r in resolutions) + " |")
     return out
+
+
+def best_per_light(rows) -> list:
+    """Per (light, resolution), pooled over the scenes: dicts as best_per_group's (label, error, tied,
+    labels), a tie said as one; the terminal's first answer."""
+    return best_per_group([{**r, "scene": "every scene"} for r in rows])
+
+
+def terminal_answer(rows, most: int = 12) -> list:
+    """The lines ``dsm run`` ends with: the headline (answer) and the best instance per light and
+    resolution over every scene (at most ``most`` lines; the rest named by count)."""
+    if not rows:
+        return []
+    best = best_per_light(rows)
+    lines = [answer(rows)] + [f"best for light {b['light']} at R = {b['resolution']}: {best_cell(b)}"
+                              for b in best[:most]]
+    if len(best) > most:
+        lines.append(f"... and {len(best) - most} more lights and resolutions (table.md)")
+    return lines
