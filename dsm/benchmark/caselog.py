@@ -68,9 +68,11 @@ class CaseLog:
         entry = {"index": index, "case": case_key(case), "records": records, "flicker": flicker, "variant": variant}
         report_io.write_json(self.folder / f"{index:04d}.json", entry)
 
-    def clear(self):
-        """The run is complete (results.json holds every case): its case files go."""
-        shutil.rmtree(self.folder, ignore_errors=True)
+
+
+def clear(out: Path):
+    """The run in ``out`` is complete (results.json holds every case): its case files go."""
+    shutil.rmtree(Path(out) / FOLDER, ignore_errors=True)
 
 
 def progress(out: Path) -> tuple | None:

@@ -183,7 +183,7 @@ def _run(args, out: Path) -> int:
               f"dsm benchmark --out {out} --resume goes on", file=sys.stderr)
         return 130
     written = results.write(doc, out)
-    caselog.CaseLog(out, {}).clear()
+    caselog.clear(out)
     from . import ranking
     for r in ranking.ranking(doc)[:5]:       # the top of the leaderboard, before where the files are
         print(f"dsm benchmark: rank {r['rank']}: {r['contender']} (error rate {r['error']:.4f})")

@@ -423,19 +423,24 @@ def _frame_moments(state: _MapFrames, spec, fmt: str) -> tuple:
     return state.moments[key], None
 
 
+def _where(state: _MapFrames) -> Where:
+    """The planned map's place in the plan, as its cases' rows name it."""
+    m = state.map_plan
+    return Where(state.scene.data.label, m.light, m.view, m.resolution, m.texels, m.culling,
+                 m.cascade.label if m.cascade else "")
+
+
 def _frame_context(runner, state: _MapFrames, t: int) -> tuple:
-    """(the frame's MapContext, its camera, the fixed points' receivers per format): view, map and
-    receivers of frame ``t`` (a lookup timed once, the counts and the leak split as a still case's)."""
-    cfg, data, m = runner.cfg, state.scene.data, state.map_plan
+    """(the frame's MapContext, its camera): view, map and receivers of frame ``t`` (a lookup timed
+    once, the counts and the leak split as a still case's)."""
+    cfg, data = runner.cfg, state.scene.data
     cam, gb, setup, view = _frame_view(state, t)
     smap = _frame_map(runner, state, view)
     stored = {fmt: pipeline.store(smap, fmt) for fmt in cfg.map.format}
     has_rx = setup.p is not None and len(setup.pixels)
     receivers = {fmt: pipeline.receivers(sm.view, setup, data.diagonal) if has_rx else None
                  for fmt, sm in stored.items()}
-    where = Where(data.label, m.light, m.view, m.resolution, m.texels, m.culling,
-                  m.cascade.label if m.cascade else "")
-    ctx = MapContext(where, data, gb, setup, view, smap, stored, receivers, cfg.seed, 1,
+    ctx = MapContext(_where(state), data, gb, setup, view, smap, stored, receivers, cfg.seed, 1,
                      frozenset({"leak"}) if cfg.map.leak_split else frozenset(), leak_texels=cfg.map.leak_texels,
                      moments=lambda spec, fmt: _frame_moments(state, spec, fmt))
     return ctx, cam
@@ -477,9 +482,7 @@ def _write_case(runner, state: _MapFrames, case: Case, frames: _CaseFrames):
     mo, m = state.path.motion, state.map_plan
     pairs, ever = flicker(np.array(frames.v), np.array(frames.vstar), np.array(frames.eligible),
                           np.array(frames.face))
-    where = Where(state.scene.data.label, m.light, m.view, m.resolution, m.texels, m.culling,
-                  m.cascade.label if m.cascade else "")
-    ident = case_row.identity(where, case)
+    ident = case_row.identity(_where(state), case)
     meta = {"motion": mo.label, **{k: ident[k] for k in FRAME_KEYS}}
     for fr, pr in zip(frames.frames, [{}] + pairs):          # frame t carries the pair (t - 1, t)
         runner.record.motion_frames.append({**meta, **fr, **pr})

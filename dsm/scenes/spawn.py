@@ -195,3 +195,14 @@ def ray_to(si, n, target, delta) -> mi.Ray3f:
     dist = dr.norm(d)
     short = bound(target)
     return mi.Ray3f(o, d / dist, dr.maximum(dist - short, 0.0), 0.0, mi.Color0f())
+
+
+def rays_np(o: np.ndarray, d: np.ndarray, maxt: np.ndarray | None = None) -> mi.Ray3f:
+    """A ray array from (n, 3) numpy origins and directions (and per-ray ``maxt``), built from plain
+    float32 buffers, not gathered from a traced one (gathering a layer's rays and tracing them again
+    corrupted memory now and then on the room's cube map under the LLVM backend)."""
+    f32 = lambda a: mi.Float(np.ascontiguousarray(a, np.float32))
+    ray = mi.Ray3f(mi.Point3f(*(f32(o[:, k]) for k in range(3))), mi.Vector3f(*(f32(d[:, k]) for k in range(3))))
+    if maxt is not None:
+        ray.maxt = f32(maxt)
+    return ray

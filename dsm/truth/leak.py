@@ -17,9 +17,9 @@ sliver narrower than that, between two probes, is missed.
 """
 from __future__ import annotations
 
-import mitsuba as mi
 import numpy as np
 
+from .. import lights
 from ..scenes import spawn
 from . import reference
 
@@ -59,23 +59,21 @@ def deep_in_shadow(scene, p: np.ndarray, normal: np.ndarray, shape: np.ndarray, 
     lift = np.tile(np.maximum(radius, 1e-30) * np.max(np.hypot(offs[:, 0], offs[:, 1])), len(offs))
     up = np.tile(unit, (len(offs), 1))
     o = q + up * lift[:, None]
-    f32 = lambda x: mi.Float(np.ascontiguousarray(x, np.float32))
-    ray = mi.Ray3f(mi.Point3f(*(f32(o[:, c]) for c in range(3))), mi.Vector3f(*(f32(-up[:, c]) for c in range(3))))
-    ray.maxt = f32(2.0 * lift)
+    ray = spawn.rays_np(o, -up, 2.0 * lift)
     pi = scene.ray_intersect_preliminary(ray, coherent=False)
     valid = pi.is_valid()
     own = np.asarray(spawn.hit_shape(pi, valid, spawn.shape_table(scene)).numpy(), np.int64) == np.tile(shape, len(offs))
     si = pi.compute_surface_interaction(ray)
     on_surface, _ = reference.visibility(scene, si, light, magnitude)
-    in_air = point_visibility(scene, q + up * (1e-3 * lift[:, None]), light)
-    lit = np.where(own, on_surface.numpy().astype(bool), in_air)
+    lit = own & on_surface.numpy().astype(bool)
+    off = np.flatnonzero(~own)              # past the surface's edge: traced from the plane, only those
+    if len(off):
+        lit[off] = point_visibility(scene, q[off] + up[off] * (1e-3 * lift[off, None]), light)
     return ~lit.reshape(len(offs), n).any(axis=0)
 
 
 def point_visibility(scene, q: np.ndarray, light) -> np.ndarray:
     """Whether each point ``q`` ((m, 3), in the air, no surface of its own) sees ``light`` (bool)."""
-    from .. import lights
-    f32 = lambda x: mi.Float(np.ascontiguousarray(x, np.float32))
     if lights.get(light.type).POSITIONAL:
         to = np.asarray(light.position, np.float64)[None, :] - q
         dist = np.linalg.norm(to, axis=1)
@@ -83,6 +81,4 @@ def point_visibility(scene, q: np.ndarray, light) -> np.ndarray:
     else:
         d = np.broadcast_to(-np.asarray(light.direction, np.float64) / np.linalg.norm(light.direction), q.shape)
         maxt = np.full(len(q), np.inf)
-    ray = mi.Ray3f(mi.Point3f(*(f32(q[:, c]) for c in range(3))), mi.Vector3f(*(f32(d[:, c]) for c in range(3))))
-    ray.maxt = f32(maxt)
-    return ~scene.ray_test(ray, coherent=False).numpy().astype(bool)
+    return ~scene.ray_test(spawn.rays_np(q, d, maxt), coherent=False).numpy().astype(bool)

@@ -68,15 +68,7 @@ def light_rays(group, samples: int, first: int, count: int) -> mi.Ray3f:
     ray = supersampled_view(group.view, samples).texel_rays(first, count)
     centre = group.scene_data.centre
     o = pl.points_np(ray.o) - (0.0 if centre is None else np.asarray(centre, np.float64))
-    return _ray_np(o, pl.points_np(ray.d))
-
-
-def _ray_np(o: np.ndarray, d: np.ndarray) -> mi.Ray3f:
-    """A ray array from (n, 3) numpy origins and directions: built from plain buffers, not gathered
-    from a traced one (gathering a layer's rays and tracing them again corrupted memory now and then
-    on the room's cube map under the LLVM backend)."""
-    f32 = lambda a, k: mi.Float(np.ascontiguousarray(a[:, k], np.float32))
-    return mi.Ray3f(mi.Point3f(f32(o, 0), f32(o, 1), f32(o, 2)), mi.Vector3f(f32(d, 0), f32(d, 1), f32(d, 2)))
+    return spawn.rays_np(o, pl.points_np(ray.d))
 
 
 def _seen_hits(scene, ray, table):
@@ -103,7 +95,7 @@ def layer_gbuffers(group, samples: int, layers: int, first: int, count: int):
         if len(idx):
             # the kept rays traced again rather than their interactions gathered: one array per field, and
             # the same hit (a ray's hit does not depend on the rays beside it: COHERENT off)
-            sub = _ray_np(pl.points_np(ray.o)[idx], pl.points_np(ray.d)[idx])
+            sub = spawn.rays_np(pl.points_np(ray.o)[idx], pl.points_np(ray.d)[idx])
             si_k = scene.ray_intersect_preliminary(sub, coherent=COHERENT).compute_surface_interaction(sub)
             n = mi.Vector3f(si_k.n)
             p = si_k.p if sd.centre is None else exact_frame.to_world(si_k.p, sd.centre)
