@@ -129,3 +129,30 @@ def test_measure_kernel_reports_the_warm_calls_median(monkeypatch):
     monkeypatch.setattr(timing, "_compiled", lambda hist: (0.0, 0))
     assert timing.measure_kernel(lambda: (), repeats=3)[1].ms == 2.0       # median of 1 and 3, not of 100, 1, 3
     assert timing.measure_kernel(lambda: (), repeats=1)[1].ms == 7.0
+
+
+def test_measure_calls_makes_repeats_calls_and_reports_the_later_calls_median(monkeypatch):
+    """measure_calls (a moment map's clock): ``repeats`` calls in all, as a map build's, not a cold
+    call and ``repeats`` more; the first call's wall clock is cold_ms and stays out of the median
+    when there are later calls, and is the time when it is the only call."""
+    from dsm.core import timing
+    walls, calls = iter([100.0, 1.0, 3.0, 50.0, 9.0]), []
+
+    def run(fn):
+        calls.append(fn())
+        return (len(calls),), next(walls)
+    monkeypatch.setattr(timing, "_run", run)
+    monkeypatch.setattr(timing, "_jit_kernels", lambda: [])
+    out, t = timing.measure_calls(lambda: "called", repeats=3)
+    assert len(calls) == 3 and out == (3,) and t.ms == 2.0 and t.cold_ms == 100.0
+    assert timing.measure_calls(lambda: "called", repeats=1)[1].ms == 50.0 and len(calls) == 4
+
+
+def test_the_benchmark_times_each_case_over_its_timing_calls():
+    """Every config of a suite case (depth, pre-filtered, flicker) asks for the benchmark's TIMING_CALLS."""
+    from dsm.benchmark import suite as suite_mod
+    s = suite_mod.load_suite(suite_mod.SUITE_FILE)
+    for case in suite_mod.cases(s, "test"):
+        for cfg in (case.config, case.prefiltered, case.motion, case.prefiltered_motion):
+            if cfg is not None:
+                assert cfg["timing"] == {"repeats": suite_mod.TIMING_CALLS}

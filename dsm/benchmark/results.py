@@ -24,7 +24,7 @@ from ..report import figures, io as report_io
 from ..truth import metrics
 from . import caselog, perceptual, ranking, render
 from .document import RESULTS_VERSION
-from .suite import LATEST, ORIGIN, SUITE_FILES, cases, load_suite, suite_sha256, tuned_labels
+from .suite import LATEST, ORIGIN, SUITE_FILES, TIMING_CALLS, cases, load_suite, suite_sha256, tuned_labels
 
 MEASURES = ("n_receivers", "n_gt_shadowed", "n_acne", "n_peterpan", "acne_rate", "peterpan_rate", "error_rate",
             "texel_size", "texel_f32_steps", "build_ms", "lookup_ms")
@@ -181,7 +181,7 @@ def run_suite(size: str = "default", variant: str | None = None, progress=print,
     ppd = suite.get("flip", {}).get("ppd")          # dsm-bench-1 has no FLIP
     todo, tuned = cases(suite, size), tuned_labels(suite)
     header = {"suite": suite["suite"]["name"], "suite_sha256": suite_sha256(SUITE_FILES[version]), "size": size,
-              "variant": variant, "cluster": cluster, "cases": len(todo)}
+              "variant": variant, "cluster": cluster, "cases": len(todo), "timing_calls": TIMING_CALLS}
     log = caselog.CaseLog(out, header)
     done = log.start(resume)
     entries = []
@@ -212,7 +212,7 @@ def document(suite: dict, version: str, size: str, entries: list, cluster: str |
             "cases": [r for e in entries for r in e["records"]],
             "flicker_motion": suite.get("flicker", {}).get("motion"),
             "backend": {"name": "ray", "address": cluster} if cluster else {"name": "local"},
-            "ranking": ranking.RULE}
+            "ranking": ranking.RULE, "timing_calls": TIMING_CALLS}
 
 
 def write(doc: dict, out: Path) -> Path:

@@ -104,6 +104,25 @@ def measure_kernel(fn, repeats: int = 3):
     return out, Timing(statistics.median(kernel[1:] or kernel), compile_ms, cold, n_kernels, misses)
 
 
+def measure_calls(fn, repeats: int = 3):
+    """Wall-clock twin of :func:`measure_kernel` for work that is not all Dr.Jit kernels (a moment
+    map's numpy blur): ``fn`` called ``repeats`` times (at least once), the reported ms the median
+    of the calls after the first (the first alone when ``repeats`` is 1); the first call's code
+    generation and backend time is ``compile_ms`` and its wall clock ``cold_ms``. The same calls as
+    a map build's, so a build and its moment map are timed alike, and no call beyond them."""
+    drain_launches()
+    walls, out, hist = [], None, []
+    for i in range(max(1, repeats)):
+        out, ms = _run(fn)
+        walls.append(ms)
+        if i == 0:
+            hist = _jit_kernels()
+            LAUNCHES["outside_repeats"] += len(hist)
+    LAUNCHES["timed_repeats"] += len(_jit_kernels())
+    compile_ms, misses = _compiled(hist)
+    return out, Timing(statistics.median(walls[1:] or walls), compile_ms, walls[0], len(hist), misses)
+
+
 def kernel_ms(fn, repeats: int = 3):
     """(median over warm calls of the summed execution time of the kernels one call of ``fn``
     launches, ms; kernels per call): the device's own time, without Python's tracing or launch

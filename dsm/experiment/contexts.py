@@ -85,7 +85,7 @@ class Contexts:
                         self.builds.casters(scene), smap.view, spec.samples, self.builds.extents[scene.label])
                     mm = pipeline.moment_map(spec, smap, fmt, fine)
                     return (*mm.b, mm)
-                out, t = timing.measure(build, self.cfg.timing_repeats)
+                out, t = timing.measure_calls(build, self.cfg.timing_repeats)
                 if spec.samples > 1:        # one build's rays (the timed repeats cast them again)
                     self.record.add_rays({"map_texel": smap.view.n_texels * spec.samples ** 2})
                 cache[key] = (out[-1], t)
