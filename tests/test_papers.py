@@ -40,10 +40,12 @@ def _vsv_rows(adaptive_error: float) -> list:
 def test_a_verdict_follows_the_numbers(papers):
     """The VSV claim agrees only below the best epsilon's error (0.02); Figure 6's tie is said, and is no
     agreement; an empty rate prints as undefined."""
-    assert papers._vsv_adaptive(_vsv_rows(0.019))[1] is True
-    assert papers._vsv_adaptive(_vsv_rows(0.02))[1] is False
+    claim = {c.where: c for c in papers.CLAIMS}
+    vsv, figure6 = claim["Section 3.3, Figure 8"].measure, claim["Figure 6"].measure
+    assert vsv(_vsv_rows(0.019))[1] is True
+    assert vsv(_vsv_rows(0.02))[1] is False
     same = {"acne_rate": 0.01, "peterpan_rate": 0.02, "n_acne": 5.0, "n_peterpan": 7.0}
-    text, ok = papers._figure6([{**same, "scheme": s} for s in ("constant", "slope_scaled", "adaptive", "dual")])
+    text, ok = figure6([{**same, "scheme": s} for s in ("constant", "slope_scaled", "adaptive", "dual")])
     assert "a tie" in text and ok is False
     assert papers.pct(math.nan) == "undefined" and papers.pct(0.00135179) == "0.135 %"
     assert [papers.verdict(v) for v in (True, False, None)] == ["agrees", "does not agree", "not measurable"]
