@@ -366,8 +366,7 @@ def sponza_sections(runs: Path) -> list[str]:
            "Their scene is \"Sponza (20K polygons)\": neither model exactly (the Dabrovic copy here holds "
            f"{provenance(runs)['mesh']['triangles']:,} triangles, Crytek's remodel about 262,000). dsm times its "
            "ray-traced build and its lookup on the CPU; the paper times a GPU's shadow-map pass and final shading. "
-           "Times on a shared machine vary from run to run (two runs here gave dual 1.59 and 2.06 times constant): the "
-           "order is what compares, the ratios only roughly.", ""]
+           "Times on a shared machine vary from run to run: the order is what compares, the ratios only roughly.", ""]
     out += table1(dou) + ["", "### Dou et al.'s Figure 6: acne and detachment at 1024^2", "",
                           "The camera inside the courtyard (experiments/dou_table1.toml); counts of receivers.", ""]
     out += figure6(dou) + ["", "### Voxelized shadow volumes on Sponza, a point light (section 3.3, Figure 8)", "",

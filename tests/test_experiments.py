@@ -28,8 +28,8 @@ def test_experiment_runs_tiny(path, tmp_path):
     if cfg.scenes and all(s.missing for s in cfg.scenes):
         names = sorted({_absent_name(s) for s in cfg.scenes})
         assert set(names) <= NOT_SHIPPED | MODELS, names
-        pytest.skip(f"{path.name} needs {', '.join(names)}, not shipped: its publisher states no redistribution "
-                    "terms (data/meshes/README.md); a copy in data/meshes/ runs it")
+        pytest.skip(f"{path.name} needs {', '.join(names)}, not shipped (data/meshes/README.md); a copy of your own "
+                    "runs it (docs/sponza.md: DSM_SPONZA)")
     tiny = dataclasses.replace(cfg, camera_resolution=(48, 48), timing_repeats=1,
                                map=dataclasses.replace(cfg.map, resolution=(32,),
                                                        texels=(6 * 32 ** 2,) if cfg.map.texels else ()))

@@ -70,7 +70,7 @@ def absent_files(cfg: Config) -> list:
     """Files of the config's optional scenes that are absent (each once, in config order)."""
     out = []
     for s in cfg.scenes:
-        name = s.file if s.file is not None else s.label       # a model without a path: its name
+        name = s.file if s.file is not None else f"{s.model} (no copy given)"      # a model without a path
         if s.missing and name not in out:
             out.append(name)
     return out
