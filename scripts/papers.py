@@ -223,9 +223,10 @@ CLAIMS = (
     Claim(MS, "Slope-scaled depth bias removes acne that a constant bias leaves.", "Figure 10", "real_meshes",
           _slope_beats_constant, "slope-scaled acne < constant 1 texel's, Sponza 1024^2"),
     Claim(MS, "Fitting the light's projection to the view frustum, not the scene, gives more texels per pixel and "
-          "less aliasing.", "Figure 11", "common_techniques_fit", _tight_fit_helps,
+          "less aliasing.", "Figures 11, 12", "common_techniques_fit", _tight_fit_helps,
           "more texels per pixel and a lower error (one map, float32, constant bias)"),
-    Claim(MS, "With tight near and far planes a 16-bit depth buffer can do.", "Depth buffer precision",
+    Claim(MS, "With tight near and far planes a 16-bit depth buffer can do.",
+          "Calculating the Near Plane and Far Plane",
           "common_techniques_fit", _sixteen_bits_suffice, "unorm16 error <= 1.05 x float32's"),
     Claim(MS, "Moving the light in texel-sized increments removes shimmering edges.", "Figures 16, 17",
           "common_techniques_shimmer", _texel_steps_stop_shimmer, "every stabilized flicker rate < every other"),

@@ -33,7 +33,7 @@ class Model:
 
 # The Dabrovic atrium (y up, about 34.8 x 16.5 x 15.6, courtyard floor at y = 0, centred on the
 # origin in x and z) is the frame. Crytek's remodel is the same building in centimetres, y up,
-# long along x and centred likewise (its published bounds: x -1920.95 to 1799.91, y -126.44 to
+# long along x and centred likewise (its commonly quoted bounds: x -1920.95 to 1799.91, y -126.44 to
 # 1429.43, z -1182.81 to 1105.43), so 0.01 puts it in that frame.
 SPONZA = Model(
     name="sponza", env="DSM_SPONZA",
