@@ -14,7 +14,7 @@ def test_real_meshes_need_no_per_scene_epsilon(tmp_path):
                               map=dataclasses.replace(cfg.map, resolution=(512,)))
     res = dsm.run(cfg, out=tmp_path / "real")
     absent = [s for s in cfg.scenes if s.missing]              # the teapot and Sponza where not supplied
-    assert {s.file.name for s in absent} <= {"mitsuba_teapot.ply", "sponza_dabrovic.ply"}
+    assert {s.model or s.file.name for s in absent} <= {"mitsuba_teapot.ply", "sponza"}
     assert res.run["n_failed"] == 0 and res.run["n_skipped"] == len(absent)
     scenes = {r["scene"] for r in res.rows}
     assert len(scenes) == 7 - len(absent) >= 5

@@ -70,14 +70,19 @@ def absent_files(cfg: Config) -> list:
     """Files of the config's optional scenes that are absent (each once, in config order)."""
     out = []
     for s in cfg.scenes:
-        if s.missing and s.file not in out:
-            out.append(s.file)
+        name = s.file if s.file is not None else f"{s.model} (no copy given)"      # a model without a path
+        if s.missing and name not in out:
+            out.append(name)
     return out
 
 
 def check_runnable(cfg: Config):
     """Raise NothingToRun when every scene of the config is an absent optional file."""
     if cfg.scenes and all(s.missing for s in cfg.scenes):
+        model = next((s for s in cfg.scenes if s.model), None)
+        if model is not None:           # a model's own line: its keys and where to obtain a copy
+            raise NothingToRun(cfg.source, f"{model.where}.model", "nothing to run: "
+                               + model.missing.removeprefix("skipped: "))
         files = absent_files(cfg)
         where = sorted({str(f.parent) for f in files})
         raise NothingToRun(cfg.source, "scene", "nothing to run: every scene is an absent optional file ("

@@ -200,6 +200,8 @@ class SceneSpec:
     label: str = ""
     closed: tuple = ()          # (shape name, closed) overrides of detected closedness
     missing: str = ""           # an optional file that is absent: the run records it as skipped
+    model: str = ""             # a named model the kit does not ship (dsm.scenes.models: "sponza")
+    units: float = 1.0          # the model's file units in its frame (Crytek's Sponza: cm, 0.01)
     source: str = field(default="", compare=False)     # the config file, for errors found on loading
     where: str = field(default="scene", compare=False)  # its [[scene]] key, e.g. "scene[2]"
 

@@ -190,7 +190,8 @@ def load_mesh_file(spec, width, height, camera=None):
     p = spec.params
     _precheck_file(spec)
     up = np.eye(3)["xyz".index(p.up)]
-    to_world = mi.ScalarTransform4f().translate([float(c) for c in p.translate]).scale(p.scale)
+    # a named model's units (Crytek's Sponza in cm) scale its file only: the config's poses are in its frame
+    to_world = mi.ScalarTransform4f().translate([float(c) for c in p.translate]).scale(p.scale * spec.units)
     mesh = mi.load_dict({"type": spec.file.suffix.lower()[1:], "filename": str(spec.file), "to_world": to_world})
     check_mesh(mesh, "mesh", spec)      # before the camera is posed from its bounds (a 1e-20 mesh has none)
     bb = mesh.bbox()
@@ -200,7 +201,7 @@ def load_mesh_file(spec, width, height, camera=None):
         # far from the origin: the file's vertices scaled in float32 as at the origin, then moved in
         # float64, for the exact frame and for the ground and camera both frames share
         local = mi.load_dict({"type": spec.file.suffix.lower()[1:], "filename": str(spec.file),
-                              "to_world": mi.ScalarTransform4f().scale(p.scale)})
+                              "to_world": mi.ScalarTransform4f().scale(p.scale * spec.units)})
         mesh64 = (np.asarray(local.vertex_positions_buffer(), np.float64).reshape(-1, 3) + np.asarray(p.translate, float),
                   np.asarray(local.faces_buffer(), np.int64).reshape(-1, 3))
         lo, hi = mesh64[0].min(0), mesh64[0].max(0)

@@ -39,7 +39,7 @@ def load(spec: SceneSpec, camera_resolution=None, camera=None) -> SceneData:
     ConfigError naming ``spec.source`` and the [[scene]] key (``spec.where``). ``camera``: the
     [camera] pose (a CameraSpec), overriding the scene's own (an XML sensor's too)."""
     if spec.missing:
-        raise ConfigError(source_of(spec), f"{spec.where}.file", spec.missing)
+        raise ConfigError(source_of(spec), f"{spec.where}.{'model' if spec.model else 'file'}", spec.missing)
     if spec.params is not None and spec.params.precision == "camera_relative":
         return _camera_relative(spec, camera_resolution, camera)
     data = _load_builtin(spec, camera_resolution, camera) if spec.builtin else load_file(spec, camera_resolution, camera)

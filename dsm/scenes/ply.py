@@ -107,3 +107,24 @@ def _ply_ascii_faces(body: bytes, elements):
                 i += k
         return np.asarray(out, np.int64)
     return None
+
+
+def ply_positions(path: Path) -> np.ndarray:
+    """A PLY file's vertex positions (n, 3), float64, read with numpy (vertices before other elements)."""
+    with open(path, "rb") as f:
+        head = f.read(1 << 16)
+    end = head.index(b"end_header")
+    fmt, elements = _ply_header(head[:end])
+    offset = head.index(b"\n", end) + 1
+    name, n, props = elements[0]
+    if name != "vertex" or any(isinstance(t, tuple) for _, t in props):
+        raise ValueError(f"{path}: the first element is not a plain vertex list")
+    if fmt == "ascii":
+        rows = path.read_bytes()[offset:].splitlines()[:n]
+        table = np.array([r.split()[:len(props)] for r in rows], np.float64)
+    else:
+        dtype = np.dtype([(p, PLY_ORDER[fmt] + t) for p, t in props])
+        table = np.frombuffer(path.read_bytes(), dtype, n, offset)
+        return np.stack([table[c].astype(np.float64) for c in "xyz"], axis=1)
+    names = [p for p, _ in props]
+    return table[:, [names.index(c) for c in "xyz"]]

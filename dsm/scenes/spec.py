@@ -1,7 +1,7 @@
 """[[scene]] tables into scene specs: a built-in or a file, list-valued parameters swept, checked up front."""
 from __future__ import annotations
 
-from dataclasses import fields
+from dataclasses import fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -9,6 +9,7 @@ import numpy as np
 from ..core.types import ConfigError, SceneSpec, sweep_params
 from .builtins import builtin_geometry, scale_range
 from .checks import check_held
+from .models import MODEL_KEYS, MODELS, absent_message, locate, version_of
 from .params import BUILTINS, FILE_SUFFIXES, FileParams, GrazingParams, PlaneParams
 
 
@@ -16,6 +17,10 @@ XML_KEYS = ("scale", "translate")   # what an XML scene takes of FileParams: its
 
 def parse_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]:
     """One [[scene]] table, with list-valued parameters swept, into scene specs."""
+    if "model" in t:
+        return _model_scene(t, source, where, base)
+    if "version" in t:
+        raise ConfigError(source, f"{where}.version", "a version is a named model's (give model too)", list(MODELS))
     if ("builtin" in t) == ("file" in t):
         raise ConfigError(source, where, "a scene needs exactly one of builtin or file", ("builtin", "file"))
     if "builtin" in t:
@@ -66,6 +71,36 @@ def parse_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]
                           "units; translate: elsewhere)", ("file", "closed", "optional") + XML_KEYS)
     return [SceneSpec(file=path, params=p, label=_label(path.stem, p, FileParams()), closed=closed, source=source,
                       where=where) for p in specs]
+
+
+def _model_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]:
+    """A [[scene]] with ``model`` (a model the kit does not ship): the user's copy from ``file`` or
+    the model's environment variable, placed in the model's frame; skipped, saying how to get
+    one, where there is none."""
+    name = t["model"]
+    if not isinstance(name, str) or name not in MODELS:
+        raise ConfigError(source, f"{where}.model", f"unknown model {name!r}", list(MODELS))
+    if "builtin" in t or "optional" in t:
+        key = "builtin" if "builtin" in t else "optional"
+        raise ConfigError(source, f"{where}.{key}", f"a model's scene takes no {key} key (an absent copy is "
+                          "skipped, saying how to get one)", ("model", "version", "file"))
+    model = MODELS[name]
+    raw = t.get("file")
+    if raw is not None and not isinstance(raw, str):
+        raise ConfigError(source, f"{where}.file", f"expected a path string, got {raw!r}")
+    path = locate(model, raw, base)
+    rest = {k: v for k, v in t.items() if k not in MODEL_KEYS and k != "file"}
+    if path is None or not path.is_file():
+        specs = sweep_params(FileParams, rest, source, where, skip=("closed",))
+        return [SceneSpec(file=path, params=p, label=_label(name, p, FileParams()), model=name,
+                          missing=absent_message(model, path, source, where), source=source, where=where) for p in specs]
+    if path.suffix.lower() not in (".obj", ".ply"):
+        raise ConfigError(source, f"{where}.file", f"{model.name}'s copy must be a mesh file, not "
+                          f"{path.suffix!r}", (".obj", ".ply"))
+    version = version_of(model, path, t.get("version"), source, where)
+    specs = parse_scene({**rest, "file": str(path)}, source, where, base)
+    return [replace(s, model=name, units=version.units, label=_label(f"{name}_{version.name}", s.params,
+                    FileParams())) for s in specs]
 
 
 def _closed_override(t, source, where) -> tuple:
