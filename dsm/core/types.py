@@ -335,11 +335,13 @@ VIRTUAL_PRESETS = {
     # that wide each side; the level rounds down), VirtualShadowMapArray.cpp (MaxPhysicalPages 2048,
     # PageDilationBorderSizeDirectional 0.05); the VSM documentation (16k x 16k virtual, 128 x 128 pages)
     "ue5": VirtualSpec("ue5", 128, 16384, 6, 22, -0.5, "footprint", 100.0, 0.05, 2048),
-    # Blender EEVEE (4.2+): eevee_defines.hh (SHADOW_PAGE_RES 256, SHADOW_TILEMAP_RES 32 pages a side,
-    # SHADOW_MAX_PAGE 4096), eevee_shadow.hh (coverage_get: a level is 2^level units wide),
-    # eevee_shadow_lib.glsl (level = ceil(log2(2 d narrowing) + lod_bias)); one Blender unit is a
-    # metre. Assumed: lod_bias 0 and the level range (EEVEE derives it from the camera each frame)
-    "eevee": VirtualSpec("eevee", 256, 8192, -8, 24, 0.0, "distance", 100.0, 0.0, 4096),
+    # Blender EEVEE (4.2+): eevee_defines.hh (SHADOW_PAGE_RES 256, SHADOW_TILEMAP_RES 32 pages a side),
+    # eevee_shadow.hh (coverage_get: a level is 2^level units wide), eevee_shadow_lib.glsl (level =
+    # ceil(log2(2 d narrowing) + lod_bias); pages tagged at the pixel, radius 0), eevee_shadow.cc
+    # (lod_bias = -log2(shadow_resolution_scale): 0 at scale 1; pages = pool bytes / (256^2 x 4));
+    # one Blender unit is a metre. Assumed: the 512 MB pool (2048 pages) and the level range (EEVEE
+    # derives it from the camera's near plane and bounds each frame)
+    "eevee": VirtualSpec("eevee", 256, 8192, -8, 24, 0.0, "distance", 100.0, 0.0, 2048),
 }
 
 
