@@ -140,6 +140,25 @@ def test_plane_level_histogram_follows_from_each_receivers_distance():
     assert lookup.nearest_tap is not None
 
 
+@pytest.mark.parametrize("preset", ["ue5", "eevee"])
+def test_levels_and_pages_do_not_depend_on_the_scenes_scale(preset):
+    """plane_box at scale 1 and 1024 (a power of two: its float32 geometry scales exactly): the same
+    receivers in the same levels, the same pages, and each level 1024 times as wide."""
+    import dsm.pipeline as pl
+    from dsm.core.types import VIRTUAL_PRESETS, LightSpec
+    spec = VIRTUAL_PRESETS[preset]
+    out = []
+    for scale in (1.0, 1024.0):
+        sd = pl.load_scene(pl.scene_spec({"builtin": "plane_box", "scale": scale}), (64, 64), None)
+        setup = pl.light_setup(sd, pl.gbuffer(sd), LightSpec("directional", direction=SLANT), "sun")
+        view = pl.make_view(setup.light, spec.resolution, pl.points_np(setup.p), sd.bbox, None, spec, sd.sensor,
+                            sd.scale)
+        out.append((view, np.asarray(pl.receivers(view, setup, sd.diagonal).face.numpy(), int)))
+    (a, fa), (b, fb) = out
+    assert np.array_equal(fa, fb) and np.array_equal(a.pages, b.pages) and a.n_pages > 0
+    assert np.allclose(b.extents, 1024.0 * a.extents, rtol=1e-12)
+
+
 # ---------------------------------------------------------------- one level: the single map
 
 def _one_level(pl, sd, setup, all_pages=True, level=None):
