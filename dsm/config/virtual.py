@@ -9,8 +9,8 @@ from dataclasses import replace
 
 from ..core.types import VIRTUAL_PRESETS, VIRTUAL_RULES, ConfigError, as_list, check_keys, choice, number
 
-VIRTUAL_KEYS = ("preset", "page_size", "resolution", "first_level", "last_level", "lod_bias", "rule", "unit_cm",
-                "border", "max_pages")
+VIRTUAL_KEYS = ("preset", "page_size", "resolution", "first_level", "last_level", "levels", "lod_bias", "rule",
+                "unit_cm", "border", "max_pages")
 MAX_LEVELS = 64                 # levels a view holds (faces)
 MAX_PAGES_SIDE = 1024           # pages along a level's side (the page table holds levels x this^2)
 
@@ -27,7 +27,18 @@ def _values(t: dict, source: str) -> dict:
             "unit_cm": lambda v: number(v, source, key("unit_cm"), positive=True),
             "border": lambda v: number(v, source, key("border"), minimum=0.0, maximum=0.5),
             "max_pages": lambda v: number(v, source, key("max_pages"), integer=True, minimum=1)}
-    return {k: conv[k](t[k]) for k in VIRTUAL_KEYS if k in t and k != "preset"}
+    return {k: conv[k](t[k]) for k in VIRTUAL_KEYS if k in t and k not in ("preset", "levels")}
+
+
+def _levels(t: dict, spec, source: str):
+    """``levels`` (a count from first_level) as last_level; given with last_level, a ConfigError."""
+    if "levels" not in t:
+        return spec
+    if "last_level" in t:
+        raise ConfigError(source, "map.virtual.levels", "give levels or last_level, not both",
+                          ("levels", "last_level"))
+    n = number(t["levels"], source, "map.virtual.levels", integer=True, minimum=1, maximum=MAX_LEVELS)
+    return replace(spec, last_level=spec.first_level + n - 1)
 
 
 def _check(spec, source: str):
@@ -63,6 +74,7 @@ def parse_virtual(m: dict, lights, source: str) -> tuple:
     out = []
     for name in names:
         spec = replace(VIRTUAL_PRESETS[choice(name, source, "map.virtual.preset", tuple(VIRTUAL_PRESETS))], **values)
+        spec = _levels(t, spec, source)
         _check(spec, source)
         out.append(spec)
     if all(light.type not in ("directional", "scene") for light in lights):

@@ -62,14 +62,6 @@ def level_constant(spec: VirtualSpec, camera: Camera, scale: float = 1.0) -> flo
     return math.log2(spec.unit_cm / (100.0 * scale)) + math.log2(2.0 * narrowing) + spec.lod_bias
 
 
-def level_of_distance(spec: VirtualSpec, d, C: float) -> np.ndarray:
-    """The absolute level of receivers at camera distances ``d`` (float64; the view's float32 kernel
-    is :meth:`VirtualView.face_of`)."""
-    x = np.log2(np.maximum(np.asarray(d, float), 1e-300)) + C
-    lvl = np.floor(x) if spec.rule == "footprint" else np.ceil(x)
-    return np.clip(lvl, spec.first_level, spec.last_level).astype(int)
-
-
 def level_width(spec: VirtualSpec, level, scale: float = 1.0):
     """World width (scene units) of absolute level ``level``: UE5 ``2^(l+3)`` cm, EEVEE ``2^l`` m."""
     cm = 2.0 ** (np.asarray(level, float) + 3.0) if spec.rule == "footprint" else 100.0 * 2.0 ** np.asarray(level, float)
@@ -79,11 +71,6 @@ def level_width(spec: VirtualSpec, level, scale: float = 1.0):
 def level_snap(spec: VirtualSpec, width):
     """The grid a level's centre is rounded to: UE5 its radius (a quarter of its width), EEVEE one page."""
     return np.asarray(width, float) / (4.0 if spec.rule == "footprint" else pages_per_side(spec))
-
-
-def pixel_footprint(camera: Camera, d) -> np.ndarray:
-    """World width of one camera pixel at distance ``d`` along its axis: ``2 d tan(fov_x / 2) / W``."""
-    return 2.0 * np.asarray(d, float) * camera.tan_x / camera.width
 
 
 class VirtualView(View):
