@@ -64,7 +64,8 @@ def level_constant(spec: VirtualSpec, camera: Camera, scale: float = 1.0) -> flo
 
 def level_width(spec: VirtualSpec, level, scale: float = 1.0):
     """World width (scene units) of absolute level ``level``: UE5 ``2^(l+3)`` cm, EEVEE ``2^l`` m."""
-    cm = 2.0 ** (np.asarray(level, float) + 3.0) if spec.rule == "footprint" else 100.0 * 2.0 ** np.asarray(level, float)
+    level = np.asarray(level, float)
+    cm = 2.0 ** (level + 3.0) if spec.rule == "footprint" else 100.0 * 2.0 ** level
     return cm * scale / spec.unit_cm
 
 
