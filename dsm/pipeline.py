@@ -43,6 +43,7 @@ from .scenes import gbuffer as gbuffer_mod
 from .maps import shrink as shrink_mod
 from .truth import leak as leak_mod, metrics as metrics_mod
 from .truth import cascades as cascade_metrics_mod
+from .truth import virtual as virtual_metrics_mod
 from .scenes.camera import Camera
 from .scenes.closedness import shape_closedness
 from .core.env import exact_math
@@ -403,6 +404,7 @@ def moment_visibility(spec, rx: Receiver, mmap, smap):
 
 
 cascade_metrics = cascade_metrics_mod.case_metrics     # (view, rx, v, V*) -> (columns, per-cascade rows, curve, faces)
+virtual_metrics = virtual_metrics_mod.case_metrics     # (virtual view, built map, faces) -> its columns
 split_distances = cascades_mod.split_distances
 
 

@@ -98,13 +98,15 @@ class MapPlan:
     specs: tuple = ()             # the scheme instances (SchemeSpec) read from this map, in config order
     scene_index: int = 0          # of the config's scenes
     light_index: int = 0          # of the scene's lights (the label's number)
-    cascade: object = None        # a directional light's CascadeSpec (faces = its count), else None
+    cascade: object = None        # a directional light's CascadeSpec or VirtualSpec (faces = its count), else None
     moments: tuple = ()           # pre-filtered instances (MomentSpec) built from this map's z1 (culling none)
     supersampled_rays: int = 0    # rays of the supersampled first layers its moment maps cast (one each)
 
     @property
     def texels(self) -> int:
-        """Texels of the map: faces * resolution^2."""
+        """Texels of the map: faces * resolution^2; a virtual map's its physical page pool."""
+        if getattr(self.cascade, "virtual", False):
+            return self.cascade.physical_texels
         return self.faces * self.resolution ** 2
 
     @property
@@ -627,9 +629,10 @@ def _plan_scene(plan: Plan, cfg: Config, si: int, sc, groups: dict, used: set, v
             short = reference_shortfall(specs[li])
             if short:
                 plan.area_short.append(f"{sc.label} {label}: {short}")
-        for view, cascade in _layouts(views_for(ltype, cfg.map.view, shape), cfg.map.cascade):
+        for view, cascade in _layouts(views_for(ltype, cfg.map.view, shape), cfg.map.cascade + cfg.map.virtual):
             faces = cascade.count if cascade is not None else VIEW_FACES[view]
-            for R in cfg.map.resolutions_for(faces):
+            virtual = getattr(cascade, "virtual", False)     # its own resolution: [map.virtual] resolution
+            for R in ((cascade.resolution,) if virtual else cfg.map.resolutions_for(faces)):
                 slot = _Slot(sc.label, si, label, li, ltype, view, cascade, faces, R)
                 for culling, config_group in groups.items():
                     m = _map_plan(cfg, slot, culling, config_group, used, views_seen)
@@ -691,6 +694,9 @@ def _check_planned(cfg: Config, plan: Plan, views_seen: set):
         raise ConfigError(cfg.source, "map.kind", "pre-filtered maps are built from a depth map and no light of the "
                           "config's scenes gets one (a vsv view is a voxel grid); add a depth view to map.view",
                           POINT_VIEWS)
+    if cfg.map.virtual and plan.maps and not any(getattr(m.cascade, "virtual", False) for m in plan.maps):
+        raise ConfigError(cfg.source, "map.virtual", "a virtual shadow map is a directional light's and no light of "
+                          "the config's scenes is directional; remove [map.virtual] or add a directional [[light]]")
     if cfg.map.cascade and plan.maps and not any(m.cascade is not None for m in plan.maps):
         raise ConfigError(cfg.source, "map.cascades", "cascades are for directional lights and no light of the "
                           "config's scenes is directional; remove map.cascades or add a directional [[light]]")

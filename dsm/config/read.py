@@ -12,6 +12,7 @@ import tomllib
 from dataclasses import replace
 from pathlib import Path
 
+from .virtual import parse_virtual
 from ..core.types import (LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, MAP_VIEWS, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA, REPORT_IMAGES, LOOKUP_MODES, BUILD_MODES, LAMBDA_MAX, SEED_MAX, ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params, SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec, CameraSpec, CascadeSpec, CASCADE_SPLITS, CASCADE_FITS, DEPTH_BOUNDS, MAX_CASCADES, MotionSpec, CAMERA_PATHS, LIGHT_PATHS, MAP_KINDS, MomentSpec, ContactSpec, BLUR_KERNELS)
 
 # a run's folder is runs/<name>-tune-YYYYmmdd-HHMMSS[-n] (at most 25 bytes more) and a file name takes 255 bytes
@@ -195,8 +196,8 @@ def _parse_lights(raw: dict, source: str, scenes) -> list:
 
 def _parse_map(m: dict, lights, source: str) -> MapSpec:
     """The ``[map]`` table ``m`` as a MapSpec: sizes, filters, formats, views, cascades and kinds."""
-    check_keys(m, ("resolution", "texels", "filter", "format", "view", "shrink") + CASCADE_KEYS + KIND_KEYS, source,
-               "map")
+    check_keys(m, ("resolution", "texels", "filter", "format", "view", "shrink", "virtual") + CASCADE_KEYS + KIND_KEYS,
+               source, "map")
     if "resolution" in m and "texels" in m:
         raise ConfigError(source, "map", "give either resolution (per face) or texels (total per view), not both",
                           ("resolution", "texels"))
@@ -220,12 +221,16 @@ def _parse_map(m: dict, lights, source: str) -> MapSpec:
                           f"directional (the lights are {', '.join(sorted({l.type for l in lights}))}); remove "
                           "map.cascades or add a directional light")
     kinds = _parse_kinds(m, formats, lights, cascade, source)
+    virtual = parse_virtual(m, lights, source)
+    if virtual and kinds != ("depth",):
+        raise ConfigError(source, "map.virtual", "pre-filtered maps are built on one map per view; remove "
+                          "[map.virtual] or keep map.kind = depth", ("depth",))
     if "leak_texels" in m and "kind" not in m:
         raise ConfigError(source, "map.leak_texels", "the leak split is made in runs that give map.kind (e.g. "
                           'kind = ["depth"]); add it', ("kind",))
     return MapSpec(resolutions, filters, formats, views, texels, cascade, kinds,
                    _parse_moments(m, kinds, formats, source),
-                   "kind" in m, number(m.get("leak_texels", 2.0), source, "map.leak_texels", minimum=0.0))
+                   "kind" in m, number(m.get("leak_texels", 2.0), source, "map.leak_texels", minimum=0.0), virtual)
 
 
 def once(values, source: str, key: str):

@@ -6,7 +6,8 @@ exclusions, the split of its errors, its build and lookup costs), ``cascade`` (a
 ``motion`` (a case over frames), ``area`` (an area light's soft-shadow metrics),
 ``precision`` (the map's float32 headroom: :mod:`dsm.maps.headroom`), ``prefilter`` (a run whose
 ``[map] kind`` is given: every case's map kind, its peter-panning split into contact and leak,
-and a moment map's build time) and ``contact`` (a case with ``[contact]``'s screen-space contact
+and a moment map's build time), ``virtual`` (a virtual shadow map's pages, memory, rays and levels:
+:mod:`dsm.truth.virtual`) and ``contact`` (a case with ``[contact]``'s screen-space contact
 shadows after its lookup, dsm.contact). A row holds
 the core group and each other group whole or not at all; :func:`check_row` refuses a column the
 schema does not name and a group cut short, so a metric can no longer vanish from metrics.csv.
@@ -46,6 +47,9 @@ def _cols(group: str, spec: str) -> list:
     return out
 
 
+# a virtual shadow map's (dsm.truth.virtual): pages, physical texels, rays, receivers and pages per level
+VIRTUAL_COLUMNS = ["vsm_pages_tagged", "vsm_pages_built", "vsm_memory_texels", "vsm_rays", "vsm_level_histogram",
+                   "vsm_level_pages"]
 CONTACT_COLUMNS = ("n_contact_false n_contact_recovered n_contact_missed contact_acne_rate contact_peterpan_rate "
                    "contact_error_rate contact_mean_abs_error contact_ms").split()
 
@@ -60,7 +64,7 @@ _ORDER = (
     "build_first_ms build_compile_ms build_peak_mb lookup_ms lookup_compile_ms lookup_kernels_compiled "
     "reference_ms sweep_key sweep_value").split() + list(SOFT_COLUMNS) + ["f32_step", "texel_f32_steps", "map_kind",
                                                                          *LEAK_COLUMNS, "moments_ms"] + CONTACT_COLUMNS + [
-    "lookup_shared", "build_shared"]
+    "lookup_shared", "build_shared"] + VIRTUAL_COLUMNS
 
 _GROUPS = (
     _cols("core", "case:t scene:t light:t view:t scheme:t preset:t params:t culling:t resolution:i total_texels:i "
@@ -77,7 +81,9 @@ _GROUPS = (
     + _cols("area", " ".join(SOFT_COLUMNS))
     + _cols("precision", "f32_step texel_f32_steps")
     + _cols("prefilter", "map_kind:t " + " ".join(LEAK_COLUMNS) + " moments_ms")
-    + _cols("contact", " ".join(CONTACT_COLUMNS)))
+    + _cols("contact", " ".join(CONTACT_COLUMNS))
+    + _cols("virtual", "vsm_pages_tagged:i vsm_pages_built:i vsm_memory_texels:i vsm_rays:i vsm_level_histogram:t "
+                       "vsm_level_pages:t"))
 
 _BY_NAME = {c.name: c for c in _GROUPS}
 COLUMNS = tuple(_BY_NAME[n] for n in _ORDER)
@@ -85,7 +91,7 @@ NAMES = [c.name for c in COLUMNS]
 TEXT_COLUMNS = {c.name for c in COLUMNS if c.kind == TEXT}
 INT_COLUMNS = {c.name for c in COLUMNS if c.kind == INT}
 GROUPS = {g: {c.name for c in COLUMNS if c.group == g} for g in ("core", "map", "cascade", "motion", "area",
-                                                                  "precision", "prefilter", "contact")}
+                                                                  "precision", "prefilter", "contact", "virtual")}
 
 
 class SchemaError(ValueError):

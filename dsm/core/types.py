@@ -289,6 +289,64 @@ class CascadeSpec:
         return out
 
 
+VIRTUAL_RULES = ("footprint", "distance")     # how a receiver's clipmap level is chosen (dsm.maps.virtual)
+
+
+@dataclass(frozen=True)
+class VirtualSpec:
+    """A directional light's virtual shadow map (``[map.virtual]``; dsm.maps.virtual): clipmap levels
+    around the camera, pages tagged by the receivers, each receiver looked up in its level."""
+    preset: str = ""                # "ue5" | "eevee" | "" (every key given)
+    page_size: int = 128            # texels per page side
+    resolution: int = 16384         # virtual texels per level side
+    first_level: int = 6            # finest clipmap level (absolute)
+    last_level: int = 22            # coarsest clipmap level (absolute)
+    lod_bias: float = -0.5          # level-of-detail bias (-1 doubles the resolution)
+    rule: str = "footprint"         # footprint (UE5: floor, pixel footprint) | distance (EEVEE: ceil, distance)
+    unit_cm: float = 100.0          # centimetres in one scene unit (a scene at scale 1)
+    border: float = 0.05            # a receiver this fraction of a page from its page's edge also tags the neighbour
+    max_pages: int = 2048           # the physical page pool
+
+    virtual = True                  # read by the plan and the views (a CascadeSpec has no such field)
+
+    @property
+    def count(self) -> int:
+        """Clipmap levels (the view's faces)."""
+        return self.last_level - self.first_level + 1
+
+    @property
+    def physical_texels(self) -> int:
+        """Texels of the physical page pool: max_pages x page_size^2 (the plan's memory bound)."""
+        return self.max_pages * self.page_size ** 2
+
+    @property
+    def label(self) -> str:
+        """The layout's name in reports: ``vsm <preset>`` plus the keys that differ from the preset."""
+        from dataclasses import fields
+        base = VIRTUAL_PRESETS.get(self.preset, VirtualSpec())
+        diff = [f"{f.name}={getattr(self, f.name):g}" if isinstance(getattr(self, f.name), float)
+                else f"{f.name}={getattr(self, f.name)}" for f in fields(self)
+                if f.name != "preset" and getattr(self, f.name) != getattr(base, f.name)]
+        return " ".join(["vsm", self.preset or "custom"] + diff)
+
+
+# the engines' defaults, each value read in the source named (docs/virtual_shadow_maps.md lists them)
+VIRTUAL_PRESETS = {
+    # Unreal Engine 5: VirtualShadowMapClipmap.cpp (r.Shadow.Virtual.Clipmap.FirstLevel 6, LastLevel 22,
+    # r.Shadow.Virtual.ResolutionLodBiasDirectional -0.5; level radius 2^(level+1) cm, the level twice
+    # that wide each side; the level rounds down), VirtualShadowMapArray.cpp (MaxPhysicalPages 2048,
+    # PageDilationBorderSizeDirectional 0.05); the VSM documentation (16k x 16k virtual, 128 x 128 pages)
+    "ue5": VirtualSpec("ue5", 128, 16384, 6, 22, -0.5, "footprint", 100.0, 0.05, 2048),
+    # Blender EEVEE (4.2+): eevee_defines.hh (SHADOW_PAGE_RES 256, SHADOW_TILEMAP_RES 32 pages a side),
+    # eevee_shadow.hh (coverage_get: a level is 2^level units wide), eevee_shadow_lib.glsl (level =
+    # ceil(log2(2 d narrowing) + lod_bias); pages tagged at the pixel, radius 0), eevee_shadow.cc
+    # (lod_bias = -log2(shadow_resolution_scale): 0 at scale 1; pages = pool bytes / (256^2 x 4));
+    # one Blender unit is a metre. Assumed: the 512 MB pool (2048 pages) and the level range (EEVEE
+    # derives it from the camera's near plane and bounds each frame)
+    "eevee": VirtualSpec("eevee", 256, 8192, -8, 24, 0.0, "distance", 100.0, 0.0, 2048),
+}
+
+
 CAMERA_PATHS = ("none", "dolly", "pan", "orbit", "keyframes")
 LIGHT_PATHS = ("none", "turn", "move", "keyframes")
 
@@ -323,6 +381,7 @@ class MapSpec:
     moments: tuple = ()         # MomentSpec instances of the pre-filtered kinds (dsm.prefilter)
     leak_split: bool = False    # kind given: every case splits its peter-panning into contact and leak
     leak_texels: float = 2.0    # the split: peter-panning this many texels inside the exact shadow is a leak
+    virtual: tuple = ()         # VirtualSpec layouts of directional lights ([map.virtual]; dsm.maps.virtual)
 
     def resolutions_for(self, faces: int) -> tuple:
         """Per-face resolutions of a view with ``faces`` faces (from ``texels`` when given)."""

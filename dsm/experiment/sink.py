@@ -15,7 +15,7 @@ from .. import pipeline
 from ..case import CaseResult, MapContext
 from ..core import record
 from ..report import figures, publish, tables as report, io as report_io
-from ..report.sections import cascades as cascade_files, contact_images, soft as soft_report
+from ..report.sections import cascades as cascade_files, contact_images, soft as soft_report, virtual as virtual_files
 
 
 class Sink:
@@ -49,12 +49,15 @@ class Sink:
 
     def still_case(self, ctx: MapContext, ident: dict, result: CaseResult):
         """A still case's per-cascade rows and curve, and its images (classes, shading, contact
-        march, an area light's V, the cascade index)."""
+        march, an area light's V, the cascade index or a virtual map's level)."""
         if result.cascades is not None:
             per, curve, faces = result.cascades
             self.record.cascade_rows += [{**ident, **r} for r in per]
             self.record.cascade_curves.append((ident, curve))
-        if result.cascades is not None and self.files:
+        if result.cascades is not None and self.files and getattr(ctx.view, "virtual", False):
+            virtual_files.write_level_image(self.folder(ident) / f"{ident['case']}_level.png", ctx.setup.pixels,
+                                            ctx.view.levels[faces], *ctx.image_size)
+        elif result.cascades is not None and self.files:
             folder = self.folder(ident)
             cascade_files.write_index_image(folder / f"{ident['case']}_cascade.png", ctx.setup.pixels, faces,
                                             *ctx.image_size)

@@ -1,7 +1,7 @@
 """A directional light (the sun): an orthographic map fitted to the receivers, or cascades."""
 from __future__ import annotations
 
-from ..maps import cascades
+from ..maps import cascades, virtual
 from ..core.types import LightSpec, check_keys
 from ..maps.views import OrthographicView
 from .base import required, unit_direction
@@ -25,7 +25,10 @@ def views(point_views: tuple, shape: str) -> tuple:
 
 
 def make_view(light, R, receivers_world, bbox, kind, cascade, sensor, scale):
-    """The orthographic map fitted to the receivers, or the cascades of ``cascade`` for ``sensor``."""
+    """The orthographic map fitted to the receivers, or the cascades of ``cascade`` (a CascadeSpec), or
+    the virtual shadow map of ``cascade`` (a VirtualSpec), for ``sensor``."""
+    if getattr(cascade, "virtual", False):
+        return virtual.make_view(light, cascade, receivers_world, bbox, sensor, scale)
     if cascade is not None:
         return cascades.make_view(light, cascade, R, receivers_world, bbox, sensor, scale)
     return OrthographicView(light.direction, receivers_world, bbox, R)

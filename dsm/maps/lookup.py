@@ -25,7 +25,8 @@ mean, so every scheme works with every filter; Weiskopf & Ertl 2003, section 5):
 Taps stay on the receiver's face: at a cube edge or the paraboloid rim the index is clamped
 to the face rather than continued on the neighbouring face. Beyond a directional light's
 (orthographic) map, which has a margin of a few texels around the receivers, a tap finds no
-caster: it reads the far bound, as a texel whose ray hit nothing.
+caster: it reads the far bound, as a texel whose ray hit nothing; so does a texel of a virtual
+map's page that no receiver tagged (dsm.maps.virtual: nothing was cast there).
 """
 from __future__ import annotations
 
@@ -79,7 +80,7 @@ def tap_at(rx: Receiver, smap, u, v) -> Tap:
     R1 = mi.Int32(view.R_u) - 1
     i = dr.clip(mi.Int32(dr.floor(u)), 0, R1)
     j = dr.clip(mi.Int32(dr.floor(v)), 0, R1)
-    idx = (rx.face * view.R_u + mi.UInt32(j)) * view.R_u + mi.UInt32(i)
+    idx, absent = view.texel_index(rx.face, i, j)
     slope = dr.gather(mi.Float, smap.slope, idx) if smap.slope is not None else None
     z2 = dr.gather(mi.Float, smap.z2, idx) if smap.z2 is not None else None
     z1 = dr.gather(mi.Float, smap.z1, idx)
@@ -87,6 +88,8 @@ def tap_at(rx: Receiver, smap, u, v) -> Tap:
     if view.kind == "orthographic":
         # beyond a directional light's map no caster was recorded: the far bound, as a miss
         out = (u < 0) | (v < 0) | (u >= view.R) | (v >= view.R)
+        if absent is not None:      # a virtual map's page no receiver tagged: nothing was cast there
+            out |= absent
         z1 = dr.select(out, view.far_o, z1)
         shape = dr.select(out, 0xFFFFFFFF, shape)
         z2 = dr.select(out, view.far_o, z2) if z2 is not None else None

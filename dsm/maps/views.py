@@ -146,6 +146,11 @@ class View:
         face, rest = idx // RR, idx % RR
         return face, mi.Float(rest % R) + 0.5, mi.Float(rest // R) + 0.5
 
+    def texel_index(self, face, i, j):
+        """(storage index, not stored) of texel (i, j) of ``face`` (i, j within the face): ``face R^2 +
+        j R + i``, and None (every texel is stored; a virtual map's page table says otherwise)."""
+        return (face * self.R_u + mi.UInt32(j)) * self.R_u + mi.UInt32(i), None
+
     def texel_rays(self, first: int, count: int) -> mi.Ray3f:
         """Rays through the centres of texels ``first .. first + count - 1`` (face, then row-major)."""
         face, cu, cv = self.texel_coords(dr.arange(mi.UInt32, first, first + count))
@@ -209,6 +214,22 @@ class OrthographicView(View):
         self.extent = float(extent)
         super().__init__(origin, ex, ey, ez, resolution, near=0.0, far=float(zs.max() - z0 + margin))
         self.L = dr.opaque(mi.Float, self.extent)
+
+    @classmethod
+    def square(cls, direction, x0: float, y0: float, extent: float, scene_bbox, resolution: int) -> "OrthographicView":
+        """The single map over a given light-space square (corner (x0, y0) along ``ex``, ``ey``, side
+        ``extent``), near and far as a fitted map's (a virtual map's one level is this map)."""
+        ex, ey, ez = light_frame(direction)
+        zs = _bbox_corners(*scene_bbox) @ ez
+        diag = float(np.linalg.norm(np.asarray(scene_bbox[1]) - np.asarray(scene_bbox[0])))
+        margin = 0.01 * max(zs.max() - zs.min(), diag, 1e-30)
+        z0 = zs.min() - margin
+        view = cls.__new__(cls)
+        view.extent = float(extent)
+        View.__init__(view, ex * x0 + ey * y0 + ez * z0, ex, ey, ez, resolution, near=0.0,
+                      far=float(zs.max() - z0 + margin))
+        view.L = dr.opaque(mi.Float, view.extent)
+        return view
 
     def signature_arrays(self) -> list:
         """The fitted square's side (the frame holds its corner)."""

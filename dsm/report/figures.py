@@ -50,9 +50,9 @@ def image_folder(row) -> str:
 
 
 # the files a case writes under images/<scene>_<light>/: <case>_<kind> (error and shadow here,
-# cascade in dsm.maps.cascades, frames in dsm.experiment.motion, v, vstar and abserr in dsm.report.sections.soft)
+# cascade in dsm.maps.cascades, level in dsm.report.sections.virtual, frames in dsm.experiment.motion, v, vstar and abserr in dsm.report.sections.soft)
 CASE_IMAGE_KINDS = ("error.png", "shadow.png", "cascade.png", "frames.gif", "v.png", "vstar.png", "abserr.png",
-                    "contact.png")
+                    "contact.png", "level.png")
 
 
 def image_paths(row) -> tuple:

@@ -17,6 +17,7 @@ from pathlib import Path
 from ..truth import metrics
 from . import io as report, summary
 from .figures import image_paths
+from .sections import virtual as virtual_report
 
 CASE_COLUMNS = [("case", "case", "text"), ("scene", "scene", "text"), ("light", "light", "text"),
                 ("view", "view", "text"), ("scheme", "scheme", "text"), ("params", "params", "text"),
@@ -279,6 +280,7 @@ def write_html(path: Path, rows: list, run: dict):
     body += [_status_section(run)]
     if rows:
         body.append(_case_section(rows, out))
+        body.append(virtual_report.html_section(rows))
     body += [_plots_section(out), _run_section(run)]
     page = (f"<!doctype html><html lang=en><head><meta charset=utf-8><title>dsm: {_e(name)}</title>"
             f"<meta name=viewport content=\"width=device-width\"><style>{CSS}</style></head><body>"

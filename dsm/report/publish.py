@@ -22,6 +22,7 @@ from . import figures, html as htmlpage, jobs as draw_jobs, tables as report, io
 from ..truth import metrics
 from .sections import cascades, motion
 from .sections import soft as soft_report
+from .sections import virtual as virtual_report
 
 PLOT_PREFIXES = ("vs_bias_", "vs_resolution_", "vs_texels_", "pareto_", "tradeoff_", "soft_", "cascades_", "flicker_")
 IMAGES_PER_JOB = 150
@@ -192,6 +193,7 @@ def write_report(out: Path, images=(), curves=None, plots: bool = True) -> dict:
                        run.get("status", []), oracle_rows, _texels(run), state=run.get("state"),
                        planned=run.get("plan", {}).get("cases"))
     _sections(out, notes, plots and bool(rows))
+    virtual_report.write_table(out / "virtual.md", rows)
     htmlpage.write_html(out / "report.html", rows, run)
     t3 = time.perf_counter()
     return {"figures": n_figures, "images": len(items), "workers": pool, "read_s": t1 - t0, "draw_s": t2 - t1,

@@ -25,7 +25,7 @@ def case_metrics(view: CascadeView, rx, v: np.ndarray, v_star: np.ndarray) -> tu
     acne, peter = v_star & ~lit, ~v_star & lit
     rows = []
     for c in view.describe():
-        k = c["cascade"]
+        k = c.get("face", c["cascade"])     # a virtual view names a level by its number, its face apart
         s = face == k
         nl, ns = int((v_star & s).sum()), int((~v_star & s).sum())
         na, npp = int((acne & s).sum()), int((peter & s).sum())

@@ -136,6 +136,9 @@ def _check_map(cfg):
     if getattr(m, "cascade", ()):
         raise ConfigError(src, "map.cascades", "dsm tune fits one map per scene and light fixed across views; "
                           "a cascaded view follows its camera: remove the cascades")
+    if getattr(m, "virtual", ()):
+        raise ConfigError(src, "map.virtual", "dsm tune fits one map per scene and light fixed across views; "
+                          "a virtual shadow map's levels and pages follow its camera: remove [map.virtual]")
     if any(s.samples > 1 for s in m.moments):
         raise ConfigError(src, "map.moment_samples", "dsm tune builds each moment map from its one map of one ray "
                           "a texel: remove it (dsm run measures supersampled moments)")
