@@ -33,7 +33,8 @@ def llvm_version():
     except Exception:
         return None
     # Dr.Jit 1.0 gives the version as text ("19.1.7"), later releases as a tuple of numbers
-    return tuple(int(x) for x in ver.split(".")) if isinstance(ver, str) else tuple(ver)
+    ver = tuple(int(x) for x in ver.split(".")) if isinstance(ver, str) else tuple(ver)
+    return None if not ver or min(ver) < 0 else ver         # (-1, -1, -1): no library loaded
 
 
 def use_variant(variant: str | None = None, threads: int | None = None) -> str:
@@ -58,6 +59,8 @@ def use_variant(variant: str | None = None, threads: int | None = None) -> str:
         ver = llvm_version()
         if ver is None or ver[0] < 16:
             found = "none found" if ver is None else ".".join(map(str, ver))
+            given = os.environ.get("DRJIT_LIBLLVM_PATH")
+            found += f", DRJIT_LIBLLVM_PATH={given}" if given else ""
             raise SetupError(f"{LLVM_HINT} (found: {found})")
     if variant.startswith("cuda") and not has_cuda():
         raise SetupError(f"variant {variant} needs an NVIDIA GPU with CUDA; none found here: use llvm_ad_rgb")
