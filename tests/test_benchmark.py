@@ -631,5 +631,5 @@ def test_force_replaces_every_file_of_the_previous_run_and_keeps_the_user_s(tmp_
     assert not (out / "flicker").exists() and not (out / "cases").exists()
     assert (out / "notes.txt").read_text() == "old"
     doc = json.loads((out / "results.json").read_text())
-    assert doc["suite"] == "dsm-bench-1" and doc["results_version"] == 2
+    assert doc["suite"] == "dsm-bench-1" and doc["results_version"] == 3
     assert (out / "leaderboard.html").read_text() != "old" and (out / "scale.png").read_bytes() != b"old"

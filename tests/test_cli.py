@@ -24,7 +24,7 @@ def test_default_experiment_writes_the_report(tmp_path):
     assert len({r["resolution"] for r in rows}) == 3
     assert len({r["scene"] for r in rows}) == 6
     run = json.loads((out / "run.json").read_text())
-    for k in ("python", "mitsuba", "drjit", "libllvm", "dsm_git_commit"):
+    for k in ("python", "mitsuba", "drjit", "libllvm", "dsm", "dsm_git_commit"):
         assert run["versions"][k]
     assert run["variant"] == "llvm_ad_rgb" and run["threads"] >= 1
     assert run["rays"]["map_texel"] > 0 and run["rays"]["reference"] > 0

@@ -425,6 +425,9 @@ def test_cli_tune_resume_keeps_finished_schemes_and_tunes_the_rest(tmp_path, cap
     full, out = tmp_path / "full", tmp_path / "o"
     assert cli.main(["tune", str(cfg), "--out", str(full)]) == 0
     whole = json.loads((full / "tune.json").read_text())
+    from importlib.metadata import version
+    assert {k: whole["versions"][k] for k in ("dsm", "mitsuba", "drjit")} == \
+        {k: version(k) for k in ("dsm", "mitsuba", "drjit")}              # what the tune's numbers depend on
     assert cli.main(["tune", str(cfg), "--out", str(out)]) == 0
     state = json.loads((out / "tune_state.json").read_text())
     assert [s["entry"]["scheme"] for s in state["schemes"]] == ["constant", "receiver_plane"]

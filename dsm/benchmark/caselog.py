@@ -2,7 +2,7 @@
 kill -9 loses at most the case that was running, and ``dsm benchmark --resume`` goes on.
 
 ``<out>/cases/run.json`` says what the run measures (suite, its hash, size, variant, backend, the
-number of cases); ``<out>/cases/<index>.json`` holds one finished case (its records, flicker
+number of cases, and the dsm, Mitsuba and Dr.Jit versions it runs on); ``<out>/cases/<index>.json`` holds one finished case (its records, flicker
 records and the variant it ran on), each written atomically. A resumed run takes a case from its
 file only where the file names the same case of the same run; results.json, written at the end
 from every case, makes the folder complete.
@@ -13,6 +13,7 @@ import json
 import shutil
 from pathlib import Path
 
+from ..core import env
 from ..report import io as report_io
 
 FOLDER = "cases"
@@ -51,6 +52,10 @@ class CaseLog:
         except (OSError, ValueError):
             return {}
         differs = [k for k in sorted(self.header) if held.get(k) != self.header[k]]
+        if "versions" in differs:        # the one to name first: every other key may agree
+            change = env.engine_change(held.get("versions"), self.header["versions"])
+            raise Mismatch(f"its run in progress was measured with other versions ({change}); results differ bit "
+                           "for bit between versions")
         if differs:
             k = differs[0]
             raise Mismatch(f"its run in progress has {k} = {held.get(k)!r}, this run {self.header[k]!r}")

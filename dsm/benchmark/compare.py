@@ -4,7 +4,8 @@ Counts from two machines differ by float32 rounding (about 0.1 % of receivers, m
 against GPU). The rule: a case's count (receivers, acne, peter-panning) has changed when it moved
 by more than ``max(0.1 % of A's receivers, 2)`` receivers; a smaller move is a tie. A case present
 in one file only is added or removed. A change in the suite's hash makes the files incomparable
-(they measure different suites): that is reported first.
+(they measure different suites): that is reported first, then other dsm, Mitsuba or Dr.Jit versions
+(results differ bit for bit between releases), in one line.
 
 A case's FLIP (its mean over the render's pixels, in [0, 1]) has changed when it moved by more than
 ``FLIP_TIE`` (0.001: a tenth of a percent of FLIP's range; a handful of pixels changing class moves it
@@ -17,6 +18,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from ..core import env
 from .ranking import offset_of
 
 COUNTS = ("n_receivers", "n_acne", "n_peterpan")
@@ -77,6 +79,8 @@ def compare(doc_a: dict, doc_b: dict) -> dict:
     return {"same_suite": doc_a.get("suite_sha256") == doc_b.get("suite_sha256"),
             "suites": [doc_a.get("suite"), doc_b.get("suite")],
             "commits": [doc_a.get("versions", {}).get("dsm_git_commit"), doc_b.get("versions", {}).get("dsm_git_commit")],
+            "versions": [env.engine(doc_a.get("versions")), env.engine(doc_b.get("versions"))],
+            "versions_change": env.engine_change(doc_a.get("versions"), doc_b.get("versions")),
             "rule": f"a count is changed when it moves by more than max({TIE_FRACTION:.1%} of A's receivers, "
                     f"{TIE_MIN}), FLIP by more than {FLIP_TIE:g}, a flicker rate by more than {FLICKER_TIE:g}; else a tie",
             "changed": changed, "n_tied": tied, "flicker": flicker_changes(doc_a, doc_b),
@@ -87,6 +91,8 @@ def text(diff: dict) -> str:
     """The comparison as printed lines."""
     lines = [f"suites {diff['suites'][0]} -> {diff['suites'][1]}" + ("" if diff["same_suite"] else
              " (different suite hashes: the files measure different suites)"),
+             *([f"versions differ: {diff['versions_change']} (results differ bit for bit between versions: a "
+                 "change may be theirs)"] if diff.get("versions_change") else []),
              f"rule: {diff['rule']}",
              f"{len(diff['changed'])} cases changed, {diff['n_tied']} tied, {len(diff['added'])} added, "
              f"{len(diff['removed'])} removed"]

@@ -1,7 +1,10 @@
 """A benchmark result document (results.json) read back and checked before any use.
 
-``results_version`` 2 is what this dsm writes; a document without it is version 1 (written by dsm
-0.2.0 and earlier, the same fields) and is read the same. A newer version, and anything that is
+``results_version`` 3 is what this dsm writes: version 2's fields, and ``versions`` must name the dsm,
+Mitsuba and Dr.Jit versions the results were measured with (results differ bit for bit between
+releases; ``dsm benchmark --compare`` says when two documents' differ). Version 2, and a document
+without ``results_version`` (version 1, written by dsm 0.2.0 and earlier, the same fields), are read
+the same, their versions as recorded (dsm's own unrecorded). A newer version, and anything that is
 not a results document, is refused in one line naming the file and what is wrong with it.
 """
 from __future__ import annotations
@@ -10,8 +13,10 @@ import json
 import math
 from pathlib import Path
 
-RESULTS_VERSION = 2
-READS = (1, 2)                 # the versions this dsm reads
+from ..core.env import ENGINE        # version 3: versions.<these> are text
+
+RESULTS_VERSION = 3
+READS = (1, 2, 3)              # the versions this dsm reads
 NAMES = ("scene", "unit", "light", "contender")          # a record's identity (offset: optional, "0")
 COUNTS = ("n_receivers", "n_acne", "n_peterpan")          # integers where present (an oracle's: receivers only)
 
@@ -61,6 +66,8 @@ def check(doc, path="<document>") -> dict:
                          f"{', '.join(map(str, READS))} (a newer dsm wrote it: upgrade to compare)")
     if not isinstance(doc["suite"], str):
         raise NotResults(f"{where}: suite is {_kind(doc['suite'])}, not a suite's name")
+    if version >= 3:
+        _engine(doc.get("versions"), where)
     _records(doc.get("cases"), where, "cases", COUNTS)
     _records(doc.get("flicker", []), where, "flicker", ())
     for i, rec in enumerate(doc.get("flicker", [])):
@@ -86,6 +93,17 @@ def _records(recs, where: str, key: str, counts: tuple):
                 raise NotResults(f"{where}: {key}[{i}].{c} is {rec[c]!r}, not a count (a whole number >= 0)")
         if "flip" in rec and rec["flip"] is not None:
             _number(rec["flip"], where, f"{key}[{i}].flip")
+
+
+def _engine(versions, where: str):
+    """A version 3 document names the dsm, Mitsuba and Dr.Jit versions it was measured with."""
+    if not isinstance(versions, dict):
+        raise NotResults(f"{where}: versions is {_kind(versions)}, not an object naming the dsm, mitsuba and "
+                         "drjit versions (results_version 3)")
+    for k in ENGINE:
+        if not isinstance(versions.get(k), str) or not versions[k]:
+            raise NotResults(f"{where}: versions.{k} is {versions.get(k)!r}, not a version (results_version 3 "
+                             f"records {', '.join(ENGINE)})")
 
 
 def _number(x, where: str, name: str):

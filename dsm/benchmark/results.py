@@ -171,17 +171,19 @@ def run_suite(size: str = "default", variant: str | None = None, progress=print,
     finished case is kept under ``out/cases/`` as it finishes (dsm.benchmark.caselog), and the
     flicker runs' folders go under ``out`` (a temporary folder, removed, when None); ``resume``:
     the cases the folder's run in progress finished are taken from there (caselog.Mismatch where
-    it measured another suite, size, variant or backend); ``cluster``: a connected Ray address
+    it measured another suite, size, variant or backend, or ran on other dsm, Mitsuba or Dr.Jit versions); ``cluster``: a connected Ray address
     the cases' map groups run on (dsm benchmark --cluster)."""
     if out is None:
         import tempfile
         with tempfile.TemporaryDirectory() as tmp:
             return run_suite(size, variant, progress, version, Path(tmp), cluster)
+    from ..core.env import engine, versions
     suite = load_suite(SUITE_FILES[version])
     ppd = suite.get("flip", {}).get("ppd")          # dsm-bench-1 has no FLIP
     todo, tuned = cases(suite, size), tuned_labels(suite)
     header = {"suite": suite["suite"]["name"], "suite_sha256": suite_sha256(SUITE_FILES[version]), "size": size,
-              "variant": variant, "cluster": cluster, "cases": len(todo), "timing_calls": TIMING_CALLS}
+              "variant": variant, "cluster": cluster, "cases": len(todo), "versions": engine(versions()),
+              "timing_calls": TIMING_CALLS}
     log = caselog.CaseLog(out, header)
     done = log.start(resume)
     entries = []

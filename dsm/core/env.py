@@ -29,9 +29,12 @@ def llvm_version():
     """Dr.Jit's libLLVM version as a tuple, or None when it has none."""
     import drjit as dr
     try:
-        return tuple(dr.detail.llvm_version())
+        ver = dr.detail.llvm_version()
     except Exception:
         return None
+    # Dr.Jit 1.0 gives the version as text ("19.1.7"), later releases as a tuple of numbers
+    ver = tuple(int(x) for x in ver.split(".")) if isinstance(ver, str) else tuple(ver)
+    return None if not ver or min(ver) < 0 else ver         # (-1, -1, -1): no library loaded
 
 
 def use_variant(variant: str | None = None, threads: int | None = None) -> str:
@@ -56,6 +59,8 @@ def use_variant(variant: str | None = None, threads: int | None = None) -> str:
         ver = llvm_version()
         if ver is None or ver[0] < 16:
             found = "none found" if ver is None else ".".join(map(str, ver))
+            given = os.environ.get("DRJIT_LIBLLVM_PATH")
+            found += f", DRJIT_LIBLLVM_PATH={given}" if given else ""
             raise SetupError(f"{LLVM_HINT} (found: {found})")
     if variant.startswith("cuda") and not has_cuda():
         raise SetupError(f"variant {variant} needs an NVIDIA GPU with CUDA; none found here: use llvm_ad_rgb")
@@ -124,9 +129,38 @@ def git_commit() -> str:
         return "unknown"
 
 
+def dsm_version() -> str:
+    """The installed dsm's version (its package metadata), or ``unknown`` for a copy not installed."""
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        return version("dsm")
+    except PackageNotFoundError:
+        return "unknown"
+
+
 def versions() -> dict:
-    """Python, Mitsuba, Dr.Jit, libLLVM and the kit's git commit (read once per run: git is a subprocess)."""
+    """Python, Mitsuba, Dr.Jit, libLLVM, dsm and its git commit (read once per run: git is a subprocess)."""
     import drjit as dr
     import mitsuba as mi
     return {"python": platform.python_version(), "mitsuba": mi.__version__, "drjit": dr.__version__,
-            "libllvm": ".".join(map(str, llvm_version() or ())) or "unavailable", "dsm_git_commit": git_commit()}
+            "libllvm": ".".join(map(str, llvm_version() or ())) or "unavailable", "dsm": dsm_version(),
+            "dsm_git_commit": git_commit()}
+
+
+# The versions a result's bits depend on: Mitsuba and Dr.Jit change a count between releases (a
+# kernel's rounding, Embree's build), and dsm changes what it measures. They enter every case's
+# resume key and are compared when a run is resumed or two benchmark results are compared.
+ENGINE = ("dsm", "mitsuba", "drjit")
+
+
+def engine(versions_: dict) -> dict:
+    """The ENGINE part of a ``versions()`` record (an absent one, as an older dsm wrote it: None)."""
+    return {k: (versions_ or {}).get(k) for k in ENGINE}
+
+
+def engine_change(before: dict, after: dict) -> str | None:
+    """The ENGINE versions that differ between two ``versions()`` records, as one phrase
+    (``mitsuba 3.9.0 -> 3.9.1, drjit 1.4.0 -> 1.5.0``), or None when they agree."""
+    a, b = engine(before), engine(after)
+    moved = [f"{k} {a[k] or 'unrecorded'} -> {b[k] or 'unrecorded'}" for k in ENGINE if a[k] != b[k]]
+    return ", ".join(moved) or None

@@ -3,7 +3,9 @@
 A case is identified by a hash (:func:`case_keys`) of its full specification (scene spec and
 the hashes of its input files, light, view, resolution, culling, scheme instance, filter,
 stored format, and what every case of the config shares: camera, seed, variant, oracle
-lambdas) and the kit's version (its git commit, or the installed version without git).
+lambdas) and the software's versions (:func:`kit_version`: the kit's git commit, or its installed
+version without git, and dsm's, Mitsuba's and Dr.Jit's versions, since results differ bit for bit
+between releases; a resume that finds other versions says so in one line, and its cases run again).
 
 ``dsm run CONFIG --out DIR --resume`` reads DIR's run.json (each finished case's status entry
 carries its ``key``) and metrics.csv (:class:`Previous`). The runner then follows the plan as
@@ -33,17 +35,15 @@ from ..report import figures, io as report_io
 _FILE_HASHES: dict = {}
 
 
-def kit_version() -> str:
-    """The kit's git commit (with ``+dirty`` for uncommitted edits), else its installed version."""
+def kit_version(versions_: dict | None = None) -> str:
+    """What a result depends on of the software: the kit's git commit (``+dirty`` for uncommitted
+    edits; else its installed version) and the ENGINE versions (dsm, Mitsuba, Dr.Jit) of
+    ``versions_`` (a ``core.env.versions()`` record; read here when None)."""
     from ..core import env
-    commit = env.git_commit()
-    if commit and commit != "unknown":
-        return "git:" + commit
-    from importlib.metadata import PackageNotFoundError, version
-    try:
-        return "version:" + version("dsm")
-    except PackageNotFoundError:
-        return "version:unknown"
+    v = env.versions() if versions_ is None else versions_
+    commit = v.get("dsm_git_commit")
+    head = "git:" + commit if commit and commit != "unknown" else "version:" + str(v.get("dsm") or "unknown")
+    return " ".join([head] + [f"{k} {v.get(k)}" for k in env.ENGINE])
 
 
 def file_hash(path) -> str:
@@ -192,10 +192,12 @@ class Previous:
         self.out = Path(out)
         self.done = {}          # key -> (old case id, metrics.csv row as text, status entry)
         self.cascade_rows = {}  # old case id -> its cascades.csv rows (cascaded maps)
+        self.versions = None    # the previous run's versions record (None: no previous run.json)
         run_json = self.out / "run.json"
         if not run_json.is_file():
             return
         run = json.loads(run_json.read_text())
+        self.versions = run.get("versions") or {}
         rows = {}
         if (self.out / "metrics.csv").is_file():
             # a row cut short (a run killed while writing it) is not kept: its case runs again

@@ -86,7 +86,7 @@ class Runner:
         self.plan_dict = None         # run.json's plan, made once
         self.run_json_at = -math.inf  # when run.json was last written (perf_counter seconds)
         # case ids and identity keys from the plan (dsm.experiment.resume); a resumed run reuses matching cases
-        self.keys = dict(resume.case_keys(config, self.plan, "git:" + self.versions["dsm_git_commit"]))
+        self.keys = dict(resume.case_keys(config, self.plan, resume.kit_version(self.versions)))
         self.first_case = list(itertools.accumulate((m.cases for m in self.plan.maps), initial=0))
         self.resume_previous = resume_previous
         self.kept, self.stale = {}, []
@@ -103,7 +103,9 @@ class Runner:
         t0, c0 = time.perf_counter(), _cpu()
         self.out.mkdir(parents=True, exist_ok=True)
         if self.resume_previous:
-            self.kept, self.stale = resume.Previous(self.out).arrange(list(self.keys.items()))
+            previous = resume.Previous(self.out)
+            self._say_versions(previous.versions)
+            self.kept, self.stale = previous.arrange(list(self.keys.items()))
         self.sink.open()
         self.state = "running"
         self._write_run_json()
@@ -125,6 +127,13 @@ class Runner:
                 self._write_run_json(force=True)
         return Results(self.out, self.record.rows, self._run_json(), self.sink.images, self.record.oracle_rows,
                        self.record.curves)
+
+    def _say_versions(self, before: dict | None):
+        """One line on stderr when the run being resumed ran on other dsm, Mitsuba or Dr.Jit versions."""
+        change = env.engine_change(before, self.versions) if before is not None else None
+        if change:
+            print(f"dsm: --resume: {self.out} was measured with other versions ({change}); results differ bit for "
+                  "bit between versions, so its cases run again", file=sys.stderr)
 
     def _measured(self, t0: float, c0: float):
         """run.json's measuring time, CPU, peak memory and kernel launches (the case images

@@ -122,5 +122,6 @@ def visibility(b, t, prm):
     shadow = s2 + dr.select(between, quotient, 0.0)      # not 0 * inf where no root lies in front
     v = 1.0 - dr.clip(shadow, 0.0, 1.0)
     # float32 can leave the system singular (c2 = 0 for a window of one depth with a small bias:
-    # a NaN bound); Chebyshev's bound of the same biased moments, looser but defined, stands in
-    return dr.select(dr.isfinite(v), v, chebyshev(b0, b1, t, 0.0))
+    # a NaN bound); Chebyshev's bound of the same biased moments, looser but defined, stands in.
+    # The NaN is tested before the clip: Dr.Jit 1.4 clips a NaN to a bound (1.5 keeps it NaN)
+    return dr.select(dr.isnan(shadow), chebyshev(b0, b1, t, 0.0), v)

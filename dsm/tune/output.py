@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..report.io import atomic
+from ..core import env
 from ..core.types import Length
 from .compare import FINE, GRADCHECK_STEP
 from .search import Param
@@ -280,7 +281,8 @@ def _split_table(split: dict) -> list:
 
 
 def write(res: TuneResult, out: Path, orc_train=None, orc_held=None):
-    """Write ``res`` into folder ``out``: tuned.toml, steps.csv, table.md, tune.json, bias_map.npy and the plots."""
+    """Write ``res`` into folder ``out``: tuned.toml, steps.csv, table.md, tune.json (with the versions the
+    tune ran on), bias_map.npy and the plots."""
     out.mkdir(parents=True, exist_ok=True)
     (out / "tuned.toml").write_text(res.tuned_toml)
     keys = []
@@ -292,7 +294,7 @@ def write(res: TuneResult, out: Path, orc_train=None, orc_held=None):
         for r in res.steps:
             w.writerow({k: ("" if isinstance(v, float) and math.isnan(v) else v) for k, v in r.items()})
     (out / "table.md").write_text(table_text(res))
-    doc = {"lambda": res.spec.lam, "n_train": res.n_train, "n_heldout": res.n_heldout, "notes": res.notes,
+    doc = {"versions": env.versions(), "lambda": res.spec.lam, "n_train": res.n_train, "n_heldout": res.n_heldout, "notes": res.notes,
            "schemes": [{k: v for k, v in e.items() if k not in ("spec",)} for e in res.schemes],
            "comparison": res.comparison, "oracle_train": orc_train, "oracle_heldout": orc_held,
            "moments": res.moments,

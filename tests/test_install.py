@@ -1,0 +1,133 @@
+"""The install: each dependency once, Ray only in the `cluster` extra, the Mitsuba and Dr.Jit ranges
+stated in docs/install.md and holding the installed versions; and (slow) the plain route, `pip install .`
+into a fresh virtual environment, whose first run counts as this one."""
+import csv
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+import tomllib
+from importlib.metadata import version
+from pathlib import Path
+
+import pytest
+from packaging.requirements import Requirement
+from packaging.specifiers import SpecifierSet
+
+ROOT = Path(__file__).resolve().parent.parent
+# timings, peak memory and compile counts differ between runs by nature; every other column is compared
+VARYING = {"build_ms", "build_first_ms", "build_compile_ms", "build_peak_mb", "lookup_ms", "lookup_compile_ms",
+           "lookup_kernels_compiled", "reference_ms", "fit_ms"}
+FIRST_RUN = """
+[experiment]
+name = "first"
+[camera]
+resolution = [32, 32]
+[[scene]]
+builtin = "plane_box"
+[[light]]
+type = "directional"
+direction = [-0.4, -0.3, -1.0]
+[map]
+resolution = 32
+[timing]
+repeats = 1
+[[scheme]]
+name = "none"
+[[scheme]]
+name = "constant"
+bias = [0.01, 0.05]
+"""
+
+
+def _project() -> dict:
+    return tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+
+
+def test_each_dependency_is_listed_once_and_ray_only_in_the_cluster_extra():
+    proj = _project()
+    names = [Requirement(r).name.lower() for r in proj["dependencies"]]
+    assert len(names) == len(set(names)), names
+    assert "ray" not in names
+    extras = proj["optional-dependencies"]
+    assert [e for e, reqs in extras.items() if any(Requirement(r).name == "ray" for r in reqs)] == ["cluster"]
+
+
+def test_mitsuba_and_drjit_ranges_hold_the_installed_versions_and_are_the_documented_ones():
+    reqs = {Requirement(r).name: Requirement(r) for r in _project()["dependencies"]}
+    install = (ROOT / "docs" / "install.md").read_text()
+    for name in ("mitsuba", "drjit"):
+        spec = reqs[name].specifier
+        assert len(spec) == 2, f"{name}: a range with both bounds, not {spec}"
+        assert spec.contains(version(name)), (name, version(name), str(spec))
+        stated = [SpecifierSet(m) for m in re.findall(rf"`{name}\s*([<>=!~][^`]*)`", install)]
+        assert stated and all(s == spec for s in stated), f"docs/install.md states {stated}, pyproject {spec}"
+
+
+def test_a_libllvm_dr_jit_cannot_load_is_one_line_naming_drjit_libllvm_path(tmp_path):
+    """DRJIT_LIBLLVM_PATH pointing at no library: dsm run stops before any work, exit 3, in one line that
+    names the variable's value and what to install (Dr.Jit's own notice aside)."""
+    (tmp_path / "first.toml").write_text(FIRST_RUN)
+    lib = tmp_path / "nowhere" / "libLLVM.so"
+    env = {**os.environ, "DRJIT_LIBLLVM_PATH": str(lib)}
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), str(ROOT / "plugins"), env.get("PYTHONPATH", "")])
+    p = subprocess.run([sys.executable, "-m", "dsm", "run", "first.toml", "--out", "o"], capture_output=True,
+                       text=True, timeout=300, env=env, cwd=tmp_path)
+    ours = [line for line in p.stderr.splitlines() if line.startswith("dsm")]
+    assert p.returncode == 3 and len(ours) == 1, p.stderr
+    assert ours[0].startswith("dsm: setup error: Dr.Jit's LLVM backend needs libLLVM 16 or newer")
+    assert f"(found: none found, DRJIT_LIBLLVM_PATH={lib})" in ours[0] and "libllvm19" in ours[0]
+    assert not (tmp_path / "o" / "metrics.csv").exists()
+
+
+def _copy_project(dest: Path) -> Path:
+    """What `pip install .` builds from (the package, its plugins and pyproject.toml), outside the worktree."""
+    dest.mkdir()
+    for name in ("dsm", "plugins"):
+        shutil.copytree(ROOT / name, dest / name, ignore=shutil.ignore_patterns("__pycache__", "*.egg-info"))
+    shutil.copy(ROOT / "pyproject.toml", dest / "pyproject.toml")
+    return dest
+
+
+def _rows(path: Path) -> list:
+    with open(path, newline="") as fh:
+        return [{k: v for k, v in r.items() if k not in VARYING} for r in csv.DictReader(fh)]
+
+
+@pytest.mark.slow
+def test_pip_install_into_a_fresh_venv_then_a_first_run_counts_as_here(tmp_path):
+    """The plain route (docs/install.md) as a user runs it: a fresh venv, `pip install .` (from PyPI:
+    mitsuba, drjit and the rest, no Ray), `dsm run`; its rows are this environment's, bit for bit."""
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=120)
+    py = venv / "bin" / "python"
+    src = _copy_project(tmp_path / "src")
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+    t0 = time.perf_counter()
+    pip = subprocess.run([str(py), "-m", "pip", "install", "-q", "--disable-pip-version-check", str(src)],
+                         capture_output=True, text=True, timeout=1500, env=env, cwd=tmp_path)
+    assert pip.returncode == 0, pip.stderr[-3000:]
+    install_s = time.perf_counter() - t0
+    check = subprocess.run([str(py), "-c", "import importlib.util as u; print(u.find_spec('ray') is None)"],
+                           capture_output=True, text=True, timeout=60, env=env, cwd=tmp_path)
+    assert check.stdout.strip() == "True", "the plain route installed Ray"
+    (tmp_path / "first.toml").write_text(FIRST_RUN)
+    t0 = time.perf_counter()
+    run = subprocess.run([str(venv / "bin" / "dsm"), "run", "first.toml", "--out", "fresh"], capture_output=True,
+                         text=True, timeout=600, env=env, cwd=tmp_path)
+    assert run.returncode == 0, run.stderr[-3000:]
+    first_run_s = time.perf_counter() - t0
+    from dsm import pipeline
+    from dsm.experiment.runner import Runner
+    Runner(pipeline.prepare(tomllib.loads(FIRST_RUN)), tmp_path / "here", progress=False).run()
+    fresh, here = _rows(tmp_path / "fresh" / "metrics.csv"), _rows(tmp_path / "here" / "metrics.csv")
+    same_engine = all(version(n) == subprocess.run(
+        [str(py), "-c", f"from importlib.metadata import version; print(version('{n}'))"], capture_output=True,
+        text=True, timeout=60, env=env).stdout.strip() for n in ("mitsuba", "drjit"))
+    ident = lambda rows: [(r["case"], r["scene"], r["scheme"], r["params"]) for r in rows]
+    assert ident(fresh) == ident(here) and len(here) == 3
+    if same_engine:          # the same Mitsuba and Dr.Jit: the same bits (another release may round otherwise)
+        assert fresh == here
+    print(f"plain route: pip install {install_s:.0f} s, first run {first_run_s:.0f} s")
