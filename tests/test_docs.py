@@ -187,7 +187,7 @@ def test_generated_references_name_every_key_scheme_and_command():
         assert f"`{k.name}`" in config.split(f"[{k.table}]", 1)[1], (k.table, k.name)
     page = generate.schemes_reference()
     assert all(f"## {s.NAME}\n" in page for s in schemes.ALL) and all(f"`{n}`" in page for n in presets.names())
-    commands = [name for name, _ in generate._subparsers(cli._parser())]
+    commands = [name for name, _ in generate.subparsers(cli.parser())]
     assert {"run", "report", "plan", "schemes", "perf", "tune", "benchmark"} <= set(commands)
     assert all(f"## dsm {c}\n" in generate.cli_reference() for c in commands)
 
@@ -196,12 +196,13 @@ HOWTO_TOML = re.compile(r"```toml\n(.*?)```", re.S)
 
 
 def test_howto_configs_load():
-    """Every TOML block of a how-to guide is a config dsm accepts (paths relative to the checkout)."""
-    blocks = [(p.name, b) for p in sorted((ROOT / "docs" / "howto").glob("*.md"))
-              for b in HOWTO_TOML.findall(p.read_text())]
-    assert len(blocks) >= 4
+    """Every TOML block of a how-to guide and of README.md is a config dsm accepts (paths relative to
+    the checkout)."""
+    pages = sorted((ROOT / "docs" / "howto").glob("*.md")) + [ROOT / "README.md"]
+    blocks = [(p.name, b) for p in pages for b in HOWTO_TOML.findall(p.read_text())]
+    assert len(blocks) >= 5
     for name, block in blocks:
-        read.parse(tomllib.loads(block), f"docs/howto/{name}", base=ROOT)
+        read.parse(tomllib.loads(block), name, base=ROOT)
 
 
 def test_readme_is_a_front_door():

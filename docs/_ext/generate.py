@@ -80,21 +80,20 @@ def cli_reference() -> str:
     """The CLI reference page: every subcommand's help as argparse prints it."""
     os.environ["COLUMNS"] = "100"          # argparse wraps at the terminal's width: a fixed one, the same page
     from dsm import cli
-    parser = cli._parser()
+    parser = cli.parser()
     out = ["# Command-line reference", "",
            "Generated from dsm's argparse parsers (`dsm/cli.py`, `dsm/benchmark/command.py`): what "
            "`dsm COMMAND --help` prints.", "", "```text", parser.format_help().rstrip(), "```", ""]
-    for name, sub in _subparsers(parser):
+    for name, sub in subparsers(parser):
         out += [f"## dsm {name}", "", "```text", sub.format_help().rstrip(), "```", ""]
     return "\n".join(out)
 
 
-def _subparsers(parser) -> list:
+def subparsers(parser) -> list:
     """(name, parser) of each subcommand, aliases once, in the parser's order."""
-    import argparse
     seen, out = set(), []
-    for action in parser._actions:
-        if isinstance(action, argparse._SubParsersAction):
+    for action in parser._actions:          # argparse keeps its actions there; subcommands map names to parsers
+        if isinstance(action.choices, dict):
             for name, sub in action.choices.items():
                 if id(sub) not in seen:
                     seen.add(id(sub))
