@@ -215,3 +215,13 @@ def test_readme_is_a_front_door():
     assert "scripts/test" in (ROOT / ".ci" / "run").read_text()
     for target in re.findall(r"\]\(([^)#:]+)(?:#[^)]*)?\)", text):
         assert (ROOT / target).exists(), target
+
+
+@pytest.mark.parametrize("key, good, bad", [("steps", 256, 257), ("jitter", 1.0, 1.01)])
+def test_contact_bounds_are_the_readers(key, good, bad):
+    """The reference's upper bounds of [contact] steps and jitter are where the reader starts refusing."""
+    assert keymod.contact_bounds()[key].endswith(f"to {good:g}")
+    base = {"scene": [{"builtin": "plane"}], "scheme": [{"name": "none"}]}
+    read.parse({**base, "contact": {key: good}}, "<c>")
+    with pytest.raises(read.ConfigError, match=f"contact.{key}"):
+        read.parse({**base, "contact": {key: bad}}, "<c>")

@@ -48,8 +48,8 @@ def config_reference() -> str:
         arr = table in ("scene", "light", "scheme", "motion") or table == "tune.camera"
         out += [f"## [{'[' if arr else ''}{table}{']' if arr else ''}]", ""] + key_table(keys.keys_of(table)) + [""]
         if table == "contact":
-            out += ["The march's parameters (one value each):", ""] + key_table(keys.dataclass_keys("contact",
-                                                                                                   ContactSpec)) + [""]
+            out += ["The march's parameters (one value each):", ""] + key_table(keys.dataclass_keys(
+                "contact", ContactSpec, keys.contact_bounds())) + [""]
         if table == "scene":
             out += _scene_params(keys, BUILTINS)
     out += ["## [map.&lt;kind&gt;]: pre-filtered maps", "",
@@ -65,8 +65,9 @@ def _scene_params(keys, builtins) -> list:
     out = ["### Built-in scenes and their parameters", "",
            "Every built-in takes `scale`, `translate` and `precision`; a mesh or XML `file` takes `scale` and "
            "`translate`. Lists sweep.", ""]
-    for name, cls in builtins.items():
-        out += [f"#### `builtin = \"{name}\"`", "", _first_line(cls.__doc__), ""]
+    from dsm.scenes.params import FileParams
+    for name, cls in [(f'builtin = "{n}"', c) for n, c in builtins.items()] + [('file = "..."', FileParams)]:
+        out += [f"#### `{name}`", "", _first_line(cls.__doc__), ""]
         out += key_table(keys.dataclass_keys("scene", cls)) + [""]
     return out
 
@@ -121,12 +122,15 @@ def schemes_reference() -> str:
 
 def _param_table(cls) -> list:
     """Markdown lines of a parameter dataclass's fields: name, default, valid, meaning."""
-    lines = ["| parameter | default | valid | meaning |", "|---|---|---|---|"]
+    from dsm.config.keys import exact_text
+    if not dataclasses.fields(cls):
+        return ["No parameters."]
+    lines = ["| parameter | default (as TOML) | valid | meaning |", "|---|---|---|---|"]
     for f in dataclasses.fields(cls):
         md = f.metadata
         valid = md.get("choices") or " ".join(x for x in (f">= {md['min']:g}" if "min" in md else "",
                                                            f"<= {md['max']:g}" if "max" in md else "") if x)
-        lines.append(f"| `{f.name}` | {md_cell(f.default)} | {md_cell(valid)} | {md_cell(md.get('doc', ''))} |")
+        lines.append(f"| `{f.name}` | {md_cell(exact_text(f.default))} | {md_cell(valid)} | {md_cell(md.get('doc', ''))} |")
     return lines
 
 

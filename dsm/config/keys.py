@@ -10,9 +10,11 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from ..core.types import (AREA_SHAPES, BACKENDS, BLUR_KERNELS, BUILD_MODES, CAMERA_PATHS, CASCADE_FITS,
+from ..core.types import (AREA_SHAPES, Length, BACKENDS, BLUR_KERNELS, BUILD_MODES, CAMERA_PATHS, CASCADE_FITS,
                           CASCADE_SPLITS, DEPTH_BOUNDS, FILTERS, FORMATS, LAMBDA_MAX, LIGHT_PATHS, LOOKUP_MODES,
                           MAP_KINDS, MAP_VIEWS, MAX_CASCADES, REPORT_IMAGES, SEED_MAX, VARIANTS)
+from ..contact.presets import PRESETS as CONTACT_PRESETS
+from ..scenes.params import BUILTINS
 from .tune import MAP_FITS, MAP_UNITS, ROLES, SCHEDULES
 
 LENGTH = "length: a number (world units), \"k texel\" or \"k range\""
@@ -33,8 +35,13 @@ class Key:
 
 
 def _r(lo, hi=None) -> str:
-    """A range in words: 'lo to hi' or '>= lo'."""
-    return f">= {lo:g}" if hi is None else f"{lo:g} to {hi:g}"
+    """A range in words, its bounds written exactly: 'lo to hi' or '>= lo'."""
+    return f">= {_exact(lo)}" if hi is None else f"{_exact(lo)} to {_exact(hi)}"
+
+
+def _exact(x) -> str:
+    """A bound as a user may paste it back: an integer in full, a float by its shortest repr."""
+    return str(int(x)) if float(x).is_integer() else repr(float(x))
 
 
 KEYS = (
@@ -53,7 +60,7 @@ KEYS = (
         "> 0", "world"),
     Key("camera", "far", "float", "the scene's", "far plane", "> 0", "world"),
     Key("scene", "builtin", "str", "(builtin or file)", "a built-in scene; its parameters are listed below",
-        "dsm.scenes.params.BUILTINS", sweeps=True),
+        tuple(BUILTINS)),
     Key("scene", "file", "str", "(builtin or file)", "a mesh (.ply, .obj) or a Mitsuba 3 XML scene, relative to "
         "the config file (an XML scene's sensor, film and emitters are used)"),
     Key("scene", "optional", "bool", "false", "an absent file is skipped (run.json says so) instead of an error"),
@@ -121,7 +128,7 @@ KEYS = (
     Key("map", "evsm", "table", "the kind's defaults", "EVSM's parameters or preset"),
     Key("map", "msm", "table", "the kind's defaults", "MSM's parameters or preset"),
     Key("contact", "preset", "str", "none", "an engine's contact-shadow settings (no other key with it)",
-        "dsm.contact.presets"),
+        tuple(sorted(CONTACT_PRESETS))),
     Key("memory", "budget_mb", "float", "RAM / 4", "wavefront budget: larger maps are cast in tiles", "> 0", "MB"),
     Key("timing", "repeats", "int", "3", "timed calls of every lookup, build and reference (their median)",
         _r(1, 100)),
@@ -218,16 +225,39 @@ def keys_of(table: str) -> tuple:
     return tuple(k for k in KEYS if k.table == table)
 
 
-def dataclass_keys(table: str, cls) -> tuple:
-    """Keys of a table read into dataclass ``cls`` (its fields' defaults and metadata: doc, min, max, choices)."""
+def exact_text(value) -> str:
+    """A default as a user may paste it back into TOML: floats by their shortest repr, a Length as
+    \"value unit\" (world units as a bare number), tuples as lists."""
+    if isinstance(value, Length):
+        return _exact(value.value) if value.unit == "world" else f'"{_exact(value.value)} {value.unit}"'
+    if isinstance(value, bool) or value is None:
+        return str(value).lower()
+    if isinstance(value, float):
+        return "inf" if value == float("inf") else _exact(value)
+    if isinstance(value, tuple):
+        return "[" + ", ".join(exact_text(v) for v in value) + "]"
+    return f'"{value}"' if isinstance(value, str) else str(value)
+
+
+def contact_bounds() -> dict:
+    """[contact]'s bounds the reader checks beyond its fields' metadata (dsm.config.read)."""
+    from .read import CONTACT_MAX_STEPS
+    return {"length": "> 0", "steps": _r(1, CONTACT_MAX_STEPS), "jitter": _r(0, 1)}
+
+
+def dataclass_keys(table: str, cls, bounds: dict | None = None) -> tuple:
+    """Keys of a table read into dataclass ``cls`` (its fields' defaults and metadata: doc, min, max,
+    choices); ``bounds`` gives the valid range of fields the reader bounds further."""
     out = []
     for f in dataclasses.fields(cls):
         md = f.metadata
         lo, hi = md.get("min"), md.get("max")
         valid = md.get("choices") or (_r(lo, hi) if lo is not None and hi is not None else
                                       (_r(lo) if lo is not None else ""))
-        default = f.default if f.default is not dataclasses.MISSING else "(required)"
+        valid = (bounds or {}).get(f.name, valid)
+        default = exact_text(f.default) if f.default is not dataclasses.MISSING else "(required)"
         ftype = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", str(f.type))
-        out.append(Key(table, f.name, ftype.lower() if ftype == "Length" else ftype, str(default),
-                       md.get("doc", ""), valid, LENGTH if ftype in ("Length",) else ""))
+        ftype = {"Length": "length", "tuple": "[x, y, z]"}.get(ftype, ftype)
+        out.append(Key(table, f.name, ftype, str(default),
+                       md.get("doc", ""), valid, LENGTH if ftype == "length" else ""))
     return tuple(out)
