@@ -1,6 +1,7 @@
 """Sphinx extension of dsm's documentation: writes the generated pages before Sphinx looks for
 sources, and shows docs/design.md (kept whole on disk, where other pages link to it) as the index of
 its topics, which are generated from it one page per ``## `` heading."""
+import re
 from pathlib import Path
 
 from generate import design_pages, write_all
@@ -14,15 +15,23 @@ def generate(app, config):
 
 
 def design_index(app, docname, source):
-    """source-read: design.md becomes its title and the toctree of its generated topic pages."""
+    """source-read: design.md becomes the index of its generated topic pages, keeping every heading
+    (## to ####) it has, each with a link to the topic page holding it, so a link to
+    design.md#some-heading still lands on that heading."""
     if docname != "design":
         return
     text = (DOCS / "design.md").read_text()
     title = text.split("\n", 1)[0].lstrip("# ").strip() or "Design"
-    slugs = [slug for slug, _ in design_pages(text)]
-    source[0] = (f"# {title}\n\nThe design, one page per topic (generated from `docs/design.md` at build "
-                 "time).\n\n```{toctree}\n:maxdepth: 1\n\n"
-                 + "\n".join(f"_generated/design/{s}" for s in slugs) + "\n```\n")
+    pages = design_pages(text)
+    lines = [f"# {title}", "", "The design, one page per topic (generated from `docs/design.md` at build time).",
+             "", "```{toctree}", ":maxdepth: 1", ""] + [f"_generated/design/{slug}" for slug, _ in pages] + ["```", ""]
+    for slug, page in pages[1:]:
+        prose = re.sub(r"(?ms)^```.*?^```", "", page)       # a '#' line inside a code block is no heading
+        for heading in re.findall(r"(?m)^#{1,3} .+$", prose):
+            level = heading.index(" ") + 1          # the topic page's headings are one level up
+            lines += ["#" * level + heading[level - 1:], "", f"In [{page.split(chr(10), 1)[0][2:]}]"
+                      f"(_generated/design/{slug}.md).", ""]
+    source[0] = "\n".join(lines)
 
 
 def setup(app):
