@@ -14,5 +14,6 @@ html_title = "dsm"
 exclude_patterns = ["_build", "_ext", "gallery/*.md"]      # gallery/: fragments scripts/gallery.py writes
 myst_enable_extensions = ["dollarmath", "colon_fence"]
 myst_heading_anchors = 4
+smartquotes = False                  # --force stays two hyphens, "k texel" keeps its quotes
 nb_execution_mode = "off"            # notebooks are shown with their stored outputs, never run again
 suppress_warnings = ["myst.header"]   # pages written before the site may start at ## or skip a level

@@ -18,7 +18,12 @@ def md_cell(value) -> str:
     """A value as one Markdown table cell (pipes escaped, tuples as comma lists)."""
     if isinstance(value, (tuple, list)):
         value = ", ".join(str(v) for v in value)
-    return str(value).replace("|", "\\|").replace("\n", " ")
+    return escape(str(value)).replace("|", "\\|").replace("\n", " ")
+
+
+def escape(text: str) -> str:
+    """Text whose '<' is shown, not read as an HTML tag (runs/<name>-<time>)."""
+    return text.replace("<", "&lt;")
 
 
 def key_table(keys) -> list:
@@ -74,7 +79,7 @@ def _scene_params(keys, builtins) -> list:
 
 def _first_line(doc) -> str:
     """A docstring's first paragraph on one line."""
-    return " ".join((doc or "").strip().split("\n\n")[0].split())
+    return escape(" ".join((doc or "").strip().split("\n\n")[0].split()))
 
 
 def cli_reference() -> str:
