@@ -78,6 +78,11 @@ def _parser():
     return ap
 
 
+def parser() -> argparse.ArgumentParser:
+    """The ``dsm`` command's argparse parser (its subcommands included; the docs' CLI reference)."""
+    return _parser()
+
+
 def _add_machine(p, variant_help="Mitsuba variant (default llvm_ad_rgb)", threads=True):
     """--variant and (for commands that measure) --threads, alike in every command."""
     p.add_argument("--variant", choices=cfgmod.VARIANTS, help=variant_help)

@@ -1,6 +1,6 @@
 """Regenerate docs/gallery/ from the default experiment and experiments/engine_defaults.toml:
-the README's tables (the default run's summary, table.md's first sections; engine defaults
-against the best possible), error images and a screenshot of the default run's report.html.
+the default run's summary (table.md's first sections) in docs/results/default.md, the engine
+defaults against the best possible, error images and a screenshot of the default run's report.html.
 
     .venv/bin/python scripts/gallery.py [results folder of a default run] [--default-only]
 
@@ -23,6 +23,7 @@ from dsm.truth.metrics import CLASS_COLORS, CLASS_NAMES
 
 ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "docs" / "gallery"
+RESULTS_PAGE = ROOT / "docs" / "results" / "default.md"
 
 
 def default_run(folder):
@@ -58,19 +59,28 @@ def screenshot(page: Path, png: Path, size=(1280, 900)) -> bool:
         drv.quit()
 
 
-def readme_table(table: str):
-    """The README's default table, between its two markers: the summary's sections as written,
-    their headings one level down (under the README's own section)."""
-    readme = ROOT / "README.md"
-    text = readme.read_text()
+def results_table(table: str, run: dict):
+    """docs/results/default.md's table, between its two markers: the summary's sections as written,
+    after a line naming the run's commit, machine and variant."""
+    page = RESULTS_PAGE
+    text = page.read_text()
     a, b = "<!-- default-table: scripts/gallery.py writes from here -->\n", "<!-- default-table: to here -->\n"
     if a not in text or b not in text:
-        print("README.md: the default-table markers are missing; table left as it is", file=sys.stderr)
+        print(f"{page}: the default-table markers are missing; table left as it is", file=sys.stderr)
         return
-    body = [("#" + line if line.startswith("## ") else line) for line in table.splitlines()
-            if line.strip() != "## Summary"]
+    body = [line for line in table.splitlines() if line.strip() != "## Summary"]
     head, rest = text.split(a, 1)
-    readme.write_text(head + a + "\n".join(body).strip("\n") + "\n" + b + rest.split(b, 1)[1])
+    page.write_text(head + a + provenance(run) + "\n\n" + "\n".join(body).strip("\n") + "\n" + b
+                    + rest.split(b, 1)[1])
+
+
+def provenance(run: dict) -> str:
+    """Which commit, machine and variant a run's numbers come from (its run.json)."""
+    from dsm.benchmark.results import machine
+    m = machine()
+    commit = run.get("versions", {}).get("dsm_git_commit", "unknown")
+    return (f"*From a default run at commit `{commit}`, variant {run.get('variant', 'llvm_ad_rgb')}, on "
+            f"{m['cpu']} ({m['cores']} cores), written by `scripts/gallery.py`.*")
 
 
 def main():
@@ -78,9 +88,9 @@ def main():
     out = default_run(args[0] if args else None)
     OUT.mkdir(parents=True, exist_ok=True)
     rows = report.read_rows(out / "metrics.csv")
-    # the README's table: table.md's summary sections, as the run wrote them
+    # the results page's table: table.md's summary sections, as the run wrote them
     (OUT / "default_table.md").write_text("\n".join(summary.summary_md(rows)) + "\n")
-    readme_table((OUT / "default_table.md").read_text())
+    results_table((OUT / "default_table.md").read_text(), json.loads((out / "run.json").read_text()))
     # the images: the room's own point light, cube view, R = 512, four schemes
     from PIL import Image
     pick = [("none", ""), ("constant", "bias=2 texel"), ("normal_offset", "offset=1.5 texel bias=0"), ("adaptive", "K=0.0001")]

@@ -1,4 +1,4 @@
-"""The README's leaderboard table from a dsm benchmark results.json: the top ranks (rank <= TOP)
+"""The leaderboard table of docs/benchmark.md from a dsm benchmark results.json: the top ranks (rank <= TOP)
 and every engine preset, each contender's notes as the page gives them, then the oracles' floor.
 
     .venv/bin/python scripts/leaderboard_table.py bench4/results.json
@@ -12,7 +12,7 @@ TOP = 12
 
 
 def cell(v, signed=False) -> str:
-    """A number as the README writes it: 4 decimals ('-' for none)."""
+    """A number as docs/benchmark.md writes it: 4 decimals ('-' for none)."""
     if v is None or v != v:
         return "-"
     return f"{v:+.4f}" if signed else f"{v:.4f}"

@@ -1,5 +1,5 @@
 """The answer first: per scheme instance over a run's cases, and the best instance per scene,
-light and resolution (table.md's first sections, report.html's first screen, the README's table).
+light and resolution (table.md's first sections, report.html's first screen, docs/results/default.md).
 
 Definitions (stated in the report, checked by tests/test_report.py against a numpy recomputation):
 

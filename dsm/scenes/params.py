@@ -18,16 +18,16 @@ PRECISIONS = ("world", "camera_relative")
 class Placement:
     """Where a built-in scene (or a mesh file) sits: ``scale`` multiplies geometry, camera and the
     config's light positions; ``translate`` then moves all of them (far-from-origin cases)."""
-    scale: float = field(default=1.0, metadata={"min": 1e-30})
+    scale: float = field(default=1.0, metadata={"min": 1e-30, "doc": "multiplies geometry, camera and the config's light positions"})
     translate: tuple = field(default=ORIGIN, metadata={"doc": "world offset [x, y, z] after scale"})
-    precision: str = field(default="world", metadata={"choices": PRECISIONS})
+    precision: str = field(default="world", metadata={"choices": PRECISIONS, "doc": "how the simulated engine holds positions: float32 world coordinates, or relative to the camera"})
 
 
 @dataclass(frozen=True)
 class PlaneParams(Placement):
     """One 4 x 4 plane tilted ``tilt`` degrees about a horizontal axis at ``azimuth`` degrees; light from above."""
-    tilt: float = field(default=45.0, metadata={"min": 0.0})
-    azimuth: float = 0.0
+    tilt: float = field(default=45.0, metadata={"min": 0.0, "doc": "the plane's tilt, degrees"})
+    azimuth: float = field(default=0.0, metadata={"doc": "the tilt axis's direction, degrees"})
 
 
 @dataclass(frozen=True)
@@ -43,21 +43,21 @@ class LShapeParams(Placement):
 @dataclass(frozen=True)
 class FloatingPlateParams(Placement):
     """An open 1.5 x 1.5 plate ``gap`` above the ground: the bias/gap threshold of peter-panning."""
-    gap: float = field(default=0.2, metadata={"min": 0.0})
+    gap: float = field(default=0.2, metadata={"min": 0.0, "doc": "the plate's height over the ground, world units"})
 
 
 @dataclass(frozen=True)
 class StackedPlatesParams(Placement):
     """Two open plates over the ground, a 0.75 x 1.5 one at ``high`` over half of a 1.5 x 1.5 one
     at ``low``: occluders at two depths, the classic light leak of variance shadow maps."""
-    low: float = field(default=0.25, metadata={"min": 0.0})
-    high: float = field(default=2.0, metadata={"min": 0.0})
+    low: float = field(default=0.25, metadata={"min": 0.0, "doc": "the lower plate's height, world units"})
+    high: float = field(default=2.0, metadata={"min": 0.0, "doc": "the upper plate's height, world units"})
 
 
 @dataclass(frozen=True)
 class GrazingParams(Placement):
     """The ground and a box lit ``angle`` degrees from the ground's normal (80 to 89: projective aliasing)."""
-    angle: float = field(default=85.0, metadata={"min": 0.0})
+    angle: float = field(default=85.0, metadata={"min": 0.0, "doc": "the light's angle from the ground's normal, degrees"})
 
 
 @dataclass(frozen=True)
@@ -81,14 +81,14 @@ class TerrainParams(Placement):
     """A real terrain in metres (dsm.scenes.terrain): 30 x 32 km of the Jacksboro fault DEM, 236 to 1076 m
     high, 275,772 triangles (every ``stride``-th sample), the camera on a ridge above its
     south-west, a low sun: cascades and scale on geometry nobody here made."""
-    stride: int = field(default=1, metadata={"min": 1})
+    stride: int = field(default=1, metadata={"min": 1, "doc": "keep every stride-th elevation sample"})
 
 
 @dataclass(frozen=True)
 class FileParams(Placement):
     """A scene file. Meshes (OBJ/PLY) get a ground under them, a default camera and light."""
-    up: str = field(default="y", metadata={"choices": ("x", "y", "z")})
-    ground: str = field(default="yes", metadata={"choices": ("yes", "no")})
+    up: str = field(default="y", metadata={"choices": ("x", "y", "z"), "doc": "a mesh file's up axis"})
+    ground: str = field(default="yes", metadata={"choices": ("yes", "no"), "doc": "a ground under a mesh file"})
 
 
 BUILTINS = {
