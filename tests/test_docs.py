@@ -87,7 +87,7 @@ def accepted_keys(monkeypatch) -> dict:
         seen.setdefault(_table_of(where), set()).update(allowed)
         return real(table, allowed, source, where)
     for name in ("dsm.config.read", "dsm.config.tune", "dsm.core.types", "dsm.lights.spot", "dsm.lights.scene",
-                 "dsm.lights.directional", "dsm.lights.point", "dsm.lights.area"):
+                 "dsm.lights.directional", "dsm.lights.point", "dsm.lights.area", "dsm.config.virtual"):
         monkeypatch.setattr(importlib.import_module(name), "check_keys", recording)
     for path in sorted((ROOT / "experiments").glob("*.toml")):
         read.load(path)

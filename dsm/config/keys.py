@@ -12,7 +12,8 @@ from dataclasses import dataclass
 
 from ..core.types import (AREA_SHAPES, Length, BACKENDS, BLUR_KERNELS, BUILD_MODES, CAMERA_PATHS, CASCADE_FITS,
                           CASCADE_SPLITS, DEPTH_BOUNDS, FILTERS, FORMATS, LAMBDA_MAX, LIGHT_PATHS, LOOKUP_MODES,
-                          MAP_KINDS, MAP_VIEWS, MAX_CASCADES, REPORT_IMAGES, SEED_MAX, VARIANTS)
+                          MAP_KINDS, MAP_VIEWS, MAX_CASCADES, REPORT_IMAGES, SEED_MAX, VARIANTS, VIRTUAL_PRESETS,
+                          VIRTUAL_RULES)
 from ..contact.presets import PRESETS as CONTACT_PRESETS
 from ..scenes.params import BUILTINS
 from .tune import MAP_FITS, MAP_UNITS, ROLES, SCHEDULES
@@ -63,6 +64,10 @@ KEYS = (
         tuple(BUILTINS)),
     Key("scene", "file", "str", "(builtin or file)", "a mesh (.ply, .obj) or a Mitsuba 3 XML scene, relative to "
         "the config file (an XML scene's sensor, film and emitters are used)"),
+    Key("scene", "model", "str", "(none)", "a model the kit does not ship, from your copy: `file`, else the "
+        "environment variable DSM_SPONZA (docs/sponza.md)", ("sponza",)),
+    Key("scene", "version", "str", "told by the file's size", "which Sponza the copy is (Dabrovic's in metres, "
+        "Crytek's remodel in centimetres)", ("dabrovic", "crytek")),
     Key("scene", "optional", "bool", "false", "an absent file is skipped (run.json says so) instead of an error"),
     Key("scene", "closed", "table", "each shape's own verdict", "override the closed-solid verdict per shape: { name = true } "
         "(second-depth and culling schemes rely on it)"),
@@ -127,6 +132,28 @@ KEYS = (
     Key("map", "esm", "table", "the kind's defaults", "ESM's parameters or preset"),
     Key("map", "evsm", "table", "the kind's defaults", "EVSM's parameters or preset"),
     Key("map", "msm", "table", "the kind's defaults", "MSM's parameters or preset"),
+    Key("map", "virtual", "table", "off", "a directional light's virtual shadow map (see [map.virtual])"),
+    Key("map.virtual", "preset", "str or list", "(every key given)", "the engine whose values the other keys "
+        "override", tuple(sorted(VIRTUAL_PRESETS)), source="docs/virtual_shadow_maps.md", sweeps=True),
+    Key("map.virtual", "page_size", "int", "the preset's (ue5 128, eevee 256)", "texels a page side", _r(1, 4096),
+        "texels"),
+    Key("map.virtual", "resolution", "int", "the preset's (ue5 16384, eevee 8192)", "virtual texels a level side "
+        "(a whole number of pages)", _r(1, 2 ** 20), "texels"),
+    Key("map.virtual", "first_level", "int", "the preset's", "the finest clipmap level (a level is 2^level "
+        "centimetres in UE5, 2^level units in EEVEE)", _r(-60, 60)),
+    Key("map.virtual", "last_level", "int", "the preset's", "the coarsest clipmap level", _r(-60, 60)),
+    Key("map.virtual", "levels", "int", "(last_level)", "levels from first_level (instead of last_level)",
+        _r(1, 64)),
+    Key("map.virtual", "lod_bias", "float", "the preset's (ue5 -0.5, eevee 0)", "level-of-detail bias (-1 doubles "
+        "the resolution a receiver reads)", _r(-16, 16), "levels"),
+    Key("map.virtual", "rule", "str", "the preset's", "how a receiver's level is chosen: its pixel footprint "
+        "(UE5) or its distance (EEVEE)", VIRTUAL_RULES),
+    Key("map.virtual", "unit_cm", "float", "100", "centimetres in one scene unit (UE5's levels are in centimetres)",
+        "> 0", "cm"),
+    Key("map.virtual", "border", "float", "the preset's (ue5 0.05, eevee 0)", "a receiver this fraction of a page "
+        "from its page's edge also tags the neighbour", _r(0, 0.5), "pages"),
+    Key("map.virtual", "max_pages", "int", "2048", "the physical page pool; more tagged pages stop the map",
+        ">= 1", "pages"),
     Key("contact", "preset", "str", "none", "an engine's contact-shadow settings (no other key with it)",
         tuple(sorted(CONTACT_PRESETS))),
     Key("memory", "budget_mb", "float", "RAM / 4", "wavefront budget: larger maps are cast in tiles", "> 0", "MB"),
@@ -215,7 +242,7 @@ KEYS = (
     Key("tune.bias_map", "layers", "int", "8", "edge: surfaces followed along each light ray", ">= 1"),
 )
 
-TABLES = ("experiment", "camera", "scene", "light", "map", "contact", "memory", "timing", "oracle", "report",
+TABLES = ("experiment", "camera", "scene", "light", "map", "map.virtual", "contact", "memory", "timing", "oracle", "report",
           "execution", "motion", "motion.keys", "motion.light_keys", "scheme", "tune", "tune.camera",
           "tune.bias_map")
 
