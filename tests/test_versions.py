@@ -1,6 +1,7 @@
 """The versions a result depends on (dsm's, Mitsuba's, Dr.Jit's): recorded in run.json and results.json,
 part of every case's resume key, and named in one line by --resume and --compare when they differ."""
 import json
+import os
 from importlib.metadata import version
 
 import drjit as dr
@@ -131,3 +132,26 @@ def test_a_version_3_document_must_name_its_versions(versions, word):
     with pytest.raises(document.NotResults, match=word):
         document.check(doc, "r.json")
     assert document.check({**doc, "results_version": 2}) is not None     # version 2 did not require them
+
+
+def test_a_dsm_copy_inside_another_projects_repository_records_no_commit_of_that_repository(tmp_path):
+    """git_commit asks git from the package's folder: a dsm copied into another project's repository
+    (a vendored or installed copy) is not that repository's commit, and says ``unknown``; the
+    checkout itself names its own HEAD."""
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+    from dsm.core import env
+    root = Path(env.__file__).resolve().parents[2]
+    other = tmp_path / "other"
+    shutil.copytree(root / "dsm", other / "lib" / "dsm", ignore=shutil.ignore_patterns("__pycache__"))
+    git = lambda *a: subprocess.run(["git", *a], cwd=other, capture_output=True, text=True, check=True).stdout
+    git("init", "-q")
+    git("-c", "user.email=a@b", "-c", "user.name=a", "commit", "-q", "--allow-empty", "-m", "x")
+    code = "from dsm.core import env; print(env.git_commit())"
+    got = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
+                         env={**os.environ, "PYTHONPATH": str(other / "lib")}).stdout.strip()
+    assert got == "unknown"
+    head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True).stdout.strip()
+    assert env.git_commit().split("+")[0] == head

@@ -118,9 +118,15 @@ def register_plugins() -> list:
 
 
 def git_commit() -> str:
-    """The kit's git commit (``+dirty`` with uncommitted changes to tracked files), or ``unknown``."""
+    """The kit's git commit (``+dirty`` with uncommitted changes to tracked files), or ``unknown`` (not
+    a checkout of dsm: the repository holding the package is not the one whose top holds ``dsm/``)."""
     try:
         here = Path(__file__).resolve().parent
+        top = subprocess.run(["git", "rev-parse", "--show-toplevel"], cwd=here, capture_output=True, text=True,
+                             timeout=5).stdout.strip()
+        # an installed dsm inside another project's repository is not that repository's commit
+        if not top or Path(top).resolve() != here.parents[1]:
+            return "unknown"
         out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, timeout=5)
         dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=here,
                                capture_output=True, text=True, timeout=5).stdout.strip()
