@@ -178,6 +178,21 @@ def _strokes(ax) -> list:
     return out
 
 
+# Okabe & Ito's colour-blind-safe palette (Color Universal Design, 2008), less its yellow and black
+OKABE_ITO = ("#E69F00", "#56B4E9", "#009E73", "#0072B2", "#D55E00", "#CC79A7")
+
+
+def test_series_styles_tell_24_series_apart_by_colour_and_shape():
+    """Series k < 24 differ in their (colour, marker, dash); every colour is the palette's; a marker
+    and dash change with each pass over the six colours, so no two series are told by colour alone."""
+    from dsm.report import figures
+    styles = [figures.style(k) for k in range(24)]
+    assert len({(s["color"], s["marker"], s["ls"]) for s in styles}) == 24
+    assert {s["color"] for s in styles} == set(OKABE_ITO)
+    assert all(styles[k]["marker"] != styles[k + 6]["marker"] and styles[k]["ls"] != styles[k + 6]["ls"]
+               for k in range(18))
+
+
 def test_consolidated_legends_name_each_map_and_instance_once(tmp_path):
     """The trade-off figure: one legend entry per map (not one per curve), on the first panel
     only when every panel holds the same maps; views at equal memory: one entry per instance
@@ -192,7 +207,7 @@ def test_consolidated_legends_name_each_map_and_instance_once(tmp_path):
     assert "solid: one world bias, dotted: one k texel" in " ".join(fig._suptitle.get_text().split())
     # a map's two curves share its colour: solid (world) and dotted (texel)
     styles = {(tuple(c), dashed) for c, _, dashed in _strokes(fig.axes[0])}
-    assert styles == {(to_rgba(f"C{k}"), dashed) for k in (0, 1) for dashed in (False, True)}
+    assert styles == {(to_rgba(OKABE_ITO[k]), dashed) for k in (0, 1) for dashed in (False, True)}
     rows = []
     for view in ("cube", "dual_paraboloid"):
         for k in range(10):
@@ -211,7 +226,7 @@ def test_consolidated_legends_name_each_map_and_instance_once(tmp_path):
     drawn = [st for ax in fig.axes for st in _strokes(ax) if len(st[1])]
     assert len(drawn) == 10 * 2
     assert {(tuple(c), dashed) for c, _, dashed in drawn} == {
-        (to_rgba(f"C{k}"), dashed) for k in range(10) for dashed in (False, True)}
+        (to_rgba(OKABE_ITO[k % 6]), dashed) for k in range(10) for dashed in (False, True)}
 
 
 def test_dsm_report_rebuilds_table_md_and_the_page(run, tmp_path):

@@ -15,7 +15,7 @@ import html
 from pathlib import Path
 
 from ..truth import metrics
-from . import io as report, summary
+from . import io as report, labels, summary
 from .figures import image_paths
 
 CASE_COLUMNS = [("case", "case", "text"), ("scene", "scene", "text"), ("light", "light", "text"),
@@ -128,7 +128,14 @@ def _num(x) -> tuple:
 def _td(text, value, num) -> str:
     cls = " class=n" if num else ""
     data = "" if value is None else f' data-v="{_e(value)}"'
-    return f"<td{cls}{data}>{_e(text)}</td>"
+    # a text cell shown otherwise than its value (a parameter label): the exact value on hover
+    title = f' title="{_e(labels.params_title(value))}"' if not num and value not in (None, text) else ""
+    return f"<td{cls}{data}{title}>{_e(text)}</td>"
+
+
+def _params_cell(params) -> tuple:
+    """A params cell: the readable label shown, the exact text its value (sorting) and hover."""
+    return labels.params_label(params), params, False
 
 
 def _table(head, rows, table_id=None, sortable=False) -> str:
@@ -145,7 +152,7 @@ def _table(head, rows, table_id=None, sortable=False) -> str:
 def _best_section(rows) -> str:
     resolutions, pivot = summary.best_pivot(rows)
     head = [("scene", "text"), ("light", "text")] + [(f"R = {r}", "text") for r in resolutions]
-    body = [("", [(s, None, False), (l, None, False)] + [(summary.best_cell(cells.get(r)), None, False)
+    body = [("", [(s, None, False), (l, None, False)] + [_params_cell(summary.best_cell(cells.get(r)))
                                                          for r in resolutions]) for s, l, cells in pivot]
     return (f"<section id=best><h2>Best scheme per scene, light and resolution</h2>"
             f"<p class=note>{_e(summary.BEST_DEFINITION)}</p>{_table(head, body)}</section>")
@@ -164,7 +171,7 @@ def summary_section(rows) -> str:
         ("undefined acne / peter-pan / error", "text")] + [(h, "num") for h in ("build ms", "lookup ms", "best in")]
     body = []
     for s in insts:
-        cells = [(s[c], None, False) for c in cols]
+        cells = [_params_cell(s[c]) if c == "params" else (s[c], None, False) for c in cols]
         for k in ("cases", "acne_pooled", "acne_mean", "acne_median", "acne_max", "peterpan_pooled", "peterpan_mean",
                   "peterpan_median", "peterpan_max") + (("leak_pooled",) if split else ()) + (
                   "error_pooled", "error_mean", "error_median", "error_max", "undefined", "build_ms", "lookup_ms",
@@ -191,7 +198,8 @@ def _case_section(rows, out: Path) -> str:
         err, shadow = image_paths(r)
         err = err if (out / err).is_file() else ""
         shadow = shadow if (out / shadow).is_file() else ""
-        label = f"{r['scene']}, light {r['light']}, {r['view']}, {r['scheme']} {r['preset'] or r['params']}, " \
+        label = f"{r['scene']}, light {r['light']}, {r['view']}, {r['scheme']} " \
+                f"{r['preset'] or labels.params_label(r['params'])}, " \
                 f"R = {r['resolution']}, {r['filter']}, {r['format']}"
         attrs = "".join(f' data-{k}="{_e(r[k])}"' for k in FILTER_COLUMNS) + \
             f' data-case="{_e(r["case"])}" data-err="{_e(err)}" data-shadow="{_e(shadow)}" data-label="{_e(label)}"'
@@ -200,6 +208,8 @@ def _case_section(rows, out: Path) -> str:
             if t == "num":
                 v, txt = _num(r[key])
                 cells.append((txt, v, True))
+            elif key == "params":
+                cells.append(_params_cell(r[key]))
             else:
                 cells.append((r[key], None, False))
         body.append((attrs, cells))
@@ -274,7 +284,7 @@ def write_html(path: Path, rows: list, run: dict):
     body = [f"<h1>dsm: {_e(name)}</h1><p class=meta>{_e(counts)}. Files: <a href=table.md>table.md</a>, "
             f"<a href=metrics.csv>metrics.csv</a>, <a href=oracle.csv>oracle.csv</a>, <a href=run.json>run.json</a>.</p>"]
     if rows:
-        body += [f"<p class=answer id=answer>{_e(summary.answer(rows))}</p>", _best_section(rows),
+        body += [f"<p class=answer id=answer>{_e(labels.params_label(summary.answer(rows)))}</p>", _best_section(rows),
                  summary_section(rows)]
     body += [_status_section(run)]
     if rows:
