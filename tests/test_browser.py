@@ -107,7 +107,12 @@ def test_filtering_and_a_case_s_images(page):
     case = rows[-1]["case"]
     drv.find_element("css selector", f"#case-table tbody tr[data-case='{case}']").click()
     imgs = drv.find_elements("css selector", "#viewer img")
-    assert [i.get_attribute("alt") for i in imgs] == [f"error image of case {case}", f"shadow image of case {case}"]
+    assert [i.get_attribute("alt") for i in imgs] == [f"error image of case {case}", f"shadow image of case {case}",
+                                                      f"shading (tinted) of case {case}",
+                                                      f"error classes (tinted) of case {case}"]
+    assert [c.text for c in drv.find_elements("css selector", "#viewer figcaption")] == [
+        "error classes (colours below)", "shading under the shadow map (Lambert, ambient in shadow)",
+        "error classes tinted over the shading"]
     # the images load from the file system (a broken link has no natural width)
     loaded = drv.execute_script("const im = Array.from(document.querySelectorAll('#viewer img'));"
                                 "return im.every(i => i.complete && i.naturalWidth === 32)")
