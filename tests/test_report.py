@@ -193,6 +193,24 @@ def test_series_styles_tell_24_series_apart_by_colour_and_shape():
                for k in range(18))
 
 
+def _texts_fit(fig, min_points):
+    """Every text of a drawn figure (its Texts and tick-label artists): (smallest size in points,
+    texts whose box leaves the figure)."""
+    from matplotlib.text import Text
+    fig.canvas.draw()
+    r = fig.canvas.get_renderer()
+    sizes, out = [], []
+    for t in fig.findobj(Text):
+        if t.get_text() and t.get_visible():
+            sizes.append(t.get_fontsize())
+            b = t.get_window_extent(r)
+            if b.x0 < -1 or b.y0 < -1 or b.x1 > fig.bbox.x1 + 1 or b.y1 > fig.bbox.y1 + 1:
+                out.append(t.get_text()[:40])
+    # the tick labels: one artist a panel (dsm.report.canvas.tick_labels), its font in ``prop``
+    sizes += [a.prop.get_size_in_points() for a in fig.findobj(lambda a: hasattr(a, "texts") and hasattr(a, "prop"))]
+    return min(sizes), out
+
+
 def test_consolidated_legends_name_each_map_and_instance_once(tmp_path):
     """The trade-off figure: one legend entry per map (not one per curve), on the first panel
     only when every panel holds the same maps; views at equal memory: one entry per instance
@@ -205,6 +223,8 @@ def test_consolidated_legends_name_each_map_and_instance_once(tmp_path):
     fig = figures.draw_tradeoff(tmp_path / "t.png", "s", [("R = 64", maps), ("R = 128", maps)])
     assert [getattr(ax, "legend_texts", []) for ax in fig.axes] == [["float32", "float32 back_closed"], []]
     assert "solid: one world bias, dotted: one k texel" in " ".join(fig._suptitle.get_text().split())
+    # no text below figures.MIN_FONT points (9 as report.html shows it), none outside the figure
+    assert _texts_fit(fig, figures.MIN_FONT) == (figures.MIN_FONT, [])
     # a map's two curves share its colour: solid (world) and dotted (texel)
     styles = {(tuple(c), dashed) for c, _, dashed in _strokes(fig.axes[0])}
     assert styles == {(to_rgba(OKABE_ITO[k]), dashed) for k in (0, 1) for dashed in (False, True)}
@@ -222,6 +242,7 @@ def test_consolidated_legends_name_each_map_and_instance_once(tmp_path):
     assert sorted(named) == sorted(f"normal_angle bias={k} texel" for k in range(10))
     assert max(len(getattr(ax, "legend_texts", [])) for ax in fig.axes) <= figures.MAX_LEGEND
     assert "cube solid, dual_paraboloid dashed" in " ".join(fig._suptitle.get_text().split())   # wrapped
+    assert _texts_fit(fig, figures.MIN_FONT) == (figures.MIN_FONT, [])
     # both views of every instance drawn: 10 instances x 2 views (the seam row: undefined rates, no line)
     drawn = [st for ax in fig.axes for st in _strokes(ax) if len(st[1])]
     assert len(drawn) == 10 * 2

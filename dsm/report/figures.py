@@ -107,7 +107,10 @@ def write_images(out: Path, items: list):
 
 # ------------------------------------------------------------------ drawing primitives
 
-LEGEND_Y = -0.22          # where the first entry sits, in the panel's height below it
+# where a legend's first entry sits: this far below its panel, in inches (clear of the tick labels
+# and the x label), whatever the panel's height: a fraction of the height put a tall panel's legend
+# below the room _figure leaves for it, its last lines cut off
+LEGEND_GAP_IN = 0.45
 
 
 def _figure(ncols, nrows, width=3.7, height=2.5, legend_rows=0, sharey=False, sharex=False):
@@ -267,7 +270,7 @@ def _legend(ax):
     fig = ax.figure
     box = ax.get_position()                                  # figure fraction (no layout engine)
     w_in, h_in = fig.get_size_inches()
-    x0, top = box.x0 * w_in, (box.y0 + LEGEND_Y * box.height) * h_in      # inches
+    x0, top = box.x0 * w_in, box.y0 * h_in - LEGEND_GAP_IN               # inches
     pitch = LEGEND_SPACING * LEGEND_FONT * _font_height_em() / 72
     mid = lambda i: top - (i + 0.5) * pitch                  # the middle of line i
     strokes = [(i, st) for i, st in enumerate(styles) if st["ls"] not in ("none", "None", "")]

@@ -37,7 +37,7 @@ td.n{text-align:right;font-variant-numeric:tabular-nums} th{background:#f2f2f2;p
 table.sortable th{cursor:pointer;user-select:none} th[aria-sort=ascending]::after{content:" \\25B2"}
 th[aria-sort=descending]::after{content:" \\25BC"} tr.win td:first-child{font-weight:600}
 #best td.cell{min-width:14em} .scroll{max-height:32em;overflow:auto;border:1px solid #ccc;display:inline-block;max-width:100%}
-.wide{overflow-x:auto;max-width:100%;display:inline-block}
+.wide{overflow-x:auto;max-width:100%;display:inline-block} .scroll,.wide,.figbox{box-sizing:border-box}
 #case-table tbody tr{cursor:pointer} #case-table tbody tr:hover{background:#eef4ff}
 #case-table tbody tr.sel{background:#dde8ff} .filters{margin:.3em 0} .filters label{margin-right:.8em}
 #viewer{margin:.5em 0;min-height:2em} #viewer figure{display:inline-block;margin:0 8px 6px 0;vertical-align:top}
