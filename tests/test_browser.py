@@ -107,16 +107,20 @@ def test_filtering_and_a_case_s_images(page):
     case = rows[-1]["case"]
     drv.find_element("css selector", f"#case-table tbody tr[data-case='{case}']").click()
     imgs = drv.find_elements("css selector", "#viewer img")
-    assert [i.get_attribute("alt") for i in imgs] == [f"error image of case {case}", f"shadow image of case {case}",
-                                                      f"shading (tinted) of case {case}",
-                                                      f"error classes (tinted) of case {case}"]
+    assert [i.get_attribute("alt") for i in imgs] == [f"shading (tinted) of case {case}",
+                                                      f"error classes (tinted) of case {case}",
+                                                      f"exact image of case {case}", f"shadow image of case {case}",
+                                                      f"error image of case {case}"]
     assert [c.text for c in drv.find_elements("css selector", "#viewer figcaption")] == [
-        "error classes (colours below)", "shading under the shadow map (Lambert, ambient in shadow)",
-        "error classes tinted over the shading"]
+        "error classes over the display render (N.L)", "exact shading (display render, V*)",
+        "shading under the shadow map (Lambert, ambient in shadow)", "error classes (colours below)"]
     # the images load from the file system (a broken link has no natural width)
-    loaded = drv.execute_script("const im = Array.from(document.querySelectorAll('#viewer img'));"
-                                "return im.every(i => i.complete && i.naturalWidth === 32)")
-    assert loaded
+    loaded = drv.execute_async_script("const done = arguments[0];"
+                                      "const im = Array.from(document.querySelectorAll('#viewer img'));"
+                                      "Promise.all(im.map(i => i.decode().catch(() => null)))"
+                                      ".then(() => done(im.map(i => i.complete ? i.naturalWidth : 0)))")
+    # the camera's 32 px images, and the display renders at ten times that (at least 320 px a side)
+    assert loaded == [320, 32, 320, 32, 32]
 
 
 def test_the_benchmark_leaderboard_sorts_in_the_browser(tmp_path):

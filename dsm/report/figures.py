@@ -78,6 +78,15 @@ def image_paths(row) -> tuple:
     return f + "_error.png", f + "_shadow.png"
 
 
+# a scene and light's display renders (dsm.experiment.display), one pair per images/<scene>_<light>/
+DISPLAY_FILES = ("display_nl.png", "display_exact.png")
+
+
+def display_paths(row) -> tuple:
+    """(N.L display render, exact display render) of a case's scene and light, relative to the run's folder."""
+    return tuple(f"images/{image_folder(row)}/{name}" for name in DISPLAY_FILES)
+
+
 def _atomic_save(path: Path, save):
     with atomic(path) as tmp:
         save(tmp)

@@ -18,7 +18,7 @@ from pathlib import Path
 
 from ..truth import metrics
 from . import io as report, labels, summary
-from .figures import image_paths, points_file, slug
+from .figures import display_paths, image_paths, points_file, slug
 
 CASE_COLUMNS = [("case", "case", "text"), ("scene", "scene", "text"), ("light", "light", "text"),
                 ("view", "view", "text"), ("scheme", "scheme", "text"), ("params", "params", "text"),
@@ -44,6 +44,7 @@ th[aria-sort=descending]::after{content:" \\25BC"} tr.win td:first-child{font-we
 #viewer img{image-rendering:pixelated;width:320px;border:1px solid #999;display:block}
 #viewer figcaption{font-size:12px;color:#333} .tint{position:relative;width:320px}
 .tint img+img{position:absolute;left:0;top:0;mix-blend-mode:multiply;opacity:.85}
+#viewer img[src$="display_nl.png"],#viewer img[src$="display_exact.png"]{image-rendering:auto}
 .plots figure{margin:6px 0 14px;max-width:100%} .plots .figbox{overflow-x:auto;max-width:100%}
 .plots img{max-width:none;border:1px solid #eee;cursor:zoom-in}
 .plots figcaption{font-size:13px;color:#333;max-width:60em} .plots h3{font-size:1em;margin:.6em 0 .2em}
@@ -112,8 +113,26 @@ cases.tBodies[0].addEventListener('click', ev => {
     cap.textContent += ' (no images were written: [report] images = "none")';
     return;
   }
-  const shown = [[tr.dataset.err, 'error image', 'error classes (colours below)'],
-                 [tr.dataset.shadow, 'shadow image', 'shading under the shadow map (Lambert, ambient in shadow)']];
+  const base = tr.dataset.nl || tr.dataset.shadow;
+  if (tr.dataset.err && base) {     // the classes (nearest-neighbour) tinted over the scene's shading: shapes stay readable
+    const fig = document.createElement('figure');
+    const box = document.createElement('div');
+    box.className = 'tint';
+    for (const [src, alt] of [[base, 'shading'], [tr.dataset.err, 'error classes']]) {
+      const img = document.createElement('img');
+      img.src = src; img.alt = alt + ' (tinted) of case ' + tr.dataset.case;
+      box.appendChild(img);
+    }
+    fig.appendChild(box);
+    const cap = document.createElement('figcaption');
+    cap.textContent = tr.dataset.nl ? 'error classes over the display render (N.L)'
+                                    : 'error classes tinted over the shading';
+    fig.appendChild(cap);
+    viewer.appendChild(fig);
+  }
+  const shown = [[tr.dataset.exact, 'exact image', 'exact shading (display render, V*)'],
+                 [tr.dataset.shadow, 'shadow image', 'shading under the shadow map (Lambert, ambient in shadow)'],
+                 [tr.dataset.err, 'error image', 'error classes (colours below)']];
   for (const [src, alt, words] of shown) {
     if (!src) continue;
     const fig = document.createElement('figure');
@@ -122,21 +141,6 @@ cases.tBodies[0].addEventListener('click', ev => {
     fig.appendChild(img);
     const cap = document.createElement('figcaption');
     cap.textContent = words;
-    fig.appendChild(cap);
-    viewer.appendChild(fig);
-  }
-  if (tr.dataset.err && tr.dataset.shadow) {   // the classes tinted over the shading: shapes stay readable
-    const fig = document.createElement('figure');
-    const box = document.createElement('div');
-    box.className = 'tint';
-    for (const [src, alt] of [[tr.dataset.shadow, 'shading'], [tr.dataset.err, 'error classes']]) {
-      const img = document.createElement('img');
-      img.src = src; img.alt = alt + ' (tinted) of case ' + tr.dataset.case;
-      box.appendChild(img);
-    }
-    fig.appendChild(box);
-    const cap = document.createElement('figcaption');
-    cap.textContent = 'error classes tinted over the shading';
     fig.appendChild(cap);
     viewer.appendChild(fig);
   }
@@ -256,15 +260,19 @@ def summary_section(rows) -> str:
 def _case_section(rows, out: Path) -> str:
     head = [(h, t) for _, h, t in CASE_COLUMNS]
     body = []
+    shown = {p for r in {(r["scene"], r["light"]): r for r in rows}.values() for p in display_paths(r)
+             if (out / p).is_file()}                # the display renders the run wrote (one pair a scene and light)
     for r in rows:
         err, shadow = image_paths(r)
         err = err if (out / err).is_file() else ""
         shadow = shadow if (out / shadow).is_file() else ""
+        nl, exact = (p if p in shown else "" for p in display_paths(r))
         label = f"{r['scene']}, light {r['light']}, {r['view']}, {r['scheme']} " \
                 f"{r['preset'] or labels.params_label(r['params'])}, " \
                 f"R = {r['resolution']}, {r['filter']}, {r['format']}"
         attrs = "".join(f' data-{k}="{_e(r[k])}"' for k in FILTER_COLUMNS) + \
-            f' data-case="{_e(r["case"])}" data-err="{_e(err)}" data-shadow="{_e(shadow)}" data-label="{_e(label)}"'
+            f' data-case="{_e(r["case"])}" data-err="{_e(err)}" data-shadow="{_e(shadow)}" data-label="{_e(label)}"' \
+            f' data-nl="{_e(nl)}" data-exact="{_e(exact)}"'
         cells = []
         for key, _, t in CASE_COLUMNS:
             if t == "num":
