@@ -399,7 +399,8 @@ def test_report_images_key(tmp_path):
         res = dsm.run(base_config(report={"images": mode}, **small), out=tmp_path / mode)
         files = sorted(p.relative_to(res.out).as_posix() for p in (res.out / "images").rglob("*.png"))
         err, shadow = figures.image_paths(res.rows[0])
-        assert files == sorted(p for p, s in ((err, "_error.png"), (shadow, "_shadow.png")) if s in want), mode
+        display = list(figures.display_paths(res.rows[0])) if mode == "all" else []    # the scene's display renders
+        assert files == sorted([p for p, s in ((err, "_error.png"), (shadow, "_shadow.png")) if s in want] + display), mode
         assert err == f"images/plane_0_directional/{res.rows[0]['case']}_error.png"
     # the shadow image is the render: lit receivers brighter than the ambient 0.12 floor
     from PIL import Image

@@ -3,7 +3,7 @@
 Drawn as the report's figures are (dsm.report.figures): matplotlib's Agg canvas without pyplot,
 a symlog rate axis from 0 to 1 (linear below 1e-4, so zero shows), at most MAX_LEGEND legend
 entries per panel (more contenders go to more rows of panels), at the report's DPI (shown at its
-pixel size, its 6-point text reads as 9), each contender in the report's series style (colour,
+pixel size, its MIN_FONT text reads as 9 points), each contender in the report's series style (colour,
 marker and dash: report.figures.style), the oracle's per-texel floor a thick black dashed line
 named on the panel, PNG with fast compression. The numbers drawn are :func:`series`, which the
 page's tables print too.
@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from ..report.figures import DPI, LINTHRESH, MAX_LEGEND, MIN_FONT, PNG, RC, style
+from ..report.figures import DPI, LINTHRESH, LABEL_FONT, MAX_LEGEND, MIN_FONT, PNG, RC, style
 from . import ranking
 
 UNITS = ("cm", "m", "km")
@@ -66,8 +66,8 @@ def draw(data: dict, far_unit: str | None = None):
                 ax.set_ylim(0, 1)
                 ax.set_xticks(range(len(labels)), labels)
                 ax.set_xlabel("scene unit (at the origin)" if kind == "unit" else f"offset (world units, at {far_unit})",
-                              fontsize=MIN_FONT + 1)
-                ax.set_ylabel("error rate", fontsize=MIN_FONT + 1)
+                              fontsize=LABEL_FONT)
+                ax.set_ylabel("error rate", fontsize=LABEL_FONT)
                 ax.legend(fontsize=MIN_FONT, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False,
                           handlelength=3)
         fig.subplots_adjust(wspace=0.6, hspace=0.45)

@@ -10,7 +10,8 @@ it), shaded with the kit's own Lambert term (dsm.report.tables.shade): once with
 (N.L, the shapes) and once under the exact visibility V*. They are drawn after every timed
 measurement, in the report's time, with their own G-buffer and light set-ups (nothing the
 measurement counts is touched), one pair per scene and light: images/<scene>_<light>/display_*.png.
-Area lights are left out (their V* is a jittered estimate per receiver, costly at this size).
+Area lights are left out (their V* is a jittered estimate per receiver, costly at this size), and
+so are runs whose ``[report] images`` is not "all".
 """
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ import numpy as np
 from .. import lights, pipeline
 from ..report import png
 from ..report.figures import display_paths, shade_image
-from ..report.tables import shade
+from ..report.tables import receiver_cosines, shade
 
 DISPLAY_MIN = 320          # pixels on a display render's shorter side, at least
 
@@ -61,9 +62,9 @@ def write_renders(out: Path, cfg, pairs: set) -> list:
 def _write_pair(out: Path, scene: str, label: str, gb, setup):
     """One scene and light's N.L and exact renders as 8-bit grey PNGs."""
     positional = pipeline.is_positional(setup.light)
-    n = len(setup.pixels)
-    nl, exact = (shade((gb.height, gb.width), gb, setup, v, positional)
-                 for v in (np.ones(n), np.asarray(setup.v_star, float)))
+    cos = receiver_cosines(setup, positional) if setup.n is not None else None     # once for both renders
+    nl, exact = (shade((gb.height, gb.width), gb, setup, v, positional, cos)
+                 for v in (np.ones(len(setup.pixels)), np.asarray(setup.v_star, float)))
     for name, img in zip(display_paths({"scene": scene, "light": label}), (nl, exact)):
         path = out / name
         path.parent.mkdir(parents=True, exist_ok=True)

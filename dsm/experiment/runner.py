@@ -149,8 +149,9 @@ class Runner:
 
     def _display_renders(self):
         """Each scene and light's display renders (dsm.experiment.display), in the report's time: a
-        complete run that writes images only; what was left out is a note in run.json's status."""
-        if self.state != "complete" or self.cfg.report_images == "none" or not self.record.rows:
+        complete run that writes every image ([report] images = "all") only; what was left out is a note in
+        run.json's status."""
+        if self.state != "complete" or self.cfg.report_images != "all" or not self.record.rows:
             return
         try:
             notes = display.write_renders(self.out, self.cfg, {(r["scene"], r["light"]) for r in self.record.rows})

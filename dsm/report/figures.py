@@ -29,15 +29,19 @@ from .tables import case_time, pareto_front
 
 LINTHRESH = 1e-4          # symlog: linear below this rate
 MAX_LEGEND = 13           # entries per panel (more make more panels, the costliest artists)
-# drawn at 144 dpi and shown at its pixel size (report.html: one image pixel a CSS pixel, 96 a CSS
-# inch), a figure reads at 1.5 times its size in points: its smallest text, 6 points, reads as 9
-DPI = 144
-SHOWN_SCALE = DPI / 96    # CSS points a figure's point reads as, shown at its pixel size
-MIN_FONT = 6              # points: no text of a figure is smaller (9 points as shown)
+# drawn at 120 dpi and shown at its pixel size (report.html: one image pixel a CSS pixel, 96 a CSS
+# inch), a figure reads at 1.25 times its size in points: its smallest text, 7.2 points, reads as 9.
+# (Any DPI x MIN_FONT of 864 reads at 9; 120 and 7.2 draw 2.8 times the pixels of the earlier 72 dpi
+# figures, where 144 and 6 drew 4 times: text a fifth larger beside the same panels, a third less
+# of the report's drawing and PNG time.)
+DPI = 120
+MIN_FONT = 7.2            # points: no text of a figure is smaller (9 points as shown)
+LABEL_FONT = 7.5          # axis labels and panel titles
+TITLE_FONT = 8.5          # a figure's title
 PNG = {"compress_level": 1}
-# the figures' settings, while making and drawing them: 6-point tick labels (set once, not per
+# the figures' settings, while making and drawing them: MIN_FONT tick labels (set once, not per
 # panel: tick_params re-styles every tick already made); glyphs unhinted (FreeType's autohinter
-# is a tenth of the drawing time and sharpens little at 6 points)
+# is a tenth of the drawing time and sharpens little at these sizes)
 RC = {"xtick.labelsize": MIN_FONT, "ytick.labelsize": MIN_FONT, "text.hinting": "no_hinting"}
 # series styles: Okabe & Ito's colour-blind-safe palette (Color Universal Design, 2008) without its
 # yellow (too faint on white) and black (the frontier's and the oracle's lines), times four marker
@@ -257,7 +261,7 @@ def _freeze_x_ticks(ax):
 
 
 
-LEGEND_FONT = 6           # points
+LEGEND_FONT = MIN_FONT    # points
 LEGEND_SPACING = 1.6      # line pitch of a legend, in font sizes (within the 0.2 in per entry _figure leaves)
 
 
@@ -327,7 +331,7 @@ def _handle_style(h) -> dict:
 def _title(fig, text):
     """The figure's title, wrapped to its width (a narrow figure would cut a long one)."""
     import textwrap
-    fig.suptitle("\n".join(textwrap.wrap(text, max(30, int(fig.get_figwidth() * 17)))), fontsize=8)
+    fig.suptitle("\n".join(textwrap.wrap(text, max(30, int(fig.get_figwidth() * 16)))), fontsize=TITLE_FONT)
 
 
 def _save(fig, path, points=None):
@@ -377,7 +381,7 @@ def chunks(items, n=MAX_LEGEND):
 def _title_panel(ax, text):
     """A panel's title at a fixed height (matplotlib would otherwise measure the panel's every
     tick label to place it: nothing is drawn above a panel here)."""
-    ax.set_title(text, fontsize=7, y=1.0, pad=4)
+    ax.set_title(text, fontsize=LABEL_FONT, y=1.0, pad=4)
 
 
 def _line(ax, x, y, **kw):
@@ -486,10 +490,10 @@ def draw_lines(path, title, columns, ylabels=("acne rate", "peter-panning rate")
             xs += _line_series(ax, series, styles, i)
             _rate_axis(ax)
             if j == 0:
-                ax.set_ylabel(ylabel, fontsize=7)
+                ax.set_ylabel(ylabel, fontsize=LABEL_FONT)
         _x_scale(axes[-1, j], xs, xlog2)       # shared: once per column
         _title_panel(axes[0, j], ctitle)
-        axes[-1, j].set_xlabel(xlabel, fontsize=7)
+        axes[-1, j].set_xlabel(xlabel, fontsize=LABEL_FONT)
         _legend(axes[-1, j])
     _title(fig, title)
     _save(fig, path)
@@ -518,9 +522,9 @@ def draw_pareto(path, title, panels, front):
               mew=0.6, clip_on=False)
         _x_scale(ax, [], log=True)
         _rate_axis(ax)
-        ax.set_xlabel("time per case: map build + lookup (ms)", fontsize=7)
+        ax.set_xlabel("time per case: map build + lookup (ms)", fontsize=LABEL_FONT)
         if ax is axes[0][0]:
-            ax.set_ylabel("error rate: (acne + peter-pan) / receivers", fontsize=7)
+            ax.set_ylabel("error rate: (acne + peter-pan) / receivers", fontsize=LABEL_FONT)
         _legend(ax)
     _title(fig, title)
     _save(fig, path, points)
@@ -567,9 +571,9 @@ def draw_tradeoff(path, title, panels):
         points.append((ax, [(p[0], p[1], p[2], p[3]) for m in maps for p in m[4] if len(p) > 3]))
         _rate_axis(ax, "x")
         _rate_axis(ax, "y")
-        ax.set_xlabel("acne rate", fontsize=7)
+        ax.set_xlabel("acne rate", fontsize=LABEL_FONT)
         if ax is axes[0][0]:
-            ax.set_ylabel("peter-panning rate", fontsize=7)
+            ax.set_ylabel("peter-panning rate", fontsize=LABEL_FONT)
         _title_panel(ax, ptitle)
         entries = [(m[0], m[1]) for m in maps]
         if entries != shown:
