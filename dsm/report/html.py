@@ -267,8 +267,8 @@ def _case_section(rows, out: Path) -> str:
         err = err if (out / err).is_file() else ""
         shadow = shadow if (out / shadow).is_file() else ""
         nl, exact = (p if p in shown else "" for p in display_paths(r))
-        label = f"{r['scene']}, light {r['light']}, {r['view']}, {r['scheme']} " \
-                f"{r['preset'] or labels.params_label(r['params'])}, " \
+        instance = f"{r['scheme']} {r['preset'] or labels.params_label(r['params'])}".strip()
+        label = f"{r['scene']}, light {r['light']}, {r['view']}, {instance}, " \
                 f"R = {r['resolution']}, {r['filter']}, {r['format']}"
         attrs = "".join(f' data-{k}="{_e(r[k])}"' for k in FILTER_COLUMNS) + \
             f' data-case="{_e(r["case"])}" data-err="{_e(err)}" data-shadow="{_e(shadow)}" data-label="{_e(label)}"' \
