@@ -151,10 +151,12 @@ class Runner:
         """Each scene and light's display renders (dsm.experiment.display), in the report's time: a
         complete run that writes every image ([report] images = "all") only; what was left out is a note in
         run.json's status."""
-        if self.state != "complete" or self.cfg.report_images != "all" or not self.record.rows:
+        if self.state != "complete" or self.cfg.report_images != "all" or not (self.out / "metrics.csv").is_file():
             return
         try:
-            notes = display.write_renders(self.out, self.cfg, {(r["scene"], r["light"]) for r in self.record.rows})
+            # the pairs from metrics.csv, the run's data file: a cluster's driver holds no rows of its own
+            rows = report_io.read_csv(self.out / "metrics.csv")
+            notes = display.write_renders(self.out, self.cfg, {(r["scene"], r["light"]) for r in rows})
         except Exception as e:          # the page falls back to the case's own images
             notes = [f"display renders: {type(e).__name__}: {e}"]
         self.record.status += [{"what": "display render", "status": "note", "error": n} for n in notes]
