@@ -419,8 +419,10 @@ def out_problem(out: Path, force: bool, bench: bool = False) -> str | None:
 
 
 # what a run writes inside images/ (<scene>_<light>/<case>_<kind>, also under stale/) and plots/
-WRITTEN = {"images": re.compile(r"\d{4}_(" + "|".join(map(re.escape, figures.CASE_IMAGE_KINDS)) + ")"),
-           "plots": re.compile(r"[^/]+\.png")}
+# (and a scene and light's display renders), and plots/ (figures, and their case points' .points.json)
+WRITTEN = {"images": re.compile(r"\d{4}_(" + "|".join(map(re.escape, figures.CASE_IMAGE_KINDS)) + ")|"
+                                + "|".join(map(re.escape, figures.DISPLAY_FILES))),
+           "plots": re.compile(r"[^/]+\.png|[^/]+\.points\.json")}
 
 
 def _clear(paths):

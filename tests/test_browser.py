@@ -107,11 +107,20 @@ def test_filtering_and_a_case_s_images(page):
     case = rows[-1]["case"]
     drv.find_element("css selector", f"#case-table tbody tr[data-case='{case}']").click()
     imgs = drv.find_elements("css selector", "#viewer img")
-    assert [i.get_attribute("alt") for i in imgs] == [f"error image of case {case}", f"shadow image of case {case}"]
+    assert [i.get_attribute("alt") for i in imgs] == [f"shading (tinted) of case {case}",
+                                                      f"error classes (tinted) of case {case}",
+                                                      f"exact image of case {case}", f"shadow image of case {case}",
+                                                      f"error image of case {case}"]
+    assert [c.text for c in drv.find_elements("css selector", "#viewer figcaption")] == [
+        "error classes over the display render (N.L)", "exact shading (display render, V*)",
+        "shading under the shadow map (Lambert, ambient in shadow)", "error classes (colours below)"]
     # the images load from the file system (a broken link has no natural width)
-    loaded = drv.execute_script("const im = Array.from(document.querySelectorAll('#viewer img'));"
-                                "return im.every(i => i.complete && i.naturalWidth === 32)")
-    assert loaded
+    loaded = drv.execute_async_script("const done = arguments[0];"
+                                      "const im = Array.from(document.querySelectorAll('#viewer img'));"
+                                      "Promise.all(im.map(i => i.decode().catch(() => null)))"
+                                      ".then(() => done(im.map(i => i.complete ? i.naturalWidth : 0)))")
+    # the camera's 32 px images, and the display renders at ten times that (at least 320 px a side)
+    assert loaded == [320, 32, 320, 32, 32]
 
 
 def test_the_benchmark_leaderboard_sorts_in_the_browser(tmp_path):
@@ -142,5 +151,123 @@ def test_the_benchmark_leaderboard_sorts_in_the_browser(tmp_path):
         # the scale figure beside the page loads from the file system (a broken link has no natural width)
         assert drv.execute_script("const i = document.querySelector('img[src=\"scale.png\"]');"
                                   "return i !== null && i.complete && i.naturalWidth > 400")
+    finally:
+        drv.quit()
+
+
+LAYOUT_JS = """
+const out = {pageWidth: document.documentElement.scrollWidth, window: window.innerWidth, overflow: []};
+const body = document.body.getBoundingClientRect();
+// every box the page lays out: none reaches past the body's right edge (wide content scrolls inside its box)
+for (const e of document.querySelectorAll('section, h1, h2, p, .wide, .scroll, .figbox, .filters, figure, #viewer')) {
+  if (e.closest('#zoom') || e.offsetParent === null) continue;
+  const r = e.getBoundingClientRect();
+  if (r.right > body.right + 1) out.overflow.push(e.tagName + '#' + (e.id || e.className) + ' ' + r.right);
+}
+return out;
+"""
+
+
+def _all_images_loaded(drv) -> list:
+    """The page's images made eager and awaited; returns the sources of those that did not load."""
+    drv.execute_script("document.querySelectorAll('details').forEach(d => d.open = true);"
+                       "document.querySelectorAll('img[loading=lazy]').forEach(i => i.loading = 'eager')")
+    return drv.execute_async_script(
+        "const done = arguments[0]; const imgs = Array.from(document.querySelectorAll('img'))"
+        ".filter(i => i.getAttribute('src'));"
+        "Promise.all(imgs.map(i => i.decode().catch(() => null))).then(() =>"
+        " done(imgs.filter(i => !(i.complete && i.naturalWidth > 0)).map(i => i.getAttribute('src'))))")
+
+
+@pytest.mark.parametrize("width", [1280, 820])
+def test_the_report_fits_its_window_and_its_plots_read_at_9_points(page, width):
+    """At each window width: no box runs past the page's edge, the summary shows every row (no
+    fixed-height box), every image loads, the tables' text is at least 9 points (12 CSS px) and every
+    figure is shown at its pixel size, so its smallest text (figures.MIN_FONT points at figures.DPI)
+    reads at 9 points or more."""
+    from dsm.report import figures
+    res, drv = page
+    drv.set_window_size(width, 900)
+    drv.get((res.out / "report.html").as_uri())
+    assert _all_images_loaded(drv) == []
+    layout = drv.execute_script(LAYOUT_JS)
+    assert layout["overflow"] == [] and layout["pageWidth"] <= layout["window"]
+    box = drv.execute_script("const b = document.querySelector('#summary-table').parentElement;"
+                             "return [b.scrollHeight, b.clientHeight, document.querySelectorAll('#summary-table tbody tr').length]")
+    assert box[0] <= box[1] and box[2] == 4
+    px = drv.execute_script("return ['#summary-table td', '#case-table td', '.plots figcaption', '.note']"
+                            ".map(s => parseFloat(getComputedStyle(document.querySelector(s)).fontSize))")
+    assert min(px) >= 12, px                                # 12 CSS px = 9 points
+    shown = drv.execute_script("return Array.from(document.querySelectorAll('.plots img'))"
+                               ".map(i => [i.clientWidth, i.naturalWidth])")
+    assert shown and all(w == n for w, n in shown), shown
+    # MIN_FONT points at DPI are MIN_FONT * DPI / 72 image pixels, shown one a CSS pixel (0.75 point)
+    assert figures.MIN_FONT * figures.DPI / 72 * 0.75 >= 9
+
+
+def test_a_point_of_a_pareto_plot_names_its_case_and_opens_it(page):
+    """The pareto figure's image map: each area sits on a case's point (the case's time and error
+    rate, from metrics.csv), its title names the case, and a click shows the case's images."""
+    res, drv = page
+    drv.set_window_size(1280, 900)
+    drv.get((res.out / "report.html").as_uri())
+    rows = {r["case"]: r for r in _csv(res)}
+    areas = drv.execute_script("return Array.from(document.querySelectorAll('map[name^=pts-pareto] area'))"
+                               ".map(a => [a.getAttribute('href'), a.title])")
+    scored = [c for c, r in rows.items() if r["error_rate"] != ""]
+    assert sorted(h.removeprefix("#case-") for h, _ in areas) == sorted(scored)
+    assert all(t.startswith(f"case {h.removeprefix('#case-')}: {rows[h.removeprefix('#case-')]['scheme']}")
+               for h, t in areas)
+    href = areas[-1][0]
+    drv.execute_script("document.querySelector(`area[href='${arguments[0]}']`).click()", href)
+    case = href.removeprefix("#case-")
+    assert drv.find_element("css selector", "#viewer p").text.startswith(f"case {case}:")
+    assert drv.find_element("css selector", "#case-table tr.sel").get_attribute("data-case") == case
+
+
+def test_the_leaderboard_filters_and_fits(tmp_path):
+    """leaderboard.html at two widths: nothing runs past the page's edge, the scale figure loads at its
+    pixel size; the family filter keeps the pre-filtered maps' rows alone (kind as the first word, by
+    hand), the scene filter the cases of that scene, a ranking row's click its contender's cases."""
+    from dsm.benchmark import page as bench_page
+    cases = []
+    for scene in ("s", "t"):
+        for c, e in {"vsm box:5": 0.30, "bevy": 0.10, "receiver_plane": 0.20}.items():
+            cases.append({"scene": scene, "unit": "m", "light": "directional", "contender": c, "n_receivers": 1000,
+                          "n_acne": int(e * 1000), "n_peterpan": 0, "acne_rate": e, "peterpan_rate": 0.0,
+                          "error_rate": e, "texel_size": 0.01, "build_ms": 1.0, "lookup_ms": 1.0,
+                          "params": "bias=5.96046e-08 range"})
+        cases.append({"scene": scene, "unit": "m", "light": "directional", "contender": "oracle", "n_receivers": 1000,
+                      "world_objective": 0.05, "texel_objective": 0.05, "per_texel_objective": 0.0})
+    doc = {"suite": "dsm-bench-1", "suite_sha256": "0" * 64, "size": "test", "dsm_version": "0", "variant": "x",
+           "versions": {"dsm_git_commit": "c"}, "machine": {"cpu": "cpu", "cores": 1}, "cases": cases}
+    path = bench_page.write_page(doc, tmp_path)
+    drv = _chrome()
+    try:
+        from selenium.webdriver.support.ui import Select
+        for width in (1280, 820):
+            drv.set_window_size(width, 900)
+            drv.get(path.as_uri())
+            assert _all_images_loaded(drv) == []
+            layout = drv.execute_script(LAYOUT_JS)
+            assert layout["overflow"] == [] and layout["pageWidth"] <= layout["window"]
+            img = drv.execute_script("const i = document.querySelector('img[src=\"scale.png\"]');"
+                                     "return [i.clientWidth, i.naturalWidth]")
+            assert img[0] == img[1]
+        visible = lambda table: drv.execute_script(
+            f"return Array.from(document.querySelectorAll('#{table} tbody tr')).filter(r => !r.hidden)"
+            ".map(r => [r.dataset.contender, r.dataset.scene])")
+        visible_pairs = lambda table: [tuple(x) for x in visible(table)]
+        Select(drv.find_element("css selector", ".filters select[name=family]")).select_by_value("pre-filtered map")
+        assert [c for c, _ in visible("ranking")] == ["vsm box:5"]
+        Select(drv.find_element("css selector", ".filters select[name=family]")).select_by_value("")
+        Select(drv.find_element("css selector", ".filters select[name=scene]")).select_by_value("t")
+        assert sorted(visible_pairs("case-list")) == sorted((c["contender"], "t") for c in cases
+                                                      if c["scene"] == "t" and c["contender"] != "oracle")
+        assert drv.find_element("id", "case-list-shown").text == "3"
+        drv.execute_script("document.querySelector('#ranking tbody tr[data-contender=\"bevy\"]').click()")
+        assert visible_pairs("case-list") == [("bevy", "t")]
+        # the parameters read as a power of two, the exact text in results.json
+        assert "bias=2^-24 range" in drv.find_element("id", "case-list").text
     finally:
         drv.quit()

@@ -48,7 +48,8 @@ def test_a_local_two_worker_cluster_writes_the_rows_of_a_local_run(tmp_path):
     assert sum(n["cases"] for n in run["nodes"].values()) == 16
     assert sum(n["groups"] for n in run["nodes"].values()) == len(run["plan"]["maps"]) == 8
     files = lambda run: sorted(str(p.relative_to(run / "images")) for p in (run / "images").rglob("*") if p.is_file())
-    assert files(tmp_path / "ray") == files(tmp_path / "local") and len(files(tmp_path / "local")) == 2 * 16
+    # two images a case, and two display renders a scene and light (two scenes, one light each)
+    assert files(tmp_path / "ray") == files(tmp_path / "local") and len(files(tmp_path / "local")) == 2 * 16 + 2 * 2
     assert (tmp_path / "ray" / "oracle.csv").read_text().count("\n") == \
         (tmp_path / "local" / "oracle.csv").read_text().count("\n")
     # what accuracy costs in time survives the tasks: every time the local run measured, the tasks measured

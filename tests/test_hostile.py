@@ -455,7 +455,15 @@ def test_force_clears_only_what_a_run_wrote_inside_images_and_plots(tmp_path):
     old = sorted(p.name for p in (out / "images").rglob("*_error.png"))
     stale = out / "images" / "plane_box_0_directional" / "0099_error.png"     # a dsm image of no current case
     stale.write_bytes(b"x")
+    # a display render and a figure's case points of a scene and view the new run does not have
+    (out / "images" / "gone_0_directional").mkdir()
+    stale_display = out / "images" / "gone_0_directional" / "display_nl.png"
+    stale_points = out / "plots" / "pareto_gone.points.json"
+    stale_display.write_bytes(b"x")
+    stale_points.write_text("[]")
     assert cli.main(["run", str(_toml(tmp_path, raw)), "--out", str(out), "--force"]) == 0
+    assert not stale_display.exists() and not stale_display.parent.exists() and not stale_points.exists()
+    assert (out / "images" / "plane_box_0_directional" / "display_nl.png").is_file()
     assert (out / "plots" / "keep.txt").read_text() == "mine" and (out / "images" / "mine.txt").read_text() == "mine"
     assert (out / "images" / "album" / "photo.jpg").read_bytes() == b"jpg"
     assert not stale.exists() and sorted(p.name for p in (out / "images").rglob("*_error.png")) == old

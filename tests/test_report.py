@@ -178,6 +178,39 @@ def _strokes(ax) -> list:
     return out
 
 
+# Okabe & Ito's colour-blind-safe palette (Color Universal Design, 2008), less its yellow and black
+OKABE_ITO = ("#E69F00", "#56B4E9", "#009E73", "#0072B2", "#D55E00", "#CC79A7")
+
+
+def test_series_styles_tell_24_series_apart_by_colour_and_shape():
+    """Series k < 24 differ in their (colour, marker, dash); every colour is the palette's; a marker
+    and dash change with each pass over the six colours, so no two series are told by colour alone."""
+    from dsm.report import figures
+    styles = [figures.style(k) for k in range(24)]
+    assert len({(s["color"], s["marker"], s["ls"]) for s in styles}) == 24
+    assert {s["color"] for s in styles} == set(OKABE_ITO)
+    assert all(styles[k]["marker"] != styles[k + 6]["marker"] and styles[k]["ls"] != styles[k + 6]["ls"]
+               for k in range(18))
+
+
+def _texts_fit(fig, min_points):
+    """Every text of a drawn figure (its Texts and tick-label artists): (smallest size in points,
+    texts whose box leaves the figure)."""
+    from matplotlib.text import Text
+    fig.canvas.draw()
+    r = fig.canvas.get_renderer()
+    sizes, out = [], []
+    for t in fig.findobj(Text):
+        if t.get_text() and t.get_visible():
+            sizes.append(t.get_fontsize())
+            b = t.get_window_extent(r)
+            if b.x0 < -1 or b.y0 < -1 or b.x1 > fig.bbox.x1 + 1 or b.y1 > fig.bbox.y1 + 1:
+                out.append(t.get_text()[:40])
+    # the tick labels: one artist a panel (dsm.report.canvas.tick_labels), its font in ``prop``
+    sizes += [a.prop.get_size_in_points() for a in fig.findobj(lambda a: hasattr(a, "texts") and hasattr(a, "prop"))]
+    return min(sizes), out
+
+
 def test_consolidated_legends_name_each_map_and_instance_once(tmp_path):
     """The trade-off figure: one legend entry per map (not one per curve), on the first panel
     only when every panel holds the same maps; views at equal memory: one entry per instance
@@ -190,9 +223,11 @@ def test_consolidated_legends_name_each_map_and_instance_once(tmp_path):
     fig = figures.draw_tradeoff(tmp_path / "t.png", "s", [("R = 64", maps), ("R = 128", maps)])
     assert [getattr(ax, "legend_texts", []) for ax in fig.axes] == [["float32", "float32 back_closed"], []]
     assert "solid: one world bias, dotted: one k texel" in " ".join(fig._suptitle.get_text().split())
+    # no text below figures.MIN_FONT points (9 as report.html shows it), none outside the figure
+    assert _texts_fit(fig, figures.MIN_FONT) == (figures.MIN_FONT, [])
     # a map's two curves share its colour: solid (world) and dotted (texel)
     styles = {(tuple(c), dashed) for c, _, dashed in _strokes(fig.axes[0])}
-    assert styles == {(to_rgba(f"C{k}"), dashed) for k in (0, 1) for dashed in (False, True)}
+    assert styles == {(to_rgba(OKABE_ITO[k]), dashed) for k in (0, 1) for dashed in (False, True)}
     rows = []
     for view in ("cube", "dual_paraboloid"):
         for k in range(10):
@@ -207,11 +242,12 @@ def test_consolidated_legends_name_each_map_and_instance_once(tmp_path):
     assert sorted(named) == sorted(f"normal_angle bias={k} texel" for k in range(10))
     assert max(len(getattr(ax, "legend_texts", [])) for ax in fig.axes) <= figures.MAX_LEGEND
     assert "cube solid, dual_paraboloid dashed" in " ".join(fig._suptitle.get_text().split())   # wrapped
+    assert _texts_fit(fig, figures.MIN_FONT) == (figures.MIN_FONT, [])
     # both views of every instance drawn: 10 instances x 2 views (the seam row: undefined rates, no line)
     drawn = [st for ax in fig.axes for st in _strokes(ax) if len(st[1])]
     assert len(drawn) == 10 * 2
     assert {(tuple(c), dashed) for c, _, dashed in drawn} == {
-        (to_rgba(f"C{k}"), dashed) for k in range(10) for dashed in (False, True)}
+        (to_rgba(OKABE_ITO[k % 6]), dashed) for k in range(10) for dashed in (False, True)}
 
 
 def test_dsm_report_rebuilds_table_md_and_the_page(run, tmp_path):
@@ -363,7 +399,8 @@ def test_report_images_key(tmp_path):
         res = dsm.run(base_config(report={"images": mode}, **small), out=tmp_path / mode)
         files = sorted(p.relative_to(res.out).as_posix() for p in (res.out / "images").rglob("*.png"))
         err, shadow = figures.image_paths(res.rows[0])
-        assert files == sorted(p for p, s in ((err, "_error.png"), (shadow, "_shadow.png")) if s in want), mode
+        display = list(figures.display_paths(res.rows[0])) if mode == "all" else []    # the scene's display renders
+        assert files == sorted([p for p, s in ((err, "_error.png"), (shadow, "_shadow.png")) if s in want] + display), mode
         assert err == f"images/plane_0_directional/{res.rows[0]['case']}_error.png"
     # the shadow image is the render: lit receivers brighter than the ambient 0.12 floor
     from PIL import Image

@@ -32,7 +32,7 @@ from ..config import plan as planmod, read as cfgmod
 from ..core import env, record, timing
 from ..maps import headroom, shadowmap
 from ..report import publish, tables as report, io as report_io
-from . import motion, resume, wavefront
+from . import display, motion, resume, wavefront
 from .builds import Builds
 from .contexts import Contexts, SceneRun, ViewRun
 from .results import Results
@@ -147,6 +147,7 @@ class Runner:
         """The report, after every timed measurement, composed from the run's files alone (as
         dsm report does): figures, table.md, cascades.md, report.html."""
         t1, c1 = time.perf_counter(), _cpu()
+        self._display_renders()
         try:
             self.timing["report_parts"] = publish.write_report(self.out, (), self.record.curves,
                                                                plots=self.state == "complete")
@@ -154,6 +155,20 @@ class Runner:
             self._fail("report (dsm report rebuilds it)", e)
         self.timing["report_s"] = time.perf_counter() - t1 + self.sink.images_s
         self.timing["report_cpu_s"] = _cpu() - c1 + self.sink.images_cpu_s
+
+    def _display_renders(self):
+        """Each scene and light's display renders (dsm.experiment.display), in the report's time: a
+        complete run that writes every image ([report] images = "all") only; what was left out is a note in
+        run.json's status."""
+        if self.state != "complete" or self.cfg.report_images != "all" or not (self.out / "metrics.csv").is_file():
+            return
+        try:
+            # the pairs from metrics.csv, the run's data file: a cluster's driver holds no rows of its own
+            rows = report_io.read_csv(self.out / "metrics.csv")
+            notes = display.write_renders(self.out, self.cfg, {(r["scene"], r["light"]) for r in rows})
+        except Exception as e:          # the page falls back to the case's own images
+            notes = [f"display renders: {type(e).__name__}: {e}"]
+        self.record.status += [{"what": "display render", "status": "note", "error": n} for n in notes]
 
     def _launches(self) -> dict:
         """JIT kernel launches while measuring (Dr.Jit's kernel history, this process only: a

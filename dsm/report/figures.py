@@ -23,20 +23,41 @@ import numpy as np
 from ..truth import metrics
 from . import canvas
 from . import png
+from .labels import params_label
 from .io import atomic
 from .tables import case_time, pareto_front
 
 LINTHRESH = 1e-4          # symlog: linear below this rate
 MAX_LEGEND = 13           # entries per panel (more make more panels, the costliest artists)
-DPI = 72
+# drawn at 120 dpi and shown at its pixel size (report.html: one image pixel a CSS pixel, 96 a CSS
+# inch), a figure reads at 1.25 times its size in points: its smallest text, 7.2 points, reads as 9.
+# (Any DPI x MIN_FONT of 864 reads at 9; 120 and 7.2 draw 2.8 times the pixels of the earlier 72 dpi
+# figures, where 144 and 6 drew 4 times: text a fifth larger beside the same panels, a third less
+# of the report's drawing and PNG time.)
+DPI = 120
+MIN_FONT = 7.2            # points: no text of a figure is smaller (9 points as shown)
+LABEL_FONT = 7.5          # axis labels and panel titles
+TITLE_FONT = 8.5          # a figure's title
 PNG = {"compress_level": 1}
-# the figures' settings, while making and drawing them: 6-point tick labels (set once, not per
+# the figures' settings, while making and drawing them: MIN_FONT tick labels (set once, not per
 # panel: tick_params re-styles every tick already made); glyphs unhinted (FreeType's autohinter
-# is a tenth of the drawing time and sharpens little at 6 points and 72 dpi)
-RC = {"xtick.labelsize": 6, "ytick.labelsize": 6, "text.hinting": "no_hinting"}
-# matplotlib's default colour cycle ("C0" .. "C9"), resolved once: a "CN" colour is looked up in
-# the rc cycle each time it is converted
-CYCLE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf")
+# is a tenth of the drawing time and sharpens little at these sizes)
+RC = {"xtick.labelsize": MIN_FONT, "ytick.labelsize": MIN_FONT, "text.hinting": "no_hinting"}
+# series styles: Okabe & Ito's colour-blind-safe palette (Color Universal Design, 2008) without its
+# yellow (too faint on white) and black (the frontier's and the oracle's lines), times four marker
+# and dash pairs: 24 series that differ in colour and in shape, so none is told by colour alone
+COLOURS = ("#E69F00", "#56B4E9", "#009E73", "#0072B2", "#D55E00", "#CC79A7")
+MARKERS = ("o", "s", "^", "D")
+DASHES = ("-", "--", ":", "-.")
+N_STYLES = len(COLOURS) * len(MARKERS)
+CYCLE = COLOURS           # colour k of a series is CYCLE[k % len(CYCLE)] (style(k) adds its marker and dash)
+
+
+def style(k: int) -> dict:
+    """Series k's colour, marker and dash: distinct for k < N_STYLES (colour first, then the shape)."""
+    k %= N_STYLES
+    j = k // len(COLOURS)
+    return {"color": COLOURS[k % len(COLOURS)], "marker": MARKERS[j], "ls": DASHES[j]}
 
 
 def slug(s: str, keep: str = "-_.") -> str:
@@ -59,6 +80,15 @@ def image_paths(row) -> tuple:
     """(error image, shadow image) of a case, relative to the run's folder."""
     f = f"images/{image_folder(row)}/{row['case']}"
     return f + "_error.png", f + "_shadow.png"
+
+
+# a scene and light's display renders (dsm.experiment.display), one pair per images/<scene>_<light>/
+DISPLAY_FILES = ("display_nl.png", "display_exact.png")
+
+
+def display_paths(row) -> tuple:
+    """(N.L display render, exact display render) of a case's scene and light, relative to the run's folder."""
+    return tuple(f"images/{image_folder(row)}/{name}" for name in DISPLAY_FILES)
 
 
 def _atomic_save(path: Path, save):
@@ -90,7 +120,10 @@ def write_images(out: Path, items: list):
 
 # ------------------------------------------------------------------ drawing primitives
 
-LEGEND_Y = -0.22          # where the first entry sits, in the panel's height below it
+# where a legend's first entry sits: this far below its panel, in inches (clear of the tick labels
+# and the x label), whatever the panel's height: a fraction of the height put a tall panel's legend
+# below the room _figure leaves for it, its last lines cut off
+LEGEND_GAP_IN = 0.45
 
 
 def _figure(ncols, nrows, width=3.7, height=2.5, legend_rows=0, sharey=False, sharex=False):
@@ -228,7 +261,7 @@ def _freeze_x_ticks(ax):
 
 
 
-LEGEND_FONT = 6           # points
+LEGEND_FONT = MIN_FONT    # points
 LEGEND_SPACING = 1.6      # line pitch of a legend, in font sizes (within the 0.2 in per entry _figure leaves)
 
 
@@ -237,7 +270,7 @@ def _legend(ax):
     marker, then its label. Three artists however many entries (the strokes, their markers, the
     labels as one text of many lines): matplotlib's Legend lays every entry out as boxes of its
     own, a third of a figure's drawing time. ``ax.legend_texts`` keeps the labels."""
-    from matplotlib.collections import CircleCollection, LineCollection
+    from matplotlib.collections import LineCollection
     entries = ax.__dict__.pop("legend_entries", None)       # set by _line_series for this figure only
     if entries is None:
         handles, labels = ax.get_legend_handles_labels()
@@ -250,7 +283,7 @@ def _legend(ax):
     fig = ax.figure
     box = ax.get_position()                                  # figure fraction (no layout engine)
     w_in, h_in = fig.get_size_inches()
-    x0, top = box.x0 * w_in, (box.y0 + LEGEND_Y * box.height) * h_in      # inches
+    x0, top = box.x0 * w_in, box.y0 * h_in - LEGEND_GAP_IN               # inches
     pitch = LEGEND_SPACING * LEGEND_FONT * _font_height_em() / 72
     mid = lambda i: top - (i + 0.5) * pitch                  # the middle of line i
     strokes = [(i, st) for i, st in enumerate(styles) if st["ls"] not in ("none", "None", "")]
@@ -259,10 +292,12 @@ def _legend(ax):
                                   linestyles=[st["ls"] for _, st in strokes],
                                   linewidths=[st["lw"] for _, st in strokes], transform=fig.dpi_scale_trans))
     dots = [(i, st) for i, st in enumerate(styles) if st["marker"] not in (None, "none", "None", "")]
-    if dots:
-        fig.add_artist(CircleCollection([st["ms"] ** 2 for _, st in dots], offsets=[(x0 + 0.18, mid(i)) for i, _ in dots],
-                                        offset_transform=fig.dpi_scale_trans, facecolors=[st["face"] for _, st in dots],
-                                        edgecolors=[st["edge"] for _, st in dots], linewidths=0.5))
+    for marker in dict.fromkeys(st["marker"] for _, st in dots):     # one collection per marker shape
+        group = [(i, st) for i, st in dots if st["marker"] == marker]
+        fig.add_artist(_marker_collection(marker, [2 / math.sqrt(math.pi) * st["ms"] for _, st in group],
+                                          [(x0 + 0.18, mid(i)) for i, _ in group], fig.dpi_scale_trans,
+                                          faces=[st["face"] for _, st in group], edges=[st["edge"] for _, st in group],
+                                          lw=0.5))
     fig.text(x0 + 0.36, top, "\n".join(labels), transform=fig.dpi_scale_trans, fontsize=LEGEND_FONT, va="top",
              linespacing=LEGEND_SPACING)
 
@@ -296,11 +331,13 @@ def _handle_style(h) -> dict:
 def _title(fig, text):
     """The figure's title, wrapped to its width (a narrow figure would cut a long one)."""
     import textwrap
-    fig.suptitle("\n".join(textwrap.wrap(text, max(30, int(fig.get_figwidth() * 17)))), fontsize=8)
+    fig.suptitle("\n".join(textwrap.wrap(text, max(30, int(fig.get_figwidth() * 16)))), fontsize=TITLE_FONT)
 
 
-def _save(fig, path):
-    """The figure as a PNG, drawn under RC (matplotlib makes most ticks while drawing)."""
+def _save(fig, path, points=None):
+    """The figure as a PNG, drawn under RC (matplotlib makes most ticks while drawing); ``points``:
+    [(axes, [(x, y, case, label)])] in data coordinates, written beside it as the pixels they
+    were drawn at (points_file)."""
     from matplotlib import rc_context
     cv = canvas.canvas(fig)
     dpi = fig.dpi
@@ -308,9 +345,32 @@ def _save(fig, path):
         fig.set_dpi(DPI)             # what savefig(dpi=DPI) draws at; its PNG writer is Pillow's (png.py says why not)
         try:
             cv.draw()
-            png.write(Path(path), np.asarray(cv.buffer_rgba()), dpi=DPI)
+            # RGB: the figure is opaque (white), and an alpha of 255 everywhere is a quarter of the bytes to compress
+            png.write(Path(path), np.asarray(cv.buffer_rgba())[..., :3], dpi=DPI)
+            if points is not None:
+                _write_points(Path(path), fig, points)
         finally:
             fig.set_dpi(dpi)         # as savefig leaves it: a figure returned to a caller keeps its own
+
+
+def points_file(png_path: Path) -> Path:
+    """Where a figure's case points are listed: beside its PNG, ``<name>.points.json``."""
+    return Path(png_path).with_suffix(".points.json")
+
+
+def _write_points(path: Path, fig, points: list):
+    """The case points of a drawn figure as [[x, y, case, label]] in its PNG's pixels (origin top
+    left), so a page can name each point and open its case (report.html's image map)."""
+    height = fig.bbox.height
+    out = []
+    for ax, pts in points:
+        if not pts:
+            continue
+        xy = ax.transData.transform([(p[0], p[1]) for p in pts])
+        out += [[int(round(x)), int(round(height - y)), str(p[2]), str(p[3])]
+                for (x, y), p in zip(xy, pts) if math.isfinite(x) and math.isfinite(y)]
+    with atomic(points_file(path)) as tmp:
+        tmp.write_text(json.dumps(out, separators=(",", ":")) + "\n", encoding="utf-8")
 
 
 def chunks(items, n=MAX_LEGEND):
@@ -322,7 +382,7 @@ def chunks(items, n=MAX_LEGEND):
 def _title_panel(ax, text):
     """A panel's title at a fixed height (matplotlib would otherwise measure the panel's every
     tick label to place it: nothing is drawn above a panel here)."""
-    ax.set_title(text, fontsize=7, y=1.0, pad=4)
+    ax.set_title(text, fontsize=LABEL_FONT, y=1.0, pad=4)
 
 
 def _line(ax, x, y, **kw):
@@ -345,13 +405,37 @@ def _strokes(ax, lines, clip_on: bool):
                                              capstyle=cap, joinstyle="round", clip_on=clip_on), autolim=False)
 
 
-def _dots(ax, xy, ms: float, faces, edges, lw: float, zorder: float):
-    """Round markers at data points ``xy`` as one CircleCollection, sized as Line2D's ``markersize``
-    ``ms`` (a diameter in points; the collection takes an area), unclipped, on whole pixels as Line2D's."""
-    from matplotlib.collections import CircleCollection
-    ax.add_collection(CircleCollection([math.pi / 4 * ms ** 2] * len(xy), offsets=xy, offset_transform=ax.transData,
-                                       facecolors=faces, edgecolors=edges, linewidths=lw, clip_on=False,
-                                       zorder=zorder, snap=True), autolim=False)
+def _marker_collection(marker: str, ms, xy, transform, faces, edges, lw: float, **kw):
+    """Markers of one shape at ``xy`` (in ``transform``'s coordinates), ``ms`` their diameters in
+    points (one, or one each) as Line2D's ``markersize``: a CircleCollection for "o", else the
+    marker's path as scatter() draws it."""
+    from matplotlib.collections import CircleCollection, PathCollection
+    from matplotlib.markers import MarkerStyle
+    ms = np.broadcast_to(np.asarray(ms, float), (len(xy),))
+    if marker == "o":
+        return CircleCollection(math.pi / 4 * ms ** 2, offsets=xy, offset_transform=transform, facecolors=faces,
+                                edgecolors=edges, linewidths=lw, **kw)
+    from matplotlib.transforms import IdentityTransform
+    m = MarkerStyle(marker)
+    # a unit marker's path scaled by sqrt(size) points, as scatter() makes it (the paths' own transform
+    # the identity: a figure or axes would otherwise give it theirs); sized to the circle of that diameter
+    coll = PathCollection([m.get_path().transformed(m.get_transform())], sizes=math.pi / 4 * ms ** 2, offsets=xy,
+                          offset_transform=transform, facecolors=faces, edgecolors=edges, linewidths=lw, **kw)
+    coll.set_transform(IdentityTransform())
+    return coll
+
+
+def _dots(ax, xy, ms: float, faces, edges, lw: float, zorder: float, markers=None):
+    """Markers at data points ``xy`` (round, or ``markers`` one each), one collection per shape,
+    sized as Line2D's ``markersize`` ``ms`` (a diameter in points), unclipped, on whole pixels as Line2D's."""
+    markers = ["o"] * len(xy) if markers is None else list(markers)
+    faces = faces if isinstance(faces, (list, tuple)) else [faces] * len(xy)
+    edges = edges if isinstance(edges, (list, tuple)) else [edges] * len(xy)
+    for marker in dict.fromkeys(markers):
+        at = [i for i, m in enumerate(markers) if m == marker]
+        ax.add_collection(_marker_collection(marker, ms, [xy[i] for i in at], ax.transData, [faces[i] for i in at],
+                                             [edges[i] for i in at], lw, clip_on=False, zorder=zorder, snap=True),
+                          autolim=False)
 
 
 SERIES_MS = 3             # a series' marker diameter, in points (as Line2D's markersize)
@@ -365,25 +449,30 @@ def _line_series(ax, series, styles, i) -> list:
     from matplotlib.colors import to_rgba
     xs, lines, dots, entries = [], [], [], []
     for k, (label, pts) in enumerate(series.items()):
-        style = dict(styles.get(label, {}))
-        shown = style.pop("legend", label)          # its legend entry ('_': none)
-        color = to_rgba(style.pop("color", CYCLE[k % len(CYCLE)]))
-        ls, lw = style.pop("linestyle", style.pop("ls", "-")), style.pop("lw", 0.9)
-        if style:
-            raise ValueError(f"series {label!r}: unknown style keys {sorted(style)} (color, linestyle, lw, legend)")
+        given = dict(styles.get(label, {}))
+        shown = given.pop("legend", label)          # its legend entry ('_': none)
+        own = style(k)                 # the k-th series' colour, marker and dash
+        color = to_rgba(given.pop("color", own["color"]))
+        marker = given.pop("marker", own["marker"])
+        ls, lw = given.pop("linestyle", given.pop("ls", own["ls"])), given.pop("lw", 0.9)
+        if given:
+            raise ValueError(f"series {label!r}: unknown style keys {sorted(given)} (color, marker, linestyle, lw, "
+                             "legend)")
         if not str(shown).startswith("_"):
-            entries.append((dict(color=color, ls=ls, lw=lw, marker="o", ms=SERIES_MS, face=color, edge=color), shown))
+            entries.append((dict(color=color, ls=ls, lw=lw, marker=marker, ms=SERIES_MS, face=color, edge=color),
+                            shown))
         pts = sorted(p for p in pts if metrics.defined(p[1 + i]))    # undefined: left out, not 0
         xs += [p[0] for p in pts]
         if len(pts) > 1 and ls not in ("none", "None", ""):
             lines.append(([(p[0], p[1 + i]) for p in pts], color, ls, lw))
-        dots += [((p[0], p[1 + i]), color) for p in pts]
+        dots += [((p[0], p[1 + i]), color, marker) for p in pts]
     _strokes(ax, lines, clip_on=False)
     if dots:
         # the data limits from the points themselves (the x axis autoscales to them): add_collection
         # would find them by transforming every path through the axes' scales
         ax.update_datalim([d[0] for d in dots])
-        _dots(ax, [d[0] for d in dots], SERIES_MS, [d[1] for d in dots], [d[1] for d in dots], 1.0, 2.01)
+        _dots(ax, [d[0] for d in dots], SERIES_MS, [d[1] for d in dots], [d[1] for d in dots], 1.0, 2.01,
+              [d[2] for d in dots])
     ax.legend_entries = entries
     return xs
 
@@ -402,10 +491,10 @@ def draw_lines(path, title, columns, ylabels=("acne rate", "peter-panning rate")
             xs += _line_series(ax, series, styles, i)
             _rate_axis(ax)
             if j == 0:
-                ax.set_ylabel(ylabel, fontsize=7)
+                ax.set_ylabel(ylabel, fontsize=LABEL_FONT)
         _x_scale(axes[-1, j], xs, xlog2)       # shared: once per column
         _title_panel(axes[0, j], ctitle)
-        axes[-1, j].set_xlabel(xlabel, fontsize=7)
+        axes[-1, j].set_xlabel(xlabel, fontsize=LABEL_FONT)
         _legend(axes[-1, j])
     _title(fig, title)
     _save(fig, path)
@@ -421,22 +510,25 @@ def draw_pareto(path, title, panels, front):
     frontier ``front`` [(time, error)] over every case."""
     fig, axes = _figure(len(panels), 1, width=4.2, height=3.0, legend_rows=max(len(p) for p in panels) + 1,
                         sharey=True)
+    points = []
     for ax, series in zip(axes[0], panels):
+        points.append((ax, [(p[0], p[1], p[2], p[3]) for _, pts in series.values() for p in pts if len(p) > 3]))
         for label, (k, pts) in series.items():
-            _line(ax, [p[0] for p in pts], [p[1] for p in pts], ls="none", marker="o", ms=POINT_MS, mew=0,
-                  color=CYCLE[k % len(CYCLE)], label=label, clip_on=False)
+            st = style(k)
+            _line(ax, [p[0] for p in pts], [p[1] for p in pts], ls="none", marker=st["marker"], ms=POINT_MS, mew=0,
+                  color=st["color"], label=label, clip_on=False)
         _line(ax, [p[0] for p in front], [p[1] for p in front], color="k", ls="-", lw=0.8,
               label="non-dominated (all schemes)")
         _line(ax, [p[0] for p in front], [p[1] for p in front], ls="none", marker="o", ms=6.3, mfc="none", mec="k",
               mew=0.6, clip_on=False)
         _x_scale(ax, [], log=True)
         _rate_axis(ax)
-        ax.set_xlabel("time per case: map build + lookup (ms)", fontsize=7)
+        ax.set_xlabel("time per case: map build + lookup (ms)", fontsize=LABEL_FONT)
         if ax is axes[0][0]:
-            ax.set_ylabel("error rate: (acne + peter-pan) / receivers", fontsize=7)
+            ax.set_ylabel("error rate: (acne + peter-pan) / receivers", fontsize=LABEL_FONT)
         _legend(ax)
     _title(fig, title)
-    _save(fig, path)
+    _save(fig, path, points)
     return fig
 
 
@@ -456,14 +548,15 @@ def _tradeoff_maps(ax, maps):
     """Each map's two curves and its case points in ``ax`` as three collections (solid, dotted,
     points), with a legend entry per map (its colour, the solid stroke); _rate_axis sets both limits."""
     from matplotlib.colors import to_rgba
-    colours = [to_rgba(CYCLE[k % len(CYCLE)]) for _, k, _, _, _ in maps]
+    colours = [to_rgba(style(k)["color"]) for _, k, _, _, _ in maps]
+    shapes = [style(k)["marker"] for _, k, _, _, _ in maps]
     _strokes(ax, [(_steps_post(*m[2 + i]), c, ls, lw) for i, (lw, ls) in enumerate(((1.0, "-"), (0.8, ":")))
                   for m, c in zip(maps, colours)], clip_on=True)
-    pts = [(p, c) for m, c in zip(maps, colours) for p in m[4]]
+    pts = [(p[:2], c, mk) for m, c, mk in zip(maps, colours, shapes) for p in m[4]]
     if pts:
-        _dots(ax, [p for p, _ in pts], 3.5, [c for _, c in pts], "k", 0.3, 3)
-    ax.legend_entries = [(dict(color=c, ls="-", lw=1.0, marker="None", ms=4, face=c, edge=c), m[0])
-                         for m, c in zip(maps, colours)]
+        _dots(ax, [p[0] for p in pts], 3.5, [p[1] for p in pts], "k", 0.3, 3, [p[2] for p in pts])
+    ax.legend_entries = [(dict(color=c, ls="-", lw=1.0, marker=mk, ms=3.5, face=c, edge="k"), m[0])
+                         for m, c, mk in zip(maps, colours, shapes)]
 
 
 def draw_tradeoff(path, title, panels):
@@ -473,21 +566,22 @@ def draw_tradeoff(path, title, panels):
     panel whose maps are the previous panel's has no legend of its own."""
     fig, axes = _figure(len(panels), 1, width=3.8, height=3.4, legend_rows=max(len(p[1]) for p in panels),
                         sharey=True)
-    shown = None
+    shown, points = None, []
     for ax, (ptitle, maps) in zip(axes[0], panels):
         _tradeoff_maps(ax, maps)
+        points.append((ax, [(p[0], p[1], p[2], p[3]) for m in maps for p in m[4] if len(p) > 3]))
         _rate_axis(ax, "x")
         _rate_axis(ax, "y")
-        ax.set_xlabel("acne rate", fontsize=7)
+        ax.set_xlabel("acne rate", fontsize=LABEL_FONT)
         if ax is axes[0][0]:
-            ax.set_ylabel("peter-panning rate", fontsize=7)
+            ax.set_ylabel("peter-panning rate", fontsize=LABEL_FONT)
         _title_panel(ax, ptitle)
         entries = [(m[0], m[1]) for m in maps]
         if entries != shown:
             _legend(ax)
             shown = entries
     _title(fig, f"{title} ({TRADEOFF_KEY})")
-    _save(fig, path)
+    _save(fig, path, points)
     return fig
 
 
@@ -510,7 +604,7 @@ def _res_text(rs) -> str:
 
 
 def _label(r, multi=()):
-    lab = f"{r['scheme']} {r['preset'] or r['params']}".strip()
+    lab = f"{r['scheme']} {r['preset'] or params_label(r['params'])}".strip()
     return " ".join([lab] + [r.get(k, "") for k in multi])[:48]
 
 
@@ -558,7 +652,7 @@ def _bias_job(vr: list, where: str, multi: tuple):
         # schemes whose sweep has one value have no curve: the summary and the other plots show them
         if r["resolution"] == rmax and not r["preset"] and len(swept.get((r["scheme"], r["sweep_key"]), ())) > 1:
             name, unit = _unit(r["sweep_key"])
-            others = _others(r["params"], name)
+            others = params_label(_others(r["params"], name))
             lab = f"{r['scheme']}: {name}" + (f" ({others})" if others else "")
             lab = " ".join([lab] + [r.get(k, "") for k in multi])[:52]
             units.setdefault(unit, {}).setdefault(lab, []).append((r["sweep_value"], r["acne_rate"], r["peterpan_rate"]))
@@ -596,7 +690,7 @@ def _pareto_job(vr: list, where: str):
     if not scored:
         return None
     schemes = sorted({r["scheme"] for r in scored})
-    panels = [{s: (schemes.index(s), [(case_time(r), r["error_rate"]) for r in scored if r["scheme"] == s])
+    panels = [{s: (schemes.index(s), [(case_time(r), r["error_rate"], r["case"], _label(r)) for r in scored if r["scheme"] == s])
                for s in part} for part in chunks(schemes, MAX_LEGEND - 1)]
     front = [(case_time(r), r["error_rate"]) for r in pareto_front(scored)]
     return draw_pareto, (f"{where}, {_res_text(scored)}: error rate against time, every case", panels, front)
@@ -610,7 +704,7 @@ def _tradeoff_job(vr: list, where: str, cs: list):
     for res in sorted({c[0]["resolution"] for c in cs}):
         maps = []
         for k, (meta, cw, ck) in enumerate(c for c in cs if c[0]["resolution"] == res):
-            pts = [(r["acne_rate"], r["peterpan_rate"]) for r in vr if r["filter"] == "nearest"
+            pts = [(r["acne_rate"], r["peterpan_rate"], r["case"], _label(r)) for r in vr if r["filter"] == "nearest"
                    and r["resolution"] == res and all(r[x] == meta[x] for x in ("culling", "format"))
                    and metrics.defined(r["acne_rate"]) and metrics.defined(r["peterpan_rate"])]
             lab = f"{meta['format']}" + (f" {meta['culling']}" if meta["culling"] != "none" else "")
@@ -635,7 +729,8 @@ def _texels_job(rs: list, scene: str, light: str, views: list, multi: tuple):
         lab = f"{r['view']}: {_label(r, multi)}"[:52]
         inst = inst_of[lab] = _label(r, multi)         # the instance, also when the label was cut
         named.setdefault(inst, lab)
-        styles[lab] = {"color": CYCLE[insts.index(inst) % len(CYCLE)], "linestyle": VIEW_LINES[views.index(r["view"]) % 4],
+        own = style(insts.index(inst))
+        styles[lab] = {"color": own["color"], "marker": own["marker"], "linestyle": VIEW_LINES[views.index(r["view"]) % 4],
                        "legend": inst if named[inst] == lab else "_"}
     for r in rs:                             # the series in the rows' order, as before
         tex.setdefault(f"{r['view']}: {_label(r, multi)}"[:52], []).append(
