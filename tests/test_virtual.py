@@ -309,3 +309,13 @@ def test_virtual_without_a_directional_light_is_a_config_error():
     with pytest.raises(ConfigError) as e:
         config.parse(base_config(map={"virtual": {}, "kind": ["depth", "vsm"]}), "t.toml")
     assert e.value.key in ("map.virtual", "map.kind")
+
+
+def test_report_html_has_no_virtual_section_without_a_virtual_map():
+    """A run without a virtual map holds its six virtual columns as NaN in memory (empty in the file):
+    no section for them; a virtual row gets one, its table in a box that scrolls sideways."""
+    from dsm.report.sections import virtual as section
+    nan = float("nan")
+    assert section.html_section([{"vsm_pages_tagged": nan}, {"vsm_pages_tagged": ""}, {}]) == ""
+    got = section.html_section([{"vsm_pages_tagged": 3, "case": "c"}])
+    assert "<section id=virtual>" in got and "<div class=wide><table>" in got

@@ -26,7 +26,8 @@ LEVEL_COLORS = np.array([[228, 26, 28], [55, 126, 184], [77, 175, 74], [152, 78,
 
 def virtual_rows(rows: list) -> list:
     """The rows of cases on a virtual shadow map."""
-    return [r for r in rows if r.get("vsm_pages_tagged") not in (None, "")]
+    given = lambda x: x not in (None, "") and not (isinstance(x, float) and not metrics.defined(x))
+    return [r for r in rows if given(r.get("vsm_pages_tagged"))]     # other maps: empty in the file, NaN in memory
 
 
 def _cell(x) -> str:
@@ -56,9 +57,9 @@ def html_section(rows: list) -> str:
     head = "".join(f"<th>{html.escape(h)}</th>" for _, h in COLUMNS)
     body = "".join("<tr>" + "".join(f"<td>{html.escape(_cell(r.get(k, '')))}</td>" for k, _ in COLUMNS) + "</tr>"
                    for r in rows)
-    return (f"<h2>Virtual shadow maps</h2><p>{html.escape(INTRO)} Each case's level image: "
+    return (f"<section id=virtual><h2>Virtual shadow maps</h2><p>{html.escape(INTRO)} Each case's level image: "
             "images/&lt;scene&gt;_&lt;light&gt;/&lt;case&gt;_level.png.</p>"
-            f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
+            f"<div class=wide><table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table></div></section>")
 
 
 def write_level_image(path, pixels: np.ndarray, levels: np.ndarray, width: int, height: int):
