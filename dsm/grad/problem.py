@@ -1,0 +1,129 @@
+"""One gradient problem: the scene, the receivers, a loss over the image, and its evaluation.
+
+:meth:`Problem.evaluate` runs the whole technique at parameter values (a dict, in the parameters'
+units) with AD on the parameters named in ``wrt``: the occluder's vertices and the light from the
+parameters, the view (frame in Dr.Jit), the map (attached intersections), the edge weights for
+an antialiased technique, the receivers' projection and the lookup, then the loss and one
+backward pass. The image is the ground seen from above: receivers at the pixel centres of
+``image_resolution``^2 pixels over [-window, window]^2 at z = 0, each pixel ``(2 window / N)^2``.
+
+This is the API issue 59's comparisons build on: any image-space loss (a callable of V) and any
+parameters of the spec, with the exact image (:meth:`Problem.exact_image`) as a target.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ..maps.receiver import Receiver
+from . import antialias, build, techniques
+from .scene import GradScene
+from .views import make_view
+
+
+@dataclass
+class Evaluation:
+    """A technique's image at some parameter values: the loss, its gradient, the map's classes."""
+    loss: float                 # float64 sum over the image of the float32 V
+    grads: dict                 # param -> d loss / d param, in the loss's unit per the parameter's unit
+    image: np.ndarray           # V per pixel (N, N), row y, column x
+    texel_shapes: np.ndarray    # the shape each texel's ray hit (the texels' classes)
+    pixel_texels: np.ndarray    # the texel holding each receiver's map position (a nearest lookup's class)
+    edge_pairs: int             # texel pairs the antialiasing treated (0 without it)
+
+
+class Problem:
+    """The scene, receivers and loss of a GradSpec, evaluated per technique and parameter values."""
+
+    def __init__(self, spec):
+        self.spec = spec
+        self.scene = GradScene(spec)
+        N, W = spec.image_resolution, spec.window
+        c = -W + (np.arange(N) + 0.5) * (2.0 * W / N)
+        xx, yy = np.meshgrid(c, c)               # row y, column x
+        self.x_np = xx.ravel()
+        self.pixel_area = (2.0 * W / N) ** 2
+        self.p_world = mi.Point3f(mi.Float(xx.ravel().astype(np.float32)), mi.Float(yy.ravel().astype(np.float32)),
+                                  dr.zeros(mi.Float, N * N))
+        self.n_world = mi.Vector3f(0.0, 0.0, 1.0)
+        self.target = None
+        if spec.loss == "l2":
+            self.target = self.exact_image({**spec.nominal(), **dict(spec.target)})
+
+    def values(self, overrides: dict | None = None) -> dict:
+        """Every parameter's value: the spec's nominal ones with ``overrides``."""
+        return {**self.spec.nominal(), **(overrides or {})}
+
+    def _dr_values(self, values: dict, wrt) -> dict:
+        out = {}
+        for k, v in values.items():
+            out[k] = dr.opaque(mi.Float, float(v), 1)        # opaque: one kernel for every value
+            if k in wrt:
+                dr.enable_grad(out[k])
+        return out
+
+    def image_of(self, tech, values: dict, wrt=()):
+        """(V per receiver (attached), Dr.Jit parameters, attached map, edge weights) of ``tech``."""
+        vals = self._dr_values(values, wrt)
+        light = self.scene.apply(vals)
+        view = make_view(self.spec, light)
+        amap = build.build(self.scene.scene, view)
+        edges = None
+        if tech.antialias:
+            edges = antialias.edge_weights(amap, self.scene.triangles(vals), light)
+        rx = Receiver.make(view, self.p_world, self.n_world, 1.0)
+        look = techniques.Lookup(amap, rx, edges, self.spec.bias)
+        return techniques.visibility(look, tech), vals, amap, edges, rx
+
+    def loss_of(self, V):
+        """The spec's loss of image V (Dr.Jit, attached)."""
+        kind = self.spec.loss
+        if kind == "shadow_area":
+            return dr.sum(1.0 - V) * self.pixel_area
+        if kind == "shadow_moment_x":
+            return dr.sum((1.0 - V) * self.p_world.x) * self.pixel_area
+        return dr.mean(dr.square(V - mi.Float(self.target.ravel().astype(np.float32))))
+
+    def loss_np(self, V: np.ndarray) -> float:
+        """The same loss of a detached image, summed in float64 (finite differences read this)."""
+        v = V.astype(np.float64).ravel()
+        if self.spec.loss == "shadow_area":
+            return float(np.sum(1.0 - v) * self.pixel_area)
+        if self.spec.loss == "shadow_moment_x":
+            return float(np.sum((1.0 - v) * self.x_np) * self.pixel_area)
+        return float(np.mean(np.square(v - self.target.ravel())))
+
+    def evaluate(self, tech, values: dict, wrt=()) -> Evaluation:
+        """The loss of ``tech`` at ``values`` and, for each parameter in ``wrt``, its AD derivative."""
+        V, vals, amap, edges, rx = self.image_of(tech, values, wrt)
+        grads = {}
+        if wrt:
+            loss = self.loss_of(V)
+            # nearest's image does not depend on the parameters at all: its gradient is 0, not an error
+            dr.backward(loss, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
+            grads = {k: float(dr.grad(vals[k]).numpy().ravel()[0]) for k in wrt}
+        N = self.spec.image_resolution
+        image = dr.detach(V).numpy().reshape(N, N)
+        R = self.spec.map_resolution
+        texel = dr.clip(mi.Int32(dr.floor(dr.detach(rx.v_map))), 0, R - 1) * R + \
+            dr.clip(mi.Int32(dr.floor(dr.detach(rx.u_map))), 0, R - 1)
+        return Evaluation(self.loss_np(image), grads, image, amap.smap.shape.numpy(), texel.numpy(),
+                          edges.pairs if edges is not None else 0)
+
+    def exact_image(self, values: dict) -> np.ndarray:
+        """The exact (ray-traced) visibility per pixel at ``values``: one shadow ray per receiver."""
+        vals = self._dr_values(values, ())
+        light = self.scene.apply(vals)
+        lift = mi.Vector3f(0.0, 0.0, 1e-4 * self.spec.window)    # off the ground, far below any gap
+        o = self.p_world + lift
+        if light.kind == "point":
+            d = light.position - o
+            ray = mi.Ray3f(o, dr.normalize(d), dr.norm(d) * (1.0 - 1e-6))
+        else:
+            ray = mi.Ray3f(o, -light.direction)
+        hit = self.scene.scene.ray_test(ray)
+        N = self.spec.image_resolution
+        return np.where(hit.numpy(), 0.0, 1.0).reshape(N, N)
