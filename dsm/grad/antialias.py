@@ -26,9 +26,10 @@ Re-derived here for texels whose rays were traced:
   moments before the blur. Moving the silhouette by ``da`` changes the treated texel by ``-da``
   of the difference: a linear reconstruction then integrates to the silhouette's true motion.
 
-What it leaves: a pair whose segment leaves the near triangle through an inner edge (near a
-mesh's vertex, where the silhouette passes through the next triangle) is not treated; pairs on
-one shape (a closed mesh's own silhouette over itself) are not treated.
+Where the segment leaves the near triangle through an inner edge (a quad's diagonal), the exit of
+the triangle across it is taken (one step: a silhouette reached through two inner edges, near a
+vertex of a fan, is not treated); pairs on one shape (a closed mesh's own silhouette over
+itself) are not treated.
 """
 from __future__ import annotations
 
@@ -97,9 +98,31 @@ def _crossing(c0, c1, a, b):
     return s, (den != 0) & (s >= 0) & (s <= 1) & (t >= 0) & (t <= 1)
 
 
+def _exit(view, light, buf, faces, nbr, tri, mask, c0, c1):
+    """Where segment c0 -> c1 leaves triangles ``tri`` (the crossing furthest along it): (s, whether that
+    edge is a silhouette, the triangle across it (-1: none), whether any edge is crossed)."""
+    corners = _corners(buf, faces, tri, mask)
+    proj = [view.project_on(p) for p in corners]
+    front = _faces_light(corners, light)
+    n = dr.width(tri)
+    s_out, sil, across = dr.full(mi.Float, -1.0, n), dr.zeros(mi.Bool, n), dr.full(mi.Int32, -1, n)
+    for c in range(3):
+        other = dr.gather(mi.Int32, mi.Int32(np.asarray(nbr[:, c], np.int32)), tri, mask)
+        has = other >= 0
+        o_corners = _corners(buf, faces, mi.UInt32(dr.maximum(other, 0)), mask & has)
+        silhouette = ~has | (_faces_light(o_corners, light) != front)
+        s, hit = _crossing(c0, c1, proj[c], proj[(c + 1) % 3])
+        last = mask & hit & (dr.detach(s) > dr.detach(s_out))
+        s_out = dr.select(last, s, s_out)
+        sil = dr.select(last, silhouette, sil)
+        across = dr.select(last, other, across)
+    return s_out, sil, across, s_out >= 0
+
+
 def _near_silhouette(view, triangles, light, shape, tri, c0, c1):
-    """(a, treated) per pair: the fraction from the near centre c0 where its triangle's silhouette edge
-    crosses toward c1, and whether the segment leaves the triangle through a silhouette edge."""
+    """(a, treated) per pair: the fraction from the near centre c0 where the occluder's silhouette crosses
+    toward c1, and whether it was found: the near triangle's exit edge, or, where that is an inner edge
+    (a quad's diagonal), the exit edge of the triangle across it."""
     n = dr.width(shape)
     alpha = dr.full(mi.Float, 2.0, n)
     treated = dr.zeros(mi.Bool, n)
@@ -107,20 +130,14 @@ def _near_silhouette(view, triangles, light, shape, tri, c0, c1):
         if entry is None:
             continue
         buf, faces = entry
-        mask = shape == k
-        corners = _corners(buf, faces, tri, mask)
-        proj = [view.project_on(p) for p in corners]
         nbr = edge_neighbours(faces)
-        front = _faces_light(corners, light)
-        for c in range(3):
-            other = dr.gather(mi.Int32, mi.Int32(np.asarray(nbr[:, c], np.int32)), tri, mask)
-            has = other >= 0
-            o_corners = _corners(buf, faces, mi.UInt32(dr.maximum(other, 0)), mask & has)
-            silhouette = ~has | (_faces_light(o_corners, light) != front)
-            s, hit = _crossing(c0, c1, proj[c], proj[(c + 1) % 3])
-            first = mask & hit & (dr.detach(s) < dr.detach(alpha))
-            alpha = dr.select(first, s, alpha)
-            treated = dr.select(first, silhouette, treated)
+        mask = shape == k
+        s1, sil1, across, found1 = _exit(view, light, buf, faces, nbr, tri, mask, c0, c1)
+        hop = mask & found1 & ~sil1 & (across >= 0)
+        s2, sil2, _, found2 = _exit(view, light, buf, faces, nbr, mi.UInt32(dr.maximum(across, 0)), hop, c0, c1)
+        use2 = hop & found2 & (dr.detach(s2) >= dr.detach(s1))
+        alpha = dr.select(mask & found1, dr.select(use2, s2, s1), alpha)
+        treated = dr.select(mask & found1, dr.select(use2, sil2, sil1), treated)
     return alpha, treated & (alpha <= 1.0)
 
 
@@ -156,6 +173,7 @@ def edge_weights(amap, triangles, light) -> EdgeWeights:
         weights[(du, dv)] = w_a
         back = dr.select((i >= du) & (j >= dv), idx - du - dv * R, idx)
         weights[(-du, -dv)] = dr.select((i >= du) & (j >= dv), dr.gather(mi.Float, w_b, back), 0.0)
+    dr.eval(weights)             # a kernel of its own (see dsm.grad.build)
     return EdgeWeights(weights, R, pairs)
 
 

@@ -37,4 +37,7 @@ def build(scene, view) -> AttachedMap:
     shape = dr.select(known, dr.gather(mi.UInt32, table, ids, known), spawn.NO_SHAPE)
     z1 = dr.select(valid, view.depth(si.p), view.far_o)
     prim = dr.select(valid, si.prim_index, spawn.NO_SHAPE)
+    # evaluated here (AD keeps its graph): the build, the edge weights and the lookup are separate
+    # kernels, not one whose LLVM compile takes a minute (the directional light's, measured)
+    dr.eval(z1, shape, prim)
     return AttachedMap(ShadowMap(view, z1, shape), prim)

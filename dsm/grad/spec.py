@@ -5,7 +5,8 @@ key and the valid choices, before any work. The scene is the kit's gradient test
 plate (or a box) of side ``occluder_size`` at height ``occluder_height`` over a ground at z = 0,
 lit by a point light straight above at ``light_height`` or by a directional light tilted by
 ``light_angle`` degrees from the vertical toward +x. The image is the ground seen from above:
-``image_resolution``^2 receivers at pixel centres over [-window, window]^2.
+``image_resolution``^2 receivers over [-window, window]^2, one per pixel: at a seeded random point of
+the pixel (``image_jitter``, the default) or at its centre.
 """
 from __future__ import annotations
 
@@ -35,7 +36,7 @@ MAX_BLUR = 31
 MAX_RESOLUTION = 4096
 KEYS = ("scene", "light", "light_height", "light_angle", "occluder_height", "occluder_size", "map_resolution",
         "image_resolution", "window", "params", "loss", "target", "techniques", "blur", "antialias", "bias",
-        "light_size", "fd_step", "fd_halvings")
+        "light_size", "fd_step", "fd_halvings", "image_jitter")
 # the central difference's default step per unit (world: a fraction of the occluder's size)
 FD_STEP = {"world": 2e-3, "degree": 0.02}
 
@@ -75,6 +76,7 @@ class GradSpec:
     light_size: float = 0.1
     fd_step: tuple = ()                      # ((param, step), ...) in the parameter's unit
     fd_halvings: int = 4
+    image_jitter: bool = True                # one receiver per pixel at a seeded random point (else its centre)
     source: str = "<gradient>"
 
     def unit(self, param: str) -> str:
@@ -130,6 +132,10 @@ def parse(raw: dict, source: str = "<dict>") -> GradSpec:
     if "fd_halvings" in g:
         kw["fd_halvings"] = number(g["fd_halvings"], source, "gradient.fd_halvings", integer=True, minimum=0,
                                    maximum=20)
+    if "image_jitter" in g:
+        if not isinstance(g["image_jitter"], bool):
+            raise ConfigError(source, "gradient.image_jitter", f"expected true or false, got {g['image_jitter']!r}")
+        kw["image_jitter"] = g["image_jitter"]
     light = kw["light"]
     kw["params"] = _params(g, source, light)
     kw["loss"] = choice(g.get("loss", "shadow_area"), source, "gradient.loss", LOSSES)

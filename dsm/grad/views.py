@@ -66,16 +66,22 @@ def point_view(spec, light):
 
 def directional_view(spec, light, nominal_direction):
     """The orthographic view of a directional light (``light.direction`` attached), fitted to the
-    window at ``nominal_direction`` and turned about its centre with the attached direction."""
+    window at ``nominal_direction`` and turned with the attached direction about the point where its
+    central ray meets the ground."""
     corners = _window_corners(spec)
     view = OrthographicView(nominal_direction, corners, (corners.min(axis=0), corners.max(axis=0)),
                             spec.map_resolution)
     half = 0.5 * view.extent
-    ex0, ey0, _ = view.axes_np
+    ex0, ey0, ez0 = view.axes_np
     centre = view.origin_np + (ex0 + ey0) * half
+    # the map turns about the point where its central ray meets the ground (z = 0): the receivers keep
+    # their map positions to first order and the map's texel grid does not sweep over the ground with
+    # the lever arm of the map plane's height (which would move every shadow with the grid)
+    reach = -centre[2] / ez0[2]
+    pivot = mi.Point3f(*(float(c) for c in centre + ez0 * reach))
     ex, ey, ez = light_frame_dr(light.direction)
     view.ex, view.ey, view.ez = ex, ey, ez
-    view.o = mi.Point3f(*(float(c) for c in centre)) - (ex + ey) * half
+    view.o = pivot - ez * reach - (ex + ey) * half
     view.light_size = spec.light_size
     return view
 
