@@ -1,8 +1,8 @@
 """Self-checks of the gradients, before any comparison with the truth.
 
 - **AD against the technique's own central differences**: (L(p + s) - L(p - s)) / 2s, where no
-  texel (the shape its ray hits) and no pixel (its nearest lookup's result; for nearest, the texel
-  it reads) changes between p - s,
+  texel (the shape its ray hits) and, for nearest, no pixel (its result and the texel it reads)
+  changes between p - s,
   p and p + s; the step is halved (``fd_halvings`` times at most) until none does, and a row
   whose classes still change says so (its difference then measures a jump, not a slope).
 - **Closed forms** of the plate scene (ground at z = 0, square plate of area A at height h):
@@ -85,12 +85,14 @@ def closed_form(spec, param: str) -> float | None:
 
 
 def _classes(problem, tech, values):
-    """(texel classes, pixel classes): the shape per texel; per pixel the nearest lookup's result and, for
-    the nearest techniques (a step in the receiver's map position), the texel it reads. A bilinear
-    lookup is continuous where a receiver crosses a line of texel centres (its slope is not): not a class."""
+    """(texel classes, pixel classes): the shape each texel's ray hits; for the techniques with a step in
+    the receiver's map position (nearest; PCSS, whose blocker search reads nearest taps) each pixel's
+    nearest result and the texel it reads (PCSS's search taps sit at other texels: a lower bound). The
+    others are continuous where a receiver crosses between texels: their pixels have no class."""
     ev = problem.evaluate(type(tech)("nearest"), values)
-    pixel = ev.image.ravel() + (2.0 * ev.pixel_texels if tech.name == "nearest" else 0.0)
-    return ev.texel_shapes, pixel
+    if tech.name not in ("nearest", "pcss"):
+        return ev.texel_shapes, np.zeros(1)
+    return ev.texel_shapes, ev.image.ravel() + 2.0 * ev.pixel_texels
 
 
 def central_difference(problem, tech, param: str) -> tuple:
