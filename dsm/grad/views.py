@@ -61,7 +61,7 @@ def point_view(spec, light):
     view.ex, view.ey, view.ez = light_frame_dr(mi.Vector3f(0.0, 0.0, -1.0))
     view.light_size = spec.light_size
     view.nearest_scene_depth = max(H - scene_box(spec)[1][2], 0.0)
-    return view
+    return _opaque_frame(view)
 
 
 def directional_view(spec, light, nominal_direction):
@@ -83,6 +83,15 @@ def directional_view(spec, light, nominal_direction):
     view.ex, view.ey, view.ez = ex, ey, ez
     view.o = pivot - ez * reach - (ex + ey) * half
     view.light_size = spec.light_size
+    return _opaque_frame(view)
+
+
+def _opaque_frame(view):
+    """The view with its origin and axes evaluated into memory (attached where they were). A component
+    that folds to a constant stays a literal otherwise; with the variant set by ``mi.set_variant``
+    alone (not dsm.core.env's flags) Dr.Jit 1.5 then updated it in place under the kit's
+    ``self.o + ...`` (a directional map's origin took the width of its texels: measured)."""
+    dr.make_opaque(view.o, view.ex, view.ey, view.ez)
     return view
 
 
