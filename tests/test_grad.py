@@ -113,6 +113,7 @@ def test_a_plates_shadow_area_gradient_in_its_height():
     assert ad == pytest.approx(cf, rel=0.15)       # 48^2 map: the corners' pairs are not treated
     ad, fd, changed, _ = _check(spec, "vsm", True, "occluder_z", blur=3)
     assert changed == 0 and ad == pytest.approx(fd, rel=2e-3) and ad == pytest.approx(cf, rel=0.15)
+    assert _check(spec, "vsm", True, "occluder_z", blur=3)[0] == ad      # the same bits on every evaluation
 
 
 def test_a_point_lights_height_moves_the_receivers_in_the_map():

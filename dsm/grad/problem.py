@@ -90,7 +90,8 @@ class Problem:
         return techniques.visibility(look, tech), vals, amap, edges, rx
 
     def loss_of(self, V):
-        """The spec's loss of image V (Dr.Jit, attached)."""
+        """The spec's loss of image V (Dr.Jit, attached), for a backward pass over many parameters (its
+        float32 atomic sums may differ in the last bits between runs; :meth:`derivative` does not)."""
         kind = self.spec.loss
         if kind == "shadow_area":
             return dr.sum(1.0 - V) * self.pixel_area
@@ -107,15 +108,33 @@ class Problem:
             return float(np.sum((1.0 - v) * self.x_np) * self.pixel_area)
         return float(np.mean(np.square(v - self.target.ravel())))
 
+    def loss_tangent(self, V: np.ndarray, dV: np.ndarray) -> float:
+        """d loss from the image ``V`` and its tangent ``dV`` (numpy), summed in float64."""
+        v, dv = V.astype(np.float64).ravel(), dV.astype(np.float64).ravel()
+        if self.spec.loss == "shadow_area":
+            return float(-np.sum(dv) * self.pixel_area)
+        if self.spec.loss == "shadow_moment_x":
+            return float(-np.sum(dv * self.x_np) * self.pixel_area)
+        return float(2.0 * np.sum((v - self.target.ravel()) * dv) / v.size)
+
+    def derivative(self, V, param) -> float:
+        """d loss / d ``param`` by forward-mode AD: each pixel's tangent, then an ordered float64 sum.
+        (A backward pass accumulates the same sum by float32 atomic adds, whose order, hence last
+        bits, differ between identical runs: measured, 0.5985786 to 0.5985788.)"""
+        dr.forward(param, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
+        dV = dr.grad(V)
+        if dr.width(dV) != dr.width(V):       # nearest: V does not depend on the parameter at all
+            return 0.0
+        return self.loss_tangent(dr.detach(V).numpy(), dV.numpy())
+
     def evaluate(self, tech, values: dict, wrt=()) -> Evaluation:
-        """The loss of ``tech`` at ``values`` and, for each parameter in ``wrt``, its AD derivative."""
-        V, vals, amap, edges, rx = self.image_of(tech, values, wrt)
+        """The loss of ``tech`` at ``values`` and, for each parameter in ``wrt``, its AD derivative
+        (forward mode, one pass per parameter: the same answer on every run)."""
+        V, vals, amap, edges, rx = self.image_of(tech, values, tuple(wrt)[:1])
         grads = {}
-        if wrt:
-            loss = self.loss_of(V)
-            # nearest's image does not depend on the parameters at all: its gradient is 0, not an error
-            dr.backward(loss, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
-            grads = {k: float(dr.grad(vals[k]).numpy().ravel()[0]) for k in wrt}
+        for n, k in enumerate(wrt):
+            Vk, valsk = (V, vals) if n == 0 else self.image_of(tech, values, (k,))[:2]
+            grads[k] = self.derivative(Vk, valsk[k])
         N = self.spec.image_resolution
         image = dr.detach(V).numpy().reshape(N, N)
         u, v = dr.detach(rx.u_map), dr.detach(rx.v_map)
