@@ -61,6 +61,22 @@ def test_the_guarded_msm_is_the_kits_where_the_kits_is_finite():
     assert np.array_equal(kit[finite], ours[finite])
 
 
+def test_the_stable_chebyshev_is_the_kits():
+    import mitsuba as mi
+    from dsm.grad.moments import chebyshev_stable
+    from dsm.prefilter.base import chebyshev
+    rng = np.random.default_rng(5)
+    z = rng.uniform(0.0, 1.0, (3000, 2))
+    mean, mean_sq = z.mean(axis=1), (z ** 2).mean(axis=1)
+    t = rng.uniform(0.0, 1.0, 3000)
+    args = [mi.Float(a.astype(np.float32)) for a in (mean, mean_sq, t)]
+    kit = chebyshev(*args, 1e-4).numpy()
+    ours = chebyshev_stable(*args, 1e-4).numpy()
+    var = np.maximum(mean_sq - mean ** 2, 1e-4)
+    exact = np.where(t <= mean, 1.0, var / (var + (t - mean) ** 2))      # float64
+    assert np.allclose(ours, kit, rtol=1e-5, atol=1e-6) and np.allclose(ours, exact, atol=1e-4)
+
+
 def test_antialiased_coverage_of_a_row_is_the_silhouettes_span_in_the_map():
     """Along a texel row through the plate, the mixed occluder indicator sums to the plate's width in
     texels (its edges' exact map positions), where the raw indicator counts texel centres."""

@@ -33,21 +33,31 @@ def moments(kind: str, t, params) -> list:
 
 
 def _evsm_warps(t, params):
-    """EVSM's warps over constants: p = exp(c+ (x - 1)), n = -exp(-c- (x + 1)) (x = 2t - 1), each the
-    kit's warp times exp(-c+) or exp(-c-), at most 1 in magnitude (the kit's p^2 reaches e^80, whose
-    square in the bound's derivative overflows float32). Chebyshev's bound is the same under the scale."""
+    """EVSM's warps as the kit computes them: p = exp(c+ x), n = -exp(-c- x), x = 2t - 1."""
     x = 2.0 * t - 1.0
-    return dr.exp(params.positive * (x - 1.0)), -dr.exp(-params.negative * (x + 1.0))
+    return dr.exp(params.positive * x), -dr.exp(-params.negative * x)
+
+
+def chebyshev_stable(mean, mean_sq, t, min_variance):
+    """Chebyshev's bound as the kit's (dsm.prefilter.base.chebyshev), written 1 / (1 + (d / sigma)^2):
+    the same value, while the kit's var / (var + d^2) squares EVSM's variance (up to e^80) in its
+    derivative, beyond float32."""
+    var = dr.maximum(mean_sq - mean * mean, min_variance)
+    has = var > 0
+    sigma = dr.sqrt(dr.select(has, var, 1.0))
+    r = _safe_div(t - mean, sigma, has)
+    bound = dr.select(has, 1.0 / (1.0 + r * r), 0.0)
+    return dr.select(t <= mean, 1.0, bound)
 
 
 def _evsm_visibility(b, t, prm):
-    """The kit's EVSM visibility (dsm.prefilter.evsm.visibility) on the scaled warps."""
+    """The kit's EVSM visibility (dsm.prefilter.evsm.visibility) with the stable form of the bound."""
     p, n = _evsm_warps(t, prm)
     slope_p = 2.0 * prm.positive * p
-    v = chebyshev(b[0], b[1], p, prm.min_variance * slope_p * slope_p)
+    v = chebyshev_stable(b[0], b[1], p, prm.min_variance * slope_p * slope_p)
     if len(b) == 4:
         slope_n = 2.0 * prm.negative * n
-        v = dr.minimum(v, chebyshev(b[2], b[3], n, prm.min_variance * slope_n * slope_n))
+        v = dr.minimum(v, chebyshev_stable(b[2], b[3], n, prm.min_variance * slope_n * slope_n))
     return linstep(prm.bleed, 1.0, v)
 
 
@@ -94,8 +104,8 @@ def _msm_visibility(b, t, prm):
 
 def visibility(kind: str, b: list, t, params):
     """The kind's visibility of filtered moments ``b`` at the receiver's normalized depth ``t``: the kit's
-    function (``dsm.prefilter.<kind>.visibility``); ESM's and EVSM's with their moments' constants,
-    MSM's guarded for AD."""
+    function (``dsm.prefilter.<kind>.visibility``); ESM's with its moment's constant, EVSM's with
+    the stable form of Chebyshev's bound, MSM's guarded for AD."""
     if kind == "esm":
         return dr.clip(dr.exp(dr.log(b[0]) - params.c * (t - 1.0)), 0.0, 1.0)
     if kind == "evsm":

@@ -125,7 +125,7 @@ class Problem:
         dV = dr.grad(V)
         if dr.width(dV) != dr.width(V):       # nearest: V does not depend on the parameter at all
             return 0.0
-        return self.loss_tangent(dr.detach(V).numpy(), dV.numpy())
+        return self.loss_tangent(dr.detach(V).numpy(), dV.numpy()) + 0.0       # + 0.0: -0.0 reads as 0
 
     def evaluate(self, tech, values: dict, wrt=()) -> Evaluation:
         """The loss of ``tech`` at ``values`` and, for each parameter in ``wrt``, its AD derivative
