@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 from .benchmark import command as benchmark_command
+from .grad import command as grad_command
 from .config import read as cfgmod
 from .report import figures
 from .maps import headroom
@@ -74,6 +75,7 @@ def _parser():
     sub.add_parser("schemes", help="list bias schemes, their parameters, defaults and sources")
     _bench_parser(sub)
     benchmark_command.add_parser(sub)
+    grad_command.add_parser(sub)
     _tune_parser(sub)
     return ap
 
@@ -199,6 +201,8 @@ def main(argv=None) -> int:
             return _bench(args)
         if args.cmd == "benchmark":
             return benchmark_command.main(args)
+        if args.cmd == "grad":
+            return grad_command.main(args)
         if args.cmd == "report":
             return _report(args)
         try:

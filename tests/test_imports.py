@@ -136,7 +136,7 @@ LAYERS = (
     ("case",),                       # a case as a value: its context, evaluation and row
     ("report",),                     # the run's files, tables, figures, report.html
     ("experiment",),                 # the runner, resume, motion, the cluster, the folder lock
-    ("tune", "benchmark", "perf", "testing"),   # dsm tune, dsm benchmark, dsm perf; a user's threshold asserts
+    ("tune", "benchmark", "perf", "testing", "grad"),   # dsm tune, dsm benchmark, dsm perf; threshold asserts; dsm grad
     ("cli", "pytest_plugin"),        # the command line; the pytest plugin (its fixture)
     ("launch", "__main__", ""),      # its entry points and the package's facade (dsm/__init__: dsm.run, ...)
 )

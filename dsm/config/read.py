@@ -22,7 +22,7 @@ CASCADE_KEYS = ("cascades", "split", "lambda", "fit", "depth_bounds", "stabilize
 
 
 TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing", "memory", "oracle", "report", "motion",
-            "execution", "tune", "contact")    # [tune]: read by dsm.tune (dsm tune), ignored by dsm run
+            "execution", "tune", "contact", "gradient")    # [tune]: read by dsm tune, [gradient] by dsm grad; ignored by dsm run
 
 
 # the shipped experiments named after a source's file number before 0.2.0 (CHANGELOG.md)

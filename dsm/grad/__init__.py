@@ -1,0 +1,9 @@
+"""Differentiable shadow maps: gradients of a shadowed image with respect to the scene.
+
+``[gradient]`` (:mod:`.spec`) names the parameters (an occluder's translation, a vertex, a light's
+position or angle, with units), the loss and the techniques; :class:`.problem.Problem` evaluates a
+technique with Dr.Jit AD through the map's attached intersections (:mod:`.build`), the light's
+frame in Dr.Jit (:mod:`.views`), the antialiased map after Worchel & Alexa 2023 (:mod:`.antialias`)
+and the lookups (:mod:`.techniques`); :mod:`.check` holds the self-checks (AD against central
+differences, closed forms) and ``dsm grad`` (:mod:`.command`) writes their table.
+"""

@@ -1,0 +1,89 @@
+"""The gradient test bed's scene: a ground and one occluder whose vertices follow the parameters.
+
+The meshes are loaded with ``optimize=False`` so Mitsuba keeps them apart (it merges meshes that
+share a BSDF otherwise, and the occluder must be found by name). :meth:`GradScene.apply` writes
+the occluder's vertex positions as a Dr.Jit expression of the parameters: where a parameter has
+gradients enabled, the vertex buffer is attached, and ``scene.ray_intersect`` recomputes each
+hit on its triangle with those attached vertices (the map's depths carry the gradient).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ..scenes.geometry import box, make_mesh, quad
+
+GROUND_HALF = 8.0          # the ground's half side, in units of the image window
+
+
+@dataclass
+class LightState:
+    """The light as Dr.Jit values (attached where a parameter is): position (point) or travel direction."""
+    kind: str
+    position: object = None       # mi.Point3f, world (point light)
+    direction: object = None      # mi.Vector3f, unit, the direction light travels (directional)
+
+
+def occluder_geometry(spec) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices, faces) of the occluder at the nominal parameters (float64, world)."""
+    s, h = spec.occluder_size, spec.occluder_height
+    if spec.scene == "plate":
+        return quad([0.0, 0.0, h], [s / 2, 0.0, 0.0], [0.0, s / 2, 0.0])
+    return box([-s / 2, -s / 2, h], [s / 2, s / 2, h + s])
+
+
+class GradScene:
+    """The Mitsuba scene of a GradSpec and the occluder's vertex buffer as a function of parameters."""
+
+    def __init__(self, spec):
+        self.spec = spec
+        half = GROUND_HALF * spec.window
+        gv, gf = quad([0.0, 0.0, 0.0], [half, 0.0, 0.0], [0.0, half, 0.0])
+        ov, of = occluder_geometry(spec)
+        self.ground_np = (gv, np.asarray(gf, np.int64))
+        self.occluder_np = (np.asarray(ov, float), np.asarray(of, np.int64))
+        self.scene = mi.load_dict({"type": "scene", "ground": make_mesh("ground", gv, gf),
+                                   "occluder": make_mesh("occluder", ov, of)}, optimize=False)
+        self.params = mi.traverse(self.scene)
+        self.names = [s.id() for s in self.scene.shapes()]          # scene.shapes() is not insertion order
+        self.base = mi.Float(np.asarray(ov, np.float32).ravel())
+        n = len(ov) * 3
+        idx = dr.arange(mi.UInt32, n)
+        self._is_z, self._is_x, self._corner_z = (idx % 3 == 2), (idx % 3 == 0), (idx == 2)
+
+    def vertex_positions(self, values: dict):
+        """The occluder's vertex buffer (flat mi.Float, world) at parameter ``values`` (Dr.Jit scalars)."""
+        pos = self.base + dr.select(self._is_z, values["occluder_z"], 0.0)
+        pos = pos + dr.select(self._is_x, values["occluder_x"], 0.0)
+        return pos + dr.select(self._corner_z, values["corner_z"], 0.0)
+
+    def apply(self, values: dict) -> LightState:
+        """Move the occluder to parameter ``values`` (rebuilding the scene) and return the light there."""
+        self.params["occluder.vertex_positions"] = self.vertex_positions(values)
+        self.params.update()
+        return self.light(values)
+
+    def light(self, values: dict) -> LightState:
+        """The light at parameter ``values``: a point straight above, or a direction tilted toward +x."""
+        if self.spec.light == "point":
+            zero = dr.zeros(mi.Float, 1)
+            return LightState("point", position=mi.Point3f(values["light_x"], zero, values["light_height"]))
+        a = values["light_angle"] * (math.pi / 180.0)
+        return LightState("directional", direction=mi.Vector3f(dr.sin(a), dr.zeros(mi.Float, 1), -dr.cos(a)))
+
+    def shape_index(self, name: str) -> int:
+        """The index into ``scene.shapes()`` of shape ``name``."""
+        return self.names.index(name)
+
+    def triangles(self, values: dict):
+        """Per shape index of ``scene.shapes()``: (flat vertex buffer as Dr.Jit sees it, faces (numpy)).
+        The occluder's buffer is the attached expression of ``values``; the ground's is fixed."""
+        out = [None] * len(self.names)
+        out[self.shape_index("occluder")] = (self.vertex_positions(values), self.occluder_np[1])
+        out[self.shape_index("ground")] = (mi.Float(np.asarray(self.ground_np[0], np.float32).ravel()),
+                                           self.ground_np[1])
+        return out

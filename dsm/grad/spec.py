@@ -1,0 +1,223 @@
+"""The ``[gradient]`` table: which scene parameters are differentiated, the loss, the techniques.
+
+Read once into a frozen :class:`GradSpec`; every mistake is a ConfigError naming the file, the
+key and the valid choices, before any work. The scene is the kit's gradient test bed: a square
+plate (or a box) of side ``occluder_size`` at height ``occluder_height`` over a ground at z = 0,
+lit by a point light straight above at ``light_height`` or by a directional light tilted by
+``light_angle`` degrees from the vertical toward +x. The image is the ground seen from above:
+``image_resolution``^2 receivers over [-window, window]^2, one per pixel: at a seeded random point of
+the pixel (``image_jitter``, the default) or at its centre.
+"""
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..core.types import ConfigError, check_keys, choice, number, as_list
+
+# a differentiable parameter: (its unit, the light it applies to or None for every light)
+PARAMS = {
+    "occluder_z": ("world", None),        # the occluder's translation along z (the plate's height)
+    "occluder_x": ("world", None),        # the occluder's translation along x (the box's offset)
+    "corner_z": ("world", None),          # a displacement along z of the occluder's first vertex
+    "light_height": ("world", "point"),   # the point light's z
+    "light_x": ("world", "point"),        # the point light's x
+    "light_angle": ("degree", "directional"),   # the directional light's tilt from the vertical toward +x
+}
+SCENES = ("plate", "box")
+LIGHTS = ("point", "directional")
+LOSSES = ("shadow_area", "shadow_moment_x", "l2")
+# the unit of each loss, given the world unit of length
+LOSS_UNITS = {"shadow_area": "world^2", "shadow_moment_x": "world^3", "l2": "1 (mean over pixels)"}
+TECHNIQUES = ("nearest", "pcf_bilinear", "pcss", "vsm", "esm", "evsm", "msm")
+MOMENT_TECHNIQUES = ("vsm", "esm", "evsm", "msm")
+MAX_BLUR = 31
+MAX_RESOLUTION = 4096
+KEYS = ("scene", "light", "light_height", "light_angle", "occluder_height", "occluder_size", "map_resolution",
+        "image_resolution", "window", "params", "loss", "target", "techniques", "blur", "antialias", "bias",
+        "light_size", "fd_step", "fd_halvings", "image_jitter")
+# the central difference's default step per unit (world: a fraction of the occluder's size)
+FD_STEP = {"world": 2e-3, "degree": 0.02}
+
+
+@dataclass(frozen=True)
+class Technique:
+    """One technique instance: its name, blur width in texels (moment maps; 1 elsewhere) and
+    whether its map is antialiased (Worchel & Alexa 2023's edge treatment, dsm.grad.antialias)."""
+    name: str
+    blur: int = 1
+    antialias: bool = False
+
+    @property
+    def label(self) -> str:
+        """The instance as the table names it, e.g. ``vsm blur 3 aa``."""
+        out = self.name + (f" blur {self.blur}" if self.name in MOMENT_TECHNIQUES else "")
+        return out + (" aa" if self.antialias else "")
+
+
+@dataclass(frozen=True)
+class GradSpec:
+    """What ``dsm grad`` differentiates: the scene, the parameters (with units), loss and techniques."""
+    scene: str = "plate"
+    light: str = "point"
+    light_height: float = 2.0
+    light_angle: float = 20.0
+    occluder_height: float = 0.5
+    occluder_size: float = 0.5
+    map_resolution: int = 128
+    image_resolution: int = 128
+    window: float = 1.0
+    params: tuple = ("occluder_z",)
+    loss: str = "shadow_area"
+    target: tuple = ()                       # ((param, value), ...): the l2 loss's target parameters
+    techniques: tuple = field(default_factory=lambda: tuple(Technique(t) for t in TECHNIQUES))
+    bias: float = 0.02
+    light_size: float = 0.1
+    fd_step: tuple = ()                      # ((param, step), ...) in the parameter's unit
+    fd_halvings: int = 4
+    image_jitter: bool = True                # one receiver per pixel at a seeded random point (else its centre)
+    source: str = "<gradient>"
+
+    def unit(self, param: str) -> str:
+        """The unit of parameter ``param`` (world or degree)."""
+        return PARAMS[param][0]
+
+    def step(self, param: str) -> float:
+        """The central difference's step of ``param`` in its unit."""
+        given = dict(self.fd_step)
+        if param in given:
+            return given[param]
+        base = FD_STEP[self.unit(param)]
+        return base * self.occluder_size if self.unit(param) == "world" else base
+
+    def nominal(self) -> dict:
+        """Every parameter's value at the configured scene (the point where gradients are taken)."""
+        return {"occluder_z": 0.0, "occluder_x": 0.0, "corner_z": 0.0, "light_height": self.light_height,
+                "light_x": 0.0, "light_angle": self.light_angle}
+
+
+def load(path) -> GradSpec:
+    """The GradSpec of TOML file ``path``'s ``[gradient]`` table; ConfigError for any mistake."""
+    path = Path(path)
+    source = str(path)
+    if not path.is_file():
+        raise ConfigError(source, "file", "no such config file")
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise ConfigError(source, "toml", f"not valid TOML: {e}") from None
+    return parse(raw, source)
+
+
+def parse(raw: dict, source: str = "<dict>") -> GradSpec:
+    """The GradSpec of a config dict holding a ``[gradient]`` table (other tables are ignored)."""
+    if "gradient" not in raw or not isinstance(raw["gradient"], dict):
+        raise ConfigError(source, "gradient", "a [gradient] table is required (dsm grad reads it)")
+    g = raw["gradient"]
+    check_keys(g, KEYS, source, "gradient")
+    kw = {"source": source}
+    kw["scene"] = choice(g.get("scene", "plate"), source, "gradient.scene", SCENES)
+    kw["light"] = choice(g.get("light", "point"), source, "gradient.light", LIGHTS)
+    for key in ("light_height", "occluder_height", "occluder_size", "window", "light_size"):
+        if key in g:
+            kw[key] = number(g[key], source, f"gradient.{key}", positive=True)
+    if "light_angle" in g:
+        kw["light_angle"] = number(g["light_angle"], source, "gradient.light_angle", minimum=-60.0, maximum=60.0)
+    if "bias" in g:
+        kw["bias"] = number(g["bias"], source, "gradient.bias", minimum=0.0)
+    for key in ("map_resolution", "image_resolution"):
+        if key in g:
+            kw[key] = number(g[key], source, f"gradient.{key}", integer=True, minimum=8, maximum=MAX_RESOLUTION)
+    if "fd_halvings" in g:
+        kw["fd_halvings"] = number(g["fd_halvings"], source, "gradient.fd_halvings", integer=True, minimum=0,
+                                   maximum=20)
+    if "image_jitter" in g:
+        if not isinstance(g["image_jitter"], bool):
+            raise ConfigError(source, "gradient.image_jitter", f"expected true or false, got {g['image_jitter']!r}")
+        kw["image_jitter"] = g["image_jitter"]
+    light = kw["light"]
+    kw["params"] = _params(g, source, light)
+    kw["loss"] = choice(g.get("loss", "shadow_area"), source, "gradient.loss", LOSSES)
+    kw["target"] = _target(g, source, light, kw["loss"])
+    kw["fd_step"] = _steps(g, source, kw["params"])
+    kw["techniques"] = _techniques(g, source)
+    spec = GradSpec(**kw)
+    if spec.light == "point" and not spec.occluder_height + _top(spec) < spec.light_height:
+        raise ConfigError(source, "gradient.light_height", f"must be above the occluder's top "
+                          f"({spec.occluder_height + _top(spec):g}), got {spec.light_height:g}")
+    return spec
+
+
+def _top(spec) -> float:
+    return spec.occluder_size if spec.scene == "box" else 0.0
+
+
+def _param_names(raw, source: str, key: str, light: str) -> list:
+    names = as_list(raw)
+    if not names:
+        raise ConfigError(source, key, "empty list", sorted(PARAMS))
+    for n in names:
+        choice(n, source, key, sorted(PARAMS))
+        if PARAMS[n][1] not in (None, light):
+            raise ConfigError(source, key, f"{n} is a parameter of a {PARAMS[n][1]} light and gradient.light is "
+                              f"{light}", [p for p, (_, lt) in PARAMS.items() if lt in (None, light)])
+    if len(set(names)) != len(names):
+        raise ConfigError(source, key, "a parameter is given twice: give each once")
+    return names
+
+
+def _params(g: dict, source: str, light: str) -> tuple:
+    return tuple(_param_names(g.get("params", ["occluder_z"]), source, "gradient.params", light))
+
+
+def _target(g: dict, source: str, light: str, loss: str) -> tuple:
+    if "target" not in g:
+        if loss == "l2":
+            raise ConfigError(source, "gradient.target", "the l2 loss needs a target: a table of parameter "
+                              "values whose exact (ray-traced) image is the target", sorted(PARAMS))
+        return ()
+    if loss != "l2":
+        raise ConfigError(source, "gradient.target", f"is read only with loss = \"l2\", not {loss!r}")
+    t = g["target"]
+    if not isinstance(t, dict) or not t:
+        raise ConfigError(source, "gradient.target", f"expected a table of parameter values, got {t!r}")
+    _param_names(list(t), source, "gradient.target", light)
+    return tuple((k, number(v, source, f"gradient.target.{k}")) for k, v in t.items())
+
+
+def _steps(g: dict, source: str, params: tuple) -> tuple:
+    t = g.get("fd_step", {})
+    if not isinstance(t, dict):
+        raise ConfigError(source, "gradient.fd_step", f"expected a table of steps by parameter, got {t!r}")
+    for k in t:
+        if k not in params:
+            raise ConfigError(source, f"gradient.fd_step.{k}", "names no parameter of gradient.params", params)
+    return tuple((k, number(v, source, f"gradient.fd_step.{k}", positive=True)) for k, v in t.items())
+
+
+def _techniques(g: dict, source: str) -> tuple:
+    names = as_list(g.get("techniques", list(TECHNIQUES)))
+    if not names:
+        raise ConfigError(source, "gradient.techniques", "empty list", TECHNIQUES)
+    for n in names:
+        choice(n, source, "gradient.techniques", TECHNIQUES)
+    if len(set(names)) != len(names):
+        raise ConfigError(source, "gradient.techniques", "a technique is given twice: give each once")
+    blurs = as_list(g.get("blur", [1, 3, 5]))
+    if not blurs:
+        raise ConfigError(source, "gradient.blur", "empty list")
+    for b in blurs:
+        w = number(b, source, "gradient.blur", integer=True, minimum=1, maximum=MAX_BLUR)
+        if w % 2 == 0:
+            raise ConfigError(source, "gradient.blur", f"a blur width is odd (centred on the texel), got {w}")
+    if len(set(blurs)) != len(blurs):
+        raise ConfigError(source, "gradient.blur", "a width is given twice: give each once")
+    aas = as_list(g.get("antialias", [False, True]))
+    if not aas or any(not isinstance(a, bool) for a in aas) or len(set(aas)) != len(aas):
+        raise ConfigError(source, "gradient.antialias", f"expected false, true or [false, true], got {aas!r}")
+    out = []
+    for n in names:
+        for w in (blurs if n in MOMENT_TECHNIQUES else [1]):
+            out += [Technique(n, int(w), a) for a in aas]
+    return tuple(out)

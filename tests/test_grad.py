@@ -1,0 +1,176 @@
+"""dsm grad: gradients of the shadowed image in scene parameters (dsm.grad), checked against
+analytic answers (closed forms of a plate's shadow, a silhouette's position in the map, numpy's
+light frame) and second computations (central differences, the kit's MSM in float32)."""
+import math
+
+import numpy as np
+import pytest
+
+from dsm.core.types import ConfigError
+from dsm.grad import spec as specmod
+
+SMALL = {"map_resolution": 48, "image_resolution": 48, "window": 1.0}
+
+
+def _spec(**kw):
+    return specmod.parse({"gradient": {**SMALL, **kw}}, "g.toml")
+
+
+@pytest.mark.parametrize("table, key, words", [
+    ({"techniques": ["pcf"]}, "gradient.techniques", "valid: nearest, pcf_bilinear"),
+    ({"params": ["light_angle"]}, "gradient.params", "directional light"),
+    ({"loss": "l2"}, "gradient.target", "needs a target"),
+    ({"target": {"occluder_z": 0.1}}, "gradient.target", "only with loss"),
+    ({"blur": [2]}, "gradient.blur", "odd"),
+    ({"fd_step": {"light_x": 1e-3}}, "gradient.fd_step.light_x", "names no parameter"),
+    ({"light_height": 0.4}, "gradient.light_height", "above the occluder"),
+    ({"colour": 1}, "gradient.colour", "unknown key"),
+])
+def test_a_bad_gradient_table_is_one_line_naming_file_and_key(table, key, words):
+    with pytest.raises(ConfigError) as e:
+        specmod.parse({"gradient": table}, "g.toml")
+    msg = str(e.value)
+    assert msg.startswith(f"g.toml: {key}: ") and words in msg and "\n" not in msg
+
+
+def test_the_light_frame_in_drjit_is_numpys():
+    import mitsuba as mi
+    from dsm.grad.views import light_frame_dr
+    from dsm.maps.views import light_frame
+    for d in ([0, 0, -1], [0.3, -0.2, -1], [1, 0.1, 0.05], [-0.2, 0.95, 0.1]):
+        got = light_frame_dr(mi.Vector3f(*map(float, d)))
+        for a, b in zip(got, light_frame(d)):
+            assert np.allclose(np.asarray(a).ravel(), b, atol=2e-7)
+
+
+def test_the_guarded_msm_is_the_kits_where_the_kits_is_finite():
+    import drjit as dr
+    import mitsuba as mi
+    from dsm.grad.moments import visibility
+    from dsm.prefilter import msm
+    rng = np.random.default_rng(3)
+    z = rng.uniform(0.0, 1.0, (4000, 3))          # three depths per window, mixed
+    w = rng.dirichlet([1, 1, 1], 4000)
+    b = [mi.Float((w * z ** k).sum(axis=1).astype(np.float32)) for k in (1, 2, 3, 4)]
+    t = mi.Float(rng.uniform(0.0, 1.0, 4000).astype(np.float32))
+    prm = msm.Params()
+    kit = msm.visibility(b, t, prm).numpy()
+    ours = visibility("msm", b, t, prm).numpy()
+    finite = np.isfinite(kit)
+    assert finite.mean() > 0.99
+    assert np.array_equal(kit[finite], ours[finite])
+
+
+def test_the_stable_chebyshev_is_the_kits():
+    import mitsuba as mi
+    from dsm.grad.moments import chebyshev_stable
+    from dsm.prefilter.base import chebyshev
+    rng = np.random.default_rng(5)
+    z = rng.uniform(0.0, 1.0, (3000, 2))
+    mean, mean_sq = z.mean(axis=1), (z ** 2).mean(axis=1)
+    t = rng.uniform(0.0, 1.0, 3000)
+    args = [mi.Float(a.astype(np.float32)) for a in (mean, mean_sq, t)]
+    kit = chebyshev(*args, 1e-4).numpy()
+    ours = chebyshev_stable(*args, 1e-4).numpy()
+    var = np.maximum(mean_sq - mean ** 2, 1e-4)
+    exact = np.where(t <= mean, 1.0, var / (var + (t - mean) ** 2))      # float64
+    assert np.allclose(ours, kit, rtol=1e-5, atol=1e-6) and np.allclose(ours, exact, atol=1e-4)
+
+
+def test_antialiased_coverage_of_a_row_is_the_silhouettes_span_in_the_map():
+    """Along a texel row through the plate, the mixed occluder indicator sums to the plate's width in
+    texels (its edges' exact map positions), where the raw indicator counts texel centres."""
+    import drjit as dr
+    import mitsuba as mi
+    from dsm.grad import antialias, build
+    from dsm.grad.problem import Problem
+    from dsm.grad.views import make_view
+    spec = _spec(occluder_size=0.537)                # edges off the texel grid
+    pb = Problem(spec)
+    vals = {k: dr.opaque(mi.Float, v, 1) for k, v in pb.values().items()}
+    light = pb.scene.apply(vals)
+    view = make_view(spec, light)
+    amap = build.build(pb.scene.scene, view)
+    ew = antialias.edge_weights(amap, pb.scene.triangles(vals), light)
+    occ = pb.scene.shape_index("occluder")
+    ind = dr.select(amap.smap.shape == occ, 1.0, 0.0)
+    mixed = antialias.mix([ind], ew)[0].numpy().reshape(48, 48)
+    raw = ind.numpy().reshape(48, 48)
+    # the plate's edge x = s/2 at depth H - h, in the perspective map: u = R/2 (1 + x / (T (H - h)))
+    H, h, s, R = spec.light_height, spec.occluder_height, spec.occluder_size, 48
+    T = spec.window * 1.15 / H
+    width = R / 2 * (s / 2) / (T * (H - h)) * 2
+    row = R // 2
+    assert abs(mixed[row].sum() - width) < 2e-3 * width
+    assert abs(raw[row].sum() - width) > 0.05          # the raw row counts centres: it misses the edges
+
+
+def _check(spec, tech_name, aa, param, blur=1):
+    from dsm.grad.check import central_difference, closed_form
+    from dsm.grad.problem import Problem
+    from dsm.grad.spec import Technique
+    pb = Problem(spec)
+    tech = Technique(tech_name, blur, aa)
+    ev = pb.evaluate(tech, pb.values(), (param,))
+    fd, step, texels, pixels = central_difference(pb, tech, param)
+    return ev.grads[param], fd, texels + pixels, closed_form(spec, param)
+
+
+def test_a_plates_shadow_area_gradient_in_its_height():
+    """Point light: nearest's gradient is 0 (shown, though the area grows at 2 A H^2 / (H - h)^3), so is
+    PCF's (its tests only flip); the antialiased map's matches its own differences and the closed form."""
+    spec = _spec(params=["occluder_z"])
+    ad, fd, changed, cf = _check(spec, "nearest", False, "occluder_z")
+    assert ad == 0.0 and cf == pytest.approx(2 * 0.25 * 4 / 1.5 ** 3)
+    ad, fd, changed, _ = _check(spec, "pcf_bilinear", False, "occluder_z")
+    assert ad == 0.0 and changed == 0 and fd == 0.0
+    ad, fd, changed, cf = _check(spec, "pcf_bilinear", True, "occluder_z")
+    assert changed == 0 and ad == pytest.approx(fd, rel=2e-3)
+    assert ad == pytest.approx(cf, rel=0.15)       # 48^2 map: the corners' pairs are not treated
+    ad, fd, changed, _ = _check(spec, "vsm", True, "occluder_z", blur=3)
+    assert changed == 0 and ad == pytest.approx(fd, rel=2e-3) and ad == pytest.approx(cf, rel=0.15)
+    assert _check(spec, "vsm", True, "occluder_z", blur=3)[0] == ad      # the same bits on every evaluation
+
+
+def test_a_point_lights_height_moves_the_receivers_in_the_map():
+    """PCF's gradient in the light's height comes through its bilinear weights (the receivers move across
+    a map whose texels keep their class: the area it sees grows) and matches its own differences; with
+    the antialiased map the plate's silhouette moves too and the area shrinks, as -2 A H h / (H - h)^3 says."""
+    spec = _spec(params=["light_height"])
+    ad, fd, changed, cf = _check(spec, "pcf_bilinear", False, "light_height")
+    assert changed == 0 and ad == pytest.approx(fd, rel=1e-2) and ad > 0
+    # two jittered receivers per texel: the image's sum does not alias with the map's texel grid
+    spec = _spec(params=["light_height"], image_resolution=96)
+    ad, fd, changed, cf = _check(spec, "pcf_bilinear", True, "light_height")
+    assert cf == pytest.approx(-2 * 0.25 * 2 * 0.5 / 1.5 ** 3)
+    assert changed == 0 and ad == pytest.approx(fd, rel=1e-2) and ad == pytest.approx(cf, rel=0.1)
+
+
+def test_a_directional_lights_angle_shifts_the_shadow_edge():
+    """The shadow's first moment in x moves by A h / cos^2(theta) per radian of tilt."""
+    # the bias exceeds the tilted ground's depth change over a bilinear lookup's reach (tan 20 deg x 2 texels)
+    spec = _spec(light="directional", light_angle=20.0, params=["light_angle"], loss="shadow_moment_x", bias=0.06)
+    ad, fd, changed, cf = _check(spec, "pcf_bilinear", True, "light_angle")
+    assert cf == pytest.approx(0.25 * 0.5 / math.cos(math.radians(20)) ** 2 * math.pi / 180)
+    assert changed == 0 and ad == pytest.approx(fd, rel=1e-2) and ad == pytest.approx(cf, rel=0.05)
+    ad, fd, changed, _ = _check(spec, "pcf_bilinear", False, "light_angle")
+    assert changed == 0 and abs(ad) < 0.2 * cf and ad == pytest.approx(fd, abs=0.02 * cf)
+
+
+def test_dsm_grad_writes_its_table_and_refuses_a_bad_config(tmp_path, capsys):
+    from dsm.cli import main
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[gradient]\nloss = "area"\n')
+    assert main(["grad", str(bad), "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "gradient.loss" in err and "shadow_area" in err
+    good = tmp_path / "good.toml"
+    good.write_text('[gradient]\nmap_resolution = 32\nimage_resolution = 32\ntechniques = ["nearest"]\n'
+                    'antialias = [false]\nparams = ["occluder_z"]\n')
+    assert main(["grad", str(good), "--out", str(tmp_path / "g")]) == 0
+    lines = (tmp_path / "g" / "selfcheck.csv").read_text().splitlines()
+    assert lines[0].startswith("technique,param,unit,loss,ad,fd") and len(lines) == 2
+    cells = lines[1].split(",")
+    assert cells[:3] == ["nearest", "occluder_z", "world"] and float(cells[4]) == 0.0
+    assert cells[9] == ""                          # AD vs FD of 0 against 0: undefined, not 0
+    assert "undefined" in (tmp_path / "g" / "table.md").read_text()
