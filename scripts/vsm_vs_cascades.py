@@ -41,7 +41,8 @@ MOTION_SCENES = 2
 
 
 def scene_tables(cfg: dict, base: Path) -> list:
-    """The config's [[scene]] tables, a list of translates expanded, files absolute; a missing optional file left out."""
+    """The config's [[scene]] tables, a list of translates expanded, files absolute; a missing optional
+    file left out."""
     out = []
     for t in cfg["scene"]:
         t = dict(t)
@@ -136,8 +137,8 @@ def flicker_scene(cfg: dict, scene: dict, i: int, mem_res: dict, out: Path) -> l
         for r in got:
             if r["motion"]:
                 lay = r["cascade_layout"]
-                rows.append({"scene_label": label(scene), "map": lay if kind == "virtual" else f"4 cascades {lay}".strip(),
-                             **{k: r[k] for k in FLICKER}})
+                name = lay if kind == "virtual" else f"4 cascades {lay}".strip()
+                rows.append({"scene_label": label(scene), "map": name, **{k: r[k] for k in FLICKER}})
     return rows
 
 

@@ -83,7 +83,8 @@ def test_transition_columns_against_numpy():
     wrong = rng.random(len(pts)) < 0.1
     got = columns(view, pts, face, tpp, wrong)
     near = transition_texels(view, pts, face) <= TRANSITION_TEXELS
-    assert got["tpp_p10"] == pytest.approx(np.percentile(tpp, 10)) and got["tpp_p90"] == pytest.approx(np.percentile(tpp, 90))
+    assert got["tpp_p10"] == pytest.approx(np.percentile(tpp, 10))
+    assert got["tpp_p90"] == pytest.approx(np.percentile(tpp, 90))
     assert got["tpp_below_1"] == pytest.approx(np.count_nonzero(tpp < 1) / len(tpp))
     assert got["n_transition"] == near.sum() > 0
     assert got["transition_error_rate"] == pytest.approx(wrong[near].sum() / near.sum())
