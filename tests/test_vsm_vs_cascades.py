@@ -94,3 +94,25 @@ def test_transition_columns_against_numpy():
     assert none["n_transition"] == 0 and math.isnan(none["transition_error_rate"])
     empty = columns(view, np.zeros((0, 3)), np.zeros(0, int), np.zeros(0), np.zeros(0, bool))
     assert all(math.isnan(empty[k]) for k in ("tpp_p10", "tpp_below_1", "transition_error_rate"))
+
+
+def test_the_page_s_tables_are_the_committed_results():
+    """docs/vsm_vs_cascades.md's measured part is what scripts/vsm_vs_cascades_page.py makes of the
+    committed docs/vsm_vs_cascades/*.csv (a page edited by hand, or stale, fails), and its equal-memory
+    rows keep the rule: the cascades' texels within 4 R + 2 of the virtual map's M."""
+    import csv
+    import importlib.util
+    from conftest import ROOT
+    from dsm.maps.budget import cascade_resolution
+    spec = importlib.util.spec_from_file_location("vsm_page", ROOT / "scripts" / "vsm_vs_cascades_page.py")
+    page = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(page)
+    text = (ROOT / "docs" / "vsm_vs_cascades.md").read_text()
+    assert page.BEGIN + "\n" + page.measured_text(ROOT / "docs" / "vsm_vs_cascades") + "\n" + page.END in text
+    rows = list(csv.DictReader(open(ROOT / "docs" / "vsm_vs_cascades" / "comparison.csv")))
+    virtual = {(r["scene_label"], r["preset"]): int(r["vsm_memory_texels"]) for r in rows if r["budget"] == "virtual"}
+    mem = [r for r in rows if r["budget"] == "equal memory"]
+    assert len(mem) == 4 * len(virtual)            # four schemes per scene and preset
+    for r in mem:
+        M, R = virtual[(r["scene_label"], r["preset"])], int(r["resolution"])
+        assert R == cascade_resolution(M, 4) and abs(4 * R * R - M) <= 4 * R + 2     # half of 4(R+1)^2 - 4R^2
