@@ -1,4 +1,4 @@
-"""dsm benchmark (dsm-bench-1 to -4): the suites' hash pins, scale normalization, the
+"""dsm benchmark (dsm-bench-1 to -5): the suites' hash pins, scale normalization, the
 far-from-origin axis, the compare rule, the leaderboard's ranking and tie rule, the preset bias
 conversion, FLIP, the shaded renders, the scale figure, and one tiny end-to-end run."""
 import json
@@ -16,6 +16,7 @@ SUITE_1_SHA256 = "15b8554a6f096049e4da44ba45084ae524f5d93f04380a71907185a990a2ba
 SUITE_2_SHA256 = "ebd3668f4b3bff1df961afae653c8e91018de253cd2df644be3a1c71884b9cd1"
 SUITE_3_SHA256 = "5582fcb3e08f61997b71398424ea90d81b26e8c56d66886b835a18bbdad60677"
 SUITE_4_SHA256 = "196f379d78e7a92dd254aabdb5fa6894bb58e74bf7a4d064f6fdeeea94af22b1"
+SUITE_5_SHA256 = "ba5710bbaa9e35aa4786570b9dbaf960b6de00a30bd85827c37061d471d57d23"
 
 
 def test_suite_hashes_are_pinned():
@@ -25,10 +26,33 @@ def test_suite_hashes_are_pinned():
     assert suite.load_suite(suite.SUITE_FILES["dsm-bench-2"])["suite"]["name"] == "dsm-bench-2"
     assert suite.suite_sha256(suite.SUITE_FILES["dsm-bench-3"]) == SUITE_3_SHA256
     assert suite.load_suite(suite.SUITE_FILES["dsm-bench-3"])["suite"]["name"] == "dsm-bench-3"
+    assert suite.suite_sha256(suite.SUITE_FILES["dsm-bench-4"]) == SUITE_4_SHA256
+    assert suite.load_suite(suite.SUITE_FILES["dsm-bench-4"])["suite"]["name"] == "dsm-bench-4"
     # the newest is what dsm benchmark runs by default
-    assert suite.LATEST == "dsm-bench-4" and suite.suite_sha256() == SUITE_4_SHA256
+    assert suite.LATEST == "dsm-bench-5" and suite.suite_sha256() == SUITE_5_SHA256
     s = suite.load_suite()
-    assert s["suite"]["name"] == "dsm-bench-4" and s["flip"]["ppd"] == 67.0
+    assert s["suite"]["name"] == "dsm-bench-5" and s["flip"]["ppd"] == 67.0
+
+
+def test_suite_5_is_suite_4_with_the_virtual_maps_under_the_directional_light():
+    """dsm-bench-5's cases are dsm-bench-4's (but for their names) plus a virtual config where the scene
+    runs the directional light: that light alone, both presets, levels in physical size (100 x factor cm)."""
+    s4, s5 = (suite.load_suite(suite.SUITE_FILES[v]) for v in ("dsm-bench-4", "dsm-bench-5"))
+    c4, c5 = suite.cases(s4, "default"), suite.cases(s5, "default")
+    assert [(c.scene, c.unit, c.offset) for c in c4] == [(c.scene, c.unit, c.offset) for c in c5]
+    unnamed = lambda cfg: {**cfg, "experiment": {}}
+    factor = {sc["name"]: sc["factor"] for sc in s5["scene"]}
+    for a, b in zip(c4, c5):
+        assert unnamed(a.config) == unnamed(b.config) and a.virtual is None
+        if b.scene == "cbox":                   # spot and point only: no directional light
+            assert b.virtual is None
+            continue
+        v = b.virtual
+        assert [t["type"] for t in v["light"]] == ["scene"] and v["scene"] == b.config["scene"]
+        assert v["map"] == {"virtual": {"preset": ["ue5", "eevee"], "unit_cm": 100.0 * factor[b.scene]}}
+        assert v["scheme"] == [{"name": "normal_offset", "offset": "1 texel"}]
+    row = {"cascade_layout": "vsm eevee unit_cm=10", "scheme": "normal_offset", "preset": "", "params": "x"}
+    assert results.contender_of(row) == "virtual eevee"
 
 
 def test_suite_1_still_makes_its_cases_at_the_origin_only():
@@ -67,7 +91,7 @@ def test_a_far_case_is_the_metre_case_moved():
         for offset, translate in (("1e4", [1e4, 5e3, 0.0]), ("1e5", [1e5, 5e4, 0.0])):
             far = _by(cs, name, "m", offset)
             assert far.config["scene"][0].pop("translate") == translate and far.translate == tuple(translate)
-            assert far.config["experiment"].pop("name") == f"dsm-bench-4-{name}-m-at-{offset}"
+            assert far.config["experiment"].pop("name") == f"dsm-bench-5-{name}-m-at-{offset}"
             assert {**here.config, "experiment": {}} == {**far.config, "experiment": {}}
     assert {c.unit for c in cs if c.offset != "0"} == {"m"}
 
@@ -216,12 +240,12 @@ def test_run(tmp_path_factory):
 
 def test_benchmark_end_to_end_at_test_size(test_run):
     out, doc = test_run
-    assert doc["suite"] == "dsm-bench-4" and doc["suite_sha256"] == SUITE_4_SHA256 and doc["size"] == "test"
+    assert doc["suite"] == "dsm-bench-5" and doc["suite_sha256"] == SUITE_5_SHA256 and doc["size"] == "test"
     assert doc["machine"]["cores"] >= 1 and doc["versions"]["dsm_git_commit"]
     assert doc["far_unit"] == "m" and doc["flip_ppd"] == 67.0
     # 2 scenes x (2 units + 2 offsets at m) x 1 light x (3 contenders + the tuned one + the oracle
-    # + 2 pre-filtered kinds at their defaults + their presets: vsm three, msm mjp)
-    assert len(doc["cases"]) == 72
+    # + 2 pre-filtered kinds at their defaults + their presets: vsm three, msm mjp + 2 virtual maps)
+    assert len(doc["cases"]) == 88
     recs = {(r["scene"], r["unit"], r["offset"], r["contender"]): r for r in doc["cases"]}
     for r in doc["cases"]:
         if r["contender"] != "oracle":
@@ -230,6 +254,11 @@ def test_benchmark_end_to_end_at_test_size(test_run):
     # the texel width follows the unit: 100 times wider in cm (the map is fitted to the scene)
     assert recs[("bunny", "cm", "0", "bevy")]["texel_size"] == pytest.approx(
         100 * recs[("bunny", "m", "0", "bevy")]["texel_size"], rel=1e-3)
+    # a virtual map's levels are physical: the same receivers and counts in cm and m, texels 100 times wider
+    for name in ("virtual ue5", "virtual eevee"):
+        cm, m = recs[("bunny", "cm", "0", name)], recs[("bunny", "m", "0", name)]
+        assert cm["texel_size"] == pytest.approx(100 * m["texel_size"], rel=1e-5)
+        assert (cm["n_receivers"], cm["n_acne"], cm["n_peterpan"]) == (m["n_receivers"], m["n_acne"], m["n_peterpan"])
     page = (out / "leaderboard.html").read_text()
     assert "Ranking" in page and "Oracle floor" in page and "three" in page and "http" not in page
     assert "function sortBy" in page and 'class="sortable filtered"' in page   # report.html's header sort
@@ -294,8 +323,8 @@ def test_the_scale_figure_and_tables_hold_the_results_numbers(test_run):
     with Image.open(out / "scale.png") as im:
         assert im.format == "PNG" and im.width > 400 and im.height > 150
         pixels = np.asarray(im.convert("RGB")).reshape(-1, 3).astype(int)
-    who = ["bevy", "msm box:5", "msm mjp box:5", "oracle", "receiver_plane", "three", "tuned_normal_angle", "vsm box:5",
-           "vsm three box:5"]
+    who = ["bevy", "msm box:5", "msm mjp box:5", "oracle", "receiver_plane", "three", "tuned_normal_angle",
+           "virtual eevee", "virtual ue5", "vsm box:5", "vsm three box:5"]
     def by_numpy(keep):
         value = lambda r: r["per_texel_objective"] if r["contender"] == "oracle" else r["error_rate"]
         return [float(np.mean(np.array([value(r) for r in doc["cases"] if r["contender"] == c and keep(r)],

@@ -60,7 +60,11 @@ def is_prefiltered(row: dict) -> bool:
 
 def contender_of(row: dict, tuned: dict | None = None) -> str:
     """The contender a metrics row belongs to: a pre-filtered kind and its filter (``vsm box:5``), else its
-    preset's name, else a tuned contender's (``tuned``: :func:`dsm.benchmark.suite.tuned_labels`), else its scheme's."""
+    preset's name, else a tuned contender's (``tuned``: :func:`dsm.benchmark.suite.tuned_labels`), else its scheme's;
+    a virtual shadow map's row (dsm-bench-5 on) is its preset's, ``virtual ue5`` (a key its layout label adds
+    beside the preset, as the suite's unit_cm, is the same contender's)."""
+    if (row.get("cascade_layout") or "").startswith("vsm "):
+        return "virtual " + row["cascade_layout"].split()[1]
     if is_prefiltered(row):           # an engine's preset of the kind (dsm-bench-4 on) between them
         return " ".join(x for x in (row["scheme"], row.get("preset") or "", row["filter"]) if x)
     if not row["preset"] and tuned and (row["scheme"], row["params"]) in tuned:
@@ -170,6 +174,10 @@ def run_case(case, ppd, variant: str | None = None, tuned=None, out: Path | None
     if case.prefiltered is not None:
         pre = measured(case.prefiltered, variant, cluster)
         records += case_records(case, pre, None if ppd is None else case_flips(case, pre, ppd, variant, setups, known),
+                                oracle=False)
+    if getattr(case, "virtual", None) is not None:      # dsm-bench-5 on; its light labelled as the depth config's
+        vsm = measured(case.virtual, variant, cluster)
+        records += case_records(case, vsm, None if ppd is None else case_flips(case, vsm, ppd, variant, setups),
                                 oracle=False)
     flicker = []
     for motion in (m for m in (case.motion, case.prefiltered_motion) if m is not None):

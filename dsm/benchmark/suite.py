@@ -19,6 +19,10 @@ the depth config with the suite's [[motion]] camera move.
 From dsm-bench-4 on ``[prefiltered] presets`` adds each kind's engine presets (after its defaults) and
 ``[flicker] prefiltered = true`` gives such a case a fourth config, ``prefiltered_motion``: the
 pre-filtered config with the same [[motion]]. An XML scene takes ``translate``: no scene is off the far axis.
+
+From dsm-bench-5 on ``[virtual]`` gives a case whose scene runs the directional light a fifth config,
+``virtual``: that light alone on the suite's virtual shadow map presets with its one scheme
+(:func:`virtual_config`).
 """
 from __future__ import annotations
 
@@ -31,7 +35,8 @@ from pathlib import Path
 SUITE_FILES = {"dsm-bench-1": Path(__file__).with_name("suite_1.toml"),
                "dsm-bench-2": Path(__file__).with_name("suite_2.toml"),
                "dsm-bench-3": Path(__file__).with_name("suite_3.toml"),
-               "dsm-bench-4": Path(__file__).with_name("suite_4.toml")}
+               "dsm-bench-4": Path(__file__).with_name("suite_4.toml"),
+               "dsm-bench-5": Path(__file__).with_name("suite_5.toml")}
 LATEST = list(SUITE_FILES)[-1]
 SUITE_FILE = SUITE_FILES[LATEST]
 ORIGIN = "0"              # the offset label of a case at the origin (every case of dsm-bench-1)
@@ -57,6 +62,7 @@ class Case:
     prefiltered: dict | None = None       # the pre-filtered kinds' config of the case (dsm-bench-3 on)
     motion: dict | None = None            # the flicker config of the case (dsm-bench-3 on, a few scenes)
     prefiltered_motion: dict | None = None  # the pre-filtered kinds' flicker config (dsm-bench-4 on)
+    virtual: dict | None = None           # the virtual shadow maps' config (dsm-bench-5 on)
 
 
 def suite_sha256(path: Path = SUITE_FILE) -> str:
@@ -164,6 +170,18 @@ def prefiltered_config(suite: dict, cfg: dict, kinds: list) -> dict | None:
     return {**{k: v for k, v in cfg.items() if k != "scheme"}, "experiment": {"name": name}, "map": mp}
 
 
+def virtual_config(suite: dict, cfg: dict, scene: dict, lights: list) -> dict | None:
+    """The virtual shadow maps' config of a case's depth config ``cfg``: its scene and camera, the
+    directional light alone, the suite's presets (levels in physical size: ``unit_cm`` 100 x the scene's
+    factor) and its one scheme; None without ``[virtual]`` or where the scene does not run that light."""
+    v = suite.get("virtual")
+    if not v or "directional" not in scene_lights(scene, lights):
+        return None
+    mp = {"virtual": {"preset": list(v["presets"]), "unit_cm": 100.0 * scene["factor"]}}
+    return {**cfg, "experiment": {"name": cfg["experiment"]["name"] + "-virtual"},
+            "light": [t for t in cfg["light"] if t["type"] == "scene"], "map": mp, "scheme": [dict(v["scheme"])]}
+
+
 def motion_config(suite: dict, cfg: dict) -> dict:
     """The flicker config of a case's depth config ``cfg``: the same with the suite's [[motion]]."""
     name = cfg["experiment"]["name"] + "-flicker"
@@ -194,5 +212,6 @@ def cases(suite: dict, size: str) -> list:
             pre = prefiltered_config(suite, cfg, s["prefiltered"])
             pre_flicker = flicker and pre is not None and suite["flicker"].get("prefiltered", False)
             out.append(Case(name, unit, scale, cfg, offset, translate, pre, motion_config(suite, cfg) if flicker else None,
-                            motion_config(suite, pre) if pre_flicker else None))
+                            motion_config(suite, pre) if pre_flicker else None,
+                            virtual_config(suite, cfg, scene, s["lights"])))
     return out

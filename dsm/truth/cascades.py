@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..maps.cascades import CascadeView, texels_per_pixel
-from . import metrics
+from . import metrics, transition
 
 
 def _np3(v) -> np.ndarray:
@@ -15,7 +15,8 @@ def _np3(v) -> np.ndarray:
 def case_metrics(view: CascadeView, rx, v: np.ndarray, v_star: np.ndarray) -> tuple:
     """(per-case columns, per-cascade rows, distance curve, cascade index per receiver) of one case."""
     if rx is None or len(v) == 0:
-        return {"texels_per_pixel": metrics.UNDEFINED, "fit_ms": view.fit_ms}, [], None, np.zeros(0, int)
+        empty = transition.columns(view, np.zeros((0, 3)), np.zeros(0, int), np.zeros(0), np.zeros(0, bool))
+        return {"texels_per_pixel": metrics.UNDEFINED, "fit_ms": view.fit_ms, **empty}, [], None, np.zeros(0, int)
     p, n = _np3(rx.p_world), _np3(rx.n_world)
     face = np.asarray(rx.face.numpy(), int)
     tpp = texels_per_pixel(view, p, n, face)
@@ -44,4 +45,5 @@ def case_metrics(view: CascadeView, rx, v: np.ndarray, v_star: np.ndarray) -> tu
         if s.any():
             curve.append((float(np.sqrt(edges[i] * edges[i + 1])), float((acne | peter)[s].mean()),
                           float(np.median(tpp[s]))))
-    return {"texels_per_pixel": float(np.median(tpp)), "fit_ms": view.fit_ms}, rows, curve, face
+    near = transition.columns(view, p, face, tpp, acne | peter)
+    return {"texels_per_pixel": float(np.median(tpp)), "fit_ms": view.fit_ms, **near}, rows, curve, face
