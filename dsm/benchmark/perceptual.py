@@ -1,6 +1,8 @@
 """FLIP (NVIDIA's perceptual image error, the flip-evaluator package) of a shadowed render against the exact one."""
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 
@@ -11,9 +13,33 @@ def as_rgb(grey: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(np.repeat(g[..., None], 3, axis=2))
 
 
+@lru_cache(maxsize=1)
+def one_thread() -> int:
+    """Set the OpenMP runtimes this process has loaded (flip-evaluator's wheel brings its own libgomp)
+    to one thread; returns how many were set. A benchmark render is 64 x 64 pixels: two threads cost
+    1.7 times one's CPU on a quiet machine and 5 times on a loaded one (their barriers spin while the
+    other waits for a core), for the same value (FLIP's mean is the same bits at 1, 2 and 4 threads)."""
+    import ctypes
+    import flip_evaluator  # noqa: F401  (loads its OpenMP runtime)
+    try:
+        with open("/proc/self/maps") as fh:
+            libs = {line.split()[-1] for line in fh if "libgomp" in line or "libomp" in line or "libiomp" in line}
+    except OSError:                         # not Linux: FLIP keeps its runtime's default
+        return 0
+    n = 0
+    for path in sorted(libs):
+        try:
+            ctypes.CDLL(path).omp_set_num_threads(1)
+            n += 1
+        except (OSError, AttributeError):
+            continue
+    return n
+
+
 def mean_flip(reference: np.ndarray, test: np.ndarray, ppd: float) -> float:
     """The mean LDR FLIP error of ``test`` against ``reference`` (grey renders) at ``ppd`` pixels per degree."""
     import flip_evaluator
+    one_thread()
     _, mean, _ = flip_evaluator.evaluate(as_rgb(reference), as_rgb(test), "LDR", inputsRGB=True, applyMagma=False,
                                          computeMeanError=True, parameters={"ppd": float(ppd)})
     return float(mean)

@@ -42,11 +42,13 @@ SUITE_FILE = SUITE_FILES[LATEST]
 ORIGIN = "0"              # the offset label of a case at the origin (every case of dsm-bench-1)
 MESHES = Path(__file__).resolve().parents[2] / "data" / "meshes"
 SIZES = ("test", "default", "full")
-# Calls a case's map builds, moment maps and lookups are timed over: the first cold, the reported
-# time the second's (dsm.core.timing). A dsm run's default is 3 (the median of two warm calls);
-# the benchmark's times are means over many cases of a contender, where one warm call per case
-# is enough, and the third call was a third of the suite's CPU time.
-TIMING_CALLS = 2
+# Calls a case's map builds, moment maps and lookups are timed over (dsm.core.timing): one. A dsm
+# run times 3 (a median of warm calls after a cold one); the benchmark is one long process, where a
+# call is warm from its first (Dr.Jit's kernel time leaves compilation out, and its memory and the
+# moment maps' numpy buffers come from allocators the earlier cases grew), and its time columns are
+# means over the many cases of a contender. The repeats were half of the suite's CPU time; the
+# per-contender means with one call against two are in docs/bench/benchmark-default/README.md.
+TIMING_CALLS = 1
 LIGHTS = ("directional", "spot", "point")
 
 

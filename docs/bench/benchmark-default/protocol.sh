@@ -14,7 +14,7 @@ for round in 1 2; do
   for c in $A $B; do
     rm -rf $OUT/run-$c-$round
     ( cd $OUT/tree-$c && PYTHONPATH=$OUT/tree-$c:$OUT/tree-$c/plugins /usr/bin/time -f "%U %S %e" -o $OUT/time-$c-$round \
-        "$ROOT/.venv/bin/python" -m dsm benchmark --out $OUT/run-$c-$round > $OUT/log-$c-$round 2>&1 )
+        "$ROOT/.venv/bin/python" -m dsm benchmark --suite dsm-bench-4 --out $OUT/run-$c-$round > $OUT/log-$c-$round 2>&1 )
     echo "$c $round $(cat $OUT/time-$c-$round)" >> $OUT/times.txt
   done
 done
