@@ -36,9 +36,13 @@ MAX_BLUR = 31
 MAX_RESOLUTION = 4096
 KEYS = ("scene", "light", "light_height", "light_angle", "occluder_height", "occluder_size", "map_resolution",
         "image_resolution", "window", "params", "loss", "target", "techniques", "blur", "antialias", "bias",
-        "light_size", "fd_step", "fd_halvings", "image_jitter")
+        "light_size", "fd_step", "fd_halvings", "image_jitter", "reference_samples", "reference_step", "projective_spp",
+        "projective_seeds", "inverse_starts", "inverse_iterations", "inverse_tolerance")
 # the central difference's default step per unit (world: a fraction of the occluder's size)
 FD_STEP = {"world": 2e-3, "degree": 0.02}
+# the supersampled reference's default step per unit (world: a fraction of the occluder's size; measured
+# at 32^2 receivers per pixel: its error estimate under 1 % of the closed forms, dsm.grad.reference)
+REFERENCE_STEP = {"world": 0.04, "degree": 1.0}
 
 
 @dataclass(frozen=True)
@@ -77,6 +81,13 @@ class GradSpec:
     fd_step: tuple = ()                      # ((param, step), ...) in the parameter's unit
     fd_halvings: int = 4
     image_jitter: bool = True                # one receiver per pixel at a seeded random point (else its centre)
+    reference_samples: int = 32              # the reference's receivers per pixel and axis (stratified)
+    reference_step: tuple = ()               # ((param, step), ...): the reference's central difference
+    projective_spp: int = 64                 # Mitsuba's projective integrator: samples per pixel
+    projective_seeds: int = 4                # ... and its seeds (bias and spread of a stochastic gradient)
+    inverse_starts: tuple = (-0.1, -0.05, 0.05, 0.1)   # the inverse task's starts: offsets from the truth
+    inverse_iterations: int = 40
+    inverse_tolerance: float = 0.01          # a start succeeds when its final error is within this
     source: str = "<gradient>"
 
     def unit(self, param: str) -> str:
@@ -89,6 +100,14 @@ class GradSpec:
         if param in given:
             return given[param]
         base = FD_STEP[self.unit(param)]
+        return base * self.occluder_size if self.unit(param) == "world" else base
+
+    def reference_step_of(self, param: str) -> float:
+        """The supersampled reference's central-difference step of ``param`` in its unit."""
+        given = dict(self.reference_step)
+        if param in given:
+            return given[param]
+        base = REFERENCE_STEP[self.unit(param)]
         return base * self.occluder_size if self.unit(param) == "world" else base
 
     def nominal(self) -> dict:
@@ -136,11 +155,13 @@ def parse(raw: dict, source: str = "<dict>") -> GradSpec:
         if not isinstance(g["image_jitter"], bool):
             raise ConfigError(source, "gradient.image_jitter", f"expected true or false, got {g['image_jitter']!r}")
         kw["image_jitter"] = g["image_jitter"]
+    kw.update(_compare_keys(g, source))
     light = kw["light"]
     kw["params"] = _params(g, source, light)
     kw["loss"] = choice(g.get("loss", "shadow_area"), source, "gradient.loss", LOSSES)
     kw["target"] = _target(g, source, light, kw["loss"])
     kw["fd_step"] = _steps(g, source, kw["params"])
+    kw["reference_step"] = _steps(g, source, kw["params"], "reference_step")
     kw["techniques"] = _techniques(g, source)
     spec = GradSpec(**kw)
     if spec.light == "point" and not spec.occluder_height + _top(spec) < spec.light_height:
@@ -186,14 +207,31 @@ def _target(g: dict, source: str, light: str, loss: str) -> tuple:
     return tuple((k, number(v, source, f"gradient.target.{k}")) for k, v in t.items())
 
 
-def _steps(g: dict, source: str, params: tuple) -> tuple:
-    t = g.get("fd_step", {})
+def _steps(g: dict, source: str, params: tuple, key: str = "fd_step") -> tuple:
+    t = g.get(key, {})
     if not isinstance(t, dict):
-        raise ConfigError(source, "gradient.fd_step", f"expected a table of steps by parameter, got {t!r}")
+        raise ConfigError(source, f"gradient.{key}", f"expected a table of steps by parameter, got {t!r}")
     for k in t:
         if k not in params:
-            raise ConfigError(source, f"gradient.fd_step.{k}", "names no parameter of gradient.params", params)
-    return tuple((k, number(v, source, f"gradient.fd_step.{k}", positive=True)) for k, v in t.items())
+            raise ConfigError(source, f"gradient.{key}.{k}", "names no parameter of gradient.params", params)
+    return tuple((k, number(v, source, f"gradient.{key}.{k}", positive=True)) for k, v in t.items())
+
+
+def _compare_keys(g: dict, source: str) -> dict:
+    """The reference's, the projective integrator's and the inverse task's keys (dsm grad --compare, --inverse)."""
+    kw = {}
+    for key, lo, hi in (("reference_samples", 1, 64), ("projective_spp", 1, 4096), ("projective_seeds", 1, 64),
+                        ("inverse_iterations", 1, 1000)):
+        if key in g:
+            kw[key] = number(g[key], source, f"gradient.{key}", integer=True, minimum=lo, maximum=hi)
+    if "inverse_tolerance" in g:
+        kw["inverse_tolerance"] = number(g["inverse_tolerance"], source, "gradient.inverse_tolerance", positive=True)
+    if "inverse_starts" in g:
+        starts = as_list(g["inverse_starts"])
+        if not starts:
+            raise ConfigError(source, "gradient.inverse_starts", "empty list")
+        kw["inverse_starts"] = tuple(number(x, source, "gradient.inverse_starts") for x in starts)
+    return kw
 
 
 def _techniques(g: dict, source: str) -> tuple:
