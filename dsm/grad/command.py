@@ -121,7 +121,7 @@ def run_compare(problem, out: Path):
     for p in spec.params:
         if p not in projective.OCCLUDER_PARAMS:
             continue
-        for name in projective.INTEGRATORS:
+        for name in spec.projective_integrators:
             res = projective.gradient(problem, name, p, spec.projective_spp, spec.projective_seeds)
             proj.append((res, refs[p], comparemod.cosine(res.image, refs[p].image)))
     tables.write_rows(out / "projective.csv", tables.PROJECTIVE_COLUMNS,

@@ -29,7 +29,6 @@ import numpy as np
 from ..scenes.geometry import make_mesh
 from .scene import GROUND_HALF, occluder_geometry
 
-INTEGRATORS = ("direct_projective", "prb_projective")
 OCCLUDER_PARAMS = ("occluder_z", "occluder_x", "corner_z")
 # the camera's height over the ground in windows: far, so the occluder hides little of its shadow (the
 # projective integrators take a perspective camera only; a plane facing it maps linearly to its pixels)

@@ -37,9 +37,11 @@ MAX_RESOLUTION = 4096
 KEYS = ("scene", "light", "light_height", "light_angle", "occluder_height", "occluder_size", "map_resolution",
         "image_resolution", "window", "params", "loss", "target", "techniques", "blur", "antialias", "bias",
         "light_size", "fd_step", "fd_halvings", "image_jitter", "reference_samples", "reference_step", "projective_spp",
-        "projective_seeds", "inverse_starts", "inverse_iterations", "inverse_tolerance")
+        "projective_seeds", "projective_integrators", "inverse_starts", "inverse_iterations", "inverse_tolerance")
 # the central difference's default step per unit (world: a fraction of the occluder's size)
 FD_STEP = {"world": 2e-3, "degree": 0.02}
+# Mitsuba's projective-sampling integrators (dsm.grad.projective)
+PROJECTIVE_INTEGRATORS = ("direct_projective", "prb_projective")
 # the supersampled reference's default step per unit (world: a fraction of the occluder's size; measured
 # at 32^2 receivers per pixel: its error estimate under 1 % of the closed forms, dsm.grad.reference)
 REFERENCE_STEP = {"world": 0.04, "degree": 1.0}
@@ -85,6 +87,7 @@ class GradSpec:
     reference_step: tuple = ()               # ((param, step), ...): the reference's central difference
     projective_spp: int = 64                 # Mitsuba's projective integrator: samples per pixel
     projective_seeds: int = 4                # ... and its seeds (bias and spread of a stochastic gradient)
+    projective_integrators: tuple = PROJECTIVE_INTEGRATORS
     inverse_starts: tuple = (-0.1, -0.05, 0.05, 0.1)   # the inverse task's starts: offsets from the truth
     inverse_iterations: int = 40
     inverse_tolerance: float = 0.01          # a start succeeds when its final error is within this
@@ -226,6 +229,13 @@ def _compare_keys(g: dict, source: str) -> dict:
             kw[key] = number(g[key], source, f"gradient.{key}", integer=True, minimum=lo, maximum=hi)
     if "inverse_tolerance" in g:
         kw["inverse_tolerance"] = number(g["inverse_tolerance"], source, "gradient.inverse_tolerance", positive=True)
+    if "projective_integrators" in g:
+        names = as_list(g["projective_integrators"])
+        for n in names:
+            choice(n, source, "gradient.projective_integrators", PROJECTIVE_INTEGRATORS)
+        if len(set(names)) != len(names):
+            raise ConfigError(source, "gradient.projective_integrators", "an integrator is given twice: give each once")
+        kw["projective_integrators"] = tuple(names)
     if "inverse_starts" in g:
         starts = as_list(g["inverse_starts"])
         if not starts:
