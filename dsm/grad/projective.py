@@ -6,7 +6,7 @@ by sampling silhouette edges. The test bed's scene is rendered as Mitsuba sees i
 ground and occluder meshes (the occluder's vertex buffer the same expression of the parameters,
 :meth:`GradScene.vertex_positions`), a diffuse ground, the point light (intensity 1) or the
 directional light, and an orthographic camera looking straight down over [-window, window]^2 at
-``image_resolution``^2 pixels. V per pixel is the rendered radiance over the radiance of the
+``image_resolution``^2 pixels, direct light only (``max_depth`` 2). V per pixel is the rendered radiance over the radiance of the
 ground without the occluder (one more render at the same seed: the same pixel samples), so the
 occluder's parameters reach the loss only through I: d loss / dp from the forward-mode tangent
 of the image (``dr.forward`` through ``mi.render``), summed in float64. A light's parameters also
@@ -74,7 +74,8 @@ def scene_dict(spec, integrator: str, with_occluder: bool = True) -> dict:
     gv, gf = quad([0.0, 0.0, 0.0], [half, 0.0, 0.0], [0.0, half, 0.0])
     W, N = spec.window, spec.image_resolution
     cam = mi.ScalarTransform4f().look_at(origin=[0, 0, CAMERA_HEIGHT * W], target=[0, 0, 0], up=[0, 1, 0])
-    d = {"type": "scene", "integrator": {"type": integrator},
+    # max_depth 2: direct light only, as V is (a deeper path adds the ground's light reflected by the occluder)
+    d = {"type": "scene", "integrator": {"type": integrator, "max_depth": 2},
          "sensor": {"type": "perspective", "to_world": cam, "fov": 2.0 * math.degrees(math.atan(1.0 / CAMERA_HEIGHT)),
                     "fov_axis": "x",
                     "film": {"type": "hdrfilm", "width": N, "height": N, "rfilter": {"type": "box"},
