@@ -25,7 +25,8 @@ PARAMS = {
     "light_x": ("world", "point"),        # the point light's x
     "light_angle": ("degree", "directional"),   # the directional light's tilt from the vertical toward +x
 }
-SCENES = ("plate", "box")
+SCENES = ("plate", "box", "mesh")
+MESH_SUFFIXES = (".ply", ".obj")
 LIGHTS = ("point", "directional")
 LOSSES = ("shadow_area", "shadow_moment_x", "l2")
 # the unit of each loss, given the world unit of length
@@ -34,7 +35,7 @@ TECHNIQUES = ("nearest", "pcf_bilinear", "pcss", "vsm", "esm", "evsm", "msm")
 MOMENT_TECHNIQUES = ("vsm", "esm", "evsm", "msm")
 MAX_BLUR = 31
 MAX_RESOLUTION = 4096
-KEYS = ("scene", "light", "light_height", "light_angle", "occluder_height", "occluder_size", "map_resolution",
+KEYS = ("scene", "mesh", "light", "light_height", "light_angle", "occluder_height", "occluder_size", "map_resolution",
         "image_resolution", "window", "params", "loss", "target", "techniques", "blur", "antialias", "bias",
         "light_size", "fd_step", "fd_halvings", "image_jitter", "reference_samples", "reference_step", "projective_spp",
         "projective_seeds", "projective_integrators", "inverse_starts", "inverse_iterations", "inverse_tolerance")
@@ -66,6 +67,7 @@ class Technique:
 class GradSpec:
     """What ``dsm grad`` differentiates: the scene, the parameters (with units), loss and techniques."""
     scene: str = "plate"
+    mesh: str = ""                           # scene = "mesh": the occluder's PLY or OBJ file (absolute path)
     light: str = "point"
     light_height: float = 2.0
     light_angle: float = 20.0
@@ -141,6 +143,7 @@ def parse(raw: dict, source: str = "<dict>") -> GradSpec:
     kw = {"source": source}
     kw["scene"] = choice(g.get("scene", "plate"), source, "gradient.scene", SCENES)
     kw["light"] = choice(g.get("light", "point"), source, "gradient.light", LIGHTS)
+    kw["mesh"] = _mesh(g, source, kw["scene"])
     for key in ("light_height", "occluder_height", "occluder_size", "window", "light_size"):
         if key in g:
             kw[key] = number(g[key], source, f"gradient.{key}", positive=True)
@@ -174,7 +177,24 @@ def parse(raw: dict, source: str = "<dict>") -> GradSpec:
 
 
 def _top(spec) -> float:
-    return spec.occluder_size if spec.scene == "box" else 0.0
+    return 0.0 if spec.scene == "plate" else spec.occluder_size     # a mesh is scaled to fit the box's cube
+
+
+def _mesh(g: dict, source: str, scene: str) -> str:
+    """The mesh file of scene = "mesh" (relative to the config's folder), checked before any work."""
+    if scene != "mesh":
+        if "mesh" in g:
+            raise ConfigError(source, "gradient.mesh", f"is read only with scene = \"mesh\", not {scene!r}")
+        return ""
+    raw = g.get("mesh")
+    if not isinstance(raw, str) or not raw:
+        raise ConfigError(source, "gradient.mesh", f"scene = \"mesh\" needs a PLY or OBJ file, got {raw!r}")
+    path = Path(raw) if Path(raw).is_absolute() else Path(source).parent / raw
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise ConfigError(source, "gradient.mesh", f"unknown file type {path.suffix!r}", MESH_SUFFIXES)
+    if not path.is_file():
+        raise ConfigError(source, "gradient.mesh", f"no such file {str(path)!r}")
+    return str(path.resolve())
 
 
 def _param_names(raw, source: str, key: str, light: str) -> list:
