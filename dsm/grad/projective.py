@@ -26,7 +26,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..scenes.geometry import make_mesh
+from ..scenes.geometry import make_mesh, quad
 from .scene import GROUND_HALF, occluder_geometry
 
 OCCLUDER_PARAMS = ("occluder_z", "occluder_x", "corner_z")
@@ -69,7 +69,6 @@ def _emitter(spec) -> dict:
 
 def scene_dict(spec, integrator: str, with_occluder: bool = True) -> dict:
     """The test bed as a Mitsuba scene dict: ground, occluder, light, a camera looking down, ``integrator``."""
-    from ..scenes.geometry import quad
     half = GROUND_HALF * spec.window
     gv, gf = quad([0.0, 0.0, 0.0], [half, 0.0, 0.0], [0.0, half, 0.0])
     W, N = spec.window, spec.image_resolution
@@ -106,7 +105,9 @@ def visible_ground(problem) -> np.ndarray:
 
 def gradient(problem, integrator: str, param: str, spp: int, seeds: int) -> ProjectiveResult:
     """``integrator``'s d loss / d ``param`` (an occluder parameter) over ``seeds`` seeds."""
-    spec = problem.spec
+    if param not in OCCLUDER_PARAMS:
+        raise ValueError(f"the projective reference takes an occluder parameter ({', '.join(OCCLUDER_PARAMS)}), "
+                         f"not {param!r}")
     level = mi.log_level()
     # its warnings (no indirect silhouette found under a point light) are this module's finding, reported
     mi.set_log_level(mi.LogLevel.Error)
