@@ -13,6 +13,8 @@ from pathlib import Path
 from ..core import env
 from ..core.types import VARIANTS, ConfigError
 from . import spec as specmod
+from . import compare as comparemod
+from . import figure, inverse, projective, tables
 from .check import loss_unit, self_check
 from .problem import Problem
 
@@ -27,6 +29,11 @@ def add_parser(sub):
     g.add_argument("config", help="TOML file with a [gradient] table")
     g.add_argument("--out", default="grad", help="folder for selfcheck.csv and table.md (default: grad/)")
     g.add_argument("--variant", choices=VARIANTS, help="Mitsuba variant (default llvm_ad_rgb)")
+    g.add_argument("--compare", action="store_true", help="also each technique against the supersampled exact "
+                   "difference and Mitsuba's projective integrators: compare.csv, projective.csv, compare.md, "
+                   "gradients.png")
+    g.add_argument("--inverse", action="store_true", help="also the inverse task (recover each parameter by "
+                   "descent through each technique): inverse.csv, inverse.md")
     return g
 
 
@@ -82,6 +89,10 @@ def main(args) -> int:
     except env.SetupError as e:
         print(f"dsm: {e}", file=sys.stderr)
         return 2
+    if getattr(args, "compare", False) and spec.loss not in comparemod.LOSSES:
+        print(f"dsm: config error: {spec.source}: gradient.loss: --compare takes {spec.loss!r} loss only from a "
+              f"reference of its own (valid: {', '.join(comparemod.LOSSES)})", file=sys.stderr)
+        return 2
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     problem = Problem(spec)
@@ -92,4 +103,50 @@ def main(args) -> int:
     (out / "table.md").write_text(text)
     print(text)
     print(f"dsm grad: {len(rows)} rows in {out / 'selfcheck.csv'} and {out / 'table.md'}")
+    if getattr(args, "compare", False):
+        run_compare(problem, out)
+    if getattr(args, "inverse", False):
+        run_inverse(problem, out)
     return 0
+
+
+def run_compare(problem, out: Path):
+    """--compare: references, each technique against them, the projective integrators, the figure."""
+    spec = problem.spec
+    refs = comparemod.references(problem)
+    rows = comparemod.compare(problem, refs, progress=lambda r: print(
+        f"  {r.technique}, {r.param}: AD {_g(r.ad)} vs {_g(r.reference)}", file=sys.stderr))
+    tables.write_rows(out / "compare.csv", tables.COMPARE_COLUMNS, [tables.compare_values(r) for r in rows])
+    proj = []
+    for p in spec.params:
+        if p not in projective.OCCLUDER_PARAMS:
+            continue
+        for name in spec.projective_integrators:
+            res = projective.gradient(problem, name, p, spec.projective_spp, spec.projective_seeds)
+            proj.append((res, refs[p], comparemod.cosine(res.image, refs[p].image)))
+    tables.write_rows(out / "projective.csv", tables.PROJECTIVE_COLUMNS,
+                      [tables.projective_values(*t) for t in proj])
+    text = tables.compare_text(spec, refs, rows, proj)
+    (out / "compare.md").write_text(text)
+    figure.draw(out / "gradients.png", _panels(refs, rows, proj), spec.window)
+    print(text)
+
+
+def _panels(refs, rows, proj) -> dict:
+    panels = {}
+    for p, r in refs.items():
+        row = [("reference (exact FD)", r.image)]
+        row += [(c.technique, c.image) for c in rows if c.param == p]
+        row += [(res.integrator, res.image) for res, _, _ in proj if res.param == p]
+        panels[p] = row
+    return panels
+
+
+def run_inverse(problem, out: Path):
+    """--inverse: the inverse task's runs, inverse.csv and inverse.md."""
+    runs = inverse.run_inverse(problem, progress=lambda r: print(
+        f"  {r.technique}, {r.param}, start {r.start_offset:+g}: error {r.final_error:.3g}", file=sys.stderr))
+    tables.write_rows(out / "inverse.csv", tables.INVERSE_COLUMNS, [tables.inverse_values(r) for r in runs])
+    text = tables.inverse_text(problem.spec, runs)
+    (out / "inverse.md").write_text(text)
+    print(text)

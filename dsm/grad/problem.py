@@ -121,11 +121,16 @@ class Problem:
         """d loss / d ``param`` by forward-mode AD: each pixel's tangent, then an ordered float64 sum.
         (A backward pass accumulates the same sum by float32 atomic adds, whose order, hence last
         bits, differ between identical runs: measured, 0.5985786 to 0.5985788.)"""
+        dV = self.tangent(V, param)
+        if dV is None:                        # nearest: V does not depend on the parameter at all
+            return 0.0
+        return self.loss_tangent(dr.detach(V).numpy(), dV) + 0.0       # + 0.0: -0.0 reads as 0
+
+    def tangent(self, V, param):
+        """dV / d ``param`` per receiver by forward-mode AD (numpy), None where V does not depend on it."""
         dr.forward(param, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
         dV = dr.grad(V)
-        if dr.width(dV) != dr.width(V):       # nearest: V does not depend on the parameter at all
-            return 0.0
-        return self.loss_tangent(dr.detach(V).numpy(), dV.numpy()) + 0.0       # + 0.0: -0.0 reads as 0
+        return None if dr.width(dV) != dr.width(V) else dV.numpy()
 
     def evaluate(self, tech, values: dict, wrt=()) -> Evaluation:
         """The loss of ``tech`` at ``values`` and, for each parameter in ``wrt``, its AD derivative
@@ -148,15 +153,19 @@ class Problem:
 
     def exact_image(self, values: dict) -> np.ndarray:
         """The exact (ray-traced) visibility per pixel at ``values``: one shadow ray per receiver."""
+        N = self.spec.image_resolution
+        return self.exact_at(values, self.p_world).reshape(N, N)
+
+    def exact_at(self, values: dict, p_world) -> np.ndarray:
+        """The exact visibility (0 or 1, numpy) at ground points ``p_world`` (mi.Point3f) at ``values``."""
         vals = self._dr_values(values, ())
         light = self.scene.apply(vals)
         lift = mi.Vector3f(0.0, 0.0, 1e-4 * self.spec.window)    # off the ground, far below any gap
-        o = self.p_world + lift
+        o = p_world + lift
         if light.kind == "point":
             d = light.position - o
             ray = mi.Ray3f(o, dr.normalize(d), dr.norm(d) * (1.0 - 1e-6))
         else:
             ray = mi.Ray3f(o, -light.direction)
         hit = self.scene.scene.ray_test(ray)
-        N = self.spec.image_resolution
-        return np.where(hit.numpy(), 0.0, 1.0).reshape(N, N)
+        return np.where(hit.numpy(), 0.0, 1.0)

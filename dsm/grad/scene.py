@@ -33,7 +33,22 @@ def occluder_geometry(spec) -> tuple[np.ndarray, np.ndarray]:
     s, h = spec.occluder_size, spec.occluder_height
     if spec.scene == "plate":
         return quad([0.0, 0.0, h], [s / 2, 0.0, 0.0], [0.0, s / 2, 0.0])
+    if spec.scene == "mesh":
+        return mesh_geometry(spec.mesh, s, h)
     return box([-s / 2, -s / 2, h], [s / 2, s / 2, h + s])
+
+
+def mesh_geometry(path: str, size: float, height: float) -> tuple[np.ndarray, np.ndarray]:
+    """A PLY or OBJ file's (vertices, faces), scaled so its largest extent is ``size``, centred over the
+    origin in x and y, its lowest point at ``height`` (world)."""
+    kind = "ply" if path.lower().endswith(".ply") else "obj"
+    mesh = mi.load_dict({"type": kind, "filename": path})
+    p = mi.traverse(mesh)
+    v = np.asarray(p["vertex_positions"].numpy(), float).reshape(-1, 3)
+    f = np.asarray(p["faces"].numpy(), np.int64).reshape(-1, 3)
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    v = (v - np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]])) * (size / float(np.max(hi - lo)))
+    return v + np.array([0.0, 0.0, height]), f
 
 
 class GradScene:

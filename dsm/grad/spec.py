@@ -25,7 +25,8 @@ PARAMS = {
     "light_x": ("world", "point"),        # the point light's x
     "light_angle": ("degree", "directional"),   # the directional light's tilt from the vertical toward +x
 }
-SCENES = ("plate", "box")
+SCENES = ("plate", "box", "mesh")
+MESH_SUFFIXES = (".ply", ".obj")
 LIGHTS = ("point", "directional")
 LOSSES = ("shadow_area", "shadow_moment_x", "l2")
 # the unit of each loss, given the world unit of length
@@ -34,11 +35,17 @@ TECHNIQUES = ("nearest", "pcf_bilinear", "pcss", "vsm", "esm", "evsm", "msm")
 MOMENT_TECHNIQUES = ("vsm", "esm", "evsm", "msm")
 MAX_BLUR = 31
 MAX_RESOLUTION = 4096
-KEYS = ("scene", "light", "light_height", "light_angle", "occluder_height", "occluder_size", "map_resolution",
+KEYS = ("scene", "mesh", "light", "light_height", "light_angle", "occluder_height", "occluder_size", "map_resolution",
         "image_resolution", "window", "params", "loss", "target", "techniques", "blur", "antialias", "bias",
-        "light_size", "fd_step", "fd_halvings", "image_jitter")
+        "light_size", "fd_step", "fd_halvings", "image_jitter", "reference_samples", "reference_step", "projective_spp",
+        "projective_seeds", "projective_integrators", "inverse_starts", "inverse_iterations", "inverse_tolerance")
 # the central difference's default step per unit (world: a fraction of the occluder's size)
 FD_STEP = {"world": 2e-3, "degree": 0.02}
+# Mitsuba's projective-sampling integrators (dsm.grad.projective)
+PROJECTIVE_INTEGRATORS = ("direct_projective", "prb_projective")
+# the supersampled reference's default step per unit (world: a fraction of the occluder's size; measured
+# at 32^2 receivers per pixel: its error estimate under 1 % of the closed forms, dsm.grad.reference)
+REFERENCE_STEP = {"world": 0.04, "degree": 1.0}
 
 
 @dataclass(frozen=True)
@@ -60,6 +67,7 @@ class Technique:
 class GradSpec:
     """What ``dsm grad`` differentiates: the scene, the parameters (with units), loss and techniques."""
     scene: str = "plate"
+    mesh: str = ""                           # scene = "mesh": the occluder's PLY or OBJ file (absolute path)
     light: str = "point"
     light_height: float = 2.0
     light_angle: float = 20.0
@@ -77,6 +85,14 @@ class GradSpec:
     fd_step: tuple = ()                      # ((param, step), ...) in the parameter's unit
     fd_halvings: int = 4
     image_jitter: bool = True                # one receiver per pixel at a seeded random point (else its centre)
+    reference_samples: int = 32              # the reference's receivers per pixel and axis (stratified)
+    reference_step: tuple = ()               # ((param, step), ...): the reference's central difference
+    projective_spp: int = 64                 # Mitsuba's projective integrator: samples per pixel
+    projective_seeds: int = 4                # ... and its seeds (bias and spread of a stochastic gradient)
+    projective_integrators: tuple = PROJECTIVE_INTEGRATORS
+    inverse_starts: tuple = (-0.1, -0.05, 0.05, 0.1)   # the inverse task's starts: offsets from the truth
+    inverse_iterations: int = 40
+    inverse_tolerance: float = 0.01          # a start succeeds when its final error is within this
     source: str = "<gradient>"
 
     def unit(self, param: str) -> str:
@@ -89,6 +105,14 @@ class GradSpec:
         if param in given:
             return given[param]
         base = FD_STEP[self.unit(param)]
+        return base * self.occluder_size if self.unit(param) == "world" else base
+
+    def reference_step_of(self, param: str) -> float:
+        """The supersampled reference's central-difference step of ``param`` in its unit."""
+        given = dict(self.reference_step)
+        if param in given:
+            return given[param]
+        base = REFERENCE_STEP[self.unit(param)]
         return base * self.occluder_size if self.unit(param) == "world" else base
 
     def nominal(self) -> dict:
@@ -119,6 +143,7 @@ def parse(raw: dict, source: str = "<dict>") -> GradSpec:
     kw = {"source": source}
     kw["scene"] = choice(g.get("scene", "plate"), source, "gradient.scene", SCENES)
     kw["light"] = choice(g.get("light", "point"), source, "gradient.light", LIGHTS)
+    kw["mesh"] = _mesh(g, source, kw["scene"])
     for key in ("light_height", "occluder_height", "occluder_size", "window", "light_size"):
         if key in g:
             kw[key] = number(g[key], source, f"gradient.{key}", positive=True)
@@ -136,11 +161,13 @@ def parse(raw: dict, source: str = "<dict>") -> GradSpec:
         if not isinstance(g["image_jitter"], bool):
             raise ConfigError(source, "gradient.image_jitter", f"expected true or false, got {g['image_jitter']!r}")
         kw["image_jitter"] = g["image_jitter"]
+    kw.update(_compare_keys(g, source))
     light = kw["light"]
     kw["params"] = _params(g, source, light)
     kw["loss"] = choice(g.get("loss", "shadow_area"), source, "gradient.loss", LOSSES)
     kw["target"] = _target(g, source, light, kw["loss"])
     kw["fd_step"] = _steps(g, source, kw["params"])
+    kw["reference_step"] = _steps(g, source, kw["params"], "reference_step")
     kw["techniques"] = _techniques(g, source)
     spec = GradSpec(**kw)
     if spec.light == "point" and not spec.occluder_height + _top(spec) < spec.light_height:
@@ -150,7 +177,24 @@ def parse(raw: dict, source: str = "<dict>") -> GradSpec:
 
 
 def _top(spec) -> float:
-    return spec.occluder_size if spec.scene == "box" else 0.0
+    return 0.0 if spec.scene == "plate" else spec.occluder_size     # a mesh is scaled to fit the box's cube
+
+
+def _mesh(g: dict, source: str, scene: str) -> str:
+    """The mesh file of scene = "mesh" (relative to the config's folder), checked before any work."""
+    if scene != "mesh":
+        if "mesh" in g:
+            raise ConfigError(source, "gradient.mesh", f"is read only with scene = \"mesh\", not {scene!r}")
+        return ""
+    raw = g.get("mesh")
+    if not isinstance(raw, str) or not raw:
+        raise ConfigError(source, "gradient.mesh", f"scene = \"mesh\" needs a PLY or OBJ file, got {raw!r}")
+    path = Path(raw) if Path(raw).is_absolute() else Path(source).parent / raw
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise ConfigError(source, "gradient.mesh", f"unknown file type {path.suffix!r}", MESH_SUFFIXES)
+    if not path.is_file():
+        raise ConfigError(source, "gradient.mesh", f"no such file {str(path)!r}")
+    return str(path.resolve())
 
 
 def _param_names(raw, source: str, key: str, light: str) -> list:
@@ -186,14 +230,38 @@ def _target(g: dict, source: str, light: str, loss: str) -> tuple:
     return tuple((k, number(v, source, f"gradient.target.{k}")) for k, v in t.items())
 
 
-def _steps(g: dict, source: str, params: tuple) -> tuple:
-    t = g.get("fd_step", {})
+def _steps(g: dict, source: str, params: tuple, key: str = "fd_step") -> tuple:
+    t = g.get(key, {})
     if not isinstance(t, dict):
-        raise ConfigError(source, "gradient.fd_step", f"expected a table of steps by parameter, got {t!r}")
+        raise ConfigError(source, f"gradient.{key}", f"expected a table of steps by parameter, got {t!r}")
     for k in t:
         if k not in params:
-            raise ConfigError(source, f"gradient.fd_step.{k}", "names no parameter of gradient.params", params)
-    return tuple((k, number(v, source, f"gradient.fd_step.{k}", positive=True)) for k, v in t.items())
+            raise ConfigError(source, f"gradient.{key}.{k}", "names no parameter of gradient.params", params)
+    return tuple((k, number(v, source, f"gradient.{key}.{k}", positive=True)) for k, v in t.items())
+
+
+def _compare_keys(g: dict, source: str) -> dict:
+    """The reference's, the projective integrator's and the inverse task's keys (dsm grad --compare, --inverse)."""
+    kw = {}
+    for key, lo, hi in (("reference_samples", 1, 64), ("projective_spp", 1, 4096), ("projective_seeds", 1, 64),
+                        ("inverse_iterations", 1, 1000)):
+        if key in g:
+            kw[key] = number(g[key], source, f"gradient.{key}", integer=True, minimum=lo, maximum=hi)
+    if "inverse_tolerance" in g:
+        kw["inverse_tolerance"] = number(g["inverse_tolerance"], source, "gradient.inverse_tolerance", positive=True)
+    if "projective_integrators" in g:
+        names = as_list(g["projective_integrators"])
+        for n in names:
+            choice(n, source, "gradient.projective_integrators", PROJECTIVE_INTEGRATORS)
+        if len(set(names)) != len(names):
+            raise ConfigError(source, "gradient.projective_integrators", "an integrator is given twice: give each once")
+        kw["projective_integrators"] = tuple(names)
+    if "inverse_starts" in g:
+        starts = as_list(g["inverse_starts"])
+        if not starts:
+            raise ConfigError(source, "gradient.inverse_starts", "empty list")
+        kw["inverse_starts"] = tuple(number(x, source, "gradient.inverse_starts") for x in starts)
+    return kw
 
 
 def _techniques(g: dict, source: str) -> tuple:
