@@ -42,13 +42,12 @@ SUITE_FILE = SUITE_FILES[LATEST]
 ORIGIN = "0"              # the offset label of a case at the origin (every case of dsm-bench-1)
 MESHES = Path(__file__).resolve().parents[2] / "data" / "meshes"
 SIZES = ("test", "default", "full")
-# Calls a case's map builds, moment maps and lookups are timed over (dsm.core.timing): one. A dsm
-# run times 3 (a median of warm calls after a cold one); the benchmark is one long process, where a
-# call is warm from its first (Dr.Jit's kernel time leaves compilation out, and its memory and the
-# moment maps' numpy buffers come from allocators the earlier cases grew), and its time columns are
-# means over the many cases of a contender. The repeats were half of the suite's CPU time; the
-# per-contender means with one call against two are in docs/bench/benchmark-default/README.md.
-TIMING_CALLS = 1
+# Calls a case's map builds, moment maps and lookups are timed over (dsm.core.timing): the first
+# cold, the reported time the second's. A dsm run times 3 (the median of two warm calls); the
+# benchmark's time columns are means over the many cases of a contender, where one warm call per case
+# is enough. One call alone would read the builds' times alike (per-contender means within 8 %) but
+# the lookups' at twice their warm time (docs/bench/benchmark-default/README.md).
+TIMING_CALLS = 2
 LIGHTS = ("directional", "spot", "point")
 
 
