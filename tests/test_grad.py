@@ -174,3 +174,35 @@ def test_dsm_grad_writes_its_table_and_refuses_a_bad_config(tmp_path, capsys):
     assert cells[:3] == ["nearest", "occluder_z", "world"] and float(cells[4]) == 0.0
     assert cells[9] == ""                          # AD vs FD of 0 against 0: undefined, not 0
     assert "undefined" in (tmp_path / "g" / "table.md").read_text()
+    # a second run into the same folder is refused; --force replaces only what dsm grad wrote
+    (tmp_path / "g" / "mine.txt").write_text("a user's own file")
+    capsys.readouterr()
+    assert main(["grad", str(good), "--out", str(tmp_path / "g")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "--force" in err
+    assert main(["grad", str(good), "--out", str(tmp_path / "g"), "--force"]) == 0
+    assert (tmp_path / "g" / "mine.txt").read_text() == "a user's own file"
+    assert len((tmp_path / "g" / "selfcheck.csv").read_text().splitlines()) == 2
+
+
+def test_dsm_grad_answers_a_bad_folder_a_folder_config_and_an_unreadable_mesh_in_one_line(tmp_path, capsys):
+    """--out naming a file, the config naming a folder, and a mesh file Mitsuba cannot read (a PLY
+    header without its data) are each one line with exit 2, before any gradient is computed."""
+    from dsm.cli import main
+    good = tmp_path / "good.toml"
+    good.write_text('[gradient]\nmap_resolution = 16\nimage_resolution = 16\ntechniques = ["nearest"]\n'
+                    'antialias = [false]\nparams = ["occluder_z"]\n')
+    (tmp_path / "afile").write_text("x")
+    bad_ply = tmp_path / "bad.ply"
+    bad_ply.write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                       "property float z\nend_header\n0 0 0\n")
+    mesh = tmp_path / "mesh.toml"
+    mesh.write_text('[gradient]\nscene = "mesh"\nmesh = "bad.ply"\nmap_resolution = 16\nimage_resolution = 16\n'
+                    'techniques = ["nearest"]\nantialias = [false]\nparams = ["occluder_z"]\n')
+    for argv, words in (([str(good), "--out", str(tmp_path / "afile")], "is a file, not a folder"),
+                        ([str(tmp_path), "--out", str(tmp_path / "o1")], "is a folder, not a config file"),
+                        ([str(mesh), "--out", str(tmp_path / "o2")], "gradient.mesh")):
+        assert main(["grad", *argv]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and words in err, err
+    assert not (tmp_path / "o2" / "selfcheck.csv").exists()

@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 from ..core import env
+from ..experiment.lock import claim, entries
 from ..core.types import VARIANTS, ConfigError
 from . import spec as specmod
 from . import compare as comparemod
@@ -34,7 +35,26 @@ def add_parser(sub):
                    "gradients.png")
     g.add_argument("--inverse", action="store_true", help="also the inverse task (recover each parameter by "
                    "descent through each technique): inverse.csv, inverse.md")
+    g.add_argument("--force", action="store_true", help="replace the files an earlier dsm grad wrote in --out")
     return g
+
+
+WRITTEN = ("selfcheck.csv", "table.md", "compare.csv", "projective.csv", "compare.md", "gradients.png",
+           "inverse.csv", "inverse.md")
+
+
+def folder_problem(out: Path, force: bool) -> str | None:
+    """Why dsm grad may not write into ``out`` (None if it may): a folder holding anything is refused
+    unless --force, which removes only the files dsm grad writes (WRITTEN; a user's own stay)."""
+    held = [p for p in (entries(out) or [])]
+    if not held:
+        return None
+    if not force:
+        return (f"--out {out}: holds {len(held)} entries (an earlier run's?); --force replaces what dsm grad "
+                "wrote there, or choose another --out")
+    for name in WRITTEN:
+        (out / name).unlink(missing_ok=True)
+    return None
 
 
 def row_values(r) -> list:
@@ -87,15 +107,30 @@ def main(args) -> int:
     try:
         env.use_variant(args.variant)
     except env.SetupError as e:
-        print(f"dsm: {e}", file=sys.stderr)
-        return 2
+        print(f"dsm: setup error: {e}", file=sys.stderr)
+        return 3
     if getattr(args, "compare", False) and spec.loss not in comparemod.LOSSES:
         print(f"dsm: config error: {spec.source}: gradient.loss: --compare takes {spec.loss!r} loss only from a "
               f"reference of its own (valid: {', '.join(comparemod.LOSSES)})", file=sys.stderr)
         return 2
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    problem = Problem(spec)
+    held, why = claim(out)
+    if why is None:
+        with held:
+            why = folder_problem(out, getattr(args, "force", False))
+            if why is None:
+                return _run_held(args, spec, out)
+    print(f"dsm: {why}", file=sys.stderr)
+    return 2
+
+
+def _run_held(args, spec, out: Path) -> int:
+    """The run of ``dsm grad`` in its claimed folder ``out``."""
+    try:
+        problem = Problem(spec)
+    except ConfigError as e:
+        print(f"dsm: config error: {e}", file=sys.stderr)
+        return 2
     rows = self_check(problem, progress=lambda r: print(f"  {r.technique}, {r.param}: AD {_g(r.ad)}, FD {_g(r.fd)}",
                                                         file=sys.stderr))
     write_csv(rows, out / "selfcheck.csv")

@@ -15,6 +15,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from ..core.types import ConfigError
 from ..scenes.geometry import box, make_mesh, quad
 
 GROUND_HALF = 8.0          # the ground's half side, in units of the image window
@@ -34,19 +35,28 @@ def occluder_geometry(spec) -> tuple[np.ndarray, np.ndarray]:
     if spec.scene == "plate":
         return quad([0.0, 0.0, h], [s / 2, 0.0, 0.0], [0.0, s / 2, 0.0])
     if spec.scene == "mesh":
-        return mesh_geometry(spec.mesh, s, h)
+        return mesh_geometry(spec.mesh, s, h, spec.source)
     return box([-s / 2, -s / 2, h], [s / 2, s / 2, h + s])
 
 
-def mesh_geometry(path: str, size: float, height: float) -> tuple[np.ndarray, np.ndarray]:
+def mesh_geometry(path: str, size: float, height: float, source: str = "<dict>") -> tuple[np.ndarray, np.ndarray]:
     """A PLY or OBJ file's (vertices, faces), scaled so its largest extent is ``size``, centred over the
-    origin in x and y, its lowest point at ``height`` (world)."""
+    origin in x and y, its lowest point at ``height`` (world); ConfigError (key ``gradient.mesh``) for
+    a file Mitsuba cannot read, without faces or without extent."""
     kind = "ply" if path.lower().endswith(".ply") else "obj"
-    mesh = mi.load_dict({"type": kind, "filename": path})
+    try:
+        mesh = mi.load_dict({"type": kind, "filename": path})
+    except RuntimeError as e:
+        why = str(e).strip().splitlines()[-1] if str(e).strip() else type(e).__name__
+        raise ConfigError(source, "gradient.mesh", f"{path}: Mitsuba cannot read it ({why})") from None
     p = mi.traverse(mesh)
     v = np.asarray(p["vertex_positions"].numpy(), float).reshape(-1, 3)
     f = np.asarray(p["faces"].numpy(), np.int64).reshape(-1, 3)
+    if len(f) == 0 or len(v) == 0 or not np.isfinite(v).all():
+        raise ConfigError(source, "gradient.mesh", f"{path}: has no faces or a vertex that is not finite")
     lo, hi = v.min(axis=0), v.max(axis=0)
+    if not float(np.max(hi - lo)) > 0.0:
+        raise ConfigError(source, "gradient.mesh", f"{path}: has no extent (every vertex at one point)")
     v = (v - np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]])) * (size / float(np.max(hi - lo)))
     return v + np.array([0.0, 0.0, height]), f
 

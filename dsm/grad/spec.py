@@ -125,6 +125,8 @@ def load(path) -> GradSpec:
     """The GradSpec of TOML file ``path``'s ``[gradient]`` table; ConfigError for any mistake."""
     path = Path(path)
     source = str(path)
+    if path.is_dir():
+        raise ConfigError(source, "file", "is a folder, not a config file")
     if not path.is_file():
         raise ConfigError(source, "file", "no such config file")
     try:
