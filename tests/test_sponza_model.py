@@ -125,3 +125,18 @@ def test_a_model_takes_no_builtin_or_optional_and_only_a_mesh(tmp_path):
         parse(_config({"model": "sponza", "file": str(xml)}), "c")
     with pytest.raises(ConfigError, match=r"scene\[0\]\.version: a version is a named model's"):
         parse(_config({"builtin": "plane", "version": "crytek"}), "c")
+
+
+def test_a_bad_version_or_a_folder_as_the_copy_is_a_config_error_with_or_without_a_copy(tmp_path, monkeypatch):
+    """An unknown version is a config mistake whether or not a copy is given (it was hidden behind
+    "no copy"); a folder given as the copy, by key or by DSM_SPONZA, is named as a folder, not absent."""
+    from dsm.core.types import ConfigError
+    from dsm.config.read import parse
+    monkeypatch.delenv("DSM_SPONZA", raising=False)
+    with pytest.raises(ConfigError, match=r"scene\[0\]\.version: unknown sponza version 'foo' \(valid: dabrovic, crytek\)"):
+        parse(_config({"model": "sponza", "version": "foo"}), "c")
+    with pytest.raises(ConfigError, match=r"scene\[0\]\.file: .* is a folder, not sponza's OBJ or PLY file"):
+        parse(_config({"model": "sponza", "file": str(tmp_path)}), "c")
+    monkeypatch.setenv("DSM_SPONZA", str(tmp_path))
+    with pytest.raises(ConfigError, match=r"DSM_SPONZA: .* is a folder"):
+        parse(_config({"model": "sponza"}), "c")

@@ -68,6 +68,8 @@ def check(doc, path="<document>") -> dict:
         raise NotResults(f"{where}: suite is {_kind(doc['suite'])}, not a suite's name")
     if version >= 3:
         _engine(doc.get("versions"), where)
+    elif "versions" in doc and not isinstance(doc["versions"], dict):      # older: optional, but an object
+        raise NotResults(f"{where}: versions is {_kind(doc['versions'])}, not an object of versions")
     _records(doc.get("cases"), where, "cases", COUNTS)
     _records(doc.get("flicker", []), where, "flicker", ())
     for i, rec in enumerate(doc.get("flicker", [])):

@@ -85,10 +85,16 @@ def _model_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec
         raise ConfigError(source, f"{where}.{key}", f"a model's scene takes no {key} key (an absent copy is "
                           "skipped, saying how to get one)", ("model", "version", "file"))
     model = MODELS[name]
+    names = [v.name for v in model.versions]
+    if "version" in t and t["version"] not in names:          # a config mistake, with or without a copy
+        raise ConfigError(source, f"{where}.version", f"unknown {model.name} version {t['version']!r}", names)
     raw = t.get("file")
     if raw is not None and not isinstance(raw, str):
         raise ConfigError(source, f"{where}.file", f"expected a path string, got {raw!r}")
     path = locate(model, raw, base)
+    if path is not None and path.is_dir():
+        key = f"{where}.file" if raw is not None else model.env
+        raise ConfigError(source, key, f"{path} is a folder, not {model.name}'s OBJ or PLY file", (".obj", ".ply"))
     rest = {k: v for k, v in t.items() if k not in MODEL_KEYS and k != "file"}
     if path is None or not path.is_file():
         specs = sweep_params(FileParams, rest, source, where, skip=("closed",))
