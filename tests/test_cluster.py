@@ -4,11 +4,10 @@ import json
 
 import pytest
 
+from conftest import VARYING
+
 ray = pytest.importorskip("ray", reason="Ray is not installed (pip install 'dsm[cluster]')")
 
-# timings, peak memory and compile counts differ between runs by nature; every other column is compared
-VARYING = {"build_ms", "build_first_ms", "build_compile_ms", "build_peak_mb", "lookup_ms", "lookup_compile_ms",
-           "lookup_kernels_compiled", "reference_ms", "fit_ms"}
 
 
 def _rows(path):

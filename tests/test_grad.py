@@ -25,6 +25,12 @@ def _spec(**kw):
     ({"fd_step": {"light_x": 1e-3}}, "gradient.fd_step.light_x", "names no parameter"),
     ({"light_height": 0.4}, "gradient.light_height", "above the occluder"),
     ({"colour": 1}, "gradient.colour", "unknown key"),
+    # the keys of --compare and --inverse
+    ({"reference_samples": 0}, "gradient.reference_samples", ">= 1"),
+    ({"reference_step": {"light_x": 0.1}}, "gradient.reference_step.light_x", "names no parameter"),
+    ({"inverse_starts": []}, "gradient.inverse_starts", "empty list"),
+    ({"projective_spp": 1.5}, "gradient.projective_spp", "integer"),
+    ({"projective_integrators": ["path"]}, "gradient.projective_integrators", "direct_projective"),
 ])
 def test_a_bad_gradient_table_is_one_line_naming_file_and_key(table, key, words):
     with pytest.raises(ConfigError) as e:

@@ -16,20 +16,6 @@ def _spec(**kw):
     return specmod.parse({"gradient": {**SMALL, **kw}}, "g.toml")
 
 
-@pytest.mark.parametrize("table, key, words", [
-    ({"reference_samples": 0}, "gradient.reference_samples", ">= 1"),
-    ({"reference_step": {"light_x": 0.1}}, "gradient.reference_step.light_x", "names no parameter"),
-    ({"inverse_starts": []}, "gradient.inverse_starts", "empty list"),
-    ({"projective_spp": 1.5}, "gradient.projective_spp", "integer"),
-    ({"projective_integrators": ["path"]}, "gradient.projective_integrators", "direct_projective"),
-])
-def test_a_bad_compare_key_is_one_line_naming_file_and_key(table, key, words):
-    with pytest.raises(ConfigError) as e:
-        specmod.parse({"gradient": table}, "g.toml")
-    msg = str(e.value)
-    assert msg.startswith(f"g.toml: {key}: ") and words in msg and "\n" not in msg
-
-
 def test_cosine_similarity_is_the_angle_between_images():
     from dsm.grad.compare import cosine
     a = np.arange(12.0).reshape(3, 4) - 5.0

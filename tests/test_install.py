@@ -16,10 +16,9 @@ import pytest
 from packaging.requirements import Requirement
 from packaging.specifiers import SpecifierSet
 
+from conftest import VARYING
+
 ROOT = Path(__file__).resolve().parent.parent
-# timings, peak memory and compile counts differ between runs by nature; every other column is compared
-VARYING = {"build_ms", "build_first_ms", "build_compile_ms", "build_peak_mb", "lookup_ms", "lookup_compile_ms",
-           "lookup_kernels_compiled", "reference_ms", "fit_ms"}
 FIRST_RUN = """
 [experiment]
 name = "first"

@@ -10,12 +10,10 @@ import time
 
 import pytest
 
+from conftest import VARYING
 from dsm.report import figures
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parent.parent
-# timings, peak memory and compile counts differ between runs by nature; every other column is compared
-VARYING = {"build_ms", "build_first_ms", "build_compile_ms", "build_peak_mb", "lookup_ms", "lookup_compile_ms",
-           "lookup_kernels_compiled", "reference_ms", "fit_ms"}
 
 CONFIG = """
 [experiment]

@@ -46,7 +46,7 @@ WRITTEN = ("selfcheck.csv", "table.md", "compare.csv", "projective.csv", "compar
 def folder_problem(out: Path, force: bool) -> str | None:
     """Why dsm grad may not write into ``out`` (None if it may): a folder holding anything is refused
     unless --force, which removes only the files dsm grad writes (WRITTEN; a user's own stay)."""
-    held = [p for p in (entries(out) or [])]
+    held = entries(out) or []
     if not held:
         return None
     if not force:
