@@ -156,3 +156,22 @@ def test_the_benchmark_times_each_case_over_its_timing_calls():
         for cfg in (case.config, case.prefiltered, case.motion, case.prefiltered_motion):
             if cfg is not None:
                 assert cfg["timing"] == {"repeats": suite_mod.TIMING_CALLS}
+
+
+def test_bench_md_names_the_versions_and_machine_its_times_depend_on():
+    import platform
+
+    import drjit as dr
+    import mitsuba as mi
+
+    from dsm.core import env
+    from dsm.perf.bench import markdown
+
+    doc = {"variant": "llvm_ad_rgb", "threads": 2, "repeats": 1, "builds": [], "lookups": [], "scaling": [],
+           "versions": env.versions(), "machine": env.machine()}
+    text = markdown(doc)
+    assert f"Mitsuba {mi.__version__}, Dr.Jit {dr.__version__}" in text
+    assert f"Python {platform.python_version()}" in text
+    cpu = next((ln.split(":", 1)[1].strip() for ln in open("/proc/cpuinfo") if ln.startswith("model name")), None)
+    if cpu:
+        assert cpu in text

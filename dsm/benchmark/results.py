@@ -15,12 +15,11 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
-import platform
 from pathlib import Path
 
 import numpy as np
 
+from ..core.env import machine
 from ..report import figures, io as report_io
 from ..truth import metrics
 from . import caselog, perceptual, ranking, render
@@ -33,19 +32,6 @@ LEAK_MEASURES = ("n_leak", "leak_rate")      # a pre-filtered record's: peter-pa
 FLICKER_MEASURES = ("frames", "flicker_rate", "flicker_ever", "flicker_magnitude", "flicker_within_rate",
                     "flicker_change_rate")
 ORACLE_MEASURES = ("world_objective", "texel_objective", "per_texel_objective")
-
-
-def machine() -> dict:
-    """The machine a run measured on: CPU model, core count, OS."""
-    model = platform.processor() or "unknown"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return {"cpu": model, "cores": os.cpu_count(), "system": platform.platform()}
 
 
 def light_kind(light_label: str) -> str:

@@ -144,6 +144,19 @@ def dsm_version() -> str:
         return "unknown"
 
 
+def machine() -> dict:
+    """The machine a run measured on: CPU model, core count, OS."""
+    model = platform.processor() or "unknown"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {"cpu": model, "cores": os.cpu_count(), "system": platform.platform()}
+
+
 def versions() -> dict:
     """Python, Mitsuba, Dr.Jit, libLLVM, dsm and its git commit (read once per run: git is a subprocess)."""
     import drjit as dr

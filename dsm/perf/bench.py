@@ -312,7 +312,7 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
         builds, lookups, scale = builds + b, lookups + x, scale + s
     result = {"variant": variant, "threads": dr.thread_count(), "repeats": repeats, "builds": builds,
               "lookups": lookups, "dou_table1_ms": DOU_TABLE1, "scaling": scale, "exponents": _exponents(scale),
-              "budget_mb": budget / 2 ** 20}
+              "budget_mb": budget / 2 ** 20, "versions": env.versions(), "machine": env.machine()}
     if frame:
         specs = _scenes(meshes)
         result["frame"] = frame_cost(specs[-1], _light_for(specs[-1]), repeats=max(repeats, 5))
@@ -452,6 +452,14 @@ def markdown(r) -> str:
     return "\n".join(lines) + "\n"
 
 
+def versions_line(r) -> str:
+    """bench.md's line naming what its times depend on: the versions and the machine."""
+    v, m = r["versions"], r.get("machine") or {}
+    return (f"dsm {v['dsm']} ({v['dsm_git_commit']}), Mitsuba {v['mitsuba']}, Dr.Jit {v['drjit']}, "
+            f"libLLVM {v['libllvm']}, Python {v['python']}; {m.get('cpu', 'unknown CPU')}, "
+            f"{m.get('cores', '?')} cores, {m.get('system', 'unknown system')}")
+
+
 def _md_builds(r) -> list:
     """Section (1): builds against a full and a bare cast, wall clock."""
     lines = [f"# dsm perf ({r['variant']}, {r['threads']} threads, median of {r['repeats']} warm runs; "
@@ -466,6 +474,7 @@ def _md_builds(r) -> list:
              "first / ray_intersect | first / preliminary | two layers ms | two / first | first peak MB | two peak MB "
              "| compile ms |",
              "|---" * 14 + "|"]
+    lines[1:1] = ["", versions_line(r)] if r.get("versions") else []
     cells = [("ray_intersect_ms", ".2f"), ("bare_ms", ".2f"), ("bare_coherent_ms", ".2f"), ("mrays_per_s", ".1f"),
              ("first_layer_ms", ".2f"), ("first_over_ray_intersect", ".2f"), ("first_over_bare", ".2f"),
              ("two_layer_ms", ".2f"), ("two_over_first", ".2f"), ("first_peak_mb", ".1f"), ("two_peak_mb", ".1f"),
