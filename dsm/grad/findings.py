@@ -48,17 +48,37 @@ def winner_phrase(who: list, value, what: str, why: str) -> str:
     return f"a tie between {names(who)} ({pct(value)} each)"
 
 
+def closest_to_truth(rows) -> tuple:
+    """(techniques, their relative errors) closest to the truth among compare.csv rows of one parameter: the
+    smallest |ad - reference| and every one within twice the truth's own error of it (the truth's error
+    cannot order them: a tie); ([], []) where every relative error is undefined (the truth is 0)."""
+    cand = [(abs(float(r["ad"]) - float(r["reference"])), float(r["reference_error"] or 0.0),
+             as_number(r["rel_error"]), r["technique"]) for r in rows if as_number(r["rel_error"]) is not None]
+    if not cand:
+        return [], []
+    dev, err, _, _ = min(cand)
+    near = [c for c in cand if c[0] - dev <= 2.0 * max(err, c[1])]
+    return [c[3] for c in near], [c[2] for c in near]
+
+
 def compare_words(rows) -> str:
-    """compare.csv: per parameter, the technique whose gradient is closest to the truth (relative error)."""
+    """compare.csv: per parameter, the technique whose gradient is closest to the truth (relative error), or
+    the techniques the truth's own error cannot tell apart."""
     parts = []
     for param, rs in by(rows, "param").items():
-        who, best = smallest(rs, "rel_error")
-        phrase = winner_phrase(who, best, "relative error", "the truth is 0")
-        if len(who) == 1:
+        who, rel = closest_to_truth(rs)
+        if not who:
+            phrase = winner_phrase([], None, "relative error", "the truth is 0")
+        elif len(who) == 1:
             r = next(r for r in rs if r["technique"] == who[0])
             cos = as_number(r.get("cosine", ""))
-            sign = r.get("sign") or "undefined"
-            phrase += f", sign {sign}, per-pixel cosine {'undefined' if cos is None else number_text(cos, 3)}"
+            phrase = (f"{who[0]} ({pct(rel[0])}), sign {r.get('sign') or 'undefined'}, per-pixel cosine "
+                      f"{'undefined' if cos is None else number_text(cos, 3)}")
+        elif min(rel) == max(rel):
+            phrase = f"a tie between {names(who)} ({pct(rel[0])} each)"
+        else:
+            phrase = (f"a tie within the truth's own error between {names(who)} "
+                      f"({pct(min(rel))} to {pct(max(rel))})")
         parts.append(f"{param}: {phrase}")
     return "Closest to the truth (relative error of the loss's derivative), per parameter: " + "; ".join(parts) + "."
 

@@ -61,11 +61,16 @@ def cell_html(cell: str, numeric: bool) -> str:
     return f"<td{' class=n' if numeric else ''} data-v=\"{_e(cell)}\"{title}>{_e(text)}</td>"
 
 
+TALL = 25                 # rows: a longer table scrolls in a box of report.html's height (.scroll)
+
+
 def table_html(columns, rows, table_id: str) -> str:
     """A sortable table of a CSV's ``rows`` (dicts of strings, as csv.DictReader reads them) in
-    ``columns``' order, in a box that scrolls sideways where it is wider than the page."""
+    ``columns``' order, in a box that scrolls sideways where it is wider than the page (and down
+    where it has more than TALL rows)."""
     num = numeric_columns(columns, rows)
     head = "".join(f"<th data-type={'num' if c in num else 'text'}>{_e(c)}</th>" for c in columns)
     body = "".join("<tr>" + "".join(cell_html(r.get(c, ""), c in num) for c in columns) + "</tr>" for r in rows)
-    return (f"<div class=wide><table id=\"{_e(table_id)}\" class=sortable><thead><tr>{head}</tr></thead>"
+    box = "wide scroll" if len(rows) > TALL else "wide"
+    return (f"<div class=\"{box}\"><table id=\"{_e(table_id)}\" class=sortable><thead><tr>{head}</tr></thead>"
             f"<tbody>{body}</tbody></table></div>")
