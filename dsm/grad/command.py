@@ -33,7 +33,8 @@ def add_parser(sub):
     g = sub.add_parser("grad", help="gradients of the shadowed image in scene parameters, per technique: AD "
                        "against central differences and closed forms (a config's [gradient])")
     g.add_argument("config", help="TOML file with a [gradient] table")
-    g.add_argument("--out", default="grad", help="folder for selfcheck.csv and table.md (default: grad/)")
+    g.add_argument("--out", default="grad", help="folder for selfcheck.csv, table.md, report.html and grad.json "
+                   "(default: grad/)")
     g.add_argument("--variant", choices=VARIANTS, help="Mitsuba variant (default llvm_ad_rgb)")
     g.add_argument("--compare", action="store_true", help="also each technique against the supersampled exact "
                    "difference and Mitsuba's projective integrators: compare.csv, projective.csv, compare.md, "
