@@ -209,9 +209,18 @@ def test_a_section_is_absent_when_its_file_is_and_an_unknown_csv_is_a_link(tmp_p
     _write(tmp_path / "equal_error.csv", ["technique", "rel_error", "ms", "pt_spp", "pt_ms", "ratio"],
            [["vsm aa", "0.02", "13.5", "256", "400.0", "29.6"], ["nearest", "1.0", "2.0", "", "", ""]])
     _write(tmp_path / "mine.csv", ["a"], [["1"]])
+    (tmp_path / "mine.png").write_bytes(b"")
     page.write_report(tmp_path, {})
     doc = _parse(tmp_path / "report.html")
     assert doc.tables["table-equal-error"] == _csv_rows(tmp_path / "equal_error.csv")
-    assert "other" in doc.sections and "mine.csv" in doc.links
+    assert "other" in doc.sections and {"mine.csv", "mine.png"} <= set(doc.links) and doc.images == []
     assert any(a.startswith("Cost at equal gradient error: path tracing's time over the technique's is 29.6 (vsm aa)")
                for a in doc.answers)
+
+
+def test_the_words_are_the_same_in_a_second_identical_run(run, tmp_path):
+    """The answer reads no timing column: a second run of the same config says the same words."""
+    from dsm.cli import main
+    (tmp_path / "g.toml").write_text(TINY)
+    assert main(["grad", str(tmp_path / "g.toml"), "--compare", "--inverse", "--out", str(tmp_path / "again")]) == 0
+    assert _parse(tmp_path / "again" / "report.html").answers == _parse(run / "report.html").answers

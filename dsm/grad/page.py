@@ -85,12 +85,12 @@ def read_tables(out: Path) -> dict:
 def draw_figures(out: Path, tables: dict, tolerance=None) -> dict:
     """relative_error.png and inverse.png from the CSVs present; returns the seconds each took."""
     parts = {}
-    if "compare.csv" in tables:
+    if tables.get("compare.csv", ((), []))[1]:
         t = time.perf_counter()
         plots.relative_error_figure(out / "relative_error.png", tables["compare.csv"][1],
                                     tables.get("projective.csv", ((), []))[1])
         parts["relative_error.png"] = time.perf_counter() - t
-    if "inverse.csv" in tables:
+    if tables.get("inverse.csv", ((), []))[1]:
         t = time.perf_counter()
         plots.inverse_figure(out / "inverse.png", tables["inverse.csv"][1], tolerance)
         parts["inverse.png"] = time.perf_counter() - t
@@ -148,13 +148,14 @@ def figures_html(out: Path) -> str:
 
 
 def others_html(out: Path) -> str:
-    """Any other CSV in the folder (a file this page does not know yet), as a link."""
-    known = {name for name, *_ in TABLES}
-    other = sorted(p.name for p in out.glob("*.csv") if p.name not in known)
+    """Any other CSV or PNG in the folder (a file this page does not know yet), as a link."""
+    known = {name for name, *_ in TABLES} | {name for name, *_ in FIGURES}
+    other = sorted(p.name for p in out.iterdir() if p.suffix in (".csv", ".png") and p.name not in known)
     if not other:
         return ""
     links = "".join(f"<li><a href=\"{_e(n)}\">{_e(n)}</a></li>" for n in other)
-    return f"<section id=other><h2>Other files</h2><ul>{links}</ul></section>"
+    return (f"<section id=other><h2>Other files</h2><p class=note>Files in the folder this page does not show "
+            f"(a newer dsm grad's, or your own):</p><ul>{links}</ul></section>")
 
 
 def run_html(run: dict) -> str:
@@ -175,8 +176,8 @@ def heading(run: dict) -> str:
     g = run.get("gradient", {})
     if not g:
         return "dsm grad"
-    return (f"dsm grad: {g['scene']}, {g['light']} light, loss {g['loss']} ({g['loss_unit']}); map "
-            f"{g['map_resolution']}^2, image {g['image_resolution']}^2")
+    return (f"dsm grad: {g.get('scene', '?')}, {g.get('light', '?')} light, loss {g.get('loss', '?')} "
+            f"({g.get('loss_unit', '?')}); map {g.get('map_resolution', '?')}^2, image {g.get('image_resolution', '?')}^2")
 
 
 def page_html(out: Path, tables: dict, run: dict) -> str:
