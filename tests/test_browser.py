@@ -271,3 +271,60 @@ def test_the_leaderboard_filters_and_fits(tmp_path):
         assert "bias=2^-24 range" in drv.find_element("id", "case-list").text
     finally:
         drv.quit()
+
+
+GRAD_TINY = ('[gradient]\nmap_resolution = 24\nimage_resolution = 16\ntechniques = ["pcf_bilinear", "vsm"]\n'
+             'blur = [3]\nantialias = [false, true]\nparams = ["occluder_z", "light_height"]\nreference_samples = 8\n'
+             'projective_spp = 2\nprojective_integrators = ["direct_projective"]\nprojective_seeds = 1\n'
+             'inverse_starts = [-0.05, 0.05]\ninverse_iterations = 3\n')
+
+
+@pytest.fixture(scope="module")
+def grad_page(tmp_path_factory):
+    """dsm grad --compare --inverse's report.html (a tiny plate) in Chromium."""
+    from dsm.cli import main
+    d = tmp_path_factory.mktemp("gradbrowser")
+    (d / "g.toml").write_text(GRAD_TINY)
+    assert main(["grad", str(d / "g.toml"), "--compare", "--inverse", "--out", str(d / "out")]) == 0
+    drv = _chrome()
+    yield d / "out", drv
+    drv.quit()
+
+
+@pytest.mark.parametrize("width", [1280, 820])
+def test_the_grad_report_fits_its_window_and_reads_at_9_points(grad_page, width):
+    """dsm grad's report.html at each width: nothing runs past the page's edge, every figure loads and is
+    shown at its pixel size (its MIN_FONT text at DPI reads at 9 points), every text is 12 CSS px or more,
+    and no request leaves the file system."""
+    out, drv = grad_page
+    drv.set_window_size(width, 900)
+    drv.get((out / "report.html").as_uri())
+    assert _all_images_loaded(drv) == []
+    layout = drv.execute_script(LAYOUT_JS)
+    assert layout["overflow"] == [] and layout["pageWidth"] <= layout["window"]
+    shown = drv.execute_script("return Array.from(document.querySelectorAll('.plots img'))"
+                               ".map(i => [i.getAttribute('src'), i.clientWidth, i.naturalWidth])")
+    assert [s for s, _, _ in shown] == ["relative_error.png", "gradients.png", "inverse.png"]
+    assert all(w == n for _, w, n in shown), shown
+    px = drv.execute_script("return ['td', 'th', '.note', '.answer', 'figcaption', 'h3']"
+                            ".map(s => Math.min(...Array.from(document.querySelectorAll(s))"
+                            ".map(e => parseFloat(getComputedStyle(e).fontSize))))")
+    assert min(px) >= 12, px
+    assert drv.execute_script("return Array.from(document.querySelectorAll('[src],[href]'))"
+                              ".every(e => !/^https?:/.test(e.getAttribute('src') || e.getAttribute('href')))")
+
+
+def test_clicking_the_grad_reports_rel_error_header_orders_its_rows(grad_page):
+    """compare.csv's table sorted by rel_error in the browser: the CSV's values in order, undefined last."""
+    out, drv = grad_page
+    drv.set_window_size(1280, 900)
+    drv.get((out / "report.html").as_uri())
+    rows = list(csv.DictReader(open(out / "compare.csv")))
+    head = next(th for th in drv.find_elements("css selector", "#table-compare thead th") if th.text == "rel_error")
+    drv.execute_script("arguments[0].scrollIntoView()", head)
+    head.click()
+    got = drv.execute_script("return Array.from(document.querySelectorAll('#table-compare tbody tr'))"
+                             ".map(r => [r.cells[0].textContent, r.cells[1].textContent])")
+    key = lambda r: (r["rel_error"] == "", float(r["rel_error"]) if r["rel_error"] else 0.0)
+    want = [[r["technique"], r["param"]] for r in sorted(rows, key=key)]
+    assert got == want and want != [[r["technique"], r["param"]] for r in rows]

@@ -3,19 +3,24 @@
 Writes ``selfcheck.csv`` (one row per technique and parameter, every number as Python's repr:
 exact to paste back) and ``table.md`` (the same, rounded for reading) into ``--out``, and prints
 the table. A relative error whose reference is 0 is undefined and shown as such, never as 0.
+After the measuring: ``report.html`` (dsm.grad.page) and ``grad.json`` (the run's record: the
+measuring's and the report's seconds apart).
 """
 from __future__ import annotations
 
 import csv
+import dataclasses
 import sys
+import time
 from pathlib import Path
 
 from ..core import env
 from ..experiment.lock import claim, entries
 from ..core.types import VARIANTS, ConfigError
+from ..report.io import write_json
 from . import spec as specmod
 from . import compare as comparemod
-from . import figure, inverse, projective, tables
+from . import figure, inverse, page, projective, tables
 from .check import loss_unit, self_check
 from .problem import Problem
 
@@ -28,7 +33,8 @@ def add_parser(sub):
     g = sub.add_parser("grad", help="gradients of the shadowed image in scene parameters, per technique: AD "
                        "against central differences and closed forms (a config's [gradient])")
     g.add_argument("config", help="TOML file with a [gradient] table")
-    g.add_argument("--out", default="grad", help="folder for selfcheck.csv and table.md (default: grad/)")
+    g.add_argument("--out", default="grad", help="folder for selfcheck.csv, table.md, report.html and grad.json "
+                   "(default: grad/)")
     g.add_argument("--variant", choices=VARIANTS, help="Mitsuba variant (default llvm_ad_rgb)")
     g.add_argument("--compare", action="store_true", help="also each technique against the supersampled exact "
                    "difference and Mitsuba's projective integrators: compare.csv, projective.csv, compare.md, "
@@ -40,7 +46,7 @@ def add_parser(sub):
 
 
 WRITTEN = ("selfcheck.csv", "table.md", "compare.csv", "projective.csv", "compare.md", "gradients.png",
-           "inverse.csv", "inverse.md")
+           "inverse.csv", "inverse.md", "relative_error.png", "inverse.png", "report.html", "grad.json")
 
 
 def folder_problem(out: Path, force: bool) -> str | None:
@@ -125,12 +131,15 @@ def main(args) -> int:
 
 
 def _run_held(args, spec, out: Path) -> int:
-    """The run of ``dsm grad`` in its claimed folder ``out``."""
+    """The run of ``dsm grad`` in its claimed folder ``out``: the measuring, then the report (report.html,
+    its figures), each one's seconds in grad.json."""
+    t0 = time.perf_counter()
     try:
         problem = Problem(spec)
     except ConfigError as e:
         print(f"dsm: config error: {e}", file=sys.stderr)
         return 2
+    report_parts = {}
     rows = self_check(problem, progress=lambda r: print(f"  {r.technique}, {r.param}: AD {_g(r.ad)}, FD {_g(r.fd)}",
                                                         file=sys.stderr))
     write_csv(rows, out / "selfcheck.csv")
@@ -138,15 +147,54 @@ def _run_held(args, spec, out: Path) -> int:
     (out / "table.md").write_text(text)
     print(text)
     print(f"dsm grad: {len(rows)} rows in {out / 'selfcheck.csv'} and {out / 'table.md'}")
+    timing = {"selfcheck_s": time.perf_counter() - t0}
     if getattr(args, "compare", False):
-        run_compare(problem, out)
+        t = time.perf_counter()
+        report_parts.update(run_compare(problem, out))
+        timing["compare_s"] = time.perf_counter() - t - report_parts["gradients.png"]
     if getattr(args, "inverse", False):
+        t = time.perf_counter()
         run_inverse(problem, out)
+        timing["inverse_s"] = time.perf_counter() - t
+    timing["measure_s"] = sum(timing.values())
+    write_report(args, spec, out, timing, report_parts)
     return 0
 
 
-def run_compare(problem, out: Path):
-    """--compare: references, each technique against them, the projective integrators, the figure."""
+def run_record(args, spec, timing: dict) -> dict:
+    """grad.json's record (the report's time added once it is written): config, options, variant,
+    versions, the gradient's settings and the measuring's seconds."""
+    import mitsuba as mi
+    options = [f"--{o}" for o in ("compare", "inverse") if getattr(args, o, False)]
+    return {"command": "dsm grad", "config_file": str(spec.source), "options": options, "variant": mi.variant(),
+            "versions": env.versions(), "gradient": gradient_record(spec), "timing": dict(timing)}
+
+
+def gradient_record(spec) -> dict:
+    """The spec's settings as JSON values (techniques by their labels), with the loss's unit."""
+    rec = {}
+    for f in dataclasses.fields(spec):
+        v = getattr(spec, f.name)
+        rec[f.name] = [t.label for t in v] if f.name == "techniques" else list(v) if isinstance(v, tuple) else v
+    rec["loss_unit"] = loss_unit(spec)
+    return rec
+
+
+def write_report(args, spec, out: Path, timing: dict, parts: dict):
+    """report.html (dsm.grad.page) after the measuring, then grad.json with both times."""
+    t = time.perf_counter()
+    run = run_record(args, spec, timing)
+    parts.update(page.write_report(out, run))
+    run["timing"]["report_s"] = time.perf_counter() - t + parts.get("gradients.png", 0.0)
+    run["timing"]["report_parts"] = parts
+    write_json(out / "grad.json", run, indent=1)
+    print(f"dsm grad: {out / page.PAGE} (measuring {timing['measure_s']:.1f} s, report "
+          f"{run['timing']['report_s']:.1f} s)")
+
+
+def run_compare(problem, out: Path) -> dict:
+    """--compare: references, each technique against them, the projective integrators, the figure
+    (returns the figure's seconds: the report's time, not the measuring's)."""
     spec = problem.spec
     refs = comparemod.references(problem)
     rows = comparemod.compare(problem, refs, progress=lambda r: print(
@@ -163,8 +211,11 @@ def run_compare(problem, out: Path):
                       [tables.projective_values(*t) for t in proj])
     text = tables.compare_text(spec, refs, rows, proj)
     (out / "compare.md").write_text(text)
+    t = time.perf_counter()
     figure.draw(out / "gradients.png", _panels(refs, rows, proj), spec.window)
+    drawn = time.perf_counter() - t
     print(text)
+    return {"gradients.png": drawn}
 
 
 def _panels(refs, rows, proj) -> dict:

@@ -1,0 +1,205 @@
+"""dsm grad's report.html: one page in the run's folder that opens from the file system (no server, no
+network), composed from the folder's files after the measuring.
+
+First the answer in words (dsm.grad.findings), then a sortable table per known CSV present (TABLES:
+every cell the CSV's, numbers to 4 digits with the exact text on hover: dsm.report.csv_table), then
+the figures present (FIGURES: at their pixel size, a caption that says what to look for), then any
+other CSV in the folder as a link, and the run's versions and timing. A section is shown only when
+its file exists: a plain ``dsm grad`` has the self-check alone. A new CSV or figure of dsm grad is
+one line in TABLES or FIGURES; until then it is listed as a link.
+"""
+from __future__ import annotations
+
+import csv
+import html
+import time
+from pathlib import Path
+
+from ..report import csv_table
+from ..report.html import CSS, ZOOM_BOX, ZOOM_SCRIPT, png_size
+from ..report.io import atomic, read_csv
+from . import findings, plots
+
+PAGE = "report.html"
+# (file, section id, title, what its rows are)
+TABLES = (
+    ("compare.csv", "compare", "Each technique against the truth",
+     "Per technique and parameter: the AD derivative of the loss (ad) against the truth (reference: the central "
+     "difference of the exact image, supersampled; reference_error its own error), rel_error = |ad - reference| / "
+     "|reference|, the sign against the truth's, the cosine of the per-pixel gradient images, and the ms of one "
+     "gradient (warm median, compile apart)."),
+    ("projective.csv", "projective", "Mitsuba's projective integrators against the truth",
+     "Mean and standard error over seeds; agrees: within three combined errors of the truth (else a finding, not a "
+     "reference)."),
+    ("equal_error.csv", "equal-error", "Cost at equal gradient error",
+     "Per technique: its gradient error and ms beside differentiable path tracing's samples per pixel and ms at the "
+     "same error; ratio: path tracing's ms over the technique's (undefined where path tracing never reached the "
+     "technique's error in the range)."),
+    ("inverse.csv", "inverse", "The inverse task",
+     "One row per technique, parameter and start: Adam from the truth + start_offset through the technique's image; "
+     "final_error in the parameter's unit, success within the tolerance, converged_at the iteration from which it "
+     "stayed within it."),
+    ("selfcheck.csv", "selfcheck", "Self-check: AD against its own central difference and the closed form",
+     "Per technique and parameter: the loss, AD (ad) and the technique's own central difference (fd; the step "
+     "halved until no texel or pixel changes class, changed_* count what still did), their relative gap ad_vs_fd, "
+     "the closed form where one is known and ad_vs_closed."),
+)
+# (file, title, what to look for)
+FIGURES = (
+    ("relative_error.png", "Relative error against the truth, per technique and parameter",
+     "A dot per parameter at the technique's relative error (symlog: linear below 1 %, so 0 shows); the further "
+     "left, the closer to the truth. A technique without the antialiased map sits at 100 % where its gradient is 0."),
+    ("gradients.png", "Per-pixel gradient images: the truth, each technique, each projective integrator",
+     "Red: the pixel brightens as the parameter grows, blue: it darkens; each panel on its own scale (|max| in its "
+     "title). A technique's image should put its mass where the truth's does, at the shadow's edge."),
+    ("equal_error.png", "Cost at equal gradient error",
+     "Path tracing's error against its time, and each technique's point: a technique left of the curve at its "
+     "error is cheaper than path tracing at the same error."),
+    ("inverse.png", "The inverse task: final error per start",
+     "A line per technique through its starts' final errors (symlog); below the dashed tolerance a start "
+     "succeeded. A line flat at the start's own offset did not move."),
+)
+WORDS = (("compare.csv", findings.compare_words), ("projective.csv", findings.projective_words),
+         ("equal_error.csv", findings.equal_error_words), ("inverse.csv", findings.inverse_words),
+         ("selfcheck.csv", findings.selfcheck_words))
+DRAWN = ("relative_error.png", "inverse.png")     # the figures the report draws from the CSVs
+
+
+def _e(x) -> str:
+    return html.escape(str(x), quote=True)
+
+
+def read_tables(out: Path) -> dict:
+    """{file: (columns, rows)} of the known CSVs present in ``out``."""
+    got = {}
+    for name, *_ in TABLES:
+        p = out / name
+        if p.is_file():
+            rows = read_csv(p)
+            with open(p, newline="") as fh:
+                columns = next(csv.reader(fh))
+            got[name] = (columns, rows)
+    return got
+
+
+def draw_figures(out: Path, tables: dict, tolerance=None) -> dict:
+    """relative_error.png and inverse.png from the CSVs present; returns the seconds each took."""
+    parts = {}
+    if tables.get("compare.csv", ((), []))[1]:
+        t = time.perf_counter()
+        plots.relative_error_figure(out / "relative_error.png", tables["compare.csv"][1],
+                                    tables.get("projective.csv", ((), []))[1])
+        parts["relative_error.png"] = time.perf_counter() - t
+    if tables.get("inverse.csv", ((), []))[1]:
+        t = time.perf_counter()
+        plots.inverse_figure(out / "inverse.png", tables["inverse.csv"][1], tolerance)
+        parts["inverse.png"] = time.perf_counter() - t
+    return parts
+
+
+def answer_html(tables: dict) -> str:
+    """The answer in words: a paragraph per CSV that has one."""
+    words = [fn(tables[name][1]) for name, fn in WORDS if name in tables and tables[name][1]]
+    return "".join(f"<p class=answer>{_e(w)}</p>" for w in words if w)
+
+
+def inverse_summary(rows) -> str:
+    """The inverse task's success per technique (rows) and parameter (columns), as 'k/n'."""
+    params = list(findings.by(rows, "param"))
+    cells = []
+    for tech, rs in findings.by(rows, "technique").items():
+        per = findings.by(rs, "param")
+        cells.append({"technique": tech, **{f"{p} success": "{}/{}".format(*findings.success(per[p]))
+                                             for p in params if p in per}})
+    return ("<h3>Success per technique and parameter</h3>"
+            + csv_table.table_html(["technique"] + [f"{p} success" for p in params], cells, "inverse-summary"))
+
+
+def tables_html(tables: dict) -> str:
+    """A section per known CSV present: its note and its rows."""
+    out = []
+    for name, sid, title, note in TABLES:
+        if name not in tables:
+            continue
+        columns, rows = tables[name]
+        extra = inverse_summary(rows) + "<h3>Every start</h3>" if name == "inverse.csv" and rows else ""
+        out.append(f"<section id=\"{sid}\"><h2>{_e(title)} (<a href=\"{_e(name)}\">{_e(name)}</a>, {len(rows)} rows)"
+                   f"</h2><p class=note>{_e(note)} Click a header to sort (undefined last); hover a number for "
+                   f"its exact value.</p>{extra}{csv_table.table_html(columns, rows, 'table-' + sid)}</section>")
+    return "".join(out)
+
+
+def figures_html(out: Path) -> str:
+    """The figures present, each at its pixel size with its caption."""
+    figs = []
+    for name, title, look in FIGURES:
+        p = out / name
+        if not p.is_file():
+            continue
+        w, h = png_size(p)
+        figs.append(f"<figure><div class=figbox><img src=\"{_e(name)}\" width={w} height={h} alt=\"{_e(title)}\">"
+                    f"</div><figcaption><b>{_e(title)}</b>. {_e(look)} <a href=\"{_e(name)}\">{_e(name)}</a>"
+                    "</figcaption></figure>")
+    if not figs:
+        return ""
+    return ("<section id=figures class=plots><h2>Figures</h2><p class=note>Each figure is shown at its own pixel "
+            "size (its smallest text reads at 9 points); click one to enlarge it.</p>" + "".join(figs)
+            + "</section>" + ZOOM_BOX)
+
+
+def others_html(out: Path) -> str:
+    """Any other CSV or PNG in the folder (a file this page does not know yet), as a link."""
+    known = {name for name, *_ in TABLES} | {name for name, *_ in FIGURES}
+    other = sorted(p.name for p in out.iterdir() if p.suffix in (".csv", ".png") and p.name not in known)
+    if not other:
+        return ""
+    links = "".join(f"<li><a href=\"{_e(n)}\">{_e(n)}</a></li>" for n in other)
+    return (f"<section id=other><h2>Other files</h2><p class=note>Files in the folder this page does not show "
+            f"(a newer dsm grad's, or your own):</p><ul>{links}</ul></section>")
+
+
+def run_html(run: dict) -> str:
+    """The run's config, options, versions and measuring time (the report's own time: grad.json)."""
+    t = run.get("timing", {})
+    items = [("config", run.get("config_file", "")), ("options", " ".join(run.get("options", [])) or "none"),
+             ("variant", run.get("variant", ""))]
+    items += list(run.get("versions", {}).items())
+    items += [(f"{k.removesuffix('_s')} (s)", f"{v:.1f}") for k, v in t.items() if k.endswith("_s")]
+    rows = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in items)
+    return (f"<section id=run><h2>Run: versions and timing</h2><p class=note>The measuring's wall-clock seconds; "
+            f"the report's own (its figures and this page) are in <a href=grad.json>grad.json</a>.</p>"
+            f"<table>{rows}</table></section>")
+
+
+def heading(run: dict) -> str:
+    """The page's title line: scene, light, loss and sizes, from the run's ``gradient`` record."""
+    g = run.get("gradient", {})
+    if not g:
+        return "dsm grad"
+    return (f"dsm grad: {g.get('scene', '?')}, {g.get('light', '?')} light, loss {g.get('loss', '?')} "
+            f"({g.get('loss_unit', '?')}); map {g.get('map_resolution', '?')}^2, image {g.get('image_resolution', '?')}^2")
+
+
+def page_html(out: Path, tables: dict, run: dict) -> str:
+    """The whole page."""
+    title = heading(run)
+    files = [n for n in ("table.md", "compare.md", "inverse.md", "grad.json") if (out / n).is_file() or n == "grad.json"]
+    meta = "Files: " + ", ".join(f"<a href=\"{_e(n)}\">{_e(n)}</a>" for n in files) + "."
+    body = (f"<h1>{_e(title)}</h1><p class=meta>{meta}</p><section id=answer>{answer_html(tables)}</section>"
+            + tables_html(tables) + figures_html(out) + others_html(out) + run_html(run))
+    return (f"<!doctype html><html lang=en><head><meta charset=utf-8><title>{_e(title)}</title>"
+            f"<meta name=viewport content=\"width=device-width\"><style>{CSS}</style></head><body>{body}"
+            f"<script>{csv_table.SORT_SCRIPT}{ZOOM_SCRIPT}</script></body></html>\n")
+
+
+def write_report(out: Path, run: dict) -> dict:
+    """Draw the report's figures and write report.html into ``out`` from its files; ``run`` is what grad.json
+    records (config, options, versions, the gradient's scene, timing). Returns the seconds of each part."""
+    out = Path(out)
+    tables = read_tables(out)
+    parts = draw_figures(out, tables, run.get("gradient", {}).get("inverse_tolerance"))
+    t = time.perf_counter()
+    with atomic(out / PAGE) as tmp:
+        tmp.write_text(page_html(out, tables, run), encoding="utf-8")
+    parts[PAGE] = time.perf_counter() - t
+    return parts
