@@ -23,8 +23,9 @@ PAGE_CSS = f"""
 figure.case{{margin:0;border:1px solid #ccc;padding:6px;width:{SHOWN_PX * 2 + 30}px;max-width:100%;
 box-sizing:border-box}}
 figure.case:target{{outline:3px solid #36c}} .pair{{display:flex;flex-wrap:wrap;gap:6px}}
-.pair figure{{margin:0}} .pair img{{width:{SHOWN_PX}px;height:{SHOWN_PX}px;image-rendering:pixelated;
-border:1px solid #999;display:block}} .pair figcaption,.nums{{font-size:12px;color:#333;margin:2px 0}}
+.pair figure{{margin:0}} .crop{{width:{SHOWN_PX}px;height:{SHOWN_PX}px;overflow:hidden;border:1px solid #999}}
+.crop img{{width:{SHOWN_PX}px;image-rendering:pixelated;display:block}}
+.pair figcaption,.nums{{font-size:12px;color:#333;margin:2px 0}}
 .bar{{height:14px;width:{SHOWN_PX * 2}px;max-width:100%;border:1px solid #888}}
 .ticks{{display:flex;justify-content:space-between;width:{SHOWN_PX * 2}px;max-width:100%;font-size:12px;
 margin-bottom:.6em}}
@@ -81,21 +82,24 @@ def numbers_html(rec: dict) -> str:
     return "<p class=nums>" + html.escape("; ".join(parts)) + "</p>"
 
 
-def image_html(out: Path, rel: str, alt: str, caption: str) -> str:
-    """One image of a card (``rel`` from the benchmark's folder), or a note where it was not kept."""
-    if not (Path(out) / rel).is_file():
+def image_html(out: Path, sheet: str, place: int, alt: str, caption: str) -> str:
+    """One image of a card: the square at ``place`` of its case's ``sheet`` (from the benchmark's
+    folder), shown SHOWN_PX wide; or a note where the sheet was not kept."""
+    if not (Path(out) / sheet).is_file():
         return f"<figure><p class=note>{html.escape(alt)}: not kept in {html.escape(case_images.FOLDER)}/</p></figure>"
-    return (f"<figure><img loading=lazy src=\"../{html.escape(rel, quote=True)}\" alt=\"{html.escape(alt, quote=True)}\""
-            f" width={SHOWN_PX} height={SHOWN_PX}><figcaption>{html.escape(caption)}</figcaption></figure>")
+    return (f"<figure><div class=crop><img loading=lazy src=\"../{html.escape(sheet, quote=True)}\" "
+            f"alt=\"{html.escape(alt, quote=True)}\" style=\"margin-top:-{place * SHOWN_PX}px\"></div>"
+            f"<figcaption>{html.escape(caption)}</figcaption></figure>")
 
 
-def card_html(out: Path, index: int, rec: dict, has_flip: bool) -> str:
-    """A record's card: where it ran, its class image and FLIP map, its numbers, its links."""
+def card_html(out: Path, index: int, place: int, rec: dict, has_flip: bool) -> str:
+    """A record's card (``place``: its image's in its case's sheets): where it ran, its class image and FLIP
+    map, its numbers, its links."""
     where = f"{rec['scene']}, {rec['unit']}, offset {ranking.offset_of(rec)}, {rec['light']} light"
-    class_rel, flip_rel = case_images.paths(rec)
-    images = image_html(out, class_rel, f"error classes of {where}", "error classes (colours above)")
+    class_sheet, flip_sheet = case_images.sheets(rec)
+    images = image_html(out, class_sheet, place, f"error classes of {where}", "error classes (colours above)")
     if has_flip:
-        images += image_html(out, flip_rel, f"FLIP map of {where}", "FLIP error (scale above)")
+        images += image_html(out, flip_sheet, place, f"FLIP map of {where}", "FLIP error (scale above)")
     row = (f"<a href=\"../leaderboard.html#case-{index}\">its row in the leaderboard</a>; "
            if ranking.at_origin(rec) else "")
     key = lambda k: "" if rec.get(k) is None or (isinstance(rec[k], float) and math.isnan(rec[k])) else repr(rec[k])
@@ -123,6 +127,7 @@ def legend_html(has_flip: bool) -> str:
 
 def contender_page(doc: dict, out: Path, contender: str) -> str:
     """The HTML of one contender's page."""
+    place = case_images.places(doc["cases"])
     recs = [(i, r) for i, r in enumerate(doc["cases"]) if r["contender"] == contender]
     has_flip = any("flip" in r for _, r in recs)
     worst = sorted(recs, key=lambda ir: (not metrics.defined(ir[1]["error_rate"]),
@@ -138,7 +143,7 @@ def contender_page(doc: dict, out: Path, contender: str) -> str:
             "error of the shaded render under its visibility against the exact render (what the FLIP column "
             "averages). Rates with an empty denominator are undefined.</p>" + legend_html(has_flip)
             + f"<div class=order>Order: {order}</div><div id=cards>"
-            + "".join(card_html(out, i, r, has_flip) for i, r in worst) + "</div>")
+            + "".join(card_html(out, i, place[i], r, has_flip) for i, r in worst) + "</div>")
     return (f"<!doctype html><html><head><meta charset=utf-8><title>{html.escape(contender)}: "
             f"{html.escape(doc['suite'])}</title><meta name=viewport content=\"width=device-width\">"
             f"<style>{CSS}{PAGE_CSS}</style></head><body>{body}<script>{ORDER_SCRIPT}</script></body></html>")

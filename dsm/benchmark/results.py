@@ -165,15 +165,13 @@ def class_image(path: Path) -> np.ndarray:
     return idx.astype(np.uint8)
 
 
-def config_records(case, res, ppd, variant, setups, known, out: Path | None, oracle=False, tuned=None) -> list:
-    """The records of one of a case's configs run (``res``), with their FLIP where ``ppd`` is given;
-    their class images and FLIP maps written under ``out`` where given (dsm.benchmark.case_images)."""
+def config_records(case, res, ppd, variant, setups, known, oracle=False, tuned=None) -> tuple:
+    """(records, images) of one of a case's configs run (``res``): its records, with their FLIP where
+    ``ppd`` is given, and per row (class image, FLIP map or None) for dsm.benchmark.case_images."""
     maps = None if ppd is None else {}
     flips = None if ppd is None else case_flips(case, res, ppd, variant, setups, known, maps)
-    records = case_records(case, res, flips, oracle=oracle, tuned=tuned)
-    if out is not None:                 # the oracle's record (last) has no image: zip stops at the rows
-        case_images.keep(out, records, res.rows, res.images, maps)
-    return records
+    images = [(res.images[row["case"]], None if maps is None else maps[row["case"]]) for row in res.rows]
+    return case_records(case, res, flips, oracle=oracle, tuned=tuned), images
 
 
 def run_case(case, ppd, variant: str | None = None, tuned=None, out: Path | None = None,
@@ -181,18 +179,22 @@ def run_case(case, ppd, variant: str | None = None, tuned=None, out: Path | None
     """(records, flicker records, the variant run) of one case: its depth config's records (with the
     oracle), then its pre-filtered config's if any (both on ``cluster`` when given); its motion
     config's flicker, run here into ``out`` (a motion run's frames are one sequence: not split in tasks).
-    Each record's class image and FLIP map go under ``out`` (dsm.benchmark.case_images) where given."""
+    Its records' class images and FLIP maps go under ``out`` (dsm.benchmark.case_images) where given."""
     import dsm
     res = measured(case.config, variant, cluster)
     setups = None if ppd is None else render.light_setups(case.config, variant)    # shared: same scene and lights
     known = {}                                                                       # FLIP by renders, both configs'
-    records = config_records(case, res, ppd, variant, setups, known, out, oracle=True, tuned=tuned)
+    records, images = config_records(case, res, ppd, variant, setups, known, oracle=True, tuned=tuned)
     if case.prefiltered is not None:
         pre = measured(case.prefiltered, variant, cluster)
-        records += config_records(case, pre, ppd, variant, setups, known, out)
+        more = config_records(case, pre, ppd, variant, setups, known)
+        records, images = records + more[0], images + more[1]
     if getattr(case, "virtual", None) is not None:      # dsm-bench-5 on; its light labelled as the depth config's
         vsm = measured(case.virtual, variant, cluster)
-        records += config_records(case, vsm, ppd, variant, setups, None, out)
+        more = config_records(case, vsm, ppd, variant, setups, None)
+        records, images = records + more[0], images + more[1]
+    if out is not None:                 # the oracles' records have no image: the rest pair with the rows, in order
+        case_images.keep(out, [r for r in records if r["contender"] != "oracle"], images)
     flicker = []
     for motion in (m for m in (case.motion, case.prefiltered_motion) if m is not None):
         folder = f"flicker/{motion['experiment']['name']}"
