@@ -395,7 +395,7 @@ def test_the_renders_are_the_run_s_shadow_image_and_its_exact_twin(tmp_path, whi
     """A far case run into a folder: the benchmark's render under V is the run's shadow PNG, byte for
     byte (8-bit); the exact render differs from it only on the case's errors (brighter on acne,
     darker on peter-panning); the case's FLIP is flip-evaluator's on these two arrays, evaluated once per
-    distinct pair of renders."""
+    distinct pair of renders, and its per-pixel map (kept for the case images) flip-evaluator's map."""
     import dsm
     import flip_evaluator
     from PIL import Image
@@ -409,8 +409,8 @@ def test_the_renders_are_the_run_s_shadow_image_and_its_exact_twin(tmp_path, whi
         setups = render.light_setups(case.config)
         assert res.rows[0]["n_receivers"] < len(setups[(res.rows[0]["scene"], res.rows[0]["light"])][1].pixels)
     setups = render.light_setups(case.config)
-    known = {}
-    flips = results.case_flips(case, res, 67.0, known=known)
+    known, maps = {}, {}
+    flips = results.case_flips(case, res, 67.0, known=known, maps=maps)
     pairs = set()
     for row in res.rows:
         shadowed, exact = render.case_renders(setups, row, res.images[row["case"]])
@@ -423,8 +423,12 @@ def test_the_renders_are_the_run_s_shadow_image_and_its_exact_twin(tmp_path, whi
         assert (exact[acne] >= shadowed[acne]).all() and (exact[peter] <= shadowed[peter]).all()
         assert (exact != shadowed).sum() > 0 or row["n_acne"] + row["n_peterpan"] == 0
         rgb = lambda g: np.repeat(np.clip(g, 0, 1)[..., None], 3, axis=2).astype(np.float32)
-        assert flips[row["case"]] == pytest.approx(
-            flip_evaluator.evaluate(rgb(exact), rgb(shadowed), "LDR", parameters={"ppd": 67.0})[1], rel=1e-6)
+        error, mean, _ = flip_evaluator.evaluate(rgb(exact), rgb(shadowed), "LDR", applyMagma=False,
+                                                 parameters={"ppd": 67.0})
+        assert flips[row["case"]] == pytest.approx(mean, rel=1e-6)
+        # the kept per-pixel map (the case images' FLIP) is flip-evaluator's, and its mean the row's
+        assert maps[row["case"]].shape == exact.shape and np.allclose(maps[row["case"]], error[..., 0], atol=1e-6)
+        assert maps[row["case"]].astype(np.float64).mean() == pytest.approx(flips[row["case"]], abs=1e-5)
     assert len(known) == len(pairs)          # one FLIP evaluation per distinct pair of renders
 
 
