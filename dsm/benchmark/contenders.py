@@ -19,7 +19,7 @@ FOLDER = "contenders"
 SHOWN_PX = 256              # an image's side on the page (the default size's 64 pixels at 4 CSS px each)
 SCALE_TICKS = (0.0, 0.25, 0.5, 0.75, 1.0)
 PAGE_CSS = f"""
-.order button{{margin-right:.4em}} #cards{{display:flex;flex-wrap:wrap;gap:14px;margin-top:.6em}}
+.order button{{margin-right:.4em}} .order button[aria-pressed=true]{{font-weight:600;background:#dde8ff}} #cards{{display:flex;flex-wrap:wrap;gap:14px;margin-top:.6em}}
 figure.case{{margin:0;border:1px solid #ccc;padding:6px;width:{SHOWN_PX * 2 + 30}px;max-width:100%;
 box-sizing:border-box}}
 figure.case:target{{outline:3px solid #36c}} .pair{{display:flex;flex-wrap:wrap;gap:6px}}
@@ -78,7 +78,7 @@ def numbers_html(rec: dict) -> str:
     if "flip" in rec:
         parts.append(f"FLIP {value_text(rec['flip'])}")
     if "n_leak" in rec:
-        parts.append(f"leak {rec['n_leak']}: {value_text(rec['leak_rate'])}")
+        parts.append(f"leaks {rec['n_leak']}{of(shadowed)} shadowed: {value_text(rec['leak_rate'])}")
     return "<p class=nums>" + html.escape("; ".join(parts)) + "</p>"
 
 
