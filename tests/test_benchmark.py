@@ -395,7 +395,7 @@ def test_the_renders_are_the_run_s_shadow_image_and_its_exact_twin(tmp_path, whi
     """A far case run into a folder: the benchmark's render under V is the run's shadow PNG, byte for
     byte (8-bit); the exact render differs from it only on the case's errors (brighter on acne,
     darker on peter-panning); the case's FLIP is flip-evaluator's on these two arrays, evaluated once per
-    distinct pair of renders."""
+    distinct pair of renders, and its per-pixel map (kept for the case images) flip-evaluator's map."""
     import dsm
     import flip_evaluator
     from PIL import Image
@@ -409,8 +409,8 @@ def test_the_renders_are_the_run_s_shadow_image_and_its_exact_twin(tmp_path, whi
         setups = render.light_setups(case.config)
         assert res.rows[0]["n_receivers"] < len(setups[(res.rows[0]["scene"], res.rows[0]["light"])][1].pixels)
     setups = render.light_setups(case.config)
-    known = {}
-    flips = results.case_flips(case, res, 67.0, known=known)
+    known, maps = {}, {}
+    flips = results.case_flips(case, res, 67.0, known=known, maps=maps)
     pairs = set()
     for row in res.rows:
         shadowed, exact = render.case_renders(setups, row, res.images[row["case"]])
@@ -423,8 +423,12 @@ def test_the_renders_are_the_run_s_shadow_image_and_its_exact_twin(tmp_path, whi
         assert (exact[acne] >= shadowed[acne]).all() and (exact[peter] <= shadowed[peter]).all()
         assert (exact != shadowed).sum() > 0 or row["n_acne"] + row["n_peterpan"] == 0
         rgb = lambda g: np.repeat(np.clip(g, 0, 1)[..., None], 3, axis=2).astype(np.float32)
-        assert flips[row["case"]] == pytest.approx(
-            flip_evaluator.evaluate(rgb(exact), rgb(shadowed), "LDR", parameters={"ppd": 67.0})[1], rel=1e-6)
+        error, mean, _ = flip_evaluator.evaluate(rgb(exact), rgb(shadowed), "LDR", applyMagma=False,
+                                                 parameters={"ppd": 67.0})
+        assert flips[row["case"]] == pytest.approx(mean, rel=1e-6)
+        # the kept per-pixel map (the case images' FLIP) is flip-evaluator's, and its mean the row's
+        assert maps[row["case"]].shape == exact.shape and np.allclose(maps[row["case"]], error[..., 0], atol=1e-6)
+        assert maps[row["case"]].astype(np.float64).mean() == pytest.approx(flips[row["case"]], abs=1e-5)
     assert len(known) == len(pairs)          # one FLIP evaluation per distinct pair of renders
 
 
@@ -613,9 +617,10 @@ def _counts(doc) -> dict:
 def test_ctrl_c_and_kill_keep_finished_cases_and_resume_counts_as_uninterrupted(test_run, tmp_path):
     """Ctrl-C once the first case is kept: exit 130, a line saying what is kept and how to go on.
     --resume, killed (SIGKILL) once another case is kept, then --resume to the end: every count,
-    FLIP and flicker rate that of the uninterrupted run, and the kept cases not run again."""
+    FLIP and flicker rate that of the uninterrupted run, the kept cases not run again, and every
+    case's class image and FLIP map the same bytes as the uninterrupted run's."""
     import signal
-    _, whole = test_run
+    whole_out, whole = test_run
     out = tmp_path / "bm"
     proc = _suite_process(out)
     _wait_for_cases(out, 0, proc)
@@ -638,6 +643,8 @@ def test_ctrl_c_and_kill_keep_finished_cases_and_resume_counts_as_uninterrupted(
     assert len(ran) == 8 - kept                                    # the kept cases are not run again
     doc = json.loads((out / "results.json").read_text())
     assert _counts(doc) == _counts(whole)
+    images = lambda d: {p.relative_to(d).as_posix(): p.read_bytes() for p in (d / "case_images").rglob("*.png")}
+    assert len(images(out)) == 2 * 8 and images(out) == images(whole_out)
     assert not (out / "cases").exists() and (out / "leaderboard.html").is_file()
     assert "dsm benchmark: rank 1: " in stdout                     # the leaderboard's top, in the terminal
 
@@ -658,13 +665,114 @@ def test_force_replaces_every_file_of_the_previous_run_and_keeps_the_user_s(tmp_
     (none is stale beside the new results); a file the user put there stays."""
     out = tmp_path / "bm"
     for name in ("flicker/dsm-bench-4-x-flicker/frames.csv", "cases/0003.json", "cases/run.json", "scale.png",
-                 "leaderboard.html", "results.json", "notes.txt"):
+                 "leaderboard.html", "results.json", "notes.txt", "case_images/old_m_0/spot_x_flip.png",
+                 "contenders/old.html"):
         (out / name).parent.mkdir(parents=True, exist_ok=True)
         (out / name).write_text("old")
     monkeypatch.setenv(SIZE_ENV, "test")
     assert cli.main(["benchmark", "--out", str(out), "--suite", "dsm-bench-1", "--force"]) == 0
     assert not (out / "flicker").exists() and not (out / "cases").exists()
+    assert not (out / "case_images" / "old_m_0").exists() and not (out / "contenders" / "old.html").exists()
     assert (out / "notes.txt").read_text() == "old"
     doc = json.loads((out / "results.json").read_text())
     assert doc["suite"] == "dsm-bench-1" and doc["results_version"] == 3
     assert (out / "leaderboard.html").read_text() != "old" and (out / "scale.png").read_bytes() != b"old"
+
+
+def _stored(path):
+    """An indexed PNG's indices and palette, decoded by Pillow (not the kit's reader)."""
+    from PIL import Image
+    with Image.open(path) as im:
+        assert im.mode == "P", path
+        return np.asarray(im), np.asarray(im.getpalette(), np.uint8).reshape(-1, 3)
+
+
+def _stored_images(out, doc, which):
+    """Each record's stored image ((record, indices (32, 32), palette) but the oracles'), cut by hand from
+    its case's sheet (Pillow decodes it): a case's records top to bottom in results.json's order."""
+    from dsm.benchmark import case_images
+    recs = [r for r in doc["cases"] if r["contender"] != "oracle"]
+    by_case = {}
+    for r in recs:
+        by_case.setdefault((r["scene"], r["unit"], r["offset"]), []).append(r)
+    out_list = []
+    for key, rs in by_case.items():
+        sheet, palette = _stored(out / case_images.sheets(rs[0])[which])
+        assert sheet.shape == (32 * len(rs), 32), key           # one square image per record, nothing else
+        out_list += [(r, sheet[32 * k:32 * (k + 1)], palette) for k, r in enumerate(rs)]
+    return out_list
+
+
+def test_a_case_s_stored_class_image_holds_the_counts_of_its_row(test_run):
+    """Every record's class image decodes (Pillow) to classes whose counts, recomputed with numpy, are
+    the record's receivers, acne and peter-panning; its palette is the error image's colours; the kit's
+    reader (case_images.read_class) cuts the same image."""
+    from dsm.benchmark import case_images
+    from dsm.truth import metrics as m
+    out, doc = test_run
+    stored = _stored_images(out, doc, 0)
+    assert len(stored) == 80 and len(list((out / "case_images").iterdir())) == 2 * 8     # two sheets a case
+    for r, classes, palette in stored:
+        assert np.array_equal(palette[:len(m.CLASS_COLORS)], m.CLASS_COLORS)
+        counts = (int((classes != m.OUTSIDE).sum()), int(np.isin(classes, (m.ACNE, m.ACNE_RESOLUTION)).sum()),
+                  int(np.isin(classes, (m.PETERPAN, m.PETERPAN_RESOLUTION, m.LEAK)).sum()))
+        assert counts == (r["n_receivers"], r["n_acne"], r["n_peterpan"]), r
+    assert any(r["n_acne"] for r, _, _ in stored) and any(r["n_peterpan"] for r, _, _ in stored)   # not all 0
+    last = max(i for i, r in enumerate(doc["cases"]) if r["contender"] != "oracle")
+    assert np.array_equal(case_images.read_class(out, doc["cases"], last), stored[-1][1])
+
+
+def test_a_case_s_stored_flip_map_s_mean_is_its_row_s_flip_within_the_png_s_quantisation(test_run):
+    """A stored FLIP pixel is round(255 FLIP): its mean is within 1/510 of the row's FLIP (FLIP's own
+    mean, summed in float32, adds under 1e-5); the palette is matplotlib's magma at i / 255."""
+    from matplotlib import colormaps
+    from dsm.benchmark import case_images
+    out, doc = test_run
+    magma = np.round(colormaps["magma"](np.arange(256) / 255.0)[:, :3] * 255).astype(np.uint8)
+    off = []
+    for r, idx, palette in _stored_images(out, doc, 1):
+        assert np.array_equal(palette, magma)
+        off.append(abs(idx.astype(np.float64).mean() / 255.0 - r["flip"]))
+    assert len(off) == 80 and case_images.FLIP_BOUND == 1 / 510 and max(off) <= 1 / 510 + 1e-5
+    assert max(r["flip"] for r in doc["cases"] if "flip" in r) > 10 / 510     # a map with errors, not all black
+
+
+def _links(path):
+    """(attribute, value) of every href and src of an HTML file."""
+    from html.parser import HTMLParser
+    found = []
+
+    class Links(HTMLParser):
+        def handle_starttag(self, tag, attrs):
+            found.extend((k, v) for k, v in attrs if k in ("href", "src"))
+    Links().feed(path.read_text())
+    return found
+
+
+def test_every_link_of_the_leaderboard_and_its_contender_pages_resolves(test_run):
+    """Each href and src of leaderboard.html and contenders/*.html names a file that exists, and its
+    #fragment an id in it; every contender but the oracle has a page with a card per record of it, and
+    the ranking links each contender's name to its page."""
+    import re
+    from urllib.parse import unquote
+    from dsm.benchmark import contenders
+    out, doc = test_run
+    pages = sorted((out / "contenders").glob("*.html"))
+    names = {r["contender"] for r in doc["cases"]} - {"oracle"}
+    assert {p.relative_to(out).as_posix() for p in pages} == {contenders.page_path(c) for c in names}
+    checked = 0
+    for page in [out / "leaderboard.html"] + pages:
+        for _, value in _links(page):
+            assert not re.match(r"[a-z]+:", value), value                 # from the file system alone
+            target, _, frag = unquote(value).partition("#")
+            path = (page.parent / target).resolve() if target else page
+            assert path.is_file(), (page.name, value)
+            if frag:
+                assert re.search(rf"\bid={re.escape(frag)}[ >]", path.read_text()), (page.name, value)
+            checked += 1
+    assert checked > 2 * 80
+    ranking_links = re.findall(r'<td><a href="(contenders/[^"]+)">([^<]+)</a>', (out / "leaderboard.html").read_text())
+    assert {name for _, name in ranking_links} == names
+    for c in names:
+        text = (out / contenders.page_path(c)).read_text()
+        assert text.count("<figure class=case ") == sum(r["contender"] == c for r in doc["cases"])

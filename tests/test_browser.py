@@ -328,3 +328,52 @@ def test_clicking_the_grad_reports_rel_error_header_orders_its_rows(grad_page):
     key = lambda r: (r["rel_error"] == "", float(r["rel_error"]) if r["rel_error"] else 0.0)
     want = [[r["technique"], r["param"]] for r in sorted(rows, key=key)]
     assert got == want and want != [[r["technique"], r["param"]] for r in rows]
+
+
+def test_a_contender_page_fits_loads_its_images_and_orders_its_cases_worst_first(tmp_path):
+    """A contender's page from a hand-made result and its case images: the leaderboard's contender name
+    opens it; at two widths nothing runs past the page's edge and every image loads, shown at
+    contenders.SHOWN_PX; its cards come worst error rate first, and 'worst FLIP first' orders them by
+    the FLIP values given by hand (a case whose error rate is undefined last)."""
+    import numpy as np
+    from dsm.benchmark import case_images, contenders, page as bench_page
+    rng = np.random.default_rng(5)
+    given = {"s": (0.10, 0.02), "t": (0.30, 0.01), "u": (0.20, 0.05), "v": (float("nan"), 0.03)}
+    cases = []
+    for scene, (err, flip) in given.items():
+        n = 0 if err != err else 1000
+        for c in ("bevy", "three"):
+            cases.append({"scene": scene, "unit": "m", "offset": "0", "light": "spot", "contender": c,
+                          "n_receivers": n, "n_gt_shadowed": n // 2, "n_acne": int(err * n) if n else 0,
+                          "n_peterpan": 0, "acne_rate": err, "peterpan_rate": 0.0 if n else err, "error_rate": err,
+                          "flip": flip, "texel_size": 0.01, "build_ms": 1.0, "lookup_ms": 1.0, "params": ""})
+        case_images.keep(tmp_path, cases[-2:], [(rng.integers(0, 8, (24, 24)).astype(np.uint8),
+                                                  rng.random((24, 24)).astype(np.float32)) for _ in range(2)])
+        cases.append({"scene": scene, "unit": "m", "offset": "0", "light": "spot", "contender": "oracle",
+                      "n_receivers": n, "world_objective": 0.05, "texel_objective": 0.05, "per_texel_objective": 0.0})
+    doc = {"suite": "dsm-bench-5", "suite_sha256": "0" * 64, "size": "test", "dsm_version": "0", "variant": "x",
+           "versions": {"dsm_git_commit": "c"}, "machine": {"cpu": "cpu", "cores": 1}, "cases": cases}
+    board = bench_page.write_page(doc, tmp_path)
+    cards = lambda: drv.execute_script("return Array.from(document.querySelectorAll('#cards > figure.case'))"
+                                       ".map(f => f.querySelector('figcaption').textContent.split(',')[0])")
+    drv = _chrome()
+    try:
+        drv.get(board.as_uri())
+        drv.find_element("css selector", "#ranking a[href='contenders/bevy.html']").click()
+        assert drv.current_url == (tmp_path / contenders.page_path("bevy")).as_uri()
+        for width in (1280, 820):
+            drv.set_window_size(width, 900)
+            drv.get((tmp_path / contenders.page_path("bevy")).as_uri())
+            assert _all_images_loaded(drv) == []
+            layout = drv.execute_script(LAYOUT_JS)
+            assert layout["overflow"] == [] and layout["pageWidth"] <= layout["window"]
+            # each image its case's sheet (two records, 24 px squares) cut to the record's square
+            shown = drv.execute_script("return Array.from(document.querySelectorAll('#cards img')).map(i => "
+                                       "[i.clientWidth, i.naturalWidth, i.naturalHeight, i.parentElement.clientHeight])")
+            assert shown == [[contenders.SHOWN_PX, 24, 48, contenders.SHOWN_PX]] * 8
+        assert cards() == ["t", "u", "s", "v"]                      # error rate 0.3, 0.2, 0.1, undefined
+        assert "undefined" in drv.find_element("css selector", "#cards > figure.case:last-child").text
+        drv.find_element("css selector", ".order button[data-key=flip]").click()
+        assert cards() == sorted(given, key=lambda s: -given[s][1]) == ["u", "v", "s", "t"]
+    finally:
+        drv.quit()

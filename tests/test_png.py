@@ -45,3 +45,24 @@ def test_a_figure_is_written_at_its_dpi_and_keeps_its_own(tmp_path):
         assert im.mode == "RGB" and im.size == (int(w * figures.DPI), int(h * figures.DPI))   # Agg's canvas: whole pixels, cut
         assert np.asarray(im)[0, 0].tolist() == [255, 255, 255]       # a white background (the figure is opaque)
     assert dpi != figures.DPI and fig.dpi == dpi
+
+
+@pytest.mark.parametrize("shape,colours", [((9, 7), 8), ((1, 1), 1), ((5, 13), 256)])
+def test_pillow_decodes_an_indexed_image_s_indices_and_palette(shape, colours):
+    """Colour type 3: Pillow reads back every index and the palette's colours, and the RGB it shows."""
+    idx = RNG.integers(0, colours, shape).astype(np.uint8)
+    pal = RNG.integers(0, 256, (colours, 3)).astype(np.uint8)
+    with Image.open(io.BytesIO(png.encode_indexed(idx, pal))) as im:
+        assert im.mode == "P" and im.size == (shape[1], shape[0])
+        assert np.array_equal(np.asarray(im), idx)
+        assert np.array_equal(np.asarray(im.getpalette()[:3 * colours], np.uint8).reshape(-1, 3), pal)
+        assert np.array_equal(np.asarray(im.convert("RGB")), pal[idx])
+
+
+@pytest.mark.parametrize("idx,pal", [(np.full((2, 2), 3, np.uint8), np.zeros((3, 3), np.uint8)),
+                                     (np.zeros((2, 2), np.int32), np.zeros((3, 3), np.uint8)),
+                                     (np.zeros((2, 2), np.uint8), np.zeros((257, 3), np.uint8)),
+                                     (np.zeros((0, 2), np.uint8), np.zeros((3, 3), np.uint8))])
+def test_an_indexed_image_a_reader_would_refuse_is_refused(idx, pal):
+    with pytest.raises(ValueError):
+        png.encode_indexed(idx, pal)

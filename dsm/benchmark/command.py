@@ -1,5 +1,5 @@
 """``dsm benchmark``: run the suite (or compare two results, or rebuild the page) and write
-results.json, leaderboard.html and scale.png.
+results.json, leaderboard.html, scale.png, the contender pages and the case images.
 
 Exit status as ``dsm run``'s: 0 done, 2 a user's mistake (a flag, a file, a folder), 3 a missing
 set-up (a variant this machine cannot run, Ray's client), 130 interrupted (its finished cases
@@ -14,12 +14,13 @@ from pathlib import Path
 
 from ..config.read import VARIANTS
 from ..experiment import lock
-from . import caselog, compare, document, page, results
+from . import case_images, caselog, compare, contenders, document, page, results
 from .suite import LATEST, SUITE_FILES
 
 SIZE_ENV = "DSM_BENCHMARK_SIZE"     # a hidden size for tests: DSM_BENCHMARK_SIZE=test
 # what a run writes into --out: --force removes these (and nothing else a user keeps there)
-WRITTEN = ("results.json", "leaderboard.html", "scale.png", "flicker", caselog.FOLDER)
+WRITTEN = ("results.json", "leaderboard.html", "scale.png", "flicker", caselog.FOLDER, case_images.FOLDER,
+           contenders.FOLDER)
 
 
 def add_parser(sub):
@@ -29,7 +30,8 @@ def add_parser(sub):
     b.add_argument("--out", default="benchmark", help="folder for results.json and leaderboard.html (default: benchmark/)")
     b.add_argument("--full", action="store_true", help="the full size (larger resolutions: a GPU or a cluster)")
     b.add_argument("--compare", nargs=2, metavar=("A.json", "B.json"), help="compare two results.json files")
-    b.add_argument("--page", metavar="DIR", help="rebuild leaderboard.html and scale.png in DIR from its results.json")
+    b.add_argument("--page", metavar="DIR", help="rebuild leaderboard.html, scale.png and the contender pages in DIR "
+                   "from its results.json")
     b.add_argument("--suite", choices=list(SUITE_FILES), default=None,
                    help=f"the suite's version (default: the newest, {LATEST}); an older one re-runs its cases")
     b.add_argument("--variant", choices=VARIANTS, help="Mitsuba variant (default llvm_ad_rgb)")
@@ -155,7 +157,7 @@ def _compare(args, out: Path) -> int:
 
 
 def _page(folder: Path) -> int:
-    """leaderboard.html and scale.png rebuilt from ``folder``'s results.json alone."""
+    """leaderboard.html, scale.png and the contender pages rebuilt from ``folder``'s results.json alone."""
     try:
         doc = document.read(folder / "results.json")
     except document.NotResults as e:
@@ -198,7 +200,7 @@ def _run(args, out: Path) -> int:
 
 def _clear(out: Path):
     """--force: everything an earlier run wrote into ``out`` removed (its results, page, figure,
-    flicker runs and finished cases), so no stale file sits beside the new results."""
+    flicker runs, finished cases, case images and contender pages), so no stale file sits beside the new results."""
     for name in WRITTEN:
         path = out / name
         if path.is_dir():

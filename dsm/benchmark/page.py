@@ -9,7 +9,7 @@ from .. import prefilter
 from ..report import labels
 from ..report.html import CSS, SCRIPT
 from ..schemes.presets import PRESETS
-from . import bias_units, figure, ranking
+from . import bias_units, contenders, figure, ranking
 
 LEAK_NOTE = (" Leak rate (pre-filtered maps only, '-' for the depth map's contenders): their receivers lit at "
              "least 2 texels inside the exact shadow on their own surface (n_leak; an outline error is never "
@@ -60,7 +60,8 @@ function applyFilters() {
   }
 }
 selects.forEach(s => s.addEventListener('change', applyFilters));
-document.querySelectorAll('#ranking tbody tr').forEach(tr => tr.addEventListener('click', () => {
+document.querySelectorAll('#ranking tbody tr').forEach(tr => tr.addEventListener('click', e => {
+  if (e.target.closest('a')) return;          // the contender's name opens its page
   document.querySelector('.filters select[name=contender]').value = tr.dataset.contender;
   applyFilters();
   document.getElementById('cases').scrollIntoView();
@@ -92,9 +93,10 @@ def row_attrs(values: dict) -> str:
     return "".join(f' data-{k}="{html.escape(str(v), quote=True)}"' for k, v in values.items())
 
 
-def table(head: list, rows: list, sortable=True, attrs=None, table_id=None) -> str:
+def table(head: list, rows: list, sortable=True, attrs=None, table_id=None, links=None, ids=None) -> str:
     """An HTML table: ``head`` the column titles, ``rows`` lists of cells (numbers right-aligned, sortable);
-    ``attrs``: a dict of data attributes per row (the table is then filtered by the page's filters)."""
+    ``attrs``: a dict of data attributes per row (the table is then filtered by the page's filters);
+    ``links``: per row, {column: href} of the text cells that link; ``ids``: per row, its id (or None)."""
     num = [all(isinstance(r[i], (int, float)) or r[i] is None for r in rows) for i in range(len(head))]
     classes = " ".join((["sortable"] if sortable else []) + (["filtered"] if attrs is not None else []))
     ident = f" id={table_id}" if table_id else ""
@@ -102,10 +104,17 @@ def table(head: list, rows: list, sortable=True, attrs=None, table_id=None) -> s
     out += [f"<th data-type={'num' if n else 'text'}>{html.escape(h)}</th>" for h, n in zip(head, num)]
     out.append("</tr></thead><tbody>")
     for i, r in enumerate(rows):
-        cells = [f"<td class=n data-v='{'' if v is None else v}'>{fmt(v)}</td>" if n else f"<td>{html.escape(fmt(v))}</td>"
-                 for v, n in zip(r, num)]
-        out.append(f"<tr{row_attrs(attrs[i]) if attrs is not None else ''}>" + "".join(cells) + "</tr>")
+        href = links[i] if links is not None else {}
+        cells = [f"<td class=n data-v='{'' if v is None else v}'>{fmt(v)}</td>" if n else
+                 f"<td>{link(html.escape(fmt(v)), href.get(j))}</td>" for j, (v, n) in enumerate(zip(r, num))]
+        row_id = f" id={ids[i]}" if ids is not None and ids[i] else ""
+        out.append(f"<tr{row_id}{row_attrs(attrs[i]) if attrs is not None else ''}>" + "".join(cells) + "</tr>")
     return "".join(out) + "</tbody></table></div>"
+
+
+def link(text_html: str, href: str | None) -> str:
+    """``text_html`` as a link to ``href`` (None: as it is)."""
+    return text_html if href is None else f"<a href=\"{html.escape(href, quote=True)}\">{text_html}</a>"
 
 
 def answer(doc: dict, ranked: list) -> str:
@@ -221,7 +230,8 @@ def filters_html(doc: dict) -> str:
 
 def cases_section(doc: dict) -> str:
     """Every case at the origin: a row per contender, scene, unit and light, filtered by the page's filters."""
-    recs = [r for r in doc["cases"] if ranking.at_origin(r) and r["contender"] != "oracle"]
+    indexed = [(i, r) for i, r in enumerate(doc["cases"]) if ranking.at_origin(r) and r["contender"] != "oracle"]
+    recs = [r for _, r in indexed]
     head = ["contender", "family", "scene", "unit", "light", "parameters", "error rate", "acne rate",
             "peter-pan rate", "FLIP", "leak rate", "receivers", "build ms", "lookup ms"]
     rows = [[r["contender"], family(doc, r["contender"]), r["scene"], r["unit"], r["light"],
@@ -230,7 +240,10 @@ def cases_section(doc: dict) -> str:
     attrs = [{k: (family(doc, r["contender"]) if k == "family" else r[k]) for k in FILTERS} for r in recs]
     return (f"<section id=cases><h2>Cases at the origin (<span id=case-list-shown>{len(rows)}</span> of "
             f"{len(rows)} shown)</h2><p class=note>Parameters to four significant digits (a depth-range step as "
-            "2^-k); results.json holds them exactly.</p>" + table(head, rows, attrs=attrs, table_id="case-list")
+            "2^-k); results.json holds them exactly. A contender's name opens its case's images.</p>"
+            + table(head, rows, attrs=attrs, table_id="case-list", ids=[f"case-{i}" for i, _ in indexed],
+                    links=[{0: f"{contenders.page_path(r['contender'])}#{contenders.case_anchor(i)}"}
+                           for i, r in indexed])
             + "</section>")
 
 
@@ -269,10 +282,14 @@ def write_page(doc: dict, out: Path) -> Path:
             "Every column but the offsets' reads the cases at the origin. Far change: the error at the farthest "
             f"offset less the one at the origin (the error at each offset: the offset table below)."
             f"{html.escape(flip)}{html.escape(LEAK_NOTE)}{html.escape(flicker_note(doc))} Click a header to sort, a "
-            "row to see its cases.</p>" + filters_html(doc) + table(head, rows, attrs=attrs, table_id="ranking")
+            "row to see its cases in the table below, a contender's name to open its page: each case's error "
+            "classes and FLIP map, the worst first.</p>" + filters_html(doc)
+            + table(head, rows, attrs=attrs, table_id="ranking",
+                    links=[{1: contenders.page_path(r["contender"])} for r in ranked])
             + grid_section(doc) + scale_section(doc) + cases_section(doc) + bias_section(doc))
     Path(out).mkdir(parents=True, exist_ok=True)
     figure.write(doc, out)                      # scale.png, which the page shows
+    contenders.write_pages(doc, out)            # the pages a ranking row's contender links to
     path = Path(out) / "leaderboard.html"
     path.write_text(f"<!doctype html><html><head><meta charset=utf-8><title>{html.escape(doc['suite'])}</title>"
                     f"<meta name=viewport content=\"width=device-width\"><style>{CSS}{PAGE_CSS}</style></head>"

@@ -36,10 +36,16 @@ def one_thread() -> int:
     return n
 
 
-def mean_flip(reference: np.ndarray, test: np.ndarray, ppd: float) -> float:
-    """The mean LDR FLIP error of ``test`` against ``reference`` (grey renders) at ``ppd`` pixels per degree."""
+def flip(reference: np.ndarray, test: np.ndarray, ppd: float) -> tuple:
+    """(per-pixel LDR FLIP error (H, W) float32 in [0, 1], its mean as FLIP reports it) of ``test`` against
+    ``reference`` (grey renders) at ``ppd`` pixels per degree."""
     import flip_evaluator
     one_thread()
-    _, mean, _ = flip_evaluator.evaluate(as_rgb(reference), as_rgb(test), "LDR", inputsRGB=True, applyMagma=False,
-                                         computeMeanError=True, parameters={"ppd": float(ppd)})
-    return float(mean)
+    error, mean, _ = flip_evaluator.evaluate(as_rgb(reference), as_rgb(test), "LDR", inputsRGB=True,
+                                             applyMagma=False, computeMeanError=True, parameters={"ppd": float(ppd)})
+    return np.asarray(error, np.float32).reshape(np.shape(reference)), float(mean)
+
+
+def mean_flip(reference: np.ndarray, test: np.ndarray, ppd: float) -> float:
+    """The mean LDR FLIP error of ``test`` against ``reference`` (grey renders) at ``ppd`` pixels per degree."""
+    return flip(reference, test, ppd)[1]

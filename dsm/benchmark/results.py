@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +23,7 @@ import numpy as np
 from ..core.env import machine
 from ..report import figures, io as report_io
 from ..truth import metrics
-from . import caselog, perceptual, ranking, render
+from . import case_images, caselog, perceptual, ranking, render
 from .document import RESULTS_VERSION
 from .suite import LATEST, ORIGIN, SUITE_FILES, TIMING_CALLS, cases, load_suite, suite_sha256, tuned_labels
 
@@ -83,11 +84,13 @@ def case_records(case, results, flips=None, oracle=True, tuned=None) -> list:
     return out
 
 
-def case_flips(case, res, ppd: float, variant: str | None = None, setups=None, known: dict | None = None) -> dict:
+def case_flips(case, res, ppd: float, variant: str | None = None, setups=None, known: dict | None = None,
+               maps: dict | None = None) -> dict:
     """Case id -> mean FLIP of each row's shadowed render against the exact render, at ``ppd`` (``setups``:
     the case's :func:`dsm.benchmark.render.light_setups`, traced here when not given). ``known``: FLIP by
     the two renders' bytes, filled here: rows whose renders are the same pixels (a third of a suite's
-    rows: contenders that classify every pixel alike) share one evaluation, the same value."""
+    rows: contenders that classify every pixel alike) share one evaluation, the same value. ``maps``:
+    filled here with each row's per-pixel FLIP map (case id -> (H, W) float32), where given."""
     setups = render.light_setups(case.config, variant) if setups is None else setups
     known = {} if known is None else known
     out = {}
@@ -95,8 +98,10 @@ def case_flips(case, res, ppd: float, variant: str | None = None, setups=None, k
         shadowed, exact = render.case_renders(setups, row, res.images[row["case"]])
         key = (_pixels_key(exact), _pixels_key(shadowed))
         if key not in known:
-            known[key] = perceptual.mean_flip(exact, shadowed, ppd)
-        out[row["case"]] = known[key]
+            known[key] = perceptual.flip(exact, shadowed, ppd)
+        error, out[row["case"]] = known[key]
+        if maps is not None:
+            maps[row["case"]] = error
     return out
 
 
@@ -146,25 +151,36 @@ def class_image(path: Path) -> np.ndarray:
     return idx.astype(np.uint8)
 
 
+def config_records(case, res, ppd, variant, setups, known, oracle=False, tuned=None) -> tuple:
+    """(records, images) of one of a case's configs run (``res``): its records, with their FLIP where
+    ``ppd`` is given, and per row (class image, FLIP map or None) for dsm.benchmark.case_images."""
+    maps = None if ppd is None else {}
+    flips = None if ppd is None else case_flips(case, res, ppd, variant, setups, known, maps)
+    images = [(res.images[row["case"]], None if maps is None else maps[row["case"]]) for row in res.rows]
+    return case_records(case, res, flips, oracle=oracle, tuned=tuned), images
+
+
 def run_case(case, ppd, variant: str | None = None, tuned=None, out: Path | None = None,
              cluster: str | None = None) -> tuple:
     """(records, flicker records, the variant run) of one case: its depth config's records (with the
     oracle), then its pre-filtered config's if any (both on ``cluster`` when given); its motion
-    config's flicker, run here into ``out`` (a motion run's frames are one sequence: not split in tasks)."""
+    config's flicker, run here into ``out`` (a motion run's frames are one sequence: not split in tasks).
+    Its records' class images and FLIP maps go under ``out`` (dsm.benchmark.case_images) where given."""
     import dsm
     res = measured(case.config, variant, cluster)
     setups = None if ppd is None else render.light_setups(case.config, variant)    # shared: same scene and lights
     known = {}                                                                       # FLIP by renders, both configs'
-    records = case_records(case, res, None if ppd is None else case_flips(case, res, ppd, variant, setups, known),
-                           tuned=tuned)
+    records, images = config_records(case, res, ppd, variant, setups, known, oracle=True, tuned=tuned)
     if case.prefiltered is not None:
         pre = measured(case.prefiltered, variant, cluster)
-        records += case_records(case, pre, None if ppd is None else case_flips(case, pre, ppd, variant, setups, known),
-                                oracle=False)
+        more = config_records(case, pre, ppd, variant, setups, known)
+        records, images = records + more[0], images + more[1]
     if getattr(case, "virtual", None) is not None:      # dsm-bench-5 on; its light labelled as the depth config's
         vsm = measured(case.virtual, variant, cluster)
-        records += case_records(case, vsm, None if ppd is None else case_flips(case, vsm, ppd, variant, setups),
-                                oracle=False)
+        more = config_records(case, vsm, ppd, variant, setups, None)
+        records, images = records + more[0], images + more[1]
+    if out is not None:                 # the oracles' records have no image: the rest pair with the rows, in order
+        case_images.keep(out, [r for r in records if r["contender"] != "oracle"], images)
     flicker = []
     for motion in (m for m in (case.motion, case.prefiltered_motion) if m is not None):
         folder = f"flicker/{motion['experiment']['name']}"
@@ -195,6 +211,8 @@ def run_suite(size: str = "default", variant: str | None = None, progress=print,
               "timing_calls": TIMING_CALLS}
     log = caselog.CaseLog(out, header)
     done = log.start(resume)
+    if not resume:                      # a fresh run's images alone: none of an earlier run's stays beside them
+        shutil.rmtree(out / case_images.FOLDER, ignore_errors=True)
     entries = []
     for i, case in enumerate(todo):
         kept = done.get(i)
