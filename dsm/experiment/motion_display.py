@@ -199,16 +199,25 @@ def _text(text: str) -> np.ndarray:
 
 def _header(width: int, panel: int, lines: tuple) -> np.ndarray:
     """The labels' strip: ``lines`` (left, right) on the first line, the panels' titles on the second."""
-    strip = np.full((HEADER_PX, width), GREYS - 1, np.uint8)
-    half = HEADER_PX // 2
-    placed = [(0, 0, lines[0]), (0, None, lines[1])] + [(half, i * (panel + GAP_PX), t)
-                                                        for i, t in enumerate(PANEL_TITLES)]
-    for y, x, text in placed:
-        img = _text(text)
-        x = width - img.shape[1] if x is None else x
-        cut = img[:, :max(0, min(img.shape[1], width - x))]
-        strip[y:y + half, x:x + cut.shape[1]] = cut
+    strip = _titles(width, panel).copy()
+    for x, text in ((0, lines[0]), (None, lines[1])):
+        _blit(strip, 0, width - _text(text).shape[1] if x is None else x, _text(text))
     return strip
+
+
+@functools.lru_cache(maxsize=8)
+def _titles(width: int, panel: int) -> np.ndarray:
+    """The strip with the panels' titles alone (the same on every frame)."""
+    strip = np.full((HEADER_PX, width), GREYS - 1, np.uint8)
+    for i, text in enumerate(PANEL_TITLES):
+        _blit(strip, HEADER_PX // 2, i * (panel + GAP_PX), _text(text))
+    return strip
+
+
+def _blit(strip: np.ndarray, y: int, x: int, img: np.ndarray):
+    """``img`` into ``strip`` at (y, x), cut at the strip's right edge."""
+    cut = img[:, :max(0, min(img.shape[1], strip.shape[1] - x))]
+    strip[y:y + img.shape[0], x:x + cut.shape[1]] = cut
 
 
 # ---------------------------------------------------------------- writing
