@@ -290,7 +290,8 @@ def run_scene(runner, scene, maps, closed, extents):
     """The frame loop of every [[motion]] path over one scene's maps of the plan (called by the
     runner for a config with [[motion]]; ``scene``: its SceneRun): rows of metrics.csv (per-case
     means) into the runner's sink and of frames.csv into its record, an animated error image per
-    case (images/<scene>_<light>/<case>_frames.gif; none with [report] images = "none")."""
+    case (images/<scene>_<light>/<case>_frames.gif, drawn in the report's time from the GifFrames
+    kept in the run record: dsm.experiment.motion_display; none with [report] images = "none")."""
     cfg, data = runner.cfg, scene.data
     fp = sample_points(data.scene, max(mo.points for mo in cfg.motion), cfg.seed, data.diagonal)
     shared = SceneFrames(data, Camera.from_sensor(data.sensor), fp, closed, extents,
