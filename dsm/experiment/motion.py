@@ -543,7 +543,8 @@ def _gif_frames(state: _MapFrames, ident: dict, frames: _CaseFrames) -> GifFrame
     m, path = state.map_plan, state.path
     index = sorted(state.shown)
     instance = f"{ident['scheme']} {ident['preset'] or params_label(ident['params'])}".strip()
-    title = f"case {ident['case']}: {instance}, {m.view} R = {m.resolution}, {ident['filter']}, {ident['format']}"
+    view = f"{m.view} {ident['cascade_layout']}".strip()         # a cascaded map: its layout too
+    title = f"case {ident['case']}: {instance}, {view} R = {m.resolution}, {ident['filter']}, {ident['format']}"
     return GifFrames(frames_path(ident), state.scene.data.label, m.light, path.motion.label, title,
                      len(path.poses), index, [path.poses[t] for t in index], [path.lights[t] for t in index],
                      frames.images, frames.v_images or None)
