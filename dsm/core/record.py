@@ -133,6 +133,7 @@ class RunRecord:
     cascade_rows: list = field(default_factory=list)      # cascades.csv
     cascade_curves: list = field(default_factory=list)    # (case meta, [(distance, error, texels/pixel)]) per case
     motion_frames: list = field(default_factory=list)     # frames.csv
+    motion_gifs: list = field(default_factory=list)       # what each motion case's GIF needs (drawn in the report's time)
     reference_regions: list = field(default_factory=list)  # area lights: the reference's receivers and rays by region
 
     def add_rays(self, rays: dict):
@@ -159,6 +160,7 @@ class RunRecord:
         self.cascade_rows += task.cascade_rows
         self.cascade_curves += task.cascade_curves
         self.motion_frames += task.motion_frames
+        self.motion_gifs += task.motion_gifs
         self.maps += [{**x, "node": node} for x in task.maps]
         self.scene_info += [i for i in task.scene_info if all(x["scene"] != i["scene"] for x in self.scene_info)]
         for k, v in task.gbuffer_ms.items():

@@ -108,7 +108,8 @@ def run_group(cfg, index: int, variant, threads: int, kept: dict) -> dict:
     with tempfile.TemporaryDirectory(prefix="dsm-task-") as tmp:
         r = Runner(cfg, Path(tmp), variant, progress=False, keep_images=False)
         r.run_maps([r.plan.maps[index]], kept)
-        # the files the cases wrote as they ran (case and cascade images, motion GIFs), by path under images/
+        # the files the cases wrote as they ran (case and cascade images), by path under images/ (a motion
+        # case's GIF is drawn by the driver, from the GifFrames in the task's record)
         images = {str(p.relative_to(r.out / "images")): p.read_bytes()
                   for p in sorted((r.out / "images").rglob("*")) if p.is_file()}
     node = socket.gethostname()

@@ -42,14 +42,16 @@ import numpy as np
 
 from ..case import Case, MapContext, Where, evaluate, row as case_row
 from ..case.evaluation import lookup
-from ..report import io as report
 from ..maps import headroom, shadowmap
 from ..scenes import spawn
 from .. import lights, pipeline
 from ..truth import metrics
-from ..scenes.camera import look_at_sensor
+from ..scenes.camera import sensor_at
 from ..core import timing
 from ..scenes.camera import Camera
+from ..report.figures import frames_path
+from ..report.labels import params_label
+from .motion_display import GifFrames, shown_frames, v_image
 
 # ---------------------------------------------------------------- paths
 
@@ -133,12 +135,6 @@ def _moved(light, position, target):
     if light.type == "spot" and target is not None and light.target is None:   # a spot given by direction
         return dataclasses.replace(light, position=as_tuple(position), direction=as_tuple(np.subtract(target, position)))
     return dataclasses.replace(light, position=as_tuple(position), target=as_tuple(target))
-
-
-def sensor_at(base: Camera, origin, target, up):
-    """A sensor at a pose with the base camera's film, field of view and clip planes."""
-    fov = math.degrees(2 * math.atan(base.tan_x))
-    return mi.load_dict(look_at_sensor(origin, target, up, fov, base.width, base.height, base.near, base.far))
 
 
 # ---------------------------------------------------------------- fixed points
@@ -294,7 +290,8 @@ def run_scene(runner, scene, maps, closed, extents):
     """The frame loop of every [[motion]] path over one scene's maps of the plan (called by the
     runner for a config with [[motion]]; ``scene``: its SceneRun): rows of metrics.csv (per-case
     means) into the runner's sink and of frames.csv into its record, an animated error image per
-    case (images/<scene>_<light>/<case>_frames.gif; none with [report] images = "none")."""
+    case (images/<scene>_<light>/<case>_frames.gif, drawn in the report's time from the GifFrames
+    kept in the run record: dsm.experiment.motion_display; none with [report] images = "none")."""
     cfg, data = runner.cfg, scene.data
     fp = sample_points(data.scene, max(mo.points for mo in cfg.motion), cfg.seed, data.diagonal)
     shared = SceneFrames(data, Camera.from_sensor(data.sensor), fp, closed, extents,
@@ -327,7 +324,8 @@ class _CaseFrames:
     eligible: list = dataclasses.field(default_factory=list)
     face: list = dataclasses.field(default_factory=list)
     frames: list = dataclasses.field(default_factory=list)
-    images: list = dataclasses.field(default_factory=list)
+    images: list = dataclasses.field(default_factory=list)       # the shown frames' class images
+    v_images: list = dataclasses.field(default_factory=list)     # the shown frames' V per camera pixel
     metrics: list = dataclasses.field(default_factory=list)
     lookup_ms: list = dataclasses.field(default_factory=list)
 
@@ -350,6 +348,7 @@ class _MapFrames:
     built: list = dataclasses.field(default_factory=list)     # per frame: the map was built (not reused)
     build_ms: list = dataclasses.field(default_factory=list)
     tight: dict = dataclasses.field(default_factory=lambda: headroom.headroom(math.nan, math.nan))
+    shown: frozenset = frozenset()                             # the frames the case's GIF shows
 
 
 def _run_map(runner, shared: SceneFrames, path: PathFrames, m):
@@ -359,7 +358,8 @@ def _run_map(runner, shared: SceneFrames, path: PathFrames, m):
     specs = [pipeline.preset_for_light(s, path.lights[0].type) for s in m.specs]
     keys = [(s, filt, fmt) for s in specs for filt in cfg.map.filter for fmt in cfg.map.format]
     keys += [(s, s.filter, fmt) for s in m.moments for fmt in cfg.map.format]     # pre-filtered instances
-    state = _MapFrames(shared, path, m, {Case("", *k): _CaseFrames() for k in keys})
+    state = _MapFrames(shared, path, m, {Case("", *k): _CaseFrames() for k in keys},
+                       shown=frozenset(shown_frames(len(path.poses))))
     for t in range(len(path.poses)):
         _run_frame(runner, state, t)
     for case, frames in state.cases.items():
@@ -467,8 +467,10 @@ def _run_frame(runner, state: _MapFrames, t: int):
         frames.face.append(np.asarray(rx_pts[case.format].face.numpy(), np.int64))
         frames.vstar.append(vstar_pts)
         frames.eligible.append(elig)
-        if runner.cfg.report_images != "none":          # [report] images = "none": no GIF either
-            frames.images.append(result.classes)
+        if runner.sink.images_mode != "none" and t in state.shown:    # [report] images = "none": no GIF either
+            frames.images.append(result.classes)          # the GIF's frames, drawn in the report's time
+            if runner.sink.images_mode == "all":
+                frames.v_images.append(v_image(result.classes.shape, ctx.setup.pixels, result.v))
         mt = result.measured
         frames.metrics.append(mt)
         frames.lookup_ms.append(result.lookup.ms if ctx.receivers[case.format] is not None else math.nan)
@@ -498,7 +500,7 @@ def _write_case(runner, state: _MapFrames, case: Case, frames: _CaseFrames):
              **state.tight}
     row = case_row.row({**ident, "motion": mo.label, "frames": mo.frames}, measured, costs)
     if frames.images:
-        _write_gif(runner.sink.folder(meta) / f"{case.id}_frames.gif", frames.images)
+        runner.record.motion_gifs.append(_gif_frames(state, ident, frames))
     runner.case_done(row, {"what": f"case {case.id}", "scene": ident["scene"], "light": m.light, "view": m.view,
                            "scheme": case.spec.name, "params": case.spec.label, "resolution": m.resolution,
                            "status": "ok" if row["n_receivers"] else "empty"})
@@ -536,9 +538,13 @@ def _leak_columns(frame_metrics: list) -> dict:
     return out
 
 
-def _write_gif(path, images):
-    """The error images of the frames as an animated GIF (Pillow), 4 frames a second."""
-    from PIL import Image
-    frames = [Image.fromarray(metrics.CLASS_COLORS[c]) for c in images]
-    with report.atomic(path) as tmp:
-        frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:], duration=250, loop=0)
+def _gif_frames(state: _MapFrames, ident: dict, frames: _CaseFrames) -> GifFrames:
+    """What the case's GIF needs, kept for the report (dsm.experiment.motion_display draws it)."""
+    m, path = state.map_plan, state.path
+    index = sorted(state.shown)
+    instance = f"{ident['scheme']} {ident['preset'] or params_label(ident['params'])}".strip()
+    view = f"{m.view} {ident['cascade_layout']}".strip()         # a cascaded map: its layout too
+    title = f"case {ident['case']}: {instance}, {view} R = {m.resolution}, {ident['filter']}, {ident['format']}"
+    return GifFrames(frames_path(ident), state.scene.data.label, m.light, path.motion.label, title,
+                     len(path.poses), index, [path.poses[t] for t in index], [path.lights[t] for t in index],
+                     frames.images, frames.v_images or None)

@@ -32,7 +32,7 @@ from ..config import plan as planmod, read as cfgmod
 from ..core import env, record, timing
 from ..maps import headroom, shadowmap
 from ..report import publish, tables as report, io as report_io
-from . import display, motion, resume, wavefront
+from . import display, motion, motion_display, resume, wavefront
 from .builds import Builds
 from .contexts import Contexts, SceneRun, ViewRun
 from .results import Results
@@ -148,6 +148,7 @@ class Runner:
         dsm report does): figures, table.md, cascades.md, report.html."""
         t1, c1 = time.perf_counter(), _cpu()
         self._display_renders()
+        self._motion_gifs()
         try:
             self.timing["report_parts"] = publish.write_report(self.out, (), self.record.curves,
                                                                plots=self.state == "complete")
@@ -169,6 +170,19 @@ class Runner:
         except Exception as e:          # the page falls back to the case's own images
             notes = [f"display renders: {type(e).__name__}: {e}"]
         self.record.status += [{"what": "display render", "status": "note", "error": n} for n in notes]
+
+    def _motion_gifs(self):
+        """Each motion case's GIF (dsm.experiment.motion_display), in the report's time: frames of
+        display renders in a complete run that writes every image, else the frames' class images."""
+        pending, self.record.motion_gifs = self.record.motion_gifs, []
+        if not pending:
+            return
+        display = self.state == "complete" and self.cfg.report_images == "all"
+        try:
+            notes = motion_display.write_gifs(self.out, self.cfg, pending, display)
+        except Exception as e:          # the measurements are saved; a GIF is never worth failing them
+            notes = [f"motion GIFs: {type(e).__name__}: {e}"]
+        self.record.status += [{"what": "motion GIF", "status": "note", "error": n} for n in notes]
 
     def _launches(self) -> dict:
         """JIT kernel launches while measuring (Dr.Jit's kernel history, this process only: a

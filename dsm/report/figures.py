@@ -82,6 +82,11 @@ def image_paths(row) -> tuple:
     return f + "_error.png", f + "_shadow.png"
 
 
+def frames_path(row) -> str:
+    """A motion case's animated GIF (dsm.experiment.motion_display), relative to the run's folder."""
+    return f"images/{image_folder(row)}/{row['case']}_frames.gif"
+
+
 # a scene and light's display renders (dsm.experiment.display), one pair per images/<scene>_<light>/
 DISPLAY_FILES = ("display_nl.png", "display_exact.png")
 

@@ -30,6 +30,12 @@ def look_at_sensor(origin, target, up, fov, width, height, near=None, far=None, 
             "film": {"type": "hdrfilm", "width": int(width), "height": int(height)}}
 
 
+def sensor_at(base, origin, target, up):
+    """A sensor at a pose with the base camera's (a :class:`Camera`) film, field of view and clip planes."""
+    fov = math.degrees(2 * math.atan(base.tan_x))
+    return mi.load_dict(look_at_sensor(origin, target, up, fov, base.width, base.height, base.near, base.far))
+
+
 def clip_error(near, far, camera, source="<config>"):
     """The error for a near clip not below the far clip: one of them given alone in [camera]."""
     given = {k for k in ("near", "far") if camera is not None and getattr(camera, k) is not None}
