@@ -98,7 +98,7 @@ def _opaque_frame(view):
 def make_view(spec, light, nominal=None):
     """The attached view of ``light`` (a LightState); ``nominal``: the light's parameter values the
     view is fitted at (a directional light's angle), default the spec's."""
-    if light.kind == "point":
+    if light.kind in ("point", "area"):          # an area light's map is rendered from its centre
         return point_view(spec, light)
     angle = math.radians(spec.light_angle if nominal is None else nominal)
     return directional_view(spec, light, (math.sin(angle), 0.0, -math.cos(angle)))
