@@ -47,6 +47,7 @@ class ProjectiveResult:
     ms: float                    # one gradient (primal + forward tangent), warm median over the seeds
     image: np.ndarray            # per-pixel dV / d param of the first seed
     seen: np.ndarray = None      # (N, N) bool: the pixels whose V it measures (the camera sees the ground there)
+    first_ms: float = 0.0        # the first seed's gradient (its kernels' compile included)
 
     @property
     def mean(self) -> float:
@@ -159,12 +160,14 @@ def _gradient(problem, integrator: str, param: str, spp: int, seeds: int) -> Pro
         walls.append((time.perf_counter() - t0) * 1e3)
         params["occluder.vertex_positions"] = dr.detach(params["occluder.vertex_positions"])   # leave no graph
         params.update()
-        V, dV = np.where(seen, I / I0, exact), np.where(seen, dI / I0, 0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):     # I0 is 0 where the camera sees an area light's back
+            V, dV = np.where(seen, I / I0, exact), np.where(seen, dI / I0, 0.0)
         grads.append(problem.loss_tangent(V, dV) + 0.0)
         if seed == 0:
             image, mismatch = dV, float(np.mean(np.abs(V - exact)[seen] > 0.5))
     warm = walls[1:] or walls
-    return ProjectiveResult(integrator, param, spp, tuple(grads), mismatch, float(np.median(warm)), image, seen)
+    return ProjectiveResult(integrator, param, spp, tuple(grads), mismatch, float(np.median(warm)), image, seen,
+                            walls[0])
 
 
 def orient(img) -> np.ndarray:

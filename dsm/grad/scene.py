@@ -37,7 +37,7 @@ def occluder_geometry(spec) -> tuple[np.ndarray, np.ndarray]:
         return quad([0.0, 0.0, h], [s / 2, 0.0, 0.0], [0.0, s / 2, 0.0])
     if spec.scene == "mesh":
         return mesh_geometry(spec.mesh, s, h, spec.source)
-    return box([-s / 2, -s / 2, h], [s / 2, s / 2, h + s])
+    return box([-s / 2, -s / 2, h], [s / 2, s / 2, h + spec.thickness()])
 
 
 def mesh_geometry(path: str, size: float, height: float, source: str = "<dict>") -> tuple[np.ndarray, np.ndarray]:

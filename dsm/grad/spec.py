@@ -40,7 +40,7 @@ KEYS = ("scene", "mesh", "light", "light_height", "light_angle", "occluder_heigh
         "image_resolution", "window", "params", "loss", "target", "techniques", "blur", "antialias", "bias",
         "light_size", "fd_step", "fd_halvings", "image_jitter", "reference_samples", "reference_step", "projective_spp",
         "projective_seeds", "projective_integrators", "inverse_starts", "inverse_iterations", "inverse_tolerance",
-        "light_samples", "equal_error_spp", "equal_error_seeds")
+        "light_samples", "equal_error_spp", "equal_error_seeds", "box_height")
 MAX_LIGHT_SAMPLES = 32          # the area light's truth: light samples per axis and receiver (32^2 rays each)
 # the central difference's default step per unit (world: a fraction of the occluder's size)
 FD_STEP = {"world": 2e-3, "degree": 0.02}
@@ -76,6 +76,7 @@ class GradSpec:
     light_angle: float = 20.0
     occluder_height: float = 0.5
     occluder_size: float = 0.5
+    box_height: float | None = None          # scene = "box": its height (world); None: occluder_size (a cube)
     map_resolution: int = 128
     image_resolution: int = 128
     window: float = 1.0
@@ -100,6 +101,13 @@ class GradSpec:
     equal_error_spp: tuple = (4, 16, 64, 256, 1024)   # --compare under an area light: path tracing's spp sweep
     equal_error_seeds: int = 8               # ... and its seeds per spp (its error's bias and spread)
     source: str = "<gradient>"
+
+    def thickness(self) -> float:
+        """The occluder's extent in z above ``occluder_height`` (world): 0 for the plate, the box's height,
+        ``occluder_size`` for a mesh (scaled to fit the cube)."""
+        if self.scene == "plate":
+            return 0.0
+        return self.box_height if self.scene == "box" and self.box_height is not None else self.occluder_size
 
     def unit(self, param: str) -> str:
         """The unit of parameter ``param`` (world or degree)."""
@@ -152,7 +160,9 @@ def parse(raw: dict, source: str = "<dict>") -> GradSpec:
     kw["scene"] = choice(g.get("scene", "plate"), source, "gradient.scene", SCENES)
     kw["light"] = choice(g.get("light", "point"), source, "gradient.light", LIGHTS)
     kw["mesh"] = _mesh(g, source, kw["scene"])
-    for key in ("light_height", "occluder_height", "occluder_size", "window", "light_size"):
+    if "box_height" in g and kw["scene"] != "box":
+        raise ConfigError(source, "gradient.box_height", f"is read only with scene = \"box\", not {kw['scene']!r}")
+    for key in ("light_height", "occluder_height", "occluder_size", "window", "light_size", "box_height"):
         if key in g:
             kw[key] = number(g[key], source, f"gradient.{key}", positive=True)
     if "light_angle" in g:
@@ -181,14 +191,10 @@ def parse(raw: dict, source: str = "<dict>") -> GradSpec:
     kw["reference_step"] = _steps(g, source, kw["params"], "reference_step")
     kw["techniques"] = _techniques(g, source)
     spec = GradSpec(**kw)
-    if spec.light != "directional" and not spec.occluder_height + _top(spec) < spec.light_height:
+    if spec.light != "directional" and not spec.occluder_height + spec.thickness() < spec.light_height:
         raise ConfigError(source, "gradient.light_height", f"must be above the occluder's top "
-                          f"({spec.occluder_height + _top(spec):g}), got {spec.light_height:g}")
+                          f"({spec.occluder_height + spec.thickness():g}), got {spec.light_height:g}")
     return spec
-
-
-def _top(spec) -> float:
-    return 0.0 if spec.scene == "plate" else spec.occluder_size     # a mesh is scaled to fit the box's cube
 
 
 def _mesh(g: dict, source: str, scene: str) -> str:

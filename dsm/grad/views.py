@@ -38,7 +38,7 @@ def light_frame_dr(direction):
 
 def _window_corners(spec) -> np.ndarray:
     w = spec.window * MARGIN
-    top = spec.occluder_height + (spec.occluder_size if spec.scene == "box" else 0.0)
+    top = spec.occluder_height + (spec.thickness() if spec.scene == "box" else 0.0)
     return np.array([[x, y, z] for x in (-w, w) for y in (-w, w) for z in (0.0, top)])
 
 
