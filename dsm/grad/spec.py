@@ -98,8 +98,8 @@ class GradSpec:
     inverse_iterations: int = 40
     inverse_tolerance: float = 0.01          # a start succeeds when its final error is within this
     light_samples: int = 8                   # the area light's truth: stratified light samples per axis and receiver
-    equal_error_spp: tuple = (4, 16, 64, 256, 1024)   # --compare under an area light: path tracing's spp sweep
-    equal_error_seeds: int = 8               # ... and its seeds per spp (its error's bias and spread)
+    equal_error_spp: tuple = (1, 4, 16, 64, 256)      # --compare under an area light: path tracing's spp sweep
+    equal_error_seeds: int = 4               # ... and its seeds per spp (its error's bias and spread)
     source: str = "<gradient>"
 
     def thickness(self) -> float:
