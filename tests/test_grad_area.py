@@ -147,3 +147,12 @@ def test_dsm_grad_compare_under_an_area_light_measures_the_cost_at_equal_error(t
         assert float(r["time_ratio"]) == pytest.approx(float(r["pt_ms_per_gradient"]) / float(r["ms_per_gradient"]))
     assert (out / "equal_error.png").stat().st_size > 1000
     assert "## Cost at equal gradient error" in (out / "compare.md").read_text()
+
+
+def test_every_gradient_experiment_loads():
+    """experiments/gradient/*.toml are configs dsm grad accepts; the area ones light the bed with an area light."""
+    from conftest import ROOT
+    specs = {p.stem: specmod.load(p) for p in sorted((ROOT / "experiments" / "gradient").glob("*.toml"))}
+    assert {"compare_plate_area", "compare_box_area"} <= set(specs)
+    assert all(specs[n].light == "area" and specs[n].light_size == 0.5 for n in ("compare_plate_area", "compare_box_area"))
+    assert specs["compare_box_area"].thickness() == 0.02 and specs["compare_plate_area"].thickness() == 0.0
