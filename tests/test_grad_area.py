@@ -114,6 +114,8 @@ def test_spp_point_statistics_are_numpys():
     ({"equal_error_seeds": 1}, "gradient.equal_error_seeds", ">= 2"),
     ({"params": ["light_angle"]}, "gradient.params", "directional light"),
     ({"light_height": 0.5}, "gradient.light_height", "above the occluder"),
+    ({"box_height": 0.1}, "gradient.box_height", "read only with scene"),
+    ({"scene": "box", "box_height": 0}, "gradient.box_height", "> 0"),
 ])
 def test_bad_area_light_keys_are_one_line_errors(kw, key, words):
     with pytest.raises(ConfigError) as e:
