@@ -34,6 +34,9 @@ def draw(path: Path, panels: dict, window: float):
     fig.savefig(path)
 
 
+CURVE_STYLES = ["o-", "^--", "s-."]      # one per integrator
+
+
 def draw_equal_error(path: Path, curves, rows):
     """Write ``equal_error.png``: relative error against ms per gradient (log-log), each integrator's curve
     over its spp counts (labelled), each technique's point; one panel per parameter."""
@@ -44,14 +47,16 @@ def draw_equal_error(path: Path, curves, rows):
     FigureCanvasAgg(fig)
     for i, p in enumerate(params):
         ax = fig.add_subplot(len(params), 1, i + 1)
-        for c in (c for c in curves if c[0].param == p):
+        mine = [c for c in curves if c[0].param == p]
+        for c, style in zip(mine, CURVE_STYLES * len(mine)):
             pts = [(q.ms, q.rel_rms_error, q.spp) for q in c if q.rel_rms_error]
-            ax.plot([x for x, _, _ in pts], [y for _, y, _ in pts], "o-", color="black", lw=1, ms=3,
+            ax.plot([x for x, _, _ in pts], [y for _, y, _ in pts], style, color="black", lw=1, ms=3,
                     label=f"{c[0].integrator} (spp)")
             for x, y, spp in pts:
                 ax.annotate(str(spp), (x, y), fontsize=6, xytext=(3, 3), textcoords="offset points")
-            if c[0].truth:     # below the truth's own error the curve is not resolved
-                ax.axhline(c[0].truth_error / abs(c[0].truth), color="grey", ls=":", lw=1, label="the truth's own error")
+        if mine and mine[0][0].truth:     # below the truth's own error the curves are not resolved
+            t = mine[0][0]
+            ax.axhline(t.truth_error / abs(t.truth), color="grey", ls=":", lw=1, label="the truth's own error")
         shown = {}
         for r in rows:           # a technique's point is the same against every integrator's curve
             if r.param == p and r.error and r.technique not in shown:
