@@ -82,7 +82,7 @@ def _faces_light(corners, light):
     """Whether the triangle (its winding normal) faces the light."""
     p0, p1, p2 = corners
     n = dr.cross(p1 - p0, p2 - p0)
-    toward = (p0 + p1 + p2) / 3.0 - light.position if light.kind == "point" else light.direction
+    toward = (p0 + p1 + p2) / 3.0 - light.position if light.kind in ("point", "area") else light.direction
     return dr.dot(n, toward) < 0
 
 

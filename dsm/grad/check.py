@@ -64,8 +64,9 @@ def relative(a: float, ref: float) -> float | None:
 
 def closed_form(spec, param: str) -> float | None:
     """The exact d loss / d param of the plate scene (in the loss's unit per the parameter's unit), None where
-    the kit knows none (the box, the l2 loss, a vertex's displacement)."""
-    if spec.scene != "plate" or spec.loss == "l2" or param == "corner_z":
+    the kit knows none (the box, the l2 loss, a vertex's displacement, an area light: its soft shadow's
+    derivative is a numerical integral, tests/test_grad_area.py)."""
+    if spec.scene != "plate" or spec.loss == "l2" or param == "corner_z" or spec.light == "area":
         return None
     A, h = spec.occluder_size ** 2, spec.occluder_height
     area = spec.loss == "shadow_area"

@@ -20,7 +20,7 @@ from ..core.types import VARIANTS, ConfigError
 from ..report.io import write_json
 from . import spec as specmod
 from . import compare as comparemod
-from . import figure, inverse, page, projective, tables
+from . import equal_error, figure, inverse, page, projective, tables
 from .check import loss_unit, self_check
 from .problem import Problem
 
@@ -46,7 +46,8 @@ def add_parser(sub):
 
 
 WRITTEN = ("selfcheck.csv", "table.md", "compare.csv", "projective.csv", "compare.md", "gradients.png",
-           "inverse.csv", "inverse.md", "relative_error.png", "inverse.png", "report.html", "grad.json")
+           "equal_error.csv", "equal_error_curve.csv", "equal_error.png", "inverse.csv", "inverse.md",
+           "relative_error.png", "inverse.png", "report.html", "grad.json")
 
 
 def folder_problem(out: Path, force: bool) -> str | None:
@@ -206,16 +207,42 @@ def run_compare(problem, out: Path) -> dict:
             continue
         for name in spec.projective_integrators:
             res = projective.gradient(problem, name, p, spec.projective_spp, spec.projective_seeds)
-            proj.append((res, refs[p], comparemod.cosine(res.image, refs[p].image)))
+            seen_ref = refs[p].masked(res.seen)        # the truth over the pixels the integrator measures
+            proj.append((res, seen_ref, comparemod.cosine(res.image, seen_ref.image)))
     tables.write_rows(out / "projective.csv", tables.PROJECTIVE_COLUMNS,
                       [tables.projective_values(*t) for t in proj])
     text = tables.compare_text(spec, refs, rows, proj)
+    if spec.light == "area":
+        text += run_equal_error(problem, refs, rows, out)
     (out / "compare.md").write_text(text)
     t = time.perf_counter()
     figure.draw(out / "gradients.png", _panels(refs, rows, proj), spec.window)
     drawn = time.perf_counter() - t
     print(text)
     return {"gradients.png": drawn}
+
+
+def run_equal_error(problem, refs, rows, out: Path) -> str:
+    """--compare under an area light: path tracing's error curve per integrator and occluder parameter,
+    each technique's spp and time at equal error; equal_error.csv, equal_error_curve.csv, equal_error.png
+    and the section of compare.md it returns."""
+    spec = problem.spec
+    curves, eq = [], []
+    for p in spec.params:
+        if p not in projective.OCCLUDER_PARAMS:
+            continue
+        seen = projective.visible_ground(problem, p)
+        for name in spec.projective_integrators:
+            points = equal_error.curve(problem, name, p, refs[p])
+            for q in points:
+                print(f"  {name}, {p}, {q.spp} spp: rel. RMS error {_g(q.rel_rms_error)}, {q.ms:.0f} ms", file=sys.stderr)
+            curves.append(points)
+            eq += equal_error.rows(problem, rows, points, seen)
+    tables.write_rows(out / "equal_error_curve.csv", tables.CURVE_COLUMNS,
+                      [tables.curve_values(q) for c in curves for q in c])
+    tables.write_rows(out / "equal_error.csv", tables.EQUAL_ERROR_COLUMNS, [tables.equal_error_values(r) for r in eq])
+    figure.draw_equal_error(out / "equal_error.png", curves, eq)
+    return tables.equal_error_text(curves, eq)
 
 
 def _panels(refs, rows, proj) -> dict:

@@ -1,8 +1,9 @@
 """Gradient images side by side: the reference's per-pixel difference, each technique's tangent, the
 projective integrator's, rows of at most MAX_COLUMNS panels per parameter (``gradients.png``), each
 panel on its own symmetric colour scale (its largest magnitude; the scale is printed in the panel's
-title). Drawn as the report's figures (dsm.report.figures): at DPI, shown at its pixel size, its
-smallest text MIN_FONT points (9 as shown)."""
+title); and the cost at equal error (``equal_error.png``): path tracing's error against its ms, each
+technique's point. Drawn as the report's figures (dsm.report.figures): at DPI, shown at its pixel
+size, its smallest text MIN_FONT points (9 as shown)."""
 from __future__ import annotations
 
 import math
@@ -10,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..report.figures import DPI, MIN_FONT, PNG
+from ..report.figures import DPI, MIN_FONT, PNG, style
 
 MAX_COLUMNS = 5            # panels a row: 5 of PANEL_INCHES fit a 1280 px window at DPI
 PANEL_INCHES = 1.8
@@ -44,5 +45,44 @@ def draw(path: Path, panels: dict, window: float):
             ax.set_xticks([])
             ax.set_yticks([])
         row += math.ceil(len(items) / cols)
+    fig.tight_layout()
+    fig.savefig(path, dpi=DPI, format="png", pil_kwargs=PNG)
+
+
+CURVE_STYLES = ["o-", "^--", "s-."]      # one per integrator
+
+
+def draw_equal_error(path: Path, curves, rows):
+    """Write ``equal_error.png``: relative error against ms per gradient (log-log), each integrator's curve
+    over its spp counts (labelled), each technique's point; one panel per parameter."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    params = list(dict.fromkeys(c[0].param for c in curves))
+    fig = Figure(figsize=(6.4, 4.6 * max(len(params), 1)))
+    FigureCanvasAgg(fig)
+    for i, p in enumerate(params):
+        ax = fig.add_subplot(len(params), 1, i + 1)
+        mine = [c for c in curves if c[0].param == p]
+        for c, curve_style in zip(mine, CURVE_STYLES * len(mine)):
+            pts = [(q.ms, q.rel_rms_error, q.spp) for q in c if q.rel_rms_error]
+            ax.plot([x for x, _, _ in pts], [y for _, y, _ in pts], curve_style, color="black", lw=1, ms=3,
+                    label=f"{c[0].integrator} (spp)")
+            for x, y, spp in pts:
+                ax.annotate(str(spp), (x, y), fontsize=MIN_FONT, xytext=(3, 3), textcoords="offset points")
+        if mine and mine[0][0].truth:     # below the truth's own error the curves are not resolved
+            t = mine[0][0]
+            ax.axhline(t.truth_error / abs(t.truth), color="grey", ls=":", lw=1, label="the truth's own error")
+        shown = {}
+        for r in rows:           # a technique's point is the same against every integrator's curve
+            if r.param == p and r.error and r.technique not in shown:
+                st = style(len(shown))
+                shown[r.technique] = ax.plot([r.ms], [r.error], st["marker"], color=st["color"], ms=6,
+                                             mec="black", mew=0.5, label=r.technique)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("ms per gradient")
+        ax.set_ylabel("relative error of d loss / d " + p)
+        ax.legend(fontsize=MIN_FONT, ncol=2)
+        ax.tick_params(labelsize=MIN_FONT)
     fig.tight_layout()
     fig.savefig(path, dpi=DPI, format="png", pil_kwargs=PNG)

@@ -20,7 +20,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..maps.receiver import Receiver
-from . import antialias, build, techniques
+from . import antialias, area, build, techniques
 from .scene import GradScene
 from .views import make_view
 
@@ -156,11 +156,16 @@ class Problem:
         N = self.spec.image_resolution
         return self.exact_at(values, self.p_world).reshape(N, N)
 
-    def exact_at(self, values: dict, p_world) -> np.ndarray:
-        """The exact visibility (0 or 1, numpy) at ground points ``p_world`` (mi.Point3f) at ``values``."""
+    def exact_at(self, values: dict, p_world, light_seed: int = area.SEED) -> np.ndarray:
+        """The exact visibility (numpy) at ground points ``p_world`` (mi.Point3f) at ``values``: 0 or 1 under a
+        point or directional light, the visible fraction of an area light (its samples seeded by ``light_seed``)."""
         vals = self._dr_values(values, ())
         light = self.scene.apply(vals)
-        lift = mi.Vector3f(0.0, 0.0, 1e-4 * self.spec.window)    # off the ground, far below any gap
+        spec = self.spec
+        if light.kind == "area":
+            return area.visible_fraction(self.scene.scene, light.position, spec.light_size, p_world,
+                                         spec.light_samples, light_seed, area.LIFT * spec.window)
+        lift = mi.Vector3f(0.0, 0.0, area.LIFT * self.spec.window)    # off the ground, far below any gap
         o = p_world + lift
         if light.kind == "point":
             d = light.position - o

@@ -46,6 +46,8 @@ class ProjectiveResult:
     primal_mismatch: float       # fraction of seen pixels whose V differs from the exact image's by > 0.5
     ms: float                    # one gradient (primal + forward tangent), warm median over the seeds
     image: np.ndarray            # per-pixel dV / d param of the first seed
+    seen: np.ndarray = None      # (N, N) bool: the pixels whose V it measures (the camera sees the ground there)
+    first_ms: float = 0.0        # the first seed's gradient (its kernels' compile included)
 
     @property
     def mean(self) -> float:
@@ -60,6 +62,11 @@ class ProjectiveResult:
 
 
 def _emitter(spec) -> dict:
+    if spec.light == "area":            # Mitsuba's rectangle spans [-1, 1]^2 facing +z: scaled, turned to face down
+        to_world = (mi.ScalarTransform4f().translate([0.0, 0.0, spec.light_height])
+                    .scale([spec.light_size / 2.0, spec.light_size / 2.0, 1.0]).rotate([1.0, 0.0, 0.0], 180.0))
+        return {"type": "rectangle", "to_world": to_world,
+                "emitter": {"type": "area", "radiance": {"type": "rgb", "value": 1.0}}}
     if spec.light == "point":
         return {"type": "point", "position": [0.0, 0.0, spec.light_height], "intensity": {"type": "rgb", "value": 1.0}}
     a = math.radians(spec.light_angle)
@@ -87,17 +94,29 @@ def scene_dict(spec, integrator: str, with_occluder: bool = True) -> dict:
     return d
 
 
-def visible_ground(problem) -> np.ndarray:
-    """(N, N) bool: pixels where the camera sees the ground, not the occluder (at the nominal values; the
-    occluder's projection grown by MASK_PIXELS, and by its own displacements' reach)."""
+def hiders(spec) -> np.ndarray:
+    """(k, 3) points whose convex hull's projection hides the ground from the camera: the occluder's
+    vertices, its top raised by the reference's step, and an area light's square (between camera and ground)."""
+    ov = np.asarray(occluder_geometry(spec)[0], float).reshape(-1, 3)
+    raised = ov + np.array([0.0, 0.0, spec.reference_step_of("occluder_z")])
+    pts = [ov, raised]
+    if spec.light == "area":
+        h = spec.light_size / 2.0
+        pts.append(np.array([[x, y, spec.light_height] for x in (-h, h) for y in (-h, h)]))
+    return np.concatenate(pts)
+
+
+def visible_ground(problem, param: str | None = None) -> np.ndarray:
+    """(N, N) bool: pixels where the camera sees the ground, not the occluder or an area light (at the nominal
+    values; the hiders' projections grown by MASK_PIXELS, and by the reference's step where ``param`` moves
+    the occluder sideways)."""
     spec = problem.spec
-    ov, _ = occluder_geometry(spec)
-    ov = np.asarray(ov, float).reshape(-1, 3)
-    top = ov[:, 2].max() + spec.reference_step_of("occluder_z")
-    scale = CAMERA_HEIGHT * spec.window / (CAMERA_HEIGHT * spec.window - top)
+    pts = hiders(spec)
+    # each point projects from the camera onto the ground: scaled about the camera's foot by its height's ratio
+    flat = pts[:, :2] * (CAMERA_HEIGHT * spec.window / (CAMERA_HEIGHT * spec.window - pts[:, 2:3]))
     N, W = spec.image_resolution, spec.window
-    grow = MASK_PIXELS * 2.0 * W / N + spec.occluder_size * 0.1
-    lo, hi = ov[:, :2].min(axis=0) * scale - grow, ov[:, :2].max(axis=0) * scale + grow
+    grow = MASK_PIXELS * 2.0 * W / N + (spec.reference_step_of(param) if param == "occluder_x" else 0.0)
+    lo, hi = flat.min(axis=0) - grow, flat.max(axis=0) + grow
     c = -W + (np.arange(N) + 0.5) * (2.0 * W / N)
     xx, yy = np.meshgrid(c, c)
     return ~((xx > lo[0]) & (xx < hi[0]) & (yy > lo[1]) & (yy < hi[1]))
@@ -124,7 +143,7 @@ def _gradient(problem, integrator: str, param: str, spp: int, seeds: int) -> Pro
     params = mi.traverse(scene)
     grads, walls, image, mismatch = [], [], None, 0.0
     exact = problem.exact_image(problem.values())
-    seen = visible_ground(problem)
+    seen = visible_ground(problem, param)
     for seed in range(seeds):
         I0 = orient(mi.render(bare, spp=spp, seed=seed))
         vals = {k: dr.opaque(mi.Float, float(v), 1) for k, v in problem.values().items()}
@@ -141,12 +160,14 @@ def _gradient(problem, integrator: str, param: str, spp: int, seeds: int) -> Pro
         walls.append((time.perf_counter() - t0) * 1e3)
         params["occluder.vertex_positions"] = dr.detach(params["occluder.vertex_positions"])   # leave no graph
         params.update()
-        V, dV = np.where(seen, I / I0, exact), np.where(seen, dI / I0, 0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):     # I0 is 0 where the camera sees an area light's back
+            V, dV = np.where(seen, I / I0, exact), np.where(seen, dI / I0, 0.0)
         grads.append(problem.loss_tangent(V, dV) + 0.0)
         if seed == 0:
             image, mismatch = dV, float(np.mean(np.abs(V - exact)[seen] > 0.5))
     warm = walls[1:] or walls
-    return ProjectiveResult(integrator, param, spp, tuple(grads), mismatch, float(np.median(warm)), image)
+    return ProjectiveResult(integrator, param, spp, tuple(grads), mismatch, float(np.median(warm)), image, seen,
+                            walls[0])
 
 
 def orient(img) -> np.ndarray:

@@ -23,9 +23,10 @@ GROUND_HALF = 8.0          # the ground's half side, in units of the image windo
 
 @dataclass
 class LightState:
-    """The light as Dr.Jit values (attached where a parameter is): position (point) or travel direction."""
+    """The light as Dr.Jit values (attached where a parameter is): position (point; an area light's centre)
+    or travel direction (directional)."""
     kind: str
-    position: object = None       # mi.Point3f, world (point light)
+    position: object = None       # mi.Point3f, world (point light; the area light's centre)
     direction: object = None      # mi.Vector3f, unit, the direction light travels (directional)
 
 
@@ -36,7 +37,7 @@ def occluder_geometry(spec) -> tuple[np.ndarray, np.ndarray]:
         return quad([0.0, 0.0, h], [s / 2, 0.0, 0.0], [0.0, s / 2, 0.0])
     if spec.scene == "mesh":
         return mesh_geometry(spec.mesh, s, h, spec.source)
-    return box([-s / 2, -s / 2, h], [s / 2, s / 2, h + s])
+    return box([-s / 2, -s / 2, h], [s / 2, s / 2, h + spec.thickness()])
 
 
 def mesh_geometry(path: str, size: float, height: float, source: str = "<dict>") -> tuple[np.ndarray, np.ndarray]:
@@ -93,10 +94,11 @@ class GradScene:
         return self.light(values)
 
     def light(self, values: dict) -> LightState:
-        """The light at parameter ``values``: a point straight above, or a direction tilted toward +x."""
-        if self.spec.light == "point":
+        """The light at parameter ``values``: a point (or a square's centre) straight above, or a direction
+        tilted toward +x."""
+        if self.spec.light in ("point", "area"):
             zero = dr.zeros(mi.Float, 1)
-            return LightState("point", position=mi.Point3f(values["light_x"], zero, values["light_height"]))
+            return LightState(self.spec.light, position=mi.Point3f(values["light_x"], zero, values["light_height"]))
         a = values["light_angle"] * (math.pi / 180.0)
         return LightState("directional", direction=mi.Vector3f(dr.sin(a), dr.zeros(mi.Float, 1), -dr.cos(a)))
 

@@ -4,7 +4,8 @@ Read once into a frozen :class:`GradSpec`; every mistake is a ConfigError naming
 key and the valid choices, before any work. The scene is the kit's gradient test bed: a square
 plate (or a box) of side ``occluder_size`` at height ``occluder_height`` over a ground at z = 0,
 lit by a point light straight above at ``light_height`` or by a directional light tilted by
-``light_angle`` degrees from the vertical toward +x. The image is the ground seen from above:
+``light_angle`` degrees from the vertical toward +x, or by a square area light of side ``light_size``
+facing down at ``light_height`` (:mod:`dsm.grad.area`). The image is the ground seen from above:
 ``image_resolution``^2 receivers over [-window, window]^2, one per pixel: at a seeded random point of
 the pixel (``image_jitter``, the default) or at its centre.
 """
@@ -16,18 +17,18 @@ from pathlib import Path
 
 from ..core.types import ConfigError, check_keys, choice, number, as_list
 
-# a differentiable parameter: (its unit, the light it applies to or None for every light)
+# a differentiable parameter: (its unit, the lights it applies to or None for every light)
 PARAMS = {
     "occluder_z": ("world", None),        # the occluder's translation along z (the plate's height)
     "occluder_x": ("world", None),        # the occluder's translation along x (the box's offset)
     "corner_z": ("world", None),          # a displacement along z of the occluder's first vertex
-    "light_height": ("world", "point"),   # the point light's z
-    "light_x": ("world", "point"),        # the point light's x
-    "light_angle": ("degree", "directional"),   # the directional light's tilt from the vertical toward +x
+    "light_height": ("world", ("point", "area")),   # the point light's z (the area light's centre's)
+    "light_x": ("world", ("point", "area")),        # the point light's x (the area light's centre's)
+    "light_angle": ("degree", ("directional",)),    # the directional light's tilt from the vertical toward +x
 }
 SCENES = ("plate", "box", "mesh")
 MESH_SUFFIXES = (".ply", ".obj")
-LIGHTS = ("point", "directional")
+LIGHTS = ("point", "directional", "area")
 LOSSES = ("shadow_area", "shadow_moment_x", "l2")
 # the unit of each loss, given the world unit of length
 LOSS_UNITS = {"shadow_area": "world^2", "shadow_moment_x": "world^3", "l2": "1 (mean over pixels)"}
@@ -38,7 +39,9 @@ MAX_RESOLUTION = 4096
 KEYS = ("scene", "mesh", "light", "light_height", "light_angle", "occluder_height", "occluder_size", "map_resolution",
         "image_resolution", "window", "params", "loss", "target", "techniques", "blur", "antialias", "bias",
         "light_size", "fd_step", "fd_halvings", "image_jitter", "reference_samples", "reference_step", "projective_spp",
-        "projective_seeds", "projective_integrators", "inverse_starts", "inverse_iterations", "inverse_tolerance")
+        "projective_seeds", "projective_integrators", "inverse_starts", "inverse_iterations", "inverse_tolerance",
+        "light_samples", "equal_error_spp", "equal_error_seeds", "box_height")
+MAX_LIGHT_SAMPLES = 32          # the area light's truth: light samples per axis and receiver (32^2 rays each)
 # the central difference's default step per unit (world: a fraction of the occluder's size)
 FD_STEP = {"world": 2e-3, "degree": 0.02}
 # Mitsuba's projective-sampling integrators (dsm.grad.projective)
@@ -73,6 +76,7 @@ class GradSpec:
     light_angle: float = 20.0
     occluder_height: float = 0.5
     occluder_size: float = 0.5
+    box_height: float | None = None          # scene = "box": its height (world); None: occluder_size (a cube)
     map_resolution: int = 128
     image_resolution: int = 128
     window: float = 1.0
@@ -81,7 +85,7 @@ class GradSpec:
     target: tuple = ()                       # ((param, value), ...): the l2 loss's target parameters
     techniques: tuple = field(default_factory=lambda: tuple(Technique(t) for t in TECHNIQUES))
     bias: float = 0.02
-    light_size: float = 0.1
+    light_size: float = 0.1                  # world: PCSS's light width; the area light's side
     fd_step: tuple = ()                      # ((param, step), ...) in the parameter's unit
     fd_halvings: int = 4
     image_jitter: bool = True                # one receiver per pixel at a seeded random point (else its centre)
@@ -93,7 +97,17 @@ class GradSpec:
     inverse_starts: tuple = (-0.1, -0.05, 0.05, 0.1)   # the inverse task's starts: offsets from the truth
     inverse_iterations: int = 40
     inverse_tolerance: float = 0.01          # a start succeeds when its final error is within this
+    light_samples: int = 8                   # the area light's truth: stratified light samples per axis and receiver
+    equal_error_spp: tuple = (1, 4, 16, 64, 256)      # --compare under an area light: path tracing's spp sweep
+    equal_error_seeds: int = 4               # ... and its seeds per spp (its error's bias and spread)
     source: str = "<gradient>"
+
+    def thickness(self) -> float:
+        """The occluder's extent in z above ``occluder_height`` (world): 0 for the plate, the box's height,
+        ``occluder_size`` for a mesh (scaled to fit the cube)."""
+        if self.scene == "plate":
+            return 0.0
+        return self.box_height if self.scene == "box" and self.box_height is not None else self.occluder_size
 
     def unit(self, param: str) -> str:
         """The unit of parameter ``param`` (world or degree)."""
@@ -146,7 +160,9 @@ def parse(raw: dict, source: str = "<dict>") -> GradSpec:
     kw["scene"] = choice(g.get("scene", "plate"), source, "gradient.scene", SCENES)
     kw["light"] = choice(g.get("light", "point"), source, "gradient.light", LIGHTS)
     kw["mesh"] = _mesh(g, source, kw["scene"])
-    for key in ("light_height", "occluder_height", "occluder_size", "window", "light_size"):
+    if "box_height" in g and kw["scene"] != "box":
+        raise ConfigError(source, "gradient.box_height", f"is read only with scene = \"box\", not {kw['scene']!r}")
+    for key in ("light_height", "occluder_height", "occluder_size", "window", "light_size", "box_height"):
         if key in g:
             kw[key] = number(g[key], source, f"gradient.{key}", positive=True)
     if "light_angle" in g:
@@ -165,6 +181,9 @@ def parse(raw: dict, source: str = "<dict>") -> GradSpec:
         kw["image_jitter"] = g["image_jitter"]
     kw.update(_compare_keys(g, source))
     light = kw["light"]
+    for key in ("light_samples", "equal_error_spp", "equal_error_seeds"):
+        if key in g and light != "area":
+            raise ConfigError(source, f"gradient.{key}", f"is read only with light = \"area\", not {light!r}")
     kw["params"] = _params(g, source, light)
     kw["loss"] = choice(g.get("loss", "shadow_area"), source, "gradient.loss", LOSSES)
     kw["target"] = _target(g, source, light, kw["loss"])
@@ -172,14 +191,10 @@ def parse(raw: dict, source: str = "<dict>") -> GradSpec:
     kw["reference_step"] = _steps(g, source, kw["params"], "reference_step")
     kw["techniques"] = _techniques(g, source)
     spec = GradSpec(**kw)
-    if spec.light == "point" and not spec.occluder_height + _top(spec) < spec.light_height:
+    if spec.light != "directional" and not spec.occluder_height + spec.thickness() < spec.light_height:
         raise ConfigError(source, "gradient.light_height", f"must be above the occluder's top "
-                          f"({spec.occluder_height + _top(spec):g}), got {spec.light_height:g}")
+                          f"({spec.occluder_height + spec.thickness():g}), got {spec.light_height:g}")
     return spec
-
-
-def _top(spec) -> float:
-    return 0.0 if spec.scene == "plate" else spec.occluder_size     # a mesh is scaled to fit the box's cube
 
 
 def _mesh(g: dict, source: str, scene: str) -> str:
@@ -205,9 +220,10 @@ def _param_names(raw, source: str, key: str, light: str) -> list:
         raise ConfigError(source, key, "empty list", sorted(PARAMS))
     for n in names:
         choice(n, source, key, sorted(PARAMS))
-        if PARAMS[n][1] not in (None, light):
-            raise ConfigError(source, key, f"{n} is a parameter of a {PARAMS[n][1]} light and gradient.light is "
-                              f"{light}", [p for p, (_, lt) in PARAMS.items() if lt in (None, light)])
+        lights = PARAMS[n][1]
+        if lights is not None and light not in lights:
+            raise ConfigError(source, key, f"{n} is a parameter of a {' or '.join(lights)} light and gradient.light "
+                              f"is {light}", [p for p, (_, lt) in PARAMS.items() if lt is None or light in lt])
     if len(set(names)) != len(names):
         raise ConfigError(source, key, "a parameter is given twice: give each once")
     return names
@@ -246,7 +262,8 @@ def _compare_keys(g: dict, source: str) -> dict:
     """The reference's, the projective integrator's and the inverse task's keys (dsm grad --compare, --inverse)."""
     kw = {}
     for key, lo, hi in (("reference_samples", 1, 64), ("projective_spp", 1, 4096), ("projective_seeds", 1, 64),
-                        ("inverse_iterations", 1, 1000)):
+                        ("inverse_iterations", 1, 1000), ("light_samples", 1, MAX_LIGHT_SAMPLES),
+                        ("equal_error_seeds", 2, 64)):
         if key in g:
             kw[key] = number(g[key], source, f"gradient.{key}", integer=True, minimum=lo, maximum=hi)
     if "inverse_tolerance" in g:
@@ -263,7 +280,19 @@ def _compare_keys(g: dict, source: str) -> dict:
         if not starts:
             raise ConfigError(source, "gradient.inverse_starts", "empty list")
         kw["inverse_starts"] = tuple(number(x, source, "gradient.inverse_starts") for x in starts)
+    if "equal_error_spp" in g:
+        kw["equal_error_spp"] = _spp_sweep(g["equal_error_spp"], source)
     return kw
+
+
+def _spp_sweep(raw, source: str) -> tuple:
+    """equal_error_spp: at least two samples-per-pixel counts, increasing (path tracing's error curve)."""
+    key = "gradient.equal_error_spp"
+    spps = [number(x, source, key, integer=True, minimum=1, maximum=4096) for x in as_list(raw)]
+    if len(spps) < 2 or any(b <= a for a, b in zip(spps, spps[1:])):
+        raise ConfigError(source, key, f"expected at least two increasing counts (e.g. [4, 16, 64, 256, 1024]), "
+                          f"got {raw!r}")
+    return tuple(int(x) for x in spps)
 
 
 def _techniques(g: dict, source: str) -> tuple:

@@ -20,6 +20,10 @@ PROJECTIVE_COLUMNS = ("integrator", "param", "spp", "seeds", "mean", "standard_e
 INVERSE_COLUMNS = ("technique", "param", "unit", "start_offset", "final_error", "success", "converged_at",
                    "seconds_to_converge", "seconds")
 AGREE_SIGMAS = 3.0
+CURVE_COLUMNS = ("integrator", "param", "spp", "seeds", "mean", "bias", "standard_error", "rel_rms_error", "truth",
+                 "truth_error", "ms_per_gradient", "first_ms")
+EQUAL_ERROR_COLUMNS = ("technique", "param", "integrator", "ad", "truth", "rel_error", "ms_per_gradient",
+                       "pt_spp", "pt_ms_per_gradient", "time_ratio", "status")
 
 
 def _cell(v):
@@ -50,6 +54,40 @@ def projective_values(p, ref, cos) -> list:
     """A ProjectiveResult (against its Reference) as projective.csv's values."""
     return [p.integrator, p.param, p.spp, len(p.grads), p.mean, p.spread, p.mean - ref.value,
             relative(p.mean, ref.value), ref.value, ref.error, agrees(p, ref), p.primal_mismatch, cos, p.ms]
+
+
+def curve_values(q) -> list:
+    """An equal_error.SppPoint as equal_error_curve.csv's values."""
+    return [q.integrator, q.param, q.spp, len(q.grads), q.mean, q.bias, q.standard_error, q.rel_rms_error, q.truth,
+            q.truth_error, q.ms, q.first_ms]
+
+
+def equal_error_values(r) -> list:
+    """An equal_error.EqualErrorRow as equal_error.csv's values."""
+    return [r.technique, r.param, r.integrator, r.ad, r.truth, r.error, r.ms, r.spp, r.pt_ms, r.time_ratio, r.status]
+
+
+def equal_error_text(curves, rows) -> str:
+    """compare.md's section on cost at equal gradient error: each curve, then each technique's match."""
+    out = ["", "## Cost at equal gradient error", "",
+           "Over the pixels the camera sees of the ground (the truth masked alike). Path tracing's relative RMS "
+           "error over seeds against the truth, its bias and standard error, ms per gradient (warm median; the "
+           "first seed, with its compile, apart):", "",
+           "| integrator | param | spp x seeds | rel. RMS error | bias | std. error | ms per gradient |",
+           "|---|---|---|---|---|---|---|"]
+    for c in curves:
+        for q in c:
+            out.append(f"| {q.integrator} | {q.param} | {q.spp} x {len(q.grads)} | {_pct(q.rel_rms_error)} | "
+                       f"{_g(q.bias, 3)} | {_g(q.standard_error, 2)} | {q.ms:.0f} |")
+        out.append(f"| {c[0].integrator} | {c[0].param} | truth | {_g(c[0].truth)} +- {_g(c[0].truth_error, 2)} | | | |")
+    out += ["", "Each technique: its relative error and ms, the spp at which path tracing's error first reaches it "
+            "(log-log interpolation), path tracing's ms there, and their ratio:", "",
+            "| technique | param | integrator | rel. error | ms | path tracing spp | its ms | time ratio | status |",
+            "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        out.append(f"| {r.technique} | {r.param} | {r.integrator} | {_pct(r.error)} | {r.ms:.1f} | {_g(r.spp, 3)} | "
+                   f"{_g(r.pt_ms, 4)} | {_g(r.time_ratio, 3)} | {r.status} |")
+    return "\n".join(out) + "\n"
 
 
 def inverse_values(r) -> list:

@@ -38,7 +38,7 @@ def light_frame_dr(direction):
 
 def _window_corners(spec) -> np.ndarray:
     w = spec.window * MARGIN
-    top = spec.occluder_height + (spec.occluder_size if spec.scene == "box" else 0.0)
+    top = spec.occluder_height + (spec.thickness() if spec.scene == "box" else 0.0)
     return np.array([[x, y, z] for x in (-w, w) for y in (-w, w) for z in (0.0, top)])
 
 
@@ -98,7 +98,7 @@ def _opaque_frame(view):
 def make_view(spec, light, nominal=None):
     """The attached view of ``light`` (a LightState); ``nominal``: the light's parameter values the
     view is fitted at (a directional light's angle), default the spec's."""
-    if light.kind == "point":
+    if light.kind in ("point", "area"):          # an area light's map is rendered from its centre
         return point_view(spec, light)
     angle = math.radians(spec.light_angle if nominal is None else nominal)
     return directional_view(spec, light, (math.sin(angle), 0.0, -math.cos(angle)))
