@@ -182,10 +182,12 @@ def test_the_self_check_words_and_the_equal_error_words():
     words = findings.selfcheck_words(rows)
     assert "h: b (0.8 %)" in words and "k: no closed form" in words
     assert "at most 30 % off (b, h); undefined in 1 rows" in words
-    eq = [{"technique": "pcf aa", "ratio": "12.5"}, {"technique": "vsm aa", "ratio": "3.0"},
-          {"technique": "nearest", "ratio": ""}]
+    from dsm.grad.equal_error import BELOW, NEVER, REACHED
+    eq = [{"technique": t, "param": "h", "integrator": "direct", "time_ratio": x, "status": st}
+          for t, x, st in (("pcf aa", "12.5", REACHED), ("vsm aa", "3.0", BELOW), ("nearest", "", NEVER))]
     words = findings.equal_error_words(eq)
-    assert "is 3 (vsm aa) to 12.5 (pcf aa)" in words and "undefined for nearest" in words
+    assert "direct, d/d h: 3 (vsm aa) to 12.5 (pcf aa)" in words
+    assert "errs less than 1 of 3 techniques" in words and f"undefined where {NEVER}" in words
     assert findings.equal_error_words([{"technique": "a", "ms": "1"}]) is None
 
 
@@ -206,16 +208,18 @@ def test_a_section_is_absent_when_its_file_is_and_an_unknown_csv_is_a_link(tmp_p
     assert doc.answers[0].startswith("Closest to the closed form, per parameter: occluder_z: vsm aa (1.25 %)")
     text = (tmp_path / "report.html").read_text()
     assert ">undefined</td>" in text and 'title="exact: 0.5925925925925926">0.5926</td>' in text
-    _write(tmp_path / "equal_error.csv", ["technique", "rel_error", "ms", "pt_spp", "pt_ms", "ratio"],
-           [["vsm aa", "0.02", "13.5", "256", "400.0", "29.6"], ["nearest", "1.0", "2.0", "", "", ""]])
+    _write(tmp_path / "equal_error.csv", ["technique", "param", "integrator", "rel_error", "ms_per_gradient",
+                                          "pt_spp", "pt_ms_per_gradient", "time_ratio", "status"],
+           [["vsm aa", "occluder_z", "prb", "0.02", "13.5", "256", "400.0", "29.6", "reached"],
+            ["nearest", "occluder_z", "prb", "1.0", "2.0", "", "", "", "never within the range"]])
     _write(tmp_path / "mine.csv", ["a"], [["1"]])
     (tmp_path / "mine.png").write_bytes(b"")
     page.write_report(tmp_path, {})
     doc = _parse(tmp_path / "report.html")
     assert doc.tables["table-equal-error"] == _csv_rows(tmp_path / "equal_error.csv")
     assert "other" in doc.sections and {"mine.csv", "mine.png"} <= set(doc.links) and doc.images == []
-    assert any(a.startswith("Cost at equal gradient error: path tracing's time over the technique's is 29.6 (vsm aa)")
-               for a in doc.answers)
+    assert ("Cost at equal gradient error, path tracing's time over the technique's: prb, d/d occluder_z: "
+            "29.6 (vsm aa); undefined where never within the range.") in doc.answers
 
 
 def test_the_words_are_the_same_in_a_second_identical_run(run, tmp_path):

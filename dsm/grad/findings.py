@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from ..report.csv_table import as_number
 from ..report.labels import number_text
+from .equal_error import BELOW
+
 
 
 def pct(x: float | None) -> str:
@@ -139,19 +141,35 @@ def selfcheck_words(rows) -> str:
 
 
 def equal_error_words(rows) -> str | None:
-    """equal_error.csv (where it has technique and ratio columns): the range of path tracing's time over
-    the technique's at equal gradient error; None where the columns are absent."""
-    if not rows or "technique" not in rows[0] or "ratio" not in rows[0]:
+    """equal_error.csv (columns technique, param, integrator, time_ratio, status): per integrator and
+    parameter, the range of path tracing's time over the technique's at equal gradient error, said
+    as an upper bound where path tracing's fewest samples already err less; None without those columns."""
+    if not rows or not {"technique", "param", "integrator", "time_ratio", "status"} <= set(rows[0]):
         return None
-    label = (lambda r: f"{r['technique']}, {r['param']}") if "param" in rows[0] else (lambda r: r["technique"])
-    ratios = [(as_number(r["ratio"]), label(r)) for r in rows if as_number(r["ratio"]) is not None]
-    never = [label(r) for r in rows if as_number(r["ratio"]) is None]
-    why = "path tracing never reached its error in the range"
-    if not ratios:
-        return f"Cost at equal gradient error: undefined for every row ({why})."
-    lo, hi = min(r for r, _ in ratios), max(r for r, _ in ratios)
-    at = lambda v: names([n for r, n in ratios if r == v])
-    span = (f"{number_text(lo, 3)} ({at(lo)})" if lo == hi else
-            f"{number_text(lo, 3)} ({at(lo)}) to {number_text(hi, 3)} ({at(hi)})")
-    tail = f"; undefined for {names(never)} ({why})" if never else ""
-    return f"Cost at equal gradient error: path tracing's time over the technique's is {span}{tail}."
+    parts = []
+    for (integrator, param), group in by_pair(rows).items():
+        ratios = [(as_number(r["time_ratio"]), r["technique"]) for r in group if as_number(r["time_ratio"]) is not None]
+        at = lambda v: names([n for x, n in ratios if x == v])
+        if ratios:
+            lo, hi = min(x for x, _ in ratios), max(x for x, _ in ratios)
+            span = (f"{number_text(lo, 3)} ({at(lo)})" if lo == hi else
+                    f"{number_text(lo, 3)} ({at(lo)}) to {number_text(hi, 3)} ({at(hi)})")
+        else:
+            span = "undefined for every technique"
+        below = [r["technique"] for r in group if r["status"] == BELOW]
+        upper = (f"; at its fewest samples it already errs less than {len(below)} of {len(group)} techniques, "
+                 "so their ratios are upper bounds") if below else ""
+        none = sorted({r["status"] for r in group if as_number(r["time_ratio"]) is None})
+        tail = f"; undefined where {' or '.join(none)}" if none else ""
+        parts.append(f"{integrator}, d/d {param}: {span}{upper}{tail}")
+    return ("Cost at equal gradient error, path tracing's time over the technique's: " + "; ".join(parts) + ".")
+
+
+def by_pair(rows) -> dict:
+    """equal_error.csv's rows grouped by (integrator, param), in the CSV's order."""
+    out = {}
+    for r in rows:
+        out.setdefault((r["integrator"], r["param"]), []).append(r)
+    return out
+
+

@@ -32,9 +32,11 @@ TABLES = (
      "Mean and standard error over seeds; agrees: within three combined errors of the truth (else a finding, not a "
      "reference)."),
     ("equal_error.csv", "equal-error", "Cost at equal gradient error",
-     "Per technique: its gradient error and ms beside differentiable path tracing's samples per pixel and ms at the "
-     "same error; ratio: path tracing's ms over the technique's (undefined where path tracing never reached the "
-     "technique's error in the range)."),
+     "Per technique, parameter and projective integrator, over the pixels the integrator sees: the technique's "
+     "gradient error (rel_error) and ms beside path tracing's samples per pixel (pt_spp) and ms at the same error, "
+     "interpolated on its log-log error curve; time_ratio: path tracing's ms over the technique's. status 'already "
+     "at the first spp': path tracing's fewest samples already err less, so pt_spp and time_ratio are upper bounds; "
+     "undefined where path tracing never reached the error in the range or disagrees with the truth."),
     ("inverse.csv", "inverse", "The inverse task",
      "One row per technique, parameter and start: Adam from the truth + start_offset through the technique's image; "
      "final_error in the parameter's unit, success within the tolerance, converged_at the iteration from which it "
