@@ -158,3 +158,18 @@ def test_every_gradient_experiment_loads():
     assert {"compare_plate_area", "compare_box_area"} <= set(specs)
     assert all(specs[n].light == "area" and specs[n].light_size == 0.5 for n in ("compare_plate_area", "compare_box_area"))
     assert specs["compare_box_area"].thickness() == 0.02 and specs["compare_plate_area"].thickness() == 0.0
+
+
+def test_equal_error_figure_of_undefined_errors_says_so(tmp_path):
+    """A truth of 0 over the seen pixels (the mask hides the whole shadow) leaves every relative error undefined:
+    equal_error.png is drawn with that sentence in place of log axes that cannot exist (it raised before)."""
+    from dsm.grad.equal_error import UNDEFINED, EqualErrorRow, SppPoint
+    from dsm.grad.figure import draw_equal_error
+    from dsm.grad.tables import equal_error_text
+    curve = [SppPoint("direct_projective", "occluder_z", s, (0.0, 0.0), 0.0, 0.0, 5.0 * s, 9.0) for s in (1, 4)]
+    assert all(q.rel_rms_error is None for q in curve)
+    rows = [EqualErrorRow("pcss", "occluder_z", "direct_projective", 0.0, 0.0, None, 2.0, None, None, UNDEFINED)]
+    draw_equal_error(tmp_path / "e.png", [curve], rows)
+    assert (tmp_path / "e.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    text = equal_error_text([curve], rows)
+    assert "| pcss | occluder_z | direct_projective | undefined | 2.0 | undefined | undefined | undefined |" in text

@@ -52,6 +52,14 @@ def draw(path: Path, panels: dict, window: float):
 CURVE_STYLES = ["o-", "^--", "s-."]      # one per integrator
 
 
+def _say_undefined(ax, param: str):
+    """A panel of no defined relative error: the sentence in place of the axes."""
+    ax.set_axis_off()
+    ax.text(0.5, 0.5, f"d loss / d {param}: every relative error is undefined\n(the truth is 0 over the pixels "
+            "the camera sees, or no technique's error is defined)", ha="center", va="center", fontsize=MIN_FONT,
+            transform=ax.transAxes)
+
+
 def draw_equal_error(path: Path, curves, rows):
     """Write ``equal_error.png``: relative error against ms per gradient (log-log), each integrator's curve
     over its spp counts (labelled), each technique's point; one panel per parameter."""
@@ -78,6 +86,9 @@ def draw_equal_error(path: Path, curves, rows):
                 st = style(len(shown))
                 shown[r.technique] = ax.plot([r.ms], [r.error], st["marker"], color=st["color"], ms=6,
                                              mec="black", mew=0.5, label=r.technique)
+        if not any(np.any(np.asarray(line.get_ydata(), float) > 0) for line in ax.get_lines()):
+            _say_undefined(ax, p)      # a log axis of no positive value does not exist
+            continue
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel("ms per gradient")
