@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..report.figures import DPI, MIN_FONT, PNG, style
+from ..report.io import save_png
 
 MAX_COLUMNS = 5            # panels a row: 5 of PANEL_INCHES fit a 1280 px window at DPI
 PANEL_INCHES = 1.8
@@ -46,7 +47,7 @@ def draw(path: Path, panels: dict, window: float):
             ax.set_yticks([])
         row += math.ceil(len(items) / cols)
     fig.tight_layout()
-    fig.savefig(path, dpi=DPI, format="png", pil_kwargs=PNG)
+    save_png(path, lambda f, fmt: fig.savefig(f, dpi=DPI, format=fmt, pil_kwargs=PNG))
 
 
 CURVE_STYLES = ["o-", "^--", "s-."]      # one per integrator
@@ -96,4 +97,4 @@ def draw_equal_error(path: Path, curves, rows):
         ax.legend(fontsize=MIN_FONT, ncol=2)
         ax.tick_params(labelsize=MIN_FONT)
     fig.tight_layout()
-    fig.savefig(path, dpi=DPI, format="png", pil_kwargs=PNG)
+    save_png(path, lambda f, fmt: fig.savefig(f, dpi=DPI, format=fmt, pil_kwargs=PNG))
