@@ -776,3 +776,20 @@ def test_every_link_of_the_leaderboard_and_its_contender_pages_resolves(test_run
     for c in names:
         text = (out / contenders.page_path(c)).read_text()
         assert text.count("<figure class=case ") == sum(r["contender"] == c for r in doc["cases"])
+
+
+def test_a_contenders_page_name_is_its_own_whatever_its_characters():
+    """page_path is one file per name: a safe name as it is; one with spaces, a colon, markup, '..', an accent,
+    nothing, or 300 characters gets its slug (cut) and a hash, so names of one slug ('msm box:5', 'msm box_5')
+    keep apart and none exceeds a file name's 255 bytes (both raised before)."""
+    import hashlib
+    from dsm.benchmark import contenders
+    assert contenders.page_path("bevy") == "contenders/bevy.html"
+    odd = ["msm box:5", "msm box_5", "msm_box_5", '<b>a"</b>/../x', "thrée & co", "", ".", "..", "x" * 300, "x" * 301]
+    paths = [contenders.page_path(n) for n in odd]
+    assert len(set(paths)) == len(odd)
+    for n, p in zip(odd, paths):
+        name = p.removeprefix("contenders/")
+        assert "/" not in name and not name.startswith(".") and len(name.encode()) <= 255
+        if n != "msm_box_5":
+            assert name.endswith("~" + hashlib.sha256(n.encode()).hexdigest()[:12] + ".html")

@@ -6,16 +6,20 @@ system: no server, no network; images load as they scroll into view.
 """
 from __future__ import annotations
 
+import hashlib
 import html
 import math
 from pathlib import Path
 
 from ..report.figures import slug
 from ..report.html import CSS
+from ..report.io import write_text
 from ..truth import metrics
 from . import case_images, ranking
 
 FOLDER = "contenders"
+SLUG_MAX = 64               # characters of a contender's name kept in its page's file name
+HASH_CHARS = 12             # hex digits of the name's SHA-256 that tell apart names of one slug
 SHOWN_PX = 256              # an image's side on the page (the default size's 64 pixels at 4 CSS px each)
 SCALE_TICKS = (0.0, 0.25, 0.5, 0.75, 1.0)
 PAGE_CSS = f"""
@@ -50,8 +54,13 @@ document.querySelectorAll('.order button').forEach(b => b.addEventListener('clic
 
 
 def page_path(contender: str) -> str:
-    """A contender's page, relative to the benchmark's folder."""
-    return f"{FOLDER}/{slug(contender)}.html"
+    """A contender's page, relative to the benchmark's folder: its name where that is a short, safe file name,
+    else its slug cut to SLUG_MAX with a hash of the name (two names never share a page; '~' is no slug's)."""
+    name = slug(contender)
+    if name != contender or not name or len(name) > SLUG_MAX or name.startswith("."):
+        digest = hashlib.sha256(contender.encode("utf-8")).hexdigest()[:HASH_CHARS]
+        name = f"{name.lstrip('.')[:SLUG_MAX]}~{digest}"      # no hidden file
+    return f"{FOLDER}/{name}.html"
 
 
 def case_anchor(index: int) -> str:
@@ -152,16 +161,10 @@ def contender_page(doc: dict, out: Path, contender: str) -> str:
 def write_pages(doc: dict, out: Path) -> list:
     """Write a page per contender (the oracle has none) under ``out/contenders/``; returns their paths."""
     names = sorted({r["contender"] for r in doc["cases"] if r["contender"] != "oracle"})
-    files = {}
-    for name in names:
-        rel = page_path(name)
-        if rel in files:        # two names that make one file name: one page would hide the other
-            raise ValueError(f"contenders {files[rel]!r} and {name!r} make one page name, {rel}")
-        files[rel] = name
     (Path(out) / FOLDER).mkdir(parents=True, exist_ok=True)
     written = []
-    for rel, name in files.items():
-        path = Path(out) / rel
-        path.write_text(contender_page(doc, out, name))
+    for name in names:
+        path = Path(out) / page_path(name)
+        write_text(path, contender_page(doc, out, name))
         written.append(path)
     return written
