@@ -173,3 +173,26 @@ def test_equal_error_figure_of_undefined_errors_says_so(tmp_path):
     assert (tmp_path / "e.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     text = equal_error_text([curve], rows)
     assert "| pcss | occluder_z | direct_projective | undefined | 2.0 | undefined | undefined | undefined |" in text
+
+
+@pytest.mark.parametrize("kw, key, words", [
+    ({"light_size": 2.0}, "gradient.light_size", "valid: 0 < light_size < 2)"),
+    ({"light_size": 1e9, "window": 0.5}, "gradient.light_size", "valid: 0 < light_size < 1)"),
+    ({"light_size": "big"}, "gradient.light_size", "expected a number, got 'big'"),
+    ({"light_samples": 10 ** 6}, "gradient.light_samples", "must be <= 32, got 1000000 (valid: an integer from 1 to 32)"),
+    ({"light_samples": 0}, "gradient.light_samples", "must be >= 1, got 0 (valid: an integer from 1 to 32)"),
+    ({"light_samples": 2.5}, "gradient.light_samples", "expected an integer"),
+    ({"equal_error_spp": [4, 4]}, "gradient.equal_error_spp", "strictly increasing counts, each from 1 to 4096"),
+    ({"equal_error_spp": [0, 4]}, "gradient.equal_error_spp", ">= 1"),
+    ({"equal_error_spp": [1, 10 ** 6]}, "gradient.equal_error_spp", "<= 4096"),
+    ({"equal_error_spp": "16"}, "gradient.equal_error_spp", "expected an integer"),
+    ({"equal_error_seeds": 10 ** 6}, "gradient.equal_error_seeds", "<= 64"),
+    ({"scene": "box", "box_height": 1e9}, "gradient.light_height", "above the occluder's top"),
+    ({"scene": "box", "box_height": "0.1"}, "gradient.box_height", "expected a number"),
+])
+def test_absurd_area_light_values_are_one_line_errors(kw, key, words):
+    """Huge, wrong-typed and duplicated values of the area light's keys: refused at reading, in one line."""
+    with pytest.raises(ConfigError) as e:
+        _spec(**kw)
+    msg = str(e.value)
+    assert msg.startswith(f"g.toml: {key}: ") and words in msg and "\n" not in msg
