@@ -196,3 +196,21 @@ def test_absurd_area_light_values_are_one_line_errors(kw, key, words):
         _spec(**kw)
     msg = str(e.value)
     assert msg.startswith(f"g.toml: {key}: ") and words in msg and "\n" not in msg
+
+
+def test_compare_refuses_a_light_that_hides_the_whole_image_before_any_work(tmp_path, capsys):
+    """light_size 1.95 (under 2 x window, so read) seen from the projective camera 40 windows up covers the image
+    with the mask's two pixels: --compare says so in one line and writes nothing; the mask is numpy's box test."""
+    from dsm.cli import main
+    from dsm.grad import projective
+    spec = _spec(light_size=1.95, image_resolution=16)
+    half = 1.95 / 2 * 40.0 / (40.0 - spec.light_height) + 2 * 2.0 / 16      # projected half side, grown
+    assert half > 1.0 and not projective.ground_seen(spec, "occluder_z").any()
+    assert projective.ground_seen(_spec(light_size=0.5, image_resolution=16), "occluder_z").any()
+    cfg = tmp_path / "g.toml"
+    cfg.write_text('[gradient]\nlight = "area"\nlight_size = 1.95\nmap_resolution = 16\nimage_resolution = 16\n')
+    assert main(["grad", str(cfg), "--compare", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"dsm: config error: {cfg}: gradient.light_size: --compare's projective integrators would "
+                          "see no ground pixel") and "\n" not in err
+    assert not (tmp_path / "o").exists()

@@ -128,6 +128,10 @@ def main(args) -> int:
         print(f"dsm: config error: {spec.source}: gradient.loss: --compare takes {spec.loss!r} loss only from a "
               f"reference of its own (valid: {', '.join(comparemod.LOSSES)})", file=sys.stderr)
         return 2
+    blind = getattr(args, "compare", False) and unseen_problem(spec)
+    if blind:
+        print(f"dsm: config error: {blind}", file=sys.stderr)
+        return 2
     out = Path(args.out)
     held, why = claim(out)
     if why is None:
@@ -137,6 +141,19 @@ def main(args) -> int:
                 return _run_held(args, spec, out)
     print(f"dsm: {why}", file=sys.stderr)
     return 2
+
+
+def unseen_problem(spec) -> str | None:
+    """Why --compare's projective integrators would see no ground pixel (None if they see some): the occluder's
+    and an area light's images, grown by MASK_PIXELS, cover the whole image of their camera."""
+    for p in spec.params:
+        if p in projective.OCCLUDER_PARAMS and not projective.ground_seen(spec, p).any():
+            key, what = (("gradient.light_size", "the occluder's and the area light's images cover")
+                         if spec.light == "area" else ("gradient.occluder_size", "the occluder's image covers"))
+            return (f"{spec.source}: {key}: --compare's projective integrators would see no ground pixel: {what} "
+                    f"the whole of [-{spec.window:g}, {spec.window:g}]^2 (grown by {projective.MASK_PIXELS} pixels); "
+                    "make it smaller or the window larger")
+    return None
 
 
 def _run_held(args, spec, out: Path) -> int:
