@@ -793,3 +793,22 @@ def test_a_contenders_page_name_is_its_own_whatever_its_characters():
         assert "/" not in name and not name.startswith(".") and len(name.encode()) <= 255
         if n != "msm_box_5":
             assert name.endswith("~" + hashlib.sha256(n.encode()).hexdigest()[:12] + ".html")
+
+
+def test_contender_pages_of_a_results_folder_without_images_say_so_once(tmp_path):
+    """--page on a folder from before case_images/ (results.json alone): each page says once that no images
+    were kept, no card carries a 'not kept' note, and a stale page of an earlier naming is removed."""
+    from dsm.benchmark import contenders
+    cases = [{"scene": s, "unit": "m", "offset": "0", "light": "spot", "contender": c, "n_receivers": 100,
+              "n_gt_shadowed": 40, "n_acne": 3, "n_peterpan": 2, "acne_rate": 0.05, "peterpan_rate": 0.05,
+              "error_rate": 0.05, "texel_size": 0.01, "build_ms": 1.0, "lookup_ms": 1.0, "params": ""}
+             for s in ("a", "b") for c in ("bevy", "msm box:5")]
+    doc = {"suite": "dsm-bench-5", "size": "test", "cases": cases}
+    (tmp_path / "contenders").mkdir()
+    (tmp_path / "contenders" / "msm_box_5.html").write_text("an earlier naming's page")
+    written = contenders.write_pages(doc, tmp_path)
+    assert sorted(p.name for p in (tmp_path / "contenders").iterdir()) == sorted(p.name for p in written)
+    for p in written:
+        text = p.read_text()
+        assert text.count("<b>No images:</b>") == 1 and "not kept" not in text
+        assert text.count("<figure class=case ") == 2

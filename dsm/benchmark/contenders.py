@@ -106,8 +106,9 @@ def card_html(out: Path, index: int, place: int, rec: dict, has_flip: bool) -> s
     map, its numbers, its links."""
     where = f"{rec['scene']}, {rec['unit']}, offset {ranking.offset_of(rec)}, {rec['light']} light"
     class_sheet, flip_sheet = case_images.sheets(rec)
-    images = image_html(out, class_sheet, place, f"error classes of {where}", "error classes (colours above)")
-    if has_flip:
+    kept = (Path(out) / case_images.FOLDER).is_dir()       # none in a run from before they were kept: said once
+    images = "" if not kept else image_html(out, class_sheet, place, f"error classes of {where}", "error classes (colours above)")
+    if has_flip and kept:
         images += image_html(out, flip_sheet, place, f"FLIP map of {where}", "FLIP error (scale above)")
     row = (f"<a href=\"../leaderboard.html#case-{index}\">its row in the leaderboard</a>; "
            if ranking.at_origin(rec) else "")
@@ -151,6 +152,9 @@ def contender_page(doc: dict, out: Path, contender: str) -> str:
             "camera's receivers under the contender's shadow map against the exact visibility, and the FLIP "
             "error of the shaded render under its visibility against the exact render (what the FLIP column "
             "averages). Rates with an empty denominator are undefined.</p>" + legend_html(has_flip)
+            + ("" if (Path(out) / case_images.FOLDER).is_dir() else
+               f"<p class=note><b>No images:</b> this results folder has no {case_images.FOLDER}/ (a run from before "
+               "dsm benchmark kept them); a new run keeps each case's pair.</p>")
             + f"<div class=order>Order: {order}</div><div id=cards>"
             + "".join(card_html(out, i, place[i], r, has_flip) for i, r in worst) + "</div>")
     return (f"<!doctype html><html><head><meta charset=utf-8><title>{html.escape(contender)}: "
@@ -159,7 +163,8 @@ def contender_page(doc: dict, out: Path, contender: str) -> str:
 
 
 def write_pages(doc: dict, out: Path) -> list:
-    """Write a page per contender (the oracle has none) under ``out/contenders/``; returns their paths."""
+    """Write a page per contender (the oracle has none) under ``out/contenders/``, removing any other page
+    there (an earlier run's, or an earlier naming's); returns their paths."""
     names = sorted({r["contender"] for r in doc["cases"] if r["contender"] != "oracle"})
     (Path(out) / FOLDER).mkdir(parents=True, exist_ok=True)
     written = []
@@ -167,4 +172,6 @@ def write_pages(doc: dict, out: Path) -> list:
         path = Path(out) / page_path(name)
         write_text(path, contender_page(doc, out, name))
         written.append(path)
+    for stale in set((Path(out) / FOLDER).glob("*.html")) - set(written):     # a page of a name no longer run
+        stale.unlink()
     return written
