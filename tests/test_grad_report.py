@@ -187,7 +187,8 @@ def test_the_self_check_words_and_the_equal_error_words():
           for t, x, st in (("pcf aa", "12.5", REACHED), ("vsm aa", "3.0", BELOW), ("nearest", "", NEVER))]
     words = findings.equal_error_words(eq)
     assert "direct, d/d h: 3 (vsm aa) to 12.5 (pcf aa)" in words
-    assert "errs less than 1 of 3 techniques" in words and "; undefined for nearest (path tracing never reached its error within the spp range)" in words
+    assert "errs less than 1 of 3 techniques" in words
+    assert "; undefined for nearest (path tracing never reached its error within the spp range)" in words
     assert findings.equal_error_words([{"technique": "a", "ms": "1"}]) is None
 
 
@@ -219,7 +220,8 @@ def test_a_section_is_absent_when_its_file_is_and_an_unknown_csv_is_a_link(tmp_p
     assert doc.tables["table-equal-error"] == _csv_rows(tmp_path / "equal_error.csv")
     assert "other" in doc.sections and {"mine.csv", "mine.png"} <= set(doc.links) and doc.images == []
     assert ("Cost at equal gradient error, path tracing's time over the technique's: prb, d/d occluder_z: "
-            "29.6 (vsm aa); undefined for nearest (path tracing never reached its error within the spp range).") in doc.answers
+            "29.6 (vsm aa); undefined for nearest (path tracing never reached its error within the spp "
+            "range).") in doc.answers
 
 
 def test_the_words_are_the_same_in_a_second_identical_run(run, tmp_path):

@@ -107,7 +107,8 @@ def card_html(out: Path, index: int, place: int, rec: dict, has_flip: bool) -> s
     where = f"{rec['scene']}, {rec['unit']}, offset {ranking.offset_of(rec)}, {rec['light']} light"
     class_sheet, flip_sheet = case_images.sheets(rec)
     kept = (Path(out) / case_images.FOLDER).is_dir()       # none in a run from before they were kept: said once
-    images = "" if not kept else image_html(out, class_sheet, place, f"error classes of {where}", "error classes (colours above)")
+    images = "" if not kept else image_html(out, class_sheet, place, f"error classes of {where}",
+                                            "error classes (colours above)")
     if has_flip and kept:
         images += image_html(out, flip_sheet, place, f"FLIP map of {where}", "FLIP error (scale above)")
     row = (f"<a href=\"../leaderboard.html#case-{index}\">its row in the leaderboard</a>; "

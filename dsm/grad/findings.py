@@ -12,7 +12,8 @@ from ..report.labels import number_text
 from .equal_error import BELOW, DISAGREES, NEVER, REACHED, UNDEFINED
 
 # why a time ratio is undefined, by equal_error.csv's status
-UNDEFINED_WHY = {UNDEFINED: "the technique's relative error is undefined: the truth over the pixels the integrator sees is 0",
+UNDEFINED_WHY = {UNDEFINED: "the technique's relative error is undefined: the truth over the pixels the integrator "
+                            "sees is 0",
                  NEVER: "path tracing never reached its error within the spp range",
                  DISAGREES: "the integrator disagrees with the truth",
                  REACHED: "path tracing's time there is undefined",
@@ -84,7 +85,8 @@ def compare_words(rows) -> str:
         who, rel = closest_to_truth(rs)
         if not who:
             zero = all(as_number(r["reference"]) == 0.0 for r in rs)
-            phrase = winner_phrase([], None, "relative error", "the truth is 0" if zero else "the truth is 0 or undefined")
+            why = "the truth is 0" if zero else "the truth is 0 or undefined"
+            phrase = winner_phrase([], None, "relative error", why)
         elif len(who) == 1:
             r = next(r for r in rs if r["technique"] == who[0])
             cos = as_number(r.get("cosine", ""))
@@ -186,7 +188,8 @@ def equal_error_words(rows) -> str | None:
                  "so their ratios are upper bounds") if below else ""
         why = by_status([r for r in group if as_number(r["time_ratio"]) is None])
         if not ratios and len(why) == 1:
-            tail = f" ({UNDEFINED_WHY.get(*[next(iter(why))] * 2)})"     # one reason for all: said once
+            status = next(iter(why))            # one reason for every technique: said once
+            tail = f" ({UNDEFINED_WHY.get(status, status)})"
         else:
             tail = "".join(f"; undefined for {names(who)} ({UNDEFINED_WHY.get(status, status)})"
                            for status, who in why.items())

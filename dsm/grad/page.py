@@ -126,7 +126,8 @@ def tables_html(tables: dict) -> str:
         columns, rows = tables[name]
         extra = inverse_summary(rows) + "<h3>Every start</h3>" if name == "inverse.csv" and rows else ""
         out.append(f"<section id=\"{sid}\"><h2>{_e(title)} (<a href=\"{_e(name)}\">{_e(name)}</a>, "
-                   f"{findings.count(len(rows), 'row')})</h2><p class=note>{_e(note)} Click a header to sort (undefined last); hover a number for "
+                   f"{findings.count(len(rows), 'row')})</h2><p class=note>{_e(note)} Click a header to sort "
+                   f"(undefined last); hover a number for "
                    f"its exact value.</p>{extra}{csv_table.table_html(columns, rows, 'table-' + sid)}</section>")
     return "".join(out)
 

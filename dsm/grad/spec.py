@@ -303,7 +303,8 @@ def _spp_sweep(raw, source: str) -> tuple:
     key = "gradient.equal_error_spp"
     spps = [count(x, source, key, 1, 4096) for x in as_list(raw)]
     if len(spps) < 2 or any(b <= a for a, b in zip(spps, spps[1:])):
-        raise ConfigError(source, key, f"expected at least two strictly increasing counts, each from 1 to 4096 (e.g. [4, 16, 64, 256, 1024]), "
+        raise ConfigError(source, key, "expected at least two strictly increasing counts, each from 1 to 4096 "
+                          f"(e.g. [4, 16, 64, 256, 1024]), "
                           f"got {raw!r}")
     return tuple(int(x) for x in spps)
 

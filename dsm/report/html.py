@@ -118,7 +118,8 @@ cases.tBodies[0].addEventListener('click', ev => {
     const box = document.createElement('div');
     box.className = 'wide';
     const img = document.createElement('img');
-    img.src = tr.dataset.gif; img.alt = 'frames of case ' + tr.dataset.case; img.className = tr.dataset.gifkind === 'classes' ? 'frames classes' : 'frames';
+    img.src = tr.dataset.gif; img.alt = 'frames of case ' + tr.dataset.case;
+    img.className = tr.dataset.gifkind === 'classes' ? 'frames classes' : 'frames';
     box.appendChild(img);
     fig.appendChild(box);
     const words = document.createElement('figcaption');
