@@ -776,3 +776,39 @@ def test_every_link_of_the_leaderboard_and_its_contender_pages_resolves(test_run
     for c in names:
         text = (out / contenders.page_path(c)).read_text()
         assert text.count("<figure class=case ") == sum(r["contender"] == c for r in doc["cases"])
+
+
+def test_a_contenders_page_name_is_its_own_whatever_its_characters():
+    """page_path is one file per name: a safe name as it is; one with spaces, a colon, markup, '..', an accent,
+    nothing, or 300 characters gets its slug (cut) and a hash, so names of one slug ('msm box:5', 'msm box_5')
+    keep apart and none exceeds a file name's 255 bytes (both raised before)."""
+    import hashlib
+    from dsm.benchmark import contenders
+    assert contenders.page_path("bevy") == "contenders/bevy.html"
+    odd = ["msm box:5", "msm box_5", "msm_box_5", '<b>a"</b>/../x', "thrée & co", "", ".", "..", "x" * 300, "x" * 301]
+    paths = [contenders.page_path(n) for n in odd]
+    assert len(set(paths)) == len(odd)
+    for n, p in zip(odd, paths):
+        name = p.removeprefix("contenders/")
+        assert "/" not in name and not name.startswith(".") and len(name.encode()) <= 255
+        if n != "msm_box_5":
+            assert name.endswith("~" + hashlib.sha256(n.encode()).hexdigest()[:12] + ".html")
+
+
+def test_contender_pages_of_a_results_folder_without_images_say_so_once(tmp_path):
+    """--page on a folder from before case_images/ (results.json alone): each page says once that no images
+    were kept, no card carries a 'not kept' note, and a stale page of an earlier naming is removed."""
+    from dsm.benchmark import contenders
+    cases = [{"scene": s, "unit": "m", "offset": "0", "light": "spot", "contender": c, "n_receivers": 100,
+              "n_gt_shadowed": 40, "n_acne": 3, "n_peterpan": 2, "acne_rate": 0.05, "peterpan_rate": 0.05,
+              "error_rate": 0.05, "texel_size": 0.01, "build_ms": 1.0, "lookup_ms": 1.0, "params": ""}
+             for s in ("a", "b") for c in ("bevy", "msm box:5")]
+    doc = {"suite": "dsm-bench-5", "size": "test", "cases": cases}
+    (tmp_path / "contenders").mkdir()
+    (tmp_path / "contenders" / "msm_box_5.html").write_text("an earlier naming's page")
+    written = contenders.write_pages(doc, tmp_path)
+    assert sorted(p.name for p in (tmp_path / "contenders").iterdir()) == sorted(p.name for p in written)
+    for p in written:
+        text = p.read_text()
+        assert text.count("<b>No images:</b>") == 1 and "not kept" not in text
+        assert text.count("<figure class=case ") == 2

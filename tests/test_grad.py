@@ -212,3 +212,23 @@ def test_dsm_grad_answers_a_bad_folder_a_folder_config_and_an_unreadable_mesh_in
         err = capsys.readouterr().err.strip()
         assert err.count("\n") == 0 and words in err, err
     assert not (tmp_path / "o2" / "selfcheck.csv").exists()
+
+
+def test_dsm_grad_force_replaces_only_an_earlier_dsm_grads_folder(tmp_path):
+    """--force into another command's folder (a dsm run's report.html and table.md) is refused, its files
+    intact; into a dsm grad killed mid-write (only its selfcheck.csv's temporary file) it removes the leftovers."""
+    from dsm.grad.command import folder_problem
+    run = tmp_path / "run"
+    run.mkdir()
+    for name in ("report.html", "table.md", "metrics.csv"):
+        (run / name).write_text(name)
+    why = folder_problem(run, force=True)
+    assert why.startswith(f"--out {run}: --force replaces an earlier dsm grad's files") and "\n" not in why
+    assert sorted(p.name for p in run.iterdir()) == ["metrics.csv", "report.html", "table.md"]
+    killed = tmp_path / "killed"
+    killed.mkdir()
+    (killed / ".selfcheck.csv.4242.tmp").write_text("technique,pa")
+    (killed / "mine.txt").write_text("a user's own file")
+    assert folder_problem(killed, force=False).startswith(f"--out {killed}: holds 2 entries")
+    assert folder_problem(killed, force=True) is None
+    assert [p.name for p in killed.iterdir()] == ["mine.txt"]

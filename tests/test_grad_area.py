@@ -158,3 +158,60 @@ def test_every_gradient_experiment_loads():
     assert {"compare_plate_area", "compare_box_area"} <= set(specs)
     assert all(specs[n].light == "area" and specs[n].light_size == 0.5 for n in ("compare_plate_area", "compare_box_area"))
     assert specs["compare_box_area"].thickness() == 0.02 and specs["compare_plate_area"].thickness() == 0.0
+
+
+def test_equal_error_figure_of_undefined_errors_says_so(tmp_path):
+    """A truth of 0 over the seen pixels (the mask hides the whole shadow) leaves every relative error undefined:
+    equal_error.png is drawn with that sentence in place of log axes that cannot exist (it raised before)."""
+    from dsm.grad.equal_error import UNDEFINED, EqualErrorRow, SppPoint
+    from dsm.grad.figure import draw_equal_error
+    from dsm.grad.tables import equal_error_text
+    curve = [SppPoint("direct_projective", "occluder_z", s, (0.0, 0.0), 0.0, 0.0, 5.0 * s, 9.0) for s in (1, 4)]
+    assert all(q.rel_rms_error is None for q in curve)
+    rows = [EqualErrorRow("pcss", "occluder_z", "direct_projective", 0.0, 0.0, None, 2.0, None, None, UNDEFINED)]
+    draw_equal_error(tmp_path / "e.png", [curve], rows)
+    assert (tmp_path / "e.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    text = equal_error_text([curve], rows)
+    assert "| pcss | occluder_z | direct_projective | undefined | 2.0 | undefined | undefined | undefined |" in text
+
+
+@pytest.mark.parametrize("kw, key, words", [
+    ({"light_size": 2.0}, "gradient.light_size", "valid: 0 < light_size < 2)"),
+    ({"light_size": 1e9, "window": 0.5}, "gradient.light_size", "valid: 0 < light_size < 1)"),
+    ({"light_size": "big"}, "gradient.light_size", "expected a number, got 'big'"),
+    ({"light_samples": 10 ** 6}, "gradient.light_samples",
+     "must be <= 32, got 1000000 (valid: an integer from 1 to 32)"),
+    ({"light_samples": 0}, "gradient.light_samples", "must be >= 1, got 0 (valid: an integer from 1 to 32)"),
+    ({"light_samples": 2.5}, "gradient.light_samples", "expected an integer"),
+    ({"equal_error_spp": [4, 4]}, "gradient.equal_error_spp", "strictly increasing counts, each from 1 to 4096"),
+    ({"equal_error_spp": [0, 4]}, "gradient.equal_error_spp", ">= 1"),
+    ({"equal_error_spp": [1, 10 ** 6]}, "gradient.equal_error_spp", "<= 4096"),
+    ({"equal_error_spp": "16"}, "gradient.equal_error_spp", "expected an integer"),
+    ({"equal_error_seeds": 10 ** 6}, "gradient.equal_error_seeds", "<= 64"),
+    ({"scene": "box", "box_height": 1e9}, "gradient.light_height", "above the occluder's top"),
+    ({"scene": "box", "box_height": "0.1"}, "gradient.box_height", "expected a number"),
+])
+def test_absurd_area_light_values_are_one_line_errors(kw, key, words):
+    """Huge, wrong-typed and duplicated values of the area light's keys: refused at reading, in one line."""
+    with pytest.raises(ConfigError) as e:
+        _spec(**kw)
+    msg = str(e.value)
+    assert msg.startswith(f"g.toml: {key}: ") and words in msg and "\n" not in msg
+
+
+def test_compare_refuses_a_light_that_hides_the_whole_image_before_any_work(tmp_path, capsys):
+    """light_size 1.95 (under 2 x window, so read) seen from the projective camera 40 windows up covers the image
+    with the mask's two pixels: --compare says so in one line and writes nothing; the mask is numpy's box test."""
+    from dsm.cli import main
+    from dsm.grad import projective
+    spec = _spec(light_size=1.95, image_resolution=16)
+    half = 1.95 / 2 * 40.0 / (40.0 - spec.light_height) + 2 * 2.0 / 16      # projected half side, grown
+    assert half > 1.0 and not projective.ground_seen(spec, "occluder_z").any()
+    assert projective.ground_seen(_spec(light_size=0.5, image_resolution=16), "occluder_z").any()
+    cfg = tmp_path / "g.toml"
+    cfg.write_text('[gradient]\nlight = "area"\nlight_size = 1.95\nmap_resolution = 16\nimage_resolution = 16\n')
+    assert main(["grad", str(cfg), "--compare", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"dsm: config error: {cfg}: gradient.light_size: --compare's projective integrators would "
+                          "see no ground pixel") and "\n" not in err
+    assert not (tmp_path / "o").exists()

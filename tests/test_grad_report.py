@@ -134,9 +134,12 @@ def test_the_answer_names_numpys_argmin_per_parameter(run):
         else:
             assert f"{p}: a tie" in words and findings.names(who) in words
     proj = list(csv.DictReader(open(run / "projective.csv")))
-    agreeing = sum(r["agrees"] == "True" for r in proj)
-    assert any(a.startswith(f"Mitsuba's projective integrators agreed with the truth in {agreeing} of {len(proj)}")
-               for a in doc.answers)
+    # a truth of exactly 0 +- 0 over the seen pixels (the mask hides the shadow at 16^2) is no agreement
+    blind = [float(r["reference"]) == 0.0 and float(r["reference_error"]) == 0.0 for r in proj]
+    agreeing = sum(r["agrees"] == "True" and not b for r, b in zip(proj, blind))
+    said = next(a for a in doc.answers if a.startswith("Mitsuba's projective integrators"))
+    assert said.startswith(f"Mitsuba's projective integrators agreed with the truth in {agreeing} of {len(proj)} ")
+    assert ("measured nothing" in said) == any(blind)
 
 
 def _compare_rows(param, ads, ref, err):
@@ -181,13 +184,14 @@ def test_the_self_check_words_and_the_equal_error_words():
                                     ("a", "k", "", "", ""), ("b", "k", "", "", "0.001"))]
     words = findings.selfcheck_words(rows)
     assert "h: b (0.8 %)" in words and "k: no closed form" in words
-    assert "at most 30 % off (b, h); undefined in 1 rows" in words
+    assert "at most 30 % off (b, h); undefined in 1 row (a central difference of 0)" in words
     from dsm.grad.equal_error import BELOW, NEVER, REACHED
     eq = [{"technique": t, "param": "h", "integrator": "direct", "time_ratio": x, "status": st}
           for t, x, st in (("pcf aa", "12.5", REACHED), ("vsm aa", "3.0", BELOW), ("nearest", "", NEVER))]
     words = findings.equal_error_words(eq)
     assert "direct, d/d h: 3 (vsm aa) to 12.5 (pcf aa)" in words
-    assert "errs less than 1 of 3 techniques" in words and f"undefined where {NEVER}" in words
+    assert "errs less than 1 of 3 techniques" in words
+    assert "; undefined for nearest (path tracing never reached its error within the spp range)" in words
     assert findings.equal_error_words([{"technique": "a", "ms": "1"}]) is None
 
 
@@ -219,7 +223,8 @@ def test_a_section_is_absent_when_its_file_is_and_an_unknown_csv_is_a_link(tmp_p
     assert doc.tables["table-equal-error"] == _csv_rows(tmp_path / "equal_error.csv")
     assert "other" in doc.sections and {"mine.csv", "mine.png"} <= set(doc.links) and doc.images == []
     assert ("Cost at equal gradient error, path tracing's time over the technique's: prb, d/d occluder_z: "
-            "29.6 (vsm aa); undefined where never within the range.") in doc.answers
+            "29.6 (vsm aa); undefined for nearest (path tracing never reached its error within the spp "
+            "range).") in doc.answers
 
 
 def test_the_words_are_the_same_in_a_second_identical_run(run, tmp_path):
@@ -228,3 +233,49 @@ def test_the_words_are_the_same_in_a_second_identical_run(run, tmp_path):
     (tmp_path / "g.toml").write_text(TINY)
     assert main(["grad", str(tmp_path / "g.toml"), "--compare", "--inverse", "--out", str(tmp_path / "again")]) == 0
     assert _parse(tmp_path / "again" / "report.html").answers == _parse(run / "report.html").answers
+
+
+def test_a_truth_of_zero_over_the_seen_pixels_is_said_as_measuring_nothing():
+    """projective.csv's 0 against a truth of exactly 0 +- 0 (the mask hid the whole shadow) is no agreement;
+    equal_error.csv's undefined ratios say why once, not 'undefined where undefined'."""
+    from dsm.grad.equal_error import UNDEFINED
+    proj = [{"integrator": "direct_projective", "param": "occluder_z", "reference": "0.0", "reference_error": "0.0",
+             "rel_error": "", "agrees": "True"},
+            {"integrator": "prb_projective", "param": "occluder_z", "reference": "0.33", "reference_error": "0.01",
+             "rel_error": "0.02", "agrees": "True"}]
+    words = findings.projective_words(proj)
+    assert words.startswith("Mitsuba's projective integrators agreed with the truth in 1 of 2 cases: prb_projective ")
+    assert "measured nothing (the truth over the pixels it sees is 0: the mask hides the whole shadow): " \
+           "direct_projective on occluder_z." in words
+    eq = [{"technique": t, "param": "occluder_z", "integrator": "direct_projective", "time_ratio": "",
+           "status": UNDEFINED} for t in ("nearest", "pcss")]
+    words = findings.equal_error_words(eq)
+    assert words.endswith("direct_projective, d/d occluder_z: undefined for every technique (the technique's "
+                          "relative error is undefined: the truth over the pixels the integrator sees is 0).")
+    assert "where undefined" not in words
+
+
+@pytest.mark.parametrize("damage", ["empty", "header", "nan", "short"])
+def test_a_damaged_csv_still_gives_a_report_whose_words_say_undefined(tmp_path, damage):
+    """An empty compare.csv, one with its header only, nan and inf cells (no measured value) or a short row
+    (cells missing): report.html is written, its table holds the file's rows, no number comes from a nan."""
+    cols = ["technique", "param", "unit", "ad", "reference", "reference_error", "reference_step", "reference_samples",
+            "rel_error", "sign", "cosine", "ms_per_gradient", "compile_ms"]
+    rows = {"empty": None, "header": [],
+            "nan": [["vsm", "h", "world", "nan", "0.5", "0.01", "0.02", "4", "nan", "", "inf", "1.5", "0.1"],
+                    ["pcss", "h", "world", "0.25", "0.5", "0.01", "0.02", "4", "0.5", "True", "0.9", "2.0", "0.1"]],
+            "short": [["vsm", "h", "world", "0.25"],
+                      ["pcss", "h", "world", "0.25", "0.5", "0.01", "0.02", "4", "0.5", "True", "0.9", "2.0", "0.1"]]}
+    if rows[damage] is None:
+        (tmp_path / "compare.csv").write_text("")
+    else:
+        _write(tmp_path / "compare.csv", cols, rows[damage])
+    page.write_report(tmp_path, {})
+    doc = _parse(tmp_path / "report.html")
+    assert "compare" in doc.sections
+    padded = [r + [""] * (len(cols) - len(r)) for r in rows[damage] or []]      # a missing cell: undefined
+    assert doc.tables.get("table-compare", []) == padded
+    if rows[damage]:
+        # the one defined relative error is pcss's: the only answer that the numbers support
+        assert "h: pcss (50 %), sign True, per-pixel cosine 0.9" in doc.answers[0]
+        assert "nan" not in " ".join(doc.answers)

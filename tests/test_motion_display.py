@@ -48,6 +48,8 @@ def test_motion_gif_frames_give_the_frames_class_counts_and_change_no_count(run_
     gif = Image.open(next((res.out / "images").glob("*/0001_frames.gif")))
     k, w, h = 7, 64 * 7, 48 * 7
     assert gif.n_frames == 3 and gif.size == (3 * w + 2 * md.GAP_PX, md.HEADER_PX + h)
+    from dsm.report.html import gif_kind
+    assert gif_kind(next((res.out / "images").glob("*/0001_frames.gif"))) == "display"
     base = {metrics.OUTSIDE: 0, metrics.LIT: 1, metrics.SHADOW: 2, metrics.ACNE: 3, metrics.ACNE_RESOLUTION: 3,
             metrics.PETERPAN: 4, metrics.PETERPAN_RESOLUTION: 4, metrics.LEAK: 4}
     total = np.zeros(5, int)
@@ -97,3 +99,23 @@ def test_display_render_n_dot_l_of_a_plane_is_the_float64_cosine():
         assert 0.2 < cos < 0.99
         mid = tuple(np.argwhere(fd.receiver)[len(np.argwhere(fd.receiver)) // 2])
         assert fd.exact[mid] == pytest.approx(0.12 + 0.88 * cos, abs=2e-6)    # nothing shadows a lone plane
+
+
+def test_a_motion_gif_of_class_images_is_captioned_as_one(run_dict):
+    """[report] images = "errors": the GIF is the frames' class images (the camera's size, class colours only)
+    and report.html's viewer captions it so (it called them display renders); the display GIF of
+    test_motion_gif_frames_give_the_frames_class_counts_and_change_no_count reads as "display"."""
+    from dsm.report.html import gif_kind
+    from dsm.truth import metrics
+    cfg = base_config(camera={"resolution": [32, 24]}, scene=[{"builtin": "plane_box"}], map={"resolution": 64},
+                      scheme=[{"name": "constant", "bias": ["1 texel"]}], report={"images": "errors"},
+                      motion=[{"frames": 2, "light": "move", "light_offset": [0.0, 1.0, 0.0], "points": 200}])
+    res = run_dict(cfg, "errors")
+    path = next((res.out / "images").glob("*/0001_frames.gif"))
+    gif = Image.open(path)
+    assert gif.size == (32, 24)            # one pixel per camera pixel (identical frames may merge)
+    colours = {tuple(c) for c in np.asarray(gif.convert("RGB")).reshape(-1, 3)}
+    assert colours <= {tuple(int(x) for x in c) for c in metrics.CLASS_COLORS}
+    assert gif_kind(path) == "classes"
+    page = (res.out / "report.html").read_text()
+    assert page.count('data-gifkind="classes"') == 1 and 'data-gifkind="display"' not in page

@@ -6,16 +6,20 @@ system: no server, no network; images load as they scroll into view.
 """
 from __future__ import annotations
 
+import hashlib
 import html
 import math
 from pathlib import Path
 
 from ..report.figures import slug
 from ..report.html import CSS
+from ..report.io import write_text
 from ..truth import metrics
 from . import case_images, ranking
 
 FOLDER = "contenders"
+SLUG_MAX = 64               # characters of a contender's name kept in its page's file name
+HASH_CHARS = 12             # hex digits of the name's SHA-256 that tell apart names of one slug
 SHOWN_PX = 256              # an image's side on the page (the default size's 64 pixels at 4 CSS px each)
 SCALE_TICKS = (0.0, 0.25, 0.5, 0.75, 1.0)
 PAGE_CSS = f"""
@@ -50,8 +54,13 @@ document.querySelectorAll('.order button').forEach(b => b.addEventListener('clic
 
 
 def page_path(contender: str) -> str:
-    """A contender's page, relative to the benchmark's folder."""
-    return f"{FOLDER}/{slug(contender)}.html"
+    """A contender's page, relative to the benchmark's folder: its name where that is a short, safe file name,
+    else its slug cut to SLUG_MAX with a hash of the name (two names never share a page; '~' is no slug's)."""
+    name = slug(contender)
+    if name != contender or not name or len(name) > SLUG_MAX or name.startswith("."):
+        digest = hashlib.sha256(contender.encode("utf-8")).hexdigest()[:HASH_CHARS]
+        name = f"{name.lstrip('.')[:SLUG_MAX]}~{digest}"      # no hidden file
+    return f"{FOLDER}/{name}.html"
 
 
 def case_anchor(index: int) -> str:
@@ -97,8 +106,10 @@ def card_html(out: Path, index: int, place: int, rec: dict, has_flip: bool) -> s
     map, its numbers, its links."""
     where = f"{rec['scene']}, {rec['unit']}, offset {ranking.offset_of(rec)}, {rec['light']} light"
     class_sheet, flip_sheet = case_images.sheets(rec)
-    images = image_html(out, class_sheet, place, f"error classes of {where}", "error classes (colours above)")
-    if has_flip:
+    kept = (Path(out) / case_images.FOLDER).is_dir()       # none in a run from before they were kept: said once
+    images = "" if not kept else image_html(out, class_sheet, place, f"error classes of {where}",
+                                            "error classes (colours above)")
+    if has_flip and kept:
         images += image_html(out, flip_sheet, place, f"FLIP map of {where}", "FLIP error (scale above)")
     row = (f"<a href=\"../leaderboard.html#case-{index}\">its row in the leaderboard</a>; "
            if ranking.at_origin(rec) else "")
@@ -142,6 +153,9 @@ def contender_page(doc: dict, out: Path, contender: str) -> str:
             "camera's receivers under the contender's shadow map against the exact visibility, and the FLIP "
             "error of the shaded render under its visibility against the exact render (what the FLIP column "
             "averages). Rates with an empty denominator are undefined.</p>" + legend_html(has_flip)
+            + ("" if (Path(out) / case_images.FOLDER).is_dir() else
+               f"<p class=note><b>No images:</b> this results folder has no {case_images.FOLDER}/ (a run from before "
+               "dsm benchmark kept them); a new run keeps each case's pair.</p>")
             + f"<div class=order>Order: {order}</div><div id=cards>"
             + "".join(card_html(out, i, place[i], r, has_flip) for i, r in worst) + "</div>")
     return (f"<!doctype html><html><head><meta charset=utf-8><title>{html.escape(contender)}: "
@@ -150,18 +164,15 @@ def contender_page(doc: dict, out: Path, contender: str) -> str:
 
 
 def write_pages(doc: dict, out: Path) -> list:
-    """Write a page per contender (the oracle has none) under ``out/contenders/``; returns their paths."""
+    """Write a page per contender (the oracle has none) under ``out/contenders/``, removing any other page
+    there (an earlier run's, or an earlier naming's); returns their paths."""
     names = sorted({r["contender"] for r in doc["cases"] if r["contender"] != "oracle"})
-    files = {}
-    for name in names:
-        rel = page_path(name)
-        if rel in files:        # two names that make one file name: one page would hide the other
-            raise ValueError(f"contenders {files[rel]!r} and {name!r} make one page name, {rel}")
-        files[rel] = name
     (Path(out) / FOLDER).mkdir(parents=True, exist_ok=True)
     written = []
-    for rel, name in files.items():
-        path = Path(out) / rel
-        path.write_text(contender_page(doc, out, name))
+    for name in names:
+        path = Path(out) / page_path(name)
+        write_text(path, contender_page(doc, out, name))
         written.append(path)
+    for stale in set((Path(out) / FOLDER).glob("*.html")) - set(written):     # a page of a name no longer run
+        stale.unlink()
     return written

@@ -76,7 +76,7 @@ def family(doc: dict, contender: str) -> str:
         return "oracle"
     if contender in doc.get("tuned", {}):
         return "tuned"
-    if contender.split()[0] in prefilter.NAMES:
+    if contender.split()[:1] and contender.split()[0] in prefilter.NAMES:
         return "pre-filtered map"
     return "engine preset" if contender in PRESETS else "scheme"
 

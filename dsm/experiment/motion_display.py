@@ -29,6 +29,7 @@ import numpy as np
 
 from .. import pipeline
 from ..report import io as report_io
+from ..report.figures import CLASSES_GIF_COMMENT
 from ..report.tables import receiver_cosines, shade
 from ..scenes.camera import Camera, sensor_at
 from ..truth import metrics
@@ -287,4 +288,5 @@ def _write_classes_gif(path: Path, images: list):
     frames = [Image.fromarray(metrics.CLASS_COLORS[c]) for c in images]
     path.parent.mkdir(parents=True, exist_ok=True)
     with report_io.atomic(path) as tmp:
-        frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:], duration=FRAME_MS, loop=0)
+        frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:], duration=FRAME_MS, loop=0,
+                       comment=CLASSES_GIF_COMMENT)      # report.html's caption tells the two kinds by it

@@ -15,9 +15,9 @@ import time
 from pathlib import Path
 
 from ..core import env
-from ..experiment.lock import claim, entries
+from ..experiment.lock import claim, entries, unwritable
 from ..core.types import VARIANTS, ConfigError
-from ..report.io import write_json
+from ..report.io import atomic, write_json, write_text
 from . import spec as specmod
 from . import compare as comparemod
 from . import equal_error, figure, inverse, page, projective, tables
@@ -48,20 +48,28 @@ def add_parser(sub):
 WRITTEN = ("selfcheck.csv", "table.md", "compare.csv", "projective.csv", "compare.md", "gradients.png",
            "equal_error.csv", "equal_error_curve.csv", "equal_error.png", "inverse.csv", "inverse.md",
            "relative_error.png", "inverse.png", "report.html", "grad.json")
+MARKS = ("selfcheck.csv", "grad.json")      # what tells an earlier dsm grad's folder: its first and last file
 
 
 def folder_problem(out: Path, force: bool) -> str | None:
     """Why dsm grad may not write into ``out`` (None if it may): a folder holding anything is refused
-    unless --force, which removes only the files dsm grad writes (WRITTEN; a user's own stay)."""
+    unless --force and it holds an earlier dsm grad's files (its selfcheck.csv or grad.json: another
+    command's report.html and table.md are not dsm grad's to replace); --force removes only the files
+    dsm grad writes (WRITTEN, and their temporary files a killed run left; a user's own stay)."""
     held = entries(out) or []
     if not held:
-        return None
+        return unwritable(out)
     if not force:
         return (f"--out {out}: holds {len(held)} entries (an earlier run's?); --force replaces what dsm grad "
                 "wrote there, or choose another --out")
+    if not any((out / name).is_file() or any(out.glob(f".{name}.*.tmp")) for name in MARKS):
+        return (f"--out {out}: --force replaces an earlier dsm grad's files (a folder with its "
+                f"{' or '.join(MARKS)}); this one holds neither: choose another --out")
     for name in WRITTEN:
         (out / name).unlink(missing_ok=True)
-    return None
+        for tmp in out.glob(f".{name}.*.tmp"):      # report.io.atomic's, left by a run killed mid-write
+            tmp.unlink(missing_ok=True)
+    return unwritable(out)
 
 
 def row_values(r) -> list:
@@ -72,7 +80,7 @@ def row_values(r) -> list:
 
 def write_csv(rows, path: Path):
     """selfcheck.csv: exact values (repr), empty where undefined."""
-    with open(path, "w", newline="") as fh:
+    with atomic(path) as tmp, open(tmp, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(COLUMNS)
         for r in rows:
@@ -120,6 +128,10 @@ def main(args) -> int:
         print(f"dsm: config error: {spec.source}: gradient.loss: --compare takes {spec.loss!r} loss only from a "
               f"reference of its own (valid: {', '.join(comparemod.LOSSES)})", file=sys.stderr)
         return 2
+    blind = getattr(args, "compare", False) and unseen_problem(spec)
+    if blind:
+        print(f"dsm: config error: {blind}", file=sys.stderr)
+        return 2
     out = Path(args.out)
     held, why = claim(out)
     if why is None:
@@ -129,6 +141,19 @@ def main(args) -> int:
                 return _run_held(args, spec, out)
     print(f"dsm: {why}", file=sys.stderr)
     return 2
+
+
+def unseen_problem(spec) -> str | None:
+    """Why --compare's projective integrators would see no ground pixel (None if they see some): the occluder's
+    and an area light's images, grown by MASK_PIXELS, cover the whole image of their camera."""
+    for p in spec.params:
+        if p in projective.OCCLUDER_PARAMS and not projective.ground_seen(spec, p).any():
+            key, what = (("gradient.light_size", "the occluder's and the area light's images cover")
+                         if spec.light == "area" else ("gradient.occluder_size", "the occluder's image covers"))
+            return (f"{spec.source}: {key}: --compare's projective integrators would see no ground pixel: {what} "
+                    f"the whole of [-{spec.window:g}, {spec.window:g}]^2 (grown by {projective.MASK_PIXELS} pixels); "
+                    "make it smaller or the window larger")
+    return None
 
 
 def _run_held(args, spec, out: Path) -> int:
@@ -145,7 +170,7 @@ def _run_held(args, spec, out: Path) -> int:
                                                         file=sys.stderr))
     write_csv(rows, out / "selfcheck.csv")
     text = table_text(spec, rows)
-    (out / "table.md").write_text(text)
+    write_text(out / "table.md", text)
     print(text)
     print(f"dsm grad: {len(rows)} rows in {out / 'selfcheck.csv'} and {out / 'table.md'}")
     timing = {"selfcheck_s": time.perf_counter() - t0}
@@ -214,7 +239,7 @@ def run_compare(problem, out: Path) -> dict:
     text = tables.compare_text(spec, refs, rows, proj)
     if spec.light == "area":
         text += run_equal_error(problem, refs, rows, out)
-    (out / "compare.md").write_text(text)
+    write_text(out / "compare.md", text)
     t = time.perf_counter()
     figure.draw(out / "gradients.png", _panels(refs, rows, proj), spec.window)
     drawn = time.perf_counter() - t
@@ -261,5 +286,5 @@ def run_inverse(problem, out: Path):
         f"  {r.technique}, {r.param}, start {r.start_offset:+g}: error {r.final_error:.3g}", file=sys.stderr))
     tables.write_rows(out / "inverse.csv", tables.INVERSE_COLUMNS, [tables.inverse_values(r) for r in runs])
     text = tables.inverse_text(problem.spec, runs)
-    (out / "inverse.md").write_text(text)
+    write_text(out / "inverse.md", text)
     print(text)

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..report.figures import DPI, MIN_FONT, PNG, style
+from ..report.io import save_png
 
 MAX_COLUMNS = 5            # panels a row: 5 of PANEL_INCHES fit a 1280 px window at DPI
 PANEL_INCHES = 1.8
@@ -46,10 +47,18 @@ def draw(path: Path, panels: dict, window: float):
             ax.set_yticks([])
         row += math.ceil(len(items) / cols)
     fig.tight_layout()
-    fig.savefig(path, dpi=DPI, format="png", pil_kwargs=PNG)
+    save_png(path, lambda f, fmt: fig.savefig(f, dpi=DPI, format=fmt, pil_kwargs=PNG))
 
 
 CURVE_STYLES = ["o-", "^--", "s-."]      # one per integrator
+
+
+def _say_undefined(ax, param: str):
+    """A panel of no defined relative error: the sentence in place of the axes."""
+    ax.set_axis_off()
+    ax.text(0.5, 0.5, f"d loss / d {param}: every relative error is undefined\n(the truth is 0 over the pixels "
+            "the camera sees, or no technique's error is defined)", ha="center", va="center", fontsize=MIN_FONT,
+            transform=ax.transAxes)
 
 
 def draw_equal_error(path: Path, curves, rows):
@@ -78,6 +87,9 @@ def draw_equal_error(path: Path, curves, rows):
                 st = style(len(shown))
                 shown[r.technique] = ax.plot([r.ms], [r.error], st["marker"], color=st["color"], ms=6,
                                              mec="black", mew=0.5, label=r.technique)
+        if not any(np.any(np.asarray(line.get_ydata(), float) > 0) for line in ax.get_lines()):
+            _say_undefined(ax, p)      # a log axis of no positive value does not exist
+            continue
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel("ms per gradient")
@@ -85,4 +97,4 @@ def draw_equal_error(path: Path, curves, rows):
         ax.legend(fontsize=MIN_FONT, ncol=2)
         ax.tick_params(labelsize=MIN_FONT)
     fig.tight_layout()
-    fig.savefig(path, dpi=DPI, format="png", pil_kwargs=PNG)
+    save_png(path, lambda f, fmt: fig.savefig(f, dpi=DPI, format=fmt, pil_kwargs=PNG))

@@ -9,13 +9,26 @@ from __future__ import annotations
 
 from ..report.csv_table import as_number
 from ..report.labels import number_text
-from .equal_error import BELOW
+from .equal_error import BELOW, DISAGREES, NEVER, REACHED, UNDEFINED
+
+# why a time ratio is undefined, by equal_error.csv's status
+UNDEFINED_WHY = {UNDEFINED: "the technique's relative error is undefined: the truth over the pixels the integrator "
+                            "sees is 0",
+                 NEVER: "path tracing never reached its error within the spp range",
+                 DISAGREES: "the integrator disagrees with the truth",
+                 REACHED: "path tracing's time there is undefined",
+                 BELOW: "path tracing's time is undefined"}
 
 
 
 def pct(x: float | None) -> str:
     """A fraction as a percentage to 3 significant digits ('undefined' for None)."""
     return "undefined" if x is None else f"{number_text(100.0 * x, 3)} %"
+
+
+def count(n: int, noun: str) -> str:
+    """'1 row', '2 rows', '0 rows'."""
+    return f"{n} {noun}" + ("" if n == 1 else "s")
 
 
 def names(xs: list) -> str:
@@ -54,8 +67,9 @@ def closest_to_truth(rows) -> tuple:
     """(techniques, their relative errors) closest to the truth among compare.csv rows of one parameter: the
     smallest |ad - reference| and every one within twice the truth's own error of it (the truth's error
     cannot order them: a tie); ([], []) where every relative error is undefined (the truth is 0)."""
-    cand = [(abs(float(r["ad"]) - float(r["reference"])), float(r["reference_error"] or 0.0),
-             as_number(r["rel_error"]), r["technique"]) for r in rows if as_number(r["rel_error"]) is not None]
+    cand = [(abs(as_number(r["ad"]) - as_number(r["reference"])), as_number(r["reference_error"]) or 0.0,
+             as_number(r["rel_error"]), r["technique"]) for r in rows
+            if None not in (as_number(r["rel_error"]), as_number(r["ad"]), as_number(r["reference"]))]
     if not cand:
         return [], []
     dev, err, _, _ = min(cand)
@@ -70,7 +84,9 @@ def compare_words(rows) -> str:
     for param, rs in by(rows, "param").items():
         who, rel = closest_to_truth(rs)
         if not who:
-            phrase = winner_phrase([], None, "relative error", "the truth is 0")
+            zero = all(as_number(r["reference"]) == 0.0 for r in rs)
+            why = "the truth is 0" if zero else "the truth is 0 or undefined"
+            phrase = winner_phrase([], None, "relative error", why)
         elif len(who) == 1:
             r = next(r for r in rs if r["technique"] == who[0])
             cos = as_number(r.get("cosine", ""))
@@ -85,14 +101,25 @@ def compare_words(rows) -> str:
     return "Closest to the truth (relative error of the loss's derivative), per parameter: " + "; ".join(parts) + "."
 
 
+def measured_nothing(r) -> bool:
+    """Whether a projective.csv row's truth over the pixels it sees is exactly 0 with no error of its own: the
+    mask hid the whole shadow, so its agreement (0 against 0) says nothing."""
+    return as_number(r.get("reference")) == 0.0 and as_number(r.get("reference_error")) == 0.0
+
+
 def projective_words(rows) -> str:
-    """projective.csv: which of Mitsuba's projective integrators agreed with the truth."""
-    agree = [f"{r['integrator']} on {r['param']}" for r in rows if r["agrees"] == "True"]
-    disagree = [f"{r['integrator']} on {r['param']} (relative error {pct(as_number(r['rel_error']))})"
-                for r in rows if r["agrees"] != "True"]
-    head = f"Mitsuba's projective integrators agreed with the truth in {len(agree)} of {len(rows)} cases"
+    """projective.csv: which of Mitsuba's projective integrators agreed with the truth (a truth of 0 over the
+    pixels it sees, measuring nothing, said apart)."""
+    label = lambda r: f"{r['integrator']} on {r['param']}"
+    blind = [label(r) for r in rows if measured_nothing(r)]
+    rest = [r for r in rows if not measured_nothing(r)]
+    agree = [label(r) for r in rest if r["agrees"] == "True"]
+    disagree = [f"{label(r)} (relative error {pct(as_number(r['rel_error']))})" for r in rest if r["agrees"] != "True"]
+    head = f"Mitsuba's projective integrators agreed with the truth in {len(agree)} of {count(len(rows), 'case')}"
     tail = (f": {names(agree)}" if agree else "") + (f"; disagreed (a finding): {names(disagree)}" if disagree else "")
-    return head + tail + "."
+    none = (f"; measured nothing (the truth over the pixels it sees is 0: the mask hides the whole shadow): "
+            f"{names(blind)}" if blind else "")
+    return head + tail + none + "."
 
 
 def success(rows) -> tuple:
@@ -133,8 +160,8 @@ def selfcheck_words(rows) -> str:
     undefined = len(rows) - len(gaps)
     if gaps:
         worst, r = max(gaps, key=lambda g: g[0])
-        fd = (f"AD against its own central difference: at most {pct(worst)} off ({r['technique']}, {r['param']})"
-              f"{f'; undefined in {undefined} rows (a central difference of 0)' if undefined else ''}.")
+        rest = f"; undefined in {count(undefined, 'row')} (a central difference of 0)" if undefined else ""
+        fd = f"AD against its own central difference: at most {pct(worst)} off ({r['technique']}, {r['param']}){rest}."
     else:
         fd = "AD against its own central difference: undefined in every row (every central difference is 0)."
     return "Closest to the closed form, per parameter: " + "; ".join(parts) + ". " + fd
@@ -159,10 +186,23 @@ def equal_error_words(rows) -> str | None:
         below = [r["technique"] for r in group if r["status"] == BELOW]
         upper = (f"; at its fewest samples it already errs less than {len(below)} of {len(group)} techniques, "
                  "so their ratios are upper bounds") if below else ""
-        none = sorted({r["status"] for r in group if as_number(r["time_ratio"]) is None})
-        tail = f"; undefined where {' or '.join(none)}" if none else ""
+        why = by_status([r for r in group if as_number(r["time_ratio"]) is None])
+        if not ratios and len(why) == 1:
+            status = next(iter(why))            # one reason for every technique: said once
+            tail = f" ({UNDEFINED_WHY.get(status, status)})"
+        else:
+            tail = "".join(f"; undefined for {names(who)} ({UNDEFINED_WHY.get(status, status)})"
+                           for status, who in why.items())
         parts.append(f"{integrator}, d/d {param}: {span}{upper}{tail}")
     return ("Cost at equal gradient error, path tracing's time over the technique's: " + "; ".join(parts) + ".")
+
+
+def by_status(rows) -> dict:
+    """equal_error.csv rows' technique names grouped by status, in the CSV's order."""
+    out = {}
+    for r in rows:
+        out.setdefault(r["status"], []).append(r["technique"])
+    return out
 
 
 def by_pair(rows) -> dict:

@@ -79,7 +79,7 @@ def read_tables(out: Path) -> dict:
         if p.is_file():
             rows = read_csv(p)
             with open(p, newline="") as fh:
-                columns = next(csv.reader(fh))
+                columns = next(csv.reader(fh), [])      # an empty file: no columns, no rows
             got[name] = (columns, rows)
     return got
 
@@ -125,8 +125,9 @@ def tables_html(tables: dict) -> str:
             continue
         columns, rows = tables[name]
         extra = inverse_summary(rows) + "<h3>Every start</h3>" if name == "inverse.csv" and rows else ""
-        out.append(f"<section id=\"{sid}\"><h2>{_e(title)} (<a href=\"{_e(name)}\">{_e(name)}</a>, {len(rows)} rows)"
-                   f"</h2><p class=note>{_e(note)} Click a header to sort (undefined last); hover a number for "
+        out.append(f"<section id=\"{sid}\"><h2>{_e(title)} (<a href=\"{_e(name)}\">{_e(name)}</a>, "
+                   f"{findings.count(len(rows), 'row')})</h2><p class=note>{_e(note)} Click a header to sort "
+                   f"(undefined last); hover a number for "
                    f"its exact value.</p>{extra}{csv_table.table_html(columns, rows, 'table-' + sid)}</section>")
     return "".join(out)
 

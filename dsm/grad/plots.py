@@ -13,6 +13,7 @@ from pathlib import Path
 
 from ..report.csv_table import as_number
 from ..report.figures import DPI, LABEL_FONT, LINTHRESH, MIN_FONT, PNG, RC, style
+from ..report.io import save_png
 from .findings import by
 
 REL_LINTHRESH = 0.01       # relative error: linear below 1 %, so 0 shows beside 1 % and 100 %
@@ -27,7 +28,7 @@ def _save(fig, path: Path):
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     FigureCanvasAgg(fig)
     # tight: the legends sit right of their panels, outside the axes' layout
-    fig.savefig(path, dpi=DPI, format="png", bbox_inches="tight", pil_kwargs=PNG)
+    save_png(path, lambda f, fmt: fig.savefig(f, dpi=DPI, format=fmt, bbox_inches="tight", pil_kwargs=PNG))
 
 
 def error_rows(compare_rows, projective_rows) -> tuple:
@@ -93,8 +94,8 @@ def inverse_figure(path: Path, inverse_rows, tolerance: float | None = None):
         axes = fig.subplots(1, len(groups), squeeze=False)[0]
         for ax, (param, rs) in zip(axes, groups.items()):
             for k, t in enumerate(techs):
-                pts = sorted((as_number(r["start_offset"]), as_number(r["final_error"]))
-                             for r in rs if r["technique"] == t)
+                pts = sorted((x, y) for x, y in ((as_number(r["start_offset"]), as_number(r["final_error"]))
+                                                 for r in rs if r["technique"] == t) if x is not None and y is not None)
                 st = style(k)
                 ax.plot([x for x, _ in pts], [y for _, y in pts], marker=st["marker"], ls=st["ls"], ms=4, lw=1.0,
                         color=st["color"], label=t)

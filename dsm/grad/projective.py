@@ -110,7 +110,11 @@ def visible_ground(problem, param: str | None = None) -> np.ndarray:
     """(N, N) bool: pixels where the camera sees the ground, not the occluder or an area light (at the nominal
     values; the hiders' projections grown by MASK_PIXELS, and by the reference's step where ``param`` moves
     the occluder sideways)."""
-    spec = problem.spec
+    return ground_seen(problem.spec, param)
+
+
+def ground_seen(spec, param: str | None = None) -> np.ndarray:
+    """visible_ground of a GradSpec alone (before any work: dsm grad --compare refuses a scene it sees none of)."""
     pts = hiders(spec)
     # each point projects from the camera onto the ground: scaled about the camera's foot by its height's ratio
     flat = pts[:, :2] * (CAMERA_HEIGHT * spec.window / (CAMERA_HEIGHT * spec.window - pts[:, 2:3]))

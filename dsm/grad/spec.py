@@ -191,6 +191,11 @@ def parse(raw: dict, source: str = "<dict>") -> GradSpec:
     kw["reference_step"] = _steps(g, source, kw["params"], "reference_step")
     kw["techniques"] = _techniques(g, source)
     spec = GradSpec(**kw)
+    if spec.light == "area" and not spec.light_size < 2.0 * spec.window:
+        raise ConfigError(source, "gradient.light_size", f"the area light's side must be smaller than the image's "
+                          f"(2 x window = {2.0 * spec.window:g}): a larger square hides the whole image from the "
+                          f"projective integrators' camera above it; got {spec.light_size:g} (valid: 0 < light_size "
+                          f"< {2.0 * spec.window:g})")
     if spec.light != "directional" and not spec.occluder_height + spec.thickness() < spec.light_height:
         raise ConfigError(source, "gradient.light_height", f"must be above the occluder's top "
                           f"({spec.occluder_height + spec.thickness():g}), got {spec.light_height:g}")
@@ -258,6 +263,14 @@ def _steps(g: dict, source: str, params: tuple, key: str = "fd_step") -> tuple:
     return tuple((k, number(v, source, f"gradient.{key}.{k}", positive=True)) for k, v in t.items())
 
 
+def count(raw, source: str, key: str, lo: int, hi: int) -> int:
+    """``raw`` as an integer from ``lo`` to ``hi``; else a ConfigError at ``key`` that names the range."""
+    try:
+        return number(raw, source, key, integer=True, minimum=lo, maximum=hi)
+    except ConfigError as e:
+        raise ConfigError(source, key, f"{e.problem} (valid: an integer from {lo} to {hi})") from None
+
+
 def _compare_keys(g: dict, source: str) -> dict:
     """The reference's, the projective integrator's and the inverse task's keys (dsm grad --compare, --inverse)."""
     kw = {}
@@ -265,7 +278,7 @@ def _compare_keys(g: dict, source: str) -> dict:
                         ("inverse_iterations", 1, 1000), ("light_samples", 1, MAX_LIGHT_SAMPLES),
                         ("equal_error_seeds", 2, 64)):
         if key in g:
-            kw[key] = number(g[key], source, f"gradient.{key}", integer=True, minimum=lo, maximum=hi)
+            kw[key] = count(g[key], source, f"gradient.{key}", lo, hi)
     if "inverse_tolerance" in g:
         kw["inverse_tolerance"] = number(g["inverse_tolerance"], source, "gradient.inverse_tolerance", positive=True)
     if "projective_integrators" in g:
@@ -288,9 +301,10 @@ def _compare_keys(g: dict, source: str) -> dict:
 def _spp_sweep(raw, source: str) -> tuple:
     """equal_error_spp: at least two samples-per-pixel counts, increasing (path tracing's error curve)."""
     key = "gradient.equal_error_spp"
-    spps = [number(x, source, key, integer=True, minimum=1, maximum=4096) for x in as_list(raw)]
+    spps = [count(x, source, key, 1, 4096) for x in as_list(raw)]
     if len(spps) < 2 or any(b <= a for a, b in zip(spps, spps[1:])):
-        raise ConfigError(source, key, f"expected at least two increasing counts (e.g. [4, 16, 64, 256, 1024]), "
+        raise ConfigError(source, key, "expected at least two strictly increasing counts, each from 1 to 4096 "
+                          f"(e.g. [4, 16, 64, 256, 1024]), "
                           f"got {raw!r}")
     return tuple(int(x) for x in spps)
 

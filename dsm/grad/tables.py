@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
+from ..report.io import atomic
 from .check import relative
 from .inverse import success_rate
 
@@ -32,7 +33,7 @@ def _cell(v):
 
 def write_rows(path: Path, columns, rows):
     """A CSV of ``rows`` (lists of values in ``columns``' order)."""
-    with open(path, "w", newline="") as fh:
+    with atomic(path) as tmp, open(tmp, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(columns)
         for r in rows:

@@ -21,23 +21,34 @@ def _e(x) -> str:
     return html.escape(str(x), quote=True)
 
 
-def as_number(cell: str) -> float | None:
-    """A CSV cell as a float (None for an empty cell, text or a boolean's True / False)."""
-    if cell in ("", "True", "False"):
+def as_number(cell) -> float | None:
+    """A CSV cell as a finite float (None for a missing or empty cell, text, a boolean's True / False,
+    or nan and inf: no measured value, undefined)."""
+    if cell in (None, "", "True", "False"):
         return None
     try:
-        return float(cell)
+        x = float(cell)
     except ValueError:
         return None
+    return x if math.isfinite(x) else None
+
+
+def _parses(cell: str) -> bool:
+    """Whether a cell reads as a float (nan and inf included: the column still sorts as numbers)."""
+    try:
+        float(cell)
+    except (TypeError, ValueError):
+        return False
+    return cell not in ("True", "False")
 
 
 def numeric_columns(columns, rows) -> set:
     """The columns whose every non-empty cell is a number (at least one cell holding one)."""
     out = set()
     for c in columns:
-        cells = [r.get(c, "") for r in rows]
+        cells = [r.get(c) or "" for r in rows]
         filled = [x for x in cells if x != ""]
-        if filled and all(as_number(x) is not None for x in filled):
+        if filled and all(_parses(x) for x in filled):
             out.add(c)
     return out
 
@@ -70,7 +81,7 @@ def table_html(columns, rows, table_id: str) -> str:
     where it has more than TALL rows)."""
     num = numeric_columns(columns, rows)
     head = "".join(f"<th data-type={'num' if c in num else 'text'}>{_e(c)}</th>" for c in columns)
-    body = "".join("<tr>" + "".join(cell_html(r.get(c, ""), c in num) for c in columns) + "</tr>" for r in rows)
+    body = "".join("<tr>" + "".join(cell_html(r.get(c) or "", c in num) for c in columns) + "</tr>" for r in rows)
     box = "wide scroll" if len(rows) > TALL else "wide"
     return (f"<div class=\"{box}\"><table id=\"{_e(table_id)}\" class=sortable><thead><tr>{head}</tr></thead>"
             f"<tbody>{body}</tbody></table></div>")

@@ -82,6 +82,9 @@ def image_paths(row) -> tuple:
     return f + "_error.png", f + "_shadow.png"
 
 
+CLASSES_GIF_COMMENT = b"dsm: the frames' class images"   # in a motion GIF of class images, not display renders
+
+
 def frames_path(row) -> str:
     """A motion case's animated GIF (dsm.experiment.motion_display), relative to the run's folder."""
     return f"images/{image_folder(row)}/{row['case']}_frames.gif"

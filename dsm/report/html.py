@@ -18,7 +18,7 @@ from pathlib import Path
 
 from ..truth import metrics
 from . import io as report, labels, summary
-from .figures import display_paths, frames_path, image_paths, points_file, slug
+from .figures import CLASSES_GIF_COMMENT, display_paths, frames_path, image_paths, points_file, slug
 from .sections import virtual as virtual_report
 
 CASE_COLUMNS = [("case", "case", "text"), ("scene", "scene", "text"), ("light", "light", "text"),
@@ -47,6 +47,7 @@ th[aria-sort=descending]::after{content:" \\25BC"} tr.win td:first-child{font-we
 .tint img+img{position:absolute;left:0;top:0;mix-blend-mode:multiply;opacity:.85}
 #viewer img[src$="display_nl.png"],#viewer img[src$="display_exact.png"]{image-rendering:auto}
 #viewer figure.motion{display:block;max-width:100%} #viewer img.frames{width:auto;image-rendering:auto;max-width:none}
+#viewer img.frames.classes{width:320px;image-rendering:pixelated}
 .plots figure{margin:6px 0 14px;max-width:100%} .plots .figbox{overflow-x:auto;max-width:100%}
 .plots img{max-width:none;border:1px solid #eee;cursor:zoom-in}
 .plots figcaption{font-size:13px;color:#333;max-width:60em} .plots h3{font-size:1em;margin:.6em 0 .2em}
@@ -117,12 +118,15 @@ cases.tBodies[0].addEventListener('click', ev => {
     const box = document.createElement('div');
     box.className = 'wide';
     const img = document.createElement('img');
-    img.src = tr.dataset.gif; img.alt = 'frames of case ' + tr.dataset.case; img.className = 'frames';
+    img.src = tr.dataset.gif; img.alt = 'frames of case ' + tr.dataset.case;
+    img.className = tr.dataset.gifkind === 'classes' ? 'frames classes' : 'frames';
     box.appendChild(img);
     fig.appendChild(box);
     const words = document.createElement('figcaption');
-    words.textContent = 'each frame: the error classes over the display render (N.L), the exact shading, the ' +
-                        'shading under the map';
+    words.textContent = tr.dataset.gifkind === 'classes' ?
+      'each frame: its error classes, one pixel per camera pixel (the class images: [report] images = "errors", ' +
+      'or a run that did not complete)' :
+      'each frame: the error classes over the display render (N.L), the exact shading, the shading under the map';
     fig.appendChild(words);
     viewer.appendChild(fig);
     return;
@@ -286,12 +290,13 @@ def _case_section(rows, out: Path) -> str:
         shadow = shadow if (out / shadow).is_file() else ""
         nl, exact = (p if p in shown else "" for p in display_paths(r))
         gif = frames_path(r) if r.get("motion") and (out / frames_path(r)).is_file() else ""
+        kind = gif_kind(out / gif) if gif else ""
         instance = f"{r['scheme']} {r['preset'] or labels.params_label(r['params'])}".strip()
         label = f"{r['scene']}, light {r['light']}, {r['view']}, {instance}, " \
                 f"R = {r['resolution']}, {r['filter']}, {r['format']}"
         attrs = "".join(f' data-{k}="{_e(r[k])}"' for k in FILTER_COLUMNS) + \
             f' data-case="{_e(r["case"])}" data-err="{_e(err)}" data-shadow="{_e(shadow)}" data-label="{_e(label)}"' \
-            f' data-nl="{_e(nl)}" data-exact="{_e(exact)}" data-gif="{_e(gif)}"'
+            f' data-nl="{_e(nl)}" data-exact="{_e(exact)}" data-gif="{_e(gif)}" data-gifkind="{kind}"'
         cells = []
         for key, _, t in CASE_COLUMNS:
             if t == "num":
@@ -343,6 +348,14 @@ def png_size(path: Path) -> tuple:
     with open(path, "rb") as fh:
         head = fh.read(24)
     return struct.unpack(">II", head[16:24])
+
+
+def gif_kind(path: Path) -> str:
+    """A motion GIF's frames: "classes" (the frames' class images, marked by CLASSES_GIF_COMMENT:
+    images = "errors" or a run that did not complete) or "display" (three panels of display renders)."""
+    with open(path, "rb") as fh:
+        head = fh.read(4096)           # the comment precedes the first frame
+    return "classes" if CLASSES_GIF_COMMENT in head else "display"
 
 
 def _where_names(rows) -> dict:

@@ -46,6 +46,12 @@ def _exact(x):
     return repr(float(x)) if isinstance(x, float) and metrics.defined(x) else _fmt(x)
 
 
+def write_text(path: Path, text: str):
+    """Write ``text`` (UTF-8) into ``path`` atomically."""
+    with atomic(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
 def write_json(path: Path, data: dict, indent=None):
     """Write ``data`` as JSON into ``path`` atomically (values JSON cannot hold as their ``str``)."""
     with atomic(path) as tmp:
