@@ -31,12 +31,36 @@ def _spec(**kw):
     ({"inverse_starts": []}, "gradient.inverse_starts", "empty list"),
     ({"projective_spp": 1.5}, "gradient.projective_spp", "integer"),
     ({"projective_integrators": ["path"]}, "gradient.projective_integrators", "direct_projective"),
+    # sizes that leave nothing to differentiate
+    ({"bias": 1e30}, "gradient.bias", "valid: 0 <= bias < 0.5"),
+    ({"occluder_size": 1.6}, "gradient.window", "beyond the image's half-width 1"),
+    ({"window": 1e-9}, "gradient.window", "beyond the image's half-width"),
+    ({"window": 100.0, "image_resolution": 16}, "gradient.window", "under 4"),
 ])
 def test_a_bad_gradient_table_is_one_line_naming_file_and_key(table, key, words):
     with pytest.raises(ConfigError) as e:
         specmod.parse({"gradient": table}, "g.toml")
     msg = str(e.value)
     assert msg.startswith(f"g.toml: {key}: ") and words in msg and "\n" not in msg
+
+
+@pytest.mark.parametrize("light, extra", [("point", {}), ("area", {"light_size": 0.2}),
+                                          ("directional", {"light_angle": -35.0})])
+def test_the_shadow_reach_is_the_plates_corners_projected_and_any_scale_passes(light, extra):
+    h, size, H, window = 0.5, 0.5, 2.0, 1.0
+    spec = specmod.parse({"gradient": {"light": light, **extra}}, "g.toml")
+    corners = np.array([[sx * size / 2, sy * size / 2, h] for sx in (-1, 1) for sy in (-1, 1)], dtype=np.float64)
+    if light == "directional":       # along the light's direction (tilted toward +x) down to z = 0
+        d = np.array([math.sin(math.radians(-35.0)), 0.0, -math.cos(math.radians(-35.0))])
+        ground = corners - (corners[:, 2:] / d[2]) * d
+    else:                            # from the light straight above the origin through each corner
+        ground = corners[:, :2] * (H / (H - h))
+    assert specmod.shadow_half_extent(spec) == pytest.approx(np.max(np.abs(ground[:, :2])), rel=1e-12)
+    for scale in (1e-3, 1e4):        # the same scene in other units is the same question
+        lengths = {"occluder_height": h * scale, "occluder_size": size * scale, "window": window * scale,
+                   "bias": 0.02 * scale, **({"light_height": H * scale} if light != "directional" else {}),
+                   **({"light_size": 0.2 * scale} if light == "area" else {})}
+        specmod.parse({"gradient": {"light": light, **extra, **lengths}}, "g.toml")
 
 
 def test_the_light_frame_in_drjit_is_numpys():

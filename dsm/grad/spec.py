@@ -11,6 +11,8 @@ the pixel (``image_jitter``, the default) or at its centre.
 """
 from __future__ import annotations
 
+import math
+
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,6 +38,7 @@ TECHNIQUES = ("nearest", "pcf_bilinear", "pcss", "vsm", "esm", "evsm", "msm")
 MOMENT_TECHNIQUES = ("vsm", "esm", "evsm", "msm")
 MAX_BLUR = 31
 MAX_RESOLUTION = 4096
+MIN_SHADOW_PIXELS = 4     # the shadow's least width in image pixels: fewer leave no edge to differentiate
 KEYS = ("scene", "mesh", "light", "light_height", "light_angle", "occluder_height", "occluder_size", "map_resolution",
         "image_resolution", "window", "params", "loss", "target", "techniques", "blur", "antialias", "bias",
         "light_size", "fd_step", "fd_halvings", "image_jitter", "reference_samples", "reference_step", "projective_spp",
@@ -199,7 +202,38 @@ def parse(raw: dict, source: str = "<dict>") -> GradSpec:
     if spec.light != "directional" and not spec.occluder_height + spec.thickness() < spec.light_height:
         raise ConfigError(source, "gradient.light_height", f"must be above the occluder's top "
                           f"({spec.occluder_height + spec.thickness():g}), got {spec.light_height:g}")
+    check_extent(spec, source)
     return spec
+
+
+def shadow_half_extent(spec: GradSpec) -> float:
+    """How far from the origin the occluder's shadow reaches on the ground (world), at most: its
+    half-side scaled by H / (H - h) under a point or area light, shifted by h tan(angle) under the
+    directional light (the area light's penumbra reaches further; this bounds its umbra)."""
+    half = 0.5 * spec.occluder_size
+    if spec.light == "directional":
+        return half + spec.occluder_height * abs(math.tan(math.radians(spec.light_angle)))
+    return half * spec.light_height / (spec.light_height - spec.occluder_height - spec.thickness())
+
+
+def check_extent(spec: GradSpec, source: str):
+    """The sizes that leave nothing to differentiate, refused in one line: a bias at or above the
+    occluder's height (every receiver lit), a shadow larger than the image (its edge, where every
+    gradient lives, outside it) or under MIN_SHADOW_PIXELS pixels across. All relative, so any scale passes."""
+    if not spec.bias < spec.occluder_height:
+        raise ConfigError(source, "gradient.bias", f"must be below the occluder's height above the ground "
+                          f"({spec.occluder_height:g}): a larger depth bias lights every receiver; got {spec.bias:g} "
+                          f"(valid: 0 <= bias < {spec.occluder_height:g})")
+    reach = shadow_half_extent(spec)
+    if not reach < spec.window:
+        raise ConfigError(source, "gradient.window", f"the occluder's shadow reaches {reach:g} from the centre, "
+                          f"beyond the image's half-width {spec.window:g}: its edge, where the gradient is, would be "
+                          f"outside the image (valid: window > {reach:g}, or a smaller occluder_size)")
+    pixels = reach / spec.window * spec.image_resolution
+    if not pixels >= MIN_SHADOW_PIXELS:
+        raise ConfigError(source, "gradient.window", f"the occluder's shadow spans {pixels:.3g} pixels of the "
+                          f"{spec.image_resolution}^2 image, under {MIN_SHADOW_PIXELS} (valid: window <= "
+                          f"{reach * spec.image_resolution / MIN_SHADOW_PIXELS:g}, or a larger occluder_size)")
 
 
 def _mesh(g: dict, source: str, scene: str) -> str:
