@@ -559,7 +559,7 @@ def _run_held(cfg, args, out: Path, clustered: bool) -> int:
     from .report import summary
     for line in summary.terminal_answer(res.rows):      # the first answer, before where the files are
         print(f"dsm: {line}")
-    print(f"dsm: {len(res.rows)} cases in {time.perf_counter() - t0:.1f} s (measuring {t['measure_s']:.1f} s, "
+    print(f"dsm: {len(res.rows)} case{'' if len(res.rows) == 1 else 's'} in {time.perf_counter() - t0:.1f} s (measuring {t['measure_s']:.1f} s, "
           f"report {t['report_s']:.1f} s) -> {out}/ (report.html, table.md, metrics.csv, oracle.csv, images/, "
           "plots/, run.json)")
     if empty:
