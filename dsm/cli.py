@@ -14,7 +14,6 @@ import re
 import shutil
 import signal
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -23,7 +22,7 @@ from .grad import command as grad_command
 from .config import read as cfgmod
 from .report import figures
 from .maps import headroom
-from .experiment import lock, resume
+from .experiment import resume
 from .experiment.lock import claim, entries, name_problem, unwritable
 from .core.env import MAX_THREADS, SetupError
 
