@@ -2,7 +2,7 @@
 from .config.read import load as load_config, parse as parse_config
 from .core.types import ConfigError, Length
 
-__version__ = "0.4.0"
+__version__ = "0.5.0"
 
 
 def run(config, out=None, variant=None, progress=False, *, force=False, resume=False):
