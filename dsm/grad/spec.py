@@ -39,6 +39,8 @@ MOMENT_TECHNIQUES = ("vsm", "esm", "evsm", "msm")
 MAX_BLUR = 31
 MAX_RESOLUTION = 4096
 MIN_SHADOW_PIXELS = 4     # the shadow's least width in image pixels: fewer leave no edge to differentiate
+FLOAT32_STEP = 2.0 ** -24  # a float32 depth's relative step
+MIN_DEPTH_STEPS = 4       # the occluder-ground gap's least size in float32 depth steps at the light's distance
 KEYS = ("scene", "mesh", "light", "light_height", "light_angle", "occluder_height", "occluder_size", "map_resolution",
         "image_resolution", "window", "params", "loss", "target", "techniques", "blur", "antialias", "bias",
         "light_size", "fd_step", "fd_halvings", "image_jitter", "reference_samples", "reference_step", "projective_spp",
@@ -219,11 +221,20 @@ def shadow_half_extent(spec: GradSpec) -> float:
 def check_extent(spec: GradSpec, source: str):
     """The sizes that leave nothing to differentiate, refused in one line: a bias at or above the
     occluder's height (every receiver lit), a shadow larger than the image (its edge, where every
-    gradient lives, outside it) or under MIN_SHADOW_PIXELS pixels across. All relative, so any scale passes."""
+    gradient lives, outside it) or under MIN_SHADOW_PIXELS pixels across, a light so far that float32 depths
+    cannot part the occluder from the ground. All relative, so any scale passes."""
     if not spec.bias < spec.occluder_height:
         raise ConfigError(source, "gradient.bias", f"must be below the occluder's height above the ground "
                           f"({spec.occluder_height:g}): a larger depth bias lights every receiver; got {spec.bias:g} "
                           f"(valid: 0 <= bias < {spec.occluder_height:g})")
+    if spec.light != "directional":      # the map stores float32 depths from the light
+        steps = spec.occluder_height / (spec.light_height * FLOAT32_STEP)
+        if not steps >= MIN_DEPTH_STEPS:
+            raise ConfigError(source, "gradient.light_height", f"the occluder's height above the ground "
+                              f"({spec.occluder_height:g}) is {steps:.3g} float32 depth steps at the light's distance "
+                              f"{spec.light_height:g}, under {MIN_DEPTH_STEPS}: the map cannot tell the occluder from "
+                              f"the ground (valid: light_height <= "
+                              f"{spec.occluder_height / (MIN_DEPTH_STEPS * FLOAT32_STEP):g})")
     reach = shadow_half_extent(spec)
     if not reach < spec.window:
         raise ConfigError(source, "gradient.window", f"the occluder's shadow reaches {reach:g} from the centre, "
