@@ -233,8 +233,11 @@ def test_dsm_grad_answers_a_bad_folder_a_folder_config_and_an_unreadable_mesh_in
     mesh = tmp_path / "mesh.toml"
     mesh.write_text('[gradient]\nscene = "mesh"\nmesh = "bad.ply"\nmap_resolution = 16\nimage_resolution = 16\n'
                     'techniques = ["nearest"]\nantialias = [false]\nparams = ["occluder_z"]\n')
+    latin1 = tmp_path / "latin1.toml"
+    latin1.write_bytes('[gradient]\n# caf\u00e9\n'.encode("latin-1"))
     for argv, words in (([str(good), "--out", str(tmp_path / "afile")], "is a file, not a folder"),
                         ([str(tmp_path), "--out", str(tmp_path / "o1")], "is a folder, not a config file"),
+                        ([str(latin1), "--out", str(tmp_path / "o3")], "file: not UTF-8 text (byte 0xe9"),
                         ([str(mesh), "--out", str(tmp_path / "o2")], "gradient.mesh")):
         assert main(["grad", *argv]) == 2
         err = capsys.readouterr().err.strip()

@@ -33,6 +33,13 @@ RENAMED_EXPERIMENTS = {"seed002_fit.toml": "common_techniques_fit.toml",
 def load(path) -> Config:
     """The Config read from TOML file ``path``; ConfigError for a missing, unreadable or invalid file."""
     path = Path(path)
+    return parse(read_toml(path), str(path), base=path.parent)
+
+
+def read_toml(path) -> dict:
+    """The tables of TOML file ``path``; a ConfigError in one line for a folder, a missing, unreadable,
+    non-UTF-8 or invalid file (every command's config is read here)."""
+    path = Path(path)
     source = str(path)
     if path.is_dir():
         raise ConfigError(source, "file", "is a folder, not a config file")
@@ -50,7 +57,7 @@ def load(path) -> Config:
                           "TOML files are UTF-8; save it as UTF-8") from None
     except OSError as e:
         raise ConfigError(source, "file", f"cannot read it: {e.strerror or e}") from None
-    return parse(raw, source, base=path.parent)
+    return raw
 
 
 def coerce(obj, source: str = "<dict>") -> Config:

@@ -13,10 +13,10 @@ from __future__ import annotations
 
 import math
 
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..config.read import read_toml
 from ..core.types import ConfigError, check_keys, choice, number, as_list
 
 # a differentiable parameter: (its unit, the lights it applies to or None for every light)
@@ -142,17 +142,7 @@ class GradSpec:
 
 def load(path) -> GradSpec:
     """The GradSpec of TOML file ``path``'s ``[gradient]`` table; ConfigError for any mistake."""
-    path = Path(path)
-    source = str(path)
-    if path.is_dir():
-        raise ConfigError(source, "file", "is a folder, not a config file")
-    if not path.is_file():
-        raise ConfigError(source, "file", "no such config file")
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise ConfigError(source, "toml", f"not valid TOML: {e}") from None
-    return parse(raw, source)
+    return parse(read_toml(path), str(path))
 
 
 def parse(raw: dict, source: str = "<dict>") -> GradSpec:
