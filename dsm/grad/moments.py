@@ -137,16 +137,21 @@ def box_blur(x, width: int, R: int):
     return x
 
 
-def bilinear(x, u, v, R: int):
-    """Bilinear fetch of map ``x`` (flat, R x R) at map positions (u, v) in texels (clamped at the border)."""
+def bilinear_taps(u, v):
+    """The four texels around map positions (u, v) in texels: (weight, i, j) with (i, j) a texel's
+    integer index (float, unclamped) and the weights bilinear in the fractional position."""
     fx, fy = u - 0.5, v - 0.5
     i0, j0 = dr.floor(fx), dr.floor(fy)
     wx, wy = fx - i0, fy - j0
-    out = dr.zeros(mi.Float, dr.width(u))
     for a in (0, 1):
         for b in (0, 1):
-            ii = dr.clip(mi.Int32(i0) + a, 0, R - 1)
-            jj = dr.clip(mi.Int32(j0) + b, 0, R - 1)
-            w = (wx if a else 1.0 - wx) * (wy if b else 1.0 - wy)
-            out += w * dr.gather(mi.Float, x, mi.UInt32(jj * R + ii))
+            yield (wx if a else 1.0 - wx) * (wy if b else 1.0 - wy), i0 + a, j0 + b
+
+
+def bilinear(x, u, v, R: int):
+    """Bilinear fetch of map ``x`` (flat, R x R) at map positions (u, v) in texels (clamped at the border)."""
+    out = dr.zeros(mi.Float, dr.width(u))
+    for w, i, j in bilinear_taps(u, v):
+        ii, jj = dr.clip(mi.Int32(i), 0, R - 1), dr.clip(mi.Int32(j), 0, R - 1)
+        out += w * dr.gather(mi.Float, x, mi.UInt32(jj * R + ii))
     return out

@@ -61,14 +61,9 @@ def _test(look: Lookup, prm, u, v, aa: bool):
 
 def pcf(look: Lookup, prm, u, v, aa: bool):
     """Bilinear PCF at map positions (u, v): the four tests blended by the fractional position."""
-    x, y = u - 0.5, v - 0.5
-    i0, j0 = dr.floor(x), dr.floor(y)
-    fx, fy = x - i0, y - j0
     out = dr.zeros(mi.Float, dr.width(u))
-    for a in (0, 1):
-        for b in (0, 1):
-            w = (fx if a else 1.0 - fx) * (fy if b else 1.0 - fy)
-            out += w * _test(look, prm, i0 + 0.5 + a, j0 + 0.5 + b, aa)
+    for w, i, j in moments.bilinear_taps(u, v):       # a test at each texel's centre
+        out += w * _test(look, prm, i + 0.5, j + 0.5, aa)
     return out
 
 
