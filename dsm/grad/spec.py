@@ -120,18 +120,18 @@ class GradSpec:
 
     def step(self, param: str) -> float:
         """The central difference's step of ``param`` in its unit."""
-        given = dict(self.fd_step)
-        if param in given:
-            return given[param]
-        base = FD_STEP[self.unit(param)]
-        return base * self.occluder_size if self.unit(param) == "world" else base
+        return self.step_in(param, self.fd_step, FD_STEP)
 
     def reference_step_of(self, param: str) -> float:
         """The supersampled reference's central-difference step of ``param`` in its unit."""
-        given = dict(self.reference_step)
-        if param in given:
-            return given[param]
-        base = REFERENCE_STEP[self.unit(param)]
+        return self.step_in(param, self.reference_step, REFERENCE_STEP)
+
+    def step_in(self, param: str, given: tuple, defaults: dict) -> float:
+        """``param``'s step as ``given`` ((param, step), ...), else its unit's default in ``defaults``: a
+        world step in units of ``occluder_size``, so the difference scales with the scene."""
+        if param in dict(given):
+            return dict(given)[param]
+        base = defaults[self.unit(param)]
         return base * self.occluder_size if self.unit(param) == "world" else base
 
     def nominal(self) -> dict:
