@@ -123,20 +123,33 @@ def test_filtering_and_a_case_s_images(page):
     assert loaded == [320, 32, 320, 32, 32]
 
 
+def _record(scene, contender, rate, n=1000, **more):
+    """A hand-made benchmark record: acne alone at ``rate`` of ``n`` receivers (``more`` adds or overrides keys)."""
+    return {"scene": scene, "unit": "m", "light": "directional", "contender": contender, "n_receivers": n,
+            "n_acne": int(rate * n) if n else 0, "n_peterpan": 0, "acne_rate": rate, "peterpan_rate": 0.0,
+            "error_rate": rate, "texel_size": 0.01, "build_ms": 1.0, "lookup_ms": 1.0, **more}
+
+
+def _oracle(scene, n=1000, **more):
+    """A hand-made oracle record of one case."""
+    return {"scene": scene, "unit": "m", "light": "directional", "contender": "oracle", "n_receivers": n,
+            "world_objective": 0.05, "texel_objective": 0.05, "per_texel_objective": 0.0, **more}
+
+
+def _result(cases, suite="dsm-bench-1") -> dict:
+    """A hand-made results.json document of ``cases``."""
+    return {"suite": suite, "suite_sha256": "0" * 64, "size": "test", "dsm_version": "0", "variant": "x",
+            "versions": {"dsm_git_commit": "c"}, "machine": {"cpu": "cpu", "cores": 1}, "cases": cases}
+
+
 def test_the_benchmark_leaderboard_sorts_in_the_browser(tmp_path):
     """dsm benchmark's leaderboard.html from the file system: the answer first, a click on the
     error-rate header twice orders the ranking rows by hand-made error rates, largest first, and
     its scale.png shows."""
     from dsm.benchmark import page as bench_page
     rates = {"a": 0.30, "b": 0.10, "c": 0.20}          # one case each at 1000 receivers
-    cases = [{"scene": "s", "unit": "m", "light": "directional", "contender": c, "n_receivers": 1000,
-              "n_acne": int(e * 1000), "n_peterpan": 0, "acne_rate": e, "peterpan_rate": 0.0, "error_rate": e,
-              "texel_size": 0.01, "build_ms": 1.0, "lookup_ms": 1.0} for c, e in rates.items()]
-    cases.append({"scene": "s", "unit": "m", "light": "directional", "contender": "oracle", "n_receivers": 1000,
-                  "world_objective": 0.05, "texel_objective": 0.05, "per_texel_objective": 0.0})
-    doc = {"suite": "dsm-bench-1", "suite_sha256": "0" * 64, "size": "test", "dsm_version": "0", "variant": "x",
-           "versions": {"dsm_git_commit": "c"}, "machine": {"cpu": "cpu", "cores": 1}, "cases": cases}
-    path = bench_page.write_page(doc, tmp_path)
+    cases = [_record("s", c, e) for c, e in rates.items()] + [_oracle("s")]
+    path = bench_page.write_page(_result(cases), tmp_path)
     drv = _chrome()
     try:
         drv.get(path.as_uri())
@@ -233,15 +246,9 @@ def test_the_leaderboard_filters_and_fits(tmp_path):
     cases = []
     for scene in ("s", "t"):
         for c, e in {"vsm box:5": 0.30, "bevy": 0.10, "receiver_plane": 0.20}.items():
-            cases.append({"scene": scene, "unit": "m", "light": "directional", "contender": c, "n_receivers": 1000,
-                          "n_acne": int(e * 1000), "n_peterpan": 0, "acne_rate": e, "peterpan_rate": 0.0,
-                          "error_rate": e, "texel_size": 0.01, "build_ms": 1.0, "lookup_ms": 1.0,
-                          "params": "bias=5.96046e-08 range"})
-        cases.append({"scene": scene, "unit": "m", "light": "directional", "contender": "oracle", "n_receivers": 1000,
-                      "world_objective": 0.05, "texel_objective": 0.05, "per_texel_objective": 0.0})
-    doc = {"suite": "dsm-bench-1", "suite_sha256": "0" * 64, "size": "test", "dsm_version": "0", "variant": "x",
-           "versions": {"dsm_git_commit": "c"}, "machine": {"cpu": "cpu", "cores": 1}, "cases": cases}
-    path = bench_page.write_page(doc, tmp_path)
+            cases.append(_record(scene, c, e, params="bias=5.96046e-08 range"))
+        cases.append(_oracle(scene))
+    path = bench_page.write_page(_result(cases), tmp_path)
     drv = _chrome()
     try:
         from selenium.webdriver.support.ui import Select
@@ -343,17 +350,12 @@ def test_a_contender_page_fits_loads_its_images_and_orders_its_cases_worst_first
     for scene, (err, flip) in given.items():
         n = 0 if err != err else 1000
         for c in ("bevy", "three"):
-            cases.append({"scene": scene, "unit": "m", "offset": "0", "light": "spot", "contender": c,
-                          "n_receivers": n, "n_gt_shadowed": n // 2, "n_acne": int(err * n) if n else 0,
-                          "n_peterpan": 0, "acne_rate": err, "peterpan_rate": 0.0 if n else err, "error_rate": err,
-                          "flip": flip, "texel_size": 0.01, "build_ms": 1.0, "lookup_ms": 1.0, "params": ""})
+            cases.append(_record(scene, c, err, n, offset="0", light="spot", n_gt_shadowed=n // 2,
+                                 peterpan_rate=0.0 if n else err, flip=flip, params=""))
         case_images.keep(tmp_path, cases[-2:], [(rng.integers(0, 8, (24, 24)).astype(np.uint8),
                                                   rng.random((24, 24)).astype(np.float32)) for _ in range(2)])
-        cases.append({"scene": scene, "unit": "m", "offset": "0", "light": "spot", "contender": "oracle",
-                      "n_receivers": n, "world_objective": 0.05, "texel_objective": 0.05, "per_texel_objective": 0.0})
-    doc = {"suite": "dsm-bench-5", "suite_sha256": "0" * 64, "size": "test", "dsm_version": "0", "variant": "x",
-           "versions": {"dsm_git_commit": "c"}, "machine": {"cpu": "cpu", "cores": 1}, "cases": cases}
-    board = bench_page.write_page(doc, tmp_path)
+        cases.append(_oracle(scene, n, offset="0", light="spot"))
+    board = bench_page.write_page(_result(cases, "dsm-bench-5"), tmp_path)
     cards = lambda: drv.execute_script("return Array.from(document.querySelectorAll('#cards > figure.case'))"
                                        ".map(f => f.querySelector('figcaption').textContent.split(',')[0])")
     drv = _chrome()
