@@ -16,8 +16,6 @@ INT_COLUMNS = record.INT_COLUMNS
 
 
 @contextlib.contextmanager
-
-
 def atomic(path: Path):
     """Yield a temporary path beside ``path``; rename it to ``path`` once written, so a reader
     (or an interrupted run) never sees a half-written file."""
