@@ -379,9 +379,19 @@ def visibility(spec: SchemeSpec, rx: Receiver, smap, filt: str = "nearest", seed
     return lookup.visibility(schemes.get(spec.name), spec.params, rx, smap, filt, seed)
 
 
+def pcss_blockers_found(spec: SchemeSpec, rx: Receiver, smap) -> np.ndarray:
+    """Per receiver (numpy bool), whether PCSS's blocker search on ``smap`` finds a blocker."""
+    return lookup.pcss_found(schemes.get(spec.name), spec.params, rx, smap).numpy().astype(bool)
+
+
 # ---------------------------------------------------------------- pre-filtered maps (dsm.prefilter)
 
 moment_key = prefilter.build_key          # (MomentSpec, format) -> what its moment map depends on
+
+
+def moment_count(spec) -> int:
+    """Moments per texel one pre-filtered instance stores."""
+    return prefilter.get(spec.name).count(spec.params)
 
 
 def moment_map(spec, smap, fmt: str, fine=None):

@@ -21,13 +21,10 @@ from __future__ import annotations
 import math
 from collections import defaultdict
 
-import numpy as np
-
+from ..truth import paired
 from .suite import ORIGIN
 
-SEED = 0
-RESAMPLES = 2000
-CONFIDENCE = 0.95
+SEED, RESAMPLES, CONFIDENCE = paired.SEED, paired.RESAMPLES, paired.CONFIDENCE
 RULE = {"test": "paired bootstrap of the mean per-case error-rate difference over the cases both ran at the origin",
         "resamples": RESAMPLES, "seed": SEED, "confidence": CONFIDENCE}
 RULE_TEXT = (f"Two contenders share a rank where the data cannot tell them apart: the {CONFIDENCE:.0%} bootstrap "
@@ -128,10 +125,7 @@ def paired_interval(a_rows: list, b_rows: list):
     shared = sorted(set(a) & set(b))
     if not shared:
         return None
-    d = np.array([b[k] - a[k] for k in shared], np.float64)
-    means = d[np.random.default_rng(SEED).integers(0, d.size, (RESAMPLES, d.size))].mean(axis=1)
-    low, high = np.quantile(means, [(1 - CONFIDENCE) / 2, (1 + CONFIDENCE) / 2])
-    return float(low), float(high)
+    return paired.interval([b[k] - a[k] for k in shared])
 
 
 def apart(a_rows: list, b_rows: list) -> bool:

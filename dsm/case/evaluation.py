@@ -64,7 +64,7 @@ def evaluate(ctx: MapContext, case: Case, looked=None, attached=None) -> CaseRes
         cols, per, curve, faces = pipeline.cascade_metrics(ctx.view, receivers, v, ctx.setup.v_star)
         measured.update(cols)
         result.cascades = (per, curve, faces)
-        if getattr(ctx.view, "virtual", False):
+        if ctx.view.virtual:
             measured.update(pipeline.virtual_metrics(ctx.view, ctx.depth_map, faces))
     if "attached" in ctx.measures:
         measured.update(_attached(ctx, case, look, attached))

@@ -15,6 +15,7 @@ import numpy as np
 from ..core import timing
 from ..maps import headroom
 from ..truth import metrics
+from . import cost
 from .context import Case, MapContext, Where
 from .evaluation import CaseResult
 
@@ -55,9 +56,10 @@ class BuildCost:
 
 
 def still_costs(ctx: MapContext, result: CaseResult, build: BuildCost) -> dict:
-    """A still case's cost columns: its map's build, its lookup, the light's exact reference."""
+    """A still case's cost columns: its map's build, its lookup, the light's exact reference, and
+    its costs in counts (:func:`dsm.case.cost.costs`)."""
     lookup = result.lookup
-    return {"build_ms": build.own.ms, "build_first_ms": build.first_layer.ms, "build_compile_ms": build.own.compile_ms,
+    return {**cost.costs(ctx, result.case), "build_ms": build.own.ms, "build_first_ms": build.first_layer.ms, "build_compile_ms": build.own.compile_ms,
             "build_peak_mb": build.peak_bytes / 2 ** 20, "build_shared": build.shared,
             "lookup_ms": lookup.ms, "lookup_compile_ms": lookup.compile_ms,
             "lookup_kernels_compiled": lookup.cache_misses, "lookup_shared": result.lookup_shared,

@@ -40,7 +40,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..case import Case, MapContext, Where, evaluate, row as case_row
+from ..case import Case, MapContext, Where, cost as case_cost, evaluate, row as case_row
 from ..case.evaluation import lookup
 from ..maps import headroom, shadowmap
 from ..scenes import spawn
@@ -328,6 +328,7 @@ class _CaseFrames:
     v_images: list = dataclasses.field(default_factory=list)     # the shown frames' V per camera pixel
     metrics: list = dataclasses.field(default_factory=list)
     lookup_ms: list = dataclasses.field(default_factory=list)
+    costs: list = dataclasses.field(default_factory=list)        # each frame's costs in counts (dsm.case.cost)
 
 
 @dataclasses.dataclass
@@ -474,6 +475,7 @@ def _run_frame(runner, state: _MapFrames, t: int):
         mt = result.measured
         frames.metrics.append(mt)
         frames.lookup_ms.append(result.lookup.ms if ctx.receivers[case.format] is not None else math.nan)
+        frames.costs.append(case_cost.costs(ctx, case))
         frames.frames.append({"frame": t, "map_built": state.built[-1], "n_points_visible": int(elig.sum()),
                               "n_receivers": mt["n_receivers"], "acne_rate": mt["acne_rate"],
                               "peterpan_rate": mt["peterpan_rate"], "error_rate": mt["error_rate"]})
@@ -497,7 +499,7 @@ def _write_case(runner, state: _MapFrames, case: Case, frames: _CaseFrames):
     costs = {"maps_built": int(sum(state.built)), "build_ms": float(np.median(state.build_ms)),
              "build_first_ms": float("nan"), "lookup_ms": case_row.median_defined(frames.lookup_ms),
              "reference_ms": float("nan"), "sweep_key": "", "sweep_value": float("nan"), "texel_size": float("nan"),
-             **state.tight}
+             **state.tight, **case_cost.over_frames(frames.costs)}
     row = case_row.row({**ident, "motion": mo.label, "frames": mo.frames}, measured, costs)
     if frames.images:
         runner.record.motion_gifs.append(_gif_frames(state, ident, frames))

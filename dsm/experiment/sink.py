@@ -54,7 +54,7 @@ class Sink:
             per, curve, faces = result.cascades
             self.record.cascade_rows += [{**ident, **r} for r in per]
             self.record.cascade_curves.append((ident, curve))
-        if result.cascades is not None and self.files and getattr(ctx.view, "virtual", False):
+        if result.cascades is not None and self.files and ctx.view.virtual:
             virtual_files.write_level_image(self.folder(ident) / f"{ident['case']}_level.png", ctx.setup.pixels,
                                             ctx.view.levels[faces], *ctx.image_size)
         elif result.cascades is not None and self.files:

@@ -204,6 +204,12 @@ def pcss(scheme, prm, rx: Receiver, smap):
     return dr.select(found, vis, 1.0)
 
 
+def pcss_found(scheme, params, rx: Receiver, smap):
+    """Per receiver (lazy Bool), whether PCSS's blocker search finds a blocker (its filter runs only there)."""
+    prm = resolve(params, rx)
+    return pcss_estimate(scheme, prm, scheme.shift(rx, prm), smap)[2]
+
+
 def resolve(params, rx: Receiver):
     """Scheme parameters as opaque Dr.Jit values in world units (per receiver for texels)."""
     out = {}

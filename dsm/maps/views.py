@@ -65,6 +65,8 @@ class View:
     light_size = 0.0            # an area light's width, world, for PCSS (dsm.lights.area_surface); 0: none
     exclude = ()                # shapes the map steps over: an area light's own luminaire (dsm.lights.area_surface)
     nearest_scene_depth = 0.0   # the light's distance to the scene's bounds (spot and point views), ndc24's and PCSS's near
+    virtual = False             # pages through a page table (dsm.maps.virtual)
+    page_table_entries = 0      # a virtual map's page table: one entry per virtual page of every level
 
     @property
     def faces(self) -> int:

@@ -187,6 +187,11 @@ class VirtualView(View):
         return len(self.pages) * self.page_size ** 2
 
     @property
+    def page_table_entries(self) -> int:
+        """Entries of the page table: every virtual page of every level (tagged or not)."""
+        return self.faces * self.pages_side ** 2
+
+    @property
     def n_pages(self) -> int:
         """Pages tagged (each one built)."""
         return len(self.pages)

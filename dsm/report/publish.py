@@ -18,7 +18,7 @@ import math
 import time
 from pathlib import Path
 
-from . import figures, html as htmlpage, jobs as draw_jobs, tables as report, io as report_io, summary
+from . import figures, frontier, html as htmlpage, jobs as draw_jobs, tables as report, io as report_io, summary
 from ..truth import metrics
 from .sections import cascades, motion
 from .sections import soft as soft_report
@@ -193,6 +193,9 @@ def write_report(out: Path, images=(), curves=None, plots: bool = True) -> dict:
                        run.get("status", []), oracle_rows, _texels(run), state=run.get("state"),
                        planned=run.get("plan", {}).get("cases"))
     _sections(out, notes, plots and bool(rows))
+    points = frontier.points_from_rows(rows)
+    if points:                          # a run from before the cost columns has no frontier (table.md says so)
+        frontier.write_csv(out / "frontier.csv", points)
     virtual_report.write_table(out / "virtual.md", rows)
     htmlpage.write_html(out / "report.html", rows, run)
     t3 = time.perf_counter()

@@ -27,6 +27,7 @@ import math
 import numpy as np
 
 from ..truth.metrics import defined
+from . import frontier
 
 SITUATION = ("scene", "light", "view", "resolution")
 
@@ -310,12 +311,12 @@ def best_per_light(rows) -> list:
 
 
 def terminal_answer(rows, most: int = 12) -> list:
-    """The lines ``dsm run`` ends with: the headline (answer) and the best instance per light and
-    resolution over every scene (at most ``most`` lines; the rest named by count)."""
+    """The lines ``dsm run`` ends with: what accuracy costs (dsm.report.frontier), the headline (answer)
+    and the best instance per light and resolution over every scene (at most ``most`` lines; the rest named by count)."""
     if not rows:
         return []
     best = best_per_light(rows)
-    lines = [answer(rows)] + [f"best for light {b['light']} at R = {b['resolution']}: {best_cell(b)}"
+    lines = frontier.answer_lines(frontier.answers(frontier.points_from_rows(rows))) + [answer(rows)] + [f"best for light {b['light']} at R = {b['resolution']}: {best_cell(b)}"
                               for b in best[:most]]
     if len(best) > most:
         lines.append(f"... and {len(best) - most} more lights and resolutions (table.md)")

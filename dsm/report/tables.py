@@ -11,7 +11,7 @@ from .sections import contact as contact_report
 from ..maps import headroom
 from ..truth import metrics
 from ..core import record
-from . import io as report_io, summary
+from . import frontier, io as report_io, summary
 
 COLUMNS = record.NAMES          # metrics.csv's columns: the run record's schema (dsm.core.record)
 
@@ -186,7 +186,7 @@ def write_table(path: Path, rows: list, name: str, source: str, status=None, ora
              "peter-pan = n_peterpan / n_gt_shadowed, error = (acne + peter-pan) / receivers. "
              "A dash: undefined (an empty denominator), left out of every summary and plot. report.html shows "
              "the same with a sortable case table, the images and the plots.", "",
-             *summary.summary_md(rows), *status_md(status), *precision_md(rows), "", "## Cases", "",
+             *frontier.summary_md(frontier.points_from_rows(rows)), *summary.summary_md(rows), *status_md(status), *precision_md(rows), "", "## Cases", "",
              "self/edge: acne counts on the receiver's own shape / at another shape's edge; pp dist: median "
              "distance from a peter-panned receiver to its true occluder (world units). Times are medians over the "
              "timed repeats of the kernels' own time (Dr.Jit's kernel history).",

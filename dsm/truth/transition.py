@@ -24,7 +24,7 @@ def selection_measure(view, p: np.ndarray) -> np.ndarray:
     """What the view's selection reads at world points ``p`` (float64): the distance to the camera
     (virtual) or the camera's view depth (cascaded)."""
     d = np.asarray(p, float) - np.asarray(view.camera.origin, float)
-    if getattr(view, "virtual", False):
+    if view.virtual:
         return np.linalg.norm(d, axis=1)
     return d @ np.asarray(view.camera.forward, float)
 
@@ -32,7 +32,7 @@ def selection_measure(view, p: np.ndarray) -> np.ndarray:
 def selection_bounds(view) -> tuple:
     """(lo, hi) per face of the selection's ranges, -inf / inf where a bound is no transition."""
     n = view.faces
-    if getattr(view, "virtual", False):
+    if view.virtual:
         lo, hi = (np.array(b, float) for b in zip(*(view.distance_range(k) for k in range(n))))
     else:
         s = np.asarray(view.splits, float)
