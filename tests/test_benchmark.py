@@ -675,7 +675,7 @@ def test_force_replaces_every_file_of_the_previous_run_and_keeps_the_user_s(tmp_
     assert not (out / "case_images" / "old_m_0").exists() and not (out / "contenders" / "old.html").exists()
     assert (out / "notes.txt").read_text() == "old"
     doc = json.loads((out / "results.json").read_text())
-    assert doc["suite"] == "dsm-bench-1" and doc["results_version"] == 3
+    assert doc["suite"] == "dsm-bench-1" and doc["results_version"] == 4
     assert (out / "leaderboard.html").read_text() != "old" and (out / "scale.png").read_bytes() != b"old"
 
 

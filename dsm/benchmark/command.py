@@ -14,12 +14,12 @@ from pathlib import Path
 
 from ..config.read import VARIANTS
 from ..experiment import lock
-from . import case_images, caselog, compare, contenders, document, page, results
+from . import case_images, caselog, compare, contenders, costs, document, page, results
 from .suite import LATEST, SUITE_FILES
 
 SIZE_ENV = "DSM_BENCHMARK_SIZE"     # a hidden size for tests: DSM_BENCHMARK_SIZE=test
 # what a run writes into --out: --force removes these (and nothing else a user keeps there)
-WRITTEN = ("results.json", "leaderboard.html", "scale.png", "flicker", caselog.FOLDER, case_images.FOLDER,
+WRITTEN = ("results.json", "leaderboard.html", "frontier.csv", "scale.png", "flicker", caselog.FOLDER, case_images.FOLDER,
            contenders.FOLDER)
 
 
@@ -165,6 +165,7 @@ def _page(folder: Path) -> int:
     missing = [k for k in ("suite_sha256", "size", "dsm_version", "versions", "variant", "machine") if k not in doc]
     if missing:
         return _err(f"--page {folder / 'results.json'}: has no {missing[0]} (the page states it)")
+    costs.write_frontier(doc, folder)
     print(f"dsm benchmark: wrote {page.write_page(doc, folder)}")
     return 0
 
@@ -190,6 +191,7 @@ def _run(args, out: Path) -> int:
     for r in ranking.ranking(doc)[:5]:       # the top of the leaderboard, before where the files are
         print(f"dsm benchmark: rank {r['rank']}: {r['contender']} (error rate {r['error']:.4f})")
     try:
+        costs.write_frontier(doc, out)
         print(f"dsm benchmark: wrote {written} and {page.write_page(doc, out)}")
     except KeyboardInterrupt:
         print(f"dsm benchmark: interrupted while writing the page; {written} is whole: dsm benchmark --page {out} "

@@ -1,8 +1,10 @@
 """A benchmark result document (results.json) read back and checked before any use.
 
-``results_version`` 3 is what this dsm writes: version 2's fields, and ``versions`` must name the dsm,
-Mitsuba and Dr.Jit versions the results were measured with (results differ bit for bit between
-releases; ``dsm benchmark --compare`` says when two documents' differ). Version 2, and a document
+``results_version`` 4 is what this dsm writes: version 3's fields, and every contender's record (not
+the oracle's) carries its case's costs in counts (``map_bytes``, ``page_table_bytes`` and ``map_rays``
+whole numbers >= 0, ``taps`` a number: :mod:`dsm.case.cost`). Version 3 is version 2's fields, and
+``versions`` must name the dsm, Mitsuba and Dr.Jit versions the results were measured with (results
+differ bit for bit between releases; ``dsm benchmark --compare`` says when two documents' differ). Versions 3 and 2, and a document
 without ``results_version`` (version 1, written by dsm 0.2.0 and earlier, the same fields), are read
 the same, their versions as recorded (dsm's own unrecorded). A newer version, and anything that is
 not a results document, is refused in one line naming the file and what is wrong with it.
@@ -15,10 +17,11 @@ from pathlib import Path
 
 from ..core.env import ENGINE        # version 3: versions.<these> are text
 
-RESULTS_VERSION = 3
-READS = (1, 2, 3)              # the versions this dsm reads
+RESULTS_VERSION = 4
+READS = (1, 2, 3, 4)              # the versions this dsm reads
 NAMES = ("scene", "unit", "light", "contender")          # a record's identity (offset: optional, "0")
 COUNTS = ("n_receivers", "n_acne", "n_peterpan")          # integers where present (an oracle's: receivers only)
+COST_COUNTS = ("map_bytes", "page_table_bytes", "map_rays")   # version 4: every contender record's, whole
 
 
 class NotResults(ValueError):
@@ -71,6 +74,8 @@ def check(doc, path="<document>") -> dict:
     elif "versions" in doc and not isinstance(doc["versions"], dict):      # older: optional, but an object
         raise NotResults(f"{where}: versions is {_kind(doc['versions'])}, not an object of versions")
     _records(doc.get("cases"), where, "cases", COUNTS)
+    if version >= 4:
+        _costs(doc["cases"], where)
     _records(doc.get("flicker", []), where, "flicker", ())
     for i, rec in enumerate(doc.get("flicker", [])):
         if "flicker_rate" not in rec:
@@ -95,6 +100,21 @@ def _records(recs, where: str, key: str, counts: tuple):
                 raise NotResults(f"{where}: {key}[{i}].{c} is {rec[c]!r}, not a count (a whole number >= 0)")
         if "flip" in rec and rec["flip"] is not None:
             _number(rec["flip"], where, f"{key}[{i}].flip")
+
+
+def _costs(recs: list, where: str):
+    """A version 4 document: every contender record carries its costs (whole counts, and taps a number)."""
+    for i, rec in enumerate(recs):
+        if rec["contender"] == "oracle":
+            continue
+        for c in COST_COUNTS + ("taps",):
+            if c not in rec:
+                raise NotResults(f"{where}: cases[{i}] has no {c} (results_version 4 records each contender's "
+                                 f"costs: {', '.join(COST_COUNTS)}, taps)")
+        for c in COST_COUNTS:
+            if not (isinstance(rec[c], int) and not isinstance(rec[c], bool) and rec[c] >= 0):
+                raise NotResults(f"{where}: cases[{i}].{c} is {rec[c]!r}, not a count (a whole number >= 0)")
+        _number(rec["taps"], where, f"cases[{i}].taps")
 
 
 def _engine(versions, where: str):

@@ -142,7 +142,13 @@ def ranking(doc: dict) -> list:
     by_name = contender_rows(doc)
     scored = [{**scores(name, rows, doc.get("far_unit"), far), "flicker": flick.get(name)}
               for name, rows in by_name.items()]
-    scored.sort(key=lambda s: (s["error"], s["contender"]))
+    return ranked_within(scored, by_name)
+
+
+def ranked_within(scored: list, by_name: dict) -> list:
+    """``scored`` rows (each with contender and error) ranked among themselves by RULE_TEXT's rule,
+    best first, each with its ``rank``; ``by_name``: contender -> its records (contender_rows)."""
+    scored = sorted(scored, key=lambda s: (s["error"], s["contender"]))
     out, lead = [], None
     for i, s in enumerate(scored):
         if lead is None or apart(by_name[lead["contender"]], by_name[s["contender"]]):

@@ -4,6 +4,9 @@ From dsm-bench-2 on a case's record carries its offset (label and ``translate``)
 shadowed count (``n_gt_shadowed``: where the scene sits must not move it), the map's float32 headroom
 (``texel_f32_steps``: below 64 the case is precision-limited) and the mean FLIP of its
 shadowed render against the exact render (:mod:`dsm.benchmark.render`, :mod:`dsm.benchmark.perceptual`).
+From results version 4 on a contender's record also carries its case's costs in counts (``map_bytes``,
+``page_table_bytes``, ``map_rays``, ``taps``: :mod:`dsm.case.cost`), which the leaderboard's memory
+classes and the frontier read (:mod:`dsm.benchmark.costs`).
 From dsm-bench-3 on a case also runs its pre-filtered config (:func:`dsm.benchmark.suite.prefiltered_config`):
 those records are named by kind and filter (``vsm box:5``), carry ``map_kind`` and the leak split
 (``n_leak``, ``leak_rate``), and add no oracle (the depth config's is the case's floor). A case with a
@@ -29,6 +32,7 @@ from .suite import LATEST, ORIGIN, SUITE_FILES, TIMING_CALLS, cases, load_suite,
 
 MEASURES = ("n_receivers", "n_gt_shadowed", "n_acne", "n_peterpan", "acne_rate", "peterpan_rate", "error_rate",
             "texel_size", "texel_f32_steps", "build_ms", "lookup_ms")
+COST_MEASURES = ("map_bytes", "page_table_bytes", "map_rays", "taps")   # results version 4 on (dsm.case.cost)
 LEAK_MEASURES = ("n_leak", "leak_rate")      # a pre-filtered record's: peter-panning far from the occluder
 FLICKER_MEASURES = ("frames", "flicker_rate", "flicker_ever", "flicker_magnitude", "flicker_within_rate",
                     "flicker_change_rate")
@@ -68,7 +72,7 @@ def case_records(case, results, flips=None, oracle=True, tuned=None) -> list:
     for row in results.rows:
         rec = {"scene": case.scene, "unit": case.unit, **where, "light": light_kind(row["light"]),
                "contender": contender_of(row, tuned), "params": row["params"]}
-        rec.update({k: row[k] for k in MEASURES})
+        rec.update({k: row[k] for k in MEASURES + COST_MEASURES})
         if is_prefiltered(row):
             rec.update({"map_kind": row["map_kind"], **{k: row[k] for k in LEAK_MEASURES}})
         if flips is not None:

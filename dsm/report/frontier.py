@@ -202,8 +202,7 @@ def _rate(x: float) -> str:
 
 
 def _cost(c: Choice) -> str:
-    return (f"{size(c.bytes)}, {c.rays:,.0f} rays, {c.taps:.3g} tap{'' if c.taps == 1 else 's'}; build {c.build_ms:.3g} ms, "
-            f"lookup {c.lookup_ms:.3g} ms")
+    return f"{size(c.bytes)}, {c.rays:,.0f} rays, {c.taps:.3g} tap{'' if c.taps == 1 else 's'}"
 
 
 def families(tied: list, chosen: Choice) -> str:
@@ -213,30 +212,48 @@ def families(tied: list, chosen: Choice) -> str:
 
 
 def answer_lines(found: list) -> list:
-    """The answer in words, two lines per light type: what to use and what halving its error costs."""
+    """The answer in words, two lines per light type: what to use (counts only, so identical runs say
+    the same) and what a lower error costs; :func:`time_lines` gives the measured times beside."""
     out = []
     for a in found:
-        c, best, n_tied = a["chosen"], a["best"], len(a["tied"]) - 1
+        c, n_tied = a["chosen"], len(a["tied"]) - 1
         head = f"{a['light_type']} ({a['situations']} situations): {c.instance}: error {_rate(c.error)}, {_cost(c)}"
         if n_tied == 0:
             out.append(head + " (the lowest error, told apart from every other instance)")
-        elif c is best:
-            out.append(head + f" (the lowest error; {n_tied} more tie with it: {families(a['tied'], c)})")
         else:
-            out.append(head + f" (the cheapest of {n_tied + 1} the data cannot tell from the lowest, "
-                       f"{_rate(best.error)} by {best.instance}; ties: {families(a['tied'], c)})")
-        out.append("  " + halving(c, a["half"]))
+            what = "the lowest error" if c is a["best"] else "the cheapest the data cannot tell from the lowest"
+            out.append(head + f" ({what}; {n_tied} more tie: {families(a['tied'], c)})")
+        out.append("  " + costs_more(c, a["best"], a["half"]))
     return out
 
 
-def halving(c: Choice, half: Choice | None) -> str:
-    """What halving the chosen instance's error costs, in words."""
+def _pay(c: Choice, other: Choice) -> str:
+    ratio = other.bytes / c.bytes if c.bytes else math.inf
+    memory = "the same memory" if ratio == 1 else f"{ratio:.2g}x the memory"
+    return f"{memory}: {other.instance} ({_cost(other)})"
+
+
+def costs_more(c: Choice, best: Choice, half: Choice | None) -> str:
+    """What a lower error than the chosen instance's costs: the lowest error's, and half its error's."""
+    if half is not None and half is best:
+        return f"the lowest, {_rate(best.error)}, halves it and costs {_pay(c, best)}"
+    lowest = "" if best is c else f"the lowest, {_rate(best.error)}, costs {_pay(c, best)}; "
     if c.error == 0:
-        return "no error left to halve"
+        return lowest + "no error left to halve"
     if half is None:
-        return f"no instance run halves its error (at most {_rate(c.error / 2)})"
-    ratio = half.bytes / c.bytes if c.bytes else math.inf
-    return (f"for {_rate(half.error)} you pay {ratio:.2g}x the memory: {half.instance} ({_cost(half)})")
+        return lowest + f"no instance run halves its error (at most {_rate(c.error / 2)})"
+    return lowest + f"for {_rate(half.error)} you pay {_pay(c, half)}"
+
+
+def time_lines(found: list) -> list:
+    """The measured times of each light type's named instances (means of the per-case medians, ms)."""
+    out = []
+    for a in found:
+        named = [x for x in (a["chosen"], a["best"], a["half"]) if x is not None]
+        out.append(f"{a['light_type']}: measured " + "; ".join(
+            f"{x.instance}: build {x.build_ms:.3g} ms, lookup {x.lookup_ms:.3g} ms"
+            for x in dict.fromkeys(named)))
+    return out
 
 
 DEFINITION = ("Per light type, over its situations (scene and light): the cheapest instance (bytes its lookup "
@@ -255,7 +272,7 @@ def summary_md(points: list) -> list:
                 "no frontier.", ""]
     marks = on_frontier(points)
     n_on = sum(1 for m in marks if m)
-    lines = answer_lines(answers(points))
-    return ["## What accuracy costs", "", *[f"- {x.strip()}" if not x.startswith(" ") else f"  - {x.strip()}"
-                                            for x in lines], "",
+    found = answers(points)
+    lines = [f"- {x.strip()}" if not x.startswith(" ") else f"  - {x.strip()}" for x in answer_lines(found)]
+    return ["## What accuracy costs", "", *lines, "", *[f"- {x}" for x in time_lines(found)], "",
             DEFINITION + f" {n_on} of {len(points)} points are on their frontier.", ""]

@@ -316,7 +316,8 @@ def terminal_answer(rows, most: int = 12) -> list:
     if not rows:
         return []
     best = best_per_light(rows)
-    lines = frontier.answer_lines(frontier.answers(frontier.points_from_rows(rows))) + [answer(rows)] + [f"best for light {b['light']} at R = {b['resolution']}: {best_cell(b)}"
+    found = frontier.answers(frontier.points_from_rows(rows))
+    lines = frontier.answer_lines(found) + frontier.time_lines(found) + [answer(rows)] + [f"best for light {b['light']} at R = {b['resolution']}: {best_cell(b)}"
                               for b in best[:most]]
     if len(best) > most:
         lines.append(f"... and {len(best) - most} more lights and resolutions (table.md)")
