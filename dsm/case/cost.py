@@ -28,44 +28,11 @@ from __future__ import annotations
 import numpy as np
 
 from .. import pipeline
-from ..maps import lookup as map_lookup
+from ..maps import costs as rules
 from ..truth import metrics
 from .context import Case, MapContext
 
-# bytes per stored depth: a 24-bit depth occupies a 32-bit word on GPUs (D24_UNORM_S8_UINT, X8_D24)
-FORMAT_BYTES = {"float32": 4, "float16": 2, "unorm16": 2, "unorm24": 4, "ndc24": 4}
-SLOPE_BYTES = 4                 # the slope layer: float32 in every format
-PAGE_ENTRY_BYTES = 4            # a virtual map's page table: one uint32 physical page per virtual page
 COLUMNS = ("map_bytes", "page_table_bytes", "map_rays", "taps")
-FIXED_TAPS = {"nearest": 1, "pcf_bilinear": 4, "pcf_jitter4x4": 16}
-
-
-def layer_bytes(layers, fmt: str) -> int:
-    """Bytes per texel of the depth ``layers`` (``z1``, ``z2``, ``slope``; ``shape`` never) stored in ``fmt``."""
-    width = FORMAT_BYTES[fmt]
-    return sum(width if k in ("z1", "z2") else SLOPE_BYTES if k == "slope" else 0 for k in layers)
-
-
-def moment_bytes(moments: int, fmt: str, mipmaps: bool) -> float:
-    """Bytes per texel of a pre-filtered map: ``moments`` at ``fmt``'s width, x 4/3 with a mip chain."""
-    return moments * FORMAT_BYTES[fmt] * (4 / 3 if mipmaps else 1)
-
-
-def filter_taps(filt: str) -> int | None:
-    """Taps per lookup of a depth filter whose count is fixed (None: pcss, counted as it runs)."""
-    if filt in FIXED_TAPS:
-        return FIXED_TAPS[filt]
-    if filt == "pcf_wide" or filt.startswith("pcf_wide:"):
-        k = int(filt.split(":", 1)[1]) if ":" in filt else map_lookup.PCF_WIDE_DEFAULT
-        return k * k
-    if filt == "pcss":
-        return None
-    raise ValueError(f"unknown filter {filt!r}")
-
-
-def pcss_taps(found_fraction: float) -> float:
-    """PCSS's taps per lookup when ``found_fraction`` of the receivers find a blocker (the rest stop after the search)."""
-    return map_lookup.PCSS_SEARCH ** 2 + map_lookup.PCSS_FILTER ** 2 * found_fraction
 
 
 def case_layers(case: Case, culling: str) -> tuple:
@@ -79,17 +46,17 @@ def costs(ctx: MapContext, case: Case) -> dict:
     """The case's cost columns (:data:`COLUMNS`): bytes read, page table, build rays, taps per lookup."""
     view, smap = ctx.view, ctx.depth_map
     texels = view.n_texels
-    table = view.page_table_entries * PAGE_ENTRY_BYTES
+    table = view.page_table_entries * rules.PAGE_ENTRY_BYTES
     if case.prefiltered:
         spec = case.spec
-        per = moment_bytes(pipeline.moment_count(spec), case.format, spec.mipmaps)
+        per = rules.moment_bytes(pipeline.moment_count(spec), case.format, spec.mipmaps)
         return {"map_bytes": int(round(texels * per)), "page_table_bytes": table,
                 "map_rays": texels * spec.samples ** 2, "taps": 2.0 if spec.mipmaps else 1.0}
     layers, searched = case_layers(case, ctx.where.culling)
     rays = smap.rays.get("map_texel", texels) + (smap.rays.get("map_continue", 0) if searched else 0)
-    fixed = filter_taps(case.filter)
+    fixed = rules.filter_taps(case.filter)
     taps = float(fixed) if fixed is not None else _pcss_taps(ctx, case)
-    return {"map_bytes": texels * layer_bytes(layers, case.format), "page_table_bytes": table,
+    return {"map_bytes": texels * rules.layer_bytes(layers, case.format), "page_table_bytes": table,
             "map_rays": int(rays), "taps": taps}
 
 
@@ -99,7 +66,7 @@ def _pcss_taps(ctx: MapContext, case: Case) -> float:
     if rx is None:
         return metrics.UNDEFINED
     found = pipeline.pcss_blockers_found(case.spec, rx, ctx.stored[case.format])
-    return pcss_taps(float(np.mean(found)))
+    return rules.pcss_taps(float(np.mean(found)))
 
 
 def over_frames(frame_costs: list) -> dict:

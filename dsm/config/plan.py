@@ -32,6 +32,7 @@ from .. import lights as light_types
 from .. import prefilter
 from .. import schemes as schemes_mod
 from ..core.types import DEFAULT_CAMERA, POINT_VIEWS, VIEW_FACES, Config, ConfigError
+from ..maps import costs as cost_rules
 from ..maps.shadowmap import MAX_STEPS
 from ..contact import presets as contact_presets
 
@@ -113,6 +114,27 @@ class MapPlan:
     def layers(self) -> tuple:
         """The stored layers: ``z1`` and ``shape``, then the optional ones the schemes need."""
         return ("z1", "shape") + tuple(self.needs)
+
+    @property
+    def read_bytes(self) -> tuple:
+        """(fewest, most) bytes one of its cases' lookups reads (dsm.maps.costs: the layers it reads at
+        their stored width, never the shape ids); a virtual map's at most, its pool being the bound."""
+        fmts = ("float32",) + tuple(self.formats)
+        per = [cost_rules.layer_bytes(("z1",) + tuple(k for k in ("z2", "slope") if k in schemes_mod.needs_of([sp])), f)
+               for sp in self.specs for f in fmts]
+        per += [cost_rules.moment_bytes(prefilter.get(m.name).count(m.params), f, m.mipmaps)
+                for m in self.moments for f in fmts]
+        return (round(min(per) * self.texels), round(max(per) * self.texels)) if per else (0, 0)
+
+    @property
+    def build_rays(self) -> tuple:
+        """(rays, exact): the rays its build casts: one a texel (exact) without a layered search or a
+        virtual map's pool; else at most, as only the build knows."""
+        if getattr(self.cascade, "virtual", False):
+            return self.texels, False
+        if not self.layered:
+            return self.texels, True
+        return self.texels * (MAX_STEPS if self.culling != "none" else 2), False
 
     @property
     def build_bytes_per_texel(self) -> int:
@@ -256,14 +278,16 @@ class Plan:
                          + ", ".join(f"{lab} ({t})" for lab, t in lights))
         lines.append("  maps (one per scene/light/view/resolution/culling; layers only as the schemes need):")
         lines.append(f"    {'scene':18s} {'light':12s} {'view':16s} {'R':>5s} {'culling':12s} {'layers':22s} "
-                     f"{'formats':14s} {'texels':>10s} {'tiles':>5s} {'MB':>8s}  schemes")
+                     f"{'formats':14s} {'texels':>10s} {'tiles':>5s} {'MB':>8s} {'read MB':>11s} {'rays':>13s}  schemes")
         for m in self.maps:
             tiles = -(-m.texels // m.tile) if m.tile else 1
             mem = m.peak_bytes * mb
             lines.append(f"    {m.scene[:18]:18s} {m.light[:12]:12s} {m.view:16s} {m.resolution:5d} {m.culling:12s} "
                          f"{'+'.join(m.layers) + (' (layered)' if m.layered else ''):22s} "
-                         f"{','.join(m.formats) or '-':14s} {m.texels:10d} {tiles:5d} {mem:8.1f}  "
+                         f"{','.join(m.formats) or '-':14s} {m.texels:10d} {tiles:5d} {mem:8.1f} {_read(m):>11s} "
+                         f"{_rays(m):>13s}  "
                          + ", ".join(m.schemes) + (f"  [cascades: {m.cascade.label}]" if m.cascade else ""))
+        lines.append(self._cost_line())
         lines.append("  rays (exact): " + ", ".join(f"{k} {v:,}" for k, v in self.rays.items()))
         lines.append("  rays (at most): " + ", ".join(f"{k} {v:,}" for k, v in self.rays_bound.items()))
         n_fmt = sum(1 + len(m.formats) for m in self.maps)
@@ -286,6 +310,12 @@ class Plan:
                      "of a scene)")
         lines += [f"  warning: {w}" for w in self.warnings()]
         return "\n".join(lines)
+
+    def _cost_line(self) -> str:
+        """What the table's cost columns mean."""
+        return ("  read MB: the bytes a case's lookup reads (its layers at their stored width; fewest-most over the "
+                "map's cases; <= where a virtual map's pages are known only once built); rays: its build's (<= where "
+                "a layered search or a virtual map's pages decide); metrics.csv gives each case's map_bytes, map_rays, taps")
 
     def _lookups_line(self) -> str:
         """How the cases' lookups run ([timing] lookups): per case, or each map's in waves of how many."""
@@ -330,6 +360,19 @@ class Plan:
                          for m in self.maps],
                 **({"contact": dataclasses.asdict(self.contact)} if self.contact is not None else {}),
                 **({"shrink": self.shrink} if self.shrink is not None else {})}
+
+
+def _read(m: Map) -> str:
+    """A map's read MB cell: fewest-most, ``<=`` for a virtual map."""
+    lo, hi = (x / 2 ** 20 for x in m.read_bytes)
+    text = f"{hi:.3g}" if lo == hi else f"{lo:.3g}-{hi:.3g}"
+    return ("<=" if getattr(m.cascade, "virtual", False) else "") + text
+
+
+def _rays(m: Map) -> str:
+    """A map's rays cell: exact, or ``<=`` a bound."""
+    rays, exact = m.build_rays
+    return ("" if exact else "<=") + f"{rays:,}"
 
 
 def views_for(light_type: str, point_views, shape: str = "") -> tuple:
