@@ -116,7 +116,9 @@ def _rows(specs):
                     "scheme": scheme, "preset": "", "params": params, "resolution": res, "total_texels": res * res,
                     "filter": "nearest", "format": "float32", "culling": "none", "acne_rate": a, "peterpan_rate": p,
                     "error_rate": (a + p) / 2, "seam_error_rate": math.nan, "build_ms": 1.0 + i, "lookup_ms": 0.5,
-                    "sweep_key": key, "sweep_value": value})
+                    "sweep_key": key, "sweep_value": value, "n_receivers": 1000, "n_acne": round(500 * a),
+                    "n_peterpan": round(500 * p), "map_bytes": 4 * res * res, "page_table_bytes": 0,
+                    "map_rays": res * res, "taps": 1.0})
     return out
 
 

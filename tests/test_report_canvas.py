@@ -92,7 +92,7 @@ def test_the_points_of_the_pareto_and_trade_off_figures_are_every_case(tmp_path)
     assert len(drawn) == len(want)
     for ln, w in zip(drawn, want):
         assert np.array_equal(np.column_stack([ln.get_xdata(), ln.get_ydata()]), w)
-    assert fig.axes[0].legend_texts == ["a", "b", "non-dominated (all schemes)"]
+    assert fig.axes[0].legend_texts == ["a", "b", "on the frontier (error, bytes, rays)"]
     curve = (np.array([0.0, 1.0]), np.array([1.0, 0.0]))
     cases = [(0.01, 0.2), (0.5, 0.003)]
     fig = figures.draw_tradeoff(tmp_path / "t.png", "t", [("R = 1", [("f", 0, curve, curve, cases)])])

@@ -21,11 +21,10 @@ from pathlib import Path
 import numpy as np
 
 from ..truth import metrics
-from . import canvas
+from . import canvas, frontier
 from . import png
 from .labels import params_label
 from .io import atomic
-from .tables import case_time, pareto_front
 
 LINTHRESH = 1e-4          # symlog: linear below this rate
 MAX_LEGEND = 13           # entries per panel (more make more panels, the costliest artists)
@@ -514,8 +513,8 @@ POINT_MS = 4.7            # a case's point, in points (scatter's s=10 and its 1.
 
 
 def draw_pareto(path, title, panels, front):
-    """Error rate (symlog) against time (log): panels = [{scheme: [(time, error)]}], each with the
-    frontier ``front`` [(time, error)] over every case."""
+    """Error rate (symlog) against bytes read (log): panels = [{scheme: [(bytes, error)]}], each with the
+    frontier ``front`` [(bytes, error)] over every case."""
     fig, axes = _figure(len(panels), 1, width=4.2, height=3.0, legend_rows=max(len(p) for p in panels) + 1,
                         sharey=True)
     points = []
@@ -526,12 +525,12 @@ def draw_pareto(path, title, panels, front):
             _line(ax, [p[0] for p in pts], [p[1] for p in pts], ls="none", marker=st["marker"], ms=POINT_MS, mew=0,
                   color=st["color"], label=label, clip_on=False)
         _line(ax, [p[0] for p in front], [p[1] for p in front], color="k", ls="-", lw=0.8,
-              label="non-dominated (all schemes)")
+              label="on the frontier (error, bytes, rays)")
         _line(ax, [p[0] for p in front], [p[1] for p in front], ls="none", marker="o", ms=6.3, mfc="none", mec="k",
               mew=0.6, clip_on=False)
         _x_scale(ax, [], log=True)
         _rate_axis(ax)
-        ax.set_xlabel("time per case: map build + lookup (ms)", fontsize=LABEL_FONT)
+        ax.set_xlabel("bytes its lookup reads (stored width)", fontsize=LABEL_FONT)
         if ax is axes[0][0]:
             ax.set_ylabel("error rate: (acne + peter-pan) / receivers", fontsize=LABEL_FONT)
         _legend(ax)
@@ -693,15 +692,19 @@ def _resolution_job(vr: list, where: str, multi: tuple):
 
 
 def _pareto_job(vr: list, where: str):
-    """The cost of accuracy: every scored case's error rate against its time, with the frontier."""
+    """What accuracy costs: every scored case's error rate against the bytes its lookup reads, the
+    cases on the frontier (dsm.report.frontier: error, bytes and rays; time never decides) circled.
+    None for rows without costs (a run from before them)."""
     scored = [r for r in vr if metrics.defined(r["error_rate"])]
-    if not scored:
+    if not scored or not frontier.has_costs(scored):
         return None
+    nbytes = lambda r: r["map_bytes"] + r["page_table_bytes"]
     schemes = sorted({r["scheme"] for r in scored})
-    panels = [{s: (schemes.index(s), [(case_time(r), r["error_rate"], r["case"], _label(r)) for r in scored if r["scheme"] == s])
+    panels = [{s: (schemes.index(s), [(nbytes(r), r["error_rate"], r["case"], _label(r)) for r in scored if r["scheme"] == s])
                for s in part} for part in chunks(schemes, MAX_LEGEND - 1)]
-    front = [(case_time(r), r["error_rate"]) for r in pareto_front(scored)]
-    return draw_pareto, (f"{where}, {_res_text(scored)}: error rate against time, every case", panels, front)
+    marks = frontier.on_frontier(frontier.points_from_rows(scored))
+    front = sorted((nbytes(r), r["error_rate"]) for r, m in zip(scored, marks) if m)
+    return draw_pareto, (f"{where}, {_res_text(scored)}: error rate against memory, every case", panels, front)
 
 
 def _tradeoff_job(vr: list, where: str, cs: list):

@@ -332,9 +332,10 @@ PLOT_KINDS = (
     ("vs_texels_", "Views at equal memory",
      "At the same total texels the lower line is the view that spends its memory better; the second row counts "
      "only receivers near a seam between faces."),
-    ("pareto_", "Cost of accuracy: error rate against time",
-     "Every case is a point (hover to name it, click to open its images); the black line joins the cases that "
-     "no other case beats in both time and error: the schemes on it are the ones worth their cost."),
+    ("pareto_", "What accuracy costs: error rate against memory",
+     "Every case is a point at the bytes its lookup reads (hover to name it, click to open its images); the black "
+     "line joins the cases on the frontier: no other case has at most their error, bytes and rays. Time is "
+     "measured, in the case table, and never decides."),
     ("tradeoff_", "The exact trade-off of one bias, with the cases on it",
      "Lines: every acne and peter-panning pair one bias value reaches on this map (solid: a world bias, dotted: "
      "a texel bias); points: the run's nearest-filter cases (hover to name, click to open). A point above or "

@@ -178,7 +178,7 @@ def precision_md(rows: list) -> list:
 def write_table(path: Path, rows: list, name: str, source: str, status=None, oracle_rows=(), texels=(),
                 state=None, planned=None):
     """table.md: the answer first (dsm.report.summary), then failures, then every case, then the
-    views at equal memory, the oracles and the Pareto frontier. ``state`` and ``planned`` (run.json's
+    views at equal memory, the oracles and the frontier of error, bytes and rays. ``state`` and ``planned`` (run.json's
     state and the plan's case count) mark a run that stopped early."""
     failed = sum(1 for x in status or [] if x["status"] == "failed")
     lines = [f"# {name}", "", *unfinished_md(state, planned, len(rows)), f"Config: `{source}`. {len(rows)} cases" +
@@ -237,39 +237,23 @@ def case_time(r) -> float:
     return r["build_ms"] + r["lookup_ms"]
 
 
-def pareto_front(rows: list) -> list:
-    """The rows no other row beats on both error rate and time (ties kept once), fastest first."""
-    pts = sorted((r for r in rows if metrics.defined(r["error_rate"])), key=lambda r: (case_time(r), r["error_rate"]))
-    front, best = [], float("inf")
-    for r in pts:
-        if r["error_rate"] < best:
-            front.append(r)
-            best = r["error_rate"]
-    return front
-
-
-def _pareto_groups(rows):
-    groups = {}
-    for r in rows:
-        groups.setdefault((r["scene"], r["light"], r["view"]), []).append(r)
-    return sorted(groups.items())
-
-
 def pareto_md(rows: list) -> list:
-    """table.md's Pareto section: per scene, light and view, the cases none beats on both error rate and time."""
-    if not rows:
+    """table.md's frontier section: per scene and light, the cases on the frontier (dsm.report.frontier:
+    no other case has at most their error rate, bytes and rays, one lower), cheapest first, times beside."""
+    points = frontier.points_from_rows(rows)
+    if not points:
         return []
-    out = ["", "## Cost of accuracy: the Pareto frontier", "",
-           "Per scene, light and view: the cases no other case beats on both error rate and time "
-           "(map build + lookup, kernel-time medians of the timed repeats), over every scheme, resolution, filter "
-           "and format. "
-           "plots/pareto_*.png plots all cases with the frontier marked.", "",
-           "| scene | light | view | scheme | params | R | filter | format | error rate | time ms |",
-           "|---" * 10 + "|"]
-    for (scene, light, view), rs in _pareto_groups(rows):
-        for r in pareto_front(rs):
-            out.append(f"| {scene} | {light} | {view} | {r['scheme']} | {r['params']} | {r['resolution']} | "
-                       f"{r['filter']} | {r['format']} | {r['error_rate']:.4f} | {case_time(r):.2f} |")
+    out = ["", "## What accuracy costs: the frontier", "",
+           "Per scene and light: the cases no other case beats on error rate without reading more bytes or "
+           "casting more rays (frontier.csv marks every case), over every scheme, resolution, view, filter and "
+           "format; time is measured and shown (map build and lookup, kernel-time medians), never deciding. "
+           "plots/pareto_*.png plot every case's error against its bytes with the frontier marked.", "",
+           "| scene | light | instance | error rate | bytes | rays | taps | build ms | lookup ms |",
+           "|---" * 9 + "|"]
+    on = [p for p, m in zip(points, frontier.on_frontier(points)) if m]
+    for p in sorted(on, key=lambda p: (p.scene, p.light, p.bytes, p.rays, p.error, p.instance)):
+        out.append(f"| {p.scene} | {p.light} | {p.instance} | {p.error:.4f} | {frontier.size(p.bytes)} | "
+                   f"{p.rays:,} | {p.taps:.3g} | {p.build_ms:.3g} | {p.lookup_ms:.3g} |")
     return out
 
 
