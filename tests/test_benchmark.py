@@ -812,3 +812,31 @@ def test_contender_pages_of_a_results_folder_without_images_say_so_once(tmp_path
         text = p.read_text()
         assert text.count("<b>No images:</b>") == 1 and "not kept" not in text
         assert text.count("<figure class=case ") == 2
+
+
+def test_frontier_csv_and_memory_classes_from_the_records(test_run):
+    """frontier.csv beside results.json: per (scene at its unit, light), on_frontier recomputed in numpy
+    from the records at the origin (error from the counts; bytes = map_bytes + page_table_bytes; rays);
+    the leaderboard's memory classes hold contenders whose mean bytes lie in [2^k, 2^(k+1)), ranked from 1."""
+    import csv
+
+    from dsm.benchmark import costs
+    out, doc = test_run
+    recs = [r for r in doc["cases"] if r["contender"] != "oracle" and r["offset"] == "0"]
+    rows = list(csv.DictReader(open(out / "frontier.csv")))
+    assert [(r["scene"], r["instance"]) for r in rows] == [(f"{r['scene']} {r['unit']}", r["contender"]) for r in recs]
+    want = []
+    for r in recs:
+        same = [q for q in recs if (q["scene"], q["unit"], q["light"]) == (r["scene"], r["unit"], r["light"])]
+        c = np.array([[(q["n_acne"] + q["n_peterpan"]) / q["n_receivers"], q["map_bytes"] + q["page_table_bytes"],
+                       q["map_rays"]] for q in same], np.float64)
+        me = c[[q is r for q in same].index(True)]
+        want.append("0" if ((c <= me).all(1) & (c < me).any(1)).any() else "1")
+    assert [r["on_frontier"] for r in rows] == want and "1" in want
+    classes = costs.classes(doc, ranking.ranking(doc))
+    assert sum(len(rs) for _, rs in classes) == len({r["contender"] for r in recs})
+    for k, rs in classes:
+        assert rs[0]["rank"] == 1
+        for r in rs:
+            mean_bytes = np.mean([q["map_bytes"] + q["page_table_bytes"] for q in recs if q["contender"] == r["contender"]])
+            assert 2 ** k <= mean_bytes < 2 ** (k + 1)

@@ -90,6 +90,16 @@ def classes(doc: dict, ranked: list) -> list:
     return [(k, ranking.ranked_within(groups[k], by_name)) for k in sorted(groups)]
 
 
+def answer_lines(doc: dict) -> list:
+    """What accuracy costs, in words (dsm.report.frontier's, over the records at the origin); a document
+    without costs says so."""
+    if not has_costs(doc):
+        return [f"results_version {doc.get('results_version', 1)} records no costs: the ranking below is by error "
+                "alone (run this dsm's benchmark for memory classes and the frontier)"]
+    found = frontier.answers(points(doc))
+    return frontier.answer_lines(found) + frontier.time_lines(found)
+
+
 def write_frontier(doc: dict, out) -> bool:
     """frontier.csv of the records at the origin beside results.json (:mod:`dsm.report.frontier`'s
     columns); False (nothing written, an old one removed) for a document without costs."""
