@@ -265,7 +265,18 @@ def best_cell(b) -> str:
         return ""
     if not b["tied"]:
         return f"{b['label']} ({rate(b['error'])})"
-    return f"{b['tied'] + 1} tied ({rate(b['error'])}): {names(b['labels'])}"
+    return f"{b['tied'] + 1} tied ({rate(b['error'])}): {tie_words(b['labels'])}"
+
+
+def tie_words(labels: list) -> str:
+    """A tie's instances: every label up to TIE_NAMES + 1, else their families (each label's first word)
+    and how many of each, most first (the full list is the table's and the page's)."""
+    if len(labels) <= TIE_NAMES + 1:
+        return names(labels)
+    counts = {}
+    for label in labels:
+        counts[label.split()[0]] = counts.get(label.split()[0], 0) + 1
+    return ", ".join(f"{f} {n}" if n > 1 else f for f, n in sorted(counts.items(), key=lambda t: (-t[1], t[0])))
 
 
 def names(labels: list) -> str:
