@@ -349,7 +349,7 @@ def test_the_scale_figure_and_tables_hold_the_results_numbers(test_run):
     page = (out / "leaderboard.html").read_text()
     section = page[page.index("Error rate against the offset"):]
     row = re.search(r"<tr[^>]*><td>receiver_plane</td>(.*?)</tr>", section).group(1)
-    cells = [float(v) for v in re.findall(r"data-v='([^']*)'", row)]
+    cells = [float(v) for v in re.findall(r'data-v="([^"]*)"', row)]
     assert cells == data["offset"][1]["receiver_plane"]
 
 

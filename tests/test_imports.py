@@ -262,12 +262,14 @@ def test_no_folder_shadows_a_public_name():
 
 
 def test_pyproject_ships_every_data_file_of_the_package():
-    """Each TOML and JSON file under dsm/ (default.toml, the benchmark's suites and its tune) is in
-    pyproject's package-data for its package: a wheel without one fails where it is read."""
+    """Each TOML, JSON, HTML, JS and CSS file under dsm/ (default.toml, the benchmark's suites and its tune,
+    the pages' templates, scripts and style) is in pyproject's package-data for its package, by name or
+    pattern: a wheel without one fails where it is read."""
+    import fnmatch
     import tomllib
     data = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]
-    files = [p for ext in ("toml", "json") for p in (ROOT / "dsm").rglob(f"*.{ext}")]
-    assert files
+    files = [p for ext in ("toml", "json", "html", "js", "css") for p in (ROOT / "dsm").rglob(f"*.{ext}")]
+    assert {p.suffix for p in files} == {".toml", ".json", ".html", ".js", ".css"}
     for p in files:
         pkg = ".".join(p.parent.relative_to(ROOT).parts)
-        assert p.name in data.get(pkg, []), (pkg, p.name)
+        assert any(fnmatch.fnmatch(p.name, pattern) for pattern in data.get(pkg, [])), (pkg, p.name)

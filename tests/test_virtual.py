@@ -318,4 +318,4 @@ def test_report_html_has_no_virtual_section_without_a_virtual_map():
     nan = float("nan")
     assert section.html_section([{"vsm_pages_tagged": nan}, {"vsm_pages_tagged": ""}, {}]) == ""
     got = section.html_section([{"vsm_pages_tagged": 3, "case": "c"}])
-    assert "<section id=virtual>" in got and "<div class=wide><table>" in got
+    assert "<section id=virtual>" in got and '<div class="wide"><table>' in got

@@ -6,18 +6,20 @@ every cell the CSV's, numbers to 4 digits with the exact text on hover: dsm.repo
 the figures present (FIGURES: at their pixel size, a caption that says what to look for), then any
 other CSV in the folder as a link, and the run's versions and timing. A section is shown only when
 its file exists: a plain ``dsm grad`` has the self-check alone. A new CSV or figure of dsm grad is
-one line in TABLES or FIGURES; until then it is listed as a link.
+one line in TABLES or FIGURES; until then it is listed as a link. This module gathers the page's
+words, tables and figures from the folder; the markup is the template grad.html (dsm.report.templates),
+which the other pages share.
 """
 from __future__ import annotations
 
 import csv
-import html
 import time
 from pathlib import Path
 
 from ..report import csv_table
-from ..report.html import CSS, ZOOM_BOX, ZOOM_SCRIPT, png_size
+from ..report.html import png_size
 from ..report.io import atomic, read_csv
+from ..report.templates import Table, render
 from . import findings, plots
 
 PAGE = "report.html"
@@ -67,10 +69,6 @@ WORDS = (("compare.csv", findings.compare_words), ("projective.csv", findings.pr
 DRAWN = ("relative_error.png", "inverse.png")     # the figures the report draws from the CSVs
 
 
-def _e(x) -> str:
-    return html.escape(str(x), quote=True)
-
-
 def read_tables(out: Path) -> dict:
     """{file: (columns, rows)} of the known CSVs present in ``out``."""
     got = {}
@@ -99,13 +97,13 @@ def draw_figures(out: Path, tables: dict, tolerance=None) -> dict:
     return parts
 
 
-def answer_html(tables: dict) -> str:
+def answer_words(tables: dict) -> list:
     """The answer in words: a paragraph per CSV that has one."""
     words = [fn(tables[name][1]) for name, fn in WORDS if name in tables and tables[name][1]]
-    return "".join(f"<p class=answer>{_e(w)}</p>" for w in words if w)
+    return [w for w in words if w]
 
 
-def inverse_summary(rows) -> str:
+def inverse_summary(rows) -> Table:
     """The inverse task's success per technique (rows) and parameter (columns), as 'k/n'."""
     params = list(findings.by(rows, "param"))
     cells = []
@@ -113,65 +111,47 @@ def inverse_summary(rows) -> str:
         per = findings.by(rs, "param")
         cells.append({"technique": tech, **{f"{p} success": "{}/{}".format(*findings.success(per[p]))
                                              for p in params if p in per}})
-    return ("<h3>Success per technique and parameter</h3>"
-            + csv_table.table_html(["technique"] + [f"{p} success" for p in params], cells, "inverse-summary"))
+    return csv_table.table(["technique"] + [f"{p} success" for p in params], cells, "inverse-summary")
 
 
-def tables_html(tables: dict) -> str:
-    """A section per known CSV present: its note and its rows."""
+def table_sections(tables: dict) -> list:
+    """A section per known CSV present: its id, title, file, row count, note, rows (and the inverse task's
+    summary)."""
     out = []
     for name, sid, title, note in TABLES:
         if name not in tables:
             continue
         columns, rows = tables[name]
-        extra = inverse_summary(rows) + "<h3>Every start</h3>" if name == "inverse.csv" and rows else ""
-        out.append(f"<section id=\"{sid}\"><h2>{_e(title)} (<a href=\"{_e(name)}\">{_e(name)}</a>, "
-                   f"{findings.count(len(rows), 'row')})</h2><p class=note>{_e(note)} Click a header to sort "
-                   f"(undefined last); hover a number for "
-                   f"its exact value.</p>{extra}{csv_table.table_html(columns, rows, 'table-' + sid)}</section>")
-    return "".join(out)
+        out.append({"id": sid, "title": title, "file": name, "count": findings.count(len(rows), "row"), "note": note,
+                    "summary": inverse_summary(rows) if name == "inverse.csv" and rows else None,
+                    "table": csv_table.table(columns, rows, "table-" + sid)})
+    return out
 
 
-def figures_html(out: Path) -> str:
-    """The figures present, each at its pixel size with its caption."""
+def figures(out: Path) -> list:
+    """The figures present, each with its pixel size, title and what to look for."""
     figs = []
     for name, title, look in FIGURES:
-        p = out / name
-        if not p.is_file():
-            continue
-        w, h = png_size(p)
-        figs.append(f"<figure><div class=figbox><img src=\"{_e(name)}\" width={w} height={h} alt=\"{_e(title)}\">"
-                    f"</div><figcaption><b>{_e(title)}</b>. {_e(look)} <a href=\"{_e(name)}\">{_e(name)}</a>"
-                    "</figcaption></figure>")
-    if not figs:
-        return ""
-    return ("<section id=figures class=plots><h2>Figures</h2><p class=note>Each figure is shown at its own pixel "
-            "size (its smallest text reads at 9 points); click one to enlarge it.</p>" + "".join(figs)
-            + "</section>" + ZOOM_BOX)
+        if (out / name).is_file():
+            w, h = png_size(out / name)
+            figs.append({"name": name, "width": w, "height": h, "title": title, "look": look})
+    return figs
 
 
-def others_html(out: Path) -> str:
-    """Any other CSV or PNG in the folder (a file this page does not know yet), as a link."""
+def others(out: Path) -> list:
+    """Any other CSV or PNG in the folder (a file this page does not know yet)."""
     known = {name for name, *_ in TABLES} | {name for name, *_ in FIGURES}
-    other = sorted(p.name for p in out.iterdir() if p.suffix in (".csv", ".png") and p.name not in known)
-    if not other:
-        return ""
-    links = "".join(f"<li><a href=\"{_e(n)}\">{_e(n)}</a></li>" for n in other)
-    return (f"<section id=other><h2>Other files</h2><p class=note>Files in the folder this page does not show "
-            f"(a newer dsm grad's, or your own):</p><ul>{links}</ul></section>")
+    return sorted(p.name for p in out.iterdir() if p.suffix in (".csv", ".png") and p.name not in known)
 
 
-def run_html(run: dict) -> str:
+def run_facts(run: dict) -> list:
     """The run's config, options, versions and measuring time (the report's own time: grad.json)."""
     t = run.get("timing", {})
     items = [("config", run.get("config_file", "")), ("options", " ".join(run.get("options", [])) or "none"),
              ("variant", run.get("variant", ""))]
     items += list(run.get("versions", {}).items())
     items += [(f"{k.removesuffix('_s')} (s)", f"{v:.1f}") for k, v in t.items() if k.endswith("_s")]
-    rows = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in items)
-    return (f"<section id=run><h2>Run: versions and timing</h2><p class=note>The measuring's wall-clock seconds; "
-            f"the report's own (its figures and this page) are in <a href=grad.json>grad.json</a>.</p>"
-            f"<table>{rows}</table></section>")
+    return items
 
 
 def heading(run: dict) -> str:
@@ -185,14 +165,9 @@ def heading(run: dict) -> str:
 
 def page_html(out: Path, tables: dict, run: dict) -> str:
     """The whole page."""
-    title = heading(run)
     files = [n for n in ("table.md", "compare.md", "inverse.md", "grad.json") if (out / n).is_file() or n == "grad.json"]
-    meta = "Files: " + ", ".join(f"<a href=\"{_e(n)}\">{_e(n)}</a>" for n in files) + "."
-    body = (f"<h1>{_e(title)}</h1><p class=meta>{meta}</p><section id=answer>{answer_html(tables)}</section>"
-            + tables_html(tables) + figures_html(out) + others_html(out) + run_html(run))
-    return (f"<!doctype html><html lang=en><head><meta charset=utf-8><title>{_e(title)}</title>"
-            f"<meta name=viewport content=\"width=device-width\"><style>{CSS}</style></head><body>{body}"
-            f"<script>{csv_table.SORT_SCRIPT}{ZOOM_SCRIPT}</script></body></html>\n")
+    return render("grad.html", title=heading(run), files=files, answers=answer_words(tables),
+                  tables=table_sections(tables), figures=figures(out), others=others(out), facts=run_facts(run))
 
 
 def write_report(out: Path, run: dict) -> dict:

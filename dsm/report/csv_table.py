@@ -2,23 +2,17 @@
 (labels.number_text), the exact text as the CSV holds it in the cell's value (sorting) and on hover,
 and an empty cell (the kit's undefined) as the word ``undefined``, sorted last.
 
-A page that shows such tables adds report.html's style (html.CSS) and SORT_SCRIPT: a click on a
-header sorts by that column (numbers by value, text alphabetically).
+A page shows such a table with the templates' table macro (dsm.report.templates) and sort.js: a
+click on a header sorts by that column (numbers by value, text alphabetically).
 """
 from __future__ import annotations
 
-import html
 import math
 
 from . import labels
-from .html import SCRIPT
+from .templates import Cell, Row, Table
 
-SORT_SCRIPT = SCRIPT.split("const cases")[0]      # report.html's header sort, without its case viewer
 UNDEFINED = "undefined"
-
-
-def _e(x) -> str:
-    return html.escape(str(x), quote=True)
 
 
 def as_number(cell) -> float | None:
@@ -64,24 +58,21 @@ def shown(cell: str, numeric: bool) -> str:
     return labels.number_text(x) if math.isfinite(x) else cell
 
 
-def cell_html(cell: str, numeric: bool) -> str:
-    """One <td>: the shown text; its exact CSV text as data-v (what the sort reads) and, where it is
+def cell(text: str, numeric: bool) -> Cell:
+    """One cell: the shown text; its exact CSV text as data-v (what the sort reads) and, where it is
     shown otherwise, on hover."""
-    text = shown(cell, numeric)
-    title = f' title="exact: {_e(cell)}"' if cell and text != cell else ""
-    return f"<td{' class=n' if numeric else ''} data-v=\"{_e(cell)}\"{title}>{_e(text)}</td>"
+    text_shown = shown(text, numeric)
+    return Cell(text_shown, text, numeric, f"exact: {text}" if text and text_shown != text else None)
 
 
 TALL = 25                 # rows: a longer table scrolls in a box of report.html's height (.scroll)
 
 
-def table_html(columns, rows, table_id: str) -> str:
+def table(columns, rows, table_id: str) -> Table:
     """A sortable table of a CSV's ``rows`` (dicts of strings, as csv.DictReader reads them) in
     ``columns``' order, in a box that scrolls sideways where it is wider than the page (and down
     where it has more than TALL rows)."""
     num = numeric_columns(columns, rows)
-    head = "".join(f"<th data-type={'num' if c in num else 'text'}>{_e(c)}</th>" for c in columns)
-    body = "".join("<tr>" + "".join(cell_html(r.get(c) or "", c in num) for c in columns) + "</tr>" for r in rows)
-    box = "wide scroll" if len(rows) > TALL else "wide"
-    return (f"<div class=\"{box}\"><table id=\"{_e(table_id)}\" class=sortable><thead><tr>{head}</tr></thead>"
-            f"<tbody>{body}</tbody></table></div>")
+    body = [Row([cell(r.get(c) or "", c in num) for c in columns]) for r in rows]
+    return Table([(c, "num" if c in num else "text") for c in columns], body, table_id, ("sortable",),
+                 "wide scroll" if len(rows) > TALL else "wide")

@@ -2,11 +2,10 @@
 pages per level), its section of report.html and each case's level image."""
 from __future__ import annotations
 
-import html
-
 import numpy as np
 
 from .. import io as report
+from ..templates import Cell, Row, Table, render
 from ...truth import metrics
 
 COLUMNS = (("case", "case"), ("scene", "scene"), ("cascade_layout", "layout"), ("scheme", "scheme"),
@@ -49,17 +48,18 @@ def write_table(path, rows: list) -> bool:
     return True
 
 
-def html_section(rows: list) -> str:
-    """report.html's section on the run's virtual shadow maps ("" without one)."""
+def html_table(rows: list) -> dict | None:
+    """report.html's section on the run's virtual shadow maps: its words and table (None without one)."""
     rows = virtual_rows(rows)
     if not rows:
-        return ""
-    head = "".join(f"<th>{html.escape(h)}</th>" for _, h in COLUMNS)
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(_cell(r.get(k, '')))}</td>" for k, _ in COLUMNS) + "</tr>"
-                   for r in rows)
-    return (f"<section id=virtual><h2>Virtual shadow maps</h2><p>{html.escape(INTRO)} Each case's level image: "
-            "images/&lt;scene&gt;_&lt;light&gt;/&lt;case&gt;_level.png.</p>"
-            f"<div class=wide><table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table></div></section>")
+        return None
+    body = [Row([Cell(_cell(r.get(k, ""))) for k, _ in COLUMNS]) for r in rows]
+    return {"intro": INTRO, "table": Table([(h, None) for _, h in COLUMNS], body, box="wide")}
+
+
+def html_section(rows: list) -> str:
+    """report.html's section on the run's virtual shadow maps, alone ("" without one)."""
+    return render("virtual.html", virtual=html_table(rows))
 
 
 def write_level_image(path, pixels: np.ndarray, levels: np.ndarray, width: int, height: int):
