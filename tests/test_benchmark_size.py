@@ -7,8 +7,9 @@ import tomllib
 import pytest
 
 from dsm import cli
-from dsm.benchmark import command
-from dsm.benchmark.suite import LATEST, SUITE_FILES
+from dsm.benchmark import caselog, command
+from dsm.benchmark.suite import LATEST, SUITE_FILES, cases, load_suite, suite_sha256
+from dsm.core import env
 
 SIZES = ("test", "default", "full")
 
@@ -101,3 +102,18 @@ def test_a_size_given_two_ways_that_disagree_is_refused_in_one_line(argv, env, s
     assert cli.main(["benchmark", "--out", "bm", *argv]) == 2
     assert capsys.readouterr().err.strip().splitlines() == [f"dsm benchmark: {says}"]
     assert started == [] and list(tmp_path.iterdir()) == []       # before any work: not even --out
+
+
+def test_resume_at_another_size_is_refused_naming_the_size(tmp_path, capsys, monkeypatch):
+    """A run in progress at the test size: --resume at the default size (no --size) names the size, not the number
+    of cases that follows from it; nothing is run."""
+    monkeypatch.delenv(command.SIZE_ENV, raising=False)
+    out, s = tmp_path / "bm", load_suite(SUITE_FILES[LATEST])
+    header = {"suite": LATEST, "suite_sha256": suite_sha256(SUITE_FILES[LATEST]), "size": "test", "variant": None,
+              "cluster": None, "cases": len(cases(s, "test")), "versions": env.engine(env.versions())}
+    caselog.CaseLog(out, header).start(False)
+    assert cli.main(["benchmark", "--out", str(out), "--resume"]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"dsm benchmark: --out {out}: cannot resume: its run in progress has size = 'test', this run 'default'; "
+        "--force starts again"]
+    assert sorted(p.name for p in (out / "cases").iterdir()) == ["run.json"]
