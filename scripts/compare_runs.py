@@ -66,9 +66,19 @@ def run_all(out: Path):
     subprocess.run(cmd, check=False)
     # dsm benchmark at its test size: its cases as a CSV, so they compare as every run does
     bench = out / "benchmark"
-    subprocess.run([sys.executable, "-m", "dsm.cli", "benchmark", "--out", str(bench / "run")], check=False,
-                   env={**os.environ, "DSM_BENCHMARK_SIZE": "test"})
+    flags, env = _test_size()
+    subprocess.run([sys.executable, "-m", "dsm.cli", "benchmark", "--out", str(bench / "run"), *flags], check=False,
+                   env=env)
     _cases_csv(bench / "run" / "results.json", bench / "cases.csv")
+
+
+def _test_size() -> tuple:
+    """The flags and environment that run this checkout's benchmark at its test size: --size test, or the
+    DSM_BENCHMARK_SIZE that a checkout from before --size read (compare-commits runs this script in both)."""
+    helped = subprocess.run([sys.executable, "-m", "dsm.cli", "benchmark", "--help"], capture_output=True, text=True)
+    if "--size" in helped.stdout:
+        return ["--size", "test"], dict(os.environ)
+    return [], {**os.environ, "DSM_BENCHMARK_SIZE": "test"}
 
 
 def _cases_csv(results_json: Path, csv_path: Path):

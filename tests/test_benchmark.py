@@ -8,7 +8,6 @@ import pytest
 
 from dsm import cli
 from dsm.benchmark import bias_units, compare, ranking, results, suite
-from dsm.benchmark.command import SIZE_ENV
 from dsm.core.types import Length
 
 # the suites' identities: changing suite_<n>.toml changes its hash, which makes it a new version
@@ -232,9 +231,7 @@ def test_bias_conversion_to_world_and_texels():
 def test_run(tmp_path_factory):
     """dsm benchmark at the test size, once for this module: (its folder, results.json)."""
     out = tmp_path_factory.mktemp("bench")
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv(SIZE_ENV, "test")
-        assert cli.main(["benchmark", "--out", str(out)]) == 0
+    assert cli.main(["benchmark", "--out", str(out), "--size", "test"]) == 0
     return out, json.loads((out / "results.json").read_text())
 
 
@@ -246,6 +243,10 @@ def test_benchmark_end_to_end_at_test_size(test_run):
     # 2 scenes x (2 units + 2 offsets at m) x 1 light x (3 contenders + the tuned one + the oracle
     # + 2 pre-filtered kinds at their defaults + their presets: vsm three, msm mjp + 2 virtual maps)
     assert len(doc["cases"]) == 88
+    # what ran is what --help counts for the size (tests/test_benchmark_size.py counts it from the TOML)
+    ran = {(r["scene"], r["unit"], r["offset"]) for r in doc["cases"]}, {r["contender"] for r in doc["cases"]} - {"oracle"}
+    summary = suite.size_summary(suite.load_suite(), "test")
+    assert summary.startswith(f"{len(ran[0])} cases (") and f", {len(ran[1])} contenders," in summary
     recs = {(r["scene"], r["unit"], r["offset"], r["contender"]): r for r in doc["cases"]}
     for r in doc["cases"]:
         if r["contender"] != "oracle":
@@ -563,14 +564,13 @@ def test_flicker_is_frames_csv_s_recomputed(test_run):
     assert "no oracle floor" in page and "while the sun turns 2 degrees" in page and "every contender" in page
 
 
-def test_the_benchmark_on_a_local_ray_cluster_counts_as_here(test_run, tmp_path, monkeypatch):
+def test_the_benchmark_on_a_local_ray_cluster_counts_as_here(test_run, tmp_path):
     """dsm benchmark --cluster local: every case's counts those of the run here (the map groups are
     Ray tasks; the motion runs stay here), and results.json says where it ran."""
     ray = pytest.importorskip("ray", reason="Ray is not installed (pip install 'dsm[cluster]')")
     _, here = test_run
-    monkeypatch.setenv(SIZE_ENV, "test")
     try:
-        assert cli.main(["benchmark", "--out", str(tmp_path), "--cluster", "local"]) == 0
+        assert cli.main(["benchmark", "--out", str(tmp_path), "--size", "test", "--cluster", "local"]) == 0
     finally:
         ray.shutdown()
     doc = json.loads((tmp_path / "results.json").read_text())
@@ -584,11 +584,9 @@ def test_the_benchmark_on_a_local_ray_cluster_counts_as_here(test_run, tmp_path,
 
 def _suite_process(out, *flags):
     """``python -m dsm benchmark --out OUT`` at the test size, as a user starts it."""
-    import os
     import subprocess
     import sys
-    env = {**os.environ, SIZE_ENV: "test"}
-    return subprocess.Popen([sys.executable, "-m", "dsm", "benchmark", "--out", str(out), *flags], env=env,
+    return subprocess.Popen([sys.executable, "-m", "dsm", "benchmark", "--out", str(out), "--size", "test", *flags],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
@@ -660,7 +658,7 @@ def test_page_rebuilds_the_leaderboard_from_results_alone(test_run, tmp_path):
     assert (copy / "scale.png").read_bytes() == (out / "scale.png").read_bytes()
 
 
-def test_force_replaces_every_file_of_the_previous_run_and_keeps_the_user_s(tmp_path, monkeypatch):
+def test_force_replaces_every_file_of_the_previous_run_and_keeps_the_user_s(tmp_path):
     """--force after a run of another suite: its flicker runs, case files, page and figure are gone
     (none is stale beside the new results); a file the user put there stays."""
     out = tmp_path / "bm"
@@ -669,8 +667,7 @@ def test_force_replaces_every_file_of_the_previous_run_and_keeps_the_user_s(tmp_
                  "contenders/old.html"):
         (out / name).parent.mkdir(parents=True, exist_ok=True)
         (out / name).write_text("old")
-    monkeypatch.setenv(SIZE_ENV, "test")
-    assert cli.main(["benchmark", "--out", str(out), "--suite", "dsm-bench-1", "--force"]) == 0
+    assert cli.main(["benchmark", "--out", str(out), "--size", "test", "--suite", "dsm-bench-1", "--force"]) == 0
     assert not (out / "flicker").exists() and not (out / "cases").exists()
     assert not (out / "case_images" / "old_m_0").exists() and not (out / "contenders" / "old.html").exists()
     assert (out / "notes.txt").read_text() == "old"

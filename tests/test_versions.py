@@ -11,7 +11,6 @@ import pytest
 import dsm
 from dsm import cli
 from dsm.benchmark import caselog, document
-from dsm.benchmark.command import SIZE_ENV
 from dsm.benchmark.suite import LATEST, SUITE_FILES, cases, load_suite, suite_sha256
 from dsm.config import plan as planmod
 from dsm.config import read as cfgmod
@@ -86,13 +85,12 @@ def _bench_header(size: str, versions: dict) -> dict:
             "variant": None, "cluster": None, "cases": len(cases(s, size)), "versions": versions}
 
 
-def test_benchmark_resume_on_other_versions_is_refused_in_one_line(tmp_path, monkeypatch, capsys):
+def test_benchmark_resume_on_other_versions_is_refused_in_one_line(tmp_path, capsys):
     """A benchmark run in progress made with another Dr.Jit: --resume names the versions, exit 2, no case run."""
     out = tmp_path / "bm"
     here = env.engine(env.versions())
     caselog.CaseLog(out, _bench_header("test", {**here, "drjit": "1.0.0"})).start(False)
-    monkeypatch.setenv(SIZE_ENV, "test")
-    assert cli.main(["benchmark", "--out", str(out), "--resume"]) == 2
+    assert cli.main(["benchmark", "--out", str(out), "--size", "test", "--resume"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"dsm benchmark: --out {out}: cannot resume: its run in progress was measured with other versions (drjit "
                    f"1.0.0 -> {dr.__version__}); results differ bit for bit between versions; --force starts again"]

@@ -51,7 +51,8 @@ class CaseLog:
             held = json.loads((self.folder / "run.json").read_text())
         except (OSError, ValueError):
             return {}
-        differs = [k for k in sorted(self.header) if held.get(k) != self.header[k]]
+        # in the header's order: suite, hash and size before the number of cases that follows from them
+        differs = [k for k in self.header if held.get(k) != self.header[k]]
         if "versions" in differs:        # the one to name first: every other key may agree
             change = env.engine_change(held.get("versions"), self.header["versions"])
             raise Mismatch(f"its run in progress was measured with other versions ({change}); results differ bit "

@@ -7,17 +7,27 @@ kept: ``--resume`` goes on).
 """
 from __future__ import annotations
 
+import argparse
 import os
 import shutil
 import sys
+import textwrap
 from pathlib import Path
 
 from ..config.read import VARIANTS
 from ..experiment import lock
 from . import case_images, caselog, compare, contenders, costs, document, page, results
-from .suite import LATEST, SUITE_FILES
+from .suite import LATEST, SIZES, SUITE_FILES, load_suite, size_summary
 
-SIZE_ENV = "DSM_BENCHMARK_SIZE"     # a hidden size for tests: DSM_BENCHMARK_SIZE=test
+SIZE_ENV = "DSM_BENCHMARK_SIZE"     # deprecated (the tests' hidden size before --size): an alias that says so
+# Wall seconds of a whole run at each size on 2 cores (llvm_ad_rgb, AMD EPYC), by suite version, as (quiet,
+# with other jobs beside): the one place --help reads them from. dsm-bench-5:
+# - test: quiet 40 s is docs/design.md's for dsm-bench-4's test size (c7ccbee; dsm-bench-5's adds the 2 virtual
+#   maps); 69 s (28 CPU s) at a688b50 with load 5 to 6.
+# - default: quiet 190 s (224 CPU s) at 31ed51c, docs/bench/benchmark-default/README.md (load 1 to 3); 1355 s
+#   (788 CPU s) at a688b50 with load 2 to 7.
+# - full: not measured on 2 cores (its 2048^2 maps and 256^2 camera are meant for a GPU or a cluster).
+MEASURED_WALL_S = {"dsm-bench-5": {"test": (40.0, 69.0), "default": (190.0, 1355.0)}}
 # what a run writes into --out: --force removes these (and nothing else a user keeps there)
 WRITTEN = ("results.json", "leaderboard.html", "frontier.csv", "scale.png", "flicker", caselog.FOLDER, case_images.FOLDER,
            contenders.FOLDER)
@@ -26,9 +36,12 @@ WRITTEN = ("results.json", "leaderboard.html", "frontier.csv", "scale.png", "fli
 def add_parser(sub):
     """Add the ``benchmark`` subcommand to an argparse subparsers object."""
     b = sub.add_parser("benchmark", help=f"run the frozen shadow-bias suite ({LATEST}): results.json and a "
-                       "leaderboard page; or compare two results")
+                       "leaderboard page; or compare two results", epilog=sizes_text(),
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
     b.add_argument("--out", default="benchmark", help="folder for results.json and leaderboard.html (default: benchmark/)")
-    b.add_argument("--full", action="store_true", help="the full size (larger resolutions: a GPU or a cluster)")
+    b.add_argument("--size", choices=SIZES, help="the suite's cases and resolutions (default: default; each size's "
+                   "cases and time below)")
+    b.add_argument("--full", action="store_true", help="an alias for --size full (kept for old scripts; says so)")
     b.add_argument("--compare", nargs=2, metavar=("A.json", "B.json"), help="compare two results.json files")
     b.add_argument("--page", metavar="DIR", help="rebuild leaderboard.html, scale.png and the contender pages in DIR "
                    "from its results.json")
@@ -44,6 +57,57 @@ def add_parser(sub):
     return b
 
 
+def sizes_text(version: str = LATEST) -> str:
+    """The --help lines on the sizes: each one's cases (counted from the suite's definition) and wall time."""
+    suite = load_suite(SUITE_FILES[version])
+    lines = [f"sizes of {version} (--size), with the wall time of a run on 2 cores:"]
+    return "\n".join(lines + [textwrap.fill(f"{size_summary(suite, size)}; {wall_words(version, size)}", 96,
+                                            initial_indent=f"  {size:<8}", subsequent_indent=" " * 10)
+                              for size in SIZES])
+
+
+def wall_words(version: str, size: str) -> str:
+    """A size's wall time on 2 cores in words, quiet and loaded, as measured (MEASURED_WALL_S), or that it was not."""
+    walls_s = MEASURED_WALL_S.get(version, {}).get(size)
+    if walls_s is None:
+        return "not measured on 2 cores" + (" (meant for a GPU or a cluster)" if size == "full" else "")
+    quiet_s, loaded_s = walls_s
+    return f"about {_duration(quiet_s)} quiet, {_duration(loaded_s)} with other jobs beside"
+
+
+def _duration(wall_s: float) -> str:
+    """Seconds in words: seconds under two minutes, else minutes."""
+    return f"{wall_s:.0f} s" if wall_s < 120 else f"{wall_s / 60:.0f} minutes"
+
+
+def size_spellings(args, environ=os.environ) -> list:
+    """Each way the run's size was given, as (spelling, size): --size, --full, the deprecated DSM_BENCHMARK_SIZE."""
+    given = [(f"--size {args.size}", args.size)] if args.size is not None else []
+    if args.full:
+        given.append(("--full", "full"))
+    if environ.get(SIZE_ENV):
+        given.append((f"{SIZE_ENV}={environ[SIZE_ENV]}", environ[SIZE_ENV]))
+    return given
+
+
+def size_problem(given: list) -> str | None:
+    """Why the run's size cannot be told from its spellings ``given`` (one line), None when it can."""
+    for spelling, size in given:
+        if size not in SIZES:
+            return f"{spelling}: not a size (one of {', '.join(SIZES)}); give --size"
+    for spelling, size in given[1:]:
+        if size != given[0][1]:
+            return f"{given[0][0]} and {spelling} disagree: give one --size"
+    return None
+
+
+def alias_lines(given: list) -> list:
+    """One line for each old spelling of the size among ``given``, saying what it is an alias of."""
+    lines = {"--full": "--full is an alias for --size full (kept for old scripts): give --size full"}
+    return [lines.get(spelling, f"{SIZE_ENV} is deprecated, an alias for --size {size}: give --size {size}")
+            for spelling, size in given if not spelling.startswith("--size")]
+
+
 def _err(msg: str) -> int:
     print(f"dsm benchmark: {msg}", file=sys.stderr)
     return 2
@@ -55,7 +119,8 @@ def flag_problem(args) -> str | None:
         return "--out is empty: give a folder"
     if args.cluster is not None and not args.cluster.strip():
         return "--cluster is empty: give local, auto or a Ray address host:port"
-    run_flags = [f for f, on in (("--full", args.full), ("--suite", args.suite is not None),
+    run_flags = [f for f, on in (("--size", args.size is not None), ("--full", args.full),
+                                 ("--suite", args.suite is not None),
                                  ("--cluster", args.cluster is not None), ("--variant", args.variant is not None),
                                  ("--resume", args.resume)) if on]
     for mode, on in (("--compare", args.compare), ("--page", args.page)):
@@ -67,7 +132,7 @@ def flag_problem(args) -> str | None:
         return "--page rewrites only the page: --force does not apply to it"
     if args.resume and args.force:
         return "--resume goes on with a run and --force replaces it: give one"
-    return None
+    return None if args.compare or args.page else size_problem(size_spellings(args))
 
 
 def main(args) -> int:
@@ -82,9 +147,17 @@ def main(args) -> int:
         return _err(f"--out {out}: is a file, not a folder; choose another --out")
     if args.compare:
         return _held(out, lambda: _compare(args, out))
+    return _start(args, out)
+
+
+def _start(args, out: Path) -> int:
+    """A run into ``out``, once the folder, the variant and the cluster can serve it (else one line and its status)."""
     problem = folder_problem(out, args.force, args.resume)
     if problem:
         return _err(problem)
+    given = size_spellings(args)
+    for line in alias_lines(given):
+        print(f"dsm benchmark: {line}", file=sys.stderr)
     if args.variant:                 # a variant this machine cannot run: one line before any work
         from ..core import env
         try:
@@ -96,7 +169,7 @@ def main(args) -> int:
         problem = _connect(args.cluster)
         if problem is not None:
             return problem
-    return _held(out, lambda: _run(args, out))
+    return _held(out, lambda: _run(args, out, given[0][1] if given else "default"))
 
 
 def _connect(address: str) -> int | None:
@@ -170,8 +243,7 @@ def _page(folder: Path) -> int:
     return 0
 
 
-def _run(args, out: Path) -> int:
-    size = "full" if args.full else os.environ.get(SIZE_ENV, "default")
+def _run(args, out: Path, size: str) -> int:
     if args.force:
         _clear(out)
     try:

@@ -216,3 +216,26 @@ def cases(suite: dict, size: str) -> list:
                             motion_config(suite, pre) if pre_flicker else None,
                             virtual_config(suite, cfg, scene, s["lights"])))
     return out
+
+
+def contender_count(case: Case) -> int:
+    """How many contenders a case's configs run (the oracle aside): its [[scheme]] tables, each pre-filtered kind
+    at its defaults and engine presets under each blur, and the virtual maps' presets."""
+    n = len(case.config["scheme"])
+    if case.prefiltered is not None:
+        mp = case.prefiltered["map"]
+        n += sum(len(mp.get(k, {}).get("preset", ["default"])) for k in mp["kind"]) * len(mp["blur"])
+    if case.virtual is not None:
+        n += len(case.virtual["map"]["virtual"]["preset"])
+    return n
+
+
+def size_summary(suite: dict, size: str) -> str:
+    """One line on the suite at ``size``, counted from its cases: cases (scenes x units + far offsets), lights,
+    contenders (the most a case runs), camera and map resolutions."""
+    s, runs = size_of(suite, size), cases(suite, size)
+    far = [o for o in s["offsets"] if o != ORIGIN]
+    axes_words = f"{len(s['units'])} units" + (f" + {len(far)} far offsets" if far else "")
+    lights = f"{len(s['lights'])} light{'s' if len(s['lights']) > 1 else ''} ({', '.join(s['lights'])})"
+    return (f"{len(runs)} cases ({len(s['scenes'])} scenes x ({axes_words})), {lights}, "
+            f"{max(map(contender_count, runs))} contenders, camera {s['camera']}^2, map {s['map']}^2")

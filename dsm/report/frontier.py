@@ -211,19 +211,25 @@ def families(tied: list, chosen: Choice) -> str:
     return ", ".join(f"{f} {n}" for f, n in sorted(counts.items(), key=lambda t: (-t[1], t[0])))
 
 
+def answer_words(a: dict) -> tuple:
+    """(what to use, why: the ties, what a lower error costs) of one light type's answer, in words (counts only)."""
+    c, n_tied = a["chosen"], len(a["tied"]) - 1
+    head = f"{a['light_type']} ({a['situations']} situations): {c.instance}: error {_rate(c.error)}, {_cost(c)}"
+    if n_tied == 0:
+        why = "the lowest error, told apart from every other instance"
+    else:
+        what = "the lowest error" if c is a["best"] else "the cheapest the data cannot tell from the lowest"
+        why = f"{what}; {n_tied} more tie: {families(a['tied'], c)}"
+    return head, why, costs_more(c, a["best"], a["half"])
+
+
 def answer_lines(found: list) -> list:
     """The answer in words, two lines per light type: what to use (counts only, so identical runs say
     the same) and what a lower error costs; :func:`time_lines` gives the measured times beside."""
     out = []
     for a in found:
-        c, n_tied = a["chosen"], len(a["tied"]) - 1
-        head = f"{a['light_type']} ({a['situations']} situations): {c.instance}: error {_rate(c.error)}, {_cost(c)}"
-        if n_tied == 0:
-            out.append(head + " (the lowest error, told apart from every other instance)")
-        else:
-            what = "the lowest error" if c is a["best"] else "the cheapest the data cannot tell from the lowest"
-            out.append(head + f" ({what}; {n_tied} more tie: {families(a['tied'], c)})")
-        out.append("  " + costs_more(c, a["best"], a["half"]))
+        head, why, more = answer_words(a)
+        out += [f"{head} ({why})", "  " + more]
     return out
 
 
@@ -250,7 +256,7 @@ def time_lines(found: list) -> list:
     out = []
     for a in found:
         named = [x for x in (a["chosen"], a["best"], a["half"]) if x is not None]
-        out.append(f"{a['light_type']}: measured " + "; ".join(
+        out.append(f"{a['light_type']}: " + "; ".join(
             f"{x.instance}: build {x.build_ms:.3g} ms, lookup {x.lookup_ms:.3g} ms"
             for x in dict.fromkeys(named)))
     return out
@@ -274,5 +280,5 @@ def summary_md(points: list) -> list:
     n_on = sum(1 for m in marks if m)
     found = answers(points)
     lines = [f"- {x.strip()}" if not x.startswith(" ") else f"  - {x.strip()}" for x in answer_lines(found)]
-    return ["## What accuracy costs", "", *lines, "", *[f"- {x}" for x in time_lines(found)], "",
+    return ["## What accuracy costs", "", *lines, "", "Measured times:", "", *[f"- {x}" for x in time_lines(found)], "",
             DEFINITION + f" {n_on} of {len(points)} points are on their frontier.", ""]

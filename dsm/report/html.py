@@ -1,7 +1,9 @@
 """report.html: one self-contained page per run that opens from the file system (no server, no
 network, no external script; images referenced relatively, inside the run's folder).
 
-First screen: the best scheme per scene, light and resolution, then the per-instance summary
+First screen: what accuracy costs per light type (dsm.report.frontier: the cheapest instance the data
+cannot tell from the lowest error, its ties one click away, what a lower error costs), then the best
+scheme per scene, light and resolution, then the per-instance summary
 (dsm.report.summary); then a sortable, filterable case table (click a header to sort, a row to see its
 error and shadow images), the plots, failures, and the run's versions and timing.
 
@@ -15,7 +17,7 @@ import struct
 from pathlib import Path
 
 from ..truth import metrics
-from . import io as report, labels, summary
+from . import frontier, io as report, labels, summary
 from .figures import CLASSES_GIF_COMMENT, display_paths, frames_path, image_paths, points_file, slug
 from .sections import virtual as virtual_report
 from .templates import Cell, Row, Table, render
@@ -69,6 +71,29 @@ def _best(rows) -> dict:
     body = [Row([_cell(s), _cell(li)] + [_params_cell(summary.best_cell(cells.get(r))) for r in resolutions])
             for s, li, cells in pivot]
     return {"note": summary.BEST_DEFINITION, "table": Table(columns, body)}
+
+
+def costs_view(points: list, empty: str) -> dict:
+    """The first screen's answer (dsm.report.frontier): per light type its words, what a lower error
+    costs and its ties as a table one click away; the measured times; ``empty`` where there are no points."""
+    if not points:
+        return {"answers": [], "times": [], "note": "", "empty": empty}
+    found = frontier.answers(points)
+    answers = []
+    for a in found:
+        head, why, more = frontier.answer_words(a)
+        answers.append({"line": head, "why": why, "more": more, "tied": len(a["tied"]) - 1, "table": _tied_table(a)})
+    return {"answers": answers, "times": frontier.time_lines(found), "note": frontier.DEFINITION, "empty": None}
+
+
+def _tied_table(a: dict) -> Table:
+    """The instances one light type's answer ties, cheapest first, with their mean error and costs."""
+    columns = [("instance", "text"), ("error rate", "num"), ("bytes", "num"), ("rays", "num"), ("taps", "num"),
+               ("build ms", "num"), ("lookup ms", "num")]
+    body = [Row([_cell(c.instance), _num_cell(c.error), Cell(frontier.size(c.bytes), c.bytes, num=True),
+                 Cell(f"{c.rays:,.0f}", c.rays, num=True), _num_cell(c.taps), _num_cell(c.build_ms),
+                 _num_cell(c.lookup_ms)], cls="win" if c is a["chosen"] else None) for c in a["tied"]]
+    return Table(columns, body, None, ("sortable",), "wide")
 
 
 def _summary(rows) -> dict:
@@ -222,11 +247,16 @@ def _counts(rows, run) -> str:
             f"{run.get('n_failed', 0)} failed, {run.get('n_empty', 0)} empty; state: {run.get('state', '?')}")
 
 
+NO_COSTS = ("This run's rows carry no costs (a run from before dsm 0.6, or no case): no frontier. "
+            "dsm run again for the answer by what accuracy costs.")
+
+
 def write_html(path: Path, rows: list, run: dict):
     """report.html in ``path``'s folder (the run's), from its typed rows and run.json."""
     path = Path(path)
     out = path.parent
     page = render("report.html", title=f"dsm: {run.get('experiment', out.name)}", counts=_counts(rows, run),
+                  costs=costs_view(frontier.points_from_rows(rows), NO_COSTS),
                   answer=labels.params_label(summary.answer(rows)) if rows else None,
                   best=_best(rows) if rows else None, summary=_summary(rows) if rows else None,
                   failed=_failed(run), cases=_cases(rows, out) if rows else None,

@@ -69,6 +69,7 @@ def environment() -> jinja2.Environment:
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(HERE), autoescape=jinja2.select_autoescape(["html"]),
                              undefined=jinja2.StrictUndefined, trim_blocks=True, lstrip_blocks=True)
     env.globals.update(inline=inline, CLASSES=class_colours())
+    env.filters["capitalize_first"] = lambda text: text[:1].upper() + text[1:]    # the rest as written (labels)
     return env
 
 
