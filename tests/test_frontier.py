@@ -162,3 +162,32 @@ def test_an_undefined_error_is_on_no_frontier_and_a_tie_is_on_it_twice():
     from dsm.report import frontier
     pts = [_point("s", "a at 64", float("nan"), 10), _point("s", "b at 64", 0.1, 10), _point("s", "c at 64", 0.1, 10)]
     assert frontier.on_frontier(pts) == [None, True, True]
+
+
+def test_the_leaderboard_ranks_inside_memory_classes_and_says_the_console_s_words(tmp_path):
+    """A made-up version 4 document: 'big' errs least at 30x the bytes of 'small' (a tie the cases cannot
+    break); the page's first answer is the console's line, the ranking groups big and small apart (each
+    first in its class), and the class headline names both."""
+    import html as html_mod
+
+    from dsm.benchmark import costs, page, ranking
+    big, small = [0.010, 0.011, 0.009, 0.010, 0.0095], [0.012, 0.009, 0.011, 0.0105, 0.0093]
+    cases = []
+    for i, (b, s) in enumerate(zip(big, small)):
+        for name, err, n_bytes in (("big", b, 30 * MIB), ("small", s, MIB)):
+            cases.append({"scene": f"s{i}", "unit": "m", "offset": "0", "light": "directional", "contender": name,
+                          "n_receivers": 10000, "n_acne": round(err * 10000), "n_peterpan": 0, "acne_rate": err,
+                          "peterpan_rate": 0.0, "error_rate": round(err * 10000) / 10000, "texel_size": 0.01,
+                          "build_ms": 1.0, "lookup_ms": 1.0, "map_bytes": n_bytes, "page_table_bytes": 0,
+                          "map_rays": 1000, "taps": 1.0})
+    doc = {"results_version": 4, "suite": "dsm-bench-5", "suite_sha256": "0" * 64, "size": "test", "dsm_version": "0",
+           "variant": "x", "versions": {"dsm_git_commit": "c", "dsm": "0", "mitsuba": "3", "drjit": "1"},
+           "machine": {"cpu": "cpu", "cores": 1}, "cases": cases}
+    text = html_mod.unescape(page.write_page(doc, tmp_path).read_text())
+    head = costs.answer_lines(doc)[0]
+    assert head.startswith("directional (5 situations): small: error 0.01")
+    assert head.split(" (the cheapest")[0] in text
+    classes = costs.classes(doc, ranking.ranking(doc))
+    assert [(k, [r["contender"] for r in rs], [r["rank"] for r in rs]) for k, rs in classes] == [
+        (20, ["small"], [1]), (24, ["big"], [1])]
+    assert "1 MiB to 2 MiB: small" in text and "16 MiB to 32 MiB: big" in text

@@ -10,9 +10,10 @@ from pathlib import Path
 
 from .. import prefilter
 from ..report import labels
+from ..report.html import costs_view
 from ..report.templates import Cell, Row, Table, render
 from ..schemes.presets import PRESETS
-from . import bias_units, contenders, figure, ranking
+from . import bias_units, contenders, costs, figure, ranking
 
 
 def flicker_note(doc: dict) -> str:
@@ -69,22 +70,65 @@ def table(head: list, rows: list, attrs=None, table_id=None, links=None, ids=Non
 
 
 def answers(doc: dict, ranked: list) -> list:
-    """The page's opening, as (words, hover or None): the ranking's top, the most scale-robust preset, the
-    far-from-origin, pre-filtered and tuned lines where the document has them, the oracle's floor."""
-    floor = ranking.oracle_floor(doc)
-    top = ", ".join(f"{r['rank']}. {r['contender']} ({r['error']:.4f})" for r in ranked[:5])
-    robust = ranking.most_scale_robust(ranked, among=set(PRESETS))
-    if robust is None:
-        robust_text = "Most scale-robust preset: none (no preset ran at more than one unit)."
-    else:
-        robust_text = (f"Most scale-robust preset: {robust['contender']} (mean spread of its error across cm, m and "
-                       f"km: {robust['spread']:.4f}; its mean error rate {robust['error']:.4f}: a preset that fails "
-                       "alike at every unit is robust by this measure, not good).")
-    lines = [f"Ranking (mean error rate over every scene, unit and light, at the origin): {top}.", robust_text,
-             far_answer(ranked), prefiltered_answer(ranked), tuned_answer(doc, ranked),
-             f"Oracle floor: per-texel {floor['per_texel_objective']:.2g}, best single world bias "
-             f"{floor['world_objective']:.4f}, best single texel bias {floor['texel_objective']:.4f}."]
+    """The page's opening, as (words, hover or None): with costs (results version 4) the best of each memory
+    class and the other headlines among the contenders on the frontier; else the ranking's top by error
+    alone; the most scale-robust preset, the far-from-origin, pre-filtered and tuned lines where the
+    document has them, the oracle's floor and why it may sit above a contender."""
+    front = costs.on_frontier(ranked, costs.contender_costs(doc)) if costs.has_costs(doc) else None
+    pool = ranked if front is None else [r for r in ranked if r["contender"] in front]
+    presets_on = [r for r in pool if r["contender"] in PRESETS]
+    robust = ([robust_answer(pool, front is not None), far_answer(pool)] if front is None or presets_on
+              else [no_preset_answer(pool)])
+    lines = [class_answer(doc, ranked) if front is not None else top_answer(ranked), *robust,
+             prefiltered_answer(ranked, front), tuned_answer(doc, ranked, front), floor_answer(doc)]
     return [line if isinstance(line, tuple) else (line, None) for line in lines if line is not None]
+
+
+def top_answer(ranked: list) -> str:
+    """The ranking's top five by error alone (a document without costs)."""
+    top = ", ".join(f"{r['rank']}. {r['contender']} ({r['error']:.4f})" for r in ranked[:5])
+    return f"Ranking (mean error rate over every scene, unit and light, at the origin): {top}."
+
+
+def class_answer(doc: dict, ranked: list) -> str:
+    """At equal cost: the first of each memory class (a tie at its head said as one), cheapest class first."""
+    parts = []
+    for k, rows in costs.classes(doc, ranked):
+        first = [r["contender"] for r in rows if r["rank"] == 1]
+        who = first[0] if len(first) == 1 else f"{len(first)} tied ({', '.join(first)})"
+        parts.append(f"{costs.class_label(k)}: {who} ({rows[0]['error']:.4f})")
+    return "Best in each memory class (a class is a factor of 2 of the bytes a lookup reads): " + "; ".join(parts) + "."
+
+
+def robust_answer(pool: list, on_frontier: bool) -> str:
+    """The most scale-robust preset, among the contenders on the frontier where the document has costs."""
+    robust = ranking.most_scale_robust(pool, among=set(PRESETS))
+    where = " on the frontier" if on_frontier else ""
+    if robust is None:
+        return (f"Most scale-robust preset{where}: none (no such preset ran at more than one unit). Scale "
+                "robustness is the spread of a preset's error across cm, m and km: a preset that fails alike at "
+                "every unit spreads little.")
+    return (f"Most scale-robust preset{where}: {robust['contender']} (mean spread of its error across cm, m and "
+            f"km: {robust['spread']:.4f}; its mean error rate {robust['error']:.4f}: a preset that fails alike at "
+            "every unit is robust by this measure, not good).")
+
+
+def no_preset_answer(pool: list) -> str:
+    """Where no engine preset is on the frontier: so, and where the presets' robustness is read instead."""
+    names = ", ".join(r["contender"] for r in pool)
+    return (f"No engine preset is on the frontier (on it: {names}): every preset errs more than a contender of no "
+            "more memory and rays. Their robustness to scale and to distance from the origin is in the ranking's "
+            "scale spread and far change columns.")
+
+
+def floor_answer(doc: dict) -> str:
+    """The oracles' floor and what it bounds: a single depth bias on the suite's depth map, nearest lookup."""
+    floor = ranking.oracle_floor(doc)
+    return (f"Oracle floor: per-texel {floor['per_texel_objective']:.2g}, best single world bias "
+            f"{floor['world_objective']:.4f}, best single texel bias {floor['texel_objective']:.4f}: the best any "
+            "depth bias can do on the suite's depth map at its resolution with the nearest lookup. A contender that "
+            "changes the map (a virtual map's finer pages, a pre-filtered map's moments, a normal offset that moves "
+            "the lookup, a filter) is not bound by it and may sit below it.")
 
 
 def far_answer(ranked: list) -> str | None:
@@ -99,8 +143,14 @@ def far_answer(ranked: list) -> str | None:
             "a preset that fails alike everywhere moves little: robust by this measure, not good).")
 
 
-def prefiltered_answer(ranked: list) -> str | None:
-    """The opening's line on the pre-filtered maps: the best of them, its rank and leak rate."""
+def frontier_words(name: str, front) -> str:
+    """'; on the frontier' or '; not on the frontier' (nothing for a document without costs)."""
+    return "" if front is None else ("; on the frontier" if name in front else "; not on the frontier")
+
+
+def prefiltered_answer(ranked: list, front=None) -> str | None:
+    """The opening's line on the pre-filtered maps: the best of them, its rank, leak rate and whether it is
+    on the frontier (``front``: the contenders on it, None without costs)."""
     pool = [r for r in ranked if r.get("leak") is not None]
     if not pool:
         return None
@@ -108,10 +158,10 @@ def prefiltered_answer(ranked: list) -> str | None:
     words = best["contender"].split()          # kind, [an engine's preset,] filter
     what = f"{words[1]}'s preset of {words[0]}" if len(words) == 3 else "at the kind's defaults"
     return (f"Best pre-filtered map: {best['contender']} (rank {best['rank']}, error rate {best['error']:.4f}, "
-            f"leak rate {best['leak']:.4f}, {what}).")
+            f"leak rate {best['leak']:.4f}, {what}{frontier_words(best['contender'], front)}).")
 
 
-def tuned_answer(doc: dict, ranked: list) -> tuple | None:
+def tuned_answer(doc: dict, ranked: list, front=None) -> tuple | None:
     """The opening's line on the best tuned scheme: its frozen values, rank and error; its exact values on hover."""
     pool = [r for r in ranked if r["contender"] in doc.get("tuned", {})]
     if not pool:
@@ -120,7 +170,7 @@ def tuned_answer(doc: dict, ranked: list) -> tuple | None:
     t = doc["tuned"][best["contender"]]
     values = ", ".join(labels.params_label(f"{k}={v}").replace("=", " = ", 1) for k, v in t.items() if k != "name")
     text = (f"Best tuned scheme: {best['contender']} ({t['name']} with {values}; rank {best['rank']}, error rate "
-            f"{best['error']:.4f}), tuned once on the suite's training views (its built-in scenes at metres under its "
+            f"{best['error']:.4f}{frontier_words(best['contender'], front)}), tuned once on the suite's training views (its built-in scenes at metres under its "
             "three lights, from two cameras that are not the suite's) and frozen into the suite.")
     return text, "exact: " + ", ".join(f"{k} = {v}" for k, v in t.items() if k != "name")
 
@@ -193,15 +243,27 @@ def biases(doc: dict) -> dict:
 
 def ranking_table(doc: dict, ranked: list) -> Table:
     """The ranking: a row per contender, its name linking its page; the far change where the suite moves scenes
-    (the error at each offset is the offset table's)."""
+    (the error at each offset is the offset table's). With costs (results version 4): grouped into memory
+    classes, cheapest first, each ranked inside by the ranking's rule, with bytes, rays, taps and the frontier."""
     far = list(ranked[0]["far"])[1:] if ranked else []
-    head = ["rank", "contender", "family", "error rate", "acne rate", "peter-pan rate", "scale spread", "FLIP",
-            "leak rate", "flicker"] + (["far change"] if far else []) + ["build ms", "lookup ms"]
-    rows = [[r["rank"], r["contender"], family(doc, r["contender"]), r["error"], r["acne"], r["peterpan"], r["spread"],
-             r["flip"], r.get("leak"), r.get("flicker")] + ([r["far_change"]] if far else [])
-            + [r["build_ms"], r["lookup_ms"]] for r in ranked]
+    tail = ["scale spread", "FLIP", "leak rate", "flicker"] + (["far change"] if far else []) + ["build ms", "lookup ms"]
+    values = lambda r: ([r["spread"], r["flip"], r.get("leak"), r.get("flicker")] + ([r["far_change"]] if far else [])
+                        + [r["build_ms"], r["lookup_ms"]])
+    if not costs.has_costs(doc):
+        head = ["rank", "contender", "family", "error rate", "acne rate", "peter-pan rate"] + tail
+        rows = [[r["rank"], r["contender"], family(doc, r["contender"]), r["error"], r["acne"], r["peterpan"]]
+                + values(r) for r in ranked]
+        at = 1
+    else:
+        ranked = [dict(r, memory=costs.class_label(k)) for k, rs in costs.classes(doc, ranked) for r in rs]
+        head = ["memory class", "rank in class", "contender", "family", "frontier", "error rate", "acne rate",
+                "peter-pan rate", "MiB read", "rays", "taps"] + tail
+        rows = [[r["memory"], r["rank"], r["contender"], family(doc, r["contender"]),
+                 "yes" if r["on_frontier"] else "no", r["error"], r["acne"], r["peterpan"], r["bytes"] / 2 ** 20, r["rays"],
+                 r["taps"]] + values(r) for r in ranked]
+        at = 2
     return table(head, rows, attrs=filtered(doc, [r["contender"] for r in ranked]), table_id="ranking",
-                 links=[{1: contenders.page_path(r["contender"])} for r in ranked])
+                 links=[{at: contenders.page_path(r["contender"])} for r in ranked])
 
 
 def meta(doc: dict) -> str:
@@ -217,7 +279,11 @@ def context(doc: dict) -> dict:
     flip = (f" FLIP: the mean FLIP error (flip-evaluator, LDR, {doc['flip_ppd']:g} pixels per degree) of the "
             "shaded render under the contender's visibility against the same render under the exact one."
             if doc.get("flip_ppd") else "")
+    no_costs = (f"This results.json (results_version {doc.get('results_version', 1)}) records no costs: the ranking "
+                "below is by error alone. A benchmark of this dsm records each case's bytes, rays and taps.")
     return {"title": doc["suite"], "meta": meta(doc), "answers": answers(doc, ranked), "rule": ranking.RULE_TEXT,
+            "costs": costs_view(costs.points(doc) if costs.has_costs(doc) else [], no_costs),
+            "classed": costs.has_costs(doc),
             "flip": flip, "flicker": flicker_note(doc), "filters": filters(doc), "ranking": ranking_table(doc, ranked),
             "grid": grid(doc), "scale": scale(doc), "cases": cases(doc), "bias": biases(doc)}
 

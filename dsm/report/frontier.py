@@ -15,8 +15,9 @@ choices on the cost side, part of the instance.
   them, the lowest mean error rate; the instances the paired bootstrap (:mod:`dsm.truth.paired`,
   the benchmark's rule) cannot tell from it; the cheapest of those (bytes, then rays, then taps,
   then label), named with its error, bytes, rays and times; the families of the others that tie;
-  and what halving its error costs: the cheapest instance whose mean error is at most half of it,
-  with its bytes as a multiple.
+  what a lower error costs: the lowest error's and the cheapest at half its error or less, with
+  their bytes as a multiple; and what half its memory or less gives: the lowest error among the
+  instances that cheap.
 
 :func:`answer_lines` gives the words that the report's first screen, ``dsm run``'s last lines and
 the leaderboard's headline all print.
@@ -178,8 +179,11 @@ def answer(points: list) -> dict | None:
     chosen = min(tied, key=lambda c: c.cost_key)
     better = [c for c in cands if c.error <= chosen.error / 2] if chosen.error > 0 else []
     half = min(better, key=lambda c: c.cost_key) if better else None
+    thrifty = [c for c in cands if c.bytes <= chosen.bytes / 2]
+    saving = min(thrifty, key=lambda c: (c.error, *c.cost_key)) if thrifty else None
     return {"light_type": points[0].light_type, "situations": len(situations), "instances": len(cands),
-            "best": best, "chosen": chosen, "tied": sorted(tied, key=lambda c: c.cost_key), "half": half}
+            "best": best, "chosen": chosen, "tied": sorted(tied, key=lambda c: c.cost_key), "half": half,
+            "saving": saving}
 
 
 def answers(points: list) -> list:
@@ -220,7 +224,7 @@ def answer_words(a: dict) -> tuple:
     else:
         what = "the lowest error" if c is a["best"] else "the cheapest the data cannot tell from the lowest"
         why = f"{what}; {n_tied} more tie: {families(a['tied'], c)}"
-    return head, why, costs_more(c, a["best"], a["half"])
+    return head, why, costs_more(c, a["best"], a["half"]) + saves(c, a["saving"])
 
 
 def answer_lines(found: list) -> list:
@@ -251,11 +255,20 @@ def costs_more(c: Choice, best: Choice, half: Choice | None) -> str:
     return lowest + f"for {_rate(half.error)} you pay {_pay(c, half)}"
 
 
+def saves(c: Choice, saving: Choice | None) -> str:
+    """What half the memory or less gives: the lowest error among the instances that cheap ('' where none ran)."""
+    if saving is None:
+        return ""
+    ratio = c.bytes / saving.bytes if saving.bytes else math.inf
+    return (f"; at {ratio:.2g}x less memory the lowest error is {_rate(saving.error)}: {saving.instance} "
+            f"({_cost(saving)})")
+
+
 def time_lines(found: list) -> list:
     """The measured times of each light type's named instances (means of the per-case medians, ms)."""
     out = []
     for a in found:
-        named = [x for x in (a["chosen"], a["best"], a["half"]) if x is not None]
+        named = [x for x in (a["chosen"], a["best"], a["half"], a["saving"]) if x is not None]
         out.append(f"{a['light_type']}: " + "; ".join(
             f"{x.instance}: build {x.build_ms:.3g} ms, lookup {x.lookup_ms:.3g} ms"
             for x in dict.fromkeys(named)))
