@@ -644,7 +644,7 @@ def test_ctrl_c_and_kill_keep_finished_cases_and_resume_counts_as_uninterrupted(
     images = lambda d: {p.relative_to(d).as_posix(): p.read_bytes() for p in (d / "case_images").rglob("*.png")}
     assert len(images(out)) == 2 * 8 and images(out) == images(whole_out)
     assert not (out / "cases").exists() and (out / "leaderboard.html").is_file()
-        assert "dsm benchmark: directional (" in stdout                 # what accuracy costs, in the terminal
+    assert "dsm benchmark: directional (" in stdout                 # what accuracy costs, in the terminal
 
 
 def test_page_rebuilds_the_leaderboard_from_results_alone(test_run, tmp_path):
