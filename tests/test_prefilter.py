@@ -354,7 +354,8 @@ def test_a_run_of_floating_plate_measures_each_kind_and_vsm_unfiltered_is_a_cons
     assert len(res.rows) == 1 + 4 * 2
     for r in res.rows:
         assert record.check_row(r) is r
-        assert set(r) == record.GROUPS["core"] | record.GROUPS["map"] | record.GROUPS["prefilter"] | record.GROUPS["precision"]
+        assert set(r) == (record.GROUPS["core"] | record.GROUPS["map"] | record.GROUPS["prefilter"]
+                          | record.GROUPS["precision"] | record.GROUPS["cost"])
         assert r["n_peterpan_edge"] + r["n_leak"] == r["n_peterpan"]
         assert (r["map_kind"] == "depth") == (r["scheme"] == "constant")
         assert np.isnan(r["moments_ms"]) == (r["map_kind"] == "depth")

@@ -51,8 +51,12 @@ def test_the_repr_is_short_and_says_where_the_run_is(res):
 
 
 def test_the_terminal_answer_says_ties_and_the_lowest_pooled_error(res):
-    from dsm.report import summary
+    from dsm.report import frontier, summary
     lines = summary.terminal_answer(res.rows)
+    found = frontier.answers(frontier.points_from_rows(res.rows))
+    first = frontier.answer_lines(found) + frontier.time_lines(found)       # what accuracy costs comes first
+    assert lines[:len(first)] == first and first[0].startswith("directional (")
+    lines = lines[len(first):]
     assert lines[0] == summary.answer(res.rows) and lines[0].startswith("Lowest pooled error rate")
     best = summary.best_per_light(res.rows)
     assert len(lines) == 1 + len(best) == 1 + 2               # one light, two resolutions
