@@ -9,7 +9,8 @@ exclusions, the split of its errors, its build and lookup costs), ``cascade`` (a
 and a moment map's build time), ``virtual`` (a virtual shadow map's pages, memory, rays and levels:
 :mod:`dsm.truth.virtual`) ``transition`` (a cascaded or virtual map's texels per pixel spread and errors near a cascade
 or level transition: :mod:`dsm.truth.transition`) and ``contact`` (a case with ``[contact]``'s screen-space contact
-shadows after its lookup, dsm.contact). A row holds
+shadows after its lookup, dsm.contact) and ``hybrid`` (a case whose receivers a rule sends to rays: the
+rays and the error left after them, dsm.hybrid). A row holds
 the core group and each other group whole or not at all; :func:`check_row` refuses a column the
 schema does not name and a group cut short, so a metric can no longer vanish from metrics.csv.
 
@@ -54,6 +55,10 @@ VIRTUAL_COLUMNS = ["vsm_pages_tagged", "vsm_pages_built", "vsm_memory_texels", "
 # a cascaded or virtual map's (dsm.truth.transition): texels per pixel's spread, errors near a transition
 TRANSITION_COLUMNS = ["tpp_p10", "tpp_p90", "tpp_below_1", "n_transition", "transition_error_rate",
                       "off_transition_error_rate"]
+# a hybrid case's (dsm.hybrid): its rule, the rays it traced, their cost and the error left after them
+HYBRID_COLUMNS = ("hybrid_rule:t hybrid_params:t hybrid_origin:t hybrid_rays:i ray_fraction hybrid_n_ray_wrong:i "
+                  "hybrid_shortened:i hybrid_n_acne:i hybrid_n_peterpan:i hybrid_acne_rate hybrid_peterpan_rate "
+                  "hybrid_error_rate hybrid_ms hybrid_compile_ms").split()
 CONTACT_COLUMNS = ("n_contact_false n_contact_recovered n_contact_missed contact_acne_rate contact_peterpan_rate "
                    "contact_error_rate contact_mean_abs_error contact_ms").split()
 
@@ -68,7 +73,8 @@ _ORDER = (
     "build_first_ms build_compile_ms build_peak_mb lookup_ms lookup_compile_ms lookup_kernels_compiled "
     "reference_ms sweep_key sweep_value").split() + list(SOFT_COLUMNS) + ["f32_step", "texel_f32_steps", "map_kind",
                                                                          *LEAK_COLUMNS, "moments_ms"] + CONTACT_COLUMNS + [
-    "lookup_shared", "build_shared"] + VIRTUAL_COLUMNS + TRANSITION_COLUMNS
+    "lookup_shared", "build_shared"] + VIRTUAL_COLUMNS + TRANSITION_COLUMNS + [
+    c.partition(":")[0] for c in HYBRID_COLUMNS]
 
 _GROUPS = (
     _cols("core", "case:t scene:t light:t view:t scheme:t preset:t params:t culling:t resolution:i total_texels:i "
@@ -88,7 +94,8 @@ _GROUPS = (
     + _cols("contact", " ".join(CONTACT_COLUMNS))
     + _cols("virtual", "vsm_pages_tagged:i vsm_pages_built:i vsm_memory_texels:i vsm_rays:i vsm_level_histogram:t "
                        "vsm_level_pages:t")
-    + _cols("transition", " ".join(TRANSITION_COLUMNS)))
+    + _cols("transition", " ".join(TRANSITION_COLUMNS))
+    + _cols("hybrid", " ".join(HYBRID_COLUMNS)))
 
 _BY_NAME = {c.name: c for c in _GROUPS}
 COLUMNS = tuple(_BY_NAME[n] for n in _ORDER)
@@ -97,7 +104,7 @@ TEXT_COLUMNS = {c.name for c in COLUMNS if c.kind == TEXT}
 INT_COLUMNS = {c.name for c in COLUMNS if c.kind == INT}
 GROUPS = {g: {c.name for c in COLUMNS if c.group == g} for g in ("core", "map", "cascade", "motion", "area",
                                                                   "precision", "prefilter", "contact", "virtual",
-                                                                  "transition")}
+                                                                  "transition", "hybrid")}
 
 
 class SchemaError(ValueError):
