@@ -143,13 +143,20 @@ def _attached(ctx: MapContext, case: Case, look, attached) -> dict:
 def _hybrid(ctx: MapContext, case: Case, v) -> dict:
     """The hybrid instance's columns: its rule's rays traced against the exact scene, the error left
     (the case's own columns stay the map's alone, the budget's 0)."""
-    setup, receivers = ctx.setup, ctx.receivers[case.format]
+    return hybrid.measure(case.hybrid, *hybrid_parts(ctx, case, v), ctx.repeats)[0]
+
+
+def hybrid_parts(ctx: MapContext, case: Case, v) -> tuple:
+    """(what the case's hybrid rule reads, the exact side its rays are traced against)."""
+    setup = ctx.setup
+    if setup.ref is not None:
+        raise ValueError("hybrid rays decide a hard light's visibility; this light is an area light")
     light, bbox = pipeline.exact_side(ctx.scene, setup.light)
     exact = hybrid.Exact(ctx.scene.exact, light, setup.si, pipeline.scene_magnitude(bbox))
-    width = ctx.image_size[0]
-    inputs = HybridInputs(receivers, ctx.stored[case.format], np.asarray(v), setup.v_star.astype(bool),
-                          setup.pixels, width, not pipeline.is_positional(setup.light))
-    return hybrid.measure(case.hybrid, inputs, exact, ctx.repeats)[0]
+    inputs = HybridInputs(ctx.receivers[case.format], ctx.stored[case.format], np.asarray(v),
+                          setup.v_star.astype(bool), setup.pixels, ctx.image_size[0],
+                          not pipeline.is_positional(setup.light))
+    return inputs, exact
 
 
 def _deep(ctx: MapContext, fmt: str, texel_world: np.ndarray):
