@@ -219,3 +219,16 @@ def test_a_run_with_hybrid_writes_its_columns_and_section(run_dict, tmp_path):
     assert len(rows) == 3 and res.run["n_failed"] == 0
     assert sorted(r["hybrid_rule"] for r in rows) == ["band", "band", "oracle"]
     assert all(r["hybrid_error_rate"] <= r["error_rate"] for r in rows)
+
+
+def test_origin_rules_across_scales():
+    """The kit's spawn rule neither self-shadows nor leaks from 1e-3 to 1e6; Mitsuba's unit term
+    leaks at the millimetre box's contact; an absolute 1e-4 self-shadows the tilted plane at 1e3 on."""
+    from dsm.hybrid import origin_study
+    rows = origin_study.table((1e-3, 1.0, 1e3, 1e6), 64)
+    at = {(r["scene"], r["scale"], r["origin"]): r for r in rows}
+    assert all(r["n_false_shadow"] == r["n_leak"] == 0 for r in rows if r["origin"] == "spawn")
+    assert at["plane_box", 1e-3, "mitsuba"]["n_leak"] > 0 and at["plane_box", 1.0, "mitsuba"]["n_leak"] == 0
+    assert at["plane", 1e3, "epsilon"]["n_false_shadow"] > 0 and at["plane", 1.0, "epsilon"]["n_false_shadow"] == 0
+    assert at["plane_box", 1.0, "spawn"]["n_gt_shadowed"] > 0          # the box does cast a shadow here
+    assert origin_study.markdown(rows)[0].startswith("| scene | scale |")

@@ -19,6 +19,7 @@ from pathlib import Path
 from ..truth import metrics
 from . import io as report, labels, summary
 from .figures import CLASSES_GIF_COMMENT, display_paths, frames_path, image_paths, points_file, slug
+from .sections import hybrid as hybrid_report
 from .sections import virtual as virtual_report
 
 CASE_COLUMNS = [("case", "case", "text"), ("scene", "scene", "text"), ("light", "light", "text"),
@@ -447,6 +448,7 @@ def write_html(path: Path, rows: list, run: dict):
     if rows:
         body.append(_case_section(rows, out))
         body.append(virtual_report.html_section(rows))
+        body.append(hybrid_report.html_section(rows, out))
     body += [_plots_section(out, rows), _run_section(run)]
     page = (f"<!doctype html><html lang=en><head><meta charset=utf-8><title>dsm: {_e(name)}</title>"
             f"<meta name=viewport content=\"width=device-width\"><style>{CSS}</style></head><body>"
