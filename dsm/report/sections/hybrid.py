@@ -119,32 +119,36 @@ def plot_jobs(folder: Path, rows: list) -> list:
             for m, c in sorted(curves(hybrid_rows(rows)).items())]
 
 
-STYLES = {"oracle": (":", "o"), "band": ("-", "."), "classifier": ("--", "x"), "all": ("", "s")}
+# (line style, marker) per rule: the oracle's and the band's sweeps are nested sets of rays, drawn as
+# lines; the classifier's parameters and the origin rules are no one sweep, drawn as points
+STYLES = {"oracle": (":", "o"), "band": ("-", "."), "classifier": ("none", "x"), "all": ("none", "s")}
 
 
 def draw(path: Path, title: str, series: dict):
-    """Error rate against rays per receiver, a line per (scheme instance, rule, origin): colour the
-    scheme instance, style the rule (the oracle dotted: the floor)."""
+    """Error rate against rays per receiver per (scheme instance, rule, origin): colour the scheme
+    instance, style the rule (the oracle dotted: the floor); the legend names colours and styles."""
     from matplotlib.figure import Figure
-    fig = Figure(figsize=(6.4, 4.0))
+    from matplotlib.lines import Line2D
+    fig = Figure(figsize=(6.4, 4.2))
     ax = fig.subplots()
     schemes = sorted({k[0] for k in series})
+    colour = lambda s: f"C{schemes.index(s) % 10}"
     for (scheme, rule, origin), pts in sorted(series.items()):
         x, y = zip(*pts)
         ls, mk = STYLES.get(rule, ("-", "."))
-        ax.plot(x, y, linestyle=ls or "none", marker=mk, markersize=3, linewidth=1,
-                color=f"C{schemes.index(scheme) % 10}", label=f"{scheme}: {rule}" + (
-                    f" ({origin})" if origin != "spawn" else ""))
+        ax.plot(x, y, linestyle=ls, marker=mk, markersize=3, linewidth=1, color=colour(scheme))
     ax.set_yscale("symlog", linthresh=1e-4)
     ax.set_ylim(0, 1)
     ax.set_xlim(-0.02, 1.02)
-    ax.set_xlabel("rays per receiver", fontsize=8)
+    ax.set_xlabel("rays per receiver (0: the map alone)", fontsize=8)
     ax.set_ylabel("error rate after the rays", fontsize=8)
     ax.set_title(f"{title}: budget curves", fontsize=8)
     ax.tick_params(labelsize=7)
-    if len(series) <= 13:
-        ax.legend(fontsize=6)
-    fig.subplots_adjust(bottom=0.13, top=0.92, left=0.12, right=0.98)
+    handles = [Line2D([], [], color=colour(s), label=s[:40]) for s in schemes[:9]]
+    handles += [Line2D([], [], color="0.3", linestyle=ls, marker=mk, markersize=3, label=rule)
+                for rule, (ls, mk) in STYLES.items() if any(k[1] == rule for k in series)]
+    ax.legend(handles=handles, fontsize=6, loc="upper right")
+    fig.subplots_adjust(bottom=0.12, top=0.93, left=0.12, right=0.98)
     report.save_png(Path(path), lambda f, fmt: fig.savefig(f, dpi=80, format=fmt))
 
 
