@@ -10,18 +10,17 @@ from . import all as all_rule, band, classifier, oracle
 from .base import Inputs, Rule, Selection
 
 REGISTRY = (classifier, band, oracle, all_rule)
-_broken = [m.NAME for m in REGISTRY if not isinstance(m, Rule)]
-assert not _broken, f"hybrid rule modules not meeting the Rule contract: {_broken}"
+BY_NAME = {r.NAME: r for r in REGISTRY if isinstance(r, Rule)}
+assert len(BY_NAME) == len(REGISTRY), "a hybrid rule module does not meet the Rule contract, or a name repeats"
 
 
 def get(name: str):
     """The rule module named ``name``; KeyError listing the valid names."""
-    for r in REGISTRY:
-        if r.NAME == name:
-            return r
-    raise KeyError(f"unknown hybrid rule {name!r} (valid: {', '.join(r.NAME for r in REGISTRY)})")
+    if name not in BY_NAME:
+        raise KeyError(f"unknown hybrid rule {name!r} (valid: {', '.join(BY_NAME)})")
+    return BY_NAME[name]
 
 
 def names() -> tuple:
     """The rules a config may name."""
-    return tuple(r.NAME for r in REGISTRY)
+    return tuple(BY_NAME)

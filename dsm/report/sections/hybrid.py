@@ -43,13 +43,15 @@ def pooled(rows: list) -> list:
     for r in rows:
         groups.setdefault((summary.instance_label(summary.instance_key(r)), _rule_label(r)), []).append(r)
     out = []
-    for (scheme, rule), rs in sorted(groups.items()):
+    for (scheme, rule), rs in groups.items():
         n = sum(r["n_receivers"] for r in rs)
         out.append([rule, scheme, len(rs), _ratio(sum(r["hybrid_rays"] for r in rs), n),
                     _ratio(sum(r["n_acne"] + r["n_peterpan"] for r in rs), n),
                     _ratio(sum(r["hybrid_n_acne"] + r["hybrid_n_peterpan"] for r in rs), n),
                     sum(r["hybrid_n_ray_wrong"] for r in rs)])
-    return out
+    # a scheme's rules together, each rule's sweep by its rays (an undefined fraction last)
+    rays = lambda x: x if metrics.defined(x) else float("inf")
+    return sorted(out, key=lambda row: (row[1], row[0].split()[0], rays(row[3]), row[0]))
 
 
 def _map_key(r) -> tuple:
