@@ -232,3 +232,19 @@ def test_origin_rules_across_scales():
     assert at["plane", 1e3, "epsilon"]["n_false_shadow"] > 0 and at["plane", 1.0, "epsilon"]["n_false_shadow"] == 0
     assert at["plane_box", 1.0, "spawn"]["n_gt_shadowed"] > 0          # the box does cast a shadow here
     assert origin_study.markdown(rows)[0].startswith("| scene | scale |")
+
+
+def test_a_resumed_hybrid_run_keeps_its_cases_and_a_new_instance_is_a_new_case(tmp_path):
+    """Case keys name the hybrid instance: adding a band width keeps the run's cases and measures the new one."""
+    from dsm import pipeline
+    from dsm.experiment.runner import Runner
+    base = dict(scene=[{"builtin": "plane_box"}], camera={"resolution": [32, 32]}, map={"resolution": 32},
+                scheme=[{"name": "constant", "bias": "1 texel"}], report={"images": "none"})
+    out = tmp_path / "o"
+    first = Runner(pipeline.prepare(base_config(**base, hybrid={"rule": "band", "k": [0.5, 2.0]})), out,
+                   progress=False).run()
+    assert len(first.rows) == 2
+    again = Runner(pipeline.prepare(base_config(**base, hybrid={"rule": "band", "k": [0.5, 2.0, 8.0]})), out,
+                   progress=False, resume_previous=True).run()
+    assert again.run["resumed_cases"] == 2 and len(again.rows) == 3
+    assert sorted(r["hybrid_params"] for r in again.rows) == ["k=0.5", "k=2.0", "k=8.0"]
