@@ -219,6 +219,11 @@ def test_a_run_with_hybrid_writes_its_columns_and_section(run_dict, tmp_path):
     assert len(rows) == 3 and res.run["n_failed"] == 0
     assert sorted(r["hybrid_rule"] for r in rows) == ["band", "band", "oracle"]
     assert all(r["hybrid_error_rate"] <= r["error_rate"] for r in rows)
+    out = tmp_path / "hybrid"
+    text = (out / "hybrid.md").read_text()
+    assert "## Rays for zero error" in text and "| oracle | spawn | constant bias=1 texel | 1 | 1 |" in text
+    assert len(list((out / "plots").glob("hybrid_*.png"))) == 1
+    assert "<section id=hybrid>" in (out / "report.html").read_text()
 
 
 def test_origin_rules_across_scales():

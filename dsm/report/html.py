@@ -340,6 +340,10 @@ PLOT_KINDS = (
      "Lines: every acne and peter-panning pair one bias value reaches on this map (solid: a world bias, dotted: "
      "a texel bias); points: the run's nearest-filter cases (hover to name, click to open). A point above or "
      "right of its map's lines is accuracy a single bias would have had."),
+    ("hybrid_", "Hybrid rays: error against rays per receiver",
+     "Each map's budget curves ([hybrid]): 0 rays is the map alone; a colour per scheme instance, a style per "
+     "rule; the dotted oracle is the floor (the fewest rays for each error), a curve far right of it spends "
+     "rays where the map was right."),
 )
 ZOOM_BOX = "<div id=zoom title='click to close'><img alt=''></div>"
 
@@ -448,7 +452,7 @@ def write_html(path: Path, rows: list, run: dict):
     if rows:
         body.append(_case_section(rows, out))
         body.append(virtual_report.html_section(rows))
-        body.append(hybrid_report.html_section(rows, out))
+        body.append(hybrid_report.html_section(rows))
     body += [_plots_section(out, rows), _run_section(run)]
     page = (f"<!doctype html><html lang=en><head><meta charset=utf-8><title>dsm: {_e(name)}</title>"
             f"<meta name=viewport content=\"width=device-width\"><style>{CSS}</style></head><body>"
