@@ -130,7 +130,7 @@ LAYERS = (
     ("lights", "schemes"),           # light types (their views, an area light's surface); bias schemes
     ("prefilter",),                  # pre-filtered maps (moments)
     ("truth",),                      # exact visibility, metrics, the oracle
-    ("contact",),                    # screen-space contact shadows
+    ("contact", "hybrid"),           # screen-space contact shadows; hybrid rays (a rule, the rays, the error left)
     ("config",),                     # the TOML read into specs, the plan
     ("pipeline",),                   # the stages, one public function each
     ("case",),                       # a case as a value: its context, evaluation and row

@@ -20,11 +20,13 @@ MEASURES = frozenset({"seams", "split", "attached", "contact", "cascade", "leak"
 
 @dataclass(frozen=True)
 class Case:
-    """One case of a map: a scheme instance (or a pre-filtered instance), its filter and stored format."""
+    """One case of a map: a scheme instance (or a pre-filtered instance), its filter and stored format,
+    and the hybrid instance that sends some of its receivers to rays (dsm.hybrid), if any."""
     id: str           # "0001", ...: its place in the plan
     spec: object      # SchemeSpec, or MomentSpec (a pre-filtered instance)
     filter: str
     format: str
+    hybrid: object = None     # HybridSpec ([hybrid]), or None: the map alone
 
     @property
     def prefiltered(self) -> bool:

@@ -14,6 +14,7 @@ import numpy as np
 from .. import pipeline
 from ..contact import march as contact
 from ..core import timing
+from ..hybrid import Inputs as HybridInputs, trace as hybrid
 from ..truth import metrics
 from .context import Case, MapContext
 
@@ -76,6 +77,8 @@ def evaluate(ctx: MapContext, case: Case, looked=None, attached=None) -> CaseRes
         measured.update(metrics.leak_split(v, ctx.setup.v_star, deep))
         if receivers is not None and deep is not None:      # the leaks in their own colour
             leak = metrics.leak_mask(v, ctx.setup.v_star, deep)
+    if case.hybrid is not None:
+        measured.update(_hybrid(ctx, case, v))
     result.classes = _class_image(ctx, v, _wrong(ctx, case), leak)
     return result
 
@@ -135,6 +138,25 @@ def _attached(ctx: MapContext, case: Case, look, attached) -> dict:
     return {"n_backfacing": int(v_back.size),
             "backface_lit_rate": float((v_back >= 0.5).mean()) if v_back.size else metrics.UNDEFINED,
             "n_plane_fallback": fallbacks if uses_plane else metrics.UNDEFINED}
+
+
+def _hybrid(ctx: MapContext, case: Case, v) -> dict:
+    """The hybrid instance's columns: its rule's rays traced against the exact scene, the error left
+    (the case's own columns stay the map's alone, the budget's 0)."""
+    return hybrid.measure(case.hybrid, *hybrid_parts(ctx, case, v), ctx.repeats)[0]
+
+
+def hybrid_parts(ctx: MapContext, case: Case, v) -> tuple:
+    """(what the case's hybrid rule reads, the exact side its rays are traced against)."""
+    setup = ctx.setup
+    if setup.ref is not None:
+        raise ValueError("hybrid rays decide a hard light's visibility; this light is an area light")
+    light, bbox = pipeline.exact_side(ctx.scene, setup.light)
+    exact = hybrid.Exact(ctx.scene.exact, light, setup.si, pipeline.scene_magnitude(bbox))
+    inputs = HybridInputs(ctx.receivers[case.format], ctx.stored[case.format], np.asarray(v),
+                          setup.v_star.astype(bool), setup.pixels, ctx.image_size[0],
+                          not pipeline.is_positional(setup.light))
+    return inputs, exact
 
 
 def _deep(ctx: MapContext, fmt: str, texel_world: np.ndarray):

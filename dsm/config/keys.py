@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from ..core.types import (AREA_SHAPES, Length, BACKENDS, BLUR_KERNELS, BUILD_MODES, CAMERA_PATHS, CASCADE_FITS,
                           CASCADE_SPLITS, DEPTH_BOUNDS, FILTERS, FORMATS, LAMBDA_MAX, LIGHT_PATHS, LOOKUP_MODES,
                           MAP_KINDS, MAP_VIEWS, MAX_CASCADES, REPORT_IMAGES, SEED_MAX, VARIANTS, VIRTUAL_PRESETS,
-                          VIRTUAL_RULES)
+                          VIRTUAL_RULES, HYBRID_ORIGINS)
 from ..contact.presets import PRESETS as CONTACT_PRESETS
 from ..scenes.params import BUILTINS
 from .tune import MAP_FITS, MAP_UNITS, ROLES, SCHEDULES
@@ -242,8 +242,8 @@ KEYS = (
     Key("tune.bias_map", "layers", "int", "8", "edge: surfaces followed along each light ray", ">= 1"),
 )
 
-TABLES = ("experiment", "camera", "scene", "light", "map", "map.virtual", "contact", "memory", "timing", "oracle", "report",
-          "execution", "motion", "motion.keys", "motion.light_keys", "scheme", "tune", "tune.camera",
+TABLES = ("experiment", "camera", "scene", "light", "map", "map.virtual", "contact", "hybrid", "memory", "timing", "oracle",
+          "report", "execution", "motion", "motion.keys", "motion.light_keys", "scheme", "tune", "tune.camera",
           "tune.bias_map")
 
 
@@ -288,3 +288,19 @@ def dataclass_keys(table: str, cls, bounds: dict | None = None) -> tuple:
         out.append(Key(table, f.name, ftype, str(default),
                        md.get("doc", ""), valid, LENGTH if ftype == "length" else ""))
     return tuple(out)
+
+
+def hybrid_keys() -> tuple:
+    """``[hybrid]``'s keys (one table or an array of them): the rule, the origin rule and every rule's
+    parameters (dsm.hybrid), each read by the reader's one parse_hybrid."""
+    from .. import hybrid
+    out = [Key("hybrid", "rule", "str", "(required)", "the rule that sends receivers to rays (a case per "
+               "instance of every depth case)", hybrid.names(), source="docs/hybrid.md"),
+           Key("hybrid", "origin", "str", "spawn", "where a hybrid's ray starts (dsm.hybrid.origins)", HYBRID_ORIGINS,
+               source="kit; Mitsuba 3.9; Wachter & Binder 2019 (Ray Tracing Gems ch. 6); absolute 1e-4", sweeps=True)]
+    for rule in hybrid.REGISTRY:
+        out += [dataclasses.replace(k, sweeps=True, source=rule.SOURCE) for k in dataclass_keys("hybrid", rule.Params)]
+    return tuple(out)
+
+
+KEYS = KEYS + hybrid_keys()

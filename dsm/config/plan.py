@@ -699,7 +699,7 @@ class _Slot(NamedTuple):
 def _map_plan(cfg: Config, slot: _Slot, culling: str, config_group, used: set, views_seen: set):
     """The MapPlan of one slot (scene, light, view, resolution) and culling; None where no scheme reads it."""
     view, faces, R, ltype = slot.view, slot.faces, slot.resolution, slot.light_type
-    per_case = len(cfg.map.filter) * len(cfg.map.format)
+    per_case = len(cfg.map.filter) * len(cfg.map.format) * max(1, len(cfg.hybrid))   # [hybrid]: a case each
     fmts = tuple(f for f in cfg.map.format if f != "float32")
     # engine presets are combined instances per light type, resolved here
     read = [s for s in config_group if schemes_mod.reads_view(s, view)]  # a VSV grid: its own

@@ -6,6 +6,7 @@ parameter, scene parameter or map option multiplies the cases (see :func:`expand
 """
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import os
 import tomllib
@@ -13,7 +14,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from .virtual import parse_virtual
-from ..core.types import (LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, MAP_VIEWS, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA, REPORT_IMAGES, LOOKUP_MODES, BUILD_MODES, LAMBDA_MAX, SEED_MAX, ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params, SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec, CameraSpec, CascadeSpec, CASCADE_SPLITS, CASCADE_FITS, DEPTH_BOUNDS, MAX_CASCADES, MotionSpec, CAMERA_PATHS, LIGHT_PATHS, MAP_KINDS, MomentSpec, ContactSpec, BLUR_KERNELS)
+from ..core.types import (LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, MAP_VIEWS, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA, REPORT_IMAGES, LOOKUP_MODES, BUILD_MODES, LAMBDA_MAX, SEED_MAX, ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params, SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec, CameraSpec, CascadeSpec, CASCADE_SPLITS, CASCADE_FITS, DEPTH_BOUNDS, MAX_CASCADES, MotionSpec, CAMERA_PATHS, LIGHT_PATHS, MAP_KINDS, MomentSpec, ContactSpec, BLUR_KERNELS, HybridSpec, HYBRID_ORIGINS)
 
 # a run's folder is runs/<name>-tune-YYYYmmdd-HHMMSS[-n] (at most 25 bytes more) and a file name takes 255 bytes
 NAME_MAX_BYTES = 255 - len("-tune-20240101-120000-999")
@@ -22,7 +23,7 @@ CASCADE_KEYS = ("cascades", "split", "lambda", "fit", "depth_bounds", "stabilize
 
 
 TOP_KEYS = ("experiment", "camera", "scene", "light", "map", "scheme", "timing", "memory", "oracle", "report", "motion",
-            "execution", "tune", "contact", "gradient")    # [tune]: read by dsm tune, [gradient] by dsm grad; ignored by dsm run
+            "execution", "tune", "contact", "gradient", "hybrid")    # [tune]: read by dsm tune, [gradient] by dsm grad; ignored by dsm run
 
 
 # the shipped experiments named after a source's file number before 0.2.0 (CHANGELOG.md)
@@ -143,13 +144,14 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     _check_motion_moments(motion, mapspec, source)
     contact = _parse_contact(raw, source, bool(motion))
     shrink = _parse_shrink(m, source, bool(motion))
+    hybrid = parse_hybrid(raw, source, bool(motion), lights, mapspec)
     from .tune import parse_tune                 # [tune]: dsm tune's, checked here so a bad key fails at load
     tune = parse_tune(raw, source, seed, tuple(schemes))
     return Config(name=name, source=source, seed=seed, variant=variant, camera_resolution=camera_resolution,
                   camera=camera, motion=motion,
                   scenes=tuple(scenes), lights=tuple(lights), map=mapspec, schemes=tuple(schemes),
                   timing_repeats=repeats, timing_lookups=lookups, timing_builds=builds, memory_budget_mb=budget, oracle=OracleSpec(lambdas),
-                  report_images=report_images, raw=raw, contact=contact, shrink=shrink, tune=tune,
+                  report_images=report_images, raw=raw, contact=contact, shrink=shrink, tune=tune, hybrid=hybrid,
                   execution=_parse_execution(_table(raw, "execution", source), source))
 
 
@@ -340,6 +342,58 @@ def _parse_contact(raw: dict, source: str, motion: bool):
         raise ConfigError(source, "contact", "contact shadows are measured on still frames; remove [contact] or "
                           "the [[motion]] paths", ["motion"])
     return spec
+
+
+def parse_hybrid(raw: dict, source: str, motion: bool, lights, mapspec) -> tuple:
+    """``[hybrid]`` (one table or an array ``[[hybrid]]``): each a rule, its parameters and origin
+    rules (lists sweep) as HybridSpecs, checked before any work; () without it."""
+    if "hybrid" not in raw:
+        return ()
+    from ..hybrid import get as rule_of, names as rule_names
+    tables = _array_of_tables(raw, "hybrid", source)
+    if not tables:
+        raise ConfigError(source, "hybrid", "empty: give at least one rule", rule_names())
+    _check_hybrid_context(source, motion, lights, mapspec)
+    out = []
+    for i, t in enumerate(tables):
+        where = f"hybrid[{i}]" if isinstance(raw["hybrid"], list) else "hybrid"
+        if "rule" not in t:
+            raise ConfigError(source, f"{where}.rule", "required: the rule that sends receivers to rays",
+                              rule_names())
+        rule = rule_of(choice(t["rule"], source, f"{where}.rule", rule_names()))
+        fields = tuple(f.name for f in dataclasses.fields(rule.Params))
+        check_keys(t, ("rule", "origin") + fields, source, where)
+        origins = [choice(o, source, f"{where}.origin", HYBRID_ORIGINS) for o in as_list(t.get("origin", "spawn"))]
+        if not origins:
+            raise ConfigError(source, f"{where}.origin", "empty list", HYBRID_ORIGINS)
+        once(origins, source, f"{where}.origin")
+        params = sweep_params(rule.Params, t, source, where, skip=("rule", "origin"))
+        for p in params:
+            _check_upper(p, source, where)
+        out += [HybridSpec(rule.NAME, p, o) for p in params for o in origins]
+    return tuple(dict.fromkeys(out))
+
+
+def _check_hybrid_context(source: str, motion: bool, lights, mapspec):
+    """ConfigError where ``[hybrid]`` cannot run: motion paths, area lights, no depth map."""
+    if motion:
+        raise ConfigError(source, "hybrid", "hybrid rays are measured on still frames; remove [hybrid] or "
+                          "the [[motion]] paths", ["motion"])
+    from .. import lights as light_types
+    if any(light_types.is_soft(l) for l in lights):
+        raise ConfigError(source, "hybrid", "hybrid rays decide a hard light's visibility; an area light's V* is "
+                          "a fraction: remove [hybrid] or the area lights", ["directional", "spot", "point"])
+    if "depth" not in mapspec.kind:
+        raise ConfigError(source, "hybrid", "hybrid rays replace a depth map's answers and map.kind does not name "
+                          "depth", MAP_KINDS)
+
+
+def _check_upper(params, source: str, where: str):
+    """ConfigError where a float parameter passes its field's ``metadata["max"]``."""
+    for f in dataclasses.fields(params):
+        hi, val = f.metadata.get("max"), getattr(params, f.name)
+        if hi is not None and isinstance(val, float) and val > hi:
+            raise ConfigError(source, f"{where}.{f.name}", f"must be <= {hi:g}, got {val:g}")
 
 
 def _parse_shrink(m: dict, source: str, motion: bool):

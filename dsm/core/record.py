@@ -9,8 +9,9 @@ exclusions, the split of its errors, its build and lookup costs), ``cascade`` (a
 and a moment map's build time), ``virtual`` (a virtual shadow map's pages, memory, rays and levels:
 :mod:`dsm.truth.virtual`) ``transition`` (a cascaded or virtual map's texels per pixel spread and errors near a cascade
 or level transition: :mod:`dsm.truth.transition`), ``cost`` (what a case costs in counts: the bytes its
-lookup reads, its page table, its map's rays, its taps per lookup: :mod:`dsm.case.cost`) and ``contact`` (a case with ``[contact]``'s screen-space contact
-shadows after its lookup, dsm.contact). A row holds
+lookup reads, its page table, its map's rays, its taps per lookup: :mod:`dsm.case.cost`), ``contact`` (a case with ``[contact]``'s screen-space contact
+shadows after its lookup, dsm.contact) and ``hybrid`` (a case whose receivers a rule sends to rays: the
+rays and the error left after them, dsm.hybrid). A row holds
 the core group and each other group whole or not at all; :func:`check_row` refuses a column the
 schema does not name and a group cut short, so a metric can no longer vanish from metrics.csv.
 
@@ -57,6 +58,10 @@ TRANSITION_COLUMNS = ["tpp_p10", "tpp_p90", "tpp_below_1", "n_transition", "tran
                       "off_transition_error_rate"]
 # what a case costs in counts (dsm.case.cost): bytes its lookup reads, its page table, its map's rays, taps per lookup
 COST_COLUMNS = ["map_bytes", "page_table_bytes", "map_rays", "taps"]
+# a hybrid case's (dsm.hybrid): its rule, the rays it traced, their cost and the error left after them
+HYBRID_COLUMNS = ("hybrid_rule:t hybrid_params:t hybrid_origin:t hybrid_rays:i ray_fraction hybrid_n_ray_wrong:i "
+                  "hybrid_shortened:i hybrid_n_acne:i hybrid_n_peterpan:i hybrid_acne_rate hybrid_peterpan_rate "
+                  "hybrid_error_rate hybrid_ms hybrid_compile_ms").split()
 CONTACT_COLUMNS = ("n_contact_false n_contact_recovered n_contact_missed contact_acne_rate contact_peterpan_rate "
                    "contact_error_rate contact_mean_abs_error contact_ms").split()
 
@@ -71,7 +76,8 @@ _ORDER = (
     "build_first_ms build_compile_ms build_peak_mb lookup_ms lookup_compile_ms lookup_kernels_compiled "
     "reference_ms sweep_key sweep_value").split() + list(SOFT_COLUMNS) + ["f32_step", "texel_f32_steps", "map_kind",
                                                                          *LEAK_COLUMNS, "moments_ms"] + CONTACT_COLUMNS + [
-    "lookup_shared", "build_shared"] + VIRTUAL_COLUMNS + TRANSITION_COLUMNS + COST_COLUMNS
+    "lookup_shared", "build_shared"] + VIRTUAL_COLUMNS + TRANSITION_COLUMNS + COST_COLUMNS + [
+    c.partition(":")[0] for c in HYBRID_COLUMNS]
 
 _GROUPS = (
     _cols("core", "case:t scene:t light:t view:t scheme:t preset:t params:t culling:t resolution:i total_texels:i "
@@ -92,7 +98,8 @@ _GROUPS = (
     + _cols("virtual", "vsm_pages_tagged:i vsm_pages_built:i vsm_memory_texels:i vsm_rays:i vsm_level_histogram:t "
                        "vsm_level_pages:t")
     + _cols("transition", " ".join(TRANSITION_COLUMNS))
-    + _cols("cost", "map_bytes:i page_table_bytes:i map_rays:i taps"))
+    + _cols("cost", "map_bytes:i page_table_bytes:i map_rays:i taps")
+    + _cols("hybrid", " ".join(HYBRID_COLUMNS)))
 
 _BY_NAME = {c.name: c for c in _GROUPS}
 COLUMNS = tuple(_BY_NAME[n] for n in _ORDER)
@@ -101,7 +108,7 @@ TEXT_COLUMNS = {c.name for c in COLUMNS if c.kind == TEXT}
 INT_COLUMNS = {c.name for c in COLUMNS if c.kind == INT}
 GROUPS = {g: {c.name for c in COLUMNS if c.group == g} for g in ("core", "map", "cascade", "motion", "area",
                                                                   "precision", "prefilter", "contact", "virtual",
-                                                                  "transition", "cost")}
+                                                                  "transition", "cost", "hybrid")}
 
 
 class SchemaError(ValueError):

@@ -161,6 +161,10 @@ def coerce_field(f: dataclasses.Field, raw, source: str, key: str):
         return number(raw, source, key, integer=True, minimum=f.metadata.get("min"), maximum=f.metadata.get("max"))
     if f.type in ("str", str):
         return choice(raw, source, key, f.metadata["choices"])
+    if f.type in ("bool", bool):
+        if not isinstance(raw, bool):
+            raise ConfigError(source, key, f"expected true or false, got {raw!r}")
+        return raw
     raise TypeError(f"unsupported parameter type {f.type!r}")
 
 
@@ -427,6 +431,18 @@ class MomentSpec(ParamsLabel):
                 + ("/mip" if self.mipmaps else ""))
 
 
+HYBRID_ORIGINS = ("spawn", "mitsuba", "wachter_binder", "epsilon")   # where a hybrid's ray starts (dsm.hybrid.origins)
+
+
+@dataclass(frozen=True)
+class HybridSpec(ParamsLabel):
+    """One hybrid instance (a ``[hybrid]`` value set, dsm.hybrid): the rule that picks the receivers a
+    ray decides (``rule``), its frozen parameters, and the origin rule of those rays."""
+    rule: str
+    params: Any
+    origin: str = "spawn"
+
+
 @dataclass(frozen=True)
 class OracleSpec:
     """``[oracle]``: the weights of peter-panning in the oracles' objective
@@ -495,6 +511,7 @@ class Config:
     report_images: str = "all"              # [report] images (REPORT_IMAGES)
     motion: tuple = ()                       # MotionSpec paths ([[motion]]); empty: still frames
     contact: "ContactSpec | None" = None     # [contact]: contact shadows after each case (None: not planned)
+    hybrid: tuple = ()                       # [hybrid]: HybridSpec instances, each a case of every depth case (dsm.hybrid)
     shrink: float | None = None              # [map] shrink: casters moved inward along welded normals, world units (None: off)
     tune: "TuneSpec | None" = field(default=None, compare=False, repr=False)   # [tune] (dsm.config.tune), read by dsm tune
     raw: dict = field(default_factory=dict, compare=False)

@@ -112,6 +112,11 @@ def scene_identity(spec) -> dict:
     return ident
 
 
+def hybrids(cfg) -> tuple:
+    """The hybrid instances every depth case runs with (``(None,)``: the map alone, no [hybrid])."""
+    return tuple(getattr(cfg, "hybrid", ())) or (None,)
+
+
 def case_keys(cfg, plan, version: str | None = None) -> list:
     """(case id, key) for every case of the plan, in the runner's order (case ids from the plan:
     the n-th case of the plan is case n, whatever fails before it)."""
@@ -136,10 +141,12 @@ def case_keys(cfg, plan, version: str | None = None) -> list:
         for spec in m.specs:
             for filt in cfg.map.filter:
                 for fmt in cfg.map.format:
-                    n += 1
-                    text = json.dumps({**shared, **group, "scheme": _plain(spec), "filter": filt, "format": fmt},
-                                      sort_keys=True, default=str)
-                    out.append((f"{n:04d}", hashlib.sha256(text.encode()).hexdigest()[:24]))
+                    for hybrid in hybrids(cfg):
+                        n += 1
+                        extra = {"hybrid": _plain(hybrid)} if hybrid is not None else {}   # old keys stay
+                        text = json.dumps({**shared, **group, "scheme": _plain(spec), "filter": filt, "format": fmt,
+                                           **extra}, sort_keys=True, default=str)
+                        out.append((f"{n:04d}", hashlib.sha256(text.encode()).hexdigest()[:24]))
         for spec in m.moments:            # pre-filtered instances, after the map's schemes (the runner's order)
             for fmt in cfg.map.format:
                 n += 1

@@ -393,8 +393,8 @@ class Runner:
                            else self.builds.timed(scene.data, view_run.view, set(), "none", m.tile)[1], 1)
         self.case_no = self.first_case[self.plan.maps.index(m)]     # case ids from the plan
         specs = [pipeline.preset_for_light(spec, view_run.setup.light.type) for spec in m.specs]   # a preset's values here
-        depth = {spec: [self._next(spec, filt, fmt) for filt in self.cfg.map.filter for fmt in self.cfg.map.format]
-                 for spec in specs}
+        depth = {spec: [self._next(spec, filt, fmt, h) for filt in self.cfg.map.filter for fmt in self.cfg.map.format
+                        for h in resume.hybrids(self.cfg)] for spec in specs}
         attached, looked = self._lookups(ctx, [c for cases in depth.values() for c in cases])
         for spec, cases in depth.items():
             own = frozenset(pipeline.needs_of([spec]))                  # this instance's own layers, for build_ms
@@ -413,18 +413,19 @@ class Runner:
                 self.bar.update(1)
         return first_layer
 
-    def _next(self, spec, filt: str, fmt: str) -> Case:
+    def _next(self, spec, filt: str, fmt: str, hybrid=None) -> Case:
         """The next case of the plan: its id counted."""
         self.case_no += 1
-        return Case(f"{self.case_no:04d}", spec, filt, fmt)
+        return Case(f"{self.case_no:04d}", spec, filt, fmt, hybrid)
 
     def _lookups(self, ctx: MapContext, cases: list) -> tuple:
         """(attached, looked) of one map's depth cases not kept from a resumed run, by (spec, filter,
         format): with ``[timing] lookups = "wavefront"`` every lookup from the map's wavefront
         (dsm.experiment.wavefront; its wave time into the map's record), else each case times its
         own lookup and only its attached-shadow V and plane fallbacks come from one wavefront."""
-        family = [c.lookup_key for c in cases]
-        todo = [c.lookup_key for c in cases if self.keys.get(c.id) not in self.kept]
+        # a lookup once however many hybrid instances its case runs with
+        family = list(dict.fromkeys(c.lookup_key for c in cases))
+        todo = list(dict.fromkeys(c.lookup_key for c in cases if self.keys.get(c.id) not in self.kept))
         if self.cfg.timing_lookups == "per_case":
             return wavefront.attached_only(todo, ctx.stored, ctx.receivers, ctx.backfacing, ctx.seed), {}
         looked, wave = wavefront.run(todo, ctx.stored, ctx.receivers, ctx.backfacing, ctx.seed, ctx.repeats, family)

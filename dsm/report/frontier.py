@@ -93,13 +93,42 @@ def _six(x) -> float:
 
 def points_from_rows(rows) -> list:
     """The points of a run's metrics rows (none for rows without the cost columns); an instance's
-    label names the choices that vary among its light type's rows."""
+    label names the choices that vary among its light type's rows. A hybrid row (dsm.hybrid) gives
+    two points: the map alone (once per map case) and the map with its rule's rays, whose error is the
+    error left after them and whose rays add the rays traced."""
     if not has_costs(rows):
         return []
     varied = {t: varied_choices([r for r in rows if light_type(r) == t]) for t in {light_type(r) for r in rows}}
-    return [Point(r["scene"], r["light"], light_type(r), instance_label(r, varied[light_type(r)]),
-                  r["preset"] or r["scheme"], error_rate(r), int(r["map_bytes"]) + int(r["page_table_bytes"]),
-                  int(r["map_rays"]), _six(r["taps"]), _six(r["build_ms"]), _six(r["lookup_ms"])) for r in rows]
+    out, seen = [], set()
+    for r in rows:
+        base = _point(r, instance_label(r, varied[light_type(r)]))
+        if not r.get("hybrid_rule"):
+            out.append(base)
+            continue
+        if (base.scene, base.light, base.instance) not in seen:      # the map alone, the budget's 0
+            seen.add((base.scene, base.light, base.instance))
+            out.append(base)
+        out.append(_hybrid_point(r, base))
+    return out
+
+
+def _point(r: dict, instance: str) -> Point:
+    """A metrics row's point (the map alone)."""
+    return Point(r["scene"], r["light"], light_type(r), instance, r["preset"] or r["scheme"], error_rate(r),
+                 int(r["map_bytes"]) + int(r["page_table_bytes"]), int(r["map_rays"]), _six(r["taps"]),
+                 _six(r["build_ms"]), _six(r["lookup_ms"]))
+
+
+def _hybrid_point(r: dict, base: Point) -> Point:
+    """A hybrid row's point: the error left after its rule's rays, the rays traced added to the map's."""
+    n = r["n_receivers"]
+    words = " ".join(x for x in (r["hybrid_rule"], r.get("hybrid_params") or "") if x)
+    origin = r.get("hybrid_origin") or ""
+    instance = f"{base.instance} + rays: {words}" + (f" from {origin}" if origin and origin != "spawn" else "")
+    left = (r["hybrid_n_acne"] + r["hybrid_n_peterpan"]) / n if n else math.nan
+    return Point(base.scene, base.light, base.light_type, instance, base.family, left, base.bytes,
+                 base.rays + int(r["hybrid_rays"]), base.taps, base.build_ms,
+                 _six(base.lookup_ms + float(r["hybrid_ms"])))
 
 
 def on_frontier(points: list) -> list:

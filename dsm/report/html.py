@@ -19,6 +19,7 @@ from pathlib import Path
 from ..truth import metrics
 from . import frontier, io as report, labels, summary
 from .figures import CLASSES_GIF_COMMENT, display_paths, frames_path, image_paths, points_file, slug
+from .sections import hybrid as hybrid_report
 from .sections import virtual as virtual_report
 from .templates import Cell, Row, Table, render
 
@@ -165,6 +166,10 @@ PLOT_KINDS = (
      "Lines: every acne and peter-panning pair one bias value reaches on this map (solid: a world bias, dotted: "
      "a texel bias); points: the run's nearest-filter cases (hover to name, click to open). A point above or "
      "right of its map's lines is accuracy a single bias would have had."),
+    ("hybrid_", "Hybrid rays: error against rays per receiver",
+     "Each map's budget curves ([hybrid]): 0 rays is the map alone; a colour per scheme instance, a style per "
+     "rule; the dotted oracle is the floor (the fewest rays for each error), a curve far right of it spends "
+     "rays where the map was right."),
 )
 
 
@@ -260,6 +265,6 @@ def write_html(path: Path, rows: list, run: dict):
                   answer=labels.params_label(summary.answer(rows)) if rows else None,
                   best=_best(rows) if rows else None, summary=_summary(rows) if rows else None,
                   failed=_failed(run), cases=_cases(rows, out) if rows else None,
-                  virtual=virtual_report.html_table(rows), plots=_plots(out, rows), facts=_facts(run))
+                  virtual=virtual_report.html_table(rows), hybrid=hybrid_report.html_view(rows), plots=_plots(out, rows), facts=_facts(run))
     with report.atomic(path) as tmp:
         tmp.write_text(page, encoding="utf-8")

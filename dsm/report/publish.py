@@ -22,9 +22,11 @@ from . import figures, frontier, html as htmlpage, jobs as draw_jobs, tables as 
 from ..truth import metrics
 from .sections import cascades, motion
 from .sections import soft as soft_report
+from .sections import hybrid as hybrid_report
 from .sections import virtual as virtual_report
 
-PLOT_PREFIXES = ("vs_bias_", "vs_resolution_", "vs_texels_", "pareto_", "tradeoff_", "soft_", "cascades_", "flicker_")
+PLOT_PREFIXES = ("vs_bias_", "vs_resolution_", "vs_texels_", "pareto_", "tradeoff_", "soft_", "cascades_", "flicker_",
+                 "hybrid_")
 IMAGES_PER_JOB = 150
 
 
@@ -179,6 +181,7 @@ def write_report(out: Path, images=(), curves=None, plots: bool = True) -> dict:
                 p.unlink()
         jobs += figures.plot_jobs(folder, rows, rates)
         jobs += soft_report.plot_jobs(folder, rows)          # area lights: MAE of V against V* by region
+        jobs += hybrid_report.plot_jobs(folder, rows)        # [hybrid]: error against rays per receiver
     n_figures = len(jobs)
     items = [i for i in images if i is not None]
     by_folder = {}
@@ -197,6 +200,7 @@ def write_report(out: Path, images=(), curves=None, plots: bool = True) -> dict:
     if points:                          # a run from before the cost columns has no frontier (table.md says so)
         frontier.write_csv(out / "frontier.csv", points)
     virtual_report.write_table(out / "virtual.md", rows)
+    hybrid_report.write_table(out / "hybrid.md", rows)
     htmlpage.write_html(out / "report.html", rows, run)
     t3 = time.perf_counter()
     return {"figures": n_figures, "images": len(items), "workers": pool, "read_s": t1 - t0, "draw_s": t2 - t1,
