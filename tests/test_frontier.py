@@ -191,3 +191,21 @@ def test_the_leaderboard_ranks_inside_memory_classes_and_says_the_console_s_word
     assert [(k, [r["contender"] for r in rs], [r["rank"] for r in rs]) for k, rs in classes] == [
         (20, ["small"], [1]), (24, ["big"], [1])]
     assert "1 MiB to 2 MiB: small" in text and "16 MiB to 32 MiB: big" in text
+
+
+def test_a_hybrid_case_is_the_map_alone_and_the_map_with_its_rays(run_dict):
+    """[hybrid]: each map case is one point alone (its own counts) and one per rule, the error left after the
+    rays and the rays traced added to the map's ('all' traces every receiver: error 0, map rays + receivers);
+    the oracle rule reads V*: the floor, on no frontier and in no answer."""
+    from dsm.report import frontier
+    cfg = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [40, 40]}, map={"resolution": 64},
+                      scheme=[{"name": "constant", "bias": "1 texel"}],
+                      hybrid=[{"rule": "band", "k": 2.0}, {"rule": "oracle"}, {"rule": "all"}])
+    rows = run_dict(cfg).rows
+    pts = frontier.points_from_rows(rows)
+    assert len(pts) == 1 + 2 and not any("oracle" in p.instance for p in pts)
+    alone, band, every = pts
+    r = rows[0]
+    assert alone.error == (r["n_acne"] + r["n_peterpan"]) / r["n_receivers"] and alone.rays == r["map_rays"]
+    assert every.error == 0 and every.rays == r["map_rays"] + r["n_receivers"] and every.bytes == alone.bytes
+    assert band.instance.endswith("+ rays: band k=2.0") and alone.rays < band.rays < every.rays

@@ -38,6 +38,7 @@ CHOICES = ("view", "filter", "format", "culling", "cascade_layout", "map_kind", 
 CSV_COLUMNS = ("scene", "light", "instance", "error_rate", "bytes", "rays", "taps", "build_ms", "lookup_ms",
                "on_frontier")
 TIME_COLUMNS = ("build_ms", "lookup_ms")
+FLOOR_RULES = ("oracle",)       # a hybrid rule that reads V* is the floor (hybrid.md), not an instance to use
 
 
 @dataclass(frozen=True)
@@ -108,7 +109,8 @@ def points_from_rows(rows) -> list:
         if (base.scene, base.light, base.instance) not in seen:      # the map alone, the budget's 0
             seen.add((base.scene, base.light, base.instance))
             out.append(base)
-        out.append(_hybrid_point(r, base))
+        if r["hybrid_rule"] not in FLOOR_RULES:
+            out.append(_hybrid_point(r, base))
     return out
 
 
@@ -247,7 +249,8 @@ def families(tied: list, chosen: Choice) -> str:
 def answer_words(a: dict) -> tuple:
     """(what to use, why: the ties, what a lower error costs) of one light type's answer, in words (counts only)."""
     c, n_tied = a["chosen"], len(a["tied"]) - 1
-    head = f"{a['light_type']} ({a['situations']} situations): {c.instance}: error {_rate(c.error)}, {_cost(c)}"
+    n = a["situations"]
+    head = f"{a['light_type']} ({n} situation{'' if n == 1 else 's'}): {c.instance}: error {_rate(c.error)}, {_cost(c)}"
     if n_tied == 0:
         why = "the lowest error, told apart from every other instance"
     else:
