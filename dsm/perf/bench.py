@@ -306,30 +306,55 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
     timing.enable_history()
     meshes = Path(meshes) if meshes else MESHES
     budget = physical_memory() // 4           # the default memory budget ([memory] budget_mb)
-    builds, lookups, scale = [], [], []
+    result = {"variant": variant, "threads": dr.thread_count(), "repeats": repeats, "builds": [], "lookups": [],
+              "dou_table1_ms": DOU_TABLE1, "scaling": [], "exponents": {}, "budget_mb": budget / 2 ** 20,
+              "versions": env.versions(), "machine": env.machine(), "sections": [], "complete": False}
     for spec in _scenes(meshes):
         b, x, s = _scene_bench(spec, resolutions, repeats, scaling_resolutions, budget)
-        builds, lookups, scale = builds + b, lookups + x, scale + s
-    result = {"variant": variant, "threads": dr.thread_count(), "repeats": repeats, "builds": builds,
-              "lookups": lookups, "dou_table1_ms": DOU_TABLE1, "scaling": scale, "exponents": _exponents(scale),
-              "budget_mb": budget / 2 ** 20, "versions": env.versions(), "machine": env.machine()}
+        result["builds"] += b
+        result["lookups"] += x
+        result["scaling"] += s
+        result["exponents"] = _exponents(result["scaling"])
+        keep_section(out, result, f"builds and lookups of {spec.label}")
     if frame:
         specs = _scenes(meshes)
         result["frame"] = frame_cost(specs[-1], _light_for(specs[-1]), repeats=max(repeats, 5))
+        keep_section(out, result, "frame")
     if geometry:
         result["geometry"] = geometry_cost(out, tuple(geometry), repeats=max(1, min(repeats, 3)))
+        keep_section(out, result, "geometry")
     if sweep:
         from .bench_modes import build_modes, lookup_modes
         result["sweep"] = sweep_throughput(out)
         result["lookup_modes"] = lookup_modes(out)
         result["build_modes"] = build_modes(out)
+        keep_section(out, result, "sweep")
     if prefilter:
         from .bench_prefilter import prefilter_cost
         result["prefilter"] = prefilter_cost(repeats=repeats)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "bench.json").write_text(json.dumps(result, indent=2))
-    (out / "bench.md").write_text(markdown(result))
+        keep_section(out, result, "prefilter")
+    result["complete"] = True
+    keep_section(out, result, None)
     return result
+
+
+def keep_section(out: Path, result: dict, section: str | None):
+    """bench.json and bench.md rewritten (atomically) with ``section`` finished, so a Ctrl-C or a
+    kill keeps every section measured before it; None: the bench is complete."""
+    from ..report import io as report_io
+    if section is not None:
+        result["sections"].append(section)
+    out.mkdir(parents=True, exist_ok=True)
+    report_io.write_text(out / "bench.json", json.dumps(result, indent=2))
+    report_io.write_text(out / "bench.md", markdown(result))
+
+
+def kept_sections(out: Path) -> list | None:
+    """The sections an interrupted perf kept in ``out``/bench.json (None: no bench.json)."""
+    try:
+        return list(json.loads((Path(out) / "bench.json").read_text()).get("sections", []))
+    except (OSError, ValueError, AttributeError):
+        return None
 
 
 def _exponents(scale) -> dict:
@@ -443,6 +468,8 @@ def markdown(r) -> str:
     """bench.md: every section measured, in order."""
     from .bench_geometry import markdown as geometry_md
     lines = _md_builds(r) + _md_two(r) + _md_lookups(r) + _md_scaling(r) + _md_frame(r)
+    if r.get("complete") is False:      # an interrupted perf: what it measured, said at the top
+        lines[1:1] = ["", f"Interrupted: measured only {', '.join(r['sections']) or 'nothing'}."]
     from .bench_prefilter import markdown as prefilter_md
     lines += geometry_md(r["geometry"]) if r.get("geometry") else []
     lines += prefilter_md(r["prefilter"]) if r.get("prefilter") else []

@@ -1,0 +1,106 @@
+"""Issue 76: every hostile input on the newest surfaces answered. Each row: the exit code, the one
+line (naming the file, key or flag and what is valid) and no file outside the command's own
+written or lost."""
+import json
+
+import pytest
+
+from dsm import cli
+
+
+def _files(folder) -> dict:
+    """Every file under ``folder`` with its bytes (the lock file aside): what a refusal must leave."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
+            if p.is_file() and p.name != ".dsm-lock"}
+
+
+def _answer(capsys, *argv) -> tuple:
+    """(exit status, stderr's lines) of ``dsm argv``."""
+    capsys.readouterr()
+    rc = cli.main([str(a) for a in argv])
+    return rc, capsys.readouterr().err.strip().splitlines()
+
+
+def _one_line(err: list, *words):
+    assert len(err) == 1, err
+    assert "Traceback" not in err[0]
+    for w in words:
+        assert w in err[0], (w, err[0])
+
+
+# ---------------------------------------------------------------- lost or mixed work: folders
+
+FOREIGN = {"a dsm run's folder": ({"run.json": "{}", "metrics.csv": "case\n", "report.html": "<p>"}, "holds a dsm run"),
+           "a user's folder": ({"notes.txt": "mine", "thesis/ch1.tex": "x"}, "not a dsm benchmark's")}
+
+
+@pytest.mark.parametrize("force", [False, True])
+@pytest.mark.parametrize("kind", list(FOREIGN))
+def test_benchmark_refuses_a_folder_of_another_commands_files(kind, force, tmp_path, capsys):
+    out = tmp_path / "f"
+    for name, text in FOREIGN[kind][0].items():
+        (out / name).parent.mkdir(parents=True, exist_ok=True)
+        (out / name).write_text(text)
+    before = _files(out)
+    rc, err = _answer(capsys, "benchmark", "--out", out, *(["--force"] if force else []))
+    assert rc == 2
+    _one_line(err, f"--out {out}", FOREIGN[kind][1], "choose another --out")
+    assert _files(out) == before
+
+
+def test_benchmark_page_with_out_is_refused(tmp_path, capsys):
+    rc, err = _answer(capsys, "benchmark", "--page", tmp_path / "a", "--out", tmp_path / "b")
+    assert rc == 2
+    _one_line(err, "--page", "--out does not apply")
+    assert list(tmp_path.iterdir()) == []
+
+
+PERF = ["perf", "--resolutions", "32", "--scaling", "", "--repeats", "1", "--no-sweep", "--no-prefilter"]
+
+
+@pytest.mark.parametrize("held, words", [
+    ({"run.json": "{}", "metrics.csv": "case\n"}, ["holds a dsm run", "choose another --out"]),
+    ({"bench.json": "{}", "bench.md": "# earlier"}, ["holds an earlier dsm perf (bench.json)", "--force"]),
+])
+def test_perf_refuses_a_run_folder_and_an_earlier_perf(held, words, tmp_path, capsys):
+    out = tmp_path / "p"
+    out.mkdir()
+    for name, text in held.items():
+        (out / name).write_text(text)
+    before = _files(out)
+    rc, err = _answer(capsys, *PERF, "--meshes", tmp_path, "--out", out)
+    assert rc == 2
+    _one_line(err, f"--out {out}", *words)
+    assert _files(out) == before
+
+
+@pytest.mark.parametrize("flag", ["--resolutions", "--scaling"])
+def test_perf_refuses_a_map_above_16384(flag, tmp_path, capsys):
+    argv = [a if a != "32" or flag != "--resolutions" else "100000" for a in PERF]
+    if flag == "--scaling":
+        argv[argv.index("--scaling") + 1] = "1024,100000"
+    rc, err = _answer(capsys, *argv, "--out", tmp_path / "p")
+    assert rc == 2
+    _one_line(err, flag, "100000", "16384")
+    assert not (tmp_path / "p").exists()
+
+
+def test_perf_interrupted_keeps_its_measured_sections_and_force_replaces_them(tmp_path, capsys, monkeypatch):
+    from dsm.perf import bench
+
+    def interrupted(*a, **k):          # Ctrl-C at a known point: as the frame section starts
+        raise KeyboardInterrupt
+    monkeypatch.setattr(bench, "frame_cost", interrupted)
+    out, meshes = tmp_path / "p", tmp_path / "no-meshes"
+    meshes.mkdir()
+    rc, err = _answer(capsys, *PERF, "--meshes", meshes, "--out", out)
+    assert rc == 130
+    _one_line(err, "interrupted", str(out / "bench.json"), "builds and lookups of terrain", "the rest not measured")
+    kept = json.loads((out / "bench.json").read_text())
+    assert kept["complete"] is False and [b["scene"] for b in kept["builds"]] == ["plane_box", "terrain"]
+    assert "Interrupted: measured only builds and lookups of plane_box" in (out / "bench.md").read_text()
+    assert sorted(p.name for p in out.iterdir()) == ["bench.json", "bench.md"]
+    monkeypatch.undo()
+    rc, err = _answer(capsys, *PERF, "--no-frame", "--meshes", meshes, "--out", out, "--force")
+    assert rc == 0, err
+    assert json.loads((out / "bench.json").read_text())["complete"] is True
