@@ -45,6 +45,7 @@ def _numeric(fn: str, column: str, rows: list):
     if not isinstance(column, str):
         raise TypeError(f"{fn}: column must be a column name (text), got {column!r}")
     known = [c for c in record.NAMES if c not in record.TEXT_COLUMNS]
+    known.sort(key=lambda c: not c.endswith("_rate"))      # the rates first: what a threshold is usually of
     known += sorted({k for r in rows for k, v in r.items() if k not in record.NAMES and _is_number(v)})
     if column in record.TEXT_COLUMNS:
         raise TypeError(f"{fn}: {column!r} is a text column; give a numeric one ({', '.join(known[:12])}, ...)")

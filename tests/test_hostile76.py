@@ -104,3 +104,70 @@ def test_perf_interrupted_keeps_its_measured_sections_and_force_replaces_them(tm
     rc, err = _answer(capsys, *PERF, "--no-frame", "--meshes", meshes, "--out", out, "--force")
     assert rc == 0, err
     assert json.loads((out / "bench.json").read_text())["complete"] is True
+
+
+# ---------------------------------------------------------------- dsm benchmark's documents and kept cases
+
+from dsm.benchmark import caselog, compare, document  # noqa: E402
+
+GOOD = {"suite": "dsm-bench-4", "suite_sha256": "x", "size": "test", "dsm_version": "0", "versions": {
+    "dsm": "0", "mitsuba": "3", "drjit": "1"}, "variant": "llvm_ad_rgb", "machine": {}, "cases": [
+    {"scene": "s", "unit": "m", "offset": "0", "light": "directional", "contender": "p", "n_receivers": 100,
+     "n_acne": 3, "n_peterpan": 1, "flip": 0.01, "error_rate": 0.04, "map_bytes": 1, "page_table_bytes": 0,
+     "map_rays": 1, "taps": 1}], "results_version": 3}
+
+
+def _doc(**case):
+    return {**GOOD, "cases": [{**GOOD["cases"][0], **case}]}
+
+
+@pytest.mark.parametrize("doc, word", [
+    (_doc(error_rate="0.04"), "cases[0].error_rate is '0.04', not a number"),
+    ({**GOOD, "cases": [{k: v for k, v in GOOD["cases"][0].items() if k != "n_receivers"}]}, "has no n_receivers"),
+    ({**GOOD, "cases": []}, "cases is empty"),
+    ({**GOOD, "cases": GOOD["cases"] * 2}, "cases[1] repeats cases[0]"),
+])
+def test_page_and_compare_refuse_a_damaged_document_in_one_line(doc, word, tmp_path, capsys):
+    folder = tmp_path / "b"
+    folder.mkdir()
+    (folder / "results.json").write_text(json.dumps(doc))
+    before = _files(folder)
+    rc, err = _answer(capsys, "benchmark", "--page", folder)
+    assert rc == 2
+    _one_line(err, "--page", str(folder / "results.json"), word)
+    assert _files(folder) == before
+    (tmp_path / "good.json").write_text(json.dumps(GOOD))
+    rc, err = _answer(capsys, "benchmark", "--compare", tmp_path / "good.json", folder / "results.json",
+                      "--out", tmp_path / "cmp")
+    assert rc == 2
+    _one_line(err, "--compare", word)
+    assert not (tmp_path / "cmp" / "compare.json").exists()
+
+
+@pytest.mark.parametrize("a, b, changed", [(0.01, float("nan"), 1), (float("nan"), 0.01, 1),
+                                           (float("nan"), float("nan"), 0), (0.01, 0.0105, 0)])
+def test_compare_counts_a_flip_that_became_undefined_as_changed(a, b, changed):
+    diff = compare.compare(_doc(flip=a), _doc(flip=b))
+    assert (len(diff["changed"]), diff["n_tied"]) == (changed, 1 - changed)
+
+
+def _record(**over) -> dict:
+    rec = {"scene": "s", "unit": "m", "light": "directional", "contender": "p", "n_receivers": 795,
+           "n_gt_shadowed": 40, "n_acne": 21, "n_peterpan": 4}
+    rec.update(over)
+    n, sh = rec["n_receivers"], rec["n_gt_shadowed"]
+    rates = {"acne_rate": rec["n_acne"] / (n - sh), "peterpan_rate": rec["n_peterpan"] / sh,
+             "error_rate": (rec["n_acne"] + rec["n_peterpan"]) / n}
+    return {**rec, **rates, **over}
+
+
+@pytest.mark.parametrize("edit", [{}, {"n_acne": 99999}, {"error_rate": 0.5}, {"n_peterpan": 41}, {"n_acne": -1},
+                                  {"n_receivers": 10}])
+def test_a_kept_case_edited_to_impossible_counts_runs_again(edit, tmp_path):
+    from types import SimpleNamespace
+    log = caselog.CaseLog(tmp_path, {"suite": "dsm-bench-4"})
+    log.start(resume=False)
+    log.keep(0, SimpleNamespace(scene="s", unit="m", offset="0"), [_record(**edit)], [], "llvm_ad_rgb")
+    log.keep(1, SimpleNamespace(scene="t", unit="m", offset="0"), [_record(), {"contender": "oracle",
+                                                                               "n_receivers": 3}], [], "llvm_ad_rgb")
+    assert sorted(log.finished()) == ([0, 1] if not edit else [1])

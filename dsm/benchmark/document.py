@@ -74,6 +74,8 @@ def check(doc, path="<document>") -> dict:
     elif "versions" in doc and not isinstance(doc["versions"], dict):      # older: optional, but an object
         raise NotResults(f"{where}: versions is {_kind(doc['versions'])}, not an object of versions")
     _records(doc.get("cases"), where, "cases", COUNTS)
+    if not doc["cases"]:
+        raise NotResults(f"{where}: cases is empty: a results document holds a record per case and contender")
     if version >= 4:
         _costs(doc["cases"], where)
     _records(doc.get("flicker", []), where, "flicker", ())
@@ -88,6 +90,7 @@ def _records(recs, where: str, key: str, counts: tuple):
     """Every record of list ``key`` names its case and holds whole counts."""
     if not isinstance(recs, list):
         raise NotResults(f"{where}: {key} is {_kind(recs)}, not a list of records")
+    seen = {}
     for i, rec in enumerate(recs):
         if not isinstance(rec, dict):
             raise NotResults(f"{where}: {key}[{i}] is {_kind(rec)}, not a record (an object)")
@@ -95,11 +98,18 @@ def _records(recs, where: str, key: str, counts: tuple):
         if missing:
             raise NotResults(f"{where}: {key}[{i}] has no text {missing[0]} (a record names scene, unit, light and "
                              "contender)")
+        ident = (*(rec[n] for n in NAMES), str(rec.get("offset", "0")))
+        if ident in seen:        # --compare and the ranking would keep one of the two silently
+            raise NotResults(f"{where}: {key}[{i}] repeats {key}[{seen[ident]}] ({', '.join(ident)}): one record "
+                             "per case and contender")
+        seen[ident] = i
+        if key == "cases" and "n_receivers" not in rec:
+            raise NotResults(f"{where}: {key}[{i}] has no n_receivers (every case record counts its receivers)")
         for c in counts:
             if c in rec and not (isinstance(rec[c], int) and not isinstance(rec[c], bool) and rec[c] >= 0):
                 raise NotResults(f"{where}: {key}[{i}].{c} is {rec[c]!r}, not a count (a whole number >= 0)")
-        if "flip" in rec and rec["flip"] is not None:
-            _number(rec["flip"], where, f"{key}[{i}].flip")
+        for name in [k for k in rec if k == "flip" or k.endswith("_rate")]:
+            _number(rec[name], where, f"{key}[{i}].{name}")
 
 
 def _costs(recs: list, where: str):
