@@ -171,3 +171,55 @@ def test_a_kept_case_edited_to_impossible_counts_runs_again(edit, tmp_path):
     log.keep(1, SimpleNamespace(scene="t", unit="m", offset="0"), [_record(), {"contender": "oracle",
                                                                                "n_receivers": 3}], [], "llvm_ad_rgb")
     assert sorted(log.finished()) == ([0, 1] if not edit else [1])
+
+
+# ---------------------------------------------------------------- virtual shadow maps
+
+def _virtual_toml(tmp_path, virtual: str = "", light: str = "[0.2, -0.3, -1]", map_table: str = "") -> str:
+    cfg = tmp_path / "v.toml"
+    cfg.write_text('[experiment]\nname = "v"\n[camera]\nresolution = [32, 32]\n[[scene]]\nbuiltin = "plane_box"\n'
+                   f'[[light]]\ntype = "directional"\ndirection = {light}\n[map]\n{map_table}[map.virtual]\n'
+                   f'preset = "ue5"\n{virtual}[[scheme]]\nname = "none"\n')
+    return cfg
+
+
+@pytest.mark.parametrize("virtual", ["levels = 1\n", "unit_cm = 1e30\n", "first_level = -60\nlast_level = -60\n"])
+def test_virtual_levels_that_hold_no_receiver_fail_naming_the_keys(virtual, tmp_path, capsys):
+    out = tmp_path / "o"
+    rc, err = _answer(capsys, "run", _virtual_toml(tmp_path, virtual), "--out", out)
+    assert rc == 1
+    failed = [line for line in err if line.startswith("dsm: failed")]
+    assert len(failed) == 1 and "Traceback" not in "\n".join(err) and "incompatible sizes" not in failed[0]
+    for word in ("none of the", "map.virtual.first_level, last_level or levels", "unit_cm", "at most 60"):
+        assert word in failed[0], failed[0]
+    assert json.loads((out / "run.json").read_text())["n_failed"] == 1
+
+
+def test_a_sun_from_below_gives_a_virtual_map_the_empty_case_it_gives_a_plain_map(tmp_path, capsys):
+    out = tmp_path / "o"
+    rc, err = _answer(capsys, "run", _virtual_toml(tmp_path, light="[0, 0, 1]"), "--out", out)
+    assert rc == 0, err
+    assert any("1 cases are empty" in line and "undefined" in line for line in err)
+    plain = tmp_path / "plain.toml"
+    plain.write_text(_virtual_toml(tmp_path, light="[0, 0, 1]").read_text().replace('[map.virtual]\npreset = "ue5"\n', ""))
+    assert _answer(capsys, "run", plain, "--out", tmp_path / "p")[0] == 0
+    counts = lambda o: [json.loads((o / "run.json").read_text())[k] for k in ("n_failed", "n_empty", "n_cases_ok")]
+    assert counts(out) == counts(tmp_path / "p") == [0, 1, 0]
+
+
+def test_a_map_resolution_that_sizes_no_map_beside_a_virtual_one_is_refused(tmp_path, capsys):
+    for command in (["plan"], ["run", "--out", tmp_path / "o"]):
+        rc, err = _answer(capsys, command[0], _virtual_toml(tmp_path, map_table="resolution = [64, 128]\n"),
+                          *command[1:])
+        assert rc == 2
+        _one_line(err, "map.resolution", "[64, 128] sizes no map", "map.virtual.resolution")
+    assert not (tmp_path / "o").exists()
+
+
+def test_the_plan_counts_a_virtual_maps_rays_as_at_most(tmp_path, capsys):
+    rc = cli.main(["plan", str(_virtual_toml(tmp_path))])
+    text = capsys.readouterr().out
+    assert rc == 0
+    exact = next(line for line in text.splitlines() if "rays (exact)" in line)
+    bound = next(line for line in text.splitlines() if "rays (at most)" in line)
+    assert "map_texel" not in exact and "map_texel 33,554,432" in bound
