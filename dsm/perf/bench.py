@@ -25,7 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
-MESHES = Path(__file__).resolve().parents[2] / "data" / "meshes"   # the real test meshes shipped with the kit
+from ..core.env import meshes_folder
+
+MESHES = meshes_folder()       # the real test meshes shipped with the kit (a checkout's or a wheel's)
 
 DOU_TABLE1 = {"constant": 6.327, "slope_scaled": 6.647, "adaptive": 7.319, "dual": 9.890}
 
