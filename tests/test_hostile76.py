@@ -281,3 +281,28 @@ def test_the_words_say_why_no_technique_is_closest_where_the_truth_is_zero_withi
              "rel_error": "", "sign": "", "cosine": ""} for t, ad in (("nearest", "0.05"), ("pcss", "0.01"))]
     text = findings.compare_words(rows)
     assert "undefined" in text and "the truth is 0 within its own error" in text and "nearest (" not in text
+
+
+# ---------------------------------------------------------------- also
+
+def test_a_truncated_sponza_obj_names_its_line_not_numpy(tmp_path):
+    from dsm.core.types import ConfigError
+    from dsm.scenes import models
+    obj = tmp_path / "sponza.obj"
+    obj.write_text("v 0 0 0\nv 1 1 1\nv 2 2\n")
+    with pytest.raises(ConfigError) as e:
+        models.version_of(models.SPONZA, obj, None, "s.toml", "scene[0]")
+    text = str(e.value)
+    assert "scene[0].file" in text and "line 3 is a vertex with fewer than 3 coordinates" in text
+    assert "inhomogeneous" not in text
+
+
+def test_a_fitted_exponent_of_one_size_is_undefined_not_nan():
+    from dsm.perf import bench, bench_geometry
+    nan = float("nan")
+    geometry = {"rows": [], "exponents": {k: nan for k in ("build_kernel_ms", "build_wall_ms", "frame_kernel_ms",
+                                                            "frame_wall_ms")}}
+    text = "\n".join(bench_geometry.markdown(geometry))
+    assert "build undefined (one size" in text and "nan" not in text
+    assert bench.fitted_exponent([1024], [3.0]) != bench.fitted_exponent([1024], [3.0])     # NaN: one size
+    assert bench_geometry.exponent_text(bench.fitted_exponent([1024], [3.0])).startswith("undefined")

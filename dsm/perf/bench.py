@@ -567,6 +567,7 @@ def _md_lookups(r) -> list:
 
 def _md_scaling(r) -> list:
     """Section (4): build time against resolution, with the fitted exponents."""
+    from .bench_geometry import exponent_text
     lines = []
     if r.get("scaling"):
         lines += ["", f"## (4) Build time against resolution (tiled within the memory budget of "
@@ -580,7 +581,7 @@ def _md_scaling(r) -> list:
         lines += ["", "Fitted exponent of time against texels (log-log least squares; 1 is linear):", "",
                   "| scene | first layer | two layers |", "|---|---|---|"]
         for label, e in r["exponents"].items():
-            lines.append(f"| {label} | {e['first']:.3f} | {e['two']:.3f} |")
+            lines.append(f"| {label} | {exponent_text(e['first'])} | {exponent_text(e['two'])} |")
     return lines
 
 
