@@ -31,9 +31,10 @@ MAX_MAP = 16384     # the largest map resolution: [map] resolution's maximum (co
 DEFAULT_CONFIG = Path(__file__).parent / "config" / "default.toml"
 # what a dsm run writes into its folder: --force clears a folder holding nothing else
 RUN_OUTPUTS = ("run.json", "metrics.csv", "oracle.csv", "table.md", "images", "plots", "report.html",
-               "oracle_curves.npz", "cascades.csv", "cascades.md", "frames.csv", "virtual.md")
+               "oracle_curves.npz", "cascades.csv", "cascades.md", "frames.csv", "virtual.md",
+               "frontier.csv")
 # left by a killed run (report.atomic)
-RUN_TEMP = re.compile(r"\.(?:run\.json|metrics\.csv|oracle\.csv|table\.md|report\.html|oracle_curves\.npz)\.\d+\.tmp")
+RUN_TEMP = re.compile(r"\.(?:run\.json|metrics\.csv|frontier\.csv|oracle\.csv|table\.md|report\.html|oracle_curves\.npz)\.\d+\.tmp")
 
 
 def _positive_int(text):
