@@ -108,6 +108,8 @@ def assert_no_worse_than(res, column: str, scheme: str, than: str, *, params: st
     """In every situation (scene, light, view, resolution, filter, format, cascade layout) ``where``
     selects, ``scheme``'s ``column`` is at most ``than``'s plus ``tolerance`` (one instance each:
     ``params`` / ``than_params`` pick it where the scheme is swept)."""
+    if tolerance is None:
+        raise TypeError("assert_no_worse_than: tolerance must be a number (0: no worse at all), got None")
     _threshold("assert_no_worse_than", "tolerance", tolerance)
     pick = lambda name, prm: res.where(scheme=name, **({"params": prm} if prm else {}), **where).rows
     mine, theirs = pick(scheme, params), pick(than, than_params)

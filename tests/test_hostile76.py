@@ -48,6 +48,15 @@ def test_benchmark_refuses_a_folder_of_another_commands_files(kind, force, tmp_p
     assert _files(out) == before
 
 
+def test_benchmark_takes_a_folder_that_holds_only_its_own_compare(tmp_path):
+    from dsm.benchmark import command
+    out = tmp_path / "benchmark"
+    out.mkdir()
+    (out / "compare.json").write_text("{}")
+    (out / "compare.txt").write_text("")
+    assert command.folder_problem(out, force=False, resume=False) is None
+
+
 def test_benchmark_page_with_out_is_refused(tmp_path, capsys):
     rc, err = _answer(capsys, "benchmark", "--page", tmp_path / "a", "--out", tmp_path / "b")
     assert rc == 2

@@ -76,6 +76,8 @@ def test_the_plugin_fixture_runs_a_config_once_for_several_calls(dsm_results, mo
     (lambda r: assert_no_worse_than(r, "error_rate", "none", than="constant", tolerance=float("nan")), ValueError,
      ["tolerance = nan", "finite"]),
     (lambda r: assert_oracle_gap(r, below="0.1"), TypeError, ["below must be a number"]),
+    (lambda r: assert_no_worse_than(r, "error_rate", "none", than="constant", tolerance=None), TypeError,
+     ["tolerance must be a number"]),
     (lambda r: assert_rate(r.where(allow_empty=True, scheme="nonne"), "acne_rate", below=0.5), ValueError,
      ["the Results hold no case"]),
 ])

@@ -146,7 +146,7 @@ def foreign_problem(out: Path) -> str | None:
     held = sorted(p.name for p in lock.entries(out) or [])
     if (out / "run.json").is_file() or (out / "metrics.csv").is_file():
         return f"--out {out}: holds a dsm run (run.json, metrics.csv), not a dsm benchmark; choose another --out"
-    if held and not any(name in held for name in WRITTEN):
+    if held and not any(name in held for name in WRITTEN + ("compare.json", "compare.txt")):   # --compare's too
         more = ", ..." if len(held) > 3 else ""
         return (f"--out {out}: holds files that are not a dsm benchmark's ({', '.join(held[:3])}{more}); "
                 "choose another --out (an empty folder or a benchmark's)")
