@@ -94,7 +94,7 @@ def test_perf_refuses_a_map_above_16384(flag, tmp_path, capsys):
     assert not (tmp_path / "p").exists()
 
 
-def test_perf_interrupted_keeps_its_measured_sections_and_force_replaces_them(tmp_path, capsys, monkeypatch):
+def test_perf_interrupted_keeps_its_measured_sections_and_resume_goes_on(tmp_path, capsys, monkeypatch):
     from dsm.perf import bench
 
     def interrupted(*a, **k):          # Ctrl-C at a known point: as the frame section starts
@@ -102,17 +102,40 @@ def test_perf_interrupted_keeps_its_measured_sections_and_force_replaces_them(tm
     monkeypatch.setattr(bench, "frame_cost", interrupted)
     out, meshes = tmp_path / "p", tmp_path / "no-meshes"
     meshes.mkdir()
-    rc, err = _answer(capsys, *PERF, "--meshes", meshes, "--out", out)
+    argv = [*PERF, "--meshes", meshes, "--out", out]
+    rc, err = _answer(capsys, *argv)
     assert rc == 130
-    _one_line(err, "interrupted", str(out / "bench.json"), "builds and lookups of terrain", "the rest not measured")
+    _one_line(err, "interrupted", str(out / "bench.json"), "builds and lookups of terrain", "the rest not measured",
+              "--resume")
     kept = json.loads((out / "bench.json").read_text())
     assert kept["complete"] is False and [b["scene"] for b in kept["builds"]] == ["plane_box", "terrain"]
     assert "Interrupted: measured only builds and lookups of plane_box" in (out / "bench.md").read_text()
     assert sorted(p.name for p in out.iterdir()) == ["bench.json", "bench.md"]
-    monkeypatch.undo()
+    rc, err = _answer(capsys, *argv)            # neither --resume nor --force: refused, kept as it was
+    assert rc == 2 and "--resume" in err[0] and json.loads((out / "bench.json").read_text()) == kept
+    rc, err = _answer(capsys, *[a if a != "1" else "2" for a in argv], "--resume")   # other repeats
+    assert rc == 2
+    _one_line(err, "cannot resume", "repeats = 1, this one 2")
+    monkeypatch.setattr(bench, "frame_cost", lambda *a, **k: {"scene": "terrain", "map": 32})
+    monkeypatch.setattr(bench, "_scene_bench", interrupted)        # a kept section is not measured again
+    monkeypatch.setattr(bench, "markdown", lambda r: "")
+    rc, err = _answer(capsys, *argv, "--resume")
+    assert rc == 0, err
+    done = json.loads((out / "bench.json").read_text())
+    assert done["complete"] is True and done["builds"] == kept["builds"] and done["frame"]["map"] == 32
+    assert done["sections"] == kept["sections"] + ["frame"]
+
+
+def test_perf_force_replaces_an_earlier_perf(tmp_path, capsys):
+    out, meshes = tmp_path / "p", tmp_path / "no-meshes"
+    meshes.mkdir()
+    out.mkdir()
+    (out / "bench.json").write_text("{}")
+    (out / "notes.txt").write_text("mine")
     rc, err = _answer(capsys, *PERF, "--no-frame", "--meshes", meshes, "--out", out, "--force")
     assert rc == 0, err
     assert json.loads((out / "bench.json").read_text())["complete"] is True
+    assert (out / "notes.txt").read_text() == "mine"
 
 
 # ---------------------------------------------------------------- dsm benchmark's documents and kept cases
