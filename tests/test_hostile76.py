@@ -46,6 +46,11 @@ def test_benchmark_refuses_a_folder_of_another_commands_files(kind, force, tmp_p
     assert rc == 2
     _one_line(err, f"--out {out}", FOREIGN[kind][1], "choose another --out")
     assert _files(out) == before
+    (tmp_path / "a.json").write_text(json.dumps(GOOD))
+    rc, err = _answer(capsys, "benchmark", "--compare", tmp_path / "a.json", tmp_path / "a.json", "--out", out)
+    assert rc == 2                   # --compare's compare.json and compare.txt: not among them either
+    _one_line(err, f"--out {out}", FOREIGN[kind][1])
+    assert _files(out) == before
 
 
 def test_benchmark_takes_a_folder_that_holds_only_its_own_compare(tmp_path):

@@ -355,6 +355,10 @@ def resumed(out: Path, asked: dict) -> dict:
         raise Mismatch(f"{Path(out) / 'bench.json'} cannot be read") from None
     if not isinstance(kept, dict) or kept.get("complete") is not False:
         raise Mismatch("it holds no interrupted dsm perf (bench.json is complete or from an older dsm)")
+    rows = [r for k in SCENE_KEYS for r in (kept.get(k) if isinstance(kept.get(k), list) else [None])]
+    if not (isinstance(kept.get("sections"), list) and all(isinstance(x, str) for x in kept["sections"])
+            and all(isinstance(r, dict) and isinstance(r.get("scene"), str) for r in rows)):
+        raise Mismatch(f"{Path(out) / 'bench.json'} is damaged (its sections or rows are not a dsm perf's)")
     differs = [k for k in asked if (kept.get("asked") or {}).get(k) != asked[k]]
     if differs:
         k = differs[0]
@@ -392,9 +396,10 @@ def keep_section(out: Path, result: dict, section: str | None):
 def kept_sections(out: Path) -> list | None:
     """The sections an interrupted perf kept in ``out``/bench.json (None: no bench.json)."""
     try:
-        return list(json.loads((Path(out) / "bench.json").read_text()).get("sections", []))
+        sections = json.loads((Path(out) / "bench.json").read_text()).get("sections", [])
     except (OSError, ValueError, AttributeError):
         return None
+    return [str(x) for x in sections] if isinstance(sections, list) else None
 
 
 def _exponents(scale) -> dict:
