@@ -277,8 +277,10 @@ GRAD = '[gradient]\nscene = "plate"\nlight = "{light}"\nmap_resolution = 32\nima
      ["the light under the occluder's top", "valid: 0 < step < 1.5"]),
     ("point", "occluder_z", "inverse_starts = [1e30]\n", "gradient.inverse_starts",
      ["1e+30 moves occluder_z out of the scene", "|offset| < 0.5"]),
-    ("directional", "light_angle", "inverse_starts = [-0.5, 55]\n", "gradient.inverse_starts",
-     ["55 moves light_angle out of the scene", "|offset| < 40 degree"]),
+    ("directional", "light_angle", "inverse_starts = [-0.5, 75]\n", "gradient.inverse_starts",
+     ["75 moves light_angle out of the scene", "|offset| < 70 degree"]),
+    ("point", "occluder_x", "reference_step = {occluder_x = 10}\n", "gradient.reference_step.occluder_x",
+     ["10 moves the occluder out of the image", "valid: 0 < step < 1"]),
 ])
 def test_grad_refuses_what_it_would_ignore_or_measure_in_another_scene(light, param, extra, key, words, tmp_path,
                                                                        capsys):

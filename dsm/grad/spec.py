@@ -207,11 +207,12 @@ def parse(raw: dict, source: str = "<dict>") -> GradSpec:
 
 def _room(spec: GradSpec) -> dict:
     """How far each parameter may move from its nominal value (in its unit) and the scene stay one: the
-    occluder between the ground and the light, the light above the occluder, inside the image's window."""
+    occluder between the ground and the light, the light above the occluder, inside the image's window, a
+    directional light above the horizon."""
     top, ground = spec.occluder_height + spec.thickness(), spec.occluder_height
     above = spec.light_height - top if spec.light != "directional" else math.inf
     return {"occluder_z": min(ground, above), "corner_z": min(ground, above), "light_height": above,
-            "occluder_x": spec.window, "light_x": spec.window, "light_angle": 60.0 - abs(spec.light_angle)}
+            "occluder_x": spec.window, "light_x": spec.window, "light_angle": 90.0 - abs(spec.light_angle)}
 
 
 def check_starts(spec: GradSpec, source: str):
@@ -228,13 +229,12 @@ def check_steps(spec: GradSpec, source: str, key: str):
     """A central difference's +-step that moves the occluder under the ground or above the light, or the
     light under the occluder's top, refused: the difference would measure another scene."""
     room = _room(spec)
-    for param in ("occluder_z", "corner_z", "light_height"):
-        if param not in spec.params:
-            continue
+    for param in spec.params:
         step = spec.step_in(param, getattr(spec, key), REFERENCE_STEP if key == "reference_step" else FD_STEP)
         if not step < room[param]:
-            what = "the light under the occluder's top" if param == "light_height" else (
-                "the occluder under the ground" if step >= spec.occluder_height else "the occluder above the light")
+            what = {"light_height": "the light under the occluder's top", "occluder_x": "the occluder out of the image",
+                    "light_x": "the light out of the image", "light_angle": "the light to the horizon (90 degrees)"}.get(
+                param, "the occluder under the ground" if step >= spec.occluder_height else "the occluder above the light")
             raise ConfigError(source, f"gradient.{key}.{param}", f"{step:g} moves {what} at one side of the central "
                               f"difference (valid: 0 < step < {room[param]:g})")
 
