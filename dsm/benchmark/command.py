@@ -82,8 +82,9 @@ def main(args) -> int:
     out = Path(args.out if args.out is not None else "benchmark")
     if out.exists() and not out.is_dir():
         return _err(f"--out {out}: is a file, not a folder; choose another --out")
-    if args.compare:               # its two files never land among another command's
-        return _err(foreign_problem(out)) if foreign_problem(out) else _held(out, lambda: _compare(args, out))
+    if args.compare:
+        problem = foreign_problem(out)          # its two files never land among another command's either
+        return _err(problem) if problem else _held(out, lambda: _compare(args, out))
     problem = folder_problem(out, args.force, args.resume)
     if problem:
         return _err(problem)

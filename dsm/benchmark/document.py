@@ -98,11 +98,7 @@ def _records(recs, where: str, key: str, counts: tuple):
         if missing:
             raise NotResults(f"{where}: {key}[{i}] has no text {missing[0]} (a record names scene, unit, light and "
                              "contender)")
-        ident = (*(rec[n] for n in NAMES), str(rec.get("offset", "0")))
-        if ident in seen:        # --compare and the ranking would keep one of the two silently
-            raise NotResults(f"{where}: {key}[{i}] repeats {key}[{seen[ident]}] ({', '.join(ident)}): one record "
-                             "per case and contender")
-        seen[ident] = i
+        _once(seen, rec, where, f"{key}[{i}]")
         if key == "cases" and "n_receivers" not in rec:
             raise NotResults(f"{where}: {key}[{i}] has no n_receivers (every case record counts its receivers)")
         for c in counts:
@@ -110,6 +106,16 @@ def _records(recs, where: str, key: str, counts: tuple):
                 raise NotResults(f"{where}: {key}[{i}].{c} is {rec[c]!r}, not a count (a whole number >= 0)")
         for name in [k for k in rec if k == "flip" or k.endswith("_rate")]:
             _number(rec[name], where, f"{key}[{i}].{name}")
+
+
+def _once(seen: dict, rec: dict, where: str, name: str):
+    """A record's case and contender not given before (``seen``: identity -> name): --compare and the
+    ranking would keep one of the two silently."""
+    ident = (*(rec[n] for n in NAMES), str(rec.get("offset", "0")))
+    if ident in seen:
+        raise NotResults(f"{where}: {name} repeats {seen[ident]} ({', '.join(ident)}): one record per case and "
+                         "contender")
+    seen[ident] = name
 
 
 def _costs(recs: list, where: str):
