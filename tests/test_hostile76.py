@@ -163,6 +163,9 @@ def _doc(**case):
     ({**GOOD, "cases": [{k: v for k, v in GOOD["cases"][0].items() if k != "n_receivers"}]}, "has no n_receivers"),
     ({**GOOD, "cases": []}, "cases is empty"),
     ({**GOOD, "cases": GOOD["cases"] * 2}, "cases[1] repeats cases[0]"),
+    (_doc(offset=[1]), "cases[0].offset is a list"),
+    (_doc(error_rate=1.5), "cases[0].error_rate is 1.5, not a rate"),
+    (_doc(n_gt_shadowed="10"), "cases[0].n_gt_shadowed is '10', not a count"),
 ])
 def test_page_and_compare_refuse_a_damaged_document_in_one_line(doc, word, tmp_path, capsys):
     folder = tmp_path / "b"

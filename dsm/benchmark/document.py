@@ -20,7 +20,7 @@ from ..core.env import ENGINE        # version 3: versions.<these> are text
 RESULTS_VERSION = 4
 READS = (1, 2, 3, 4)              # the versions this dsm reads
 NAMES = ("scene", "unit", "light", "contender")          # a record's identity (offset: optional, "0")
-COUNTS = ("n_receivers", "n_acne", "n_peterpan")          # integers where present (an oracle's: receivers only)
+COUNTS = ("n_receivers", "n_gt_shadowed", "n_acne", "n_peterpan")   # integers where present (an oracle's: receivers)
 COST_COUNTS = ("map_bytes", "page_table_bytes", "map_rays")   # version 4: every contender record's, whole
 
 
@@ -98,6 +98,9 @@ def _records(recs, where: str, key: str, counts: tuple):
         if missing:
             raise NotResults(f"{where}: {key}[{i}] has no text {missing[0]} (a record names scene, unit, light and "
                              "contender)")
+        if not isinstance(rec.get("offset", "0"), str):
+            raise NotResults(f"{where}: {key}[{i}].offset is {_kind(rec['offset'])}, not an offset's label (\"0\", "
+                             "\"1e4\")")
         _once(seen, rec, where, f"{key}[{i}]")
         if key == "cases" and "n_receivers" not in rec:
             raise NotResults(f"{where}: {key}[{i}] has no n_receivers (every case record counts its receivers)")
@@ -105,7 +108,7 @@ def _records(recs, where: str, key: str, counts: tuple):
             if c in rec and not (isinstance(rec[c], int) and not isinstance(rec[c], bool) and rec[c] >= 0):
                 raise NotResults(f"{where}: {key}[{i}].{c} is {rec[c]!r}, not a count (a whole number >= 0)")
         for name in [k for k in rec if k == "flip" or k.endswith("_rate")]:
-            _number(rec[name], where, f"{key}[{i}].{name}")
+            _rate(rec[name], where, f"{key}[{i}].{name}")
 
 
 def _once(seen: dict, rec: dict, where: str, name: str):
@@ -150,6 +153,13 @@ def _number(x, where: str, name: str):
         return
     if isinstance(x, bool) or not isinstance(x, (int, float)):
         raise NotResults(f"{where}: {name} is {x!r}, not a number")
+
+
+def _rate(x, where: str, name: str):
+    """A rate or FLIP: a number in [0, 1], NaN (undefined) or null."""
+    _number(x, where, name)
+    if x is not None and x == x and not 0.0 <= x <= 1.0:
+        raise NotResults(f"{where}: {name} is {x!r}, not a rate (from 0 to 1, or NaN where undefined)")
 
 
 def _kind(x) -> str:
