@@ -161,7 +161,10 @@ def test_the_wheel_ships_the_meshes_and_runs_the_benchmark_from_another_folder(t
                            capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
     meshes, same = where.stdout.split("\n")[:2]
     assert meshes.startswith(site) and same == "True True", where.stdout + where.stderr
-    run = subprocess.run([str(venv / "bin" / "dsm"), "benchmark", "--out", "b"], capture_output=True, text=True,
+    dsm = str(venv / "bin" / "dsm")
+    helped = subprocess.run([dsm, "benchmark", "--help"], capture_output=True, text=True, timeout=120, env=env).stdout
+    size = ["--size", "test"] if "--size" in helped else []      # --size replaces DSM_BENCHMARK_SIZE
+    run = subprocess.run([dsm, "benchmark", "--out", "b", *size], capture_output=True, text=True,
                          timeout=900, env={**env, "DSM_BENCHMARK_SIZE": "test"}, cwd=tmp_path)
     assert run.returncode == 0, run.stderr[-3000:]
     assert json.loads((tmp_path / "b" / "results.json").read_text())["cases"]
