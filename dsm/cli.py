@@ -26,12 +26,14 @@ from .experiment import resume
 from .experiment.lock import claim, entries, name_problem, unwritable
 from .core.env import MAX_THREADS, SetupError
 
+MAX_MAP = 16384     # the largest map resolution: [map] resolution's maximum (config/read.py)
+
 DEFAULT_CONFIG = Path(__file__).parent / "config" / "default.toml"
 # what a dsm run writes into its folder: --force clears a folder holding nothing else
 RUN_OUTPUTS = ("run.json", "metrics.csv", "oracle.csv", "table.md", "images", "plots", "report.html",
                "oracle_curves.npz", "cascades.csv", "cascades.md", "frames.csv", "virtual.md", "frontier.csv")
 # left by a killed run (report.atomic)
-RUN_TEMP = re.compile(r"\.(?:run\.json|metrics\.csv|oracle\.csv|table\.md|report\.html|oracle_curves\.npz)\.\d+\.tmp")
+RUN_TEMP = re.compile(r"\.(?:run\.json|metrics\.csv|frontier\.csv|oracle\.csv|table\.md|report\.html|oracle_curves\.npz)\.\d+\.tmp")
 
 
 def _positive_int(text):
@@ -119,6 +121,9 @@ def _bench_parser(sub):
     b.add_argument("--resolutions", default="256,512,1024,2048,4096", help="comma-separated map resolutions")
     b.add_argument("--repeats", type=_positive_int, default=5)
     b.add_argument("--meshes", help="folder of the real test meshes (default: the kit's data/meshes)")
+    b.add_argument("--force", action="store_true", help="replace an earlier dsm perf's bench.json and bench.md in --out")
+    b.add_argument("--resume", action="store_true", help="go on with the dsm perf interrupted in --out (its finished "
+                   "sections kept)")
     _add_machine(b, variant_help=None, threads=False)
     tables = {"--scaling": ("1024,2048,4096,8192", "map resolutions of the cost-against-resolution table, tiled "
                             "within the memory budget ('' to skip; default 1024,2048,4096,8192)"),
@@ -254,6 +259,10 @@ def _bench(args) -> int:
         _err(f"--resolutions/--scaling/--geometry: expected positive integers like 256,1024, got "
              f"{args.resolutions!r} / {args.scaling!r} / {args.geometry!r}")
         return 2
+    for flag, values in (("--resolutions", res), ("--scaling", scale)):
+        if max(values, default=0) > MAX_MAP:     # as dsm run's map.resolution: a map of 2^32 texels or more
+            _err(f"{flag}: {max(values)} is above {MAX_MAP}, the largest map resolution (as [map] resolution)")
+            return 2
     problem = meshes_problem(args.meshes)
     if problem:
         _err(problem)
@@ -267,19 +276,51 @@ def _bench(args) -> int:
 
 
 def _bench_held(args, res, scale) -> int:
-    from .perf.bench import run_bench
-    problem = out_problem(Path(args.out), force=True, bench=True)
+    from .perf.bench import Mismatch, kept_sections, run_bench
+    out = Path(args.out)
+    problem = out_problem(out, force=True, bench=True) or perf_folder_problem(out, args.force, args.resume)
     if problem:
         _err(problem)
         return 2
     try:
-        run_bench(Path(args.out), res, args.repeats, args.meshes, args.variant, scale, not args.no_sweep,
-                  not args.no_frame, args.geometry_triangles, not args.no_prefilter)
+        run_bench(out, res, args.repeats, args.meshes, args.variant, scale, not args.no_sweep, not args.no_frame,
+                  args.geometry_triangles, not args.no_prefilter, resume=args.resume)
     except SetupError as e:
         _err(f"setup error: {e}")
         return 3
+    except Mismatch as e:
+        _err(f"--out {out}: cannot resume: {e}; --force starts again")
+        return 2
+    except KeyboardInterrupt:
+        kept = kept_sections(out)
+        what = (f"kept in {out / 'bench.json'} and bench.md: {', '.join(kept)}; the rest not measured (the same "
+                "command with --resume goes on)" if kept else "no section had finished: nothing kept")
+        _err(f"perf interrupted; {what}")
+        return 130
     print((Path(args.out) / "bench.md").read_text())
     return 0
+
+
+PERF_FILES = ("bench.json", "bench.md")     # what dsm perf writes (and --force replaces)
+
+
+def perf_folder_problem(out: Path, force: bool, resume: bool = False) -> str | None:
+    """Why dsm perf may not write into ``out`` (None if it may): a dsm run's folder, or an earlier
+    perf without ``force`` (with it, the earlier perf's files are removed) or ``resume``."""
+    if force and resume:
+        return "--resume goes on with a perf and --force replaces it: give one"
+    if (out / "run.json").is_file() or (out / "metrics.csv").is_file():
+        return f"--out {out}: holds a dsm run (run.json, metrics.csv), not a dsm perf; choose another --out"
+    earlier = [out / f for f in PERF_FILES if (out / f).is_file()]
+    if resume:
+        return None if (out / "bench.json").is_file() else (
+            f"--out {out}: holds no interrupted dsm perf (bench.json) to resume; run without --resume")
+    if earlier and not force:
+        return (f"--out {out}: holds an earlier dsm perf ({earlier[0].name}); choose another --out, --resume "
+                "(goes on with an interrupted one) or --force (replaces it)")
+    for f in earlier:
+        f.unlink()
+    return None
 
 
 def _report(args) -> int:

@@ -26,7 +26,10 @@ def config_key(config) -> str:
     """What identifies a run of ``config``: a TOML file's path and bytes, or a dict's JSON text."""
     if isinstance(config, (str, Path)):
         path = Path(config).resolve()
-        return f"{path}:{hashlib.sha256(path.read_bytes()).hexdigest()}"
+        try:
+            return f"{path}:{hashlib.sha256(path.read_bytes()).hexdigest()}"
+        except OSError:             # missing or unreadable: dsm.run says why in its ConfigError
+            return f"{path}:unreadable"
     if isinstance(config, dict):
         return json.dumps(config, sort_keys=True, default=str)
     return repr(config)

@@ -18,8 +18,11 @@ a threshold unless ``allow_undefined=True`` (it says nothing about the scheme).
 """
 from __future__ import annotations
 
+import difflib
 import math
+import numbers
 
+from .core import record
 from .report import figures
 
 SITUATION = ("scene", "light", "view", "resolution", "filter", "format", "cascade_layout")
@@ -36,6 +39,38 @@ def _image(res, r: dict) -> str:
     return str(path) if path.is_file() else "no image file"
 
 
+def _numeric(fn: str, column: str, rows: list):
+    """Raise where ``column`` is no numeric column of a run's rows (misspelt, or text such as scheme),
+    naming the valid ones: a KeyError or a comparison of text told nothing."""
+    if not isinstance(column, str):
+        raise TypeError(f"{fn}: column must be a column name (text), got {column!r}")
+    known = [c for c in record.NAMES if c not in record.TEXT_COLUMNS]
+    known.sort(key=lambda c: not c.endswith("_rate"))      # the rates first: what a threshold is usually of
+    known += sorted({k for r in rows for k, v in r.items() if k not in record.NAMES and _is_number(v)})
+    if column in record.TEXT_COLUMNS:
+        raise TypeError(f"{fn}: {column!r} is a text column; give a numeric one ({', '.join(known[:12])}, ...)")
+    if column not in known:
+        near = difflib.get_close_matches(column, known, n=3, cutoff=0.5) or [c for c in known if column in c][:3]
+        hint = f" (did you mean {' or '.join(near)}?)" if near else ""
+        raise ValueError(f"{fn}: no column {column!r}{hint}; numeric columns: {', '.join(known[:10])}, ... "
+                         "(every one: dsm.core.record.NAMES)")
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, numbers.Real) and not isinstance(v, bool)
+
+
+def _threshold(fn: str, name: str, value):
+    """Raise where a threshold is no finite number: text would compare as a TypeError, NaN would pass
+    every comparison written ``not a > b``."""
+    if value is None:
+        return
+    if not _is_number(value):
+        raise TypeError(f"{fn}: {name} must be a number, got {value!r} ({type(value).__name__})")
+    if not math.isfinite(value):
+        raise ValueError(f"{fn}: {name} = {value!r}; give a finite number")
+
+
 def _fail(title: str, lines: list, most: int = 20):
     more = [f"  ... and {len(lines) - most} more"] if len(lines) > most else []
     raise AssertionError("\n".join([title] + lines[:most] + more))
@@ -46,7 +81,12 @@ def assert_rate(res, column: str, below: float | None = None, above: float | Non
     """Every case ``where`` selects has ``column`` below ``below`` (strictly) and/or at least ``above``."""
     if below is None and above is None:
         raise TypeError("assert_rate: give below=, above= or both")
+    for name, value in (("below", below), ("above", above)):
+        _threshold("assert_rate", name, value)
+    if not res.rows:
+        raise ValueError("assert_rate: the Results hold no case; a threshold cannot pass on no case")
     rows = res.where(**where).rows
+    _numeric("assert_rate", column, rows)
     bad = []
     for r in rows:
         v = r[column]
@@ -68,8 +108,12 @@ def assert_no_worse_than(res, column: str, scheme: str, than: str, *, params: st
     """In every situation (scene, light, view, resolution, filter, format, cascade layout) ``where``
     selects, ``scheme``'s ``column`` is at most ``than``'s plus ``tolerance`` (one instance each:
     ``params`` / ``than_params`` pick it where the scheme is swept)."""
+    if tolerance is None:
+        raise TypeError("assert_no_worse_than: tolerance must be a number (0: no worse at all), got None")
+    _threshold("assert_no_worse_than", "tolerance", tolerance)
     pick = lambda name, prm: res.where(scheme=name, **({"params": prm} if prm else {}), **where).rows
     mine, theirs = pick(scheme, params), pick(than, than_params)
+    _numeric("assert_no_worse_than", column, mine)
     ref = {}
     for r in theirs:
         key = tuple(r.get(k) for k in SITUATION)
@@ -100,6 +144,7 @@ def assert_oracle_gap(res, below: float, *, oracle: str = "world", **where):
     receivers at lambda 1."""
     if oracle not in ORACLES:
         raise ValueError(f"assert_oracle_gap: oracle={oracle!r} (choices: {', '.join(ORACLES)})")
+    _threshold("assert_oracle_gap", "below", below)
     keys = ("scene", "light", "view", "resolution", "culling", "format")
     floors = {tuple(o[k] for k in keys): o[f"{oracle}_objective"] for o in res.oracle if o.get("lambda", 1.0) == 1.0}
     rows = [r for r in res.where(filter="nearest", **where).rows if tuple(r[k] for k in keys) in floors]

@@ -248,7 +248,7 @@ def test_every_folder_of_the_kit_is_packaged():
     import tomllib
     listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
     folders = {".".join(p.parent.relative_to(ROOT).parts) for p in (ROOT / "dsm").rglob("__init__.py")}
-    assert folders | {"dsm_plugins"} == listed
+    assert folders | {"dsm_plugins", "dsm_meshes"} == listed       # dsm_meshes: data/meshes in a wheel
 
 
 def test_no_folder_shadows_a_public_name():

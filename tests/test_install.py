@@ -2,6 +2,7 @@
 stated in docs/install.md and holding the installed versions; and (slow) the plain route, `pip install .`
 into a fresh virtual environment, whose first run counts as this one."""
 import csv
+import json
 import os
 import re
 import shutil
@@ -84,7 +85,7 @@ def test_a_libllvm_dr_jit_cannot_load_is_one_line_naming_drjit_libllvm_path(tmp_
 def _copy_project(dest: Path) -> Path:
     """What `pip install .` builds from (the package, its plugins and pyproject.toml), outside the worktree."""
     dest.mkdir()
-    for name in ("dsm", "plugins"):
+    for name in ("dsm", "plugins", "data"):        # data: the real meshes the wheel ships (package dsm_meshes)
         shutil.copytree(ROOT / name, dest / name, ignore=shutil.ignore_patterns("__pycache__", "*.egg-info"))
     shutil.copy(ROOT / "pyproject.toml", dest / "pyproject.toml")
     return dest
@@ -130,3 +131,40 @@ def test_pip_install_into_a_fresh_venv_then_a_first_run_counts_as_here(tmp_path)
     if same_engine:          # the same Mitsuba and Dr.Jit: the same bits (another release may round otherwise)
         assert fresh == here
     print(f"plain route: pip install {install_s:.0f} s, first run {first_run_s:.0f} s")
+
+
+def test_the_wheel_ships_the_meshes_and_runs_the_benchmark_from_another_folder(tmp_path):
+    """Issue 76: a pip-installed kit had no data/meshes (dsm benchmark's traceback, dsm perf's rows
+    silently skipped). The wheel, installed with --no-deps into a fresh venv that sees this
+    environment's packages (offline), runs the benchmark at its test size from another folder."""
+    src = _copy_project(tmp_path / "src")
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+    built = subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--disable-pip-version-check",
+                            "-w", str(tmp_path / "dist"), str(src)], capture_output=True, text=True, timeout=600,
+                           env=env)
+    if built.returncode != 0:       # the isolated build needs setuptools from an index or pip's cache
+        pytest.skip(f"cannot build the wheel here: {built.stderr.strip().splitlines()[-1:]}")
+    (wheel,) = (tmp_path / "dist").glob("dsm-*.whl")
+    assert wheel.stat().st_size < 12 * 2 ** 20          # the meshes are 6.7 MB, about 4 MB compressed
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=120)
+    py = venv / "bin" / "python"
+    site = subprocess.run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+                          capture_output=True, text=True, check=True).stdout.strip()
+    here = [p for p in sys.path if p.endswith("site-packages")]
+    Path(site, "here.pth").write_text("\n".join(here) + "\n")     # mitsuba, drjit, numpy: not this checkout
+    pip = subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-deps", "--no-index",
+                          "--disable-pip-version-check", str(wheel)], capture_output=True, text=True, timeout=600, env=env)
+    assert pip.returncode == 0, pip.stderr[-2000:]
+    where = subprocess.run([str(py), "-c", "import dsm.perf.bench as b, dsm.benchmark.suite as s; "
+                            "print(b.MESHES); print(s.MESHES == b.MESHES, (b.MESHES / 'mitsuba_bunny.ply').is_file())"],
+                           capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
+    meshes, same = where.stdout.split("\n")[:2]
+    assert meshes.startswith(site) and same == "True True", where.stdout + where.stderr
+    dsm = str(venv / "bin" / "dsm")
+    helped = subprocess.run([dsm, "benchmark", "--help"], capture_output=True, text=True, timeout=120, env=env).stdout
+    size = ["--size", "test"] if "--size" in helped else []      # --size replaces DSM_BENCHMARK_SIZE
+    run = subprocess.run([dsm, "benchmark", "--out", "b", *size], capture_output=True, text=True,
+                         timeout=900, env={**env, "DSM_BENCHMARK_SIZE": "test"}, cwd=tmp_path)
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert json.loads((tmp_path / "b" / "results.json").read_text())["cases"]

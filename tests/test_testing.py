@@ -66,6 +66,39 @@ def test_the_plugin_fixture_runs_a_config_once_for_several_calls(dsm_results, mo
     assert len(calls) == 1
 
 
+@pytest.mark.parametrize("call, error, words", [
+    (lambda r: assert_rate(r, "acne", below=0.5), ValueError, ["no column 'acne'", "acne_rate", "dsm.core.record.NAMES"]),
+    (lambda r: assert_rate(r, "err", below=0.5), ValueError, ["no column 'err'", "error_rate"]),
+    (lambda r: assert_no_worse_than(r, "eror_rate", "none", than="constant"), ValueError, ["no column", "error_rate"]),
+    (lambda r: assert_rate(r, "scheme", below=0.5), TypeError, ["'scheme' is a text column", "acne_rate"]),
+    (lambda r: assert_rate(r, "acne_rate", below="0.5"), TypeError, ["below must be a number", "'0.5'"]),
+    (lambda r: assert_rate(r, "acne_rate", above=float("nan")), ValueError, ["above = nan", "finite"]),
+    (lambda r: assert_no_worse_than(r, "error_rate", "none", than="constant", tolerance=float("nan")), ValueError,
+     ["tolerance = nan", "finite"]),
+    (lambda r: assert_oracle_gap(r, below="0.1"), TypeError, ["below must be a number"]),
+    (lambda r: assert_no_worse_than(r, "error_rate", "none", than="constant", tolerance=None), TypeError,
+     ["tolerance must be a number"]),
+    (lambda r: assert_rate(r.where(allow_empty=True, scheme="nonne"), "acne_rate", below=0.5), ValueError,
+     ["the Results hold no case"]),
+])
+def test_a_misspelt_column_or_a_threshold_that_is_no_number_is_named(res, call, error, words):
+    """Issue 76: a KeyError naming nothing, a bare TypeError, and NaN passing where 0 fails."""
+    with pytest.raises(error) as e:
+        call(res)
+    assert all(w in str(e.value) for w in words), str(e.value)
+
+
+def test_the_plugin_fixture_on_a_missing_config_raises_dsm_runs_config_error(dsm_results, tmp_path):
+    import dsm
+    from dsm.core.types import ConfigError
+    with pytest.raises(ConfigError) as direct:
+        dsm.run(tmp_path / "missing.toml", out=tmp_path / "a")
+    with pytest.raises(ConfigError) as fixture:
+        dsm_results(tmp_path / "missing.toml")
+    assert str(fixture.value).replace(str(fixture.value.source), "") == str(direct.value).replace(
+        str(direct.value.source), "") or str(fixture.value) == str(direct.value)
+
+
 def test_loading_the_plugin_imports_neither_mitsuba_nor_drjit():
     import subprocess
     import sys

@@ -10,6 +10,7 @@ from every case, makes the folder complete.
 from __future__ import annotations
 
 import json
+import math
 import shutil
 from pathlib import Path
 
@@ -64,8 +65,9 @@ class CaseLog:
         for path in sorted(self.folder.glob("[0-9]*.json")):
             try:
                 entry = json.loads(path.read_text())
-                out[int(entry["index"])] = entry
-            except (OSError, ValueError, KeyError, TypeError):
+                if all(consistent(r) for r in entry["records"]):
+                    out[int(entry["index"])] = entry
+            except (OSError, ValueError, KeyError, TypeError, AttributeError):
                 continue            # not one of ours, or damaged by hand: that case runs again
         return out
 
@@ -74,6 +76,28 @@ class CaseLog:
         entry = {"index": index, "case": case_key(case), "records": records, "flicker": flicker, "variant": variant}
         report_io.write_json(self.folder / f"{index:04d}.json", entry)
 
+
+
+def consistent(rec: dict) -> bool:
+    """Whether a kept record's counts can be a measurement and its rates are its counts': one edited
+    by hand (n_acne above its lit receivers, a rate of other counts) is no finished case."""
+    counts = [rec.get(k) for k in ("n_receivers", "n_gt_shadowed", "n_acne", "n_peterpan")]
+    if "n_acne" not in rec:
+        return True                 # an oracle's floor: objectives, no counts to agree
+    if not all(isinstance(c, int) and not isinstance(c, bool) and c >= 0 for c in counts):
+        return False
+    n, shadowed, acne, peter = counts
+    if shadowed > n or acne > n - shadowed or peter > shadowed:
+        return False
+    return all(_same_rate(rec.get(k), num, den) for k, num, den in
+               (("acne_rate", acne, n - shadowed), ("peterpan_rate", peter, shadowed), ("error_rate", acne + peter, n)))
+
+
+def _same_rate(rate, num: int, den: int) -> bool:
+    """Whether a kept rate is num / den as the metrics compute it (NaN over no receiver)."""
+    if not isinstance(rate, (int, float)) or isinstance(rate, bool):
+        return False
+    return rate != rate if den == 0 else math.isclose(rate, num / den, rel_tol=1e-12, abs_tol=0.0)
 
 
 def clear(out: Path):

@@ -38,7 +38,7 @@ def add_parser(sub):
     b = sub.add_parser("benchmark", help=f"run the frozen shadow-bias suite ({LATEST}): results.json and a "
                        "leaderboard page; or compare two results", epilog=sizes_text(),
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    b.add_argument("--out", default="benchmark", help="folder for results.json and leaderboard.html (default: benchmark/)")
+    b.add_argument("--out", default=None, help="folder for results.json and leaderboard.html (default: benchmark/)")
     b.add_argument("--size", choices=SIZES, help="the suite's cases and resolutions (default: default; each size's "
                    "cases and time below)")
     b.add_argument("--full", action="store_true", help="an alias for --size full (kept for old scripts; says so)")
@@ -128,6 +128,8 @@ def flag_problem(args) -> str | None:
             return f"{mode} runs no case: {run_flags[0]} does not apply to it"
     if args.compare and args.page:
         return "--compare and --page are two commands: give one"
+    if args.page and args.out is not None:
+        return f"--page rewrites the page in its own folder ({args.page}): --out does not apply to it"
     if args.page and args.force:
         return "--page rewrites only the page: --force does not apply to it"
     if args.resume and args.force:
@@ -142,11 +144,12 @@ def main(args) -> int:
         return _err(problem)
     if args.page:
         return _page(Path(args.page))
-    out = Path(args.out)
+    out = Path(args.out if args.out is not None else "benchmark")
     if out.exists() and not out.is_dir():
         return _err(f"--out {out}: is a file, not a folder; choose another --out")
     if args.compare:
-        return _held(out, lambda: _compare(args, out))
+        problem = foreign_problem(out)          # its two files never land among another command's either
+        return _err(problem) if problem else _held(out, lambda: _compare(args, out))
     return _start(args, out)
 
 
@@ -189,6 +192,9 @@ def _connect(address: str) -> int | None:
 
 def folder_problem(out: Path, force: bool, resume: bool) -> str | None:
     """Why a run may not write into ``out`` as asked (in one line), None when it may."""
+    foreign = foreign_problem(out)
+    if foreign:
+        return foreign
     done = (out / "results.json").exists()
     partial = caselog.progress(out)
     if resume:
@@ -205,6 +211,19 @@ def folder_problem(out: Path, force: bool, resume: bool) -> str | None:
     if partial is not None:
         return (f"--out {out}: holds an interrupted run ({partial[0]} of {partial[1]} cases finished); --resume "
                 "goes on with it, --force starts again")
+    return None
+
+
+def foreign_problem(out: Path) -> str | None:
+    """Why ``out`` is not the benchmark's to write into (another command's or a user's files), None
+    when it is empty or a benchmark's own: its files never mix with others', --force or not."""
+    held = sorted(p.name for p in lock.entries(out) or [])
+    if (out / "run.json").is_file() or (out / "metrics.csv").is_file():
+        return f"--out {out}: holds a dsm run (run.json, metrics.csv), not a dsm benchmark; choose another --out"
+    if held and not any(name in held for name in WRITTEN + ("compare.json", "compare.txt")):   # --compare's too
+        more = ", ..." if len(held) > 3 else ""
+        return (f"--out {out}: holds files that are not a dsm benchmark's ({', '.join(held[:3])}{more}); "
+                "choose another --out (an empty folder or a benchmark's)")
     return None
 
 

@@ -47,10 +47,13 @@ def case_changes(a: dict, b: dict) -> list:
 
 
 def _moved(a: dict, b: dict, key: str, tie: float) -> list:
-    """[(key, a's, b's)] where both hold a defined ``key`` that moved by more than ``tie``."""
+    """[(key, a's, b's)] where ``key`` moved by more than ``tie``, or became undefined (NaN) or
+    defined: a value that is lost is a change, not a tie; both undefined are alike."""
     x, y = a.get(key), b.get(key)
-    if x is None or y is None or x != x or y != y:
+    if x is None or y is None or (x != x and y != y):
         return []
+    if x != x or y != y:
+        return [(key, x, y)]
     return [(key, x, y)] if abs(y - x) > tie else []
 
 

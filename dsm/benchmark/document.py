@@ -20,7 +20,7 @@ from ..core.env import ENGINE        # version 3: versions.<these> are text
 RESULTS_VERSION = 4
 READS = (1, 2, 3, 4)              # the versions this dsm reads
 NAMES = ("scene", "unit", "light", "contender")          # a record's identity (offset: optional, "0")
-COUNTS = ("n_receivers", "n_acne", "n_peterpan")          # integers where present (an oracle's: receivers only)
+COUNTS = ("n_receivers", "n_gt_shadowed", "n_acne", "n_peterpan")   # integers where present (an oracle's: receivers)
 COST_COUNTS = ("map_bytes", "page_table_bytes", "map_rays")   # version 4: every contender record's, whole
 
 
@@ -74,6 +74,8 @@ def check(doc, path="<document>") -> dict:
     elif "versions" in doc and not isinstance(doc["versions"], dict):      # older: optional, but an object
         raise NotResults(f"{where}: versions is {_kind(doc['versions'])}, not an object of versions")
     _records(doc.get("cases"), where, "cases", COUNTS)
+    if not doc["cases"]:
+        raise NotResults(f"{where}: cases is empty: a results document holds a record per case and contender")
     if version >= 4:
         _costs(doc["cases"], where)
     _records(doc.get("flicker", []), where, "flicker", ())
@@ -88,6 +90,7 @@ def _records(recs, where: str, key: str, counts: tuple):
     """Every record of list ``key`` names its case and holds whole counts."""
     if not isinstance(recs, list):
         raise NotResults(f"{where}: {key} is {_kind(recs)}, not a list of records")
+    seen = {}
     for i, rec in enumerate(recs):
         if not isinstance(rec, dict):
             raise NotResults(f"{where}: {key}[{i}] is {_kind(rec)}, not a record (an object)")
@@ -95,11 +98,27 @@ def _records(recs, where: str, key: str, counts: tuple):
         if missing:
             raise NotResults(f"{where}: {key}[{i}] has no text {missing[0]} (a record names scene, unit, light and "
                              "contender)")
+        if not isinstance(rec.get("offset", "0"), str):
+            raise NotResults(f"{where}: {key}[{i}].offset is {_kind(rec['offset'])}, not an offset's label (\"0\", "
+                             "\"1e4\")")
+        _once(seen, rec, where, f"{key}[{i}]")
+        if key == "cases" and "n_receivers" not in rec:
+            raise NotResults(f"{where}: {key}[{i}] has no n_receivers (every case record counts its receivers)")
         for c in counts:
             if c in rec and not (isinstance(rec[c], int) and not isinstance(rec[c], bool) and rec[c] >= 0):
                 raise NotResults(f"{where}: {key}[{i}].{c} is {rec[c]!r}, not a count (a whole number >= 0)")
-        if "flip" in rec and rec["flip"] is not None:
-            _number(rec["flip"], where, f"{key}[{i}].flip")
+        for name in [k for k in rec if k == "flip" or k.endswith("_rate")]:
+            _rate(rec[name], where, f"{key}[{i}].{name}")
+
+
+def _once(seen: dict, rec: dict, where: str, name: str):
+    """A record's case and contender not given before (``seen``: identity -> name): --compare and the
+    ranking would keep one of the two silently."""
+    ident = (*(rec[n] for n in NAMES), str(rec.get("offset", "0")))
+    if ident in seen:
+        raise NotResults(f"{where}: {name} repeats {seen[ident]} ({', '.join(ident)}): one record per case and "
+                         "contender")
+    seen[ident] = name
 
 
 def _costs(recs: list, where: str):
@@ -134,6 +153,13 @@ def _number(x, where: str, name: str):
         return
     if isinstance(x, bool) or not isinstance(x, (int, float)):
         raise NotResults(f"{where}: {name} is {x!r}, not a number")
+
+
+def _rate(x, where: str, name: str):
+    """A rate or FLIP: a number in [0, 1], NaN (undefined) or null."""
+    _number(x, where, name)
+    if x is not None and x == x and not 0.0 <= x <= 1.0:
+        raise NotResults(f"{where}: {name} is {x!r}, not a rate (from 0 to 1, or NaN where undefined)")
 
 
 def _kind(x) -> str:

@@ -31,6 +31,8 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..core.env import meshes_folder
+
 # every version, oldest first; the newest is what ``dsm benchmark`` runs unless told otherwise
 SUITE_FILES = {"dsm-bench-1": Path(__file__).with_name("suite_1.toml"),
                "dsm-bench-2": Path(__file__).with_name("suite_2.toml"),
@@ -40,7 +42,7 @@ SUITE_FILES = {"dsm-bench-1": Path(__file__).with_name("suite_1.toml"),
 LATEST = list(SUITE_FILES)[-1]
 SUITE_FILE = SUITE_FILES[LATEST]
 ORIGIN = "0"              # the offset label of a case at the origin (every case of dsm-bench-1)
-MESHES = Path(__file__).resolve().parents[2] / "data" / "meshes"
+MESHES = meshes_folder()       # the suite's meshes: a checkout's data/meshes or a wheel's copy
 SIZES = ("test", "default", "full")
 # Calls a case's map builds, moment maps and lookups are timed over (dsm.core.timing): the first
 # cold, the reported time the second's. A dsm run times 3 (the median of two warm calls); the

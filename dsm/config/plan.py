@@ -31,7 +31,7 @@ from ..scenes import size as scene_size
 from .. import lights as light_types
 from .. import prefilter
 from .. import schemes as schemes_mod
-from ..core.types import DEFAULT_CAMERA, POINT_VIEWS, VIEW_FACES, Config, ConfigError
+from ..core.types import DEFAULT_CAMERA, POINT_VIEWS, VIEW_FACES, Config, ConfigError, MapSpec
 from ..maps import costs as cost_rules
 from ..maps.shadowmap import MAX_STEPS
 from ..contact import presets as contact_presets
@@ -193,9 +193,11 @@ class Plan:
 
     @property
     def rays(self) -> dict:
-        """Exact counts by kind."""
-        return {"gbuffer": sum(w * h for _, w, h, _ in self.scenes),
-                "map_texel": sum(m.texels + m.supersampled_rays for m in self.maps)}
+        """Exact counts by kind (map_texel only where no virtual map's pages decide it: rays_bound)."""
+        out = {"gbuffer": sum(w * h for _, w, h, _ in self.scenes)}
+        if not any(getattr(m.cascade, "virtual", False) for m in self.maps):    # else its pages decide
+            out["map_texel"] = sum(m.texels + m.supersampled_rays for m in self.maps)
+        return out
 
     @property
     def rays_bound(self) -> dict:
@@ -205,7 +207,8 @@ class Plan:
                   for lab, _ in lights)
         cont = sum(m.texels * ((MAX_STEPS - 1) if m.layered and m.culling != "none" else 1)
                    for m in self.maps if m.layered)
-        return {"reference": ref, "map_continue": cont}
+        texel = {} if "map_texel" in self.rays else {"map_texel": sum(m.texels + m.supersampled_rays for m in self.maps)}
+        return {"reference": ref, **texel, "map_continue": cont}
 
     def peak_bytes(self) -> int:
         """Estimated peak bytes of the run: the most, over scenes, of its pixels' buffers plus its largest map."""
@@ -740,6 +743,12 @@ def _check_planned(cfg: Config, plan: Plan, views_seen: set):
     if cfg.map.virtual and plan.maps and not any(getattr(m.cascade, "virtual", False) for m in plan.maps):
         raise ConfigError(cfg.source, "map.virtual", "a virtual shadow map is a directional light's and no light of "
                           "the config's scenes is directional; remove [map.virtual] or add a directional [[light]]")
+    sized = cfg.map.texels or cfg.map.resolution != MapSpec.resolution      # [map]'s sizes, given
+    if sized and plan.maps and all(getattr(m.cascade, "virtual", False) for m in plan.maps):
+        key = "texels" if cfg.map.texels else "resolution"       # a scene's own lights: known only once loaded
+        raise ConfigError(cfg.source, f"map.{key}", f"{list(getattr(cfg.map, key))} sizes no map here: every map is "
+                          "[map.virtual]'s, map.virtual.resolution virtual texels a level side; remove "
+                          f"map.{key}, or give map.virtual.resolution, or add map.cascades to compare with")
     if cfg.map.cascade and plan.maps and not any(m.cascade is not None for m in plan.maps):
         raise ConfigError(cfg.source, "map.cascades", "cascades are for directional lights and no light of the "
                           "config's scenes is directional; remove map.cascades or add a directional [[light]]")

@@ -6,6 +6,7 @@ error naming the package to install.
 """
 from __future__ import annotations
 
+import importlib.util
 import os
 import platform
 import subprocess
@@ -23,6 +24,17 @@ class SetupError(RuntimeError):
 # Dr.Jit starts every thread it is given: 100000 fail with a RuntimeError from its pool, 1024 start
 # in 0.05 s; more than 1024 never helps on any machine dsm runs on
 MAX_THREADS = 1024
+
+
+def meshes_folder() -> Path:
+    """The kit's real meshes: the checkout's data/meshes, else the installed wheel's copy (package
+    ``dsm_meshes``, pyproject's package-data), so dsm benchmark and dsm perf read them either way."""
+    checkout = Path(__file__).resolve().parents[2] / "data" / "meshes"
+    if checkout.is_dir():
+        return checkout
+    spec = importlib.util.find_spec("dsm_meshes")
+    places = list(spec.submodule_search_locations or []) if spec is not None else []
+    return Path(places[0]) if places else checkout
 
 
 def llvm_version():

@@ -133,6 +133,8 @@ def same_value(column: str, value, wanted) -> bool:
 def no_match(rows: list, kw: dict) -> str:
     """Why ``Results.where(**kw)`` matched nothing: the first filter no row meets alone, with the
     values its column holds; else that the filters meet no row together."""
+    if not rows:        # an empty Results: no filter is to blame
+        return "Results.where: the Results hold no case to select from; allow_empty=True returns the empty result"
     for k, v in kw.items():
         held = sorted({str(row_value(r, k)) for r in rows if row_value(r, k) is not None})
         if not any(same_value(k, row_value(r, k), v) for r in rows):

@@ -13,7 +13,7 @@ import numpy as np
 
 from .. import pipeline
 from ..case import CaseResult, MapContext
-from ..core import record
+from ..core import record, signals
 from ..report import figures, publish, tables as report, io as report_io
 from ..report.sections import cascades as cascade_files, contact_images, soft as soft_report, virtual as virtual_files
 
@@ -42,10 +42,11 @@ class Sink:
 
     def add(self, row: dict, status: dict):
         """One finished case: its row into metrics.csv (refused unless it fits the schema,
-        record.check_row) and the record, and its status."""
-        self.csv.write(row)
-        self.record.rows.append(row)
-        self.record.status.append(status)
+        record.check_row) and the record, and its status, together: an interrupt waits for all three."""
+        with signals.deferred():
+            self.csv.write(row)
+            self.record.rows.append(row)
+            self.record.status.append(status)
 
     def still_case(self, ctx: MapContext, ident: dict, result: CaseResult):
         """A still case's per-cascade rows and curve, and its images (classes, shading, contact

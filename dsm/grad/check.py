@@ -62,6 +62,14 @@ def relative(a: float, ref: float) -> float | None:
     return abs(a - ref) / abs(ref)
 
 
+def relative_within(a: float, ref: float, ref_error: float) -> float | None:
+    """|a - ref| / |ref|, None where |ref| is within its own error of 0 (a truth of 0 +- its error has no
+    scale to divide by: 0.00095 +- 0.0025 made an error of 5237 %)."""
+    if not abs(ref) > ref_error:
+        return None
+    return relative(a, ref)
+
+
 def closed_form(spec, param: str) -> float | None:
     """The exact d loss / d param of the plate scene (in the loss's unit per the parameter's unit), None where
     the kit knows none (the box, the l2 loss, a vertex's displacement, an area light: its soft shadow's

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core import timing
-from .check import relative
+from .check import relative_within
 from .reference import reference
 
 REPEATS = 3
@@ -40,8 +40,8 @@ class CompareRow:
 
     @property
     def rel_error(self) -> float | None:
-        """|AD - reference| / |reference| (None where the reference is 0)."""
-        return relative(self.ad, self.reference)
+        """|AD - reference| / |reference| (None where the reference is within its own error of 0)."""
+        return relative_within(self.ad, self.reference, self.reference_error)
 
     @property
     def sign(self) -> str | None:

@@ -85,7 +85,10 @@ def compare_words(rows) -> str:
         who, rel = closest_to_truth(rs)
         if not who:
             zero = all(as_number(r["reference"]) == 0.0 for r in rs)
-            why = "the truth is 0" if zero else "the truth is 0 or undefined"
+            within = all(None not in (ref := as_number(r["reference"]), err := as_number(r["reference_error"]))
+                         and abs(ref) <= err for r in rs)
+            why = ("the truth is 0" if zero else "the truth is 0 within its own error" if within
+                   else "the truth is 0 or undefined")
             phrase = winner_phrase([], None, "relative error", why)
         elif len(who) == 1:
             r = next(r for r in rs if r["technique"] == who[0])

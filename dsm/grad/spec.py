@@ -160,6 +160,9 @@ def parse(raw: dict, source: str = "<dict>") -> GradSpec:
     for key in ("light_height", "occluder_height", "occluder_size", "window", "light_size", "box_height"):
         if key in g:
             kw[key] = number(g[key], source, f"gradient.{key}", positive=True)
+    if "light_angle" in g and kw["light"] != "directional":     # it would be ignored, silently
+        raise ConfigError(source, "gradient.light_angle", f"is read only with light = \"directional\", not "
+                          f"{kw['light']!r} (a point or area light is placed by light_height and light_x)")
     if "light_angle" in g:
         kw["light_angle"] = number(g["light_angle"], source, "gradient.light_angle", minimum=-60.0, maximum=60.0)
     if "bias" in g:
@@ -195,7 +198,45 @@ def parse(raw: dict, source: str = "<dict>") -> GradSpec:
         raise ConfigError(source, "gradient.light_height", f"must be above the occluder's top "
                           f"({spec.occluder_height + spec.thickness():g}), got {spec.light_height:g}")
     check_extent(spec, source)
+    for key in ("fd_step", "reference_step"):
+        check_steps(spec, source, key)
+    if "inverse_starts" in g:       # the defaults are offsets of a unit-sized scene: a scaled one gives its own
+        check_starts(spec, source)
     return spec
+
+
+def _room(spec: GradSpec) -> dict:
+    """How far each parameter may move from its nominal value (in its unit) and the scene stay one: the
+    occluder between the ground and the light, the light above the occluder, inside the image's window, a
+    directional light above the horizon."""
+    top, ground = spec.occluder_height + spec.thickness(), spec.occluder_height
+    above = spec.light_height - top if spec.light != "directional" else math.inf
+    return {"occluder_z": min(ground, above), "corner_z": min(ground, above), "light_height": above,
+            "occluder_x": spec.window, "light_x": spec.window, "light_angle": 90.0 - abs(spec.light_angle)}
+
+
+def check_starts(spec: GradSpec, source: str):
+    """The inverse task's start offsets that leave the scene (a plate under the ground, 1e30) refused."""
+    for param in spec.params:
+        room = _room(spec)[param]
+        far = [s for s in spec.inverse_starts if not abs(s) < room]
+        if far:
+            raise ConfigError(source, "gradient.inverse_starts", f"{far[0]:g} moves {param} out of the scene "
+                              f"(valid: offsets of {param} with |offset| < {room:g} {spec.unit(param)})")
+
+
+def check_steps(spec: GradSpec, source: str, key: str):
+    """A central difference's +-step that moves the occluder under the ground or above the light, or the
+    light under the occluder's top, refused: the difference would measure another scene."""
+    room = _room(spec)
+    for param in spec.params:
+        step = spec.step_in(param, getattr(spec, key), REFERENCE_STEP if key == "reference_step" else FD_STEP)
+        if not step < room[param]:
+            what = {"light_height": "the light under the occluder's top", "occluder_x": "the occluder out of the image",
+                    "light_x": "the light out of the image", "light_angle": "the light to the horizon (90 degrees)"}.get(
+                param, "the occluder under the ground" if step >= spec.occluder_height else "the occluder above the light")
+            raise ConfigError(source, f"gradient.{key}.{param}", f"{step:g} moves {what} at one side of the central "
+                              f"difference (valid: 0 < step < {room[param]:g})")
 
 
 def shadow_half_extent(spec: GradSpec) -> float:

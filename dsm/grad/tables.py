@@ -11,7 +11,7 @@ import csv
 from pathlib import Path
 
 from ..report.io import atomic
-from .check import relative
+from .check import relative_within
 from .inverse import success_rate
 
 COMPARE_COLUMNS = ("technique", "param", "unit", "ad", "reference", "reference_error", "reference_step",
@@ -46,15 +46,24 @@ def compare_values(r) -> list:
             r.reference_samples, r.rel_error, r.sign, r.cosine, r.ms, r.compile_ms]
 
 
-def agrees(result, ref) -> bool:
-    """Whether a projective gradient's mean is within AGREE_SIGMAS combined errors of the reference."""
+def agrees(result, ref) -> bool | None:
+    """Whether a projective gradient's mean is within AGREE_SIGMAS combined errors of the reference; None
+    where the truth over its pixels is 0 +- 0 (the mask hid the shadow: 0 against 0 is no agreement)."""
+    if ref.value == 0.0 and ref.error == 0.0:
+        return None
     return abs(result.mean - ref.value) <= AGREE_SIGMAS * (result.spread + ref.error)
+
+
+def verdict(result, ref) -> str:
+    """compare.md's word for a projective gradient: agrees, disagrees or measured nothing."""
+    return {True: "agrees", False: "disagrees", None: "measured nothing"}[agrees(result, ref)]
 
 
 def projective_values(p, ref, cos) -> list:
     """A ProjectiveResult (against its Reference) as projective.csv's values."""
     return [p.integrator, p.param, p.spp, len(p.grads), p.mean, p.spread, p.mean - ref.value,
-            relative(p.mean, ref.value), ref.value, ref.error, agrees(p, ref), p.primal_mismatch, cos, p.ms]
+            relative_within(p.mean, ref.value, ref.error), ref.value, ref.error, agrees(p, ref), p.primal_mismatch, cos,
+            p.ms]
 
 
 def curve_values(q) -> list:
@@ -126,7 +135,7 @@ def compare_text(spec, refs, rows, projective) -> str:
                 "|---|---|---|---|---|---|---|---|"]
         for p, ref, _ in projective:
             out.append(f"| {p.integrator} | {p.param} | {p.spp} x {len(p.grads)} | {_g(p.mean)} | {_g(p.spread, 2)} | "
-                       f"{_pct(relative(p.mean, ref.value))} | {'agrees' if agrees(p, ref) else 'disagrees'} | "
+                       f"{_pct(relative_within(p.mean, ref.value, ref.error))} | {verdict(p, ref)} | "
                        f"{p.ms:.1f} |")
     return "\n".join(out) + "\n"
 

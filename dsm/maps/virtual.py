@@ -110,6 +110,8 @@ class VirtualView(View):
         pts = np.asarray(receivers_world, float).reshape(-1, 3)
         t_jit = time.perf_counter()
         self.pages = self._tag(pts, all_pages)       # (n, 3) int: face, page x, page y (sorted)
+        if not len(self.pages):
+            self.pages = self._no_page(len(pts))
         t_start += time.perf_counter() - t_jit          # fit_ms: the host's work, not the tagging kernel
         if len(self.pages) > spec.max_pages:
             raise ValueError(f"the virtual shadow map tags {len(self.pages)} pages, more than its pool "
@@ -158,6 +160,18 @@ class VirtualView(View):
         cand = cand[(cand[:, 1] >= 0) & (cand[:, 1] < S) & (cand[:, 2] >= 0) & (cand[:, 2] < S)]
         out = np.unique(cand, axis=0)
         return out[np.lexsort((out[:, 1], out[:, 2], out[:, 0]))]
+
+    def _no_page(self, n_receivers: int) -> np.ndarray:
+        """The pages of a map no receiver tagged: none lit (a sun from below) is an empty case, as
+        an orthographic map's, so its first level's first page stands in (a map of no page cannot be
+        built); receivers outside every level are a range that cannot see them, named."""
+        if n_receivers:
+            spec = self.spec
+            raise ValueError(f"none of the {n_receivers} receivers lies inside the virtual map's levels "
+                             f"{spec.first_level} to {spec.last_level} ({self.extents[0]:.3g} to {self.extents[-1]:.3g} "
+                             f"scene units wide about the camera; map.virtual.first_level, last_level or levels, and "
+                             f"unit_cm = {spec.unit_cm:g} set them): raise last_level (at most 60) or lower unit_cm")
+        return np.zeros((1, 3), int)
 
     def _page_table(self):
         """The physical page of each virtual page (NO_PAGE: not tagged) and each physical page's place."""

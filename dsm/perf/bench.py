@@ -25,7 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
-MESHES = Path(__file__).resolve().parents[2] / "data" / "meshes"   # the real test meshes shipped with the kit
+from ..core.env import meshes_folder
+
+MESHES = meshes_folder()       # the real test meshes shipped with the kit (a checkout's or a wheel's)
 
 DOU_TABLE1 = {"constant": 6.327, "slope_scaled": 6.647, "adaptive": 7.319, "dual": 9.890}
 
@@ -292,8 +294,10 @@ def meshes_problem(meshes) -> str | None:
 
 def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int = 5, meshes: Path | None = None,
               variant: str | None = None, scaling_resolutions=(), sweep: bool = False, frame: bool = True,
-              geometry=(), prefilter: bool = True) -> dict:
-    """Measure (1) to (8) (scaling, sweep, frame, geometry and prefilter as asked), write bench.md and bench.json into ``out``; the dict."""
+              geometry=(), prefilter: bool = True, resume: bool = False) -> dict:
+    """Measure (1) to (8) (scaling, sweep, frame, geometry and prefilter as asked), write bench.md and
+    bench.json into ``out`` as each section finishes; ``resume``: the sections an interrupted perf
+    there kept are taken as they are (Mismatch where it was asked for other sections); the dict."""
     import drjit as dr
 
     from ..core import env, timing
@@ -303,33 +307,99 @@ def run_bench(out: Path, resolutions=(256, 512, 1024, 2048, 4096), repeats: int 
     if problem:          # the real-mesh rows would be dropped without a word
         raise FileNotFoundError(problem)
     variant = env.use_variant(variant)
+    asked = {"resolutions": list(resolutions), "scaling_resolutions": list(scaling_resolutions), "repeats": repeats,
+             "meshes": str(Path(meshes).resolve()) if meshes else None, "variant": variant, "sweep": sweep,
+             "frame": frame, "geometry": list(geometry), "prefilter": prefilter}
+    kept = resumed(out, asked) if resume else None
     timing.enable_history()
     meshes = Path(meshes) if meshes else MESHES
     budget = physical_memory() // 4           # the default memory budget ([memory] budget_mb)
-    builds, lookups, scale = [], [], []
+    result = {"variant": variant, "threads": dr.thread_count(), "repeats": repeats, "builds": [], "lookups": [],
+              "dou_table1_ms": DOU_TABLE1, "scaling": [], "exponents": {}, "budget_mb": budget / 2 ** 20,
+              "versions": env.versions(), "machine": env.machine(), "asked": asked, "sections": [], "complete": False}
+    section = lambda name, fn: _section(out, result, kept, name, fn)
     for spec in _scenes(meshes):
-        b, x, s = _scene_bench(spec, resolutions, repeats, scaling_resolutions, budget)
-        builds, lookups, scale = builds + b, lookups + x, scale + s
-    result = {"variant": variant, "threads": dr.thread_count(), "repeats": repeats, "builds": builds,
-              "lookups": lookups, "dou_table1_ms": DOU_TABLE1, "scaling": scale, "exponents": _exponents(scale),
-              "budget_mb": budget / 2 ** 20, "versions": env.versions(), "machine": env.machine()}
+        section(f"builds and lookups of {spec.label}",
+                lambda: dict(zip(SCENE_KEYS, _scene_bench(spec, resolutions, repeats, scaling_resolutions, budget))))
     if frame:
         specs = _scenes(meshes)
-        result["frame"] = frame_cost(specs[-1], _light_for(specs[-1]), repeats=max(repeats, 5))
+        section("frame", lambda: {"frame": frame_cost(specs[-1], _light_for(specs[-1]), repeats=max(repeats, 5))})
     if geometry:
-        result["geometry"] = geometry_cost(out, tuple(geometry), repeats=max(1, min(repeats, 3)))
+        section("geometry", lambda: {"geometry": geometry_cost(out, tuple(geometry), repeats=max(1, min(repeats, 3)))})
     if sweep:
         from .bench_modes import build_modes, lookup_modes
-        result["sweep"] = sweep_throughput(out)
-        result["lookup_modes"] = lookup_modes(out)
-        result["build_modes"] = build_modes(out)
+        section("sweep", lambda: {"sweep": sweep_throughput(out), "lookup_modes": lookup_modes(out),
+                                  "build_modes": build_modes(out)})
     if prefilter:
         from .bench_prefilter import prefilter_cost
-        result["prefilter"] = prefilter_cost(repeats=repeats)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "bench.json").write_text(json.dumps(result, indent=2))
-    (out / "bench.md").write_text(markdown(result))
+        section("prefilter", lambda: {"prefilter": prefilter_cost(repeats=repeats)})
+    result["complete"] = True
+    keep_section(out, result, None)
     return result
+
+
+SCENE_KEYS = ("builds", "lookups", "scaling")     # a scene's section: rows added to these lists
+SECTION_KEYS = {"frame": ("frame",), "geometry": ("geometry",), "sweep": ("sweep", "lookup_modes", "build_modes"),
+                "prefilter": ("prefilter",)}
+
+
+class Mismatch(ValueError):
+    """The interrupted perf in the folder was asked for other sections than this one."""
+
+
+def resumed(out: Path, asked: dict) -> dict:
+    """The interrupted perf's bench.json in ``out`` (Mismatch where it was asked otherwise, or is none)."""
+    try:
+        kept = json.loads((Path(out) / "bench.json").read_text())
+    except (OSError, ValueError):
+        raise Mismatch(f"{Path(out) / 'bench.json'} cannot be read") from None
+    if not isinstance(kept, dict) or kept.get("complete") is not False:
+        raise Mismatch("it holds no interrupted dsm perf (bench.json is complete or from an older dsm)")
+    rows = [r for k in SCENE_KEYS for r in (kept.get(k) if isinstance(kept.get(k), list) else [None])]
+    if not (isinstance(kept.get("sections"), list) and all(isinstance(x, str) for x in kept["sections"])
+            and all(isinstance(r, dict) and isinstance(r.get("scene"), str) for r in rows)):
+        raise Mismatch(f"{Path(out) / 'bench.json'} is damaged (its sections or rows are not a dsm perf's)")
+    differs = [k for k in asked if (kept.get("asked") or {}).get(k) != asked[k]]
+    if differs:
+        k = differs[0]
+        raise Mismatch(f"its perf was asked {k} = {(kept.get('asked') or {}).get(k)!r}, this one {asked[k]!r}")
+    return kept
+
+
+def _section(out: Path, result: dict, kept: dict | None, name: str, fn):
+    """One section: taken from ``kept`` where the interrupted perf finished it, else measured; kept at once."""
+    if kept is not None and name in kept["sections"]:
+        if name in SECTION_KEYS:
+            part = {k: kept[k] for k in SECTION_KEYS[name] if k in kept}
+        else:               # a scene's rows, by its label
+            label = name.removeprefix("builds and lookups of ")
+            part = {k: [r for r in kept[k] if r["scene"] == label] for k in SCENE_KEYS}
+    else:
+        part = fn()
+    for k, v in part.items():
+        result[k] = result[k] + v if k in SCENE_KEYS else v
+    result["exponents"] = _exponents(result["scaling"])
+    keep_section(out, result, name)
+
+
+def keep_section(out: Path, result: dict, section: str | None):
+    """bench.json and bench.md rewritten (atomically) with ``section`` finished, so a Ctrl-C or a
+    kill keeps every section measured before it; None: the bench is complete."""
+    from ..report import io as report_io
+    if section is not None:
+        result["sections"].append(section)
+    out.mkdir(parents=True, exist_ok=True)
+    report_io.write_text(out / "bench.json", json.dumps(result, indent=2))
+    report_io.write_text(out / "bench.md", markdown(result))
+
+
+def kept_sections(out: Path) -> list | None:
+    """The sections an interrupted perf kept in ``out``/bench.json (None: no bench.json)."""
+    try:
+        sections = json.loads((Path(out) / "bench.json").read_text()).get("sections", [])
+    except (OSError, ValueError, AttributeError):
+        return None
+    return [str(x) for x in sections] if isinstance(sections, list) else None
 
 
 def _exponents(scale) -> dict:
@@ -443,6 +513,8 @@ def markdown(r) -> str:
     """bench.md: every section measured, in order."""
     from .bench_geometry import markdown as geometry_md
     lines = _md_builds(r) + _md_two(r) + _md_lookups(r) + _md_scaling(r) + _md_frame(r)
+    if r.get("complete") is False:      # an interrupted perf: what it measured, said at the top
+        lines[1:1] = ["", f"Interrupted: measured only {', '.join(r['sections']) or 'nothing'}."]
     from .bench_prefilter import markdown as prefilter_md
     lines += geometry_md(r["geometry"]) if r.get("geometry") else []
     lines += prefilter_md(r["prefilter"]) if r.get("prefilter") else []
@@ -538,6 +610,7 @@ def _md_lookups(r) -> list:
 
 def _md_scaling(r) -> list:
     """Section (4): build time against resolution, with the fitted exponents."""
+    from .bench_geometry import exponent_text
     lines = []
     if r.get("scaling"):
         lines += ["", f"## (4) Build time against resolution (tiled within the memory budget of "
@@ -551,7 +624,7 @@ def _md_scaling(r) -> list:
         lines += ["", "Fitted exponent of time against texels (log-log least squares; 1 is linear):", "",
                   "| scene | first layer | two layers |", "|---|---|---|"]
         for label, e in r["exponents"].items():
-            lines.append(f"| {label} | {e['first']:.3f} | {e['two']:.3f} |")
+            lines.append(f"| {label} | {exponent_text(e['first'])} | {exponent_text(e['two'])} |")
     return lines
 
 

@@ -103,6 +103,11 @@ def decade_slopes(triangles, ms) -> list:
     return [float((m[i + 1] - m[i]) / (t[i + 1] - t[i])) if t[i + 1] != t[i] else None for i in range(len(t) - 1)]
 
 
+def exponent_text(x: float) -> str:
+    """A fitted exponent in bench.md: 3 decimals, or undefined (one size: no slope; NaN, never printed)."""
+    return f"{x:.3f}" if x == x else "undefined (one size: a slope needs two)"
+
+
 def markdown(g: dict) -> list:
     """The bench.md lines of section (7)."""
     tris = [r["triangles"] for r in g["rows"]]
@@ -123,10 +128,10 @@ def markdown(g: dict) -> list:
                          if t + "peak_mb" in r else f"{r.get(t + 'run_error', 'not measured')} | | " for t in ("", "check_"))
         lines.append(f"| {r['triangles']:,} | {r['bare_kernel_ms']:.2f} | {r['build_kernel_ms']:.2f} | "
                      f"{r['build_wall_ms']:.2f} | {r['frame_kernel_ms']:.2f} | {r['frame_wall_ms']:.2f} | {mem} |")
-    e, d = g["exponents"], g.get("decade_slopes", {})
+    e, d = {k: exponent_text(v) for k, v in g["exponents"].items()}, g.get("decade_slopes", {})
     lines += ["", "Fitted exponent of time against triangles (log-log least squares; 0: independent of the "
-              f"geometry): build {e['build_kernel_ms']:.3f} (kernel), {e['build_wall_ms']:.3f} (wall); frame "
-              f"{e['frame_kernel_ms']:.3f} (kernel), {e['frame_wall_ms']:.3f} (wall)."]
+              f"geometry): build {e['build_kernel_ms']} (kernel), {e['build_wall_ms']} (wall); frame "
+              f"{e['frame_kernel_ms']} (kernel), {e['frame_wall_ms']} (wall)."]
     if d:
         lines += ["", "Slope between consecutive sizes (kernel time; a bend the one exponent hides): build "
                   + ", ".join("-" if x is None else f"{x:.2f}" for x in d["build_kernel_ms"]) + "; frame "

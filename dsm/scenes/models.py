@@ -72,8 +72,12 @@ def file_bounds(path: Path) -> tuple:
     if path.suffix.lower() == ".ply":
         v = ply_positions(path)
     else:
-        rows = [line.split()[1:4] for line in path.read_bytes().splitlines() if line.startswith(b"v ")]
-        v = np.array(rows, np.float64).reshape(-1, 3)
+        rows = [(n, line.split()[1:4]) for n, line in enumerate(path.read_bytes().splitlines(), 1)
+                if line.startswith(b"v ")]
+        short = next((n for n, xyz in rows if len(xyz) < 3), None)
+        if short is not None:           # a file cut short mid-line: say where, not numpy's "inhomogeneous shape"
+            raise ValueError(f"line {short} is a vertex with fewer than 3 coordinates (a file cut short?)")
+        v = np.array([xyz for _, xyz in rows], np.float64).reshape(-1, 3)
     if v.size == 0:
         raise ValueError(f"{path}: no vertices")
     return v.min(axis=0), v.max(axis=0)
