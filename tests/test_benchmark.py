@@ -582,26 +582,31 @@ def test_the_benchmark_on_a_local_ray_cluster_counts_as_here(test_run, tmp_path)
     assert got == want and len(got) == len(here["cases"])
 
 
-def _suite_process(out, *flags):
-    """``python -m dsm benchmark --out OUT`` at the test size, as a user starts it."""
+SIGNAL_AFTER_KEEP = """
+import os, signal, sys
+from dsm import cli
+from dsm.benchmark import caselog
+keep, kept, after, sig = caselog.CaseLog.keep, [], int(sys.argv[1]), getattr(signal, sys.argv[2])
+def keep_then_signal(self, *args):
+    keep(self, *args)
+    kept.append(args[0])
+    if len(kept) == after:           # a known point: the case just kept, the next not begun
+        os.kill(os.getpid(), sig)
+caselog.CaseLog.keep = keep_then_signal
+sys.argv = ["dsm", *sys.argv[3:]]
+sys.exit(cli.main())
+"""
+
+
+def _suite_process(out, *flags, signal_after=None):
+    """``python -m dsm benchmark --out OUT`` at the test size, as a user starts it; ``signal_after``:
+    (n, signal name) sends the process that signal itself once it has kept its n-th case."""
     import subprocess
     import sys
-    return subprocess.Popen([sys.executable, "-m", "dsm", "benchmark", "--out", str(out), "--size", "test", *flags],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-
-
-def _wait_for_cases(out, more_than: int, proc, timeout_s: float = 900.0) -> int:
-    """Block until ``out/cases/`` holds more than ``more_than`` finished cases (the trigger is the
-    record appearing, not a timer); returns how many it holds."""
-    import time
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < timeout_s:
-        n = len(list((out / "cases").glob("[0-9]*.json")))
-        if n > more_than:
-            return n
-        assert proc.poll() is None, proc.communicate()
-        time.sleep(0.05)
-    raise AssertionError("no case finished")
+    args = ["benchmark", "--out", str(out), "--size", "test", *flags]
+    cmd = ([sys.executable, "-c", SIGNAL_AFTER_KEEP, str(signal_after[0]), signal_after[1], *args]
+           if signal_after else [sys.executable, "-m", "dsm", *args])
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
 def _counts(doc) -> dict:
@@ -620,20 +625,18 @@ def test_ctrl_c_and_kill_keep_finished_cases_and_resume_counts_as_uninterrupted(
     import signal
     whole_out, whole = test_run
     out = tmp_path / "bm"
-    proc = _suite_process(out)
-    _wait_for_cases(out, 0, proc)
-    proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=300)
+    proc = _suite_process(out, signal_after=(1, "SIGINT"))
+    _, err = proc.communicate(timeout=900)
     assert proc.returncode == 130, err
     assert "interrupted" in err and "--resume" in err and "Traceback" not in err
     kept = len(list((out / "cases").glob("[0-9]*.json")))
-    assert kept >= 1 and not (out / "results.json").exists()
+    assert kept == 1 and not (out / "results.json").exists()
     assert cli.main(["benchmark", "--out", str(out)]) == 2        # a plain run into it is refused: it names --resume
-    proc = _suite_process(out, "--resume")
-    _wait_for_cases(out, kept, proc)
-    proc.kill()
-    proc.wait()
-    kept = len(list((out / "cases").glob("[0-9]*.json")))
+    proc = _suite_process(out, "--resume", signal_after=(1, "SIGKILL"))
+    proc.communicate(timeout=900)
+    assert proc.returncode == -signal.SIGKILL
+    assert len(list((out / "cases").glob("[0-9]*.json"))) == kept + 1
+    kept += 1
     proc = _suite_process(out, "--resume")
     stdout, err = proc.communicate(timeout=1800)
     assert proc.returncode == 0, err
