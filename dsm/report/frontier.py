@@ -309,8 +309,9 @@ def time_lines(found: list) -> list:
 
 DEFINITION = ("Per light type, over its situations (scene and light): the cheapest instance (bytes its lookup "
               "reads, then rays its map took, then taps per lookup) among those whose error rate the paired "
-              "bootstrap (95 %, 2000 resamples, seed 0) cannot tell from the lowest mean error rate; then what a lower "
-              "error costs and what half the memory gives. Resolution, view, filter, format and culling are choices on the cost side. "
+              "bootstrap (95 %, 2000 resamples, seed 0) cannot tell from the lowest mean error rate; then what a "
+              "lower error costs and what half the memory gives. Resolution, view, filter, format and culling are "
+              "choices on the cost side. "
               "Times are measured and shown, never deciding. frontier.csv holds every instance's error, bytes, "
               "rays, taps and times, and whether it is on its situation's frontier (no other instance has at most "
               "its error, bytes and rays, one of them lower).")
