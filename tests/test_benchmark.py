@@ -587,6 +587,9 @@ import os, signal, sys
 from dsm import cli
 from dsm.benchmark import caselog
 keep, kept, after, sig = caselog.CaseLog.keep, [], int(sys.argv[1]), getattr(signal, sys.argv[2])
+# as a terminal's Ctrl-C finds it: a test suite started in the background (a shell's `&`) passes
+# SIGINT on ignored, and Python then installs no KeyboardInterrupt for it
+signal.signal(signal.SIGINT, signal.default_int_handler)
 def keep_then_signal(self, *args):
     keep(self, *args)
     kept.append(args[0])
