@@ -240,10 +240,14 @@ def _cost(c: Choice) -> str:
     return f"{size(c.bytes)}, {c.rays:,.0f} rays, {c.taps:.3g} tap{'' if c.taps == 1 else 's'}"
 
 
+def family_counts(families) -> list:
+    """[(family, how many)] of ``families`` (one name per instance), most first, then by name."""
+    return sorted(Counter(families).items(), key=lambda t: (-t[1], t[0]))
+
+
 def families(tied: list, chosen: Choice) -> str:
     """The other tied instances as their families and counts (``adaptive 5, constant 3``), most first."""
-    counts = Counter(c.family for c in tied if c is not chosen)
-    return ", ".join(f"{f} {n}" for f, n in sorted(counts.items(), key=lambda t: (-t[1], t[0])))
+    return ", ".join(f"{f} {n}" for f, n in family_counts(c.family for c in tied if c is not chosen))
 
 
 def answer_words(a: dict) -> tuple:

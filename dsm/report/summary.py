@@ -273,10 +273,7 @@ def tie_words(labels: list) -> str:
     and how many of each, most first (the full list is the table's and the page's)."""
     if len(labels) <= TIE_NAMES + 1:
         return names(labels)
-    counts = {}
-    for label in labels:
-        counts[label.split()[0]] = counts.get(label.split()[0], 0) + 1
-    return ", ".join(f"{f} {n}" if n > 1 else f for f, n in sorted(counts.items(), key=lambda t: (-t[1], t[0])))
+    return ", ".join(f"{f} {n}" if n > 1 else f for f, n in frontier.family_counts(x.split()[0] for x in labels))
 
 
 def names(labels: list) -> str:
