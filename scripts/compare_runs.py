@@ -2,7 +2,8 @@
 
 ``run OUT``: in the current checkout (put it first on PYTHONPATH), run every experiment at its
 smoke size, the default experiment, a tiled run, a run under ``--cluster local`` and
-``dsm tune experiments/tune.toml`` into OUT/<name>/, and ``dsm benchmark`` at its test size
+``dsm tune experiments/tune.toml`` into OUT/<name>/, ``dsm grad`` on every experiments/gradient/*.toml
+and ``dsm benchmark`` at its test size
 (its cases written as OUT/benchmark/cases.csv).
 ``compare A B``: the same runs of two checkouts, every CSV column compared row by row except
 what depends on the machine or the kernel cache; prints one line per run and the differences.
@@ -18,8 +19,9 @@ from pathlib import Path
 
 # columns that measure the machine, not the method: by their unit's suffix, or a word in the name
 # (a suffix only: "_s" inside a name would also drop n_gt_shadowed, n_acne_self, n_seam, texel_size)
-MACHINE_SUFFIXES = ("_ms", "_mb", "_s", "_bytes")
-MACHINE_WORDS = ("kernels_compiled", "time", "seconds")
+# (map_bytes and page_table_bytes are counts of the method, compared; a peak in bytes is the machine's)
+MACHINE_SUFFIXES = ("_ms", "_mb", "_s")
+MACHINE_WORDS = ("kernels_compiled", "time", "seconds", "peak")
 
 
 def _machine(col: str) -> bool:
@@ -64,6 +66,10 @@ def run_all(out: Path):
     cmd = [sys.executable, "-m", "dsm.cli", "run", "experiments/point_views.toml", "--out", str(out / "cluster"),
            "--cluster", "local"]
     subprocess.run(cmd, check=False)
+    # every shipped gradient experiment: its selfcheck.csv (and whatever other CSV dsm grad writes)
+    for path in sorted(Path("experiments/gradient").glob("*.toml")):
+        subprocess.run([sys.executable, "-m", "dsm.cli", "grad", str(path), "--out", str(out / f"grad-{path.stem}")],
+                       check=False)
     # dsm benchmark at its test size: its cases as a CSV, so they compare as every run does
     bench = out / "benchmark"
     flags, env = _test_size()

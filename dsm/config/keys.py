@@ -16,7 +16,7 @@ from ..core.types import (AREA_SHAPES, Length, BACKENDS, BLUR_KERNELS, BUILD_MOD
                           VIRTUAL_RULES, HYBRID_ORIGINS)
 from ..contact.presets import PRESETS as CONTACT_PRESETS
 from ..scenes.params import BUILTINS
-from .tune import MAP_FITS, MAP_UNITS, ROLES, SCHEDULES
+from .tune import MAP_FITS, MAP_UNITS, ROLES, SCHEDULES, SEARCHES
 
 LENGTH = "length: a number (world units), \"k texel\" or \"k range\""
 
@@ -210,6 +210,10 @@ KEYS = (
     Key("tune", "bias_map", "table", "none", "a learned bias map (see tune.bias_map)"),
     Key("tune", "scan", "int", "0", "points of an exact 1-D scan of one-parameter schemes", _r(0, 100000)),
     Key("tune", "gradcheck", "bool", "false", "AD against central differences of the relaxed loss"),
+    Key("tune", "search", "str", "ad", "optuna: also Optuna's TPE on the exact objective at the AD tuner's number "
+        "of exact evaluations (the extra dsm[tune])", SEARCHES),
+    Key("tune", "objectives", "int", "1", "2: also NSGA-II on acne and peter-panning, its Pareto front "
+        "(search = optuna)", "1 or 2"),
     Key("tune.camera", "name", "str", "cam<i>", "the camera's name in the results"),
     Key("tune.camera", "position", "[x, y, z]", "(required)", "scales and moves with a built-in's scale, translate",
         unit="world"),

@@ -10,7 +10,8 @@ from ..core.types import LAMBDA_MAX, SEED_MAX, ConfigError, Length, as_list, che
 
 
 TUNE_KEYS = ("lambda", "steps", "lr", "temperature", "schedule", "seed", "batch", "params", "range", "camera",
-             "bias_map", "scan", "gradcheck")
+             "bias_map", "scan", "gradcheck", "search", "objectives")
+SEARCHES = ("ad", "optuna")     # the gradient tuner alone, or beside Optuna at its number of exact evaluations
 CAMERA_KEYS = ("name", "position", "target", "up", "fov", "role")
 ROLES = ("train", "heldout")
 SCHEDULES = ("geometric", "linear")
@@ -85,6 +86,8 @@ class TuneSpec:
     bias_map: BiasMapSpec | None = None
     scan: int = 0                             # points of the exact 1-D scan of a one-parameter scheme (0: none)
     gradcheck: bool = False                   # AD against central differences of the relaxed loss, per parameter
+    search: str = "ad"                        # "optuna": also a black-box study per scheme (dsm.tune.blackbox)
+    objectives: int = 1                       # 2: also NSGA-II on (acne, peter-panning), its Pareto front
 
 
 def parse_tune(raw: dict, source: str, seed: int, schemes: tuple) -> TuneSpec | None:
@@ -114,12 +117,18 @@ def tune_spec(t, src: str, seed: int, schemes: tuple) -> TuneSpec:
     gradcheck = t.get("gradcheck", False)
     if not isinstance(gradcheck, bool):
         raise ConfigError(src, "tune.gradcheck", f"expected true or false, got {gradcheck!r}", ("true", "false"))
+    search = choice(t.get("search", "ad"), src, "tune.search", SEARCHES)
+    objectives = number(t.get("objectives", 1), src, "tune.objectives", integer=True, minimum=1, maximum=2)
+    if objectives == 2 and search != "optuna":
+        raise ConfigError(src, "tune.objectives", "two objectives are searched by Optuna's NSGA-II: give "
+                          "search = \"optuna\" with it", ("1",))
     names = tuned_names(schemes)
     params = _params(t, src, names)
     ranges = _ranges(t, src, names, params)
     cams = _cameras(t, src)
     bmap = _bias_map(t["bias_map"], src, steps, lr, cams) if "bias_map" in t else None
-    return TuneSpec(lam, steps, lr, temp, schedule, seed, batch, params, ranges, cams, bmap, scan, gradcheck)
+    return TuneSpec(lam, steps, lr, temp, schedule, seed, batch, params, ranges, cams, bmap, scan, gradcheck, search,
+                    objectives)
 
 
 def tuned_names(schemes: tuple) -> list:

@@ -1,6 +1,8 @@
 """The exact (hard) objective's counts of a scheme instance with the kit's nearest lookup."""
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import dataclasses
 import time
 
@@ -11,6 +13,44 @@ from ..core.types import Length, SchemeSpec
 
 
 NAN = float("nan")       # one object: lists of rows compare equal where both hold it
+
+
+# ---------------------------------------------------------------- what a search ran, counted
+
+@dataclasses.dataclass
+class Tally:
+    """The evaluations a search made, counted where they run: ``exact``, the exact objective's counts at one
+    parameter point over a set of receivers (hard_counts); ``relaxed``, a pass of the relaxed loss (forward, and
+    backward where AD follows: relax.relaxed_loss); ``line``, an exact line search (the margins linearised along
+    a line and the objective counted at every receiver's flip: refine.margin_line)."""
+    exact: int = 0
+    relaxed: int = 0
+    line: int = 0
+
+    def as_dict(self) -> dict:
+        """The counts by kind, for tune.json."""
+        return dataclasses.asdict(self)
+
+
+_ACTIVE = contextvars.ContextVar("dsm_tune_tally", default=None)
+
+
+@contextlib.contextmanager
+def tallying():
+    """Count the evaluations made inside the block into a new Tally (nested blocks count into their own only)."""
+    tally = Tally()
+    token = _ACTIVE.set(tally)
+    try:
+        yield tally
+    finally:
+        _ACTIVE.reset(token)
+
+
+def count(kind: str):
+    """One evaluation of ``kind`` (exact, relaxed, line) made: counted into the active Tally, if any."""
+    tally = _ACTIVE.get()
+    if tally is not None:
+        setattr(tally, kind, getattr(tally, kind) + 1)
 
 
 # ---------------------------------------------------------------- hard (exact) evaluation
@@ -27,6 +67,7 @@ def with_values(spec: SchemeSpec, values: dict) -> SchemeSpec:
 def hard_counts(spec: SchemeSpec, cases, groups) -> dict:
     """Exact counts of one scheme instance over ``cases`` with the kit's nearest lookup."""
     culling = pl.culling_of(spec.params)
+    count("exact")
     return counted(cases, lambda c: pl.visibility(spec, c.rx, groups[c.group].maps[culling])[0])
 
 

@@ -11,7 +11,7 @@ from ..experiment.lock import entries, unwritable
 from . import resume as tune_resume
 
 TUNE_FILES = ("tuned.toml", "table.md", "steps.csv", "tune.json", "plots/tune_loss.png", "bias_map.npy",
-              "texel_offsets.npy", "tune_state.json")   # what dsm tune writes
+              "texel_offsets.npy", "tune_state.json", "optuna.journal")   # what dsm tune writes
 
 
 def tune_folder(out: Path, name: str, force: bool = False, resume: bool = False) -> tuple:

@@ -174,7 +174,7 @@ def table_text(res: TuneResult) -> str:
     """The Markdown summary (``table.md``): a row per tuned scheme against grid search and oracle, then the bias map."""
     out = [f"# dsm tune (lambda = {res.spec.lam:g}; objective (n_acne + lambda n_peterpan) / n_receivers)", "",
            f"training receivers {res.n_train}, held-out receivers {res.n_heldout}"]
-    out += _scheme_section(res) + _gradcheck_section(res)
+    out += _scheme_section(res) + _blackbox_section(res) + _gradcheck_section(res)
     if res.bias_map:
         out += _bias_map_section(res.bias_map)
     out += moments_table(res)
@@ -204,6 +204,42 @@ def _scheme_section(res: TuneResult) -> list:
         out += ["", f"a grid of one point per parameter (steps {res.spec.steps} < 2^parameters; its box's centre): "
                 f"{', '.join(thin)}: give more steps for a comparison"]
     return out
+
+
+def _blackbox_section(res: TuneResult) -> list:
+    """table.md's AD tuner against Optuna's TPE at equal exact evaluations, and NSGA-II's front (search = optuna)."""
+    rows = [r for r in res.comparison if "optuna_train" in r]
+    if not rows:
+        return []
+    out = ["", "AD against Optuna's TPE at the same number of exact evaluations (the objective on the training "
+           "views; evaluations: exact / relaxed passes / exact line searches):", "",
+           "| scheme | AD | AD train | AD held-out | AD evaluations | AD wall ms (CPU ms) | TPE | TPE train "
+           "| TPE held-out | TPE evaluations | TPE wall ms (CPU ms) | lower on train |",
+           "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for r in rows:
+        out.append(f"| {r['scheme']} | {r['tuned_params']} | {_fmt(r['tuned_train'])} | {_fmt(r['tuned_heldout'])} "
+                   f"| {r['tuned_evaluations']} / {r['tuned_relaxed_evaluations']} / {r['tuned_line_searches']} "
+                   f"| {r['tuned_wall_ms']:.0f} ({r['tuned_cpu_ms']:.0f}) | {r['optuna_params']} "
+                   f"| {_fmt(r['optuna_train'])} | {_fmt(r['optuna_heldout'])} | {r['optuna_evaluations']} / 0 / 0 "
+                   f"| {r['optuna_wall_ms']:.0f} ({r['optuna_cpu_ms']:.0f}) "
+                   f"| {lower_words(r['tuned_train'], r['optuna_train'])} |")
+    for e in res.schemes:
+        f = e.get("optuna_front")
+        if f:
+            ad = f["ad_point"]
+            pts = ", ".join(f"({p['acne_per_receiver']:.5f}, {p['peterpan_per_receiver']:.5f})" for p in f["front"])
+            out += ["", f"{e['scheme']} {e['start']}: NSGA-II's Pareto front in (acne, peter-panning) per receiver "
+                    f"({f['trials']} trials, population {f['population']}): {pts}; the AD tuner's point at lambda "
+                    f"{ad['lambda']:g}: ({ad['acne_per_receiver']:.5f}, {ad['peterpan_per_receiver']:.5f}), "
+                    + ("dominated by the front" if ad["dominated"] else "on or beyond the front")]
+    return out
+
+
+def lower_words(ad: float, tpe: float) -> str:
+    """Which search ended lower on the training objective: AD, TPE or a tie (equal objectives)."""
+    if not (math.isfinite(ad) and math.isfinite(tpe)):
+        return "undefined"
+    return "tie" if ad == tpe else "AD" if ad < tpe else "TPE"
 
 
 def _gradcheck_section(res: TuneResult) -> list:

@@ -9,7 +9,7 @@ import numpy as np
 from .. import pipeline as pl
 from ..schemes import get as get_scheme
 from .relax import margins
-from .evaluate import sync_clock
+from .evaluate import count, sync_clock
 
 
 def margin_line(module, params, values: dict, direction: dict, cases, groups) -> tuple:
@@ -17,6 +17,7 @@ def margin_line(module, params, values: dict, direction: dict, cases, groups) ->
     ``direction`` (parameter name -> change per unit step, in the parameter's unit), by Dr.Jit's
     forward-mode AD: (margin, slope), float64 arrays over the cases in order."""
     culling = pl.culling_of(params)
+    count("line")
     m_all, g_all = [], []
     for c in cases:
         a = mi.Float(0.0)

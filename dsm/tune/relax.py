@@ -12,6 +12,7 @@ from ..maps import lookup
 from .. import pipeline as pl
 from ..schemes.base import no_shift
 from ..core.types import Length
+from .evaluate import count
 
 
 CLIP = 30.0              # |margin / T| beyond which the sigmoid is flat (its derivative below 1e-13)
@@ -79,6 +80,7 @@ def relaxed_loss(module, params, values, cases, groups, t_texels, lam, weights=N
     relax = module.shift is not no_shift and any(
         k in values for k in ("offset", "normal_offset"))
     culling = pl.culling_of(params)
+    count("relaxed")
     total, n = 0.0, 0
     t = dr.opaque(mi.Float, float(t_texels))
     for i, c in enumerate(cases):

@@ -56,6 +56,7 @@ refine and compare), bias_map (with residual_map) and output.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -63,7 +64,7 @@ from . import resume as tune_resume
 from ..report.tables import objective
 from .. import pipeline as pl
 from ..core.types import ConfigError, Length, describe_params
-from .evaluate import NAN, hard_counts, with_values
+from .evaluate import NAN, hard_counts, sync_clock, tallying, with_values
 from ..config.tune import TuneSpec, tunable, tune_spec
 from .cases import pooled_thresholds, prepare_cases
 from .compare import exact_scan, gradient_check, grid_search
@@ -72,6 +73,7 @@ from .bias_map import edge_bias_map, heldout_split, map_start, reads_camera, res
 from .search import start_value, tune_scheme
 from .output import TuneResult, moments_toml, tuned_toml, write
 from .moment_search import tune_all
+from . import blackbox
 
 
 @dataclass
@@ -87,6 +89,8 @@ def parse_tune(cfg) -> TuneConfig:
     without one) and what dsm tune refuses of the rest (ConfigError naming file, key and choices),
     checked before any work; the schemes to tune are the config's ``[[scheme]]`` instances."""
     spec = cfg.tune if getattr(cfg, "tune", None) is not None else tune_spec({}, cfg.source, cfg.seed, cfg.schemes)
+    if spec.search == "optuna":
+        blackbox.require_optuna(cfg.source)
     _check_lights_and_kinds(cfg)
     _check_schemes(cfg, spec)
     _check_map(cfg)
@@ -268,6 +272,9 @@ def _tune_schemes(tc, train, held, groups, orc_train, out, resume, tick) -> tupl
     keys = tune_resume.scheme_keys(tc)
     previous = tune_resume.read_state(out) if (resume and out is not None) else {}
     finished, kept = [], 0
+    if out is not None and not resume:      # a tune stopped within its first scheme resumes too (its Optuna study)
+        tune_resume.write_state(out, tc.config.name, [])
+    store = blackbox.storage(out) if ts.search == "optuna" else None
     for i, (spec, key) in enumerate(zip(tc.schemes, keys)):
         # steps.csv's instance column: two instances of one scheme (texel and world constants) apart
         tag = lambda rows: [{"instance": f"{i}: {spec.name} {describe_params(spec.params)}".strip(), **r}
@@ -276,7 +283,7 @@ def _tune_schemes(tc, train, held, groups, orc_train, out, resume, tick) -> tupl
             entry = {**previous[key]["entry"], "spec": with_values(spec, previous[key]["entry"]["values"])}
             results.append(entry)
             steps += tag(previous[key]["steps"])
-            comparison.append(_comparison_row(entry, ts.steps))
+            comparison.append(_comparison_row(entry))
             finished.append(previous[key])
             kept += 1
             if out is not None:             # the state lists every finished scheme, kept ones too
@@ -286,9 +293,11 @@ def _tune_schemes(tc, train, held, groups, orc_train, out, resume, tick) -> tupl
                     tick()
             continue
         entry, rows = _scheme_entry(tc, spec, train, held, groups, orc_train, tick)
+        if store is not None:
+            entry.update(_blackbox_entries(tc, spec, entry, train, held, groups, store, key))
         results.append(entry)
         steps += tag(rows)
-        comparison.append(_comparison_row(entry, ts.steps))
+        comparison.append(_comparison_row(entry))
         if out is not None:                 # after each scheme, so a stopped tune resumes from here
             finished.append({"key": key, "entry": {k: v for k, v in entry.items() if k != "spec"},
                              "steps": rows})
@@ -300,9 +309,14 @@ def _scheme_entry(tc, spec, train, held, groups, orc_train, tick) -> tuple:
     """One scheme tuned, grid-searched, scanned (and gradient-checked) with its counts on the training
     and held-out views and (constant) the exact oracle: (its result entry, its step rows)."""
     ts = tc.spec
-    r = tune_scheme(tc, spec, train, groups, tick, {"world": orc_train["best_b"], "texel": orc_train["best_k"]})
+    wall0, cpu0 = sync_clock(), time.process_time()
+    with tallying() as ad_count:
+        r = tune_scheme(tc, spec, train, groups, tick, {"world": orc_train["best_b"], "texel": orc_train["best_k"]})
+    ad_cost = {"evaluations": ad_count.as_dict(), "wall_ms": (sync_clock() - wall0) * 1e3,
+               "cpu_ms": (time.process_time() - cpu0) * 1e3}
     tuned = with_values(spec, r["values"])
-    g = grid_search(tc, spec, r["box"], train, groups, ts.steps)
+    with tallying() as grid_count:
+        g = grid_search(tc, spec, r["box"], train, groups, ts.steps)
     grid_spec = with_values(spec, g["values"])
     scan = exact_scan(tc, spec, r["box"], train, groups, ts.scan)
     check = gradient_check(tc, spec, r["box"], train, groups) if ts.gradcheck else None
@@ -316,6 +330,7 @@ def _scheme_entry(tc, spec, train, held, groups, orc_train, tick) -> tuple:
              "gradcheck": check, "start_outside_box": _outside_box(spec, r["box"]),
              "scan": None if scan is None else {**scan, "params": describe_params(with_values(spec, scan["values"]).params)},
              "first_step_ms": r["first_step_ms"], "step_ms": r["step_ms"], "tune_ms": r["total_ms"],
+             "ad": ad_cost, "grid_evaluations": grid_count.as_dict(),
              "grid": {**g, "params": describe_params(grid_spec.params),
                       "heldout": _with_obj(hard_counts(grid_spec, held, groups), ts.lam)["objective"]
                       if held else float("nan")}}
@@ -372,15 +387,60 @@ def _learned_map(tc, train, held, groups, results, orc_train, orc_held, bar) -> 
     return bmap
 
 
+def _blackbox_entries(tc, spec, entry, train, held, groups, store, key) -> dict:
+    """Optuna's studies of one scheme over the AD tuner's box, at the number of exact evaluations the AD
+    tuner made: TPE on the objective, and (two objectives) NSGA-II's Pareto front with the AD tuner's point."""
+    ts, box = tc.spec, _box_of(entry, spec)
+    trials = entry["ad"]["evaluations"]["exact"]
+    tpe = blackbox.study(tc, spec, box, train, groups, trials, store, f"{key}-tpe")
+    best = blackbox.best_trial(tpe)
+    found = with_values(spec, best["values"])
+    out = {"optuna": {"sampler": "TPE", "trials": trials, "values": best["values"], "trial": best["number"],
+                      "params": describe_params(found.params),
+                      "train": _with_obj(hard_counts(found, train, groups), ts.lam),
+                      "heldout": _with_obj(hard_counts(found, held, groups), ts.lam) if held else None,
+                      "evaluations": tpe["evaluations"], "wall_ms": tpe["wall_ms"], "cpu_ms": tpe["cpu_ms"]}}
+    if ts.objectives == 2:
+        nsga = blackbox.study(tc, spec, box, train, groups, trials, store, f"{key}-nsga2", objectives=2)
+        n = max(entry["train"]["n_receivers"], 1)
+        ad_point = [entry["train"]["n_acne"] / n, entry["train"]["n_peterpan"] / n]
+        front = blackbox.pareto_front(nsga)
+        out["optuna_front"] = {"sampler": "NSGA-II", "trials": trials,
+                               "population": blackbox.population_size(trials),
+                               "front": [{"values": t["values"], "acne_per_receiver": t["objectives"][0],
+                                          "peterpan_per_receiver": t["objectives"][1]} for t in front],
+                               "ad_point": {"lambda": ts.lam, "acne_per_receiver": ad_point[0],
+                                            "peterpan_per_receiver": ad_point[1],
+                                            "dominated": any(t["objectives"][0] <= ad_point[0] and
+                                                             t["objectives"][1] <= ad_point[1] and
+                                                             t["objectives"] != ad_point for t in front)},
+                               "evaluations": nsga["evaluations"], "wall_ms": nsga["wall_ms"],
+                               "cpu_ms": nsga["cpu_ms"]}
+    return out
+
+
+def _box_of(entry, spec) -> list:
+    """The AD tuner's search box of a result entry, as Params (names, units, ranges and the start clipped
+    into them, as it searched)."""
+    from .search import Param
+    return [Param(n, entry["units"][n], min(max(start_value(spec, n), lo), hi), 1.0, lo, hi)
+            for n, (lo, hi) in entry["box"].items()]
+
+
 def _with_obj(counts, lam):
     return {**counts, "objective": objective(counts, lam)}
 
 
-def _comparison_row(e, budget):
+def _comparison_row(e):
     g = e["grid"]
+    ad = e.get("ad") or {}
     row = {"scheme": e["scheme"], "tuned_params": e["params"], "tuned_train": e["train"]["objective"],
            "tuned_heldout": e["heldout"]["objective"] if e["heldout"] else float("nan"),
-           "tuned_ms": e["tune_ms"], "tuned_evaluations": budget, "first_step_ms": e["first_step_ms"],
+           "tuned_ms": e["tune_ms"], "tuned_evaluations": (ad.get("evaluations") or {}).get("exact", NAN),
+           "tuned_relaxed_evaluations": (ad.get("evaluations") or {}).get("relaxed", NAN),
+           "tuned_line_searches": (ad.get("evaluations") or {}).get("line", NAN),
+           "tuned_wall_ms": ad.get("wall_ms", NAN), "tuned_cpu_ms": ad.get("cpu_ms", NAN),
+           "first_step_ms": e["first_step_ms"],
            "step_ms": e["step_ms"],
            "grid_params": g["params"], "grid_train": g["objective"], "grid_heldout": g["heldout"],
            "grid_ms": g["total_ms"], "grid_evaluations": g["evaluations"],
@@ -389,4 +449,10 @@ def _comparison_row(e, budget):
            "scan_params": e["scan"]["params"] if e["scan"] else "-",
            "scan_train": e["scan"]["objective"] if e["scan"] else NAN,
            "scan_evaluations": e["scan"]["evaluations"] if e["scan"] else 0}
+    if e.get("optuna"):
+        o = e["optuna"]
+        row.update({"optuna_params": o["params"], "optuna_train": o["train"]["objective"],
+                    "optuna_heldout": o["heldout"]["objective"] if o["heldout"] else NAN,
+                    "optuna_evaluations": o["evaluations"]["exact"], "optuna_wall_ms": o["wall_ms"],
+                    "optuna_cpu_ms": o["cpu_ms"]})
     return row
