@@ -94,7 +94,3 @@ def read_class(out: Path, records: list, index: int) -> np.ndarray:
     """The class image (H, W) of results.json's ``cases[index]``, from the benchmark's folder ``out``."""
     return image_at(read_indices(Path(out) / sheets(records[index])[0]), places(records)[index])
 
-
-def read_flip(out: Path, records: list, index: int) -> np.ndarray:
-    """The stored FLIP map (H, W) of results.json's ``cases[index]`` as float64 (within FLIP_BOUND of FLIP's)."""
-    return image_at(read_indices(Path(out) / sheets(records[index])[1]), places(records)[index]) / FLIP_LEVELS

@@ -92,17 +92,6 @@ def grey_index(img: np.ndarray) -> np.ndarray:
     return np.round(np.clip(img, 0, 1) * (GREYS - 1)).astype(np.uint8)
 
 
-def tint_index(shading: np.ndarray, classes: np.ndarray) -> np.ndarray:
-    """Palette indices of the classes tinted over a grey shading in [0, 1] (same shape)."""
-    level = np.round(np.clip(shading, 0, 1) * (TINT_LEVELS - 1)).astype(np.int64)
-    return (GREYS + classes.astype(np.int64) * TINT_LEVELS + level).astype(np.uint8)
-
-
-def upscale(img: np.ndarray, k: int) -> np.ndarray:
-    """Each pixel k x k (nearest-neighbour)."""
-    return np.repeat(np.repeat(img, k, 0), k, 1)
-
-
 # ---------------------------------------------------------------- a frame's display render
 
 @dataclasses.dataclass

@@ -259,7 +259,8 @@ def _progress_bar(tc):
     """A tqdm bar over the run's steps: a scene each, ``steps`` per scheme, an Adam bias map's steps."""
     from tqdm import tqdm
     ts = tc.spec
-    total = len(tc.config.scenes) + ts.steps * (len(tc.schemes) + len(tc.config.map.moments)) + (
+    studies = ts.objectives if ts.search == "optuna" else 0        # Optuna's trials: as many as the steps made
+    total = len(tc.config.scenes) + ts.steps * ((1 + studies) * len(tc.schemes) + len(tc.config.map.moments)) + (
         ts.bias_map.steps if ts.bias_map and ts.bias_map.fit == "adam" else 0)
     return tqdm(total=total, desc="dsm tune", unit="step", leave=False)
 
@@ -294,7 +295,7 @@ def _tune_schemes(tc, train, held, groups, orc_train, out, resume, tick) -> tupl
             continue
         entry, rows = _scheme_entry(tc, spec, train, held, groups, orc_train, tick)
         if store is not None:
-            entry.update(_blackbox_entries(tc, spec, entry, train, held, groups, store, key))
+            entry.update(_blackbox_entries(tc, spec, entry, train, held, groups, store, key, tick))
         results.append(entry)
         steps += tag(rows)
         comparison.append(_comparison_row(entry))
@@ -387,12 +388,13 @@ def _learned_map(tc, train, held, groups, results, orc_train, orc_held, bar) -> 
     return bmap
 
 
-def _blackbox_entries(tc, spec, entry, train, held, groups, store, key) -> dict:
+def _blackbox_entries(tc, spec, entry, train, held, groups, store, key, tick=None) -> dict:
     """Optuna's studies of one scheme over the AD tuner's box, at the number of exact evaluations the AD
     tuner made: TPE on the objective, and (two objectives) NSGA-II's Pareto front with the AD tuner's point."""
     ts, box = tc.spec, _box_of(entry, spec)
     trials = entry["ad"]["evaluations"]["exact"]
-    tpe = blackbox.study(tc, spec, box, train, groups, trials, store, f"{key}-tpe")
+    on_trial = (lambda n: tick()) if tick else None
+    tpe = blackbox.study(tc, spec, box, train, groups, trials, store, f"{key}-tpe", on_trial=on_trial)
     best = blackbox.best_trial(tpe)
     found = with_values(spec, best["values"])
     out = {"optuna": {"sampler": "TPE", "trials": trials, "values": best["values"], "trial": best["number"],
@@ -401,7 +403,8 @@ def _blackbox_entries(tc, spec, entry, train, held, groups, store, key) -> dict:
                       "heldout": _with_obj(hard_counts(found, held, groups), ts.lam) if held else None,
                       "evaluations": tpe["evaluations"], "wall_ms": tpe["wall_ms"], "cpu_ms": tpe["cpu_ms"]}}
     if ts.objectives == 2:
-        nsga = blackbox.study(tc, spec, box, train, groups, trials, store, f"{key}-nsga2", objectives=2)
+        nsga = blackbox.study(tc, spec, box, train, groups, trials, store, f"{key}-nsga2", objectives=2,
+                              on_trial=on_trial)
         n = max(entry["train"]["n_receivers"], 1)
         ad_point = [entry["train"]["n_acne"] / n, entry["train"]["n_peterpan"] / n]
         front = blackbox.pareto_front(nsga)
