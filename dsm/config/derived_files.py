@@ -5,6 +5,10 @@ from __future__ import annotations
 
 import json
 import math
+import tomllib
+from pathlib import Path
+
+from .read import parse
 
 DERIVED_TOML = "derived.toml"
 DERIVATION_JSON = "derivation.json"
@@ -65,3 +69,16 @@ def explain_lines(d) -> list:
     out.append(f"  largest |coordinate| {m['max_abs_coordinate']:.6g} (float32 step {m['f32_step']:.3g}); "
                f"diagonal {m['diagonal']:.4g}")
     return out
+
+
+def config_of(d, out=None, source: str | None = None):
+    """The Config of derivation ``d`` as derived.toml in folder ``out`` reads (its source that file)."""
+    where = Path(out) / DERIVED_TOML if out is not None else None
+    return parse(tomllib.loads(toml_text(d)), source or str(where), where.parent if where else None)
+
+
+def write(d, out):
+    """derived.toml and derivation.json into the results folder ``out``."""
+    out = Path(out)
+    (out / DERIVED_TOML).write_text(toml_text(d), encoding="utf-8")
+    (out / DERIVATION_JSON).write_text(json.dumps(record(d), indent=1) + "\n", encoding="utf-8")
