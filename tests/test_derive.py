@@ -193,3 +193,23 @@ def test_derived_toml_run_again_gives_the_derived_runs_results(tmp_path, capsys)
     assert 0 < page.index("id=derived") < page.index("id=costs")      # the reasons before the answer
     assert "## Derived from" in (first / "table.md").read_text()
     assert "id=derived" not in (again / "report.html").read_text()    # a config file's run derived nothing
+
+
+def test_an_xml_scene_at_1e6_rendered_camera_relative_keeps_the_origins_float32_headroom(tmp_path):
+    """[[scene]] precision on an XML scene (the axis the precision rule derives): the exact side is the
+    origin's (receivers, exact shadow); world precision leaves a texel fewer than 64 float32 steps at
+    1e6, camera_relative as many as at the origin."""
+    from dsm import run
+    box = BOX.format(x=-1, y=0.5, z=0.5)
+    origin = small_scene(tmp_path, "origin", SUN, box)
+    far = small_scene(tmp_path, "far", SUN, BOX.format(x=1e6 - 1, y=1e6 + 0.5, z=0.5), offset=(1e6, 1e6, 0.0))
+    base = {"map": {"resolution": 128}, "scheme": [{"name": "constant", "bias": "1 texel"}],
+            "timing": {"repeats": 1}, "report": {"images": "none"}}
+    rows = []
+    for scene in ({"file": str(origin)}, {"file": str(far), "precision": ["world", "camera_relative"]}):
+        rows += run({**base, "scene": [scene]}, out=tmp_path / ("run_" + scene["file"].split("/")[-1])).rows
+    at0, world, relative = rows
+    for r in (world, relative):
+        assert (r["n_receivers"], r["n_gt_shadowed"]) == (at0["n_receivers"], at0["n_gt_shadowed"])
+    assert world["f32_step"] == 0.0625 and world["texel_f32_steps"] < 64
+    assert relative["texel_f32_steps"] >= 64 and at0["texel_f32_steps"] >= 64
