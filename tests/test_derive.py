@@ -213,3 +213,57 @@ def test_an_xml_scene_at_1e6_rendered_camera_relative_keeps_the_origins_float32_
         assert (r["n_receivers"], r["n_gt_shadowed"]) == (at0["n_receivers"], at0["n_gt_shadowed"])
     assert world["f32_step"] == 0.0625 and world["texel_f32_steps"] < 64
     assert relative["texel_f32_steps"] >= 64 and at0["texel_f32_steps"] >= 64
+
+
+def facts_of(views=(), closed=(), open_=(), analytic=(), thinnest=math.inf):
+    """SceneFacts made here (the rules are functions of them alone)."""
+    return scene_facts.SceneFacts(path=None, film=(4, 3), delta_lights=(), area_lights=(), default_light="",
+                                  closed=closed, open=open_, analytic=analytic, thinnest_closed=thinnest,
+                                  max_abs_coordinate=1.0, diagonal=1.0, views=views)
+
+
+def view_of(texel_world, near, far, kind="orthographic"):
+    n = len(texel_world)
+    return scene_facts.ViewFacts("0:sun", "directional", kind, np.ones(n), np.asarray(texel_world, float), near, far)
+
+
+def test_the_formats_rule_offers_a_unorm_format_where_its_step_passes_a_texel():
+    # at MEASURE_R the texel is 2 world units, so 1 at twice it: unorm16's step over 0..131070 is 2
+    r = 2 * scene_facts.MEASURE_R
+    assert derive.formats_rule(facts_of((view_of([2.0], 0.0, 2.0 * 65535),)), r)[0] == ("float32", "unorm16")
+    assert derive.formats_rule(facts_of((view_of([2.0], 0.0, 0.5 * 65535),)), r)[0] == ("float32",)
+    # unorm24 as well only where its step (range / (2^24 - 1)) passes the texel too
+    assert derive.formats_rule(facts_of((view_of([2.0], 0.0, 2.0 * (2 ** 24 - 1)),)), r)[0] == \
+        ("float32", "unorm16", "unorm24")
+
+
+def test_the_shrink_rule_offers_half_a_texel_below_a_quarter_of_the_thinnest_solid():
+    v = (view_of([1.0], 0.0, 1.0),)
+    assert derive.shrink_rule(facts_of(v, open_=(("plate", "4 boundary edges"),)), 0.5)[0] == 0.25
+    assert derive.shrink_rule(facts_of(v, closed=("box",), open_=(("plate", "open"),), thinnest=0.4), 0.5)[0] == 0.1
+    assert derive.shrink_rule(facts_of(v, closed=("box",)), 0.5)[0] == 0.0                  # nothing open
+    assert derive.shrink_rule(facts_of(v, open_=(("s", "analytic"),), analytic=("s",)), 0.5)[0] == 0.0
+
+
+def test_the_schemes_rule_takes_every_family_and_preset_once():
+    from dsm import schemes
+    from dsm.schemes import presets
+    v = (view_of([1.0], 0.0, 1.0),)
+    tables, _ = derive.schemes_rule(facts_of(v), two_layer=False)
+    names = [t["name"] for t in tables if "name" in t]
+    assert names == [m.NAME for m in schemes.REGISTRY if m.NAME not in ("combined",) + derive.TWO_LAYER]
+    assert [t["preset"] for t in tables if "preset" in t] == presets.names()
+    tables, _ = derive.schemes_rule(facts_of(v), two_layer=True)
+    assert set(derive.TWO_LAYER) <= {t.get("name") for t in tables}
+
+
+def test_a_scene_file_that_cannot_be_derived_from_is_one_line(tmp_path, capsys):
+    assert cli.main(["run", str(tmp_path / "absent.xml"), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "absent.xml" in err[0] and "scene.file" in err[0]
+    ortho = write(tmp_path, "ortho", '<sensor type="orthographic"><film type="hdrfilm"><integer name="width" '
+                  'value="8"/><integer name="height" value="8"/></film></sensor>', SUN, GROUND.format(s=4, t=""))
+    assert cli.main(["plan", str(ortho)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "perspective" in err[0]
+    assert not (tmp_path / "o").exists()

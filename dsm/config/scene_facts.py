@@ -17,9 +17,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+import mitsuba as mi
 import numpy as np
 
 from .. import lights as light_types
+from ..core.types import ConfigError
 from ..scenes import exact_frame, gbuffer
 from ..scenes.camera import Camera
 from ..scenes.closedness import shape_closedness
@@ -67,6 +69,10 @@ def measure(path) -> SceneFacts:
     path = Path(path).resolve()
     spec = parse_scene({"file": str(path)}, str(path), "scene", path.parent)[0]
     sd = load(spec)
+    if "x_fov" not in mi.traverse(sd.sensor):
+        raise ConfigError(str(path), "scene.file", f"its first sensor is not a perspective camera: a derived "
+                          "experiment reads the pixels' footprints of a pinhole camera; write a config instead "
+                          "(docs/config.md)", ("perspective",))
     delta, _ = lights_of(sd.scene)
     area = emitter_lights(sd.scene, light_types.get("area").parse(dict(AREA_EMITTER), str(path), "light"))
     default = "" if delta or area else sd.own_lights[0]
@@ -96,7 +102,6 @@ def _closedness(scene, names) -> tuple:
 
 def _footprints(sd, lights) -> tuple:
     """ViewFacts of every light's views, measured on the G-buffer of the scene's own camera."""
-    import mitsuba as mi
     centre = sd.centre if sd.centre is not None else np.zeros(3)
     sensor = sd.sensor if sd.centre is None else exact_frame.sensor_in(sd.sensor, centre, sd.camera_pose)
     w, h = (int(x) for x in sensor.film().size())
