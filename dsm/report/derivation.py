@@ -16,7 +16,7 @@ def read(out: Path, notes: list | None = None) -> dict | None:
         return None
     try:
         d = json.loads(path.read_text(encoding="utf-8"))
-        return {"scene": str(d["measured"]["scene"]),
+        return {"scene": str(d["measured"]["scene"]), "name": Path(str(d["measured"]["scene"])).name,
                 "choices": [{k: str(c[k]) for k in ("rule", "choice", "reason")} for c in d["choices"]]}
     except (OSError, ValueError, KeyError, TypeError) as e:
         if notes is not None:
@@ -28,5 +28,6 @@ def md_lines(d: dict | None) -> list:
     """table.md's section on the derived choices (none for a run of a config file)."""
     if d is None:
         return []
-    return ([f"## Derived from {d['scene']}", "", "Each choice of derived.toml (beside these results) and why:", ""]
+    return ([f"## Derived from {d['name']}", "", f"Each choice of derived.toml (beside these results) for `{d['scene']}`, "
+             "and why:", ""]
             + [f"- **{c['rule']}**: {c['choice']} ({c['reason']})" for c in d["choices"]] + [""])
