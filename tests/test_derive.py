@@ -267,3 +267,11 @@ def test_a_scene_file_that_cannot_be_derived_from_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "perspective" in err[0]
     assert not (tmp_path / "o").exists()
+
+
+def test_a_spot_light_is_one_perspective_view_and_writes_no_map_view(tmp_path):
+    spot = ('<emitter type="spot"><float name="cutoff_angle" value="40"/><transform name="to_world">'
+            '<lookat origin="1, -1, 4" target="0, 0, 0"/></transform></emitter>')
+    facts, d = derived(small_scene(tmp_path, "spot", spot, BOX.format(x=-1, y=0.5, z=0.5)))
+    assert [(v.light_type, v.kind) for v in facts.views] == [("spot", "perspective")]
+    assert "view" not in d.tables["map"] and d.tables["light"] == [{"type": "scene"}]
