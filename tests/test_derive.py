@@ -275,3 +275,13 @@ def test_a_spot_light_is_one_perspective_view_and_writes_no_map_view(tmp_path):
     facts, d = derived(small_scene(tmp_path, "spot", spot, BOX.format(x=-1, y=0.5, z=0.5)))
     assert [(v.light_type, v.kind) for v in facts.views] == [("spot", "perspective")]
     assert "view" not in d.tables["map"] and d.tables["light"] == [{"type": "scene"}]
+
+
+def test_a_light_no_pixel_faces_derives_the_defaults_and_says_so(tmp_path):
+    below = '<emitter type="directional"><vector name="direction" x="0" y="0" z="1"/></emitter>'
+    facts, d = derived(small_scene(tmp_path, "below", below))
+    assert len(facts.views[0].footprint_texels) == 0
+    assert d.tables["map"]["resolution"] == [derive.DEFAULT_R // 2, derive.DEFAULT_R, 2 * derive.DEFAULT_R]
+    assert choice(d, "resolution").reason.startswith("no receiver seen")
+    assert d.measured["views"][0]["footprint_median"] is None                # undefined, not 0
+    json.dumps(derived_files.record(d), allow_nan=False)                      # valid JSON: no NaN

@@ -202,6 +202,8 @@ def shrink_rule(facts: SceneFacts, texel: float) -> tuple:
 def precision_rule(max_abs_coordinate: float, texel: float) -> tuple:
     """[[scene]] precision: world and camera_relative where float32's step at the scene's largest
     coordinate exceeds 1/FEW_STEPS of the median texel; else world alone."""
+    if not texel > 0:
+        return ("world",), Choice("precision", "world", "no receiver seen: no texel to hold float32's step against")
     h = headroom.headroom(max_abs_coordinate, texel)
     step, steps = h["f32_step"], h["texel_f32_steps"]
     said = f"float32 step {step:.3g} at |x| = {max_abs_coordinate:.3g}, a texel {texel:.3g}: {steps:.3g} steps a texel"
@@ -250,7 +252,8 @@ def measured_quantities(facts: SceneFacts, median: float, exact_r: float, texel:
               "footprint_median": _f(np.median(v.footprint_texels)) if len(v.footprint_texels) else None,
               "footprint_min": _f(v.footprint_texels.min()) if len(v.footprint_texels) else None,
               "footprint_max": _f(v.footprint_texels.max()) if len(v.footprint_texels) else None,
-              "footprint_ratio": _f(footprint_ratio(v.footprint_texels)), "depth_near": v.near, "depth_far": v.far}
+              "footprint_ratio": _f(footprint_ratio(v.footprint_texels)), "depth_near": _f(v.near),
+              "depth_far": _f(v.far)}
              for v in facts.views]
     return {"scene": str(facts.path), "film": list(facts.film), "measure_resolution": MEASURE_R, "views": views,
             "footprint_median": _f(median), "resolution_exact": _f(exact_r), "texel_world_median": _f(texel),

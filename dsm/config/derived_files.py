@@ -62,7 +62,7 @@ def explain_lines(d) -> list:
     for v in m["views"]:
         out.append(f"  {v['light']} {v['view']}: {v['receivers']} receivers, footprint (texels per pixel) median "
                    f"{g(v['footprint_median'])}, min {g(v['footprint_min'])}, max {g(v['footprint_max'])}, ratio "
-                   f"{g(v['footprint_ratio'])}; depth range {v['depth_near']:.4g} to {v['depth_far']:.4g}")
+                   f"{g(v['footprint_ratio'])}; depth range {g(v['depth_near'])} to {g(v['depth_far'])}")
     out.append(f"  median footprint {g(m['footprint_median'])}: one texel per pixel at "
                f"{g(m['resolution_exact'])}; median texel there {g(m['texel_world_median'])} world units")
     out.append(f"  closed meshes: {', '.join(m['closed_meshes']) or 'none'}; open: {', '.join(m['open_meshes']) or 'none'}")

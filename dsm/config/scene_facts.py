@@ -14,6 +14,7 @@ has the footprints it has at the origin; only its distance from the origin diffe
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -115,15 +116,19 @@ def _footprints(sd, lights) -> tuple:
     for i, light in enumerate(lights):
         light_x = exact_frame.light_in(light, centre)
         module = light_types.get(light.type)
-        label = f"{i}:{light.label or light.type}"
+        facing = p[_facing(light_x, module.POSITIONAL, p, n)]
+        pts = mi.Point3f(*(facing[:, k].astype(np.float32) for k in range(3)))
         for kind in module.views(POINT_VIEWS, light.shape):
-            facing = _facing(light_x, module.POSITIONAL, p, n)
-            view = module.make_view(light_x, MEASURE_R, p[facing], bbox, kind, None, sensor, 1.0)
-            pts = mi.Point3f(*(p[facing][:, k].astype(np.float32) for k in range(3)))
-            keep = view.inside(pts).numpy().astype(bool) if module.POSITIONAL else np.ones(int(facing.sum()), bool)
+            if not len(facing):          # nothing faces this light: no footprint (zero-sized kernels fail)
+                out.append(ViewFacts(f"{i}:{light.label or light.type}", light.type, kind, np.zeros(0), np.zeros(0),
+                                     math.nan, math.nan))
+                continue
+            view = module.make_view(light_x, MEASURE_R, facing, bbox, kind, None, sensor, 1.0)
+            keep = view.inside(pts).numpy().astype(bool) if module.POSITIONAL else np.ones(len(facing), bool)
             tw = np.asarray(view.texel_world(pts).numpy(), np.float64)[keep]
-            pw = cam.pixel_width(p[facing][keep])
-            out.append(ViewFacts(label, light.type, kind, pw / tw, tw, float(view.near), float(view.far)))
+            pw = cam.pixel_width(facing[keep])
+            out.append(ViewFacts(f"{i}:{light.label or light.type}", light.type, kind, pw / tw, tw,
+                                 float(view.near), float(view.far)))
     return tuple(out)
 
 
