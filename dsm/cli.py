@@ -653,7 +653,7 @@ def _run_held(cfg, args, out: Path, clustered: bool, derived=None) -> int:
         print(f"dsm: {line}")
     print(f"dsm: {len(res.rows)} case{'' if len(res.rows) == 1 else 's'} in {time.perf_counter() - t0:.1f} s (measuring {t['measure_s']:.1f} s, "
           f"report {t['report_s']:.1f} s) -> {out}/ (report.html, table.md, metrics.csv, oracle.csv, images/, "
-          "plots/, run.json, frontier.csv)")
+          f"plots/, run.json, frontier.csv{', derived.toml' if derived is not None else ''})")
     if empty:
         print(f"dsm: {empty} cases are empty (no receiver: nothing faces the light inside its domain); "
               "their rates are undefined (see table.md)", file=sys.stderr)
