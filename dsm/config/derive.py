@@ -167,7 +167,8 @@ def cascades_rule(facts: SceneFacts) -> tuple:
     said = ", ".join(f"{k} {r:.3g}" for k, r in ratios.items())
     if wide:
         return CASCADES, Choice("cascades", f"{CASCADES} cascades", f"footprint ratio (largest / smallest) {said}: "
-                                f"above {CASCADE_RATIO:g}, one map cannot cover the camera's depth range")
+                                f"above {CASCADE_RATIO:g}, one map cannot cover the camera's depth range (a virtual map is the "
+                                "other answer: add [map.virtual])")
     note = (f" (other views {max(others):.3g}: the kit cascades directional lights only)"
             if others and max(others) > CASCADE_RATIO else "")
     return 0, Choice("cascades", "one map", f"footprint ratio (largest / smallest) {said or 'no directional light'}: "
@@ -243,7 +244,8 @@ def schemes_rule(facts: SceneFacts, two_layer: bool) -> tuple:
     left = [f"{n} ({why})" for n, why in LEFT_OUT.items()]
     return tables, Choice("schemes", f"{len(names)} schemes at their defaults, {len(kept)} engine presets",
                           f"every family once, so the first run answers which family; presets for "
-                          f"{', '.join(types) or 'no light'}; left out: {'; '.join(left)}")
+                          f"{', '.join(types) or 'no light'} (an area light's are a spot light's); "
+                          f"left out: {'; '.join(left)}")
 
 
 def measured_quantities(facts: SceneFacts, median: float, exact_r: float, texel: float) -> dict:
