@@ -110,7 +110,7 @@ def test_the_precision_axis_appears_far_from_the_origin_only(tmp_path):
     assert far.tables["scene"][0]["precision"] == ["world", "camera_relative"]
     # float32's step at 1e6 is 2^-4: the median texel spans fewer than 64 of them
     assert far.measured["f32_step"] == 0.0625
-    assert far.measured["texel_world_median"] / 0.0625 < 64
+    assert far.measured["texel_world_finest"] / 0.0625 < 64
     cfg = derived_files.config_of(far, tmp_path)                # an XML scene takes the precision axis
     assert [s.params.precision for s in cfg.scenes] == ["world", "camera_relative"]
 
@@ -144,7 +144,7 @@ def test_the_resolution_rule_on_a_plane_matches_the_footprint_computed_here(tmp_
     r0 = scene_facts.MEASURE_R
     texel = (x.max() - x.min()) * r0 / (r0 - 8) / r0
     exact = r0 / np.median(pixel / texel)
-    assert d.measured["resolution_exact"] == pytest.approx(exact, rel=1e-4)
+    assert d.measured["lights"][0]["resolution_exact"] == pytest.approx(exact, rel=1e-4)
     r = 2 ** round(math.log2(exact))
     assert d.tables["map"]["resolution"] == [r // 2, r, 2 * r]
 
@@ -152,10 +152,15 @@ def test_the_resolution_rule_on_a_plane_matches_the_footprint_computed_here(tmp_
 def test_rules_on_known_quantities():
     assert derive.footprint_ratio(np.array([0.5, 1.0, 4.0])) == 8.0
     assert math.isnan(derive.footprint_ratio(np.zeros(0)))
-    (exact, rs), _ = derive.resolution_rule(4.0)          # 4 texels a pixel at 1024: one at 256
-    assert exact == 256 and rs == (128, 256, 512)
-    (exact, rs), _ = derive.resolution_rule(1024 / 700)   # 700 rounds to 512 (log2 9.45)
-    assert rs == (256, 512, 1024)
+    per_light, _ = derive.resolution_rule({"sun": 4.0})   # 4 texels a pixel at 1024: one at 256
+    assert per_light == {"sun": (256.0, 256)} and derive.resolutions(per_light) == (128, 256, 512)
+    per_light, _ = derive.resolution_rule({"sun": 1024 / 700})   # 700 rounds to 512 (log2 9.45)
+    assert per_light["sun"][1] == 512
+    # two lights: each its own bracket, swept together
+    per_light, c = derive.resolution_rule({"sun": 1.0, "lamp": 16.0})
+    assert derive.resolutions(per_light) == (32, 64, 128, 512, 1024, 2048)
+    assert "sun: one texel per pixel at 1024, so 1024" in c.reason and "lamp: one texel per pixel at 64" in c.reason
+    assert derive.resolutions({}) == (256, 512, 1024) and derive.power_of_two(math.nan)[1] == derive.DEFAULT_R
     assert derive.precision_rule(1e6, 1.0)[0] == ("world", "camera_relative")      # 16 steps a texel
     assert derive.precision_rule(1e6, 4.0)[0] == ("world",)                        # 64 steps: not fewer
     assert derive.unorm_steps(1.0, 65536.0)["unorm16"] == 1.0
@@ -229,7 +234,7 @@ def view_of(texel_world, near, far, kind="orthographic"):
 
 def test_the_formats_rule_offers_a_unorm_format_where_its_step_passes_a_texel():
     # at MEASURE_R the texel is 2 world units, so 1 at twice it: unorm16's step over 0..131070 is 2
-    r = 2 * scene_facts.MEASURE_R
+    r = {"0:sun": 2 * scene_facts.MEASURE_R}
     assert derive.formats_rule(facts_of((view_of([2.0], 0.0, 2.0 * 65535),)), r)[0] == ("float32", "unorm16")
     assert derive.formats_rule(facts_of((view_of([2.0], 0.0, 0.5 * 65535),)), r)[0] == ("float32",)
     # unorm24 as well only where its step (range / (2^24 - 1)) passes the texel too
@@ -282,6 +287,6 @@ def test_a_light_no_pixel_faces_derives_the_defaults_and_says_so(tmp_path):
     facts, d = derived(small_scene(tmp_path, "below", below))
     assert len(facts.views[0].footprint_texels) == 0
     assert d.tables["map"]["resolution"] == [derive.DEFAULT_R // 2, derive.DEFAULT_R, 2 * derive.DEFAULT_R]
-    assert choice(d, "resolution").reason.startswith("no receiver seen")
+    assert choice(d, "resolution").reason.startswith("0:directional: no receiver seen")
     assert d.measured["views"][0]["footprint_median"] is None                # undefined, not 0
     json.dumps(derived_files.record(d), allow_nan=False)                      # valid JSON: no NaN

@@ -55,14 +55,16 @@ def derive(facts: SceneFacts) -> Derivation:
     light_tables, c_lights = lights_rule(facts)
     views, c_views = views_rule(facts)
     filters, c_soft = soft_rule(facts)
-    median = pooled_median(facts)
-    (r_exact, rs), c_res = resolution_rule(median)
-    texel = texel_at(facts, rs[1])
+    medians = light_medians(facts)
+    per_light, c_res = resolution_rule(medians)
+    rs = resolutions(per_light)
+    texels = [texel_at(facts, light, r) for light, (_, r) in per_light.items()]
+    texel = min(texels) if texels else math.nan       # the finest: the most demanding of float32
     cascades, c_casc = cascades_rule(facts)
     two_layer, c_cull = culling_rule(facts)
     shrink, c_shrink = shrink_rule(facts, texel)
     precision, c_prec = precision_rule(facts.max_abs_coordinate, texel)
-    formats, c_fmt = formats_rule(facts, rs[1])
+    formats, c_fmt = formats_rule(facts, {k: r for k, (_, r) in per_light.items()})
     scheme_tables, c_schemes = schemes_rule(facts, two_layer)
     m = {"resolution": list(rs)}
     m.update({"view": list(views)} if views else {})
@@ -73,7 +75,7 @@ def derive(facts: SceneFacts) -> Derivation:
     tables = {"experiment": {"name": experiment_name(facts.path)}, "scene": [scene], "light": light_tables,
               "map": m, "scheme": scheme_tables}
     offered = (("map", f"shrink = {shrink:.6g}", c_shrink.reason),) if shrink else ()
-    measured = measured_quantities(facts, median, r_exact, texel)
+    measured = measured_quantities(facts, medians, per_light, texel)
     return Derivation(tables, (c_lights, c_views, c_soft, c_res, c_casc, c_cull, c_shrink, c_prec, c_fmt, c_schemes),
                       measured, offered)
 
@@ -121,10 +123,12 @@ def soft_rule(facts: SceneFacts) -> tuple:
                                 "measures them against one exact ray per receiver and refuses them beside an area light")
 
 
-def pooled_median(facts: SceneFacts) -> float:
-    """The median footprint (texels per pixel at MEASURE_R) over every light's and view's receivers; NaN without one."""
-    f = np.concatenate([v.footprint_texels for v in facts.views] + [np.zeros(0)])
-    return float(np.median(f)) if len(f) else math.nan
+def light_medians(facts: SceneFacts) -> dict:
+    """Per light, the median footprint (texels per pixel at MEASURE_R) over its views' receivers; NaN without one."""
+    out = {}
+    for v in facts.views:
+        out.setdefault(v.light, []).append(v.footprint_texels)
+    return {k: (float(np.median(np.concatenate(f))) if sum(map(len, f)) else math.nan) for k, f in out.items()}
 
 
 def resolution_for(median_texels: float, measure_r: int = MEASURE_R) -> float:
@@ -132,23 +136,35 @@ def resolution_for(median_texels: float, measure_r: int = MEASURE_R) -> float:
     return measure_r / median_texels
 
 
-def resolution_rule(median_texels: float) -> tuple:
-    """((exact resolution, (half, it, twice))): one texel per pixel at the median receiver, rounded to
-    the nearest power of two, with half and twice it."""
+def power_of_two(median_texels: float) -> tuple:
+    """(exact resolution, the nearest power of two within MIN_R to MAX_R): one texel per pixel at the
+    median receiver; (NaN, DEFAULT_R) without one."""
     if not median_texels > 0:
-        r = DEFAULT_R
-        return (math.nan, (r // 2, r, 2 * r)), Choice("resolution", f"{r // 2}, {r}, {2 * r}",
-                                                      "no receiver seen: the kit's default, with half and twice it")
+        return math.nan, DEFAULT_R
     exact = resolution_for(median_texels)
-    r = int(min(MAX_R, max(MIN_R, 2 ** round(math.log2(exact)))))
-    return (exact, (r // 2, r, 2 * r)), Choice(
-        "resolution", f"{r // 2}, {r}, {2 * r}", f"the median receiver's pixel spans one texel at {exact:.0f} "
-        f"(rounded to the power of two {r}, within {MIN_R} to {MAX_R}), with half and twice it")
+    return exact, int(min(MAX_R, max(MIN_R, 2 ** round(math.log2(exact)))))
 
 
-def texel_at(facts: SceneFacts, r: int) -> float:
-    """The median receiver's texel width (world units) at resolution ``r`` over every view."""
-    tw = np.concatenate([v.texel_world for v in facts.views] + [np.zeros(0)])
+def resolution_rule(medians: dict) -> tuple:
+    """({light: (exact resolution, its power of two)}, the choice): per light, one texel per pixel at its
+    median receiver, rounded to the nearest power of two; the config sweeps each with half and twice it."""
+    per_light = {k: power_of_two(m) for k, m in medians.items()}
+    said = "; ".join(f"{k}: one texel per pixel at {e:.0f}, so {r}" if e == e else f"{k}: no receiver seen, the "
+                     f"kit's default {r}" for k, (e, r) in per_light.items())
+    rs = resolutions(per_light)
+    return per_light, Choice("resolution", ", ".join(map(str, rs)), f"{said or 'no light'} (the median receiver's "
+                             f"pixel, rounded to a power of two within {MIN_R} to {MAX_R}), with half and twice it")
+
+
+def resolutions(per_light: dict) -> tuple:
+    """The resolutions swept: each light's power of two with half and twice it (DEFAULT_R's without a light)."""
+    rs = {r for _, p in per_light.values() for r in (p // 2, p, 2 * p)}
+    return tuple(sorted(rs)) or (DEFAULT_R // 2, DEFAULT_R, 2 * DEFAULT_R)
+
+
+def texel_at(facts: SceneFacts, light: str, r: int) -> float:
+    """The median receiver's texel width (world units) of ``light`` at resolution ``r`` over its views."""
+    tw = np.concatenate([v.texel_world for v in facts.views if v.light == light] + [np.zeros(0)])
     return float(np.median(tw)) * MEASURE_R / r if len(tw) else math.nan
 
 
@@ -219,12 +235,12 @@ def unorm_steps(near: float, far: float) -> dict:
     return {"unorm16": (far - near) / (2 ** 16 - 1), "unorm24": (far - near) / (2 ** 24 - 1)}
 
 
-def formats_rule(facts: SceneFacts, r: int) -> tuple:
+def formats_rule(facts: SceneFacts, r: dict) -> tuple:
     """[map] format: float32, and each unorm format whose step over a view's depth range exceeds
-    FORMAT_TEXELS of its median texel's depth (a texel's width at resolution ``r``)."""
+    FORMAT_TEXELS of its median texel's depth (a texel's width at its light's resolution ``r[light]``)."""
     chosen, said = ["float32"], []
     for v in facts.views:
-        texel = float(np.median(v.texel_world)) * MEASURE_R / r if len(v.texel_world) else math.nan
+        texel = float(np.median(v.texel_world)) * MEASURE_R / r[v.light] if len(v.texel_world) else math.nan
         steps = unorm_steps(v.near, v.far)
         said.append(f"{v.light} {v.kind}: depth {v.far - v.near:.3g}, unorm16 step {steps['unorm16']:.3g} "
                     f"against a texel {texel:.3g}")
@@ -248,7 +264,7 @@ def schemes_rule(facts: SceneFacts, two_layer: bool) -> tuple:
                           f"left out: {'; '.join(left)}")
 
 
-def measured_quantities(facts: SceneFacts, median: float, exact_r: float, texel: float) -> dict:
+def measured_quantities(facts: SceneFacts, medians: dict, per_light: dict, texel: float) -> dict:
     """The quantities behind the rules, per view and for the scene (derivation.json, ``--explain``)."""
     views = [{"light": v.light, "view": v.kind, "receivers": int(len(v.footprint_texels)),
               "footprint_median": _f(np.median(v.footprint_texels)) if len(v.footprint_texels) else None,
@@ -258,7 +274,8 @@ def measured_quantities(facts: SceneFacts, median: float, exact_r: float, texel:
               "depth_far": _f(v.far)}
              for v in facts.views]
     return {"scene": str(facts.path), "film": list(facts.film), "measure_resolution": MEASURE_R, "views": views,
-            "footprint_median": _f(median), "resolution_exact": _f(exact_r), "texel_world_median": _f(texel),
+            "lights": [{"light": k, "footprint_median": _f(medians[k]), "resolution_exact": _f(e), "resolution": r}
+                       for k, (e, r) in per_light.items()], "texel_world_finest": _f(texel),
             "closed_meshes": list(facts.closed), "open_meshes": [n for n, _ in facts.open],
             "max_abs_coordinate": facts.max_abs_coordinate,
             "f32_step": float(np.spacing(np.float32(facts.max_abs_coordinate))), "diagonal": facts.diagonal}

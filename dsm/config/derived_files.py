@@ -63,8 +63,10 @@ def explain_lines(d) -> list:
         out.append(f"  {v['light']} {v['view']}: {v['receivers']} receivers, footprint (texels per pixel) median "
                    f"{g(v['footprint_median'])}, min {g(v['footprint_min'])}, max {g(v['footprint_max'])}, ratio "
                    f"{g(v['footprint_ratio'])}; depth range {g(v['depth_near'])} to {g(v['depth_far'])}")
-    out.append(f"  median footprint {g(m['footprint_median'])}: one texel per pixel at "
-               f"{g(m['resolution_exact'])}; median texel there {g(m['texel_world_median'])} world units")
+    for light in m["lights"]:
+        out.append(f"  {light['light']}: median footprint {g(light['footprint_median'])}: one texel per pixel at "
+                   f"{g(light['resolution_exact'])} (so {light['resolution']})")
+    out.append(f"  the finest median texel there {g(m['texel_world_finest'])} world units")
     out.append(f"  closed meshes: {', '.join(m['closed_meshes']) or 'none'}; open: {', '.join(m['open_meshes']) or 'none'}")
     out.append(f"  largest |coordinate| {m['max_abs_coordinate']:.6g} (float32 step {m['f32_step']:.3g}); "
                f"diagonal {m['diagonal']:.4g}")
