@@ -20,6 +20,7 @@ from pathlib import Path
 from .benchmark import command as benchmark_command
 from .grad import command as grad_command
 from .config import read as cfgmod
+from .config import derived_files
 from .report import figures
 from .maps import headroom
 from .experiment import resume
@@ -31,7 +32,8 @@ MAX_MAP = 16384     # the largest map resolution: [map] resolution's maximum (co
 DEFAULT_CONFIG = Path(__file__).parent / "config" / "default.toml"
 # what a dsm run writes into its folder: --force clears a folder holding nothing else
 RUN_OUTPUTS = ("run.json", "metrics.csv", "oracle.csv", "table.md", "images", "plots", "report.html",
-               "oracle_curves.npz", "cascades.csv", "cascades.md", "frames.csv", "virtual.md", "frontier.csv")
+               "oracle_curves.npz", "cascades.csv", "cascades.md", "frames.csv", "virtual.md", "frontier.csv",
+               derived_files.DERIVED_TOML, derived_files.DERIVATION_JSON)
 # left by a killed run (report.atomic)
 RUN_TEMP = re.compile(r"\.(?:run\.json|metrics\.csv|frontier\.csv|oracle\.csv|table\.md|report\.html|oracle_curves\.npz)\.\d+\.tmp")
 
@@ -72,7 +74,10 @@ def _parser():
     rp.add_argument("dirs", nargs="+", metavar="DIR", help="a results folder, or two to compare (A then B)")
     rp.add_argument("--out", help="comparison folder (default: ./compare-<A>-<B>); only with two folders")
     p = sub.add_parser("plan", help="print what a config will compute: cases, maps, rays by kind, memory")
-    p.add_argument("config", nargs="?", help="experiment TOML file (default: the built-in default experiment)")
+    p.add_argument("config", nargs="?", help="experiment TOML file (default: the built-in default experiment), or a "
+                   "Mitsuba scene (.xml): the experiment derived from it")
+    p.add_argument("--explain", action="store_true", help="with a scene file: print the measured quantities behind "
+                   "each derived choice, and the choices (nothing else is run)")
     sub.add_parser("schemes", help="list bias schemes, their parameters, defaults and sources")
     _bench_parser(sub)
     benchmark_command.add_parser(sub)
@@ -102,7 +107,8 @@ def _add_again(p, force_help: str, resume_help: str):
 
 def _run_parser(sub):
     r = sub.add_parser("run", help="run an experiment config (default: the built-in default experiment)")
-    r.add_argument("config", nargs="?", help="experiment TOML file")
+    r.add_argument("config", nargs="?", help="experiment TOML file, or a Mitsuba scene (.xml): the experiment "
+                   "derived from it (derived.toml beside the results)")
     r.add_argument("--out", help="results folder (default: runs/<name>-<time>)")
     _add_machine(r)
     _add_again(r, "replace a previous dsm run in --out (a folder with its run.json); never other files",
@@ -209,8 +215,18 @@ def main(argv=None) -> int:
             return grad_command.main(args)
         if args.cmd == "report":
             return _report(args)
+        derived = None
+        if args.cmd in ("run", "plan") and is_scene_file(args.config):
+            derived, rc = _checked(lambda: derivation_of(args))
+            if rc is not None:
+                return rc
+            if args.cmd == "plan":
+                return _plan_derived(derived, args)
+        elif getattr(args, "explain", False):
+            _err("plan: --explain explains an experiment derived from a scene file (dsm plan SCENE.xml --explain)")
+            return 2
         try:
-            cfg = cfgmod.load(args.config or DEFAULT_CONFIG)
+            cfg = None if derived else cfgmod.load(args.config or DEFAULT_CONFIG)
         except cfgmod.ConfigError as e:
             return _config_error(e)
         if args.cmd == "plan":
@@ -218,8 +234,13 @@ def main(argv=None) -> int:
         if getattr(args, "out", None) is not None and not str(args.out).strip():
             _err("--out: an empty path (leave --out out for runs/<name>-<time>/)")
             return 2
-        out = Path(args.out) if args.out else fresh_folder(f"{cfg.name}-tune" if args.cmd == "tune" else cfg.name)
-        return _tune(cfg, args, out) if args.cmd == "tune" else _run(cfg, args, out)
+        name = derived.tables["experiment"]["name"] if derived else cfg.name
+        out = Path(args.out) if args.out else fresh_folder(f"{name}-tune" if args.cmd == "tune" else name)
+        if derived:
+            cfg, rc = _checked(lambda: derived_files.config_of(derived, out))
+            if rc is not None:
+                return rc
+        return _tune(cfg, args, out) if args.cmd == "tune" else _run(cfg, args, out, derived)
     except KeyboardInterrupt:
         # as the command (not main([...]) from Python): a second Ctrl-C, or one passed on while Ray shuts
         # down, must not break the exit's clean-up (tqdm's and Ray's atexit handlers) into a traceback
@@ -397,6 +418,33 @@ def _compare_out_problem(out: Path) -> str | None:
     return None
 
 
+def is_scene_file(path) -> bool:
+    """Whether a command's config argument names a Mitsuba scene, from which the experiment is derived."""
+    return path is not None and Path(path).suffix.lower() == ".xml"
+
+
+def derivation_of(args):
+    """The experiment derived from the scene file ``args.config`` (dsm.config.derive), its scene
+    measured under the command's variant and threads (a plan's on the CPU)."""
+    from .core import env
+    from .config import derive, scene_facts
+    variant = getattr(args, "variant", None)
+    env.use_variant(None if args.cmd == "plan" else variant, getattr(args, "threads", None))
+    return derive.derive(scene_facts.measure(args.config))
+
+
+def _plan_derived(derived, args) -> int:
+    """dsm plan SCENE.xml: the derived choices (with --explain the quantities behind them, and nothing else),
+    then the derived config's plan."""
+    lines = derived_files.explain_lines(derived) if args.explain else []
+    for line in lines + derived_files.reason_lines(derived):
+        print(line)
+    if args.explain:
+        return 0
+    cfg, rc = _checked(lambda: derived_files.config_of(derived, None, f"{args.config} (derived)"))
+    return rc if rc is not None else _plan(cfg)
+
+
 def _plan(cfg) -> int:
     from .config import plan as planmod
     from .scenes import load as scenes
@@ -536,7 +584,7 @@ def _checked(check):
         return None, _config_error(e)
 
 
-def _run(cfg, args, out: Path) -> int:
+def _run(cfg, args, out: Path, derived=None) -> int:
     from . import pipeline
     # every check dsm.run makes, before any work
     cfg, rc = _checked(lambda: pipeline.prepare(cfg, args.variant, args.threads))
@@ -567,14 +615,18 @@ def _run(cfg, args, out: Path) -> int:
         _err(problem)
         return 2
     with held:
-        return _run_held(cfg, args, out, clustered)
+        return _run_held(cfg, args, out, clustered, derived)
 
 
-def _run_held(cfg, args, out: Path, clustered: bool) -> int:
+def _run_held(cfg, args, out: Path, clustered: bool, derived=None) -> int:
     problem, resuming = folder_problem(out, cfg, args.force, bool(getattr(args, "resume", False)))
     if problem:
         _err(problem)
         return 2
+    if derived is not None:             # beside the results, before any case: the report reads the reasons
+        derived_files.write(derived, out)
+        for line in derived_files.reason_lines(derived):
+            print(f"dsm: {line}")
     try:
         from .experiment.runner import Runner
         t0 = time.perf_counter()
@@ -601,7 +653,7 @@ def _run_held(cfg, args, out: Path, clustered: bool) -> int:
         print(f"dsm: {line}")
     print(f"dsm: {len(res.rows)} case{'' if len(res.rows) == 1 else 's'} in {time.perf_counter() - t0:.1f} s (measuring {t['measure_s']:.1f} s, "
           f"report {t['report_s']:.1f} s) -> {out}/ (report.html, table.md, metrics.csv, oracle.csv, images/, "
-          "plots/, run.json, frontier.csv)")
+          f"plots/, run.json, frontier.csv{', derived.toml' if derived is not None else ''})")
     if empty:
         print(f"dsm: {empty} cases are empty (no receiver: nothing faces the light inside its domain); "
               "their rates are undefined (see table.md)", file=sys.stderr)

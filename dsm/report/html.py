@@ -256,11 +256,12 @@ NO_COSTS = ("This run's rows carry no costs (a run from before dsm 0.6, or no ca
             "dsm run again for the answer by what accuracy costs.")
 
 
-def write_html(path: Path, rows: list, run: dict):
-    """report.html in ``path``'s folder (the run's), from its typed rows and run.json."""
+def write_html(path: Path, rows: list, run: dict, derived: dict | None = None):
+    """report.html in ``path``'s folder (the run's), from its typed rows and run.json; ``derived``: what
+    the run derived from its scene file (dsm.report.derivation), first."""
     path = Path(path)
     out = path.parent
-    page = render("report.html", title=f"dsm: {run.get('experiment', out.name)}", counts=_counts(rows, run),
+    page = render("report.html", title=f"dsm: {run.get('experiment', out.name)}", counts=_counts(rows, run), derived=derived,
                   costs=costs_view(frontier.points_from_rows(rows), NO_COSTS),
                   answer=labels.params_label(summary.answer(rows)) if rows else None,
                   best=_best(rows) if rows else None, summary=_summary(rows) if rows else None,

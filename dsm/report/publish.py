@@ -18,7 +18,7 @@ import math
 import time
 from pathlib import Path
 
-from . import figures, frontier, html as htmlpage, jobs as draw_jobs, tables as report, io as report_io, summary
+from . import derivation, figures, frontier, html as htmlpage, jobs as draw_jobs, tables as report, io as report_io, summary
 from ..truth import metrics
 from .sections import cascades, motion
 from .sections import soft as soft_report
@@ -162,6 +162,7 @@ def write_report(out: Path, images=(), curves=None, plots: bool = True) -> dict:
     t0 = time.perf_counter()
     notes = []
     run, rows, oracle_rows = _load(out, notes)
+    derived = derivation.read(out, notes)
     if curves is not None:
         rates = [figures.curve_rates(*c) for c in curves]
         figures.save_curves(out / "oracle_curves.npz", rates)
@@ -194,14 +195,14 @@ def write_report(out: Path, images=(), curves=None, plots: bool = True) -> dict:
     t2 = time.perf_counter()
     report.write_table(out / "table.md", rows, run.get("experiment", out.name), run.get("config_file", ""),
                        run.get("status", []), oracle_rows, _texels(run), state=run.get("state"),
-                       planned=run.get("plan", {}).get("cases"))
+                       planned=run.get("plan", {}).get("cases"), derived=derivation.md_lines(derived))
     _sections(out, notes, plots and bool(rows))
     points = frontier.points_from_rows(rows)
     if points:                          # a run from before the cost columns has no frontier (table.md says so)
         frontier.write_csv(out / "frontier.csv", points)
     virtual_report.write_table(out / "virtual.md", rows)
     hybrid_report.write_table(out / "hybrid.md", rows)
-    htmlpage.write_html(out / "report.html", rows, run)
+    htmlpage.write_html(out / "report.html", rows, run, derived)
     t3 = time.perf_counter()
     return {"figures": n_figures, "images": len(items), "workers": pool, "read_s": t1 - t0, "draw_s": t2 - t1,
             "pages_s": t3 - t2, "notes": notes}

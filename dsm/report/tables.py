@@ -176,16 +176,17 @@ def precision_md(rows: list) -> list:
 
 
 def write_table(path: Path, rows: list, name: str, source: str, status=None, oracle_rows=(), texels=(),
-                state=None, planned=None):
+                state=None, planned=None, derived=()):
     """table.md: the answer first (dsm.report.summary), then failures, then every case, then the
     views at equal memory, the oracles and the frontier of error, bytes and rays. ``state`` and ``planned`` (run.json's
-    state and the plan's case count) mark a run that stopped early."""
+    state and the plan's case count) mark a run that stopped early; ``derived``: the lines saying what a
+    run derived from its scene file (dsm.report.derivation), before the answer."""
     failed = sum(1 for x in status or [] if x["status"] == "failed")
     lines = [f"# {name}", "", *unfinished_md(state, planned, len(rows)), f"Config: `{source}`. {len(rows)} cases" +
              (f"; **{failed} failed** (see Failed below)" if failed else "") + ". Rates: acne = n_acne / n_gt_lit, "
              "peter-pan = n_peterpan / n_gt_shadowed, error = (acne + peter-pan) / receivers. "
              "A dash: undefined (an empty denominator), left out of every summary and plot. report.html shows "
-             "the same with a sortable case table, the images and the plots.", "",
+             "the same with a sortable case table, the images and the plots.", "", *derived,
              *frontier.summary_md(frontier.points_from_rows(rows)), *summary.summary_md(rows), *status_md(status), *precision_md(rows), "", "## Cases", "",
              "self/edge: acne counts on the receiver's own shape / at another shape's edge; pp dist: median "
              "distance from a peter-panned receiver to its true occluder (world units). Times are medians over the "

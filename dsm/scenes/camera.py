@@ -197,6 +197,15 @@ class Camera:
             out.append(self.origin + self.forward * d + self.left * (sx * self.tan_x * d) + self.up * (sy * self.tan_y * d))
         return np.array(out)
 
+    def pixel_width(self, p: np.ndarray) -> np.ndarray:
+        """World width of each point's camera pixel across its ray: the square root of the pixel's
+        solid angle, (2 tan_x / W)^2 cos^3(alpha), times the distance (a texel's ``texel_world`` is
+        measured the same way, so their ratio is texels per pixel whatever the surface's slope)."""
+        q = np.asarray(p, float).reshape(-1, 3) - self.origin
+        dist = np.linalg.norm(q, axis=1)
+        cos_a = (q @ self.forward) / dist
+        return (2.0 * self.tan_x / self.width) * cos_a ** 1.5 * dist
+
     def pixel_area(self, p: np.ndarray, n: np.ndarray) -> np.ndarray:
         """World area of each receiver's camera pixel footprint on its surface (p, n: (k, 3)):
         the pixel's solid angle (2 tan_x / W)^2 cos^3(alpha) times distance^2 over |cos| to the normal."""

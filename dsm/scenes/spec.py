@@ -13,7 +13,7 @@ from .models import MODEL_KEYS, MODELS, absent_message, locate, version_of
 from .params import BUILTINS, FILE_SUFFIXES, FileParams, GrazingParams, PlaneParams
 
 
-XML_KEYS = ("scale", "translate")   # what an XML scene takes of FileParams: its units and place (dsm.scenes.xml_scale)
+XML_KEYS = ("scale", "translate", "precision")   # what an XML scene takes of FileParams: its units, place and how the engine holds them (dsm.scenes.xml_scale)
 
 def parse_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]:
     """One [[scene]] table, with list-valued parameters swept, into scene specs."""
