@@ -923,7 +923,7 @@ def test_a_hybrid_record_whose_rays_disagree_is_refused_in_one_line():
     doc = {"results_version": 5, "suite": "dsm-bench-6", "cases": [rec],
            "versions": {"dsm": "0", "mitsuba": "3", "drjit": "1"}}
     assert document.check(doc) is doc
-    for bad, word in (({"ray_fraction": 0.5}, "ray_fraction"), ({"hybrid_rays": 11, "ray_fraction": 1.1}, "hybrid_rays"),
-                      ({"hybrid_rays": 2.0}, "hybrid_rays")):
+    for bad, word in (({"ray_fraction": 0.5}, "ray_fraction"), ({"hybrid_rays": 2.0}, "hybrid_rays"),
+                      ({"hybrid_rays": 11, "ray_fraction": 1.1}, "hybrid_rays")):
         with pytest.raises(document.NotResults, match=rf"^<document>: cases\[0\]\.{word} is [^\n]*$"):
             document.check({**doc, "cases": [{**rec, **bad}]})

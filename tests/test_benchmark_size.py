@@ -59,7 +59,8 @@ def test_help_counts_each_size_as_the_suite_defines_it(capsys):
 def test_measured_times_name_only_known_suites_and_sizes():
     for version, by_size in command.MEASURED_WALL_S.items():
         assert version in SUITE_FILES and set(by_size) <= set(SIZES)
-        assert all((quiet_s is None or 0 < quiet_s <= loaded_s) and loaded_s > 0 for quiet_s, loaded_s in by_size.values())
+        assert all((quiet_s is None or 0 < quiet_s <= loaded_s) and loaded_s > 0
+                   for quiet_s, loaded_s in by_size.values())
 
 
 @pytest.fixture

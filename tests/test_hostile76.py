@@ -223,8 +223,9 @@ def _virtual_toml(tmp_path, virtual: str = "", light: str = "[0.2, -0.3, -1]", m
     return cfg
 
 
-@pytest.mark.parametrize("virtual, valid", [("unit_cm = 1e30\n", "no last_level up to 60 reaches it"),
-                                            ("first_level = -60\nlast_level = -60\n", "last_level >= -19 (at most 60)")])
+@pytest.mark.parametrize("virtual, valid", [
+    ("unit_cm = 1e30\n", "no last_level up to 60 reaches it"),
+    ("first_level = -60\nlast_level = -60\n", "last_level >= -19 (at most 60)")])
 def test_virtual_levels_too_narrow_for_float32_are_refused_before_any_work(virtual, valid, tmp_path, capsys):
     """Known from the config: the coarsest level narrower than float32's step at one scene unit (2^-23 x scale)
     holds no receiver: exit 2 in one line naming map.virtual, its keys and their valid range, no folder written.
@@ -237,8 +238,8 @@ def test_virtual_levels_too_narrow_for_float32_are_refused_before_any_work(virtu
         unit_cm = 1e30 if "1e30" in virtual else 100.0
         width = 2.0 ** (last + 3) / unit_cm
         assert width < 2.0 ** -23                                   # the case is the rule's, by hand
-        _one_line(err, "v.toml", "map.virtual", f"(last_level {last},", f"{width:.3g} scene units wide",
-                  f"map.virtual.unit_cm <= {2.0 ** (last + 3) / 2.0 ** -23:.3g}", valid, "first_level, last_level or levels")
+        _one_line(err, "v.toml", "map.virtual", f"(last_level {last},", f"{width:.3g} scene units wide", valid,
+                  f"map.virtual.unit_cm <= {2.0 ** (last + 3) / 2.0 ** -23:.3g}", "first_level, last_level or levels")
     assert 2.0 ** (-19 + 3) / 100 >= 2.0 ** -23 > 2.0 ** (-20 + 3) / 100      # -19: the lowest last_level that reaches
     assert not out.exists()
 

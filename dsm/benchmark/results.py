@@ -205,7 +205,7 @@ def run_case(case, ppd, variant: str | None = None, tuned=None, out: Path | None
         vsm = measured(case.virtual, variant, cluster)
         more = config_records(case, vsm, ppd, variant, setups, None)
         records, images = records + more[0], images + more[1]
-    if case.hybrid is not None:         # dsm-bench-6 on: the depth config's scene and lights, its rows' V after the rays
+    if case.hybrid is not None:         # dsm-bench-6 on: the depth config's scene and lights, V after the rays
         hyb = measured(case.hybrid, variant, cluster)
         more = config_records(case, hyb, ppd, variant, setups, known, hybrid=hybrid)
         records, images = records + more[0], images + more[1]

@@ -216,7 +216,8 @@ def hybrid_labels(suite: dict) -> dict:
         params = {k: v for k, v in c.items() if k not in ("name", "rule", "origin")}
         spec = HybridSpec(c["rule"], rule_of(c["rule"]).Params(**params), c.get("origin", "spawn"))
         if (spec.rule, spec.label) in out:
-            raise ValueError(f"hybrid.contender {c['name']!r}: the same rule and values as {out[(spec.rule, spec.label)]!r}")
+            twin = out[(spec.rule, spec.label)]
+            raise ValueError(f"hybrid.contender {c['name']!r}: the same rule and values as {twin!r}")
         out[(spec.rule, spec.label)] = c["name"]
     return out
 

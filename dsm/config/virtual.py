@@ -74,8 +74,9 @@ def check_reach(specs: tuple, scales, source: str):
             lowest = next((lv for lv in range(spec.last_level, 61) if spec.level_width(lv, scale) >= need), None)
             levels = (f"last_level >= {lowest} (at most 60)" if lowest is not None
                       else "no last_level up to 60 reaches it")
+            width = spec.level_width(spec.last_level, scale)
             raise ConfigError(source, "map.virtual", f"the coarsest level (last_level {spec.last_level}, "
-                              f"{cm:.3g} cm) is {spec.level_width(spec.last_level, scale):.3g} scene units wide at scale "
+                              f"{cm:.3g} cm) is {width:.3g} scene units wide at scale "
                               f"{scale:g}, under float32's step at one scene unit ({need:.3g}): no receiver can lie in "
                               f"its levels; valid: map.virtual.unit_cm <= {cm / need * scale:.3g}, or {levels} "
                               f"(map.virtual.first_level, last_level or levels)")
