@@ -1,5 +1,6 @@
-"""The leaderboard table of docs/benchmark.md from a dsm benchmark results.json: the top ranks (rank <= TOP)
-and every engine preset, each contender's notes as the page gives them, then the oracles' floor.
+"""The leaderboard table of docs/benchmark.md from a dsm benchmark results.json: the top ranks (rank <= TOP),
+every engine preset and every hybrid contender (its ray fraction beside the error; a dash for a map alone), each
+contender's notes as the page gives them, then the oracles' floor.
 
     .venv/bin/python scripts/leaderboard_table.py bench4/results.json
 """
@@ -40,19 +41,21 @@ def main(path):
     ranked = ranking.ranking(doc)
     far = list(ranked[0]["far"])[1:] if ranked else []
     tags = notes(doc, ranked)
-    print("| rank | contender | error rate | acne rate | peter-pan rate | spread over cm/m/km | FLIP | leak rate | "
-          "flicker | " + " | ".join(f"error at {o}" for o in far) + f" | change to {far[-1]} |")
-    print("| --- " * (11 + len(far) - 1) + "|")
+    print("| rank | contender | error rate | ray fraction | acne rate | peter-pan rate | spread over cm/m/km | FLIP | "
+          "leak rate | flicker | " + " | ".join(f"error at {o}" for o in far) + f" | change to {far[-1]} |")
+    print("| --- " * (12 + len(far) - 1) + "|")
     for r in ranked:
-        if r["rank"] > TOP and r["contender"] not in PRESETS:
+        hybrid = r.get("ray_fraction") is not None
+        if r["rank"] > TOP and r["contender"] not in PRESETS and not hybrid:
             continue
         name = r["contender"] + (f" ({', '.join(tags[r['contender']])})" if r["contender"] in tags else "")
-        print(f"| {r['rank']} | {name} | {cell(r['error'])} | {cell(r['acne'])} | {cell(r['peterpan'])} | "
+        rays = cell(r["ray_fraction"]) if hybrid else "\u2014"
+        print(f"| {r['rank']} | {name} | {cell(r['error'])} | {rays} | {cell(r['acne'])} | {cell(r['peterpan'])} | "
               f"{cell(r['spread'])} | {cell(r['flip'])} | {cell(r.get('leak'))} | {cell(r.get('flicker'))} | "
               + " | ".join(cell(r["far"][o]) for o in far) + f" | {cell(r['far_change'], True)} |")
     floor = ranking.oracle_floor(doc)
     print(f"| | oracle floor: per-texel / one world bias / one texel bias | {floor['per_texel_objective']:.5f} / "
-          f"{floor['world_objective']:.4f} / {floor['texel_objective']:.4f} |" + " |" * (8 + len(far)))
+          f"{floor['world_objective']:.4f} / {floor['texel_objective']:.4f} |" + " |" * (9 + len(far)))
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""dsm benchmark (dsm-bench-1 to -5): the suites' hash pins, scale normalization, the
+"""dsm benchmark (dsm-bench-1 to -6): the suites' hash pins, scale normalization, the
 far-from-origin axis, the compare rule, the leaderboard's ranking and tie rule, the preset bias
 conversion, FLIP, the shaded renders, the scale figure, and one tiny end-to-end run."""
 import json
@@ -16,6 +16,7 @@ SUITE_2_SHA256 = "ebd3668f4b3bff1df961afae653c8e91018de253cd2df644be3a1c71884b9c
 SUITE_3_SHA256 = "5582fcb3e08f61997b71398424ea90d81b26e8c56d66886b835a18bbdad60677"
 SUITE_4_SHA256 = "196f379d78e7a92dd254aabdb5fa6894bb58e74bf7a4d064f6fdeeea94af22b1"
 SUITE_5_SHA256 = "ba5710bbaa9e35aa4786570b9dbaf960b6de00a30bd85827c37061d471d57d23"
+SUITE_6_SHA256 = "e75a9dd2038cc3f08931d455ecc4224f54996164d9c59fbf144cc2681f454197"
 
 
 def test_suite_hashes_are_pinned():
@@ -27,10 +28,12 @@ def test_suite_hashes_are_pinned():
     assert suite.load_suite(suite.SUITE_FILES["dsm-bench-3"])["suite"]["name"] == "dsm-bench-3"
     assert suite.suite_sha256(suite.SUITE_FILES["dsm-bench-4"]) == SUITE_4_SHA256
     assert suite.load_suite(suite.SUITE_FILES["dsm-bench-4"])["suite"]["name"] == "dsm-bench-4"
+    assert suite.suite_sha256(suite.SUITE_FILES["dsm-bench-5"]) == SUITE_5_SHA256
+    assert suite.load_suite(suite.SUITE_FILES["dsm-bench-5"])["suite"]["name"] == "dsm-bench-5"
     # the newest is what dsm benchmark runs by default
-    assert suite.LATEST == "dsm-bench-5" and suite.suite_sha256() == SUITE_5_SHA256
+    assert suite.LATEST == "dsm-bench-6" and suite.suite_sha256() == SUITE_6_SHA256
     s = suite.load_suite()
-    assert s["suite"]["name"] == "dsm-bench-5" and s["flip"]["ppd"] == 67.0
+    assert s["suite"]["name"] == "dsm-bench-6" and s["flip"]["ppd"] == 67.0
 
 
 def test_suite_5_is_suite_4_with_the_virtual_maps_under_the_directional_light():
@@ -52,6 +55,30 @@ def test_suite_5_is_suite_4_with_the_virtual_maps_under_the_directional_light():
         assert v["scheme"] == [{"name": "normal_offset", "offset": "1 texel"}]
     row = {"cascade_layout": "vsm eevee unit_cm=10", "scheme": "normal_offset", "preset": "", "params": "x"}
     assert results.contender_of(row) == "virtual eevee"
+
+
+def test_suite_6_is_suite_5_with_the_hybrid_classifier_at_amd_s_settings_and_a_cut_off():
+    """dsm-bench-6's cases are dsm-bench-5's (but for their names) plus a hybrid config of every case: the depth
+    config with constant at 1 texel and the classifier at the sample's defaults (tileCutOff 0) and at cut-off 8."""
+    from dsm.hybrid import classifier
+    s5, s6 = (suite.load_suite(suite.SUITE_FILES[v]) for v in ("dsm-bench-5", "dsm-bench-6"))
+    c5, c6 = suite.cases(s5, "default"), suite.cases(s6, "default")
+    assert [(c.scene, c.unit, c.offset) for c in c5] == [(c.scene, c.unit, c.offset) for c in c6]
+    unnamed = lambda cfg: None if cfg is None else {**cfg, "experiment": {}}
+    for a, b in zip(c5, c6):
+        assert unnamed(a.config) == unnamed(b.config) and unnamed(a.virtual) == unnamed(b.virtual) and a.hybrid is None
+        h = b.hybrid
+        assert unnamed(h) == {**unnamed(b.config), "scheme": [{"name": "constant", "bias": "1 texel"}],
+                              "hybrid": [{"rule": "classifier"}, {"rule": "classifier", "tileCutOff": 8}]}
+        assert suite.contender_count(b) == suite.contender_count(a) + 2
+    amd = classifier.Params()         # AMD's sample: tileCutOff 0, a 0.25 degree sun, offset 0.002, both flags on
+    assert (amd.tileCutOff, amd.blockerOffset, amd.bRejectLitPixels, amd.bUseCascadesForRayT) == (0, 0.002, True, True)
+    assert amd.sunSizeLightSpace == pytest.approx(np.tan(np.radians(0.125)), rel=1e-15)
+    labels = suite.hybrid_labels(s6)
+    assert sorted(labels.values()) == ["hybrid classifier", "hybrid classifier cutoff 8"]
+    row = {"hybrid_rule": "classifier", "hybrid_params": next(k for k, v in labels.items() if v.endswith("8"))[1],
+           "scheme": "constant", "preset": "", "params": "bias=1 texel"}
+    assert results.contender_of(row, None, labels) == "hybrid classifier cutoff 8"
 
 
 def test_suite_1_still_makes_its_cases_at_the_origin_only():
@@ -90,7 +117,7 @@ def test_a_far_case_is_the_metre_case_moved():
         for offset, translate in (("1e4", [1e4, 5e3, 0.0]), ("1e5", [1e5, 5e4, 0.0])):
             far = _by(cs, name, "m", offset)
             assert far.config["scene"][0].pop("translate") == translate and far.translate == tuple(translate)
-            assert far.config["experiment"].pop("name") == f"dsm-bench-5-{name}-m-at-{offset}"
+            assert far.config["experiment"].pop("name") == f"dsm-bench-6-{name}-m-at-{offset}"
             assert {**here.config, "experiment": {}} == {**far.config, "experiment": {}}
     assert {c.unit for c in cs if c.offset != "0"} == {"m"}
 
@@ -237,12 +264,13 @@ def test_run(tmp_path_factory):
 
 def test_benchmark_end_to_end_at_test_size(test_run):
     out, doc = test_run
-    assert doc["suite"] == "dsm-bench-5" and doc["suite_sha256"] == SUITE_5_SHA256 and doc["size"] == "test"
+    assert doc["suite"] == "dsm-bench-6" and doc["suite_sha256"] == SUITE_6_SHA256 and doc["size"] == "test"
     assert doc["machine"]["cores"] >= 1 and doc["versions"]["dsm_git_commit"]
     assert doc["far_unit"] == "m" and doc["flip_ppd"] == 67.0
     # 2 scenes x (2 units + 2 offsets at m) x 1 light x (3 contenders + the tuned one + the oracle
-    # + 2 pre-filtered kinds at their defaults + their presets: vsm three, msm mjp + 2 virtual maps)
-    assert len(doc["cases"]) == 88
+    # + 2 pre-filtered kinds at their defaults + their presets: vsm three, msm mjp + 2 virtual maps
+    # + 2 hybrid classifiers)
+    assert len(doc["cases"]) == 104
     # what ran is what --help counts for the size (tests/test_benchmark_size.py counts it from the TOML)
     ran = {(r["scene"], r["unit"], r["offset"]) for r in doc["cases"]}, {r["contender"] for r in doc["cases"]} - {"oracle"}
     summary = suite.size_summary(suite.load_suite(), "test")
@@ -324,8 +352,9 @@ def test_the_scale_figure_and_tables_hold_the_results_numbers(test_run):
     with Image.open(out / "scale.png") as im:
         assert im.format == "PNG" and im.width > 400 and im.height > 150
         pixels = np.asarray(im.convert("RGB")).reshape(-1, 3).astype(int)
-    who = ["bevy", "msm box:5", "msm mjp box:5", "oracle", "receiver_plane", "three", "tuned_normal_angle",
-           "virtual eevee", "virtual ue5", "vsm box:5", "vsm three box:5"]
+    who = ["bevy", "hybrid classifier", "hybrid classifier cutoff 8", "msm box:5", "msm mjp box:5", "oracle",
+           "receiver_plane", "three", "tuned_normal_angle", "virtual eevee", "virtual ue5", "vsm box:5",
+           "vsm three box:5"]
     def by_numpy(keep):
         value = lambda r: r["per_texel_objective"] if r["contender"] == "oracle" else r["error_rate"]
         return [float(np.mean(np.array([value(r) for r in doc["cases"] if r["contender"] == c and keep(r)],
@@ -678,7 +707,7 @@ def test_force_replaces_every_file_of_the_previous_run_and_keeps_the_user_s(tmp_
     assert not (out / "case_images" / "old_m_0").exists() and not (out / "contenders" / "old.html").exists()
     assert (out / "notes.txt").read_text() == "old"
     doc = json.loads((out / "results.json").read_text())
-    assert doc["suite"] == "dsm-bench-1" and doc["results_version"] == 4
+    assert doc["suite"] == "dsm-bench-1" and doc["results_version"] == 5
     assert (out / "leaderboard.html").read_text() != "old" and (out / "scale.png").read_bytes() != b"old"
 
 
@@ -714,7 +743,7 @@ def test_a_case_s_stored_class_image_holds_the_counts_of_its_row(test_run):
     from dsm.truth import metrics as m
     out, doc = test_run
     stored = _stored_images(out, doc, 0)
-    assert len(stored) == 80 and len(list((out / "case_images").iterdir())) == 2 * 8     # two sheets a case
+    assert len(stored) == 96 and len(list((out / "case_images").iterdir())) == 2 * 8     # two sheets a case
     for r, classes, palette in stored:
         assert np.array_equal(palette[:len(m.CLASS_COLORS)], m.CLASS_COLORS)
         counts = (int((classes != m.OUTSIDE).sum()), int(np.isin(classes, (m.ACNE, m.ACNE_RESOLUTION)).sum()),
@@ -736,7 +765,7 @@ def test_a_case_s_stored_flip_map_s_mean_is_its_row_s_flip_within_the_png_s_quan
     for r, idx, palette in _stored_images(out, doc, 1):
         assert np.array_equal(palette, magma)
         off.append(abs(idx.astype(np.float64).mean() / 255.0 - r["flip"]))
-    assert len(off) == 80 and case_images.FLIP_BOUND == 1 / 510 and max(off) <= 1 / 510 + 1e-5
+    assert len(off) == 96 and case_images.FLIP_BOUND == 1 / 510 and max(off) <= 1 / 510 + 1e-5
     assert max(r["flip"] for r in doc["cases"] if "flip" in r) > 10 / 510     # a map with errors, not all black
 
 
@@ -773,7 +802,7 @@ def test_every_link_of_the_leaderboard_and_its_contender_pages_resolves(test_run
             if frag:
                 assert re.search(rf"\bid={re.escape(frag)}[ >]", path.read_text()), (page.name, value)
             checked += 1
-    assert checked > 2 * 80
+    assert checked > 2 * 96
     ranking_links = re.findall(r'<td><a href="(contenders/[^"]+)">([^<]+)</a>', (out / "leaderboard.html").read_text())
     assert {name for _, name in ranking_links} == names
     for c in names:
@@ -832,7 +861,7 @@ def test_frontier_csv_and_memory_classes_from_the_records(test_run):
     for r in recs:
         same = [q for q in recs if (q["scene"], q["unit"], q["light"]) == (r["scene"], r["unit"], r["light"])]
         c = np.array([[(q["n_acne"] + q["n_peterpan"]) / q["n_receivers"], q["map_bytes"] + q["page_table_bytes"],
-                       q["map_rays"]] for q in same], np.float64)
+                       q["map_rays"] + q.get("hybrid_rays", 0)] for q in same], np.float64)   # a hybrid's rays count
         me = c[[q is r for q in same].index(True)]
         want.append("0" if ((c <= me).all(1) & (c < me).any(1)).any() else "1")
     assert [r["on_frontier"] for r in rows] == want and "1" in want
@@ -843,3 +872,58 @@ def test_frontier_csv_and_memory_classes_from_the_records(test_run):
         for r in rs:
             mean_bytes = np.mean([q["map_bytes"] + q["page_table_bytes"] for q in recs if q["contender"] == r["contender"]])
             assert 2 ** k <= mean_bytes < 2 ** (k + 1)
+
+
+def test_the_hybrid_contenders_carry_their_rays_beside_their_error(test_run):
+    """A hybrid contender's record: ray_fraction = hybrid_rays / n_receivers; at cut-off 8 never more rays than at
+    AMD's 0 (its tiles are a subset); the leaderboard's ray fraction is its rays summed over the cases at the origin
+    over their receivers (numpy), beside the error; a map alone's cell is a dash; frontier.csv counts the rays."""
+    import csv
+    import re
+
+    out, doc = test_run
+    hyb = [r for r in doc["cases"] if r["contender"].startswith("hybrid ")]
+    assert {r["contender"] for r in hyb} == {"hybrid classifier", "hybrid classifier cutoff 8"} and len(hyb) == 16
+    for r in hyb:
+        assert r["ray_fraction"] == r["hybrid_rays"] / r["n_receivers"] and 0 < r["hybrid_rays"] <= r["n_receivers"]
+        assert r["error_rate"] == (r["n_acne"] + r["n_peterpan"]) / r["n_receivers"]
+    key = lambda r: (r["scene"], r["unit"], r["offset"], r["light"])
+    amd = {key(r): r for r in hyb if r["contender"] == "hybrid classifier"}
+    cut = {key(r): r for r in hyb if r["contender"] == "hybrid classifier cutoff 8"}
+    assert amd.keys() == cut.keys() and all(cut[k]["hybrid_rays"] <= amd[k]["hybrid_rays"] for k in amd)
+    assert any(cut[k]["hybrid_rays"] < amd[k]["hybrid_rays"] for k in amd)     # the cut-off drops some tile here
+    page = (out / "leaderboard.html").read_text()
+    table = page[page.index('id=ranking') if 'id=ranking' in page else page.index('id="ranking"'):]
+    table = table[:table.index("</table>")]
+    head = [re.sub("<[^>]+>", "", h) for h in re.findall(r"<th[^>]*>(.*?)</th>", table, re.S)]
+    at = head.index("ray fraction")
+    assert head[at - 1] == "error rate"
+    cells = {}
+    for row in re.findall(r"<tr[^>]*>(.*?)</tr>", table, re.S)[1:]:
+        tds = [re.sub("<[^>]+>", "", c) for c in re.findall(r"<td[^>]*>(.*?)</td>", row, re.S)]
+        cells[tds[head.index("contender")]] = tds[at]
+    for name in ("hybrid classifier", "hybrid classifier cutoff 8"):
+        here = [r for r in hyb if r["contender"] == name and r["offset"] == "0"]
+        want = np.sum([r["hybrid_rays"] for r in here], dtype=np.float64) / np.sum([r["n_receivers"] for r in here])
+        assert cells[name] == f"{want:.4g}", (name, cells[name])
+        assert {r["contender"]: r for r in ranking.ranking(doc)}[name]["ray_fraction"] == pytest.approx(want, rel=1e-15)
+    assert cells["bevy"] == "\u2014" and cells["vsm box:5"] == "\u2014"
+    rows = [r for r in csv.DictReader(open(out / "frontier.csv")) if r["instance"] == "hybrid classifier"]
+    want_rays = sorted(r["map_rays"] + r["hybrid_rays"] for r in hyb if r["contender"] == "hybrid classifier"
+                       and r["offset"] == "0")
+    assert sorted(int(r["rays"]) for r in rows) == want_rays
+
+
+def test_a_hybrid_record_whose_rays_disagree_is_refused_in_one_line():
+    """results version 5: a hybrid record's rays are a count of at most its receivers and ray_fraction their share."""
+    from dsm.benchmark import document
+    rec = {"scene": "s", "unit": "m", "light": "directional", "contender": "hybrid classifier", "n_receivers": 10,
+           "n_acne": 0, "n_peterpan": 0, "map_bytes": 4, "page_table_bytes": 0, "map_rays": 1, "taps": 1.0,
+           "hybrid_rays": 4, "ray_fraction": 0.4}
+    doc = {"results_version": 5, "suite": "dsm-bench-6", "cases": [rec],
+           "versions": {"dsm": "0", "mitsuba": "3", "drjit": "1"}}
+    assert document.check(doc) is doc
+    for bad, word in (({"ray_fraction": 0.5}, "ray_fraction"), ({"hybrid_rays": 2.0}, "hybrid_rays"),
+                      ({"hybrid_rays": 11, "ray_fraction": 1.1}, "hybrid_rays")):
+        with pytest.raises(document.NotResults, match=rf"^<document>: cases\[0\]\.{word} is [^\n]*$"):
+            document.check({**doc, "cases": [{**rec, **bad}]})

@@ -17,7 +17,7 @@ SIZES = ("test", "default", "full")
 def _toml_counts(size: str) -> tuple:
     """(cases, contenders) of the newest suite at ``size``, from its TOML alone: every scene at each unit,
     and at each far offset unless ``far = false``; the depth contenders, each pre-filtered kind at its
-    defaults and presets per blur, and the virtual presets where the directional light runs."""
+    defaults and presets per blur, the virtual presets where the directional light runs, and the hybrid ones."""
     toml = tomllib.loads(SUITE_FILES[LATEST].read_text())
     table, c, pre = toml["size"][size], toml["contenders"], toml["prefiltered"]
     names = table.get("scenes", [sc["name"] for sc in toml["scene"]])
@@ -28,7 +28,8 @@ def _toml_counts(size: str) -> tuple:
     kinds = table.get("prefiltered", pre["kinds"])
     n_pre = sum(1 + len(pre["presets"].get(k, [])) for k in kinds) * len(pre["blur"])
     n_virtual = len(toml["virtual"]["presets"]) * ("directional" in table.get("lights", ["directional"]))
-    return n_cases, len(depth) + n_pre + n_virtual
+    n_hybrid = len(toml["hybrid"]["contender"])
+    return n_cases, len(depth) + n_pre + n_virtual + n_hybrid
 
 
 def _help_counts(capsys) -> dict:
@@ -46,17 +47,20 @@ def test_help_counts_each_size_as_the_suite_defines_it(capsys):
     assert list(counts) == list(SIZES)
     for size in SIZES:
         assert counts[size][:2] == _toml_counts(size), size
-    assert counts["test"][:2] == (8, 10) and counts["default"][:2] == (45, 31)   # the documented sizes
+    assert counts["test"][:2] == (8, 12) and counts["default"][:2] == (45, 33)   # the documented sizes
     for size, (_, _, words) in counts.items():      # a time as measured, or that it was not
         assert re.fullmatch(r"about \d+ (s|minutes) quiet, \d+ (s|minutes) with other jobs beside|"
+                            r"about \d+ (s|minutes) with other jobs beside \(not measured quiet\)|"
                             r"not measured on 2 cores.*", words), (size, words)
-    assert counts["test"][2].startswith("about 40 s quiet") and counts["full"][2].startswith("not measured")
+    assert counts["test"][2] == "about 62 s with other jobs beside (not measured quiet)"
+    assert counts["full"][2].startswith("not measured")
 
 
 def test_measured_times_name_only_known_suites_and_sizes():
     for version, by_size in command.MEASURED_WALL_S.items():
         assert version in SUITE_FILES and set(by_size) <= set(SIZES)
-        assert all(0 < quiet_s <= loaded_s for quiet_s, loaded_s in by_size.values())
+        assert all((quiet_s is None or 0 < quiet_s <= loaded_s) and loaded_s > 0
+                   for quiet_s, loaded_s in by_size.values())
 
 
 @pytest.fixture

@@ -253,3 +253,26 @@ def test_a_resumed_hybrid_run_keeps_its_cases_and_a_new_instance_is_a_new_case(t
                    progress=False, resume_previous=True).run()
     assert again.run["resumed_cases"] == 2 and len(again.rows) == 3
     assert sorted(r["hybrid_params"] for r in again.rows) == ["k=0.5", "k=2.0", "k=8.0"]
+
+
+def test_a_hybrid_case_s_class_image_shows_v_after_its_rays(tmp_path):
+    """The class image of a hybrid case holds its hybrid_* counts (V after the rays), not the map alone's: with
+    `all` rays from the kit's spawn rule (V* bit for bit) no pixel is wrong, while `none`'s map alone has acne;
+    with the oracle at a budget, the pixels left wrong are the hybrid's error, counted here with numpy."""
+    from dsm import pipeline
+    from dsm.experiment.runner import Runner
+    from dsm.truth import metrics as m
+    cfg = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [32, 32]}, map={"resolution": 64},
+                      scheme=[{"name": "none"}], report={"images": "none"},
+                      hybrid=[{"rule": "all"}, {"rule": "oracle", "budget": 0.01}])
+    res = Runner(pipeline.prepare(cfg), tmp_path / "o", progress=False).run()
+    assert len(res.rows) == 2
+    for row in res.rows:
+        classes = res.images[row["case"]]
+        acne = int(np.isin(classes, (m.ACNE, m.ACNE_RESOLUTION)).sum())
+        peterpan = int(np.isin(classes, (m.PETERPAN, m.PETERPAN_RESOLUTION, m.LEAK)).sum())
+        assert (int((classes != m.OUTSIDE).sum()), acne, peterpan) == \
+            (row["n_receivers"], row["hybrid_n_acne"], row["hybrid_n_peterpan"]), row["hybrid_rule"]
+        assert row["n_acne"] > 0                                  # the map alone's, kept in the row's own columns
+    every = next(r for r in res.rows if r["hybrid_rule"] == "all")
+    assert every["hybrid_n_acne"] == every["hybrid_n_peterpan"] == 0

@@ -7,7 +7,8 @@ falls in (``[2^k, 2^(k+1))``), and contenders are ranked inside each class by th
 (:mod:`dsm.benchmark.ranking`), never across a 30x gap of memory. *On the frontier*: no other
 contender has a mean error rate, mean bytes and mean rays each at most its own, one of them lower
 (the per-situation frontier is frontier.csv's, :mod:`dsm.report.frontier`). A document of an older
-version has no costs: the page says so and keeps the plain ranking.
+version has no costs: the page says so and keeps the plain ranking. A hybrid contender's rays (dsm-bench-6 on)
+are its map's and the rays its rule traced (``map_rays + hybrid_rays``), as a run's frontier counts them.
 """
 from __future__ import annotations
 
@@ -41,9 +42,14 @@ def points(doc: dict) -> list:
         n = r["n_receivers"]
         out.append(frontier.Point(f"{r['scene']} {r['unit']}", r["light"], r["light"], r["contender"],
                                   family_of(r["contender"]), (r["n_acne"] + r["n_peterpan"]) / n if n else math.nan,
-                                  int(r["map_bytes"]) + int(r["page_table_bytes"]), int(r["map_rays"]),
+                                  int(r["map_bytes"]) + int(r["page_table_bytes"]), rays_of(r),
                                   float(r["taps"]), float(r["build_ms"]), float(r["lookup_ms"])))
     return out
+
+
+def rays_of(rec: dict) -> int:
+    """A record's rays: its map's, and a hybrid contender's traced rays with them."""
+    return int(rec["map_rays"]) + int(rec.get("hybrid_rays", 0))
 
 
 def contender_costs(doc: dict) -> dict:

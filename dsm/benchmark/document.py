@@ -1,11 +1,14 @@
 """A benchmark result document (results.json) read back and checked before any use.
 
-``results_version`` 4 is what this dsm writes: version 3's fields, and every contender's record (not
-the oracle's) carries its case's costs in counts (``map_bytes``, ``page_table_bytes`` and ``map_rays``
-whole numbers >= 0, ``taps`` a number: :mod:`dsm.case.cost`). Version 3 is version 2's fields, and
+``results_version`` 5 is what this dsm writes: version 4's fields, and a hybrid contender's record (dsm-bench-6
+on) carries ``hybrid_rays`` (a whole number, at most its receivers) and ``ray_fraction`` (``hybrid_rays /
+n_receivers``; NaN without receivers), its counts the error left after the rays. Version 4 is version 3's
+fields, and every contender's record (not the oracle's) carries its case's costs in counts (``map_bytes``,
+``page_table_bytes`` and ``map_rays`` whole numbers >= 0, ``taps`` a number: :mod:`dsm.case.cost`). Version 3 is
+version 2's fields, and
 ``versions`` must name the dsm, Mitsuba and Dr.Jit versions the results were measured with (results
-differ bit for bit between releases; ``dsm benchmark --compare`` says when two documents' differ). Versions 3 and 2, and a document
-without ``results_version`` (version 1, written by dsm 0.2.0 and earlier, the same fields), are read
+differ bit for bit between releases; ``dsm benchmark --compare`` says when two documents' differ). Versions 3 and 2,
+and a document without ``results_version`` (version 1, written by dsm 0.2.0 and earlier, the same fields), are read
 the same, their versions as recorded (dsm's own unrecorded). A newer version, and anything that is
 not a results document, is refused in one line naming the file and what is wrong with it.
 """
@@ -17,8 +20,8 @@ from pathlib import Path
 
 from ..core.env import ENGINE        # version 3: versions.<these> are text
 
-RESULTS_VERSION = 4
-READS = (1, 2, 3, 4)              # the versions this dsm reads
+RESULTS_VERSION = 5
+READS = (1, 2, 3, 4, 5)           # the versions this dsm reads
 NAMES = ("scene", "unit", "light", "contender")          # a record's identity (offset: optional, "0")
 COUNTS = ("n_receivers", "n_gt_shadowed", "n_acne", "n_peterpan")   # integers where present (an oracle's: receivers)
 COST_COUNTS = ("map_bytes", "page_table_bytes", "map_rays")   # version 4: every contender record's, whole
@@ -78,6 +81,7 @@ def check(doc, path="<document>") -> dict:
         raise NotResults(f"{where}: cases is empty: a results document holds a record per case and contender")
     if version >= 4:
         _costs(doc["cases"], where)
+    _rays(doc["cases"], where)
     _records(doc.get("flicker", []), where, "flicker", ())
     for i, rec in enumerate(doc.get("flicker", [])):
         if "flicker_rate" not in rec:
@@ -134,6 +138,22 @@ def _costs(recs: list, where: str):
             if not (isinstance(rec[c], int) and not isinstance(rec[c], bool) and rec[c] >= 0):
                 raise NotResults(f"{where}: cases[{i}].{c} is {rec[c]!r}, not a count (a whole number >= 0)")
         _number(rec["taps"], where, f"cases[{i}].taps")
+
+
+def _rays(recs: list, where: str):
+    """A hybrid record's rays (version 5): a whole number of at most its receivers, and ray_fraction their share."""
+    for i, rec in enumerate(recs):
+        if "hybrid_rays" not in rec and "ray_fraction" not in rec:
+            continue
+        n, rays = rec["n_receivers"], rec.get("hybrid_rays")
+        if not (isinstance(rays, int) and not isinstance(rays, bool) and 0 <= rays <= n):
+            raise NotResults(f"{where}: cases[{i}].hybrid_rays is {rays!r}, not a count of at most its {n} receivers")
+        fraction = rec.get("ray_fraction")
+        _number(fraction, where, f"cases[{i}].ray_fraction")
+        want = rays / n if n else math.nan
+        if fraction is None or not (fraction == want or (fraction != fraction and want != want)):
+            raise NotResults(f"{where}: cases[{i}].ray_fraction is {fraction!r}, not its hybrid_rays / n_receivers "
+                             f"({rays} / {n})")
 
 
 def _engine(versions, where: str):

@@ -31,20 +31,26 @@ def flicker_note(doc: dict) -> str:
             f"as {move}; it has no oracle floor (the oracles are per view){tail}.")
 
 
-FAMILIES = ("engine preset", "scheme", "pre-filtered map", "tuned", "oracle")
+FAMILIES = ("engine preset", "scheme", "pre-filtered map", "hybrid rays", "tuned", "oracle")
 FILTERS = ("family", "contender", "scene", "unit", "light")
 
 
 def family(doc: dict, contender: str) -> str:
-    """A contender's family (FAMILIES): the oracle, a tuned scheme, a pre-filtered map, an engine's preset,
-    else a scheme at its defaults."""
+    """A contender's family (FAMILIES): the oracle, a tuned scheme, a pre-filtered map, hybrid rays, an engine's
+    preset, else a scheme at its defaults."""
     if contender == "oracle":
         return "oracle"
     if contender in doc.get("tuned", {}):
         return "tuned"
     if contender.split()[:1] and contender.split()[0] in prefilter.NAMES:
         return "pre-filtered map"
+    if contender.startswith(HYBRID_PREFIX):
+        return "hybrid rays"
     return "engine preset" if contender in PRESETS else "scheme"
+
+
+HYBRID_PREFIX = "hybrid "  # a hybrid contender's name (the suite's [[hybrid.contender]], dsm-bench-6 on)
+NO_RAYS = "\u2014"      # the ray fraction's cell of a contender that traces no ray (a map alone)
 
 
 def fmt(v, digits=4) -> str:
@@ -58,11 +64,11 @@ def table(head: list, rows: list, attrs=None, table_id=None, links=None, ids=Non
     """A sortable table: ``head`` the column titles, ``rows`` lists of cells (numbers right-aligned);
     ``attrs``: a dict of data attributes per row (the table is then filtered by the page's filters);
     ``links``: per row, {column: href} of the text cells that link; ``ids``: per row, its id (or None)."""
-    num = [all(isinstance(r[i], (int, float)) or r[i] is None for r in rows) for i in range(len(head))]
+    num = [all(isinstance(r[i], (int, float)) or r[i] in (None, NO_RAYS) for r in rows) for i in range(len(head))]
     body = []
     for i, r in enumerate(rows):
         href = links[i] if links is not None else {}
-        cells = [Cell(fmt(v), "" if v is None else v, True) if n else Cell(fmt(v), href=href.get(j))
+        cells = [Cell(fmt(v), "" if v in (None, NO_RAYS) else v, True) if n else Cell(fmt(v), href=href.get(j))
                  for j, (v, n) in enumerate(zip(r, num))]
         body.append(Row(cells, attrs[i] if attrs is not None else {}, ids[i] if ids is not None else None))
     classes = ("sortable",) + (("filtered",) if attrs is not None else ())
@@ -219,11 +225,12 @@ def cases(doc: dict) -> Table:
     a contender's name links its card on its page."""
     indexed = [(i, r) for i, r in enumerate(doc["cases"]) if ranking.at_origin(r) and r["contender"] != "oracle"]
     recs = [r for _, r in indexed]
-    head = ["contender", "family", "scene", "unit", "light", "parameters", "error rate", "acne rate",
+    head = ["contender", "family", "scene", "unit", "light", "parameters", "error rate", "ray fraction", "acne rate",
             "peter-pan rate", "FLIP", "leak rate", "receivers", "build ms", "lookup ms"]
     rows = [[r["contender"], family(doc, r["contender"]), r["scene"], r["unit"], r["light"],
-             labels.params_label(r.get("params", "")), r["error_rate"], r["acne_rate"], r["peterpan_rate"],
-             r.get("flip"), r.get("leak_rate"), r["n_receivers"], r["build_ms"], r["lookup_ms"]] for r in recs]
+             labels.params_label(r.get("params", "")), r["error_rate"], r.get("ray_fraction", NO_RAYS), r["acne_rate"],
+             r["peterpan_rate"], r.get("flip"), r.get("leak_rate"), r["n_receivers"], r["build_ms"], r["lookup_ms"]]
+            for r in recs]
     attrs = [{k: (family(doc, r["contender"]) if k == "family" else r[k]) for k in FILTERS} for r in recs]
     return table(head, rows, attrs=attrs, table_id="case-list", ids=[f"case-{i}" for i, _ in indexed],
                  links=[{0: f"{contenders.page_path(r['contender'])}#{contenders.case_anchor(i)}"}
@@ -241,6 +248,11 @@ def biases(doc: dict) -> dict:
     return {"scene": scene, "table": table(head, rows)}
 
 
+def ray_cell(row: dict):
+    """A ranking row's ray fraction (rays per receiver at the origin), or NO_RAYS for a map alone."""
+    return NO_RAYS if row.get("ray_fraction") is None else row["ray_fraction"]
+
+
 def ranking_table(doc: dict, ranked: list) -> Table:
     """The ranking: a row per contender, its name linking its page; the far change where the suite moves scenes
     (the error at each offset is the offset table's). With costs (results version 4): grouped into memory
@@ -250,17 +262,17 @@ def ranking_table(doc: dict, ranked: list) -> Table:
     values = lambda r: ([r["spread"], r["flip"], r.get("leak"), r.get("flicker")] + ([r["far_change"]] if far else [])
                         + [r["build_ms"], r["lookup_ms"]])
     if not costs.has_costs(doc):
-        head = ["rank", "contender", "family", "error rate", "acne rate", "peter-pan rate"] + tail
-        rows = [[r["rank"], r["contender"], family(doc, r["contender"]), r["error"], r["acne"], r["peterpan"]]
-                + values(r) for r in ranked]
+        head = ["rank", "contender", "family", "error rate", "ray fraction", "acne rate", "peter-pan rate"] + tail
+        rows = [[r["rank"], r["contender"], family(doc, r["contender"]), r["error"], ray_cell(r), r["acne"],
+                 r["peterpan"]] + values(r) for r in ranked]
         at = 1
     else:
         ranked = [dict(r, memory=costs.class_label(k)) for k, rs in costs.classes(doc, ranked) for r in rs]
-        head = ["memory class", "rank in class", "contender", "family", "frontier", "error rate", "acne rate",
-                "peter-pan rate", "MiB read", "rays", "taps"] + tail
+        head = ["memory class", "rank in class", "contender", "family", "frontier", "error rate", "ray fraction",
+                "acne rate", "peter-pan rate", "MiB read", "rays", "taps"] + tail
         rows = [[r["memory"], r["rank"], r["contender"], family(doc, r["contender"]),
-                 "yes" if r["on_frontier"] else "no", r["error"], r["acne"], r["peterpan"], r["bytes"] / 2 ** 20, r["rays"],
-                 r["taps"]] + values(r) for r in ranked]
+                 "yes" if r["on_frontier"] else "no", r["error"], ray_cell(r), r["acne"], r["peterpan"],
+                 r["bytes"] / 2 ** 20, r["rays"], r["taps"]] + values(r) for r in ranked]
         at = 2
     return table(head, rows, attrs=filtered(doc, [r["contender"] for r in ranked]), table_id="ranking",
                  links=[{at: contenders.page_path(r["contender"])} for r in ranked])

@@ -14,7 +14,9 @@ contender its error rate per offset and its far change: the mean over (scene, li
 at the farthest offset less its error at the origin (same unit). From dsm-bench-3 on a pre-filtered
 contender also has its pooled leak rate: its n_leak summed over the cases at the origin over their
 summed n_gt_shadowed (a depth contender: None), and a depth contender its flicker: the mean flicker_rate
-of its records in the document's ``flicker`` list (None without any; no oracle floor).
+of its records in the document's ``flicker`` list (None without any; no oracle floor). From dsm-bench-6 on a
+hybrid contender has its ray fraction: its rays summed over the cases at the origin over their summed receivers
+(:func:`pooled_rays`; a map alone: None).
 """
 from __future__ import annotations
 
@@ -93,6 +95,15 @@ def pooled_leak(rows: list):
     return sum(r["n_leak"] for r in rows) / shadowed if shadowed else float("nan")
 
 
+def pooled_rays(rows: list):
+    """Sum of hybrid_rays over sum of n_receivers of ``rows`` (None unless every row traced rays: a map alone;
+    NaN when no row has a receiver)."""
+    if not rows or not all("hybrid_rays" in r for r in rows):
+        return None
+    receivers = sum(r["n_receivers"] for r in rows)
+    return sum(r["hybrid_rays"] for r in rows) / receivers if receivers else float("nan")
+
+
 def scores(name: str, rows: list, far_unit, far: list) -> dict:
     """One contender's leaderboard numbers from its records: origin means, FLIP, far columns."""
     here = [r for r in rows if at_origin(r)]
@@ -101,7 +112,7 @@ def scores(name: str, rows: list, far_unit, far: list) -> dict:
            "spread": scale_spread(here), "build_ms": mean(r["build_ms"] for r in here),
            "lookup_ms": mean(r["lookup_ms"] for r in here),
            "flip": mean(r["flip"] for r in here) if all("flip" in r for r in here) else None,
-           "leak": pooled_leak(here)}
+           "leak": pooled_leak(here), "ray_fraction": pooled_rays(here)}
     out["far"] = {o: mean(r["error_rate"] for r in rows if offset_of(r) == o and r["unit"] == far_unit)
                   for o in far}
     out["far_change"] = far_change(rows, far_unit, far[-1]) if len(far) > 1 else None

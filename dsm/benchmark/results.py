@@ -13,6 +13,10 @@ those records are named by kind and filter (``vsm box:5``), carry ``map_kind`` a
 flicker config (:func:`dsm.benchmark.suite.motion_config`) runs it into ``flicker/<its name>/`` of the
 benchmark's folder (frames.csv kept there) and adds one flicker record per light and contender to the
 document's ``flicker`` list (not to ``cases``: its counts are a motion's, summed over frames).
+From dsm-bench-6 on (results version 5) a case also runs its hybrid config (:func:`dsm.benchmark.suite.hybrid_config`):
+a hybrid contender's record counts the error left after its rule's rays (``n_acne``, ``n_peterpan`` and their
+rates are the run's ``hybrid_*`` columns), carries ``hybrid_rays`` and ``ray_fraction`` (rays / receivers), and its
+``lookup_ms`` adds the rays' time to the map's lookup (the rays are part of the lookup; the frontier counts them).
 """
 from __future__ import annotations
 
@@ -28,7 +32,8 @@ from ..report import figures, io as report_io
 from ..truth import metrics
 from . import case_images, caselog, perceptual, ranking, render
 from .document import RESULTS_VERSION
-from .suite import LATEST, ORIGIN, SUITE_FILES, TIMING_CALLS, cases, load_suite, suite_sha256, tuned_labels
+from .suite import (LATEST, ORIGIN, SUITE_FILES, TIMING_CALLS, cases, hybrid_labels, load_suite, suite_sha256,
+                    tuned_labels)
 
 MEASURES = ("n_receivers", "n_gt_shadowed", "n_acne", "n_peterpan", "acne_rate", "peterpan_rate", "error_rate",
             "texel_size", "texel_f32_steps", "build_ms", "lookup_ms")
@@ -37,6 +42,10 @@ LEAK_MEASURES = ("n_leak", "leak_rate")      # a pre-filtered record's: peter-pa
 FLICKER_MEASURES = ("frames", "flicker_rate", "flicker_ever", "flicker_magnitude", "flicker_within_rate",
                     "flicker_change_rate")
 ORACLE_MEASURES = ("world_objective", "texel_objective", "per_texel_objective")
+# a hybrid row's error after its rays (metrics.csv's hybrid_* columns) -> the record's error columns
+HYBRID_ERROR = {"n_acne": "hybrid_n_acne", "n_peterpan": "hybrid_n_peterpan", "acne_rate": "hybrid_acne_rate",
+                "peterpan_rate": "hybrid_peterpan_rate", "error_rate": "hybrid_error_rate"}
+HYBRID_MEASURES = ("hybrid_rays", "ray_fraction")
 
 
 def light_kind(light_label: str) -> str:
@@ -49,11 +58,14 @@ def is_prefiltered(row: dict) -> bool:
     return row.get("map_kind") not in (None, "", "depth")
 
 
-def contender_of(row: dict, tuned: dict | None = None) -> str:
+def contender_of(row: dict, tuned: dict | None = None, hybrid: dict | None = None) -> str:
     """The contender a metrics row belongs to: a pre-filtered kind and its filter (``vsm box:5``), else its
     preset's name, else a tuned contender's (``tuned``: :func:`dsm.benchmark.suite.tuned_labels`), else its scheme's;
     a virtual shadow map's row (dsm-bench-5 on) is its preset's, ``virtual ue5`` (a key its layout label adds
-    beside the preset, as the suite's unit_cm, is the same contender's)."""
+    beside the preset, as the suite's unit_cm, is the same contender's); a hybrid row (dsm-bench-6 on) is its
+    hybrid contender's (``hybrid``: :func:`dsm.benchmark.suite.hybrid_labels`)."""
+    if row.get("hybrid_rule"):
+        return hybrid[(row["hybrid_rule"], row["hybrid_params"])]
     if (row.get("cascade_layout") or "").startswith("vsm "):
         return "virtual " + row["cascade_layout"].split()[1]
     if is_prefiltered(row):           # an engine's preset of the kind (dsm-bench-4 on) between them
@@ -63,16 +75,18 @@ def contender_of(row: dict, tuned: dict | None = None) -> str:
     return row["preset"] or row["scheme"]
 
 
-def case_records(case, results, flips=None, oracle=True, tuned=None) -> list:
+def case_records(case, results, flips=None, oracle=True, tuned=None, hybrid=None) -> list:
     """The suite's records of one (scene, unit, offset) run: one per light and contender (with its
-    FLIP from ``flips``, case id -> mean FLIP, where given; ``tuned``: the suite's tuned labels), plus its
-    oracle floor (if ``oracle``)."""
+    FLIP from ``flips``, case id -> mean FLIP, where given; ``tuned``, ``hybrid``: the suite's tuned and
+    hybrid labels), plus its oracle floor (if ``oracle``)."""
     out = []
     where = {"offset": case.offset, "translate": list(case.translate)}
     for row in results.rows:
         rec = {"scene": case.scene, "unit": case.unit, **where, "light": light_kind(row["light"]),
-               "contender": contender_of(row, tuned), "params": row["params"]}
+               "contender": contender_of(row, tuned, hybrid), "params": row["params"]}
         rec.update({k: row[k] for k in MEASURES + COST_MEASURES})
+        if row.get("hybrid_rule"):
+            rec.update(hybrid_measures(row))
         if is_prefiltered(row):
             rec.update({"map_kind": row["map_kind"], **{k: row[k] for k in LEAK_MEASURES}})
         if flips is not None:
@@ -86,6 +100,13 @@ def case_records(case, results, flips=None, oracle=True, tuned=None) -> list:
         rec.update({k: float(min(o[k] for o in rows)) for k in ORACLE_MEASURES})
         out.append(rec)
     return out
+
+
+def hybrid_measures(row: dict) -> dict:
+    """A hybrid row's record columns: the error left after its rays, the rays, their fraction of the receivers,
+    and the lookup's time with the rays' added."""
+    return {**{k: row[h] for k, h in HYBRID_ERROR.items()}, **{k: row[k] for k in HYBRID_MEASURES},
+            "lookup_ms": float(row["lookup_ms"]) + float(row["hybrid_ms"])}
 
 
 def case_flips(case, res, ppd: float, variant: str | None = None, setups=None, known: dict | None = None,
@@ -155,20 +176,21 @@ def class_image(path: Path) -> np.ndarray:
     return idx.astype(np.uint8)
 
 
-def config_records(case, res, ppd, variant, setups, known, oracle=False, tuned=None) -> tuple:
+def config_records(case, res, ppd, variant, setups, known, oracle=False, tuned=None, hybrid=None) -> tuple:
     """(records, images) of one of a case's configs run (``res``): its records, with their FLIP where
     ``ppd`` is given, and per row (class image, FLIP map or None) for dsm.benchmark.case_images."""
     maps = None if ppd is None else {}
     flips = None if ppd is None else case_flips(case, res, ppd, variant, setups, known, maps)
     images = [(res.images[row["case"]], None if maps is None else maps[row["case"]]) for row in res.rows]
-    return case_records(case, res, flips, oracle=oracle, tuned=tuned), images
+    return case_records(case, res, flips, oracle=oracle, tuned=tuned, hybrid=hybrid), images
 
 
 def run_case(case, ppd, variant: str | None = None, tuned=None, out: Path | None = None,
-             cluster: str | None = None) -> tuple:
+             cluster: str | None = None, hybrid: dict | None = None) -> tuple:
     """(records, flicker records, the variant run) of one case: its depth config's records (with the
     oracle), then its pre-filtered config's if any (both on ``cluster`` when given); its motion
-    config's flicker, run here into ``out`` (a motion run's frames are one sequence: not split in tasks).
+    config's flicker, run here into ``out`` (a motion run's frames are one sequence: not split in tasks); its
+    hybrid config's where it has one (``hybrid``: the suite's hybrid labels).
     Its records' class images and FLIP maps go under ``out`` (dsm.benchmark.case_images) where given."""
     import dsm
     res = measured(case.config, variant, cluster)
@@ -182,6 +204,10 @@ def run_case(case, ppd, variant: str | None = None, tuned=None, out: Path | None
     if getattr(case, "virtual", None) is not None:      # dsm-bench-5 on; its light labelled as the depth config's
         vsm = measured(case.virtual, variant, cluster)
         more = config_records(case, vsm, ppd, variant, setups, None)
+        records, images = records + more[0], images + more[1]
+    if case.hybrid is not None:         # dsm-bench-6 on: the depth config's scene and lights, V after the rays
+        hyb = measured(case.hybrid, variant, cluster)
+        more = config_records(case, hyb, ppd, variant, setups, known, hybrid=hybrid)
         records, images = records + more[0], images + more[1]
     if out is not None:                 # the oracles' records have no image: the rest pair with the rows, in order
         case_images.keep(out, [r for r in records if r["contender"] != "oracle"], images)
@@ -209,7 +235,7 @@ def run_suite(size: str = "default", variant: str | None = None, progress=print,
     from ..core.env import engine, versions
     suite = load_suite(SUITE_FILES[version])
     ppd = suite.get("flip", {}).get("ppd")          # dsm-bench-1 has no FLIP
-    todo, tuned = cases(suite, size), tuned_labels(suite)
+    todo, tuned, hybrid = cases(suite, size), tuned_labels(suite), hybrid_labels(suite)
     header = {"suite": suite["suite"]["name"], "suite_sha256": suite_sha256(SUITE_FILES[version]), "size": size,
               "variant": variant, "cluster": cluster, "cases": len(todo), "versions": engine(versions()),
               "timing_calls": TIMING_CALLS}
@@ -226,7 +252,7 @@ def run_suite(size: str = "default", variant: str | None = None, progress=print,
         if progress:
             where = "" if case.offset == ORIGIN else f" at {case.offset}"
             progress(f"dsm benchmark: {i + 1}/{len(todo)} {case.scene} in {case.unit}{where} (scale {case.scale:g})")
-        recs, flick, run_variant = run_case(case, ppd, variant, tuned, out, cluster)
+        recs, flick, run_variant = run_case(case, ppd, variant, tuned, out, cluster, hybrid)
         log.keep(i, case, recs, flick, run_variant)
         entries.append({"records": recs, "flicker": flick, "variant": run_variant})
     return document(suite, version, size, entries, cluster)

@@ -23,6 +23,10 @@ pre-filtered config with the same [[motion]]. An XML scene takes ``translate``: 
 From dsm-bench-5 on ``[virtual]`` gives a case whose scene runs the directional light a fifth config,
 ``virtual``: that light alone on the suite's virtual shadow map presets with its one scheme
 (:func:`virtual_config`).
+
+From dsm-bench-6 on ``[hybrid]`` gives every case a sixth config, ``hybrid``: the depth config with the suite's
+one scheme and each ``[[hybrid.contender]]`` as a ``[[hybrid]]`` instance (:func:`hybrid_config`): a receiver the
+rule sends to a ray gets the ray's answer (docs/hybrid.md).
 """
 from __future__ import annotations
 
@@ -38,7 +42,8 @@ SUITE_FILES = {"dsm-bench-1": Path(__file__).with_name("suite_1.toml"),
                "dsm-bench-2": Path(__file__).with_name("suite_2.toml"),
                "dsm-bench-3": Path(__file__).with_name("suite_3.toml"),
                "dsm-bench-4": Path(__file__).with_name("suite_4.toml"),
-               "dsm-bench-5": Path(__file__).with_name("suite_5.toml")}
+               "dsm-bench-5": Path(__file__).with_name("suite_5.toml"),
+               "dsm-bench-6": Path(__file__).with_name("suite_6.toml")}
 LATEST = list(SUITE_FILES)[-1]
 SUITE_FILE = SUITE_FILES[LATEST]
 ORIGIN = "0"              # the offset label of a case at the origin (every case of dsm-bench-1)
@@ -66,6 +71,7 @@ class Case:
     motion: dict | None = None            # the flicker config of the case (dsm-bench-3 on, a few scenes)
     prefiltered_motion: dict | None = None  # the pre-filtered kinds' flicker config (dsm-bench-4 on)
     virtual: dict | None = None           # the virtual shadow maps' config (dsm-bench-5 on)
+    hybrid: dict | None = None            # the hybrid rays' config (dsm-bench-6 on)
 
 
 def suite_sha256(path: Path = SUITE_FILE) -> str:
@@ -185,6 +191,37 @@ def virtual_config(suite: dict, cfg: dict, scene: dict, lights: list) -> dict | 
             "light": [t for t in cfg["light"] if t["type"] == "scene"], "map": mp, "scheme": [dict(v["scheme"])]}
 
 
+def hybrid_tables(suite: dict) -> list:
+    """The [[hybrid]] tables of the suite's hybrid contenders (each its rule and parameters, no name), in order."""
+    return [{k: v for k, v in c.items() if k != "name"} for c in suite.get("hybrid", {}).get("contender", [])]
+
+
+def hybrid_config(suite: dict, cfg: dict) -> dict | None:
+    """The hybrid rays' config of a case's depth config ``cfg``: the same scene, camera, lights and map with the
+    suite's one scheme and its contenders as [[hybrid]] instances; None without ``[hybrid]``."""
+    tables = hybrid_tables(suite)
+    if not tables:
+        return None
+    return {**cfg, "experiment": {"name": cfg["experiment"]["name"] + "-hybrid"},
+            "scheme": [dict(suite["hybrid"]["scheme"])], "hybrid": tables}
+
+
+def hybrid_labels(suite: dict) -> dict:
+    """(rule, parameters label) -> hybrid contender name, the label as a run's ``hybrid_params`` column writes
+    it; refused where two contenders share their rule and label (their rows would be the same)."""
+    from ..core.types import HybridSpec
+    from ..hybrid import get as rule_of
+    out = {}
+    for c in suite.get("hybrid", {}).get("contender", []):
+        params = {k: v for k, v in c.items() if k not in ("name", "rule", "origin")}
+        spec = HybridSpec(c["rule"], rule_of(c["rule"]).Params(**params), c.get("origin", "spawn"))
+        if (spec.rule, spec.label) in out:
+            twin = out[(spec.rule, spec.label)]
+            raise ValueError(f"hybrid.contender {c['name']!r}: the same rule and values as {twin!r}")
+        out[(spec.rule, spec.label)] = c["name"]
+    return out
+
+
 def motion_config(suite: dict, cfg: dict) -> dict:
     """The flicker config of a case's depth config ``cfg``: the same with the suite's [[motion]]."""
     name = cfg["experiment"]["name"] + "-flicker"
@@ -216,19 +253,21 @@ def cases(suite: dict, size: str) -> list:
             pre_flicker = flicker and pre is not None and suite["flicker"].get("prefiltered", False)
             out.append(Case(name, unit, scale, cfg, offset, translate, pre, motion_config(suite, cfg) if flicker else None,
                             motion_config(suite, pre) if pre_flicker else None,
-                            virtual_config(suite, cfg, scene, s["lights"])))
+                            virtual_config(suite, cfg, scene, s["lights"]), hybrid_config(suite, cfg)))
     return out
 
 
 def contender_count(case: Case) -> int:
     """How many contenders a case's configs run (the oracle aside): its [[scheme]] tables, each pre-filtered kind
-    at its defaults and engine presets under each blur, and the virtual maps' presets."""
+    at its defaults and engine presets under each blur, the virtual maps' presets and the hybrid contenders."""
     n = len(case.config["scheme"])
     if case.prefiltered is not None:
         mp = case.prefiltered["map"]
         n += sum(len(mp.get(k, {}).get("preset", ["default"])) for k in mp["kind"]) * len(mp["blur"])
     if case.virtual is not None:
         n += len(case.virtual["map"]["virtual"]["preset"])
+    if case.hybrid is not None:
+        n += len(case.hybrid["hybrid"])
     return n
 
 

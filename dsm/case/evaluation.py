@@ -77,9 +77,11 @@ def evaluate(ctx: MapContext, case: Case, looked=None, attached=None) -> CaseRes
         measured.update(metrics.leak_split(v, ctx.setup.v_star, deep))
         if receivers is not None and deep is not None:      # the leaks in their own colour
             leak = metrics.leak_mask(v, ctx.setup.v_star, deep)
-    if case.hybrid is not None:
-        measured.update(_hybrid(ctx, case, v))
-    result.classes = _class_image(ctx, v, _wrong(ctx, case), leak)
+    shown = v
+    if case.hybrid is not None:        # its image shows V after the rays: what the hybrid shows (its hybrid_* counts)
+        cols, shown = _hybrid(ctx, case, v)
+        measured.update(cols)
+    result.classes = _class_image(ctx, shown, _wrong(ctx, case), leak)
     return result
 
 
@@ -140,10 +142,10 @@ def _attached(ctx: MapContext, case: Case, look, attached) -> dict:
             "n_plane_fallback": fallbacks if uses_plane else metrics.UNDEFINED}
 
 
-def _hybrid(ctx: MapContext, case: Case, v) -> dict:
-    """The hybrid instance's columns: its rule's rays traced against the exact scene, the error left
-    (the case's own columns stay the map's alone, the budget's 0)."""
-    return hybrid.measure(case.hybrid, *hybrid_parts(ctx, case, v), ctx.repeats)[0]
+def _hybrid(ctx: MapContext, case: Case, v) -> tuple:
+    """(the hybrid instance's columns, V after its rays): its rule's rays traced against the exact scene,
+    the error left (the case's own columns stay the map's alone, the budget's 0)."""
+    return hybrid.measure(case.hybrid, *hybrid_parts(ctx, case, v), ctx.repeats)
 
 
 def hybrid_parts(ctx: MapContext, case: Case, v) -> tuple:

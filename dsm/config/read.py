@@ -13,7 +13,7 @@ import tomllib
 from dataclasses import replace
 from pathlib import Path
 
-from .virtual import parse_virtual
+from .virtual import check_reach, parse_virtual
 from ..core.types import (LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, MAP_VIEWS, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA, REPORT_IMAGES, LOOKUP_MODES, BUILD_MODES, LAMBDA_MAX, SEED_MAX, ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params, SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec, CameraSpec, CascadeSpec, CASCADE_SPLITS, CASCADE_FITS, DEPTH_BOUNDS, MAX_CASCADES, MotionSpec, CAMERA_PATHS, LIGHT_PATHS, MAP_KINDS, MomentSpec, ContactSpec, BLUR_KERNELS, HybridSpec, HYBRID_ORIGINS)
 
 # a run's folder is runs/<name>-tune-YYYYmmdd-HHMMSS[-n] (at most 25 bytes more) and a file name takes 255 bytes
@@ -137,6 +137,7 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     lights = _parse_lights(raw, source, scenes)
     m = _table(raw, "map", source)
     mapspec = _parse_map(m, lights, source)
+    check_reach(mapspec.virtual, sorted({sc.params.scale for sc in scenes if sc.params is not None}), source)
     schemes = _parse_schemes(raw, mapspec, source)
     budget, (repeats, lookups, builds), lambdas, report_images = _parse_run_tables(raw, source)
     motion = tuple(_parse_motion(t, source, f"motion[{i}]") for i, t in enumerate(_array_of_tables(raw, "motion", source)))

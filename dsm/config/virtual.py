@@ -13,6 +13,9 @@ VIRTUAL_KEYS = ("preset", "page_size", "resolution", "first_level", "last_level"
                 "unit_cm", "border", "max_pages")
 MAX_LEVELS = 64                 # levels a view holds (faces)
 MAX_PAGES_SIDE = 1024           # pages along a level's side (the page table holds levels x this^2)
+# float32's relative step (2^-23): a coarsest level narrower than this times the scene's scale spans less than one
+# float32 step of a coordinate of one scene unit, so no receiver there can lie in it apart from its neighbours
+FLOAT32_STEP = 2.0 ** -23
 
 
 def _values(t: dict, source: str) -> dict:
@@ -54,6 +57,29 @@ def _check(spec, source: str):
                           f"{spec.first_level}")
     if spec.count > MAX_LEVELS:
         raise ConfigError(source, "map.virtual.last_level", f"{spec.count} levels; at most {MAX_LEVELS}")
+
+
+def check_reach(specs: tuple, scales, source: str):
+    """ConfigError, before any work, where a virtual map's coarsest level is narrower than float32's step at one
+    scene unit of a scene's ``scale`` (:data:`FLOAT32_STEP`): no receiver can lie in any of its levels. It names the
+    keys and their valid range. Levels wide enough that still hold no receiver (the receivers all farther from the
+    camera than the coarsest level reaches, as ``levels = 1`` leaves) depend on where the camera's receivers lie:
+    known only once the scene is loaded, that case fails alone (dsm.maps.virtual) and the others run."""
+    for spec in specs:
+        for scale in scales:
+            need = FLOAT32_STEP * scale                   # the narrowest coarsest level, scene units
+            if spec.level_width(spec.last_level, scale) >= need:
+                continue
+            cm = spec.level_width(spec.last_level, 1.0) * spec.unit_cm      # its physical width
+            lowest = next((lv for lv in range(spec.last_level, 61) if spec.level_width(lv, scale) >= need), None)
+            levels = (f"last_level >= {lowest} (at most 60)" if lowest is not None
+                      else "no last_level up to 60 reaches it")
+            width = spec.level_width(spec.last_level, scale)
+            raise ConfigError(source, "map.virtual", f"the coarsest level (last_level {spec.last_level}, "
+                              f"{cm:.3g} cm) is {width:.3g} scene units wide at scale "
+                              f"{scale:g}, under float32's step at one scene unit ({need:.3g}): no receiver can lie in "
+                              f"its levels; valid: map.virtual.unit_cm <= {cm / need * scale:.3g}, or {levels} "
+                              f"(map.virtual.first_level, last_level or levels)")
 
 
 def parse_virtual(m: dict, lights, source: str) -> tuple:

@@ -318,6 +318,12 @@ class VirtualSpec:
         """Clipmap levels (the view's faces)."""
         return self.last_level - self.first_level + 1
 
+    def level_width(self, level, scale: float = 1.0):
+        """World width (scene units at ``scale``) of absolute level ``level`` (a number or a numpy array):
+        UE5 ``2^(l+3)`` cm (a radius of ``2^(l+1)`` cm, the level four radii wide), EEVEE ``2^l`` m."""
+        cm = 2.0 ** (level + 3.0) if self.rule == "footprint" else 100.0 * 2.0 ** level
+        return cm * scale / self.unit_cm
+
     @property
     def physical_texels(self) -> int:
         """Texels of the physical page pool: max_pages x page_size^2 (the plan's memory bound)."""

@@ -64,9 +64,7 @@ def level_constant(spec: VirtualSpec, camera: Camera, scale: float = 1.0) -> flo
 
 def level_width(spec: VirtualSpec, level, scale: float = 1.0):
     """World width (scene units) of absolute level ``level``: UE5 ``2^(l+3)`` cm, EEVEE ``2^l`` m."""
-    level = np.asarray(level, float)
-    cm = 2.0 ** (level + 3.0) if spec.rule == "footprint" else 100.0 * 2.0 ** level
-    return cm * scale / spec.unit_cm
+    return spec.level_width(np.asarray(level, float), scale)
 
 
 def level_snap(spec: VirtualSpec, width):
