@@ -38,6 +38,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..core.types import Length
+from ..scenes import spawn
 from .receiver import Receiver
 
 
@@ -245,6 +246,42 @@ def plane_fallbacks(scheme, params, rx: Receiver, smap) -> int:
     """How many receivers :func:`plane_misses` names (0 for a scheme without a plane)."""
     miss = plane_misses(scheme, params, rx, smap)
     return 0 if miss is None else int(dr.count(miss).numpy().ravel()[0])
+
+
+SURFACE_SLACK_TEXELS = 0.125   # float32 rounding allowance of the own-surface test, texels at the receiver
+
+
+def on_own_surface(rx: Receiver, tap: Tap, built):
+    """Per receiver (lazy Bool): whether ``tap``'s texel's first hit lies on the receiver's own
+    surface, the rule of metrics.csv's ``n_acne_self`` (docs/design.md, *Metrics*).
+
+    With ``z_c`` the depth of the receiver's tangent plane (``rx.p_world``, ``rx.n_world``) on the
+    texel's centre ray and ``g_u``, ``g_v`` its depth change to the next texel centre in u and in v:
+    the hit is on the receiver's surface when ``|z1 - z_c| <= (|g_u| + |g_v|) / 2 + s``, that is
+    within the plane's depth span over the texel's footprint (centre to corner) plus
+    ``s = SURFACE_SLACK_TEXELS * rx.texel_world`` for float32 rounding where the plane faces the
+    light (span 0). Both terms are lengths along the light's ray measured in the receiver's own
+    texel, so the rule does not depend on the scene's scale or position. A hit on the receiver's
+    own triangle lies on that plane, so it always passes; where the texel's rays miss the plane
+    (grazing light) the span is unbounded and the hit counts as on the surface; a texel whose ray
+    hit nothing never does. ``z1`` is read from ``built``, the float32 map the stored one was made
+    of (a stored format's quantization says nothing about where the hit is)."""
+    view = built.view
+    z1 = dr.gather(mi.Float, built.z1, tap.idx)
+    z_c, met = view.plane_hit(tap.cu_map, tap.cv_map, rx.p_world, rx.n_world, tap.face)
+    g_u = view.depth_on_plane(tap.cu_map + 1.0, tap.cv_map, rx.p_world, rx.n_world, tap.face) - z_c
+    g_v = view.depth_on_plane(tap.cu_map, tap.cv_map + 1.0, rx.p_world, rx.n_world, tap.face) - z_c
+    span = 0.5 * (dr.abs(g_u) + dr.abs(g_v))
+    span = dr.select(dr.isfinite(span), span, dr.inf)         # a neighbour's ray misses the plane
+    near = dr.abs(z1 - z_c) <= span + SURFACE_SLACK_TEXELS * rx.texel_world
+    return (tap.shape != spawn.NO_SHAPE) & (~met | near)
+
+
+def nearest_on_own_surface(scheme, params, rx: Receiver, smap, built):
+    """Per receiver (lazy Bool): :func:`on_own_surface` of the nearest texel the scheme's lookup
+    reads on ``smap`` (after its shift; ``scheme`` None: no shift, a pre-filtered instance's)."""
+    shifted = rx if scheme is None else scheme.shift(rx, resolve(params, rx))
+    return on_own_surface(rx, nearest_tap(shifted, smap), built)
 
 
 def visibility(scheme, params, rx: Receiver, smap, filt: str = "nearest", seed: int = 7):
