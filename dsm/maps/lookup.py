@@ -251,29 +251,38 @@ def plane_fallbacks(scheme, params, rx: Receiver, smap) -> int:
 SURFACE_SLACK_TEXELS = 0.125   # float32 rounding allowance of the own-surface test, texels at the receiver
 
 
-def on_own_surface(rx: Receiver, tap: Tap, built):
+def on_own_surface(rx: Receiver, shifted: Receiver, tap: Tap, built):
     """Per receiver (lazy Bool): whether ``tap``'s texel's first hit lies on the receiver's own
-    surface, the rule of metrics.csv's ``n_acne_self`` (docs/design.md, *Metrics*).
+    surface, the rule of metrics.csv's ``n_acne_self`` (docs/design.md, *The acne split*).
 
-    With ``z_c`` the depth of the receiver's tangent plane (``rx.p_world``, ``rx.n_world``) on the
-    texel's centre ray and ``g_u``, ``g_v`` its depth change to the next texel centre in u and in v:
-    the hit is on the receiver's surface when ``|z1 - z_c| <= (|g_u| + |g_v|) / 2 + s``, that is
-    within the plane's depth span over the texel's footprint (centre to corner) plus
-    ``s = SURFACE_SLACK_TEXELS * rx.texel_world`` for float32 rounding where the plane faces the
-    light (span 0). Both terms are lengths along the light's ray measured in the receiver's own
-    texel, so the rule does not depend on the scene's scale or position. A hit on the receiver's
-    own triangle lies on that plane, so it always passes; where the texel's rays miss the plane
-    (grazing light) the span is unbounded and the hit counts as on the surface; a texel whose ray
-    hit nothing never does. ``z1`` is read from ``built``, the float32 map the stored one was made
-    of (a stored format's quantization says nothing about where the hit is)."""
+    ``z_c``: the depth of the receiver's tangent plane (``rx.p_world``, ``rx.n_world``) on the
+    texel's centre ray. The texel's depth extent, centre to corner, is taken twice: the receiver
+    plane's, half its depth changes to the next texel centres in u and in v, and the hit surface's,
+    half the map's own depth changes to the neighbouring texels (per axis the smaller of the two
+    sides, so that an outline beside the texel does not count). The hit is on the receiver's
+    surface when ``|z1 - z_c| <= min(receiver's, hit's) + s``, ``s = SURFACE_SLACK_TEXELS *
+    rx.texel_world`` for float32 rounding where both face the light (extent 0). Every term is a
+    length along the light's ray in units of the receiver's own texel: the rule does not depend on
+    the scene's scale or position. A hit on the receiver's own triangle lies on that plane and
+    passes; a wall standing on the receiver, which faces the light more than the receiver does,
+    does not (a contact is an outline). Where the texel's rays miss the plane (grazing light) the
+    receiver's extent is unbounded; a texel whose ray hit nothing never holds the receiver's
+    surface. Depths are read from ``built``, the float32 map the stored one was made of (a stored
+    format's quantization says nothing about where the hit is); ``shifted``: the receiver as the
+    lookup moved it (its face names the texels' map)."""
     view = built.view
     z1 = dr.gather(mi.Float, built.z1, tap.idx)
     z_c, met = view.plane_hit(tap.cu_map, tap.cv_map, rx.p_world, rx.n_world, tap.face)
-    g_u = view.depth_on_plane(tap.cu_map + 1.0, tap.cv_map, rx.p_world, rx.n_world, tap.face) - z_c
-    g_v = view.depth_on_plane(tap.cu_map, tap.cv_map + 1.0, rx.p_world, rx.n_world, tap.face) - z_c
-    span = 0.5 * (dr.abs(g_u) + dr.abs(g_v))
-    span = dr.select(dr.isfinite(span), span, dr.inf)         # a neighbour's ray misses the plane
-    near = dr.abs(z1 - z_c) <= span + SURFACE_SLACK_TEXELS * rx.texel_world
+    plane = 0.0
+    hit = 0.0
+    for du, dv in ((1.0, 0.0), (0.0, 1.0)):
+        g = view.depth_on_plane(tap.cu_map + du, tap.cv_map + dv, rx.p_world, rx.n_world, tap.face) - z_c
+        plane = plane + 0.5 * dr.abs(g)
+        ahead = dr.gather(mi.Float, built.z1, tap_at(shifted, built, tap.cu_map + du, tap.cv_map + dv).idx)
+        behind = dr.gather(mi.Float, built.z1, tap_at(shifted, built, tap.cu_map - du, tap.cv_map - dv).idx)
+        hit = hit + 0.5 * dr.minimum(dr.abs(ahead - z1), dr.abs(behind - z1))
+    plane = dr.select(dr.isfinite(plane), plane, dr.inf)      # a neighbour's ray misses the plane
+    near = dr.abs(z1 - z_c) <= dr.minimum(plane, hit) + SURFACE_SLACK_TEXELS * rx.texel_world
     return (tap.shape != spawn.NO_SHAPE) & (~met | near)
 
 
@@ -281,7 +290,7 @@ def nearest_on_own_surface(scheme, params, rx: Receiver, smap, built):
     """Per receiver (lazy Bool): :func:`on_own_surface` of the nearest texel the scheme's lookup
     reads on ``smap`` (after its shift; ``scheme`` None: no shift, a pre-filtered instance's)."""
     shifted = rx if scheme is None else scheme.shift(rx, resolve(params, rx))
-    return on_own_surface(rx, nearest_tap(shifted, smap), built)
+    return on_own_surface(rx, shifted, nearest_tap(shifted, smap), built)
 
 
 def visibility(scheme, params, rx: Receiver, smap, filt: str = "nearest", seed: int = 7):
