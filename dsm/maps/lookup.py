@@ -261,7 +261,7 @@ def on_own_surface(rx: Receiver, shifted: Receiver, tap: Tap, built):
     half the map's own depth changes to the neighbouring texels (per axis the smaller of the two
     sides, so that an outline beside the texel does not count). The hit is on the receiver's
     surface when ``|z1 - z_c| <= min(receiver's, hit's) + s``, ``s = SURFACE_SLACK_TEXELS *
-    rx.texel_world`` for float32 rounding where both face the light (extent 0). Every term is a
+    rx.texel_world`` for float32 rounding where either faces the light (extent 0). Every term is a
     length along the light's ray in units of the receiver's own texel: the rule does not depend on
     the scene's scale or position. A hit on the receiver's own triangle lies on that plane and
     passes; a wall standing on the receiver, which faces the light more than the receiver does,

@@ -1,8 +1,8 @@
 """Metrics: shadow-map visibility V against exact visibility V*, per receiver.
 
 | acne (false shadow)          | V* = 1 and V < 0.5; ``self`` when the nearest texel's first hit lies
-|                              | on the receiver's own surface (its tangent plane, within the plane's
-|                              | depth span over the texel: dsm.maps.lookup.on_own_surface), ``edge``
+|                              | on the receiver's own surface (its tangent plane, within the texel's
+|                              | depth extent: dsm.maps.lookup.on_own_surface), ``edge``
 |                              | otherwise (another surface, whatever shape holds it: an outline)
 | peter-panning (false light)  | V* = 0 and V >= 0.5, with the distance to the true occluder
 | acne_rate                    | n_acne / n_gt_lit
