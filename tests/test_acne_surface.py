@@ -153,3 +153,19 @@ def test_ground_acne_under_a_floating_plate_is_edge():
     assert np.array_equal((acne & ~own)[clear], expected_edge[clear])
     m = compute(v.numpy(), setup.v_star, own, setup.occluder_dist)
     assert m["n_acne_edge"] == int((acne & ~own).sum()) and m["n_acne_self"] == int((acne & own).sum())
+
+
+def test_the_split_does_not_depend_on_the_scene_scale(run_dict):
+    """The box on the ground at scale 1 and 1024 (a power of two: every float scales exactly): the
+    same self and edge counts for every scheme, both present (the rule's lengths are texels)."""
+    cfg = base_config(scene=[{"builtin": "plane_box", "scale": [1.0, 1024.0]}], camera={"resolution": [64, 64]},
+                      map={"resolution": 64}, scheme=EVERY_SCHEME)
+    res = run_dict(cfg)
+    assert res.run["n_failed"] == 0
+    by = {}
+    for r in res.rows:
+        by.setdefault(r["scheme"], []).append((r["n_acne"], r["n_acne_self"], r["n_acne_edge"]))
+    assert len(by) == len(EVERY_SCHEME)
+    for scheme, (small, large) in by.items():
+        assert small == large, (scheme, small, large)
+    assert by["none"][0][1] > 100 and sum(v[0][2] for v in by.values()) > 0
