@@ -261,7 +261,8 @@ def on_own_surface(rx: Receiver, shifted: Receiver, tap: Tap, built):
     half the map's own depth changes to the neighbouring texels (per axis the smaller of the two
     sides, so that an outline beside the texel does not count). The hit is on the receiver's
     surface when ``|z1 - z_c| <= min(receiver's, hit's) + s``, ``s = SURFACE_SLACK_TEXELS *
-    rx.texel_world`` for float32 rounding where either faces the light (extent 0). Every term is a
+    rx.texel_world`` for float32 rounding where either faces the light (extent 0), taken in the
+    view's depth (``depth_per_world``: a VSV grid's depth is an angle's fraction). Every term is a
     length along the light's ray in units of the receiver's own texel: the rule does not depend on
     the scene's scale or position. A hit on the receiver's own triangle lies on that plane and
     passes; a wall standing on the receiver, which faces the light more than the receiver does,
@@ -282,7 +283,8 @@ def on_own_surface(rx: Receiver, shifted: Receiver, tap: Tap, built):
         behind = dr.gather(mi.Float, built.z1, tap_at(shifted, built, tap.cu_map - du, tap.cv_map - dv).idx)
         hit = hit + 0.5 * dr.minimum(dr.abs(ahead - z1), dr.abs(behind - z1))
     plane = dr.select(dr.isfinite(plane), plane, dr.inf)      # a neighbour's ray misses the plane
-    near = dr.abs(z1 - z_c) <= dr.minimum(plane, hit) + SURFACE_SLACK_TEXELS * rx.texel_world
+    slack = SURFACE_SLACK_TEXELS * rx.texel_world * view.depth_per_world(rx.p_world)    # in the view's depth
+    near = dr.abs(z1 - z_c) <= dr.minimum(plane, hit) + slack
     return (tap.shape != spawn.NO_SHAPE) & (~met | near)
 
 
