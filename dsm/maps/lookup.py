@@ -266,14 +266,15 @@ def on_own_surface(rx: Receiver, shifted: Receiver, tap: Tap, built):
     length along the light's ray in units of the receiver's own texel: the rule does not depend on
     the scene's scale or position. A hit on the receiver's own triangle lies on that plane and
     passes; a wall standing on the receiver, which faces the light more than the receiver does,
-    does not (a contact is an outline). Where the texel's rays miss the plane (grazing light) the
-    receiver's extent is unbounded; a texel whose ray hit nothing never holds the receiver's
-    surface. Depths are read from ``built``, the float32 map the stored one was made of (a stored
+    does not (a contact is an outline). Where the centre ray misses the plane in front of the light
+    (grazing light) no hit of it lies on the plane: another surface; where only a neighbour's ray
+    misses it, the receiver's extent is unbounded and the hit's decides. A texel whose ray hit
+    nothing never holds the receiver's surface. Depths are read from ``built``, the float32 map the stored one was made of (a stored
     format's quantization says nothing about where the hit is); ``shifted``: the receiver as the
     lookup moved it (its face names the texels' map)."""
     view = built.view
     z1 = dr.gather(mi.Float, built.z1, tap.idx)
-    z_c, met = view.plane_hit(tap.cu_map, tap.cv_map, rx.p_world, rx.n_world, tap.face)
+    z_c = view.depth_on_plane(tap.cu_map, tap.cv_map, rx.p_world, rx.n_world, tap.face)   # +inf: missed
     plane = 0.0
     hit = 0.0
     for du, dv in ((1.0, 0.0), (0.0, 1.0)):
@@ -285,7 +286,7 @@ def on_own_surface(rx: Receiver, shifted: Receiver, tap: Tap, built):
     plane = dr.select(dr.isfinite(plane), plane, dr.inf)      # a neighbour's ray misses the plane
     slack = SURFACE_SLACK_TEXELS * rx.texel_world * view.depth_per_world(rx.p_world)    # in the view's depth
     near = dr.abs(z1 - z_c) <= dr.minimum(plane, hit) + slack
-    return (tap.shape != spawn.NO_SHAPE) & (~met | near)
+    return (tap.shape != spawn.NO_SHAPE) & near
 
 
 def nearest_on_own_surface(scheme, params, rx: Receiver, smap, built):
