@@ -14,8 +14,8 @@ later capability call these and nothing private. Stage by stage::
     view = pl.make_view(setup.light, 1024, pl.points_np(setup.p), sd.bbox)
     smap = pl.store(pl.build_map(sd.scene, view, pl.needs_of([spec])), "float32")
     rx = pl.receivers(smap.view, setup, sd.diagonal)
-    v, tap_shape = pl.visibility(spec, rx, smap)
-    m = pl.metrics(v.numpy(), setup, tap_shape.numpy())
+    v, _ = pl.visibility(spec, rx, smap)
+    m = pl.metrics(v.numpy(), setup, pl.own_surface(spec, rx, smap, smap).numpy())
 """
 from __future__ import annotations
 
@@ -379,6 +379,15 @@ def visibility(spec: SchemeSpec, rx: Receiver, smap, filt: str = "nearest", seed
     return lookup.visibility(schemes.get(spec.name), spec.params, rx, smap, filt, seed)
 
 
+def own_surface(spec: SchemeSpec | None, rx: Receiver, smap, built):
+    """Per receiver (lazy Bool), whether the nearest texel the lookup of ``spec`` reads on ``smap``
+    holds a first hit on the receiver's own surface (:func:`dsm.maps.lookup.on_own_surface`: the
+    acne split's ``self``); ``built``: the float32 map ``smap`` was stored from; ``spec`` None: a
+    pre-filtered instance's (no shift, ``smap`` the built map)."""
+    scheme = None if spec is None else schemes.get(spec.name)
+    return lookup.nearest_on_own_surface(scheme, None if spec is None else spec.params, rx, smap, built)
+
+
 def pcss_blockers_found(spec: SchemeSpec, rx: Receiver, smap) -> np.ndarray:
     """Per receiver (numpy bool), whether PCSS's blocker search on ``smap`` finds a blocker."""
     return lookup.pcss_found(schemes.get(spec.name), spec.params, rx, smap).numpy().astype(bool)
@@ -491,10 +500,11 @@ classify = metrics_mod.classify
 split = metrics_mod.split                 # (v, V*, wrong under the per-texel oracle) -> resolution / bias counts
 
 
-def metrics(v: np.ndarray, setup: LightSetup, tap_shape: np.ndarray, seam=None, has_seams=None) -> dict:
-    """Counts and rates of one case (undefined values are NaN); an area light's soft metrics
+def metrics(v: np.ndarray, setup: LightSetup, own: np.ndarray, seam=None, has_seams=None) -> dict:
+    """Counts and rates of one case (undefined values are NaN; ``own``: per receiver, its nearest
+    texel's hit on its own surface, :func:`own_surface`); an area light's soft metrics
     (:func:`dsm.truth.metrics.soft`) replace the hard ones they redefine."""
-    m = metrics_mod.compute(v, setup.v_star, setup.shape, tap_shape, setup.occluder_dist, seam, has_seams)
+    m = metrics_mod.compute(v, setup.v_star, own, setup.occluder_dist, seam, has_seams)
     if setup.ref is not None:
-        m.update(metrics_mod.soft(v, setup.ref.hits, setup.ref.samples, setup.ref.half, setup.shape, tap_shape))
+        m.update(metrics_mod.soft(v, setup.ref.hits, setup.ref.samples, setup.ref.half, own))
     return m

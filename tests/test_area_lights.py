@@ -244,15 +244,16 @@ def test_soft_metrics_by_hand():
     # receivers: umbra (0/16), penumbra (8/16), lit (16/16), lit (16/16)
     hits, samples = np.array([0, 8, 16, 16]), np.array([16, 16, 16, 16])
     v = np.array([0.75, 0.25, 1.0, 0.25])
-    m = metrics.soft(v, hits, samples, np.array([0.1, 0.2, 0.1, 0.1]), np.zeros(4), np.zeros(4))
+    m = metrics.soft(v, hits, samples, np.array([0.1, 0.2, 0.1, 0.1]), np.array([True, True, True, False]))
     assert (m["n_umbra"], m["n_penumbra"], m["n_lit"]) == (1, 1, 2)
     assert m["mae_umbra"] == 0.75 and m["mae_penumbra"] == 0.25 and m["mae_lit"] == 0.375
     assert m["rmse_lit"] == pytest.approx(np.sqrt(0.75 ** 2 / 2))
     assert m["mean_abs_error"] == pytest.approx((0.75 + 0.25 + 0 + 0.75) / 4)
     assert (m["n_acne"], m["n_peterpan"]) == (1, 1)           # the lit 0.25 and the umbra 0.75; not the penumbra
     assert m["acne_rate"] == 0.5 and m["peterpan_rate"] == 1.0
+    assert (m["n_acne_self"], m["n_acne_edge"]) == (0, 1)      # the acne receiver's texel: another surface
     assert m["ref_half_width_max"] == 0.2
-    empty = metrics.soft(np.array([0.5]), np.array([3]), np.array([16]), np.array([0.2]), np.zeros(1), np.zeros(1))
+    empty = metrics.soft(np.array([0.5]), np.array([3]), np.array([16]), np.array([0.2]), np.ones(1, bool))
     assert np.isnan(empty["mae_umbra"]) and np.isnan(empty["acne_rate"]) and np.isnan(empty["peterpan_rate"])
 
 

@@ -100,7 +100,7 @@ def _pixel_truth(scene, o, d, light_dir):
     to_light = np.broadcast_to(-_unit(np.asarray(light_dir, float)), p.shape)
     receiver = hit & ((n * to_light).sum(1) > 0)
     t_occ, _, _ = scene.first_hit(p, to_light, tmin=1e-9)
-    return {"hit": hit, "receiver": receiver, "vstar": ~np.isfinite(t_occ), "part": part, "p": p}
+    return {"hit": hit, "receiver": receiver, "vstar": ~np.isfinite(t_occ), "part": part, "p": p, "n": n}
 
 
 def truth(scene, sensor, light_dir, tilt=2e-5):

@@ -50,11 +50,11 @@ def evaluate(ctx: MapContext, case: Case, looked=None, attached=None) -> CaseRes
     receivers = ctx.receivers[case.format]
     shared = 1
     if looked is not None:
-        v, tap_shape, lookup_t = looked.v, looked.tap_shape, looked.timing
+        v, lookup_t = looked.v, looked.timing
         attached, shared = (looked.v_back, looked.misses), looked.shared
     else:
-        v, tap_shape, lookup_t = _looked_up(receivers, look, ctx.repeats)
-    measured = pipeline.metrics(v, ctx.setup, tap_shape, *_seams(ctx))
+        v, lookup_t = _looked_up(receivers, look, ctx.repeats)
+    measured = pipeline.metrics(v, ctx.setup, _own_surface(ctx, case, receivers), *_seams(ctx))
     result = CaseResult(case, v, measured, None, lookup_t, shared, moments_t)
     if "split" in ctx.measures:         # NaN unless nearest (the oracles' lookup)
         measured.update(pipeline.split(v, ctx.setup.v_star, _wrong(ctx, case)))
@@ -95,11 +95,23 @@ def lookup(ctx: MapContext, case: Case):
 
 
 def _looked_up(receivers, look, repeats: int) -> tuple:
-    """(V, tap shapes (numpy), the lookup's Timing) of ``receivers``, timed over ``repeats`` calls."""
+    """(V (numpy), the lookup's Timing) of ``receivers``, timed over ``repeats`` calls."""
     if receivers is None:
-        return np.zeros(0), np.zeros(0, np.uint32), NO_LOOKUP
-    (v, tap_shape), t = timing.measure_kernel(lambda: look(receivers), repeats)
-    return v.numpy(), tap_shape.numpy(), t
+        return np.zeros(0), NO_LOOKUP
+    (v, _), t = timing.measure_kernel(lambda: look(receivers), repeats)
+    return v.numpy(), t
+
+
+def _own_surface(ctx: MapContext, case: Case, receivers) -> np.ndarray:
+    """Per receiver, whether the nearest texel the case's lookup reads holds a first hit on the
+    receiver's own surface (the acne split's ``self``), outside the timed lookup."""
+    if receivers is None:
+        return np.zeros(0, bool)
+    if case.prefiltered:        # the moments' nearest texel, as pipeline.moment_visibility reads it
+        own = pipeline.own_surface(None, receivers, ctx.depth_map, ctx.depth_map)
+    else:
+        own = pipeline.own_surface(case.spec, receivers, ctx.stored[case.format], ctx.depth_map)
+    return own.numpy().astype(bool)
 
 
 def _seams(ctx: MapContext) -> tuple:

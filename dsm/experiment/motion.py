@@ -207,6 +207,8 @@ def points_seen(scene, fp: FixedPoints, cam: Camera):
     d = dr.normalize(fp.p - o)
     pi = scene.ray_intersect_preliminary(mi.Ray3f(o + d * 0, d), coherent=False)
     t = np.asarray(pi.t.numpy(), np.float64)
+    # the same triangle (shape and primitive index together), not the same shape: merged meshes hold
+    # many surfaces in one shape
     same = (np.asarray(spawn.hit_shape(pi, pi.is_valid(), fp.table).numpy(), np.int64) == fp.shape) & \
         (np.asarray(pi.prim_index.numpy(), np.int64) == fp.prim)
     seen = in_frustum & pi.is_valid().numpy().astype(bool) & (same | (t >= dist * (1 - 1e-4)))

@@ -56,7 +56,9 @@ def _blocked(p: np.ndarray, d: np.ndarray, tris: np.ndarray) -> np.ndarray:
 
 
 def truth(sd, si, shape: np.ndarray, light) -> np.ndarray:
-    """V* per receiver in float64, each receiver's own shape left out."""
+    """V* per receiver in float64, each receiver's own shape left out (shape identity is surface
+    identity here: SCENES are a plane and a convex box on the ground, each surface its own shape
+    and none able to shade itself; a merged mesh would need a per-triangle rule)."""
     p = np.stack([np.asarray(c.numpy(), np.float64) for c in si.p], 1)
     to_light = -np.asarray(light.direction, np.float64) / np.linalg.norm(light.direction)
     d = np.broadcast_to(to_light, p.shape).copy()

@@ -38,6 +38,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..core.types import Length
+from ..scenes import spawn
 from .receiver import Receiver
 
 
@@ -245,6 +246,54 @@ def plane_fallbacks(scheme, params, rx: Receiver, smap) -> int:
     """How many receivers :func:`plane_misses` names (0 for a scheme without a plane)."""
     miss = plane_misses(scheme, params, rx, smap)
     return 0 if miss is None else int(dr.count(miss).numpy().ravel()[0])
+
+
+SURFACE_SLACK_TEXELS = 0.125   # float32 rounding allowance of the own-surface test, texels at the receiver
+
+
+def on_own_surface(rx: Receiver, shifted: Receiver, tap: Tap, built):
+    """Per receiver (lazy Bool): whether ``tap``'s texel's first hit lies on the receiver's own
+    surface, the rule of metrics.csv's ``n_acne_self`` (docs/design.md, *The acne split*).
+
+    ``z_c``: the depth of the receiver's tangent plane (``rx.p_world``, ``rx.n_world``) on the
+    texel's centre ray. The texel's depth extent, centre to corner, is taken twice: the receiver
+    plane's, half its depth changes to the next texel centres in u and in v, and the hit surface's,
+    half the map's own depth changes to the neighbouring texels (per axis the smaller of the two
+    sides, so that an outline beside the texel does not count). The hit is on the receiver's
+    surface when ``|z1 - z_c| <= min(receiver's, hit's) + s``, ``s = SURFACE_SLACK_TEXELS *
+    rx.texel_world`` for float32 rounding where either faces the light (extent 0), taken in the
+    view's depth (``depth_per_world``: a VSV grid's depth is an angle's fraction). Every term is a
+    length along the light's ray in units of the receiver's own texel: the rule does not depend on
+    the scene's scale or position. A hit on the receiver's own triangle lies on that plane and
+    passes; a wall standing on the receiver, which faces the light more than the receiver does,
+    does not (a contact is an outline). Where the centre ray misses the plane in front of the light
+    (grazing light) no hit of it lies on the plane: another surface; where only a neighbour's ray
+    misses it, the receiver's extent is unbounded and the hit's decides. A texel whose ray hit
+    nothing never holds the receiver's surface. Depths are read from ``built``, the float32 map the stored one was made of (a stored
+    format's quantization says nothing about where the hit is); ``shifted``: the receiver as the
+    lookup moved it (its face names the texels' map)."""
+    view = built.view
+    z1 = dr.gather(mi.Float, built.z1, tap.idx)
+    z_c = view.depth_on_plane(tap.cu_map, tap.cv_map, rx.p_world, rx.n_world, tap.face)   # +inf: missed
+    plane = 0.0
+    hit = 0.0
+    for du, dv in ((1.0, 0.0), (0.0, 1.0)):
+        g = view.depth_on_plane(tap.cu_map + du, tap.cv_map + dv, rx.p_world, rx.n_world, tap.face) - z_c
+        plane = plane + 0.5 * dr.abs(g)
+        ahead = dr.gather(mi.Float, built.z1, tap_at(shifted, built, tap.cu_map + du, tap.cv_map + dv).idx)
+        behind = dr.gather(mi.Float, built.z1, tap_at(shifted, built, tap.cu_map - du, tap.cv_map - dv).idx)
+        hit = hit + 0.5 * dr.minimum(dr.abs(ahead - z1), dr.abs(behind - z1))
+    plane = dr.select(dr.isfinite(plane), plane, dr.inf)      # a neighbour's ray misses the plane
+    slack = SURFACE_SLACK_TEXELS * rx.texel_world * view.depth_per_world(rx.p_world)    # in the view's depth
+    near = dr.abs(z1 - z_c) <= dr.minimum(plane, hit) + slack
+    return (tap.shape != spawn.NO_SHAPE) & near
+
+
+def nearest_on_own_surface(scheme, params, rx: Receiver, smap, built):
+    """Per receiver (lazy Bool): :func:`on_own_surface` of the nearest texel the scheme's lookup
+    reads on ``smap`` (after its shift; ``scheme`` None: no shift, a pre-filtered instance's)."""
+    shifted = rx if scheme is None else scheme.shift(rx, resolve(params, rx))
+    return on_own_surface(rx, shifted, nearest_tap(shifted, smap), built)
 
 
 def visibility(scheme, params, rx: Receiver, smap, filt: str = "nearest", seed: int = 7):

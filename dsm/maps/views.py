@@ -103,6 +103,11 @@ class View:
         """Depth of world point ``p`` in the view's metric (world units)."""
         return dr.dot(p - self.o, self.ez)
 
+    def depth_per_world(self, p):
+        """The view's depth change per world length along the light's ray at world points ``p``: 1
+        where depth is a world length (every view but a VSV grid's)."""
+        return dr.ones(mi.Float, dr.width(p))
+
     def face_of(self, p):
         """The face of world points ``p``: 0 on a single-map view."""
         return dr.zeros(mi.UInt32, dr.width(p))

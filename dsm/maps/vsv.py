@@ -165,6 +165,15 @@ class EpipolarView(View):
         """Depth of world points ``p``: the fraction of the grid's alpha range (0 at alpha_0, 1 at alpha_1)."""
         return (self.angles(p)[2] - self.A0) * self.A_inv
 
+    def depth_per_world(self, p):
+        """The depth's change per world length along the light's ray at ``p``: d alpha / d r over the
+        alpha range, with d alpha / d r = D sin(phi) / (radial^2 + (D - z)^2) (r: the distance from
+        the light, D: the eye's)."""
+        x, y, z = self.local(p)
+        radial2 = dr.square(x) + dr.square(y)
+        r = dr.maximum(dr.norm(p - self.o), 1e-30)
+        return self.D * dr.sqrt(radial2) / r / dr.maximum(radial2 + dr.square(self.D - z), 1e-30) * self.A_inv
+
     def ray_at(self, u, v, face=None):
         """(origin, direction) of the light ray of grid position (u, v): from the light at that theta and phi."""
         theta, phi = self.T0 + u * self.dT, self.P0 + v * self.dP

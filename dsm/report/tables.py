@@ -188,7 +188,7 @@ def write_table(path: Path, rows: list, name: str, source: str, status=None, ora
              "A dash: undefined (an empty denominator), left out of every summary and plot. report.html shows "
              "the same with a sortable case table, the images and the plots.", "", *derived,
              *frontier.summary_md(frontier.points_from_rows(rows)), *summary.summary_md(rows), *status_md(status), *precision_md(rows), "", "## Cases", "",
-             "self/edge: acne counts on the receiver's own shape / at another shape's edge; pp dist: median "
+             "self/edge: acne counts on the receiver's own surface / at another surface's outline; pp dist: median "
              "distance from a peter-panned receiver to its true occluder (world units). Times are medians over the "
              "timed repeats of the kernels' own time (Dr.Jit's kernel history).",
              "", legend_md(), "",

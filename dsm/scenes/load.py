@@ -4,7 +4,8 @@ Every built-in is made of triangle meshes in code (z up, dsm.scenes.builtins), o
 effect the source documents show, with a ``scale`` parameter that scales geometry, camera and the
 config's light positions together, and a ``translate`` offset applied after it (far from the
 origin in one line of config). Shapes are loaded with ``optimize=False`` so each keeps its
-identity (attribution of acne to the receiver's own shape or another one).
+identity (the culling of closed shapes and each shape's error bound read it; the acne split reads
+surfaces, not shapes: dsm.maps.lookup.on_own_surface).
 
 A scene that cannot be used (an XML or mesh file that does not load, no sensor, no
 triangles, positions that are not finite, triangles too large or too small for float32

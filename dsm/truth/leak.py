@@ -62,6 +62,10 @@ def deep_in_shadow(scene, p: np.ndarray, normal: np.ndarray, shape: np.ndarray, 
     ray = spawn.rays_np(o, -up, 2.0 * lift)
     pi = scene.ray_intersect_preliminary(ray, coherent=False)
     valid = pi.is_valid()
+    # Shape identity, not the acne split's surface test (issue 78): the probe's ray spans only
+    # +-lift (k texels) about the tangent plane, so a hit on another surface of the receiver's own
+    # mesh lies within k texels of the receiver (a contact), and a lit point there marks the
+    # shadow's edge all the same; between separate shapes it tells a plate's edge as before.
     own = np.asarray(spawn.hit_shape(pi, valid, spawn.shape_table(scene)).numpy(), np.int64) == np.tile(shape, len(offs))
     si = pi.compute_surface_interaction(ray)
     on_surface, _ = reference.visibility(scene, si, light, magnitude)

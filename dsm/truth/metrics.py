@@ -1,7 +1,9 @@
 """Metrics: shadow-map visibility V against exact visibility V*, per receiver.
 
-| acne (false shadow)          | V* = 1 and V < 0.5; ``self`` when the texel's first hit is on the
-|                              | receiver's own shape, ``edge`` otherwise (aliasing at shadow edges)
+| acne (false shadow)          | V* = 1 and V < 0.5; ``self`` when the nearest texel's first hit lies
+|                              | on the receiver's own surface (its tangent plane, within the texel's
+|                              | depth extent: dsm.maps.lookup.on_own_surface), ``edge``
+|                              | otherwise (another surface, whatever shape holds it: an outline)
 | peter-panning (false light)  | V* = 0 and V >= 0.5, with the distance to the true occluder
 | acne_rate                    | n_acne / n_gt_lit
 | peterpan_rate                | n_peterpan / n_gt_shadowed
@@ -57,16 +59,17 @@ def defined(x) -> bool:
     return not (isinstance(x, float) and x != x)
 
 
-def compute(v: np.ndarray, v_star: np.ndarray, rx_shape: np.ndarray, tap_shape: np.ndarray,
-            occluder_dist: np.ndarray, seam_dist: np.ndarray | None = None, has_seams: bool | None = None) -> dict:
-    """All metrics of one case from per-receiver arrays (``seam_dist``: texels to a face seam;
-    ``has_seams``: whether the view has seams at all, else told by finite seam distances)."""
+def compute(v: np.ndarray, v_star: np.ndarray, own: np.ndarray, occluder_dist: np.ndarray,
+            seam_dist: np.ndarray | None = None, has_seams: bool | None = None) -> dict:
+    """All metrics of one case from per-receiver arrays (``own``: the nearest texel's first hit is on
+    the receiver's own surface; ``seam_dist``: texels to a face seam; ``has_seams``: whether the
+    view has seams at all, else told by finite seam distances)."""
     v = np.asarray(v, np.float64)
     v_star = np.asarray(v_star, bool)
     shadowed_v = v < 0.5
     acne = v_star & shadowed_v
     peter = ~v_star & ~shadowed_v
-    acne_self = acne & (tap_shape == rx_shape)
+    acne_self = acne & np.asarray(own, bool)
     n = int(v.size)
     n_lit, n_shadow = int(v_star.sum()), int((~v_star).sum())
     n_acne, n_peter = int(acne.sum()), int(peter.sum())
@@ -160,7 +163,7 @@ def split(v, v_star, resolution=None) -> dict:
 SOFT_REGIONS = ("umbra", "penumbra", "lit")
 
 
-def soft(v, hits, samples, half, rx_shape, tap_shape) -> dict:
+def soft(v, hits, samples, half, own) -> dict:
     """Soft-shadow metrics of V in [0, 1] against an area light's reference V* = hits / samples.
 
     Regions by the reference's samples: umbra (none visible, V* = 0), penumbra (0 < V* < 1),
@@ -170,7 +173,7 @@ def soft(v, hits, samples, half, rx_shape, tap_shape) -> dict:
     receivers: ``acne_rate``), peter-panning = umbra and V >= 0.5 (over the umbra); penumbra
     receivers count in neither. The reference's own uncertainty: the mean and largest
     half-width of its interval (at the light's confidence) and the mean samples per receiver, to tell the kit's error from the reference's
-    noise."""
+    noise. ``own``: per receiver, the acne split's ``self`` (as in :func:`compute`)."""
     v = np.asarray(v, np.float64)
     hits, samples = np.asarray(hits), np.asarray(samples)
     v_star = hits / np.maximum(samples, 1)
@@ -180,7 +183,7 @@ def soft(v, hits, samples, half, rx_shape, tap_shape) -> dict:
     n = int(v.size)
     acne = lit & (v < 0.5)
     peter = umbra & (v >= 0.5)
-    acne_self = acne & (np.asarray(tap_shape) == np.asarray(rx_shape))
+    acne_self = acne & np.asarray(own, bool)
     out = {"n_gt_lit": int(lit.sum()), "n_gt_shadowed": int(umbra.sum()), "n_acne": int(acne.sum()),
            "n_acne_self": int(acne_self.sum()), "n_acne_edge": int(acne.sum() - acne_self.sum()),
            "n_peterpan": int(peter.sum()), "acne_rate": _rate(acne.sum(), lit.sum()),
