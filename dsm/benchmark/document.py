@@ -16,12 +16,14 @@ import math
 from pathlib import Path
 
 from ..core.env import ENGINE        # version 3: versions.<these> are text
+from .suite import SIZES, SUITE_FILES
 
 RESULTS_VERSION = 4
 READS = (1, 2, 3, 4)              # the versions this dsm reads
 NAMES = ("scene", "unit", "light", "contender")          # a record's identity (offset: optional, "0")
 COUNTS = ("n_receivers", "n_gt_shadowed", "n_acne", "n_peterpan")   # integers where present (an oracle's: receivers)
 COST_COUNTS = ("map_bytes", "page_table_bytes", "map_rays")   # version 4: every contender record's, whole
+LIGHTS = ("directional", "spot", "point")                 # the suites' lights (every version's)
 
 
 class NotResults(ValueError):
@@ -69,6 +71,11 @@ def check(doc, path="<document>") -> dict:
                          f"{', '.join(map(str, READS))} (a newer dsm wrote it: upgrade to compare)")
     if not isinstance(doc["suite"], str):
         raise NotResults(f"{where}: suite is {_kind(doc['suite'])}, not a suite's name")
+    if doc["suite"] not in SUITE_FILES:     # the page and --compare name it and its cases
+        raise NotResults(f"{where}: suite {doc['suite']!r} is not a suite this dsm knows (one of "
+                         f"{', '.join(SUITE_FILES)})")
+    if "size" in doc and doc["size"] not in SIZES:       # (version 1 may have none: --page says so)
+        raise NotResults(f"{where}: size {doc['size']!r} is not a size (one of {', '.join(SIZES)})")
     if version >= 3:
         _engine(doc.get("versions"), where)
     elif "versions" in doc and not isinstance(doc["versions"], dict):      # older: optional, but an object
@@ -102,6 +109,9 @@ def _records(recs, where: str, key: str, counts: tuple):
             raise NotResults(f"{where}: {key}[{i}].offset is {_kind(rec['offset'])}, not an offset's label (\"0\", "
                              "\"1e4\")")
         _once(seen, rec, where, f"{key}[{i}]")
+        if rec["light"] not in LIGHTS:
+            raise NotResults(f"{where}: {key}[{i}].light is {rec['light']!r}, not a suite's light (one of "
+                             f"{', '.join(LIGHTS)})")
         if key == "cases" and "n_receivers" not in rec:
             raise NotResults(f"{where}: {key}[{i}] has no n_receivers (every case record counts its receivers)")
         for c in counts:
@@ -109,6 +119,35 @@ def _records(recs, where: str, key: str, counts: tuple):
                 raise NotResults(f"{where}: {key}[{i}].{c} is {rec[c]!r}, not a count (a whole number >= 0)")
         for name in [k for k in rec if k == "flip" or k.endswith("_rate")]:
             _rate(rec[name], where, f"{key}[{i}].{name}")
+        problem = counts_problem(rec) if key == "cases" else None
+        if problem:
+            raise NotResults(f"{where}: {key}[{i}]: {problem}: an edited record")
+
+
+def counts_problem(rec: dict) -> str | None:
+    """Why a case record's counts cannot be a measurement or its rates are not its counts' (None if
+    they can and are); an oracle's record (objectives, no counts) has none."""
+    if "n_acne" not in rec:
+        return None
+    counts = [rec.get(k) for k in COUNTS]
+    if not all(isinstance(c, int) and not isinstance(c, bool) and c >= 0 for c in counts):
+        return f"{', '.join(COUNTS)} are not all counts"
+    n, shadowed, acne, peter = counts
+    if shadowed > n or acne > n - shadowed or peter > shadowed:
+        return (f"n_acne {acne} and n_peterpan {peter} do not fit n_receivers {n} with n_gt_shadowed {shadowed} "
+                "(acne <= lit receivers, peter-panning <= shadowed ones)")
+    for k, num, den in (("acne_rate", acne, n - shadowed), ("peterpan_rate", peter, shadowed),
+                        ("error_rate", acne + peter, n)):
+        if not _same_rate(rec.get(k), num, den):
+            return f"{k} {rec.get(k)!r} is not {num} / {den}" + (" (undefined: NaN)" if den == 0 else "")
+    return None
+
+
+def _same_rate(rate, num: int, den: int) -> bool:
+    """Whether a recorded rate is num / den as the metrics compute it (NaN over no receiver)."""
+    if not isinstance(rate, (int, float)) or isinstance(rate, bool):
+        return False
+    return rate != rate if den == 0 else math.isclose(rate, num / den, rel_tol=1e-12, abs_tol=0.0)
 
 
 def _once(seen: dict, rec: dict, where: str, name: str):
@@ -134,6 +173,9 @@ def _costs(recs: list, where: str):
             if not (isinstance(rec[c], int) and not isinstance(rec[c], bool) and rec[c] >= 0):
                 raise NotResults(f"{where}: cases[{i}].{c} is {rec[c]!r}, not a count (a whole number >= 0)")
         _number(rec["taps"], where, f"cases[{i}].taps")
+        if rec["taps"] is not None and not (rec["taps"] != rec["taps"] or 0 <= rec["taps"] < math.inf):
+            raise NotResults(f"{where}: cases[{i}].taps is {rec['taps']!r}, not texels read per lookup (a number "
+                             ">= 0, NaN where no receiver)")
 
 
 def _engine(versions, where: str):
