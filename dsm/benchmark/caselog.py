@@ -82,7 +82,7 @@ def consistent(rec: dict) -> bool:
     """Whether a kept record's counts can be a measurement and its rates are its counts': one edited
     by hand (n_acne above its lit receivers, a rate of other counts) is no finished case (the rule
     results.json's reader applies too: document.counts_problem)."""
-    return document.counts_problem(rec) is None
+    return document.counts_problem(rec, whole=True) is None
 
 
 def clear(out: Path):

@@ -124,22 +124,30 @@ def _records(recs, where: str, key: str, counts: tuple):
             raise NotResults(f"{where}: {key}[{i}]: {problem}: an edited record")
 
 
-def counts_problem(rec: dict) -> str | None:
+def counts_problem(rec: dict, whole: bool = False) -> str | None:
     """Why a case record's counts cannot be a measurement or its rates are not its counts' (None if
-    they can and are); an oracle's record (objectives, no counts) has none."""
+    they can and are): the counts and rates it holds (``whole``: all four counts and three rates, as a
+    kept case's); an oracle's record (objectives, no counts) has none."""
     if "n_acne" not in rec:
         return None
-    counts = [rec.get(k) for k in COUNTS]
-    if not all(isinstance(c, int) and not isinstance(c, bool) and c >= 0 for c in counts):
+    if whole and not all(k in rec for k in COUNTS + ("acne_rate", "peterpan_rate", "error_rate")):
+        return "a count or rate is missing"
+    got = {k: rec.get(k, 0) for k in COUNTS}
+    if not all(isinstance(c, int) and not isinstance(c, bool) and c >= 0 for c in got.values()):
         return f"{', '.join(COUNTS)} are not all counts"
-    n, shadowed, acne, peter = counts
-    if shadowed > n or acne > n - shadowed or peter > shadowed:
-        return (f"n_acne {acne} and n_peterpan {peter} do not fit n_receivers {n} with n_gt_shadowed {shadowed} "
-                "(acne <= lit receivers, peter-panning <= shadowed ones)")
-    for k, num, den in (("acne_rate", acne, n - shadowed), ("peterpan_rate", peter, shadowed),
-                        ("error_rate", acne + peter, n)):
-        if not _same_rate(rec.get(k), num, den):
-            return f"{k} {rec.get(k)!r} is not {num} / {den}" + (" (undefined: NaN)" if den == 0 else "")
+    n, acne, peter = got["n_receivers"], got["n_acne"], got["n_peterpan"]
+    shadowed = rec.get("n_gt_shadowed")
+    fits = acne + peter <= n if shadowed is None else shadowed <= n and acne <= n - shadowed and peter <= shadowed
+    if not fits:
+        return (f"n_acne {acne} and n_peterpan {peter} do not fit n_receivers {n}"
+                + ("" if shadowed is None else f" with n_gt_shadowed {shadowed}")
+                + " (acne <= lit receivers, peter-panning <= shadowed ones)")
+    rates = [("error_rate", acne + peter, n)]
+    if shadowed is not None:
+        rates += [("acne_rate", acne, n - shadowed), ("peterpan_rate", peter, shadowed)]
+    for k, num, den in rates:
+        if k in rec and not _same_rate(rec[k], num, den):
+            return f"{k} {rec[k]!r} is not {num} / {den}" + (" (undefined: NaN)" if den == 0 else "")
     return None
 
 
