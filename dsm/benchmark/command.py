@@ -39,8 +39,8 @@ def add_parser(sub):
                        "leaderboard page; or compare two results", epilog=sizes_text(),
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     b.add_argument("--out", default=None, help="folder for results.json and leaderboard.html (default: benchmark/)")
-    b.add_argument("--size", choices=SIZES, help="the suite's cases and resolutions (default: default; each size's "
-                   "cases and time below)")
+    b.add_argument("--size", choices=SIZES, action=EverySize, help="the suite's cases and resolutions (default: "
+                   "default; each size's cases and time below)")
     b.add_argument("--full", action="store_true", help="an alias for --size full (kept for old scripts; says so)")
     b.add_argument("--compare", nargs=2, metavar=("A.json", "B.json"), help="compare two results.json files")
     b.add_argument("--page", metavar="DIR", help="rebuild leaderboard.html, scale.png and the contender pages in DIR "
@@ -80,9 +80,20 @@ def _duration(wall_s: float) -> str:
     return f"{wall_s:.0f} s" if wall_s < 120 else f"{wall_s / 60:.0f} minutes"
 
 
+class EverySize(argparse.Action):
+    """``--size``, each value given kept in ``sizes``: a second that disagrees is refused as ``--size`` with
+    ``--full`` is (argparse alone keeps the last silently)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        namespace.size = values
+        namespace.sizes = [*(vars(namespace).get("sizes") or []), values]
+
+
 def size_spellings(args, environ=os.environ) -> list:
-    """Each way the run's size was given, as (spelling, size): --size, --full, the deprecated DSM_BENCHMARK_SIZE."""
-    given = [(f"--size {args.size}", args.size)] if args.size is not None else []
+    """Each way the run's size was given, as (spelling, size): --size (each time), --full, the deprecated
+    DSM_BENCHMARK_SIZE."""
+    sizes = vars(args).get("sizes") or ([args.size] if args.size is not None else [])
+    given = [(f"--size {size}", size) for size in sizes]
     if args.full:
         given.append(("--full", "full"))
     if environ.get(SIZE_ENV):
