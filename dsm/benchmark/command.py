@@ -160,7 +160,13 @@ def main(args) -> int:
         return _err(f"--out {out}: is a file, not a folder; choose another --out")
     if args.compare:
         problem = foreign_problem(out)          # its two files never land among another command's either
-        return _err(problem) if problem else _held(out, lambda: _compare(args, out))
+        if problem:
+            return _err(problem)
+        try:                                    # both read before --out is made or locked
+            a, b = (document.read(p) for p in args.compare)
+        except document.NotResults as e:
+            return _err(f"--compare {e}")
+        return _held(out, lambda: _compare(a, b, out))
     return _start(args, out)
 
 
@@ -248,11 +254,7 @@ def _held(out: Path, fn) -> int:
         return fn()
 
 
-def _compare(args, out: Path) -> int:
-    try:
-        a, b = (document.read(p) for p in args.compare)
-    except document.NotResults as e:
-        return _err(f"--compare {e}")
+def _compare(a: dict, b: dict, out: Path) -> int:
     diff = compare.compare(a, b)
     print(compare.text(diff))
     print(f"dsm benchmark: wrote {compare.write(diff, out)}")
