@@ -53,10 +53,13 @@ DAMAGED = {  # what the tour wrote into results.json -> (the edit, words of the 
     "size 'huge' (exit 0)": ({"doc": {"size": "huge"}}, ["size 'huge' is not a size", "test, default, full"]),
     "size 5 (exit 0)": ({"doc": {"size": 5}}, ["size 5 is not a size", "test, default, full"]),
     "an unknown suite (exit 0)": ({"doc": {"suite": "dsm-bench-9"}}, ["suite 'dsm-bench-9'", "dsm-bench-5"]),
-    "light 'area' (a KeyError)": ({"case": {"light": "area"}}, ["cases[0].light is 'area'", "directional, spot, point"]),
-    "n_acne above the lit receivers (exit 0)": ({"case": {"n_acne": 99999}}, ["n_acne 99999", "do not fit", "n_receivers 100"]),
+    "light 'area' (a KeyError)": ({"case": {"light": "area"}},
+                                  ["cases[0].light is 'area'", "directional, spot, point"]),
+    "n_acne above the lit receivers (exit 0)": ({"case": {"n_acne": 99999}},
+                                                ["n_acne 99999", "do not fit", "n_receivers 100"]),
     "n_receivers 0, rates kept (exit 0)": ({"case": {"n_receivers": 0}}, ["n_receivers 0", "do not fit"]),
-    "error_rate NaN over 100 receivers (exit 0)": ({"case": {"error_rate": float("nan")}}, ["error_rate nan is not 4 / 100"]),
+    "error_rate NaN over 100 receivers (exit 0)": ({"case": {"error_rate": float("nan")}},
+                                                   ["error_rate nan is not 4 / 100"]),
     "an acne rate of other counts (exit 0)": ({"case": {"acne_rate": 0.5}}, ["acne_rate 0.5 is not 3 / 90"]),
 }
 
@@ -155,7 +158,8 @@ def _drop_column(col):
 
 
 EDITED = {  # metrics.csv as the tour edited it -> words of the one line
-    "map_bytes = -5 (exit 0, on the frontier)": (_edit_cell("map_bytes", "-5"), ["case 0001: map_bytes -5 is not a count"]),
+    "map_bytes = -5 (exit 0, on the frontier)": (_edit_cell("map_bytes", "-5"),
+                                                 ["case 0001: map_bytes -5 is not a count"]),
     "map_bytes empty (a traceback)": (_edit_cell("map_bytes", ""), ["case 0001: map_bytes nan is not a count"]),
     "taps = -1 (exit 0)": (_edit_cell("taps", "-1"), ["case 0001: taps -1.0", "a number >= 0"]),
     "page_table_bytes = -1 (exit 0)": (_edit_cell("page_table_bytes", "-1"), ["page_table_bytes -1 is not a count"]),
@@ -211,8 +215,9 @@ def test_a_rebuilt_frontier_is_the_one_its_counts_give_and_none_without_rows(tin
 # ---------------------------------------------------------------- [hybrid]: instances, the plan's rays
 
 def test_an_instance_given_by_two_hybrid_tables_is_refused(tmp_path, capsys):
+    tables = [{"rule": "band", "k": [0.1, 1.0]}, {"rule": "band", "k": [1.0, 3.0]}]
     cfg = _toml(tmp_path / "h.toml", base_config(camera={"resolution": [32, 32]}, map={"resolution": 32},
-                                                 hybrid=[{"rule": "band", "k": [0.1, 1.0]}, {"rule": "band", "k": [1.0, 3.0]}]))
+                                                 hybrid=tables))
     before = _files(tmp_path)
     rc, err = cli_run(capsys, "run", cfg, "--out", tmp_path / "out")
     assert rc == 2
@@ -278,9 +283,9 @@ def test_an_append_a_kill_cut_short_is_cut_off_before_the_resume_appends(tmp_pat
 @pytest.mark.parametrize("damage", [b"\x00\x01garbage\n{not json\n", b"[1, 2]\n"])
 def test_resume_refuses_a_damaged_journal_in_one_line(damage, tmp_path, capsys):
     from dsm.tune import resume as tune_resume
-    cfg = _toml(tmp_path / "t.toml", base_config(camera={"resolution": [32, 32]}, scene=[{"builtin": "plane_box"}],
-                                                 map={"resolution": 32}, scheme=[{"name": "constant", "bias": "1 texel"}],
-                                                 tune={"steps": 4, "search": "optuna"}))
+    cfg = _toml(tmp_path / "t.toml", base_config(
+        camera={"resolution": [32, 32]}, scene=[{"builtin": "plane_box"}], map={"resolution": 32},
+        scheme=[{"name": "constant", "bias": "1 texel"}], tune={"steps": 4, "search": "optuna"}))
     out = tmp_path / "tune"
     out.mkdir()
     tune_resume.write_state(out, "test", [])

@@ -166,10 +166,11 @@ def _check_costs(path: Path, rows: list):
             v = r.get(c)
             if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0
                     and float(v).is_integer()):
-                raise NotARun(f"{path}: case {r['case']}: {c} {v!r} is not a count (a whole number >= 0): an edited file")
+                raise NotARun(f"{path}: case {r['case']}: {c} {v!r} is not a count (a whole number >= 0): "
+                              "an edited file")
         if not (r["taps"] != r["taps"] or 0 <= r["taps"] < math.inf):
-            raise NotARun(f"{path}: case {r['case']}: taps {r['taps']!r} is not texels read per lookup (a number >= 0): "
-                          "an edited file")
+            raise NotARun(f"{path}: case {r['case']}: taps {r['taps']!r} is not texels read per lookup "
+                          "(a number >= 0): an edited file")
 
 
 def _texels(run) -> tuple:
