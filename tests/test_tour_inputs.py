@@ -109,7 +109,9 @@ def test_a_kept_case_meets_the_same_counts_rule(tmp_path):
 
 @pytest.mark.parametrize("argv", [["--size", "test", "--size", "default"], ["--size", "default", "--size", "test"],
                                   ["--size", "test", "--size", "full"]])
-def test_two_sizes_are_refused_as_size_with_full_is(argv, tmp_path, capsys):
+def test_two_sizes_are_refused_as_size_with_full_is(argv, tmp_path, capsys, monkeypatch):
+    from dsm.benchmark import results
+    monkeypatch.setattr(results, "run_suite", lambda *a, **k: pytest.fail("the suite ran at the last --size"))
     out = tmp_path / "bm"
     rc, err = cli_run(capsys, "benchmark", *argv, "--out", out)
     assert rc == 2
