@@ -10,12 +10,12 @@ from every case, makes the folder complete.
 from __future__ import annotations
 
 import json
-import math
 import shutil
 from pathlib import Path
 
 from ..core import env
 from ..report import io as report_io
+from . import document
 
 FOLDER = "cases"
 
@@ -80,24 +80,9 @@ class CaseLog:
 
 def consistent(rec: dict) -> bool:
     """Whether a kept record's counts can be a measurement and its rates are its counts': one edited
-    by hand (n_acne above its lit receivers, a rate of other counts) is no finished case."""
-    counts = [rec.get(k) for k in ("n_receivers", "n_gt_shadowed", "n_acne", "n_peterpan")]
-    if "n_acne" not in rec:
-        return True                 # an oracle's floor: objectives, no counts to agree
-    if not all(isinstance(c, int) and not isinstance(c, bool) and c >= 0 for c in counts):
-        return False
-    n, shadowed, acne, peter = counts
-    if shadowed > n or acne > n - shadowed or peter > shadowed:
-        return False
-    return all(_same_rate(rec.get(k), num, den) for k, num, den in
-               (("acne_rate", acne, n - shadowed), ("peterpan_rate", peter, shadowed), ("error_rate", acne + peter, n)))
-
-
-def _same_rate(rate, num: int, den: int) -> bool:
-    """Whether a kept rate is num / den as the metrics compute it (NaN over no receiver)."""
-    if not isinstance(rate, (int, float)) or isinstance(rate, bool):
-        return False
-    return rate != rate if den == 0 else math.isclose(rate, num / den, rel_tol=1e-12, abs_tol=0.0)
+    by hand (n_acne above its lit receivers, a rate of other counts) is no finished case (the rule
+    results.json's reader applies too: document.counts_problem)."""
+    return document.counts_problem(rec, whole=True) is None
 
 
 def clear(out: Path):

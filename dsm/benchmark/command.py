@@ -43,8 +43,8 @@ def add_parser(sub):
                        "leaderboard page; or compare two results", epilog=sizes_text(),
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     b.add_argument("--out", default=None, help="folder for results.json and leaderboard.html (default: benchmark/)")
-    b.add_argument("--size", choices=SIZES, help="the suite's cases and resolutions (default: default; each size's "
-                   "cases and time below)")
+    b.add_argument("--size", choices=SIZES, action=EverySize, help="the suite's cases and resolutions (default: "
+                   "default; each size's cases and time below)")
     b.add_argument("--full", action="store_true", help="an alias for --size full (kept for old scripts; says so)")
     b.add_argument("--compare", nargs=2, metavar=("A.json", "B.json"), help="compare two results.json files")
     b.add_argument("--page", metavar="DIR", help="rebuild leaderboard.html, scale.png and the contender pages in DIR "
@@ -87,9 +87,20 @@ def _duration(wall_s: float) -> str:
     return f"{wall_s:.0f} s" if wall_s < 120 else f"{wall_s / 60:.0f} minutes"
 
 
+class EverySize(argparse.Action):
+    """``--size``, each value given kept in ``sizes``: a second that disagrees is refused as ``--size`` with
+    ``--full`` is (argparse alone keeps the last silently)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        namespace.size = values
+        namespace.sizes = [*(vars(namespace).get("sizes") or []), values]
+
+
 def size_spellings(args, environ=os.environ) -> list:
-    """Each way the run's size was given, as (spelling, size): --size, --full, the deprecated DSM_BENCHMARK_SIZE."""
-    given = [(f"--size {args.size}", args.size)] if args.size is not None else []
+    """Each way the run's size was given, as (spelling, size): --size (each time), --full, the deprecated
+    DSM_BENCHMARK_SIZE."""
+    sizes = vars(args).get("sizes") or ([args.size] if args.size is not None else [])
+    given = [(f"--size {size}", size) for size in sizes]
     if args.full:
         given.append(("--full", "full"))
     if environ.get(SIZE_ENV):
@@ -156,7 +167,13 @@ def main(args) -> int:
         return _err(f"--out {out}: is a file, not a folder; choose another --out")
     if args.compare:
         problem = foreign_problem(out)          # its two files never land among another command's either
-        return _err(problem) if problem else _held(out, lambda: _compare(args, out))
+        if problem:
+            return _err(problem)
+        try:                                    # both read before --out is made or locked
+            a, b = (document.read(p) for p in args.compare)
+        except document.NotResults as e:
+            return _err(f"--compare {e}")
+        return _held(out, lambda: _compare(a, b, out))
     return _start(args, out)
 
 
@@ -244,11 +261,7 @@ def _held(out: Path, fn) -> int:
         return fn()
 
 
-def _compare(args, out: Path) -> int:
-    try:
-        a, b = (document.read(p) for p in args.compare)
-    except document.NotResults as e:
-        return _err(f"--compare {e}")
+def _compare(a: dict, b: dict, out: Path) -> int:
     diff = compare.compare(a, b)
     print(compare.text(diff))
     print(f"dsm benchmark: wrote {compare.write(diff, out)}")

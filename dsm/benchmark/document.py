@@ -19,12 +19,14 @@ import math
 from pathlib import Path
 
 from ..core.env import ENGINE        # version 3: versions.<these> are text
+from .suite import SIZES, SUITE_FILES
 
 RESULTS_VERSION = 5
 READS = (1, 2, 3, 4, 5)           # the versions this dsm reads
 NAMES = ("scene", "unit", "light", "contender")          # a record's identity (offset: optional, "0")
 COUNTS = ("n_receivers", "n_gt_shadowed", "n_acne", "n_peterpan")   # integers where present (an oracle's: receivers)
 COST_COUNTS = ("map_bytes", "page_table_bytes", "map_rays")   # version 4: every contender record's, whole
+LIGHTS = ("directional", "spot", "point")                 # the suites' lights (every version's)
 
 
 class NotResults(ValueError):
@@ -72,6 +74,11 @@ def check(doc, path="<document>") -> dict:
                          f"{', '.join(map(str, READS))} (a newer dsm wrote it: upgrade to compare)")
     if not isinstance(doc["suite"], str):
         raise NotResults(f"{where}: suite is {_kind(doc['suite'])}, not a suite's name")
+    if doc["suite"] not in SUITE_FILES:     # the page and --compare name it and its cases
+        raise NotResults(f"{where}: suite {doc['suite']!r} is not a suite this dsm knows (one of "
+                         f"{', '.join(SUITE_FILES)})")
+    if "size" in doc and doc["size"] not in SIZES:       # (version 1 may have none: --page says so)
+        raise NotResults(f"{where}: size {doc['size']!r} is not a size (one of {', '.join(SIZES)})")
     if version >= 3:
         _engine(doc.get("versions"), where)
     elif "versions" in doc and not isinstance(doc["versions"], dict):      # older: optional, but an object
@@ -106,6 +113,9 @@ def _records(recs, where: str, key: str, counts: tuple):
             raise NotResults(f"{where}: {key}[{i}].offset is {_kind(rec['offset'])}, not an offset's label (\"0\", "
                              "\"1e4\")")
         _once(seen, rec, where, f"{key}[{i}]")
+        if rec["light"] not in LIGHTS:
+            raise NotResults(f"{where}: {key}[{i}].light is {rec['light']!r}, not a suite's light (one of "
+                             f"{', '.join(LIGHTS)})")
         if key == "cases" and "n_receivers" not in rec:
             raise NotResults(f"{where}: {key}[{i}] has no n_receivers (every case record counts its receivers)")
         for c in counts:
@@ -113,6 +123,43 @@ def _records(recs, where: str, key: str, counts: tuple):
                 raise NotResults(f"{where}: {key}[{i}].{c} is {rec[c]!r}, not a count (a whole number >= 0)")
         for name in [k for k in rec if k == "flip" or k.endswith("_rate")]:
             _rate(rec[name], where, f"{key}[{i}].{name}")
+        problem = counts_problem(rec) if key == "cases" else None
+        if problem:
+            raise NotResults(f"{where}: {key}[{i}]: {problem}: an edited record")
+
+
+def counts_problem(rec: dict, whole: bool = False) -> str | None:
+    """Why a case record's counts cannot be a measurement or its rates are not its counts' (None if
+    they can and are): the counts and rates it holds (``whole``: all four counts and three rates, as a
+    kept case's); an oracle's record (objectives, no counts) has none."""
+    if "n_acne" not in rec:
+        return None
+    if whole and not all(k in rec for k in COUNTS + ("acne_rate", "peterpan_rate", "error_rate")):
+        return "a count or rate is missing"
+    got = {k: rec.get(k, 0) for k in COUNTS}
+    if not all(isinstance(c, int) and not isinstance(c, bool) and c >= 0 for c in got.values()):
+        return f"{', '.join(COUNTS)} are not all counts"
+    n, acne, peter = got["n_receivers"], got["n_acne"], got["n_peterpan"]
+    shadowed = rec.get("n_gt_shadowed")
+    fits = acne + peter <= n if shadowed is None else shadowed <= n and acne <= n - shadowed and peter <= shadowed
+    if not fits:
+        return (f"n_acne {acne} and n_peterpan {peter} do not fit n_receivers {n}"
+                + ("" if shadowed is None else f" with n_gt_shadowed {shadowed}")
+                + " (acne <= lit receivers, peter-panning <= shadowed ones)")
+    rates = [("error_rate", acne + peter, n)]
+    if shadowed is not None:
+        rates += [("acne_rate", acne, n - shadowed), ("peterpan_rate", peter, shadowed)]
+    for k, num, den in rates:
+        if k in rec and not _same_rate(rec[k], num, den):
+            return f"{k} {rec[k]!r} is not {num} / {den}" + (" (undefined: NaN)" if den == 0 else "")
+    return None
+
+
+def _same_rate(rate, num: int, den: int) -> bool:
+    """Whether a recorded rate is num / den as the metrics compute it (NaN over no receiver)."""
+    if not isinstance(rate, (int, float)) or isinstance(rate, bool):
+        return False
+    return rate != rate if den == 0 else math.isclose(rate, num / den, rel_tol=1e-12, abs_tol=0.0)
 
 
 def _once(seen: dict, rec: dict, where: str, name: str):
@@ -138,6 +185,9 @@ def _costs(recs: list, where: str):
             if not (isinstance(rec[c], int) and not isinstance(rec[c], bool) and rec[c] >= 0):
                 raise NotResults(f"{where}: cases[{i}].{c} is {rec[c]!r}, not a count (a whole number >= 0)")
         _number(rec["taps"], where, f"cases[{i}].taps")
+        if rec["taps"] is not None and not (rec["taps"] != rec["taps"] or 0 <= rec["taps"] < math.inf):
+            raise NotResults(f"{where}: cases[{i}].taps is {rec['taps']!r}, not texels read per lookup (a number "
+                             ">= 0, NaN where no receiver)")
 
 
 def _rays(recs: list, where: str):

@@ -102,6 +102,7 @@ class MapPlan:
     cascade: object = None        # a directional light's CascadeSpec or VirtualSpec (faces = its count), else None
     moments: tuple = ()           # pre-filtered instances (MomentSpec) built from this map's z1 (culling none)
     supersampled_rays: int = 0    # rays of the supersampled first layers its moment maps cast (one each)
+    hybrid_cases: int = 0         # [hybrid]: its depth cases with a rule's rays (each at most one a receiver)
 
     @property
     def texels(self) -> int:
@@ -208,7 +209,9 @@ class Plan:
         cont = sum(m.texels * ((MAX_STEPS - 1) if m.layered and m.culling != "none" else 1)
                    for m in self.maps if m.layered)
         texel = {} if "map_texel" in self.rays else {"map_texel": sum(m.texels + m.supersampled_rays for m in self.maps)}
-        return {"reference": ref, **texel, "map_continue": cont}
+        px = {label: w * h for label, w, h, _ in self.scenes}
+        hybrid = sum(px.get(m.scene, 0) * m.hybrid_cases for m in self.maps)     # a rule's rays: one a receiver
+        return {"reference": ref, **texel, "map_continue": cont, **({"hybrid": hybrid} if hybrid else {})}
 
     def peak_bytes(self) -> int:
         """Estimated peak bytes of the run: the most, over scenes, of its pixels' buffers plus its largest map."""
@@ -723,7 +726,8 @@ def _map_plan(cfg: Config, slot: _Slot, culling: str, config_group, used: set, v
                    + [f"{s.name} {s.label} {s.filter}" for s in moments],
                    len(group) * per_case + len(moments) * len(cfg.map.format),
                    specs=tuple(group), scene_index=slot.scene_index, light_index=slot.light_index, cascade=slot.cascade,
-                   moments=moments, supersampled_rays=sum(fine.values()))
+                   moments=moments, supersampled_rays=sum(fine.values()),
+                   hybrid_cases=len(group) * per_case if cfg.hybrid else 0)
 
 
 def _check_planned(cfg: Config, plan: Plan, views_seen: set):

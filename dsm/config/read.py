@@ -355,7 +355,7 @@ def parse_hybrid(raw: dict, source: str, motion: bool, lights, mapspec) -> tuple
     if not tables:
         raise ConfigError(source, "hybrid", "empty: give at least one rule", rule_names())
     _check_hybrid_context(source, motion, lights, mapspec)
-    out = []
+    out, seen = [], {}
     for i, t in enumerate(tables):
         where = f"hybrid[{i}]" if isinstance(raw["hybrid"], list) else "hybrid"
         if "rule" not in t:
@@ -371,8 +371,13 @@ def parse_hybrid(raw: dict, source: str, motion: bool, lights, mapspec) -> tuple
         params = sweep_params(rule.Params, t, source, where, skip=("rule", "origin"))
         for p in params:
             _check_upper(p, source, where)
-        out += [HybridSpec(rule.NAME, p, o) for p in params for o in origins]
-    return tuple(dict.fromkeys(out))
+        for spec in (HybridSpec(rule.NAME, p, o) for p in params for o in origins):
+            if spec in seen:            # as a [[scheme]] instance: the same cases twice, or one silently dropped
+                what = " ".join(x for x in (spec.rule, spec.label, f"from {spec.origin}") if x)
+                raise ConfigError(source, where, f"{what} is already {seen[spec]}'s: give each instance once")
+            seen[spec] = where
+            out.append(spec)
+    return tuple(out)
 
 
 def _check_hybrid_context(source: str, motion: bool, lights, mapspec):

@@ -47,6 +47,8 @@ class Sink:
             self.csv.write(row)
             self.record.rows.append(row)
             self.record.status.append(status)
+            if row.get("hybrid_rule"):      # a rule's rays: run.json's rays beside the map's (dsm plan bounds them)
+                self.record.add_rays({"hybrid": int(row["hybrid_rays"])})
 
     def still_case(self, ctx: MapContext, ident: dict, result: CaseResult):
         """A still case's per-cascade rows and curve, and its images (classes, shading, contact

@@ -79,6 +79,7 @@ def _load(out: Path, notes: list | None = None):
         raise NotARun(f"{out}/run.json: not a dsm run.json (not a JSON object)")
     rows = _read_rows(out / "metrics.csv", notes, "case")
     _check_metrics(out / "metrics.csv", rows)
+    _check_costs(out / "metrics.csv", rows)
     _note_missing(out, run, rows, notes)
     oracle_rows = _read_rows(out / "oracle.csv", notes) if (out / "oracle.csv").is_file() else []
     return run, rows, oracle_rows
@@ -146,6 +147,32 @@ def _check_metrics(path: Path, rows: list):
                               f" / {den} ({want:.6g}): an edited file")
 
 
+HYBRID_COUNTS = ("hybrid_rays", "hybrid_n_acne", "hybrid_n_peterpan")
+
+
+def _check_costs(path: Path, rows: list):
+    """NotARun unless the cost columns (the frontier's) are all absent (a run from before them) or all
+    there, each row's a count >= 0 (taps a number >= 0, NaN without receivers), and a hybrid row's rays
+    and error left counts too: an edited file is not put on a frontier."""
+    from ..core.record import GROUPS
+    cost = sorted(GROUPS["cost"])
+    held = [c for c in cost if rows and c in rows[0]]
+    if held and len(held) < len(cost):
+        raise NotARun(f"{path}: has {held[0]} but no {sorted(set(cost) - set(held))[0]} column: an edited file "
+                      f"(a run writes all of {', '.join(cost)} or, before them, none)")
+    for r in rows if held else ():
+        whole = [c for c in cost if c != "taps"] + [c for c in HYBRID_COUNTS if r.get("hybrid_rule")]
+        for c in whole:
+            v = r.get(c)
+            if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0
+                    and float(v).is_integer()):
+                raise NotARun(f"{path}: case {r['case']}: {c} {v!r} is not a count (a whole number >= 0): "
+                              "an edited file")
+        if not (r["taps"] != r["taps"] or 0 <= r["taps"] < math.inf):
+            raise NotARun(f"{path}: case {r['case']}: taps {r['taps']!r} is not texels read per lookup "
+                          "(a number >= 0): an edited file")
+
+
 def _texels(run) -> tuple:
     """The config's ``[map] texels`` as run.json recorded it (none where the record is damaged)."""
     cfg = run.get("config")
@@ -200,6 +227,8 @@ def write_report(out: Path, images=(), curves=None, plots: bool = True) -> dict:
     points = frontier.points_from_rows(rows)
     if points:                          # a run from before the cost columns has no frontier (table.md says so)
         frontier.write_csv(out / "frontier.csv", points)
+    elif (out / "frontier.csv").is_file():      # one of rows no longer there: not this report's
+        (out / "frontier.csv").unlink()
     virtual_report.write_table(out / "virtual.md", rows)
     hybrid_report.write_table(out / "hybrid.md", rows)
     htmlpage.write_html(out / "report.html", rows, run, derived)

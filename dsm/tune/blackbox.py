@@ -13,6 +13,7 @@ failed, and neither sampler reads failed trials).
 """
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 
@@ -48,6 +49,29 @@ def storage(out: Path | None):
         return optuna.storages.InMemoryStorage()
     from optuna.storages.journal import JournalFileBackend
     return optuna.storages.JournalStorage(JournalFileBackend(str(Path(out) / JOURNAL)))
+
+
+def journal_problem(out: Path) -> str | None:
+    """Why ``--resume`` cannot go on with the studies' journal in ``out`` (None if it can, or there is
+    none). An append a kill cut short (a last line without its newline, which Optuna skips) is cut off
+    first: the resume's next append would join it into a line Optuna cannot read."""
+    path = Path(out) / JOURNAL
+    if not path.is_file():
+        return None
+    raw = path.read_bytes()
+    whole = raw[: raw.rfind(b"\n") + 1]
+    for n, line in enumerate(whole.splitlines(), 1):
+        try:
+            ok = isinstance(json.loads(line), dict)
+        except ValueError:
+            ok = False
+        if not ok:
+            return (f"--resume: {path} line {n} is not a record of Optuna's journal (a damaged file); "
+                    "--force starts the tune again")
+    if len(whole) < len(raw):
+        with open(path, "r+b") as fh:
+            fh.truncate(len(whole))
+    return None
 
 
 def _open_study(store, name: str, objectives: int):

@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..experiment.lock import entries, unwritable
-from . import resume as tune_resume
+from . import blackbox, resume as tune_resume
 
 TUNE_FILES = ("tuned.toml", "table.md", "steps.csv", "tune.json", "plots/tune_loss.png", "bias_map.npy",
               "texel_offsets.npy", "tune_state.json", "optuna.journal")   # what dsm tune writes
@@ -19,7 +19,7 @@ def tune_folder(out: Path, name: str, force: bool = False, resume: bool = False)
     there); a previous tune that ``force`` replaces has its files removed (only those)."""
     held = entries(out)
     if resume and held:
-        return tune_resume.state_problem(out, name) or unwritable(out), True
+        return tune_resume.state_problem(out, name) or blackbox.journal_problem(out) or unwritable(out), True
     if held:
         if not force:
             return (f"--out {out}: is not an empty folder; choose another --out, or pass --resume (goes on with a dsm "
