@@ -1,3 +1,4 @@
+import json
 import os
 from pathlib import Path
 
@@ -79,3 +80,22 @@ def one_line(err, *words):
     assert len(err) == 1 and "Traceback" not in err[0], err
     for w in words:
         assert w in err[0], (w, err[0])
+
+
+def write_toml(path: Path, cfg: dict) -> Path:
+    """``cfg`` (tables of scalars, lists and tables; arrays of tables as lists) written to ``path`` as TOML."""
+    def value(v):
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, str):
+            return json.dumps(v)
+        if isinstance(v, list):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        return repr(v)
+    lines = []
+    for name, table in cfg.items():
+        for t in (table if isinstance(table, list) else [table]):
+            lines.append(f"[[{name}]]" if isinstance(table, list) else f"[{name}]")
+            lines += [f"{k} = {value(v)}" for k, v in t.items()]
+    Path(path).write_text("\n".join(lines) + "\n")
+    return Path(path)

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 import dsm
-from conftest import cli_run as _cli, one_line as _one_line
+from conftest import cli_run as _cli, one_line as _one_line, write_toml
 from dsm import cli
 from dsm.config import read as config
 from dsm.experiment import lock
@@ -487,21 +487,8 @@ def test_force_clears_only_what_a_run_wrote_inside_images_and_plots(tmp_path):
 
 
 def _toml(tmp_path, raw) -> Path:
-    """``raw`` (a config dict of tables and arrays of tables) as a TOML file."""
-    def value(v):
-        if isinstance(v, str):
-            return json.dumps(v)
-        if isinstance(v, list):
-            return "[" + ", ".join(value(x) for x in v) + "]"
-        return repr(v)
-    lines = []
-    for k, v in raw.items():
-        for t in (v if isinstance(v, list) else [v]):
-            lines.append(f"[[{k}]]" if isinstance(v, list) else f"[{k}]")
-            lines += [f"{kk} = {value(vv)}" for kk, vv in t.items()]
-    p = tmp_path / "cfg.toml"
-    p.write_text("\n".join(lines) + "\n")
-    return p
+    """``raw`` (a config dict of tables and arrays of tables) as tmp_path/cfg.toml."""
+    return write_toml(tmp_path / "cfg.toml", raw)
 
 
 def test_resume_on_a_damaged_metrics_csv(tmp_path, capsys):

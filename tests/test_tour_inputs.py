@@ -11,7 +11,7 @@ import shutil
 import numpy as np
 import pytest
 
-from conftest import base_config, cli_run, one_line
+from conftest import base_config, cli_run, one_line, write_toml
 
 
 def _files(folder) -> dict:
@@ -21,22 +21,7 @@ def _files(folder) -> dict:
 
 
 def _toml(path, cfg: dict):
-    """``cfg`` (tables of scalars, lists and tables) written as TOML, enough for these configs."""
-    def value(v):
-        if isinstance(v, bool):
-            return "true" if v else "false"
-        if isinstance(v, str):
-            return json.dumps(v)
-        if isinstance(v, list):
-            return "[" + ", ".join(value(x) for x in v) + "]"
-        return repr(v)
-    lines = []
-    for name, table in cfg.items():
-        for t in (table if isinstance(table, list) else [table]):
-            lines.append(f"[[{name}]]" if isinstance(table, list) else f"[{name}]")
-            lines += [f"{k} = {value(v)}" for k, v in t.items()]
-    path.write_text("\n".join(lines) + "\n")
-    return path
+    return write_toml(path, cfg)
 
 
 # ---------------------------------------------------------------- results.json (--page, --compare)
