@@ -1,4 +1,6 @@
 """dsm: measure shadow-map bias schemes against exact ray-traced visibility (Mitsuba 3, Dr.Jit)."""
+import os
+
 from .config.read import load as load_config, parse as parse_config
 from .core.types import ConfigError, Length
 
@@ -6,14 +8,20 @@ __version__ = "0.5.0"
 
 
 def run(config, out=None, variant=None, progress=False, *, force=False, resume=False):
-    """Run an experiment (Config, dict or TOML path) and return its :class:`dsm.experiment.runner.Results`."""
+    """Run an experiment (Config, dict, TOML path, or a Mitsuba scene .xml whose experiment is derived from it)
+    and return its :class:`dsm.experiment.runner.Results`."""
     from .experiment.runner import run as _run
+    derived = None
+    if isinstance(config, (str, os.PathLike)) and os.fspath(config).lower().endswith(".xml"):
+        from .config import derive, derived_files, scene_facts
+        derived = derive.derive(scene_facts.measure(os.fspath(config)))     # as dsm run SCENE.xml derives it
+        config = derived_files.config_of(derived, out)
     if out is None:                      # a fresh temporary folder: no one else writes there
         return _run(config, out=None, variant=variant, progress=progress)
-    return _run_in(config, out, variant, progress, force, resume)
+    return _run_in(config, out, variant, progress, force, resume, derived)
 
 
-def _run_in(config, out, variant, progress, force, resume):
+def _run_in(config, out, variant, progress, force, resume, derived=None):
     if force and resume:                 # as the command line refuses --force with --resume
         raise ConfigError("dsm.experiment", "force", "force=True replaces a run and resume=True goes on with it: give one")
     # dsm run's rules for --out (dsm.cli): the folder locked, a previous run kept unless
@@ -31,6 +39,9 @@ def _run_in(config, out, variant, progress, force, resume):
         problem, resuming = cli.folder_problem(out, config, force, resume)
         if problem:
             raise ConfigError("dsm.experiment", "out", api_words(problem))
+        if derived is not None:          # derived.toml and derivation.json beside the results, as dsm run writes them
+            from .config import derived_files
+            derived_files.write(derived, out)
         return Runner(config, out, variant, progress, resume_previous=resuming).run()
 
 

@@ -7,6 +7,8 @@ import math
 import numpy as np
 import pytest
 
+import dsm
+
 from dsm import cli
 from dsm.config import derive, derived_files, scene_facts
 from dsm.core import env
@@ -198,6 +200,11 @@ def test_derived_toml_run_again_gives_the_derived_runs_results(tmp_path, capsys)
     assert 0 < page.index("id=derived") < page.index("id=costs")      # the reasons before the answer
     assert "## Derived from" in (first / "table.md").read_text()
     assert "id=derived" not in (again / "report.html").read_text()    # a config file's run derived nothing
+    api = dsm.run(path, out=tmp_path / "api")               # the Python API derives as dsm run does
+    assert (tmp_path / "api" / "derived.toml").read_text() == (first / "derived.toml").read_text()
+    c = list(csv.DictReader(open(tmp_path / "api" / "metrics.csv")))
+    assert [x["case"] for x in c] == [x["case"] for x in a] and len(api.rows) == len(a)
+    assert [x["n_acne"] for x in c] == [x["n_acne"] for x in a]
 
 
 def test_an_xml_scene_at_1e6_rendered_camera_relative_keeps_the_origins_float32_headroom(tmp_path):
