@@ -537,12 +537,16 @@ def scene_lights(spec, cfg: Config) -> list:
     return [(f"{i}:{t}", t) for i, t in enumerate(types)]
 
 
-def _layouts(views, cascade_specs):
-    """(view, cascade layout or None) pairs: a directional light's orthographic view once per layout."""
+def _layouts(views, cascade_specs, light_type: str = ""):
+    """(view, cascade layout or None) pairs: a directional light's orthographic view once per layout
+    (cascades, clipmap virtual maps), a spot light's perspective view once per punctual virtual map."""
+    punctual = [c for c in cascade_specs if getattr(c, "virtual", False) and c.punctual]
+    clipmaps = [c for c in cascade_specs if not any(c is x for x in punctual)]
     for view in views:
-        if view == "orthographic" and cascade_specs:
-            for c in cascade_specs:
-                yield view, c
+        if view == "orthographic" and clipmaps:
+            yield from ((view, c) for c in clipmaps)
+        elif view == "perspective" and light_type == "spot" and punctual:
+            yield from ((view, c) for c in punctual)
         else:
             yield view, None
 
@@ -678,7 +682,7 @@ def _plan_scene(plan: Plan, cfg: Config, si: int, sc, groups: dict, used: set, v
             short = reference_shortfall(specs[li])
             if short:
                 plan.area_short.append(f"{sc.label} {label}: {short}")
-        for view, cascade in _layouts(views_for(ltype, cfg.map.view, shape), cfg.map.cascade + cfg.map.virtual):
+        for view, cascade in _layouts(views_for(ltype, cfg.map.view, shape), cfg.map.cascade + cfg.map.virtual, ltype):
             faces = cascade.count if cascade is not None else VIEW_FACES[view]
             virtual = getattr(cascade, "virtual", False)     # its own resolution: [map.virtual] resolution
             for R in ((cascade.resolution,) if virtual else cfg.map.resolutions_for(faces)):
@@ -745,8 +749,9 @@ def _check_planned(cfg: Config, plan: Plan, views_seen: set):
                           "config's scenes gets one (a vsv view is a voxel grid); add a depth view to map.view",
                           POINT_VIEWS)
     if cfg.map.virtual and plan.maps and not any(getattr(m.cascade, "virtual", False) for m in plan.maps):
-        raise ConfigError(cfg.source, "map.virtual", "a virtual shadow map is a directional light's and no light of "
-                          "the config's scenes is directional; remove [map.virtual] or add a directional [[light]]")
+        raise ConfigError(cfg.source, "map.virtual", "a virtual shadow map is a directional light's (a spot light's "
+                          "with rule punctual) and no light of the config's scenes gets one; remove [map.virtual] or "
+                          "add a directional or spot [[light]]")
     sized = cfg.map.texels or cfg.map.resolution != MapSpec.resolution      # [map]'s sizes, given
     if sized and plan.maps and all(getattr(m.cascade, "virtual", False) for m in plan.maps):
         key = "texels" if cfg.map.texels else "resolution"       # a scene's own lights: known only once loaded
