@@ -128,7 +128,7 @@ def _check_lights(specs, lights, source: str):
     for spec in specs:
         kind = "spot" if spec.punctual else "directional"
         if all(light.type not in (kind, "scene") for light in lights):
-            raise ConfigError(source, "map.virtual.preset", f"{spec.preset or spec.rule}: a virtual shadow map of rule "
+            raise ConfigError(source, "map.virtual", f"{spec.preset or spec.rule}: a virtual shadow map of rule "
                               f"{spec.rule} is a {kind} light's and no [[light]] is one (the lights are "
                               f"{', '.join(sorted({l.type for l in lights}))}); remove [map.virtual], choose another "
                               f"preset or add a {kind} light", tuple(VIRTUAL_PRESETS))
