@@ -135,10 +135,12 @@ KEYS = (
     Key("map", "virtual", "table", "off", "a directional or spot light's virtual shadow map (see [map.virtual])"),
     Key("map.virtual", "preset", "str or list", "(every key given)", "the engine whose values the other keys "
         "override", tuple(sorted(VIRTUAL_PRESETS)), source="docs/virtual_shadow_maps.md", sweeps=True),
-    Key("map.virtual", "page_size", "int", "the preset's (ue5 128, eevee and eevee_punctual 256)", "texels a page side", _r(1, 4096),
+    Key("map.virtual", "page_size", "int", "the preset's (ue5 128, eevee and eevee_punctual 256)", "texels a page side",
+        _r(1, 4096),
         "texels"),
     Key("map.virtual", "resolution", "int", "the preset's (ue5 16384, eevee and eevee_punctual 8192)", "virtual texels "
-        "a level side (a whole number of pages; punctual: level 0's, level l has 2^-l of it)", _r(1, 2 ** 20), "texels"),
+        "a level side (a whole number of pages; punctual: level 0's, level l has 2^-l of it)", _r(1, 2 ** 20),
+        "texels"),
     Key("map.virtual", "first_level", "int", "the preset's", "the finest clipmap level (a level is 2^level "
         "centimetres in UE5, 2^level units in EEVEE; punctual: >= 0, resolution / 2^level texels)", _r(-60, 60)),
     Key("map.virtual", "last_level", "int", "the preset's", "the coarsest clipmap level", _r(-60, 60)),

@@ -99,7 +99,8 @@ class MapPlan:
     specs: tuple = ()             # the scheme instances (SchemeSpec) read from this map, in config order
     scene_index: int = 0          # of the config's scenes
     light_index: int = 0          # of the scene's lights (the label's number)
-    cascade: object = None        # a directional light's CascadeSpec or VirtualSpec, a spot's punctual VirtualSpec (faces = its count), else None
+    # a directional light's CascadeSpec or VirtualSpec, a spot's punctual VirtualSpec (faces = its count), else None
+    cascade: object = None
     moments: tuple = ()           # pre-filtered instances (MomentSpec) built from this map's z1 (culling none)
     supersampled_rays: int = 0    # rays of the supersampled first layers its moment maps cast (one each)
     hybrid_cases: int = 0         # [hybrid]: its depth cases with a rule's rays (each at most one a receiver)

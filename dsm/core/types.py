@@ -313,7 +313,7 @@ class VirtualSpec:
     unit_cm: float = 100.0          # centimetres in one scene unit (a scene at scale 1)
     border: float = 0.05            # a receiver this fraction of a page from its page's edge also tags the neighbour
     max_pages: int = 2048           # the physical page pool
-    lod_min: float = 0.0            # punctual: the footprint's floor (> 0 metres in the world, < 0 minus the light's unit plane)
+    lod_min: float = 0.0            # punctual: the footprint floor (> 0: metres, world; < 0: -it on the light plane)
 
     virtual = True                  # read by the plan and the views (a CascadeSpec has no such field)
 
@@ -357,7 +357,7 @@ VIRTUAL_PRESETS = {
     # PageDilationBorderSizeDirectional 0.05); the VSM documentation (16k x 16k virtual, 128 x 128 pages)
     "ue5": VirtualSpec("ue5", 128, 16384, 6, 22, -0.5, "footprint", 100.0, 0.05, 2048),
     # Blender EEVEE (4.2+): eevee_defines.hh (SHADOW_PAGE_RES 256, SHADOW_TILEMAP_RES 32 pages a side),
-    # eevee_shadow.hh (coverage_get: a level is 2^level units wide), eevee_shadow_lib.glsl (level =
+    # eevee_shadow.hh (coverage_get: a level is 2^level units wide), eevee_shadow_tilemap_lib.glsl (level =
     # ceil(log2(2 d narrowing) + lod_bias); pages tagged at the pixel, radius 0), eevee_shadow.cc
     # (lod_bias = -log2(shadow_resolution_scale): 0 at scale 1; pages = pool bytes / (256^2 x 4));
     # one Blender unit is a metre. Assumed: the 512 MB pool (2048 pages) and the level range (EEVEE

@@ -41,7 +41,8 @@ from ..scenes.camera import Camera
 from .views import View, light_frame
 
 NO_PAGE = 0xFFFFFFFF
-EEVEE_NARROWING = 1.0001       # eevee_shadow_lib.glsl: one tile hidden to hide the moving transition
+# shadow_directional_level_fractional (eevee_shadow_tilemap_lib.glsl): one tile hidden to hide the moving transition
+EEVEE_NARROWING = 1.0001
 
 
 def pages_per_side(spec: VirtualSpec) -> int:

@@ -46,7 +46,7 @@ def level_resolution(spec: VirtualSpec, level) -> np.ndarray:
 
 
 class VirtualSpotView(PerspectiveView):
-    """A spot light's virtual shadow map: one face per level of a perspective page table, pages tagged by the receivers."""
+    """A spot light's virtual shadow map: one face per level of a perspective page table, pages tagged by receivers."""
     virtual = True
 
     def __init__(self, position, axis, cutoff_deg: float, spec: VirtualSpec, camera: Camera, receivers_world,
@@ -113,7 +113,8 @@ class VirtualSpotView(PerspectiveView):
         """The physical page of each virtual page (NO_PAGE: not tagged) and each physical page's place."""
         table = np.full(self.page_table_entries, NO_PAGE, np.uint32)
         pg = self.pages
-        table[self.base_np[pg[:, 0]] + pg[:, 2] * self.sides_np[pg[:, 0]] + pg[:, 1]] = np.arange(len(pg), dtype=np.uint32)
+        at = self.base_np[pg[:, 0]] + pg[:, 2] * self.sides_np[pg[:, 0]] + pg[:, 1]
+        table[at] = np.arange(len(pg), dtype=np.uint32)
         self.table = mi.UInt32(table)
         self.page_face = mi.UInt32(pg[:, 0].astype(np.uint32))
         self.page_x = mi.UInt32(pg[:, 1].astype(np.uint32))
@@ -180,7 +181,7 @@ class VirtualSpotView(PerspectiveView):
         return gnomonic_texel(x, y, z, 2.0 * self.T / Rk)
 
     def texel_coords(self, idx):
-        """(level face, centre u, centre v) of physical texels ``idx``: page ``idx // P^2``, texel ``idx % P^2`` in it."""
+        """(level face, centre u, centre v) of physical texels ``idx``: page ``idx // P^2``, its texel ``idx % P^2``."""
         page, rest = idx // self.PP_u, idx % self.PP_u
         face = dr.gather(mi.UInt32, self.page_face, page)
         i = dr.gather(mi.UInt32, self.page_x, page) * self.P_u + rest % self.P_u
@@ -188,7 +189,7 @@ class VirtualSpotView(PerspectiveView):
         return face, mi.Float(i) + 0.5, mi.Float(j) + 0.5
 
     def texel_index(self, face, i, j):
-        """(physical index, not stored) of texel (i, j) of level ``face`` (clamped to the level) through the page table."""
+        """(physical index, not stored) of texel (i, j) of level ``face`` (clamped to it) through the page table."""
         top = mi.Int32(dr.gather(mi.UInt32, self.Ru, face)) - 1
         iu, ju = mi.UInt32(dr.clip(mi.Int32(i), 0, top)), mi.UInt32(dr.clip(mi.Int32(j), 0, top))
         S = dr.gather(mi.UInt32, self.Sf, face)
