@@ -1,4 +1,4 @@
-"""A spot light's virtual shadow map (dsm.maps.virtual_spot): a plane's level histogram derived from
+"""A spot light's virtual shadow map (dsm.maps.virtual_punctual): a plane's level histogram derived from
 each receiver's camera depth and its distance to the light by EEVEE's punctual rule (written out here
 in float64), each level's pages against the whole perspective map of that level's resolution, a run's
 columns and the config's refusals. Expected values: the rule in numpy float64 and the kit's single
@@ -94,7 +94,7 @@ def test_lod_min_floors_the_footprint_in_the_world_or_on_the_light_plane(lod_min
     """lod_min > 0 (metres) floors the camera footprint in the world before the division by the
     light's distance, < 0 floors it on the light's unit plane after; with lod_bias -3 the floor is
     above every receiver's own footprint, so the floor alone sets the levels (derived here)."""
-    from dsm.maps.virtual_spot import VirtualSpotView
+    from dsm.maps.virtual_punctual import VirtualSpotView
     from dsm.scenes.camera import Camera
     pl, sd, setup = _plane(48)
     pts = pl.points_np(setup.p)
@@ -119,7 +119,7 @@ def test_a_level_s_pages_are_the_whole_perspective_map_of_its_resolution(level):
     import drjit as dr
     import mitsuba as mi
     from dsm.maps.views import PerspectiveView
-    from dsm.maps.virtual_spot import VirtualSpotView
+    from dsm.maps.virtual_punctual import VirtualSpotView
     from dsm.scenes.camera import Camera
     import dsm.pipeline as pl
     from dsm.core.types import LightSpec

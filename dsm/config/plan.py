@@ -538,16 +538,16 @@ def scene_lights(spec, cfg: Config) -> list:
     return [(f"{i}:{t}", t) for i, t in enumerate(types)]
 
 
-def _layouts(views, cascade_specs):
+def _layouts(views, cascade_specs, punctual_views: tuple = ()):
     """(view, cascade layout or None) pairs: a directional light's orthographic view once per layout
-    (cascades, clipmap virtual maps), a spot light's perspective view (no other light gets one) once per
-    punctual virtual map."""
+    (cascades, clipmap virtual maps), a light's ``punctual_views`` (a spot's perspective, a point light's
+    cube) once per punctual virtual map."""
     punctual = [c for c in cascade_specs if getattr(c, "virtual", False) and c.punctual]
     clipmaps = [c for c in cascade_specs if not any(c is x for x in punctual)]
     for view in views:
         if view == "orthographic" and clipmaps:
             yield from ((view, c) for c in clipmaps)
-        elif view == "perspective" and punctual:
+        elif view in punctual_views and punctual:
             yield from ((view, c) for c in punctual)
         else:
             yield view, None
@@ -684,7 +684,8 @@ def _plan_scene(plan: Plan, cfg: Config, si: int, sc, groups: dict, used: set, v
             short = reference_shortfall(specs[li])
             if short:
                 plan.area_short.append(f"{sc.label} {label}: {short}")
-        for view, cascade in _layouts(views_for(ltype, cfg.map.view, shape), cfg.map.cascade + cfg.map.virtual):
+        for view, cascade in _layouts(views_for(ltype, cfg.map.view, shape), cfg.map.cascade + cfg.map.virtual,
+                                       light_types.get(ltype).PUNCTUAL_VIEWS):
             faces = cascade.count if cascade is not None else VIEW_FACES[view]
             virtual = getattr(cascade, "virtual", False)     # its own resolution: [map.virtual] resolution
             for R in ((cascade.resolution,) if virtual else cfg.map.resolutions_for(faces)):

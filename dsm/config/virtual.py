@@ -1,5 +1,5 @@
 """``[map.virtual]``: a directional light's virtual shadow map (dsm.maps.virtual), or a spot light's
-(``rule = "punctual"``: dsm.maps.virtual_spot), read into VirtualSpecs.
+(``rule = "punctual"``: dsm.maps.virtual_punctual), read into VirtualSpecs.
 
 ``preset`` (``"ue5"``, ``"eevee"``, ``"eevee_punctual"``; a list sweeps) gives the engine's values; any
 other key of the table overrides that value in every preset.
@@ -124,10 +124,12 @@ def parse_virtual(m: dict, lights, source: str) -> tuple:
 
 
 def _check_lights(specs, lights, source: str):
-    """ConfigError where a preset has no light of its kind: a clipmap a directional light, punctual a spot."""
+    """ConfigError where a preset has no light of its kind: a clipmap a directional light, punctual a spot
+    or a point light."""
     for spec in specs:
-        kind = "spot" if spec.punctual else "directional"
-        if all(light.type not in (kind, "scene") for light in lights):
+        kinds = ("spot", "point") if spec.punctual else ("directional",)
+        kind = " or ".join(kinds)
+        if all(light.type not in kinds + ("scene",) for light in lights):
             raise ConfigError(source, "map.virtual", f"{spec.preset or spec.rule}: a virtual shadow map of rule "
                               f"{spec.rule} is a {kind} light's and no [[light]] is one (the lights are "
                               f"{', '.join(sorted({l.type for l in lights}))}); remove [map.virtual], choose another "

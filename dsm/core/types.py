@@ -294,7 +294,7 @@ class CascadeSpec:
 
 
 # how a receiver's level is chosen: footprint and distance a directional light's clipmap (dsm.maps.virtual),
-# punctual a spot light's perspective page table (dsm.maps.virtual_spot)
+# punctual a spot light's perspective page table (dsm.maps.virtual_punctual)
 VIRTUAL_RULES = ("footprint", "distance", "punctual")
 
 
@@ -302,7 +302,7 @@ VIRTUAL_RULES = ("footprint", "distance", "punctual")
 class VirtualSpec:
     """A virtual shadow map (``[map.virtual]``): a directional light's clipmap levels around the camera
     (dsm.maps.virtual), or with ``rule = "punctual"`` a spot light's perspective page table whose levels
-    halve its resolution (dsm.maps.virtual_spot); pages tagged by the receivers, each read in its level."""
+    halve its resolution (dsm.maps.virtual_punctual); pages tagged by the receivers, each read in its level."""
     preset: str = ""                # "ue5" | "eevee" | "" (every key given)
     page_size: int = 128            # texels per page side
     resolution: int = 16384         # virtual texels per level side
@@ -363,7 +363,7 @@ VIRTUAL_PRESETS = {
     # one Blender unit is a metre. Assumed: the 512 MB pool (2048 pages) and the level range (EEVEE
     # derives it from the camera's near plane and bounds each frame)
     "eevee": VirtualSpec("eevee", 256, 8192, -8, 24, 0.0, "distance", 100.0, 0.0, 2048),
-    # Blender EEVEE's spot and point lights (dsm.maps.virtual_spot): eevee_defines.hh (SHADOW_PAGE_RES 256,
+    # Blender EEVEE's spot and point lights (dsm.maps.virtual_punctual): eevee_defines.hh (SHADOW_PAGE_RES 256,
     # SHADOW_TILEMAP_RES 32, so SHADOW_MAP_MAX_RES 8192 texels at level 0; SHADOW_TILEMAP_LOD 5, levels 0 to 5);
     # the level rule shadow_punctual_pixel_ratio (eevee_shadow_tilemap_lib.glsl); lod_min the light's
     # resolution limit (Light::shadow_lod_min_get, eevee_light.cc): its default was not read, 0 leaves it out

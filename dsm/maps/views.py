@@ -187,6 +187,10 @@ class View:
         (cube edges, the paraboloids' rim); +inf on a single planar map, which has none."""
         return dr.full(mi.Float, dr.inf, dr.width(u))
 
+    def level_of_face(self, faces) -> np.ndarray:
+        """The (absolute) level each face of ``faces`` holds (numpy): a virtual map's; elsewhere the face."""
+        return np.asarray(faces, int)
+
 
 MARGIN_TEXELS = 4
 

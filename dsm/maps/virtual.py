@@ -280,6 +280,10 @@ class VirtualView(View):
             else (2.0 ** (lvl - 1 - self.C), 2.0 ** (lvl - self.C))
         return (0.0 if k == 0 else lo), (math.inf if k == self.cascades - 1 else hi)
 
+    def level_of_face(self, faces) -> np.ndarray:
+        """The absolute level of each face of ``faces`` (one face per level)."""
+        return self.levels[np.asarray(faces, int)]
+
     def level_pages(self) -> dict:
         """{absolute level: pages tagged} for the levels with pages."""
         faces, counts = np.unique(self.pages[:, 0], return_counts=True) if len(self.pages) else ((), ())
