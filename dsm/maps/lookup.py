@@ -78,7 +78,7 @@ class Tap:
 def tap_at(rx: Receiver, smap, u, v) -> Tap:
     """The texel containing map position (u, v) on the receiver's face (clamped to the face)."""
     view = smap.view
-    R1 = mi.Int32(view.R_u) - 1
+    R1 = mi.Int32(view.face_resolution(rx.face)) - 1
     i = dr.clip(mi.Int32(dr.floor(u)), 0, R1)
     j = dr.clip(mi.Int32(dr.floor(v)), 0, R1)
     idx, absent = view.texel_index(rx.face, i, j)

@@ -187,6 +187,11 @@ class View:
         (cube edges, the paraboloids' rim); +inf on a single planar map, which has none."""
         return dr.full(mi.Float, dr.inf, dr.width(u))
 
+    def face_resolution(self, face):
+        """Texels a side of faces ``face`` (mi.UInt32): the view's resolution (a virtual punctual map's
+        faces differ: dsm.maps.virtual_punctual)."""
+        return self.R_u
+
     def level_of_face(self, faces) -> np.ndarray:
         """The (absolute) level each face of ``faces`` holds (numpy): a virtual map's; elsewhere the face."""
         return np.asarray(faces, int)

@@ -176,6 +176,10 @@ class PunctualPages:
         idx = page * self.PP_u + (ju % self.P_u) * self.P_u + iu % self.P_u
         return dr.select(absent, 0, idx), absent
 
+    def face_resolution(self, face):
+        """Texels a side of faces ``face``: resolution / 2^level."""
+        return dr.gather(mi.UInt32, self.Ru, face)
+
     def to_square(self, u, v):
         """Not defined on a view whose faces differ in resolution: :meth:`ray_at` takes the face."""
         raise NotImplementedError("a virtual punctual map's square coordinates need the face: use ray_at(u, v, face)")
