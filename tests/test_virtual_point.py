@@ -124,3 +124,19 @@ def test_a_run_reports_pages_levels_and_costs(run_dict):
     assert sum(map(int, hist.values())) == r["n_receivers"] > 0
     assert r["map_bytes"] == 4 * r["vsm_memory_texels"]
     assert r["page_table_bytes"] == 4 * 6 * sum((32 >> k) ** 2 for k in range(6))
+
+
+def test_a_point_light_gets_a_virtual_map_only_in_its_cube_view():
+    """eevee_punctual on a point light replaces its cube view; a config whose point light has no cube
+    view gets no virtual map and is refused before any work, naming map.virtual and the cube view."""
+    from dsm.config import plan, read as config
+    from dsm.core.types import ConfigError
+    point = {"type": "point", "position": [0, 0, 2]}
+    cfg = config.parse(base_config(light=[point], map={"view": ["cube", "dual_paraboloid"],
+                                                       "virtual": {"preset": "eevee_punctual"}}), "t.toml")
+    got = sorted((m.view, m.cascade.preset if m.cascade is not None else "") for m in plan.make(cfg).maps)
+    assert got == [("cube", "eevee_punctual"), ("dual_paraboloid", "")]
+    cfg = config.parse(base_config(light=[point], map={"virtual": {"preset": "eevee_punctual"}}), "t.toml")
+    with pytest.raises(ConfigError) as e:
+        plan.make(cfg)
+    assert e.value.key == "map.virtual" and "cube" in str(e.value) and "t.toml" in str(e.value)

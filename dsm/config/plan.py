@@ -752,9 +752,10 @@ def _check_planned(cfg: Config, plan: Plan, views_seen: set):
                           "config's scenes gets one (a vsv view is a voxel grid); add a depth view to map.view",
                           POINT_VIEWS)
     if cfg.map.virtual and plan.maps and not any(getattr(m.cascade, "virtual", False) for m in plan.maps):
-        raise ConfigError(cfg.source, "map.virtual", "a virtual shadow map is a directional light's (a spot light's "
-                          "with rule punctual) and no light of the config's scenes gets one; remove [map.virtual] or "
-                          "add a directional or spot [[light]]")
+        raise ConfigError(cfg.source, "map.virtual", "a virtual shadow map is a directional light's (with rule "
+                          "punctual a spot light's, or a point light's cube view) and no light of the config's scenes "
+                          "gets one; remove [map.virtual], add such a [[light]], or add cube to map.view for a point "
+                          "light", ("directional", "spot", "point with map.view cube"))
     sized = cfg.map.texels or cfg.map.resolution != MapSpec.resolution      # [map]'s sizes, given
     if sized and plan.maps and all(getattr(m.cascade, "virtual", False) for m in plan.maps):
         key = "texels" if cfg.map.texels else "resolution"       # a scene's own lights: known only once loaded
