@@ -48,8 +48,8 @@ def level_resolution(spec: VirtualSpec, level) -> np.ndarray:
 
 class PunctualPages:
     """What a spot's and a point light's virtual maps share: faces of per-face resolution through one page
-    table, the punctual level rule, the tagging. A subclass sets ``levels`` and the per-face arrays
-    (:meth:`_faces_np`) and gives ``largest_axis`` and ``cube_face``; it is mixed before its view class."""
+    table, the punctual level rule, the tagging. A subclass calls :meth:`_setup` (levels, per-face arrays)
+    and :meth:`_pages`, and gives ``largest_axis`` and ``cube_face``; it is mixed in before its view class."""
     virtual = True
 
     def _setup(self, spec: VirtualSpec, camera: Camera, scale: float, half_width: float, cube_faces: int):
