@@ -67,6 +67,9 @@ def evaluate(ctx: MapContext, case: Case, looked=None, attached=None) -> CaseRes
         result.cascades = (per, curve, faces)
         if ctx.view.virtual:
             measured.update(pipeline.virtual_metrics(ctx.view, ctx.depth_map, faces))
+    elif "cascade" in ctx.measures and ctx.view.virtual:     # a spot's virtual map: its levels, no cascade rows
+        faces = np.asarray(receivers.face.numpy(), int) if receivers is not None else np.zeros(0, int)
+        measured.update(pipeline.virtual_metrics(ctx.view, ctx.depth_map, faces))
     if "attached" in ctx.measures:
         measured.update(_attached(ctx, case, look, attached))
     texel_world = receivers.texel_world.numpy() if receivers is not None else np.zeros(0)

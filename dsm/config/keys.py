@@ -132,28 +132,33 @@ KEYS = (
     Key("map", "esm", "table", "the kind's defaults", "ESM's parameters or preset"),
     Key("map", "evsm", "table", "the kind's defaults", "EVSM's parameters or preset"),
     Key("map", "msm", "table", "the kind's defaults", "MSM's parameters or preset"),
-    Key("map", "virtual", "table", "off", "a directional light's virtual shadow map (see [map.virtual])"),
+    Key("map", "virtual", "table", "off", "a directional or spot light's virtual shadow map (see [map.virtual])"),
     Key("map.virtual", "preset", "str or list", "(every key given)", "the engine whose values the other keys "
         "override", tuple(sorted(VIRTUAL_PRESETS)), source="docs/virtual_shadow_maps.md", sweeps=True),
-    Key("map.virtual", "page_size", "int", "the preset's (ue5 128, eevee 256)", "texels a page side", _r(1, 4096),
+    Key("map.virtual", "page_size", "int", "the preset's (ue5 128, eevee and eevee_punctual 256)", "texels a page side",
+        _r(1, 4096),
         "texels"),
-    Key("map.virtual", "resolution", "int", "the preset's (ue5 16384, eevee 8192)", "virtual texels a level side "
-        "(a whole number of pages)", _r(1, 2 ** 20), "texels"),
+    Key("map.virtual", "resolution", "int", "the preset's (ue5 16384, eevee and eevee_punctual 8192)", "virtual texels "
+        "a level side (a whole number of pages; punctual: level 0's, level l has 2^-l of it)", _r(1, 2 ** 20),
+        "texels"),
     Key("map.virtual", "first_level", "int", "the preset's", "the finest clipmap level (a level is 2^level "
-        "centimetres in UE5, 2^level units in EEVEE)", _r(-60, 60)),
+        "centimetres in UE5, 2^level units in EEVEE; punctual: >= 0, resolution / 2^level texels)", _r(-60, 60)),
     Key("map.virtual", "last_level", "int", "the preset's", "the coarsest clipmap level", _r(-60, 60)),
     Key("map.virtual", "levels", "int", "(last_level)", "levels from first_level (instead of last_level)",
         _r(1, 64)),
     Key("map.virtual", "lod_bias", "float", "the preset's (ue5 -0.5, eevee 0)", "level-of-detail bias (-1 doubles "
         "the resolution a receiver reads)", _r(-16, 16), "levels"),
     Key("map.virtual", "rule", "str", "the preset's", "how a receiver's level is chosen: its pixel footprint "
-        "(UE5) or its distance (EEVEE)", VIRTUAL_RULES),
+        "(UE5) or its distance (EEVEE) on a directional light, its footprint seen from a spot light (punctual, "
+        "EEVEE)", VIRTUAL_RULES),
     Key("map.virtual", "unit_cm", "float", "100", "centimetres in one scene unit (UE5's levels are in centimetres)",
         "> 0", "cm"),
     Key("map.virtual", "border", "float", "the preset's (ue5 0.05, eevee 0)", "a receiver this fraction of a page "
         "from its page's edge also tags the neighbour", _r(0, 0.5), "pages"),
     Key("map.virtual", "max_pages", "int", "2048", "the physical page pool; more tagged pages stop the map",
         ">= 1", "pages"),
+    Key("map.virtual", "lod_min", "float", "0", "punctual: the footprint's floor, > 0 in metres in the world, "
+        "< 0 its magnitude on the light's unit plane (EEVEE's resolution limit; 0: none)", "any", "m"),
     Key("contact", "preset", "str", "none", "an engine's contact-shadow settings (no other key with it)",
         tuple(sorted(CONTACT_PRESETS))),
     Key("memory", "budget_mb", "float", "RAM / 4", "wavefront budget: larger maps are cast in tiles", "> 0", "MB"),

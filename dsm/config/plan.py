@@ -99,7 +99,8 @@ class MapPlan:
     specs: tuple = ()             # the scheme instances (SchemeSpec) read from this map, in config order
     scene_index: int = 0          # of the config's scenes
     light_index: int = 0          # of the scene's lights (the label's number)
-    cascade: object = None        # a directional light's CascadeSpec or VirtualSpec (faces = its count), else None
+    # a directional light's CascadeSpec or VirtualSpec, a spot's punctual VirtualSpec (faces = its count), else None
+    cascade: object = None
     moments: tuple = ()           # pre-filtered instances (MomentSpec) built from this map's z1 (culling none)
     supersampled_rays: int = 0    # rays of the supersampled first layers its moment maps cast (one each)
     hybrid_cases: int = 0         # [hybrid]: its depth cases with a rule's rays (each at most one a receiver)
@@ -537,12 +538,17 @@ def scene_lights(spec, cfg: Config) -> list:
     return [(f"{i}:{t}", t) for i, t in enumerate(types)]
 
 
-def _layouts(views, cascade_specs):
-    """(view, cascade layout or None) pairs: a directional light's orthographic view once per layout."""
+def _layouts(views, cascade_specs, punctual_views: tuple = ()):
+    """(view, cascade layout or None) pairs: a directional light's orthographic view once per layout
+    (cascades, clipmap virtual maps), a light's ``punctual_views`` (a spot's perspective, a point light's
+    cube) once per punctual virtual map."""
+    punctual = [c for c in cascade_specs if getattr(c, "virtual", False) and c.punctual]
+    clipmaps = [c for c in cascade_specs if not any(c is x for x in punctual)]
     for view in views:
-        if view == "orthographic" and cascade_specs:
-            for c in cascade_specs:
-                yield view, c
+        if view == "orthographic" and clipmaps:
+            yield from ((view, c) for c in clipmaps)
+        elif view in punctual_views and punctual:
+            yield from ((view, c) for c in punctual)
         else:
             yield view, None
 
@@ -678,7 +684,8 @@ def _plan_scene(plan: Plan, cfg: Config, si: int, sc, groups: dict, used: set, v
             short = reference_shortfall(specs[li])
             if short:
                 plan.area_short.append(f"{sc.label} {label}: {short}")
-        for view, cascade in _layouts(views_for(ltype, cfg.map.view, shape), cfg.map.cascade + cfg.map.virtual):
+        for view, cascade in _layouts(views_for(ltype, cfg.map.view, shape), cfg.map.cascade + cfg.map.virtual,
+                                       light_types.get(ltype).PUNCTUAL_VIEWS):
             faces = cascade.count if cascade is not None else VIEW_FACES[view]
             virtual = getattr(cascade, "virtual", False)     # its own resolution: [map.virtual] resolution
             for R in ((cascade.resolution,) if virtual else cfg.map.resolutions_for(faces)):
@@ -745,8 +752,10 @@ def _check_planned(cfg: Config, plan: Plan, views_seen: set):
                           "config's scenes gets one (a vsv view is a voxel grid); add a depth view to map.view",
                           POINT_VIEWS)
     if cfg.map.virtual and plan.maps and not any(getattr(m.cascade, "virtual", False) for m in plan.maps):
-        raise ConfigError(cfg.source, "map.virtual", "a virtual shadow map is a directional light's and no light of "
-                          "the config's scenes is directional; remove [map.virtual] or add a directional [[light]]")
+        raise ConfigError(cfg.source, "map.virtual", "a virtual shadow map is a directional light's (with rule "
+                          "punctual a spot light's, or a point light's cube view) and no light of the config's scenes "
+                          "gets one; remove [map.virtual], add such a [[light]], or add cube to map.view for a point "
+                          "light", ("directional", "spot", "point with map.view cube"))
     sized = cfg.map.texels or cfg.map.resolution != MapSpec.resolution      # [map]'s sizes, given
     if sized and plan.maps and all(getattr(m.cascade, "virtual", False) for m in plan.maps):
         key = "texels" if cfg.map.texels else "resolution"       # a scene's own lights: known only once loaded

@@ -1,7 +1,8 @@
-"""``[map.virtual]``: a directional light's virtual shadow map (dsm.maps.virtual) read into VirtualSpecs.
+"""``[map.virtual]``: a directional light's virtual shadow map (dsm.maps.virtual), or a spot light's
+(``rule = "punctual"``: dsm.maps.virtual_punctual), read into VirtualSpecs.
 
-``preset`` (``"ue5"``, ``"eevee"``; a list sweeps) gives the engine's values; any other key of
-the table overrides that value in every preset.
+``preset`` (``"ue5"``, ``"eevee"``, ``"eevee_punctual"``; a list sweeps) gives the engine's values; any
+other key of the table overrides that value in every preset.
 """
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from dataclasses import replace
 from ..core.types import VIRTUAL_PRESETS, VIRTUAL_RULES, ConfigError, as_list, check_keys, choice, number
 
 VIRTUAL_KEYS = ("preset", "page_size", "resolution", "first_level", "last_level", "levels", "lod_bias", "rule",
-                "unit_cm", "border", "max_pages")
+                "unit_cm", "border", "max_pages", "lod_min")
 MAX_LEVELS = 64                 # levels a view holds (faces)
 MAX_PAGES_SIDE = 1024           # pages along a level's side (the page table holds levels x this^2)
 # float32's relative step (2^-23): a coarsest level narrower than this times the scene's scale spans less than one
@@ -29,7 +30,8 @@ def _values(t: dict, source: str) -> dict:
             "rule": lambda v: choice(v, source, key("rule"), VIRTUAL_RULES),
             "unit_cm": lambda v: number(v, source, key("unit_cm"), positive=True),
             "border": lambda v: number(v, source, key("border"), minimum=0.0, maximum=0.5),
-            "max_pages": lambda v: number(v, source, key("max_pages"), integer=True, minimum=1)}
+            "max_pages": lambda v: number(v, source, key("max_pages"), integer=True, minimum=1),
+            "lod_min": lambda v: number(v, source, key("lod_min"))}
     return {k: conv[k](t[k]) for k in VIRTUAL_KEYS if k in t and k not in ("preset", "levels")}
 
 
@@ -57,6 +59,20 @@ def _check(spec, source: str):
                           f"{spec.first_level}")
     if spec.count > MAX_LEVELS:
         raise ConfigError(source, "map.virtual.last_level", f"{spec.count} levels; at most {MAX_LEVELS}")
+    if spec.punctual:
+        _check_punctual(spec, source)
+
+
+def _check_punctual(spec, source: str):
+    """ConfigError where a spot's levels do not halve into whole pages: level l holds resolution / 2^l texels."""
+    if spec.first_level < 0:
+        raise ConfigError(source, "map.virtual.first_level", f"{spec.first_level}: a punctual map's level l halves "
+                          "the resolution l times, so levels start at 0 or above")
+    if spec.last_level > 30 or (spec.resolution // spec.page_size) % (2 ** spec.last_level):
+        raise ConfigError(source, "map.virtual.last_level", f"{spec.last_level}: level {spec.last_level} of a "
+                          f"punctual map holds {spec.resolution} / 2^{spec.last_level} texels, not a whole number of "
+                          f"pages of page_size {spec.page_size}; valid: 2^last_level divides resolution / page_size "
+                          f"({spec.resolution // spec.page_size})")
 
 
 def check_reach(specs: tuple, scales, source: str):
@@ -66,7 +82,7 @@ def check_reach(specs: tuple, scales, source: str):
     camera than the coarsest level reaches, as ``levels = 1`` leaves) depend on where the camera's receivers lie:
     known only once the scene is loaded, that case fails alone (dsm.maps.virtual) and the others run."""
     for spec in specs:
-        for scale in scales:
+        for scale in scales if not spec.punctual else ():      # a spot's levels are resolutions, not widths
             need = FLOAT32_STEP * scale                   # the narrowest coarsest level, scene units
             if spec.level_width(spec.last_level, scale) >= need:
                 continue
@@ -103,8 +119,18 @@ def parse_virtual(m: dict, lights, source: str) -> tuple:
         spec = _levels(t, spec, source)
         _check(spec, source)
         out.append(spec)
-    if all(light.type not in ("directional", "scene") for light in lights):
-        raise ConfigError(source, "map.virtual", "a virtual shadow map is a directional light's and no [[light]] is "
-                          f"directional (the lights are {', '.join(sorted({l.type for l in lights}))}); remove "
-                          "[map.virtual] or add a directional light")
+    _check_lights(out, lights, source)
     return tuple(out)
+
+
+def _check_lights(specs, lights, source: str):
+    """ConfigError where a preset has no light of its kind: a clipmap a directional light, punctual a spot
+    or a point light."""
+    for spec in specs:
+        kinds = ("spot", "point") if spec.punctual else ("directional",)
+        kind = " or ".join(kinds)
+        if all(light.type not in kinds + ("scene",) for light in lights):
+            raise ConfigError(source, "map.virtual", f"{spec.preset or spec.rule}: a virtual shadow map of rule "
+                              f"{spec.rule} is a {kind} light's and no [[light]] is one (the lights are "
+                              f"{', '.join(sorted({l.type for l in lights}))}); remove [map.virtual], choose another "
+                              f"preset or add a {kind} light", tuple(VIRTUAL_PRESETS))

@@ -293,13 +293,16 @@ class CascadeSpec:
         return out
 
 
-VIRTUAL_RULES = ("footprint", "distance")     # how a receiver's clipmap level is chosen (dsm.maps.virtual)
+# how a receiver's level is chosen: footprint and distance a directional light's clipmap (dsm.maps.virtual),
+# punctual a spot light's perspective page table (dsm.maps.virtual_punctual)
+VIRTUAL_RULES = ("footprint", "distance", "punctual")
 
 
 @dataclass(frozen=True)
 class VirtualSpec:
-    """A directional light's virtual shadow map (``[map.virtual]``; dsm.maps.virtual): clipmap levels
-    around the camera, pages tagged by the receivers, each receiver looked up in its level."""
+    """A virtual shadow map (``[map.virtual]``): a directional light's clipmap levels around the camera
+    (dsm.maps.virtual), or with ``rule = "punctual"`` a spot light's perspective page table whose levels
+    halve its resolution (dsm.maps.virtual_punctual); pages tagged by the receivers, each read in its level."""
     preset: str = ""                # "ue5" | "eevee" | "" (every key given)
     page_size: int = 128            # texels per page side
     resolution: int = 16384         # virtual texels per level side
@@ -310,8 +313,14 @@ class VirtualSpec:
     unit_cm: float = 100.0          # centimetres in one scene unit (a scene at scale 1)
     border: float = 0.05            # a receiver this fraction of a page from its page's edge also tags the neighbour
     max_pages: int = 2048           # the physical page pool
+    lod_min: float = 0.0            # punctual: the footprint floor (> 0: metres, world; < 0: -it on the light plane)
 
     virtual = True                  # read by the plan and the views (a CascadeSpec has no such field)
+
+    @property
+    def punctual(self) -> bool:
+        """Whether this is a spot light's map (EEVEE's punctual rule), not a directional light's clipmap."""
+        return self.rule == "punctual"
 
     @property
     def count(self) -> int:
@@ -348,12 +357,17 @@ VIRTUAL_PRESETS = {
     # PageDilationBorderSizeDirectional 0.05); the VSM documentation (16k x 16k virtual, 128 x 128 pages)
     "ue5": VirtualSpec("ue5", 128, 16384, 6, 22, -0.5, "footprint", 100.0, 0.05, 2048),
     # Blender EEVEE (4.2+): eevee_defines.hh (SHADOW_PAGE_RES 256, SHADOW_TILEMAP_RES 32 pages a side),
-    # eevee_shadow.hh (coverage_get: a level is 2^level units wide), eevee_shadow_lib.glsl (level =
+    # eevee_shadow.hh (coverage_get: a level is 2^level units wide), eevee_shadow_tilemap_lib.glsl (level =
     # ceil(log2(2 d narrowing) + lod_bias); pages tagged at the pixel, radius 0), eevee_shadow.cc
     # (lod_bias = -log2(shadow_resolution_scale): 0 at scale 1; pages = pool bytes / (256^2 x 4));
     # one Blender unit is a metre. Assumed: the 512 MB pool (2048 pages) and the level range (EEVEE
     # derives it from the camera's near plane and bounds each frame)
     "eevee": VirtualSpec("eevee", 256, 8192, -8, 24, 0.0, "distance", 100.0, 0.0, 2048),
+    # Blender EEVEE's spot and point lights (dsm.maps.virtual_punctual): eevee_defines.hh (SHADOW_PAGE_RES 256,
+    # SHADOW_TILEMAP_RES 32, so SHADOW_MAP_MAX_RES 8192 texels at level 0; SHADOW_TILEMAP_LOD 5, levels 0 to 5);
+    # the level rule shadow_punctual_pixel_ratio (eevee_shadow_tilemap_lib.glsl); lod_min the light's
+    # resolution limit (Light::shadow_lod_min_get, eevee_light.cc): its default was not read, 0 leaves it out
+    "eevee_punctual": VirtualSpec("eevee_punctual", 256, 8192, 0, 5, 0.0, "punctual", 100.0, 0.0, 2048, 0.0),
 }
 
 

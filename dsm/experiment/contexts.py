@@ -58,7 +58,7 @@ class Contexts:
                          else Receiver.make(v, setup.p, setup.n, data.diagonal, setup.camera))
                 back = Receiver.make(v, back_p, back_n, data.diagonal, setup.camera) if back_p is not None else None
                 by_view[id(v)] = (front, back)
-        cascade_layout = view.spec.label if view.cascaded else ""
+        cascade_layout = view.spec.label if view.cascaded or view.virtual else ""
         where = Where(data.label, setup.label, view.kind, view.resolution, view.n_texels, smap.culling, cascade_layout)
         measures = {"seams", "split", "attached", "cascade"} | ({"contact"} if self.cfg.contact is not None else set())
         ctx = MapContext(where, data, scene.gbuffer, setup, view, smap, stored,

@@ -10,6 +10,7 @@ TYPE = "area"
 POSITIONAL = True
 SOFT = True                     # its reference is the visible fraction V* (dsm.truth.area), not one ray
 MOTION = ()
+PUNCTUAL_VIEWS = ()             # no punctual virtual map (dsm.maps.virtual_punctual)
 SAMPLING = ("min_samples", "max_samples", "tolerance", "confidence", "replicates")
 SHAPE_KEYS = {"emitter": (), "sphere": ("position", "size"), "disk": ("position", "direction", "size"),
               "rectangle": ("position", "direction", "size")}

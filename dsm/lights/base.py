@@ -6,7 +6,8 @@ reaches everywhere), ``MOTION`` (the ``[[motion]]`` light paths it follows), ``p
 source, where) -> LightSpec`` (its ``[[light]]`` table, keys checked), ``views(point_views,
 shape) -> tuple`` (the view kinds the plan gives it) and ``make_view(light, R, receivers_world,
 bbox, kind, cascade, sensor, scale)``; ``SOFT``: whether its exact visibility is a visible fraction
-(dsm.truth.area's Monte Carlo reference) rather than one shadow ray. A new light type is a module here and a line in
+(dsm.truth.area's Monte Carlo reference) rather than one shadow ray; ``PUNCTUAL_VIEWS`` the view
+kinds a ``[map.virtual]`` of rule punctual replaces (dsm.maps.virtual_punctual). A new light type is a module here and a line in
 ``lights/__init__.py``'s registry.
 """
 from __future__ import annotations
@@ -24,6 +25,7 @@ class LightType(Protocol):
     POSITIONAL: bool
     SOFT: bool
     MOTION: tuple
+    PUNCTUAL_VIEWS: tuple       # the view kinds a punctual virtual map replaces (spot: perspective, point: cube)
 
     def parse(self, t: dict, source: str, where: str) -> Any:
         """The light's LightSpec from its [[light]] table (ConfigError naming the key)."""

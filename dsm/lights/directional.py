@@ -10,6 +10,7 @@ TYPE = "directional"
 POSITIONAL = False              # every receiver is in its domain; shadow rays go along -direction
 SOFT = False
 MOTION = ("turn",)              # [[motion]] light = "turn": its direction turned about an axis
+PUNCTUAL_VIEWS = ()             # its virtual maps are clipmaps (dsm.maps.virtual), never punctual
 
 
 def parse(t: dict, source: str, where: str) -> LightSpec:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from ..core.types import LightSpec, check_keys, vec3
+from ..maps import virtual_punctual
 from ..maps.vsv import EpipolarView, camera_pose
 from ..maps.views import CubeView, ParaboloidView
 from .base import required, unit_direction
@@ -10,6 +11,7 @@ TYPE = "point"
 POSITIONAL = True
 SOFT = False
 MOTION = ("move", "keyframes")
+PUNCTUAL_VIEWS = ("cube",)          # the view a punctual virtual map ([map.virtual] rule punctual) replaces
 
 
 def parse(t: dict, source: str, where: str) -> LightSpec:
@@ -31,6 +33,8 @@ def make_view(light, R, receivers_world, bbox, kind, cascade, sensor, scale):
     axis = light.direction if light.direction is not None else (0.0, 0.0, -1.0)
     if kind in ("paraboloid", "dual_paraboloid"):
         return ParaboloidView(light.position, axis, bbox, R, dual=kind == "dual_paraboloid")
+    if kind == "cube" and getattr(cascade, "virtual", False):      # [map.virtual] rule punctual
+        return virtual_punctual.cube_view(light, cascade, receivers_world, bbox, sensor, scale)
     if kind == "cube":
         return CubeView(light.position, bbox, R)
     if kind == "vsv":

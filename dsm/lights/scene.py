@@ -8,6 +8,7 @@ TYPE = "scene"
 POSITIONAL = False
 SOFT = False
 MOTION = ()
+PUNCTUAL_VIEWS = ()
 
 
 def parse(t: dict, source: str, where: str) -> LightSpec:

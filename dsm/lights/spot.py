@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.types import ConfigError, LightSpec, check_keys, number, vec3
+from ..maps import virtual_punctual
 from ..maps.vsv import EpipolarView, camera_pose
 from ..maps.views import PerspectiveView
 from .base import required, unit_direction
@@ -11,7 +12,8 @@ from .base import required, unit_direction
 TYPE = "spot"
 POSITIONAL = True
 SOFT = False
-MOTION = ("move", "keyframes")  # translated, or along keyframes (aimed at their targets)
+MOTION = ("move", "keyframes")
+PUNCTUAL_VIEWS = ("perspective",)   # the view a punctual virtual map ([map.virtual] rule punctual) replaces  # translated, or along keyframes (aimed at their targets)
 
 
 def parse(t: dict, source: str, where: str) -> LightSpec:
@@ -36,7 +38,10 @@ def views(point_views: tuple, shape: str) -> tuple:
 
 def make_view(light, R, receivers_world, bbox, kind, cascade, sensor, scale):
     """The perspective map along the spot's axis (its direction, or toward its target); ``kind``
-    "vsv": the VSV grid of the light and the camera ``sensor`` over the same cone (dsm.maps.vsv)."""
+    "vsv": the VSV grid of the light and the camera ``sensor`` over the same cone (dsm.maps.vsv);
+    ``cascade`` a VirtualSpec: its virtual shadow map for ``sensor`` (dsm.maps.virtual_punctual)."""
+    if getattr(cascade, "virtual", False):
+        return virtual_punctual.spot_view(light, cascade, receivers_world, bbox, sensor, scale)
     axis = light.direction if light.direction is not None else np.subtract(light.target, light.position)
     view = PerspectiveView(light.position, axis, light.cutoff, bbox, R)
     if kind != "vsv":

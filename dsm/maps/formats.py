@@ -76,6 +76,10 @@ def stored_view(view, fmt: str):
 
 def _texel_axis_cosine(view) -> np.ndarray:
     """Per texel of a cube map: the cosine between the texel centre's ray and its face's axis."""
+    if view.virtual:        # faces that differ in resolution, through pages: each stored texel's own ray
+        face, cu, cv = view.texel_coords(dr.arange(mi.UInt32, view.n_texels))
+        _, d = view.ray_at(cu, cv, face)
+        return np.asarray(dr.dot(d, view._frame(face)[2]).numpy(), np.float64)
     R = view.resolution
     c = (np.arange(R) + 0.5) / R * 2.0 - 1.0
     a, b = np.meshgrid(c, c)                     # row j (v), column i (u)

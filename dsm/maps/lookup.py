@@ -78,7 +78,7 @@ class Tap:
 def tap_at(rx: Receiver, smap, u, v) -> Tap:
     """The texel containing map position (u, v) on the receiver's face (clamped to the face)."""
     view = smap.view
-    R1 = mi.Int32(view.R_u) - 1
+    R1 = mi.Int32(view.face_resolution(rx.face)) - 1
     i = dr.clip(mi.Int32(dr.floor(u)), 0, R1)
     j = dr.clip(mi.Int32(dr.floor(v)), 0, R1)
     idx, absent = view.texel_index(rx.face, i, j)
@@ -86,11 +86,13 @@ def tap_at(rx: Receiver, smap, u, v) -> Tap:
     z2 = dr.gather(mi.Float, smap.z2, idx) if smap.z2 is not None else None
     z1 = dr.gather(mi.Float, smap.z1, idx)
     shape = dr.gather(mi.UInt32, smap.shape, idx)
+    out = None
     if view.kind == "orthographic":
         # beyond a directional light's map no caster was recorded: the far bound, as a miss
         out = (u < 0) | (v < 0) | (u >= view.R) | (v >= view.R)
-        if absent is not None:      # a virtual map's page no receiver tagged: nothing was cast there
-            out |= absent
+    if absent is not None:      # a virtual map's page no receiver tagged: nothing was cast there
+        out = absent if out is None else out | absent
+    if out is not None:
         z1 = dr.select(out, view.far_o, z1)
         shape = dr.select(out, 0xFFFFFFFF, shape)
         z2 = dr.select(out, view.far_o, z2) if z2 is not None else None

@@ -187,6 +187,15 @@ class View:
         (cube edges, the paraboloids' rim); +inf on a single planar map, which has none."""
         return dr.full(mi.Float, dr.inf, dr.width(u))
 
+    def face_resolution(self, face):
+        """Texels a side of faces ``face`` (mi.UInt32): the view's resolution (a virtual punctual map's
+        faces differ: dsm.maps.virtual_punctual)."""
+        return self.R_u
+
+    def level_of_face(self, faces) -> np.ndarray:
+        """The (absolute) level each face of ``faces`` holds (numpy): a virtual map's; elsewhere the face."""
+        return np.asarray(faces, int)
+
 
 MARGIN_TEXELS = 4
 
@@ -299,7 +308,7 @@ class PerspectiveView(View):
     def texel_world(self, p):
         """World texel size at points ``p``: a planar (gnomonic) texel's footprint, growing with distance."""
         x, y, z = self.local(p)
-        return _gnomonic_texel(x, y, z, 2.0 * self.T / self.R)
+        return gnomonic_texel(x, y, z, 2.0 * self.T / self.R)
 
     def to_light(self, p):
         """Unit direction from points ``p`` toward the light position."""
@@ -312,7 +321,7 @@ class PerspectiveView(View):
         return (z > 0) & in_cone & (dr.abs(x) <= self.T * z) & (dr.abs(y) <= self.T * z)
 
 
-def _gnomonic_texel(x, y, z, step):
+def gnomonic_texel(x, y, z, step):
     """World texel size at local point (x, y, z) of a planar (gnomonic) map with ``step`` per texel
     in the tangent plane at unit distance: distance * sqrt(solid angle) = step * z * (1 + a^2 + b^2)^(-1/4)."""
     zz = dr.maximum(z, 1e-30 * dr.norm(mi.Vector3f(x, y, z)))
@@ -463,7 +472,7 @@ class CubeView(PointView):
     def texel_world(self, p):
         """World texel size at points ``p`` on their cube face (a gnomonic footprint, growing with distance)."""
         x, y, z = self._local(p, self.face_of(p))
-        return _gnomonic_texel(x, y, z, 2.0 / self.R)
+        return gnomonic_texel(x, y, z, 2.0 / self.R)
 
     def seam_distance(self, u, v, face):
         """Distance in texels from map position (u, v) to the nearest edge of its cube face."""

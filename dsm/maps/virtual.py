@@ -41,7 +41,8 @@ from ..scenes.camera import Camera
 from .views import View, light_frame
 
 NO_PAGE = 0xFFFFFFFF
-EEVEE_NARROWING = 1.0001       # eevee_shadow_lib.glsl: one tile hidden to hide the moving transition
+# shadow_directional_level_fractional (eevee_shadow_tilemap_lib.glsl): one tile hidden to hide the moving transition
+EEVEE_NARROWING = 1.0001
 
 
 def pages_per_side(spec: VirtualSpec) -> int:
@@ -278,6 +279,10 @@ class VirtualView(View):
         lo, hi = (2.0 ** (lvl - self.C), 2.0 ** (lvl + 1 - self.C)) if self.spec.rule == "footprint" \
             else (2.0 ** (lvl - 1 - self.C), 2.0 ** (lvl - self.C))
         return (0.0 if k == 0 else lo), (math.inf if k == self.cascades - 1 else hi)
+
+    def level_of_face(self, faces) -> np.ndarray:
+        """The absolute level of each face of ``faces`` (one face per level)."""
+        return self.levels[np.asarray(faces, int)]
 
     def level_pages(self) -> dict:
         """{absolute level: pages tagged} for the levels with pages."""

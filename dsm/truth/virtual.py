@@ -11,7 +11,7 @@ def histogram_text(counts: dict) -> str:
 
 def level_histogram(view, faces: np.ndarray) -> dict:
     """{absolute level: receivers} of the receivers' faces (levels without receivers left out)."""
-    lv, n = np.unique(np.asarray(view.levels)[np.asarray(faces, int)], return_counts=True)
+    lv, n = np.unique(view.level_of_face(faces), return_counts=True)
     return {int(a): int(b) for a, b in zip(lv, n)}
 
 
