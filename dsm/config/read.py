@@ -14,7 +14,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from .virtual import check_reach, parse_virtual
-from ..core.types import (LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, MAP_VIEWS, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA, REPORT_IMAGES, LOOKUP_MODES, BUILD_MODES, LAMBDA_MAX, SEED_MAX, ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params, SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec, CameraSpec, CascadeSpec, CASCADE_SPLITS, CASCADE_FITS, DEPTH_BOUNDS, MAX_CASCADES, MotionSpec, CAMERA_PATHS, LIGHT_PATHS, MAP_KINDS, MomentSpec, ContactSpec, BLUR_KERNELS, HybridSpec, HYBRID_ORIGINS)
+from ..core.types import (LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, MAP_VIEWS, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA, REPORT_IMAGES, LOOKUP_MODES, BUILD_MODES, LAMBDA_MAX, SEED_MAX, ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params, SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec, CameraSpec, CascadeSpec, CASCADE_SPLITS, CASCADE_FITS, DEPTH_BOUNDS, MAX_CASCADES, MotionSpec, CAMERA_PATHS, LIGHT_PATHS, CACHE_POLICIES, CasterPath, MAP_KINDS, MomentSpec, ContactSpec, BLUR_KERNELS, HybridSpec, HYBRID_ORIGINS)
 
 # a run's folder is runs/<name>-tune-YYYYmmdd-HHMMSS[-n] (at most 25 bytes more) and a file name takes 255 bytes
 NAME_MAX_BYTES = 255 - len("-tune-20240101-120000-999")
@@ -618,7 +618,7 @@ def _kind_presets(name: str, t: dict, source: str) -> list:
 def _parse_motion(t: dict, source: str, where: str) -> MotionSpec:
     """One [[motion]] path: frames, a camera path and/or a light path, fixed points."""
     check_keys(t, ("frames", "camera", "offset", "angle", "keys", "light", "light_axis", "light_angle",
-                   "light_offset", "light_keys", "points", "label"), source, where)
+                   "light_offset", "light_keys", "points", "label", "casters", "cache"), source, where)
     kw = {"frames": number(t.get("frames", 8), source, f"{where}.frames", integer=True, minimum=2, maximum=1000),
           "camera": choice(t.get("camera", "none"), source, f"{where}.camera", CAMERA_PATHS),
           "light": choice(t.get("light", "none"), source, f"{where}.light", LIGHT_PATHS),
@@ -652,6 +652,8 @@ def _parse_motion(t: dict, source: str, where: str) -> MotionSpec:
     if "light_angle" in t:
         kw["light_angle"] = number(t["light_angle"], source, f"{where}.light_angle")
     kw.update(_parse_light_move(t, kw["light"], source, where))
+    kw["cache"] = choice(t.get("cache", "none"), source, f"{where}.cache", CACHE_POLICIES)
+    kw["casters"] = _parse_casters(t.get("casters", []), source, where)
     label = t.get("label", "")
     if not isinstance(label, str):
         raise ConfigError(source, f"{where}.label", f"expected a string, got {label!r}")
@@ -661,6 +663,31 @@ def _parse_motion(t: dict, source: str, where: str) -> MotionSpec:
         parts += {"none": [], "turn": [f"sun turn {spec.light_angle:g}deg"]}.get(spec.light, [f"light {spec.light}"])
         label = " + ".join(parts) or "static"
     return replace(spec, label=label)
+
+
+def _parse_casters(raw, source: str, where: str) -> tuple:
+    """[[motion.casters]]: each a shape's name and its translation, linear (``offset``) or keyframed (``keys``)."""
+    if isinstance(raw, dict):
+        raw = [raw]
+    if not isinstance(raw, list) or not all(isinstance(c, dict) for c in raw):
+        raise ConfigError(source, f"{where}.casters", "expected a list of tables {shape, offset | keys}")
+    out = []
+    for j, c in enumerate(raw):
+        at = f"{where}.casters[{j}]"
+        check_keys(c, ("shape", "offset", "keys"), source, at)
+        if not isinstance(c.get("shape"), str) or not c["shape"]:
+            raise ConfigError(source, f"{at}.shape", "a moving caster needs the shape's name (a string)")
+        if ("offset" in c) == ("keys" in c):
+            raise ConfigError(source, at, "give offset (a linear path) or keys (keyframes), one of them",
+                              ("offset", "keys"))
+        keys = c.get("keys", [])
+        if "keys" in c and (not isinstance(keys, list) or len(keys) < 2):
+            raise ConfigError(source, f"{at}.keys", "expected a list of at least two translations [x, y, z]")
+        out.append(CasterPath(c["shape"], vec3(c.get("offset", [0, 0, 0]), source, f"{at}.offset"),
+                              tuple(vec3(k, source, f"{at}.keys[{i}]") for i, k in enumerate(keys))))
+    if len({c.shape for c in out}) < len(out):
+        raise ConfigError(source, f"{where}.casters", "a shape moves along one path; it is named twice")
+    return tuple(out)
 
 
 def _parse_light_move(t: dict, path: str, source: str, where: str) -> dict:

@@ -1,0 +1,99 @@
+"""Moving casters of a ``[[motion]]`` path: each named shape translated per frame in the Mitsuba scene.
+
+A caster's translation at frame t is linear (``offset`` times t / (frames - 1)) or interpolated
+linearly between ``keys`` spread evenly over the frames; like a light's ``light_offset`` it is
+multiplied by the scene's ``scale``. Mitsuba 3 holds a mesh's vertices in ``vertex_positions``
+(``mi.traverse``) and rebuilds the scene's acceleration structure on ``params.update()``; the
+vertices are moved from their loaded positions in float64 and rounded once per frame, so a frame's
+geometry does not depend on the frames before it. The exact side's scene (a scene far from the
+origin, :mod:`dsm.scenes.exact_frame`) moves with it. ``restore`` puts every vertex back.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+import drjit as dr
+import mitsuba as mi
+
+from ..core.types import ConfigError
+
+
+def translations(casters, frames: int, scale: float) -> np.ndarray:
+    """(frames, casters, 3): each caster's translation per frame, world units (float64)."""
+    out = np.zeros((frames, len(casters), 3))
+    for j, c in enumerate(casters):
+        for t in range(frames):
+            f = t / (frames - 1)
+            if c.keys:
+                keys = np.asarray(c.keys, float)
+                x = f * (len(keys) - 1)
+                k = min(int(x), len(keys) - 2)
+                out[t, j] = keys[k] * (1 - (x - k)) + keys[k + 1] * (x - k)
+            else:
+                out[t, j] = np.asarray(c.offset, float) * f
+    return out * scale
+
+
+class Mover:
+    """The moving shapes of one path over one scene: their loaded vertices, and each frame's placement."""
+
+    def __init__(self, data, casters, frames: int, where: str):
+        """Check the shapes' names (a ConfigError naming ``where``) and keep their loaded vertices."""
+        self.data = data
+        self.index = []
+        for j, c in enumerate(casters):
+            if c.shape not in data.shape_names:
+                raise ConfigError("<config>", f"{where}.casters[{j}].shape",
+                                  f"{c.shape!r} is no shape of scene {data.label!r}", tuple(data.shape_names))
+            self.index.append(data.shape_names.index(c.shape))
+        self.offsets = translations(casters, frames, data.scale)
+        scenes = [data.scene] + ([data.exact_scene] if data.exact_scene is not None else [])
+        self.params = [mi.traverse(s) for s in scenes]
+        keys = [f"{data.scene.shapes()[i].id()}.vertex_positions" for i in self.index]
+        self.keys = keys
+        self.base = [[np.asarray(p[k], np.float64).reshape(-1, 3) for k in keys] for p in self.params]
+        self.placed = None
+
+    @property
+    def moving(self) -> bool:
+        """Whether any caster moves over the path."""
+        return bool(self.index) and bool(np.any(self.offsets != 0.0))
+
+    def shapes(self) -> frozenset:
+        """The moving shapes' indices (order of scene.shapes())."""
+        return frozenset(self.index)
+
+    def key(self, t: int) -> tuple:
+        """What frame ``t``'s geometry is: the casters' translations (equal keys, equal scenes)."""
+        return tuple(self.offsets[t].ravel().tolist())
+
+    def place(self, t: int) -> bool:
+        """Move the casters to frame ``t``'s translations; True if the geometry changed."""
+        key = self.key(t)
+        if key == self.placed or (self.placed is None and not any(key)):
+            self.placed = key
+            return False
+        for params, base in zip(self.params, self.base):
+            for k, v, d in zip(self.keys, base, self.offsets[t]):
+                params[k] = mi.Float((v + d).astype(np.float32).ravel())
+            params.update()
+        dr.eval()
+        self.placed = key
+        return True
+
+    def restore(self):
+        """Every caster back at its loaded place."""
+        if self.placed is not None and any(self.placed):
+            for params, base in zip(self.params, self.base):
+                for k, v in zip(self.keys, base):
+                    params[k] = mi.Float(v.astype(np.float32).ravel())
+                params.update()
+        self.placed = None
+
+    def swept_bbox(self) -> tuple:
+        """The scene's bounds over every frame: the loaded bounds and each caster's at each frame."""
+        lo, hi = np.array(self.data.bbox[0], float), np.array(self.data.bbox[1], float)
+        for v, d in zip(self.base[0], np.moveaxis(self.offsets, 1, 0)):
+            lo = np.minimum(lo, v.min(0) + d.min(0))
+            hi = np.maximum(hi, v.max(0) + d.max(0))
+        return lo, hi
