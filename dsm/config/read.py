@@ -142,6 +142,7 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     budget, (repeats, lookups, builds), lambdas, report_images = _parse_run_tables(raw, source)
     motion = tuple(_parse_motion(t, source, f"motion[{i}]") for i, t in enumerate(_array_of_tables(raw, "motion", source)))
     _check_motion_lights(motion, lights, source)
+    _check_motion_casters(motion, scenes, source)
     _check_motion_moments(motion, mapspec, source)
     contact = _parse_contact(raw, source, bool(motion))
     shrink = _parse_shrink(m, source, bool(motion))
@@ -761,6 +762,20 @@ def _parse_light(t: dict, source: str, where: str) -> LightSpec:
     if kind is None:
         raise ConfigError(source, f"{where}.type", "missing", lights.TYPES)
     return lights.get(kind).parse(t, source, where)
+
+
+def _check_motion_casters(motion, scenes, source):
+    """Each moving caster names a shape of every built-in scene (a mesh file's names are checked once loaded)."""
+    from ..scenes.builtins import builtin_geometry
+    for sc in scenes:
+        if not sc.builtin or not any(mo.casters for mo in motion):
+            continue
+        names = list(builtin_geometry(sc.builtin, sc.params)[0])
+        for i, mo in enumerate(motion):
+            for j, c in enumerate(mo.casters):
+                if c.shape not in names:
+                    raise ConfigError(source, f"motion[{i}].casters[{j}].shape",
+                                      f"no shape named {c.shape!r} in {sc.builtin}", names)
 
 
 def _check_motion_moments(motion, mapspec, source):

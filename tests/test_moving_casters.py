@@ -1,0 +1,181 @@
+"""Moving casters under [[motion]] and the maps' cache policies (dsm.experiment.casters, .cache).
+
+Known answers: with nothing moving every policy gives the same numbers as a path without
+casters; a box sliding over a plane under a sun with ``static``: its ghosts are the receivers in
+the box's shadow at frame 0 but not at frame k, its missing shadows the converse, both counted
+here by a float64 ray-box test (numpy) within the receivers one texel from the outlines."""
+import csv
+import math
+
+import numpy as np
+import pytest
+
+from conftest import base_config
+
+SUN = [-1.0, -0.3, -0.8]
+SLIDE = [0.0, 1.2, 0.0]           # the box's whole translation over the frames (world units)
+FRAMES = 3
+TIMES = {"build_ms", "build_first_ms", "lookup_ms", "build_compile_ms", "build_peak_mb", "lookup_compile_ms",
+         "lookup_kernels_compiled", "reference_ms", "moments_ms", "frame_build_ms", "fit_ms", "case"}
+
+
+def _config(motion, light=None, camera=48, resolution=64):
+    return base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [camera, camera]},
+                       map={"resolution": resolution},
+                       light=light or [{"type": "directional", "direction": SUN}],
+                       scheme=[{"name": "constant", "bias": "1 texel"}, {"name": "normal_offset"}], motion=motion)
+
+
+def _frames(out):
+    with open(out / "frames.csv", newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _metrics(out):
+    with open(out / "metrics.csv", newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _without_times(rows, drop=()):
+    return [{k: v for k, v in r.items() if k not in TIMES and k not in drop} for r in rows]
+
+
+def test_translations_linear_and_keyframes_by_hand():
+    """A linear path reaches ``offset`` at the last frame; keyframes are spread evenly and interpolated."""
+    from dsm.core.types import CasterPath
+    from dsm.experiment.casters import translations
+    out = translations([CasterPath("a", offset=(2.0, 0.0, 0.0)),
+                        CasterPath("b", keys=((0.0, 0.0, 0.0), (0.0, 4.0, 0.0), (0.0, 4.0, 2.0)))], 5, 0.5)
+    assert np.allclose(out[:, 0, 0], [0.0, 0.25, 0.5, 0.75, 1.0])
+    assert np.allclose(out[:, 1], [[0, 0, 0], [0, 1, 0], [0, 2, 0], [0, 2, 0.5], [0, 2, 1]])
+
+
+def test_nothing_moving_every_policy_gives_the_same_numbers(run_dict):
+    """A camera dolly and a moving spot, with no caster, a caster whose offset is zero, under
+    ``none`` and ``static``: every count and rate of metrics.csv and frames.csv is the same, and
+    no frame has a ghost or a missing shadow."""
+    spot = [{"type": "spot", "position": [-2.0, -1.0, 3.0], "target": [0.0, 0.0, 0.0], "cutoff": 45}]
+    paths = [{"frames": 3, "points": 300, "camera": "dolly", "offset": [0.0, 0.4, 0.0], "label": "p"},
+             {"frames": 3, "points": 300, "light": "move", "light_offset": [0.0, 1.0, 0.0], "label": "q"}]
+    variants = {"plain": {}, "none": {"cache": "none", "casters": [{"shape": "box", "offset": [0.0, 0.0, 0.0]}]},
+                "static": {"cache": "static"}}
+    runs = {}
+    for name, extra in variants.items():
+        res = run_dict(_config([{**p, **extra} for p in paths], light=spot), name=name)
+        runs[name] = (_without_times(_metrics(res.out)), _without_times(_frames(res.out), ("cache",)))
+    assert runs["plain"] == runs["none"] == runs["static"]
+    frames = runs["plain"][1]
+    assert frames and all(f["n_ghost"] == "0" and f["n_missing"] == "0" for f in frames)
+    assert any(f["map_built"] == "True" for f in frames if int(f["frame"]) > 0)     # the light's views did change
+
+
+def _box_hits(p, d, lo, hi):
+    """Whether the ray p + t d, t > 0, meets the box [lo, hi] (float64 slabs; a start inside hits)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1, t2 = (lo - p) / d, (hi - p) / d
+    tn = np.nanmax(np.minimum(t1, t2), axis=1)
+    tf = np.nanmin(np.maximum(t1, t2), axis=1)
+    return (tf > 1e-9) & (tf >= tn)
+
+
+def _expected(setup_p, box, offset, grow):
+    """(certainly inside the shadow of the box moved by ``offset``, inside it give or take ``grow``
+    across the box's vertical sides): per receiver, toward the sun."""
+    d = -np.asarray(SUN, float) / np.linalg.norm(SUN)
+    d = np.broadcast_to(d, setup_p.shape)
+    lo, hi = box[0] + offset, box[1] + offset
+    g = np.array([grow, grow, 0.0])
+    return _box_hits(setup_p, d, lo + g, hi - g), _box_hits(setup_p, d, lo - g, hi + g)
+
+
+def _receivers_at(offset, camera):
+    """The receivers' world positions with the box moved by ``offset`` (moved here through
+    mi.traverse, independently of dsm.experiment.casters), and the box's loaded bounds."""
+    import mitsuba as mi
+    import dsm.pipeline as pl
+    sd = pl.load_scene(pl.scene_spec({"builtin": "plane_box"}), (camera, camera))
+    params = mi.traverse(sd.scene)
+    v = np.asarray(params["box.vertex_positions"], np.float64).reshape(-1, 3)
+    box = (v.min(0), v.max(0))
+    params["box.vertex_positions"] = mi.Float((v + offset).astype(np.float32).ravel())
+    params.update()
+    from dsm.core.types import LightSpec
+    light = LightSpec("directional", direction=tuple(SUN))
+    setup = pl.light_setup(sd, pl.gbuffer(sd), light, "sun")
+    return pl.points_np(setup.p), box
+
+
+def test_static_cache_ghosts_and_missing_shadows_of_a_sliding_box(run_dict):
+    """``static``: the map of frame 0 kept while the box slides; at frame k the ghosts are the
+    receivers in the frame-0 shadow outside the frame-k shadow, the missing the converse (numpy's
+    ray-box count, within the receivers one texel from either outline); ``none`` has neither."""
+    motion = {"frames": FRAMES, "points": 200, "casters": [{"shape": "box", "offset": SLIDE}]}
+    camera, resolution = 128, 1024      # the outlines' one-texel band well narrower than the ghost
+    res_static = run_dict(_config([{**motion, "cache": "static"}], camera=camera, resolution=resolution),
+                          name="static")
+    res_none = run_dict(_config([{**motion, "cache": "none"}]), name="none")
+    frames = _frames(res_static.out)
+    texel = 8.0 * math.sqrt(2.0) / resolution     # a bound on a texel's width: the ground's diagonal over R
+    grow = 1.0 * texel / (-SUN[2] / np.linalg.norm(SUN))     # one texel, as it lies on the ground
+    _, box = _receivers_at(np.zeros(3), camera)
+    checked = 0
+    for k in range(1, FRAMES):
+        off = np.asarray(SLIDE) * k / (FRAMES - 1)
+        p, _ = _receivers_at(off, camera)
+        in0, maybe0 = _expected(p, box, np.zeros(3), grow)
+        ink, maybek = _expected(p, box, off, grow)
+        on_box_k = np.all((p >= box[0] + off - 1e-4) & (p <= box[1] + off + 1e-4), axis=1)
+        ink, maybek = ink & ~on_box_k, maybek & ~on_box_k      # a convex box does not shadow its lit faces
+        band = (in0 != maybe0) | (ink != maybek)
+        ghost, missing = in0 & ~maybek, ink & ~maybe0
+        rows = [f for f in frames if int(f["frame"]) == k]
+        assert rows and all(int(f["n_receivers"]) == len(p) for f in rows)
+        for f in rows:
+            assert ghost.sum() >= 100 and missing.sum() >= 40 and band.sum() < ghost.sum()
+            # between the receivers certainly in it and those in it give or take a texel
+            assert ghost.sum() <= int(f["n_ghost"]) <= (maybe0 & ~ink).sum(), (k, f["n_ghost"], ghost.sum())
+            assert missing.sum() <= int(f["n_missing"]) <= (maybek & ~in0).sum(), (k, f["n_missing"], missing.sum())
+            assert f["map_built"] == "False" and float(f["recast_fraction"]) == 0.0
+            checked += 1
+    assert checked == 2 * (FRAMES - 1)
+    none = _frames(res_none.out)
+    assert all(f["n_ghost"] == "0" and f["n_missing"] == "0" and f["map_built"] == "True" for f in none)
+    assert all(float(f["recast_fraction"]) == 1.0 for f in none)
+
+
+def test_a_caster_back_where_it_was_leaves_a_static_map_right(run_dict):
+    """Keyframes out and back: under ``static`` the last frame's kept map is right again (no ghost,
+    no missing shadow), the middle frame's is not; ``none`` casts every frame whose casters moved."""
+    motion = {"frames": 3, "points": 200, "casters": [{"shape": "box", "keys": [[0, 0, 0], [0.0, 1.2, 0.0],
+                                                                                 [0, 0, 0]]}]}
+    static = _frames(run_dict(_config([{**motion, "cache": "static"}]), name="static").out)
+    none = _frames(run_dict(_config([{**motion, "cache": "none"}]), name="none").out)
+    by = lambda rows, k: [f for f in rows if int(f["frame"]) == k]
+    assert all(int(f["n_ghost"]) > 0 and int(f["n_missing"]) > 0 for f in by(static, 1))
+    assert all(f["n_ghost"] == "0" and f["n_missing"] == "0" for f in by(static, 2))
+    assert [f["map_built"] for f in by(static, 2)] == ["False"] * 2
+    assert all(f["map_built"] == "True" for f in none)
+    # the map at frame 2 under none is cast again on the loaded geometry: the same counts as frame 0
+    keep = ("n_receivers", "acne_rate", "peterpan_rate", "error_rate")
+    assert [{k: f[k] for k in keep} for f in by(none, 2)] == [{k: f[k] for k in keep} for f in by(none, 0)]
+
+
+def test_moving_caster_config_errors_name_the_key():
+    """A caster without a path, with both paths, or naming no shape of the scene: one line naming the key."""
+    import dsm
+    from dsm.config import read as config
+    from dsm.core.types import ConfigError
+    for casters, key in (([{"shape": "box"}], "motion[0].casters[0]"),
+                         ([{"shape": "box", "offset": [1, 0, 0], "keys": [[0, 0, 0], [1, 0, 0]]}], "motion[0].casters[0]"),
+                         ([{"shape": "box", "keys": [[0, 0, 0]]}], "motion[0].casters[0].keys"),
+                         ([{"shape": "box", "offset": [1, 0]}], "motion[0].casters[0].offset"),
+                         ([{"shape": "box", "offset": [1, 0, 0], "speed": 1}], "motion[0].casters[0].speed")):
+        with pytest.raises(ConfigError) as e:
+            config.parse(base_config(motion=[{"casters": casters}]), "t.toml")
+        assert e.value.key == key, (casters, e.value)
+    with pytest.raises(ConfigError) as e:
+        config.parse(base_config(motion=[{"cache": "lazy"}]), "t.toml")
+    assert e.value.key == "motion[0].cache" and list(e.value.choices) == ["none", "static"]
+    with pytest.raises(ConfigError) as e:
+        dsm.run(_config([{"frames": 2, "points": 10, "casters": [{"shape": "teapot", "offset": [1, 0, 0]}]}]))
+    assert e.value.key == "motion[0].casters[0].shape" and list(e.value.choices) == ["ground", "box"]
