@@ -179,3 +179,28 @@ def test_moving_caster_config_errors_name_the_key():
     with pytest.raises(ConfigError) as e:
         dsm.run(_config([{"frames": 2, "points": 10, "casters": [{"shape": "teapot", "offset": [1, 0, 0]}]}]))
     assert e.value.key == "motion[0].casters[0].shape" and list(e.value.choices) == ["ground", "box"]
+
+
+def test_a_moved_mesh_gives_the_numbers_of_a_file_with_the_mesh_there(run_dict, tmp_path):
+    """A mesh scene (Mitsuba XML of two OBJ files): the box moved by the path under ``none``
+    gives at its last frame every count of the first frame of a scene whose OBJ holds the box
+    already there (exact visibility, receivers and map per frame follow the geometry)."""
+    from test_acne_surface import _box, _obj, _xml
+    ground = (np.array([[-3, -3, 0], [3, -3, 0], [3, 3, 0], [-3, 3, 0]], float), np.array([[0, 1, 2], [0, 2, 3]]))
+    (tmp_path / "ground.obj").write_text(_obj([ground]))
+    (tmp_path / "box.obj").write_text(_obj([_box([-0.5, -0.5, 0.0], [0.5, 0.5, 1.0])]))
+    (tmp_path / "moved.obj").write_text(_obj([_box([-0.5, 0.5, 0.0], [0.5, 1.5, 1.0])]))
+    (tmp_path / "a.xml").write_text(_xml(["ground.obj", "box.obj"]))
+    (tmp_path / "b.xml").write_text(_xml(["ground.obj", "moved.obj"]))
+    light = [{"type": "directional", "direction": SUN}]
+    base = dict(camera={"resolution": [48, 48]}, map={"resolution": 64}, light=light,
+                scheme=[{"name": "constant", "bias": "1 texel"}, {"name": "normal_offset"}])
+    moving = _frames(run_dict(base_config(scene=[{"file": str(tmp_path / "a.xml")}], **base, motion=[
+        {"frames": 2, "points": 200, "casters": [{"shape": "s1", "offset": [0.0, 1.0, 0.0]}]}]), name="a").out)
+    there = _frames(run_dict(base_config(scene=[{"file": str(tmp_path / "b.xml")}], **base,
+                                         motion=[{"frames": 2, "points": 200}]), name="b").out)
+    keep = ("n_receivers", "acne_rate", "peterpan_rate", "error_rate")
+    last = [{k: f[k] for k in keep} for f in moving if f["frame"] == "1"]
+    first = [{k: f[k] for k in keep} for f in moving if f["frame"] == "0"]
+    assert last == [{k: f[k] for k in keep} for f in there if f["frame"] == "0"]
+    assert last != first                                  # the box did move
