@@ -58,12 +58,15 @@ def test_nothing_moving_every_policy_gives_the_same_numbers(run_dict):
     paths = [{"frames": 3, "points": 300, "camera": "dolly", "offset": [0.0, 0.4, 0.0], "label": "p"},
              {"frames": 3, "points": 300, "light": "move", "light_offset": [0.0, 1.0, 0.0], "label": "q"}]
     variants = {"plain": {}, "none": {"cache": "none", "casters": [{"shape": "box", "offset": [0.0, 0.0, 0.0]}]},
-                "static": {"cache": "static"}}
+                "static": {"cache": "static"}, "stagger:2": {"cache": "stagger:2"}}
     runs = {}
     for name, extra in variants.items():
-        res = run_dict(_config([{**p, **extra} for p in paths], light=spot), name=name)
-        runs[name] = (_without_times(_metrics(res.out)), _without_times(_frames(res.out), ("cache",)))
-    assert runs["plain"] == runs["none"] == runs["static"]
+        res = run_dict(_config([{**p, **extra} for p in paths], light=spot), name=name.replace(":", "_"))
+        casts = ("maps_built", "map_built", "recast_fraction")      # stagger casts on time, the others when needed
+        runs[name] = (_without_times(_metrics(res.out)), _without_times(_frames(res.out), ("cache",)),
+                      _without_times(_metrics(res.out), casts), _without_times(_frames(res.out), ("cache",) + casts))
+    assert runs["plain"][:2] == runs["none"][:2] == runs["static"][:2]
+    assert runs["plain"][2:] == runs["stagger:2"][2:]
     frames = runs["plain"][1]
     assert frames and all(f["n_ghost"] == "0" and f["n_missing"] == "0" for f in frames)
     assert any(f["map_built"] == "True" for f in frames if int(f["frame"]) > 0)     # the light's views did change
@@ -160,6 +163,20 @@ def test_a_caster_back_where_it_was_leaves_a_static_map_right(run_dict):
     assert [{k: f[k] for k in keep} for f in by(none, 2)] == [{k: f[k] for k in keep} for f in by(none, 0)]
 
 
+def test_stagger_casts_every_n_frames_and_stagger_one_is_none(run_dict):
+    """The sliding box under ``stagger:2``: cast at frames 0, 2, 4, its ghosts only at the odd
+    frames, and those equal to ``static``'s at frame 1; ``stagger:1`` gives ``none``'s numbers."""
+    motion = {"frames": 5, "points": 200, "casters": [{"shape": "box", "offset": SLIDE}]}
+    runs = {c: _frames(run_dict(_config([{**motion, "cache": c}]), name=c.replace(":", "_")).out)
+            for c in ("none", "static", "stagger:1", "stagger:2")}
+    stagger = runs["stagger:2"]
+    assert [f["map_built"] for f in stagger if f["scheme"] == "constant"] == ["True", "False"] * 2 + ["True"]
+    assert all((int(f["n_ghost"]) > 0) == (int(f["frame"]) % 2 == 1) for f in stagger)
+    one = lambda rows: [(f["frame"], f["scheme"], f["n_ghost"], f["n_missing"]) for f in rows if f["frame"] == "1"]
+    assert one(stagger) == one(runs["static"])
+    assert _without_times(runs["stagger:1"], ("cache",)) == _without_times(runs["none"], ("cache",))
+
+
 def test_moving_caster_config_errors_name_the_key():
     """A caster without a path, with both paths, or naming no shape of the scene: one line naming the key."""
     import dsm
@@ -175,7 +192,12 @@ def test_moving_caster_config_errors_name_the_key():
         assert e.value.key == key, (casters, e.value)
     with pytest.raises(ConfigError) as e:
         config.parse(base_config(motion=[{"cache": "lazy"}]), "t.toml")
-    assert e.value.key == "motion[0].cache" and list(e.value.choices) == ["none", "static"]
+    assert e.value.key == "motion[0].cache" and list(e.value.choices) == ["none", "static", "stagger:N"]
+    for bad in ("stagger:0", "stagger:x", "stagger:"):
+        with pytest.raises(ConfigError) as e:
+            config.parse(base_config(motion=[{"cache": bad}]), "t.toml")
+        assert e.value.key == "motion[0].cache" and bad in str(e.value)
+    assert config.parse(base_config(motion=[{"cache": "stagger:03"}]), "t.toml").motion[0].cache == "stagger:3"
     with pytest.raises(ConfigError) as e:
         dsm.run(_config([{"frames": 2, "points": 10, "casters": [{"shape": "teapot", "offset": [1, 0, 0]}]}]))
     assert e.value.key == "motion[0].casters[0].shape" and list(e.value.choices) == ["ground", "box"]

@@ -186,8 +186,8 @@ KEYS = (
     Key("motion", "points", "int", "4000", "fixed surface points whose flicker is counted", _r(1, 10_000_000)),
     Key("motion", "label", "str", "the path's", "the path's name in the results"),
     Key("motion", "casters", "list of tables", "[]", "moving shapes {shape, offset | keys}"),
-    Key("motion", "cache", "str", "none", "the maps' cache policy: none rebuilds a map whenever its view or "
-        "a caster moved; static only when its view changed", CACHE_POLICIES),
+    Key("motion", "cache", "str", "none", "the maps' cache policy: none casts a map again whenever its view or "
+        "a caster moved; static only when its view changed; stagger:N also every N frames", CACHE_POLICIES),
     Key("motion.casters", "shape", "str", "(required)", "the moving shape's name (the scene's shape names)"),
     Key("motion.casters", "offset", "[x, y, z]", "(offset or keys)", "the shape's whole translation over the "
         "frames (linear)", unit="world"),

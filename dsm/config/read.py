@@ -653,7 +653,7 @@ def _parse_motion(t: dict, source: str, where: str) -> MotionSpec:
     if "light_angle" in t:
         kw["light_angle"] = number(t["light_angle"], source, f"{where}.light_angle")
     kw.update(_parse_light_move(t, kw["light"], source, where))
-    kw["cache"] = choice(t.get("cache", "none"), source, f"{where}.cache", CACHE_POLICIES)
+    kw["cache"] = _cache_policy(t.get("cache", "none"), source, f"{where}.cache")
     kw["casters"] = _parse_casters(t.get("casters", []), source, where)
     label = t.get("label", "")
     if not isinstance(label, str):
@@ -664,6 +664,19 @@ def _parse_motion(t: dict, source: str, where: str) -> MotionSpec:
         parts += {"none": [], "turn": [f"sun turn {spec.light_angle:g}deg"]}.get(spec.light, [f"light {spec.light}"])
         label = " + ".join(parts) or "static"
     return replace(spec, label=label)
+
+
+def _cache_policy(raw, source: str, key: str) -> str:
+    """A [[motion]] cache value: ``none``, ``static`` or ``stagger:N`` (a map cast every N frames, 1 <= N <= 1000)."""
+    if isinstance(raw, str) and raw.startswith("stagger:"):
+        n = raw.split(":", 1)[1]
+        if not n.isdigit() or not 1 <= int(n) <= 1000:
+            raise ConfigError(source, key, f"{raw!r}: stagger:N takes a period N in frames, an integer from 1 to 1000",
+                              CACHE_POLICIES)
+        return f"stagger:{int(n)}"
+    if raw not in CACHE_POLICIES[:-1]:
+        raise ConfigError(source, key, f"unknown value {raw!r}", CACHE_POLICIES)
+    return raw
 
 
 def _parse_casters(raw, source: str, where: str) -> tuple:

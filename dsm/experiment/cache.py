@@ -1,15 +1,18 @@
 """The maps' cache policies of a ``[[motion]]`` path ([[motion]] cache), one module each.
 
 A policy says, per frame, whether a planned map is cast again given whether its view's
-signature changed and whether a caster moved since the map kept was cast. The policies'
-names are core.types.CACHE_POLICIES (the config's choices); this registry checks each module
-against the Policy protocol at import."""
+signature changed, whether a caster moved since the map kept was cast, the frames since then and
+the policy's period (``stagger:N``'s N; 0 for the others). The policies' names are
+core.types.CACHE_POLICIES (the config's choices; ``stagger:N`` is ``stagger`` with N); this
+registry checks each module against the Policy protocol at import."""
 from __future__ import annotations
 
 from typing import Protocol, runtime_checkable
 
 from ..core.types import CACHE_POLICIES
-from . import cache_none, cache_static
+from functools import partial
+
+from . import cache_none, cache_stagger, cache_static
 
 
 @runtime_checkable
@@ -17,15 +20,17 @@ class Policy(Protocol):
     """What the frame loop reads of a cache policy module."""
     NAME: str
 
-    def rebuild(self, view_changed: bool, geometry_changed: bool) -> bool:
+    def rebuild(self, view_changed: bool, geometry_changed: bool, age: int, period: int) -> bool:
         """Whether the frame's map is cast again."""
 
 
-REGISTRY = {m.NAME: m for m in (cache_none, cache_static)}
-assert tuple(REGISTRY) == CACHE_POLICIES, "core.types.CACHE_POLICIES lists the registry's policies"
+REGISTRY = {m.NAME: m for m in (cache_none, cache_static, cache_stagger)}
+assert tuple(REGISTRY) == tuple(p.split(":")[0] for p in CACHE_POLICIES), "CACHE_POLICIES lists the registry's"
 assert all(isinstance(m, Policy) for m in REGISTRY.values())
 
 
-def get(name: str) -> Policy:
-    """The policy module named ``name`` (one of CACHE_POLICIES)."""
-    return REGISTRY[name]
+def rule(name: str):
+    """(view_changed, geometry_changed, age) -> cast again, of the config's ``cache`` value (one of
+    CACHE_POLICIES, ``stagger:N`` with its N)."""
+    policy, _, period = name.partition(":")
+    return partial(REGISTRY[policy].rebuild, period=int(period or 0))

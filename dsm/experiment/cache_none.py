@@ -7,6 +7,6 @@ and its view's signature holds, the map kept is the one a rebuild would cast, so
 NAME = "none"
 
 
-def rebuild(view_changed: bool, geometry_changed: bool) -> bool:
-    """Whether the frame's map is cast again."""
+def rebuild(view_changed: bool, geometry_changed: bool, age: int, period: int) -> bool:
+    """Whether the frame's map is cast again (``age``, ``period``: unused)."""
     return view_changed or geometry_changed

@@ -9,6 +9,6 @@ or its projection changes or when asked. A caster that moves leaves its shadow w
 NAME = "static"
 
 
-def rebuild(view_changed: bool, geometry_changed: bool) -> bool:
-    """Whether the frame's map is cast again."""
+def rebuild(view_changed: bool, geometry_changed: bool, age: int, period: int) -> bool:
+    """Whether the frame's map is cast again (``age``, ``period``: unused)."""
     return view_changed

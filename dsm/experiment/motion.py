@@ -359,7 +359,8 @@ class _MapFrames:
     tight: dict = dataclasses.field(default_factory=lambda: headroom.headroom(math.nan, math.nan))
     shown: frozenset = frozenset()                             # the frames the case's GIF shows
     mover: object = None                                      # the path's moving casters (dsm.experiment.casters)
-    policy: object = None                                     # the path's cache policy (dsm.experiment.cache)
+    policy: object = None                                     # the path's cache rule (dsm.experiment.cache)
+    cast_frame: int = 0                                       # the frame the kept map was cast at
     geometry: tuple = ()                                      # the frame's casters' translations
     map_geometry: object = None                               # the casters' translations the kept map was cast with
     bbox: tuple = ()                                          # the scene's bounds over the path (views fit to them)
@@ -377,7 +378,7 @@ def _run_map(runner, shared: SceneFrames, path: PathFrames, m, mover: Mover):
     keys += [(s, s.filter, fmt) for s in m.moments for fmt in cfg.map.format]     # pre-filtered instances
     state = _MapFrames(shared, path, m, {Case("", *k): _CaseFrames() for k in keys},
                        shown=frozenset(shown_frames(len(path.poses))), mover=mover,
-                       policy=cache.get(path.motion.cache), extents=shared.extents,
+                       policy=cache.rule(path.motion.cache), extents=shared.extents,
                        bbox=mover.swept_bbox() if mover.moving else shared.data.bbox)
     for t in range(len(path.poses)):
         if mover.place(t):           # a caster moved: the continuation rays' triangle tables follow it
@@ -422,7 +423,7 @@ def _frame_map(runner, state: _MapFrames, view):
     sig = _view_signature(view)
     view_changed, geometry_changed = sig != state.signature, state.geometry != state.map_geometry
     state.fresh = None
-    if state.smap is None or state.policy.rebuild(view_changed, geometry_changed):
+    if state.smap is None or state.policy(view_changed, geometry_changed, len(state.built) - state.cast_frame):
         def build():
             """The frame's map built: its arrays, then the ShadowMap."""
             sm = _cast(state, view)
@@ -432,7 +433,7 @@ def _frame_map(runner, state: _MapFrames, view):
         state.moments = {}                        # a new first layer: new moments
         state.build_ms.append(tm.ms)
         state.built.append(True)
-        state.map_geometry = state.geometry
+        state.map_geometry, state.cast_frame = state.geometry, len(state.built) - 1
         runner.record.add_rays({"map_texel": state.smap.rays.get("map_texel", 0)})
     else:
         state.smap = dataclasses.replace(state.smap, view=view)
