@@ -48,6 +48,10 @@ def test_translations_linear_and_keyframes_by_hand():
                         CasterPath("b", keys=((0.0, 0.0, 0.0), (0.0, 4.0, 0.0), (0.0, 4.0, 2.0)))], 5, 0.5)
     assert np.allclose(out[:, 0, 0], [0.0, 0.25, 0.5, 0.75, 1.0])
     assert np.allclose(out[:, 1], [[0, 0, 0], [0, 1, 0], [0, 2, 0], [0, 2, 0.5], [0, 2, 1]])
+    from dsm.experiment.casters import rotation, turns
+    assert np.allclose(turns([CasterPath("a", angle=90.0)], 4)[:, 0], [0, 30, 60, 90])
+    assert np.allclose(rotation((0, 0, 2), 90.0) @ [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])     # right-handed, as Mitsuba's
+    assert np.allclose(rotation((1, 1, 1), 120.0) @ [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
 
 
 def test_nothing_moving_every_policy_gives_the_same_numbers(run_dict):
@@ -186,7 +190,9 @@ def test_moving_caster_config_errors_name_the_key():
                          ([{"shape": "box", "offset": [1, 0, 0], "keys": [[0, 0, 0], [1, 0, 0]]}], "motion[0].casters[0]"),
                          ([{"shape": "box", "keys": [[0, 0, 0]]}], "motion[0].casters[0].keys"),
                          ([{"shape": "box", "offset": [1, 0]}], "motion[0].casters[0].offset"),
-                         ([{"shape": "box", "offset": [1, 0, 0], "speed": 1}], "motion[0].casters[0].speed")):
+                         ([{"shape": "box", "offset": [1, 0, 0], "speed": 1}], "motion[0].casters[0].speed"),
+                         ([{"shape": "box", "angle": 10, "axis": [0, 0, 0]}], "motion[0].casters[0].axis"),
+                         ([{"shape": "box", "angle": "ten"}], "motion[0].casters[0].angle")):
         with pytest.raises(ConfigError) as e:
             config.parse(base_config(motion=[{"casters": casters}]), "t.toml")
         assert e.value.key == key, (casters, e.value)
@@ -203,22 +209,28 @@ def test_moving_caster_config_errors_name_the_key():
     assert e.value.key == "motion[0].casters[0].shape" and list(e.value.choices) == ["ground", "box"]
 
 
-def test_a_moved_mesh_gives_the_numbers_of_a_file_with_the_mesh_there(run_dict, tmp_path):
-    """A mesh scene (Mitsuba XML of two OBJ files): the box moved by the path under ``none``
-    gives at its last frame every count of the first frame of a scene whose OBJ holds the box
-    already there (exact visibility, receivers and map per frame follow the geometry)."""
+@pytest.mark.parametrize("path", ["slide", "turn"])
+def test_a_moved_mesh_gives_the_numbers_of_a_file_with_the_mesh_there(run_dict, tmp_path, path):
+    """A mesh scene (Mitsuba XML of two OBJ files): the box moved by the path under ``none`` (slid
+    by 1 along y, or turned by 30 degrees about z through its centre) gives at its last frame every
+    count of the first frame of a scene whose OBJ holds the box already there (exact visibility,
+    receivers and map per frame follow the geometry)."""
     from test_acne_surface import _box, _obj, _xml
     ground = (np.array([[-3, -3, 0], [3, -3, 0], [3, 3, 0], [-3, 3, 0]], float), np.array([[0, 1, 2], [0, 2, 3]]))
     (tmp_path / "ground.obj").write_text(_obj([ground]))
-    (tmp_path / "box.obj").write_text(_obj([_box([-0.5, -0.5, 0.0], [0.5, 0.5, 1.0])]))
-    (tmp_path / "moved.obj").write_text(_obj([_box([-0.5, 0.5, 0.0], [0.5, 1.5, 1.0])]))
+    box = _box([-0.5, -0.5, 0.0], [0.5, 0.5, 1.0])
+    (tmp_path / "box.obj").write_text(_obj([box]))
+    c, s = math.cos(math.radians(30.0)), math.sin(math.radians(30.0))
+    there = box[0] + [0.0, 1.0, 0.0] if path == "slide" else box[0] @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]).T
+    caster = {"shape": "s1", "offset": [0.0, 1.0, 0.0]} if path == "slide" else {"shape": "s1", "angle": 30.0}
+    (tmp_path / "moved.obj").write_text(_obj([(there, box[1])]))
     (tmp_path / "a.xml").write_text(_xml(["ground.obj", "box.obj"]))
     (tmp_path / "b.xml").write_text(_xml(["ground.obj", "moved.obj"]))
     light = [{"type": "directional", "direction": SUN}]
     base = dict(camera={"resolution": [48, 48]}, map={"resolution": 64}, light=light,
                 scheme=[{"name": "constant", "bias": "1 texel"}, {"name": "normal_offset"}])
     moving = _frames(run_dict(base_config(scene=[{"file": str(tmp_path / "a.xml")}], **base, motion=[
-        {"frames": 2, "points": 200, "casters": [{"shape": "s1", "offset": [0.0, 1.0, 0.0]}]}]), name="a").out)
+        {"frames": 2, "points": 200, "casters": [caster]}]), name="a").out)
     there = _frames(run_dict(base_config(scene=[{"file": str(tmp_path / "b.xml")}], **base,
                                          motion=[{"frames": 2, "points": 200}]), name="b").out)
     keep = ("n_receivers", "acne_rate", "peterpan_rate", "error_rate")

@@ -185,7 +185,7 @@ KEYS = (
     Key("motion", "light_keys", "list of tables", "(keyframes)", "light keyframes {position, target}, at least two"),
     Key("motion", "points", "int", "4000", "fixed surface points whose flicker is counted", _r(1, 10_000_000)),
     Key("motion", "label", "str", "the path's", "the path's name in the results"),
-    Key("motion", "casters", "list of tables", "[]", "moving shapes {shape, offset | keys}"),
+    Key("motion", "casters", "list of tables", "[]", "moving shapes {shape, offset | keys, angle, axis}"),
     Key("motion", "cache", "str", "none", "the maps' cache policy: none casts a map again whenever its view or "
         "a caster moved; static only when its view changed; stagger:N also every N frames", CACHE_POLICIES),
     Key("motion.casters", "shape", "str", "(required)", "the moving shape's name (the scene's shape names)"),
@@ -193,6 +193,9 @@ KEYS = (
         "frames (linear)", unit="world"),
     Key("motion.casters", "keys", "list of [x, y, z]", "(offset or keys)", "translations at keyframes spread "
         "evenly over the frames", unit="world"),
+    Key("motion.casters", "angle", "float", "0", "the shape's whole turn over the frames, about axis through "
+        "its bounding box's centre", unit="degrees"),
+    Key("motion.casters", "axis", "[x, y, z]", "[0, 0, 1]", "the turn's axis"),
     Key("motion.keys", "position", "[x, y, z]", "(required)", "a keyframe's position", unit="world"),
     Key("motion.keys", "target", "[x, y, z]", "(required for the camera)", "a keyframe's target", unit="world"),
     Key("motion.light_keys", "position", "[x, y, z]", "(required)", "a light keyframe's position", unit="world"),

@@ -680,25 +680,28 @@ def _cache_policy(raw, source: str, key: str) -> str:
 
 
 def _parse_casters(raw, source: str, where: str) -> tuple:
-    """[[motion.casters]]: each a shape's name and its translation, linear (``offset``) or keyframed (``keys``)."""
+    """[[motion.casters]]: each a shape's name, its translation, linear (``offset``) or keyframed (``keys``),
+    and/or its turn (``angle`` degrees about ``axis`` through its centre)."""
     if isinstance(raw, dict):
         raw = [raw]
     if not isinstance(raw, list) or not all(isinstance(c, dict) for c in raw):
-        raise ConfigError(source, f"{where}.casters", "expected a list of tables {shape, offset | keys}")
+        raise ConfigError(source, f"{where}.casters", "expected a list of tables {shape, offset | keys, angle, axis}")
     out = []
     for j, c in enumerate(raw):
         at = f"{where}.casters[{j}]"
-        check_keys(c, ("shape", "offset", "keys"), source, at)
+        check_keys(c, ("shape", "offset", "keys", "angle", "axis"), source, at)
         if not isinstance(c.get("shape"), str) or not c["shape"]:
             raise ConfigError(source, f"{at}.shape", "a moving caster needs the shape's name (a string)")
-        if ("offset" in c) == ("keys" in c):
-            raise ConfigError(source, at, "give offset (a linear path) or keys (keyframes), one of them",
-                              ("offset", "keys"))
+        if ("offset" in c and "keys" in c) or not {"offset", "keys", "angle"} & set(c):
+            raise ConfigError(source, at, "give offset (a linear path) or keys (keyframes), one of them, and/or "
+                              "angle (a turn)", ("offset", "keys", "angle"))
         keys = c.get("keys", [])
         if "keys" in c and (not isinstance(keys, list) or len(keys) < 2):
             raise ConfigError(source, f"{at}.keys", "expected a list of at least two translations [x, y, z]")
         out.append(CasterPath(c["shape"], vec3(c.get("offset", [0, 0, 0]), source, f"{at}.offset"),
-                              tuple(vec3(k, source, f"{at}.keys[{i}]") for i, k in enumerate(keys))))
+                              tuple(vec3(k, source, f"{at}.keys[{i}]") for i, k in enumerate(keys)),
+                              number(c.get("angle", 0.0), source, f"{at}.angle"),
+                              vec3(c.get("axis", [0, 0, 1]), source, f"{at}.axis", nonzero=True)))
     if len({c.shape for c in out}) < len(out):
         raise ConfigError(source, f"{where}.casters", "a shape moves along one path; it is named twice")
     return tuple(out)

@@ -387,6 +387,8 @@ class CasterPath:
     shape: str                      # the shape's name (SceneData.shape_names)
     offset: tuple = (0.0, 0.0, 0.0)  # linear: the whole translation over the frames
     keys: tuple = ()                # keyframes: translations spread evenly over the frames (at least two)
+    angle: float = 0.0              # the whole turn over the frames (degrees), about ``axis`` through the shape's centre
+    axis: tuple = (0.0, 0.0, 1.0)   # the turn's axis (world)
 
 
 @dataclass(frozen=True)
