@@ -198,7 +198,7 @@ def test_moving_caster_config_errors_name_the_key():
         assert e.value.key == key, (casters, e.value)
     with pytest.raises(ConfigError) as e:
         config.parse(base_config(motion=[{"cache": "lazy"}]), "t.toml")
-    assert e.value.key == "motion[0].cache" and list(e.value.choices) == ["none", "static", "stagger:N"]
+    assert e.value.key == "motion[0].cache" and list(e.value.choices) == ["none", "static", "stagger:N", "invalidate"]
     for bad in ("stagger:0", "stagger:x", "stagger:"):
         with pytest.raises(ConfigError) as e:
             config.parse(base_config(motion=[{"cache": bad}]), "t.toml")
@@ -238,3 +238,60 @@ def test_a_moved_mesh_gives_the_numbers_of_a_file_with_the_mesh_there(run_dict, 
     first = [{k: f[k] for k in keep} for f in moving if f["frame"] == "0"]
     assert last == [{k: f[k] for k in keep} for f in there if f["frame"] == "0"]
     assert last != first                                  # the box did move
+
+
+def _in_hull(points, corners):
+    """Whether each 2-D point lies inside the convex hull of ``corners`` (numpy: monotone chain, then
+    every edge's side)."""
+    pts = sorted(map(tuple, np.round(corners, 12)))
+    cross = lambda o, a, b: (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+    lower, upper = [], []
+    for p in pts:
+        while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 0:
+            lower.pop()
+        lower.append(p)
+    for p in reversed(pts):
+        while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= 0:
+            upper.pop()
+        upper.append(p)
+    hull = np.array(lower[:-1] + upper[:-1])
+    ok = np.ones(len(points), bool)
+    for a, b in zip(hull, np.roll(hull, -1, axis=0)):
+        ok &= (b[0] - a[0]) * (points[:, 1] - a[1]) - (b[1] - a[1]) * (points[:, 0] - a[0]) >= 0
+    return ok
+
+
+def test_invalidate_recasts_the_texels_the_box_covers_and_equals_none(run_dict):
+    """``invalidate``: every count and rate of ``none`` and no ghost; the texels re-cast at frame k
+    are those whose centres fall inside the sun's projection of the box at frame k - 1 or at k (the
+    convex hulls of its projected corners, counted here), a small fraction of the map."""
+    import dsm.pipeline as pl
+    from dsm.core.types import LightSpec
+    motion = {"frames": FRAMES, "points": 200, "casters": [{"shape": "box", "offset": SLIDE}]}
+    inv = _frames(run_dict(_config([{**motion, "cache": "invalidate"}]), name="invalidate").out)
+    none = _frames(run_dict(_config([{**motion, "cache": "none"}]), name="none").out)
+    keep = ("frame", "scheme", "n_receivers", "acne_rate", "peterpan_rate", "error_rate", "n_ghost", "n_missing")
+    assert [{k: f[k] for k in keep} for f in inv] == [{k: f[k] for k in keep} for f in none]
+    assert all(f["n_ghost"] == "0" and f["n_missing"] == "0" for f in inv)
+    p0, box = _receivers_at(np.zeros(3), 48)
+    light = LightSpec("directional", direction=tuple(SUN))
+    bbox = (np.array([-4.0, -4.0, 0.0]), np.array([4.0, 4.0, 1.0]))    # the ground holds the box's whole path
+    view = pl.make_view(light, 64, p0, bbox)
+    R = view.resolution
+    jj, ii = np.mgrid[0:R, 0:R]
+    centres = np.stack([ii.ravel() + 0.5, jj.ravel() + 0.5], axis=1)
+    corners = np.array([[box[i >> k & 1][k] for k in range(3)] for i in range(8)])
+    uv = lambda pts: np.stack([np.asarray(c.numpy(), float) for c in view.project_on(mi_points(pts))], axis=1)
+    for k in range(1, FRAMES):
+        was, now = (np.asarray(SLIDE) * j / (FRAMES - 1) for j in (k - 1, k))
+        expected = _in_hull(centres, uv(corners + was)) | _in_hull(centres, uv(corners + now))
+        texels = {round(float(f["recast_fraction"]) * R ** 2) for f in inv if int(f["frame"]) == k}   # CSV: 6 digits
+        assert texels == {int(expected.sum())}, (k, texels, expected.sum())
+        assert 0.005 < expected.mean() < 0.2
+        assert all(f["map_built"] == "False" and f["frame_build_ms"] == "" for f in inv if int(f["frame"]) == k)
+
+
+def mi_points(pts):
+    """numpy (n, 3) as a Mitsuba Point3f."""
+    import mitsuba as mi
+    return mi.Point3f(*(mi.Float(np.asarray(pts[:, c], np.float32)) for c in range(3)))

@@ -674,7 +674,7 @@ def _cache_policy(raw, source: str, key: str) -> str:
             raise ConfigError(source, key, f"{raw!r}: stagger:N takes a period N in frames, an integer from 1 to 1000",
                               CACHE_POLICIES)
         return f"stagger:{int(n)}"
-    if raw not in CACHE_POLICIES[:-1]:
+    if raw not in CACHE_POLICIES or raw == "stagger:N":
         raise ConfigError(source, key, f"unknown value {raw!r}", CACHE_POLICIES)
     return raw
 

@@ -359,7 +359,7 @@ VIRTUAL_PRESETS = {
 
 CAMERA_PATHS = ("none", "dolly", "pan", "orbit", "keyframes")
 LIGHT_PATHS = ("none", "turn", "move", "keyframes")
-CACHE_POLICIES = ("none", "static", "stagger:N")   # [[motion]] cache: dsm.experiment.cache's registry holds one module each
+CACHE_POLICIES = ("none", "static", "stagger:N", "invalidate")   # [[motion]] cache: dsm.experiment.cache's registry holds one module each
 
 
 @dataclass(frozen=True)

@@ -12,21 +12,27 @@ from typing import Protocol, runtime_checkable
 from ..core.types import CACHE_POLICIES
 from functools import partial
 
-from . import cache_none, cache_stagger, cache_static
+from . import cache_invalidate, cache_none, cache_stagger, cache_static
 
 
 @runtime_checkable
 class Policy(Protocol):
     """What the frame loop reads of a cache policy module."""
     NAME: str
+    PARTIAL: bool        # a caster's move re-casts the texels its bounds touch (dsm.experiment.texel_recast)
 
     def rebuild(self, view_changed: bool, geometry_changed: bool, age: int, period: int) -> bool:
         """Whether the frame's map is cast again."""
 
 
-REGISTRY = {m.NAME: m for m in (cache_none, cache_static, cache_stagger)}
+REGISTRY = {m.NAME: m for m in (cache_none, cache_static, cache_stagger, cache_invalidate)}
 assert tuple(REGISTRY) == tuple(p.split(":")[0] for p in CACHE_POLICIES), "CACHE_POLICIES lists the registry's"
 assert all(isinstance(m, Policy) for m in REGISTRY.values())
+
+
+def partial_recast(name: str) -> bool:
+    """Whether the policy named by the config's ``cache`` value re-casts the texels a moving caster touches."""
+    return REGISTRY[name.partition(":")[0]].PARTIAL
 
 
 def rule(name: str):

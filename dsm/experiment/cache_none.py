@@ -5,6 +5,7 @@ and its view's signature holds, the map kept is the one a rebuild would cast, so
 (motion's results before moving casters, bit for bit)."""
 
 NAME = "none"
+PARTIAL = False                 # a move of a caster re-casts no part of the map kept
 
 
 def rebuild(view_changed: bool, geometry_changed: bool, age: int, period: int) -> bool:

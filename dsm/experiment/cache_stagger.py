@@ -7,6 +7,7 @@ changes. Between casts a moving caster leaves a ghost and a missing shadow up to
 old; ``stagger:1`` is ``none`` (a map cast every frame)."""
 
 NAME = "stagger"
+PARTIAL = False                 # a move of a caster re-casts no part of the map kept
 
 
 def rebuild(view_changed: bool, geometry_changed: bool, age: int, period: int) -> bool:

@@ -7,6 +7,7 @@ or its projection changes or when asked. A caster that moves leaves its shadow w
 (a ghost) and casts none where it is (missing)."""
 
 NAME = "static"
+PARTIAL = False                 # a move of a caster re-casts no part of the map kept
 
 
 def rebuild(view_changed: bool, geometry_changed: bool, age: int, period: int) -> bool:

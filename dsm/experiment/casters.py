@@ -112,14 +112,21 @@ class Mover:
                 params.update()
         self.placed = None
 
-    def swept_bbox(self) -> tuple:
-        """The scene's bounds over every frame: the loaded bounds and each caster's at each frame
-        (a turning caster's: its loaded box's corners turned, which hold the turned shape)."""
-        lo, hi = np.array(self.data.bbox[0], float), np.array(self.data.bbox[1], float)
+    def bounds(self, t: int) -> list:
+        """Each caster's world bounds (lo, hi) at frame ``t``: its loaded box's corners turned and
+        moved, which hold the turned shape."""
+        out = []
         for j, v in enumerate(self.base[0]):
             b = np.array([v.min(0), v.max(0)])
             corners = np.array([[b[i >> k & 1, k] for k in range(3)] for i in range(8)]) - self.centres[j]
-            for t in range(len(self.offsets)):
-                p = corners @ rotation(self.axes[j], self.angles[t, j]).T + self.centres[j] + self.offsets[t, j]
-                lo, hi = np.minimum(lo, p.min(0)), np.maximum(hi, p.max(0))
+            p = corners @ rotation(self.axes[j], self.angles[t, j]).T + self.centres[j] + self.offsets[t, j]
+            out.append((p.min(0), p.max(0)))
+        return out
+
+    def swept_bbox(self) -> tuple:
+        """The scene's bounds over every frame: the loaded bounds and each caster's at each frame."""
+        lo, hi = np.array(self.data.bbox[0], float), np.array(self.data.bbox[1], float)
+        for t in range(len(self.offsets)):
+            for b_lo, b_hi in self.bounds(t):
+                lo, hi = np.minimum(lo, b_lo), np.maximum(hi, b_hi)
         return lo, hi

@@ -53,6 +53,7 @@ from ..report.figures import frames_path
 from ..report.labels import params_label
 from . import cache
 from .casters import Mover
+from . import texel_recast
 from .motion_display import GifFrames, shown_frames, v_image
 
 # ---------------------------------------------------------------- paths
@@ -360,7 +361,10 @@ class _MapFrames:
     shown: frozenset = frozenset()                             # the frames the case's GIF shows
     mover: object = None                                      # the path's moving casters (dsm.experiment.casters)
     policy: object = None                                     # the path's cache rule (dsm.experiment.cache)
-    cast_frame: int = 0                                       # the frame the kept map was cast at
+    cast_frame: int = 0                                       # the frame the kept map was cast at, whole
+    map_frame: int = 0                                        # the frame whose casters the kept map holds
+    partial: bool = False                                     # the policy re-casts the texels moved casters touch
+    recast: list = dataclasses.field(default_factory=list)    # per frame: texels cast over the map's texels
     geometry: tuple = ()                                      # the frame's casters' translations
     map_geometry: object = None                               # the casters' translations the kept map was cast with
     bbox: tuple = ()                                          # the scene's bounds over the path (views fit to them)
@@ -378,7 +382,8 @@ def _run_map(runner, shared: SceneFrames, path: PathFrames, m, mover: Mover):
     keys += [(s, s.filter, fmt) for s in m.moments for fmt in cfg.map.format]     # pre-filtered instances
     state = _MapFrames(shared, path, m, {Case("", *k): _CaseFrames() for k in keys},
                        shown=frozenset(shown_frames(len(path.poses))), mover=mover,
-                       policy=cache.rule(path.motion.cache), extents=shared.extents,
+                       policy=cache.rule(path.motion.cache), partial=cache.partial_recast(path.motion.cache),
+                       extents=shared.extents,
                        bbox=mover.swept_bbox() if mover.moving else shared.data.bbox)
     for t in range(len(path.poses)):
         if mover.place(t):           # a caster moved: the continuation rays' triangle tables follow it
@@ -434,14 +439,30 @@ def _frame_map(runner, state: _MapFrames, view):
         state.build_ms.append(tm.ms)
         state.built.append(True)
         state.map_geometry, state.cast_frame = state.geometry, len(state.built) - 1
+        state.map_frame = state.cast_frame
+        state.recast.append(1.0)
         runner.record.add_rays({"map_texel": state.smap.rays.get("map_texel", 0)})
     else:
         state.smap = dataclasses.replace(state.smap, view=view)
         state.built.append(False)
+        state.recast.append(0.0)
         if geometry_changed:
             state.fresh = _cast(state, view)
+        if geometry_changed and state.partial:    # re-cast where a caster was or is: the map kept is right again
+            _recast_touched(state, view)
     state.signature = sig
     return state.smap
+
+
+def _recast_touched(state: _MapFrames, view):
+    """The kept map's texels whose rays meet a moved caster's bounds (at the map's frame or this
+    one) taken from this frame's cast (dsm.experiment.texel_recast); the fraction re-cast recorded."""
+    t = len(state.built) - 1
+    mask = texel_recast.touched(view, state.mover.bounds(state.map_frame) + state.mover.bounds(t))
+    state.smap = texel_recast.compose(state.smap, state.fresh, mask)
+    state.moments = {}                            # a new first layer: new moments
+    state.map_geometry, state.map_frame = state.geometry, t
+    state.recast[-1] = float(mask.mean())
 
 
 def _frame_moments(state: _MapFrames, spec, fmt: str) -> tuple:
@@ -542,8 +563,16 @@ def _run_frame(runner, state: _MapFrames, t: int):
                               "n_receivers": mt["n_receivers"], "acne_rate": mt["acne_rate"],
                               "peterpan_rate": mt["peterpan_rate"], "error_rate": mt["error_rate"],
                               "cache": state.path.motion.cache, **stale,
-                              "recast_fraction": 1.0 if state.built[-1] else 0.0,
-                              "frame_build_ms": state.build_ms[-1] if state.built[-1] else 0.0})
+                              "recast_fraction": state.recast[-1],
+                              "frame_build_ms": _frame_build_ms(state)})
+
+
+def _frame_build_ms(state: _MapFrames) -> float:
+    """The frame's build time: its whole cast's, 0 where the map was kept as it was, undefined where
+    part of it was re-cast (composed from an untimed whole cast: not a partial cast's cost)."""
+    if state.built[-1]:
+        return state.build_ms[-1]
+    return metrics.UNDEFINED if state.recast[-1] > 0 else 0.0
 
 
 def _write_case(runner, state: _MapFrames, case: Case, frames: _CaseFrames):
