@@ -187,7 +187,8 @@ KEYS = (
     Key("motion", "label", "str", "the path's", "the path's name in the results"),
     Key("motion", "casters", "list of tables", "[]", "moving shapes {shape, offset | keys, angle, axis}"),
     Key("motion", "cache", "str", "none", "the maps' cache policy: none casts a map again whenever its view or "
-        "a caster moved; static only when its view changed; stagger:N also every N frames", CACHE_POLICIES),
+        "a caster moved; static only when its view changed; stagger:N also every N frames; invalidate re-casts the texels a "
+        "moved caster's bounds touch", CACHE_POLICIES),
     Key("motion.casters", "shape", "str", "(required)", "the moving shape's name (the scene's shape names)"),
     Key("motion.casters", "offset", "[x, y, z]", "(offset or keys)", "the shape's whole translation over the "
         "frames (linear)", unit="world"),
