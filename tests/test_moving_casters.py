@@ -67,8 +67,9 @@ def test_nothing_moving_every_policy_gives_the_same_numbers(run_dict):
     for name, extra in variants.items():
         res = run_dict(_config([{**p, **extra} for p in paths], light=spot), name=name.replace(":", "_"))
         casts = ("maps_built", "map_built", "recast_fraction")      # stagger casts on time, the others when needed
-        runs[name] = (_without_times(_metrics(res.out)), _without_times(_frames(res.out), ("cache",)),
-                      _without_times(_metrics(res.out), casts), _without_times(_frames(res.out), ("cache",) + casts))
+        runs[name] = (_without_times(_metrics(res.out), ("cache",)), _without_times(_frames(res.out), ("cache",)),
+                      _without_times(_metrics(res.out), ("cache",) + casts),
+                      _without_times(_frames(res.out), ("cache",) + casts))
     assert runs["plain"][:2] == runs["none"][:2] == runs["static"][:2]
     assert runs["plain"][2:] == runs["stagger:2"][2:]
     frames = runs["plain"][1]
@@ -175,6 +176,13 @@ def test_stagger_casts_every_n_frames_and_stagger_one_is_none(run_dict):
             for c in ("none", "static", "stagger:1", "stagger:2")}
     stagger = runs["stagger:2"]
     assert [f["map_built"] for f in stagger if f["scheme"] == "constant"] == ["True", "False"] * 2 + ["True"]
+    rows = _metrics(run_dict(_config([{**motion, "cache": "stagger:2"}]), name="again").out)
+    for r in rows:            # per case: the mean over the frames, the worst frame, the mean texels re-cast
+        mine = [f for f in stagger if f["scheme"] == r["scheme"]]
+        rates = [float(f["ghost_rate"]) for f in mine]
+        assert r["cache"] == "stagger:2" and float(r["recast_fraction"]) == pytest.approx(3 / 5, rel=1e-5)
+        assert float(r["ghost_rate"]) == pytest.approx(np.mean(rates), rel=1e-5)
+        assert float(r["ghost_rate_worst"]) == pytest.approx(max(rates), rel=1e-5) and max(rates) > 0
     assert all((int(f["n_ghost"]) > 0) == (int(f["frame"]) % 2 == 1) for f in stagger)
     one = lambda rows: [(f["frame"], f["scheme"], f["n_ghost"], f["n_missing"]) for f in rows if f["frame"] == "1"]
     assert one(stagger) == one(runs["static"])

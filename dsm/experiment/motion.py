@@ -590,6 +590,7 @@ def _write_case(runner, state: _MapFrames, case: Case, frames: _CaseFrames):
         ms = state.moments_ms.get(pipeline.moment_key(case.spec, case.format)) if case.prefiltered else None
         measured.update(case_row.map_kind_columns(case, float(np.median(ms)) if ms else metrics.UNDEFINED))
     measured.update(_flicker_columns(pairs, ever))
+    measured.update(_cache_columns(mo.cache, frames.frames))
     costs = {"maps_built": int(sum(state.built)), "build_ms": float(np.median(state.build_ms)),
              "build_first_ms": float("nan"), "lookup_ms": case_row.median_defined(frames.lookup_ms),
              "reference_ms": float("nan"), "sweep_key": "", "sweep_value": float("nan"), "texel_size": float("nan"),
@@ -623,6 +624,18 @@ def _flicker_columns(pairs: list, ever: float) -> dict:
     out = {k: case_row.mean_defined([p[k] for p in pairs])
            for k in ("flicker_rate", "flicker_magnitude", "flicker_within_rate", "flicker_change_rate")}
     return {**out, "flicker_ever": ever}
+
+
+def _cache_columns(policy: str, frame_rows: list) -> dict:
+    """A motion case's cache: its policy, the ghost and missing rates' mean over the frames and
+    their worst frame (undefined where no frame defines them), the mean fraction of texels re-cast."""
+    worst = lambda vals: max(v for v in vals if metrics.defined(v)) if any(map(metrics.defined, vals)) \
+        else metrics.UNDEFINED
+    out = {"cache": policy, "recast_fraction": float(np.mean([f["recast_fraction"] for f in frame_rows]))}
+    for k in ("ghost_rate", "missing_rate"):
+        vals = [f[k] for f in frame_rows]
+        out[k], out[f"{k}_worst"] = case_row.mean_defined(vals), worst(vals)
+    return out
 
 
 def _leak_columns(frame_metrics: list) -> dict:
