@@ -200,7 +200,8 @@ def test_moving_caster_config_errors_name_the_key():
                          ([{"shape": "box", "offset": [1, 0]}], "motion[0].casters[0].offset"),
                          ([{"shape": "box", "offset": [1, 0, 0], "speed": 1}], "motion[0].casters[0].speed"),
                          ([{"shape": "box", "angle": 10, "axis": [0, 0, 0]}], "motion[0].casters[0].axis"),
-                         ([{"shape": "box", "angle": "ten"}], "motion[0].casters[0].angle")):
+                         ([{"shape": "box", "angle": "ten"}], "motion[0].casters[0].angle"),
+                         ([{"shape": "box", "angle": 5, "static": 1}], "motion[0].casters[0].static")):
         with pytest.raises(ConfigError) as e:
             config.parse(base_config(motion=[{"casters": casters}]), "t.toml")
         assert e.value.key == key, (casters, e.value)
@@ -297,6 +298,20 @@ def test_invalidate_recasts_the_texels_the_box_covers_and_equals_none(run_dict):
         assert texels == {int(expected.sum())}, (k, texels, expected.sum())
         assert 0.005 < expected.mean() < 0.2
         assert all(f["map_built"] == "False" and f["frame_build_ms"] == "" for f in inv if int(f["frame"]) == k)
+
+
+def test_a_caster_flagged_static_is_never_invalidated(run_dict):
+    """``invalidate`` with the moving box flagged static (UE5's undefined case) re-casts nothing
+    after frame 0 and gives ``static``'s ghosts and missing shadows, which stay after the box stops."""
+    keys = [[0, 0, 0], [0.0, 1.2, 0.0], [0.0, 1.2, 0.0]]
+    inv = _frames(run_dict(_config([{"frames": 3, "points": 200, "cache": "invalidate", "casters": [
+        {"shape": "box", "keys": keys, "static": True}]}]), name="inv").out)
+    static = _frames(run_dict(_config([{"frames": 3, "points": 200, "cache": "static", "casters": [
+        {"shape": "box", "keys": keys}]}]), name="static").out)
+    keep = ("frame", "scheme", "n_receivers", "n_ghost", "n_missing", "error_rate")
+    assert [{k: f[k] for k in keep} for f in inv] == [{k: f[k] for k in keep} for f in static]
+    assert all(int(f["n_ghost"]) > 0 for f in inv if f["frame"] == "2")
+    assert all(float(f["recast_fraction"]) == 0.0 for f in inv if f["frame"] != "0")
 
 
 def mi_points(pts):

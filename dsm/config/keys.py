@@ -197,6 +197,8 @@ KEYS = (
     Key("motion.casters", "angle", "float", "0", "the shape's whole turn over the frames, about axis through "
         "its bounding box's centre", unit="degrees"),
     Key("motion.casters", "axis", "[x, y, z]", "[0, 0, 1]", "the turn's axis"),
+    Key("motion.casters", "static", "bool", "false", "flagged static although it moves: cache invalidate never "
+        "re-casts for it (UE5's Static invalidation on a moving primitive)"),
     Key("motion.keys", "position", "[x, y, z]", "(required)", "a keyframe's position", unit="world"),
     Key("motion.keys", "target", "[x, y, z]", "(required for the camera)", "a keyframe's target", unit="world"),
     Key("motion.light_keys", "position", "[x, y, z]", "(required)", "a light keyframe's position", unit="world"),

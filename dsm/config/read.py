@@ -689,7 +689,9 @@ def _parse_casters(raw, source: str, where: str) -> tuple:
     out = []
     for j, c in enumerate(raw):
         at = f"{where}.casters[{j}]"
-        check_keys(c, ("shape", "offset", "keys", "angle", "axis"), source, at)
+        check_keys(c, ("shape", "offset", "keys", "angle", "axis", "static"), source, at)
+        if not isinstance(c.get("static", False), bool):
+            raise ConfigError(source, f"{at}.static", f"expected true or false, got {c['static']!r}")
         if not isinstance(c.get("shape"), str) or not c["shape"]:
             raise ConfigError(source, f"{at}.shape", "a moving caster needs the shape's name (a string)")
         if ("offset" in c and "keys" in c) or not {"offset", "keys", "angle"} & set(c):
@@ -701,7 +703,8 @@ def _parse_casters(raw, source: str, where: str) -> tuple:
         out.append(CasterPath(c["shape"], vec3(c.get("offset", [0, 0, 0]), source, f"{at}.offset"),
                               tuple(vec3(k, source, f"{at}.keys[{i}]") for i, k in enumerate(keys)),
                               number(c.get("angle", 0.0), source, f"{at}.angle"),
-                              vec3(c.get("axis", [0, 0, 1]), source, f"{at}.axis", nonzero=True)))
+                              vec3(c.get("axis", [0, 0, 1]), source, f"{at}.axis", nonzero=True),
+                              c.get("static", False)))
     if len({c.shape for c in out}) < len(out):
         raise ConfigError(source, f"{where}.casters", "a shape moves along one path; it is named twice")
     return tuple(out)

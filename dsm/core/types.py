@@ -389,6 +389,7 @@ class CasterPath:
     keys: tuple = ()                # keyframes: translations spread evenly over the frames (at least two)
     angle: float = 0.0              # the whole turn over the frames (degrees), about ``axis`` through the shape's centre
     axis: tuple = (0.0, 0.0, 1.0)   # the turn's axis (world)
+    flagged_static: bool = False    # ``static = true``: flagged static, so ``invalidate`` never re-casts for it
 
 
 @dataclass(frozen=True)

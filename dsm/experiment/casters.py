@@ -65,6 +65,7 @@ class Mover:
         self.offsets = translations(casters, frames, data.scale)
         self.angles = turns(casters, frames)
         self.axes = [np.asarray(c.axis, float) for c in casters]
+        self.flagged = [c.flagged_static for c in casters]
         scenes = [data.scene] + ([data.exact_scene] if data.exact_scene is not None else [])
         self.params = [mi.traverse(s) for s in scenes]
         keys = [f"{data.scene.shapes()[i].id()}.vertex_positions" for i in self.index]
@@ -112,11 +113,18 @@ class Mover:
                 params.update()
         self.placed = None
 
-    def bounds(self, t: int) -> list:
-        """Each caster's world bounds (lo, hi) at frame ``t``: its loaded box's corners turned and
-        moved, which hold the turned shape."""
+    @property
+    def any_flagged(self) -> bool:
+        """Whether a caster is flagged static (``invalidate`` never re-casts for it)."""
+        return any(self.flagged)
+
+    def bounds(self, t: int, invalidating: bool = False) -> list:
+        """Each caster's world bounds (lo, hi) at frame ``t`` (``invalidating``: of the casters not
+        flagged static): its loaded box's corners turned and moved, which hold the turned shape."""
         out = []
         for j, v in enumerate(self.base[0]):
+            if invalidating and self.flagged[j]:
+                continue
             b = np.array([v.min(0), v.max(0)])
             corners = np.array([[b[i >> k & 1, k] for k in range(3)] for i in range(8)]) - self.centres[j]
             p = corners @ rotation(self.axes[j], self.angles[t, j]).T + self.centres[j] + self.offsets[t, j]

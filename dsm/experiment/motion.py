@@ -458,10 +458,12 @@ def _recast_touched(state: _MapFrames, view):
     """The kept map's texels whose rays meet a moved caster's bounds (at the map's frame or this
     one) taken from this frame's cast (dsm.experiment.texel_recast); the fraction re-cast recorded."""
     t = len(state.built) - 1
-    mask = texel_recast.touched(view, state.mover.bounds(state.map_frame) + state.mover.bounds(t))
+    mask = texel_recast.touched(view, state.mover.bounds(state.map_frame, True) + state.mover.bounds(t, True))
     state.smap = texel_recast.compose(state.smap, state.fresh, mask)
     state.moments = {}                            # a new first layer: new moments
-    state.map_geometry, state.map_frame = state.geometry, t
+    # a caster flagged static left its old texels: the map is this frame's no more (a fresh map every frame)
+    state.map_geometry = None if state.mover.any_flagged else state.geometry
+    state.map_frame = t
     state.recast[-1] = float(mask.mean())
 
 
