@@ -26,8 +26,11 @@ class Policy(Protocol):
 
 
 REGISTRY = {m.NAME: m for m in (cache_none, cache_static, cache_stagger, cache_invalidate)}
-assert tuple(REGISTRY) == tuple(p.split(":")[0] for p in CACHE_POLICIES), "CACHE_POLICIES lists the registry's"
-assert all(isinstance(m, Policy) for m in REGISTRY.values())
+if tuple(REGISTRY) != tuple(p.partition(":")[0] for p in CACHE_POLICIES):
+    raise TypeError(f"core.types.CACHE_POLICIES {CACHE_POLICIES} must list the registry's policies {tuple(REGISTRY)}")
+for _module in REGISTRY.values():
+    if not isinstance(_module, Policy):
+        raise TypeError(f"{_module.__name__} lacks a field of the cache Policy protocol (NAME, PARTIAL, rebuild)")
 
 
 def partial_recast(name: str) -> bool:

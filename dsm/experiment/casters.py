@@ -53,13 +53,13 @@ def translations(casters, frames: int, scale: float) -> np.ndarray:
 class Mover:
     """The moving shapes of one path over one scene: their loaded vertices, and each frame's placement."""
 
-    def __init__(self, data, casters, frames: int, where: str):
-        """Check the shapes' names (a ConfigError naming ``where``) and keep their loaded vertices."""
+    def __init__(self, data, casters, frames: int, source: str, where: str):
+        """Check the shapes' names (a ConfigError naming ``source`` and ``where``) and keep their loaded vertices."""
         self.data = data
         self.index = []
         for j, c in enumerate(casters):
             if c.shape not in data.shape_names:
-                raise ConfigError("<config>", f"{where}.casters[{j}].shape",
+                raise ConfigError(source, f"{where}.casters[{j}].shape",
                                   f"{c.shape!r} is no shape of scene {data.label!r}", tuple(data.shape_names))
             self.index.append(data.shape_names.index(c.shape))
         self.offsets = translations(casters, frames, data.scale)

@@ -301,7 +301,8 @@ def run_scene(runner, scene, maps, closed, extents):
     fp = sample_points(data.scene, max(mo.points for mo in cfg.motion), cfg.seed, data.diagonal)
     shared = SceneFrames(data, Camera.from_sensor(data.sensor), fp, closed, extents,
                          pipeline.scene_magnitude(data.bbox))
-    movers = [Mover(data, mo.casters, mo.frames, f"motion[{i}]") for i, mo in enumerate(cfg.motion)]  # names checked
+    movers = [Mover(data, mo.casters, mo.frames, cfg.source, f"motion[{i}]")      # the shapes' names checked first
+              for i, mo in enumerate(cfg.motion)]
     for mo, mover in zip(cfg.motion, movers):
         pts = _first_points(fp, min(mo.points, fp.count))
         poses = camera_path(mo, shared.base, data.bbox, data.scale, data.offset)
