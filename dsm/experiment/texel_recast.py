@@ -3,8 +3,10 @@
 A texel of a map holds what its one ray through the texel's centre met (its first hit, slope and
 second depth), so a texel whose ray meets no moved caster's bounds, neither where the caster was
 nor where it is, holds the same values in a fresh cast: those are kept, the others taken from
-this frame's cast. The test is a float64 slab test (numpy) against bounds grown by a small margin
-(float32 rays), so it only ever re-casts too many texels, never too few."""
+this frame's cast. The test is a float64 slab test (numpy) of the float32 rays as cast against
+bounds grown by a margin that holds the float32 rounding of the casters' vertices and of the
+intersection test (a few float32 steps at the coordinates' magnitude), so it only ever re-casts
+too many texels, never too few."""
 from __future__ import annotations
 
 import dataclasses
@@ -15,7 +17,8 @@ import numpy as np
 
 from .. import pipeline
 
-GROW = 1e-5       # the bounds' margin, a fraction of their diagonal plus the ray origins' magnitude
+F32_STEPS = 8.0 * 2.0 ** -24    # the bounds' margin: this many float32 units at the coordinates' magnitude ...
+RELATIVE = 1e-6                 # ... plus this fraction of the bounds' diagonal
 
 
 def touched(view, boxes) -> np.ndarray:
@@ -24,7 +27,8 @@ def touched(view, boxes) -> np.ndarray:
     o, d = pipeline.points_np(ray.o), pipeline.points_np(ray.d)
     out = np.zeros(len(o), bool)
     for lo, hi in boxes:
-        g = GROW * (np.linalg.norm(np.subtract(hi, lo)) + np.abs(o).max())
+        scale = max(np.abs(o).max(), np.abs(lo).max(), np.abs(hi).max())
+        g = F32_STEPS * scale + RELATIVE * np.linalg.norm(np.subtract(hi, lo))
         with np.errstate(divide="ignore", invalid="ignore"):
             t1, t2 = (lo - g - o) / d, (hi + g - o) / d
         inside = (o >= lo - g) & (o <= hi + g)                 # a ray parallel to a slab: inside it or never
