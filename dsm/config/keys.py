@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from ..core.types import (AREA_SHAPES, Length, BACKENDS, BLUR_KERNELS, BUILD_MODES, CAMERA_PATHS, CASCADE_FITS,
+from ..core.types import (AREA_SHAPES, Length, BACKENDS, BLUR_KERNELS, BUILD_MODES, CACHE_POLICIES, CAMERA_PATHS, CASCADE_FITS,
                           CASCADE_SPLITS, DEPTH_BOUNDS, FILTERS, FORMATS, LAMBDA_MAX, LIGHT_PATHS, LOOKUP_MODES,
                           MAP_KINDS, MAP_VIEWS, MAX_CASCADES, REPORT_IMAGES, SEED_MAX, VARIANTS, VIRTUAL_PRESETS,
                           VIRTUAL_RULES, HYBRID_ORIGINS)
@@ -190,6 +190,20 @@ KEYS = (
     Key("motion", "light_keys", "list of tables", "(keyframes)", "light keyframes {position, target}, at least two"),
     Key("motion", "points", "int", "4000", "fixed surface points whose flicker is counted", _r(1, 10_000_000)),
     Key("motion", "label", "str", "the path's", "the path's name in the results"),
+    Key("motion", "casters", "list of tables", "[]", "moving shapes {shape, offset | keys, angle, axis}"),
+    Key("motion", "cache", "str", "none", "the maps' cache policy: none casts a map again whenever its view or "
+        "a caster moved; static only when its view changed; stagger:N also every N frames; invalidate re-casts the texels a "
+        "moved caster's bounds touch", CACHE_POLICIES),
+    Key("motion.casters", "shape", "str", "(required)", "the moving shape's name (the scene's shape names)"),
+    Key("motion.casters", "offset", "[x, y, z]", "(offset or keys)", "the shape's whole translation over the "
+        "frames (linear)", unit="world"),
+    Key("motion.casters", "keys", "list of [x, y, z]", "(offset or keys)", "translations at keyframes spread "
+        "evenly over the frames", unit="world"),
+    Key("motion.casters", "angle", "float", "0", "the shape's whole turn over the frames, about axis through "
+        "its bounding box's centre", unit="degrees"),
+    Key("motion.casters", "axis", "[x, y, z]", "[0, 0, 1]", "the turn's axis"),
+    Key("motion.casters", "static", "bool", "false", "flagged static although it moves: cache invalidate never "
+        "re-casts for it (UE5's Static invalidation on a moving primitive)"),
     Key("motion.keys", "position", "[x, y, z]", "(required)", "a keyframe's position", unit="world"),
     Key("motion.keys", "target", "[x, y, z]", "(required for the camera)", "a keyframe's target", unit="world"),
     Key("motion.light_keys", "position", "[x, y, z]", "(required)", "a light keyframe's position", unit="world"),
@@ -252,7 +266,7 @@ KEYS = (
 )
 
 TABLES = ("experiment", "camera", "scene", "light", "map", "map.virtual", "contact", "hybrid", "memory", "timing", "oracle",
-          "report", "execution", "motion", "motion.keys", "motion.light_keys", "scheme", "tune", "tune.camera",
+          "report", "execution", "motion", "motion.keys", "motion.light_keys", "motion.casters", "scheme", "tune", "tune.camera",
           "tune.bias_map")
 
 

@@ -14,7 +14,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from .virtual import check_reach, parse_virtual
-from ..core.types import (LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, MAP_VIEWS, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA, REPORT_IMAGES, LOOKUP_MODES, BUILD_MODES, LAMBDA_MAX, SEED_MAX, ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params, SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec, CameraSpec, CascadeSpec, CASCADE_SPLITS, CASCADE_FITS, DEPTH_BOUNDS, MAX_CASCADES, MotionSpec, CAMERA_PATHS, LIGHT_PATHS, MAP_KINDS, MomentSpec, ContactSpec, BLUR_KERNELS, HybridSpec, HYBRID_ORIGINS)
+from ..core.types import (LENGTH_UNITS, FILTERS, FORMATS, POINT_VIEWS, MAP_VIEWS, VARIANTS, CULLINGS, VIEW_FACES, DEFAULT_CAMERA, REPORT_IMAGES, LOOKUP_MODES, BUILD_MODES, LAMBDA_MAX, SEED_MAX, ConfigError, NothingToRun, Length, number, choice, vec3, as_list, check_keys, coerce_field, sweep_params, SceneSpec, LightSpec, MapSpec, SchemeSpec, OracleSpec, Config, describe_params, BACKENDS, ExecutionSpec, CameraSpec, CascadeSpec, CASCADE_SPLITS, CASCADE_FITS, DEPTH_BOUNDS, MAX_CASCADES, MotionSpec, CAMERA_PATHS, LIGHT_PATHS, CACHE_POLICIES, CasterPath, MAP_KINDS, MomentSpec, ContactSpec, BLUR_KERNELS, HybridSpec, HYBRID_ORIGINS)
 
 # a run's folder is runs/<name>-tune-YYYYmmdd-HHMMSS[-n] (at most 25 bytes more) and a file name takes 255 bytes
 NAME_MAX_BYTES = 255 - len("-tune-20240101-120000-999")
@@ -142,6 +142,7 @@ def parse(raw: dict, source: str = "<config>", base: Path | None = None) -> Conf
     budget, (repeats, lookups, builds), lambdas, report_images = _parse_run_tables(raw, source)
     motion = tuple(_parse_motion(t, source, f"motion[{i}]") for i, t in enumerate(_array_of_tables(raw, "motion", source)))
     _check_motion_lights(motion, lights, source)
+    _check_motion_casters(motion, scenes, source)
     _check_motion_moments(motion, mapspec, source)
     contact = _parse_contact(raw, source, bool(motion))
     shrink = _parse_shrink(m, source, bool(motion))
@@ -618,7 +619,7 @@ def _kind_presets(name: str, t: dict, source: str) -> list:
 def _parse_motion(t: dict, source: str, where: str) -> MotionSpec:
     """One [[motion]] path: frames, a camera path and/or a light path, fixed points."""
     check_keys(t, ("frames", "camera", "offset", "angle", "keys", "light", "light_axis", "light_angle",
-                   "light_offset", "light_keys", "points", "label"), source, where)
+                   "light_offset", "light_keys", "points", "label", "casters", "cache"), source, where)
     kw = {"frames": number(t.get("frames", 8), source, f"{where}.frames", integer=True, minimum=2, maximum=1000),
           "camera": choice(t.get("camera", "none"), source, f"{where}.camera", CAMERA_PATHS),
           "light": choice(t.get("light", "none"), source, f"{where}.light", LIGHT_PATHS),
@@ -652,6 +653,8 @@ def _parse_motion(t: dict, source: str, where: str) -> MotionSpec:
     if "light_angle" in t:
         kw["light_angle"] = number(t["light_angle"], source, f"{where}.light_angle")
     kw.update(_parse_light_move(t, kw["light"], source, where))
+    kw["cache"] = _cache_policy(t.get("cache", "none"), source, f"{where}.cache")
+    kw["casters"] = _parse_casters(t.get("casters", []), source, where)
     label = t.get("label", "")
     if not isinstance(label, str):
         raise ConfigError(source, f"{where}.label", f"expected a string, got {label!r}")
@@ -661,6 +664,50 @@ def _parse_motion(t: dict, source: str, where: str) -> MotionSpec:
         parts += {"none": [], "turn": [f"sun turn {spec.light_angle:g}deg"]}.get(spec.light, [f"light {spec.light}"])
         label = " + ".join(parts) or "static"
     return replace(spec, label=label)
+
+
+def _cache_policy(raw, source: str, key: str) -> str:
+    """A [[motion]] cache value: ``none``, ``static`` or ``stagger:N`` (a map cast every N frames, 1 <= N <= 1000)."""
+    if isinstance(raw, str) and raw.startswith("stagger:"):
+        n = raw.split(":", 1)[1]
+        if not n.isdigit() or not 1 <= int(n) <= 1000:
+            raise ConfigError(source, key, f"{raw!r}: stagger:N takes a period N in frames, an integer from 1 to 1000",
+                              CACHE_POLICIES)
+        return f"stagger:{int(n)}"
+    if raw not in CACHE_POLICIES or raw == "stagger:N":
+        raise ConfigError(source, key, f"unknown value {raw!r}", CACHE_POLICIES)
+    return raw
+
+
+def _parse_casters(raw, source: str, where: str) -> tuple:
+    """[[motion.casters]]: each a shape's name, its translation, linear (``offset``) or keyframed (``keys``),
+    and/or its turn (``angle`` degrees about ``axis`` through its centre)."""
+    if isinstance(raw, dict):
+        raw = [raw]
+    if not isinstance(raw, list) or not all(isinstance(c, dict) for c in raw):
+        raise ConfigError(source, f"{where}.casters", "expected a list of tables {shape, offset | keys, angle, axis}")
+    out = []
+    for j, c in enumerate(raw):
+        at = f"{where}.casters[{j}]"
+        check_keys(c, ("shape", "offset", "keys", "angle", "axis", "static"), source, at)
+        if not isinstance(c.get("static", False), bool):
+            raise ConfigError(source, f"{at}.static", f"expected true or false, got {c['static']!r}")
+        if not isinstance(c.get("shape"), str) or not c["shape"]:
+            raise ConfigError(source, f"{at}.shape", "a moving caster needs the shape's name (a string)")
+        if ("offset" in c and "keys" in c) or not {"offset", "keys", "angle"} & set(c):
+            raise ConfigError(source, at, "give offset (a linear path) or keys (keyframes), one of them, and/or "
+                              "angle (a turn)", ("offset", "keys", "angle"))
+        keys = c.get("keys", [])
+        if "keys" in c and (not isinstance(keys, list) or len(keys) < 2):
+            raise ConfigError(source, f"{at}.keys", "expected a list of at least two translations [x, y, z]")
+        out.append(CasterPath(c["shape"], vec3(c.get("offset", [0, 0, 0]), source, f"{at}.offset"),
+                              tuple(vec3(k, source, f"{at}.keys[{i}]") for i, k in enumerate(keys)),
+                              number(c.get("angle", 0.0), source, f"{at}.angle"),
+                              vec3(c.get("axis", [0, 0, 1]), source, f"{at}.axis", nonzero=True),
+                              c.get("static", False)))
+    if len({c.shape for c in out}) < len(out):
+        raise ConfigError(source, f"{where}.casters", "a shape moves along one path; it is named twice")
+    return tuple(out)
 
 
 def _parse_light_move(t: dict, path: str, source: str, where: str) -> dict:
@@ -734,6 +781,20 @@ def _parse_light(t: dict, source: str, where: str) -> LightSpec:
     if kind is None:
         raise ConfigError(source, f"{where}.type", "missing", lights.TYPES)
     return lights.get(kind).parse(t, source, where)
+
+
+def _check_motion_casters(motion, scenes, source):
+    """Each moving caster names a shape of every built-in scene (a mesh file's names are checked once loaded)."""
+    from ..scenes.builtins import builtin_geometry
+    for sc in scenes:
+        if not sc.builtin or not any(mo.casters for mo in motion):
+            continue
+        names = list(builtin_geometry(sc.builtin, sc.params)[0])
+        for i, mo in enumerate(motion):
+            for j, c in enumerate(mo.casters):
+                if c.shape not in names:
+                    raise ConfigError(source, f"motion[{i}].casters[{j}].shape",
+                                      f"no shape named {c.shape!r} in {sc.builtin}", names)
 
 
 def _check_motion_moments(motion, mapspec, source):

@@ -62,6 +62,8 @@ COST_COLUMNS = ["map_bytes", "page_table_bytes", "map_rays", "taps"]
 HYBRID_COLUMNS = ("hybrid_rule:t hybrid_params:t hybrid_origin:t hybrid_rays:i ray_fraction hybrid_n_ray_wrong:i "
                   "hybrid_shortened:i hybrid_n_acne:i hybrid_n_peterpan:i hybrid_acne_rate hybrid_peterpan_rate "
                   "hybrid_error_rate hybrid_ms hybrid_compile_ms").split()
+# a motion case's cache (dsm.experiment.cache): its policy, ghosts and missing shadows (mean and worst frame), texels re-cast
+CACHE_COLUMNS = "cache ghost_rate missing_rate ghost_rate_worst missing_rate_worst recast_fraction".split()
 CONTACT_COLUMNS = ("n_contact_false n_contact_recovered n_contact_missed contact_acne_rate contact_peterpan_rate "
                    "contact_error_rate contact_mean_abs_error contact_ms").split()
 
@@ -77,7 +79,7 @@ _ORDER = (
     "reference_ms sweep_key sweep_value").split() + list(SOFT_COLUMNS) + ["f32_step", "texel_f32_steps", "map_kind",
                                                                          *LEAK_COLUMNS, "moments_ms"] + CONTACT_COLUMNS + [
     "lookup_shared", "build_shared"] + VIRTUAL_COLUMNS + TRANSITION_COLUMNS + COST_COLUMNS + [
-    c.partition(":")[0] for c in HYBRID_COLUMNS]
+    c.partition(":")[0] for c in HYBRID_COLUMNS] + CACHE_COLUMNS
 
 _GROUPS = (
     _cols("core", "case:t scene:t light:t view:t scheme:t preset:t params:t culling:t resolution:i total_texels:i "
@@ -90,7 +92,7 @@ _GROUPS = (
                    "build_compile_ms build_peak_mb lookup_compile_ms lookup_kernels_compiled:i lookup_shared:i build_shared:i")
     + _cols("cascade", "texels_per_pixel fit_ms")
     + _cols("motion", "motion:t frames:i flicker_rate flicker_ever flicker_magnitude flicker_within_rate "
-                      "flicker_change_rate maps_built:i")
+                      "flicker_change_rate maps_built:i cache:t " + " ".join(CACHE_COLUMNS[1:]))
     + _cols("area", " ".join(SOFT_COLUMNS))
     + _cols("precision", "f32_step texel_f32_steps")
     + _cols("prefilter", "map_kind:t " + " ".join(LEAK_COLUMNS) + " moments_ms")

@@ -373,6 +373,7 @@ VIRTUAL_PRESETS = {
 
 CAMERA_PATHS = ("none", "dolly", "pan", "orbit", "keyframes")
 LIGHT_PATHS = ("none", "turn", "move", "keyframes")
+CACHE_POLICIES = ("none", "static", "stagger:N", "invalidate")   # [[motion]] cache: dsm.experiment.cache's registry holds one module each
 
 
 @dataclass(frozen=True)
@@ -390,6 +391,19 @@ class MotionSpec:
     light_keys: tuple = ()          # keyframes: ((position, target or None), ...) of a spot or point light
     points: int = 4000              # fixed points sampled on the surfaces (the experiment's seed)
     label: str = ""
+    casters: tuple = ()             # CasterPath per moving shape ([[motion.casters]])
+    cache: str = "none"             # the maps' cache policy (CACHE_POLICIES; dsm.experiment.cache)
+
+
+@dataclass(frozen=True)
+class CasterPath:
+    """One moving shape of a ``[[motion]]`` path: its translation per frame (world units before the scene's scale)."""
+    shape: str                      # the shape's name (SceneData.shape_names)
+    offset: tuple = (0.0, 0.0, 0.0)  # linear: the whole translation over the frames
+    keys: tuple = ()                # keyframes: translations spread evenly over the frames (at least two)
+    angle: float = 0.0              # the whole turn over the frames (degrees), about ``axis`` through the shape's centre
+    axis: tuple = (0.0, 0.0, 1.0)   # the turn's axis (world)
+    flagged_static: bool = False    # ``static = true``: flagged static, so ``invalidate`` never re-casts for it
 
 
 @dataclass(frozen=True)

@@ -51,6 +51,9 @@ from ..core import timing
 from ..scenes.camera import Camera
 from ..report.figures import frames_path
 from ..report.labels import params_label
+from . import cache
+from .casters import Mover
+from . import texel_recast
 from .motion_display import GifFrames, shown_frames, v_image
 
 # ---------------------------------------------------------------- paths
@@ -298,14 +301,19 @@ def run_scene(runner, scene, maps, closed, extents):
     fp = sample_points(data.scene, max(mo.points for mo in cfg.motion), cfg.seed, data.diagonal)
     shared = SceneFrames(data, Camera.from_sensor(data.sensor), fp, closed, extents,
                          pipeline.scene_magnitude(data.bbox))
-    for mo in cfg.motion:
+    movers = [Mover(data, mo.casters, mo.frames, cfg.source, f"motion[{i}]")      # the shapes' names checked first
+              for i, mo in enumerate(cfg.motion)]
+    for mo, mover in zip(cfg.motion, movers):
         pts = _first_points(fp, min(mo.points, fp.count))
         poses = camera_path(mo, shared.base, data.bbox, data.scale, data.offset)
         for m in maps:
             if m.light_index >= len(scene.lights):
                 continue
             path = PathFrames(mo, poses, light_path(mo, scene.lights[m.light_index], data.scale, data.offset), pts)
-            _run_map(runner, shared, path, m)
+            try:
+                _run_map(runner, shared, path, m, mover)
+            finally:                 # the scene is shared by the next path and map: its casters back in place
+                mover.restore()
 
 
 def _first_points(fp: FixedPoints, use: int) -> FixedPoints:
@@ -352,18 +360,36 @@ class _MapFrames:
     build_ms: list = dataclasses.field(default_factory=list)
     tight: dict = dataclasses.field(default_factory=lambda: headroom.headroom(math.nan, math.nan))
     shown: frozenset = frozenset()                             # the frames the case's GIF shows
+    mover: object = None                                      # the path's moving casters (dsm.experiment.casters)
+    policy: object = None                                     # the path's cache rule (dsm.experiment.cache)
+    cast_frame: int = 0                                       # the frame the kept map was cast at, whole
+    map_frame: int = 0                                        # the frame whose casters the kept map holds
+    partial: bool = False                                     # the policy re-casts the texels moved casters touch
+    recast: list = dataclasses.field(default_factory=list)    # per frame: texels cast over the map's texels
+    geometry: tuple = ()                                      # the frame's casters' translations
+    map_geometry: object = None                               # the casters' translations the kept map was cast with
+    bbox: tuple = ()                                          # the scene's bounds over the path (views fit to them)
+    extents: object = None                                    # the frame's per-shape spawn extents (map builds)
+    fresh: object = None                                      # this frame's map where the kept one is stale, else None
 
 
-def _run_map(runner, shared: SceneFrames, path: PathFrames, m):
-    """Every frame of a path on planned map ``m``, then one case row per scheme instance, filter
-    and format (its counts summed over the frames, rates and flicker averaged)."""
+def _run_map(runner, shared: SceneFrames, path: PathFrames, m, mover: Mover):
+    """Every frame of a path on planned map ``m`` (its casters placed per frame by ``mover``), then
+    one case row per scheme instance, filter and format (its counts summed over the frames, rates
+    and flicker averaged)."""
     cfg = runner.cfg
     specs = [pipeline.preset_for_light(s, path.lights[0].type) for s in m.specs]
     keys = [(s, filt, fmt) for s in specs for filt in cfg.map.filter for fmt in cfg.map.format]
     keys += [(s, s.filter, fmt) for s in m.moments for fmt in cfg.map.format]     # pre-filtered instances
     state = _MapFrames(shared, path, m, {Case("", *k): _CaseFrames() for k in keys},
-                       shown=frozenset(shown_frames(len(path.poses))))
+                       shown=frozenset(shown_frames(len(path.poses))), mover=mover,
+                       policy=cache.rule(path.motion.cache), partial=cache.partial_recast(path.motion.cache),
+                       extents=shared.extents,
+                       bbox=mover.swept_bbox() if mover.moving else shared.data.bbox)
     for t in range(len(path.poses)):
+        if mover.place(t):           # a caster moved: the continuation rays' triangle tables follow it
+            state.extents = pipeline.spawn_extents(shared.data.scene) if any(mover.key(t)) else shared.extents
+        state.geometry = mover.key(t)
         _run_frame(runner, state, t)
     for case, frames in state.cases.items():
         _write_case(runner, state, dataclasses.replace(case, id=runner.next_case()), frames)
@@ -376,39 +402,70 @@ def _frame_view(state: _MapFrames, t: int):
     pose_key = (tuple(np.round(o, 12)), tuple(np.round(tg, 12)), tuple(np.round(up, 12)))
     sensor = sensor_at(state.scene.base, o, tg, up)
     cam = Camera.from_sensor(sensor)
-    if pose_key not in state.gb:                 # the G-buffer is shared while the camera stays
+    pose_key = (pose_key, state.geometry)        # ... and the casters
+    if pose_key not in state.gb:                 # the G-buffer is shared while the camera and the casters stay
         state.gb = {pose_key: pipeline.gbuffer(data, sensor=sensor)}
     gb = state.gb[pose_key]
-    if (pose_key, light) not in state.setup:     # receivers and their V*: shared while camera and light stay
+    if (pose_key, light) not in state.setup:     # receivers and their V*: shared while camera, casters and light stay
         state.setup = {(pose_key, light): pipeline.light_setup(data, gb, light, m.light)}
     setup = state.setup[(pose_key, light)]
     rpts = pipeline.points_np(setup.p) if setup.p is not None else np.zeros((0, 3))
-    view = pipeline.make_view(light, m.resolution, rpts, data.bbox, m.view, m.cascade, sensor, data.scale)
+    view = pipeline.make_view(light, m.resolution, rpts, state.bbox, m.view, m.cascade, sensor, data.scale)
     setup = setup.subset(view.inside(setup.p).numpy().astype(bool)) if setup.p is not None else setup
     return cam, gb, setup, view
 
 
-def _frame_map(runner, state: _MapFrames, view):
-    """The frame's ShadowMap: built where the view's projection changed, else the last one re-viewed."""
-    sig = _view_signature(view)
+def _cast(state: _MapFrames, view):
+    """The frame's map cast as the plan says (its layers, culling and tile) on the frame's geometry."""
     m, shared = state.map_plan, state.scene
-    if sig != state.signature or state.smap is None:          # the map is shared while its projection stays
+    return pipeline.build_map(shared.data.scene, view, set(m.needs), m.culling,
+                              shared.closed if m.culling != "none" else None, m.tile, state.extents)
+
+
+def _frame_map(runner, state: _MapFrames, view):
+    """The frame's ShadowMap: cast again where the cache policy says (its view's projection changed,
+    or under ``none`` a caster moved), else the last one re-viewed; where the map kept is stale,
+    this frame's map is cast too (untimed, ``state.fresh``) to count ghosts and missing shadows."""
+    sig = _view_signature(view)
+    view_changed, geometry_changed = sig != state.signature, state.geometry != state.map_geometry
+    state.fresh = None
+    if state.smap is None or state.policy(view_changed, geometry_changed, len(state.built) - state.cast_frame):
         def build():
-            """The frame's map built (the plan's layers, culling and tile): its arrays, then the ShadowMap."""
-            sm = pipeline.build_map(shared.data.scene, view, set(m.needs), m.culling,
-                                    shared.closed if m.culling != "none" else None, m.tile, shared.extents)
+            """The frame's map built: its arrays, then the ShadowMap."""
+            sm = _cast(state, view)
             return (*shadowmap.arrays(sm), sm)       # the arrays, so the timing waits for them
         out, tm = timing.measure_kernel(build, 1)      # a frame's build once, in kernel time (as a still map's)
         state.smap = out[-1]
         state.moments = {}                        # a new first layer: new moments
         state.build_ms.append(tm.ms)
         state.built.append(True)
+        state.map_geometry, state.cast_frame = state.geometry, len(state.built) - 1
+        state.map_frame = state.cast_frame
+        state.recast.append(1.0)
         runner.record.add_rays({"map_texel": state.smap.rays.get("map_texel", 0)})
     else:
         state.smap = dataclasses.replace(state.smap, view=view)
         state.built.append(False)
+        state.recast.append(0.0)
+        if geometry_changed:
+            state.fresh = _cast(state, view)
+        if geometry_changed and state.partial:    # re-cast where a caster was or is: the map kept is right again
+            _recast_touched(state, view)
     state.signature = sig
     return state.smap
+
+
+def _recast_touched(state: _MapFrames, view):
+    """The kept map's texels whose rays meet a moved caster's bounds (at the map's frame or this
+    one) taken from this frame's cast (dsm.experiment.texel_recast); the fraction re-cast recorded."""
+    t = len(state.built) - 1
+    mask = texel_recast.touched(view, state.mover.bounds(state.map_frame, True) + state.mover.bounds(t, True))
+    state.smap = texel_recast.compose(state.smap, state.fresh, mask)
+    state.moments = {}                            # a new first layer: new moments
+    # a caster flagged static left its old texels: the map is this frame's no more (a fresh map every frame)
+    state.map_geometry = None if state.mover.any_flagged else state.geometry
+    state.map_frame = t
+    state.recast[-1] = float(mask.mean())
 
 
 def _frame_moments(state: _MapFrames, spec, fmt: str) -> tuple:
@@ -449,14 +506,39 @@ def _frame_context(runner, state: _MapFrames, t: int) -> tuple:
     return ctx, cam
 
 
+def _fresh_context(state: _MapFrames, ctx: MapContext):
+    """The frame's context on this frame's map (``state.fresh``) where the kept map is stale, else None."""
+    if state.fresh is None:
+        return None
+    fresh = state.fresh
+    stored = {fmt: pipeline.store(fresh, fmt) for fmt in ctx.stored}
+    return dataclasses.replace(ctx, depth_map=fresh, stored=stored,
+                               moments=lambda spec, fmt: (pipeline.moment_map(spec, fresh, fmt), None))
+
+
+def cache_errors(v_cached: np.ndarray, v_fresh: np.ndarray) -> dict:
+    """Ghosts (shadowed by the cached map where this frame's map says lit: V >= 0.5) and missing
+    shadows (lit where this frame's map shadows), with their rates over the receivers this frame's
+    map leaves lit and shadowed (undefined where there are none)."""
+    lit_c, lit_f = v_cached >= 0.5, v_fresh >= 0.5
+    ghost, missing = int((~lit_c & lit_f).sum()), int((lit_c & ~lit_f).sum())
+    n_lit, n_shadowed = int(lit_f.sum()), int((~lit_f).sum())
+    rate = lambda num, den: num / den if den else metrics.UNDEFINED
+    return {"n_ghost": ghost, "n_missing": missing, "ghost_rate": rate(ghost, n_lit),
+            "missing_rate": rate(missing, n_shadowed)}
+
+
 def _run_frame(runner, state: _MapFrames, t: int):
     """Frame ``t``: its view and map, then every case evaluated at the frame's receivers
     (dsm.case.evaluate) and looked up at the fixed points, into ``state.cases``."""
     ctx, cam = _frame_context(runner, state, t)
+    fresh_ctx = _fresh_context(state, ctx)
     pts, light = state.path.points, state.path.lights[t]
     elig, vstar_pts, n_cam = points_frame(state.scene.data.scene, pts, cam, light, ctx.view, state.scene.magnitude,
-                                          state.vstar.get(light))
-    state.vstar = {light: vstar_pts}             # the fixed points' V*: shared while the light stays
+                                          state.vstar.get((light, state.geometry)))
+    state.vstar = {(light, state.geometry): vstar_pts}   # the fixed points' V*: shared while light and casters stay
+    if state.mover.moving:       # a point sampled on a moving caster stays where it was sampled: left out
+        elig = elig & ~np.isin(pts.shape, list(state.mover.shapes()))
     rx_pts = {fmt: pipeline.receivers(sm.view, dataclasses.replace(ctx.setup, p=pts.p, n=n_cam), ctx.scene.diagonal)
               for fmt, sm in ctx.stored.items()}
     first = ctx.receivers[runner.cfg.map.format[0]]
@@ -475,12 +557,25 @@ def _run_frame(runner, state: _MapFrames, t: int):
             if runner.sink.images_mode == "all":
                 frames.v_images.append(v_image(result.classes.shape, ctx.setup.pixels, result.v))
         mt = result.measured
+        v_fresh = result.v if fresh_ctx is None else evaluate(fresh_ctx, case).v
+        stale = cache_errors(np.asarray(result.v), np.asarray(v_fresh))
         frames.metrics.append(mt)
         frames.lookup_ms.append(result.lookup.ms if ctx.receivers[case.format] is not None else math.nan)
         frames.costs.append(case_cost.costs(ctx, case))
         frames.frames.append({"frame": t, "map_built": state.built[-1], "n_points_visible": int(elig.sum()),
                               "n_receivers": mt["n_receivers"], "acne_rate": mt["acne_rate"],
-                              "peterpan_rate": mt["peterpan_rate"], "error_rate": mt["error_rate"]})
+                              "peterpan_rate": mt["peterpan_rate"], "error_rate": mt["error_rate"],
+                              "cache": state.path.motion.cache, **stale,
+                              "recast_fraction": state.recast[-1],
+                              "frame_build_ms": _frame_build_ms(state)})
+
+
+def _frame_build_ms(state: _MapFrames) -> float:
+    """The frame's build time: its whole cast's, 0 where the map was kept as it was, undefined where
+    part of it was re-cast (composed from an untimed whole cast: not a partial cast's cost)."""
+    if state.built[-1]:
+        return state.build_ms[-1]
+    return metrics.UNDEFINED if state.recast[-1] > 0 else 0.0
 
 
 def _write_case(runner, state: _MapFrames, case: Case, frames: _CaseFrames):
@@ -498,6 +593,7 @@ def _write_case(runner, state: _MapFrames, case: Case, frames: _CaseFrames):
         ms = state.moments_ms.get(pipeline.moment_key(case.spec, case.format)) if case.prefiltered else None
         measured.update(case_row.map_kind_columns(case, float(np.median(ms)) if ms else metrics.UNDEFINED))
     measured.update(_flicker_columns(pairs, ever))
+    measured.update(_cache_columns(mo.cache, frames.frames))
     costs = {"maps_built": int(sum(state.built)), "build_ms": float(np.median(state.build_ms)),
              "build_first_ms": float("nan"), "lookup_ms": case_row.median_defined(frames.lookup_ms),
              "reference_ms": float("nan"), "sweep_key": "", "sweep_value": float("nan"), "texel_size": float("nan"),
@@ -531,6 +627,18 @@ def _flicker_columns(pairs: list, ever: float) -> dict:
     out = {k: case_row.mean_defined([p[k] for p in pairs])
            for k in ("flicker_rate", "flicker_magnitude", "flicker_within_rate", "flicker_change_rate")}
     return {**out, "flicker_ever": ever}
+
+
+def _cache_columns(policy: str, frame_rows: list) -> dict:
+    """A motion case's cache: its policy, the ghost and missing rates' mean over the frames and
+    their worst frame (undefined where no frame defines them), the mean fraction of texels re-cast."""
+    worst = lambda vals: max(v for v in vals if metrics.defined(v)) if any(map(metrics.defined, vals)) \
+        else metrics.UNDEFINED
+    out = {"cache": policy, "recast_fraction": float(np.mean([f["recast_fraction"] for f in frame_rows]))}
+    for k in ("ghost_rate", "missing_rate"):
+        vals = [f[k] for f in frame_rows]
+        out[k], out[f"{k}_worst"] = case_row.mean_defined(vals), worst(vals)
+    return out
 
 
 def _leak_columns(frame_metrics: list) -> dict:

@@ -7,7 +7,8 @@ from ...truth import metrics
 FRAME_COLUMNS = ("case", "motion", "scene", "light", "cascade_layout", "scheme", "params", "resolution", "filter",
                  "format", "frame", "map_built", "n_points_visible", "n_pairs_eligible", "n_flicker", "flicker_rate",
                  "n_eligible_within", "flicker_within_rate", "n_eligible_change", "flicker_change_rate",
-                 "flicker_magnitude", "n_receivers", "acne_rate", "peterpan_rate", "error_rate")
+                 "flicker_magnitude", "n_receivers", "acne_rate", "peterpan_rate", "error_rate", "cache", "n_ghost",
+                 "ghost_rate", "n_missing", "missing_rate", "recast_fraction", "frame_build_ms")
 
 
 def write_frames_csv(path, rows):
