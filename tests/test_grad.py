@@ -77,40 +77,6 @@ def test_the_light_frame_in_drjit_is_numpys():
             assert np.allclose(np.asarray(a).ravel(), b, atol=2e-7)
 
 
-def test_the_guarded_msm_is_the_kits_where_the_kits_is_finite():
-    import drjit as dr
-    import mitsuba as mi
-    from dsm.grad.moments import visibility
-    from dsm.prefilter import msm
-    rng = np.random.default_rng(3)
-    z = rng.uniform(0.0, 1.0, (4000, 3))          # three depths per window, mixed
-    w = rng.dirichlet([1, 1, 1], 4000)
-    b = [mi.Float((w * z ** k).sum(axis=1).astype(np.float32)) for k in (1, 2, 3, 4)]
-    t = mi.Float(rng.uniform(0.0, 1.0, 4000).astype(np.float32))
-    prm = msm.Params()
-    kit = msm.visibility(b, t, prm).numpy()
-    ours = visibility("msm", b, t, prm).numpy()
-    finite = np.isfinite(kit)
-    assert finite.mean() > 0.99
-    assert np.array_equal(kit[finite], ours[finite])
-
-
-def test_the_stable_chebyshev_is_the_kits():
-    import mitsuba as mi
-    from dsm.grad.moments import chebyshev_stable
-    from dsm.prefilter.base import chebyshev
-    rng = np.random.default_rng(5)
-    z = rng.uniform(0.0, 1.0, (3000, 2))
-    mean, mean_sq = z.mean(axis=1), (z ** 2).mean(axis=1)
-    t = rng.uniform(0.0, 1.0, 3000)
-    args = [mi.Float(a.astype(np.float32)) for a in (mean, mean_sq, t)]
-    kit = chebyshev(*args, 1e-4).numpy()
-    ours = chebyshev_stable(*args, 1e-4).numpy()
-    var = np.maximum(mean_sq - mean ** 2, 1e-4)
-    exact = np.where(t <= mean, 1.0, var / (var + (t - mean) ** 2))      # float64
-    assert np.allclose(ours, kit, rtol=1e-5, atol=1e-6) and np.allclose(ours, exact, atol=1e-4)
-
-
 def test_antialiased_coverage_of_a_row_is_the_silhouettes_span_in_the_map():
     """Along a texel row through the plate, the mixed occluder indicator sums to the plate's width in
     texels (its edges' exact map positions), where the raw indicator counts texel centres."""
@@ -248,7 +214,7 @@ def test_dsm_grad_writes_its_table_and_refuses_a_bad_config(tmp_path, capsys):
     assert lines[0].startswith("technique,param,unit,loss,ad,fd") and len(lines) == 2
     cells = lines[1].split(",")
     assert cells[:3] == ["nearest", "occluder_z", "world"] and float(cells[4]) == 0.0
-    assert cells[9] == ""                          # AD vs FD of 0 against 0: undefined, not 0
+    assert cells[lines[0].split(",").index("ad_vs_fd")] == ""      # AD vs FD of 0 against 0: undefined, not 0
     assert "undefined" in (tmp_path / "g" / "table.md").read_text()
     # a second run into the same folder is refused; --force replaces only what dsm grad wrote
     (tmp_path / "g" / "mine.txt").write_text("a user's own file")
