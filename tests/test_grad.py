@@ -69,10 +69,9 @@ def test_the_shadow_reach_is_the_plates_corners_projected_and_any_scale_passes(l
 
 def test_the_light_frame_in_drjit_is_numpys():
     import mitsuba as mi
-    from dsm.grad.views import light_frame_dr
     from dsm.maps.views import light_frame
     for d in ([0, 0, -1], [0.3, -0.2, -1], [1, 0.1, 0.05], [-0.2, 0.95, 0.1]):
-        got = light_frame_dr(mi.Vector3f(*map(float, d)))
+        got = light_frame(mi.Vector3f(*map(float, d)))
         for a, b in zip(got, light_frame(d)):
             assert np.allclose(np.asarray(a).ravel(), b, atol=2e-7)
 
@@ -271,3 +270,35 @@ def test_dsm_grad_force_replaces_only_an_earlier_dsm_grads_folder(tmp_path):
     assert folder_problem(killed, force=False).startswith(f"--out {killed}: holds 2 entries")
     assert folder_problem(killed, force=True) is None
     assert [p.name for p in killed.iterdir()] == ["mine.txt"]
+
+
+def test_every_light_type_map_kind_and_filter_has_a_gradient_or_a_reason():
+    """Over the kit's registries: a light type, map kind or filter that dsm grad does not differentiate is
+    listed with its reason (dsm.grad.support), never silently absent; every map kind is a technique, and
+    its moments of an attached depth carry the derivative of its numpy moments (float64 central
+    difference), so its gradient reaches the map."""
+    import drjit as dr
+    import mitsuba as mi
+    from dsm import lights, prefilter
+    from dsm.core.types import FILTERS
+    from dsm.grad import moments, support
+    assert set(support.LIGHTS) | set(support.LIGHTS_WITHOUT) == set(lights.TYPES)
+    assert not set(support.LIGHTS) & set(support.LIGHTS_WITHOUT)
+    assert set(support.LIGHTS.values()) <= set(specmod.LIGHTS)
+    assert set(support.FILTERS) | set(support.FILTERS_WITHOUT) == set(FILTERS)
+    assert not set(support.FILTERS) & set(support.FILTERS_WITHOUT)
+    assert all(len(why) > 40 for why in (*support.LIGHTS_WITHOUT.values(), *support.FILTERS_WITHOUT.values()))
+    assert specmod.TECHNIQUES == support.FILTERS + tuple(k.NAME for k in prefilter.REGISTRY)
+    t = np.linspace(0.05, 0.95, 19)
+    h = 1e-6
+    for kind in prefilter.REGISTRY:
+        params = kind.Params()
+        want = [(a - b) / (2 * h) for a, b in zip(kind.moments(t + h, params), kind.moments(t - h, params))]
+        if kind.NAME == "esm":       # grad's own form exp(c (t - 1)): the kit's moment over exp(c)
+            want = [w / np.exp(params.c) for w in want]
+        for k, w in enumerate(want):
+            x = mi.Float(t.astype(np.float32))
+            dr.enable_grad(x)
+            m = moments.moments(kind.NAME, x, params)[k]
+            dr.forward(x)
+            assert np.allclose(dr.grad(m).numpy(), w, rtol=2e-3, atol=0.0), (kind.NAME, k)

@@ -14,10 +14,10 @@ import drjit as dr
 import mitsuba as mi
 
 from ..maps import lookup
-from ..prefilter import esm, evsm, msm, vsm
+from .. import prefilter
 from ..prefilter.base import normalized_depth
 
-KINDS = {"vsm": vsm, "esm": esm, "evsm": evsm, "msm": msm}
+KINDS = {kind.NAME: kind for kind in prefilter.REGISTRY}
 
 
 def moments(kind: str, t, params) -> list:
