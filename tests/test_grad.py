@@ -302,3 +302,18 @@ def test_every_light_type_map_kind_and_filter_has_a_gradient_or_a_reason():
             m = moments.moments(kind.NAME, x, params)[k]
             dr.forward(x)
             assert np.allclose(dr.grad(m).numpy(), w, rtol=2e-3, atol=0.0), (kind.NAME, k)
+
+
+def test_dsm_grad_run_returns_the_self_check_and_refuses_a_bad_config_in_one_line():
+    """dsm.grad.run: the command's measuring as values. The antialiased PCF row of a plate's height is
+    within 15 % of 2 A H^2 / (H - h)^3 (48^2 map: the corners' pairs are not treated); a config error names
+    the key before any work."""
+    import dsm.grad
+    res = dsm.grad.run({"gradient": {**SMALL, "params": ["occluder_z"], "techniques": ["pcf_bilinear"],
+                                     "antialias": [True]}})
+    [row] = res.selfcheck
+    assert row.technique == "pcf_bilinear aa" and row.closed_form == pytest.approx(2 * 0.25 * 4 / 1.5 ** 3)
+    assert row.ad == pytest.approx(row.closed_form, rel=0.15) and res.compare is None and res.inverse is None
+    with pytest.raises(ConfigError) as e:
+        dsm.grad.run({"gradient": {"loss": "l2", "target": {"occluder_z": 0.05}}}, compare=True)
+    assert str(e.value).startswith("<dict>: gradient.loss: ") and "\n" not in str(e.value)
