@@ -1,10 +1,11 @@
 """The light's view with its frame in Dr.Jit, so a light's parameters stay in the AD graph.
 
 The kit's views (:mod:`dsm.maps.views`) take their frame at construction, in numpy (opaque
-constants: fast, and cut from the graph) or in Dr.Jit. Here it is given as Dr.Jit expressions of
-the light's attached values (``light_frame`` of an attached direction), the fit (resolution,
-extent, cone, near and far) made at their values; ``project``, ``depth`` and ``ray_at`` (the
-kit's code) then differentiate through them.
+constants: fast, and cut from the graph) or in Dr.Jit. Here a view is fitted the kit's way at the
+nominal light (resolution, extent, cone, near and far), and a new view with that fit is built with
+the frame as Dr.Jit expressions of the light's attached values (``View.with_frame``;
+``light_frame`` of an attached direction); ``project``, ``depth`` and ``ray_at`` (the kit's code)
+then differentiate through them.
 
 - Point light: a :class:`~dsm.maps.views.PerspectiveView` from the light's position looking
   down (-z), its square covering the image window with MARGIN to spare; depth along the axis.
@@ -19,7 +20,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..maps.views import OrthographicView, PerspectiveView
+from ..maps.views import OrthographicView, PerspectiveView, light_frame
 
 MARGIN = 1.15              # the map's square over the image window's (filter taps at the border read real texels)
 
@@ -41,13 +42,15 @@ def point_view(spec, light):
     H = spec.light_height
     reach = spec.window * MARGIN * math.sqrt(2.0) + spec.occluder_size
     cutoff = math.degrees(math.atan(reach / H))
-    view = PerspectiveView(light.position, mi.Vector3f(0.0, 0.0, -1.0), cutoff, scene_box(spec), spec.map_resolution)
+    fitted = PerspectiveView((0.0, 0.0, H), (0.0, 0.0, -1.0), cutoff, scene_box(spec), spec.map_resolution)
     # a square frustum: its half side at unit depth is the window's half side over the light's height
-    view.tan_half = spec.window * MARGIN / H
-    view.T = dr.opaque(mi.Float, view.tan_half)
-    view.light_size = spec.light_size
-    view.nearest_scene_depth = max(H - scene_box(spec)[1][2], 0.0)
-    return view
+    fitted.tan_half = spec.window * MARGIN / H
+    fitted.T = dr.opaque(mi.Float, fitted.tan_half)
+    fitted.light_size = spec.light_size
+    fitted.nearest_scene_depth = max(H - scene_box(spec)[1][2], 0.0)
+    # the fit (depth range) stays the nominal light's, as a central difference's two maps share it: a
+    # range refitted at each value would move every normalized depth, which AD (a numpy fit) does not see
+    return fitted.with_frame(light.position, *light_frame(mi.Vector3f(0.0, 0.0, -1.0)))
 
 
 def directional_view(spec, light, nominal_direction):
@@ -60,9 +63,8 @@ def directional_view(spec, light, nominal_direction):
     fitted = OrthographicView(nominal_direction, corners, (corners.min(axis=0), corners.max(axis=0)),
                               spec.map_resolution)
     centre = fitted.origin_np + (fitted.axes_np[0] + fitted.axes_np[1]) * (0.5 * fitted.extent)
-    view = fitted.turned(light.direction, -centre[2] / fitted.axes_np[2][2])
-    view.light_size = spec.light_size
-    return view
+    fitted.light_size = spec.light_size
+    return fitted.turned(light.direction, -centre[2] / fitted.axes_np[2][2])
 
 
 def make_view(spec, light, nominal=None):

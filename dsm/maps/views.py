@@ -24,6 +24,7 @@ times the distance), so "1 texel" means the same thing on every view.
 """
 from __future__ import annotations
 
+import copy
 import math
 
 import drjit as dr
@@ -112,6 +113,13 @@ class View:
         self.R = dr.opaque(mi.Float, float(resolution))
         self.R_u = dr.opaque(mi.UInt32, int(resolution))
         self.far_o = dr.opaque(mi.Float, self.far)
+
+    def with_frame(self, origin, ex, ey, ez) -> "View":
+        """A new view with this one's fit (resolution, near, far, extent or cone) and the frame given
+        here (numpy, or Dr.Jit: dsm grad's attached light), taken at its construction as every view's."""
+        view = copy.copy(self)
+        View.__init__(view, origin, ex, ey, ez, self.resolution, self.near, self.far)
+        return view
 
     @property
     def depth_range(self) -> float:
@@ -264,18 +272,14 @@ class OrthographicView(View):
 
     def turned(self, direction, reach: float) -> "OrthographicView":
         """This map turned to ``direction`` (Dr.Jit, e.g. attached to a light's angle) about the point
-        ``reach`` along its central ray from the map plane, its fit (extent, near, far) kept: a new view
-        whose frame is given at construction. dsm grad turns a directional map about the point where its
-        central ray meets the ground, so the receivers keep their map positions to first order."""
+        ``reach`` along its central ray from the map plane, its fit (extent, near, far) kept
+        (:meth:`View.with_frame`). dsm grad turns a directional map about the point where its central
+        ray meets the ground, so the receivers keep their map positions to first order."""
         half = 0.5 * self.extent
         ex0, ey0, ez0 = self.axes_np
         pivot = mi.Point3f(*(float(c) for c in self.origin_np + (ex0 + ey0) * half + ez0 * reach))
         ex, ey, ez = light_frame(direction)
-        view = type(self).__new__(type(self))
-        view.extent = self.extent
-        View.__init__(view, pivot - ez * reach - (ex + ey) * half, ex, ey, ez, self.resolution, self.near, self.far)
-        view.L = dr.opaque(mi.Float, view.extent)
-        return view
+        return self.with_frame(pivot - ez * reach - (ex + ey) * half, ex, ey, ez)
 
     def signature_arrays(self) -> list:
         """The fitted square's side (the frame holds its corner)."""
@@ -312,11 +316,9 @@ class PerspectiveView(View):
     kind = "perspective"
 
     def __init__(self, position, axis, cutoff_deg: float, scene_bbox, resolution: int):
-        """``position`` and ``axis``: numpy, or Dr.Jit (dsm grad's attached light): the depth range is
-        fitted at their values."""
         ex, ey, ez = light_frame(axis)
         corners = _bbox_corners(*scene_bbox)
-        zs = (corners - frame_numpy(position)) @ frame_numpy(ez)
+        zs = (corners - np.asarray(position, float)) @ ez
         self.cutoff = float(cutoff_deg)
         self.tan_half = math.tan(math.radians(self.cutoff))
         far = max(float(zs.max()), 1e-30)
