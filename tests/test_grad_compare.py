@@ -89,7 +89,8 @@ def test_the_inverse_task_recovers_the_plates_height_through_the_antialiased_map
         run = descend(inv, Technique("vsm", 3, True), "occluder_z", off)
         assert run.success and run.final_error < 0.01 and run.converged_at is not None
         stuck = descend(inv, Technique("pcf_bilinear", 1, False), "occluder_z", off)
-        assert stuck.final_error == abs(off) and not stuck.success and stuck.converged_at is None
+        # a gradient of 0 never moves the parameter (mi.ad.Adam holds it in float32)
+        assert set(stuck.trace) == {float(np.float32(off))} and not stuck.success and stuck.converged_at is None
 
 
 def test_dsm_grad_compare_writes_its_tables_and_refuses_the_l2_loss(tmp_path, capsys):

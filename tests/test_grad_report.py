@@ -199,11 +199,11 @@ def test_a_section_is_absent_when_its_file_is_and_an_unknown_csv_is_a_link(tmp_p
     """A plain dsm grad folder (selfcheck.csv alone): the self-check, no other table, no figure; a CSV
     another version writes (equal_error.csv) gets its section from its columns; an unknown one a link."""
     cols = ["technique", "param", "unit", "loss", "ad", "fd", "fd_step", "changed_texels", "changed_pixels",
-            "ad_vs_fd", "closed_form", "ad_vs_closed", "edge_pairs"]
+            "changed_pairs", "ad_vs_fd", "closed_form", "ad_vs_closed", "edge_pairs"]
     _write(tmp_path / "selfcheck.csv", cols, [["vsm aa", "occluder_z", "world", "0.25", "0.6", "0.6", "0.001", "0",
-                                               "0", "1e-06", "0.5925925925925926", "0.0125", "10"],
+                                               "0", "0", "1e-06", "0.5925925925925926", "0.0125", "10"],
                                               ["nearest", "occluder_z", "world", "0.25", "0.0", "0.0", "0.001", "0",
-                                               "0", "", "0.5925925925925926", "1.0", "0"]])
+                                               "0", "0", "", "0.5925925925925926", "1.0", "0"]])
     page.write_report(tmp_path, {})
     doc = _parse(tmp_path / "report.html")
     assert [s for s in doc.sections if s not in ("answer", "run")] == ["selfcheck"]

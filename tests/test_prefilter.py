@@ -543,6 +543,82 @@ def test_msm_where_float32_leaves_the_system_singular_falls_back_to_chebyshev():
     assert np.isfinite(v) and v == pytest.approx(want, abs=0.05)
 
 
+@pytest.mark.parametrize("b, t, a", [
+    # d33d22 = 0 in float32: c2 = -inf and the roots NaN; the receiver far behind the one caster
+    ([9.109666e-05, 8.298602e-09, 7.559749e-13, 6.8866796e-17], 0.14421274, 3e-5),
+    # no moment bias: d22 = 0 in float32
+    ([0.4790513, 0.22949015, 0.10993756, 0.05266573], 0.62705207, 0.0)])
+def test_msm_whose_roots_are_nan_falls_back_to_chebyshev_not_to_lit(b, t, a):
+    """Windows of one depth where float32 leaves the Hankel system singular and the roots NaN (found
+    among random windows): the bound is Chebyshev's of the biased E[t], E[t^2] (float64 here), as where
+    c2 = 0, not V = 1 (a NaN root compared false on both sides and the shadow summed to 0: lit)."""
+    from dsm.prefilter import msm
+    v = _np(msm.visibility([_f([x]) for x in b], _f([t]), _prm(moment_bias=a, depth_bias=0.0)))[0]
+    b0, b1 = ((1 - a) * np.float32(x).astype(np.float64) + a * 0.5 for x in b[:2])
+    var, t64 = max(b1 - b0 * b0, 0.0), float(np.float32(t))
+    want = var / (var + (t64 - b0) ** 2)
+    assert t64 > b0 and v == pytest.approx(want, abs=1e-3) and v < 0.01
+
+
+def _forward(f, x):
+    """(f(x), df/dx) per element by Dr.Jit's forward mode, numpy float64."""
+    x = _f(x)
+    dr.enable_grad(x)
+    y = f(x)
+    dr.forward(x)
+    return _np(dr.detach(y)), _np(dr.grad(y))
+
+
+def _backward(f, x):
+    """(f(x), df/dx) per element by Dr.Jit's reverse mode (f elementwise), numpy float64: a select's
+    unused branch gets a zero adjoint, which an unguarded inf turns into NaN (forward mode does not)."""
+    x = _f(x)
+    dr.enable_grad(x)
+    y = f(x)
+    dr.backward(y)
+    return _np(dr.detach(y)), _np(dr.grad(x))
+
+
+def test_chebyshevs_derivative_holds_at_evsms_warped_variance():
+    """EVSM's warped moments reach e^80: var / (var + d^2)'s derivative squares e^80 (inf in float32,
+    NaN gradients for dsm grad). The bound's derivative in t is its stable form's, -2 d var / (var +
+    d^2)^2 computed in float64, and its value the quotient's to the bit with or without AD."""
+    from dsm.prefilter.base import chebyshev
+    c = 40.0
+    mean = np.exp(c * RNG.uniform(-0.5, 0.9, 500))
+    var = mean * mean * RNG.uniform(0.01, 0.5, 500)
+    t = mean * RNG.uniform(1.05, 3.0, 500)
+    args = [_f(mean), _f(mean * mean + var)]
+    v, dv = _forward(lambda x: chebyshev(*args, x, 1e-4), t)
+    plain = _np(chebyshev(*args, _f(t), 1e-4))
+    assert np.array_equal(v, plain) and np.isfinite(dv).all()
+    m32, s32, t32 = (np.float32(a_).astype(np.float64) for a_ in (mean, mean * mean + var, t))
+    var64 = np.maximum(s32 - m32 * m32, 1e-4)
+    d = t32 - m32
+    want = -2.0 * d * var64 / (var64 + d * d) ** 2
+    assert np.allclose(dv, want, rtol=2e-3, atol=0.0)
+
+
+def test_msms_derivative_is_finite_where_its_system_is_singular():
+    """Reverse mode through the guarded lookup (dsm grad's moments are attached): over windows of one
+    depth (blur 1: every texel of an unfiltered map) under the default bias, where float32's system is
+    often singular, the derivative in the caster's depth is finite; in t, on three-caster windows, it is
+    the float64 central difference of the numpy reference (median gap under 5 %)."""
+    from dsm.prefilter import msm
+    prm = _prm(moment_bias=3e-5, depth_bias=0.0)
+    z, t = RNG.uniform(0.05, 0.95, 2000), _f(RNG.uniform(0.0, 1.0, 2000))
+    _, dv = _backward(lambda x: msm.visibility([x ** k for k in (1, 2, 3, 4)], t, prm), z)   # the caster moves
+    assert np.isfinite(dv).all()
+    zz = RNG.uniform(0.1, 0.9, (3, 200))
+    w = RNG.dirichlet([1, 1, 1], 200).T
+    b = np.float32(np.stack([(w * zz ** k).sum(0) for k in (1, 2, 3, 4)])).astype(np.float64)
+    t = np.float32(RNG.uniform(0.1, 0.9, 200)).astype(np.float64)
+    alpha, h = 2e-3, 1e-4
+    v, dv = _backward(lambda x: msm.visibility([_f(x_) for x_ in b], x, _prm(moment_bias=alpha, depth_bias=0.0)), t)
+    fd = (_hamburger_np(b, t + h, alpha) - _hamburger_np(b, t - h, alpha)) / (2 * h)
+    assert np.isfinite(dv).all() and np.median(np.abs(dv - fd)) < 0.05 * np.median(np.abs(fd))
+
+
 def test_dsm_schemes_lists_each_map_kind_with_its_source_and_parameters():
     from dataclasses import fields
     from dsm import prefilter

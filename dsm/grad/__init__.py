@@ -5,5 +5,9 @@ position or angle, with units), the loss and the techniques; :class:`.problem.Pr
 technique with Dr.Jit AD through the map's attached intersections (:mod:`.build`), the light's
 frame in Dr.Jit (:mod:`.views`), the antialiased map after Worchel & Alexa 2023 (:mod:`.antialias`)
 and the lookups (:mod:`.techniques`); :mod:`.check` holds the self-checks (AD against central
-differences, closed forms) and ``dsm grad`` (:mod:`.command`) writes their table.
+differences, closed forms) and ``dsm grad`` (:mod:`.command`) writes their table;
+:func:`run` returns what it measures, for Python users (:mod:`.api`).
 """
+from .api import GradRun, run
+
+__all__ = ["GradRun", "run"]

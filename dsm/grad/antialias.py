@@ -51,6 +51,7 @@ class EdgeWeights:
     weights: dict          # (du, dv) -> mi.Float per texel
     resolution: int
     pairs: int             # pairs treated (their weight may still be 0)
+    structure: np.ndarray  # per texel: bit 0 its pair toward +u treated, bit 1 toward +v (the map's discrete structure)
 
 
 def edge_neighbours(faces: np.ndarray) -> np.ndarray:
@@ -148,8 +149,8 @@ def edge_weights(amap, triangles, light) -> EdgeWeights:
     R = view.resolution
     idx = dr.arange(mi.UInt32, R * R)
     i, j = idx % R, idx // R
-    weights, pairs = {}, 0
-    for du, dv in ((1, 0), (0, 1)):
+    weights, pairs, structure = {}, 0, np.zeros(R * R, np.uint8)
+    for bit, (du, dv) in enumerate(((1, 0), (0, 1))):
         inside = (i + du < R) & (j + dv < R)
         other = dr.select(inside, idx + du + dv * R, idx)
         za, zb = dr.detach(smap.z1), dr.detach(dr.gather(mi.Float, smap.z1, other))
@@ -166,6 +167,9 @@ def edge_weights(amap, triangles, light) -> EdgeWeights:
                                           near_tri, c0, c1)
         ok = pair & treated
         pairs += int(dr.count(ok).numpy().ravel()[0])
+        # a pair switches on or off (a corner's segment passing an edge's end) without any texel changing
+        # class: the treated texels' values jump, so a difference across it measures a jump, not a slope
+        structure |= (ok.numpy().astype(np.uint8) << bit)
         w_near = dr.select(ok & (alpha < 0.5), 0.5 - alpha, 0.0)     # the near texel toward the far one
         w_far = dr.select(ok & (alpha >= 0.5), alpha - 0.5, 0.0)     # the far texel toward the near one
         w_a = dr.select(a_near, w_near, w_far)                       # texel idx toward idx + (du, dv)
@@ -174,7 +178,7 @@ def edge_weights(amap, triangles, light) -> EdgeWeights:
         back = dr.select((i >= du) & (j >= dv), idx - du - dv * R, idx)
         weights[(-du, -dv)] = dr.select((i >= du) & (j >= dv), dr.gather(mi.Float, w_b, back), 0.0)
     dr.eval(weights)             # a kernel of its own (see dsm.grad.build)
-    return EdgeWeights(weights, R, pairs)
+    return EdgeWeights(weights, R, pairs, structure)
 
 
 def neighbour(idx, d, R: int):

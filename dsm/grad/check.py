@@ -1,10 +1,12 @@
 """Self-checks of the gradients, before any comparison with the truth.
 
 - **AD against the technique's own central differences**: (L(p + s) - L(p - s)) / 2s, where no
-  texel (the shape its ray hits) and, for nearest, no pixel (its result and the texel it reads)
-  changes between p - s,
-  p and p + s; the step is halved (``fd_halvings`` times at most) until none does, and a row
-  whose classes still change says so (its difference then measures a jump, not a slope).
+  texel (the shape its ray hits), for nearest and PCSS no pixel (its result and the texel it
+  reads), and for an antialiased map no texel pair (whether the edge treatment treats it: a
+  corner's pair switches on and off while no texel changes class) changes between p - s, p and
+  p + s; the step is halved (``fd_halvings`` times at most) until none does, and a row whose
+  structure still changes says so (its difference then measures a jump, not a slope, and AD
+  against it is undefined).
 - **Closed forms** of the plate scene (ground at z = 0, square plate of area A at height h):
   under a point light at height H the shadow is the plate scaled by H / (H - h), so its area
   A H^2 / (H - h)^2 has d/dh = 2 A H^2 / (H - h)^3 and d/dH = -2 A H h / (H - h)^3, and its first
@@ -38,11 +40,12 @@ class CheckRow:
     changed_pixels: int
     closed_form: float | None
     edge_pairs: int
+    changed_pairs: int = 0       # texels whose antialiasing pairs differ between p - step and p + step
 
     @property
     def clean(self) -> bool:
-        """Whether no texel or pixel changed class within +-step (the difference is a slope)."""
-        return self.changed_texels == 0 and self.changed_pixels == 0
+        """Whether no texel, pixel or antialiasing pair changed within +-step (the difference is a slope)."""
+        return self.changed_texels == 0 and self.changed_pixels == 0 and self.changed_pairs == 0
 
     @property
     def ad_vs_fd(self) -> float | None:
@@ -94,36 +97,37 @@ def closed_form(spec, param: str) -> float | None:
 
 
 def _classes(problem, tech, values):
-    """(texel classes, pixel classes): the shape each texel's ray hits; for the techniques with a step in
-    the receiver's map position (nearest; PCSS, whose blocker search reads nearest taps) each pixel's
-    nearest result and the texel it reads (PCSS's search taps sit at other texels: a lower bound). The
-    others are continuous where a receiver crosses between texels: their pixels have no class."""
+    """(texel classes, pixel classes, pair classes): the shape each texel's ray hits; for the techniques with
+    a step in the receiver's map position (nearest; PCSS, whose blocker search reads nearest taps) each
+    pixel's nearest result and the texel it reads (PCSS's search taps sit at other texels: a lower bound);
+    for an antialiased map which of each texel's pairs the edge treatment treats. The others are continuous
+    where a receiver crosses between texels: their pixels have no class."""
     ev = problem.evaluate(type(tech)("nearest"), values)
-    if tech.name not in ("nearest", "pcss"):
-        return ev.texel_shapes, np.zeros(1)
-    return ev.texel_shapes, ev.image.ravel() + 2.0 * ev.pixel_texels
+    pixels = ev.image.ravel() + 2.0 * ev.pixel_texels if tech.name in ("nearest", "pcss") else np.zeros(1)
+    pairs = np.zeros(1, np.uint8)
+    if tech.antialias:
+        pairs = problem.evaluate(type(tech)("nearest", antialias=True), values).edge_structure
+    return ev.texel_shapes, pixels, pairs
 
 
 def central_difference(problem, tech, param: str) -> tuple:
-    """(FD, step, texels changed, pixels changed) of ``tech``'s loss in ``param``, halving the step until
-    no class changes within +-step (at most ``fd_halvings`` times)."""
+    """(FD, step, texels changed, pixels changed, pairs changed) of ``tech``'s loss in ``param``, halving the
+    step until no class changes within +-step (at most ``fd_halvings`` times)."""
     spec = problem.spec
     base = problem.values()
     step = spec.step(param)
-    t0, p0 = _classes(problem, tech, base)
+    c0 = _classes(problem, tech, base)
     for k in range(spec.fd_halvings + 1):
         lo, hi = dict(base), dict(base)
         lo[param] -= step
         hi[param] += step
-        tl, pl = _classes(problem, tech, lo)
-        th, ph = _classes(problem, tech, hi)
-        texels = int(np.count_nonzero((tl != t0) | (th != t0)))
-        pixels = int(np.count_nonzero((pl != p0) | (ph != p0)))
-        if (texels == 0 and pixels == 0) or k == spec.fd_halvings:
+        cl, ch = _classes(problem, tech, lo), _classes(problem, tech, hi)
+        texels, pixels, pairs = (int(np.count_nonzero((a != o) | (b != o))) for a, b, o in zip(cl, ch, c0))
+        if (texels == 0 and pixels == 0 and pairs == 0) or k == spec.fd_halvings:
             break
         step /= 2.0
     fd = (problem.evaluate(tech, hi).loss - problem.evaluate(tech, lo).loss) / (2.0 * step)
-    return fd, step, texels, pixels
+    return fd, step, texels, pixels, pairs
 
 
 def self_check(problem, progress=None) -> list:
@@ -133,9 +137,9 @@ def self_check(problem, progress=None) -> list:
     for tech in spec.techniques:
         ev = problem.evaluate(tech, problem.values(), spec.params)
         for p in spec.params:
-            fd, step, texels, pixels = central_difference(problem, tech, p)
+            fd, step, texels, pixels, pairs = central_difference(problem, tech, p)
             rows.append(CheckRow(tech.label, p, spec.unit(p), ev.loss, ev.grads[p], fd, step, texels, pixels,
-                                 closed_form(spec, p), ev.edge_pairs))
+                                 closed_form(spec, p), ev.edge_pairs, pairs))
             if progress:
                 progress(rows[-1])
     return rows

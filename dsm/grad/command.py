@@ -25,7 +25,7 @@ from .check import loss_unit, self_check
 from .problem import Problem
 
 COLUMNS = ("technique", "param", "unit", "loss", "ad", "fd", "fd_step", "changed_texels", "changed_pixels",
-           "ad_vs_fd", "closed_form", "ad_vs_closed", "edge_pairs")
+           "changed_pairs", "ad_vs_fd", "closed_form", "ad_vs_closed", "edge_pairs")
 
 
 def add_parser(sub):
@@ -75,7 +75,7 @@ def folder_problem(out: Path, force: bool) -> str | None:
 def row_values(r) -> list:
     """A CheckRow as selfcheck.csv's values (None stays empty: undefined)."""
     return [r.technique, r.param, r.unit, r.loss, r.ad, r.fd, r.step, r.changed_texels, r.changed_pixels,
-            r.ad_vs_fd, r.closed_form, r.ad_vs_closed, r.edge_pairs]
+            r.changed_pairs, r.ad_vs_fd, r.closed_form, r.ad_vs_closed, r.edge_pairs]
 
 
 def write_csv(rows, path: Path):
@@ -101,14 +101,15 @@ def table_text(spec, rows) -> str:
     lines = [f"# Gradient self-check: {spec.scene}, {spec.light} light, loss {spec.loss} ({unit})", "",
              f"Map {spec.map_resolution}^2, image {spec.image_resolution}^2 over [-{spec.window:g}, "
              f"{spec.window:g}]^2, bias {spec.bias:g} world. AD: Dr.Jit reverse mode; FD: central difference "
-             "(step halved until no texel or pixel changes class; `changed` counts what still did); closed "
+             "(step halved until no texel, pixel or antialiasing pair changes; `changed` counts what still did: "
+             "its AD vs FD is undefined); closed "
              "form: dsm.grad.check. Derivatives in the loss's unit per the parameter's unit.", "",
-             "| technique | param | loss | AD | FD | AD vs FD | closed form | AD vs closed | step | changed (texels, pixels) |",
+             "| technique | param | loss | AD | FD | AD vs FD | closed form | AD vs closed | step | changed (texels, pixels, pairs) |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r.technique} | {r.param} ({r.unit}) | {_g(r.loss)} | {_g(r.ad)} | {_g(r.fd)} | "
                      f"{_pct(r.ad_vs_fd)} | {_g(r.closed_form)} | {_pct(r.ad_vs_closed)} | {r.step:g} | "
-                     f"{r.changed_texels}, {r.changed_pixels} |")
+                     f"{r.changed_texels}, {r.changed_pixels}, {r.changed_pairs} |")
     return "\n".join(lines) + "\n"
 
 

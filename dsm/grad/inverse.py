@@ -2,9 +2,11 @@
 
 The target is the exact (ray-traced) image at the configured scene; each start moves one
 parameter by an offset (``inverse_starts``, in the parameter's unit) and descends the l2 loss
-between the technique's image and the target with Adam (Kingma & Ba 2015) on that one parameter,
-its step ``STEP_FRACTION`` of the largest start offset and decaying as 1 / (1 + k / DECAY), for
-``inverse_iterations`` steps. Per start: the final parameter error, whether it is within
+between the technique's image and the target with Adam (Kingma & Ba 2015; ``mi.ad.Adam``, as
+dsm tune's steps) on that one parameter, its learning rate ``STEP_FRACTION`` of the largest start
+offset and decaying as 1 / (1 + k / DECAY) (:func:`learning_rate`, set before each step), for
+``inverse_iterations`` steps. mi.ad.Adam keeps its state in float32 with epsilon 1e-8 (the
+hand-written Adam it replaced: float64, 1e-12), so the traces moved in their last digits. Per start: the final parameter error, whether it is within
 ``inverse_tolerance`` (success), the iteration from which the error stayed within it (None if
 never), and the time to that iteration (wall clock of the whole step: evaluation, derivative,
 update; ``dr.sync_thread()`` around each read, the first step's compile included, as a user meets it).
@@ -12,11 +14,11 @@ update; ``dr.sync_thread()`` around each read, the first step's compile included
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from dataclasses import dataclass
 
 import drjit as dr
+import mitsuba as mi
 
 from .problem import Problem
 
@@ -46,21 +48,29 @@ def inverse_problem(problem, param: str) -> Problem:
     return Problem(spec)
 
 
+def learning_rate(spec, k: int) -> float:
+    """The learning rate of step ``k`` (from 0): STEP_FRACTION of the largest start offset, decaying as
+    1 / (1 + k / DECAY)."""
+    return STEP_FRACTION * max(abs(s) for s in spec.inverse_starts) / (1.0 + k / DECAY)
+
+
 def descend(problem, tech, param: str, offset: float) -> InverseRun:
-    """Adam on ``param`` from the truth + ``offset``, through ``tech``'s image (``problem``'s loss is l2)."""
+    """Adam (mi.ad.Adam) on ``param`` from the truth + ``offset``, through ``tech``'s image (``problem``'s
+    loss is l2): its gradient by forward mode (Problem.evaluate), handed to the optimizer per step."""
     spec = problem.spec
     truth = spec.nominal()[param]
-    lr0 = STEP_FRACTION * max(abs(s) for s in spec.inverse_starts)
-    p, m, v = truth + offset, 0.0, 0.0
+    opt = mi.ad.Adam(lr=learning_rate(spec, 0), beta_1=BETAS[0], beta_2=BETAS[1])
+    opt[param] = mi.Float(truth + offset)
+    p = truth + offset
     trace, times = [], []
     dr.sync_thread()
     t0 = time.perf_counter()
     for k in range(spec.inverse_iterations):
         g = problem.evaluate(tech, problem.values({param: p}), (param,)).grads[param]
-        m = BETAS[0] * m + (1 - BETAS[0]) * g
-        v = BETAS[1] * v + (1 - BETAS[1]) * g * g
-        mh, vh = m / (1 - BETAS[0] ** (k + 1)), v / (1 - BETAS[1] ** (k + 1))
-        p -= lr0 / (1.0 + k / DECAY) * mh / (math.sqrt(vh) + 1e-12) if vh > 0 else 0.0
+        opt.set_learning_rate(learning_rate(spec, k))
+        dr.set_grad(opt[param], mi.Float(g))
+        opt.step()
+        p = float(opt[param][0])
         trace.append(p)
         dr.sync_thread()
         times.append(time.perf_counter() - t0)

@@ -45,7 +45,7 @@ TABLES = (
      "stayed within it."),
     ("selfcheck.csv", "selfcheck", "Self-check: AD against its own central difference and the closed form",
      "Per technique and parameter: the loss, AD (ad) and the technique's own central difference (fd; the step "
-     "halved until no texel or pixel changes class, changed_* count what still did), their relative gap ad_vs_fd, "
+     "halved until no texel, pixel or antialiasing pair changes, changed_* count what still did), their relative gap ad_vs_fd, "
      "the closed form where one is known and ad_vs_closed."),
 )
 # (file, title, what to look for)

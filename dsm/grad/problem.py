@@ -37,6 +37,7 @@ class Evaluation:
     texel_shapes: np.ndarray    # the shape each texel's ray hit (the texels' classes)
     pixel_texels: np.ndarray    # the texel holding each receiver's map position (a nearest lookup's class)
     edge_pairs: int             # texel pairs the antialiasing treated (0 without it)
+    edge_structure: np.ndarray  # per texel, which of its pairs the antialiasing treated (all 0 without it)
 
 
 class Problem:
@@ -144,7 +145,8 @@ class Problem:
         image = dr.detach(V).numpy().reshape(N, N)
         u, v = dr.detach(rx.u_map), dr.detach(rx.v_map)
         return Evaluation(self.loss_np(image), grads, image, amap.smap.shape.numpy(), self._texel(u, v),
-                          edges.pairs if edges is not None else 0)
+                          edges.pairs if edges is not None else 0,
+                          edges.structure if edges is not None else np.zeros(1, np.uint8))
 
     def _texel(self, u, v) -> np.ndarray:
         """The texel index holding map positions (u, v) (clamped to the map), numpy."""

@@ -16,8 +16,10 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .. import prefilter
 from ..config.read import read_toml
 from ..core.types import ConfigError, check_keys, choice, number, as_list
+from . import support
 
 # a differentiable parameter: (its unit, the lights it applies to or None for every light)
 PARAMS = {
@@ -34,8 +36,9 @@ LIGHTS = ("point", "directional", "area")
 LOSSES = ("shadow_area", "shadow_moment_x", "l2")
 # the unit of each loss, given the world unit of length
 LOSS_UNITS = {"shadow_area": "world^2", "shadow_moment_x": "world^3", "l2": "1 (mean over pixels)"}
-TECHNIQUES = ("nearest", "pcf_bilinear", "pcss", "vsm", "esm", "evsm", "msm")
-MOMENT_TECHNIQUES = ("vsm", "esm", "evsm", "msm")
+# the depth map's filters grad differentiates, then every pre-filtered kind of the kit's registry
+MOMENT_TECHNIQUES = prefilter.NAMES
+TECHNIQUES = support.FILTERS + MOMENT_TECHNIQUES
 MAX_BLUR = 31
 MAX_RESOLUTION = 4096
 MIN_SHADOW_PIXELS = 4     # the shadow's least width in image pixels: fewer leave no edge to differentiate

@@ -62,8 +62,8 @@ def _test(look: Lookup, prm, u, v, aa: bool):
 def pcf(look: Lookup, prm, u, v, aa: bool):
     """Bilinear PCF at map positions (u, v): the four tests blended by the fractional position."""
     out = dr.zeros(mi.Float, dr.width(u))
-    for w, i, j in moments.bilinear_taps(u, v):       # a test at each texel's centre
-        out += w * _test(look, prm, i + 0.5, j + 0.5, aa)
+    for uc, vc, w in lookup.bilinear_taps(u, v):       # a test at each texel's centre
+        out += w * _test(look, prm, uc, vc, aa)
     return out
 
 

@@ -120,16 +120,22 @@ def position_key(p):
     return h ^ (h >> 16)
 
 
+def bilinear_taps(u, v):
+    """[(u, v, weight)] of the four texel centres around map positions (u, v) (texels), the weights
+    bilinear in the fractional position: pcf_bilinear's taps, and dsm grad's bilinear fetch."""
+    x, y = u - 0.5, v - 0.5
+    i0, j0 = dr.floor(x), dr.floor(y)
+    fx, fy = x - i0, y - j0
+    return [(i0 + 0.5 + a, j0 + 0.5 + b, (fx if a else 1.0 - fx) * (fy if b else 1.0 - fy))
+            for a in (0, 1) for b in (0, 1)]
+
+
 def filter_taps(filt: str, rx: Receiver, seed: int = 7):
     """[(u, v, weight)] of a filter's taps around the receiver's map position."""
     if filt == "nearest":
         return [(rx.u_map, rx.v_map, 1.0)]
     if filt == "pcf_bilinear":
-        x, y = rx.u_map - 0.5, rx.v_map - 0.5
-        i0, j0 = dr.floor(x), dr.floor(y)
-        fx, fy = x - i0, y - j0
-        return [(i0 + 0.5 + a, j0 + 0.5 + b, (fx if a else 1.0 - fx) * (fy if b else 1.0 - fy))
-                for a in (0, 1) for b in (0, 1)]
+        return bilinear_taps(rx.u_map, rx.v_map)
     if filt == "pcf_wide" or filt.startswith("pcf_wide:"):
         k = int(filt.split(":", 1)[1]) if ":" in filt else PCF_WIDE_DEFAULT
         w = 1.0 / (k * k)

@@ -24,6 +24,7 @@ times the distance), so "1 texel" means the same thing on every view.
 """
 from __future__ import annotations
 
+import copy
 import math
 
 import drjit as dr
@@ -33,8 +34,16 @@ import numpy as np
 from ..core.types import VIEW_FACES
 
 
-def light_frame(direction) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Right-handed orthonormal (ex, ey, ez) with ez along ``direction``, stable for any axis."""
+def light_frame(direction) -> tuple:
+    """Right-handed orthonormal (ex, ey, ez) with ez along ``direction``, stable for any axis: numpy
+    float64 for a numpy or sequence direction, Dr.Jit (the same construction, differentiable: dsm grad's
+    attached light) for a mi.Vector3f."""
+    if dr.is_array_v(direction):
+        ez = dr.normalize(direction)
+        near_z = dr.abs(ez.z) > 0.9
+        zero, one = dr.zeros(mi.Float, dr.width(ez)), dr.ones(mi.Float, dr.width(ez))
+        ey = dr.normalize(dr.cross(ez, mi.Vector3f(dr.select(near_z, one, zero), zero, dr.select(near_z, zero, one))))
+        return dr.cross(ey, ez), ey, ez
     ez = np.asarray(direction, dtype=np.float64)
     ez = ez / np.linalg.norm(ez)
     helper = np.array([1.0, 0.0, 0.0]) if abs(ez[2]) > 0.9 else np.array([0.0, 0.0, 1.0])
@@ -46,6 +55,25 @@ def light_frame(direction) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def _opaque_vec(v):
     return mi.Vector3f(*(dr.opaque(mi.Float, float(c)) for c in v))
+
+
+def frame_value(v):
+    """A frame vector as a view holds it: opaque Dr.Jit values of a numpy one; of a Dr.Jit one (attached,
+    say) an evaluated copy, so that a component that folds to a constant is not a literal the views'
+    ``self.o + ...`` could update in place (Dr.Jit 1.5 did: a directional map's origin took the width of
+    its texels, measured)."""
+    if not dr.is_array_v(v):
+        return _opaque_vec(v)
+    out = type(v)(v)
+    dr.make_opaque(out)
+    return out
+
+
+def frame_numpy(v) -> np.ndarray:
+    """A frame vector's value in numpy float64 (a Dr.Jit one detached, its first lane)."""
+    if not dr.is_array_v(v):
+        return np.asarray(v, float)
+    return np.array([float(dr.detach(c).numpy().ravel()[0]) for c in (v.x, v.y, v.z)])
 
 
 def _bbox_corners(bbox_min, bbox_max) -> np.ndarray:
@@ -74,15 +102,24 @@ class View:
         return VIEW_FACES[self.kind]
 
     def __init__(self, origin, ex, ey, ez, resolution: int, near: float, far: float):
+        """The frame (origin and axes: numpy, or Dr.Jit, e.g. attached to a light's parameters) is taken
+        here, once: ``o``, ``ex``, ``ey``, ``ez`` in Dr.Jit, ``origin_np``, ``axes_np`` their values."""
         self.resolution = int(resolution)
-        self.origin_np = np.asarray(origin, float)
-        self.axes_np = (np.asarray(ex, float), np.asarray(ey, float), np.asarray(ez, float))
+        self.origin_np = frame_numpy(origin)
+        self.axes_np = tuple(frame_numpy(a) for a in (ex, ey, ez))
         self.near, self.far = float(near), float(far)
-        self.o = _opaque_vec(origin)
-        self.ex, self.ey, self.ez = (_opaque_vec(a) for a in self.axes_np)
+        self.o = frame_value(origin)
+        self.ex, self.ey, self.ez = (frame_value(a) for a in (ex, ey, ez))
         self.R = dr.opaque(mi.Float, float(resolution))
         self.R_u = dr.opaque(mi.UInt32, int(resolution))
         self.far_o = dr.opaque(mi.Float, self.far)
+
+    def with_frame(self, origin, ex, ey, ez) -> "View":
+        """A new view with this one's fit (resolution, near, far, extent or cone) and the frame given
+        here (numpy, or Dr.Jit: dsm grad's attached light), taken at its construction as every view's."""
+        view = copy.copy(self)
+        View.__init__(view, origin, ex, ey, ez, self.resolution, self.near, self.far)
+        return view
 
     @property
     def depth_range(self) -> float:
@@ -246,6 +283,17 @@ class OrthographicView(View):
                       far=float(zs.max() - z0 + margin))
         view.L = dr.opaque(mi.Float, view.extent)
         return view
+
+    def turned(self, direction, reach: float) -> "OrthographicView":
+        """This map turned to ``direction`` (Dr.Jit, e.g. attached to a light's angle) about the point
+        ``reach`` along its central ray from the map plane, its fit (extent, near, far) kept
+        (:meth:`View.with_frame`). dsm grad turns a directional map about the point where its central
+        ray meets the ground, so the receivers keep their map positions to first order."""
+        half = 0.5 * self.extent
+        ex0, ey0, ez0 = self.axes_np
+        pivot = mi.Point3f(*(float(c) for c in self.origin_np + (ex0 + ey0) * half + ez0 * reach))
+        ex, ey, ez = light_frame(direction)
+        return self.with_frame(pivot - ez * reach - (ex + ey) * half, ex, ey, ez)
 
     def signature_arrays(self) -> list:
         """The fitted square's side (the frame holds its corner)."""

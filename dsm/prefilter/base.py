@@ -250,9 +250,25 @@ def linstep(lo, hi, x):
     return dr.clip((x - lo) / (hi - lo), 0.0, 1.0)
 
 
+def safe_div(num, den, use):
+    """num / den where ``use``; elsewhere 0, with a gradient of 0 (a select's unused branch still
+    back-propagates 0 * inf = NaN through an unguarded division)."""
+    return dr.select(use, num / dr.select(use, den, 1.0), 0.0)
+
+
 def chebyshev(mean, mean_sq, t, min_variance):
     """Chebyshev's one-sided upper bound on P(z >= t) from E[z], E[z^2] (Donnelly & Lauritzen
-    2006): 1 where t <= E[z], else var / (var + (t - E[z])^2), var at least ``min_variance``."""
+    2006): 1 where t <= E[z], else var / (var + (t - E[z])^2), var at least ``min_variance``.
+    Differentiated (dsm grad, dsm tune), its derivative is that of the same bound written
+    1 / (1 + (d / sigma)^2): var / (var + d^2)'s squares var + d^2, beyond float32 for EVSM's
+    warped variance (up to e^80). The value is the quotient's in both cases, to the bit."""
     var = dr.maximum(mean_sq - mean * mean, min_variance)
     d = t - mean
-    return dr.select(t <= mean, 1.0, var / (var + d * d))
+    bound = var / (var + d * d)
+    if dr.grad_enabled(mean, mean_sq, t, min_variance):
+        has = var > 0
+        r = safe_div(d, dr.sqrt(dr.select(has, var, 1.0)), has)
+        stable = dr.select(has, 1.0 / (1.0 + r * r), 0.0)
+        # the quotient's value (the detached difference adds an exact 0) with the stable form's derivative
+        bound = dr.detach(bound) + (stable - dr.detach(stable))
+    return dr.select(t <= mean, 1.0, bound)

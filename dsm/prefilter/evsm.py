@@ -51,25 +51,29 @@ def log_max(params) -> float:
     return 2.0 * max(params.positive, params.negative if params.moments == 4 else 0.0)
 
 
+def warp(t, c: float):
+    """exp(c x), x = 2 t - 1, of normalized depths ``t`` (numpy or Dr.Jit: the build's moments, the
+    lookup and dsm grad's attached moments warp alike); p = warp(t, c+), n = -warp(t, -c-)."""
+    exp = dr.exp if dr.is_array_v(t) else np.exp
+    return exp(c * (2.0 * t - 1.0))
+
+
 def moments(t, params) -> list:
-    """[p, p^2] or [p, p^2, n, n^2] with p = exp(c+ x), n = -exp(-c- x), x = 2 t - 1."""
-    x = 2.0 * t - 1.0
-    p = np.exp(params.positive * x)
-    out = [p, p * p]
-    if params.moments == 4:
-        n = -np.exp(-params.negative * x)
-        out += [n, n * n]
-    return out
+    """[p, p^2] or [p, p^2, n, n^2] of the warps (numpy float64, or Dr.Jit)."""
+    p = warp(t, params.positive)
+    if params.moments != 4:
+        return [p, p * p]
+    n = -warp(t, -params.negative)
+    return [p, p * p, n, n * n]
 
 
 def visibility(b, t, prm):
     """The smaller warped Chebyshev bound (one bound with 2 moments), bleed-reduced."""
-    x = 2.0 * t - 1.0
-    p = dr.exp(prm.positive * x)
+    p = warp(t, prm.positive)
     slope_p = 2.0 * prm.positive * p
     v = chebyshev(b[0], b[1], p, prm.min_variance * slope_p * slope_p)
     if len(b) == 4:
-        n = -dr.exp(-prm.negative * x)
+        n = -warp(t, -prm.negative)
         slope_n = 2.0 * prm.negative * n
         v = dr.minimum(v, chebyshev(b[2], b[3], n, prm.min_variance * slope_n * slope_n))
     return linstep(prm.bleed, 1.0, v)

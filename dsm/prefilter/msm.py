@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import drjit as dr
 import numpy as np
 
-from .base import chebyshev
+from .base import chebyshev, safe_div
 
 NAME = "msm"
 SOURCE = "Peters & Klein 2015 (I3D), Moment Shadow Mapping, algorithm 2 (Hamburger 4MSM)"
@@ -94,7 +94,9 @@ def decode(q) -> list:
 
 
 def visibility(b, t, prm):
-    """1 - the Hamburger 4MSM shadow bound at the receiver's normalized depth ``t``."""
+    """1 - the Hamburger 4MSM shadow bound at the receiver's normalized depth ``t``, its square root
+    and divisions guarded (safe_div) so that a differentiated lookup (dsm grad) has no NaN from a
+    branch it does not take: the same values as the unguarded algorithm wherever those are finite."""
     a = prm.moment_bias
     t = t - prm.depth_bias
     b0, b1, b2, b3 = ((1.0 - a) * m + a * 0.5 for m in b)
@@ -103,25 +105,27 @@ def visibility(b, t, prm):
     d22 = -b0 * b0 + b1
     sq_var = -b1 * b1 + b3
     d33d22 = sq_var * d22 - l32d22 * l32d22
-    inv_d22 = 1.0 / d22
+    # float32 can leave the system singular (c2 = 0 for a window of one depth under a small bias);
+    # Chebyshev's bound of the same biased moments, looser but defined, stands in there
+    ok = (d22 != 0) & (d33d22 != 0)
+    inv_d22 = safe_div(1.0, d22, ok)
     l32 = l32d22 * inv_d22
     c1 = t - b0
     c2 = t * t - b1 - l32 * c1
     c1 = c1 * inv_d22
-    c2 = c2 * d22 / d33d22
+    c2 = safe_div(c2 * d22, d33d22, ok)
     c1 = c1 - l32 * c2
     c0 = 1.0 - (c1 * b0 + c2 * b1)
-    p, q = c1 / c2, c0 / c2
-    r = dr.sqrt(dr.maximum(p * p * 0.25 - q, 0.0))
+    ok &= c2 != 0
+    p, q = safe_div(c1, c2, ok), safe_div(c0, c2, ok)
+    r2 = p * p * 0.25 - q
+    r = dr.select(r2 > 0, dr.sqrt(dr.select(r2 > 0, r2, 1.0)), 0.0)
     z2, z3 = -p * 0.5 - r, -p * 0.5 + r
     beyond, between = z3 < t, z2 < t
     s0 = dr.select(beyond, z2, t)
     s1 = dr.select(beyond, t, z2)
     s2 = dr.select(beyond, 1.0, 0.0)
-    quotient = (s0 * z3 - b0 * (s0 + z3) + b1) / ((z3 - s1) * (t - z2))
-    shadow = s2 + dr.select(between, quotient, 0.0)      # not 0 * inf where no root lies in front
-    v = 1.0 - dr.clip(shadow, 0.0, 1.0)
-    # float32 can leave the system singular (c2 = 0 for a window of one depth with a small bias:
-    # a NaN bound); Chebyshev's bound of the same biased moments, looser but defined, stands in.
-    # The NaN is tested before the clip: Dr.Jit 1.4 clips a NaN to a bound (1.5 keeps it NaN)
-    return dr.select(dr.isnan(shadow), chebyshev(b0, b1, t, 0.0), v)
+    den = (z3 - s1) * (t - z2)
+    quotient = safe_div(s0 * z3 - b0 * (s0 + z3) + b1, den, between & (den != 0))   # 0 where no root lies in front
+    v = 1.0 - dr.clip(s2 + quotient, 0.0, 1.0)
+    return dr.select(ok & dr.isfinite(v), v, chebyshev(b0, b1, t, 0.0))
