@@ -56,7 +56,7 @@ class AxisDepthCube:
     def depth(self, p):
         """Depth of world points ``p``: the distance along their cube face's axis."""
         face = self._cube.face_of(p)
-        _, _, W = self._cube._frame(face)
+        _, _, W = self._cube.face_axes(face)
         return dr.dot(p - self._cube.o, W)
 
     def plane_hit(self, u, v, p0, n, face=None):
@@ -79,7 +79,7 @@ def _texel_axis_cosine(view) -> np.ndarray:
     if view.virtual:        # faces that differ in resolution, through pages: each stored texel's own ray
         face, cu, cv = view.texel_coords(dr.arange(mi.UInt32, view.n_texels))
         _, d = view.ray_at(cu, cv, face)
-        return np.asarray(dr.dot(d, view._frame(face)[2]).numpy(), np.float64)
+        return np.asarray(dr.dot(d, view.face_axes(face)[2]).numpy(), np.float64)
     R = view.resolution
     c = (np.arange(R) + 0.5) / R * 2.0 - 1.0
     a, b = np.meshgrid(c, c)                     # row j (v), column i (u)

@@ -483,7 +483,8 @@ class CubeView(PointView):
         tab = np.asarray(CUBE_FACES, float)        # (6, 3 vectors, 3 coords)
         self.U, self.V, self.W = (mi.Vector3f(*(tab[:, k, c] for c in range(3))) for k in range(3))
 
-    def _frame(self, face):
+    def face_axes(self, face):
+        """The axes of faces ``face`` (per receiver): the map's u and v axes and W, the face's outward axis."""
         return (dr.gather(mi.Vector3f, self.U, face), dr.gather(mi.Vector3f, self.V, face),
                 dr.gather(mi.Vector3f, self.W, face))
 
@@ -498,7 +499,7 @@ class CubeView(PointView):
         return 2 * axis + dr.select(neg, mi.UInt32(1), mi.UInt32(0))
 
     def _local(self, p, face):
-        U, V, W = self._frame(face)
+        U, V, W = self.face_axes(face)
         q = p - self.o
         z = dr.dot(q, W)
         return dr.dot(q, U), dr.dot(q, V), dr.maximum(z, 1e-30 * dr.norm(q) + 1e-38)
@@ -512,7 +513,7 @@ class CubeView(PointView):
     def ray_at(self, u, v, face=None):
         """(origin, direction) of the ray from the light through map position (u, v) of ``face`` (default: +x)."""
         face = dr.zeros(mi.UInt32, dr.width(u)) if face is None else face
-        U, V, W = self._frame(face)
+        U, V, W = self.face_axes(face)
         a, b = self.to_square(u, v)
         d = dr.normalize(U * a + V * b + W)
         return dr.zeros(mi.Point3f, dr.width(d)) + self.o, d

@@ -260,9 +260,9 @@ class VirtualCubeView(PunctualPages, CubeView):
         """The cube face of world points ``p``: their direction's major axis (CubeView's choice)."""
         return CubeView.face_of(self, p)
 
-    def _frame(self, face):
+    def face_axes(self, face):
         """The axes (U, V, W) of faces ``face`` (cube face x levels + level): their cube face's."""
-        return CubeView._frame(self, face // len(self.levels))
+        return CubeView.face_axes(self, face // len(self.levels))
 
     def project_on(self, p, face=None):
         """(u, v) in texels of ``face`` of world points ``p`` (default: each point's own face and level)."""
@@ -275,7 +275,7 @@ class VirtualCubeView(PunctualPages, CubeView):
         """(origin, direction) of the ray from the light through (u, v) of ``face`` (default: +x, the first level)."""
         face = dr.zeros(mi.UInt32, dr.width(u)) if face is None else face
         Rk = dr.gather(mi.Float, self.Rf, face)
-        U, V, W = self._frame(face)
+        U, V, W = self.face_axes(face)
         d = dr.normalize(U * (2.0 * u / Rk - 1.0) + V * (2.0 * v / Rk - 1.0) + W)
         return dr.zeros(mi.Point3f, dr.width(d)) + self.o, d
 
