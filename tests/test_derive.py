@@ -179,7 +179,7 @@ def test_dsm_plan_explain_prints_the_measured_quantities_and_runs_nothing(tmp_pa
     assert cli.main(["plan", str(path)]) == 0 and "cases:" in capsys.readouterr().out
 
 
-MACHINE = ("_ms", "compiled")     # timing and kernel-cache columns: the machine's, not the result's
+MACHINE = (("_ms", "_mb"), "compiled")     # timing, peak memory and kernel-cache columns: the machine's
 
 
 def test_derived_toml_run_again_gives_the_derived_runs_results(tmp_path, capsys):
