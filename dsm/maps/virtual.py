@@ -137,28 +137,13 @@ class VirtualView(View):
         """The pages the receivers ``pts`` tag (their level's page, and the neighbour across an edge
         within ``border`` of a page), sorted by level, row and column; ``all_pages``: every page of
         the levels they read."""
-        if not len(pts):
-            return np.zeros((0, 3), int)
-        p = mi.Point3f(*(mi.Float(pts[:, c].astype(np.float32)) for c in range(3)))
-        face = self.face_of(p)
-        u, v = self.project_on(p, face)
-        ok = self.inside(p)
-        dr.eval(face, u, v, ok)
-        ok = np.asarray(ok.numpy(), bool)
-        f = np.asarray(face.numpy(), int)[ok]
-        P, S, b = self.page_size, self.pages_side, self.spec.border
-        fu, fv = np.asarray(u.numpy(), float)[ok] / P, np.asarray(v.numpy(), float)[ok] / P
-        px, py = np.clip(np.floor(fu), 0, S - 1).astype(int), np.clip(np.floor(fv), 0, S - 1).astype(int)
+        S = self.pages_side
+        tagged = tagged_pages(self, pts, lambda f: np.full_like(f, S), self.spec.border)
         if all_pages:
             g = np.arange(S)
-            out = [(k, x, y) for k in np.unique(f) for y in g for x in g]
+            out = [(k, x, y) for k in np.unique(tagged[:, 0]) for y in g for x in g]
             return np.array(out, int).reshape(-1, 3)
-        dx = np.where(fu - px < b, -1, np.where(fu - px > 1 - b, 1, 0))
-        dy = np.where(fv - py < b, -1, np.where(fv - py > 1 - b, 1, 0))
-        cand = np.concatenate([np.stack([f, px + ax * dx, py + ay * dy], 1) for ax in (0, 1) for ay in (0, 1)])
-        cand = cand[(cand[:, 1] >= 0) & (cand[:, 1] < S) & (cand[:, 2] >= 0) & (cand[:, 2] < S)]
-        out = np.unique(cand, axis=0)
-        return out[np.lexsort((out[:, 1], out[:, 2], out[:, 0]))]
+        return tagged
 
     def _no_page(self, n_receivers: int) -> np.ndarray:
         """The pages of a map no receiver tagged: none lit (a sun from below) is an empty case, as
@@ -304,3 +289,28 @@ def make_view(light, spec: VirtualSpec, receivers_world, bbox, sensor, scale: fl
     """The virtual view of a directional light for the camera ``sensor`` (a Mitsuba sensor or a Camera)."""
     camera = sensor if isinstance(sensor, Camera) else Camera.from_sensor(sensor)
     return VirtualView(light.direction, spec, camera, receivers_world, bbox, scale)
+
+
+
+def tagged_pages(view, pts: np.ndarray, pages_side, border: float) -> np.ndarray:
+    """The pages (face, page x, page y) that world points ``pts`` inside a virtual ``view`` tag: each
+    point's own page, and the neighbour across an edge within ``border`` (pages) of it; ``pages_side(f)``:
+    pages a side of faces ``f``. Sorted by face, row and column."""
+    if not len(pts):
+        return np.zeros((0, 3), int)
+    p = mi.Point3f(*(mi.Float(pts[:, c].astype(np.float32)) for c in range(3)))
+    face = view.face_of(p)
+    u, v = view.project_on(p, face)
+    ok = view.inside(p)
+    dr.eval(face, u, v, ok)
+    ok = np.asarray(ok.numpy(), bool)
+    f = np.asarray(face.numpy(), int)[ok]
+    S, P = pages_side(f), view.page_size
+    fu, fv = np.asarray(u.numpy(), float)[ok] / P, np.asarray(v.numpy(), float)[ok] / P
+    px, py = np.clip(np.floor(fu), 0, S - 1).astype(int), np.clip(np.floor(fv), 0, S - 1).astype(int)
+    dx = np.where(fu - px < border, -1, np.where(fu - px > 1 - border, 1, 0))
+    dy = np.where(fv - py < border, -1, np.where(fv - py > 1 - border, 1, 0))
+    cand = np.concatenate([np.stack([f, px + ax * dx, py + ay * dy, S], 1) for ax in (0, 1) for ay in (0, 1)])
+    cand = cand[(cand[:, 1] >= 0) & (cand[:, 1] < cand[:, 3]) & (cand[:, 2] >= 0) & (cand[:, 2] < cand[:, 3])]
+    out = np.unique(cand[:, :3], axis=0)
+    return out[np.lexsort((out[:, 1], out[:, 2], out[:, 0]))]

@@ -32,6 +32,7 @@ import numpy as np
 from ..core.types import VirtualSpec
 from ..scenes.camera import Camera
 from .views import CubeView, PerspectiveView, gnomonic_texel
+from .virtual import tagged_pages
 
 NO_PAGE = 0xFFFFFFFF
 
@@ -89,25 +90,7 @@ class PunctualPages:
     def _tag(self, pts: np.ndarray) -> np.ndarray:
         """The pages (face, page x, page y) the receivers ``pts`` inside the view tag: their level's
         page, and the neighbour across an edge within ``border`` of a page; sorted by face, row, column."""
-        if not len(pts):
-            return np.zeros((0, 3), int)
-        p = mi.Point3f(*(mi.Float(pts[:, c].astype(np.float32)) for c in range(3)))
-        face = self.face_of(p)
-        u, v = self.project_on(p, face)
-        ok = self.inside(p)
-        dr.eval(face, u, v, ok)
-        ok = np.asarray(ok.numpy(), bool)
-        f = np.asarray(face.numpy(), int)[ok]
-        S = self.sides_np[f]
-        P, b = self.page_size, self.spec.border
-        fu, fv = np.asarray(u.numpy(), float)[ok] / P, np.asarray(v.numpy(), float)[ok] / P
-        px, py = np.clip(np.floor(fu), 0, S - 1).astype(int), np.clip(np.floor(fv), 0, S - 1).astype(int)
-        dx = np.where(fu - px < b, -1, np.where(fu - px > 1 - b, 1, 0))
-        dy = np.where(fv - py < b, -1, np.where(fv - py > 1 - b, 1, 0))
-        cand = np.concatenate([np.stack([f, px + ax * dx, py + ay * dy, S], 1) for ax in (0, 1) for ay in (0, 1)])
-        cand = cand[(cand[:, 1] >= 0) & (cand[:, 1] < cand[:, 3]) & (cand[:, 2] >= 0) & (cand[:, 2] < cand[:, 3])]
-        out = np.unique(cand[:, :3], axis=0)
-        return out[np.lexsort((out[:, 1], out[:, 2], out[:, 0]))]
+        return tagged_pages(self, pts, lambda f: self.sides_np[f], self.spec.border)
 
     def _page_table(self):
         """The physical page of each virtual page (NO_PAGE: not tagged) and each physical page's place."""
