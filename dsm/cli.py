@@ -190,6 +190,42 @@ def _terminated(signum, frame):
     raise KeyboardInterrupt
 
 
+def _interrupted_where(args, out) -> str:
+    """What a Ctrl-C leaves and how to go on, for the one line it prints (empty where nothing was written)."""
+    where = f" (results so far in {out}/)" if out is not None and entries(out) else ""
+    if where and args.cmd == "run" and (out / "run.json").is_file():
+        try:
+            measured = json.loads((out / "run.json").read_text()).get("state") == "complete"
+        except (OSError, ValueError):
+            measured = False
+        if measured:       # stopped while the report was drawn: every case is measured
+            where = (f" while writing the report: every case is measured in {out}/; `dsm report {out}` "
+                     "writes table.md, plots/ and report.html")
+        else:
+            where += f"; `dsm run ... --out {out} --resume` runs the rest"
+    elif where and args.cmd == "tune" and (out / "tune_state.json").is_file():
+        where = f" (finished schemes in {out}/tune_state.json; `dsm tune ... --out {out} --resume` tunes the rest)"
+    return where
+
+
+def _command_without_config(args) -> int:
+    """The commands main hands on whole (schemes, perf or bench, benchmark, grad, report): their exit status."""
+    if args.cmd == "schemes":
+        print(schemes_text())
+        return 0
+    if args.cmd in ("perf", "bench"):
+        if args.cmd == "bench":
+            print("dsm: `dsm bench` is an alias of `dsm perf` (renamed in 0.2.0, so it is not confused with "
+                  "`dsm benchmark`); its default --out stays bench/", file=sys.stderr)
+        args.out = args.out if args.out is not None else args.cmd
+        return _bench(args)
+    if args.cmd == "benchmark":
+        return benchmark_command.main(args)
+    if args.cmd == "grad":
+        return grad_command.main(args)
+    return _report(args)
+
+
 def main(argv=None) -> int:
     """Run the ``dsm`` command line on ``argv`` (default: the process's arguments); returns the exit status."""
     try:
@@ -200,21 +236,8 @@ def main(argv=None) -> int:
         signal.signal(signal.SIGTERM, _terminated)
     out = None
     try:
-        if args.cmd == "schemes":
-            print(schemes_text())
-            return 0
-        if args.cmd in ("perf", "bench"):
-            if args.cmd == "bench":
-                print("dsm: `dsm bench` is an alias of `dsm perf` (renamed in 0.2.0, so it is not confused with "
-                      "`dsm benchmark`); its default --out stays bench/", file=sys.stderr)
-            args.out = args.out if args.out is not None else args.cmd
-            return _bench(args)
-        if args.cmd == "benchmark":
-            return benchmark_command.main(args)
-        if args.cmd == "grad":
-            return grad_command.main(args)
-        if args.cmd == "report":
-            return _report(args)
+        if args.cmd in ("schemes", "perf", "bench", "benchmark", "grad", "report"):
+            return _command_without_config(args)
         derived = None
         if args.cmd in ("run", "plan") and is_scene_file(args.config):
             derived, rc = _checked(lambda: derivation_of(args))
@@ -246,20 +269,8 @@ def main(argv=None) -> int:
         # down, must not break the exit's clean-up (tqdm's and Ray's atexit handlers) into a traceback
         if argv is None:
             signal.signal(signal.SIGINT, signal.SIG_IGN)
-        where = f" (results so far in {out}/)" if out is not None and entries(out) else ""
-        if where and args.cmd == "run" and (out / "run.json").is_file():
-            try:
-                measured = json.loads((out / "run.json").read_text()).get("state") == "complete"
-            except (OSError, ValueError):
-                measured = False
-            if measured:       # stopped while the report was drawn: every case is measured
-                where = (f" while writing the report: every case is measured in {out}/; `dsm report {out}` "
-                         "writes table.md, plots/ and report.html")
-            else:
-                where += f"; `dsm run ... --out {out} --resume` runs the rest"
-        elif where and args.cmd == "tune" and (out / "tune_state.json").is_file():
-            where = f" (finished schemes in {out}/tune_state.json; `dsm tune ... --out {out} --resume` tunes the rest)"
-        print(f"{chr(10) if sys.stderr.isatty() else ''}dsm: interrupted{where}", file=sys.stderr)
+        print(f"{chr(10) if sys.stderr.isatty() else ''}dsm: interrupted{_interrupted_where(args, out)}",
+              file=sys.stderr)
         return 130
     except BrokenPipeError:
         # `dsm ... | head`: the reader of stdout left; every file the command wrote stands. Later
