@@ -219,11 +219,7 @@ class VirtualView(View):
 
     def texel_coords(self, idx):
         """(level, centre u, centre v) of physical texels ``idx``: page ``idx // P^2``, texel ``idx % P^2`` in it."""
-        page, rest = idx // self.PP_u, idx % self.PP_u
-        face = dr.gather(mi.UInt32, self.page_face, page)
-        i = dr.gather(mi.UInt32, self.page_x, page) * self.P_u + rest % self.P_u
-        j = dr.gather(mi.UInt32, self.page_y, page) * self.P_u + rest // self.P_u
-        return face, mi.Float(i) + 0.5, mi.Float(j) + 0.5
+        return physical_texel_coords(self, idx)
 
     def texel_index(self, face, i, j):
         """(physical index, not stored) of virtual texel (i, j) of level ``face``: through the page table."""
@@ -314,3 +310,13 @@ def tagged_pages(view, pts: np.ndarray, pages_side, border: float) -> np.ndarray
     cand = cand[(cand[:, 1] >= 0) & (cand[:, 1] < cand[:, 3]) & (cand[:, 2] >= 0) & (cand[:, 2] < cand[:, 3])]
     out = np.unique(cand[:, :3], axis=0)
     return out[np.lexsort((out[:, 1], out[:, 2], out[:, 0]))]
+
+
+def physical_texel_coords(view, idx):
+    """(face, centre u, centre v) of a paged view's physical texels ``idx``: page ``idx // P^2`` (its face and
+    place from the view's page_face, page_x, page_y), texel ``idx % P^2`` in it, row by row."""
+    page, rest = idx // view.PP_u, idx % view.PP_u
+    face = dr.gather(mi.UInt32, view.page_face, page)
+    i = dr.gather(mi.UInt32, view.page_x, page) * view.P_u + rest % view.P_u
+    j = dr.gather(mi.UInt32, view.page_y, page) * view.P_u + rest // view.P_u
+    return face, mi.Float(i) + 0.5, mi.Float(j) + 0.5

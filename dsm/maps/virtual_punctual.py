@@ -32,7 +32,7 @@ import numpy as np
 from ..core.types import VirtualSpec
 from ..scenes.camera import Camera
 from .views import CubeView, PerspectiveView, gnomonic_texel
-from .virtual import tagged_pages
+from .virtual import physical_texel_coords, tagged_pages
 
 NO_PAGE = 0xFFFFFFFF
 
@@ -142,11 +142,7 @@ class PunctualPages:
 
     def texel_coords(self, idx):
         """(face, centre u, centre v) of physical texels ``idx``: page ``idx // P^2``, its texel ``idx % P^2``."""
-        page, rest = idx // self.PP_u, idx % self.PP_u
-        face = dr.gather(mi.UInt32, self.page_face, page)
-        i = dr.gather(mi.UInt32, self.page_x, page) * self.P_u + rest % self.P_u
-        j = dr.gather(mi.UInt32, self.page_y, page) * self.P_u + rest // self.P_u
-        return face, mi.Float(i) + 0.5, mi.Float(j) + 0.5
+        return physical_texel_coords(self, idx)
 
     def texel_index(self, face, i, j):
         """(physical index, not stored) of texel (i, j) of ``face`` (clamped to it) through the page table."""
