@@ -1,3 +1,4 @@
+import csv
 import json
 import os
 from pathlib import Path
@@ -99,3 +100,100 @@ def write_toml(path: Path, cfg: dict) -> Path:
             lines += [f"{k} = {value(v)}" for k, v in t.items()]
     Path(path).write_text("\n".join(lines) + "\n")
     return Path(path)
+
+
+# ------------------------------------------------ shared by the input tests (test_*_inputs.py, test_lock.py, ...)
+
+def tiny_toml(extra: str = "", scene: str = 'builtin = "plane"', name: str = "t") -> str:
+    """A 32^2 experiment's TOML text (one scene, one scheme), ``extra`` appended."""
+    return (f'[experiment]\nname = "{name}"\n[camera]\nresolution = [32, 32]\n[[scene]]\n{scene}\n'
+            f'[map]\nresolution = 32\n[[scheme]]\nname = "none"\n[timing]\nrepeats = 1\n{extra}')
+
+
+@pytest.fixture
+def cfg_file(tmp_path):
+    """tmp_path/c.toml holding ``tiny_toml()``."""
+    path = tmp_path / "c.toml"
+    path.write_text(tiny_toml())
+    return path
+
+
+def metrics_rows(folder: Path) -> list:
+    """``folder``/metrics.csv's rows as dicts of strings."""
+    with open(folder / "metrics.csv", newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def small_run(tmp_path):
+    """The Results of a 32^2 plane_box run with one constant bias, into tmp_path/r."""
+    import dsm
+    return dsm.run(base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [32, 32]},
+                               map={"resolution": 32}, scheme=[{"name": "constant"}]), out=tmp_path / "r")
+
+
+def write_cfg(tmp_path, raw) -> Path:
+    """``raw`` (a config dict of tables and arrays of tables) as tmp_path/cfg.toml."""
+    return write_toml(tmp_path / "cfg.toml", raw)
+
+
+def toml_text(d: dict, prefix: str = "") -> str:
+    """``d`` as TOML (scalars, lists of scalars, tables and arrays of tables): the config a user writes."""
+    val = lambda v: ("true" if v else "false") if isinstance(v, bool) else repr(v) if not isinstance(v, str) else f'"{v}"'
+    flat = lambda v: "[" + ", ".join(val(x) for x in v) + "]" if isinstance(v, list) else val(v)
+    plain = {k: v for k, v in d.items() if not isinstance(v, dict) and not (isinstance(v, list) and v and isinstance(v[0], dict))}
+    out = [f"{k} = {flat(v)}" for k, v in plain.items()]
+    for k, v in d.items():
+        name = f"{prefix}{k}"
+        if isinstance(v, dict):
+            out += [f"[{name}]", toml_text(v, name + ".")]
+        elif isinstance(v, list) and v and isinstance(v[0], dict):
+            for t in v:
+                out += [f"[[{name}]]", toml_text(t, name + ".")]
+    return "\n".join(out) + "\n"
+
+
+def folder_files(folder) -> dict:
+    """Every file under ``folder`` with its bytes (the lock file aside): what a refusal must leave."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
+            if p.is_file() and p.name != ".dsm-lock"}
+
+
+def cli_lines(capsys, *argv) -> tuple:
+    """(exit status, stderr's lines, blank ones inside kept) of an in-process ``dsm argv``."""
+    from dsm import cli
+    capsys.readouterr()
+    rc = cli.main([str(a) for a in argv])
+    return rc, capsys.readouterr().err.strip().splitlines()
+
+
+# ------------------------------------------------ what a test file may be named after (tests/test_test_names.py)
+# A test file is tests/test_<module>[_more].py for a module or package of dsm/ or plugins/, or one of
+# these topics, each with where it is documented: a file, or "file#heading" (a heading in that file).
+TEST_TOPICS = {
+    "acne_surface": "docs/design.md#### The acne split: self or edge, by surface",
+    "browser": "docs/design.md### Figures and pages a reader can read",
+    "docs": "docs/design.md### The documentation site (`docs/`, `scripts/docs`)",
+    "experiments": "experiments",
+    "far_from_origin": "docs/far_from_origin.md",
+    "filters_formats": "docs/design.md### Schemes",
+    "gpu": "DEVELOPERS.md### The GPU check (cuda_ad_rgb against llvm_ad_rgb)",
+    "hard_cases": "docs/benchmark.md",
+    "imports": "docs/design.md#### Packages as layers",
+    "inputs": "docs/running.md",
+    "install": "docs/install.md",
+    "layers": "docs/design.md### Layered maps: the cost of a second layer",
+    "machine_independence": "docs/design.md### Results that do not depend on the machine",
+    "moving_casters": "docs/moving_casters.md",
+    "msm16": "docs/design.md### Pre-filtered maps (`dsm/prefilter/`)",
+    "notebooks": "notebooks",
+    "papers": "docs/papers.md",
+    "physics": "docs/design.md### Conventions",
+    "plugins": "plugins/dsm_plugins",
+    "real_meshes": "data/meshes/README.md",
+    "scheme_contract": "docs/design.md### Schemes",
+    "sponza_model": "docs/sponza.md",
+    "stable_answer": "docs/design.md### What accuracy costs: costs in counts, the frontier, the answer",
+    "test_names": "DEVELOPERS.md## Tests",
+    "trust": "docs/design.md### Results that do not depend on the machine",
+    "versions": "docs/design.md### Installation and the versions a result depends on",
+}

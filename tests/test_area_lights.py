@@ -5,18 +5,19 @@ lights' reference cost unchanged, soft metrics by hand, configs and a run end to
 import drjit as dr
 import mitsuba as mi
 import numpy as np
+
 import pytest
 
-from dsm.truth import area, intervals, metrics
-from dsm.lights import area_surface
+from conftest import MESHES, base_config
+from dsm import pipeline, schemes
 from dsm.config import read as config
+from dsm.config.read import ConfigError
+from dsm.core.types import LightSpec
+from dsm.lights import area_surface
 from dsm.maps import lookup
 from dsm.maps.receiver import Receiver
-from dsm import pipeline, schemes
 from dsm.scenes import geometry as scene_geometry
-from dsm.core.types import ConfigError, LightSpec
-
-from conftest import MESHES, base_config
+from dsm.truth import area, intervals, metrics
 
 # the analytic scene: square light (side A, height H) above a square occluder (side B, height Hs)
 A, H, B, HS = 1.0, 4.0, 1.0, 2.0
@@ -373,3 +374,27 @@ def test_adaptive_tap_clamps_the_plane_depth_by_the_taps_offset(variant):
     want = z1 + 1e-4 * 5.0 - np.clip(plane, d - reach, d + reach)
     assert (np.abs(plane - d) > reach).mean() > 0.5           # the clamp acts on most of these taps
     np.testing.assert_allclose(got, want, atol=2e-6)
+
+
+def test_an_area_reference_in_chunks_is_the_reference_in_one_launch(monkeypatch):
+    """A stage launched every receiver's samples at once: max_samples = 2^20 over a few thousand
+    receivers passed 2^32 lanes (Dr.Jit's UInt32 index) and the memory. Now receivers go in
+    chunks of at most STAGE_LANES rays; each receiver's samples have their own seeds, so V* is
+    the same: here with chunks of one to a few receivers against one launch per stage."""
+    import numpy as np
+    from dsm.truth import area
+    from dsm.config import read as config
+    from dsm import pipeline
+    cfg = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [24, 24]},
+                      light=[{"type": "area", "shape": "rectangle", "position": [0.6, -0.4, 3.0], "size": 0.5,
+                              "max_samples": 512, "tolerance": 0.05}])
+    sd = pipeline.load_scene(pipeline.scene_spec({"builtin": "plane_box"}), (24, 24))
+    light = sd.lights_for(config.parse(cfg).lights)[0]
+    gb = pipeline.gbuffer(sd)
+    monkeypatch.setattr(area, "STAGE_LANES", 1 << 30)
+    whole = pipeline.light_setup(sd, gb, light, "a").ref
+    monkeypatch.setattr(area, "STAGE_LANES", 40)
+    chunked = pipeline.light_setup(sd, gb, light, "a").ref
+    assert len(whole.hits) > 100 and len(np.unique(whole.samples)) >= 3    # receivers stopped at several stages
+    assert np.array_equal(whole.hits, chunked.hits) and np.array_equal(whole.samples, chunked.samples)
+    assert np.array_equal(whole.low, chunked.low) and np.array_equal(whole.high, chunked.high)

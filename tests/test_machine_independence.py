@@ -71,12 +71,11 @@ def test_maps_and_gbuffer_are_the_same_bits_at_every_vector_width(variant, tmp_p
     """The room's cube maps (first layer, slope, second layer, culled) and its G-buffer, built in
     processes whose Dr.Jit LLVM vector width is forced to 4, 8 and 16 lanes, are the bits of the
     build in this process (the CPU's own width)."""
-    sys.path.insert(0, str(ROOT / "tests"))
-    import width_probe
-    here = width_probe.arrays()
+    import helpers_width_probe
+    here = helpers_width_probe.arrays()
     for width in (4, 8, 16):
         out = tmp_path / f"w{width}.npz"
-        p = subprocess.run([sys.executable, str(ROOT / "tests" / "width_probe.py"), str(width), str(out)],
+        p = subprocess.run([sys.executable, str(ROOT / "tests" / "helpers_width_probe.py"), str(width), str(out)],
                            capture_output=True, text=True, timeout=300)
         assert p.returncode == 0, p.stderr[-2000:]
         got = np.load(out)

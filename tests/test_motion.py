@@ -2,11 +2,11 @@
 cascades under a sideways camera flicker 0 within a cascade; a fixed point's exact visibility
 does not depend on the camera; the flicker arithmetic against counts made by hand."""
 import csv
-
 import numpy as np
+
 import pytest
 
-from conftest import base_config
+from conftest import cli_run as _cli, one_line as _one_line, base_config, toml_text
 
 SCHEMES = [{"name": "none"}, {"name": "constant", "bias": ["1 texel", 0.02]}, {"name": "normal_offset"},
            {"name": "receiver_plane"}, {"preset": "bevy"}]
@@ -278,3 +278,17 @@ def test_light_keyframes_interpolate_positions_and_a_spots_aim():
     assert out[3].target is None and np.allclose(d / np.linalg.norm(d), np.array([0.0, -1.0, -4.0]) / np.sqrt(17.0))
     sun = LightSpec("directional", direction=(0.0, 0.0, -1.0))
     assert all(lf == sun for lf in motion.light_path(MotionSpec(frames=3, light="move", light_offset=(1, 0, 0)), sun))
+
+
+def test_motion_with_an_area_light_is_a_config_error(tmp_path, capsys):
+    """It ran: its fixed points' V* was one ray to the light's centre, and its row summed the
+    frames' counts beside the last frame's penumbra count and errors (n_gt_lit + n_gt_shadowed +
+    n_penumbra was not n_receivers)."""
+    cfg = base_config(scene=[{"builtin": "plane_box"}],
+                      light=[{"type": "area", "shape": "rectangle", "position": [0.6, -0.4, 3.0], "size": 0.5}],
+                      motion=[{"frames": 2, "camera": "dolly", "offset": [0.0, 0.5, 0.0], "points": 100}])
+    path = tmp_path / "c.toml"
+    path.write_text(toml_text(cfg))
+    rc, err = _cli(capsys, "plan", path)
+    assert rc == 2
+    _one_line(err, str(path), "light[0].type", "[[motion]]", "point")

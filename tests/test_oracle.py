@@ -1,8 +1,9 @@
 """The oracles (dsm.truth.oracle): the best any bias can do, held to the kit's own sweeps and to
 geometry derived here, independently of truth/oracle.py."""
+import csv
 import math
-
 import numpy as np
+
 import pytest
 
 from conftest import base_config
@@ -250,3 +251,21 @@ def test_plan_counts_the_oracles_sorts():
     assert p.oracle_receivers == 2 * 2 * 64 * 32          # 2 maps x 2 formats x camera pixels
     line = next(x for x in p.text().splitlines() if "oracles" in x)
     assert f"{2 * 2 * 64 * 32:,}" in line and "2 lambda" in line
+
+
+def test_an_oracle_bias_pasted_back_gives_the_oracles_counts(tmp_path):
+    """oracle.csv's best world bias, read as text and pasted into a config as a constant bias,
+    gives the world oracle's acne and peter-panning counts (6 digits gave one more acne receiver)."""
+    import dsm
+    from conftest import base_config
+    raw = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [96, 96]}, map={"resolution": 128},
+                      scheme=[{"name": "none"}])
+    first = dsm.run(raw, out=tmp_path / "a")
+    rows = list(csv.DictReader(open(first.out / "oracle.csv")))
+    # every best bias reads back to the oracle's own float (6 digits did not)
+    assert [float(r["best_b"]) for r in rows] == [o["best_b"] for o in first.oracle]
+    assert [float(r["best_k"]) for r in rows] == [o["best_k"] for o in first.oracle]
+    row = rows[0]
+    pasted = dsm.run({**raw, "scheme": [{"name": "constant", "bias": float(row["best_b"])}]}, out=tmp_path / "b")
+    r = pasted.rows[0]
+    assert (r["n_acne"], r["n_peterpan"]) == (int(row["world_n_acne"]), int(row["world_n_peterpan"]))

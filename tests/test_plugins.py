@@ -1,5 +1,8 @@
 """The Mitsuba integrator plugins dsm_error and dsm_shadow: the runner's code, through mi.render."""
 import numpy as np
+import subprocess
+import sys
+
 import pytest
 
 from conftest import ROOT
@@ -349,3 +352,15 @@ def test_bad_plugin_properties_name_the_property_and_the_choices(variant):
     assert issubclass(ConfigError, Exception)
     # the base class's own properties stay the base class's
     assert mi.load_dict({"type": "dsm_shadow", "hide_emitters": True}).opts.spec.name == "adaptive"
+
+
+def test_the_plugins_under_an_unsupported_variant_say_which_are(tmp_path):
+    """Under scalar_rgb or a spectral variant a dsm integrator is refused when loaded, one line
+    naming the variants dsm supports (it failed with TypeErrors deep in a render)."""
+    code = ("import mitsuba as mi, sys; mi.set_variant(sys.argv[1]); import dsm\n"
+            "try:\n    mi.load_dict({'type': 'dsm_error'})\n"
+            "except Exception as e:\n    print(str(e).strip().splitlines()[-1])\n")
+    for v in ("scalar_rgb", "llvm_ad_spectral"):
+        p = subprocess.run([sys.executable, "-c", code, v], capture_output=True, text=True, timeout=120)
+        assert p.returncode == 0, p.stderr[-800:]
+        assert f"variant {v} is not supported" in p.stdout and "llvm_ad_rgb, cuda_ad_rgb" in p.stdout, p.stdout

@@ -5,7 +5,7 @@ import gc
 
 import pytest
 
-from conftest import base_config
+from conftest import base_config, small_run
 
 CFG = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [32, 32]}, map={"resolution": [32, 64]},
                   scheme=[{"name": "constant", "bias": ["1 texel", 0.02]}, {"name": "adaptive"}])
@@ -89,3 +89,13 @@ def test_dsm_run_ends_with_its_first_answer_then_the_folder(tmp_path, capsys):
     where = [i for i, line in enumerate(out) if str(tmp_path / "r") in line]
     assert first and where and first[0] < where[0]
     assert any(line.startswith("dsm: best for light") for line in out)
+
+
+def test_results_name_an_unknown_column_and_a_missing_case(tmp_path):
+    res = small_run(tmp_path)
+    with pytest.raises(KeyError, match="no column or scheme parameter schem"):
+        res.where(schem="constant")
+    assert len(res.where(scheme="constant")) == len(res.rows) == 1
+    with pytest.raises(KeyError, match="no image of case 999.*'0001'"):
+        res.rgb(999)
+    assert res.rgb(res.rows[0]).shape == (32, 32, 3)

@@ -1,12 +1,15 @@
 """Caster shrinking ([map] shrink): welded, area-weighted vertex normals; a closed mesh's shrunk depth."""
 
 import numpy as np
+
 import pytest
 
 import dsm.pipeline as pl
-from conftest import base_config
+from conftest import cli_run as _cli, one_line as _one_line, base_config, toml_text
+from dsm.config import read as config
+from dsm.config.read import ConfigError
+from dsm.core.types import LightSpec
 from dsm.maps import shrink
-from dsm.core.types import ConfigError, LightSpec
 
 R, D = 1.0, 0.1
 
@@ -104,3 +107,21 @@ def test_shrink_of_a_scene_with_non_mesh_shapes_is_refused_before_work(tmp_path)
     with pytest.raises(ConfigError) as e:
         pl.prepare(cfg)
     assert e.value.key == "map.shrink" and "ball" in str(e.value) and "\n" not in str(e.value)
+
+
+def test_a_shrink_that_turns_a_closed_caster_inside_out_is_a_config_error(tmp_path, capsys):
+    """plane_box's box is 1 x 1 x 1 (a closed cube): shrunk by 0.5 or more its faces cross and it
+    comes out inside out, a larger caster facing in (the watertight bunny shrunk by 5 shadowed
+    92 % of the lit receivers, exit 0). The ground is open: it only moves down. Just below half
+    it still runs."""
+    from dsm.scenes import load as scenes
+    cfg = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [16, 16]},
+                      map={"resolution": 16, "shrink": 0.5})
+    path = tmp_path / "c.toml"
+    path.write_text(toml_text(cfg))
+    rc, err = _cli(capsys, "run", path, "--out", tmp_path / "out")
+    assert rc == 2
+    _one_line(err, str(path), "map.shrink", "'box'", "inside out", "0.5")
+    assert not (tmp_path / "out" / "metrics.csv").exists()
+    scenes.check(config.parse(base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [16, 16]},
+                                          map={"resolution": 16, "shrink": 0.49}), "<test>"))

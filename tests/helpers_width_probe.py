@@ -1,5 +1,6 @@
-"""Run as a script: build the room's cube maps and the G-buffer with Dr.Jit's LLVM vector width
-forced to argv[1] lanes, and save every array to the .npz file argv[2].
+"""A test helper, run as a script by tests/test_machine_independence.py: build the room's cube maps
+and the G-buffer with Dr.Jit's LLVM vector width forced to argv[1] lanes, and save every array to
+the .npz file argv[2].
 
 Dr.Jit picks its width from the CPU (8 on AVX2, 16 on AVX-512) and exposes no setting for it
 in Python; drjit-core's C function ``jit_llvm_set_target`` sets it (after the backend starts,
