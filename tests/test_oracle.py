@@ -29,8 +29,25 @@ def objective(r, lam=1.0):
 
 # ---------------------------------------------------------------- pure functions
 
+def smallest_lit_float32(lit) -> np.ndarray:
+    """Per element, the smallest float32 ``b`` with ``lit(b)`` (a predicate on float32 arrays, false at
+    -inf and true at +inf, monotone in b): a bisection over every float32 value in order, their bit
+    patterns mapped to ordered integers (32 halvings instead of a walk of up to 2^21 steps)."""
+    def value(k):
+        bits = np.where(k >= 0, k, -k | 0x80000000).astype(np.uint32)
+        return bits.view(np.float32)
+    inf = int(np.array(np.inf, np.float32).view(np.int32))
+    lo, hi = np.full(lit.n, -inf, np.int64), np.full(lit.n, inf, np.int64)
+    while (hi - lo > 1).any():
+        mid = (lo + hi) // 2
+        on = lit(value(mid))
+        hi, lo = np.where(on, mid, hi), np.where(on, lo, mid)
+    return value(hi)
+
+
 def test_thresholds_are_the_smallest_float32_bias_that_lights():
-    """Against a brute-force walk over the float32 values (np.nextafter) near d - z1."""
+    """Against a search over every float32 value near d - z1: z1 + b rounds monotonically in b, so
+    the smallest bias that lights is where an exhaustive bisection of the ordered float32 values ends."""
     from dsm.truth import oracle
     rng = np.random.default_rng(1)
     z1 = rng.uniform(0.1, 50.0, 400).astype(np.float32)
@@ -38,17 +55,14 @@ def test_thresholds_are_the_smallest_float32_bias_that_lights():
     d[:20] = z1[:20]
     tw = rng.uniform(1e-3, 0.1, 400).astype(np.float32)
     tau, kappa = oracle.thresholds(z1, d), oracle.texel_thresholds(z1, d, tw)
+    walk = d != z1
+    lit = lambda b: (z1[walk] + b) - d[walk] >= 0       # float32 arrays: float32 sums, as the map rounds
+    lit.n = int(walk.sum())
+    assert (smallest_lit_float32(lit) == tau[walk]).all()
     for i in range(400):
-        lit = lambda b: np.float32(np.float32(z1[i] + np.float32(b)) - d[i]) >= 0
+        lit1 = lambda b: np.float32(np.float32(z1[i] + np.float32(b)) - d[i]) >= 0
         if d[i] == z1[i]:            # b = 0 lights it; the walk below zero would cross the subnormals
-            assert lit(tau[i]) and not lit(np.nextafter(tau[i], np.float32(-np.inf))) and tau[i] <= 0
-            continue
-        b = np.float32(d[i] - z1[i])
-        while lit(b):
-            b = np.nextafter(b, np.float32(-np.inf))
-        while not lit(b):
-            b = np.nextafter(b, np.float32(np.inf))
-        assert b == tau[i]
+            assert lit1(tau[i]) and not lit1(np.nextafter(tau[i], np.float32(-np.inf))) and tau[i] <= 0
         litk = lambda k: np.float32(np.float32(z1[i] + np.float32(np.float32(k) * tw[i])) - d[i]) >= 0
         assert litk(kappa[i]) and not litk(np.nextafter(kappa[i], np.float32(-np.inf)))
 
