@@ -262,6 +262,7 @@ def test_run(tmp_path_factory):
     return out, json.loads((out / "results.json").read_text())
 
 
+@pytest.mark.slow
 def test_benchmark_end_to_end_at_test_size(test_run):
     out, doc = test_run
     assert doc["suite"] == "dsm-bench-6" and doc["suite_sha256"] == SUITE_6_SHA256 and doc["size"] == "test"
@@ -295,6 +296,7 @@ def test_benchmark_end_to_end_at_test_size(test_run):
     assert "FLIP" in page and "<th data-type=num>1e5</th>" in page and "far change" in page and "src=scale.png" in page
 
 
+@pytest.mark.slow
 def test_far_cases_keep_the_exact_side_and_lose_only_the_map_s_precision(test_run):
     """Where the scene sits moves no exact count: receivers and V*'s shadowed receivers are the
     origin's at 1e4 and 1e5, every contender. The errors may move, and only in cases the map's
@@ -326,6 +328,7 @@ def test_far_cases_keep_the_exact_side_and_lose_only_the_map_s_precision(test_ru
             float(np.mean([recs[(s, "m", "1e4", who)]["error_rate"] for s in ("bunny", "grazing")])), abs=1e-15)
 
 
+@pytest.mark.slow
 def test_far_numbers_come_back_in_camera_relative_precision(test_run):
     """The far case run as an engine with camera-relative positions counts what the origin
     counts, contender by contender: the far axis's moves are the map's float32, nothing else."""
@@ -342,6 +345,7 @@ def test_far_numbers_come_back_in_camera_relative_precision(test_run):
             (here["n_receivers"], here["n_acne"], here["n_peterpan"])
 
 
+@pytest.mark.slow
 def test_the_scale_figure_and_tables_hold_the_results_numbers(test_run):
     """scale.png is beside the page, draws a curve per contender (and the oracle) with the
     numbers the page's tables print, which are the records' means (numpy, float64)."""
@@ -516,6 +520,7 @@ def test_the_cornell_box_counts_alike_in_cm_and_m_for_scale_free_contenders():
     assert min(n for n, _, _ in counts["m"].values()) > 400
 
 
+@pytest.mark.slow
 def test_prefiltered_contenders_carry_leaks_and_their_pooled_leak_rate(test_run):
     """Each pre-filtered record has n_leak <= n_peterpan and leak_rate = n_leak / n_gt_shadowed; the
     leaderboard's leak rate is sum n_leak / sum n_gt_shadowed over the origin cases (numpy, int64);
@@ -558,6 +563,7 @@ def test_the_tuned_contender_is_the_tune_s_result_exactly():
     assert suite.tuned_labels(suite.load_suite()) == {("normal_angle", spec.label): "tuned_normal_angle"}
 
 
+@pytest.mark.slow
 def test_the_tuned_contender_runs_under_its_own_name(test_run):
     out, doc = test_run
     tuned = [r for r in doc["cases"] if r["contender"] == "tuned_normal_angle"]
@@ -566,6 +572,7 @@ def test_the_tuned_contender_runs_under_its_own_name(test_run):
     assert "Best tuned scheme: tuned_normal_angle" in (out / "leaderboard.html").read_text()
 
 
+@pytest.mark.slow
 def test_flicker_is_frames_csv_s_recomputed(test_run):
     """Each flicker record's flicker_rate is the mean over frame pairs of n_flicker / n_pairs_eligible
     of its case's rows in its frames.csv (numpy, float64; the first frame has no pair); the leaderboard's
@@ -593,6 +600,7 @@ def test_flicker_is_frames_csv_s_recomputed(test_run):
     assert "no oracle floor" in page and "while the sun turns 2 degrees" in page and "every contender" in page
 
 
+@pytest.mark.slow
 def test_the_benchmark_on_a_local_ray_cluster_counts_as_here(test_run, tmp_path):
     """dsm benchmark --cluster local: every case's counts those of the run here (the map groups are
     Ray tasks; the motion runs stay here), and results.json says where it ran."""
@@ -649,6 +657,7 @@ def _counts(doc) -> dict:
     return {"cases": cases, "flicker": flick, "n": (len(doc["cases"]), len(doc["flicker"]))}
 
 
+@pytest.mark.slow
 def test_ctrl_c_and_kill_keep_finished_cases_and_resume_counts_as_uninterrupted(test_run, tmp_path):
     """Ctrl-C once the first case is kept: exit 130, a line saying what is kept and how to go on.
     --resume, killed (SIGKILL) once another case is kept, then --resume to the end: every count,
@@ -682,6 +691,7 @@ def test_ctrl_c_and_kill_keep_finished_cases_and_resume_counts_as_uninterrupted(
     assert "dsm benchmark: directional (" in stdout                 # what accuracy costs, in the terminal
 
 
+@pytest.mark.slow
 def test_page_rebuilds_the_leaderboard_from_results_alone(test_run, tmp_path):
     import shutil
     out, _ = test_run
@@ -735,6 +745,7 @@ def _stored_images(out, doc, which):
     return out_list
 
 
+@pytest.mark.slow
 def test_a_case_s_stored_class_image_holds_the_counts_of_its_row(test_run):
     """Every record's class image decodes (Pillow) to classes whose counts, recomputed with numpy, are
     the record's receivers, acne and peter-panning; its palette is the error image's colours; the kit's
@@ -754,6 +765,7 @@ def test_a_case_s_stored_class_image_holds_the_counts_of_its_row(test_run):
     assert np.array_equal(case_images.read_class(out, doc["cases"], last), stored[-1][1])
 
 
+@pytest.mark.slow
 def test_a_case_s_stored_flip_map_s_mean_is_its_row_s_flip_within_the_png_s_quantisation(test_run):
     """A stored FLIP pixel is round(255 FLIP): its mean is within 1/510 of the row's FLIP (FLIP's own
     mean, summed in float32, adds under 1e-5); the palette is matplotlib's magma at i / 255."""
@@ -781,6 +793,7 @@ def _links(path):
     return found
 
 
+@pytest.mark.slow
 def test_every_link_of_the_leaderboard_and_its_contender_pages_resolves(test_run):
     """Each href and src of leaderboard.html and contenders/*.html names a file that exists, and its
     #fragment an id in it; every contender but the oracle has a page with a card per record of it, and
@@ -846,6 +859,7 @@ def test_contender_pages_of_a_results_folder_without_images_say_so_once(tmp_path
         assert text.count("<figure class=case ") == 2
 
 
+@pytest.mark.slow
 def test_frontier_csv_and_memory_classes_from_the_records(test_run):
     """frontier.csv beside results.json: per (scene at its unit, light), on_frontier recomputed in numpy
     from the records at the origin (error from the counts; bytes = map_bytes + page_table_bytes; rays);
@@ -874,6 +888,7 @@ def test_frontier_csv_and_memory_classes_from_the_records(test_run):
             assert 2 ** k <= mean_bytes < 2 ** (k + 1)
 
 
+@pytest.mark.slow
 def test_the_hybrid_contenders_carry_their_rays_beside_their_error(test_run):
     """A hybrid contender's record: ray_fraction = hybrid_rays / n_receivers; at cut-off 8 never more rays than at
     AMD's 0 (its tiles are a subset); the leaderboard's ray fraction is its rays summed over the cases at the origin

@@ -4,11 +4,14 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 from dsm.report import figures, tables as report
 from dsm.schemes import REGISTRY
 from conftest import ROOT
 
 
+@pytest.mark.slow
 def test_default_experiment_writes_the_report(tmp_path):
     out = tmp_path / "default"
     p = subprocess.run([sys.executable, "-m", "dsm.cli", "run", "--out", str(out)], capture_output=True,

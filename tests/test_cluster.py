@@ -26,6 +26,7 @@ def _cfg():
             "timing": {"repeats": 1}}
 
 
+@pytest.mark.slow
 def test_a_local_two_worker_cluster_writes_the_rows_of_a_local_run(tmp_path):
     from dsm.experiment import cluster
     from dsm import pipeline

@@ -139,6 +139,7 @@ def site(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_site_builds_and_every_internal_link_resolves(site):
     """sphinx-build -W passed (the fixture) and no href or src of any page leads nowhere."""
     assert (site / "index.html").is_file()
@@ -153,6 +154,7 @@ def test_link_check_finds_a_broken_link_and_a_missing_anchor(tmp_path):
     assert broken_links(tmp_path) == [("a.html", "b.html#gone"), ("a.html", "missing.png")]
 
 
+@pytest.mark.slow
 def test_site_has_every_page_it_promises(site):
     """Tutorials (every notebook), how-to guides, the three generated references, design topics (every
     ## heading of docs/design.md) and every docs/*.md page, picked up by the globs."""
@@ -166,6 +168,7 @@ def test_site_has_every_page_it_promises(site):
         assert (site / "_generated" / "reference" / f"{ref}.html").is_file()
 
 
+@pytest.mark.slow
 def test_notebooks_show_their_stored_outputs(site):
     """A tutorial page holds as many images as its notebook's stored image outputs (not run again)."""
     import json

@@ -133,6 +133,7 @@ def test_pip_install_into_a_fresh_venv_then_a_first_run_counts_as_here(tmp_path)
     print(f"plain route: pip install {install_s:.0f} s, first run {first_run_s:.0f} s")
 
 
+@pytest.mark.slow
 def test_the_wheel_ships_the_meshes_and_runs_the_benchmark_from_another_folder(tmp_path):
     """Issue 76: a pip-installed kit had no data/meshes (dsm benchmark's traceback, dsm perf's rows
     silently skipped). The wheel, installed with --no-deps into a fresh venv that sees this

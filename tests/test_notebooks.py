@@ -25,6 +25,7 @@ def test_each_notebook_asserts_its_headline_not_finiteness(path):
     assert not finite, (path.stem, finite)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
 def test_notebook_runs_to_the_end(path, monkeypatch):
     nbformat = pytest.importorskip("nbformat", reason="nbformat is part of the test extra (pip install -e .[test])")
