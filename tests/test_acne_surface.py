@@ -5,6 +5,7 @@ under a floating plate's outline the ground's acne is the plate's, ``edge``."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from conftest import base_config
 from dsm.schemes import REGISTRY
@@ -47,6 +48,7 @@ def _xml(files) -> str:
 """
 
 
+@pytest.mark.slow
 def test_merged_geometry_gives_the_split_of_separate_shapes(run_dict, tmp_path):
     """The ground and a box as two shapes and the same triangles merged into one OBJ: the same
     self and edge counts for every scheme (by shape, the merged file's acne was all self); second
@@ -79,6 +81,7 @@ def test_merged_geometry_gives_the_split_of_separate_shapes(run_dict, tmp_path):
     assert edge > 0        # the box's outline puts acne on the ground in the merged file too
 
 
+@pytest.mark.slow
 def test_a_tilted_plane_alone_shadows_only_itself(run_dict):
     """One plane, tilted off every axis, under a directional light and a spot light whose cone lies
     inside the plane (no texel of a receiver looks past the plane's edge): every acne receiver's
@@ -155,6 +158,7 @@ def test_ground_acne_under_a_floating_plate_is_edge():
     assert m["n_acne_edge"] == int((acne & ~own).sum()) and m["n_acne_self"] == int((acne & own).sum())
 
 
+@pytest.mark.slow
 def test_the_split_does_not_depend_on_the_scene_scale(run_dict):
     """The box on the ground at scale 1 and 1024 (a power of two: every float scales exactly): the
     same self and edge counts for every scheme, both present (the rule's lengths are texels)."""

@@ -86,6 +86,7 @@ def test_zero_count_bound_holds_for_stratified_samples():
     assert miss / trials <= p_indep + 3 * np.sqrt(p_indep * (1 - p_indep) / trials)
 
 
+@pytest.mark.slow
 def test_reference_intervals_mean_what_they_say(analytic_scene):
     """Over five seeds: the share of receivers whose exact V lies outside their 99 % interval is at
     most 1 % plus three binomial sigmas; the 99th percentile of |V* - exact| is within the
@@ -281,6 +282,7 @@ def test_bad_pcf_wide_width_is_refused():
         config.parse(base_config(map={"filter": "pcf_wide:1"}), "x.toml")
 
 
+@pytest.mark.slow
 def test_area_light_run_end_to_end(run_dict):
     """A rectangle light over plane_box: rows with soft metrics, the V, V*, |V - V*| images,
     run.json's reference rays equal to the regions' sum, and per-tap adaptive bias no worse than
@@ -376,6 +378,7 @@ def test_adaptive_tap_clamps_the_plane_depth_by_the_taps_offset(variant):
     np.testing.assert_allclose(got, want, atol=2e-6)
 
 
+@pytest.mark.slow
 def test_an_area_reference_in_chunks_is_the_reference_in_one_launch(monkeypatch):
     """A stage launched every receiver's samples at once: max_samples = 2^20 over a few thousand
     receivers passed 2^32 lanes (Dr.Jit's UInt32 index) and the memory. Now receivers go in

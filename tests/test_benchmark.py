@@ -424,6 +424,7 @@ def _plane_box_spot_at_1e5():
     return suite.Case(case.scene, case.unit, case.scale, cfg, case.offset, case.translate)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("which", ["bunny_far", "plane_box_spot_far"])
 def test_the_renders_are_the_run_s_shadow_image_and_its_exact_twin(tmp_path, which):
     """A far case run into a folder: the benchmark's render under V is the run's shadow PNG, byte for
@@ -493,6 +494,7 @@ def test_the_cornell_box_is_in_millimetres_and_on_the_far_axis():
     assert sd_far.centre is not None            # traced in the frame centred on the box
 
 
+@pytest.mark.slow
 def test_the_cornell_box_counts_alike_in_cm_and_m_for_scale_free_contenders():
     """The kit's scale independence on the XML scene: every preset whose terms are in texels or depth
     range, the texel-unit schemes and a pre-filtered kind (normalized depth) count the same receivers,
@@ -703,6 +705,7 @@ def test_page_rebuilds_the_leaderboard_from_results_alone(test_run, tmp_path):
     assert (copy / "scale.png").read_bytes() == (out / "scale.png").read_bytes()
 
 
+@pytest.mark.slow
 def test_force_replaces_every_file_of_the_previous_run_and_keeps_the_user_s(tmp_path):
     """--force after a run of another suite: its flicker runs, case files, page and figure are gone
     (none is stale beside the new results); a file the user put there stays."""

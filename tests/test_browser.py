@@ -57,6 +57,7 @@ def _visible_cases(drv):
                               ".filter(r => !r.hidden).map(r => r.dataset.case)")
 
 
+@pytest.mark.slow
 def test_the_page_shows_the_summary_and_the_cases(page, tmp_path):
     res, drv = page
     shot = tmp_path / "report.png"
@@ -142,6 +143,7 @@ def _result(cases, suite="dsm-bench-1") -> dict:
             "versions": {"dsm_git_commit": "c"}, "machine": {"cpu": "cpu", "cores": 1}, "cases": cases}
 
 
+@pytest.mark.slow
 def test_the_benchmark_leaderboard_sorts_in_the_browser(tmp_path):
     """dsm benchmark's leaderboard.html from the file system: the answer first, a click on the
     error-rate header twice orders the ranking rows by hand-made error rates, largest first, and
@@ -238,6 +240,7 @@ def test_a_point_of_a_pareto_plot_names_its_case_and_opens_it(page):
     assert drv.find_element("css selector", "#case-table tr.sel").get_attribute("data-case") == case
 
 
+@pytest.mark.slow
 def test_the_leaderboard_filters_and_fits(tmp_path):
     """leaderboard.html at two widths: nothing runs past the page's edge, the scale figure loads at its
     pixel size; the family filter keeps the pre-filtered maps' rows alone (kind as the first word, by
@@ -298,6 +301,7 @@ def grad_page(tmp_path_factory):
     drv.quit()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("width", [1280, 820])
 def test_the_grad_report_fits_its_window_and_reads_at_9_points(grad_page, width):
     """dsm grad's report.html at each width: nothing runs past the page's edge, every figure loads and is
@@ -337,6 +341,7 @@ def test_clicking_the_grad_reports_rel_error_header_orders_its_rows(grad_page):
     assert got == want and want != [[r["technique"], r["param"]] for r in rows]
 
 
+@pytest.mark.slow
 def test_a_contender_page_fits_loads_its_images_and_orders_its_cases_worst_first(tmp_path):
     """A contender's page from a hand-made result and its case images: the leaderboard's contender name
     opens it; at two widths nothing runs past the page's edge and every image loads, shown at

@@ -105,6 +105,7 @@ def test_one_cascade_fit_receivers_equals_the_single_map(builtin):
                 assert np.array_equal(va.numpy(), vb.numpy()), (spec.name, filt, fmt)
 
 
+@pytest.mark.slow
 def test_one_cascade_in_the_runner_counts_as_the_single_map(run_dict):
     cfg = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [64, 64]},
                       scheme=[{"name": "constant", "bias": [0.0, "1 texel"]}, {"name": "normal_offset"}])
@@ -289,6 +290,7 @@ def test_a_camera_pose_that_cannot_look_is_a_config_error_not_a_traceback(tmp_pa
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_a_tiny_near_clip_still_sees_the_scene(run_dict):
     """near = 1e-9 (about 1e-10 of plane_box's camera distance, above the refused 1e-12) gives the receivers of the
     default near clip: the clip is in front of every surface either way."""

@@ -69,6 +69,7 @@ def test_a_context_refuses_a_measure_it_does_not_know():
         _context({"contacts"})
 
 
+@pytest.mark.slow
 def test_a_motion_path_that_does_not_move_counts_each_frame_as_the_still_case(run_dict):
     """Three frames of a still camera and light: a motion case's counts are three times the still
     run's and its rates the same (motion's frame loop and the runner evaluate cases alike). No

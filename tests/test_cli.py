@@ -49,6 +49,7 @@ def test_default_experiment_writes_the_report(tmp_path):
     assert max(defined("peterpan_rate")) > 0.05
 
 
+@pytest.mark.slow
 def test_schemes_command_lists_every_scheme():
     p = subprocess.run([sys.executable, "-m", "dsm.cli", "schemes"], capture_output=True, text=True, timeout=120)
     assert p.returncode == 0
@@ -100,6 +101,7 @@ def test_ctrl_c_while_the_report_is_written_says_how_to_finish_it(tmp_path, monk
     assert cli.main(["report", str(out)]) == 0 and (out / "table.md").is_file() and (out / "report.html").is_file()
 
 
+@pytest.mark.slow
 def test_a_reader_that_leaves_early_ends_the_command_quietly():
     """`dsm schemes | head -1`: stdout's reader is gone (here: closed before the command starts, so its
     first write fails); the command exits 0 without a BrokenPipeError traceback."""

@@ -94,6 +94,7 @@ def test_a_cluster_nobody_answers_at_is_refused_before_the_folder_is_touched(tmp
     assert f"{cfg}: execution.address: nothing answers at 127.0.0.1:1" in err and not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("table,key", [({"gpus_per_task": 1}, "gpus_per_task"), ({"cpus_per_task": 64}, "cpus_per_task")])
 def test_a_task_bigger_than_the_cluster_is_refused_and_leaves_no_ray(tmp_path, capsys, table, key):
     """gpus_per_task on a machine without a GPU, or more CPUs per task than it has: one line,

@@ -88,6 +88,7 @@ def test_length_parsing():
         Length.parse("nan texel")
 
 
+@pytest.mark.slow
 def test_cli_prints_config_error_without_traceback(tmp_path):
     path = tmp_path / "bad.toml"
     path.write_text(BAD[1][0])

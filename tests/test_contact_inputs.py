@@ -23,6 +23,7 @@ def test_contact_columns_under_an_area_light_use_its_lit_and_umbra_regions():
     assert m["contact_error_rate"] == pytest.approx(1 / 6) and m["contact_mean_abs_error"] == pytest.approx(2 / 6)
 
 
+@pytest.mark.slow
 def test_an_area_light_runs_contact_error_rate_is_the_documented_sum(run_dict):
     """design.md: contact_error_rate = (n_acne + n_contact_false + n_peterpan - n_contact_recovered)
     / n_receivers. Under an area light recovered (46) exceeded n_peterpan (0) and the sum failed."""

@@ -182,6 +182,7 @@ def test_dsm_plan_explain_prints_the_measured_quantities_and_runs_nothing(tmp_pa
 MACHINE = (("_ms", "_mb"), "compiled")     # timing, peak memory and kernel-cache columns: the machine's
 
 
+@pytest.mark.slow
 def test_derived_toml_run_again_gives_the_derived_runs_results(tmp_path, capsys):
     path = small_scene(tmp_path, "tiny", SUN, BOX.format(x=-1, y=0.5, z=0.5))
     path.write_text(path.read_text().replace('value="48"', 'value="24"').replace('value="36"', 'value="18"'))

@@ -16,6 +16,7 @@ def test_an_unknown_variant_argument_is_a_config_error_as_the_toml_key_is(tmp_pa
     assert not (tmp_path / "r").exists()
 
 
+@pytest.mark.slow
 def test_a_cuda_variant_without_a_gpu_leaves_dsm_importable_and_names_the_variant(tmp_path):
     """Item 13: Mitsuba's own set_variant("cuda_ad_rgb") fails without a GPU; `import dsm` still
     works after it, and the first call that needs the GPU raises the kit's SetupError naming it."""

@@ -81,6 +81,7 @@ def _blocked64(p, d, tris, chunk=256):
     return blocked
 
 
+@pytest.mark.slow
 def test_a_mesh_far_from_the_origin_keeps_its_reference(variant):
     """The Stanford dragon (47,794 triangles, 0.8 across, data/meshes) on its ground at 0, 1e4 and
     1e5 (at 1e6 float32 holds 13 steps across it: refused in world precision): the same receivers,
@@ -148,6 +149,7 @@ def test_near_scenes_stay_in_world_coordinates():
     assert np.array_equal(c, [1000.0, 0.0, 1.0])
 
 
+@pytest.mark.slow
 def test_camera_relative_map_keeps_its_counts_far_away_and_world_precision_is_flagged(run_dict):
     """At 1e6 a float32 step is 2^(19 - 23) = 0.0625 (1e6 lies in [2^19, 2^20)): the world-precision
     case reports that step and a texel below it, run.json lists it; camera-relative rendering gives
@@ -198,6 +200,7 @@ def _far_authored_scene(folder, at: float):
     return folder / "far.xml"
 
 
+@pytest.mark.slow
 def test_a_scene_authored_far_from_the_origin_in_its_own_file_is_exact(tmp_path):
     """The same box and ground authored at 1e6 in their own OBJ (no translate) shadow the ground as
     at the origin: the exact side is traced in the frame centred on the scene (before, its shadow

@@ -22,6 +22,7 @@ from dsm.cli import DEFAULT_CONFIG
 FILES = sorted((ROOT / "experiments").glob("*.toml")) + [DEFAULT_CONFIG]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", FILES, ids=lambda p: p.name)
 def test_experiment_runs_tiny(path, tmp_path):
     cfg = config.load(path)          # absent optional meshes are skipped by the run, never here

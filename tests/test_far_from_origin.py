@@ -2,6 +2,8 @@
 (translate, scale, the camera), what it holds loads and is measured near the origin."""
 from pathlib import Path
 
+import pytest
+
 from conftest import cli_run as _cli, one_line as _one_line, base_config
 from dsm import cli
 
@@ -65,6 +67,7 @@ def test_the_precision_line_does_not_suggest_camera_relative_to_camera_relative_
     assert "precision = \"camera_relative\" shows" not in line and "camera far from their receivers" in line
 
 
+@pytest.mark.slow
 def test_a_motion_case_far_from_the_origin_reports_its_float32_headroom(run_dict):
     """Motion rows left f32_step and texel_f32_steps empty, so a precision-limited motion case
     was never flagged. Receivers about 1e5 from the origin lie where float32's step is 2^-7

@@ -69,6 +69,7 @@ def test_bilinear_pcf_rises_linearly_across_one_texel(variant):
     assert mae_bil / mae_near == pytest.approx(predicted, rel=0.1), (mae_bil, mae_near, e, predicted)
 
 
+@pytest.mark.slow
 def test_every_filter_runs_with_every_scheme_and_view(run_dict):
     from dsm.schemes import REGISTRY
     cfg = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [48, 48]},

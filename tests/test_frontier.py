@@ -41,6 +41,7 @@ def test_bytes_rays_and_taps_of_depth_maps(run_dict):
         assert r["taps"] == taps[r["filter"]]
 
 
+@pytest.mark.slow
 def test_bytes_of_cascades_virtual_and_moment_maps(run_dict):
     """3 cascades: 3 R^2 texels; a virtual map: its built pages x page texels x 4, its page table one
     32-bit entry per virtual page of every level; VSM's 2 and MSM's 4 moments a texel, x 4/3 with mip-maps."""
@@ -106,6 +107,7 @@ FRONTIER_CONFIG = base_config(
             {"name": "receiver_plane"}, {"name": "midpoint"}])
 
 
+@pytest.mark.slow
 def test_frontier_csv_is_non_dominance_over_error_bytes_and_rays(tmp_path):
     import dsm
     res = dsm.run(FRONTIER_CONFIG, out=tmp_path / "run")
@@ -118,6 +120,7 @@ def test_frontier_csv_is_non_dominance_over_error_bytes_and_rays(tmp_path):
     assert table.index("## What accuracy costs") < table.index("## Summary")
 
 
+@pytest.mark.slow
 def test_two_identical_runs_give_the_same_frontier_and_words(tmp_path):
     import dsm
     from dsm.report import frontier

@@ -131,6 +131,7 @@ def test_a_plates_shadow_area_gradient_in_its_height():
     assert _check(spec, "vsm", True, "occluder_z", blur=3)[0] == ad      # the same bits on every evaluation
 
 
+@pytest.mark.slow
 def test_a_difference_across_a_switching_antialiasing_pair_is_flagged_not_called_clean():
     """Issue 70's plate (side 0.4 at 0.6, point light at 2.4, map 64^2, image 48^2): no texel or pixel
     changes class within +-step, yet the edge treatment's corner pairs switch on and off, and the

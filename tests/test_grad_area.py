@@ -49,6 +49,7 @@ def test_the_corner_integral_is_the_kernels_integral():
     assert _corner(X, Y, D) == pytest.approx(np.sum(D * D / (D * D + xx ** 2 + yy ** 2) ** 2) * X * Y / n / n, rel=1e-6)
 
 
+@pytest.mark.slow
 def test_the_area_lights_truth_is_the_numpy_integral_within_its_own_error():
     """The soft shadow's area and its central difference in the plate's height (light samples stratified per
     receiver, the same at both heights) against the float64 integral; the point light's 2 A H^2 / (H - h)^3
@@ -124,6 +125,7 @@ def test_bad_area_light_keys_are_one_line_errors(kw, key, words):
     assert msg.startswith(f"g.toml: {key}: ") and words in msg and "\n" not in msg
 
 
+@pytest.mark.slow
 def test_dsm_grad_compare_under_an_area_light_measures_the_cost_at_equal_error(tmp_path):
     """direct_projective agrees with the truth over the pixels it sees; equal_error.csv holds each technique's
     match against its curve, consistent with equal_error_curve.csv."""

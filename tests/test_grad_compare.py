@@ -44,6 +44,7 @@ def test_the_supersampled_reference_is_the_closed_form_within_its_own_error(kw, 
         assert -r.image.sum() * (2.0 / 48) ** 2 == pytest.approx(r.value, rel=1e-9)
 
 
+@pytest.mark.slow
 def test_techniques_against_the_reference():
     """Without the antialiased map PCF sees no plate move (AD 0: sign 'zero'); with it, within 5 % of the
     truth, per-pixel gradients pointing the same way; the point light's height reverses PCF's sign."""
@@ -60,6 +61,7 @@ def test_techniques_against_the_reference():
     assert all(r.ms > 0 for r in rows.values())
 
 
+@pytest.mark.slow
 def test_the_projective_integrator_sees_no_shadow_move_under_a_point_light():
     """Its image is the exact one (pixels the camera sees of the ground), but its gradient of the shadow's
     area in the plate's height is 0 where the truth is 2 A H^2 / (H - h)^3: a disagreement."""
@@ -79,6 +81,7 @@ def test_the_projective_integrator_sees_no_shadow_move_under_a_point_light():
     assert seen.value > 10 * seen.error and not agrees(res, seen)
 
 
+@pytest.mark.slow
 def test_the_inverse_task_recovers_the_plates_height_through_the_antialiased_map():
     from dsm.grad.inverse import inverse_problem, descend
     from dsm.grad.problem import Problem
@@ -93,6 +96,7 @@ def test_the_inverse_task_recovers_the_plates_height_through_the_antialiased_map
         assert set(stuck.trace) == {float(np.float32(off))} and not stuck.success and stuck.converged_at is None
 
 
+@pytest.mark.slow
 def test_dsm_grad_compare_writes_its_tables_and_refuses_the_l2_loss(tmp_path, capsys):
     from dsm.cli import main
     bad = tmp_path / "bad.toml"

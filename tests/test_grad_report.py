@@ -86,6 +86,7 @@ def run(tmp_path_factory):
     return d / "out"
 
 
+@pytest.mark.slow
 def test_every_table_of_a_compare_and_inverse_run_is_its_csv(run):
     doc = _parse(run / "report.html")
     for name, sid, *_ in page.TABLES:
@@ -227,6 +228,7 @@ def test_a_section_is_absent_when_its_file_is_and_an_unknown_csv_is_a_link(tmp_p
             "range).") in doc.answers
 
 
+@pytest.mark.slow
 def test_the_words_are_the_same_in_a_second_identical_run(run, tmp_path):
     """The answer reads no timing column: a second run of the same config says the same words."""
     from dsm.cli import main

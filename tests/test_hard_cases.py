@@ -178,6 +178,7 @@ def _config_scene(cfg):
 
 # ---------------------------------------------------------------- the tests
 
+@pytest.mark.slow
 def test_grazing_angles_against_the_tracer_and_the_acne_law(run_dict):
     """Ground and box lit 80, 85 and 89 degrees from the ground's normal.
 

@@ -58,6 +58,7 @@ def _builtin_cases():
     return [(b, None) for b in BUILTINS] + [("plane_box", SPOT)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("builtin,light", _builtin_cases(), ids=lambda x: x if isinstance(x, str) else "spot")
 def test_every_receiver_traced_is_the_reference_bit_for_bit(builtin, light):
     """Rule ``all`` with the kit's spawn rule and whole rays: V after the rays is V*, receiver by receiver."""
@@ -210,6 +211,7 @@ def test_config_reads_and_sweeps_hybrid_and_refuses_in_one_line():
         assert "\n" not in str(e.value) and "<h>" in str(e.value)
 
 
+@pytest.mark.slow
 def test_a_run_with_hybrid_writes_its_columns_and_section(run_dict, tmp_path):
     cfg = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [40, 40]}, map={"resolution": 64},
                       scheme=[{"name": "constant", "bias": "1 texel"}],
@@ -239,6 +241,7 @@ def test_origin_rules_across_scales():
     assert origin_study.markdown(rows)[0].startswith("| scene | scale |")
 
 
+@pytest.mark.slow
 def test_a_resumed_hybrid_run_keeps_its_cases_and_a_new_instance_is_a_new_case(tmp_path):
     """Case keys name the hybrid instance: adding a band width keeps the run's cases and measures the new one."""
     from dsm import pipeline

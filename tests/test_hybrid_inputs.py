@@ -2,6 +2,8 @@
 run casts."""
 import csv
 
+import pytest
+
 from conftest import base_config, cli_run, one_line, folder_files, write_toml
 
 
@@ -16,6 +18,7 @@ def test_an_instance_given_by_two_hybrid_tables_is_refused(tmp_path, capsys):
     assert folder_files(tmp_path) == before and not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 def test_the_plan_bounds_the_hybrid_rays_the_run_casts(tmp_path):
     """rule all from two origins: a ray per receiver per origin. The plan's bound is the camera's pixels
     per hybrid case; run.json's count is the sum of the rows' hybrid_rays, each its case's receivers."""

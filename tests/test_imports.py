@@ -8,6 +8,8 @@ functions count: a circle hidden in a function is still a circle).
 import ast
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = {"dsm": ROOT / "dsm", "dsm_plugins": ROOT / "plugins" / "dsm_plugins"}
 SCANNED = {**PACKAGES, "tests": ROOT / "tests"}     # the tests' imports obey the same rules
@@ -173,6 +175,7 @@ def layer_violations(edges) -> list:
     return out
 
 
+@pytest.mark.slow
 def test_packages_are_layers():
     """No package imports one beside or above it (docs/design.md, *Layout*)."""
     edges, _, _ = _graph()
@@ -194,11 +197,13 @@ def test_the_layer_check_sees_an_upward_and_a_sideways_import():
         "dsm.maps.cascades -> dsm.report.io (dsm.maps at level 2, dsm.report at 10)"]
 
 
+@pytest.mark.slow
 def test_no_import_circles():
     edges, _, _ = _graph()
     assert _cycles(_package_edges(edges)) == []
 
 
+@pytest.mark.slow
 def test_no_private_names_across_modules():
     _, imports, attrs = _graph()
     assert imports == [] and attrs == []
@@ -212,6 +217,7 @@ def test_the_checker_sees_a_circle_and_a_private_reach_in():
     assert names == ["_parse_scheme"]
 
 
+@pytest.mark.slow
 def test_plugins_depend_on_the_pipeline_and_the_case_only():
     """The plugins use the stages and the case's evaluation (their class image is the runner's), nothing else."""
     edges, _, _ = _graph()
@@ -221,6 +227,7 @@ def test_plugins_depend_on_the_pipeline_and_the_case_only():
                    for d in deps)
 
 
+@pytest.mark.slow
 def test_light_types_branch_only_in_the_registry():
     """No module of the kit outside dsm/lights compares a light's type with a type's name, but
     the few listed here (each a reason in docs/design.md, *Light types*): a new light type is a

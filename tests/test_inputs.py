@@ -217,6 +217,7 @@ def test_force_replaces_a_previous_run_and_nothing_else(tmp_path, capsys):
     assert (other / "thesis.tex").read_text() == "mine"
 
 
+@pytest.mark.slow
 def test_ctrl_c_is_one_line_and_exit_130(tmp_path):
     out = tmp_path / "o"
     code = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "

@@ -66,6 +66,7 @@ def test_mitsuba_and_drjit_ranges_hold_the_installed_versions_and_are_the_docume
         assert stated and all(s == spec for s in stated), f"docs/install.md states {stated}, pyproject {spec}"
 
 
+@pytest.mark.slow
 def test_a_libllvm_dr_jit_cannot_load_is_one_line_naming_drjit_libllvm_path(tmp_path):
     """DRJIT_LIBLLVM_PATH pointing at no library: dsm run stops before any work, exit 3, in one line that
     names the variable's value and what to install (Dr.Jit's own notice aside)."""

@@ -21,6 +21,7 @@ def test_thin_plate_midpoint_and_dual_keep_the_shadow(run_dict):
         assert r["peterpan_rate"] < 0.05, r
 
 
+@pytest.mark.slow
 def test_adaptive_scale_invariance_and_planes(run_dict):
     cfg = base_config(scene=[{"builtin": "plane", "tilt": [10.0, 80.0], "scale": [1e-3, 1e3]}],
                       scheme=[{"name": "adaptive"}], map={"resolution": 256})
@@ -28,6 +29,7 @@ def test_adaptive_scale_invariance_and_planes(run_dict):
     assert len(res.rows) == 4 and all(r["acne_rate"] < 0.005 for r in res.rows)
 
 
+@pytest.mark.slow
 def test_ray_counts_follow_the_needs(run_dict):
     single = run_dict(base_config(scheme=[{"name": "constant"}, {"name": "adaptive"}],
                                   map={"resolution": [32, 64]}), "single")
@@ -76,6 +78,7 @@ def test_closedness_detection():
     assert closed and "inward" in why
 
 
+@pytest.mark.slow
 def test_dragon_is_open_and_back_closed_culls_only_closed_shapes(tmp_path):
     cfg = base_config(scene=[{"file": str(MESHES / "dragon_vrip_res3.ply")}],
                       light=[{"type": "directional", "direction": [0.3, -1.0, 0.2]}],
@@ -350,6 +353,7 @@ def _fig5_expected(sd, R, tr, light):
     return out, maps, layers, rec
 
 
+@pytest.mark.slow
 def test_weiskopf_fig5_against_the_tracer(tmp_path):
     """Weiskopf & Ertl 2003, figure 5 as numbers. Every case's classes and counts against an independent
     computation: the tracer's receivers and V*, the L's layers along each texel ray in float64

@@ -9,6 +9,7 @@ from conftest import tiny_toml, cli_run as _cli, one_line as _one_line, base_con
 from dsm.config import read as config, plan
 
 
+@pytest.mark.slow
 def test_a_light_direction_beyond_float32_gives_the_counts_of_its_direction(tmp_path):
     """Each hostile direction beside the plain one it points along, on plane_box: same counts."""
     pairs = [([1e-300, 0, -1e-300], [1, 0, -1]), ([1e308, 1e308, -1e308], [1, 1, -1]),

@@ -66,6 +66,7 @@ def _cpu_flags() -> set:
     return set()
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not {"avx2", "fma"} <= _cpu_flags(), reason="forcing Dr.Jit's vector width needs an AVX2 CPU")
 def test_maps_and_gbuffer_are_the_same_bits_at_every_vector_width(variant, tmp_path):
     """The room's cube maps (first layer, slope, second layer, culled) and its G-buffer, built in

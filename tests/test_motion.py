@@ -36,6 +36,7 @@ def test_flicker_counts_by_hand():
     assert ever == 3 / 5
 
 
+@pytest.mark.slow
 def test_static_camera_and_light_flicker_zero_for_every_scheme(run_dict):
     cfg = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [64, 64]}, scheme=SCHEMES,
                       map={"resolution": 128, "filter": ["nearest", "pcf_jitter4x4"]},
@@ -50,6 +51,7 @@ def test_static_camera_and_light_flicker_zero_for_every_scheme(run_dict):
     assert len(list((res.out / "images").glob("*/0001_frames.gif"))) == 1     # in its scene-light folder
 
 
+@pytest.mark.slow
 def test_report_images_none_writes_no_frames_gif_and_the_same_numbers(run_dict):
     """[report] images = "none" means no image at all, the motion GIF included; "errors" keeps it
     (it is the frames' error images). The numbers do not depend on it."""
@@ -65,6 +67,7 @@ def test_report_images_none_writes_no_frames_gif_and_the_same_numbers(run_dict):
     assert [{k: r[k] for k in keep} for r in runs["none"].rows] == [{k: r[k] for k in keep} for r in runs["errors"].rows]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("stabilize", [True, False])
 def test_stabilized_cascades_do_not_flicker_within_a_cascade(run_dict, stabilize):
     """Why stabilized flicker within a cascade is exactly 0: a fixed point's depth is measured from
@@ -199,6 +202,7 @@ def test_moving_point_light_exact_visibility_matches_the_segment_test(scale, tra
     assert changed.sum() > 20                              # the box's shadow did sweep over the ground
 
 
+@pytest.mark.slow
 def test_still_light_given_as_a_zero_move_flickers_zero_and_builds_once(run_dict):
     """A spot and a point light 'moving' by [0, 0, 0]: nothing changes between frames, so every
     scheme's flicker is 0 and each map is built once; moved by a real offset, each frame re-fits

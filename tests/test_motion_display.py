@@ -34,6 +34,7 @@ def _frames_csv(out):
         return list(csv.DictReader(fh))
 
 
+@pytest.mark.slow
 def test_motion_gif_frames_give_the_frames_class_counts_and_change_no_count(run_dict):
     """Camera dolly and sun turning over 3 frames; the camera 64 x 48, so k = 7 (48 x 7 >= 320)."""
     from dsm.experiment import motion_display as md

@@ -54,6 +54,7 @@ def test_translations_linear_and_keyframes_by_hand():
     assert np.allclose(rotation((1, 1, 1), 120.0) @ [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
 
 
+@pytest.mark.slow
 def test_nothing_moving_every_policy_gives_the_same_numbers(run_dict):
     """A camera dolly and a moving spot, with no caster, a caster whose offset is zero, under
     ``none`` and ``static``: every count and rate of metrics.csv and frames.csv is the same, and
@@ -113,6 +114,7 @@ def _receivers_at(offset, camera):
     return pl.points_np(setup.p), box
 
 
+@pytest.mark.slow
 def test_static_cache_ghosts_and_missing_shadows_of_a_sliding_box(run_dict):
     """``static``: the map of frame 0 kept while the box slides; at frame k the ghosts are the
     receivers in the frame-0 shadow outside the frame-k shadow, the missing the converse (numpy's
@@ -151,6 +153,7 @@ def test_static_cache_ghosts_and_missing_shadows_of_a_sliding_box(run_dict):
     assert all(float(f["recast_fraction"]) == 1.0 for f in none)
 
 
+@pytest.mark.slow
 def test_a_caster_back_where_it_was_leaves_a_static_map_right(run_dict):
     """Keyframes out and back: under ``static`` the last frame's kept map is right again (no ghost,
     no missing shadow), the middle frame's is not; ``none`` casts every frame whose casters moved."""
@@ -168,6 +171,7 @@ def test_a_caster_back_where_it_was_leaves_a_static_map_right(run_dict):
     assert [{k: f[k] for k in keep} for f in by(none, 2)] == [{k: f[k] for k in keep} for f in by(none, 0)]
 
 
+@pytest.mark.slow
 def test_stagger_casts_every_n_frames_and_stagger_one_is_none(run_dict):
     """The sliding box under ``stagger:2``: cast at frames 0, 2, 4, its ghosts only at the odd
     frames, and those equal to ``static``'s at frame 1; ``stagger:1`` gives ``none``'s numbers."""
@@ -218,6 +222,7 @@ def test_moving_caster_config_errors_name_the_key():
     assert e.value.key == "motion[0].casters[0].shape" and list(e.value.choices) == ["ground", "box"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", ["slide", "turn"])
 def test_a_moved_mesh_gives_the_numbers_of_a_file_with_the_mesh_there(run_dict, tmp_path, path):
     """A mesh scene (Mitsuba XML of two OBJ files): the box moved by the path under ``none`` (slid
@@ -270,6 +275,7 @@ def _in_hull(points, corners):
     return ok
 
 
+@pytest.mark.slow
 def test_invalidate_recasts_the_texels_the_box_covers_and_equals_none(run_dict):
     """``invalidate``: every count and rate of ``none`` and no ghost; the texels re-cast at frame k
     are those whose centres fall inside the sun's projection of the box at frame k - 1 or at k (the
@@ -300,6 +306,7 @@ def test_invalidate_recasts_the_texels_the_box_covers_and_equals_none(run_dict):
         assert all(f["map_built"] == "False" and f["frame_build_ms"] == "" for f in inv if int(f["frame"]) == k)
 
 
+@pytest.mark.slow
 def test_a_caster_flagged_static_is_never_invalidated(run_dict):
     """``invalidate`` with the moving box flagged static (UE5's undefined case) re-casts nothing
     after frame 0 and gives ``static``'s ghosts and missing shadows, which stay after the box stops."""

@@ -91,6 +91,7 @@ def test_per_texel_oracle_against_brute_force():
 
 # ---------------------------------------------------------------- against the kit's sweeps
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scene", ["plane_box", "room", "l_shape"])
 def test_curve_equals_the_constant_sweep_count_for_count(run_dict, scene):
     """Every constant case (world and texel values), on all five views and two stored formats:
@@ -198,6 +199,7 @@ def test_floating_plate_best_bias_lies_below_the_gap(run_dict):
         assert o["world_objective"] <= objective(r) + 1e-12, r["params"]
 
 
+@pytest.mark.slow
 def test_per_texel_oracle_bounds_every_texel_only_scheme(run_dict):
     """Constant and slope-scaled in world or range units, midpoint, dual (world z_offset): the
     per-texel oracle's objective is at most each case's, on every map of a small run."""

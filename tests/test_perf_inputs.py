@@ -47,6 +47,7 @@ def test_perf_refuses_a_map_above_16384(flag, tmp_path, capsys):
     assert not (tmp_path / "p").exists()
 
 
+@pytest.mark.slow
 def test_perf_interrupted_keeps_its_measured_sections_and_resume_goes_on(tmp_path, capsys, monkeypatch):
     from dsm.perf import bench
 
@@ -79,6 +80,7 @@ def test_perf_interrupted_keeps_its_measured_sections_and_resume_goes_on(tmp_pat
     assert done["sections"] == kept["sections"] + ["frame"]
 
 
+@pytest.mark.slow
 def test_perf_force_replaces_an_earlier_perf(tmp_path, capsys):
     out, meshes = tmp_path / "p", tmp_path / "no-meshes"
     meshes.mkdir()

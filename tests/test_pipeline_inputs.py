@@ -36,6 +36,7 @@ def test_the_api_keeps_a_previous_run_unless_told(tmp_path):
     assert [p.name for p in (tmp_path / "mine").iterdir()] == ["keep.txt"]
 
 
+@pytest.mark.slow
 def test_force_clears_only_what_a_run_wrote_inside_images_and_plots(tmp_path):
     """A user's files inside a run's images/ and plots/ survive --force; the run's own are
     replaced (issue: --force deleted plots/keep.txt, images/mine.txt, images/album/)."""

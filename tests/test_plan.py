@@ -62,6 +62,7 @@ def test_constant_and_none_build_nothing_more(run_dict):
     assert all(r["build_first_ms"] == r["build_ms"] > 0 for r in res.rows)   # one layer: its build is the first
 
 
+@pytest.mark.slow
 def test_a_small_memory_budget_tiles_the_build_with_the_same_results(run_dict):
     # per-shape culling: the layered search keeps per-texel state between its rounds, which the
     # tiles bound (without culling one fused kernel writes both layers and keeps no such state)
@@ -78,6 +79,7 @@ def test_a_small_memory_budget_tiles_the_build_with_the_same_results(run_dict):
     assert m["build_peak_bytes"] < big.run["maps"][0]["build_peak_bytes"]
 
 
+@pytest.mark.slow
 def test_dsm_plan_prints_before_running(tmp_path):
     p = subprocess.run([sys.executable, "-m", "dsm.cli", "plan"], capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stderr
@@ -104,6 +106,7 @@ def _grid_ply(path, n):
     return len(f)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("n", [71, 224, 707])
 def test_the_memory_estimate_counts_the_geometry(tmp_path, n):
     """Meshes of 1e4, 1e5 and 1e6 triangles: the plan counts their triangles from the file's header

@@ -58,6 +58,7 @@ def _box_filtered(tmp_path):
     return mi.load_file(str(path))
 
 
+@pytest.mark.slow
 def test_dsm_shadow_with_no_bias_matches_mitsubas_direct_where_the_map_agrees(tmp_path):
     """Same seed, same camera rays: where the map's visibility equals the exact one, dsm_shadow's
     radiance is Mitsuba's direct integrator's (one delta light: no Monte Carlo noise in either),
@@ -77,6 +78,7 @@ def test_dsm_shadow_with_no_bias_matches_mitsubas_direct_where_the_map_agrees(tm
     assert ok.mean() > 0.995, ok.mean()           # a few pixels: Mitsuba's own spawn offset differs
 
 
+@pytest.mark.slow
 def test_dsm_shadow_with_adaptive_bias_matches_direct_almost_everywhere(variant):
     import mitsuba as mi
     scene = mi.load_file(str(POINT_XML))
@@ -354,6 +356,7 @@ def test_bad_plugin_properties_name_the_property_and_the_choices(variant):
     assert mi.load_dict({"type": "dsm_shadow", "hide_emitters": True}).opts.spec.name == "adaptive"
 
 
+@pytest.mark.slow
 def test_the_plugins_under_an_unsupported_variant_say_which_are(tmp_path):
     """Under scalar_rgb or a spectral variant a dsm integrator is refused when loaded, one line
     naming the variants dsm supports (it failed with TypeErrors deep in a render)."""

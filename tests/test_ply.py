@@ -48,6 +48,7 @@ def test_a_ply_face_out_of_range_is_one_line_before_mitsuba_reads_it(tmp_path, c
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_a_ply_face_out_of_range_does_not_crash_a_process(tmp_path):
     """In a process of its own (a segfault would show as a negative status), run and plan."""
     _ply(tmp_path / "m.ply", "binary_little_endian", [(0, 1, 2), (1, 99, 3)])
@@ -70,6 +71,7 @@ def test_a_ply_with_faces_in_range_passes(tmp_path, capsys):
         assert rc == 0, err
 
 
+@pytest.mark.slow
 def test_a_ply_beyond_float32_is_one_line_without_numpy_warnings(tmp_path, capsys):
     """A vertex at 3e38 (its ground beyond float32): the config error alone, no RuntimeWarning lines."""
     import numpy as np

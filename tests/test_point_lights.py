@@ -135,6 +135,7 @@ SINGULAR = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("where", sorted(SINGULAR))
 def test_singular_directions_stay_finite_and_accurate(run_dict, where):
     light, axis = SINGULAR[where]
@@ -229,6 +230,7 @@ def test_point_reference_matches_an_independent_shadow_ray_count(variant):
     assert agree > 0.998, agree
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", POINT_VIEWS)
 def test_scale_invariance_per_view(run_dict, kind):
     schemes = [{"name": "constant", "bias": "1 texel"}, {"name": "normal_offset"}, {"name": "adaptive"},

@@ -510,6 +510,7 @@ def test_esm_evsm_and_msm_do_not_leak_where_vsm_does(kind, params):
     assert region.sum() > 100 and not leak[region].any()
 
 
+@pytest.mark.slow
 def test_an_outline_error_of_a_depth_map_is_never_a_leak(run_dict):
     """Schemes without bias and with biases below the occluders' gaps (0.2 and 0.25 world), nearest
     and PCF, on the plates (whose high plate's shadow outline runs along the low plate's own edge)
@@ -630,6 +631,7 @@ def test_dsm_schemes_lists_each_map_kind_with_its_source_and_parameters():
             assert f"    {f.name} = {f.default}" in text
 
 
+@pytest.mark.slow
 def test_a_resumed_run_keeps_its_moment_cases(run_dict, tmp_path):
     import dsm
     cfg = base_config(scene=[{"builtin": "floating_plate"}], camera={"resolution": [32, 32]},
@@ -820,6 +822,7 @@ def test_pre_filtered_kinds_refuse_area_lights_and_what_motion_cannot_rebuild(ex
     assert e.value.key == key
 
 
+@pytest.mark.slow
 def test_motion_of_a_pre_filtered_map_frame_by_frame_equals_still_runs_at_each_camera(run_dict):
     """[[motion]] with [map] kind: each frame's moments are built from that frame's map (re-fitted to
     the frame's receivers), so a frame's counts (frames.csv) equal those of a still run (the runner's
@@ -861,6 +864,7 @@ def test_motion_of_a_pre_filtered_map_frame_by_frame_equals_still_runs_at_each_c
         assert r["n_leak"] <= r["n_peterpan"]
 
 
+@pytest.mark.slow
 def test_the_error_image_paints_the_leaks_in_their_own_colour(run_dict):
     """With the leak split, each leaking receiver (peter-panned at least leak_texels inside the
     exact shadow) is the LEAK class, one pixel per n_leak, written in LEAK's colour; folded back it is

@@ -14,6 +14,7 @@ def _point_light_cfg(views, kinds, schemes):
                        map={"resolution": 64, "view": views, "kind": kinds}, scheme=schemes)
 
 
+@pytest.mark.slow
 def test_pre_filtered_kinds_without_any_scheme_are_planned_and_measured_as_beside_one(run_dict):
     """The error for [[scheme]] tables without depth in map.kind says "or remove them": doing so
     planned no case at all (exit 0, an empty run). Now the kinds are measured, and each row is the

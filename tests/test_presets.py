@@ -133,6 +133,7 @@ def test_schemes_text_lists_every_preset_per_light_type_with_sources():
     assert "unreal: not encoded" in text
 
 
+@pytest.mark.slow
 def test_every_preset_runs_on_every_light_type(run_dict):
     from dsm.schemes import PRESETS
     cfg = {"experiment": {"name": "presets"}, "camera": {"resolution": [64, 64]},

@@ -1,11 +1,13 @@
 """Real meshes (data/meshes, shipped): every mesh classified, nothing NaN, one config for all scales."""
 import dataclasses
 
+import pytest
 
 from conftest import ROOT, assert_nan_only_where_undefined
 
 
 
+@pytest.mark.slow
 def test_real_meshes_need_no_per_scene_epsilon(tmp_path):
     import dsm
     from dsm.config import read as config

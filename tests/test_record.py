@@ -67,6 +67,7 @@ def _area():
                        map={"resolution": 32, "filter": ["nearest", "pcss"]}, scheme=[{"name": "constant"}])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("make", [_cascaded, _motion, _area], ids=["cascades", "motion", "area"])
 def test_dsm_report_rebuilds_what_dsm_run_wrote(tmp_path, make):
     """Every file but the run's data deleted, `dsm report` gives back the text files byte for byte

@@ -61,6 +61,7 @@ def _dsm(*args, **kw):
                           timeout=600, env=_env(), **kw)
 
 
+@pytest.mark.slow
 def test_a_killed_run_resumes_to_the_rows_of_an_uninterrupted_run(tmp_path):
     cfg = tmp_path / "resume.toml"
     # cases enough that the kill lands while measuring, not in the report after it (a case is ~5 ms)
@@ -154,12 +155,14 @@ def test_a_case_key_changes_with_its_input_file_and_the_kit_version(tmp_path):
     assert a != resume.case_keys(cfg, planmod.make(cfg), "v1")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("flags", [["--resume", "--force"]])
 def test_resume_and_force_exclude_each_other(tmp_path, flags):
     p = _dsm("run", "--out", tmp_path / "x", *flags)
     assert p.returncode == 2 and "not allowed with" in p.stderr
 
 
+@pytest.mark.slow
 def test_resume_into_another_experiments_folder_is_refused_and_changes_nothing(tmp_path):
     """--resume with a config of another [experiment] name would set every case of the folder
     aside as stale: exit 2 naming --resume and both experiments, before any work."""

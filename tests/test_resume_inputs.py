@@ -36,6 +36,7 @@ def test_resume_on_a_damaged_metrics_csv(tmp_path, capsys):
     assert [(r["n_acne"], r["n_peterpan"]) for r in rows] == [(str(r["n_acne"]), str(r["n_peterpan"])) for r in first.rows]
 
 
+@pytest.mark.slow
 def test_resume_sees_a_change_in_a_file_an_xml_includes(tmp_path):
     """A scene XML whose shapes come through <include> and a $name default: editing the included
     file makes --resume run its cases again (they were kept, stale)."""

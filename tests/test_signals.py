@@ -3,6 +3,8 @@ starts is one line."""
 import subprocess
 import sys
 
+import pytest
+
 
 
 
@@ -24,6 +26,7 @@ sys.exit(cli.main())
 """
 
 
+@pytest.mark.slow
 def test_sigterm_leaves_the_run_interrupted_not_running(tmp_path):
     import json as jsonmod
     cfg = tmp_path / "slow.toml"

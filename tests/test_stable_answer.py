@@ -51,6 +51,7 @@ def test_a_tie_at_the_lowest_pooled_rate_and_no_outright_win_are_said_so():
                                     "No instance is alone the best in any of the 1 situations (each best is a tie).")
 
 
+@pytest.mark.slow
 def test_two_identical_runs_give_the_same_best_tables_and_headline(run_dict):
     """A lone plane and a plane over a box under a directional light: most instances tie at zero
     error; the two runs' timings differ, their answers may not."""

@@ -106,6 +106,7 @@ def _method(rows):
              if not any(m in k for m in machine)} for r in rows]
 
 
+@pytest.mark.slow
 def test_together_rows_equal_every_map_built_alone(both):
     """Every count and rate of every case, the rays and each map's layers and re-hits equal the run
     that builds each map alone; one stack per light and culling (none, back_closed, front_closed)."""
@@ -209,6 +210,7 @@ def test_builds_choice_is_checked(tmp_path):
     assert "exp.toml" in msg and "timing.builds" in msg and "together" in msg and "\n" not in msg
 
 
+@pytest.mark.slow
 def test_bench_compares_the_build_modes(tmp_path, monkeypatch):
     """dsm perf (5c): a light's resolution sweep built together launches fewer timed kernels than
     each map alone (a count, not a clock: alone, one first-layer build per map and repeat), every

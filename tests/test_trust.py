@@ -12,6 +12,7 @@ LIGHTS = [{"type": "directional", "direction": [-0.3, -0.2, -1.0]},
           {"type": "point", "position": [0.3, -0.2, 2.5]}]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scene", ["plane_box", "l_shape", "room"])
 def test_counts_do_not_depend_on_the_other_schemes(run_dict, scene):
     """Each scheme alone against the same scheme beside layered and culled schemes, on all five

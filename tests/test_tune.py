@@ -161,6 +161,7 @@ def test_a_fixed_seed_repeats():
 
 # ---------------------------------------------------------------- bias map, output, config
 
+@pytest.mark.slow
 def test_bias_map_and_output_folder(tmp_path):
     import tomllib
     import dsm.pipeline as pl
@@ -331,6 +332,7 @@ def test_the_tuner_returns_its_best_exact_evaluation_never_worse_than_its_start(
     assert const["box"]["bias"][0] <= const["oracle"]["bias"] <= const["box"]["bias"][1]
 
 
+@pytest.mark.slow
 def test_cli_tune_force_replaces_only_a_previous_tune(tmp_path):
     """--force replaces a dsm tune folder's own files and keeps a user's; a folder without a
     tune.json is refused even with --force (exit 2)."""
@@ -363,6 +365,7 @@ def grid_run():
     return tu.tune(cfg), _prepared(cfg)
 
 
+@pytest.mark.slow
 def test_tuned_is_at_most_a_grid_with_as_many_evaluations(grid_run):
     """Per scheme: the tuned training objective is at most the best of a regular grid over the same
     box with at most 40 points (recomputed here from the kit's exact counts, not the tuner's grid)."""
@@ -413,6 +416,7 @@ RESUME_CFG = ('[experiment]\nname = "t"\n[camera]\nresolution = [32, 32]\n[[scen
               '[[scheme]]\nname = "receiver_plane"\n[tune]\nsteps = 9\n')
 
 
+@pytest.mark.slow
 def test_cli_tune_resume_keeps_finished_schemes_and_tunes_the_rest(tmp_path, capsys):
     """A tune stopped after its first scheme (its state holding only that one) resumes to the
     values of an uninterrupted tune, the kept scheme's rows (times included) unchanged; a changed
@@ -621,6 +625,7 @@ def test_an_absent_optional_scene_is_left_out_with_a_note_and_alone_is_nothing_t
     assert not (tmp_path / "o2").exists()
 
 
+@pytest.mark.slow
 def test_resume_keeps_every_finished_scheme_when_schemes_are_added_removed_or_changed(tmp_path, capsys):
     """--resume after a changed first scheme: the state lists the kept second one too (it once
     listed only what was tuned, so the next resume tuned it again); a scheme added in front, or
@@ -651,6 +656,7 @@ def test_resume_keeps_every_finished_scheme_when_schemes_are_added_removed_or_ch
     assert "resumed: 0 finished schemes kept, 1 tuned" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_the_python_api_keeps_dsm_tunes_folder_rules(tmp_path):
     """dsm.tune.tuner.tune(out=...) refuses a folder holding another run as dsm tune does (it once
     wrote its table.md over a dsm run's), replaces a previous tune with force=True, goes on with
@@ -687,6 +693,7 @@ LAMBDA_CFG = {"experiment": {"name": "lam"}, "camera": {"resolution": [48, 48]},
                   {"name": "b", "position": [-2.6, -2.2, 2.6], "target": [0.0, 0.0, 0.4], "fov": 60}]}}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("lam", [30.0, 1000.0])
 def test_away_from_lambda_one_tuned_stays_at_or_below_its_grid_and_reaches_a_negative_oracle(lam):
     """lambda weighs peter-panning against acne. At 1000 the exact oracle's best constant bias is
@@ -704,6 +711,7 @@ def test_away_from_lambda_one_tuned_stays_at_or_below_its_grid_and_reaches_a_neg
         assert const["values"]["bias"] < 0 and const["box"]["bias"][0] < const["values"]["bias"]
 
 
+@pytest.mark.slow
 def test_steps_name_each_instance_and_a_batch_below_one_receiver_is_refused(tmp_path):
     """steps.csv tells two instances of one scheme apart (a texel and a world constant shared one
     label, and the loss plot drew them as one line); a batch that draws no receiver a step (the

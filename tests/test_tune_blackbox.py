@@ -29,6 +29,7 @@ def _oracle(cfg):
     return min(((vs & (th.tau > b)).sum() + (~vs & (th.tau <= b)).sum()) / vs.size for b in cands)
 
 
+@pytest.mark.slow
 def test_tpe_and_the_ad_tuner_reach_the_oracle_with_the_evaluations_they_report(monkeypatch):
     """Both within 5 % of the exact oracle's objective (recomputed here); every exact evaluation, relaxed
     pass and line search counted by wrappers at the call sites equals what tune.json's entry reports."""
@@ -82,6 +83,7 @@ def test_two_objectives_need_optuna_and_a_search_name_is_checked(tmp_path):
         assert e.value.key == key
 
 
+@pytest.mark.slow
 def test_an_interrupted_study_resumes_into_the_same_trials(tmp_path, monkeypatch):
     """Interrupted between a trial's draw and its result (the 8th exact evaluation), then resumed: the
     completed trials' values, in order, and the result equal an uninterrupted run's."""
@@ -115,6 +117,7 @@ def test_an_interrupted_study_resumes_into_the_same_trials(tmp_path, monkeypatch
     assert resumed.schemes[0]["optuna"]["train"] == whole.schemes[0]["optuna"]["train"]
 
 
+@pytest.mark.slow
 def test_nsga2_front_is_the_non_dominated_trials(tmp_path):
     """objectives = 2: the front written holds exactly the (acne, peter-panning) points no trial of the study
     dominates (recomputed here from the journal), and the AD tuner's point is placed against it."""

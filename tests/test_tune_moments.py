@@ -149,6 +149,7 @@ def test_an_exponent_that_cannot_shadow_is_refused(kind, table):
     assert e.value.key.startswith(f"map.{kind}.")
 
 
+@pytest.mark.slow
 def test_a_tune_of_pre_filtered_maps_alone_resumes(tmp_path):
     from dsm.tune.tuner import tune
     first = tune(_cfg(["vsm"], [1], steps=6), out=tmp_path)

@@ -57,6 +57,7 @@ def test_a_case_key_changes_with_each_engine_version(key):
     assert [c for c, _ in other] == [c for c, _ in same] and all(a != b for (_, a), (_, b) in zip(same, other))
 
 
+@pytest.mark.slow
 def test_resume_with_other_versions_says_so_in_one_line_and_runs_every_case_again(tmp_path, monkeypatch, capsys):
     from dsm import pipeline
     from dsm.experiment.runner import Runner

@@ -238,6 +238,7 @@ def test_tagged_pages_alone_give_the_nearest_lookups_of_the_whole_level():
 
 # ---------------------------------------------------------------- a run
 
+@pytest.mark.slow
 def test_a_run_reports_pages_memory_rays_and_levels(run_dict):
     """metrics.csv's vsm_* columns: pages (tagged = built), physical texels = pages x page_size^2,
     rays = those texels (one per texel without a second layer), the level histogram summing to the

@@ -37,6 +37,7 @@ def test_virtual_levels_too_narrow_for_float32_are_refused_before_any_work(virtu
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_virtual_levels_that_hold_no_receiver_fail_their_case_alone(tmp_path, capsys):
     """levels = 1 (UE5's level 6, 5.12 m about the camera): wide enough for float32, yet the camera's receivers all
     lie farther; only the loaded scene's receivers say so. That case fails in one line naming the keys; the

@@ -71,6 +71,7 @@ def test_each_receiver_reads_its_directions_face_and_its_distances_level(lod_bia
     assert not np.any(view.texel_index(rx.face, i, j)[1].numpy())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("level", [2, 4])
 def test_a_level_s_pages_are_the_whole_cube_map_of_its_resolution(level):
     """Every receiver in one level: the page-list build's z1, slope and shape at its texels equal the

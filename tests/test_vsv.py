@@ -84,6 +84,7 @@ def test_floor_acne_of_the_plain_voxel_test_follows_voxel_size_and_slope(floor):
     assert (slope * (view.phi_span / 64) / (view.alpha_span / 256)).min() > 2            # g > 2 at 256
 
 
+@pytest.mark.slow
 def test_floor_acne_of_the_constant_epsilon_follows_its_shift_in_voxels(floor):
     """The epsilon moves the receiver toward the light by delta alpha voxels (delta = s(F) -
     s(F + epsilon l), float64; near the nadir view and light rays are parallel and delta -> 0:

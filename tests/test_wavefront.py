@@ -34,6 +34,7 @@ def both(tmp_path_factory):
     return {mode: dsm.run(_config(mode), out=out / mode) for mode in ("per_case", "wavefront")}
 
 
+@pytest.mark.slow
 def test_wavefront_rows_equal_each_case_timing_its_own_lookup(both):
     """Every count, rate and image-free column of every case equals the per-case path's, where each
     case looks up alone (the second computation)."""
@@ -96,6 +97,7 @@ def test_kernel_key_matches_what_drjit_compiles():
     assert hashes[0] != hashes[2] and keys[0] != keys[2]
 
 
+@pytest.mark.slow
 def test_a_map_cut_into_waves_gives_the_same_rows(both, tmp_path, monkeypatch):
     """With room for one case a wave, each of a map's 48 cases runs in its own wave, and every row
     is the same as in one wave."""
@@ -130,6 +132,7 @@ def test_an_unknown_lookup_mode_is_refused_before_any_work(tmp_path):
     assert not (tmp_path / "x").exists()
 
 
+@pytest.mark.slow
 def test_bench_compares_the_modes_on_a_sweep(tmp_path, monkeypatch):
     """dsm perf (5b): on a sweep whose cases share kernels, the wavefront launches fewer timed
     kernels than one lookup per case (a count, not a clock), and every row is equal."""

@@ -42,6 +42,7 @@ def _cfg(scale):
                        {"name": "normal_offset"}, {"name": "constant", "bias": 2.0}]}
 
 
+@pytest.mark.slow
 def test_the_cornell_box_in_metres_counts_as_in_its_own_units(tmp_path):
     """The config's light positions scale with the scene; texel and range biases are scale-free, so
     every count is the unscaled run's (no bias: its acne, rounding itself, within 2); the world
@@ -105,6 +106,7 @@ def test_a_moved_xml_scene_holds_its_shapes_and_camera_at_scale_times_file_plus_
     np.testing.assert_allclose(m_got[:3, 3], m_ref[:3, 3] * 0.01 + move, rtol=0, atol=1e-4)
 
 
+@pytest.mark.slow
 def test_the_cornell_box_far_from_the_origin_keeps_its_exact_side(tmp_path):
     """At 1e4 and 1e5 from the origin (metres) the exact side is traced in a frame centred on the box
     (dsm.scenes.exact_frame): every case's receivers and exact shadowed count are the origin's, while
