@@ -231,6 +231,7 @@ def test_point_light_casts_one_reference_ray_per_receiver(variant):
     assert setup.ref is None
 
 
+@pytest.mark.slow
 def test_point_light_run_counts_receivers_as_reference_rays(run_dict):
     cfg = base_config(camera={"resolution": [64, 64]}, scene=[{"builtin": "plane_box"}],
                       light=[{"type": "point", "position": [1.0, -1.0, 3.0]}], map={"resolution": 64,

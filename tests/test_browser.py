@@ -79,6 +79,7 @@ def test_the_page_shows_the_summary_and_the_cases(page, tmp_path):
                               ".every(e => !/^https?:/.test(e.getAttribute('src') || e.getAttribute('href')))")
 
 
+@pytest.mark.slow
 def test_clicking_the_acne_rate_header_orders_the_rows(page):
     res, drv = page
     rows = _csv(res)
@@ -325,6 +326,7 @@ def test_the_grad_report_fits_its_window_and_reads_at_9_points(grad_page, width)
                               ".every(e => !/^https?:/.test(e.getAttribute('src') || e.getAttribute('href')))")
 
 
+@pytest.mark.slow
 def test_clicking_the_grad_reports_rel_error_header_orders_its_rows(grad_page):
     """compare.csv's table sorted by rel_error in the browser: the CSV's values in order, undefined last."""
     out, drv = grad_page

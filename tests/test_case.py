@@ -21,6 +21,7 @@ def _context(measures=frozenset(), fmt="float32"):
     return MapContext(where, sd, gb, setup, view, smap, stored, rx, 7, 1, frozenset(measures), leak_texels=2.0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("bias", [0.0, 0.02])
 def test_evaluated_counts_and_class_image_match_numpy_on_its_own_v(bias):
     import dsm.pipeline as pl

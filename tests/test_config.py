@@ -54,6 +54,7 @@ def test_good_config_sweeps(tmp_path):
     assert cfg.map.resolution == (64, 128)
 
 
+@pytest.mark.slow
 def test_xml_without_usable_emitter_gets_a_default_light(tmp_path, run_dict):
     """An area-lit XML scene gets a point light at its luminaire, said in run.json; the plan agrees."""
     from dsm.config import plan

@@ -95,6 +95,7 @@ def accepted_keys(monkeypatch) -> dict:
     return seen
 
 
+@pytest.mark.slow
 def test_config_reference_is_the_readers_keys(monkeypatch):
     """Every key the reader accepts in a hand-read table is declared in dsm.config.keys, and every
     declared key is one the reader accepts (tables read into dataclasses are documented from them)."""

@@ -109,6 +109,7 @@ def ndc24_step(z, n, f):
     return np.asarray(z, np.float64) ** 2 * (f - n) / (f * n * (2.0 ** 24 - 1.0))
 
 
+@pytest.mark.slow
 def test_stored_formats_on_a_deep_scene_make_the_acne_their_step_predicts(run_dict):
     """plane_box lit at 45 degrees by a spot 1e4 units away: a depth range of 1e4 over a scene 8
     units wide. The rounding error e of a stored depth is uniform over one step s, so with a

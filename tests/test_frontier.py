@@ -196,6 +196,7 @@ def test_the_leaderboard_ranks_inside_memory_classes_and_says_the_console_s_word
     assert "1 MiB to 2 MiB: small" in text and "16 MiB to 32 MiB: big" in text
 
 
+@pytest.mark.slow
 def test_a_hybrid_case_is_the_map_alone_and_the_map_with_its_rays(run_dict):
     """[hybrid]: each map case is one point alone (its own counts) and one per rule, the error left after the
     rays and the rays traced added to the map's ('all' traces every receiver: error 0, map rays + receivers);

@@ -25,6 +25,7 @@ def test_cosine_similarity_is_the_angle_between_images():
     assert cosine(a, np.zeros_like(a)) is None          # an all-zero gradient image: undefined, not 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kw, param, closed", [
     ({}, "occluder_z", 2 * 0.25 * 4 / 1.5 ** 3),                                  # 2 A H^2 / (H - h)^3
     ({}, "light_height", -2 * 0.25 * 2 * 0.5 / 1.5 ** 3),                         # -2 A H h / (H - h)^3

@@ -104,6 +104,7 @@ def test_every_table_of_a_compare_and_inverse_run_is_its_csv(run):
             assert cell == f"{sum(r['success'] == 'True' for r in mine)}/{len(mine)}"
 
 
+@pytest.mark.slow
 def test_grad_json_keeps_the_measuring_and_the_report_apart(run):
     rec = json.loads((run / "grad.json").read_text())
     t = rec["timing"]

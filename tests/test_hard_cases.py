@@ -226,6 +226,7 @@ def _write_degenerate_obj(path):
         fh.writelines(f"f {a} {b} {c}\n" for a, b, c in f)
 
 
+@pytest.mark.slow
 def test_degenerate_mesh(run_dict, tmp_path):
     """Duplicated and zero-area triangles change nothing: receivers and V* are those of the
     ground and the plate alone, and the biased schemes err only at the plate's shadow outline."""
@@ -285,6 +286,7 @@ def _axis_scene(folder, direction, width):
     return scene, caster
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("direction", [(0, 0, -1), (1, 0, 0), (0, -1, 0), (0, 1, 0), (-1, 0, 0), (0, 0, 1)])
 def test_light_parallel_to_world_axes(run_dict, tmp_path, direction):
     """Axis-aligned light: map axes, box edges and texel boundaries line up and the box's sides

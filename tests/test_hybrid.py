@@ -228,6 +228,7 @@ def test_a_run_with_hybrid_writes_its_columns_and_section(run_dict, tmp_path):
     assert "<section id=hybrid>" in (out / "report.html").read_text()
 
 
+@pytest.mark.slow
 def test_origin_rules_across_scales():
     """The kit's spawn rule neither self-shadows nor leaks from 1e-3 to 1e6; Mitsuba's unit term
     leaks at the millimetre box's contact; an absolute 1e-4 self-shadows the tilted plane at 1e3 on."""
@@ -258,6 +259,7 @@ def test_a_resumed_hybrid_run_keeps_its_cases_and_a_new_instance_is_a_new_case(t
     assert sorted(r["hybrid_params"] for r in again.rows) == ["k=0.5", "k=2.0", "k=8.0"]
 
 
+@pytest.mark.slow
 def test_a_hybrid_case_s_class_image_shows_v_after_its_rays(tmp_path):
     """The class image of a hybrid case holds its hybrid_* counts (V after the rays), not the map alone's: with
     `all` rays from the kit's spawn rule (V* bit for bit) no pixel is wrong, while `none`'s map alone has acne;

@@ -77,6 +77,7 @@ BAD_FILES = ["syntax.xml", "empty.xml", "nosensor.xml", "missingmesh.xml", "infi
              "badface.obj", "nanvert.obj", "nofaces.obj", "trunc_ascii.ply", "trunc_bin.ply", "noface.ply"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", BAD_FILES)
 def test_unreadable_scene_file_is_one_line_before_any_work(tmp_path, capsys, name):
     why = _bad_files(tmp_path)[name]
@@ -186,6 +187,7 @@ def test_experiment_name_must_be_a_plain_file_name(name):
     assert e.value.key == "experiment.name" and "plain file name" in str(e.value)
 
 
+@pytest.mark.slow
 def test_force_replaces_a_previous_run_and_nothing_else(tmp_path, capsys):
     cfg = tmp_path / "c.toml"
     cfg.write_text(_tiny('builtin = "plane"'))
@@ -385,6 +387,7 @@ def test_closed_override_must_name_a_shape(tmp_path):
 
 # ---------------------------------------------------------------- 7: translate
 
+@pytest.mark.slow
 def test_translate_moves_geometry_camera_and_config_lights(run_dict):
     lights = [{"type": "directional", "direction": [-0.3, -0.2, -1.0]},
               {"type": "spot", "position": [-1.5, 1.0, 3.0], "target": [0.0, 0.0, 0.0], "cutoff": 40}]
@@ -411,6 +414,7 @@ def test_translate_must_be_three_numbers():
 
 # ---------------------------------------------------------------- 8: double torus
 
+@pytest.mark.slow
 def test_double_torus_is_a_closed_genus_two_mesh(run_dict):
     from dsm.scenes.closedness import shape_closedness
     cfg = config.parse({"scene": [{"builtin": "double_torus"}], "scheme": [{"name": "none"}]})

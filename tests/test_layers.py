@@ -10,6 +10,7 @@ from dsm.scenes.geometry import box, prism, quad
 from test_hard_cases import Scene64, assert_matches_truth, truth
 
 
+@pytest.mark.slow
 def test_thin_plate_midpoint_and_dual_keep_the_shadow(run_dict):
     cfg = base_config(scene=[{"builtin": "floating_plate", "gap": 0.2}], map={"resolution": 512},
                       camera={"resolution": [256, 256]},

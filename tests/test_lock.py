@@ -52,6 +52,7 @@ def holder():
             h.kill()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("flag", [None, "--resume", "--force"])
 def test_a_run_into_a_held_folder_is_refused_naming_the_holder_and_free_after_sigkill(tmp_path, capsys, cfg_file,
                                                                                        holder, flag):
@@ -117,6 +118,7 @@ def test_the_lock_is_an_os_lock_on_the_file(tmp_path):
     lock.acquire(tmp_path / "o").release()              # free again
 
 
+@pytest.mark.slow
 def test_a_rerun_after_a_kill_names_resume_and_force(tmp_path, capsys, cfg_file, holder):
     """A run killed with SIGKILL: run.json says running and a stale lock file stays; a plain re-run
     says how to go on (--resume) or start again (--force)."""

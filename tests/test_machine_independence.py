@@ -24,6 +24,7 @@ def _room_cube(res=48):
     return sd, view
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("needs,culling", BUILDS)
 def test_tiles_of_any_size_give_the_single_pass_bits(variant, needs, culling):
     """Tiles of 1000, 4097 and 5000 texels leave partial packets at every vector width."""

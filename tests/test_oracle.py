@@ -129,6 +129,7 @@ def test_curve_equals_the_constant_sweep_count_for_count(run_dict, scene):
             assert orc[_key(r)]["per_texel_objective"] <= objective(r) + 1e-12
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("azimuth", [0.0, 30.0])
 def test_tilted_plane_needs_the_largest_texel_threshold(run_dict, azimuth):
     """The 45-degree plane under a light straight down: the depth within a texel is the plane's,
@@ -171,6 +172,7 @@ def test_tilted_plane_needs_the_largest_texel_threshold(run_dict, azimuth):
     assert res2.rows[0]["n_acne"] == 0 and res2.rows[1]["n_acne"] >= 1
 
 
+@pytest.mark.slow
 def test_floating_plate_best_bias_lies_below_the_gap(run_dict):
     """Gap 0.2: the best single bias removes every acne a receiver gets from its own surface
     (the largest such threshold, from the pipeline's taps) and stays below the gap; no swept

@@ -10,6 +10,7 @@ from dsm import cli
 from dsm.config.read import ConfigError
 
 
+@pytest.mark.slow
 def test_the_api_keeps_a_previous_run_unless_told(tmp_path):
     a = tomllib.loads(tiny_toml())
     b = tomllib.loads(tiny_toml().replace('name = "none"', 'name = "constant"'))

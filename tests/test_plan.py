@@ -19,6 +19,7 @@ CONFIGS = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(CONFIGS))
 def test_plan_ray_counts_equal_what_the_run_casts(run_dict, name):
     from dsm.config import read as config

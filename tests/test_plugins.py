@@ -19,6 +19,7 @@ def _classes(img):
     return np.argmin(d, -1).astype(np.uint8)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("xml,scheme,view", [(POINT_XML, {"scheme": "constant", "bias": "1 texel"}, "cube"),
                                              (POINT_XML, {"scheme": "none"}, "dual_paraboloid"),
                                              (SPOT_XML, {"scheme": "slope_scaled"}, "cube"),

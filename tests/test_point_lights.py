@@ -246,6 +246,7 @@ def test_scale_invariance_per_view(run_dict, kind):
         assert np.abs(rates[s] - rates[1.0]).max() < 0.01, (kind, s, rates[s], rates[1.0])
 
 
+@pytest.mark.slow
 def test_xml_scene_with_a_point_emitter(run_dict):
     cfg = base_config(scene=[{"file": str(ROOT / "tests" / "data" / "point_scene.xml")}],
                       map={"resolution": 256, "view": ["dual_paraboloid", "cube"]},
@@ -260,6 +261,7 @@ def test_xml_scene_with_a_point_emitter(run_dict):
         assert r["acne_rate"] > 0.2                          # no bias: self-shadowing on every view
 
 
+@pytest.mark.slow
 def test_equal_memory_budgets(run_dict):
     cfg = base_config(scene=[{"builtin": "room"}], camera={"resolution": [64, 64]},
                       map={"texels": [6 * 64 ** 2], "view": ["paraboloid", "dual_paraboloid", "cube"]},

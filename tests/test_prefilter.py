@@ -339,6 +339,7 @@ def test_without_kind_the_plan_and_rows_are_unchanged():
 
 # ---------------------------------------------------------------- a run
 
+@pytest.mark.slow
 def test_a_run_of_floating_plate_measures_each_kind_and_vsm_unfiltered_is_a_constant_bias(run_dict):
     """floating_plate (a plate 0.2 above the ground), every kind at W = 1 and 5: each row has the
     prefilter group, its contact and leak add up to n_peterpan. The unfiltered VSM lights a
@@ -464,6 +465,7 @@ def chebyshev_band(low: float, high: float):
     return ((1 - 2 * r) - np.sqrt(disc)) / 4, ((1 - 2 * r) + np.sqrt(disc)) / 4
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("low, high, W", [(0.25, 2.0, 5), (0.25, 2.0, 9), (0.1, 2.0, 15), (1.0, 2.0, 9),
                                           (0.5, 2.0, 9)])
 def test_the_vsm_leak_is_chebyshevs_band_and_nothing_where_the_band_has_no_solution(low, high, W):

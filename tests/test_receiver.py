@@ -1,8 +1,8 @@
 """The receivers (dsm/maps/receiver.py) do not depend on the map's resolution."""
+import pytest
 
 
-
-
+@pytest.mark.slow
 def test_receivers_do_not_depend_on_the_map_resolution():
     """A directional light's receivers are the same set at R = 1 to 7 as at R = 8 and 64 (at
     R < 8 one receiver on the fitted border fell outside: 620 against 621)."""

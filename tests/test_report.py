@@ -35,6 +35,7 @@ def _csv(path):
     return rows, num
 
 
+@pytest.mark.slow
 def test_summary_matches_a_numpy_recomputation(run):
     from dsm.report import io as report, summary
     raw, num = _csv(run.out / "metrics.csv")
@@ -252,6 +253,7 @@ def test_consolidated_legends_name_each_map_and_instance_once(tmp_path):
         (to_rgba(OKABE_ITO[k % 6]), dashed) for k in range(10) for dashed in (False, True)}
 
 
+@pytest.mark.slow
 def test_dsm_report_rebuilds_table_md_and_the_page(run, tmp_path):
     from dsm import cli
     d = tmp_path / "copy"
@@ -351,6 +353,7 @@ def test_the_table_of_an_interrupted_run_says_it_covers_only_the_cases_that_ran(
     assert f"interrupted: 5 of the {len(run.rows)} planned cases ran" in head and "--resume" in head
 
 
+@pytest.mark.slow
 def test_dsm_report_of_a_damaged_folder_is_one_line_never_a_traceback(run, tmp_path, capsys):
     """run.json that is not JSON or not an object, a metrics.csv of another program or with text
     in a number column: exit 2 naming the file. A last row cut short (a run killed while writing
@@ -386,6 +389,7 @@ def test_dsm_report_of_a_damaged_folder_is_one_line_never_a_traceback(run, tmp_p
     assert "a dsm tune folder" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_report_images_key(tmp_path):
     import dsm
     from dsm.config import read as config
@@ -487,6 +491,7 @@ def test_a_forked_drawing_worker_dies_with_its_parent(tmp_path):
                 pass
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fork", [True, False])
 def test_drawing_in_a_process_pool_writes_what_drawing_here_writes(tmp_path, fork):
     from dsm.report import figures, jobs as draw_jobs

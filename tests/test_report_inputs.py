@@ -13,6 +13,7 @@ from conftest import small_run, base_config, cli_run, one_line, folder_files
 from dsm import cli
 
 
+@pytest.mark.slow
 def test_report_refuses_a_metrics_csv_without_a_core_column_or_with_rates_not_its_counts(tmp_path, capsys):
     import csv as csvmod
     from dsm import cli
@@ -41,6 +42,7 @@ def test_report_refuses_a_metrics_csv_without_a_core_column_or_with_rates_not_it
     assert cli.main(["report", str(res.out)]) == 0
 
 
+@pytest.mark.slow
 def test_report_says_what_a_damaged_folder_lacks(tmp_path, capsys):
     """A duplicated row is refused; rows lost against run.json, or oracle.csv deleted, are notes
     (the report was silently shorter); run.json's config as a string is no traceback."""
@@ -102,6 +104,7 @@ EDITED = {  # metrics.csv as the tour edited it -> words of the one line
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(EDITED))
 def test_report_refuses_an_edited_cost_column(name, tiny_run, tmp_path, capsys):
     edit, words = EDITED[name]

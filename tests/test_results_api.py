@@ -64,6 +64,7 @@ def test_the_terminal_answer_says_ties_and_the_lowest_pooled_error(res):
         assert f"R = {b['resolution']}" in line and summary.best_cell(b) in line
 
 
+@pytest.mark.slow
 def test_a_run_without_a_folder_leaves_none_behind():
     """dsm.run without out: its folder lives while its Results (or a part of it) does, then goes."""
     import dsm

@@ -114,6 +114,7 @@ def _cfg(biases, schemes=("none", "constant")):
             "light": [{"type": "directional", "direction": [-0.4, -0.3, -1.0]}], "map": {"resolution": 32}, "scheme": sch, "timing": {"repeats": 1}}
 
 
+@pytest.mark.slow
 def test_an_edited_config_reruns_changed_cases_and_lists_stale_ones(tmp_path):
     from dsm import pipeline
     from dsm.experiment.runner import Runner

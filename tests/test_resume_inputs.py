@@ -11,6 +11,7 @@ from dsm import cli
 from dsm.config.read import ConfigError
 
 
+@pytest.mark.slow
 def test_resume_on_a_damaged_metrics_csv(tmp_path, capsys):
     """Random bytes: one line before any work (exit 2); a row cut short: its case runs again
     (was a TypeError after the work had started)."""
@@ -67,6 +68,7 @@ def test_resume_sees_a_change_in_a_file_an_xml_includes(tmp_path):
     assert dsm.run(raw, out=out, resume=True).run["resumed_cases"] == 0
 
 
+@pytest.mark.slow
 def test_a_case_set_aside_by_one_resume_and_named_again_by_the_next(tmp_path):
     """run A; --resume with B (A's cases set aside as stale); --resume with A again: A's cases
     come back, kept (this raised KeyError 'status' and left run.json "running"); a stale

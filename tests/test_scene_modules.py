@@ -4,6 +4,8 @@ defined in the home listed here, and (since 0.2.0, CHANGELOG.md) no longer hande
 import importlib
 import subprocess
 import sys
+
+import pytest
 from pathlib import Path
 
 import dsm.scenes
@@ -39,6 +41,7 @@ def test_every_old_name_is_in_its_new_home_only():
             assert name not in vars(dsm.scenes) and not hasattr(dsm.scenes, "__getattr__"), (home, name)
 
 
+@pytest.mark.slow
 def test_a_module_imported_first_in_a_fresh_process():
     """``from . import exact_frame`` asks the package's __getattr__ first: it must import the
     submodule, not search the old homes while one of them is half imported (a circular import)."""

@@ -77,6 +77,7 @@ def test_shrunk_octahedron_is_d_deeper_from_above(octa):
     assert np.allclose(dz, D, atol=2e-5)
 
 
+@pytest.mark.slow
 def test_shrink_is_planned_and_moves_only_the_casters(run_dict):
     cfg = base_config(scene=[{"builtin": "plane_box"}], scheme=[{"name": "none"}], map={"resolution": 128})
     plain = run_dict(cfg, "plain").rows[0]

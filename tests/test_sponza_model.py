@@ -72,6 +72,7 @@ def test_the_key_wins_over_the_variable_and_a_relative_key_is_the_configs(tmp_pa
     assert cfg.scenes[0].file == tmp_path / "elsewhere.ply" and "elsewhere.ply is absent" in cfg.scenes[0].missing
 
 
+@pytest.mark.slow
 def test_crytek_centimetres_land_in_the_dabrovic_frame(tmp_path, monkeypatch, run_dict):
     """The same atrium in metres and in centimetres, with the same poses in metres: the same
     bounds (float64, within float32 rounding) and the same receivers and exact shadow."""

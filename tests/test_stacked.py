@@ -119,6 +119,7 @@ def test_together_rows_equal_every_map_built_alone(both):
     assert len(b.run["plan"]["stacks"]) == 3 * 3 and a.run["plan"]["stacks"] == []
 
 
+@pytest.mark.slow
 def test_a_stacked_map_gets_its_share_of_texels(both):
     """A stack's time is attributed by texels: within a stack (a light, culling and scheme), the
     maps' build_ms are in the ratio of their texel counts, R^2."""

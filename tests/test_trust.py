@@ -150,6 +150,7 @@ def test_ndc24_cube_compares_face_axis_depth(run_dict):
     assert f32["acne_rate"] > 0.2
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("translate", [[1e4, 0, 0], [0, 1e4, 0], [0, 0, 1e4], [2000, 1500, 100]])
 def test_far_from_the_origin_the_counts_hold(run_dict, translate):
     """The floating plate moved up to 1e4 along each axis: a bias far above float32's step there
@@ -167,6 +168,7 @@ def test_far_from_the_origin_the_counts_hold(run_dict, translate):
             assert abs(a[col] - b[col]) <= 0.01, (translate, a["params"], col, a[col], b[col])
 
 
+@pytest.mark.slow
 def test_the_map_wavefront_gives_each_case_what_its_own_lookups_give(run_dict):
     """The runner evaluates every depth case's attached-shadow lookup and plane-fallback mask of a map
     in one wavefront; each case's backface_lit_rate and n_plane_fallback must be what the pipeline's

@@ -144,6 +144,7 @@ def test_tuned_constant_bias_reaches_the_oracle(scene):
         assert largest < b < 0.2, (largest, b)
 
 
+@pytest.mark.slow
 def test_a_fixed_seed_repeats():
     from dsm.tune import tuner as tu
     cfg = _cfg({"builtin": "plane_box"}, [{"name": "slope_scaled", "bias": "0.3 texel", "slope": 1.0,
@@ -384,6 +385,7 @@ def test_tuned_is_at_most_a_grid_with_as_many_evaluations(grid_run):
         assert len(objs) <= 40 and e["train"]["objective"] <= min(objs) + 1e-12, (e["scheme"], min(objs))
 
 
+@pytest.mark.slow
 def test_one_parameter_schemes_come_within_one_percent_of_an_exact_scan(grid_run):
     """A scheme with one continuous parameter: tuned within 1 % of the exact objective's best over
     400 evenly spaced values of its box (the test's own scan, twice as fine as the reported one);
@@ -509,6 +511,7 @@ def test_gradient_check_flags_a_kink_within_its_step():
     assert abs(d["fd"] - 1.5) < 1e-12 and abs(d["rel_error"] - 1 / 3) < 1e-12
 
 
+@pytest.mark.slow
 def test_relaxed_tap_reads_z1_and_slope_bilinearly():
     """While tuning a moved lookup point, z1 and the slope layer are read bilinearly between the
     four texel centres around it (combined's slope term read at the nearest texel would jump at
@@ -583,6 +586,7 @@ def test_line_reach_is_the_least_best_value_along_a_parameter():
     assert box[0].hi >= 2 * reach and box[0].hi >= 1.0 + tsr.BOX_TEXELS
 
 
+@pytest.mark.slow
 def test_tuning_does_not_depend_on_the_scene_scale():
     """The same built-in at scale 1, 1024 and 1e-3 (cameras and lights move with it): every scheme's
     tuned training objective is equal, texel-unit values agree, and a world-unit bias scales with the
@@ -602,6 +606,7 @@ def test_tuning_does_not_depend_on_the_scene_scale():
                 assert b["values"][name] == pytest.approx(va * (s if world else 1.0), rel=1e-4), (s, a["scheme"], name)
 
 
+@pytest.mark.slow
 def test_an_absent_optional_scene_is_left_out_with_a_note_and_alone_is_nothing_to_tune(tmp_path, capsys):
     """An optional file that is absent (Sponza in experiments/tune_sponza.toml) is not tuned: with
     other scenes beside it they are tuned and the note names it; alone, `dsm tune` exits 1 saying

@@ -136,6 +136,7 @@ def test_edge_defaults():
     assert (bm.fit, bm.block, bm.widths[0], len(bm.clips), bm.grazings[0]) == ("edge", 2, 1.0, 5, 0.0)
 
 
+@pytest.mark.slow
 def test_edge_map_in_a_tune_run(tmp_path):
     """dsm tune with fit = "edge": the held-out split recounted from the fitted model on the 3 x 3
     margins of the best scheme, and the model written into table.md and tune.json."""
@@ -356,6 +357,7 @@ def test_light_samples_of_the_floating_plate_match_its_shadow():
     assert len(again) > len(cases) and np.array_equal(rows(again), rows(cases))
 
 
+@pytest.mark.slow
 def test_a_base_scheme_that_reads_the_camera_gets_no_offsets(tmp_path):
     """distance_normal scales its offset by the distance to the camera that sees each receiver; light
     samples have no camera, so the edge map over it keeps its shared threshold: its verdicts with and
@@ -373,6 +375,7 @@ def test_a_base_scheme_that_reads_the_camera_gets_no_offsets(tmp_path):
     assert not (tmp_path / "texel_offsets.npy").exists()
 
 
+@pytest.mark.slow
 def test_force_without_offsets_leaves_no_stale_offsets_file(tmp_path):
     """A tune with offsets, then one without into the same folder with force: texel_offsets.npy goes
     with the rest of the previous tune's files (tune.json says no offsets; the file must not say otherwise)."""

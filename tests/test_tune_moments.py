@@ -25,6 +25,7 @@ def vsm_run(tmp_path_factory):
     return tune(_cfg(["vsm"], [1, 5]), out=out), out
 
 
+@pytest.mark.slow
 def test_unfiltered_vsm_tuned_reaches_the_world_oracle_of_its_one_map(vsm_run):
     """At W = 1 VSM lights a receiver iff (t - t1)^2 <= min_variance (1 - q) / q (q from the bleed):
     one bias in normalized depth, on one map one world bias, so its best is the depth map's world

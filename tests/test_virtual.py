@@ -138,6 +138,7 @@ def test_plane_level_histogram_follows_from_each_receivers_distance():
     assert not np.any(absent.numpy())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preset", ["ue5", "eevee"])
 def test_levels_and_pages_do_not_depend_on_the_scenes_scale(preset):
     """plane_box at scale 1 and 1024 (a power of two: its float32 geometry scales exactly): the same
@@ -179,6 +180,7 @@ def _one_level(pl, sd, setup, all_pages=True, level=None):
     return vview, oview
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("builtin", ["plane_box", "l_shape"])
 def test_one_level_with_every_page_tagged_is_the_single_orthographic_map(builtin):
     """One level covering the scene, every page tagged: the page-list build's z1, slope and z2 equal

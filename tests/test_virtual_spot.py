@@ -111,6 +111,7 @@ def test_lod_min_floors_the_footprint_in_the_world_or_on_the_light_plane(lod_min
     assert len(np.unique(want)) >= (1 if lod_min < 0 else 2)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("level", [1, 3])
 def test_a_level_s_pages_are_the_whole_perspective_map_of_its_resolution(level):
     """Every receiver in one level (first_level = last_level): the page-list build's z1 and shape at its

@@ -222,6 +222,7 @@ def test_floating_plate_keeps_its_shadow(variant):
         assert not (shadowed & (tap_shape != ground) & (v >= 0.5)).any()
 
 
+@pytest.mark.slow
 def test_plan_pairs_each_view_with_its_own_lookups_and_a_spot_gets_a_grid(run_dict):
     """A VSV grid is read by the vsv lookups only, a depth map by the shadow-map schemes only; a
     spot light with view = ["vsv"] gets its perspective map and a grid over the same cone."""
@@ -251,6 +252,7 @@ def test_bad_vsv_parameters_are_config_errors_naming_the_key():
             config.parse(base_config(scheme=[{"name": "vsv_adaptive", "alpha": alpha}]), "<test>")
 
 
+@pytest.mark.slow
 def test_a_moving_camera_rebuilds_the_grid_each_frame_and_schemes_lists_the_lookups(run_dict):
     """A VSV is view-dependent: a camera dolly changes the epipolar frame and ranges, so every
     frame builds its own grid (dsm.experiment.motion compares the view's frame and extents)."""
@@ -293,6 +295,7 @@ def test_grid_positions_and_rays_round_trip_across_theta_zero(variant):
     dr.eval()
 
 
+@pytest.mark.slow
 def test_filters_and_stored_formats_apply_to_the_voxel_tests(run_dict):
     """Every scheme's filters (the voxel test per tap) and a stored format (the grid's first hits
     quantized over [0, 1] of the alpha range) run on a VSV: the floor's adaptive choice stays

@@ -44,6 +44,7 @@ def test_wavefront_rows_equal_each_case_timing_its_own_lookup(both):
     assert sum(r["n_acne"] + r["n_peterpan"] for r in b) > 0
 
 
+@pytest.mark.slow
 def test_cases_share_a_timing_only_within_one_kernel(both):
     """lookup_shared counts the cases of a map whose scheme, parameter units, filter and format
     match: the two texel biases share, the world bias does not; per_case rows stand for themselves."""
