@@ -424,8 +424,7 @@ def _plane_box_spot_at_1e5():
     return suite.Case(case.scene, case.unit, case.scale, cfg, case.offset, case.translate)
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("which", ["bunny_far", "plane_box_spot_far"])
+@pytest.mark.parametrize("which", [pytest.param("bunny_far", marks=pytest.mark.slow), "plane_box_spot_far"])
 def test_the_renders_are_the_run_s_shadow_image_and_its_exact_twin(tmp_path, which):
     """A far case run into a folder: the benchmark's render under V is the run's shadow PNG, byte for
     byte (8-bit); the exact render differs from it only on the case's errors (brighter on acne,

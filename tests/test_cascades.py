@@ -290,7 +290,6 @@ def test_a_camera_pose_that_cannot_look_is_a_config_error_not_a_traceback(tmp_pa
     assert not (tmp_path / "o").exists()
 
 
-@pytest.mark.slow
 def test_a_tiny_near_clip_still_sees_the_scene(run_dict):
     """near = 1e-9 (about 1e-10 of plane_box's camera distance, above the refused 1e-12) gives the receivers of the
     default near clip: the clip is in front of every surface either way."""

@@ -208,7 +208,6 @@ def test_jitter_moves_samples_back_within_a_step(plate):
     assert back.min() >= 0 and back.max() < 0.5 and back.std() > 0.1
 
 
-@pytest.mark.slow
 def test_run_writes_the_contact_group_only_when_asked(run_dict):
     cfg = base_config(scene=[{"builtin": "floating_plate", "gap": GAP}], camera={"resolution": [W, H]},
                       scheme=[{"name": "constant", "bias": [0.0, 0.3]}], map={"resolution": 256},

@@ -49,7 +49,6 @@ def test_the_corner_integral_is_the_kernels_integral():
     assert _corner(X, Y, D) == pytest.approx(np.sum(D * D / (D * D + xx ** 2 + yy ** 2) ** 2) * X * Y / n / n, rel=1e-6)
 
 
-@pytest.mark.slow
 def test_the_area_lights_truth_is_the_numpy_integral_within_its_own_error():
     """The soft shadow's area and its central difference in the plate's height (light samples stratified per
     receiver, the same at both heights) against the float64 integral; the point light's 2 A H^2 / (H - h)^3

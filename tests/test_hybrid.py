@@ -228,7 +228,6 @@ def test_a_run_with_hybrid_writes_its_columns_and_section(run_dict, tmp_path):
     assert "<section id=hybrid>" in (out / "report.html").read_text()
 
 
-@pytest.mark.slow
 def test_origin_rules_across_scales():
     """The kit's spawn rule neither self-shadows nor leaks from 1e-3 to 1e6; Mitsuba's unit term
     leaks at the millimetre box's contact; an absolute 1e-4 self-shadows the tilted plane at 1e3 on."""

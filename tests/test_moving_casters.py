@@ -114,7 +114,6 @@ def _receivers_at(offset, camera):
     return pl.points_np(setup.p), box
 
 
-@pytest.mark.slow
 def test_static_cache_ghosts_and_missing_shadows_of_a_sliding_box(run_dict):
     """``static``: the map of frame 0 kept while the box slides; at frame k the ghosts are the
     receivers in the frame-0 shadow outside the frame-k shadow, the missing the converse (numpy's
@@ -171,7 +170,6 @@ def test_a_caster_back_where_it_was_leaves_a_static_map_right(run_dict):
     assert [{k: f[k] for k in keep} for f in by(none, 2)] == [{k: f[k] for k in keep} for f in by(none, 0)]
 
 
-@pytest.mark.slow
 def test_stagger_casts_every_n_frames_and_stagger_one_is_none(run_dict):
     """The sliding box under ``stagger:2``: cast at frames 0, 2, 4, its ghosts only at the odd
     frames, and those equal to ``static``'s at frame 1; ``stagger:1`` gives ``none``'s numbers."""
@@ -275,7 +273,6 @@ def _in_hull(points, corners):
     return ok
 
 
-@pytest.mark.slow
 def test_invalidate_recasts_the_texels_the_box_covers_and_equals_none(run_dict):
     """``invalidate``: every count and rate of ``none`` and no ghost; the texels re-cast at frame k
     are those whose centres fall inside the sun's projection of the box at frame k - 1 or at k (the

@@ -67,8 +67,8 @@ def _area():
                        map={"resolution": 32, "filter": ["nearest", "pcss"]}, scheme=[{"name": "constant"}])
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("make", [_cascaded, _motion, _area], ids=["cascades", "motion", "area"])
+@pytest.mark.parametrize("make", [_cascaded, pytest.param(_motion, marks=pytest.mark.slow),
+                                  pytest.param(_area, marks=pytest.mark.slow)], ids=["cascades", "motion", "area"])
 def test_dsm_report_rebuilds_what_dsm_run_wrote(tmp_path, make):
     """Every file but the run's data deleted, `dsm report` gives back the text files byte for byte
     and the figures pixel for pixel (cascades.md and the cascade and flicker plots included)."""
