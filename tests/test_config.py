@@ -1,5 +1,4 @@
 """Bad input: a clear error naming the file, the key and the valid choices, before any work."""
-
 import pytest
 
 from dsm.config import read as config
