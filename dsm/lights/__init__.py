@@ -25,6 +25,11 @@ def get(light_type: str):
         raise ValueError(f"unknown light type {light_type!r} (valid: {', '.join(TYPES)})") from None
 
 
+def emitter(light, strength: float = 1.0) -> dict:
+    """``light`` (a LightSpec) as a Mitsuba emitter dict of ``strength``, from its type's module."""
+    return get(light.type).emitter(light, strength)
+
+
 def is_soft(light) -> bool:
     """Whether the light's exact visibility is a visible fraction (an area light), not one ray."""
     return get(light.type).SOFT

@@ -109,9 +109,13 @@ def irradiance_fraction(scene, si, n, geom: Geometry, per_axis: int, seed: int, 
     delta = spawn.error_bound(si, dr.opaque(mi.Float, float(magnitude)))
     rng = mi.PCG32(count, mi.UInt64(lookup.position_key(p)), mi.UInt64(seed))
     seen, total = np.zeros(count), np.zeros(count)
+    scale = dr.opaque(mi.Float, 1.0 / per_axis)
     for cell in range(per_axis * per_axis):
-        u = dr.minimum((float(cell % per_axis) + rng.next_float32()) / per_axis, 0.99999994)
-        v = dr.minimum((float(cell // per_axis) + rng.next_float32()) / per_axis, 0.99999994)
+        # opaque: the cell's offsets as literals would make every cell a kernel of its own to compile
+        i, j = dr.opaque(mi.Float, cell % per_axis), dr.opaque(mi.Float, cell // per_axis)
+        u = dr.minimum((i + rng.next_float32()) * scale, 0.99999994)
+        v = dr.minimum((j + rng.next_float32()) * scale, 0.99999994)
+        dr.eval(u, v, rng.state)          # else the generator's state is a chain that grows with every cell
         x, nl = geom.sample(u, v, p)
         d = x - p
         cosines = dr.maximum(dr.dot(n, d), 0.0) * dr.maximum(-dr.dot(nl, d), 0.0)
