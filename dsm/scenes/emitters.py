@@ -135,4 +135,3 @@ def mesh_triangles(shape) -> np.ndarray:
     v = np.asarray(shape.vertex_positions_buffer(), np.float64).reshape(-1, 3)
     f = np.asarray(shape.faces_buffer(), np.int64).reshape(-1, 3)
     return v[f]
-
