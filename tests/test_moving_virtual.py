@@ -45,9 +45,9 @@ def _by_path(rows, drop=()):
 def runs(tmp_path_factory):
     import dsm
     out = {}
-    for cache in ("none", "static", "stagger:2", "invalidate"):
-        res = dsm.run(_config(cache), out=tmp_path_factory.mktemp(cache.replace(":", "_")) / "out")
-        out[cache] = (_rows(res.out, "frames.csv"), _rows(res.out, "metrics.csv"))
+    for cache in ("none", "static", "stagger:2", "invalidate", "static again"):
+        res = dsm.run(_config(cache.split()[0]), out=tmp_path_factory.mktemp(cache.replace(":", "_").replace(" ", "_")) / "out")
+        out[cache] = (_rows(res.out, "frames.csv"), _rows(res.out, "metrics.csv"), res.out)
     return out
 
 
@@ -168,3 +168,29 @@ def test_invalidate_recasts_exactly_the_pages_the_swept_bounds_touch():
     assert not plan(full(), view, 1, ("at 0",), cache.rule("none"), False, bounds).any()
     assert not plan(full(), view, 1, ("at 1",), cache.rule("stagger:2"), False, bounds).any()
     assert plan(full(), view, 2, ("at 1",), cache.rule("stagger:2"), False, bounds).all()
+
+
+# ---------------------------------------------------------------- the report's section
+
+def test_cache_gif_shows_each_frames_ghosts_and_is_the_same_between_identical_runs(runs):
+    """Each frame of a sliding box's cache GIF under ``static`` holds as many pixels in the ghost's colour and in
+    the missing shadow's as frames.csv counts ghosts and missing shadows (one receiver a camera pixel); two
+    identical runs write the same GIF and budget plot, byte for byte; cache.md lists every motion case."""
+    from PIL import Image
+    from dsm.report.sections import cache as section
+    out, again = runs["static"][2], runs["static again"][2]
+    rows = [r for r in runs["static"][0] if r["motion"] == "slide"]
+    folder = out / "images" / "plane_box_0_directional"
+    gif = folder / f"{rows[0]['case']}_cache.gif"
+    im = Image.open(gif)
+    assert im.n_frames == len(rows) and sum(int(r["n_ghost"]) for r in rows) > 0
+    for t, r in enumerate(rows):
+        im.seek(t)
+        rgb = np.asarray(im.convert("RGB"))
+        count = lambda colour: int((rgb == colour).all(2).sum())
+        assert (count(section.GHOST_COLOR), count(section.MISSING_COLOR)) == (int(r["n_ghost"]), int(r["n_missing"])), t
+    assert gif.read_bytes() == (again / gif.relative_to(out)).read_bytes()
+    plot = out / "plots" / "cache_budget_plane_box_0_directional.png"
+    assert plot.read_bytes() == (again / plot.relative_to(out)).read_bytes()
+    table = (out / "cache.md").read_text()
+    assert all(f"| {r['case']} |" in table for r in runs["static"][1])

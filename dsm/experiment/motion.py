@@ -51,6 +51,7 @@ from ..core import timing
 from ..scenes.camera import Camera
 from ..report.figures import frames_path
 from ..report.labels import params_label
+from ..report.sections import cache as cache_report
 from . import cache
 from .casters import Mover
 from . import page_cache, texel_recast
@@ -337,6 +338,7 @@ class _CaseFrames:
     frames: list = dataclasses.field(default_factory=list)
     images: list = dataclasses.field(default_factory=list)       # the shown frames' class images
     v_images: list = dataclasses.field(default_factory=list)     # the shown frames' V per camera pixel
+    cache_images: list = dataclasses.field(default_factory=list)  # the shown frames' ghosts and missing shadows
     metrics: list = dataclasses.field(default_factory=list)
     lookup_ms: list = dataclasses.field(default_factory=list)
     costs: list = dataclasses.field(default_factory=list)        # each frame's costs in counts (dsm.case.cost)
@@ -569,6 +571,15 @@ def cache_errors(v_cached: np.ndarray, v_fresh: np.ndarray) -> dict:
             "missing_rate": rate(missing, n_shadowed)}
 
 
+def cache_image(shape, pixels: np.ndarray, v_cached, v_fresh) -> np.ndarray:
+    """Per camera pixel, 1 where the receiver there is a ghost, 2 a missing shadow (:func:`cache_errors`), else 0."""
+    lit_c, lit_f = np.asarray(v_cached) >= 0.5, np.asarray(v_fresh) >= 0.5
+    out = np.zeros(shape[0] * shape[1], np.uint8)
+    out[np.asarray(pixels)[~lit_c & lit_f]] = cache_report.GHOST
+    out[np.asarray(pixels)[lit_c & ~lit_f]] = cache_report.MISSING
+    return out.reshape(shape)
+
+
 def _run_frame(runner, state: _MapFrames, t: int):
     """Frame ``t``: its view and map, then every case evaluated at the frame's receivers
     (dsm.case.evaluate) and looked up at the fixed points, into ``state.cases``."""
@@ -600,6 +611,8 @@ def _run_frame(runner, state: _MapFrames, t: int):
         mt = result.measured
         v_fresh = result.v if fresh_ctx is None else evaluate(fresh_ctx, case).v
         stale = cache_errors(np.asarray(result.v), np.asarray(v_fresh))
+        if state.mover.moving and runner.sink.images_mode != "none" and t in state.shown:
+            frames.cache_images.append(cache_image(result.classes.shape, ctx.setup.pixels, result.v, v_fresh))
         frames.metrics.append(mt)
         frames.lookup_ms.append(result.lookup.ms if ctx.receivers[case.format] is not None else math.nan)
         frames.costs.append(case_cost.costs(ctx, case))
@@ -698,4 +711,4 @@ def _gif_frames(state: _MapFrames, ident: dict, frames: _CaseFrames) -> GifFrame
     title = f"case {ident['case']}: {instance}, {view} R = {m.resolution}, {ident['filter']}, {ident['format']}"
     return GifFrames(frames_path(ident), state.scene.data.label, m.light, path.motion.label, title,
                      len(path.poses), index, [path.poses[t] for t in index], [path.lights[t] for t in index],
-                     frames.images, frames.v_images or None)
+                     frames.images, frames.v_images or None, frames.cache_images or None)
