@@ -468,7 +468,8 @@ def _recast_touched(state: _MapFrames, view):
     state.map_geometry = None if state.mover.any_flagged else state.geometry
     state.map_frame = t
     state.recast[-1] = float(mask.mean())
-    state.frame_ms[-1] = metrics.UNDEFINED         # composed from an untimed whole cast: not a partial cast's cost
+    # composed from an untimed whole cast: not a partial cast's cost (nothing re-cast: nothing to time)
+    state.frame_ms[-1] = metrics.UNDEFINED if mask.any() else 0.0
 
 
 def _timed_cast(runner, state: _MapFrames, view):
