@@ -194,3 +194,20 @@ def test_cache_gif_shows_each_frames_ghosts_and_is_the_same_between_identical_ru
     assert plot.read_bytes() == (again / plot.relative_to(out)).read_bytes()
     table = (out / "cache.md").read_text()
     assert all(f"| {r['case']} |" in table for r in runs["static"][1])
+
+
+def test_a_spots_virtual_map_keeps_its_pages_the_same_way(run_dict):
+    """A spot's virtual map (EEVEE's punctual rule) under a sliding box: ``invalidate``'s counts and rates equal
+    ``none``'s frame by frame with no ghost, re-casting part of the pages; ``static`` leaves ghosts."""
+    cfg = lambda cache: base_config(
+        scene=[{"builtin": "plane_box"}], camera={"resolution": [48, 48]},
+        light=[{"type": "spot", "position": [0.0, 2.5, 0.8], "target": [0.0, -0.5, 0.0], "cutoff": 40.0}],
+        map={"virtual": {"preset": "eevee_punctual", "resolution": 2048, "page_size": 64, "lod_bias": -2.0}},
+        scheme=[{"name": "constant", "bias": "1 texel"}],
+        motion=[{"frames": 3, "points": 200, "cache": cache, "casters": [{"shape": "box", "offset": [0.6, 0.0, 0.0]}]}])
+    runs = {c: _rows(run_dict(cfg(c), c).out, "frames.csv") for c in ("none", "static", "invalidate")}
+    keep = lambda rows: [{k: v for k, v in r.items() if k not in TIMES | CASTS | {"cache"}} for r in rows]
+    assert keep(runs["invalidate"]) == keep(runs["none"])
+    assert all(r["n_ghost"] == "0" and r["n_missing"] == "0" for r in runs["invalidate"])
+    assert any(0.0 < float(r["recast_fraction"]) < 1.0 for r in runs["invalidate"])
+    assert int(runs["static"][-1]["n_ghost"]) + int(runs["static"][-1]["n_missing"]) > 0
