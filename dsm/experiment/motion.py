@@ -375,6 +375,7 @@ class _MapFrames:
     extents: object = None                                    # the frame's per-shape spawn extents (map builds)
     fresh: object = None                                      # this frame's map where the kept one is stale, else None
     pages: object = None                                      # a virtual map's page cache (dsm.experiment.page_cache)
+    page_keys: list = dataclasses.field(default_factory=list)  # the last frame's pages (View.page_keys)
     frame_ms: list = dataclasses.field(default_factory=list)  # per frame: its build's kernel time (frame_build_ms)
 
 
@@ -500,7 +501,7 @@ def _frame_pages(runner, state: _MapFrames, view):
         state.frame_ms.append(0.0)
     state.fresh = _cast(state, view) if page_cache.stale(pool, view, cast, state.geometry) else None
     keys = view.page_keys()
-    if cast.any() or keys != state.signature:     # another map: new moments
+    if cast.any() or keys != state.page_keys:     # another map: new moments
         state.moments = {}
     state.smap = page_cache.compose(pool, view, cast, part, t, state.geometry,
                                       part if part is not None else state.smap)
@@ -508,7 +509,7 @@ def _frame_pages(runner, state: _MapFrames, view):
         state.build_ms.append(state.frame_ms[-1])
     state.built.append(whole)
     state.recast.append(float(cast.mean()))
-    state.signature = keys
+    state.page_keys = keys
     return state.smap
 
 
