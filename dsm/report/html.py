@@ -271,7 +271,7 @@ def write_html(path: Path, rows: list, run: dict, derived: dict | None = None):
                   answer=labels.params_label(summary.answer(rows)) if rows else None,
                   best=_best(rows) if rows else None, summary=_summary(rows) if rows else None,
                   failed=_failed(run), cases=_cases(rows, out) if rows else None,
-                  virtual=virtual_report.html_table(rows), cache=cache_report.html_table(rows),
+                  virtual=virtual_report.html_table(rows), cache=cache_report.html_table(rows, out),
                   hybrid=hybrid_report.html_view(rows), plots=_plots(out, rows), facts=_facts(run))
     with report.atomic(path) as tmp:
         tmp.write_text(page, encoding="utf-8")

@@ -56,18 +56,22 @@ def write_table(path, rows: list) -> bool:
     return True
 
 
-def html_table(rows: list) -> dict | None:
-    """report.html's section on the run's cached maps: its words and table (None without a motion case)."""
+def html_table(rows: list, out=None) -> dict | None:
+    """report.html's section on the run's cached maps: its words and table, each case's cache GIF linked where
+    the run folder ``out`` holds it (None without a motion case)."""
     rows = cache_rows(rows)
     if not rows:
         return None
-    body = [Row([Cell(_cell(r.get(k, ""))) for k, _ in COLUMNS]) for r in rows]
-    return {"intro": INTRO, "table": Table([(h, None) for _, h in COLUMNS], body, box="wide")}
+    def gif(r):
+        path = gif_path(figures.frames_path(r))
+        return Cell("GIF", href=path) if out is not None and (out / path).is_file() else Cell("-")
+    body = [Row([Cell(_cell(r.get(k, ""))) for k, _ in COLUMNS] + [gif(r)]) for r in rows]
+    return {"intro": INTRO, "table": Table([(h, None) for _, h in COLUMNS] + [("frames", None)], body, box="wide")}
 
 
-def html_section(rows: list) -> str:
+def html_section(rows: list, out=None) -> str:
     """report.html's section on the run's cached maps, alone ("" without one)."""
-    return render("cache.html", cache=html_table(rows))
+    return render("cache.html", cache=html_table(rows, out))
 
 
 def budget_points(rows: list) -> dict:
