@@ -30,7 +30,7 @@ def test_cache_gif_frames_are_the_classes_with_ghosts_and_missing_in_their_colou
 
 
 def test_budget_points_sum_the_rates_and_leave_out_the_undefined():
-    """A case's point is (its recast_fraction, ghost_rate + missing_rate); a case with an undefined rate and a
+    """A case's point is (its recast_fraction, ghost_rate + missing_rate), grouped by scene, light and layout; a case with an undefined rate and a
     still case (no cache) have none."""
     from dsm.report.sections.cache import budget_points
     rows = [{"motion": "p", "cache": "static", "scene": "s", "light": "0:directional", "case": "0001",
@@ -39,4 +39,4 @@ def test_budget_points_sum_the_rates_and_leave_out_the_undefined():
              "ghost_rate": 0.0, "missing_rate": math.nan, "recast_fraction": 1.0},
             {"motion": "", "cache": "", "scene": "s", "light": "0:directional", "case": "0003",
              "ghost_rate": math.nan, "missing_rate": math.nan, "recast_fraction": math.nan}]
-    assert budget_points(rows) == {("s", "0:directional"): [("static", 0.2, 0.75, "0001")]}
+    assert budget_points(rows) == {("s", "0:directional", ""): [("static", 0.2, 0.75, "p")]}

@@ -1,7 +1,7 @@
 """A run with moving casters (``[[motion]] casters``, ``cache``): cache.md and report.html's section (per motion
 case: its policy, ghost and missing rates, their worst frame, the fraction re-cast and the maps cast), the
 plot of the error the cache leaves against the update budget it spends per policy
-(plots/cache_budget_<scene>_<light>.png), and each case's frames as an animated GIF of its classes with the
+(plots/cache_budget_<scene>_<light>[_<layout>].png), and each case's frames as an animated GIF of its classes with the
 ghosts and missing shadows in their own colours (images/<scene>_<light>/<case>_cache.gif)."""
 from __future__ import annotations
 
@@ -75,39 +75,48 @@ def html_section(rows: list, out=None) -> str:
 
 
 def budget_points(rows: list) -> dict:
-    """{(scene, light): [(policy, re-cast fraction, ghost + missing rate, case)]}: the cases whose rates are both
-    defined (a policy's name without its ``stagger:N`` period keeps its N in the label)."""
+    """{(scene, light, layout): [(policy, re-cast fraction, ghost + missing rate, path label)]}: the cases whose
+    rates are both defined (``stagger:N`` keeps its N; layout: the cascade layout, empty on a single map)."""
     out = {}
     for r in cache_rows(rows):
         g, m, f = r.get("ghost_rate"), r.get("missing_rate"), r.get("recast_fraction")
         if all(isinstance(x, (int, float)) and metrics.defined(x) for x in (g, m, f)):
-            out.setdefault((r["scene"], r["light"]), []).append((str(r["cache"]), float(f), float(g) + float(m),
-                                                                 str(r["case"])))
+            key = (r["scene"], r["light"], str(r.get("cascade_layout") or ""))
+            out.setdefault(key, []).append((str(r["cache"]), float(f), float(g) + float(m), str(r["motion"])))
     return out
 
 
 def write_plots(folder, rows: list):
-    """plots/cache_budget_<scene>_<light>.png: per motion case, the ghost + missing rate (means over its frames)
-    against the fraction of the map re-cast per frame, a colour and marker per policy."""
+    """plots/cache_budget_<scene>_<light>[_<layout>].png: per motion case, the ghost + missing rate (means over its
+    frames) against the fraction of the map re-cast per frame, a colour and marker per policy; a path whose label
+    is not its policy's name is named beside its point (coincident points in one label)."""
     groups = budget_points(rows)
     if not groups:
         return
     from matplotlib.figure import Figure
     folder.mkdir(exist_ok=True)
-    for (scene, light), pts in sorted(groups.items()):
+    for (scene, light, layout), pts in sorted(groups.items()):
         fig = Figure(figsize=(6, 4))
         ax = fig.subplots()
         for policy in sorted({p[0] for p in pts}):
             mine = [p for p in pts if p[0] == policy]
             colour, marker = POLICY_STYLE.get(policy.partition(":")[0], ("grey", "x"))
             ax.plot([p[1] for p in mine], [p[2] for p in mine], marker, color=colour, ls="none", label=policy)
+        named = {}
+        for policy, x, y, label in pts:
+            if label != policy:
+                named.setdefault((x, y), []).append(label)
+        for (x, y), labels in sorted(named.items()):
+            ax.annotate("; ".join(labels), (x, y), xytext=(5, -9), textcoords="offset points", fontsize=6)
         ax.set_xlabel("update budget: fraction of the map re-cast per frame (mean)")
         ax.set_ylabel("ghost + missing rate (mean over frames)")
-        ax.set_xlim(-0.05, 1.05)
-        ax.set_title(f"{scene}, light {light}: the cache's error against what it casts", fontsize=9)
+        ax.set_xlim(-0.05, 1.1)
+        where = f"{scene}, light {light}" + (f", {layout}" if layout else "")
+        ax.set_title(f"{where}: the cache's error against what it casts", fontsize=9)
         ax.legend(fontsize=7, frameon=False)
         fig.subplots_adjust(left=0.13, right=0.97, bottom=0.13, top=0.9)
-        with report.atomic(folder / f"{PLOT_PREFIX}{figures.slug(f'{scene}_{light}', keep='-_')}.png") as tmp:
+        stem = figures.slug("_".join(x for x in (scene, light, layout) if x), keep="-_")
+        with report.atomic(folder / f"{PLOT_PREFIX}{stem}.png") as tmp:
             fig.savefig(tmp, dpi=80, format="png", metadata={"Software": None})
 
 
