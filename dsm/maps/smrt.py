@@ -49,6 +49,7 @@ from .smrt_presets import PRESETS, RULES, Settings, is_smrt, settings  # noqa: F
 
 GOLDEN = 0.5 * (math.sqrt(5.0) - 1.0)     # the Fibonacci lattice's step in v
 EEVEE_THRESHOLD = 1.05                    # EEVEE's margin on the ray's depth change ("behind" an occluder)
+EVAL_EVERY = 8                            # samples per kernel of the march
 EEVEE_MAX_SLOPE = 100.0                   # EEVEE's clamp of the occluder's slope, depth ranges per unit ray time
 
 
@@ -108,7 +109,9 @@ def trace(scheme, prm, rx: Receiver, smap, target, times, rule: str):
     hit, have = dr.full(mi.Bool, False, n), dr.full(mi.Bool, False, n)
     z_h, recv_h, t_h, slope = (dr.zeros(mi.Float, n) for _ in range(4))
     max_slope = EEVEE_MAX_SLOPE * dr.opaque(mi.Float, float(smap.view.depth_range))
-    for t in times:
+    for i, t in enumerate(times):
+        if i % EVAL_EVERY == 0:       # kernels of EVAL_EVERY samples, one compiled for all (a long march's
+            dr.eval(hit, have, z_h, recv_h, t_h, slope)     # single kernel took minutes to compile)
         t_o = dr.opaque(mi.Float, t)
         sample, tap, valid = read_sample(rx, smap, rx.p_world + (target - rx.p_world) * t_o)
         if rule == "plain":
