@@ -134,6 +134,8 @@ def test_presets_costs_and_labels():
     assert smrt.settings("smrt:ue5_local") == smrt.Settings(7, 8, "hold")
     assert smrt.settings("smrt:ue5_directional") == smrt.Settings(7, 8, "hold")
     assert smrt.settings("smrt:eevee") == smrt.Settings(1, 6, "eevee")
+    assert smrt.settings("smrt:eevee_viewport") == smrt.Settings(16, 6, "eevee")
+    assert smrt.settings("smrt:eevee_render") == smrt.Settings(64, 6, "eevee")
     assert smrt.settings("smrt") == smrt.settings("smrt:ue5_local")
     assert smrt.settings("smrt:16x4:plain") == smrt.Settings(16, 4, "plain")
     assert costs.filter_taps("smrt:ue5_local") == 56 and costs.filter_taps("smrt:eevee") == 6

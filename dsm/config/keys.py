@@ -93,7 +93,7 @@ KEYS = (
     Key("map", "texels", "int", "(resolution)", "the same total texels per view (R = sqrt(texels / faces)); not "
         "with resolution", _r(1, 6 * 16384 ** 2), "texels", sweeps=True),
     Key("map", "filter", "str", "nearest", "the lookup's filter; pcf_wide:K is a K x K kernel (2 to 64); "
-        "smrt:<preset> (ue5_local, ue5_directional, eevee) or smrt:RxS[:hold|eevee] is shadow-map ray tracing, R "
+        "smrt:<preset> (ue5_local, ue5_directional, eevee, eevee_viewport, eevee_render) or smrt:RxS[:hold|eevee] is shadow-map ray tracing, R "
         "rays of S samples (docs/smrt.md)", FILTERS,
         source="Reeves et al. 1987 (PCF); Fernando 2005 (PCSS); UE5's and EEVEE's shadow-map ray tracing (SMRT)",
         sweeps=True),

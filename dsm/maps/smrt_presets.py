@@ -32,8 +32,12 @@ PRESETS = {
     # r.Shadow.Virtual.SMRT.RayCountDirectional = 7, SamplesPerRayDirectional = 8 (the same reference)
     "ue5_directional": Settings(7, 8, "hold"),
     # Render Properties > Shadows > Rays = 1, Steps = 6 (Blender manual, EEVEE's shadow settings;
-    # SceneEEVEE.shadow_ray_count, shadow_step_count defaults in Blender's DNA_scene_types.h)
+    # SceneEEVEE.shadow_ray_count, shadow_step_count defaults in Blender's DNA_scene_types.h): one frame
     "eevee": Settings(1, 6, "eevee"),
+    # EEVEE draws a new ray per anti-aliasing sample and accumulates them: Sampling > Viewport 16 and
+    # Render 64 samples (SceneEEVEE.taa_samples, taa_render_samples defaults, the same header)
+    "eevee_viewport": Settings(16, 6, "eevee"),
+    "eevee_render": Settings(64, 6, "eevee"),
 }
 DEFAULT_PRESET = "ue5_local"
 _CUSTOM = re.compile(r"^(\d+)x(\d+)(?::(\w+))?$")
