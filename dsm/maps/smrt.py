@@ -21,14 +21,15 @@ shadow-map ray tracing. For each receiver ``p`` (after the scheme's shift) and e
   read on the receiver's own face (its cube face, cascade or virtual level), at the texel containing
   its map position; it is occluded where the scheme's test fails there (its depth behind the stored
   depth by more than the bias), the bias resolved at the receiver;
-- where a sample has no data (outside the face, or on a virtual page no receiver tagged) the map is
-  extrapolated by ``rule``: ``hold`` (UE5, as issue 72 states its rule: the last valid stored depth
-  along the ray is extended over the gap; no data before any valid sample occludes nothing) or
-  ``eevee`` (Blender's shadow tracing library, described and re-derived, never copied: a sample
-  without data is skipped; a sample whose depth lies behind the stored depth by more than the
-  ray's own depth change since the last sample (x 1.05) is tested against the last valid occluder
-  depth extrapolated along the ray by its slope instead, so the ray may pass behind a surface
-  without being stopped by it);
+- a sample behind the stored depth by more than the ray's own depth change since the last sample
+  (x 1.05, EEVEE's margin) may have passed behind a surface rather than through it; there, and where
+  the map has no data (outside the face, behind its plane, or on a virtual page no receiver tagged),
+  ``rule`` decides: ``hold`` (UE5's extrapolation behind occluders, its slope left out: the last
+  stored depth the ray saw in front of it, held; a gap without data is held likewise, nothing before
+  the first valid sample occludes), ``eevee`` (Blender's shadow tracing library, described and
+  re-derived, never copied: a gap is skipped; the last valid occluder depth is extrapolated to the
+  sample by its slope between its last two valid samples) or ``plain`` (no extrapolation: each sample
+  with data against its own texel);
 - V = the fraction of rays no sample of which is occluded.
 
 Cost: R x S taps per lookup (dsm.maps.costs). One ray to the light's centre with a fine march reads,
@@ -91,6 +92,10 @@ def read_sample(rx: Receiver, smap, x):
                                  dr.clip(mi.Int32(dr.floor(v)), 0, mi.Int32(R) - 1))
     if absent is not None:
         valid &= ~absent
+    if view.kind != "orthographic":
+        # a point behind the face's plane (near the light, on another cube face) projects mirrored into it
+        o, d = view.ray_at(u, v, rx.face)
+        valid &= dr.dot(d, x - o) > 0
     return sample, tap, valid
 
 
