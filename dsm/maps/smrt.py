@@ -10,9 +10,10 @@ shadow-map ray tracing. For each receiver ``p`` (after the scheme's shift) and e
   area-preserving map (``view.light_surface``, :class:`dsm.lights.area_surface.Geometry`). One ray
   goes to the square's centre, (1/2, 1/2); with R > 1 the lattice is shifted per receiver (toroidally)
   by two numbers drawn from the receiver's own position bits and the seed, as ``pcf_jitter4x4``'s
-  jitter, so a run repeats and a receiver's V does not depend on the others. Without a light
-  surface (a point, spot or directional light, or an emitter light) every ray goes to the map's
-  origin (a directional light's: straight along the light), the hard shadow;
+  jitter, so a run repeats and a receiver's V does not depend on the others (on a scene's emitter
+  light the centre of the square is a point of one of its triangles, not its centre). Without a light
+  surface (a point, spot or directional light) every ray goes to the map's origin (a directional
+  light's: straight along the light), the hard shadow;
 - a ray toward a point below the receiver's tangent plane, or behind a one-sided light, is hidden
   (the reference's rule, dsm.truth.area);
 - the march: S samples ``x_i = p + t_i (l_k - p)``, ``t_i = ((S - i) / S)^2`` for i = 1..S, from
