@@ -764,7 +764,15 @@ def _array_of_tables(raw, key, source) -> list:
 
 
 def _filter(raw, source) -> str:
-    """A map.filter value: one of FILTERS, or ``"pcf_wide:K"`` (a K x K texel kernel, 2 <= K <= 64)."""
+    """A map.filter value: one of FILTERS, ``"pcf_wide:K"`` (a K x K texel kernel, 2 <= K <= 64) or
+    ``"smrt:<preset>"`` / ``"smrt:RxS[:rule]"`` (shadow-map ray tracing, dsm.maps.smrt)."""
+    from ..maps import smrt_presets as smrt
+    if isinstance(raw, str) and smrt.is_smrt(raw):
+        try:
+            smrt.settings(raw)
+        except ValueError as err:
+            raise ConfigError(source, "map.filter", str(err)) from None
+        return raw
     if isinstance(raw, str) and raw.startswith("pcf_wide:"):
         k = raw.split(":", 1)[1]
         if not k.isdigit() or not 2 <= int(k) <= 64:

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 LENGTH_UNITS = ("world", "texel", "range")
-FILTERS = ("nearest", "pcf_bilinear", "pcf_jitter4x4", "pcf_wide", "pcss")
+FILTERS = ("nearest", "pcf_bilinear", "pcf_jitter4x4", "pcf_wide", "pcss", "smrt")
 FORMATS = ("float32", "unorm16", "unorm24", "ndc24", "float16")
 # [map] kind: the depth-compare map, or a pre-filtered moment map (dsm.prefilter)
 MAP_KINDS = ("depth", "vsm", "esm", "evsm", "msm")

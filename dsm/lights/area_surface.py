@@ -140,8 +140,9 @@ def make_view(light, R, receivers_world, bbox, kind=None):
     """The map of an area light, cast from its centre: for a one-sided light a perspective view
     along its normal whose field of view is fitted to the receivers (``kind`` "fitted"), or a
     paraboloid around the normal when they span more than PERSPECTIVE_MAX_DEG; for a sphere the
-    point-light view ``kind``. The view carries ``light_size`` (for PCSS) and ``exclude`` (the
-    luminaire's own shapes, which its map steps over)."""
+    point-light view ``kind``. The view carries ``light_size`` (for PCSS), ``light_surface`` (SMRT's
+    ray targets; an emitter light's is given by the runner, which has the scene) and ``exclude`` (the luminaire's own shapes, which its map
+    steps over)."""
     c = np.asarray(light.position, float)
     nrm = unit(light.direction if light.direction is not None else (0.0, 0.0, -1.0))
     if light.shape == "sphere":
@@ -163,5 +164,8 @@ def make_view(light, R, receivers_world, bbox, kind=None):
         else:
             view = ParaboloidView(c, nrm, bbox, R, dual=False)
     view.light_size = light_size(light)
+    # SMRT's rays aim at points of the surface; an emitter's triangles are the scene's, not at hand here
+    # (the runner gives its view the emitter's surface: dsm.experiment.runner)
+    view.light_surface = None if light.shape == "emitter" else geometry(light)
     view.exclude = tuple(light.emitter_shapes)
     return view

@@ -91,6 +91,8 @@ class View:
     cascaded = False            # one fit per cascade (dsm.maps.cascades: cascades, spec); built alone, never stacked
     blend = 0.0                 # the cascades' blend band (dsm.maps.cascades); 0: no blended lookup
     light_size = 0.0            # an area light's width, world, for PCSS (dsm.lights.area_surface); 0: none
+    light_surface = None        # an area light's surface (dsm.lights.area_surface.Geometry: sample, one_sided), SMRT's
+                                # ray targets (dsm.maps.smrt); None: a point, or a light whose surface the view lacks
     exclude = ()                # shapes the map steps over: an area light's own luminaire (dsm.lights.area_surface)
     nearest_scene_depth = 0.0   # the light's distance to the scene's bounds (spot and point views), ndc24's and PCSS's near
     virtual = False             # pages through a page table (dsm.maps.virtual)
