@@ -26,6 +26,7 @@ from .maps import headroom
 from .experiment import resume
 from .experiment.lock import claim, entries, name_problem, unwritable
 from .core.env import MAX_THREADS, SetupError
+from .core.suggest import valid_words
 
 MAX_MAP = 16384     # the largest map resolution: [map] resolution's maximum (config/read.py)
 
@@ -61,6 +62,10 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message):
         """Exit with status 2 after one line naming the command and the mistake (no usage block)."""
+        bad = re.fullmatch(r"(.*)invalid choice: '(.*)' \(choose from (.*)\)", message)
+        if bad:                 # argparse's own list, with the nearest choice as every other error gives it
+            choices = re.findall(r"'([^']*)'", bad[3])
+            message = f"{bad[1]}invalid choice: {bad[2]!r} ({valid_words(bad[2], choices)})"
         self.exit(2, f"dsm: {self.prog.removeprefix('dsm ') if self.prog != 'dsm' else 'arguments'}: {message} "
                      f"(see {self.prog} --help)\n")
 

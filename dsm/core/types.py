@@ -1,4 +1,4 @@
-"""Plain types every module of the kit may import; this module imports nothing of dsm.
+"""Plain types every module of the kit may import; this module imports nothing of dsm but dsm.core.suggest.
 
 The lists of choices (each defined once), lengths and their units, :class:`ConfigError`,
 the value checks that produce it, and the frozen specs a config is read into.
@@ -11,6 +11,8 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+from .suggest import valid_words
 
 LENGTH_UNITS = ("world", "texel", "range")
 FILTERS = ("nearest", "pcf_bilinear", "pcf_jitter4x4", "pcf_wide", "pcss")
@@ -33,12 +35,13 @@ BUILD_MODES = ("alone", "together")        # [timing] builds: each map timed alo
 class ConfigError(ValueError):
     """A config mistake, reported before any work starts."""
 
-    def __init__(self, source: str, key: str, problem: str, choices=None):
+    def __init__(self, source: str, key: str, problem: str, choices=None, *, got=None):
+        """``got``: the misspelt name, where there is one: the message adds the nearest of ``choices``."""
         self.source, self.key, self.problem = source, key, problem
-        self.choices = tuple(choices) if choices else ()
+        self.choices, self.got = (tuple(choices) if choices else ()), got
         msg = f"{source}: {key}: {problem}"
         if self.choices:
-            msg += f" (valid: {', '.join(map(str, self.choices))})"
+            msg += f" ({valid_words(got, self.choices)})"
         super().__init__(msg)
         self.more = []          # further problems of the same kind (scenes.check gathers every scene's)
 
@@ -80,7 +83,8 @@ class Length:
                 raise ConfigError(source, key, f"{parts[0]!r} in {raw!r} is not a number") from None
             unit = parts[1].rstrip("s") if parts[1] not in LENGTH_UNITS else parts[1]
             if unit not in LENGTH_UNITS:
-                raise ConfigError(source, key, f"unknown unit {parts[1]!r} in {raw!r}", LENGTH_UNITS)
+                raise ConfigError(source, key, f"unknown unit {parts[1]!r} in {raw!r}", LENGTH_UNITS,
+                                  got=parts[1])
         else:
             raise ConfigError(source, key, f"expected a number or a string like \"2 texel\", got {type(raw).__name__}")
         if not math.isfinite(value):
@@ -117,7 +121,7 @@ def number(raw, source, key, *, integer=False, positive=False, minimum=None, max
 def choice(raw, source, key, choices):
     """``raw`` checked to be one of ``choices``; else a ConfigError at ``key`` listing them."""
     if not isinstance(raw, str) or raw not in choices:
-        raise ConfigError(source, key, f"unknown value {raw!r}", choices)
+        raise ConfigError(source, key, f"unknown value {raw!r}", choices, got=raw)
     return raw
 
 
@@ -140,7 +144,7 @@ def check_keys(table: dict, allowed, source: str, where: str):
     """Raise a ConfigError for the first key of ``table`` not in ``allowed`` (reported as ``where.key``)."""
     for k in table:
         if k not in allowed:
-            raise ConfigError(source, f"{where}.{k}" if where else k, "unknown key", sorted(allowed))
+            raise ConfigError(source, f"{where}.{k}" if where else k, "unknown key", sorted(allowed), got=k)
 
 
 def coerce_field(f: dataclasses.Field, raw, source: str, key: str):

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core import record
+from ..core.suggest import did_you_mean
 from ..report import tables as report
 from ..truth import metrics
 
@@ -28,10 +29,12 @@ class Results:
         column's kind (``resolution=512`` and ``"512"`` alike; a label such as ``params`` by its words
         and numbers, ``"bias=1texel"`` as ``"bias=1 texel"``). A filter that matches no row raises
         ValueError naming the values the column holds (``allow_empty=True``: an empty Results)."""
+        __tracebackhide__ = True        # a test's failure shows its own line, not this method's
         named = {k for r in self.rows for k in param_values(r.get("params", ""))}
         unknown = sorted(set(kw) - set(report.COLUMNS) - named)
         if unknown:
-            raise KeyError(f"Results.where: no column or scheme parameter {', '.join(unknown)} (columns: see "
+            hint = did_you_mean(unknown[0], list(report.COLUMNS) + sorted(named))
+            raise KeyError(f"Results.where: no column or scheme parameter {', '.join(unknown)} ({hint}columns: see "
                            "dsm.core.record.NAMES, e.g. scheme, params, scene, light, view, resolution, filter, "
                            f"format; the parameters of these rows: {', '.join(sorted(named)) or 'none'})")
         rows = [r for r in self.rows if all(same_value(k, row_value(r, k), v) for k, v in kw.items())]
@@ -57,7 +60,8 @@ class Results:
     def column(self, name) -> np.ndarray:
         """The values of column ``name`` over the rows, as a numpy array (a KeyError names the columns)."""
         if name not in report.COLUMNS:
-            raise KeyError(f"Results.column: no column {name!r} (columns: see dsm.core.record.NAMES, e.g. acne_rate, "
+            hint = did_you_mean(name, report.COLUMNS)
+            raise KeyError(f"Results.column: no column {name!r} ({hint}columns: see dsm.core.record.NAMES, e.g. acne_rate, "
                            "peterpan_rate, error_rate, n_receivers)")
         return np.array([r[name] for r in self.rows])
 
@@ -139,7 +143,8 @@ def no_match(rows: list, kw: dict) -> str:
         held = sorted({str(row_value(r, k)) for r in rows if row_value(r, k) is not None})
         if not any(same_value(k, row_value(r, k), v) for r in rows):
             shown = ", ".join(held[:12]) + (f" and {len(held) - 12} more" if len(held) > 12 else "")
-            return (f"Results.where: no row has {k}={v!r} ({k} holds: {shown or 'nothing: no rows'}); "
+            hint = did_you_mean(v, held)
+            return (f"Results.where: no row has {k}={v!r} ({hint}{k} holds: {shown or 'nothing: no rows'}); "
                     "allow_empty=True returns the empty result")
     return (f"Results.where: each of {', '.join(f'{k}={v!r}' for k, v in kw.items())} matches rows, but no row "
             "matches them all; allow_empty=True returns the empty result")
