@@ -113,7 +113,7 @@ def test_filtering_and_a_case_s_images(page):
                                                       f"error image of case {case}"]
     assert [c.text for c in drv.find_elements("css selector", "#viewer figcaption")] == [
         "error classes over the display render (N.L)", "exact shading (display render, V*)",
-        "shading under the shadow map (Lambert, ambient in shadow)", "error classes (colours below)"]
+        "shading under the shadow map (Lambert, ambient in shadow)", "error classes (colours beside)"]
     # the images load from the file system (a broken link has no natural width)
     loaded = drv.execute_async_script("const done = arguments[0];"
                                       "const im = Array.from(document.querySelectorAll('#viewer img'));"

@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -77,10 +78,9 @@ class Length:
             if len(parts) != 2:
                 raise ConfigError(source, key, f"cannot read length {raw!r}; write a number or \"<k> <unit>\"",
                                   LENGTH_UNITS)
-            try:
-                value = float(parts[0])
-            except ValueError:
-                raise ConfigError(source, key, f"{parts[0]!r} in {raw!r} is not a number") from None
+            value = length_number(parts[0])
+            if value is None:
+                raise ConfigError(source, key, f"{parts[0]!r} in {raw!r} is not a number (nor 2^k)") from None
             unit = parts[1].rstrip("s") if parts[1] not in LENGTH_UNITS else parts[1]
             if unit not in LENGTH_UNITS:
                 raise ConfigError(source, key, f"unknown unit {parts[1]!r} in {raw!r}", LENGTH_UNITS,
@@ -94,6 +94,21 @@ class Length:
     def __str__(self) -> str:
         v = f"{self.value:g}"
         return v if self.unit == "world" else f"{v} {self.unit}"
+
+
+POWER_OF_TWO = re.compile(r"2\^(-?\d+)")
+
+
+def length_number(text: str) -> float | None:
+    """A length's number as written: a decimal, or ``2^k`` (how reports name a depth step, such as
+    ``2^-24 range``, so a label pastes back exactly); None for anything else."""
+    power = POWER_OF_TWO.fullmatch(text)
+    if power:
+        return 2.0 ** int(power[1])
+    try:
+        return float(text)
+    except ValueError:
+        return None
 
 
 # ---------------------------------------------------------------- value checks

@@ -9,6 +9,7 @@ import numpy as np
 
 from ..core import record
 from ..core.suggest import did_you_mean
+from ..core.types import length_number
 from ..report import tables as report
 from ..truth import metrics
 
@@ -95,12 +96,14 @@ class Results:
         return len(self.rows)
 
 
-_NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+_NUMBER = re.compile(r"2\^-?\d+|[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 
 
 def label_key(text) -> str:
-    """A label compared by its words and numbers: lower case, no spaces, each number as a float."""
-    return _NUMBER.sub(lambda m: repr(float(m.group())), str(text).replace(" ", "").lower())
+    """A label compared by its words and numbers: lower case, no spaces, each number (``2^k`` too, as
+    the report names a depth step) as a float to the six digits params are written with (%g)."""
+    word = lambda m: repr(float(f"{length_number(m.group()):g}"))
+    return _NUMBER.sub(word, str(text).replace(" ", "").lower())
 
 
 def param_values(label: str) -> dict:
