@@ -11,6 +11,8 @@ import re
 import shutil
 from pathlib import Path
 
+import scheme_pages                # docs/_ext: one page per scheme
+
 GENERATED = "_generated"
 
 
@@ -118,14 +120,14 @@ def schemes_reference() -> str:
     for s in schemes.ALL:
         out += [f"## {s.NAME}", "", f"{_first_line(s.__doc__)}", "", f"Source: {s.SOURCE}. Needs: "
                 f"{', '.join(sorted(s.NEEDS)) or 'the first layer only'}.", ""]
-        out += _param_table(s.Params) + [""]
+        out += param_table(s.Params) + [""]
     out += ["## Engine presets", ""] + _presets_table() + [""]
     out += ["## Contact-shadow presets", "", "```text", *contact_presets.text(), "```", ""]
     out += ["## Pre-filtered maps and their presets", "", "```text", *cli.prefilter_text(), "```", ""]
     return "\n".join(out)
 
 
-def _param_table(cls) -> list:
+def param_table(cls) -> list:
     """Markdown lines of a parameter dataclass's fields: name, default, valid, meaning."""
     from dsm.config.keys import exact_text
     if not dataclasses.fields(cls):
@@ -195,6 +197,7 @@ def write_all(docs: Path):
     (gen / "design").mkdir()
     for slug, text in design_pages((docs / "design.md").read_text()):
         (gen / "design" / f"{slug}.md").write_text(text)
+    scheme_pages.write_pages(gen)
     (gen / "tutorials").mkdir()
     for nb in sorted((docs.parent / "notebooks").glob("*.ipynb")):
         shutil.copyfile(nb, gen / "tutorials" / nb.name)

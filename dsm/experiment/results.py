@@ -1,6 +1,7 @@
 """A run's results as a notebook or test reads them: the rows, run.json and the class images."""
 from __future__ import annotations
 
+import html as htmlmod
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -8,10 +9,26 @@ from pathlib import Path
 import numpy as np
 
 from ..core import record
+from ..core.labels import params_label
 from ..core.suggest import did_you_mean
 from ..core.types import length_number
 from ..report import tables as report
 from ..truth import metrics
+
+
+TABLE_COLUMNS = ("scheme", "params", "resolution", "acne_rate", "peterpan_rate", "error_rate", "build_ms", "lookup_ms")
+
+
+def cell_text(v, column: str = "") -> str:
+    """A table cell's text: a rate or time to four decimals below 10, one decimal above, ``undefined``
+    for NaN (an empty denominator), ``params`` as the console and report label them, else as it is."""
+    if column == "params":
+        return params_label(str(v), exact=True)
+    if isinstance(v, float) and v != v:
+        return "undefined"
+    if isinstance(v, float):
+        return f"{v:.4f}" if abs(v) < 10 else f"{v:.1f}"
+    return str(v)
 
 
 @dataclass
@@ -76,16 +93,27 @@ class Results:
                            "or rows)" if ids else f"Results.rgb: no image of case {case!r}: this run kept no images")
         return metrics.CLASS_COLORS[self.images[case]]
 
-    def table(self, columns=("scheme", "params", "resolution", "acne_rate", "peterpan_rate", "error_rate",
-                             "build_ms", "lookup_ms")) -> str:
+    def table(self, columns=TABLE_COLUMNS) -> str:
         """The rows as a Markdown table of the chosen columns (for notebooks and terminals)."""
-        fmt = lambda v: f"{v:.4f}" if isinstance(v, float) and abs(v) < 10 else (f"{v:.1f}" if isinstance(v, float) else str(v))
         lines = ["| " + " | ".join(columns) + " |", "|---" * len(columns) + "|"]
-        lines += ["| " + " | ".join(fmt(r.get(c, "")) for c in columns) + " |" for r in self.rows]
+        lines += ["| " + " | ".join(cell_text(r.get(c, ""), c) for c in columns) + " |" for r in self.rows]
         return "\n".join(lines)
+
+    def html(self, columns=TABLE_COLUMNS) -> str:
+        """The rows as an HTML table of the chosen columns, numbers right-aligned (Jupyter and the docs site,
+        whose notebook renderer shows text/html and not text/markdown)."""
+        esc = lambda v, c: htmlmod.escape(cell_text(v, c))
+        num = lambda v: ' style="text-align:right"' if isinstance(v, (int, float)) and not isinstance(v, bool) else ""
+        head = "".join(f"<th>{htmlmod.escape(c)}</th>" for c in columns)
+        body = "".join("<tr>" + "".join(f"<td{num(r.get(c))}>{esc(r.get(c, ''), c)}</td>" for c in columns) + "</tr>"
+                       for r in self.rows)
+        return f'<table class="dsm-results"><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>'
 
     def _repr_markdown_(self):
         return self.table()
+
+    def _repr_html_(self):
+        return self.html()
 
     def __getattr__(self, name):
         if name in report.COLUMNS:
