@@ -79,3 +79,15 @@ def test_dsm_plan_cuts_no_light_name(tmp_path, capsys):
     assert main(["plan", str(cfg)]) == 0
     maps = [line for line in capsys.readouterr().out.splitlines() if line.startswith("    plane_box ")]
     assert maps and all(" 0:directional " in line and "slope_scaled bias=2^-24 range" in line for line in maps)
+
+
+def test_results_show_as_an_html_table_labelled_as_the_console(tmp_path):
+    """Results._repr_html_ (what Jupyter and the site show): one row a case, the params as the console
+    labels them, an undefined rate as ``undefined``, text escaped."""
+    from dsm.experiment.results import Results
+    rows = [dict(_row("plane", "slope_scaled", SLOPE, 1), peterpan_rate=math.nan),
+            dict(_row("plane", "constant", "bias=0.05", 5), scheme="<b>")]
+    html = Results(tmp_path, rows, {})._repr_html_()
+    assert html.startswith('<table class="dsm-results"><thead><tr><th>scheme</th><th>params</th>')
+    assert html.count("<tr>") == 3 and "<td>bias=2^-24 range slope=3.0 clamp=0.0078125 range</td>" in html
+    assert ">undefined</td>" in html and "&lt;b&gt;" in html and "<b>" not in html
