@@ -91,3 +91,10 @@ def test_results_show_as_an_html_table_labelled_as_the_console(tmp_path):
     assert html.startswith('<table class="dsm-results"><thead><tr><th>scheme</th><th>params</th>')
     assert html.count("<tr>") == 3 and "<td>bias=2^-24 range slope=3.0 clamp=0.0078125 range</td>" in html
     assert ">undefined</td>" in html and "&lt;b&gt;" in html and "<b>" not in html
+
+
+def test_dsm_schemes_names_a_depth_step_as_the_report_does():
+    from dsm.cli import schemes_text
+    text = schemes_text()
+    assert "    bias = 2^-24 range    " in text and "depth_bias=2^-24 range slope_scale=3.0" in text
+    assert "5.96046e-08" not in text

@@ -129,7 +129,6 @@ def schemes_reference() -> str:
 
 def param_table(cls) -> list:
     """Markdown lines of a parameter dataclass's fields: name, default, valid, meaning."""
-    from dsm.config.keys import exact_text
     if not dataclasses.fields(cls):
         return ["No parameters."]
     lines = ["| parameter | default (as TOML) | valid | meaning |", "|---|---|---|---|"]
@@ -137,8 +136,20 @@ def param_table(cls) -> list:
         md = f.metadata
         valid = md.get("choices") or " ".join(x for x in (f">= {md['min']:g}" if "min" in md else "",
                                                            f"<= {md['max']:g}" if "max" in md else "") if x)
-        lines.append(f"| `{f.name}` | {md_cell(exact_text(f.default))} | {md_cell(valid)} | {md_cell(md.get('doc', ''))} |")
+        lines.append(f"| `{f.name}` | {md_cell(default_text(f.default))} | {md_cell(valid)} | {md_cell(md.get('doc', ''))} |")
     return lines
+
+
+def default_text(value) -> str:
+    """A parameter's default as TOML, a depth step as the reports name it (``"2^-24 range"``, which a
+    config reads back exactly), any other value exactly as the reader takes it."""
+    from dsm.config.keys import exact_text
+    from dsm.core.labels import power_of_two
+    from dsm.core.types import Length
+    if isinstance(value, Length) and value.unit == "range" and power_of_two(value.value) is not None \
+            and 2.0 ** power_of_two(value.value) == value.value:
+        return f'"2^{power_of_two(value.value)} range"'
+    return exact_text(value)
 
 
 def _presets_table() -> list:
