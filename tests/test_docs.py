@@ -230,9 +230,9 @@ def test_contact_bounds_are_the_readers(key, good, bad):
 # ---------------------------------------------------------------- the site in a browser (issue 75)
 
 def _site_page(site, path: str):
-    """Headless Chromium (as tests/test_browser.py drives it) on one built page, at 1280 x 900."""
-    from test_browser import _chrome
-    drv = _chrome()
+    """Headless Chromium (conftest.chrome) on one built page, at 1280 x 900."""
+    from conftest import chrome
+    drv = chrome()
     drv.set_window_size(1280, 900)
     drv.get((site / path).as_uri())
     return drv

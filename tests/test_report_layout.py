@@ -1,10 +1,10 @@
 """report.html laid out for a 1280 px screen (issue 75): no box wider than the page, plots side by side
 in a grid, every figure's title inside its image and clear of its panels' titles, the error classes'
-legend beside the case images. Headless Chromium as tests/test_browser.py drives it."""
+legend beside the case images. Headless Chromium as conftest.chrome drives it."""
 import pytest
 
 from conftest import base_config
-from test_browser import _all_images_loaded, _chrome
+from conftest import all_images_loaded, chrome
 
 LONG = ("floating_plate, light 0:directional, orthographic, R = 128: rates against each scheme's swept "
         "parameter (one column per unit), a title long enough to wrap to three lines in a narrow figure")
@@ -38,10 +38,10 @@ def report(tmp_path_factory):
                       scheme=[{"name": "none"}, {"name": "constant", "bias": ["1 texel", 0.05, "2^-24 range"]},
                               {"name": "slope_scaled"}, {"name": "normal_offset"}, {"name": "adaptive"}])
     res = dsm.run(cfg, out=tmp_path_factory.mktemp("layout") / "run")
-    drv = _chrome()
+    drv = chrome()
     drv.set_window_size(1280, 900)
     drv.get((res.out / "report.html").as_uri())
-    assert _all_images_loaded(drv) == []
+    assert all_images_loaded(drv) == []
     yield res, drv
     drv.quit()
 
