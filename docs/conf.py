@@ -19,3 +19,5 @@ myst_heading_anchors = 4
 smartquotes = False                  # --force stays two hyphens, "k texel" keeps its quotes
 nb_execution_mode = "off"            # notebooks are shown with their stored outputs, never run again
 suppress_warnings = ["myst.header"]   # pages written before the site may start at ## or skip a level
+html_static_path = ["_static"]
+html_css_files = ["dsm.css"]        # docs/_static/dsm.css: the scheme pages' class images shown sharp

@@ -71,7 +71,8 @@ def scheme_page(s, rates: dict) -> str:
             "red acne, blue peter-panning (dark: below the map's resolution), cream correctly lit, slate correctly "
             "shadowed, black no receiver. Every scheme's page shows the same scene: "
             "[all of them side by side](index.md).", "",
-            f"![error classes of {s.NAME} on the room](../../scheme_images/{s.NAME}.png)", ""]
+            f"```{{image}} ../../scheme_images/{s.NAME}.png", f":alt: error classes of {s.NAME} on the room",
+            ":width: 480px", ":class: pixelated", "```", ""]
     return "\n".join(out)
 
 
