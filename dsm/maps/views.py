@@ -211,6 +211,20 @@ class View:
         arrays, in a fixed order; a moving camera's frames rebuild the map when they change)."""
         return []
 
+    def frame_signature_arrays(self) -> list:
+        """What every page of a paged view depends on beyond the frame, near, far and resolution (a page cache
+        keeps its pages while it holds, dsm.experiment.page_cache); elsewhere :meth:`signature_arrays`."""
+        return self.signature_arrays()
+
+    def page_keys(self) -> list:
+        """Per stored page of a paged view, what names its texels' rays beside :meth:`frame_signature_arrays`
+        (hashable; equal keys, equal rays); a view without pages has none."""
+        return []
+
+    def with_pages(self, pages) -> "View":
+        """A paged view holding only ``pages`` (rows of face, page x, page y) of its own: a view without pages has none."""
+        raise TypeError(f"a {self.kind} view has no pages (only a virtual map's view has)")
+
     def lanes(self, idx):
         """The view as lanes ``idx`` of a build see it: itself (a stacked view, dsm.maps.stacked, gathers its per-lane values)."""
         return self
