@@ -64,7 +64,7 @@ def prepare(config, variant: str | None = None, threads: int | None = None):
     config = cfgmod.coerce(config)
     cfgmod.check_runnable(config)            # NothingToRun: every scene an absent optional file
     if variant is not None and variant not in VARIANTS:     # an argument's mistake, as the TOML key's
-        raise ConfigError("<arguments>", "variant", f"unknown variant {variant!r}", VARIANTS)
+        raise ConfigError("<arguments>", "variant", f"unknown variant {variant!r}", VARIANTS, got=variant)
     env.use_variant(variant or config.variant, threads)
     scenes.check(config)                     # unreadable scenes
     planmod.check_memory(planmod.make(config), config.source)

@@ -50,7 +50,7 @@ from ..scenes.camera import sensor_at
 from ..core import timing
 from ..scenes.camera import Camera
 from ..report.figures import frames_path
-from ..report.labels import params_label
+from ..core.labels import params_label
 from ..report.sections import cache as cache_report
 from . import cache
 from .casters import Mover

@@ -17,7 +17,8 @@ import struct
 from pathlib import Path
 
 from ..truth import metrics
-from . import frontier, io as report, labels, summary
+from . import frontier, io as report, summary
+from ..core import labels
 from .figures import CLASSES_GIF_COMMENT, display_paths, frames_path, image_paths, points_file, slug
 from .sections import hybrid as hybrid_report
 from .sections import virtual as virtual_report
@@ -72,7 +73,7 @@ def _best(rows) -> dict:
     columns = [("scene", "text"), ("light", "text")] + [(f"R = {r}", "text") for r in resolutions]
     body = [Row([_cell(s), _cell(li)] + [_params_cell(summary.best_cell(cells.get(r))) for r in resolutions])
             for s, li, cells in pivot]
-    return {"note": summary.BEST_DEFINITION, "table": Table(columns, body)}
+    return {"note": summary.BEST_DEFINITION, "table": Table(columns, body, box="wide")}    # scrolls in its box
 
 
 def costs_view(points: list, empty: str) -> dict:
