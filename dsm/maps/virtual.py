@@ -116,7 +116,7 @@ class VirtualView(View):
         if len(self.pages) > spec.max_pages:
             raise ValueError(f"the virtual shadow map tags {len(self.pages)} pages, more than its pool "
                              f"(map.virtual.max_pages = {spec.max_pages}): raise max_pages or lod_bias")
-        self._page_table()
+        self.build_page_table()
         self.fit_ms = (time.perf_counter() - t_start) * 1e3
 
     # ------------------------------------------------------------ set-up
@@ -158,7 +158,7 @@ class VirtualView(View):
                              f"unit_cm = {spec.unit_cm:g} set them): raise last_level (at most 60) or lower unit_cm")
         return np.zeros((1, 3), int)
 
-    def _page_table(self):
+    def build_page_table(self):
         """The physical page of each virtual page (NO_PAGE: not tagged) and each physical page's place."""
         S = self.pages_side
         table = np.full(self.cascades * S * S, NO_PAGE, np.uint32)
@@ -342,5 +342,5 @@ def pages_subset(view, pages):
     pages' texels cast from it are those of the whole view's cast (a texel's ray is its global texel's)."""
     out = copy.copy(view)
     out.pages = np.asarray(pages, int).reshape(-1, 3)
-    out._page_table()
+    out.build_page_table()
     return out

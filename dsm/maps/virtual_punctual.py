@@ -85,14 +85,14 @@ class PunctualPages:
         if len(self.pages) > self.spec.max_pages:
             raise ValueError(f"the virtual shadow map tags {len(self.pages)} pages, more than its pool "
                              f"(map.virtual.max_pages = {self.spec.max_pages}): raise max_pages or lod_bias")
-        self._page_table()
+        self.build_page_table()
 
     def _tag(self, pts: np.ndarray) -> np.ndarray:
         """The pages (face, page x, page y) the receivers ``pts`` inside the view tag: their level's
         page, and the neighbour across an edge within ``border`` of a page; sorted by face, row, column."""
         return tagged_pages(self, pts, lambda f: self.sides_np[f], self.spec.border)
 
-    def _page_table(self):
+    def build_page_table(self):
         """The physical page of each virtual page (NO_PAGE: not tagged) and each physical page's place."""
         table = np.full(self.page_table_entries, NO_PAGE, np.uint32)
         pg = self.pages
