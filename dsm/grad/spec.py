@@ -292,7 +292,8 @@ def _mesh(g: dict, source: str, scene: str) -> str:
         raise ConfigError(source, "gradient.mesh", f"scene = \"mesh\" needs a PLY or OBJ file, got {raw!r}")
     path = Path(raw) if Path(raw).is_absolute() else Path(source).parent / raw
     if path.suffix.lower() not in MESH_SUFFIXES:
-        raise ConfigError(source, "gradient.mesh", f"unknown file type {path.suffix!r}", MESH_SUFFIXES)
+        raise ConfigError(source, "gradient.mesh", f"unknown file type {path.suffix!r}", MESH_SUFFIXES,
+                          got=path.suffix)
     if not path.is_file():
         raise ConfigError(source, "gradient.mesh", f"no such file {str(path)!r}")
     return str(path.resolve())

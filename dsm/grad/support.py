@@ -23,4 +23,6 @@ FILTERS_WITHOUT = {
                      "a gradient of zero as nearest's",
     "pcf_wide": "its K x K taps are nearest texels: a step in the receiver's map position, a gradient of zero "
                 "as nearest's",
+    "smrt": "its rays' samples are nearest texels along each ray (dsm.maps.smrt): a step in the samples' map "
+            "positions, a gradient of zero as nearest's",
 }
