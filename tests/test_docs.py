@@ -232,9 +232,14 @@ def test_contact_bounds_are_the_readers(key, good, bad):
 def _site_page(site, path: str):
     """Headless Chromium (conftest.chrome) on one built page, at 1280 x 900."""
     from conftest import chrome
+    from selenium.webdriver.support.ui import WebDriverWait
     drv = chrome()
     drv.set_window_size(1280, 900)
     drv.get((site / path).as_uri())
+    # the page's scripts may still be laying out the sidebar when get() returns: wait for the document
+    # to say it is complete (a condition, not a sleep)
+    WebDriverWait(drv, 120).until(lambda d: d.execute_script("return document.readyState") == "complete"
+                                  and d.execute_script("return document.querySelector('.sidebar-tree') !== null"))
     return drv
 
 
