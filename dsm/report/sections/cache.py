@@ -9,6 +9,7 @@ import numpy as np
 
 from .. import figures, io as report
 from ..templates import Cell, Row, Table, render
+from . import md
 from ...truth import metrics
 
 COLUMNS = (("case", "case"), ("scene", "scene"), ("light", "light"), ("motion", "path"), ("cache", "cache"),
@@ -35,12 +36,6 @@ def cache_rows(rows: list) -> list:
     return [r for r in rows if r.get("motion") and r.get("cache")]
 
 
-def _cell(x) -> str:
-    if isinstance(x, float):
-        return "-" if not metrics.defined(x) else f"{x:.4g}"
-    return str(x)
-
-
 def write_table(path, rows: list) -> bool:
     """cache.md from metrics.csv's rows; False (nothing written, a stale one removed) without a motion case."""
     rows = cache_rows(rows)
@@ -48,11 +43,7 @@ def write_table(path, rows: list) -> bool:
         if path.is_file():
             path.unlink()
         return False
-    lines = ["# Moving casters and cached maps", "", INTRO, "", "| " + " | ".join(h for _, h in COLUMNS) + " |",
-             "|---" * len(COLUMNS) + "|"]
-    lines += ["| " + " | ".join(_cell(r.get(k, "")) for k, _ in COLUMNS) + " |" for r in rows]
-    with report.atomic(path) as tmp:
-        tmp.write_text("\n".join(lines) + "\n")
+    md.write_table(path, "Moving casters and cached maps", INTRO, COLUMNS, rows)
     return True
 
 
@@ -65,7 +56,7 @@ def html_table(rows: list, out=None) -> dict | None:
     def gif(r):
         path = gif_path(figures.frames_path(r))
         return Cell("GIF", href=path) if out is not None and (out / path).is_file() else Cell("-")
-    body = [Row([Cell(_cell(r.get(k, ""))) for k, _ in COLUMNS] + [gif(r)]) for r in rows]
+    body = [Row([Cell(md.cell(r.get(k, ""))) for k, _ in COLUMNS] + [gif(r)]) for r in rows]
     return {"intro": INTRO, "table": Table([(h, None) for _, h in COLUMNS] + [("frames", None)], body, box="wide")}
 
 
