@@ -103,3 +103,15 @@ def test_a_misspelt_command_names_the_nearest(capsys):
     assert main(["plna"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "invalid choice: 'plna' (did you mean 'plan'? valid: run, report, plan," in err
+
+
+def test_a_misspelt_smrt_preset_or_rule_names_the_nearest():
+    """SMRT's filter label: a preset or march rule one edit off is named; a far one is not guessed."""
+    from dsm.maps import smrt_presets
+    for label, near in (("smrt:ue5_locl", "'ue5_local'"), ("smrt:4x4:hld", "'hold'")):
+        with pytest.raises(ValueError) as e:
+            smrt_presets.settings(label)
+        assert f"did you mean {near}?" in str(e.value) and "\n" not in str(e.value)
+    with pytest.raises(ValueError) as e:
+        smrt_presets.settings("smrt:qqqqqqqq")
+    assert "did you mean" not in str(e.value)

@@ -6,6 +6,8 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
+from ..core.suggest import did_you_mean
+
 RULES = ("hold", "eevee", "plain")
 MAX_RAYS = 1024
 MAX_SAMPLES = 256
@@ -55,10 +57,10 @@ def settings(filt: str) -> Settings:
         return PRESETS[arg]
     m = _CUSTOM.match(arg)
     if m is None:
-        raise ValueError(f"{filt!r}: smrt takes a preset ({', '.join(PRESETS)}) or RxS[:rule] "
-                         f"(R rays, S samples per ray, rule one of {', '.join(RULES)})")
+        raise ValueError(f"{filt!r}: {did_you_mean(arg, PRESETS)}smrt takes a preset ({', '.join(PRESETS)}) "
+                         f"or RxS[:rule] (R rays, S samples per ray, rule one of {', '.join(RULES)})")
     rays, samples, rule = int(m.group(1)), int(m.group(2)), m.group(3) or "hold"
     if not (1 <= rays <= MAX_RAYS and 1 <= samples <= MAX_SAMPLES and rule in RULES):
-        raise ValueError(f"{filt!r}: rays 1 to {MAX_RAYS}, samples 1 to {MAX_SAMPLES}, rule one of "
-                         f"{', '.join(RULES)}")
+        raise ValueError(f"{filt!r}: {did_you_mean(rule, RULES) if rule not in RULES else ''}rays 1 to {MAX_RAYS}, "
+                         f"samples 1 to {MAX_SAMPLES}, rule one of {', '.join(RULES)}")
     return Settings(rays, samples, rule)
