@@ -9,7 +9,7 @@ __version__ = "0.5.0"
 
 def run(config, out=None, variant=None, progress=False, *, force=False, resume=False):
     """Run an experiment (Config, dict, TOML path, or a Mitsuba scene .xml whose experiment is derived from it)
-    and return its :class:`dsm.experiment.runner.Results`."""
+    and return its :class:`dsm.experiment.results.Results`."""
     from .experiment.runner import run as _run
     derived = None
     if isinstance(config, (str, os.PathLike)) and os.fspath(config).lower().endswith(".xml"):

@@ -26,6 +26,8 @@ from .maps import headroom
 from .experiment import resume
 from .experiment.lock import claim, entries, name_problem, unwritable
 from .core.env import MAX_THREADS, SetupError
+from .core.labels import params_label
+from .core.suggest import valid_words
 
 MAX_MAP = 16384     # the largest map resolution: [map] resolution's maximum (config/read.py)
 
@@ -61,6 +63,10 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message):
         """Exit with status 2 after one line naming the command and the mistake (no usage block)."""
+        bad = re.fullmatch(r"(.*)invalid choice: '(.*)' \(choose from (.*)\)", message)
+        if bad:                 # argparse's own list, with the nearest choice as every other error gives it
+            choices = re.findall(r"'([^']*)'", bad[3])
+            message = f"{bad[1]}invalid choice: {bad[2]!r} ({valid_words(bad[2], choices)})"
         self.exit(2, f"dsm: {self.prog.removeprefix('dsm ') if self.prog != 'dsm' else 'arguments'}: {message} "
                      f"(see {self.prog} --help)\n")
 
@@ -744,15 +750,17 @@ def schemes_text() -> str:
         needs = ", ".join(sorted(s.NEEDS)) or "first layer only"
         lines.append(f"{s.NAME}  [{s.SOURCE}]  needs: {needs}")
         for f in dataclasses.fields(s.Params):
-            lines.append(f"    {f.name} = {f.default}    {f.metadata.get('doc', '')}")
+            shown = params_label(f"{f.name}={f.default}", exact=True).partition("=")[2]
+            lines.append(f"    {f.name} = {shown}    {f.metadata.get('doc', '')}")
         lines.append("    " + (s.__doc__ or "").strip().splitlines()[0])
     lines += presets.text()
     from .contact import presets as contact_presets
     lines += contact_presets.text()
     lines.append('lengths: a number (world units), "k texel" (texel widths at the receiver) or "k range" '
-                 "(fraction of the view's depth range)")
+                 "(fraction of the view's depth range); 2^k reads as a number (\"2^-24 range\")")
     lines += prefilter_text()
-    return "\n".join(lines)
+    # a depth step as the report and the run's console name it (2^-24 range); other numbers as written
+    return "\n".join(params_label(line, exact=True) for line in lines)
 
 
 def prefilter_text() -> list:

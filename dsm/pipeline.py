@@ -34,7 +34,7 @@ from .scenes import exact_frame, load as scenes
 from .scenes.emitters import emitter_lights, emitter_to_light
 from .lights import area_surface
 from .scenes.spec import parse_scene
-from .maps import formats, lookup, shadowmap
+from .maps import formats, lookup, shadowmap, smrt
 from .scenes import spawn
 from . import lights, prefilter, schemes
 from .core import timing
@@ -64,7 +64,7 @@ def prepare(config, variant: str | None = None, threads: int | None = None):
     config = cfgmod.coerce(config)
     cfgmod.check_runnable(config)            # NothingToRun: every scene an absent optional file
     if variant is not None and variant not in VARIANTS:     # an argument's mistake, as the TOML key's
-        raise ConfigError("<arguments>", "variant", f"unknown variant {variant!r}", VARIANTS)
+        raise ConfigError("<arguments>", "variant", f"unknown variant {variant!r}", VARIANTS, got=variant)
     env.use_variant(variant or config.variant, threads)
     scenes.check(config)                     # unreadable scenes
     planmod.check_memory(planmod.make(config), config.source)
@@ -373,7 +373,10 @@ def receivers(view, setup, diagonal: float) -> Receiver:
 
 def visibility(spec: SchemeSpec, rx: Receiver, smap, filt: str = "nearest", seed: int = 7):
     """(V in [0, 1] per receiver, shape index of the nearest texel) of one scheme instance (on a
-    cascaded view with a blend band, mixed with the next cascade's over the band)."""
+    cascaded view with a blend band, mixed with the next cascade's over the band; ``smrt``: shadow-map
+    ray tracing, :mod:`dsm.maps.smrt`, which reads the receiver's own cascade)."""
+    if smrt.is_smrt(filt):
+        return smrt.visibility(schemes.get(spec.name), spec.params, rx, smap, smrt.settings(filt), seed)
     if rx.view.blend > 0:
         return cascades_mod.blended_visibility(schemes.get(spec.name), spec.params, rx, smap, filt, seed)
     return lookup.visibility(schemes.get(spec.name), spec.params, rx, smap, filt, seed)

@@ -18,11 +18,11 @@ a threshold unless ``allow_undefined=True`` (it says nothing about the scheme).
 """
 from __future__ import annotations
 
-import difflib
 import math
 import numbers
 
 from .core import record
+from .core.suggest import did_you_mean, valid_words
 from .report import figures
 
 SITUATION = ("scene", "light", "view", "resolution", "filter", "format", "cascade_layout")
@@ -42,6 +42,7 @@ def _image(res, r: dict) -> str:
 def _numeric(fn: str, column: str, rows: list):
     """Raise where ``column`` is no numeric column of a run's rows (misspelt, or text such as scheme),
     naming the valid ones: a KeyError or a comparison of text told nothing."""
+    __tracebackhide__ = True       # a failure shows the user's test line, not dsm.testing's own
     if not isinstance(column, str):
         raise TypeError(f"{fn}: column must be a column name (text), got {column!r}")
     known = [c for c in record.NAMES if c not in record.TEXT_COLUMNS]
@@ -50,10 +51,8 @@ def _numeric(fn: str, column: str, rows: list):
     if column in record.TEXT_COLUMNS:
         raise TypeError(f"{fn}: {column!r} is a text column; give a numeric one ({', '.join(known[:12])}, ...)")
     if column not in known:
-        near = difflib.get_close_matches(column, known, n=3, cutoff=0.5) or [c for c in known if column in c][:3]
-        hint = f" (did you mean {' or '.join(near)}?)" if near else ""
-        raise ValueError(f"{fn}: no column {column!r}{hint}; numeric columns: {', '.join(known[:10])}, ... "
-                         "(every one: dsm.core.record.NAMES)")
+        raise ValueError(f"{fn}: no column {column!r} ({did_you_mean(column, known)}numeric columns: "
+                         f"{', '.join(known[:10])}, ... every one: dsm.core.record.NAMES)")
 
 
 def _is_number(v) -> bool:
@@ -63,6 +62,7 @@ def _is_number(v) -> bool:
 def _threshold(fn: str, name: str, value):
     """Raise where a threshold is no finite number: text would compare as a TypeError, NaN would pass
     every comparison written ``not a > b``."""
+    __tracebackhide__ = True       # a failure shows the user's test line, not dsm.testing's own
     if value is None:
         return
     if not _is_number(value):
@@ -72,6 +72,7 @@ def _threshold(fn: str, name: str, value):
 
 
 def _fail(title: str, lines: list, most: int = 20):
+    __tracebackhide__ = True       # a failure shows the user's test line, not dsm.testing's own
     more = [f"  ... and {len(lines) - most} more"] if len(lines) > most else []
     raise AssertionError("\n".join([title] + lines[:most] + more))
 
@@ -79,6 +80,7 @@ def _fail(title: str, lines: list, most: int = 20):
 def assert_rate(res, column: str, below: float | None = None, above: float | None = None, *,
                 allow_undefined: bool = False, **where):
     """Every case ``where`` selects has ``column`` below ``below`` (strictly) and/or at least ``above``."""
+    __tracebackhide__ = True       # a failure shows the user's test line, not dsm.testing's own
     if below is None and above is None:
         raise TypeError("assert_rate: give below=, above= or both")
     for name, value in (("below", below), ("above", above)):
@@ -108,6 +110,7 @@ def assert_no_worse_than(res, column: str, scheme: str, than: str, *, params: st
     """In every situation (scene, light, view, resolution, filter, format, cascade layout) ``where``
     selects, ``scheme``'s ``column`` is at most ``than``'s plus ``tolerance`` (one instance each:
     ``params`` / ``than_params`` pick it where the scheme is swept)."""
+    __tracebackhide__ = True       # a failure shows the user's test line, not dsm.testing's own
     if tolerance is None:
         raise TypeError("assert_no_worse_than: tolerance must be a number (0: no worse at all), got None")
     _threshold("assert_no_worse_than", "tolerance", tolerance)
@@ -142,8 +145,9 @@ def assert_oracle_gap(res, below: float, *, oracle: str = "world", **where):
     (world: the best single bias of its map; texel: the best single texel bias; per_texel: the
     best bias per texel) of its map and stored format, both as E = (acne + peter-panning) /
     receivers at lambda 1."""
+    __tracebackhide__ = True       # a failure shows the user's test line, not dsm.testing's own
     if oracle not in ORACLES:
-        raise ValueError(f"assert_oracle_gap: oracle={oracle!r} (choices: {', '.join(ORACLES)})")
+        raise ValueError(f"assert_oracle_gap: oracle={oracle!r} ({valid_words(oracle, ORACLES)})")
     _threshold("assert_oracle_gap", "below", below)
     keys = ("scene", "light", "view", "resolution", "culling", "format")
     floors = {tuple(o[k] for k in keys): o[f"{oracle}_objective"] for o in res.oracle if o.get("lambda", 1.0) == 1.0}

@@ -1,6 +1,7 @@
 import csv
 import json
 import os
+import shutil
 from pathlib import Path
 
 import pytest
@@ -197,3 +198,41 @@ TEST_TOPICS = {
     "trust": ("docs/design.md", "## Results that do not depend on the machine"),
     "versions": ("docs/design.md", "## Installation and the versions a result depends on"),
 }
+
+
+# ---------------------------------------------------------------- headless Chromium (report and site tests)
+
+def chrome():
+    """Headless Chromium at 1280 x 900 through Selenium (Debian's chromium and chromium-driver); skips,
+    saying why, where either is missing or the browser cannot start."""
+    try:
+        from selenium import webdriver
+        from selenium.webdriver.chrome.options import Options
+        from selenium.webdriver.chrome.service import Service
+    except ImportError:
+        pytest.skip("selenium is not installed (pip install -e .[test])")
+    browser = shutil.which("chromium") or shutil.which("chromium-browser")
+    driver = shutil.which("chromedriver")
+    if not browser or not driver:
+        pytest.skip("Chromium or its driver is missing (as root: apt-get install chromium chromium-driver; "
+                    "scripts/test does it)")
+    opts = Options()
+    opts.binary_location = browser
+    for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--window-size=1280,900",
+              "--allow-file-access-from-files"):
+        opts.add_argument(a)
+    try:
+        return webdriver.Chrome(service=Service(driver), options=opts)
+    except Exception as e:       # a browser that cannot start here: say why, do not fail the suite
+        pytest.skip(f"Chromium did not start: {str(e).splitlines()[0]}")
+
+
+def all_images_loaded(drv) -> list:
+    """The page's images made eager and awaited; returns the sources of those that did not load."""
+    drv.execute_script("document.querySelectorAll('details').forEach(d => d.open = true);"
+                       "document.querySelectorAll('img[loading=lazy]').forEach(i => i.loading = 'eager')")
+    return drv.execute_async_script(
+        "const done = arguments[0]; const imgs = Array.from(document.querySelectorAll('img'))"
+        ".filter(i => i.getAttribute('src'));"
+        "Promise.all(imgs.map(i => i.decode().catch(() => null))).then(() =>"
+        " done(imgs.filter(i => !(i.complete && i.naturalWidth > 0)).map(i => i.getAttribute('src'))))")

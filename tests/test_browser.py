@@ -4,34 +4,10 @@ it shows the summary and the case table in the live DOM, and a click on the acne
 orders the rows as metrics.csv's values say."""
 import csv
 import math
-import shutil
 
 import pytest
 
-from conftest import base_config
-
-
-def _chrome():
-    try:
-        from selenium import webdriver
-        from selenium.webdriver.chrome.options import Options
-        from selenium.webdriver.chrome.service import Service
-    except ImportError:
-        pytest.skip("selenium is not installed (pip install -e .[test])")
-    browser = shutil.which("chromium") or shutil.which("chromium-browser")
-    driver = shutil.which("chromedriver")
-    if not browser or not driver:
-        pytest.skip("Chromium or its driver is missing (as root: apt-get install chromium chromium-driver; "
-                    "scripts/test does it)")
-    opts = Options()
-    opts.binary_location = browser
-    for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--window-size=1280,900",
-              "--allow-file-access-from-files"):
-        opts.add_argument(a)
-    try:
-        return webdriver.Chrome(service=Service(driver), options=opts)
-    except Exception as e:       # a browser that cannot start here: say why, do not fail the suite
-        pytest.skip(f"Chromium did not start: {str(e).splitlines()[0]}")
+from conftest import all_images_loaded, base_config, chrome
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +17,7 @@ def page(tmp_path_factory):
                       scene=[{"builtin": "plane"}, {"builtin": "plane_box"}], map={"resolution": [16, 32]},
                       scheme=[{"name": "none"}, {"name": "constant", "bias": ["1 texel", 0.05]}, {"name": "adaptive"}])
     res = dsm.run(cfg, out=tmp_path_factory.mktemp("browser") / "run")
-    drv = _chrome()
+    drv = chrome()
     drv.get((res.out / "report.html").as_uri())
     yield res, drv
     drv.quit()
@@ -115,7 +91,7 @@ def test_filtering_and_a_case_s_images(page):
                                                       f"error image of case {case}"]
     assert [c.text for c in drv.find_elements("css selector", "#viewer figcaption")] == [
         "error classes over the display render (N.L)", "exact shading (display render, V*)",
-        "shading under the shadow map (Lambert, ambient in shadow)", "error classes (colours below)"]
+        "shading under the shadow map (Lambert, ambient in shadow)", "error classes (colours beside)"]
     # the images load from the file system (a broken link has no natural width)
     loaded = drv.execute_async_script("const done = arguments[0];"
                                       "const im = Array.from(document.querySelectorAll('#viewer img'));"
@@ -153,7 +129,7 @@ def test_the_benchmark_leaderboard_sorts_in_the_browser(tmp_path):
     rates = {"a": 0.30, "b": 0.10, "c": 0.20}          # one case each at 1000 receivers
     cases = [_record("s", c, e) for c, e in rates.items()] + [_oracle("s")]
     path = bench_page.write_page(_result(cases), tmp_path)
-    drv = _chrome()
+    drv = chrome()
     try:
         drv.get(path.as_uri())
         assert drv.find_element("css selector", "p.answer").text.startswith("Ranking")
@@ -184,17 +160,6 @@ return out;
 """
 
 
-def _all_images_loaded(drv) -> list:
-    """The page's images made eager and awaited; returns the sources of those that did not load."""
-    drv.execute_script("document.querySelectorAll('details').forEach(d => d.open = true);"
-                       "document.querySelectorAll('img[loading=lazy]').forEach(i => i.loading = 'eager')")
-    return drv.execute_async_script(
-        "const done = arguments[0]; const imgs = Array.from(document.querySelectorAll('img'))"
-        ".filter(i => i.getAttribute('src'));"
-        "Promise.all(imgs.map(i => i.decode().catch(() => null))).then(() =>"
-        " done(imgs.filter(i => !(i.complete && i.naturalWidth > 0)).map(i => i.getAttribute('src'))))")
-
-
 @pytest.mark.parametrize("width", [1280, 820])
 def test_the_report_fits_its_window_and_its_plots_read_at_9_points(page, width):
     """At each window width: no box runs past the page's edge, the summary shows every row (no
@@ -205,7 +170,7 @@ def test_the_report_fits_its_window_and_its_plots_read_at_9_points(page, width):
     res, drv = page
     drv.set_window_size(width, 900)
     drv.get((res.out / "report.html").as_uri())
-    assert _all_images_loaded(drv) == []
+    assert all_images_loaded(drv) == []
     layout = drv.execute_script(LAYOUT_JS)
     assert layout["overflow"] == [] and layout["pageWidth"] <= layout["window"]
     box = drv.execute_script("const b = document.querySelector('#summary-table').parentElement;"
@@ -253,13 +218,13 @@ def test_the_leaderboard_filters_and_fits(tmp_path):
             cases.append(_record(scene, c, e, params="bias=5.96046e-08 range"))
         cases.append(_oracle(scene))
     path = bench_page.write_page(_result(cases), tmp_path)
-    drv = _chrome()
+    drv = chrome()
     try:
         from selenium.webdriver.support.ui import Select
         for width in (1280, 820):
             drv.set_window_size(width, 900)
             drv.get(path.as_uri())
-            assert _all_images_loaded(drv) == []
+            assert all_images_loaded(drv) == []
             layout = drv.execute_script(LAYOUT_JS)
             assert layout["overflow"] == [] and layout["pageWidth"] <= layout["window"]
             img = drv.execute_script("const i = document.querySelector('img[src=\"scale.png\"]');"
@@ -297,7 +262,7 @@ def grad_page(tmp_path_factory):
     d = tmp_path_factory.mktemp("gradbrowser")
     (d / "g.toml").write_text(GRAD_TINY)
     assert main(["grad", str(d / "g.toml"), "--compare", "--inverse", "--out", str(d / "out")]) == 0
-    drv = _chrome()
+    drv = chrome()
     yield d / "out", drv
     drv.quit()
 
@@ -311,7 +276,7 @@ def test_the_grad_report_fits_its_window_and_reads_at_9_points(grad_page, width)
     out, drv = grad_page
     drv.set_window_size(width, 900)
     drv.get((out / "report.html").as_uri())
-    assert _all_images_loaded(drv) == []
+    assert all_images_loaded(drv) == []
     layout = drv.execute_script(LAYOUT_JS)
     assert layout["overflow"] == [] and layout["pageWidth"] <= layout["window"]
     shown = drv.execute_script("return Array.from(document.querySelectorAll('.plots img'))"
@@ -365,7 +330,7 @@ def test_a_contender_page_fits_loads_its_images_and_orders_its_cases_worst_first
     board = bench_page.write_page(_result(cases, "dsm-bench-5"), tmp_path)
     cards = lambda: drv.execute_script("return Array.from(document.querySelectorAll('#cards > figure.case'))"
                                        ".map(f => f.querySelector('figcaption').textContent.split(',')[0])")
-    drv = _chrome()
+    drv = chrome()
     try:
         drv.get(board.as_uri())
         drv.find_element("css selector", "#ranking a[href='contenders/bevy.html']").click()
@@ -373,7 +338,7 @@ def test_a_contender_page_fits_loads_its_images_and_orders_its_cases_worst_first
         for width in (1280, 820):
             drv.set_window_size(width, 900)
             drv.get((tmp_path / contenders.page_path("bevy")).as_uri())
-            assert _all_images_loaded(drv) == []
+            assert all_images_loaded(drv) == []
             layout = drv.execute_script(LAYOUT_JS)
             assert layout["overflow"] == [] and layout["pageWidth"] <= layout["window"]
             # each image its case's sheet (two records, 24 px squares) cut to the record's square

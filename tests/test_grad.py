@@ -318,3 +318,30 @@ def test_dsm_grad_run_returns_the_self_check_and_refuses_a_bad_config_in_one_lin
     with pytest.raises(ConfigError) as e:
         dsm.grad.run({"gradient": {"loss": "l2", "target": {"occluder_z": 0.05}}}, compare=True)
     assert str(e.value).startswith("<dict>: gradient.loss: ") and "\n" not in str(e.value)
+
+
+def test_light_emitter_is_emitter_to_light_reversed():
+    """lights.emitter (each light type's ``emitter``, dsm grad --compare's emitters): a spot, point and directional LightSpec
+    made a Mitsuba emitter read back by the kit's emitter_to_light as themselves; a square area light a
+    rectangle of its side at its centre whose emitting normal is its direction."""
+    import mitsuba as mi
+    from dsm.core.types import LightSpec
+    from dsm.lights import emitter as light_emitter
+    from dsm.scenes.emitters import emitter_to_light
+    axis = tuple(np.array([0.2, 0.1, -1.0]) / np.linalg.norm([0.2, 0.1, -1.0]))
+    for light in (LightSpec("spot", position=(0.3, -0.2, 2.0), direction=axis, cutoff=40.0),
+                  LightSpec("point", position=(0.3, -0.2, 2.0), direction=(0.0, 0.0, -1.0)),
+                  LightSpec("directional", direction=axis)):
+        back = emitter_to_light(mi.load_dict(light_emitter(light)))
+        assert back.type == light.type
+        assert np.allclose(back.direction, light.direction, atol=1e-6)
+        if light.position is not None:
+            assert np.allclose(back.position, light.position, atol=1e-6)
+        assert back.cutoff == pytest.approx(light.cutoff, abs=1e-4) or light.type != "spot"
+    square = LightSpec("area", shape="rectangle", position=(0.1, 0.0, 2.0), direction=(0.0, 0.0, -1.0), size=(0.5,))
+    shape = mi.load_dict(light_emitter(square))
+    bb = shape.bbox()
+    assert np.allclose(np.array(bb.min).ravel(), [-0.15, -0.25, 2.0], atol=1e-6)
+    assert np.allclose(np.array(bb.max).ravel(), [0.35, 0.25, 2.0], atol=1e-6)
+    n = shape.sample_position(0.0, mi.Point2f(0.5, 0.5)).n
+    assert np.allclose(np.array(n).ravel(), [0.0, 0.0, -1.0], atol=1e-6) and shape.is_emitter()

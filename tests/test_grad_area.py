@@ -216,3 +216,36 @@ def test_compare_refuses_a_light_that_hides_the_whole_image_before_any_work(tmp_
     assert err.startswith(f"dsm: config error: {cfg}: gradient.light_size: --compare's projective integrators would "
                           "see no ground pixel") and "\n" not in err
     assert not (tmp_path / "o").exists()
+
+
+def test_truth_irradiance_fraction_is_the_kernels_integral_per_receiver():
+    """dsm.truth.area.irradiance_fraction (the kit's rectangle, its shadow rays) at single receivers under a
+    square light partly hidden by a plate, against the per-receiver float64 closed form of the kernel's
+    integral over the light's unhidden part (as plate_shadow_area above); a receiver in the lit part reads 1."""
+    import drjit as dr
+    import mitsuba as mi
+    from dsm.lights import area_surface, get
+    from dsm.scenes.geometry import make_mesh, quad
+    from dsm.truth.area import irradiance_fraction
+    H, h, half, side = 2.0, 0.8, 0.25, 0.5
+    gv, gf = quad([0.0, 0.0, 0.0], [8.0, 0.0, 0.0], [0.0, 8.0, 0.0])
+    pv, pf = quad([0.0, 0.0, h], [half, 0.0, 0.0], [0.0, half, 0.0])
+    scene = mi.load_dict({"type": "scene", "ground": make_mesh("ground", gv, gf), "plate": make_mesh("plate", pv, pf)},
+                         optimize=False)
+    light = get("area").parse({"type": "area", "shape": "rectangle", "position": [0.0, 0.0, H], "size": side},
+                               "t", "light")
+    rx = np.array([0.0, 0.31, -0.42, 0.36, 0.9])
+    ry = np.array([0.0, 0.05, 0.38, -0.29, 0.0])
+    si = dr.zeros(mi.SurfaceInteraction3f, len(rx))
+    si.p = mi.Point3f(mi.Float(rx), mi.Float(ry), mi.Float(np.zeros(len(rx))))
+    si.n = dr.zeros(mi.Normal3f, len(rx)) + mi.Normal3f(0.0, 0.0, 1.0)
+    si.shape = mi.ShapePtr([s for s in scene.shapes() if s.id() == "ground"][0])
+    got = irradiance_fraction(scene, si, si.n, area_surface.geometry(light), 32, 3, 8.0)
+    rx, ry = rx.astype(np.float32).astype(float), ry.astype(np.float32).astype(float)
+    k = H / h                 # the plate's projection from the receiver onto the light's plane
+    ox0, ox1 = np.maximum(rx + (-half - rx) * k, -side / 2), np.minimum(rx + (half - rx) * k, side / 2)
+    oy0, oy1 = np.maximum(ry + (-half - ry) * k, -side / 2), np.minimum(ry + (half - ry) * k, side / 2)
+    blocked = np.where((ox1 > ox0) & (oy1 > oy0), _rect(ox0 - rx, ox1 - rx, oy0 - ry, oy1 - ry, H), 0.0)
+    want = 1.0 - blocked / _rect(-side / 2 - rx, side / 2 - rx, -side / 2 - ry, side / 2 - ry, H)
+    assert 0.0 < want[1:4].min() and want[1:4].max() < 1.0 and want[0] == 0.0 and want[4] == 1.0
+    assert np.allclose(got, want, atol=4e-3, rtol=0.0), (got, want)

@@ -397,7 +397,7 @@ def test_report_images_key(tmp_path):
     from dsm.core.types import ConfigError
     with pytest.raises(ConfigError, match=r"<t>: report\.images: unknown value 'some' \(valid: all, errors, none\)"):
         config.parse(base_config(report={"images": "some"}), "<t>")
-    with pytest.raises(ConfigError, match=r"report\.image: unknown key \(valid: images\)"):
+    with pytest.raises(ConfigError, match=r"report\.image: unknown key \(did you mean 'images'\? valid: images\)"):
         config.parse(base_config(report={"image": "all"}), "<t>")
     assert config.parse(base_config(), "<t>").report_images == "all"
     small = dict(camera={"resolution": [24, 24]}, map={"resolution": 16}, scheme=[{"name": "none"}])

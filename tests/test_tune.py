@@ -294,7 +294,7 @@ def test_dsm_plan_checks_a_tune_table_as_dsm_tune_would(tmp_path, capsys):
     cfg.write_text('[[scene]]\nbuiltin = "plane_box"\n[map]\nresolution = 16\n[camera]\nresolution = 16\n'
                    '[[scheme]]\nname = "constant"\n[tune]\nstepz = 2\n')
     assert main(["plan", str(cfg)]) == 2
-    assert f"{cfg}: tune.stepz: unknown key (valid: " in capsys.readouterr().err
+    assert f"{cfg}: tune.stepz: unknown key (did you mean 'steps'? valid: " in capsys.readouterr().err
     cfg.write_text(cfg.read_text().replace("stepz", "steps"))
     assert main(["plan", str(cfg)]) == 0
 

@@ -34,8 +34,24 @@ def design_index(app, docname, source):
     source[0] = "\n".join(lines)
 
 
+TOPICS = "TOPICS"          # the index's placeholder line for the topics' toctree entries
+
+
+def topics(index_text: str) -> list:
+    """The topic pages: every docs/*.md but the index and those the index's other lists name."""
+    named = set(re.findall(r"(?m)^([\w/.-]+)$", index_text.split("```{toctree}", 1)[-1]))
+    return sorted(p.stem for p in DOCS.glob("*.md") if p.stem != "index" and p.stem not in named)
+
+
+def index_topics(app, docname, source):
+    """source-read: the index's TOPICS line becomes the topic pages, one a line."""
+    if docname == "index":
+        source[0] = source[0].replace(f"\n{TOPICS}\n", "\n" + "\n".join(topics(source[0])) + "\n", 1)
+
+
 def setup(app):
-    """Register the two hooks."""
+    """Register the hooks."""
     app.connect("config-inited", generate)
     app.connect("source-read", design_index)
+    app.connect("source-read", index_topics)
     return {"parallel_read_safe": True, "parallel_write_safe": True}

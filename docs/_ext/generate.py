@@ -11,6 +11,8 @@ import re
 import shutil
 from pathlib import Path
 
+import scheme_pages                # docs/_ext: one page per scheme
+
 GENERATED = "_generated"
 
 
@@ -118,16 +120,15 @@ def schemes_reference() -> str:
     for s in schemes.ALL:
         out += [f"## {s.NAME}", "", f"{_first_line(s.__doc__)}", "", f"Source: {s.SOURCE}. Needs: "
                 f"{', '.join(sorted(s.NEEDS)) or 'the first layer only'}.", ""]
-        out += _param_table(s.Params) + [""]
+        out += param_table(s.Params) + [""]
     out += ["## Engine presets", ""] + _presets_table() + [""]
     out += ["## Contact-shadow presets", "", "```text", *contact_presets.text(), "```", ""]
     out += ["## Pre-filtered maps and their presets", "", "```text", *cli.prefilter_text(), "```", ""]
     return "\n".join(out)
 
 
-def _param_table(cls) -> list:
+def param_table(cls) -> list:
     """Markdown lines of a parameter dataclass's fields: name, default, valid, meaning."""
-    from dsm.config.keys import exact_text
     if not dataclasses.fields(cls):
         return ["No parameters."]
     lines = ["| parameter | default (as TOML) | valid | meaning |", "|---|---|---|---|"]
@@ -135,8 +136,20 @@ def _param_table(cls) -> list:
         md = f.metadata
         valid = md.get("choices") or " ".join(x for x in (f">= {md['min']:g}" if "min" in md else "",
                                                            f"<= {md['max']:g}" if "max" in md else "") if x)
-        lines.append(f"| `{f.name}` | {md_cell(exact_text(f.default))} | {md_cell(valid)} | {md_cell(md.get('doc', ''))} |")
+        lines.append(f"| `{f.name}` | {md_cell(default_text(f.default))} | {md_cell(valid)} | {md_cell(md.get('doc', ''))} |")
     return lines
+
+
+def default_text(value) -> str:
+    """A parameter's default as TOML, a depth step as the reports name it (``"2^-24 range"``, which a
+    config reads back exactly), any other value exactly as the reader takes it."""
+    from dsm.config.keys import exact_text
+    from dsm.core.labels import power_of_two
+    from dsm.core.types import Length
+    if isinstance(value, Length) and value.unit == "range" and power_of_two(value.value) is not None \
+            and 2.0 ** power_of_two(value.value) == value.value:
+        return f'"2^{power_of_two(value.value)} range"'
+    return exact_text(value)
 
 
 def _presets_table() -> list:
@@ -195,6 +208,7 @@ def write_all(docs: Path):
     (gen / "design").mkdir()
     for slug, text in design_pages((docs / "design.md").read_text()):
         (gen / "design" / f"{slug}.md").write_text(text)
+    scheme_pages.write_pages(gen)
     (gen / "tutorials").mkdir()
     for nb in sorted((docs.parent / "notebooks").glob("*.ipynb")):
         shutil.copyfile(nb, gen / "tutorials" / nb.name)

@@ -9,7 +9,7 @@ import math
 from pathlib import Path
 
 from .. import prefilter
-from ..report import labels
+from ..core import labels
 from ..report.html import costs_view
 from ..report.templates import Cell, Row, Table, render
 from ..schemes.presets import PRESETS

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..core.env import meshes_folder
+from ..core.suggest import unknown
 
 # every version, oldest first; the newest is what ``dsm benchmark`` runs unless told otherwise
 SUITE_FILES = {"dsm-bench-1": Path(__file__).with_name("suite_1.toml"),
@@ -87,7 +88,7 @@ def load_suite(path: Path = SUITE_FILE) -> dict:
 def size_of(suite: dict, size: str) -> dict:
     """The pinned size ``size``: scenes, units, lights, contenders and resolutions (defaults: everything)."""
     if size not in SIZES:
-        raise ValueError(f"unknown suite size {size!r} (one of {', '.join(SIZES)})")
+        raise ValueError(unknown("suite size", size, SIZES))
     s = dict(suite["size"][size])
     s.setdefault("scenes", [sc["name"] for sc in suite["scene"]])
     s.setdefault("units", [u for u, _ in suite["suite"]["units"]])

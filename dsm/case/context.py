@@ -6,6 +6,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..core.suggest import valid_words
 from ..core.types import MomentSpec
 
 # what a context measures beyond the counts and rates every case has (each a group of columns):
@@ -78,7 +79,8 @@ class MapContext:
     def __post_init__(self):
         unknown = set(self.measures) - MEASURES
         if unknown:
-            raise ValueError(f"MapContext: unknown measures {sorted(unknown)} (choices: {sorted(MEASURES)})")
+            raise ValueError(f"MapContext: unknown measures {sorted(unknown)} "
+                             f"({valid_words(sorted(unknown)[0], sorted(MEASURES))})")
 
     @property
     def image_size(self) -> tuple:

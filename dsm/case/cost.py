@@ -20,7 +20,8 @@ build and lookup times stand beside them in the row (``build_ms``, ``lookup_ms``
 - ``taps``: texels read per lookup, per receiver: nearest 1, pcf_bilinear 4, pcf_jitter4x4 16,
   pcf_wide:K K^2; PCSS as it runs with the blocker search's early exit (Fernando 2005): its
   PCSS_SEARCH^2 search taps, then PCSS_FILTER^2 filter taps only at the receivers whose search
-  found a blocker (their mean over the case's receivers); a pre-filtered instance 1 (the moments are
+  found a blocker (their mean over the case's receivers); SMRT (dsm.maps.smrt) rays x samples;
+  a pre-filtered instance 1 (the moments are
   blurred once at build), 2 with mip-maps (two levels blended). Each tap reads every layer above.
 """
 from __future__ import annotations

@@ -92,8 +92,11 @@ KEYS = (
     Key("map", "resolution", "int", "512", "texels a side, per face", _r(1, 16384), "texels", sweeps=True),
     Key("map", "texels", "int", "(resolution)", "the same total texels per view (R = sqrt(texels / faces)); not "
         "with resolution", _r(1, 6 * 16384 ** 2), "texels", sweeps=True),
-    Key("map", "filter", "str", "nearest", "the lookup's filter; pcf_wide:K is a K x K kernel (2 to 64)",
-        FILTERS, source="Reeves et al. 1987 (PCF); Fernando 2005 (PCSS)", sweeps=True),
+    Key("map", "filter", "str", "nearest", "the lookup's filter; pcf_wide:K is a K x K kernel (2 to 64); "
+        "smrt:<preset> (ue5_local, ue5_directional, eevee, eevee_viewport, eevee_render) or smrt:RxS[:hold|eevee] is shadow-map ray tracing, R "
+        "rays of S samples (docs/smrt.md)", FILTERS,
+        source="Reeves et al. 1987 (PCF); Fernando 2005 (PCSS); UE5's and EEVEE's shadow-map ray tracing (SMRT)",
+        sweeps=True),
     Key("map", "format", "str", "float32", "the stored depth's (or moments') precision", FORMATS, sweeps=True),
     Key("map", "view", "str", "dual_paraboloid", "a point light's views (vsv: spot lights too)", MAP_VIEWS,
         source="Brabec et al. 2002 (dual paraboloid); Wyman 2011 (vsv)", sweeps=True),

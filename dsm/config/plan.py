@@ -26,6 +26,7 @@ import xml.etree.ElementTree as ET
 from typing import NamedTuple
 from dataclasses import dataclass, field
 
+from ..core.labels import params_label
 from ..truth import intervals
 from ..scenes import size as scene_size
 from .. import lights as light_types
@@ -284,16 +285,17 @@ class Plan:
                          f"G-buffer {w}x{h} ({w * h * GBUFFER_BYTES * mb:.1f} MB), lights: "
                          + ", ".join(f"{lab} ({t})" for lab, t in lights))
         lines.append("  maps (one per scene/light/view/resolution/culling; layers only as the schemes need):")
-        lines.append(f"    {'scene':18s} {'light':12s} {'view':16s} {'R':>5s} {'culling':12s} {'layers':22s} "
+        sw, lw = self.name_widths()
+        lines.append(f"    {'scene':{sw}s} {'light':{lw}s} {'view':16s} {'R':>5s} {'culling':12s} {'layers':22s} "
                      f"{'formats':14s} {'texels':>10s} {'tiles':>5s} {'MB':>8s} {'read MB':>11s} {'rays':>13s}  schemes")
         for m in self.maps:
             tiles = -(-m.texels // m.tile) if m.tile else 1
             mem = m.peak_bytes * mb
-            lines.append(f"    {m.scene[:18]:18s} {m.light[:12]:12s} {m.view:16s} {m.resolution:5d} {m.culling:12s} "
+            lines.append(f"    {m.scene:{sw}s} {m.light:{lw}s} {m.view:16s} {m.resolution:5d} {m.culling:12s} "
                          f"{'+'.join(m.layers) + (' (layered)' if m.layered else ''):22s} "
                          f"{','.join(m.formats) or '-':14s} {m.texels:10d} {tiles:5d} {mem:8.1f} {_read(m):>11s} "
                          f"{_rays(m):>13s}  "
-                         + ", ".join(m.schemes) + (f"  [cascades: {m.cascade.label}]" if m.cascade else ""))
+                         + ", ".join(params_label(x, exact=True) for x in m.schemes) + (f"  [cascades: {m.cascade.label}]" if m.cascade else ""))
         lines.append(self._cost_line())
         lines.append("  rays (exact): " + ", ".join(f"{k} {v:,}" for k, v in self.rays.items()))
         lines.append("  rays (at most): " + ", ".join(f"{k} {v:,}" for k, v in self.rays_bound.items()))
@@ -338,8 +340,14 @@ class Plan:
         at = {id(m): i for i, m in enumerate(self.maps)}
         return [[at[id(m)] for m in st] for st in self.stacks]
 
+    def name_widths(self) -> tuple:
+        """The scene and light columns' widths: the longest name each (a name is never cut: ``0:directional``)."""
+        return (max([len("scene")] + [len(m.scene) for m in self.maps]),
+                max([len("light")] + [len(m.light) for m in self.maps]))
+
     def _builds_lines(self) -> list:
         """How the maps are built ([timing] builds): each alone, or a sweep's small maps stacked (a line each)."""
+        sw, lw = self.name_widths()
         if not self.stacks:
             why = ("" if self.builds == "alone" else " ([timing] builds = \"together\" found no two maps to stack: "
                    "a motion or cluster run, cascades, tiled maps or one map a light, view and culling)")
@@ -350,7 +358,7 @@ class Plan:
                 f"(at most {STACK_BYTES >> 20} MB a stack, within the memory budget; a map's build_ms is its share of "
                 f"texels), "
                 f"{len(self.maps) - n} maps alone:"] + [
-            f"    {st[0].scene[:18]:18s} {st[0].light[:12]:12s} {st[0].view:16s} culling {st[0].culling:12s} "
+            f"    {st[0].scene:{sw}s} {st[0].light:{lw}s} {st[0].view:16s} culling {st[0].culling:12s} "
             "R = " + " + ".join(str(m.resolution) for m in st) for st in self.stacks]
 
     def as_dict(self) -> dict:

@@ -480,7 +480,7 @@ def _parse_cascades(m: dict, source: str) -> tuple:
         if isinstance(c, str):
             if c not in LAYOUTS:
                 raise ConfigError(source, "map.cascades", f"unknown engine layout {c!r}; give a count 1 to "
-                                  f"{MAX_CASCADES} or an engine", sorted(LAYOUTS))
+                                  f"{MAX_CASCADES} or an engine", sorted(LAYOUTS), got=c)
             out.append(LAYOUTS[c][0])
             continue
         n = number(c, source, "map.cascades", integer=True, minimum=1, maximum=MAX_CASCADES)
@@ -521,7 +521,8 @@ def _parse_kinds(m: dict, formats, lights, cascade, source: str) -> tuple:
         valid = prefilter.formats_of(prefilter.get(name))
         bad = [f for f in formats if f not in valid]
         if bad:
-            raise ConfigError(source, "map.format", f"{bad[0]!r} is not a storage format of {name}'s moments", valid)
+            raise ConfigError(source, "map.format", f"{bad[0]!r} is not a storage format of {name}'s moments", valid,
+                              got=bad[0])
     if cascade:
         raise ConfigError(source, "map.cascades", "pre-filtered maps are built on one map per view; remove "
                           "map.cascades or keep map.kind = depth", ("depth",))
@@ -675,7 +676,7 @@ def _cache_policy(raw, source: str, key: str) -> str:
                               CACHE_POLICIES)
         return f"stagger:{int(n)}"
     if raw not in CACHE_POLICIES or raw == "stagger:N":
-        raise ConfigError(source, key, f"unknown value {raw!r}", CACHE_POLICIES)
+        raise ConfigError(source, key, f"unknown value {raw!r}", CACHE_POLICIES, got=raw)
     return raw
 
 
@@ -764,7 +765,15 @@ def _array_of_tables(raw, key, source) -> list:
 
 
 def _filter(raw, source) -> str:
-    """A map.filter value: one of FILTERS, or ``"pcf_wide:K"`` (a K x K texel kernel, 2 <= K <= 64)."""
+    """A map.filter value: one of FILTERS, ``"pcf_wide:K"`` (a K x K texel kernel, 2 <= K <= 64) or
+    ``"smrt:<preset>"`` / ``"smrt:RxS[:rule]"`` (shadow-map ray tracing, dsm.maps.smrt)."""
+    from ..maps import smrt_presets as smrt
+    if isinstance(raw, str) and smrt.is_smrt(raw):
+        try:
+            smrt.settings(raw)
+        except ValueError as err:
+            raise ConfigError(source, "map.filter", str(err)) from None
+        return raw
     if isinstance(raw, str) and raw.startswith("pcf_wide:"):
         k = raw.split(":", 1)[1]
         if not k.isdigit() or not 2 <= int(k) <= 64:

@@ -53,11 +53,12 @@ def use_variant(variant: str | None = None, threads: int | None = None) -> str:
     """Set the Mitsuba variant (default llvm_ad_rgb) once; later calls must agree."""
     import drjit as dr
     import mitsuba as mi
+    from .suggest import valid_words
     from .types import VARIANTS
     variant = variant or os.environ.get("DSM_VARIANT") or "llvm_ad_rgb"
     if variant not in VARIANTS:
         raise SetupError(f"variant {variant!r} is not supported: dsm runs vectorized Dr.Jit code "
-                         f"(valid: {', '.join(VARIANTS)})")
+                         f"({valid_words(variant, VARIANTS)})")
     if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int)
                                 or not 1 <= threads <= MAX_THREADS):
         raise SetupError(f"threads must be an integer from 1 to {MAX_THREADS}, got {threads!r}")

@@ -1,4 +1,4 @@
-"""Plain types every module of the kit may import; this module imports nothing of dsm.
+"""Plain types every module of the kit may import; this module imports nothing of dsm but dsm.core.suggest.
 
 The lists of choices (each defined once), lengths and their units, :class:`ConfigError`,
 the value checks that produce it, and the frozen specs a config is read into.
@@ -8,12 +8,15 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .suggest import valid_words
+
 LENGTH_UNITS = ("world", "texel", "range")
-FILTERS = ("nearest", "pcf_bilinear", "pcf_jitter4x4", "pcf_wide", "pcss")
+FILTERS = ("nearest", "pcf_bilinear", "pcf_jitter4x4", "pcf_wide", "pcss", "smrt")
 FORMATS = ("float32", "unorm16", "unorm24", "ndc24", "float16")
 # [map] kind: the depth-compare map, or a pre-filtered moment map (dsm.prefilter)
 MAP_KINDS = ("depth", "vsm", "esm", "evsm", "msm")
@@ -33,12 +36,13 @@ BUILD_MODES = ("alone", "together")        # [timing] builds: each map timed alo
 class ConfigError(ValueError):
     """A config mistake, reported before any work starts."""
 
-    def __init__(self, source: str, key: str, problem: str, choices=None):
+    def __init__(self, source: str, key: str, problem: str, choices=None, *, got=None):
+        """``got``: the misspelt name, where there is one: the message adds the nearest of ``choices``."""
         self.source, self.key, self.problem = source, key, problem
-        self.choices = tuple(choices) if choices else ()
+        self.choices, self.got = (tuple(choices) if choices else ()), got
         msg = f"{source}: {key}: {problem}"
         if self.choices:
-            msg += f" (valid: {', '.join(map(str, self.choices))})"
+            msg += f" ({valid_words(got, self.choices)})"
         super().__init__(msg)
         self.more = []          # further problems of the same kind (scenes.check gathers every scene's)
 
@@ -74,13 +78,13 @@ class Length:
             if len(parts) != 2:
                 raise ConfigError(source, key, f"cannot read length {raw!r}; write a number or \"<k> <unit>\"",
                                   LENGTH_UNITS)
-            try:
-                value = float(parts[0])
-            except ValueError:
-                raise ConfigError(source, key, f"{parts[0]!r} in {raw!r} is not a number") from None
+            value = length_number(parts[0])
+            if value is None:
+                raise ConfigError(source, key, f"{parts[0]!r} in {raw!r} is not a number (nor 2^k)") from None
             unit = parts[1].rstrip("s") if parts[1] not in LENGTH_UNITS else parts[1]
             if unit not in LENGTH_UNITS:
-                raise ConfigError(source, key, f"unknown unit {parts[1]!r} in {raw!r}", LENGTH_UNITS)
+                raise ConfigError(source, key, f"unknown unit {parts[1]!r} in {raw!r}", LENGTH_UNITS,
+                                  got=parts[1])
         else:
             raise ConfigError(source, key, f"expected a number or a string like \"2 texel\", got {type(raw).__name__}")
         if not math.isfinite(value):
@@ -90,6 +94,21 @@ class Length:
     def __str__(self) -> str:
         v = f"{self.value:g}"
         return v if self.unit == "world" else f"{v} {self.unit}"
+
+
+POWER_OF_TWO = re.compile(r"2\^(-?\d+)")
+
+
+def length_number(text: str) -> float | None:
+    """A length's number as written: a decimal, or ``2^k`` (how reports name a depth step, such as
+    ``2^-24 range``, so a label pastes back exactly); None for anything else."""
+    power = POWER_OF_TWO.fullmatch(text)
+    if power:
+        return 2.0 ** int(power[1])
+    try:
+        return float(text)
+    except ValueError:
+        return None
 
 
 # ---------------------------------------------------------------- value checks
@@ -117,7 +136,7 @@ def number(raw, source, key, *, integer=False, positive=False, minimum=None, max
 def choice(raw, source, key, choices):
     """``raw`` checked to be one of ``choices``; else a ConfigError at ``key`` listing them."""
     if not isinstance(raw, str) or raw not in choices:
-        raise ConfigError(source, key, f"unknown value {raw!r}", choices)
+        raise ConfigError(source, key, f"unknown value {raw!r}", choices, got=raw)
     return raw
 
 
@@ -140,7 +159,7 @@ def check_keys(table: dict, allowed, source: str, where: str):
     """Raise a ConfigError for the first key of ``table`` not in ``allowed`` (reported as ``where.key``)."""
     for k in table:
         if k not in allowed:
-            raise ConfigError(source, f"{where}.{k}" if where else k, "unknown key", sorted(allowed))
+            raise ConfigError(source, f"{where}.{k}" if where else k, "unknown key", sorted(allowed), got=k)
 
 
 def coerce_field(f: dataclasses.Field, raw, source: str, key: str):

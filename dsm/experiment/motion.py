@@ -50,10 +50,11 @@ from ..scenes.camera import sensor_at
 from ..core import timing
 from ..scenes.camera import Camera
 from ..report.figures import frames_path
-from ..report.labels import params_label
+from ..core.labels import params_label
+from ..report.sections import cache as cache_report
 from . import cache
 from .casters import Mover
-from . import texel_recast
+from . import page_cache, texel_recast
 from .motion_display import GifFrames, shown_frames, v_image
 
 # ---------------------------------------------------------------- paths
@@ -263,11 +264,12 @@ def flicker(v, vstar, eligible, face) -> tuple:
 
 # ---------------------------------------------------------------- the frame loop
 
-def _view_signature(view) -> bytes:
-    """What a map's texels depend on: the frame, extents, offsets, depth origin and far bound."""
+def _view_signature(view, frame_only: bool = False) -> bytes:
+    """What a map's texels depend on: the frame, extents, offsets, depth origin and far bound
+    (``frame_only``: what every page of a paged view depends on, its pages and their levels' places left out)."""
     parts = [np.asarray(view.origin_np, np.float32), np.asarray(view.axes_np, np.float32),
              np.float32([view.far, view.near, view.resolution])]
-    parts += view.signature_arrays()
+    parts += view.frame_signature_arrays() if frame_only else view.signature_arrays()
     return b"".join(p.tobytes() for p in parts)
 
 
@@ -336,6 +338,7 @@ class _CaseFrames:
     frames: list = dataclasses.field(default_factory=list)
     images: list = dataclasses.field(default_factory=list)       # the shown frames' class images
     v_images: list = dataclasses.field(default_factory=list)     # the shown frames' V per camera pixel
+    cache_images: list = dataclasses.field(default_factory=list)  # the shown frames' ghosts and missing shadows
     metrics: list = dataclasses.field(default_factory=list)
     lookup_ms: list = dataclasses.field(default_factory=list)
     costs: list = dataclasses.field(default_factory=list)        # each frame's costs in counts (dsm.case.cost)
@@ -371,6 +374,9 @@ class _MapFrames:
     bbox: tuple = ()                                          # the scene's bounds over the path (views fit to them)
     extents: object = None                                    # the frame's per-shape spawn extents (map builds)
     fresh: object = None                                      # this frame's map where the kept one is stale, else None
+    pages: object = None                                      # a virtual map's page cache (dsm.experiment.page_cache)
+    page_keys: list = dataclasses.field(default_factory=list)  # the last frame's pages (View.page_keys)
+    frame_ms: list = dataclasses.field(default_factory=list)  # per frame: its build's kernel time (frame_build_ms)
 
 
 def _run_map(runner, shared: SceneFrames, path: PathFrames, m, mover: Mover):
@@ -384,7 +390,7 @@ def _run_map(runner, shared: SceneFrames, path: PathFrames, m, mover: Mover):
     state = _MapFrames(shared, path, m, {Case("", *k): _CaseFrames() for k in keys},
                        shown=frozenset(shown_frames(len(path.poses))), mover=mover,
                        policy=cache.rule(path.motion.cache), partial=cache.partial_recast(path.motion.cache),
-                       extents=shared.extents,
+                       extents=shared.extents, pages=page_cache.PagePool(),
                        bbox=mover.swept_bbox() if mover.moving else shared.data.bbox)
     for t in range(len(path.poses)):
         if mover.place(t):           # a caster moved: the continuation rays' triangle tables follow it
@@ -426,27 +432,24 @@ def _frame_map(runner, state: _MapFrames, view):
     """The frame's ShadowMap: cast again where the cache policy says (its view's projection changed,
     or under ``none`` a caster moved), else the last one re-viewed; where the map kept is stale,
     this frame's map is cast too (untimed, ``state.fresh``) to count ghosts and missing shadows."""
+    if view.virtual and state.path.motion.cache != "none":     # a page cache: the policy acts on pages
+        return _frame_pages(runner, state, view)
     sig = _view_signature(view)
     view_changed, geometry_changed = sig != state.signature, state.geometry != state.map_geometry
     state.fresh = None
     if state.smap is None or state.policy(view_changed, geometry_changed, len(state.built) - state.cast_frame):
-        def build():
-            """The frame's map built: its arrays, then the ShadowMap."""
-            sm = _cast(state, view)
-            return (*shadowmap.arrays(sm), sm)       # the arrays, so the timing waits for them
-        out, tm = timing.measure_kernel(build, 1)      # a frame's build once, in kernel time (as a still map's)
-        state.smap = out[-1]
+        state.smap = _timed_cast(runner, state, view)
         state.moments = {}                        # a new first layer: new moments
-        state.build_ms.append(tm.ms)
+        state.build_ms.append(state.frame_ms[-1])
         state.built.append(True)
         state.map_geometry, state.cast_frame = state.geometry, len(state.built) - 1
         state.map_frame = state.cast_frame
         state.recast.append(1.0)
-        runner.record.add_rays({"map_texel": state.smap.rays.get("map_texel", 0)})
     else:
         state.smap = dataclasses.replace(state.smap, view=view)
         state.built.append(False)
         state.recast.append(0.0)
+        state.frame_ms.append(0.0)
         if geometry_changed:
             state.fresh = _cast(state, view)
         if geometry_changed and state.partial:    # re-cast where a caster was or is: the map kept is right again
@@ -466,6 +469,48 @@ def _recast_touched(state: _MapFrames, view):
     state.map_geometry = None if state.mover.any_flagged else state.geometry
     state.map_frame = t
     state.recast[-1] = float(mask.mean())
+    # composed from an untimed whole cast: not a partial cast's cost (nothing re-cast: nothing to time)
+    state.frame_ms[-1] = metrics.UNDEFINED if mask.any() else 0.0
+
+
+def _timed_cast(runner, state: _MapFrames, view):
+    """The map of ``view`` cast, its kernel time appended to ``state.frame_ms``, its rays to the record."""
+    def build():
+        """The map built: its arrays, then the ShadowMap."""
+        sm = _cast(state, view)
+        return (*shadowmap.arrays(sm), sm)       # the arrays, so the timing waits for them
+    out, tm = timing.measure_kernel(build, 1)      # a frame's build once, in kernel time (as a still map's)
+    state.frame_ms.append(tm.ms)
+    runner.record.add_rays({"map_texel": out[-1].rays.get("map_texel", 0)})
+    return out[-1]
+
+
+def _frame_pages(runner, state: _MapFrames, view):
+    """A virtual map's frame under a page cache (dsm.experiment.page_cache): the pages the policy or the pool
+    says cast (timed, a map of those pages alone), the others kept; where a kept page was cast with the casters
+    elsewhere, this frame's whole map is cast too (untimed, ``state.fresh``) to count ghosts and missing shadows."""
+    t, pool = len(state.built), state.pages
+    sig = _view_signature(view, frame_only=True)
+    if sig != pool.signature:
+        pool.reset(sig)
+    cast = page_cache.plan(pool, view, t, state.geometry, state.policy, state.partial,
+                           lambda f: state.mover.bounds(f, True))
+    whole = bool(cast.all())
+    part = _timed_cast(runner, state, view if whole else view.with_pages(view.pages[cast])) if cast.any() else None
+    if not cast.any():
+        state.frame_ms.append(0.0)
+    state.fresh = _cast(state, view) if page_cache.stale(pool, view, cast, state.geometry) else None
+    keys = view.page_keys()
+    if cast.any() or keys != state.page_keys:     # another map: new moments
+        state.moments = {}
+    state.smap = page_cache.compose(pool, view, cast, part, t, state.geometry,
+                                      part if part is not None else state.smap)
+    if whole:
+        state.build_ms.append(state.frame_ms[-1])
+    state.built.append(whole)
+    state.recast.append(float(cast.mean()))
+    state.page_keys = keys
+    return state.smap
 
 
 def _frame_moments(state: _MapFrames, spec, fmt: str) -> tuple:
@@ -528,6 +573,15 @@ def cache_errors(v_cached: np.ndarray, v_fresh: np.ndarray) -> dict:
             "missing_rate": rate(missing, n_shadowed)}
 
 
+def cache_image(shape, pixels: np.ndarray, v_cached, v_fresh) -> np.ndarray:
+    """Per camera pixel, 1 where the receiver there is a ghost, 2 a missing shadow (:func:`cache_errors`), else 0."""
+    lit_c, lit_f = np.asarray(v_cached) >= 0.5, np.asarray(v_fresh) >= 0.5
+    out = np.zeros(shape[0] * shape[1], np.uint8)
+    out[np.asarray(pixels)[~lit_c & lit_f]] = cache_report.GHOST
+    out[np.asarray(pixels)[lit_c & ~lit_f]] = cache_report.MISSING
+    return out.reshape(shape)
+
+
 def _run_frame(runner, state: _MapFrames, t: int):
     """Frame ``t``: its view and map, then every case evaluated at the frame's receivers
     (dsm.case.evaluate) and looked up at the fixed points, into ``state.cases``."""
@@ -559,6 +613,8 @@ def _run_frame(runner, state: _MapFrames, t: int):
         mt = result.measured
         v_fresh = result.v if fresh_ctx is None else evaluate(fresh_ctx, case).v
         stale = cache_errors(np.asarray(result.v), np.asarray(v_fresh))
+        if state.mover.moving and runner.sink.images_mode != "none" and t in state.shown:
+            frames.cache_images.append(cache_image(result.classes.shape, ctx.setup.pixels, result.v, v_fresh))
         frames.metrics.append(mt)
         frames.lookup_ms.append(result.lookup.ms if ctx.receivers[case.format] is not None else math.nan)
         frames.costs.append(case_cost.costs(ctx, case))
@@ -571,11 +627,9 @@ def _run_frame(runner, state: _MapFrames, t: int):
 
 
 def _frame_build_ms(state: _MapFrames) -> float:
-    """The frame's build time: its whole cast's, 0 where the map was kept as it was, undefined where
-    part of it was re-cast (composed from an untimed whole cast: not a partial cast's cost)."""
-    if state.built[-1]:
-        return state.build_ms[-1]
-    return metrics.UNDEFINED if state.recast[-1] > 0 else 0.0
+    """The frame's build time: its whole cast's, 0 where the map was kept as it was, a virtual map's re-cast
+    pages' cast, undefined where texels were re-cast (composed from an untimed whole cast: not their cost)."""
+    return state.frame_ms[-1]
 
 
 def _write_case(runner, state: _MapFrames, case: Case, frames: _CaseFrames):
@@ -659,4 +713,4 @@ def _gif_frames(state: _MapFrames, ident: dict, frames: _CaseFrames) -> GifFrame
     title = f"case {ident['case']}: {instance}, {view} R = {m.resolution}, {ident['filter']}, {ident['format']}"
     return GifFrames(frames_path(ident), state.scene.data.label, m.light, path.motion.label, title,
                      len(path.poses), index, [path.poses[t] for t in index], [path.lights[t] for t in index],
-                     frames.images, frames.v_images or None)
+                     frames.images, frames.v_images or None, frames.cache_images or None)

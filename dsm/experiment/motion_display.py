@@ -30,6 +30,7 @@ import numpy as np
 from .. import pipeline
 from ..report import io as report_io
 from ..report.figures import CLASSES_GIF_COMMENT
+from ..report.sections import cache as cache_report
 from ..report.tables import receiver_cosines, shade
 from ..scenes.camera import Camera, sensor_at
 from ..truth import metrics
@@ -59,6 +60,8 @@ class GifFrames:
     lights: list              # LightSpec of each frame shown
     classes: list             # (H, W) uint8 class image of each frame shown
     v: list | None            # (H, W) uint8 round(255 V) of each frame shown; None: no display render wanted
+    cache: list | None = None  # (H, W) uint8 ghost / missing image of each frame shown (dsm.report.sections.cache);
+                               # None: no caster moves
 
 
 def shown_frames(frames: int) -> list:
@@ -216,6 +219,9 @@ def write_gifs(out: Path, cfg, pending: list, display: bool) -> list:
     """Every pending motion GIF into ``out``: frames of display renders (``display``: a complete
     run writing every image), else the frames' class images; returns notes on what failed."""
     notes = []
+    for g in pending:                 # moving casters: the frames' ghosts and missing shadows over their classes
+        if g.cache is not None:
+            cache_report.write_gif(Path(out) / cache_report.gif_path(g.path), g.classes, g.cache)
     if not display or any(g.v is None for g in pending):
         for g in pending:
             _write_classes_gif(Path(out) / g.path, g.classes)

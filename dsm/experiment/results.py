@@ -1,6 +1,7 @@
 """A run's results as a notebook or test reads them: the rows, run.json and the class images."""
 from __future__ import annotations
 
+import html as htmlmod
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -8,8 +9,26 @@ from pathlib import Path
 import numpy as np
 
 from ..core import record
+from ..core.labels import params_label
+from ..core.suggest import did_you_mean
+from ..core.types import length_number
 from ..report import tables as report
 from ..truth import metrics
+
+
+TABLE_COLUMNS = ("scheme", "params", "resolution", "acne_rate", "peterpan_rate", "error_rate", "build_ms", "lookup_ms")
+
+
+def cell_text(v, column: str = "") -> str:
+    """A table cell's text: a rate or time to four decimals below 10, one decimal above, ``undefined``
+    for NaN (an empty denominator), ``params`` as the console and report label them, else as it is."""
+    if column == "params":
+        return params_label(str(v), exact=True)
+    if isinstance(v, float) and v != v:
+        return "undefined"
+    if isinstance(v, float):
+        return f"{v:.4f}" if abs(v) < 10 else f"{v:.1f}"
+    return str(v)
 
 
 @dataclass
@@ -28,10 +47,12 @@ class Results:
         column's kind (``resolution=512`` and ``"512"`` alike; a label such as ``params`` by its words
         and numbers, ``"bias=1texel"`` as ``"bias=1 texel"``). A filter that matches no row raises
         ValueError naming the values the column holds (``allow_empty=True``: an empty Results)."""
+        __tracebackhide__ = True        # a test's failure shows its own line, not this method's
         named = {k for r in self.rows for k in param_values(r.get("params", ""))}
         unknown = sorted(set(kw) - set(report.COLUMNS) - named)
         if unknown:
-            raise KeyError(f"Results.where: no column or scheme parameter {', '.join(unknown)} (columns: see "
+            hint = did_you_mean(unknown[0], list(report.COLUMNS) + sorted(named))
+            raise KeyError(f"Results.where: no column or scheme parameter {', '.join(unknown)} ({hint}columns: see "
                            "dsm.core.record.NAMES, e.g. scheme, params, scene, light, view, resolution, filter, "
                            f"format; the parameters of these rows: {', '.join(sorted(named)) or 'none'})")
         rows = [r for r in self.rows if all(same_value(k, row_value(r, k), v) for k, v in kw.items())]
@@ -57,7 +78,8 @@ class Results:
     def column(self, name) -> np.ndarray:
         """The values of column ``name`` over the rows, as a numpy array (a KeyError names the columns)."""
         if name not in report.COLUMNS:
-            raise KeyError(f"Results.column: no column {name!r} (columns: see dsm.core.record.NAMES, e.g. acne_rate, "
+            hint = did_you_mean(name, report.COLUMNS)
+            raise KeyError(f"Results.column: no column {name!r} ({hint}columns: see dsm.core.record.NAMES, e.g. acne_rate, "
                            "peterpan_rate, error_rate, n_receivers)")
         return np.array([r[name] for r in self.rows])
 
@@ -71,16 +93,27 @@ class Results:
                            "or rows)" if ids else f"Results.rgb: no image of case {case!r}: this run kept no images")
         return metrics.CLASS_COLORS[self.images[case]]
 
-    def table(self, columns=("scheme", "params", "resolution", "acne_rate", "peterpan_rate", "error_rate",
-                             "build_ms", "lookup_ms")) -> str:
+    def table(self, columns=TABLE_COLUMNS) -> str:
         """The rows as a Markdown table of the chosen columns (for notebooks and terminals)."""
-        fmt = lambda v: f"{v:.4f}" if isinstance(v, float) and abs(v) < 10 else (f"{v:.1f}" if isinstance(v, float) else str(v))
         lines = ["| " + " | ".join(columns) + " |", "|---" * len(columns) + "|"]
-        lines += ["| " + " | ".join(fmt(r.get(c, "")) for c in columns) + " |" for r in self.rows]
+        lines += ["| " + " | ".join(cell_text(r.get(c, ""), c) for c in columns) + " |" for r in self.rows]
         return "\n".join(lines)
+
+    def html(self, columns=TABLE_COLUMNS) -> str:
+        """The rows as an HTML table of the chosen columns, numbers right-aligned (Jupyter and the docs site,
+        whose notebook renderer shows text/html and not text/markdown)."""
+        esc = lambda v, c: htmlmod.escape(cell_text(v, c))
+        num = lambda v: ' style="text-align:right"' if isinstance(v, (int, float)) and not isinstance(v, bool) else ""
+        head = "".join(f"<th>{htmlmod.escape(c)}</th>" for c in columns)
+        body = "".join("<tr>" + "".join(f"<td{num(r.get(c))}>{esc(r.get(c, ''), c)}</td>" for c in columns) + "</tr>"
+                       for r in self.rows)
+        return f'<table class="dsm-results"><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>'
 
     def _repr_markdown_(self):
         return self.table()
+
+    def _repr_html_(self):
+        return self.html()
 
     def __getattr__(self, name):
         if name in report.COLUMNS:
@@ -91,12 +124,14 @@ class Results:
         return len(self.rows)
 
 
-_NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+_NUMBER = re.compile(r"2\^-?\d+|[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 
 
 def label_key(text) -> str:
-    """A label compared by its words and numbers: lower case, no spaces, each number as a float."""
-    return _NUMBER.sub(lambda m: repr(float(m.group())), str(text).replace(" ", "").lower())
+    """A label compared by its words and numbers: lower case, no spaces, each number (``2^k`` too, as
+    the report names a depth step) as a float to the six digits params are written with (%g)."""
+    word = lambda m: repr(float(f"{length_number(m.group()):g}"))
+    return _NUMBER.sub(word, str(text).replace(" ", "").lower())
 
 
 def param_values(label: str) -> dict:
@@ -139,7 +174,8 @@ def no_match(rows: list, kw: dict) -> str:
         held = sorted({str(row_value(r, k)) for r in rows if row_value(r, k) is not None})
         if not any(same_value(k, row_value(r, k), v) for r in rows):
             shown = ", ".join(held[:12]) + (f" and {len(held) - 12} more" if len(held) > 12 else "")
-            return (f"Results.where: no row has {k}={v!r} ({k} holds: {shown or 'nothing: no rows'}); "
+            hint = did_you_mean(v, held)
+            return (f"Results.where: no row has {k}={v!r} ({hint}{k} holds: {shown or 'nothing: no rows'}); "
                     "allow_empty=True returns the empty result")
     return (f"Results.where: each of {', '.join(f'{k}={v!r}' for k, v in kw.items())} matches rows, but no row "
             "matches them all; allow_empty=True returns the empty result")

@@ -305,6 +305,8 @@ class Runner:
         data = scene.data
         pts = pipeline.points_np(setup.p) if setup.p is not None else np.zeros((0, 3))
         view = pipeline.make_view(setup.light, m.resolution, pts, data.bbox, m.view, m.cascade, data.sensor, data.scale)
+        if setup.light.shape == "emitter":      # SMRT's ray targets: the luminaire's triangles, which need the scene
+            view.light_surface = pipeline.area_geometry(setup.light, data.scene)
         if m.cascade is None:
             light.views[key] = view
         return view

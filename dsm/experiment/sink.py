@@ -64,6 +64,11 @@ class Sink:
             folder = self.folder(ident)
             cascade_files.write_index_image(folder / f"{ident['case']}_cascade.png", ctx.setup.pixels, faces,
                                             *ctx.image_size)
+        elif self.files and ctx.view.virtual and ctx.receivers.get(ident["format"]) is not None:
+            # a spot or point light's virtual map (no per-cascade rows): each receiver's level by its face
+            faces = np.asarray(ctx.receivers[ident["format"]].face.numpy(), int)
+            virtual_files.write_level_image(self.folder(ident) / f"{ident['case']}_level.png", ctx.setup.pixels,
+                                            ctx.view.level_of_face(faces), *ctx.image_size)
         self._images(ctx, ident, result)
 
     def folder(self, ident: dict) -> Path:

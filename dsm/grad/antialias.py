@@ -40,6 +40,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..scenes.spawn import NO_SHAPE
+from .light import positional
 
 # the four neighbours: (du, dv)
 DIRECTIONS = ((1, 0), (-1, 0), (0, 1), (0, -1))
@@ -83,7 +84,7 @@ def _faces_light(corners, light):
     """Whether the triangle (its winding normal) faces the light."""
     p0, p1, p2 = corners
     n = dr.cross(p1 - p0, p2 - p0)
-    toward = (p0 + p1 + p2) / 3.0 - light.position if light.kind in ("point", "area") else light.direction
+    toward = (p0 + p1 + p2) / 3.0 - light.position if positional(light) else light.direction
     return dr.dot(n, toward) < 0
 
 
@@ -144,7 +145,7 @@ def _near_silhouette(view, triangles, light, shape, tri, c0, c1):
 
 def edge_weights(amap, triangles, light) -> EdgeWeights:
     """The antialiasing weights of an attached map (``amap``: dsm.grad.build.AttachedMap); ``triangles``:
-    per shape index, (flat vertex buffer, faces); ``light``: the LightState (facing of triangles)."""
+    per shape index, (flat vertex buffer, faces); ``light``: the kit's LightSpec, attached (facing of triangles)."""
     smap, view = amap.smap, amap.smap.view
     R = view.resolution
     idx = dr.arange(mi.UInt32, R * R)

@@ -8,7 +8,7 @@ to be undefined, never given a winner.
 from __future__ import annotations
 
 from ..report.csv_table import as_number
-from ..report.labels import number_text
+from ..core.labels import number_text
 from .equal_error import BELOW, DISAGREES, NEVER, REACHED, UNDEFINED
 
 # why a time ratio is undefined, by equal_error.csv's status

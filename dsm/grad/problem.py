@@ -19,13 +19,19 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from .. import lights
+from ..lights import area_surface
 from ..maps.receiver import Receiver
-from . import antialias, area, build, techniques
+from ..truth import area as truth_area
+from ..truth import reference as truth_reference
+from . import antialias, build, techniques
+from . import light as lightmod
 from .scene import GradScene
 from .views import make_view
 
 
 JITTER_SEED = 7
+LIGHT_SEED = 5             # an area light's samples in the exact image (the supersampled reference draws its own)
 
 
 @dataclass
@@ -158,21 +164,17 @@ class Problem:
         N = self.spec.image_resolution
         return self.exact_at(values, self.p_world).reshape(N, N)
 
-    def exact_at(self, values: dict, p_world, light_seed: int = area.SEED) -> np.ndarray:
-        """The exact visibility (numpy) at ground points ``p_world`` (mi.Point3f) at ``values``: 0 or 1 under a
-        point or directional light, the visible fraction of an area light (its samples seeded by ``light_seed``)."""
-        vals = self._dr_values(values, ())
-        light = self.scene.apply(vals)
-        spec = self.spec
-        if light.kind == "area":
-            return area.visible_fraction(self.scene.scene, light.position, spec.light_size, p_world,
-                                         spec.light_samples, light_seed, area.LIFT * spec.window)
-        lift = mi.Vector3f(0.0, 0.0, area.LIFT * self.spec.window)    # off the ground, far below any gap
-        o = p_world + lift
-        if light.kind == "point":
-            d = light.position - o
-            ray = mi.Ray3f(o, dr.normalize(d), dr.norm(d) * (1.0 - 1e-6))
-        else:
-            ray = mi.Ray3f(o, -light.direction)
-        hit = self.scene.scene.ray_test(ray)
-        return np.where(hit.numpy(), 0.0, 1.0)
+    def exact_at(self, values: dict, p_world, light_seed: int = LIGHT_SEED) -> np.ndarray:
+        """The exact visibility (numpy) at ground points ``p_world`` (mi.Point3f) at ``values``, the kit's:
+        one shadow ray per receiver (dsm.truth.reference) under a hard light, 0 or 1; under an area light
+        the irradiance-weighted visible fraction (dsm.truth.area.irradiance_fraction), its samples keyed by
+        ``light_seed``."""
+        self.scene.apply(self._dr_values(values, ()))
+        light = lightmod.floats(self.scene.nominal_light, values)
+        si = self.scene.ground_interactions(p_world)
+        scene, magnitude = self.scene.scene, self.scene.magnitude
+        if lights.is_soft(light):
+            return truth_area.irradiance_fraction(scene, si, si.n, area_surface.geometry(light),
+                                                  self.spec.light_samples, light_seed, magnitude)
+        visible, _ = truth_reference.visibility(scene, si, light, magnitude)
+        return np.where(visible.numpy(), 1.0, 0.0)

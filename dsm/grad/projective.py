@@ -4,9 +4,10 @@
 Differentiable Rendering of Geometry", 2023) differentiate the rendered image through visibility
 by sampling silhouette edges. The test bed's scene is rendered as Mitsuba sees it: the same
 ground and occluder meshes (the occluder's vertex buffer the same expression of the parameters,
-:meth:`GradScene.vertex_positions`), a diffuse ground, the point light (intensity 1) or the
-directional light, and an orthographic camera looking straight down over [-window, window]^2 at
-``image_resolution``^2 pixels, direct light only (``max_depth`` 2). V per pixel is the rendered radiance over the radiance of the
+:meth:`GradScene.vertex_positions`), a diffuse ground, the light (the kit's LightSpec as Mitsuba's
+emitter of strength 1, :func:`dsm.lights.emitter`: the point light a spot with no
+falloff inside its cone) and an orthographic camera looking straight down over [-window, window]^2
+at ``image_resolution``^2 pixels, direct light only (``max_depth`` 2). V per pixel is the rendered radiance over the radiance of the
 ground without the occluder (one more render at the same seed: the same pixel samples), so the
 occluder's parameters reach the loss only through I: d loss / dp from the forward-mode tangent
 of the image (``dr.forward`` through ``mi.render``), summed in float64. A light's parameters also
@@ -26,7 +27,9 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from .. import lights
 from ..scenes.geometry import make_mesh, quad
+from . import light as lightmod
 from .scene import GROUND_HALF, occluder_geometry
 
 OCCLUDER_PARAMS = ("occluder_z", "occluder_x", "corner_z")
@@ -61,19 +64,6 @@ class ProjectiveResult:
         return float(np.std(self.grads, ddof=1) / math.sqrt(n)) if n > 1 else 0.0
 
 
-def _emitter(spec) -> dict:
-    if spec.light == "area":            # Mitsuba's rectangle spans [-1, 1]^2 facing +z: scaled, turned to face down
-        to_world = (mi.ScalarTransform4f().translate([0.0, 0.0, spec.light_height])
-                    .scale([spec.light_size / 2.0, spec.light_size / 2.0, 1.0]).rotate([1.0, 0.0, 0.0], 180.0))
-        return {"type": "rectangle", "to_world": to_world,
-                "emitter": {"type": "area", "radiance": {"type": "rgb", "value": 1.0}}}
-    if spec.light == "point":
-        return {"type": "point", "position": [0.0, 0.0, spec.light_height], "intensity": {"type": "rgb", "value": 1.0}}
-    a = math.radians(spec.light_angle)
-    return {"type": "directional", "direction": [math.sin(a), 0.0, -math.cos(a)],
-            "irradiance": {"type": "rgb", "value": 1.0}}
-
-
 def scene_dict(spec, integrator: str, with_occluder: bool = True) -> dict:
     """The test bed as a Mitsuba scene dict: ground, occluder, light, a camera looking down, ``integrator``."""
     half = GROUND_HALF * spec.window
@@ -87,7 +77,7 @@ def scene_dict(spec, integrator: str, with_occluder: bool = True) -> dict:
                     "film": {"type": "hdrfilm", "width": N, "height": N, "rfilter": {"type": "box"},
                              "pixel_format": "rgb", "sample_border": True},
                     "sampler": {"type": "independent"}},
-         "light": _emitter(spec), "ground": make_mesh("ground", gv, gf)}
+         "light": lights.emitter(lightmod.nominal(spec)), "ground": make_mesh("ground", gv, gf)}
     if with_occluder:
         ov, of = occluder_geometry(spec)
         d["occluder"] = make_mesh("occluder", ov, of)

@@ -10,8 +10,8 @@ two: the same difference at step s / 2, and at step s over a second seed of the 
 reported error is the larger change. The per-pixel image of the difference is the reference of
 a technique's per-pixel tangent (cosine similarity).
 
-Under an area light a receiver's exact V is the visible fraction of the light (:mod:`.area`), from
-stratified light samples drawn per receiver and seed: the same samples at p + s and p - s (common
+Under an area light a receiver's exact V is the irradiance-weighted visible fraction of the light
+(:func:`dsm.truth.area.irradiance_fraction`), from stratified light samples keyed by the receiver and seed: the same samples at p + s and p - s (common
 random numbers), and a second seed draws both new receivers and new light samples.
 
 Each difference also keeps its per-pixel loss image (the pixel's receivers' part of the loss's

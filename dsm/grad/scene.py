@@ -8,26 +8,15 @@ hit on its triangle with those attached vertices (the map's depths carry the gra
 """
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
-
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
 from ..core.types import ConfigError
 from ..scenes.geometry import box, make_mesh, quad
+from . import light as lightmod
 
 GROUND_HALF = 8.0          # the ground's half side, in units of the image window
-
-
-@dataclass
-class LightState:
-    """The light as Dr.Jit values (attached where a parameter is): position (point; an area light's centre)
-    or travel direction (directional)."""
-    kind: str
-    position: object = None       # mi.Point3f, world (point light; the area light's centre)
-    direction: object = None      # mi.Vector3f, unit, the direction light travels (directional)
 
 
 def occluder_geometry(spec) -> tuple[np.ndarray, np.ndarray]:
@@ -67,6 +56,7 @@ class GradScene:
 
     def __init__(self, spec):
         self.spec = spec
+        self.nominal_light = lightmod.nominal(spec)         # the kit's LightSpec, from the light registry
         half = GROUND_HALF * spec.window
         gv, gf = quad([0.0, 0.0, 0.0], [half, 0.0, 0.0], [0.0, half, 0.0])
         ov, of = occluder_geometry(spec)
@@ -87,20 +77,27 @@ class GradScene:
         pos = pos + dr.select(self._is_x, values["occluder_x"], 0.0)
         return pos + dr.select(self._corner_z, values["corner_z"], 0.0)
 
-    def apply(self, values: dict) -> LightState:
-        """Move the occluder to parameter ``values`` (rebuilding the scene) and return the light there."""
+    def apply(self, values: dict):
+        """Move the occluder to parameter ``values`` (rebuilding the scene) and return the light there (the
+        kit's LightSpec, its position or direction attached: dsm.grad.light.at)."""
         self.params["occluder.vertex_positions"] = self.vertex_positions(values)
         self.params.update()
-        return self.light(values)
+        return lightmod.at(self.nominal_light, values)
 
-    def light(self, values: dict) -> LightState:
-        """The light at parameter ``values``: a point (or a square's centre) straight above, or a direction
-        tilted toward +x."""
-        if self.spec.light in ("point", "area"):
-            zero = dr.zeros(mi.Float, 1)
-            return LightState(self.spec.light, position=mi.Point3f(values["light_x"], zero, values["light_height"]))
-        a = values["light_angle"] * (math.pi / 180.0)
-        return LightState("directional", direction=mi.Vector3f(dr.sin(a), dr.zeros(mi.Float, 1), -dr.cos(a)))
+    @property
+    def magnitude(self) -> float:
+        """The scene's largest absolute coordinate (the spawn offsets' extent for shapes that are not meshes)."""
+        return float(GROUND_HALF * self.spec.window)
+
+    def ground_interactions(self, p_world):
+        """Surface interactions on the ground at points ``p_world`` (on z = 0; normal +z), as the kit's
+        exact side reads a receiver (dsm.truth: the spawn offset from the ground's triangle)."""
+        n = dr.width(p_world)
+        si = dr.zeros(mi.SurfaceInteraction3f, n)
+        si.p = mi.Point3f(p_world)
+        si.n = dr.zeros(mi.Normal3f, n) + mi.Normal3f(0.0, 0.0, 1.0)
+        si.shape = mi.ShapePtr(self.scene.shapes()[self.shape_index("ground")])
+        return si
 
     def shape_index(self, name: str) -> int:
         """The index into ``scene.shapes()`` of shape ``name``."""

@@ -5,7 +5,7 @@ key and the valid choices, before any work. The scene is the kit's gradient test
 plate (or a box) of side ``occluder_size`` at height ``occluder_height`` over a ground at z = 0,
 lit by a point light straight above at ``light_height`` or by a directional light tilted by
 ``light_angle`` degrees from the vertical toward +x, or by a square area light of side ``light_size``
-facing down at ``light_height`` (:mod:`dsm.grad.area`). The image is the ground seen from above:
+facing down at ``light_height`` (its truth: :func:`dsm.truth.area.irradiance_fraction`). The image is the ground seen from above:
 ``image_resolution``^2 receivers over [-window, window]^2, one per pixel: at a seeded random point of
 the pixel (``image_jitter``, the default) or at its centre.
 """
@@ -32,7 +32,7 @@ PARAMS = {
 }
 SCENES = ("plate", "box", "mesh")
 MESH_SUFFIXES = (".ply", ".obj")
-LIGHTS = ("point", "directional", "area")
+LIGHTS = tuple(support.LIGHTS.values())     # gradient.light: the kit light types dsm grad differentiates
 LOSSES = ("shadow_area", "shadow_moment_x", "l2")
 # the unit of each loss, given the world unit of length
 LOSS_UNITS = {"shadow_area": "world^2", "shadow_moment_x": "world^3", "l2": "1 (mean over pixels)"}
@@ -292,7 +292,8 @@ def _mesh(g: dict, source: str, scene: str) -> str:
         raise ConfigError(source, "gradient.mesh", f"scene = \"mesh\" needs a PLY or OBJ file, got {raw!r}")
     path = Path(raw) if Path(raw).is_absolute() else Path(source).parent / raw
     if path.suffix.lower() not in MESH_SUFFIXES:
-        raise ConfigError(source, "gradient.mesh", f"unknown file type {path.suffix!r}", MESH_SUFFIXES)
+        raise ConfigError(source, "gradient.mesh", f"unknown file type {path.suffix!r}", MESH_SUFFIXES,
+                          got=path.suffix)
     if not path.is_file():
         raise ConfigError(source, "gradient.mesh", f"no such file {str(path)!r}")
     return str(path.resolve())

@@ -8,14 +8,11 @@ docs/howto/add_a_light.md, a new map kind or a new filter cannot go without a wo
 from __future__ import annotations
 
 # kit light type -> gradient.light that differentiates it
-LIGHTS = {"directional": "directional", "area": "area"}
+LIGHTS = {"spot": "point", "directional": "directional", "area": "area"}
 # kit light type -> why dsm grad has no gradient for it
 LIGHTS_WITHOUT = {
     "point": "its cube and paraboloid views are not differentiated (a receiver's face is a step in its "
-             "direction); gradient.light = \"point\" is a point light straight above with one perspective map "
-             "looking down",
-    "spot": "its axis and cone are no parameter of dsm grad; a spot straight down over the window is "
-            "gradient.light = \"point\"'s perspective map",
+             "direction); gradient.light = \"point\" is the kit's spot straight down, one perspective map",
     "scene": "its emitters are the scene file's: dsm grad builds its own scene, with no file's light to move",
 }
 # filters of the depth map that dsm grad differentiates (its techniques beside the map kinds)
@@ -26,4 +23,6 @@ FILTERS_WITHOUT = {
                      "a gradient of zero as nearest's",
     "pcf_wide": "its K x K taps are nearest texels: a step in the receiver's map position, a gradient of zero "
                 "as nearest's",
+    "smrt": "its rays' samples are nearest texels along each ray (dsm.maps.smrt): a step in the samples' map "
+            "positions, a gradient of zero as nearest's",
 }

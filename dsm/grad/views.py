@@ -21,8 +21,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..maps.views import OrthographicView, PerspectiveView, light_frame
-
-MARGIN = 1.15              # the map's square over the image window's (filter taps at the border read real texels)
+from .light import MARGIN, positional
 
 
 def _window_corners(spec) -> np.ndarray:
@@ -68,9 +67,9 @@ def directional_view(spec, light, nominal_direction):
 
 
 def make_view(spec, light, nominal=None):
-    """The attached view of ``light`` (a LightState); ``nominal``: the light's parameter values the
-    view is fitted at (a directional light's angle), default the spec's."""
-    if light.kind in ("point", "area"):          # an area light's map is rendered from its centre
+    """The attached view of ``light`` (the kit's LightSpec, attached: dsm.grad.light.at); ``nominal``: the
+    light's parameter values the view is fitted at (a directional light's angle), default the spec's."""
+    if positional(light):          # a spot's perspective map; an area light's is rendered from its centre
         return point_view(spec, light)
     angle = math.radians(spec.light_angle if nominal is None else nominal)
     return directional_view(spec, light, (math.sin(angle), 0.0, -math.cos(angle)))

@@ -8,6 +8,7 @@ dsm.case.evaluate).
 """
 from . import all as all_rule, band, classifier, oracle
 from .base import Inputs, Rule, Selection
+from ..core.suggest import unknown
 
 REGISTRY = (classifier, band, oracle, all_rule)
 BY_NAME = {r.NAME: r for r in REGISTRY if isinstance(r, Rule)}
@@ -17,7 +18,7 @@ assert len(BY_NAME) == len(REGISTRY), "a hybrid rule module does not meet the Ru
 def get(name: str):
     """The rule module named ``name``; KeyError listing the valid names."""
     if name not in BY_NAME:
-        raise KeyError(f"unknown hybrid rule {name!r} (valid: {', '.join(BY_NAME)})")
+        raise KeyError(unknown("hybrid rule", name, BY_NAME))
     return BY_NAME[name]
 
 

@@ -25,6 +25,7 @@ from .. import lights
 from ..core.types import HYBRID_ORIGINS
 from ..scenes import spawn
 from ..truth import reference
+from ..core.suggest import unknown
 
 EPSILON = 1e-4          # world units: the absolute rule's offset (a unit-scale scene's usual choice)
 WB_ORIGIN = 1.0 / 32.0            # Wächter & Binder: below this |p_i| the offset is a float, not ulps
@@ -77,7 +78,7 @@ def rays(si, light, magnitude: float, origin: str) -> mi.Ray3f:
         return _ray_from(wachter_binder(si.p, n_out), d, target)
     if origin == "epsilon":
         return _ray_from(si.p + n_out * EPSILON, d, target)
-    raise ValueError(f"unknown origin rule {origin!r} (valid: {', '.join(ORIGINS)})")
+    raise ValueError(unknown("origin rule", origin, ORIGINS))
 
 
 def shortened(ray: mi.Ray3f, t_min, t_max) -> mi.Ray3f:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from . import area, directional, point, scene, spot
 from .base import LightType, unit_direction
+from ..core.suggest import unknown
 
 REGISTRY = {m.TYPE: m for m in (scene, directional, spot, point, area)}
 TYPES = tuple(REGISTRY)
@@ -22,7 +23,12 @@ def get(light_type: str):
     try:
         return REGISTRY[light_type]
     except KeyError:
-        raise ValueError(f"unknown light type {light_type!r} (valid: {', '.join(TYPES)})") from None
+        raise ValueError(unknown("light type", light_type, TYPES)) from None
+
+
+def emitter(light, strength: float = 1.0) -> dict:
+    """``light`` (a LightSpec) as a Mitsuba emitter dict of ``strength``, from its type's module."""
+    return get(light.type).emitter(light, strength)
 
 
 def is_soft(light) -> bool:

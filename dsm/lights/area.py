@@ -2,9 +2,13 @@
 cast from its centre and its exact visibility a Monte Carlo estimate."""
 from __future__ import annotations
 
+import math
+
+import numpy as np
+
 from . import area_surface
 from ..core.types import AREA_SHAPES, ConfigError, LightSpec, as_list, check_keys, choice, number, vec3
-from .base import unit_direction
+from .base import rgb, unit_direction
 
 TYPE = "area"
 POSITIONAL = True
@@ -73,3 +77,29 @@ def views(point_views: tuple, shape: str) -> tuple:
 def make_view(light, R, receivers_world, bbox, kind, cascade, sensor, scale):
     """The view from the luminaire's centre (:func:`dsm.lights.area_surface.make_view`)."""
     return area_surface.make_view(light, R, receivers_world, bbox, kind)
+
+
+def emitter(light, strength: float) -> dict:
+    """The luminaire as a Mitsuba shape carrying an area emitter of radiance ``strength``: a rectangle or
+    a disk (Mitsuba's face +z, turned to the light's normal; one-sided, as the reference samples it) or
+    a sphere; an emitter light is the scene's own already."""
+    import mitsuba as mi
+    if light.shape == "emitter":
+        raise ValueError("an area light of shape 'emitter' is the scene's own emitters and has no emitter of its own")
+    pos = [float(c) for c in light.position]
+    out = {"emitter": {"type": "area", "radiance": rgb(strength)}}
+    if light.shape == "sphere":
+        return {"type": "sphere", "center": pos, "radius": 0.5 * float(light.size[0]), **out}
+    # a side or [width, height]; a disk's diameter (Mitsuba's disk has radius 1, its rectangle half side 1)
+    w, h = (light.size * 2)[:2] if len(light.size) == 1 else light.size[:2]
+    turn = _turn_from_z(light.direction)
+    to_world = mi.ScalarTransform4f().translate(pos).rotate(*turn).scale([w / 2.0, h / 2.0, 1.0])
+    return {"type": light.shape, "to_world": to_world, **out}
+
+
+def _turn_from_z(direction) -> tuple:
+    """(axis, degrees) of the rotation taking +z to ``direction`` (a half turn about x for -z)."""
+    z, d = np.array([0.0, 0.0, 1.0]), np.asarray(direction, float) / np.linalg.norm(direction)
+    axis = np.cross(z, d)
+    degrees = math.degrees(math.atan2(float(np.linalg.norm(axis)), float(z @ d)))
+    return (list(axis / np.linalg.norm(axis)) if np.linalg.norm(axis) > 1e-12 else [1.0, 0.0, 0.0]), degrees

@@ -13,6 +13,7 @@ import drjit as dr
 from ..core.types import AREA_SHAPES as SHAPES
 from ..maps.views import CubeView, ParaboloidView, PerspectiveView, light_frame
 from ..scenes.emitters import mesh_triangles
+from ..core.suggest import unknown
 
 PERSPECTIVE_MAX_DEG = 70.0     # beyond this half angle a one-sided light's map is a paraboloid
 
@@ -127,7 +128,7 @@ def geometry(light, scene=None) -> Geometry:
         area = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
         return Geometry("emitter", c, nrm, ex, ey, (), tris, mi.DiscreteDistribution(area.astype(np.float32)),
                         tuple(light.emitter_shapes))
-    raise ValueError(f"unknown area light shape {light.shape!r} (valid: {', '.join(SHAPES)})")
+    raise ValueError(unknown("area light shape", light.shape, SHAPES))
 
 
 def light_size(light) -> float:
@@ -140,8 +141,9 @@ def make_view(light, R, receivers_world, bbox, kind=None):
     """The map of an area light, cast from its centre: for a one-sided light a perspective view
     along its normal whose field of view is fitted to the receivers (``kind`` "fitted"), or a
     paraboloid around the normal when they span more than PERSPECTIVE_MAX_DEG; for a sphere the
-    point-light view ``kind``. The view carries ``light_size`` (for PCSS) and ``exclude`` (the
-    luminaire's own shapes, which its map steps over)."""
+    point-light view ``kind``. The view carries ``light_size`` (for PCSS), ``light_surface`` (SMRT's
+    ray targets; an emitter light's is given by the runner, which has the scene) and ``exclude`` (the luminaire's own shapes, which its map
+    steps over)."""
     c = np.asarray(light.position, float)
     nrm = unit(light.direction if light.direction is not None else (0.0, 0.0, -1.0))
     if light.shape == "sphere":
@@ -150,7 +152,7 @@ def make_view(light, R, receivers_world, bbox, kind=None):
         elif kind in ("paraboloid", "dual_paraboloid"):
             view = ParaboloidView(c, nrm, bbox, R, dual=kind == "dual_paraboloid")
         else:
-            raise ValueError(f"unknown sphere-light view {kind!r} (valid: paraboloid, dual_paraboloid, cube)")
+            raise ValueError(unknown("sphere-light view", kind, ("paraboloid", "dual_paraboloid", "cube")))
     else:
         pts = np.asarray(receivers_world, float).reshape(-1, 3) - c
         dist = np.linalg.norm(pts, axis=1)
@@ -163,5 +165,8 @@ def make_view(light, R, receivers_world, bbox, kind=None):
         else:
             view = ParaboloidView(c, nrm, bbox, R, dual=False)
     view.light_size = light_size(light)
+    # SMRT's rays aim at points of the surface; an emitter's triangles are the scene's, not at hand here
+    # (the runner gives its view the emitter's surface: dsm.experiment.runner)
+    view.light_surface = None if light.shape == "emitter" else geometry(light)
     view.exclude = tuple(light.emitter_shapes)
     return view

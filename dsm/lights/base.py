@@ -5,7 +5,8 @@ point: its shadow rays end there and a receiver may lie outside its domain; a di
 reaches everywhere), ``MOTION`` (the ``[[motion]]`` light paths it follows), ``parse(table,
 source, where) -> LightSpec`` (its ``[[light]]`` table, keys checked), ``views(point_views,
 shape) -> tuple`` (the view kinds the plan gives it) and ``make_view(light, R, receivers_world,
-bbox, kind, cascade, sensor, scale)``; ``SOFT``: whether its exact visibility is a visible fraction
+bbox, kind, cascade, sensor, scale)``, ``emitter(light, strength)`` (the light as a Mitsuba emitter
+dict, for a renderer's image of the same scene: dsm grad --compare); ``SOFT``: whether its exact visibility is a visible fraction
 (dsm.truth.area's Monte Carlo reference) rather than one shadow ray; ``PUNCTUAL_VIEWS`` the view
 kinds a ``[map.virtual]`` of rule punctual replaces (dsm.maps.virtual_punctual). A new light type is a module here and a line in
 ``lights/__init__.py``'s registry.
@@ -35,6 +36,14 @@ class LightType(Protocol):
 
     def make_view(self, light, R, receivers_world, bbox, kind, cascade, sensor, scale) -> Any:
         """The light's view of kind ``kind`` at resolution R."""
+
+    def emitter(self, light, strength: float) -> dict:
+        """The light as a Mitsuba emitter dict of ``strength`` (an area light's: a shape carrying one)."""
+
+
+def rgb(strength: float) -> dict:
+    """A Mitsuba RGB value of ``strength`` in every channel (an emitter's intensity, irradiance or radiance)."""
+    return {"type": "rgb", "value": float(strength)}
 
 
 def unit_direction(raw, source: str, key: str) -> tuple:

@@ -4,7 +4,7 @@ from __future__ import annotations
 from ..maps import cascades, virtual
 from ..core.types import LightSpec, check_keys
 from ..maps.views import OrthographicView
-from .base import required, unit_direction
+from .base import required, rgb, unit_direction
 
 TYPE = "directional"
 POSITIONAL = False              # every receiver is in its domain; shadow rays go along -direction
@@ -33,3 +33,8 @@ def make_view(light, R, receivers_world, bbox, kind, cascade, sensor, scale):
     if cascade is not None:
         return cascades.make_view(light, cascade, R, receivers_world, bbox, sensor, scale)
     return OrthographicView(light.direction, receivers_world, bbox, R)
+
+
+def emitter(light, strength: float) -> dict:
+    """Mitsuba's directional emitter along the light's direction, irradiance ``strength``."""
+    return {"type": "directional", "direction": [float(c) for c in light.direction], "irradiance": rgb(strength)}

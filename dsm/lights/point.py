@@ -5,7 +5,8 @@ from ..core.types import LightSpec, check_keys, vec3
 from ..maps import virtual_punctual
 from ..maps.vsv import EpipolarView, camera_pose
 from ..maps.views import CubeView, ParaboloidView
-from .base import required, unit_direction
+from .base import required, rgb, unit_direction
+from ..core.suggest import unknown
 
 TYPE = "point"
 POSITIONAL = True
@@ -40,4 +41,9 @@ def make_view(light, R, receivers_world, bbox, kind, cascade, sensor, scale):
     if kind == "vsv":
         eye, up = camera_pose(sensor)
         return EpipolarView(light.position, eye, up, receivers_world, bbox, R)
-    raise ValueError(f"unknown point-light view {kind!r} (valid: paraboloid, dual_paraboloid, cube, vsv)")
+    raise ValueError(unknown("point-light view", kind, ("paraboloid", "dual_paraboloid", "cube", "vsv")))
+
+
+def emitter(light, strength: float) -> dict:
+    """Mitsuba's point emitter at the light's position, intensity ``strength``."""
+    return {"type": "point", "position": [float(c) for c in light.position], "intensity": rgb(strength)}

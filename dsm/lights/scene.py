@@ -25,3 +25,8 @@ def views(point_views: tuple, shape: str) -> tuple:
 def make_view(light, R, receivers_world, bbox, kind, cascade, sensor, scale):
     """Never called: the scene's lights stand in for this entry before any view is made."""
     raise ValueError("a 'scene' light stands for the scene's own lights and has no view of its own")
+
+
+def emitter(light, strength: float):
+    """Never called: the scene's lights are its own emitters already."""
+    raise ValueError("a 'scene' light stands for the scene's own emitters and has no emitter of its own")

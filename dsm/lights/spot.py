@@ -7,7 +7,7 @@ from ..core.types import ConfigError, LightSpec, check_keys, number, vec3
 from ..maps import virtual_punctual
 from ..maps.vsv import EpipolarView, camera_pose
 from ..maps.views import PerspectiveView
-from .base import required, unit_direction
+from .base import required, rgb, unit_direction
 
 TYPE = "spot"
 POSITIONAL = True
@@ -48,3 +48,15 @@ def make_view(light, R, receivers_world, bbox, kind, cascade, sensor, scale):
         return view
     eye, up = camera_pose(sensor)
     return EpipolarView(light.position, eye, up, receivers_world, bbox, R, domain=view.inside)
+
+
+def emitter(light, strength: float) -> dict:
+    """Mitsuba's spot emitter along the light's axis, intensity ``strength``, with no falloff inside its
+    cutoff (``beam_width`` = ``cutoff_angle``): a point light within its cone, as the map reads it."""
+    import mitsuba as mi
+    pos = np.asarray(light.position, float)
+    axis = np.asarray(light.direction if light.direction is not None else np.subtract(light.target, pos), float)
+    up = [0.0, 1.0, 0.0] if abs(axis[1]) < 0.9 * np.linalg.norm(axis) else [1.0, 0.0, 0.0]
+    to_world = mi.ScalarTransform4f().look_at(origin=list(pos), target=list(pos + axis), up=up)
+    return {"type": "spot", "to_world": to_world, "cutoff_angle": float(light.cutoff),
+            "beam_width": float(light.cutoff), "intensity": rgb(strength)}

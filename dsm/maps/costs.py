@@ -5,7 +5,7 @@ and the case (dsm.case.cost counts them on the map as built); dsm.case.cost says
 """
 from __future__ import annotations
 
-from . import lookup as map_lookup
+from . import lookup as map_lookup, smrt_presets as smrt
 
 # bytes per stored depth: a 24-bit depth occupies a 32-bit word on GPUs (D24_UNORM_S8_UINT, X8_D24)
 FORMAT_BYTES = {"float32": 4, "float16": 2, "unorm16": 2, "unorm24": 4, "ndc24": 4}
@@ -26,7 +26,8 @@ def moment_bytes(moments: int, fmt: str, mipmaps: bool) -> float:
 
 
 def filter_taps(filt: str) -> int | None:
-    """Taps per lookup of a depth filter whose count is fixed (None: pcss, counted as it runs)."""
+    """Taps per lookup of a depth filter whose count is fixed (None: pcss, counted as it runs; smrt:
+    rays x samples, every sample a tap)."""
     if filt in FIXED_TAPS:
         return FIXED_TAPS[filt]
     if filt == "pcf_wide" or filt.startswith("pcf_wide:"):
@@ -34,6 +35,8 @@ def filter_taps(filt: str) -> int | None:
         return k * k
     if filt == "pcss":
         return None
+    if smrt.is_smrt(filt):
+        return smrt.settings(filt).taps
     raise ValueError(f"unknown filter {filt!r}")
 
 

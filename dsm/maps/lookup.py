@@ -40,6 +40,7 @@ import mitsuba as mi
 from ..core.types import Length
 from ..scenes import spawn
 from .receiver import Receiver
+from ..core.suggest import unknown
 
 
 def lit(scheme, rx, tap, params):
@@ -152,7 +153,7 @@ def filter_taps(filt: str, rx: Receiver, seed: int = 7):
                 taps.append((rx.u_map + (a - 1.5) + (rng.next_float32() - 0.5),
                              rx.v_map + (b - 1.5) + (rng.next_float32() - 0.5), 1.0 / 16.0))
         return taps
-    raise ValueError(f"unknown filter {filt!r} (valid: nearest, pcf_bilinear, pcf_jitter4x4, pcf_wide[:K], pcss)")
+    raise ValueError(unknown("filter", filt, ("nearest", "pcf_bilinear", "pcf_jitter4x4", "pcf_wide[:K]", "pcss")))
 
 
 PCF_WIDE_DEFAULT = 5       # pcf_wide without :K

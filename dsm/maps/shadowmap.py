@@ -28,6 +28,7 @@ import numpy as np
 from ..scenes import spawn
 from ..scenes.spawn import COHERENT
 from ..core.types import CULLINGS
+from ..core.suggest import unknown as unknown_words, valid_words
 
 
 LAYERS = ("slope", "z2")   # optional attributes a scheme may need (besides z1 and shape)
@@ -297,7 +298,7 @@ def build(scene, view, needs, culling: str = "none", cull_modes=None, tile: int 
     """
     unknown = set(needs) - set(LAYERS)
     if unknown:
-        raise ValueError(f"unknown map attributes {sorted(unknown)} (valid: {', '.join(LAYERS)})")
+        raise ValueError(f"unknown map attributes {sorted(unknown)} ({valid_words(sorted(unknown)[0], LAYERS)})")
     if extents is None and is_layered(needs, cull_modes):
         extents = spawn.shape_extents(scene)        # once for every tile (callers pass them, once per scene)
     n = view.n_texels
@@ -332,7 +333,7 @@ def cull_modes_for(culling: str, closed: list) -> np.ndarray:
     table = {"none": (CULL_NONE, CULL_NONE), "back": (CULL_BACK, CULL_BACK), "front": (CULL_FRONT, CULL_FRONT),
              "back_closed": (CULL_BACK, CULL_NONE), "front_closed": (CULL_FRONT, CULL_NONE)}
     if culling not in table:
-        raise ValueError(f"unknown culling {culling!r} (valid: {', '.join(table)})")
+        raise ValueError(unknown_words("culling", culling, table))
     on_closed, on_open = table[culling]
     return np.array([on_closed if c else on_open for c in closed], np.uint32)
 

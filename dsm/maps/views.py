@@ -91,6 +91,8 @@ class View:
     cascaded = False            # one fit per cascade (dsm.maps.cascades: cascades, spec); built alone, never stacked
     blend = 0.0                 # the cascades' blend band (dsm.maps.cascades); 0: no blended lookup
     light_size = 0.0            # an area light's width, world, for PCSS (dsm.lights.area_surface); 0: none
+    light_surface = None        # an area light's surface (dsm.lights.area_surface.Geometry: sample, one_sided), SMRT's
+                                # ray targets (dsm.maps.smrt); None: a point, or a light whose surface the view lacks
     exclude = ()                # shapes the map steps over: an area light's own luminaire (dsm.lights.area_surface)
     nearest_scene_depth = 0.0   # the light's distance to the scene's bounds (spot and point views), ndc24's and PCSS's near
     virtual = False             # pages through a page table (dsm.maps.virtual)
@@ -210,6 +212,20 @@ class View:
         """What the map's texels depend on beyond the frame, near, far and resolution (float32
         arrays, in a fixed order; a moving camera's frames rebuild the map when they change)."""
         return []
+
+    def frame_signature_arrays(self) -> list:
+        """What every page of a paged view depends on beyond the frame, near, far and resolution (a page cache
+        keeps its pages while it holds, dsm.experiment.page_cache); elsewhere :meth:`signature_arrays`."""
+        return self.signature_arrays()
+
+    def page_keys(self) -> list:
+        """Per stored page of a paged view, what names its texels' rays beside :meth:`frame_signature_arrays`
+        (hashable; equal keys, equal rays); a view without pages has none."""
+        return []
+
+    def with_pages(self, pages) -> "View":
+        """A paged view holding only ``pages`` (rows of face, page x, page y) of its own: a view without pages has none."""
+        raise TypeError(f"a {self.kind} view has no pages (only a virtual map's view has)")
 
     def lanes(self, idx):
         """The view as lanes ``idx`` of a build see it: itself (a stacked view, dsm.maps.stacked, gathers its per-lane values)."""

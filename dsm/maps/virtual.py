@@ -29,6 +29,7 @@ one near and far (the scene's bounds along the light, with a margin), as the sin
 """
 from __future__ import annotations
 
+import copy
 import math
 import time
 
@@ -115,7 +116,7 @@ class VirtualView(View):
         if len(self.pages) > spec.max_pages:
             raise ValueError(f"the virtual shadow map tags {len(self.pages)} pages, more than its pool "
                              f"(map.virtual.max_pages = {spec.max_pages}): raise max_pages or lod_bias")
-        self._page_table()
+        self.build_page_table()
         self.fit_ms = (time.perf_counter() - t_start) * 1e3
 
     # ------------------------------------------------------------ set-up
@@ -157,7 +158,7 @@ class VirtualView(View):
                              f"unit_cm = {spec.unit_cm:g} set them): raise last_level (at most 60) or lower unit_cm")
         return np.zeros((1, 3), int)
 
-    def _page_table(self):
+    def build_page_table(self):
         """The physical page of each virtual page (NO_PAGE: not tagged) and each physical page's place."""
         S = self.pages_side
         table = np.full(self.cascades * S * S, NO_PAGE, np.uint32)
@@ -249,6 +250,20 @@ class VirtualView(View):
         return [np.asarray(self.extents, np.float32), np.asarray(self.rects, np.float32),
                 np.asarray(self.pages, np.float32).ravel()]
 
+    def frame_signature_arrays(self) -> list:
+        """Each level's width: a page's rays depend on it, on the frame (the first level's origin, the depth's)
+        and on its own level's rectangle, which :meth:`page_keys` names."""
+        return [np.asarray(self.extents, np.float32)]
+
+    def page_keys(self) -> list:
+        """Per tagged page: (face, page x, page y, its level's rectangle x0, y0, width): equal keys, equal rays
+        in views of equal :meth:`frame_signature_arrays` (a level panned with the camera names new pages)."""
+        return [(int(f), int(x), int(y), *self.rects[int(f)]) for f, x, y in self.pages]
+
+    def with_pages(self, pages) -> "VirtualView":
+        """This view holding only ``pages`` (rows of face, page x, page y, tagged here): its page table rebuilt."""
+        return pages_subset(self, pages)
+
     def texel_size(self, k: int) -> float:
         """World width of one texel of level face ``k`` (float64)."""
         return float(self.extents[k]) / self.resolution
@@ -320,3 +335,12 @@ def physical_texel_coords(view, idx):
     i = dr.gather(mi.UInt32, view.page_x, page) * view.P_u + rest % view.P_u
     j = dr.gather(mi.UInt32, view.page_y, page) * view.P_u + rest // view.P_u
     return face, mi.Float(i) + 0.5, mi.Float(j) + 0.5
+
+
+def pages_subset(view, pages):
+    """A copy of a paged ``view`` holding only ``pages`` (rows of face, page x, page y), its page table rebuilt: the
+    pages' texels cast from it are those of the whole view's cast (a texel's ray is its global texel's)."""
+    out = copy.copy(view)
+    out.pages = np.asarray(pages, int).reshape(-1, 3)
+    out.build_page_table()
+    return out

@@ -32,7 +32,7 @@ import numpy as np
 from ..core.types import VirtualSpec
 from ..scenes.camera import Camera
 from .views import CubeView, PerspectiveView, gnomonic_texel
-from .virtual import physical_texel_coords, tagged_pages
+from .virtual import pages_subset, physical_texel_coords, tagged_pages
 
 NO_PAGE = 0xFFFFFFFF
 
@@ -85,14 +85,14 @@ class PunctualPages:
         if len(self.pages) > self.spec.max_pages:
             raise ValueError(f"the virtual shadow map tags {len(self.pages)} pages, more than its pool "
                              f"(map.virtual.max_pages = {self.spec.max_pages}): raise max_pages or lod_bias")
-        self._page_table()
+        self.build_page_table()
 
     def _tag(self, pts: np.ndarray) -> np.ndarray:
         """The pages (face, page x, page y) the receivers ``pts`` inside the view tag: their level's
         page, and the neighbour across an edge within ``border`` of a page; sorted by face, row, column."""
         return tagged_pages(self, pts, lambda f: self.sides_np[f], self.spec.border)
 
-    def _page_table(self):
+    def build_page_table(self):
         """The physical page of each virtual page (NO_PAGE: not tagged) and each physical page's place."""
         table = np.full(self.page_table_entries, NO_PAGE, np.uint32)
         pg = self.pages
@@ -166,6 +166,18 @@ class PunctualPages:
     def signature_arrays(self) -> list:
         """The tagged pages (a moving camera rebuilds when they change)."""
         return [np.asarray(self.pages, np.float32).ravel()]
+
+    def frame_signature_arrays(self) -> list:
+        """Nothing beyond the frame: a page's rays depend on the light's frame, the cone and its face alone."""
+        return []
+
+    def page_keys(self) -> list:
+        """Per tagged page: (face, page x, page y): equal keys, equal rays in views of one frame."""
+        return [(int(f), int(x), int(y)) for f, x, y in self.pages]
+
+    def with_pages(self, pages):
+        """This view holding only ``pages`` (rows of face, page x, page y, tagged here): its page table rebuilt."""
+        return pages_subset(self, pages)
 
     def level_of_face(self, faces) -> np.ndarray:
         """The level of each face of ``faces`` (a point light's: of its cube face's levels)."""

@@ -15,6 +15,7 @@ from .base import (LOG_MAX, MOMENT_FORMATS, MapKind, build as build_map, fetch, 
                    supersampled_view)
 from ..maps.lookup import resolve
 from ..core.types import ConfigError
+from ..core.suggest import unknown
 
 REGISTRY = (vsm, esm, evsm, msm)
 _broken = [m.NAME for m in REGISTRY if not isinstance(m, MapKind)]
@@ -27,7 +28,7 @@ def get(name: str):
     for m in REGISTRY:
         if m.NAME == name:
             return m
-    raise KeyError(f"unknown map kind {name!r} (valid: {', '.join(NAMES)})")
+    raise KeyError(unknown("map kind", name, NAMES))
 
 
 def check(name: str, params, formats, source: str, where: str):
@@ -43,7 +44,8 @@ def check(name: str, params, formats, source: str, where: str):
             raise ConfigError(source, f"{where}.{f.name}", f"must be > {below} ({getattr(params, below)!r}), "
                               f"got {val!r}")
         if "choices" in f.metadata and val not in f.metadata["choices"]:
-            raise ConfigError(source, f"{where}.{f.name}", f"unknown value {val!r}", f.metadata["choices"])
+            raise ConfigError(source, f"{where}.{f.name}", f"unknown value {val!r}", f.metadata["choices"],
+                              got=val)
     log_max = get(name).log_max(params)
     for fmt in formats:
         if log_max is not None and fmt in LOG_MAX and log_max > LOG_MAX[fmt]:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-from . import labels
+from ..core import labels
 from .templates import Cell, Row, Table
 
 UNDEFINED = "undefined"

@@ -23,7 +23,7 @@ import numpy as np
 from ..truth import metrics
 from . import canvas, frontier
 from . import png
-from .labels import params_label
+from ..core.labels import params_label
 from .io import atomic
 
 LINTHRESH = 1e-4          # symlog: linear below this rate
@@ -335,10 +335,20 @@ def _handle_style(h) -> dict:
                 edge=edge[0] if len(edge) else "none")
 
 
+TITLE_GAP = 0.08          # inches between a figure's title and its panels' titles
+
+
 def _title(fig, text):
-    """The figure's title, wrapped to its width (a narrow figure would cut a long one)."""
+    """The figure's title, wrapped to its width (a narrow figure would cut a long one), the panels
+    lowered where its lines need the room (a wrapped title overlapped the panels' own titles)."""
     import textwrap
-    fig.suptitle("\n".join(textwrap.wrap(text, max(30, int(fig.get_figwidth() * 16)))), fontsize=TITLE_FONT)
+    lines = textwrap.wrap(text, max(30, int(fig.get_figwidth() * 16)))
+    fig.suptitle("\n".join(lines), fontsize=TITLE_FONT)
+    height = fig.get_figheight()
+    # suptitle's top at y = 0.98; a line is 1.2 font sizes; a panel's title its font and 4 points of pad
+    need = 0.02 * height + len(lines) * 1.2 * TITLE_FONT / 72 + (1.2 * LABEL_FONT + 4) / 72 + TITLE_GAP
+    if fig.subplotpars.top > 1 - need / height:
+        fig.subplots_adjust(top=1 - need / height)
 
 
 def _save(fig, path, points=None):

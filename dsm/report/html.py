@@ -17,10 +17,12 @@ import struct
 from pathlib import Path
 
 from ..truth import metrics
-from . import frontier, io as report, labels, summary
+from . import frontier, io as report, summary
+from ..core import labels
 from .figures import CLASSES_GIF_COMMENT, display_paths, frames_path, image_paths, points_file, slug
 from .sections import hybrid as hybrid_report
 from .sections import virtual as virtual_report
+from .sections import cache as cache_report
 from .templates import Cell, Row, Table, render
 
 CASE_COLUMNS = [("case", "case", "text"), ("scene", "scene", "text"), ("light", "light", "text"),
@@ -71,7 +73,7 @@ def _best(rows) -> dict:
     columns = [("scene", "text"), ("light", "text")] + [(f"R = {r}", "text") for r in resolutions]
     body = [Row([_cell(s), _cell(li)] + [_params_cell(summary.best_cell(cells.get(r))) for r in resolutions])
             for s, li, cells in pivot]
-    return {"note": summary.BEST_DEFINITION, "table": Table(columns, body)}
+    return {"note": summary.BEST_DEFINITION, "table": Table(columns, body, box="wide")}    # scrolls in its box
 
 
 def costs_view(points: list, empty: str) -> dict:
@@ -170,6 +172,10 @@ PLOT_KINDS = (
      "Each map's budget curves ([hybrid]): 0 rays is the map alone; a colour per scheme instance, a style per "
      "rule; the dotted oracle is the floor (the fewest rays for each error), a curve far right of it spends "
      "rays where the map was right."),
+    (cache_report.PLOT_PREFIX, "A cache's error against its update budget",
+     "Per motion case with moving casters, the ghost + missing rate its cache policy leaves against the fraction "
+     "of the map it re-casts per frame: none re-casts everything at no error; a policy lower and further left "
+     "saves more for less error."),
 )
 
 
@@ -266,6 +272,7 @@ def write_html(path: Path, rows: list, run: dict, derived: dict | None = None):
                   answer=labels.params_label(summary.answer(rows)) if rows else None,
                   best=_best(rows) if rows else None, summary=_summary(rows) if rows else None,
                   failed=_failed(run), cases=_cases(rows, out) if rows else None,
-                  virtual=virtual_report.html_table(rows), hybrid=hybrid_report.html_view(rows), plots=_plots(out, rows), facts=_facts(run))
+                  virtual=virtual_report.html_table(rows), cache=cache_report.html_table(rows, out),
+                  hybrid=hybrid_report.html_view(rows), plots=_plots(out, rows), facts=_facts(run))
     with report.atomic(path) as tmp:
         tmp.write_text(page, encoding="utf-8")

@@ -24,9 +24,10 @@ from .sections import cascades, motion
 from .sections import soft as soft_report
 from .sections import hybrid as hybrid_report
 from .sections import virtual as virtual_report
+from .sections import cache as cache_report
 
 PLOT_PREFIXES = ("vs_bias_", "vs_resolution_", "vs_texels_", "pareto_", "tradeoff_", "soft_", "cascades_", "flicker_",
-                 "hybrid_")
+                 "hybrid_", cache_report.PLOT_PREFIX)
 IMAGES_PER_JOB = 150
 
 
@@ -230,6 +231,9 @@ def write_report(out: Path, images=(), curves=None, plots: bool = True) -> dict:
     elif (out / "frontier.csv").is_file():      # one of rows no longer there: not this report's
         (out / "frontier.csv").unlink()
     virtual_report.write_table(out / "virtual.md", rows)
+    cache_report.write_table(out / "cache.md", rows)
+    if plots and rows:
+        cache_report.write_plots(out / "plots", rows)
     hybrid_report.write_table(out / "hybrid.md", rows)
     htmlpage.write_html(out / "report.html", rows, run, derived)
     t3 = time.perf_counter()

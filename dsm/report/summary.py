@@ -28,6 +28,7 @@ import numpy as np
 
 from ..truth.metrics import defined
 from . import frontier
+from ..core import labels
 
 SITUATION = ("scene", "light", "view", "resolution")
 
@@ -191,7 +192,8 @@ def summary_md(rows) -> list:
     extra = ", with " + " and ".join(multi) if multi else ""
     head = summary_columns(rows)
     split = has_leak_split(rows)          # the leak column only where the run has it: others unchanged
-    out = ["## Summary", "", f"**{answer(rows)}**", "",
+    shown = lambda text: labels.params_label(text, exact=True)     # as the console and report name a bias
+    out = ["## Summary", "", f"**{shown(answer(rows))}**", "",
            DEFINITIONS.format(extra=extra) + (LEAK_COLUMN_DEFINITION if split else ""), "",
            "| " + " | ".join(head) + " | cases | acne pooled | acne mean / median / max | peter-pan pooled | "
            "peter-pan mean / median / max | " + ("leak pooled | " if split else "") + "error pooled | "
@@ -200,7 +202,7 @@ def summary_md(rows) -> list:
     for s in per_instance(rows):
         trio = lambda t: f"{rate(s[t + '_mean'])} / {rate(s[t + '_median'])} / {rate(s[t + '_max'])}"
         leak = f"{rate(s['leak_pooled'])} | " if split else ""
-        out.append("| " + " | ".join(str(s[h]) for h in head) + f" | {s['cases']} | {rate(s['acne_pooled'])} | "
+        out.append("| " + " | ".join(shown(str(s[h])) for h in head) + f" | {s['cases']} | {rate(s['acne_pooled'])} | "
                    f"{trio('acne')} | {rate(s['peterpan_pooled'])} | {trio('peterpan')} | {leak}"
                    f"{rate(s['error_pooled'])} | {trio('error')} | {s['acne_undefined']} / "
                    f"{s['peterpan_undefined']} / {s['error_undefined']} | {_ms(s['build_ms'])} | "
@@ -308,7 +310,8 @@ def best_md(rows) -> list:
     out = ["| scene | light | " + " | ".join(f"R = {r}" for r in resolutions) + " |",
            "|---" * (2 + len(resolutions)) + "|"]
     for scene, light, cells in pivot:
-        out.append(f"| {scene} | {light} | " + " | ".join(best_cell(cells.get(r)) for r in resolutions) + " |")
+        out.append(f"| {scene} | {light} | " + " | ".join(labels.params_label(best_cell(cells.get(r)), exact=True)
+                                                            for r in resolutions) + " |")
     return out
 
 
@@ -325,8 +328,16 @@ def terminal_answer(rows, most: int = 12) -> list:
         return []
     best = best_per_light(rows)
     found = frontier.answers(frontier.points_from_rows(rows))
-    lines = frontier.answer_lines(found) + frontier.time_lines(found) + [answer(rows)] + [f"best for light {b['light']} at R = {b['resolution']}: {best_cell(b)}"
-                              for b in best[:most]]
+    lines = frontier.answer_lines(found) + frontier.time_lines(found) + [answer(rows)] + [
+        f"best for light {b['light']} {pooled_scenes(rows, b['light'])} at R = {b['resolution']}: {best_cell(b)}"
+        for b in best[:most]]
     if len(best) > most:
         lines.append(f"... and {len(best) - most} more lights and resolutions (table.md)")
-    return lines
+    # the report's labels (2^-24 range), each other number as the run wrote it: the console has no hover
+    return [labels.params_label(line, exact=True) for line in lines]
+
+
+def pooled_scenes(rows, light) -> str:
+    """What a per-light best pools: ``over 5 scenes``, or ``in plane_box`` where the light lights one."""
+    scenes = sorted({r["scene"] for r in rows if r["light"] == light})
+    return f"in {scenes[0]}" if len(scenes) == 1 else f"over {len(scenes)} scenes"

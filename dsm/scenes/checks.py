@@ -74,7 +74,7 @@ def check_loaded(spec, data):
     unknown = [n for n, _ in spec.closed if n not in data.shape_names]
     if unknown:
         raise ConfigError(src, f"{spec.where}.closed.{unknown[0]}", f"no shape named {unknown[0]!r} in {what}",
-                          data.shape_names)
+                          data.shape_names, got=unknown[0])
 
 
 def check_options(cfg, spec, sd):

@@ -89,7 +89,7 @@ def version_of(model: Model, path: Path, given, source: str, where: str) -> Vers
     names = [v.name for v in model.versions]
     if given is not None:
         if given not in names:
-            raise ConfigError(source, f"{where}.version", f"unknown {model.name} version {given!r}", names)
+            raise ConfigError(source, f"{where}.version", f"unknown {model.name} version {given!r}", names, got=given)
         return model.versions[names.index(given)]
     try:
         lo, hi = file_bounds(path)

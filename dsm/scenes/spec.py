@@ -26,7 +26,7 @@ def parse_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]
     if "builtin" in t:
         name = t["builtin"]
         if not isinstance(name, str) or name not in BUILTINS:
-            raise ConfigError(source, f"{where}.builtin", f"unknown scene {name!r}", list(BUILTINS))
+            raise ConfigError(source, f"{where}.builtin", f"unknown scene {name!r}", list(BUILTINS), got=name)
         specs = sweep_params(BUILTINS[name], t, source, where, skip=("builtin", "closed"))
         for p in specs:
             _check_builtin(name, p, source, where)
@@ -55,7 +55,8 @@ def parse_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]
     unknown = sorted(k for k in t if k not in {f.name for f in fields(FileParams)} | {"file", "closed", "optional"})
     if path.suffix.lower() == ".xml" and unknown:
         # an XML scene's valid keys, not a mesh file's (those it takes, it refuses below by name)
-        raise ConfigError(source, f"{where}.{unknown[0]}", "unknown key", ("file", "closed", "optional") + XML_KEYS)
+        raise ConfigError(source, f"{where}.{unknown[0]}", "unknown key", ("file", "closed", "optional") + XML_KEYS,
+                          got=unknown[0])
     specs = sweep_params(FileParams, t, source, where, skip=("file", "closed", "optional"))
     if not path.is_file():
         return [SceneSpec(file=path, params=p, label=_label(path.stem, p, FileParams()),
@@ -79,7 +80,7 @@ def _model_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec
     one, where there is none."""
     name = t["model"]
     if not isinstance(name, str) or name not in MODELS:
-        raise ConfigError(source, f"{where}.model", f"unknown model {name!r}", list(MODELS))
+        raise ConfigError(source, f"{where}.model", f"unknown model {name!r}", list(MODELS), got=name)
     if "builtin" in t or "optional" in t:
         key = "builtin" if "builtin" in t else "optional"
         raise ConfigError(source, f"{where}.{key}", f"a model's scene takes no {key} key (an absent copy is "
@@ -87,7 +88,8 @@ def _model_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec
     model = MODELS[name]
     names = [v.name for v in model.versions]
     if "version" in t and t["version"] not in names:          # a config mistake, with or without a copy
-        raise ConfigError(source, f"{where}.version", f"unknown {model.name} version {t['version']!r}", names)
+        raise ConfigError(source, f"{where}.version", f"unknown {model.name} version {t['version']!r}", names,
+                          got=t['version'])
     raw = t.get("file")
     if raw is not None and not isinstance(raw, str):
         raise ConfigError(source, f"{where}.file", f"expected a path string, got {raw!r}")

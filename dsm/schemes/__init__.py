@@ -31,6 +31,7 @@ assert not _broken, f"scheme modules not meeting the Scheme contract: {_broken}"
 
 # Engine presets: a named engine's default bias, measurable beside every scheme (per light type).
 from .presets import PRESETS, preset_for_light
+from ..core.suggest import unknown
 
 
 def get(name: str):
@@ -38,7 +39,7 @@ def get(name: str):
     for s in ALL:
         if s.NAME == name:
             return s
-    raise KeyError(f"unknown scheme {name!r} (valid: {', '.join(s.NAME for s in ALL)})")
+    raise KeyError(unknown("scheme", name, [s.NAME for s in ALL]))
 
 
 def reads_view(spec, view: str) -> bool:

@@ -18,6 +18,7 @@ import math
 from dataclasses import dataclass, field
 
 from ..core.types import Length, SchemeSpec, describe_params
+from ..core.suggest import valid_words
 
 LIGHT_TYPES = ("directional", "spot", "point")
 SQRT2 = math.sqrt(2.0)
@@ -171,7 +172,7 @@ def preset_for_light(scheme_spec: SchemeSpec, light_type: str) -> SchemeSpec:
     if light_type == "area":
         light_type = "spot"       # an area light's map is a perspective view from its centre, as engines cast it
     if light_type not in LIGHT_TYPES:
-        raise ValueError(f"light type {light_type!r} has no preset values (valid: {', '.join(LIGHT_TYPES)})")
+        raise ValueError(f"light type {light_type!r} has no preset values ({valid_words(light_type, LIGHT_TYPES)})")
     from . import combined
     return SchemeSpec(combined.NAME, combined.Params(**PRESETS[scheme_spec.preset].values[light_type]),
                       preset=scheme_spec.preset)

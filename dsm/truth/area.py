@@ -96,6 +96,37 @@ def sample_visibility(scene, si, n, geom: Geometry, sample, magnitude: float):
     return visible(scene, si.p, n, delta, geom, sample.x, sample.y)
 
 
+def irradiance_fraction(scene, si, n, geom: Geometry, per_axis: int, seed: int, magnitude: float) -> np.ndarray:
+    """The irradiance-weighted visible fraction of the light at receivers ``si`` (normals ``n``), float64:
+    what a renderer's image over the same image without occluders measures (dsm grad's truth under an
+    area light), where V* above is the unweighted fraction a filter approximates. A sample x weighs
+    cos(receiver) cos(light) / |x - p|^2 over the area measure (0 below the tangent plane or behind a
+    one-sided light); one sample in each cell of a ``per_axis`` x ``per_axis`` grid of the light's
+    square, its random numbers keyed by the receiver's position bits and ``seed``, so a receiver reads
+    the same samples whatever moves in the scene (common random numbers for a central difference)."""
+    count = dr.width(si.p)
+    p = mi.Point3f(si.p)
+    delta = spawn.error_bound(si, dr.opaque(mi.Float, float(magnitude)))
+    rng = mi.PCG32(count, mi.UInt64(lookup.position_key(p)), mi.UInt64(seed))
+    seen, total = np.zeros(count), np.zeros(count)
+    scale = dr.opaque(mi.Float, 1.0 / per_axis)
+    for cell in range(per_axis * per_axis):
+        # opaque: the cell's offsets as literals would make every cell a kernel of its own to compile
+        i, j = dr.opaque(mi.Float, cell % per_axis), dr.opaque(mi.Float, cell // per_axis)
+        u = dr.minimum((i + rng.next_float32()) * scale, 0.99999994)
+        v = dr.minimum((j + rng.next_float32()) * scale, 0.99999994)
+        dr.eval(u, v, rng.state)          # else the generator's state is a chain that grows with every cell
+        x, nl = geom.sample(u, v, p)
+        d = x - p
+        cosines = dr.maximum(dr.dot(n, d), 0.0) * dr.maximum(-dr.dot(nl, d), 0.0)
+        ok = visible(scene, p, n, delta, geom, u, v)
+        w = cosines.numpy().astype(np.float64) / dr.squared_norm(d).numpy().astype(np.float64) ** 2
+        seen += np.where(ok.numpy(), w, 0.0)
+        total += w
+    with np.errstate(invalid="ignore", divide="ignore"):       # no part of the light above: undefined
+        return np.where(total > 0, seen / np.where(total > 0, total, 1.0), np.nan)
+
+
 @dataclass
 class Reference:
     """Per receiver: visible samples ``hits`` of ``samples``; V* = hits / samples; ``low`` and

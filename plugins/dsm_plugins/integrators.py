@@ -86,8 +86,8 @@ class Options:
             choices = e.choices
             if e.problem == "unknown key":      # the plugin's own properties are valid keys too
                 choices = tuple(own) + tuple(c for c in choices if c not in own)
-                raise cfgmod.ConfigError(source, key, "unknown property", choices) from None
-            raise cfgmod.ConfigError(source, key, e.problem, choices) from None
+                raise cfgmod.ConfigError(source, key, "unknown property", choices, got=e.got) from None
+            raise cfgmod.ConfigError(source, key, e.problem, choices, got=e.got) from None
         if len(specs) != 1:
             raise cfgmod.ConfigError(source, "scheme", "give one value per parameter (no sweeps)")
         self.spec = specs[0]

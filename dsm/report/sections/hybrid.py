@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import figures, io as report, summary
+from . import md
 from ..templates import Cell, Row, Table
 from ...truth import metrics
 
@@ -20,12 +21,6 @@ INTRO = ("Each hybrid case is a depth case whose receivers a rule sends to rays 
 def hybrid_rows(rows: list) -> list:
     """The rows of hybrid cases (their rule given)."""
     return [r for r in rows if r.get("hybrid_rule") not in (None, "")]
-
-
-def _cell(x) -> str:
-    if isinstance(x, float):
-        return "-" if not metrics.defined(x) else f"{x:.4g}"
-    return str(x)
 
 
 def _ratio(a, b) -> float:
@@ -84,7 +79,7 @@ ZERO_HEAD = ("rule", "origin", "scheme instance", "maps", "maps at zero error", 
 
 def _table(head, body) -> list:
     return ["| " + " | ".join(head) + " |", "|---" * len(head) + "|"] + [
-        "| " + " | ".join(_cell(x) for x in row) + " |" for row in body]
+        "| " + " | ".join(md.cell(x) for x in row) + " |" for row in body]
 
 
 def write_table(path, rows: list) -> bool:
@@ -160,7 +155,7 @@ def html_view(rows: list) -> dict | None:
     rows = hybrid_rows(rows)
     if not rows:
         return None
-    table = lambda head, body: Table([(h, "text") for h in head], [Row([Cell(_cell(x)) for x in r]) for r in body],
+    table = lambda head, body: Table([(h, "text") for h in head], [Row([Cell(md.cell(x)) for x in r]) for r in body],
                                      box="wide")
     return {"intro": INTRO + " The budget curves are under Plots (plots/hybrid_*.png).",
             "pooled": table(POOLED_HEAD, pooled(rows)), "zero": table(ZERO_HEAD, zero_error(rows))}

@@ -6,6 +6,7 @@ import numpy as np
 
 from .. import io as report
 from ..templates import Cell, Row, Table, render
+from . import md
 from ...truth import metrics
 
 COLUMNS = (("case", "case"), ("scene", "scene"), ("cascade_layout", "layout"), ("scheme", "scheme"),
@@ -29,22 +30,12 @@ def virtual_rows(rows: list) -> list:
     return [r for r in rows if given(r.get("vsm_pages_tagged"))]     # other maps: empty in the file, NaN in memory
 
 
-def _cell(x) -> str:
-    if isinstance(x, float):
-        return "-" if not metrics.defined(x) else f"{x:.4g}"
-    return str(x)
-
-
 def write_table(path, rows: list) -> bool:
     """virtual.md from metrics.csv's rows; False (nothing written) without a virtual case."""
     rows = virtual_rows(rows)
     if not rows:
         return False
-    lines = ["# Virtual shadow maps", "", INTRO, "", "| " + " | ".join(h for _, h in COLUMNS) + " |",
-             "|---" * len(COLUMNS) + "|"]
-    lines += ["| " + " | ".join(_cell(r.get(k, "")) for k, _ in COLUMNS) + " |" for r in rows]
-    with report.atomic(path) as tmp:
-        tmp.write_text("\n".join(lines) + "\n")
+    md.write_table(path, "Virtual shadow maps", INTRO, COLUMNS, rows)
     return True
 
 
@@ -53,7 +44,7 @@ def html_table(rows: list) -> dict | None:
     rows = virtual_rows(rows)
     if not rows:
         return None
-    body = [Row([Cell(_cell(r.get(k, ""))) for k, _ in COLUMNS]) for r in rows]
+    body = [Row([Cell(md.cell(r.get(k, ""))) for k, _ in COLUMNS]) for r in rows]
     return {"intro": INTRO, "table": Table([(h, None) for _, h in COLUMNS], body, box="wide")}
 
 

@@ -68,7 +68,7 @@ cases.tBodies[0].addEventListener('click', ev => {
   }
   const shown = [[tr.dataset.exact, 'exact image', 'exact shading (display render, V*)'],
                  [tr.dataset.shadow, 'shadow image', 'shading under the shadow map (Lambert, ambient in shadow)'],
-                 [tr.dataset.err, 'error image', 'error classes (colours below)']];
+                 [tr.dataset.err, 'error image', 'error classes (colours beside)']];
   for (const [src, alt, words] of shown) {
     if (!src) continue;
     const fig = document.createElement('figure');

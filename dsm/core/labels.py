@@ -2,8 +2,11 @@
 digits and a depth-range bias that is a power of two named as one (``2^-24 range``), beside the
 exact text the run wrote (metrics.csv's ``params``, which stays the case's identity).
 
-The shown text is for reading only; every page keeps the exact text a hover (HTML ``title``) or a
-column away, so a value a user pastes back into a config is the one the run used.
+This is the one label function of the kit's console, table.md and report: a bias reads the same
+(``2^-24 range``) in each. ``2^k`` is a number a config reads (``bias = "2^-24 range"``), so a power of
+two pastes back exactly. Where there is no hover (the console, table.md) ``exact=True`` keeps every
+other number as the run wrote it (``%g``, six digits: the text a config reads back to the same
+instance); the report's four digits keep the exact text a hover (HTML ``title``) or a column away.
 """
 from __future__ import annotations
 
@@ -42,8 +45,9 @@ def power_of_two(value: float) -> int | None:
     return k if abs(value / 2.0 ** k - 1) <= POWER_TOLERANCE else None
 
 
-def value_text(raw: str, unit: str | None) -> tuple:
-    """(shown text, note or '') of one parameter's value as written and its unit."""
+def value_text(raw: str, unit: str | None, exact: bool = False) -> tuple:
+    """(shown text, note or '') of one parameter's value as written and its unit (``exact``: a
+    number that is no named power of two as written)."""
     try:
         value = float(raw)
     except ValueError:
@@ -51,13 +55,14 @@ def value_text(raw: str, unit: str | None) -> tuple:
     k = power_of_two(value) if unit == "range" else None
     if k is not None:
         return f"2^{k} range", DEPTH_BITS.get(-k, "")
-    return number_text(value) + (f" {unit}" if unit else ""), ""
+    return (raw if exact else number_text(value)) + (f" {unit}" if unit else ""), ""
 
 
-def params_label(params: str) -> str:
-    """metrics.csv's ``params`` as shown to a reader ('bias=5.96046e-08 range' -> 'bias=2^-24 range')."""
+def params_label(params: str, exact: bool = False) -> str:
+    """``params`` (or any text of ``name=value [unit]`` words: an instance, a console line) as shown to
+    a reader ('bias=5.96046e-08 range' -> 'bias=2^-24 range'); ``exact``: other numbers as written."""
     def one(m):
-        shown, _ = value_text(m.group("value"), m.group("unit"))
+        shown, _ = value_text(m.group("value"), m.group("unit"), exact)
         return f"{m.group('name')}={shown}"
     return WORD.sub(one, params or "")
 
