@@ -247,6 +247,7 @@ def _site_page(site, path: str):
     return drv
 
 
+@pytest.mark.slow
 def test_the_sidebar_is_in_a_newcomers_order(site):
     """Start here first (install, first run, own scene, reading the report), then tutorials, how-tos,
     reference, topics, results, and the design as one entry."""
@@ -267,6 +268,7 @@ def test_the_sidebar_is_in_a_newcomers_order(site):
         drv.quit()
 
 
+@pytest.mark.slow
 def test_tutorial_01s_first_output_is_an_html_table_and_its_plumbing_is_out_of_sight(site):
     drv = _site_page(site, "_generated/tutorials/01_quick_start.html")
     try:
@@ -280,6 +282,7 @@ def test_tutorial_01s_first_output_is_an_html_table_and_its_plumbing_is_out_of_s
         drv.quit()
 
 
+@pytest.mark.slow
 def test_the_api_reference_documents_the_run_the_results_and_every_testing_function(site):
     """Each a visible entry on the API page whose text holds its docstring's first words (autodoc)."""
     import inspect
@@ -301,6 +304,7 @@ def test_the_api_reference_documents_the_run_the_results_and_every_testing_funct
         drv.quit()
 
 
+@pytest.mark.slow
 def test_every_scheme_has_its_page_with_its_image(site):
     """A page per registered scheme, titled by its name, showing its own error image (loaded)."""
     from dsm import schemes

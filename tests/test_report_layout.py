@@ -63,12 +63,14 @@ return [page, document.documentElement.scrollWidth, out];
 """
 
 
+@pytest.mark.slow
 def test_no_element_is_wider_than_the_page_at_1280_px(report):
     _, drv = report
     page, scroll, wider = drv.execute_script(WIDER_JS)
     assert wider == [] and scroll <= page
 
 
+@pytest.mark.slow
 def test_the_plots_sit_in_a_grid_and_each_shows_whole(report):
     """More than one figure a row where they fit, and each image whole in its box (its title with it)."""
     _, drv = report
@@ -86,6 +88,7 @@ def test_the_plots_sit_in_a_grid_and_each_shows_whole(report):
             assert len(set(small)) < len(small), g
 
 
+@pytest.mark.slow
 def test_the_class_legend_sits_beside_the_case_images(report):
     """A click on a case shows its images; the colours' legend stays, right of them and level with them."""
     _, drv = report

@@ -87,6 +87,7 @@ def _edges(x, v):
     return x[np.argmax(v > 0)], x[len(v) - 1 - np.argmax((v < 1)[::-1])]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("rule", ["hold", "eevee"])
 def test_many_rays_put_the_penumbra_edges_where_similar_triangles_do_within_a_texel(variant, rule):
     """Receivers on the line y = 0, x in [0, 2.5]: the plate's edge x = B/2 at height HS seen past the
