@@ -33,7 +33,9 @@ def test_notebook_runs_to_the_end(path, monkeypatch):
     monkeypatch.setenv("DSM_NOTEBOOK_SMALL", "1")
     monkeypatch.setenv("PYTHONPATH", str(ROOT))     # the kernel imports this checkout's dsm, not an installed one
     book = nbformat.read(path, as_version=4)
-    NotebookClient(book, timeout=600, kernel_name="python3",
+    # no cell timeout: a wall-clock limit fails a sound notebook on a loaded machine (notebook 11 passed
+    # 600 s at load 7); a hang is CI's to stop, as for every other test
+    NotebookClient(book, timeout=None, kernel_name="python3",
                    resources={"metadata": {"path": str(path.parent)}}).execute()
     outputs = [o for c in book.cells if c.cell_type == "code" for o in c.get("outputs", [])]
     assert not [o for o in outputs if o.get("output_type") == "error"]
