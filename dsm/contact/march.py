@@ -43,7 +43,7 @@ import numpy as np
 
 from ..truth import metrics as metrics_mod
 from ..scenes.camera import Camera
-from ..maps.lookup import position_key, resolve
+from ..maps.lookup import position_rng, resolve
 from ..maps.receiver import Receiver
 
 
@@ -90,8 +90,7 @@ def sample_distances(spec, length, rx: Receiver, seed: int) -> list:
     n = dr.width(rx.p_world)
     back = dr.zeros(mi.Float, n)
     if spec.jitter > 0:
-        rng = mi.PCG32()
-        rng.seed(mi.UInt64(position_key(rx.p_world)), dr.full(mi.UInt64, seed, n))
+        rng = position_rng(rx.p_world, seed)
         back = rng.next_float32() * dr.opaque(mi.Float, spec.jitter)
     inv = dr.opaque(mi.Float, 1.0 / spec.steps)
     return [length * (dr.opaque(mi.Float, float(k)) - back) * inv for k in range(1, spec.steps + 1)]

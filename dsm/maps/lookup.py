@@ -106,12 +106,6 @@ def nearest_tap(rx: Receiver, smap) -> Tap:
     return tap_at(rx, smap, rx.u_map, rx.v_map)
 
 
-def receiver_key(rx: Receiver):
-    """A per-receiver integer from its own position's float bits: a receiver's jitter does not
-    change when the set of receivers around it changes."""
-    return position_key(rx.p_world)
-
-
 def position_key(p):
     """An integer per point from its float bits (a hash of x, y, z): the same point, the same key."""
     bits = [dr.reinterpret_array(mi.UInt32, c) for c in (p.x, p.y, p.z)]
@@ -119,6 +113,15 @@ def position_key(p):
     h = (h ^ (h >> 15)) + bits[1] * 0x85EBCA77
     h = (h ^ (h >> 13)) + bits[2] * 0xC2B2AE3D
     return h ^ (h >> 16)
+
+
+def position_rng(p, seed: int):
+    """A PCG32 per point seeded by its position key and ``seed``: a point's random numbers do not change
+    when the points around it change (seed() keeps each lane's state; the constructor would add the lane
+    index to the stream)."""
+    rng = mi.PCG32()
+    rng.seed(mi.UInt64(position_key(p)), dr.full(mi.UInt64, seed, dr.width(p)))
+    return rng
 
 
 def bilinear_taps(u, v):
@@ -143,10 +146,7 @@ def filter_taps(filt: str, rx: Receiver, seed: int = 7):
         return [(rx.u_map + (a - 0.5 * (k - 1)), rx.v_map + (b - 0.5 * (k - 1)), w)
                 for a in range(k) for b in range(k)]
     if filt == "pcf_jitter4x4":
-        n = dr.width(rx.u_map)
-        rng = mi.PCG32()
-        # seed() keeps each lane's state (the constructor would add the lane index to the stream)
-        rng.seed(mi.UInt64(receiver_key(rx)), dr.full(mi.UInt64, seed, n))
+        rng = position_rng(rx.p_world, seed)
         taps = []
         for a in range(4):
             for b in range(4):

@@ -144,8 +144,7 @@ def trace(scheme, prm, rx: Receiver, smap, target, times, rule: str):
 
 def shifts(rx: Receiver, seed: int):
     """Per receiver, the lattice's toroidal shift (a, b) in [0, 1)^2 from its position bits and ``seed``."""
-    rng = mi.PCG32()
-    rng.seed(mi.UInt64(lookup.receiver_key(rx)), dr.full(mi.UInt64, seed + 0x5347, dr.width(rx.depth)))
+    rng = lookup.position_rng(rx.p_world, seed + 0x5347)
     return rng.next_float32(), rng.next_float32()
 
 
