@@ -40,3 +40,31 @@ def config(scene="plate", light="point", light_height=2.0, light_angle=20.0, lig
     if filters:
         out["scheme"] = [{"name": "constant", "bias": bias}]
     return out
+
+
+def value_text(v) -> str:
+    """One TOML value: a boolean, number, string, list or inline table."""
+    if isinstance(v, bool):
+        return str(v).lower()
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(value_text(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{k} = {value_text(x)}" for k, x in v.items()) + "}"
+    return repr(v)
+
+
+def toml(cfg: dict) -> str:
+    """A config dict (``config``'s) as TOML text: tables, then arrays of tables."""
+    out = []
+    for name, body in cfg.items():
+        for table in (body if isinstance(body, list) else [body]):
+            out.append(f"[[{name}]]" if isinstance(body, list) else f"[{name}]")
+            out += [f"{k} = {value_text(v)}" for k, v in table.items()]
+    return "\n".join(out) + "\n"
+
+
+def toml_config(**kw) -> str:
+    """``config(**kw)`` as TOML text."""
+    return toml(config(**kw))

@@ -129,6 +129,9 @@ KEYS = (
     Key("map", "moment_samples", "int", "1", "N x N rays a texel, their moments averaged (an MSAA resolve)",
         ">= 1", sweeps=True),
     Key("map", "mipmaps", "bool", "false", "moments read from a mip chain at each pixel's footprint", sweeps=True),
+    Key("map", "antialias", "bool or list of bool", "false", "dsm grad only: the map's silhouette texels moved "
+        "toward their neighbours by the edge's exact position (dsm run refuses it)", source="Worchel & Alexa 2023",
+        sweeps=True),
     Key("map", "leak_texels", "float", "2", "false light this far inside the exact shadow counts as a leak",
         ">= 0", "texels"),
     Key("map", "vsm", "table", "the kind's defaults", "VSM's parameters or preset (see Pre-filtered maps)"),

@@ -68,6 +68,9 @@ def read_scene(raw: dict, source: str) -> dict:
     t = one_table(raw, "scene", source)
     name = choice(t.get("builtin"), source, "scene[0].builtin", tuple(SCENES))
     scene = SCENES[name]
+    for key, owner in (("box_height", "occluder_box"), ("mesh", "occluder_mesh")):
+        if key in t and name != owner:
+            raise ConfigError(source, f"scene[0].{key}", f"is read only with builtin = \"{owner}\", not {name!r}")
     check_keys(t, SCENE_KEYS[scene], source, "scene[0]")
     kw = {"scene": scene}
     for key, field in (("size", "occluder_size"), ("height", "occluder_height"), ("box_height", "box_height")):
