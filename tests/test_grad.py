@@ -344,3 +344,32 @@ def test_light_emitter_is_emitter_to_light_reversed():
     assert np.allclose(np.array(bb.max).ravel(), [0.35, 0.25, 2.0], atol=1e-6)
     n = shape.sample_position(0.0, mi.Point2f(0.5, 0.5)).n
     assert np.allclose(np.array(n).ravel(), [0.0, 0.0, -1.0], atol=1e-6) and shape.is_emitter()
+
+
+def test_evaluate_gives_a_cases_loss_and_gradients_with_units_near_the_closed_form():
+    """dsm.grad.evaluate(ctx, case, params): the antialiased PCF case of a plate (side 0.5 at 0.5, point light
+    at 2) has d area / dh within 15 % of 2 A H^2 / (H - h)^3 and d area / dH within 10 % of -2 A H h / (H - h)^3
+    (48^2 map: the corners' pairs are not treated), in world^2 per world; its loss is the image's shadow summed
+    over the pixels (numpy, float64); at another height it is the problem's own evaluation there; a case dsm
+    grad would not differentiate as given (another bias) is refused."""
+    import dataclasses
+    import dsm.grad
+    from dsm.core.types import Length
+    spec = _spec(params=["occluder_z", "light_height"], techniques=["pcf_bilinear"], antialias=[True],
+                 image_resolution=96)
+    ctx = dsm.grad.Problem(spec)
+    [case] = dsm.grad.cases(spec)
+    assert case.case.filter == "pcf_bilinear" and case.antialias and case.case.spec.params.bias == Length(0.02)
+    res = dsm.grad.evaluate(ctx, case)
+    A, h, H = 0.25, 0.5, 2.0
+    assert res.grads["occluder_z"] == pytest.approx(2 * A * H ** 2 / (H - h) ** 3, rel=0.15)
+    assert res.grads["light_height"] == pytest.approx(-2 * A * H * h / (H - h) ** 3, rel=0.1)
+    assert res.units == {"occluder_z": "world^2 per world", "light_height": "world^2 per world"}
+    assert res.loss_unit == "world^2" and res.image.shape == (96, 96)
+    assert res.loss == pytest.approx(np.sum(1.0 - res.image.astype(np.float64)) * (2.0 / 96) ** 2, rel=1e-12)
+    up = dsm.grad.evaluate(ctx, case, {"occluder_z": 0.05}, ("occluder_z",))
+    assert up.loss == ctx.evaluate(case.technique, ctx.values({"occluder_z": 0.05})).loss and up.loss > res.loss
+    other = dataclasses.replace(case.case, spec=dataclasses.replace(case.case.spec, params=type(
+        case.case.spec.params)(bias=Length(0.05))))
+    with pytest.raises(ValueError, match="constant bias of 0.02"):
+        dsm.grad.evaluate(ctx, dsm.grad.GradCase(other, True))
