@@ -201,3 +201,13 @@ def test_the_words_say_why_no_technique_is_closest_where_the_truth_is_zero_withi
              "rel_error": "", "sign": "", "cosine": ""} for t, ad in (("nearest", "0.05"), ("pcss", "0.01"))]
     text = findings.compare_words(rows)
     assert "undefined" in text and "the truth is 0 within its own error" in text and "nearest (" not in text
+
+
+def test_the_config_reference_spells_dsm_grads_choices_and_keys_as_its_reader():
+    """dsm/config/keys.py (below grad/ in the layers) lists [gradient]'s keys, parameters, losses and
+    integrators as dsm.grad.spec reads them, and [map] antialias."""
+    from dsm.config import keys
+    assert {k.name for k in keys.keys_of("gradient")} == set(specmod.KEYS)
+    assert keys.GRAD_PARAMS == tuple(specmod.PARAMS) and keys.GRAD_LOSSES == specmod.LOSSES
+    assert keys.GRAD_PROJECTIVE == specmod.PROJECTIVE_INTEGRATORS
+    assert "antialias" in {k.name for k in keys.keys_of("map")}
