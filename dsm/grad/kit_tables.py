@@ -56,7 +56,8 @@ def one_table(raw: dict, key: str, source: str) -> dict:
     if isinstance(tables, dict):
         tables = [tables]
     if not isinstance(tables, list) or not tables or not all(isinstance(t, dict) for t in tables):
-        raise ConfigError(source, key, f"dsm grad needs one [[{key}]] table, got {'none' if tables is None else repr(tables)}")
+        got = "none" if tables is None else repr(tables)
+        raise ConfigError(source, key, f"dsm grad needs one [[{key}]] table, got {got}")
     if len(tables) > 1:
         raise ConfigError(source, f"{key}[1]", f"dsm grad takes exactly one [[{key}]], got {len(tables)}: "
                           "differentiate each in its own config")
@@ -173,7 +174,8 @@ def read_map(raw: dict, source: str) -> dict:
     if not set(kinds) & set(MOMENT_TECHNIQUES) and "blur" in m:
         raise ConfigError(source, "map.blur", "a blur is a pre-filtered map's and map.kind names none",
                           MOMENT_TECHNIQUES)
-    blurs = [number(b, source, "map.blur", integer=True, minimum=1, maximum=MAX_BLUR) for b in listed(m, "blur", 1, source)]
+    blurs = [number(b, source, "map.blur", integer=True, minimum=1, maximum=MAX_BLUR)
+             for b in listed(m, "blur", 1, source)]
     if any(w % 2 == 0 for w in blurs):
         raise ConfigError(source, "map.blur", f"a blur width is odd (centred on the texel), got {blurs}")
     aas = listed(m, "antialias", False, source)

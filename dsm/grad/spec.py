@@ -17,7 +17,6 @@ from __future__ import annotations
 import math
 
 from dataclasses import dataclass, field
-from pathlib import Path
 
 from ..config.read import read_toml
 from ..core.types import ConfigError, check_keys, choice, number, as_list
