@@ -122,6 +122,7 @@ def _with(table: str, patch, **kw) -> dict:
     ("scheme", {"name": "slope_scaled"}, {}, "scheme[0].name", "got 'slope_scaled' (valid: constant)"),
     ("scheme", {"bias": "2 texel"}, {}, "scheme[0].bias", "world units"),
     ("scheme", {"bias": [0.01, 0.02]}, {}, "scheme[0].bias", "one bias, got 2"),
+    ("scheme", [{"name": "constant"}], {}, "scheme[0].bias", "bias in world units, e.g. bias = 0.02"),
     ("scheme", None, {}, "scheme", "need a [[scheme]] for their bias"),
     ("scheme", [{"name": "constant", "bias": 0.02}], {"techniques": ["vsm"]}, "scheme", "does not name depth"),
     # the rest

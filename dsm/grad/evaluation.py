@@ -13,11 +13,13 @@
 Example (a plate of side 0.5 at 0.5 under a point light at 2: d area / dh = 2 A H^2 / (H - h)^3 = 0.593)::
 
     import dsm.grad
+    from dsm.core import env
+    env.use_variant(None)                     # llvm_ad_rgb
     spec = dsm.grad.spec_of("experiments/gradient/plate_point.toml")
     ctx = dsm.grad.Problem(spec)
     case = dsm.grad.cases(spec)[3]            # pcf_bilinear aa
     res = dsm.grad.evaluate(ctx, case)
-    res.grads["occluder_z"], res.units["occluder_z"]      # about 0.59, 'world^2 per world'
+    res.grads["occluder_z"], res.units["occluder_z"]      # 0.5986, 'world^2 per world'
 """
 from __future__ import annotations
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from .. import lights
+from .. import lights, schemes
 from ..config.read import parse_scheme
 from ..core.types import ConfigError, as_list, check_keys, choice, number
 from . import support
@@ -219,8 +219,10 @@ def read_scheme(raw: dict, source: str, techniques: tuple) -> dict:
     if t.get("name") not in SCHEMES:
         raise ConfigError(source, "scheme[0].name", f"dsm grad differentiates the depth map's tests with a constant "
                           f"bias only, got {t.get('name')!r}", SCHEMES)
-    from ..schemes import ALL, PRESETS
-    specs = parse_scheme(t, source, "scheme[0]", ALL, PRESETS)
+    if "bias" not in t:
+        raise ConfigError(source, "scheme[0].bias", "dsm grad needs the constant scheme's bias in world units, "
+                          "e.g. bias = 0.02")
+    specs = parse_scheme(t, source, "scheme[0]", schemes.ALL, schemes.PRESETS)
     if len(specs) != 1:
         raise ConfigError(source, "scheme[0].bias", f"dsm grad takes one bias, got {len(specs)}")
     bias = specs[0].params.bias
