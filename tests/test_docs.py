@@ -88,10 +88,14 @@ def accepted_keys(monkeypatch) -> dict:
         seen.setdefault(_table_of(where), set()).update(allowed)
         return real(table, allowed, source, where)
     for name in ("dsm.config.read", "dsm.config.tune", "dsm.core.types", "dsm.lights.spot", "dsm.lights.scene",
-                 "dsm.lights.directional", "dsm.lights.point", "dsm.lights.area", "dsm.config.virtual"):
+                 "dsm.lights.directional", "dsm.lights.point", "dsm.lights.area", "dsm.config.virtual",
+                 "dsm.grad.spec"):
         monkeypatch.setattr(importlib.import_module(name), "check_keys", recording)
     for path in sorted((ROOT / "experiments").glob("*.toml")):
         read.load(path)
+    from dsm.grad import spec as grad_spec        # [gradient]: dsm grad's configs
+    for path in sorted((ROOT / "experiments" / "gradient").glob("*.toml")):
+        grad_spec.load(path)
     read.parse(tomllib.loads(EVERY_TABLE), "<every table>")
     return seen
 
