@@ -254,7 +254,6 @@ def test_bias_conversion_to_world_and_texels():
     assert bias_units.scale_free("godot") and not bias_units.scale_free("bevy")
 
 
-# the tests that read it are one xdist_group: under pytest -n they run on one worker, which makes it once
 @pytest.fixture(scope="module")
 def test_run(tmp_path_factory):
     """dsm benchmark at the test size, once for this module: (its folder, results.json)."""
@@ -263,7 +262,6 @@ def test_run(tmp_path_factory):
     return out, json.loads((out / "results.json").read_text())
 
 
-@pytest.mark.xdist_group("benchmark_test_run")
 @pytest.mark.slow
 def test_benchmark_end_to_end_at_test_size(test_run):
     out, doc = test_run
@@ -298,7 +296,6 @@ def test_benchmark_end_to_end_at_test_size(test_run):
     assert "FLIP" in page and "<th data-type=num>1e5</th>" in page and "far change" in page and "src=scale.png" in page
 
 
-@pytest.mark.xdist_group("benchmark_test_run")
 @pytest.mark.slow
 def test_far_cases_keep_the_exact_side_and_lose_only_the_map_s_precision(test_run):
     """Where the scene sits moves no exact count: receivers and V*'s shadowed receivers are the
@@ -331,7 +328,6 @@ def test_far_cases_keep_the_exact_side_and_lose_only_the_map_s_precision(test_ru
             float(np.mean([recs[(s, "m", "1e4", who)]["error_rate"] for s in ("bunny", "grazing")])), abs=1e-15)
 
 
-@pytest.mark.xdist_group("benchmark_test_run")
 @pytest.mark.slow
 def test_far_numbers_come_back_in_camera_relative_precision(test_run):
     """The far case run as an engine with camera-relative positions counts what the origin
@@ -349,7 +345,6 @@ def test_far_numbers_come_back_in_camera_relative_precision(test_run):
             (here["n_receivers"], here["n_acne"], here["n_peterpan"])
 
 
-@pytest.mark.xdist_group("benchmark_test_run")
 @pytest.mark.slow
 def test_the_scale_figure_and_tables_hold_the_results_numbers(test_run):
     """scale.png is beside the page, draws a curve per contender (and the oracle) with the
@@ -526,7 +521,6 @@ def test_the_cornell_box_counts_alike_in_cm_and_m_for_scale_free_contenders():
     assert min(n for n, _, _ in counts["m"].values()) > 400
 
 
-@pytest.mark.xdist_group("benchmark_test_run")
 @pytest.mark.slow
 def test_prefiltered_contenders_carry_leaks_and_their_pooled_leak_rate(test_run):
     """Each pre-filtered record has n_leak <= n_peterpan and leak_rate = n_leak / n_gt_shadowed; the
@@ -570,7 +564,6 @@ def test_the_tuned_contender_is_the_tune_s_result_exactly():
     assert suite.tuned_labels(suite.load_suite()) == {("normal_angle", spec.label): "tuned_normal_angle"}
 
 
-@pytest.mark.xdist_group("benchmark_test_run")
 @pytest.mark.slow
 def test_the_tuned_contender_runs_under_its_own_name(test_run):
     out, doc = test_run
@@ -580,7 +573,6 @@ def test_the_tuned_contender_runs_under_its_own_name(test_run):
     assert "Best tuned scheme: tuned_normal_angle" in (out / "leaderboard.html").read_text()
 
 
-@pytest.mark.xdist_group("benchmark_test_run")
 @pytest.mark.slow
 def test_flicker_is_frames_csv_s_recomputed(test_run):
     """Each flicker record's flicker_rate is the mean over frame pairs of n_flicker / n_pairs_eligible
@@ -627,7 +619,6 @@ def only_cases(keys):
 RAY_CASES = (("bunny", "m", "1e5"), ("grazing", "cm", "0"))
 
 
-@pytest.mark.xdist_group("benchmark_test_run")
 @pytest.mark.slow
 def test_the_benchmark_on_a_local_ray_cluster_counts_as_here(test_run, tmp_path, monkeypatch):
     """dsm benchmark --cluster local: every case's counts those of the run here (the map groups are
@@ -695,7 +686,6 @@ def _counts(doc, keys) -> dict:
     return {"cases": cases, "flicker": flick, "n": (len(cases), len(flick))}
 
 
-@pytest.mark.xdist_group("benchmark_test_run")
 @pytest.mark.slow
 def test_ctrl_c_and_kill_keep_finished_cases_and_resume_counts_as_uninterrupted(test_run, tmp_path):
     """Ctrl-C once the first case is kept: exit 130, a line saying what is kept and how to go on.
@@ -732,7 +722,6 @@ def test_ctrl_c_and_kill_keep_finished_cases_and_resume_counts_as_uninterrupted(
     assert "dsm benchmark: directional (" in stdout                 # what accuracy costs, in the terminal
 
 
-@pytest.mark.xdist_group("benchmark_test_run")
 @pytest.mark.slow
 def test_page_rebuilds_the_leaderboard_from_results_alone(test_run, tmp_path):
     import shutil
@@ -788,7 +777,6 @@ def _stored_images(out, doc, which):
     return out_list
 
 
-@pytest.mark.xdist_group("benchmark_test_run")
 @pytest.mark.slow
 def test_a_case_s_stored_class_image_holds_the_counts_of_its_row(test_run):
     """Every record's class image decodes (Pillow) to classes whose counts, recomputed with numpy, are
@@ -809,7 +797,6 @@ def test_a_case_s_stored_class_image_holds_the_counts_of_its_row(test_run):
     assert np.array_equal(case_images.read_class(out, doc["cases"], last), stored[-1][1])
 
 
-@pytest.mark.xdist_group("benchmark_test_run")
 @pytest.mark.slow
 def test_a_case_s_stored_flip_map_s_mean_is_its_row_s_flip_within_the_png_s_quantisation(test_run):
     """A stored FLIP pixel is round(255 FLIP): its mean is within 1/510 of the row's FLIP (FLIP's own
@@ -838,7 +825,6 @@ def _links(path):
     return found
 
 
-@pytest.mark.xdist_group("benchmark_test_run")
 @pytest.mark.slow
 def test_every_link_of_the_leaderboard_and_its_contender_pages_resolves(test_run):
     """Each href and src of leaderboard.html and contenders/*.html names a file that exists, and its
@@ -905,7 +891,6 @@ def test_contender_pages_of_a_results_folder_without_images_say_so_once(tmp_path
         assert text.count("<figure class=case ") == 2
 
 
-@pytest.mark.xdist_group("benchmark_test_run")
 @pytest.mark.slow
 def test_frontier_csv_and_memory_classes_from_the_records(test_run):
     """frontier.csv beside results.json: per (scene at its unit, light), on_frontier recomputed in numpy
@@ -935,7 +920,6 @@ def test_frontier_csv_and_memory_classes_from_the_records(test_run):
             assert 2 ** k <= mean_bytes < 2 ** (k + 1)
 
 
-@pytest.mark.xdist_group("benchmark_test_run")
 @pytest.mark.slow
 def test_the_hybrid_contenders_carry_their_rays_beside_their_error(test_run):
     """A hybrid contender's record: ray_fraction = hybrid_rays / n_receivers; at cut-off 8 never more rays than at

@@ -130,7 +130,6 @@ sys.path.insert(0, str(ROOT / "docs" / "_ext"))
 from links import broken_links            # noqa: E402  (docs/_ext is the site's tooling, not a package)
 
 
-# the tests that read it are one xdist_group: under pytest -n they run on one worker, which makes it once
 @pytest.fixture(scope="module")
 def site(tmp_path_factory):
     """The site built as scripts/docs builds it (offline, warnings as errors) into a fresh folder."""
@@ -141,7 +140,6 @@ def site(tmp_path_factory):
     return out
 
 
-@pytest.mark.xdist_group("docs_site")
 @pytest.mark.slow
 def test_site_builds_and_every_internal_link_resolves(site):
     """sphinx-build -W passed (the fixture) and no href or src of any page leads nowhere."""
@@ -157,7 +155,6 @@ def test_link_check_finds_a_broken_link_and_a_missing_anchor(tmp_path):
     assert broken_links(tmp_path) == [("a.html", "b.html#gone"), ("a.html", "missing.png")]
 
 
-@pytest.mark.xdist_group("docs_site")
 @pytest.mark.slow
 def test_site_has_every_page_it_promises(site):
     """Tutorials (every notebook), how-to guides, the three generated references, design topics (every
@@ -172,7 +169,6 @@ def test_site_has_every_page_it_promises(site):
         assert (site / "_generated" / "reference" / f"{ref}.html").is_file()
 
 
-@pytest.mark.xdist_group("docs_site")
 @pytest.mark.slow
 def test_notebooks_show_their_stored_outputs(site):
     """A tutorial page holds as many images as its notebook's stored image outputs (not run again)."""
@@ -259,7 +255,6 @@ def _site_page(drv, site, path: str):
     return drv
 
 
-@pytest.mark.xdist_group("docs_site")
 @pytest.mark.slow
 def test_the_sidebar_is_in_a_newcomers_order(site, browser):
     """Start here first (install, first run, own scene, reading the report), then tutorials, how-tos,
@@ -278,7 +273,6 @@ def test_the_sidebar_is_in_a_newcomers_order(site, browser):
     assert design == [1, True, False]          # one entry, its topics folded under it
 
 
-@pytest.mark.xdist_group("docs_site")
 @pytest.mark.slow
 def test_tutorial_01s_first_output_is_an_html_table_and_its_plumbing_is_out_of_sight(site, browser):
     drv = _site_page(browser, site, "_generated/tutorials/01_quick_start.html")
@@ -290,7 +284,6 @@ def test_tutorial_01s_first_output_is_an_html_table_and_its_plumbing_is_out_of_s
     assert "DSM_NOTEBOOK_SMALL" not in drv.find_element("css selector", "article").text
 
 
-@pytest.mark.xdist_group("docs_site")
 @pytest.mark.slow
 def test_the_api_reference_documents_the_run_the_results_and_every_testing_function(site, browser):
     """Each a visible entry on the API page whose text holds its docstring's first words (autodoc)."""
@@ -310,7 +303,6 @@ def test_the_api_reference_documents_the_run_the_results_and_every_testing_funct
         assert text is not None and first in " ".join(text.split()), (name, first, text)
 
 
-@pytest.mark.xdist_group("docs_site")
 @pytest.mark.slow
 def test_every_scheme_has_its_page_with_its_image(site, browser):
     """A page per registered scheme, titled by its name, showing its own error image (loaded)."""

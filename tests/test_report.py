@@ -21,7 +21,6 @@ TINY = base_config(
     scheme=[{"name": "none"}, {"name": "constant", "bias": ["0.5 texel", "2 texel", 0.05]}, {"name": "adaptive"}])
 
 
-# the tests that read it are one xdist_group: under pytest -n they run on one worker, which makes it once
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     import dsm
@@ -36,7 +35,6 @@ def _csv(path):
     return rows, num
 
 
-@pytest.mark.xdist_group("report_run")
 @pytest.mark.slow
 def test_summary_matches_a_numpy_recomputation(run):
     from dsm.report import io as report, summary
@@ -255,7 +253,6 @@ def test_consolidated_legends_name_each_map_and_instance_once(tmp_path):
         (to_rgba(OKABE_ITO[k % 6]), dashed) for k in range(10) for dashed in (False, True)}
 
 
-@pytest.mark.xdist_group("report_run")
 @pytest.mark.slow
 def test_dsm_report_rebuilds_table_md_and_the_page(run, tmp_path):
     from dsm import cli
@@ -273,7 +270,6 @@ def test_dsm_report_rebuilds_table_md_and_the_page(run, tmp_path):
     assert cli.main(["report", str(tmp_path / "nothing")]) == 2
 
 
-@pytest.mark.xdist_group("report_run")
 def test_comparison_of_two_runs(run, tmp_path):
     from dsm import cli
     a = run.out
@@ -313,7 +309,6 @@ def test_comparison_of_two_runs(run, tmp_path):
     assert cli.main(["report", str(a), "--out", str(out)]) == 2
 
 
-@pytest.mark.xdist_group("report_run")
 def test_a_comparison_never_lands_in_a_run_or_a_foreign_folder(run, tmp_path, capsys):
     """--out of dsm report A B: a run's folder, a file or a folder of other files is refused with
     exit 2 naming --out, and nothing in it changes; an earlier comparison is replaced."""
@@ -340,7 +335,6 @@ def test_a_comparison_never_lands_in_a_run_or_a_foreign_folder(run, tmp_path, ca
     assert len(rows) == len(run.rows) and all(r["diff_error_rate"] in ("", "0") for r in rows)
 
 
-@pytest.mark.xdist_group("report_run")
 def test_the_table_of_an_interrupted_run_says_it_covers_only_the_cases_that_ran(run, tmp_path):
     """A Ctrl-C'd run's table.md (written then, or by dsm report later) must not read as the
     whole experiment's answer."""
@@ -359,7 +353,6 @@ def test_the_table_of_an_interrupted_run_says_it_covers_only_the_cases_that_ran(
     assert f"interrupted: 5 of the {len(run.rows)} planned cases ran" in head and "--resume" in head
 
 
-@pytest.mark.xdist_group("report_run")
 @pytest.mark.slow
 def test_dsm_report_of_a_damaged_folder_is_one_line_never_a_traceback(run, tmp_path, capsys):
     """run.json that is not JSON or not an object, a metrics.csv of another program or with text
@@ -421,7 +414,6 @@ def test_report_images_key(tmp_path):
     assert grey.max() > round(0.12 * 255)
 
 
-@pytest.mark.xdist_group("report_run")
 def test_images_sit_in_one_folder_per_scene_and_light(run):
     from dsm.report import figures
     folders = {p.name for p in (run.out / "images").iterdir()}

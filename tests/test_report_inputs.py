@@ -65,7 +65,6 @@ def test_report_says_what_a_damaged_folder_lacks(tmp_path, capsys):
     assert cli.main(["report", str(res.out)]) == 0
 
 
-# the tests that read it are one xdist_group: under pytest -n they run on one worker, which makes it once
 @pytest.fixture(scope="module")
 def tiny_run(tmp_path_factory):
     """A run of two schemes at two map sizes on one scene: six cases, a frontier of several points."""
@@ -105,7 +104,6 @@ EDITED = {  # metrics.csv as the tour edited it -> words of the one line
 }
 
 
-@pytest.mark.xdist_group("report_inputs_run")
 @pytest.mark.slow
 @pytest.mark.parametrize("name", list(EDITED))
 def test_report_refuses_an_edited_cost_column(name, tiny_run, tmp_path, capsys):
@@ -135,7 +133,6 @@ def _frontier_float64(metrics_csv) -> list:
     return out
 
 
-@pytest.mark.xdist_group("report_inputs_run")
 def test_a_rebuilt_frontier_is_the_one_its_counts_give_and_none_without_rows(tiny_run, tmp_path, capsys):
     run = tmp_path / "run"
     shutil.copytree(tiny_run, run)

@@ -27,7 +27,6 @@ def test_a_figures_title_lies_inside_it_and_above_its_panels_titles(tmp_path, ti
         assert top.y0 > below, (top, below)
 
 
-# the tests that read it are one xdist_group: under pytest -n they run on one worker, which makes it once
 @pytest.fixture(scope="module")
 def report(tmp_path_factory):
     import dsm
@@ -64,7 +63,6 @@ return [page, document.documentElement.scrollWidth, out];
 """
 
 
-@pytest.mark.xdist_group("report_layout")
 @pytest.mark.slow
 def test_no_element_is_wider_than_the_page_at_1280_px(report):
     _, drv = report
@@ -72,7 +70,6 @@ def test_no_element_is_wider_than_the_page_at_1280_px(report):
     assert wider == [] and scroll <= page
 
 
-@pytest.mark.xdist_group("report_layout")
 @pytest.mark.slow
 def test_the_plots_sit_in_a_grid_and_each_shows_whole(report):
     """More than one figure a row where they fit, and each image whole in its box (its title with it)."""
@@ -91,7 +88,6 @@ def test_the_plots_sit_in_a_grid_and_each_shows_whole(report):
             assert len(set(small)) < len(small), g
 
 
-@pytest.mark.xdist_group("report_layout")
 @pytest.mark.slow
 def test_the_class_legend_sits_beside_the_case_images(report):
     """A click on a case shows its images; the colours' legend stays, right of them and level with them."""
