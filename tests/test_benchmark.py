@@ -10,6 +10,9 @@ from dsm import cli
 from dsm.benchmark import bias_units, compare, ranking, results, suite
 from dsm.core.types import Length
 
+import helpers_benchmark_cases
+from helpers_benchmark_cases import only_cases
+
 # the suites' identities: changing suite_<n>.toml changes its hash, which makes it a new version
 SUITE_1_SHA256 = "15b8554a6f096049e4da44ba45084ae524f5d93f04380a71907185a990a2ba5c"
 SUITE_2_SHA256 = "ebd3668f4b3bff1df961afae653c8e91018de253cd2df644be3a1c71884b9cd1"
@@ -601,18 +604,6 @@ def test_flicker_is_frames_csv_s_recomputed(test_run):
     assert "no oracle floor" in page and "while the sun turns 2 degrees" in page and "every contender" in page
 
 
-def only_cases(keys):
-    """A stand-in for dsm.benchmark.suite.cases that keeps the cases named by ``keys`` ((scene, unit,
-    offset), in the suite's order): a test that proves a property of every case on a few of them."""
-    every = suite.cases
-
-    def chosen(s, size):
-        picked = [c for c in every(s, size) if (c.scene, c.unit, c.offset) in keys]
-        assert len(picked) == len(keys), (keys, picked)
-        return picked
-    return chosen
-
-
 # the cluster test's cases: both scenes, the bunny's mesh file read by the workers far from the origin
 # (the exact frame), the grazing plane in cm (the unit's scale); every kind of config runs in each
 # (depth, pre-filtered, virtual, hybrid), so every kind of map group is a Ray task
@@ -640,27 +631,6 @@ def test_the_benchmark_on_a_local_ray_cluster_counts_as_here(test_run, tmp_path,
     assert got == want and len(got) == len(doc["cases"]) == 13 * len(RAY_CASES)
 
 
-SIGNAL_AFTER_KEEP = """
-import json, os, signal, sys
-from dsm import cli
-from dsm.benchmark import caselog, results, suite
-keep, kept, after = caselog.CaseLog.keep, [], int(sys.argv[1])
-sig, keys = getattr(signal, sys.argv[2], None), {tuple(k) for k in json.loads(sys.argv[3])}
-every = suite.cases          # the cases named: as only_cases, in a process of its own
-results.cases = lambda s, size: [c for c in every(s, size) if (c.scene, c.unit, c.offset) in keys]
-# as a terminal's Ctrl-C finds it: a test suite started in the background (a shell's `&`) passes
-# SIGINT on ignored, and Python then installs no KeyboardInterrupt for it
-signal.signal(signal.SIGINT, signal.default_int_handler)
-def keep_then_signal(self, *args):
-    keep(self, *args)
-    kept.append(args[0])
-    if len(kept) == after:           # a known point: the case just kept, the next not begun
-        os.kill(os.getpid(), sig)
-caselog.CaseLog.keep = keep_then_signal
-sys.argv = ["dsm", *sys.argv[4:]]
-sys.exit(cli.main())
-"""
-
 # the interrupted run's cases: three of the grazing scene's (its cheapest), the second with the motion
 # run whose flicker records a resumed run must read back from the kept case
 RESUME_CASES = (("grazing", "cm", "0"), ("grazing", "m", "0"), ("grazing", "m", "1e4"))
@@ -672,7 +642,8 @@ def _suite_process(out, *flags, signal_after=(0, "none"), keys=RESUME_CASES):
     import subprocess
     import sys
     args = ["benchmark", "--out", str(out), "--size", "test", *flags]
-    cmd = [sys.executable, "-c", SIGNAL_AFTER_KEEP, str(signal_after[0]), signal_after[1], json.dumps(keys), *args]
+    cmd = [sys.executable, helpers_benchmark_cases.__file__, str(signal_after[0]), signal_after[1], json.dumps(keys),
+           *args]
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
