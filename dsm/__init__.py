@@ -7,9 +7,10 @@ from .core.types import ConfigError, Length
 __version__ = "0.5.0"
 
 
-def run(config, out=None, variant=None, progress=False, *, force=False, resume=False):
+def run(config, out=None, variant=None, progress=False, *, force=False, resume=False, report=True):
     """Run an experiment (Config, dict, TOML path, or a Mitsuba scene .xml whose experiment is derived from it)
-    and return its :class:`dsm.experiment.results.Results`."""
+    and return its :class:`dsm.experiment.results.Results`; ``report=False`` skips the figures and report.html
+    (as ``dsm run --no-report``: ``dsm report`` draws them later from the folder)."""
     from .experiment.runner import run as _run
     derived = None
     if isinstance(config, (str, os.PathLike)) and os.fspath(config).lower().endswith(".xml"):
@@ -17,11 +18,11 @@ def run(config, out=None, variant=None, progress=False, *, force=False, resume=F
         derived = derive.derive(scene_facts.measure(os.fspath(config)))     # as dsm run SCENE.xml derives it
         config = derived_files.config_of(derived, out)
     if out is None:                      # a fresh temporary folder: no one else writes there
-        return _run(config, out=None, variant=variant, progress=progress)
-    return _run_in(config, out, variant, progress, force, resume, derived)
+        return _run(config, out=None, variant=variant, progress=progress, report=report)
+    return _run_in(config, out, variant, progress, force, resume, derived, report)
 
 
-def _run_in(config, out, variant, progress, force, resume, derived=None):
+def _run_in(config, out, variant, progress, force, resume, derived=None, report=True):
     if force and resume:                 # as the command line refuses --force with --resume
         raise ConfigError("dsm.experiment", "force", "force=True replaces a run and resume=True goes on with it: give one")
     # dsm run's rules for --out (dsm.cli): the folder locked, a previous run kept unless
@@ -42,7 +43,7 @@ def _run_in(config, out, variant, progress, force, resume, derived=None):
         if derived is not None:          # derived.toml and derivation.json beside the results, as dsm run writes them
             from .config import derived_files
             derived_files.write(derived, out)
-        return Runner(config, out, variant, progress, resume_previous=resuming).run()
+        return Runner(config, out, variant, progress, resume_previous=resuming, report=report).run()
 
 
 def register():

@@ -120,6 +120,9 @@ def _run_parser(sub):
     _add_again(r, "replace a previous dsm run in --out (a folder with its run.json); never other files",
                "go on with the dsm run in --out: skip its finished cases that still match the config, run the "
                "rest (cases the config no longer names are listed, not deleted)")
+    r.add_argument("--no-report", action="store_true",
+                   help="measure only: metrics.csv, oracle.csv, run.json and the case images, no figures or report.html "
+                        "(dsm report OUT draws them later from the folder)")
     r.add_argument("--cluster", metavar="ADDRESS",
                    help="run the map groups as Ray tasks on the cluster at ADDRESS (auto, ray://host:port) or on "
                         "a Ray instance started here (local); needs pip install 'dsm[cluster]'")
@@ -635,6 +638,14 @@ def _run(cfg, args, out: Path, derived=None) -> int:
         return _run_held(cfg, args, out, clustered, derived)
 
 
+def _written(args, derived=None) -> str:
+    """What dsm run wrote, as its last line names it."""
+    files = ("metrics.csv, oracle.csv, images/, run.json" if getattr(args, "no_report", False) else
+             "report.html, table.md, metrics.csv, oracle.csv, images/, plots/, run.json, frontier.csv")
+    return files + (", derived.toml" if derived is not None else "") + (
+        "; --no-report: dsm report draws the rest" if getattr(args, "no_report", False) else "")
+
+
 def _run_held(cfg, args, out: Path, clustered: bool, derived=None) -> int:
     problem, resuming = folder_problem(out, cfg, args.force, bool(getattr(args, "resume", False)))
     if problem:
@@ -649,9 +660,11 @@ def _run_held(cfg, args, out: Path, clustered: bool, derived=None) -> int:
         t0 = time.perf_counter()
         if clustered:
             from .experiment import cluster
-            res = cluster.run(cfg, out, args.cluster, args.variant, progress=True, resume_previous=resuming)
+            res = cluster.run(cfg, out, args.cluster, args.variant, progress=True, resume_previous=resuming,
+                              report=not getattr(args, "no_report", False))
         else:
-            res = Runner(cfg, out, args.variant, progress=True, resume_previous=resuming).run()
+            res = Runner(cfg, out, args.variant, progress=True, resume_previous=resuming,
+                         report=not getattr(args, "no_report", False)).run()
     except SetupError as e:
         _err(f"setup error: {e}")
         return 3
@@ -669,8 +682,7 @@ def _run_held(cfg, args, out: Path, clustered: bool, derived=None) -> int:
     for line in summary.terminal_answer(res.rows):      # the first answer, before where the files are
         print(f"dsm: {line}")
     print(f"dsm: {len(res.rows)} case{'' if len(res.rows) == 1 else 's'} in {time.perf_counter() - t0:.1f} s (measuring {t['measure_s']:.1f} s, "
-          f"report {t['report_s']:.1f} s) -> {out}/ (report.html, table.md, metrics.csv, oracle.csv, images/, "
-          f"plots/, run.json, frontier.csv{', derived.toml' if derived is not None else ''})")
+          f"report {t['report_s']:.1f} s) -> {out}/ ({_written(args, derived)})")
     if empty:
         print(f"dsm: {empty} cases are empty (no receiver: nothing faces the light inside its domain); "
               "their rates are undefined (see table.md)", file=sys.stderr)

@@ -124,8 +124,9 @@ class ClusterRunner(Runner):
     """The runner with its map groups sent to Ray tasks; the driver writes every file."""
 
     def __init__(self, config, out, address=None, variant=None, progress=True, resume_previous=False,
-                 local_cpus: int | None = None):
-        super().__init__(config, out, variant, progress, keep_images=False, resume_previous=resume_previous)
+                 local_cpus: int | None = None, report: bool = True):
+        super().__init__(config, out, variant, progress, keep_images=False, resume_previous=resume_previous,
+                         report=report)
         self.plan.stacks = []       # a Ray task runs one map: [timing] builds = "together" stacks nothing here
         self.address = address if address is not None else (config.execution.address or "local")
         self.local_cpus = local_cpus
@@ -199,6 +200,7 @@ class ClusterRunner(Runner):
         return info
 
 
-def run(config, out, address=None, variant=None, progress=True, resume_previous=False, local_cpus=None):
-    """Run a prepared Config on Ray (see the module's text) and return its Results."""
-    return ClusterRunner(config, Path(out), address, variant, progress, resume_previous, local_cpus).run()
+def run(config, out, address=None, variant=None, progress=True, resume_previous=False, local_cpus=None,
+        report: bool = True):
+    """Run a prepared Config on Ray (see the module's text) and return its Results (``report=False``: no figures)."""
+    return ClusterRunner(config, Path(out), address, variant, progress, resume_previous, local_cpus, report).run()

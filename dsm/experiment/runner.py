@@ -40,6 +40,9 @@ from .sink import Sink
 
 
 RUN_JSON_EVERY_S = 1.0
+# run.json's note on a run measured without its report (dsm run --no-report, dsm.run(report=False))
+NO_REPORT_NOTE = ("not drawn (--no-report): `dsm report <folder>` draws the figures, table.md and report.html from "
+                  "the run's files (display renders and motion GIFs need a run with its report)")
 
 
 @dataclass
@@ -65,7 +68,8 @@ class Runner:
     """Runs a config's plan into folder ``out``: each shared stage once, then each case through
     :func:`dsm.case.evaluate` into the run's sink (dsm.experiment.sink)."""
     def __init__(self, config: cfgmod.Config, out: Path, variant: str | None = None, progress: bool = True,
-                 keep_images: bool = True, resume_previous: bool = False, files: bool = True):
+                 keep_images: bool = True, resume_previous: bool = False, files: bool = True,
+                 report: bool = True):
         self.cfg = config
         self.out = Path(out)
         self.variant = env.use_variant(variant or config.variant)
@@ -75,6 +79,10 @@ class Runner:
         # files=False: metrics.csv and run.json only (no image, data file or report): a caller that
         # reads the Results and throws the folder away (dsm benchmark's cases)
         self.files = files
+        # report=False: the measurements and data files without the composed report (figures, GIFs, display
+        # renders, table.md, report.html), which dsm report draws later from the files; a caller that reads the
+        # numbers (a pytest threshold) skips the drawing, most of a small run's time
+        self.report = report
         self.sink = Sink(self.out, self.record, config.report_images, keep_images, files)
         self.builds = Builds(config, self.record)
         self.case_no = 0
@@ -123,7 +131,7 @@ class Runner:
             self._write_run_json(force=True)      # a run ended by an error other than Ctrl-C is still "running"
             if self.files:
                 publish.write_data(self.out, self.record)
-                self._report()
+                self._report() if self.report else self._no_report()
                 self._write_run_json(force=True)
         return Results(self.out, self.record.rows, self._run_json(), self.sink.images, self.record.oracle_rows,
                        self.record.curves)
@@ -156,6 +164,11 @@ class Runner:
             self._fail("report (dsm report rebuilds it)", e)
         self.timing["report_s"] = time.perf_counter() - t1 + self.sink.images_s
         self.timing["report_cpu_s"] = _cpu() - c1 + self.sink.images_cpu_s
+
+    def _no_report(self):
+        """run.json's report time (the case images drawn as cases finished) and a note saying how to draw the rest."""
+        self.timing["report_s"], self.timing["report_cpu_s"] = self.sink.images_s, self.sink.images_cpu_s
+        self.record.status.append({"what": "report", "status": "note", "error": NO_REPORT_NOTE})
 
     def _display_renders(self):
         """Each scene and light's display renders (dsm.experiment.display), in the report's time: a
@@ -548,9 +561,10 @@ def _cpu() -> float:
     return time.process_time() + ru.ru_utime + ru.ru_stime
 
 
-def run(config, out=None, variant=None, progress=False) -> Results:
+def run(config, out=None, variant=None, progress=False, report: bool = True) -> Results:
     """Run an experiment (a Config, a dict or a path to a TOML file) and return its Results; without
-    ``out``, in a temporary folder removed once the Results is no longer referenced."""
+    ``out``, in a temporary folder removed once the Results is no longer referenced; ``report=False``:
+    no figures or report.html (dsm report draws them later from the folder)."""
     config = pipeline.prepare(config, variant)
     if out is None:
         # a folder of its own, kept while the Results lives (its images are what a failing test names)
@@ -559,7 +573,7 @@ def run(config, out=None, variant=None, progress=False) -> Results:
         import tempfile
         import weakref
         out = Path(tempfile.mkdtemp(prefix=f"dsm-{config.name}-"))
-        res = Runner(config, out, variant, progress).run()
+        res = Runner(config, out, variant, progress, report=report).run()
         weakref.finalize(res, shutil.rmtree, out, True)
         return res
-    return Runner(config, Path(out), variant, progress).run()
+    return Runner(config, Path(out), variant, progress, report=report).run()
