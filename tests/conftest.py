@@ -1,4 +1,6 @@
+import ast
 import csv
+import functools
 import json
 import os
 import shutil
@@ -24,6 +26,67 @@ def variant():
     dr.sync_thread()
     dr.flush_kernel_cache()
     dr.flush_malloc_cache()
+
+
+# ------------------------------------------------ pytest-xdist (scripts/test runs -n <cores> --dist loadgroup)
+# A module- or class-scoped fixture is built once per worker process, so the tests that take one of
+# their own file's are one xdist group: one worker builds it once (a documentation site, a benchmark
+# run), instead of each worker that gets one of them. The groups are found from the files' source in
+# the scheduler, not by adding xdist_group marks at collection: pytest 9.2's node ids ignore the
+# suffix through which xdist 3.8 sends such marks to the scheduler (pytest-xdist issue 1386).
+
+def fixture_decorator(node) -> tuple:
+    """(name, scope, autouse) of a ``@pytest.fixture(...)`` function definition, or None."""
+    for dec in node.decorator_list:
+        call = dec if isinstance(dec, ast.Call) else None
+        func = call.func if call else dec
+        if (isinstance(func, ast.Attribute) and func.attr == "fixture") or (isinstance(func, ast.Name)
+                                                                            and func.id == "fixture"):
+            kw = {k.arg: k.value.value for k in (call.keywords if call else []) if isinstance(k.value, ast.Constant)}
+            return kw.get("name", node.name), kw.get("scope", "function"), bool(kw.get("autouse", False))
+    return None
+
+
+@functools.lru_cache(maxsize=None)
+def shared_fixture_users(path: Path) -> frozenset:
+    """The test functions of the file ``path`` that take (directly or through another fixture of the
+    file) a module- or class-scoped fixture the file defines; every test where such a fixture is autouse."""
+    try:
+        tree = ast.parse(path.read_text())
+    except (OSError, SyntaxError, ValueError):
+        return frozenset()
+    functions = [n for n in ast.walk(tree) if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))]
+    takes = lambda n: {a.arg for a in n.args.args + n.args.kwonlyargs}
+    fixtures = {f[0]: (f, takes(n)) for n in functions if (f := fixture_decorator(n))}
+    shared = {name for name, ((_, scope, _), _) in fixtures.items() if scope in ("module", "class")}
+    autouse = any(auto and name in shared for name, ((_, _, auto), _) in fixtures.items())
+    grew = True
+    while grew:                        # a function fixture that takes a shared one shares it
+        more = {name for name, (_, args) in fixtures.items() if args & shared} - shared
+        shared |= more
+        grew = bool(more)
+    tests = {n.name: takes(n) for n in functions if n.name.startswith("test")}
+    return frozenset(t for t, args in tests.items() if autouse or args & shared)
+
+
+@pytest.hookimpl(optionalhook=True)   # a hook of pytest-xdist's: without it installed, nothing asks
+def pytest_xdist_make_scheduler(config, log):
+    """--dist loadgroup's scheduler, the tests sharing a module- or class-scoped fixture of their file
+    made one group (named after the file); xdist_group marks still group as xdist documents."""
+    if config.getvalue("dist") != "loadgroup":
+        return None
+    from xdist.scheduler import LoadGroupScheduling
+
+    class SharedFixtureScheduling(LoadGroupScheduling):
+        """LoadGroupScheduling, with a group per file for the users of its shared fixtures."""
+
+        def _split_scope(self, nodeid: str) -> str:
+            path, _, rest = nodeid.partition("::")
+            test = rest.split("::")[-1].split("[")[0]
+            if "@" not in nodeid and test in shared_fixture_users(config.rootpath / path):
+                return f"{path}@shared-fixtures"
+            return super()._split_scope(nodeid)
+    return SharedFixtureScheduling(config, log)
 
 
 def base_config(**over):
