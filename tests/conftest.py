@@ -20,7 +20,7 @@ VARYING = {"build_ms", "build_first_ms", "build_compile_ms", "build_peak_mb", "l
 def variant():
     """One variant for the session (llvm_ad_rgb unless DSM_VARIANT says otherwise)."""
     from dsm.core import env
-    v = env.use_variant(os.environ.get("DSM_VARIANT"))
+    v = env.use_variant(os.environ.get("DSM_VARIANT"), threads=worker_threads())
     yield v
     import drjit as dr
     dr.sync_thread()
@@ -67,6 +67,24 @@ def shared_fixture_users(path: Path) -> frozenset:
         grew = bool(more)
     tests = {n.name: takes(n) for n in functions if n.name.startswith("test")}
     return frozenset(t for t, args in tests.items() if autouse or args & shared)
+
+
+def worker_threads() -> int | None:
+    """Dr.Jit's threads in a pytest-xdist worker: this process's CPUs shared out among the workers (at
+    least one), or None outside xdist (Dr.Jit's own default, one per CPU). Two workers with a thread per
+    CPU each spent more CPU on a 180-test subset than with one each, and mostly took longer (DEVELOPERS.md,
+    *Tests*); results do not depend on the thread count (docs/design.md: nor on tiling)."""
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT") or 0)
+    if not os.environ.get("PYTEST_XDIST_WORKER") or workers < 1:
+        return None
+    return max(1, len(os.sched_getaffinity(0)) // workers)
+
+
+def pytest_collection_modifyitems(config, items):
+    """Under pytest-xdist, the tests marked slow first (in their order): the scheduler hands out tests in
+    collection order, so a minute-long test that starts last leaves the other workers idle meanwhile."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        items.sort(key=lambda item: item.get_closest_marker("slow") is None)     # stable: ties keep their order
 
 
 @pytest.hookimpl(optionalhook=True)   # a hook of pytest-xdist's: without it installed, nothing asks
