@@ -65,8 +65,12 @@ def run_once_shared(folder: Path, key, make):
         if done.exists():
             return pickle.loads(done.read_bytes())
         results = make()
+        try:
+            data = pickle.dumps(results)
+        except (pickle.PicklingError, TypeError, AttributeError):
+            return results                  # Results that cannot be pickled: each worker runs its own
         part = folder / f"{name}.part"
-        part.write_bytes(pickle.dumps(results))
+        part.write_bytes(data)
         part.replace(done)                  # whole or absent: a reader never sees half a pickle
         return results
 

@@ -81,8 +81,8 @@ def worker_threads() -> int | None:
 
 
 def pytest_collection_modifyitems(config, items):
-    """Under pytest-xdist, the tests marked slow first (in their order): the scheduler hands out tests in
-    collection order, so a minute-long test that starts last leaves the other workers idle meanwhile."""
+    """Under pytest-xdist, the tests marked slow first (in their order): after the groups, the scheduler
+    hands out tests in collection order, and a minute-long test started last leaves the other workers idle."""
     if os.environ.get("PYTEST_XDIST_WORKER"):
         items.sort(key=lambda item: item.get_closest_marker("slow") is None)     # stable: ties keep their order
 
