@@ -90,7 +90,8 @@ def pytest_collection_modifyitems(config, items):
 @pytest.hookimpl(optionalhook=True)   # a hook of pytest-xdist's: without it installed, nothing asks
 def pytest_xdist_make_scheduler(config, log):
     """--dist loadgroup's scheduler, the tests sharing a module- or class-scoped fixture of their file
-    made one group (named after the file); xdist_group marks still group as xdist documents."""
+    made one group (named after the file); an xdist_group mark groups too where xdist can see it (under
+    pytest before 9.2)."""
     if config.getvalue("dist") != "loadgroup":
         return None
     from xdist.scheduler import LoadGroupScheduling
