@@ -35,7 +35,7 @@ def variant():
 # the scheduler, not by adding xdist_group marks at collection: pytest 9.2's node ids ignore the
 # suffix through which xdist 3.8 sends such marks to the scheduler (pytest-xdist issue 1386).
 
-def fixture_decorator(node) -> tuple:
+def fixture_decorator(node) -> tuple | None:
     """(name, scope, autouse) of a ``@pytest.fixture(...)`` function definition, or None."""
     for dec in node.decorator_list:
         call = dec if isinstance(dec, ast.Call) else None
@@ -84,7 +84,8 @@ def pytest_collection_modifyitems(config, items):
     """Under pytest-xdist, the tests marked slow first (in their order): after the groups, the scheduler
     hands out tests in collection order, and a minute-long test started last leaves the other workers idle."""
     if os.environ.get("PYTEST_XDIST_WORKER"):
-        items.sort(key=lambda item: item.get_closest_marker("slow") is None)     # stable: ties keep their order
+        slow = lambda item: item.get_closest_marker("slow") or item.get_closest_marker("dsm_slow")
+        items.sort(key=lambda item: slow(item) is None)     # stable: ties keep their order
 
 
 @pytest.hookimpl(optionalhook=True)   # a hook of pytest-xdist's: without it installed, nothing asks
