@@ -1,4 +1,6 @@
+import ast
 import csv
+import functools
 import json
 import os
 import shutil
@@ -18,12 +20,93 @@ VARYING = {"build_ms", "build_first_ms", "build_compile_ms", "build_peak_mb", "l
 def variant():
     """One variant for the session (llvm_ad_rgb unless DSM_VARIANT says otherwise)."""
     from dsm.core import env
-    v = env.use_variant(os.environ.get("DSM_VARIANT"))
+    v = env.use_variant(os.environ.get("DSM_VARIANT"), threads=worker_threads())
     yield v
     import drjit as dr
     dr.sync_thread()
     dr.flush_kernel_cache()
     dr.flush_malloc_cache()
+
+
+# ------------------------------------------------ pytest-xdist (scripts/test runs -n <cores> --dist loadgroup)
+# A module- or class-scoped fixture is built once per worker process, so the tests that take one of
+# their own file's are one xdist group: one worker builds it once (a documentation site, a benchmark
+# run), instead of each worker that gets one of them. The groups are found from the files' source in
+# the scheduler, not by adding xdist_group marks at collection: pytest 9.2's node ids ignore the
+# suffix through which xdist 3.8 sends such marks to the scheduler (pytest-xdist issue 1386).
+
+def fixture_decorator(node) -> tuple | None:
+    """(name, scope, autouse) of a ``@pytest.fixture(...)`` function definition, or None."""
+    for dec in node.decorator_list:
+        call = dec if isinstance(dec, ast.Call) else None
+        func = call.func if call else dec
+        if (isinstance(func, ast.Attribute) and func.attr == "fixture") or (isinstance(func, ast.Name)
+                                                                            and func.id == "fixture"):
+            kw = {k.arg: k.value.value for k in (call.keywords if call else []) if isinstance(k.value, ast.Constant)}
+            return kw.get("name", node.name), kw.get("scope", "function"), bool(kw.get("autouse", False))
+    return None
+
+
+@functools.lru_cache(maxsize=None)
+def shared_fixture_users(path: Path) -> frozenset:
+    """The test functions of the file ``path`` that take (directly or through another fixture of the
+    file) a module- or class-scoped fixture the file defines; every test where such a fixture is autouse."""
+    try:
+        tree = ast.parse(path.read_text())
+    except (OSError, SyntaxError, ValueError):
+        return frozenset()
+    functions = [n for n in ast.walk(tree) if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))]
+    takes = lambda n: {a.arg for a in n.args.args + n.args.kwonlyargs}
+    fixtures = {f[0]: (f, takes(n)) for n in functions if (f := fixture_decorator(n))}
+    shared = {name for name, ((_, scope, _), _) in fixtures.items() if scope in ("module", "class")}
+    autouse = any(auto and name in shared for name, ((_, _, auto), _) in fixtures.items())
+    grew = True
+    while grew:                        # a function fixture that takes a shared one shares it
+        more = {name for name, (_, args) in fixtures.items() if args & shared} - shared
+        shared |= more
+        grew = bool(more)
+    tests = {n.name: takes(n) for n in functions if n.name.startswith("test")}
+    return frozenset(t for t, args in tests.items() if autouse or args & shared)
+
+
+def worker_threads() -> int | None:
+    """Dr.Jit's threads in a pytest-xdist worker: this process's CPUs shared out among the workers (at
+    least one), or None outside xdist (Dr.Jit's own default, one per CPU). Two workers with a thread per
+    CPU each spent more CPU on a 180-test subset than with one each, and mostly took longer (DEVELOPERS.md,
+    *Tests*); results do not depend on the thread count (docs/design.md: nor on tiling)."""
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT") or 0)
+    if not os.environ.get("PYTEST_XDIST_WORKER") or workers < 1:
+        return None
+    return max(1, len(os.sched_getaffinity(0)) // workers)
+
+
+def pytest_collection_modifyitems(config, items):
+    """Under pytest-xdist, the tests marked slow first (in their order): after the groups, the scheduler
+    hands out tests in collection order, and a minute-long test started last leaves the other workers idle."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        slow = lambda item: item.get_closest_marker("slow") or item.get_closest_marker("dsm_slow")
+        items.sort(key=lambda item: slow(item) is None)     # stable: ties keep their order
+
+
+@pytest.hookimpl(optionalhook=True)   # a hook of pytest-xdist's: without it installed, nothing asks
+def pytest_xdist_make_scheduler(config, log):
+    """--dist loadgroup's scheduler, the tests sharing a module- or class-scoped fixture of their file
+    made one group (named after the file); an xdist_group mark groups too where xdist can see it (under
+    pytest before 9.2)."""
+    if config.getvalue("dist") != "loadgroup":
+        return None
+    from xdist.scheduler import LoadGroupScheduling
+
+    class SharedFixtureScheduling(LoadGroupScheduling):
+        """LoadGroupScheduling, with a group per file for the users of its shared fixtures."""
+
+        def _split_scope(self, nodeid: str) -> str:
+            path, _, rest = nodeid.partition("::")
+            test = rest.split("::")[-1].split("[")[0]
+            if "@" not in nodeid and test in shared_fixture_users(config.rootpath / path):
+                return f"{path}@shared-fixtures"
+            return super()._split_scope(nodeid)
+    return SharedFixtureScheduling(config, log)
 
 
 def base_config(**over):
