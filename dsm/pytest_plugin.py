@@ -1,7 +1,7 @@
 """dsm's pytest plugin (registered by the entry point ``pytest11``, so a test file imports nothing):
 
 - ``dsm_results``: a session fixture, a function ``config -> Results`` that runs each experiment
-  (a TOML path, a dict or a Config) once per test session, keyed by the config's text (a path's
+  (a TOML path, a dict or a Config) once per test session, without its report (``report=True`` draws it), keyed by the config's text (a path's
   by its file's bytes) and the variant, into the session's temporary folder. Under pytest-xdist
   (``pytest -n N``) the workers share it: the first worker to ask for a config runs it, holding a
   lock on a file in the folder the workers' temporary folders sit in, and the others wait for it
@@ -77,17 +77,18 @@ def run_once_shared(folder: Path, key, make):
 
 @pytest.fixture(scope="session")
 def dsm_results(tmp_path_factory):
-    """A function (config, variant=None) -> Results: each config run once per test session (and
-    once across the workers of ``pytest -n N``)."""
+    """A function (config, variant=None, report=False) -> Results: each config run once per test session (and
+    once across the workers of ``pytest -n N``), without its report unless asked (a threshold reads numbers)."""
     runs = {}
     shared = shared_folder(tmp_path_factory)
 
-    def run(config, variant: str | None = None):
-        """The Results of ``config``, run on first use in this session."""
-        key = (config_key(config), variant)
+    def run(config, variant: str | None = None, report: bool = False):
+        """The Results of ``config``, run on first use in this session; ``report``: draw its figures and
+        report.html too (dsm.run(report=...): half of a small run's time, which a threshold does not read)."""
+        key = (config_key(config), variant, report)
         if key not in runs:
             import dsm
-            make = lambda: dsm.run(config, out=tmp_path_factory.mktemp("dsm") / "run", variant=variant)
+            make = lambda: dsm.run(config, out=tmp_path_factory.mktemp("dsm") / "run", variant=variant, report=report)
             runs[key] = make() if shared is None else run_once_shared(shared, key, make)
         return runs[key]
     run.runs = runs
