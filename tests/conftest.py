@@ -122,8 +122,9 @@ def base_config(**over):
 def run_dict(tmp_path):
     import dsm
 
-    def _run(cfg, name="out"):
-        return dsm.run(cfg, out=tmp_path / name)
+    def _run(cfg, name="out", report=False):
+        # without the report unless a test reads it: the figures are half of a small run's time
+        return dsm.run(cfg, out=tmp_path / name, report=report)
     return _run
 
 
@@ -212,7 +213,8 @@ def small_run(tmp_path):
     """The Results of a 32^2 plane_box run with one constant bias, into tmp_path/r."""
     import dsm
     return dsm.run(base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [32, 32]},
-                               map={"resolution": 32}, scheme=[{"name": "constant"}]), out=tmp_path / "r")
+                               map={"resolution": 32}, scheme=[{"name": "constant"}]), out=tmp_path / "r",
+                   report=False)
 
 
 def write_cfg(tmp_path, raw) -> Path:

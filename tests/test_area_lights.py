@@ -293,7 +293,7 @@ def test_area_light_run_end_to_end(run_dict):
                               "max_samples": 64}],
                       map={"resolution": 128, "filter": ["nearest", "pcf_wide:5", "pcss"]},
                       scheme=[{"name": "constant", "bias": "1 texel"}, {"name": "adaptive_tap"}])
-    res = run_dict(cfg)
+    res = run_dict(cfg, report=True)
     assert len(res.rows) == 6 and all(r["view"] == "perspective" for r in res.rows)
     reg = res.run["reference_regions"][0]
     assert res.run["rays"]["reference"] == reg["rays"] == sum(reg[k]["rays"] for k in area.REGIONS)

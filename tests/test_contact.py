@@ -212,10 +212,10 @@ def test_run_writes_the_contact_group_only_when_asked(run_dict):
     cfg = base_config(scene=[{"builtin": "floating_plate", "gap": GAP}], camera={"resolution": [W, H]},
                       scheme=[{"name": "constant", "bias": [0.0, 0.3]}], map={"resolution": 256},
                       light=[{"type": "directional", "direction": L.tolist()}])
-    plain = run_dict(cfg, "plain")
+    plain = run_dict(cfg, "plain", report=True)
     assert all(not (set(r) & record.GROUPS["contact"]) for r in plain.rows)
     cfg["contact"] = {"length": LENGTH, "steps": STEPS, "thickness": THICK}
-    with_c = run_dict(cfg, "contact")
+    with_c = run_dict(cfg, "contact", report=True)
     for a, b in zip(plain.rows, with_c.rows):
         assert a["n_acne"] == b["n_acne"] and a["n_peterpan"] == b["n_peterpan"]     # the scheme's own numbers
         assert set(record.GROUPS["contact"]) <= set(b)

@@ -184,7 +184,7 @@ def test_camera_relative_map_keeps_its_counts_far_away_and_world_precision_is_fl
            "scene": [{"builtin": "plane_box", "translate": [[0, 0, 0], [1e6, 5e5, 0]],
                       "precision": ["world", "camera_relative"]}],
            "scheme": [{"name": "constant", "bias": "1 texel"}], "timing": {"repeats": 1}}
-    res = run_dict(cfg)
+    res = run_dict(cfg, report=True)
     by = {r["scene"]: r for r in res.rows}
     origin, far = by["plane_box"], by["plane_box(translate=[1e+06,500000,0])"]
     rel0, rel = by["plane_box(precision=camera_relative)"], by["plane_box(translate=[1e+06,500000,0],precision=camera_relative)"]

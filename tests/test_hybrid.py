@@ -216,7 +216,7 @@ def test_a_run_with_hybrid_writes_its_columns_and_section(run_dict, tmp_path):
     cfg = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [40, 40]}, map={"resolution": 64},
                       scheme=[{"name": "constant", "bias": "1 texel"}],
                       hybrid=[{"rule": "band", "k": [0.5, 2.0]}, {"rule": "oracle"}])
-    res = run_dict(cfg, "hybrid")
+    res = run_dict(cfg, "hybrid", report=True)
     rows = res.rows
     assert len(rows) == 3 and res.run["n_failed"] == 0
     assert sorted(r["hybrid_rule"] for r in rows) == ["band", "band", "oracle"]

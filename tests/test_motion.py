@@ -41,7 +41,7 @@ def test_static_camera_and_light_flicker_zero_for_every_scheme(run_dict):
     cfg = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [64, 64]}, scheme=SCHEMES,
                       map={"resolution": 128, "filter": ["nearest", "pcf_jitter4x4"]},
                       motion=[{"frames": 3, "points": 1500}])
-    res = run_dict(cfg)
+    res = run_dict(cfg, report=True)
     assert len(res.rows) == 2 * 6
     for r in res.rows:
         assert r["flicker_rate"] == 0 and r["flicker_ever"] == 0 and r["flicker_magnitude"] == 0, r["case"]
@@ -60,7 +60,7 @@ def test_report_images_none_writes_no_frames_gif_and_the_same_numbers(run_dict):
         cfg = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [32, 32]},
                           map={"resolution": 32}, scheme=[{"name": "constant"}], report={"images": images},
                           motion=[{"frames": 2, "camera": "dolly", "offset": [0.0, 0.3, 0.0], "points": 300}])
-        runs[images] = run_dict(cfg, images)
+        runs[images] = run_dict(cfg, images, report=True)
     assert [p.name for p in (runs["none"].out / "images").rglob("*") if p.is_file()] == []
     assert len(list((runs["errors"].out / "images").glob("*/0001_frames.gif"))) == 1
     keep = ("case", "n_receivers", "n_acne", "n_peterpan", "flicker_rate", "flicker_ever")

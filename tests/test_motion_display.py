@@ -44,7 +44,7 @@ def test_motion_gif_frames_give_the_frames_class_counts_and_change_no_count(run_
                                      report={"images": images},
                                      motion=[{"frames": 3, "camera": "dolly", "offset": [0.0, 0.6, 0.0], "light": "turn",
                                               "light_axis": [0.0, 0.0, 1.0], "light_angle": 25.0, "points": 400}])
-    res, bare = run_dict(cfg("all"), "all"), run_dict(cfg("none"), "none")
+    res, bare = run_dict(cfg("all"), "all", report=True), run_dict(cfg("none"), "none", report=True)
     untimed = lambda out: [{k: v for k, v in r.items() if not k.endswith("_ms")} for r in _frames_csv(out)]
     assert untimed(res.out) == untimed(bare.out)          # drawn apart (frames.csv's build times aside)
     gif = Image.open(next((res.out / "images").glob("*/0001_frames.gif")))
@@ -112,7 +112,7 @@ def test_a_motion_gif_of_class_images_is_captioned_as_one(run_dict):
     cfg = base_config(camera={"resolution": [32, 24]}, scene=[{"builtin": "plane_box"}], map={"resolution": 64},
                       scheme=[{"name": "constant", "bias": ["1 texel"]}], report={"images": "errors"},
                       motion=[{"frames": 2, "light": "move", "light_offset": [0.0, 1.0, 0.0], "points": 200}])
-    res = run_dict(cfg, "errors")
+    res = run_dict(cfg, "errors", report=True)
     path = next((res.out / "images").glob("*/0001_frames.gif"))
     gif = Image.open(path)
     assert gif.size == (32, 24)            # one pixel per camera pixel (identical frames may merge)

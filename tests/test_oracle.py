@@ -240,7 +240,7 @@ def test_oracle_outputs(run_dict):
     from dsm.core.types import ConfigError
     res = run_dict(base_config(scene=[{"builtin": "floating_plate"}], camera={"resolution": [64, 64]},
                                map={"resolution": 64, "format": ["float32", "unorm16"]},
-                               scheme=[{"name": "constant", "bias": [0.0, 0.02]}], oracle={"lambda": [0.5, 1.0]}))
+                               scheme=[{"name": "constant", "bias": [0.0, 0.02]}], oracle={"lambda": [0.5, 1.0]}), report=True)
     rows = report.read_csv(res.out / "oracle.csv")
     assert len(rows) == 4 and {r["format"] for r in rows} == {"float32", "unorm16"}
     assert float(rows[0]["world_objective"]) == pytest.approx(res.oracle[0]["world_objective"])

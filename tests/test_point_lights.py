@@ -266,7 +266,7 @@ def test_equal_memory_budgets(run_dict):
     cfg = base_config(scene=[{"builtin": "room"}], camera={"resolution": [64, 64]},
                       map={"texels": [6 * 64 ** 2], "view": ["paraboloid", "dual_paraboloid", "cube"]},
                       scheme=[{"name": "none"}])
-    res = run_dict(cfg)
+    res = run_dict(cfg, report=True)
     got = {r["view"]: (r["resolution"], r["total_texels"]) for r in res.rows}
     assert got == {"paraboloid": (157, 157 ** 2), "dual_paraboloid": (111, 2 * 111 ** 2), "cube": (64, 6 * 64 ** 2)}
     assert (res.out / "plots" / "vs_texels_room_0_point.png").is_file()

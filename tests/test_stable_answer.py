@@ -60,7 +60,7 @@ def test_two_identical_runs_give_the_same_best_tables_and_headline(run_dict):
                       scheme=[{"name": "constant", "bias": [0.02, 0.05, "1 texel", "2 texel"]},
                               {"name": "normal_offset"}, {"name": "normal_angle"}, {"name": "receiver_plane"},
                               {"name": "dual"}, {"name": "midpoint"}])
-    a, b = run_dict(cfg, "a"), run_dict(cfg, "b")
+    a, b = run_dict(cfg, "a", report=True), run_dict(cfg, "b", report=True)
     assert [r["build_ms"] for r in a.rows] != [r["build_ms"] for r in b.rows]     # the noise is there
     assert summary.best_md(a.rows) == summary.best_md(b.rows) and summary.answer(a.rows) == summary.answer(b.rows)
     section = lambda res: (res.out / "table.md").read_text().split("## Best per scene")[1].split("##")[0]

@@ -248,7 +248,7 @@ def test_a_run_reports_pages_memory_rays_and_levels(run_dict):
     cfg = base_config(scene=[{"builtin": "long_ground"}], camera={"resolution": [48, 48]},
                       map={"virtual": {"preset": ["ue5", "eevee"], "resolution": 4096, "page_size": 64}},
                       scheme=[{"name": "constant", "bias": "1 texel"}, {"name": "normal_offset"}])
-    res = run_dict(cfg, "vsm")
+    res = run_dict(cfg, "vsm", report=True)
     assert len(res.rows) == 4
     for r in res.rows:
         page = 64
