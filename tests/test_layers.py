@@ -84,7 +84,7 @@ def test_dragon_is_open_and_back_closed_culls_only_closed_shapes(tmp_path):
     cfg = base_config(scene=[{"file": str(MESHES / "dragon_vrip_res3.ply")}],
                       light=[{"type": "directional", "direction": [0.3, -1.0, 0.2]}],
                       scheme=[{"name": "dual", "culling": "back_closed"}], map={"resolution": 128})
-    res = dsm.run(cfg, out=tmp_path / "d")
+    res = dsm.run(cfg, out=tmp_path / "d", report=False)
     assert res.run["n_failed"] == 0
     shapes = {s["name"]: s for s in res.run["scenes"][0]["shapes"]}
     assert shapes["mesh"]["closed"] is False and "non-manifold" in shapes["mesh"]["why"]
@@ -366,7 +366,7 @@ def test_weiskopf_fig5_against_the_tracer(tmp_path):
     from dsm.scenes import load as scenes
     from dsm.truth.metrics import ACNE, OUTSIDE, PETERPAN, base_class
     toml = ROOT / "experiments" / "weiskopf_fig5.toml"
-    res = dsm.run(toml, out=tmp_path / "w")
+    res = dsm.run(toml, out=tmp_path / "w", report=False)
     assert res.run["n_failed"] == 0
     cfg = config.load(toml)
     sd = scenes.load(cfg.scenes[0], cfg.camera_resolution)

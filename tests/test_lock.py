@@ -96,11 +96,11 @@ def test_the_api_takes_the_same_lock(tmp_path, holder):
     out = tmp_path / "o"
     h = holder(out)
     with pytest.raises(ConfigError) as e:
-        dsm.run(config.parse(tomllib.loads(tiny_toml())), out=out)
+        dsm.run(config.parse(tomllib.loads(tiny_toml())), out=out, report=False)
     assert e.value.key == "out" and f"process {h.pid}" in str(e.value) and str(out) in str(e.value)
     assert sorted(p.name for p in out.iterdir()) == [".dsm-lock"]
     h.kill()
-    res = dsm.run(config.parse(tomllib.loads(tiny_toml())), out=out)
+    res = dsm.run(config.parse(tomllib.loads(tiny_toml())), out=out, report=False)
     assert len(res.rows) == 1 and not (out / ".dsm-lock").exists()
 
 

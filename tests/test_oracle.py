@@ -278,12 +278,12 @@ def test_an_oracle_bias_pasted_back_gives_the_oracles_counts(tmp_path):
     from conftest import base_config
     raw = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [96, 96]}, map={"resolution": 128},
                       scheme=[{"name": "none"}])
-    first = dsm.run(raw, out=tmp_path / "a")
+    first = dsm.run(raw, out=tmp_path / "a", report=False)
     rows = list(csv.DictReader(open(first.out / "oracle.csv")))
     # every best bias reads back to the oracle's own float (6 digits did not)
     assert [float(r["best_b"]) for r in rows] == [o["best_b"] for o in first.oracle]
     assert [float(r["best_k"]) for r in rows] == [o["best_k"] for o in first.oracle]
     row = rows[0]
-    pasted = dsm.run({**raw, "scheme": [{"name": "constant", "bias": float(row["best_b"])}]}, out=tmp_path / "b")
+    pasted = dsm.run({**raw, "scheme": [{"name": "constant", "bias": float(row["best_b"])}]}, out=tmp_path / "b", report=False)
     r = pasted.rows[0]
     assert (r["n_acne"], r["n_peterpan"]) == (int(row["world_n_acne"]), int(row["world_n_peterpan"]))

@@ -15,25 +15,25 @@ def test_the_api_keeps_a_previous_run_unless_told(tmp_path):
     a = tomllib.loads(tiny_toml())
     b = tomllib.loads(tiny_toml().replace('name = "none"', 'name = "constant"'))
     out = tmp_path / "o"
-    dsm.run(a, out=out)
+    dsm.run(a, out=out, report=False)
     before = (out / "metrics.csv").read_bytes()
     with pytest.raises(ConfigError) as e:
-        dsm.run(b, out=out)
+        dsm.run(b, out=out, report=False)
     assert e.value.key == "out" and "resume=True" in str(e.value) and "force=True" in str(e.value)
     assert (out / "metrics.csv").read_bytes() == before
     assert [r["scheme"] for r in metrics_rows(out)] == ["none"]
-    res = dsm.run(a, out=out, resume=True)
+    res = dsm.run(a, out=out, resume=True, report=False)
     assert res.run["resumed_cases"] == 1
-    dsm.run(b, out=out, force=True)
+    dsm.run(b, out=out, force=True, report=False)
     assert [r["scheme"] for r in metrics_rows(out)] == ["constant"]
     other = tomllib.loads(tiny_toml(name="other"))
     with pytest.raises(ConfigError) as e:
-        dsm.run(other, out=out, resume=True)
+        dsm.run(other, out=out, resume=True, report=False)
     assert "holds experiment 't'" in str(e.value)
     (tmp_path / "mine").mkdir()
     (tmp_path / "mine" / "keep.txt").write_text("mine")
     with pytest.raises(ConfigError):
-        dsm.run(a, out=tmp_path / "mine", force=True)
+        dsm.run(a, out=tmp_path / "mine", force=True, report=False)
     assert [p.name for p in (tmp_path / "mine").iterdir()] == ["keep.txt"]
 
 

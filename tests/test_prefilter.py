@@ -638,8 +638,8 @@ def test_a_resumed_run_keeps_its_moment_cases(run_dict, tmp_path):
     import dsm
     cfg = base_config(scene=[{"builtin": "floating_plate"}], camera={"resolution": [32, 32]},
                       map={"resolution": 32, "kind": ["depth", "vsm", "msm"], "blur": [1, 3]})
-    first = dsm.run(cfg, out=tmp_path / "r")
-    again = dsm.run(cfg, out=tmp_path / "r", resume=True)
+    first = dsm.run(cfg, out=tmp_path / "r", report=False)
+    again = dsm.run(cfg, out=tmp_path / "r", resume=True, report=False)
     assert again.run["resumed_cases"] == len(first.rows) == 1 + 2 * 2
     assert [(r["case"], r["scheme"], r["filter"], r["n_leak"]) for r in again.rows] == \
         [(r["case"], r["scheme"], r["filter"], r["n_leak"]) for r in first.rows]

@@ -9,7 +9,7 @@ def test_receivers_do_not_depend_on_the_map_resolution():
     import dsm
     from conftest import base_config
     res = dsm.run(base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [48, 48]},
-                              map={"resolution": [1, 2, 3, 5, 7, 8, 64]}, scheme=[{"name": "none"}]))
+                              map={"resolution": [1, 2, 3, 5, 7, 8, 64]}, scheme=[{"name": "none"}]), report=False)
     counts = {r["resolution"]: (r["n_receivers"], r["n_excluded_outside"]) for r in res.rows}
     assert len(set(counts.values())) == 1, counts
     assert counts[8][1] == 0

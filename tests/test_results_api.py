@@ -14,7 +14,7 @@ CFG = base_config(scene=[{"builtin": "plane_box"}], camera={"resolution": [32, 3
 @pytest.fixture(scope="module")
 def res(tmp_path_factory):
     import dsm
-    return dsm.run(CFG, out=tmp_path_factory.mktemp("api") / "run")
+    return dsm.run(CFG, out=tmp_path_factory.mktemp("api") / "run", report=False)
 
 
 @pytest.mark.parametrize("kw, words", [
@@ -68,7 +68,7 @@ def test_the_terminal_answer_says_ties_and_the_lowest_pooled_error(res):
 def test_a_run_without_a_folder_leaves_none_behind():
     """dsm.run without out: its folder lives while its Results (or a part of it) does, then goes."""
     import dsm
-    res = dsm.run(CFG)
+    res = dsm.run(CFG, report=False)
     out = res.out
     part = res.where(scheme="adaptive")
     del res

@@ -21,7 +21,7 @@ def test_resume_on_a_damaged_metrics_csv(tmp_path, capsys):
                       scheme=[{"name": "constant"}])
     cfg = write_cfg(tmp_path, raw)
     out = tmp_path / "r"
-    first = dsm.run(raw, out=out)
+    first = dsm.run(raw, out=out, report=False)
     good = (out / "metrics.csv").read_bytes()
     (out / "metrics.csv").write_bytes(os.urandom(3000))
     capsys.readouterr()
@@ -60,12 +60,12 @@ def test_resume_sees_a_change_in_a_file_an_xml_includes(tmp_path):
     raw = base_config(scene=[{"file": str(main)}], light=[{"type": "directional", "direction": [0.3, 0.2, -1.0]}],
                       map={"resolution": 32}, camera={"resolution": [32, 32]}, scheme=[{"name": "constant"}])
     out = tmp_path / "r"
-    dsm.run(raw, out=out)
-    assert dsm.run(raw, out=out, resume=True).run["resumed_cases"] == 1           # nothing changed: kept
+    dsm.run(raw, out=out, report=False)
+    assert dsm.run(raw, out=out, resume=True, report=False).run["resumed_cases"] == 1           # nothing changed: kept
     part.write_text(part.read_text().replace('z="0.6"', 'z="0.9"'))                # the box moved
-    assert dsm.run(raw, out=out, resume=True).run["resumed_cases"] == 0
+    assert dsm.run(raw, out=out, resume=True, report=False).run["resumed_cases"] == 0
     ply.write_text(ply.read_text().replace("-2 -2 0", "-2 -2 0.01"))                # the $mesh file changed
-    assert dsm.run(raw, out=out, resume=True).run["resumed_cases"] == 0
+    assert dsm.run(raw, out=out, resume=True, report=False).run["resumed_cases"] == 0
 
 
 @pytest.mark.slow
@@ -79,14 +79,14 @@ def test_a_case_set_aside_by_one_resume_and_named_again_by_the_next(tmp_path):
                     scheme=[{"name": "constant", "bias": 0.01}])
     b = {**a, "scheme": [{"name": "constant", "bias": 0.02}]}
     out = tmp_path / "r"
-    first = dsm.run(a, out=out)
-    second = dsm.run(b, out=out, resume=True)
+    first = dsm.run(a, out=out, report=False)
+    second = dsm.run(b, out=out, resume=True, report=False)
     assert [s["case"] for s in second.run["stale_cases"]] == ["0001"]
-    third = dsm.run(a, out=out, resume=True)
+    third = dsm.run(a, out=out, resume=True, report=False)
     assert third.run["state"] == "complete" and third.run["resumed_cases"] == 1 and third.run["n_failed"] == 0
     assert [s["case"] for s in third.run["stale_cases"]] == ["0001"]          # B's case, under its id
     assert (third.rows[0]["n_acne"], third.rows[0]["n_peterpan"]) == (first.rows[0]["n_acne"], first.rows[0]["n_peterpan"])
     with pytest.raises(ConfigError, match="force"):
-        dsm.run(a, out=out, resume=True, force=True)
+        dsm.run(a, out=out, resume=True, force=True, report=False)
     with pytest.raises(KeyError, match="no column 'nope'"):
         third.column("nope")

@@ -97,7 +97,7 @@ def both(tmp_path_factory):
     """_config run with builds = "alone" and "together": {mode: Results}."""
     import dsm
     out = tmp_path_factory.mktemp("stack")
-    return {mode: dsm.run(_config(mode), out=out / mode) for mode in ("alone", "together")}
+    return {mode: dsm.run(_config(mode), out=out / mode, report=False) for mode in ("alone", "together")}
 
 
 def _method(rows):

@@ -31,7 +31,7 @@ def _method(rows):
 def both(tmp_path_factory):
     import dsm
     out = tmp_path_factory.mktemp("wave")
-    return {mode: dsm.run(_config(mode), out=out / mode) for mode in ("per_case", "wavefront")}
+    return {mode: dsm.run(_config(mode), out=out / mode, report=False) for mode in ("per_case", "wavefront")}
 
 
 @pytest.mark.slow
@@ -107,7 +107,7 @@ def test_a_map_cut_into_waves_gives_the_same_rows(both, tmp_path, monkeypatch):
     monkeypatch.setattr(plan, "WAVE_BYTES", 1)
     cfg = _config("wavefront")
     cfg["map"]["resolution"] = [64]
-    res = dsm.run(cfg, out=tmp_path / "w")
+    res = dsm.run(cfg, out=tmp_path / "w", report=False)
     first = [m for m in res.run["maps"] if m["culling"] == "none"]
     assert [(m["wave_cases"], m["waves"]) for m in first] == [(48, 48)]
     strip = lambda rows: [{k: v for k, v in r.items() if k != "case"} for r in _method(rows)]
@@ -127,7 +127,7 @@ def test_an_unknown_lookup_mode_is_refused_before_any_work(tmp_path):
     import dsm
     from dsm.core.types import ConfigError
     with pytest.raises(ConfigError) as e:
-        dsm.run(_config("fused"), out=tmp_path / "x")
+        dsm.run(_config("fused"), out=tmp_path / "x", report=False)
     msg = str(e.value)
     assert "timing.lookups" in msg and "wavefront" in msg and "per_case" in msg
     assert not (tmp_path / "x").exists()

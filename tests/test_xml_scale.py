@@ -48,8 +48,8 @@ def test_the_cornell_box_in_metres_counts_as_in_its_own_units(tmp_path):
     every count is the unscaled run's (no bias: its acne, rounding itself, within 2); the world
     bias of 2 (2 mm or 2 m) is not."""
     import dsm
-    a = dsm.run(_cfg(1.0), out=tmp_path / "a")
-    b = dsm.run(_cfg(0.001), out=tmp_path / "b")
+    a = dsm.run(_cfg(1.0), out=tmp_path / "a", report=False)
+    b = dsm.run(_cfg(0.001), out=tmp_path / "b", report=False)
     assert len(a.rows) == len(b.rows) == 10 and b.run["n_failed"] == 0
     for ra, rb in zip(a.rows, b.rows):
         assert ra["n_receivers"] == rb["n_receivers"] > 0
@@ -116,7 +116,7 @@ def test_the_cornell_box_far_from_the_origin_keeps_its_exact_side(tmp_path):
     for x in (0.0, 1e4, 1e5):
         cfg = {**_cfg(0.001), "scene": [{"file": str(CBOX), "scale": 0.001, "translate": [x, x / 2, 0.0]}]}
         cfg["light"] = cfg["light"][:1]
-        rows[x] = dsm.run(cfg, out=tmp_path / f"at{x:g}").rows
+        rows[x] = dsm.run(cfg, out=tmp_path / f"at{x:g}", report=False).rows
     for x in (1e4, 1e5):
         for a, b in zip(rows[0.0], rows[x]):
             assert (a["n_receivers"], a["n_gt_shadowed"]) == (b["n_receivers"], b["n_gt_shadowed"]), (x, a["params"])
