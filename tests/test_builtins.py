@@ -40,13 +40,29 @@ def _expected_shadowed(size, height, top):
     return int((shadowed & ~hidden).sum())
 
 
-def _run(tmp_path, capsys, scenes):
+def _config(scenes) -> dict:
+    """A config of ``scenes`` seen by the camera straight above, under the tilted directional light."""
     t = math.radians(TILT)
-    cfg = write_toml(tmp_path / "occ.toml", {
-        "camera": {"resolution": [N, N], "position": [CX, CY, HC], "target": [CX, CY, 0.0], "up": [0.0, 1.0, 0.0],
-                   "fov": FOV},
-        "scene": scenes, "light": [{"type": "directional", "direction": [math.sin(t), 0.0, -math.cos(t)]}],
-        "map": {"resolution": 64}, "scheme": [{"name": "none"}], "report": {"images": "none"}})
+    return {"camera": {"resolution": [N, N], "position": [CX, CY, HC], "target": [CX, CY, 0.0], "up": [0.0, 1.0, 0.0],
+                       "fov": FOV},
+            "scene": scenes, "light": [{"type": "directional", "direction": [math.sin(t), 0.0, -math.cos(t)]}],
+            "map": {"resolution": 64}, "scheme": [{"name": "none"}], "report": {"images": "none"}}
+
+
+def test_the_occluder_plates_exact_shadow_is_the_numpy_count():
+    """The plate built-in through the kit's stages (load, G-buffer, receivers, V*): the shadowed receivers
+    are those numpy finds."""
+    from dsm import pipeline
+    from dsm.config import read
+    cfg = read.parse(_config([{"builtin": "occluder_plate", "size": 0.5, "height": 0.5}]), "<occ>")
+    sd = pipeline.load_scene(cfg.scenes[0], (N, N), cfg.camera)
+    setup = pipeline.light_setup(sd, pipeline.gbuffer(sd), cfg.lights[0], "0")
+    assert len(setup.pixels) == N * N
+    assert int((~setup.v_star).sum()) == _expected_shadowed(0.5, 0.5, 0.5) == _expected_shadowed(0.5 + 1e-6, 0.5, 0.5)
+
+
+def _run(tmp_path, capsys, scenes):
+    cfg = write_toml(tmp_path / "occ.toml", _config(scenes))
     rc, err = cli_run(capsys, "run", cfg, "--out", tmp_path / "out")
     assert rc == 0, err
     return list(csv.DictReader(open(tmp_path / "out" / "metrics.csv")))

@@ -86,7 +86,7 @@ def _with_paths(p, source: str, where: str, base: Path):
         if suffixes is None or not raw:
             continue
         key, path = f"{where}.{f.name}", Path(raw).expanduser()
-        path = path if path.is_absolute() else (base / path).resolve()
+        path = path if path.is_absolute() else (Path(base or ".") / path).resolve()
         if path.suffix.lower() not in suffixes:
             raise ConfigError(source, key, f"unsupported file type {path.suffix!r}", suffixes)
         if not path.is_file():
