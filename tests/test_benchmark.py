@@ -10,6 +10,9 @@ from dsm import cli
 from dsm.benchmark import bias_units, compare, ranking, results, suite
 from dsm.core.types import Length
 
+import helpers_benchmark_cases
+from helpers_benchmark_cases import only_cases
+
 # the suites' identities: changing suite_<n>.toml changes its hash, which makes it a new version
 SUITE_1_SHA256 = "15b8554a6f096049e4da44ba45084ae524f5d93f04380a71907185a990a2ba5c"
 SUITE_2_SHA256 = "ebd3668f4b3bff1df961afae653c8e91018de253cd2df644be3a1c71884b9cd1"
@@ -601,12 +604,20 @@ def test_flicker_is_frames_csv_s_recomputed(test_run):
     assert "no oracle floor" in page and "while the sun turns 2 degrees" in page and "every contender" in page
 
 
+# the cluster test's cases: both scenes, the bunny's mesh file read by the workers far from the origin
+# (the exact frame), the grazing plane in cm (the unit's scale); every kind of config runs in each
+# (depth, pre-filtered, virtual, hybrid), so every kind of map group is a Ray task
+RAY_CASES = (("bunny", "m", "1e5"), ("grazing", "cm", "0"))
+
+
 @pytest.mark.slow
-def test_the_benchmark_on_a_local_ray_cluster_counts_as_here(test_run, tmp_path):
+def test_the_benchmark_on_a_local_ray_cluster_counts_as_here(test_run, tmp_path, monkeypatch):
     """dsm benchmark --cluster local: every case's counts those of the run here (the map groups are
-    Ray tasks; the motion runs stay here), and results.json says where it ran."""
+    Ray tasks; the motion runs stay here), and results.json says where it ran. Two of the test
+    size's eight cases (RAY_CASES): the other six add time, not another kind of task."""
     ray = pytest.importorskip("ray", reason="Ray is not installed (pip install 'dsm[cluster]')")
     _, here = test_run
+    monkeypatch.setattr(results, "cases", only_cases(RAY_CASES))
     try:
         assert cli.main(["benchmark", "--out", str(tmp_path), "--size", "test", "--cluster", "local"]) == 0
     finally:
@@ -615,47 +626,35 @@ def test_the_benchmark_on_a_local_ray_cluster_counts_as_here(test_run, tmp_path)
     assert doc["backend"] == {"name": "ray", "address": "local"} and here["backend"] == {"name": "local"}
     key = lambda r: (r["scene"], r["unit"], r["offset"], r["light"], r["contender"], r.get("params", ""))
     counts = ("n_receivers", "n_acne", "n_peterpan", "n_gt_shadowed", "flip")     # FLIP from the PNGs read back
-    want = {key(r): tuple(r.get(k) for k in counts) for r in here["cases"]}
+    want = {key(r): tuple(r.get(k) for k in counts) for r in here["cases"] if key(r)[:3] in RAY_CASES}
     got = {key(r): tuple(r.get(k) for k in counts) for r in doc["cases"]}
-    assert got == want and len(got) == len(here["cases"])
+    assert got == want and len(got) == len(doc["cases"]) == 13 * len(RAY_CASES)
 
 
-SIGNAL_AFTER_KEEP = """
-import os, signal, sys
-from dsm import cli
-from dsm.benchmark import caselog
-keep, kept, after, sig = caselog.CaseLog.keep, [], int(sys.argv[1]), getattr(signal, sys.argv[2])
-# as a terminal's Ctrl-C finds it: a test suite started in the background (a shell's `&`) passes
-# SIGINT on ignored, and Python then installs no KeyboardInterrupt for it
-signal.signal(signal.SIGINT, signal.default_int_handler)
-def keep_then_signal(self, *args):
-    keep(self, *args)
-    kept.append(args[0])
-    if len(kept) == after:           # a known point: the case just kept, the next not begun
-        os.kill(os.getpid(), sig)
-caselog.CaseLog.keep = keep_then_signal
-sys.argv = ["dsm", *sys.argv[3:]]
-sys.exit(cli.main())
-"""
+# the interrupted run's cases: three of the grazing scene's (its cheapest), the second with the motion
+# run whose flicker records a resumed run must read back from the kept case
+RESUME_CASES = (("grazing", "cm", "0"), ("grazing", "m", "0"), ("grazing", "m", "1e4"))
 
 
-def _suite_process(out, *flags, signal_after=None):
-    """``python -m dsm benchmark --out OUT`` at the test size, as a user starts it; ``signal_after``:
-    (n, signal name) sends the process that signal itself once it has kept its n-th case."""
+def _suite_process(out, *flags, signal_after=(0, "none"), keys=RESUME_CASES):
+    """``dsm benchmark --out OUT`` at the test size in a process of its own, on the cases ``keys``;
+    ``signal_after``: (n, signal name) sends the process that signal itself once it has kept its n-th case."""
     import subprocess
     import sys
     args = ["benchmark", "--out", str(out), "--size", "test", *flags]
-    cmd = ([sys.executable, "-c", SIGNAL_AFTER_KEEP, str(signal_after[0]), signal_after[1], *args]
-           if signal_after else [sys.executable, "-m", "dsm", *args])
+    cmd = [sys.executable, helpers_benchmark_cases.__file__, str(signal_after[0]), signal_after[1], json.dumps(keys),
+           *args]
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
-def _counts(doc) -> dict:
+def _counts(doc, keys) -> dict:
+    """Every count, FLIP and flicker measure of ``doc``'s records of the cases ``keys``, by record."""
     key = lambda r: (r["scene"], r["unit"], r["offset"], r["light"], r["contender"], r.get("params", ""))
     cols = ("n_receivers", "n_acne", "n_peterpan", "n_gt_shadowed", "flip", "n_leak", "per_texel_objective")
-    cases = {key(r): tuple(r.get(k) for k in cols) for r in doc["cases"]}
-    flick = {key(r): (r["flicker_rate"], r["flicker_ever"], r["flicker_magnitude"]) for r in doc["flicker"]}
-    return {"cases": cases, "flicker": flick, "n": (len(doc["cases"]), len(doc["flicker"]))}
+    cases = {key(r): tuple(r.get(k) for k in cols) for r in doc["cases"] if key(r)[:3] in keys}
+    flick = {key(r): (r["flicker_rate"], r["flicker_ever"], r["flicker_magnitude"]) for r in doc["flicker"]
+             if key(r)[:3] in keys}
+    return {"cases": cases, "flicker": flick, "n": (len(cases), len(flick))}
 
 
 @pytest.mark.slow
@@ -663,10 +662,11 @@ def test_ctrl_c_and_kill_keep_finished_cases_and_resume_counts_as_uninterrupted(
     """Ctrl-C once the first case is kept: exit 130, a line saying what is kept and how to go on.
     --resume, killed (SIGKILL) once another case is kept, then --resume to the end: every count,
     FLIP and flicker rate that of the uninterrupted run, the kept cases not run again, and every
-    case's class image and FLIP map the same bytes as the uninterrupted run's."""
+    case's class image and FLIP map the same bytes as the uninterrupted run's. Three of the test
+    size's cases (RESUME_CASES), one kept by each process."""
     import signal
     whole_out, whole = test_run
-    out = tmp_path / "bm"
+    out, n = tmp_path / "bm", len(RESUME_CASES)
     proc = _suite_process(out, signal_after=(1, "SIGINT"))
     _, err = proc.communicate(timeout=900)
     assert proc.returncode == 130, err
@@ -682,12 +682,13 @@ def test_ctrl_c_and_kill_keep_finished_cases_and_resume_counts_as_uninterrupted(
     proc = _suite_process(out, "--resume")
     stdout, err = proc.communicate(timeout=1800)
     assert proc.returncode == 0, err
-    ran = [line for line in err.splitlines() if line.startswith("dsm benchmark: ") and "/8 " in line]
-    assert len(ran) == 8 - kept                                    # the kept cases are not run again
+    ran = [line for line in err.splitlines() if line.startswith("dsm benchmark: ") and f"/{n} " in line]
+    assert len(ran) == n - kept == 1                               # the kept cases are not run again
     doc = json.loads((out / "results.json").read_text())
-    assert _counts(doc) == _counts(whole)
+    assert _counts(doc, RESUME_CASES) == _counts(whole, RESUME_CASES) and len(doc["cases"]) == 13 * n
+    assert len(doc["flicker"]) > 0                                 # the motion case's, read back from its kept file
     images = lambda d: {p.relative_to(d).as_posix(): p.read_bytes() for p in (d / "case_images").rglob("*.png")}
-    assert len(images(out)) == 2 * 8 and images(out) == images(whole_out)
+    assert len(images(out)) == 2 * n and images(out) == {k: v for k, v in images(whole_out).items() if k in images(out)}
     assert not (out / "cases").exists() and (out / "leaderboard.html").is_file()
     assert "dsm benchmark: directional (" in stdout                 # what accuracy costs, in the terminal
 

@@ -8,6 +8,7 @@ import math
 import pytest
 
 from conftest import all_images_loaded, base_config, chrome
+from helpers_grad import toml_config
 
 
 @pytest.fixture(scope="module")
@@ -249,10 +250,10 @@ def test_the_leaderboard_filters_and_fits(tmp_path):
         drv.quit()
 
 
-GRAD_TINY = ('[gradient]\nmap_resolution = 24\nimage_resolution = 16\ntechniques = ["pcf_bilinear", "vsm"]\n'
-             'blur = [3]\nantialias = [false, true]\nparams = ["occluder_z", "light_height"]\nreference_samples = 8\n'
-             'projective_spp = 2\nprojective_integrators = ["direct_projective"]\nprojective_seeds = 1\n'
-             'inverse_starts = [-0.05, 0.05]\ninverse_iterations = 3\n')
+GRAD_TINY = toml_config(map_resolution=24, image_resolution=16, techniques=["pcf_bilinear", "vsm"], blur=[3],
+                        antialias=[False, True], params=["occluder_z", "light_height"], reference_samples=8,
+                        projective_spp=2, projective_integrators=["direct_projective"], projective_seeds=1,
+                        inverse_starts=[-0.05, 0.05], inverse_iterations=3)
 
 
 @pytest.fixture(scope="module")

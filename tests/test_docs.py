@@ -1,6 +1,5 @@
 """The documentation: the config reference's keys are the reader's keys, the site builds offline with
 warnings as errors, its internal links resolve, its how-to configs load, README's commands exist."""
-import contextlib
 import importlib
 import re
 import subprocess
@@ -88,10 +87,14 @@ def accepted_keys(monkeypatch) -> dict:
         seen.setdefault(_table_of(where), set()).update(allowed)
         return real(table, allowed, source, where)
     for name in ("dsm.config.read", "dsm.config.tune", "dsm.core.types", "dsm.lights.spot", "dsm.lights.scene",
-                 "dsm.lights.directional", "dsm.lights.point", "dsm.lights.area", "dsm.config.virtual"):
+                 "dsm.lights.directional", "dsm.lights.point", "dsm.lights.area", "dsm.config.virtual",
+                 "dsm.grad.spec"):
         monkeypatch.setattr(importlib.import_module(name), "check_keys", recording)
     for path in sorted((ROOT / "experiments").glob("*.toml")):
         read.load(path)
+    from dsm.grad import spec as grad_spec        # [gradient]: dsm grad's configs
+    for path in sorted((ROOT / "experiments" / "gradient").glob("*.toml")):
+        grad_spec.load(path)
     read.parse(tomllib.loads(EVERY_TABLE), "<every table>")
     return seen
 
@@ -234,55 +237,59 @@ def test_contact_bounds_are_the_readers(key, good, bad):
 
 # ---------------------------------------------------------------- the site in a browser (issue 75)
 
-@contextlib.contextmanager
-def _site_page(site, path: str):
-    """Headless Chromium (conftest.chrome) on one built page, at 1280 x 900, closed after the block."""
+@pytest.fixture(scope="module")
+def browser():
+    """Headless Chromium (conftest.chrome) at 1280 x 900, one for the module's page tests (a start
+    each cost a second or more), quit after the last."""
     from conftest import chrome
-    from selenium.webdriver.support.ui import WebDriverWait
     drv = chrome()
     drv.set_window_size(1280, 900)
-    try:
-        drv.get((site / path).as_uri())
-        # the page's scripts may still be laying out the sidebar when get() returns: wait for the document
-        # to say it is complete (a condition, not a sleep)
-        WebDriverWait(drv, 120).until(lambda d: d.execute_script("return document.readyState") == "complete"
-                                      and d.execute_script("return document.querySelector('.sidebar-tree') !== null"))
-        yield drv
-    finally:
-        drv.quit()
+    yield drv
+    drv.quit()
+
+
+def _site_page(drv, site, path: str):
+    """``drv`` on one built page, once the page says it is laid out."""
+    from selenium.webdriver.support.ui import WebDriverWait
+    drv.get((site / path).as_uri())
+    # the page's scripts may still be laying out the sidebar when get() returns: wait for the document
+    # to say it is complete (a condition, not a sleep)
+    WebDriverWait(drv, 120).until(lambda d: d.execute_script("return document.readyState") == "complete"
+                                  and d.execute_script("return document.querySelector('.sidebar-tree') !== null"))
+    return drv
 
 
 @pytest.mark.slow
-def test_the_sidebar_is_in_a_newcomers_order(site):
+def test_the_sidebar_is_in_a_newcomers_order(site, browser):
     """Start here first (install, first run, own scene, reading the report), then tutorials, how-tos,
     reference, topics, results, and the design as one entry."""
-    with _site_page(site, "index.html") as drv:
-        captions = drv.execute_script("return Array.from(document.querySelectorAll('.sidebar-tree p.caption'))"
-                                      ".map(p => p.textContent.trim())")
-        assert captions == ["Start here", "Tutorials", "How-to guides", "Reference", "Topics", "Results", "Design"]
-        first = drv.execute_script("const l = document.querySelectorAll('.sidebar-tree ul')[0];"
-                                   "return Array.from(l.children).map(li => li.querySelector('a').getAttribute('href'))")
-        assert first[:4] == ["install.html", "running.html", "howto/my_own_scene.html", "report-figures.html"]
-        design = drv.execute_script(
-            "const ul = Array.from(document.querySelectorAll('.sidebar-tree p.caption')).pop().nextElementSibling;"
-            "const inner = ul.querySelector(':scope > li > ul');"
-            "return [ul.querySelectorAll(':scope > li').length, inner !== null, inner && inner.offsetParent !== null]")
-        assert design == [1, True, False]          # one entry, its topics folded under it
+    drv = _site_page(browser, site, "index.html")
+    captions = drv.execute_script("return Array.from(document.querySelectorAll('.sidebar-tree p.caption'))"
+                                  ".map(p => p.textContent.trim())")
+    assert captions == ["Start here", "Tutorials", "How-to guides", "Reference", "Topics", "Results", "Design"]
+    first = drv.execute_script("const l = document.querySelectorAll('.sidebar-tree ul')[0];"
+                               "return Array.from(l.children).map(li => li.querySelector('a').getAttribute('href'))")
+    assert first[:4] == ["install.html", "running.html", "howto/my_own_scene.html", "report-figures.html"]
+    design = drv.execute_script(
+        "const ul = Array.from(document.querySelectorAll('.sidebar-tree p.caption')).pop().nextElementSibling;"
+        "const inner = ul.querySelector(':scope > li > ul');"
+        "return [ul.querySelectorAll(':scope > li').length, inner !== null, inner && inner.offsetParent !== null]")
+    assert design == [1, True, False]          # one entry, its topics folded under it
 
 
 @pytest.mark.slow
-def test_tutorial_01s_first_output_is_an_html_table_and_its_plumbing_is_out_of_sight(site):
-    with _site_page(site, "_generated/tutorials/01_quick_start.html") as drv:
-        first = drv.execute_script("const o = document.querySelector('.cell_output');"
-                                   "return [o.querySelector('table') !== null, o.querySelectorAll('tbody tr').length,"
-                                   " o.innerText]")
-        assert first[0] and first[1] == 5, first             # the five schemes of its config, one row each
-        assert "| scheme |" not in first[2] and "normal_offset" in first[2]
-        assert "DSM_NOTEBOOK_SMALL" not in drv.find_element("css selector", "article").text
+def test_tutorial_01s_first_output_is_an_html_table_and_its_plumbing_is_out_of_sight(site, browser):
+    drv = _site_page(browser, site, "_generated/tutorials/01_quick_start.html")
+    first = drv.execute_script("const o = document.querySelector('.cell_output');"
+                               "return [o.querySelector('table') !== null, o.querySelectorAll('tbody tr').length,"
+                               " o.innerText]")
+    assert first[0] and first[1] == 5, first             # the five schemes of its config, one row each
+    assert "| scheme |" not in first[2] and "normal_offset" in first[2]
+    assert "DSM_NOTEBOOK_SMALL" not in drv.find_element("css selector", "article").text
 
 
 @pytest.mark.slow
-def test_the_api_reference_documents_the_run_the_results_and_every_testing_function(site):
+def test_the_api_reference_documents_the_run_the_results_and_every_testing_function(site, browser):
     """Each a visible entry on the API page whose text holds its docstring's first words (autodoc)."""
     import inspect
     import dsm
@@ -292,24 +299,24 @@ def test_the_api_reference_documents_the_run_the_results_and_every_testing_funct
     wanted |= {f"dsm.testing.{n}": f for n, f in vars(dsm.testing).items()
                if inspect.isfunction(f) and f.__module__ == "dsm.testing" and not n.startswith("_")}
     assert len(wanted) == 5
-    with _site_page(site, "api.html") as drv:
-        for name, obj in wanted.items():
-            text = drv.execute_script("const d = document.getElementById(arguments[0]);"
-                                      "return d && d.offsetParent !== null ? d.parentElement.innerText : null", name)
-            first = " ".join(inspect.getdoc(obj).replace("``", "").split()[:4])
-            assert text is not None and first in " ".join(text.split()), (name, first, text)
+    drv = _site_page(browser, site, "api.html")
+    for name, obj in wanted.items():
+        text = drv.execute_script("const d = document.getElementById(arguments[0]);"
+                                  "return d && d.offsetParent !== null ? d.parentElement.innerText : null", name)
+        first = " ".join(inspect.getdoc(obj).replace("``", "").split()[:4])
+        assert text is not None and first in " ".join(text.split()), (name, first, text)
 
 
 @pytest.mark.slow
-def test_every_scheme_has_its_page_with_its_image(site):
+def test_every_scheme_has_its_page_with_its_image(site, browser):
     """A page per registered scheme, titled by its name, showing its own error image (loaded)."""
     from dsm import schemes
-    with _site_page(site, "_generated/schemes/index.html") as drv:
-        for s in schemes.ALL:
-            drv.get((site / "_generated" / "schemes" / f"{s.NAME}.html").as_uri())
-            h1, imgs = drv.execute_script(
-                "return [document.querySelector('article h1').textContent,"
-                " Array.from(document.querySelectorAll('article img')).map(i => [i.getAttribute('src'),"
-                " i.complete && i.naturalWidth > 0])]")
-            assert h1.startswith(s.NAME), h1
-            assert [ok for src, ok in imgs if src.endswith(f"/{s.NAME}.png")] == [True], (s.NAME, imgs)
+    drv = _site_page(browser, site, "_generated/schemes/index.html")
+    for s in schemes.ALL:
+        drv.get((site / "_generated" / "schemes" / f"{s.NAME}.html").as_uri())
+        h1, imgs = drv.execute_script(
+            "return [document.querySelector('article h1').textContent,"
+            " Array.from(document.querySelectorAll('article img')).map(i => [i.getAttribute('src'),"
+            " i.complete && i.naturalWidth > 0])]")
+        assert h1.startswith(s.NAME), h1
+        assert [ok for src, ok in imgs if src.endswith(f"/{s.NAME}.png")] == [True], (s.NAME, imgs)

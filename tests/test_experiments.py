@@ -31,11 +31,7 @@ def test_experiment_runs_tiny(path, tmp_path):
         assert set(names) <= NOT_SHIPPED | MODELS, names
         pytest.skip(f"{path.name} needs {', '.join(names)}, not shipped (data/meshes/README.md); a copy of your own "
                     "runs it (docs/sponza.md: DSM_SPONZA)")
-    tiny = dataclasses.replace(cfg, camera_resolution=(48, 48), timing_repeats=1,
-                               map=dataclasses.replace(cfg.map, resolution=(32,) if not _virtual_only(cfg) else
-                                                       cfg.map.resolution,
-                                                       texels=(6 * 32 ** 2,) if cfg.map.texels else ()))
-    res = dsm.run(tiny, out=tmp_path / "out")
+    res = dsm.run(_tiny(cfg), out=tmp_path / "out")
     assert res.run["n_failed"] == 0, res.run["status"]
     # the shipped meshes are there; only the files without redistribution terms may be absent
     absent = {_absent_name(s) for s in cfg.scenes if s.missing}
@@ -43,6 +39,29 @@ def test_experiment_runs_tiny(path, tmp_path):
     assert res.run["n_skipped"] == sum(s.missing != "" for s in cfg.scenes)
     assert len(res.rows) >= len(cfg.schemes)
     assert (tmp_path / "out" / "table.md").is_file()
+
+
+# a tiny run's sizes: what runs is every case of the experiment (its scenes, lights, views, schemes, filters,
+# motions and report), each at a size that makes its work small
+CAMERA_PX = (48, 48)
+MAP_PX = 32
+VIRTUAL_SHRINK = 16             # a virtual map's texels per side and per page both /16: the same page grid
+TERRAIN_STRIDE = 8              # every 8th DEM sample: about 4,300 triangles of the 275,772
+
+
+def _tiny(cfg):
+    """``cfg`` with every size made tiny, nothing left out: the camera, the maps (a virtual map keeps its page
+    grid and levels, so a spot's level constraint still holds), the terrain's samples; one timing repeat."""
+    virtual = tuple(dataclasses.replace(v, resolution=v.resolution // VIRTUAL_SHRINK,
+                                        page_size=v.page_size // VIRTUAL_SHRINK)
+                    if v.page_size % VIRTUAL_SHRINK == 0 and v.resolution % VIRTUAL_SHRINK == 0 else v
+                    for v in cfg.map.virtual)
+    mapspec = dataclasses.replace(cfg.map, resolution=(MAP_PX,) if not _virtual_only(cfg) else cfg.map.resolution,
+                                  texels=(6 * MAP_PX ** 2,) if cfg.map.texels else (), virtual=virtual)
+    scenes = tuple(dataclasses.replace(s, params=dataclasses.replace(s.params, stride=max(s.params.stride,
+                                                                                          TERRAIN_STRIDE)))
+                   if s.builtin == "terrain" else s for s in cfg.scenes)
+    return dataclasses.replace(cfg, camera_resolution=CAMERA_PX, timing_repeats=1, map=mapspec, scenes=scenes)
 
 
 def _virtual_only(cfg) -> bool:

@@ -8,22 +8,23 @@ import pytest
 
 from dsm.core.types import ConfigError
 from dsm.grad import spec as specmod
+from helpers_grad import config, toml_config
 
 SMALL = {"map_resolution": 48, "image_resolution": 48, "window": 1.0}
 
 
 def _spec(**kw):
-    return specmod.parse({"gradient": {**SMALL, **kw}}, "g.toml")
+    return specmod.parse(config(**{**SMALL, **kw}), "g.toml")
 
 
 @pytest.mark.parametrize("table, key, words", [
-    ({"techniques": ["pcf"]}, "gradient.techniques", "valid: nearest, pcf_bilinear"),
-    ({"params": ["light_angle"]}, "gradient.params", "directional light"),
+    ({"techniques": ["pcf"]}, "map.kind", "valid: depth, vsm"),
+    ({"params": ["light_angle"]}, "gradient.params", "directional light and the [[light]] is a spot light"),
     ({"loss": "l2"}, "gradient.target", "needs a target"),
     ({"target": {"occluder_z": 0.1}}, "gradient.target", "only with loss"),
-    ({"blur": [2]}, "gradient.blur", "odd"),
+    ({"blur": [2]}, "map.blur", "odd"),
     ({"fd_step": {"light_x": 1e-3}}, "gradient.fd_step.light_x", "names no parameter"),
-    ({"light_height": 0.4}, "gradient.light_height", "above the occluder"),
+    ({"light_height": 0.4}, "light[0].position", "above the occluder"),
     ({"colour": 1}, "gradient.colour", "unknown key"),
     # the keys of --compare and --inverse
     ({"reference_samples": 0}, "gradient.reference_samples", ">= 1"),
@@ -32,16 +33,16 @@ def _spec(**kw):
     ({"projective_spp": 1.5}, "gradient.projective_spp", "integer"),
     ({"projective_integrators": ["path"]}, "gradient.projective_integrators", "direct_projective"),
     # sizes that leave nothing to differentiate
-    ({"bias": 1e30}, "gradient.bias", "valid: 0 <= bias < 0.5"),
+    ({"bias": 1e30}, "scheme[0].bias", "valid: 0 <= bias < 0.5"),
     ({"occluder_size": 1.6}, "gradient.window", "beyond the image's half-width 1"),
     ({"window": 1e-9}, "gradient.window", "beyond the image's half-width"),
     ({"window": 100.0, "image_resolution": 16}, "gradient.window", "under 4"),
     # the light at 1e9 over a gap of 0.5: 0.5 / (1e9 2^-24) = 0.0084 float32 steps (measured: the shadow vanishes)
-    ({"light_height": 1e9}, "gradient.light_height", "0.00839 float32 depth steps"),
+    ({"light_height": 1e9}, "light[0].position", "0.00839 float32 depth steps"),
 ])
 def test_a_bad_gradient_table_is_one_line_naming_file_and_key(table, key, words):
     with pytest.raises(ConfigError) as e:
-        specmod.parse({"gradient": table}, "g.toml")
+        specmod.parse(config(**table), "g.toml")
     msg = str(e.value)
     assert msg.startswith(f"g.toml: {key}: ") and words in msg and "\n" not in msg
 
@@ -50,7 +51,7 @@ def test_a_bad_gradient_table_is_one_line_naming_file_and_key(table, key, words)
                                           ("directional", {"light_angle": -35.0})])
 def test_the_shadow_reach_is_the_plates_corners_projected_and_any_scale_passes(light, extra):
     h, size, H, window = 0.5, 0.5, 2.0, 1.0
-    spec = specmod.parse({"gradient": {"light": light, **extra}}, "g.toml")
+    spec = specmod.parse(config(light=light, **extra), "g.toml")
     corners = np.array([[sx * size / 2, sy * size / 2, h] for sx in (-1, 1) for sy in (-1, 1)], dtype=np.float64)
     if light == "directional":       # along the light's direction (tilted toward +x) down to z = 0
         d = np.array([math.sin(math.radians(-35.0)), 0.0, -math.cos(math.radians(-35.0))])
@@ -59,12 +60,12 @@ def test_the_shadow_reach_is_the_plates_corners_projected_and_any_scale_passes(l
         ground = corners[:, :2] * (H / (H - h))
     assert specmod.shadow_half_extent(spec) == pytest.approx(np.max(np.abs(ground[:, :2])), rel=1e-12)
     if light == "point":             # 0.5 / (1e6 2^-24) = 8.4 depth steps: measured right (0.46 % off the closed form)
-        specmod.parse({"gradient": {"light": light, "light_height": 1e6}}, "g.toml")
+        specmod.parse(config(light=light, light_height=1e6), "g.toml")
     for scale in (1e-3, 1e4):        # the same scene in other units is the same question
         lengths = {"occluder_height": h * scale, "occluder_size": size * scale, "window": window * scale,
                    "bias": 0.02 * scale, **({"light_height": H * scale} if light != "directional" else {}),
                    **({"light_size": 0.2 * scale} if light == "area" else {})}
-        specmod.parse({"gradient": {"light": light, **extra, **lengths}}, "g.toml")
+        specmod.parse(config(light=light, **{**extra, **lengths}), "g.toml")
 
 
 def test_the_light_frame_in_drjit_is_numpys():
@@ -142,10 +143,9 @@ def test_a_difference_across_a_switching_antialiasing_pair_is_flagged_not_called
     from dsm.grad import antialias, build
     from dsm.grad.check import self_check
     from dsm.grad.problem import Problem
-    spec = specmod.parse({"gradient": {"occluder_size": 0.4, "occluder_height": 0.6, "light_height": 2.4,
-                                       "map_resolution": 64, "image_resolution": 48, "params": ["occluder_z"],
-                                       "techniques": ["pcf_bilinear", "vsm"], "blur": [3], "antialias": [True]}},
-                         "g.toml")
+    spec = specmod.parse(config(occluder_size=0.4, occluder_height=0.6, light_height=2.4, map_resolution=64,
+                                image_resolution=48, params=["occluder_z"], techniques=["pcf_bilinear", "vsm"],
+                                blur=[3], antialias=[True]), "g.toml")
     pb = Problem(spec)
     rows = self_check(pb)
     assert [r.technique for r in rows] == ["pcf_bilinear aa", "vsm blur 3 aa"]
@@ -200,13 +200,13 @@ def test_a_directional_lights_angle_shifts_the_shadow_edge():
 def test_dsm_grad_writes_its_table_and_refuses_a_bad_config(tmp_path, capsys):
     from dsm.cli import main
     bad = tmp_path / "bad.toml"
-    bad.write_text('[gradient]\nloss = "area"\n')
+    bad.write_text(toml_config(loss="area"))
     assert main(["grad", str(bad), "--out", str(tmp_path / "b")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "gradient.loss" in err and "shadow_area" in err
     good = tmp_path / "good.toml"
-    good.write_text('[gradient]\nmap_resolution = 32\nimage_resolution = 32\ntechniques = ["nearest"]\n'
-                    'antialias = [false]\nparams = ["occluder_z"]\n')
+    good.write_text(toml_config(map_resolution=32, image_resolution=32, techniques=["nearest"], antialias=[False],
+                                params=["occluder_z"]))
     assert main(["grad", str(good), "--out", str(tmp_path / "g")]) == 0
     lines = (tmp_path / "g" / "selfcheck.csv").read_text().splitlines()
     assert lines[0].startswith("technique,param,unit,loss,ad,fd") and len(lines) == 2
@@ -230,21 +230,21 @@ def test_dsm_grad_answers_a_bad_folder_a_folder_config_and_an_unreadable_mesh_in
     header without its data) are each one line with exit 2, before any gradient is computed."""
     from dsm.cli import main
     good = tmp_path / "good.toml"
-    good.write_text('[gradient]\nmap_resolution = 16\nimage_resolution = 16\ntechniques = ["nearest"]\n'
-                    'antialias = [false]\nparams = ["occluder_z"]\n')
+    good.write_text(toml_config(map_resolution=16, image_resolution=16, techniques=["nearest"], antialias=[False],
+                                params=["occluder_z"]))
     (tmp_path / "afile").write_text("x")
     bad_ply = tmp_path / "bad.ply"
     bad_ply.write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
                        "property float z\nend_header\n0 0 0\n")
     mesh = tmp_path / "mesh.toml"
-    mesh.write_text('[gradient]\nscene = "mesh"\nmesh = "bad.ply"\nmap_resolution = 16\nimage_resolution = 16\n'
-                    'techniques = ["nearest"]\nantialias = [false]\nparams = ["occluder_z"]\n')
+    mesh.write_text(toml_config(scene="mesh", mesh="bad.ply", map_resolution=16, image_resolution=16,
+                                techniques=["nearest"], antialias=[False], params=["occluder_z"]))
     latin1 = tmp_path / "latin1.toml"
     latin1.write_bytes('[gradient]\n# caf\u00e9\n'.encode("latin-1"))
     for argv, words in (([str(good), "--out", str(tmp_path / "afile")], "is a file, not a folder"),
                         ([str(tmp_path), "--out", str(tmp_path / "o1")], "is a folder, not a config file"),
                         ([str(latin1), "--out", str(tmp_path / "o3")], "file: not UTF-8 text (byte 0xe9"),
-                        ([str(mesh), "--out", str(tmp_path / "o2")], "gradient.mesh")):
+                        ([str(mesh), "--out", str(tmp_path / "o2")], "scene[0].mesh")):
         assert main(["grad", *argv]) == 2
         err = capsys.readouterr().err.strip()
         assert err.count("\n") == 0 and words in err, err
@@ -308,13 +308,12 @@ def test_dsm_grad_run_returns_the_self_check_and_refuses_a_bad_config_in_one_lin
     within 15 % of 2 A H^2 / (H - h)^3 (48^2 map: the corners' pairs are not treated); a config error names
     the key before any work."""
     import dsm.grad
-    res = dsm.grad.run({"gradient": {**SMALL, "params": ["occluder_z"], "techniques": ["pcf_bilinear"],
-                                     "antialias": [True]}})
+    res = dsm.grad.run(config(**SMALL, params=["occluder_z"], techniques=["pcf_bilinear"], antialias=[True]))
     [row] = res.selfcheck
     assert row.technique == "pcf_bilinear aa" and row.closed_form == pytest.approx(2 * 0.25 * 4 / 1.5 ** 3)
     assert row.ad == pytest.approx(row.closed_form, rel=0.15) and res.compare is None and res.inverse is None
     with pytest.raises(ConfigError) as e:
-        dsm.grad.run({"gradient": {"loss": "l2", "target": {"occluder_z": 0.05}}}, compare=True)
+        dsm.grad.run(config(loss="l2", target={"occluder_z": 0.05}), compare=True)
     assert str(e.value).startswith("<dict>: gradient.loss: ") and "\n" not in str(e.value)
 
 
@@ -343,3 +342,32 @@ def test_light_emitter_is_emitter_to_light_reversed():
     assert np.allclose(np.array(bb.max).ravel(), [0.35, 0.25, 2.0], atol=1e-6)
     n = shape.sample_position(0.0, mi.Point2f(0.5, 0.5)).n
     assert np.allclose(np.array(n).ravel(), [0.0, 0.0, -1.0], atol=1e-6) and shape.is_emitter()
+
+
+def test_evaluate_gives_a_cases_loss_and_gradients_with_units_near_the_closed_form():
+    """dsm.grad.evaluate(ctx, case, params): the antialiased PCF case of a plate (side 0.5 at 0.5, point light
+    at 2) has d area / dh within 15 % of 2 A H^2 / (H - h)^3 and d area / dH within 10 % of -2 A H h / (H - h)^3
+    (48^2 map: the corners' pairs are not treated), in world^2 per world; its loss is the image's shadow summed
+    over the pixels (numpy, float64); at another height it is the problem's own evaluation there; a case dsm
+    grad would not differentiate as given (another bias) is refused."""
+    import dataclasses
+    import dsm.grad
+    from dsm.core.types import Length
+    spec = _spec(params=["occluder_z", "light_height"], techniques=["pcf_bilinear"], antialias=[True],
+                 image_resolution=96)
+    ctx = dsm.grad.Problem(spec)
+    [case] = dsm.grad.cases(spec)
+    assert case.case.filter == "pcf_bilinear" and case.antialias and case.case.spec.params.bias == Length(0.02)
+    res = dsm.grad.evaluate(ctx, case)
+    A, h, H = 0.25, 0.5, 2.0
+    assert res.grads["occluder_z"] == pytest.approx(2 * A * H ** 2 / (H - h) ** 3, rel=0.15)
+    assert res.grads["light_height"] == pytest.approx(-2 * A * H * h / (H - h) ** 3, rel=0.1)
+    assert res.units == {"occluder_z": "world^2 per world", "light_height": "world^2 per world"}
+    assert res.loss_unit == "world^2" and res.image.shape == (96, 96)
+    assert res.loss == pytest.approx(np.sum(1.0 - res.image.astype(np.float64)) * (2.0 / 96) ** 2, rel=1e-12)
+    up = dsm.grad.evaluate(ctx, case, {"occluder_z": 0.05}, ("occluder_z",))
+    assert up.loss == ctx.evaluate(case.technique, ctx.values({"occluder_z": 0.05})).loss and up.loss > res.loss
+    other = dataclasses.replace(case.case, spec=dataclasses.replace(case.case.spec, params=type(
+        case.case.spec.params)(bias=Length(0.05))))
+    with pytest.raises(ValueError, match="constant bias of 0.02"):
+        dsm.grad.evaluate(ctx, dsm.grad.GradCase(other, True))

@@ -8,12 +8,13 @@ import pytest
 
 from dsm.core.types import ConfigError
 from dsm.grad import spec as specmod
+from helpers_grad import config, toml_config
 
 AREA = {"light": "area", "light_size": 0.5, "map_resolution": 48, "image_resolution": 48, "window": 1.0}
 
 
 def _spec(**kw):
-    return specmod.parse({"gradient": {**AREA, **kw}}, "g.toml")
+    return specmod.parse(config(**{**AREA, **kw}), "g.toml")
 
 
 def _corner(X, Y, D):
@@ -74,7 +75,7 @@ def test_the_projective_mask_leaves_the_point_lights_shadow_edge_seen():
     beyond the plate's image; two pixels of margin at 48^2 or fewer would cover it.)"""
     from dsm.grad import projective
     from dsm.grad.problem import Problem
-    pb = Problem(specmod.parse({"gradient": {"map_resolution": 64, "image_resolution": 64}}, "g.toml"))
+    pb = Problem(specmod.parse(config(map_resolution=64, image_resolution=64), "g.toml"))
     seen, exact = projective.visible_ground(pb, "occluder_z"), pb.exact_image(pb.values())
     assert np.count_nonzero(seen & (exact < 1.0)) > 40
 
@@ -107,15 +108,15 @@ def test_spp_point_statistics_are_numpys():
 
 
 @pytest.mark.parametrize("kw, key, words", [
-    ({"light": "point", "light_samples": 8}, "gradient.light_samples", "read only with light"),
+    ({"light": "point", "light_samples": 8}, "gradient.light_samples", "read only under an area light"),
     ({"light_samples": 0}, "gradient.light_samples", ">= 1"),
     ({"equal_error_spp": [16, 4]}, "gradient.equal_error_spp", "increasing"),
     ({"equal_error_spp": [4]}, "gradient.equal_error_spp", "at least two"),
     ({"equal_error_seeds": 1}, "gradient.equal_error_seeds", ">= 2"),
     ({"params": ["light_angle"]}, "gradient.params", "directional light"),
-    ({"light_height": 0.5}, "gradient.light_height", "above the occluder"),
-    ({"box_height": 0.1}, "gradient.box_height", "read only with scene"),
-    ({"scene": "box", "box_height": 0}, "gradient.box_height", "> 0"),
+    ({"light_height": 0.5}, "light[0].position", "above the occluder"),
+    ({"box_height": 0.1}, "scene[0].box_height", 'read only with builtin = "occluder_box"'),
+    ({"scene": "box", "box_height": 0}, "scene[0].box_height", "> 0"),
 ])
 def test_bad_area_light_keys_are_one_line_errors(kw, key, words):
     with pytest.raises(ConfigError) as e:
@@ -131,10 +132,11 @@ def test_dsm_grad_compare_under_an_area_light_measures_the_cost_at_equal_error(t
     from dsm.cli import main
     from dsm.grad.equal_error import crossing
     cfg = tmp_path / "a.toml"
-    cfg.write_text('[gradient]\nlight = "area"\nlight_size = 0.5\nmap_resolution = 32\nimage_resolution = 32\n'
-                   'techniques = ["vsm"]\nblur = [3]\nantialias = [true]\nparams = ["occluder_z"]\n'
-                   'reference_samples = 4\nlight_samples = 6\nprojective_spp = 2\nprojective_seeds = 2\n'
-                   'projective_integrators = ["direct_projective"]\nequal_error_spp = [1, 4]\nequal_error_seeds = 2\n')
+    cfg.write_text(toml_config(light="area", light_size=0.5, map_resolution=32, image_resolution=32,
+                               techniques=["vsm"], blur=[3], antialias=[True], params=["occluder_z"],
+                               reference_samples=4, light_samples=6, projective_spp=2, projective_seeds=2,
+                               projective_integrators=["direct_projective"], equal_error_spp=[1, 4],
+                               equal_error_seeds=2))
     assert main(["grad", str(cfg), "--compare", "--out", str(tmp_path / "o")]) == 0
     out = tmp_path / "o"
     proj = list(csv.DictReader(open(out / "projective.csv")))
@@ -177,9 +179,9 @@ def test_equal_error_figure_of_undefined_errors_says_so(tmp_path):
 
 
 @pytest.mark.parametrize("kw, key, words", [
-    ({"light_size": 2.0}, "gradient.light_size", "valid: 0 < light_size < 2)"),
-    ({"light_size": 1e9, "window": 0.5}, "gradient.light_size", "valid: 0 < light_size < 1)"),
-    ({"light_size": "big"}, "gradient.light_size", "expected a number, got 'big'"),
+    ({"light_size": 2.0}, "light[0].size", "valid: 0 < size < 2)"),
+    ({"light_size": 1e9, "window": 0.5}, "light[0].size", "valid: 0 < size < 1)"),
+    ({"light_size": "big"}, "light[0].size", "expected a number, got 'big'"),
     ({"light_samples": 10 ** 6}, "gradient.light_samples",
      "must be <= 32, got 1000000 (valid: an integer from 1 to 32)"),
     ({"light_samples": 0}, "gradient.light_samples", "must be >= 1, got 0 (valid: an integer from 1 to 32)"),
@@ -189,8 +191,8 @@ def test_equal_error_figure_of_undefined_errors_says_so(tmp_path):
     ({"equal_error_spp": [1, 10 ** 6]}, "gradient.equal_error_spp", "<= 4096"),
     ({"equal_error_spp": "16"}, "gradient.equal_error_spp", "expected an integer"),
     ({"equal_error_seeds": 10 ** 6}, "gradient.equal_error_seeds", "<= 64"),
-    ({"scene": "box", "box_height": 1e9}, "gradient.light_height", "above the occluder's top"),
-    ({"scene": "box", "box_height": "0.1"}, "gradient.box_height", "expected a number"),
+    ({"scene": "box", "box_height": 1e9}, "light[0].position", "above the occluder's top"),
+    ({"scene": "box", "box_height": "0.1"}, "scene[0].box_height", "expected a number"),
 ])
 def test_absurd_area_light_values_are_one_line_errors(kw, key, words):
     """Huge, wrong-typed and duplicated values of the area light's keys: refused at reading, in one line."""
@@ -210,10 +212,10 @@ def test_compare_refuses_a_light_that_hides_the_whole_image_before_any_work(tmp_
     assert half > 1.0 and not projective.ground_seen(spec, "occluder_z").any()
     assert projective.ground_seen(_spec(light_size=0.5, image_resolution=16), "occluder_z").any()
     cfg = tmp_path / "g.toml"
-    cfg.write_text('[gradient]\nlight = "area"\nlight_size = 1.95\nmap_resolution = 16\nimage_resolution = 16\n')
+    cfg.write_text(toml_config(light="area", light_size=1.95, map_resolution=16, image_resolution=16))
     assert main(["grad", str(cfg), "--compare", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.startswith(f"dsm: config error: {cfg}: gradient.light_size: --compare's projective integrators would "
+    assert err.startswith(f"dsm: config error: {cfg}: light[0].size: --compare's projective integrators would "
                           "see no ground pixel") and "\n" not in err
     assert not (tmp_path / "o").exists()
 

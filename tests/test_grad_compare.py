@@ -8,12 +8,13 @@ import pytest
 
 from dsm.core.types import ConfigError
 from dsm.grad import spec as specmod
+from helpers_grad import config, toml_config
 
 SMALL = {"map_resolution": 48, "image_resolution": 48, "window": 1.0}
 
 
 def _spec(**kw):
-    return specmod.parse({"gradient": {**SMALL, **kw}}, "g.toml")
+    return specmod.parse(config(**{**SMALL, **kw}), "g.toml")
 
 
 def test_cosine_similarity_is_the_angle_between_images():
@@ -101,14 +102,15 @@ def test_the_inverse_task_recovers_the_plates_height_through_the_antialiased_map
 def test_dsm_grad_compare_writes_its_tables_and_refuses_the_l2_loss(tmp_path, capsys):
     from dsm.cli import main
     bad = tmp_path / "bad.toml"
-    bad.write_text('[gradient]\nloss = "l2"\ntarget = {occluder_z = 0.05}\n')
+    bad.write_text(toml_config(loss="l2", target={"occluder_z": 0.05}))
     assert main(["grad", str(bad), "--compare", "--out", str(tmp_path / "b")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "gradient.loss" in err and "shadow_area" in err
     good = tmp_path / "good.toml"
-    good.write_text('[gradient]\nmap_resolution = 24\nimage_resolution = 16\ntechniques = ["pcf_bilinear"]\n'
-                    'antialias = [true]\nparams = ["occluder_z"]\nreference_samples = 8\nprojective_spp = 2\n'
-                    'projective_integrators = ["direct_projective"]\nprojective_seeds = 1\ninverse_starts = [0.05]\ninverse_iterations = 3\n')
+    good.write_text(toml_config(map_resolution=24, image_resolution=16, techniques=["pcf_bilinear"], antialias=[True],
+                                params=["occluder_z"], reference_samples=8, projective_spp=2,
+                                projective_integrators=["direct_projective"], projective_seeds=1,
+                                inverse_starts=[0.05], inverse_iterations=3))
     assert main(["grad", str(good), "--compare", "--inverse", "--out", str(tmp_path / "g")]) == 0
     out = tmp_path / "g"
     rows = list(csv.DictReader(open(out / "compare.csv")))
@@ -124,13 +126,13 @@ def test_a_mesh_occluder_is_scaled_to_its_size_and_set_on_its_height(tmp_path):
     from conftest import ROOT
     from dsm.grad.occluder import shapes
     with pytest.raises(ConfigError) as e:
-        specmod.parse({"gradient": {"scene": "mesh", "mesh": "nowhere.ply"}}, str(tmp_path / "g.toml"))
-    assert "gradient.mesh: no such file" in str(e.value) and "\n" not in str(e.value)
+        specmod.parse(config(scene="mesh", mesh="nowhere.ply"), str(tmp_path / "g.toml"))
+    assert "scene[0].mesh: no such file" in str(e.value) and "\n" not in str(e.value)
     with pytest.raises(ConfigError) as e:
-        specmod.parse({"gradient": {"mesh": "a.ply"}}, "g.toml")
-    assert str(e.value).startswith("g.toml: gradient.mesh: is read only with scene")
-    spec = specmod.parse({"gradient": {"scene": "mesh", "mesh": str(ROOT / "data/meshes/mitsuba_bunny.ply"),
-                                       "occluder_size": 0.4, "occluder_height": 0.3}}, "g.toml")
+        specmod.parse(config(mesh="a.ply"), "g.toml")
+    assert str(e.value).startswith('g.toml: scene[0].mesh: is read only with builtin = "occluder_mesh"')
+    spec = specmod.parse(config(scene="mesh", mesh=str(ROOT / "data/meshes/mitsuba_bunny.ply"), occluder_size=0.4,
+                                occluder_height=0.3), "g.toml")
     v, f = shapes(spec)["occluder"]         # the kit's occluder_mesh built-in
     ext = v.max(axis=0) - v.min(axis=0)
     assert ext.max() == pytest.approx(0.4) and v[:, 2].min() == pytest.approx(0.3)

@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 
 from dsm.grad import findings, page
+from helpers_grad import toml_config
 
-TINY = ('[gradient]\nmap_resolution = 24\nimage_resolution = 16\ntechniques = ["pcf_bilinear", "vsm"]\n'
-        'blur = [3]\nantialias = [false, true]\nparams = ["occluder_z", "light_height"]\nreference_samples = 8\n'
-        'projective_spp = 2\nprojective_integrators = ["direct_projective"]\nprojective_seeds = 1\n'
-        'inverse_starts = [-0.05, 0.05]\ninverse_iterations = 3\n')
+TINY = toml_config(map_resolution=24, image_resolution=16, techniques=["pcf_bilinear", "vsm"], blur=[3],
+                   antialias=[False, True], params=["occluder_z", "light_height"], reference_samples=8,
+                   projective_spp=2, projective_integrators=["direct_projective"], projective_seeds=1,
+                   inverse_starts=[-0.05, 0.05], inverse_iterations=3)
 
 
 class Tables(HTMLParser):

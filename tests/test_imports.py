@@ -6,6 +6,7 @@ edge A -> B is any ``import``/``from ... import`` of B in A, at any depth (impor
 functions count: a circle hidden in a function is still a circle).
 """
 import ast
+import functools
 from pathlib import Path
 
 import pytest
@@ -35,11 +36,17 @@ def _resolve(mod: str, is_pkg: bool, level: int, name: str | None) -> str:
     return ".".join(base + ([name] if name else []))
 
 
+@functools.cache
+def _trees() -> dict:
+    """Each module's path and syntax tree, parsed once per session (parsing the kit takes seconds)."""
+    return {mod: (path, ast.parse(path.read_text(), str(path))) for mod, path in _modules().items()}
+
+
+@functools.cache
 def _graph():
     mods = _modules()
     edges, private_imports, private_attrs = {}, [], []
-    for mod, path in mods.items():
-        tree = ast.parse(path.read_text(), str(path))
+    for mod, (path, tree) in _trees().items():
         is_pkg = path.name == "__init__.py"
         deps = set()
         aliases = {}                     # local name -> kit module it stands for
@@ -236,10 +243,10 @@ def test_light_types_branch_only_in_the_registry():
                "dsm_plugins.integrators": 5}
     names = {"directional", "spot", "point", "area", "scene"}
     found = {}
-    for mod, path in _modules().items():
+    for mod, (_, tree) in _trees().items():
         if mod.startswith(("dsm.lights", "tests")):
             continue
-        for node in ast.walk(ast.parse(path.read_text())):
+        for node in ast.walk(tree):
             if isinstance(node, ast.Compare) and any(isinstance(c, ast.Constant) and c.value in names
                                                      for c in node.comparators):
                 left = node.left

@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from conftest import VARYING
+from conftest import VARYING, cli_lines
 from dsm.report import figures
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parent.parent
@@ -56,20 +56,22 @@ def _env():
     return env
 
 
-def _dsm(*args, **kw):
-    return subprocess.run([sys.executable, "-m", "dsm", *map(str, args)], capture_output=True, text=True,
-                          timeout=600, env=_env(), **kw)
+def _dsm(capsys, *args) -> tuple:
+    """(exit status, stderr) of ``dsm args`` called in-process (the process is not what these tests test)."""
+    rc, err = cli_lines(capsys, *args)
+    return rc, "\n".join(err)
 
 
 @pytest.mark.slow
-def test_a_killed_run_resumes_to_the_rows_of_an_uninterrupted_run(tmp_path):
+def test_a_killed_run_resumes_to_the_rows_of_an_uninterrupted_run(tmp_path, capsys):
+    """The run killed (SIGKILL) is a process of its own; the runs before and after it are called in-process."""
     cfg = tmp_path / "resume.toml"
     # cases enough that the kill lands while measuring, not in the report after it (a case is ~5 ms)
     biases = ", ".join(f"{0.001 * k:g}" for k in range(1, 21))
     cfg.write_text(CONFIG.replace("resolution = [24, 32]", "resolution = [24, 32, 48, 64, 96, 128]")
                    .replace("bias = [0.001, 0.003, 0.01, 0.03, 0.1]", f"bias = [{biases}]"))
-    whole = _dsm("run", cfg, "--out", tmp_path / "whole")
-    assert whole.returncode == 0, whole.stderr[-2000:]
+    rc, err = _dsm(capsys, "run", cfg, "--out", tmp_path / "whole")
+    assert rc == 0, err[-2000:]
     total = len(_rows(tmp_path / "whole" / "metrics.csv"))
     assert total == 6 * 23
 
@@ -90,10 +92,10 @@ def test_a_killed_run_resumes_to_the_rows_of_an_uninterrupted_run(tmp_path):
     assert killed["state"] == "running" and killed["n_cases_ok"] <= rows_killed < total
 
     # without --resume or --force the folder is refused as before
-    again = _dsm("run", cfg, "--out", out)
-    assert again.returncode == 2 and "--force" in again.stderr
-    resumed = _dsm("run", cfg, "--out", out, "--resume")
-    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    rc, err = _dsm(capsys, "run", cfg, "--out", out)
+    assert rc == 2 and "--force" in err
+    rc, err = _dsm(capsys, "run", cfg, "--out", out, "--resume")
+    assert rc == 0, err[-2000:]
     run = json.loads((out / "run.json").read_text())
     assert run["state"] == "complete" and run["stale_cases"] == []
     # exactly the cases run.json listed are kept; those finished after its last write run again
@@ -102,8 +104,7 @@ def test_a_killed_run_resumes_to_the_rows_of_an_uninterrupted_run(tmp_path):
     for r in _rows(out / "metrics.csv"):
         assert (out / figures.image_paths(r)[0]).is_file()
     # a second resume of a complete run runs nothing again
-    twice = _dsm("run", cfg, "--out", out, "--resume")
-    assert twice.returncode == 0
+    assert _dsm(capsys, "run", cfg, "--out", out, "--resume")[0] == 0
     assert json.loads((out / "run.json").read_text())["resumed_cases"] == total
 
 
@@ -158,13 +159,13 @@ def test_a_case_key_changes_with_its_input_file_and_the_kit_version(tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("flags", [["--resume", "--force"]])
-def test_resume_and_force_exclude_each_other(tmp_path, flags):
-    p = _dsm("run", "--out", tmp_path / "x", *flags)
-    assert p.returncode == 2 and "not allowed with" in p.stderr
+def test_resume_and_force_exclude_each_other(tmp_path, capsys, flags):
+    rc, err = _dsm(capsys, "run", "--out", tmp_path / "x", *flags)
+    assert rc == 2 and "not allowed with" in err and not (tmp_path / "x").exists()
 
 
 @pytest.mark.slow
-def test_resume_into_another_experiments_folder_is_refused_and_changes_nothing(tmp_path):
+def test_resume_into_another_experiments_folder_is_refused_and_changes_nothing(tmp_path, capsys):
     """--resume with a config of another [experiment] name would set every case of the folder
     aside as stale: exit 2 naming --resume and both experiments, before any work."""
     from dsm import pipeline
@@ -174,7 +175,7 @@ def test_resume_into_another_experiments_folder_is_refused_and_changes_nothing(t
     before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
     other = tmp_path / "other.toml"
     other.write_text(CONFIG.replace('name = "resume"', 'name = "another"'))
-    p = _dsm("run", other, "--out", out, "--resume")
-    assert p.returncode == 2 and "Traceback" not in p.stderr, p.stderr
-    assert p.stderr.startswith(f"dsm: --resume: {out} holds experiment 'edit'") and "'another'" in p.stderr
+    rc, err = _dsm(capsys, "run", other, "--out", out, "--resume")
+    assert rc == 2 and "Traceback" not in err, err
+    assert err.startswith(f"dsm: --resume: {out} holds experiment 'edit'") and "'another'" in err
     assert {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()} == before

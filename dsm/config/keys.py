@@ -19,6 +19,10 @@ from ..scenes.params import BUILTINS
 from .tune import MAP_FITS, MAP_UNITS, ROLES, SCHEDULES, SEARCHES
 
 LENGTH = "length: a number (world units), \"k texel\" or \"k range\""
+# dsm grad's choices, spelled here as config/ sits below grad/ (tests/test_grad_inputs.py checks they agree)
+GRAD_PARAMS = ("occluder_z", "occluder_x", "corner_z", "light_height", "light_x", "light_angle")
+GRAD_LOSSES = ("shadow_area", "shadow_moment_x", "l2")
+GRAD_PROJECTIVE = ("direct_projective", "prb_projective")
 
 
 @dataclass(frozen=True)
@@ -129,6 +133,9 @@ KEYS = (
     Key("map", "moment_samples", "int", "1", "N x N rays a texel, their moments averaged (an MSAA resolve)",
         ">= 1", sweeps=True),
     Key("map", "mipmaps", "bool", "false", "moments read from a mip chain at each pixel's footprint", sweeps=True),
+    Key("map", "antialias", "bool or list of bool", "false", "dsm grad only: the map's silhouette texels moved "
+        "toward their neighbours by the edge's exact position (dsm run refuses it)", source="Worchel & Alexa 2023",
+        sweeps=True),
     Key("map", "leak_texels", "float", "2", "false light this far inside the exact shadow counts as a leak",
         ">= 0", "texels"),
     Key("map", "vsm", "table", "the kind's defaults", "VSM's parameters or preset (see Pre-filtered maps)"),
@@ -216,6 +223,41 @@ KEYS = (
         "dsm schemes"),
     Key("scheme", "preset", "str", "(name or preset)", "an engine's default bias, per light type",
         "dsm schemes (presets)"),
+    # dsm grad's own table (dsm/grad/spec.py reads it; the scene, light, map and bias are the tables above)
+    Key("gradient", "params", "list of str", "[\"occluder_z\"]", "the parameters differentiated, each with its unit",
+        GRAD_PARAMS),
+    Key("gradient", "loss", "str", "shadow_area", "the loss over the image: the shadow's area (world^2), its first "
+        "moment in x (world^3), or the mean squared difference from a target image", GRAD_LOSSES),
+    Key("gradient", "target", "table", "(l2 only)", "parameter values whose exact image is the l2 loss's target, "
+        "e.g. {occluder_z = 0.05}"),
+    Key("gradient", "image_resolution", "int", "128", "the image of receivers: pixels a side", _r(8, 4096), "pixels"),
+    Key("gradient", "window", "float", "1", "the image covers [-window, window]^2 on the ground", "> 0", "world"),
+    Key("gradient", "image_jitter", "bool", "true", "one receiver per pixel at a seeded random point (false: its "
+        "centre)"),
+    Key("gradient", "pcss_light_size", "float", "0.1", "PCSS's light width under a spot or directional light (an "
+        "area light's is its size)", "> 0", "world"),
+    Key("gradient", "fd_step", "table", "0.002 x size (world), 0.02 (degree)", "the central difference's first "
+        "step, by parameter", "> 0"),
+    Key("gradient", "fd_halvings", "int", "4", "how often the step is halved while a class changes within it",
+        _r(0, 20)),
+    Key("gradient", "reference_samples", "int", "32", "--compare: the truth's receivers per pixel and axis",
+        _r(1, 64)),
+    Key("gradient", "reference_step", "table", "0.04 x size (world), 1 (degree)", "--compare: the truth's "
+        "central-difference step, by parameter", "> 0"),
+    Key("gradient", "projective_spp", "int", "64", "--compare: Mitsuba's projective integrators' samples per pixel",
+        _r(1, 4096)),
+    Key("gradient", "projective_seeds", "int", "4", "--compare: their seeds", _r(1, 64)),
+    Key("gradient", "projective_integrators", "list of str", "both", "--compare: Mitsuba's projective integrators",
+        GRAD_PROJECTIVE),
+    Key("gradient", "inverse_starts", "list of float", "[-0.1, -0.05, 0.05, 0.1]", "--inverse: starting offsets "
+        "from the truth, in the parameter's unit"),
+    Key("gradient", "inverse_iterations", "int", "40", "--inverse: Adam's steps", _r(1, 1000)),
+    Key("gradient", "inverse_tolerance", "float", "0.01", "--inverse: a start succeeds within it", "> 0"),
+    Key("gradient", "light_samples", "int", "8", "area light: the truth's light samples per receiver and axis",
+        _r(1, 32)),
+    Key("gradient", "equal_error_spp", "list of int", "[1, 4, 16, 64, 256]", "area light, --compare: path "
+        "tracing's samples per pixel, strictly increasing", _r(1, 4096)),
+    Key("gradient", "equal_error_seeds", "int", "4", "area light, --compare: seeds per spp", _r(2, 64)),
     Key("tune", "lambda", "float", "1", "the objective: (acne + lambda peter-panning) / receivers",
         _r(0, LAMBDA_MAX)),
     Key("tune", "steps", "int", "100", "gradient steps a scheme", _r(1, 100000)),
@@ -269,8 +311,8 @@ KEYS = (
 )
 
 TABLES = ("experiment", "camera", "scene", "light", "map", "map.virtual", "contact", "hybrid", "memory", "timing", "oracle",
-          "report", "execution", "motion", "motion.keys", "motion.light_keys", "motion.casters", "scheme", "tune", "tune.camera",
-          "tune.bias_map")
+          "report", "execution", "motion", "motion.keys", "motion.light_keys", "motion.casters", "scheme", "gradient", "tune",
+          "tune.camera", "tune.bias_map")
 
 
 def keys_of(table: str) -> tuple:

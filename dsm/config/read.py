@@ -207,8 +207,11 @@ def _parse_lights(raw: dict, source: str, scenes) -> list:
 
 def _parse_map(m: dict, lights, source: str) -> MapSpec:
     """The ``[map]`` table ``m`` as a MapSpec: sizes, filters, formats, views, cascades and kinds."""
-    check_keys(m, ("resolution", "texels", "filter", "format", "view", "shrink", "virtual") + CASCADE_KEYS + KIND_KEYS,
-               source, "map")
+    check_keys(m, ("resolution", "texels", "filter", "format", "view", "shrink", "virtual", "antialias") + CASCADE_KEYS
+               + KIND_KEYS, source, "map")
+    if "antialias" in m:        # dsm grad's key: a run would ignore it, so it says so
+        raise ConfigError(source, "map.antialias", "is read only by dsm grad (Worchel & Alexa 2023's antialiased map, "
+                          "differentiated); dsm run has no antialiased map: remove it")
     if "resolution" in m and "texels" in m:
         raise ConfigError(source, "map", "give either resolution (per face) or texels (total per view), not both",
                           ("resolution", "texels"))

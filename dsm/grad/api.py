@@ -2,7 +2,8 @@
 
 The same measuring as the command (the self-check; with ``compare`` the references and each
 technique against them; with ``inverse`` the inverse task), returned rather than written: no
-folder, no report. A notebook needs this module alone, and ``result.problem`` for its own losses.
+folder, no report. A notebook needs this module alone, and ``result.problem`` for its own losses
+(one technique's loss and gradients: :func:`dsm.grad.evaluate`).
 """
 from __future__ import annotations
 
@@ -32,7 +33,8 @@ class GradRun:
 
 
 def spec_of(config) -> specmod.GradSpec:
-    """The GradSpec of ``config``: a GradSpec, a TOML path, or a dict holding a ``[gradient]`` table."""
+    """The GradSpec of ``config``: a GradSpec, a TOML path, or a config dict (``[gradient]`` and the kit's
+    ``[[scene]]``, ``[[light]]``, ``[map]``, ``[[scheme]]``)."""
     if isinstance(config, specmod.GradSpec):
         return config
     if isinstance(config, (str, Path)):

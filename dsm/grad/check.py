@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .evaluation import cases, evaluate
 from .spec import LOSS_UNITS
 
 
@@ -131,15 +132,16 @@ def central_difference(problem, tech, param: str) -> tuple:
 
 
 def self_check(problem, progress=None) -> list:
-    """Every technique of the spec against its own central differences and the closed forms, per parameter."""
+    """Every technique (one case each, dsm.grad.evaluate) of the spec against its own central differences and
+    the closed forms, per parameter."""
     spec = problem.spec
     rows = []
-    for tech in spec.techniques:
-        ev = problem.evaluate(tech, problem.values(), spec.params)
+    for case in cases(spec):
+        res = evaluate(problem, case)
         for p in spec.params:
-            fd, step, texels, pixels, pairs = central_difference(problem, tech, p)
-            rows.append(CheckRow(tech.label, p, spec.unit(p), ev.loss, ev.grads[p], fd, step, texels, pixels,
-                                 closed_form(spec, p), ev.edge_pairs, pairs))
+            fd, step, texels, pixels, pairs = central_difference(problem, case.technique, p)
+            rows.append(CheckRow(case.label, p, spec.unit(p), res.loss, res.grads[p], fd, step, texels, pixels,
+                                 closed_form(spec, p), res.evaluation.edge_pairs, pairs))
             if progress:
                 progress(rows[-1])
     return rows

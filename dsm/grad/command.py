@@ -149,8 +149,8 @@ def unseen_problem(spec) -> str | None:
     and an area light's images, grown by MASK_PIXELS, cover the whole image of their camera."""
     for p in spec.params:
         if p in projective.OCCLUDER_PARAMS and not projective.ground_seen(spec, p).any():
-            key, what = (("gradient.light_size", "the occluder's and the area light's images cover")
-                         if spec.light == "area" else ("gradient.occluder_size", "the occluder's image covers"))
+            key, what = (("light[0].size", "the occluder's and the area light's images cover")
+                         if spec.light == "area" else ("scene[0].size", "the occluder's image covers"))
             return (f"{spec.source}: {key}: --compare's projective integrators would see no ground pixel: {what} "
                     f"the whole of [-{spec.window:g}, {spec.window:g}]^2 (grown by {projective.MASK_PIXELS} pixels); "
                     "make it smaller or the window larger")

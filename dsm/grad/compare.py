@@ -16,6 +16,7 @@ import numpy as np
 
 from ..core import timing
 from .check import relative_within
+from .evaluation import case_of, evaluate
 from .reference import reference
 
 REPEATS = 3
@@ -91,7 +92,7 @@ def compare(problem, refs: dict, progress=None) -> list:
     for tech in spec.techniques:
         for p in spec.params:
             t = cost(problem, tech, p)
-            ev = problem.evaluate(tech, problem.values(), (p,))
+            ev = evaluate(problem, case_of(spec, tech), None, (p,))
             r, img = refs[p], tangent_image(problem, tech, p)
             rows.append(CompareRow(tech.label, p, spec.unit(p), ev.grads[p], r.value, r.error, r.step, r.samples,
                                    cosine(img, r.image), t.ms, t.compile_ms, img))

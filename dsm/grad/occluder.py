@@ -1,8 +1,8 @@
 """dsm grad's scene: the kit's occluder built-in, its occluder's vertices following the parameters.
 
-The scene is the ``[[scene]]`` table that ``gradient.scene`` stands for (``plate``, ``box``, ``mesh``:
-the built-ins ``occluder_plate``, ``occluder_box``, ``occluder_mesh`` of :mod:`dsm.scenes.params`),
-read by the kit's parser (:func:`dsm.scenes.spec.parse_scene`: its checks, a mesh file through the
+The scene is the config's ``[[scene]]`` table (GradSpec's scene fields, :mod:`.kit_tables`: the
+built-ins ``occluder_plate``, ``occluder_box``, ``occluder_mesh`` of :mod:`dsm.scenes.params`),
+read again by the kit's parser (:func:`dsm.scenes.spec.parse_scene`: its checks, a mesh file through the
 kit's mesh loading) and built from the built-in's geometry (shapes ``ground`` and ``occluder``), so a
 ``dsm run`` of the same table sees the same triangles. The meshes are loaded with ``optimize=False``
 so Mitsuba keeps them apart (it merges meshes that share a BSDF otherwise, and the occluder must be
@@ -27,7 +27,7 @@ from ..scenes.spec import parse_scene
 from . import light as lightmod
 
 GROUND_HALF = 8.0          # the ground's half side, in units of the image window
-# gradient.scene -> the kit's built-in
+# GradSpec.scene -> the kit's built-in
 BUILTINS = {"plate": "occluder_plate", "box": "occluder_box", "mesh": "occluder_mesh"}
 
 
@@ -44,8 +44,8 @@ def scene_table(spec) -> dict:
 
 def shapes(spec) -> dict:
     """The built-in's shapes {"ground", "occluder": (vertices float64, faces)} at the nominal values, read
-    by the kit's [[scene]] parser (its errors under ``gradient.<key>``)."""
-    (scene,) = parse_scene(scene_table(spec), spec.source, "gradient", Path(spec.source).parent)
+    by the kit's [[scene]] parser (a mesh Mitsuba cannot read: ``scene[0].mesh``, the table's own key)."""
+    (scene,) = parse_scene(scene_table(spec), spec.source, "scene[0]", Path(spec.source).parent)
     return builtin_geometry(scene.builtin, scene.params)[0]
 
 

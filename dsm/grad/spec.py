@@ -1,25 +1,27 @@
-"""The ``[gradient]`` table: which scene parameters are differentiated, the loss, the techniques.
+"""What ``dsm grad`` differentiates, read once into a frozen :class:`GradSpec`.
 
-Read once into a frozen :class:`GradSpec`; every mistake is a ConfigError naming the file, the
-key and the valid choices, before any work. The scene is the kit's gradient test bed: a square
-plate (or a box) of side ``occluder_size`` at height ``occluder_height`` over a ground at z = 0,
-lit by a point light straight above at ``light_height`` or by a directional light tilted by
-``light_angle`` degrees from the vertical toward +x, or by a square area light of side ``light_size``
-facing down at ``light_height`` (its truth: :func:`dsm.truth.area.irradiance_fraction`). The image is the ground seen from above:
-``image_resolution``^2 receivers over [-window, window]^2, one per pixel: at a seeded random point of
-the pixel (``image_jitter``, the default) or at its centre.
+``[gradient]`` holds what is gradient's own: the parameters, the loss (and its target), the central
+difference's step, the image of receivers, the references' and comparisons' settings. The scene,
+the light, the map and the bias come from the kit's own tables (:mod:`.kit_tables`): ``[[scene]]``
+(an occluder built-in: a square plate, a box or a mesh of side ``size`` at ``height`` over a ground
+at z = 0), ``[[light]]`` (a spot straight down from [0, 0, H], a directional light tilted in the
+x-z plane, or a square area light facing down: its truth :func:`dsm.truth.area.irradiance_fraction`),
+``[map]`` (resolution, kind, filter, blur, antialias) and ``[[scheme]]`` (a constant bias). Every
+mistake is a ConfigError naming the file, the key and the valid choices, before any work; a key of the
+old flat ``[gradient]`` table is refused with one line naming its new table and key. The image is the
+ground seen from above: ``image_resolution``^2 receivers over [-window, window]^2, one per pixel: at a
+seeded random point of the pixel (``image_jitter``, the default) or at its centre.
 """
 from __future__ import annotations
 
 import math
 
 from dataclasses import dataclass, field
-from pathlib import Path
 
-from .. import prefilter
 from ..config.read import read_toml
 from ..core.types import ConfigError, check_keys, choice, number, as_list
-from . import support
+from . import kit_tables, support
+from .technique import MOMENT_TECHNIQUES, Technique
 
 # a differentiable parameter: (its unit, the lights it applies to or None for every light)
 PARAMS = {
@@ -30,25 +32,21 @@ PARAMS = {
     "light_x": ("world", ("point", "area")),        # the point light's x (the area light's centre's)
     "light_angle": ("degree", ("directional",)),    # the directional light's tilt from the vertical toward +x
 }
-SCENES = ("plate", "box", "mesh")
-MESH_SUFFIXES = (".ply", ".obj")
-LIGHTS = tuple(support.LIGHTS.values())     # gradient.light: the kit light types dsm grad differentiates
+SCENES = ("plate", "box", "mesh")           # GradSpec.scene ([[scene]] builtin: kit_tables.SCENES)
+LIGHTS = tuple(support.LIGHTS.values())     # GradSpec.light: the kit light types dsm grad differentiates
 LOSSES = ("shadow_area", "shadow_moment_x", "l2")
 # the unit of each loss, given the world unit of length
 LOSS_UNITS = {"shadow_area": "world^2", "shadow_moment_x": "world^3", "l2": "1 (mean over pixels)"}
 # the depth map's filters grad differentiates, then every pre-filtered kind of the kit's registry
-MOMENT_TECHNIQUES = prefilter.NAMES
 TECHNIQUES = support.FILTERS + MOMENT_TECHNIQUES
-MAX_BLUR = 31
-MAX_RESOLUTION = 4096
 MIN_SHADOW_PIXELS = 4     # the shadow's least width in image pixels: fewer leave no edge to differentiate
 FLOAT32_STEP = 2.0 ** -24  # a float32 depth's relative step
 MIN_DEPTH_STEPS = 4       # the occluder-ground gap's least size in float32 depth steps at the light's distance
-KEYS = ("scene", "mesh", "light", "light_height", "light_angle", "occluder_height", "occluder_size", "map_resolution",
-        "image_resolution", "window", "params", "loss", "target", "techniques", "blur", "antialias", "bias",
-        "light_size", "fd_step", "fd_halvings", "image_jitter", "reference_samples", "reference_step", "projective_spp",
-        "projective_seeds", "projective_integrators", "inverse_starts", "inverse_iterations", "inverse_tolerance",
-        "light_samples", "equal_error_spp", "equal_error_seeds", "box_height")
+KEYS = ("image_resolution", "window", "params", "loss", "target", "pcss_light_size", "fd_step", "fd_halvings",
+        "image_jitter", "reference_samples", "reference_step", "projective_spp", "projective_seeds",
+        "projective_integrators", "inverse_starts", "inverse_iterations", "inverse_tolerance", "light_samples",
+        "equal_error_spp", "equal_error_seeds")
+TABLES = ("gradient", "scene", "light", "map", "scheme")    # the config's tables dsm grad reads
 MAX_LIGHT_SAMPLES = 32          # the area light's truth: light samples per axis and receiver (32^2 rays each)
 # the central difference's default step per unit (world: a fraction of the occluder's size)
 FD_STEP = {"world": 2e-3, "degree": 0.02}
@@ -57,21 +55,6 @@ PROJECTIVE_INTEGRATORS = ("direct_projective", "prb_projective")
 # the supersampled reference's default step per unit (world: a fraction of the occluder's size; measured
 # at 32^2 receivers per pixel: its error estimate under 1 % of the closed forms, dsm.grad.reference)
 REFERENCE_STEP = {"world": 0.04, "degree": 1.0}
-
-
-@dataclass(frozen=True)
-class Technique:
-    """One technique instance: its name, blur width in texels (moment maps; 1 elsewhere) and
-    whether its map is antialiased (Worchel & Alexa 2023's edge treatment, dsm.grad.antialias)."""
-    name: str
-    blur: int = 1
-    antialias: bool = False
-
-    @property
-    def label(self) -> str:
-        """The instance as the table names it, e.g. ``vsm blur 3 aa``."""
-        out = self.name + (f" blur {self.blur}" if self.name in MOMENT_TECHNIQUES else "")
-        return out + (" aa" if self.antialias else "")
 
 
 @dataclass(frozen=True)
@@ -144,35 +127,95 @@ class GradSpec:
 
 
 def load(path) -> GradSpec:
-    """The GradSpec of TOML file ``path``'s ``[gradient]`` table; ConfigError for any mistake."""
+    """The GradSpec of TOML file ``path`` (its ``[gradient]`` and the kit's tables); ConfigError for any mistake."""
     return parse(read_toml(path), str(path))
 
 
-def parse(raw: dict, source: str = "<dict>") -> GradSpec:
-    """The GradSpec of a config dict holding a ``[gradient]`` table (other tables are ignored)."""
+# an old flat [gradient] key -> (the kit's table that holds it now, what to give there; {v}: the old value)
+MOVED = {
+    "scene": ("[[scene]]", 'builtin = "occluder_plate" (or "occluder_box", "occluder_mesh")'),
+    "mesh": ("[[scene]]", 'builtin = "occluder_mesh", mesh = {v}'),
+    "light": ("[[light]]", 'type = "spot" (was "point"), "directional" or "area" (shape = "rectangle")'),
+    "light_height": ("[[light]]", "position = [0, 0, {v}]"),
+    "light_angle": ("[[light]]", 'type = "directional", direction = {v} (a tilt a: [sin a, 0, -cos a])'),
+    "occluder_height": ("[[scene]]", "height = {v}"),
+    "occluder_size": ("[[scene]]", "size = {v}"),
+    "box_height": ("[[scene]]", "box_height = {v}"),
+    "map_resolution": ("[map]", "resolution = {v}"),
+    "techniques": ("[map]", 'kind = ["depth", ...] (and the moment kinds) with filter = [...] (the depth map\'s)'),
+    "blur": ("[map]", "blur = {v}"),
+    "antialias": ("[map]", "antialias = {v}"),
+    "bias": ("[[scheme]]", 'name = "constant", bias = {v}'),
+    "light_size": ("[[light]]", "size = {v} (an area light's side; PCSS's light width under a spot or "
+                                "directional light is gradient.pcss_light_size)"),
+}
+
+
+def moved(key: str, value) -> str:
+    """Where old flat ``[gradient]`` key ``key`` (given ``value``) lives now, as one line."""
+    table, what = MOVED[key]
+    if key == "light_angle" and isinstance(value, (int, float)) and not isinstance(value, bool):
+        a = math.radians(value)
+        value = [round(math.sin(a), 12), 0.0, round(-math.cos(a), 12)]
+    v = toml_text(value)
+    return f"moved: give {table} {what.format(v=v)} (dsm grad reads the kit's {table} table)"
+
+
+def toml_text(value) -> str:
+    """``value`` as TOML writes it (a user may paste it back): booleans lower case, lists in brackets."""
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, list):
+        return "[" + ", ".join(toml_text(x) for x in value) + "]"
+    return f'"{value}"' if isinstance(value, str) else repr(value)
+
+
+def check_tables(raw: dict, source: str) -> dict:
+    """The ``[gradient]`` table of ``raw``, its old keys and the tables dsm grad does not read refused."""
     if "gradient" not in raw or not isinstance(raw["gradient"], dict):
         raise ConfigError(source, "gradient", "a [gradient] table is required (dsm grad reads it)")
+    for table in raw:
+        if table not in TABLES:
+            raise ConfigError(source, table, "dsm grad does not read this table: remove it", TABLES, got=table)
     g = raw["gradient"]
+    for key in MOVED:
+        if key in g:
+            raise ConfigError(source, f"gradient.{key}", moved(key, g[key]))
     check_keys(g, KEYS, source, "gradient")
-    kw = {"source": source}
-    kw["scene"] = choice(g.get("scene", "plate"), source, "gradient.scene", SCENES)
-    kw["light"] = choice(g.get("light", "point"), source, "gradient.light", LIGHTS)
-    kw["mesh"] = _mesh(g, source, kw["scene"])
-    if "box_height" in g and kw["scene"] != "box":
-        raise ConfigError(source, "gradient.box_height", f"is read only with scene = \"box\", not {kw['scene']!r}")
-    for key in ("light_height", "occluder_height", "occluder_size", "window", "light_size", "box_height"):
-        if key in g:
-            kw[key] = number(g[key], source, f"gradient.{key}", positive=True)
-    if "light_angle" in g and kw["light"] != "directional":     # it would be ignored, silently
-        raise ConfigError(source, "gradient.light_angle", f"is read only with light = \"directional\", not "
-                          f"{kw['light']!r} (a point or area light is placed by light_height and light_x)")
-    if "light_angle" in g:
-        kw["light_angle"] = number(g["light_angle"], source, "gradient.light_angle", minimum=-60.0, maximum=60.0)
-    if "bias" in g:
-        kw["bias"] = number(g["bias"], source, "gradient.bias", minimum=0.0)
-    for key in ("map_resolution", "image_resolution"):
-        if key in g:
-            kw[key] = number(g[key], source, f"gradient.{key}", integer=True, minimum=8, maximum=MAX_RESOLUTION)
+    return g
+
+
+def parse(raw: dict, source: str = "<dict>") -> GradSpec:
+    """The GradSpec of a config dict: its ``[gradient]`` table and the kit's ``[[scene]]``, ``[[light]]``,
+    ``[map]`` and ``[[scheme]]``."""
+    g = check_tables(raw, source)
+    kw = {"source": source, **kit_tables.read_scene(raw, source), **kit_tables.read_light(raw, source),
+          **kit_tables.read_map(raw, source)}
+    kw.update(kit_tables.read_scheme(raw, source, kw["techniques"]))
+    kw.update(_own_keys(g, source, kw["light"]))
+    spec = GradSpec(**kw)
+    check_light(spec, source)
+    check_extent(spec, source)
+    for key in ("fd_step", "reference_step"):
+        check_steps(spec, source, key)
+    if "inverse_starts" in g:       # the defaults are offsets of a unit-sized scene: a scaled one gives its own
+        check_starts(spec, source)
+    return spec
+
+
+def _own_keys(g: dict, source: str, light: str) -> dict:
+    """The ``[gradient]`` table's own keys (the image, parameters, loss, steps, comparisons) as GradSpec fields."""
+    kw = {}
+    if "window" in g:
+        kw["window"] = number(g["window"], source, "gradient.window", positive=True)
+    if "pcss_light_size" in g:
+        if light == "area":
+            raise ConfigError(source, "gradient.pcss_light_size", "under an area light PCSS's light width is the "
+                              "light's own [[light]] size: remove it")
+        kw["light_size"] = number(g["pcss_light_size"], source, "gradient.pcss_light_size", positive=True)
+    if "image_resolution" in g:
+        kw["image_resolution"] = number(g["image_resolution"], source, "gradient.image_resolution", integer=True,
+                                        minimum=8, maximum=kit_tables.MAX_RESOLUTION)
     if "fd_halvings" in g:
         kw["fd_halvings"] = number(g["fd_halvings"], source, "gradient.fd_halvings", integer=True, minimum=0,
                                    maximum=20)
@@ -181,31 +224,35 @@ def parse(raw: dict, source: str = "<dict>") -> GradSpec:
             raise ConfigError(source, "gradient.image_jitter", f"expected true or false, got {g['image_jitter']!r}")
         kw["image_jitter"] = g["image_jitter"]
     kw.update(_compare_keys(g, source))
-    light = kw["light"]
     for key in ("light_samples", "equal_error_spp", "equal_error_seeds"):
         if key in g and light != "area":
-            raise ConfigError(source, f"gradient.{key}", f"is read only with light = \"area\", not {light!r}")
+            raise ConfigError(source, f"gradient.{key}", f"is read only under an area light ([[light]] type = "
+                              f"\"area\"), not {kit_type(light)!r}")
     kw["params"] = _params(g, source, light)
     kw["loss"] = choice(g.get("loss", "shadow_area"), source, "gradient.loss", LOSSES)
     kw["target"] = _target(g, source, light, kw["loss"])
     kw["fd_step"] = _steps(g, source, kw["params"])
     kw["reference_step"] = _steps(g, source, kw["params"], "reference_step")
-    kw["techniques"] = _techniques(g, source)
-    spec = GradSpec(**kw)
+    return kw
+
+
+def kit_type(light: str) -> str:
+    """The kit's [[light]] type of GradSpec.light ``light`` (point: a spot straight down)."""
+    return {g: kit for kit, g in support.LIGHTS.items()}[light]
+
+
+def check_light(spec: GradSpec, source: str):
+    """An area light as wide as the image, or a light under the occluder's top, refused."""
     if spec.light == "area" and not spec.light_size < 2.0 * spec.window:
-        raise ConfigError(source, "gradient.light_size", f"the area light's side must be smaller than the image's "
-                          f"(2 x window = {2.0 * spec.window:g}): a larger square hides the whole image from the "
-                          f"projective integrators' camera above it; got {spec.light_size:g} (valid: 0 < light_size "
+        raise ConfigError(source, "light[0].size", f"the area light's side must be smaller than the image's "
+                          f"(2 x gradient.window = {2.0 * spec.window:g}): a larger square hides the whole image from "
+                          f"the projective integrators' camera above it; got {spec.light_size:g} (valid: 0 < size "
                           f"< {2.0 * spec.window:g})")
     if spec.light != "directional" and not spec.occluder_height + spec.thickness() < spec.light_height:
-        raise ConfigError(source, "gradient.light_height", f"must be above the occluder's top "
+        raise ConfigError(source, "light[0].position", f"the light's height must be above the occluder's top "
                           f"({spec.occluder_height + spec.thickness():g}), got {spec.light_height:g}")
-    check_extent(spec, source)
-    for key in ("fd_step", "reference_step"):
-        check_steps(spec, source, key)
-    if "inverse_starts" in g:       # the defaults are offsets of a unit-sized scene: a scaled one gives its own
-        check_starts(spec, source)
-    return spec
+
+
 
 
 def _room(spec: GradSpec) -> dict:
@@ -257,46 +304,29 @@ def check_extent(spec: GradSpec, source: str):
     occluder's height (every receiver lit), a shadow larger than the image (its edge, where every
     gradient lives, outside it) or under MIN_SHADOW_PIXELS pixels across, a light so far that float32 depths
     cannot part the occluder from the ground. All relative, so any scale passes."""
-    if not spec.bias < spec.occluder_height:
-        raise ConfigError(source, "gradient.bias", f"must be below the occluder's height above the ground "
+    depth = any(t.name not in MOMENT_TECHNIQUES for t in spec.techniques)   # a depth technique reads the bias
+    if depth and not spec.bias < spec.occluder_height:
+        raise ConfigError(source, "scheme[0].bias", f"must be below the occluder's height above the ground "
                           f"({spec.occluder_height:g}): a larger depth bias lights every receiver; got {spec.bias:g} "
                           f"(valid: 0 <= bias < {spec.occluder_height:g})")
     if spec.light != "directional":      # the map stores float32 depths from the light
         steps = spec.occluder_height / (spec.light_height * FLOAT32_STEP)
         if not steps >= MIN_DEPTH_STEPS:
-            raise ConfigError(source, "gradient.light_height", f"the occluder's height above the ground "
+            raise ConfigError(source, "light[0].position", f"the occluder's height above the ground "
                               f"({spec.occluder_height:g}) is {steps:.3g} float32 depth steps at the light's distance "
                               f"{spec.light_height:g}, under {MIN_DEPTH_STEPS}: the map cannot tell the occluder from "
-                              f"the ground (valid: light_height <= "
+                              f"the ground (valid: a height <= "
                               f"{spec.occluder_height / (MIN_DEPTH_STEPS * FLOAT32_STEP):g})")
     reach = shadow_half_extent(spec)
     if not reach < spec.window:
         raise ConfigError(source, "gradient.window", f"the occluder's shadow reaches {reach:g} from the centre, "
                           f"beyond the image's half-width {spec.window:g}: its edge, where the gradient is, would be "
-                          f"outside the image (valid: window > {reach:g}, or a smaller occluder_size)")
+                          f"outside the image (valid: window > {reach:g}, or a smaller [[scene]] size)")
     pixels = reach / spec.window * spec.image_resolution
     if not pixels >= MIN_SHADOW_PIXELS:
         raise ConfigError(source, "gradient.window", f"the occluder's shadow spans {pixels:.3g} pixels of the "
                           f"{spec.image_resolution}^2 image, under {MIN_SHADOW_PIXELS} (valid: window <= "
-                          f"{reach * spec.image_resolution / MIN_SHADOW_PIXELS:g}, or a larger occluder_size)")
-
-
-def _mesh(g: dict, source: str, scene: str) -> str:
-    """The mesh file of scene = "mesh" (relative to the config's folder), checked before any work."""
-    if scene != "mesh":
-        if "mesh" in g:
-            raise ConfigError(source, "gradient.mesh", f"is read only with scene = \"mesh\", not {scene!r}")
-        return ""
-    raw = g.get("mesh")
-    if not isinstance(raw, str) or not raw:
-        raise ConfigError(source, "gradient.mesh", f"scene = \"mesh\" needs a PLY or OBJ file, got {raw!r}")
-    path = Path(raw) if Path(raw).is_absolute() else Path(source).parent / raw
-    if path.suffix.lower() not in MESH_SUFFIXES:
-        raise ConfigError(source, "gradient.mesh", f"unknown file type {path.suffix!r}", MESH_SUFFIXES,
-                          got=path.suffix)
-    if not path.is_file():
-        raise ConfigError(source, "gradient.mesh", f"no such file {str(path)!r}")
-    return str(path.resolve())
+                          f"{reach * spec.image_resolution / MIN_SHADOW_PIXELS:g}, or a larger [[scene]] size)")
 
 
 def _param_names(raw, source: str, key: str, light: str) -> list:
@@ -307,8 +337,8 @@ def _param_names(raw, source: str, key: str, light: str) -> list:
         choice(n, source, key, sorted(PARAMS))
         lights = PARAMS[n][1]
         if lights is not None and light not in lights:
-            raise ConfigError(source, key, f"{n} is a parameter of a {' or '.join(lights)} light and gradient.light "
-                              f"is {light}", [p for p, (_, lt) in PARAMS.items() if lt is None or light in lt])
+            raise ConfigError(source, key, f"{n} is a parameter of a {' or '.join(kit_type(x) for x in lights)} "
+                              f"light and the [[light]] is a {kit_type(light)} light", [p for p, (_, lt) in PARAMS.items() if lt is None or light in lt])
     if len(set(names)) != len(names):
         raise ConfigError(source, key, "a parameter is given twice: give each once")
     return names
@@ -387,30 +417,3 @@ def _spp_sweep(raw, source: str) -> tuple:
                           f"(e.g. [4, 16, 64, 256, 1024]), "
                           f"got {raw!r}")
     return tuple(int(x) for x in spps)
-
-
-def _techniques(g: dict, source: str) -> tuple:
-    names = as_list(g.get("techniques", list(TECHNIQUES)))
-    if not names:
-        raise ConfigError(source, "gradient.techniques", "empty list", TECHNIQUES)
-    for n in names:
-        choice(n, source, "gradient.techniques", TECHNIQUES)
-    if len(set(names)) != len(names):
-        raise ConfigError(source, "gradient.techniques", "a technique is given twice: give each once")
-    blurs = as_list(g.get("blur", [1, 3, 5]))
-    if not blurs:
-        raise ConfigError(source, "gradient.blur", "empty list")
-    for b in blurs:
-        w = number(b, source, "gradient.blur", integer=True, minimum=1, maximum=MAX_BLUR)
-        if w % 2 == 0:
-            raise ConfigError(source, "gradient.blur", f"a blur width is odd (centred on the texel), got {w}")
-    if len(set(blurs)) != len(blurs):
-        raise ConfigError(source, "gradient.blur", "a width is given twice: give each once")
-    aas = as_list(g.get("antialias", [False, True]))
-    if not aas or any(not isinstance(a, bool) for a in aas) or len(set(aas)) != len(aas):
-        raise ConfigError(source, "gradient.antialias", f"expected false, true or [false, true], got {aas!r}")
-    out = []
-    for n in names:
-        for w in (blurs if n in MOMENT_TECHNIQUES else [1]):
-            out += [Technique(n, int(w), a) for a in aas]
-    return tuple(out)
