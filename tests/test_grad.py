@@ -84,12 +84,11 @@ def test_antialiased_coverage_of_a_row_is_the_silhouettes_span_in_the_map():
     import mitsuba as mi
     from dsm.grad import antialias, build
     from dsm.grad.problem import Problem
-    from dsm.grad.views import make_view
     spec = _spec(occluder_size=0.537)                # edges off the texel grid
     pb = Problem(spec)
     vals = {k: dr.opaque(mi.Float, v, 1) for k, v in pb.values().items()}
     light = pb.scene.apply(vals)
-    view = make_view(spec, light)
+    view = pb.scene.view(light)
     amap = build.build(pb.scene.scene, view)
     ew = antialias.edge_weights(amap, pb.scene.triangles(vals), light)
     occ = pb.scene.shape_index("occluder")
@@ -144,7 +143,6 @@ def test_a_difference_across_a_switching_antialiasing_pair_is_flagged_not_called
     from dsm.grad import antialias, build
     from dsm.grad.check import self_check
     from dsm.grad.problem import Problem
-    from dsm.grad.views import make_view
     spec = specmod.parse(config(occluder_size=0.4, occluder_height=0.6, light_height=2.4, map_resolution=64,
                                 image_resolution=48, params=["occluder_z"], techniques=["pcf_bilinear", "vsm"],
                                 blur=[3], antialias=[True]), "g.toml")
@@ -162,7 +160,7 @@ def test_a_difference_across_a_switching_antialiasing_pair_is_flagged_not_called
     def treated(dz):
         vals = {k: dr.opaque(mi.Float, v, 1) for k, v in pb.values({"occluder_z": dz}).items()}
         light = pb.scene.apply(vals)
-        amap = build.build(pb.scene.scene, make_view(spec, light))
+        amap = build.build(pb.scene.scene, pb.scene.view(light))
         return antialias.edge_weights(amap, pb.scene.triangles(vals), light).structure
     s = rows[0].step
     base, lo, hi = treated(0.0), treated(-s), treated(s)
@@ -246,7 +244,7 @@ def test_dsm_grad_answers_a_bad_folder_a_folder_config_and_an_unreadable_mesh_in
     for argv, words in (([str(good), "--out", str(tmp_path / "afile")], "is a file, not a folder"),
                         ([str(tmp_path), "--out", str(tmp_path / "o1")], "is a folder, not a config file"),
                         ([str(latin1), "--out", str(tmp_path / "o3")], "file: not UTF-8 text (byte 0xe9"),
-                        ([str(mesh), "--out", str(tmp_path / "o2")], "gradient.mesh")):
+                        ([str(mesh), "--out", str(tmp_path / "o2")], "scene[0].mesh")):
         assert main(["grad", *argv]) == 2
         err = capsys.readouterr().err.strip()
         assert err.count("\n") == 0 and words in err, err

@@ -124,7 +124,7 @@ def test_dsm_grad_compare_writes_its_tables_and_refuses_the_l2_loss(tmp_path, ca
 
 def test_a_mesh_occluder_is_scaled_to_its_size_and_set_on_its_height(tmp_path):
     from conftest import ROOT
-    from dsm.grad.scene import mesh_geometry
+    from dsm.grad.occluder import shapes
     with pytest.raises(ConfigError) as e:
         specmod.parse(config(scene="mesh", mesh="nowhere.ply"), str(tmp_path / "g.toml"))
     assert "scene[0].mesh: no such file" in str(e.value) and "\n" not in str(e.value)
@@ -133,7 +133,7 @@ def test_a_mesh_occluder_is_scaled_to_its_size_and_set_on_its_height(tmp_path):
     assert str(e.value).startswith('g.toml: scene[0].mesh: is read only with builtin = "occluder_mesh"')
     spec = specmod.parse(config(scene="mesh", mesh=str(ROOT / "data/meshes/mitsuba_bunny.ply"), occluder_size=0.4,
                                 occluder_height=0.3), "g.toml")
-    v, f = mesh_geometry(spec.mesh, spec.occluder_size, spec.occluder_height)
+    v, f = shapes(spec)["occluder"]         # the kit's occluder_mesh built-in
     ext = v.max(axis=0) - v.min(axis=0)
     assert ext.max() == pytest.approx(0.4) and v[:, 2].min() == pytest.approx(0.3)
     assert (v[:, 0].max() + v[:, 0].min()) == pytest.approx(0.0, abs=1e-9) and f.max() < len(v)

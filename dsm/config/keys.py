@@ -342,12 +342,12 @@ def contact_bounds() -> dict:
 
 def dataclass_keys(table: str, cls, bounds: dict | None = None) -> tuple:
     """Keys of a table read into dataclass ``cls`` (its fields' defaults and metadata: doc, min, max,
-    choices); ``bounds`` gives the valid range of fields the reader bounds further."""
+    choices, path: a file's suffixes); ``bounds`` gives the valid range of fields the reader bounds further."""
     out = []
     for f in dataclasses.fields(cls):
         md = f.metadata
         lo, hi = md.get("min"), md.get("max")
-        valid = md.get("choices") or (_r(lo, hi) if lo is not None and hi is not None else
+        valid = md.get("choices") or md.get("path") or (_r(lo, hi) if lo is not None and hi is not None else
                                       (_r(lo) if lo is not None else ""))
         valid = (bounds or {}).get(f.name, valid)
         default = exact_text(f.default) if f.default is not dataclasses.MISSING else "(required)"

@@ -179,6 +179,10 @@ def coerce_field(f: dataclasses.Field, raw, source: str, key: str):
     if f.type in ("int", int):
         return number(raw, source, key, integer=True, minimum=f.metadata.get("min"), maximum=f.metadata.get("max"))
     if f.type in ("str", str):
+        if "path" in f.metadata:      # a file's name: its reader resolves and checks it (dsm.scenes.spec)
+            if not isinstance(raw, str):
+                raise ConfigError(source, key, f"expected a path string, got {raw!r}")
+            return raw
         return choice(raw, source, key, f.metadata["choices"])
     if f.type in ("bool", bool):
         if not isinstance(raw, bool):

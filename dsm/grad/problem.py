@@ -26,8 +26,7 @@ from ..truth import area as truth_area
 from ..truth import reference as truth_reference
 from . import antialias, build, techniques
 from . import light as lightmod
-from .scene import GradScene
-from .views import make_view
+from .occluder import OccluderScene
 
 
 JITTER_SEED = 7
@@ -51,7 +50,7 @@ class Problem:
 
     def __init__(self, spec):
         self.spec = spec
-        self.scene = GradScene(spec)
+        self.scene = OccluderScene(spec)
         N, W = spec.image_resolution, spec.window
         c = -W + (np.arange(N) + 0.5) * (2.0 * W / N)
         xx, yy = np.meshgrid(c, c)               # row y, column x
@@ -87,7 +86,7 @@ class Problem:
         """(V per receiver (attached), Dr.Jit parameters, attached map, edge weights) of ``tech``."""
         vals = self._dr_values(values, wrt)
         light = self.scene.apply(vals)
-        view = make_view(self.spec, light)
+        view = self.scene.view(light)
         amap = build.build(self.scene.scene, view)
         edges = None
         if tech.antialias:

@@ -4,7 +4,7 @@
 Differentiable Rendering of Geometry", 2023) differentiate the rendered image through visibility
 by sampling silhouette edges. The test bed's scene is rendered as Mitsuba sees it: the same
 ground and occluder meshes (the occluder's vertex buffer the same expression of the parameters,
-:meth:`GradScene.vertex_positions`), a diffuse ground, the light (the kit's LightSpec as Mitsuba's
+:meth:`OccluderScene.vertex_positions`), a diffuse ground, the light (the kit's LightSpec as Mitsuba's
 emitter of strength 1, :func:`dsm.lights.emitter`: the point light a spot with no
 falloff inside its cone) and an orthographic camera looking straight down over [-window, window]^2
 at ``image_resolution``^2 pixels, direct light only (``max_depth`` 2). V per pixel is the rendered radiance over the radiance of the
@@ -28,9 +28,9 @@ import mitsuba as mi
 import numpy as np
 
 from .. import lights
-from ..scenes.geometry import make_mesh, quad
+from ..scenes.geometry import make_mesh
 from . import light as lightmod
-from .scene import GROUND_HALF, occluder_geometry
+from .occluder import shapes
 
 OCCLUDER_PARAMS = ("occluder_z", "occluder_x", "corner_z")
 # the camera's height over the ground in windows: far, so the occluder hides little of its shadow (the
@@ -66,8 +66,7 @@ class ProjectiveResult:
 
 def scene_dict(spec, integrator: str, with_occluder: bool = True) -> dict:
     """The test bed as a Mitsuba scene dict: ground, occluder, light, a camera looking down, ``integrator``."""
-    half = GROUND_HALF * spec.window
-    gv, gf = quad([0.0, 0.0, 0.0], [half, 0.0, 0.0], [0.0, half, 0.0])
+    geometry = shapes(spec)
     W, N = spec.window, spec.image_resolution
     cam = mi.ScalarTransform4f().look_at(origin=[0, 0, CAMERA_HEIGHT * W], target=[0, 0, 0], up=[0, 1, 0])
     # max_depth 2: direct light only, as V is (a deeper path adds the ground's light reflected by the occluder)
@@ -77,17 +76,16 @@ def scene_dict(spec, integrator: str, with_occluder: bool = True) -> dict:
                     "film": {"type": "hdrfilm", "width": N, "height": N, "rfilter": {"type": "box"},
                              "pixel_format": "rgb", "sample_border": True},
                     "sampler": {"type": "independent"}},
-         "light": lights.emitter(lightmod.nominal(spec)), "ground": make_mesh("ground", gv, gf)}
+         "light": lights.emitter(lightmod.nominal(spec)), "ground": make_mesh("ground", *geometry["ground"])}
     if with_occluder:
-        ov, of = occluder_geometry(spec)
-        d["occluder"] = make_mesh("occluder", ov, of)
+        d["occluder"] = make_mesh("occluder", *geometry["occluder"])
     return d
 
 
 def hiders(spec) -> np.ndarray:
     """(k, 3) points whose convex hull's projection hides the ground from the camera: the occluder's
     vertices, its top raised by the reference's step, and an area light's square (between camera and ground)."""
-    ov = np.asarray(occluder_geometry(spec)[0], float).reshape(-1, 3)
+    ov = np.asarray(shapes(spec)["occluder"][0], float).reshape(-1, 3)
     raised = ov + np.array([0.0, 0.0, spec.reference_step_of("occluder_z")])
     pts = [ov, raised]
     if spec.light == "area":

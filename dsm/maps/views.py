@@ -103,10 +103,12 @@ class View:
         """Faces (maps) of this view: one fact, types.VIEW_FACES."""
         return VIEW_FACES[self.kind]
 
-    def __init__(self, origin, ex, ey, ez, resolution: int, near: float, far: float):
+    def __init__(self, origin, ex, ey, ez, resolution: int, near: float, far: float, light_size: float = 0.0):
         """The frame (origin and axes: numpy, or Dr.Jit, e.g. attached to a light's parameters) is taken
-        here, once: ``o``, ``ex``, ``ey``, ``ez`` in Dr.Jit, ``origin_np``, ``axes_np`` their values."""
+        here, once: ``o``, ``ex``, ``ey``, ``ez`` in Dr.Jit, ``origin_np``, ``axes_np`` their values;
+        ``light_size``: the light's width for PCSS (world; 0: none)."""
         self.resolution = int(resolution)
+        self.light_size = float(light_size)
         self.origin_np = frame_numpy(origin)
         self.axes_np = tuple(frame_numpy(a) for a in (ex, ey, ez))
         self.near, self.far = float(near), float(far)
@@ -120,7 +122,7 @@ class View:
         """A new view with this one's fit (resolution, near, far, extent or cone) and the frame given
         here (numpy, or Dr.Jit: dsm grad's attached light), taken at its construction as every view's."""
         view = copy.copy(self)
-        View.__init__(view, origin, ex, ey, ez, self.resolution, self.near, self.far)
+        View.__init__(view, origin, ex, ey, ez, self.resolution, self.near, self.far, self.light_size)
         return view
 
     @property
@@ -258,7 +260,9 @@ class OrthographicView(View):
     each side; a lookup beyond the map (a far normal offset) finds no caster there: lit."""
     kind = "orthographic"
 
-    def __init__(self, direction, receivers_world: np.ndarray, scene_bbox, resolution: int):
+    def __init__(self, direction, receivers_world: np.ndarray, scene_bbox, resolution: int, light_size: float = 0.0):
+        """The map of ``direction`` fitted to ``receivers_world`` and, in depth, to ``scene_bbox`` (lo, hi);
+        ``light_size``: the light's width for PCSS (world; 0: none)."""
         ex, ey, ez = light_frame(direction)
         pts = np.asarray(receivers_world, float).reshape(-1, 3)
         if len(pts) == 0:
@@ -281,7 +285,8 @@ class OrthographicView(View):
         z0 = zs.min() - margin
         origin = ex * (cx - extent / 2) + ey * (cy - extent / 2) + ez * z0
         self.extent = float(extent)
-        super().__init__(origin, ex, ey, ez, resolution, near=0.0, far=float(zs.max() - z0 + margin))
+        super().__init__(origin, ex, ey, ez, resolution, near=0.0, far=float(zs.max() - z0 + margin),
+                         light_size=light_size)
         self.L = dr.opaque(mi.Float, self.extent)
 
     @classmethod
@@ -345,7 +350,9 @@ class PerspectiveView(View):
     """A spot light's map: a square perspective frustum from the light over its cone; depth along the axis."""
     kind = "perspective"
 
-    def __init__(self, position, axis, cutoff_deg: float, scene_bbox, resolution: int):
+    def __init__(self, position, axis, cutoff_deg: float, scene_bbox, resolution: int, light_size: float = 0.0):
+        """The square map over the cone of half angle ``cutoff_deg`` about ``axis`` from ``position``, its depth
+        range to ``scene_bbox`` (lo, hi); ``light_size``: the light's width for PCSS (world; 0: none)."""
         ex, ey, ez = light_frame(axis)
         corners = _bbox_corners(*scene_bbox)
         zs = (corners - np.asarray(position, float)) @ ez
@@ -353,7 +360,7 @@ class PerspectiveView(View):
         self.tan_half = math.tan(math.radians(self.cutoff))
         far = max(float(zs.max()), 1e-30)
         self.nearest_scene_depth = max(float(zs.min()), 0.0)
-        super().__init__(position, ex, ey, ez, resolution, near=0.0, far=far * 1.01)
+        super().__init__(position, ex, ey, ez, resolution, near=0.0, far=far * 1.01, light_size=light_size)
         self.T = dr.opaque(mi.Float, self.tan_half)
         self.cos_cut = dr.opaque(mi.Float, math.cos(math.radians(self.cutoff)))
 

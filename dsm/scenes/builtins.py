@@ -6,8 +6,15 @@ import math
 import numpy as np
 
 from ..core.types import LightSpec
+from ..core.env import meshes_folder
+from .files import mesh_arrays
 from .geometry import (CROSS_MAX, CROSS_MIN, box, cross_lengths, double_torus, normalize, prism, quad,
                        rotation)
+
+# occluder_mesh's mesh when none is given: the kit's Stanford bunny (its terms: data/meshes/README.md)
+DEFAULT_OCCLUDER_MESH = "mitsuba_bunny.ply"
+# the occluder scenes' default light: 20 degrees from the vertical toward +x (dsm grad's plate_directional)
+OCCLUDER_LIGHT_DEG = 20.0
 
 
 def _ground(half=4.0):
@@ -106,10 +113,51 @@ def _terrain(p):
         LightSpec("directional", direction=normalize([-0.664, 0.664, -0.342]))
 
 
+def _occluder_scene(p, occluder):
+    """The ground of half side ``p.ground_half`` and ``occluder`` (verts, faces): (shapes, camera, light) at
+    scale 1; the camera looks down on the occluder from the side its shadow falls toward (+x: the light's tilt)."""
+    top = float(np.max(occluder[0][:, 2]))
+    reach = max(p.size, top)
+    target = (0.0, 0.0, 0.5 * top)
+    camera = (tuple(np.add(target, np.multiply((0.6, -1.0, 0.9), 2.5 * reach))), target)
+    t = math.radians(OCCLUDER_LIGHT_DEG)
+    light = LightSpec("directional", direction=(math.sin(t), 0.0, -math.cos(t)))
+    return {"ground": _ground(p.ground_half), "occluder": occluder}, camera, light
+
+
+def _occluder_plate(p):
+    """A square plate of side ``p.size`` at ``p.height``: (shapes, camera, light) at scale 1."""
+    half = 0.5 * p.size
+    return _occluder_scene(p, quad([0.0, 0.0, p.height], [half, 0.0, 0.0], [0.0, half, 0.0]))
+
+
+def _occluder_box(p):
+    """A closed box ``p.size`` wide and ``p.box_height`` high, its bottom at ``p.height``: (shapes, camera,
+    light) at scale 1."""
+    half = 0.5 * p.size
+    return _occluder_scene(p, box([-half, -half, p.height], [half, half, p.height + p.box_height]))
+
+
+def occluder_mesh_vertices(v, size: float, height: float) -> np.ndarray:
+    """Vertices ``v`` (n, 3) scaled so their largest extent is ``size``, centred over the origin in x and
+    y, their lowest point at ``height`` (float64, world)."""
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    v = (v - np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]])) * (size / float(np.max(hi - lo)))
+    return v + np.array([0.0, 0.0, height])
+
+
+def _occluder_mesh(p):
+    """The mesh file ``p.mesh`` (or the kit's bunny) placed by occluder_mesh_vertices: (shapes, camera, light)
+    at scale 1."""
+    v, f = mesh_arrays(p.mesh or meshes_folder() / DEFAULT_OCCLUDER_MESH)
+    return _occluder_scene(p, (occluder_mesh_vertices(v, p.size, p.height), f))
+
+
 # the geometry of each built-in by name (dsm.scenes.params.BUILTINS: its parameters)
 _GEOMETRY = {"plane": _plane, "plane_box": _plane_box, "l_shape": _l_shape, "floating_plate": _floating_plate,
              "stacked_plates": _stacked_plates, "grazing": _grazing, "room": _room, "double_torus": _double_torus,
-             "long_ground": _long_ground, "terrain": _terrain}
+             "long_ground": _long_ground, "terrain": _terrain, "occluder_plate": _occluder_plate,
+             "occluder_box": _occluder_box, "occluder_mesh": _occluder_mesh}
 
 
 def builtin_geometry(name: str, p):

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from . import exact_frame, xml_scale
+from ..core import env
 from ..core.types import DEFAULT_CAMERA, ConfigError, LightSpec
 from .camera import far_bound, look_at_sensor, posed_camera, reposed_sensor, resized_sensor
 from .checks import check_held, check_mesh, source_of
@@ -74,40 +75,67 @@ def mitsuba_message(e, mesh_file: bool = False) -> str:
 
 
 def _precheck_file(spec):
-    """Problems Mitsuba reports badly or not at all: an empty file, a mesh without faces, a file that is no PLY."""
-    path, key = spec.file, f"{spec.where}.file"
+    """Problems Mitsuba reports badly or not at all in a [[scene]] file (precheck_path)."""
+    precheck_path(spec.file, source_of(spec), f"{spec.where}.file")
+
+
+def precheck_path(path: Path, source: str, key: str):
+    """Problems Mitsuba reports badly or not at all: an empty file, a mesh without faces, a file that
+    is no PLY; a ConfigError naming ``source`` and ``key``."""
     try:
         size = path.stat().st_size
         if size == 0:
-            raise ConfigError(source_of(spec), key, f"{path} is empty")
+            raise ConfigError(source, key, f"{path} is empty")
         suffix = path.suffix.lower()
         if suffix == ".obj":
             data = path.read_bytes()
             if re.search(rb"(?m)^[ \t]*f[ \t]", data) is None:
-                raise ConfigError(source_of(spec), key, f"{path} has no faces (no 'f' lines): dsm needs a triangle mesh")
+                raise ConfigError(source, key, f"{path} has no faces (no 'f' lines): dsm needs a triangle mesh")
             # a record cut short (a file truncated mid-line): Mitsuba would load the rest silently
             short = re.search(rb"(?m)^[ \t]*([vf])[ \t]+\S+(?:[ \t]+\S+)?[ \t]*\r?$", data)
             if short is not None:
                 line = data.count(b"\n", 0, short.start()) + 1
                 what = "vertex with fewer than 3 coordinates" if short.group(1) == b"v" else "face with fewer than 3 corners"
-                raise ConfigError(source_of(spec), key, f"{path}: line {line} is a {what} (a file cut short?)")
+                raise ConfigError(source, key, f"{path}: line {line} is a {what} (a file cut short?)")
         elif suffix == ".ply":
             with open(path, "rb") as fh:
                 head = fh.read(1 << 16)
             if not head.startswith(b"ply"):
-                raise ConfigError(source_of(spec), key, f"{path} is not a PLY file (it does not start with 'ply')")
+                raise ConfigError(source, key, f"{path} is not a PLY file (it does not start with 'ply')")
             end = head.find(b"end_header")
             if end < 0:
-                raise ConfigError(source_of(spec), key, f"{path}: the PLY header has no end_header")
+                raise ConfigError(source, key, f"{path}: the PLY header has no end_header")
             m = re.search(rb"element\s+face\s+(\d+)", head[:end])
             if m is None or int(m.group(1)) == 0:
-                raise ConfigError(source_of(spec), key, f"{path} has no faces (PLY element face: "
+                raise ConfigError(source, key, f"{path} has no faces (PLY element face: "
                                   f"{m.group(1).decode() if m else 'absent'}): dsm needs a triangle mesh")
             bad = ply_index_problem(path, head, end)
             if bad:
-                raise ConfigError(source_of(spec), key, f"{path}: {bad}")
+                raise ConfigError(source, key, f"{path}: {bad}")
     except OSError as e:
-        raise ConfigError(source_of(spec), key, f"cannot read {path}: {e.strerror or e}") from None
+        raise ConfigError(source, key, f"cannot read {path}: {e.strerror or e}") from None
+
+
+def mesh_arrays(path, source: str = "<scene>", key: str = "scene.mesh") -> tuple:
+    """A PLY or OBJ file's (vertices (n, 3) float64, faces (m, 3) int64) as Mitsuba loads it (its own
+    frame, float32 positions), checked as a [[scene]] file is: a file Mitsuba cannot read, or without
+    faces, finite positions or extent, is a ConfigError naming ``source`` and ``key``."""
+    import mitsuba as mi
+    path = Path(path)
+    precheck_path(path, source, key)
+    if mi.variant() is None:       # a config read before its run sets one (a built-in's mesh): the default
+        env.use_variant()
+    try:
+        mesh = mi.load_dict({"type": path.suffix.lower()[1:], "filename": str(path)})
+    except (RuntimeError, ValueError, OSError) as e:
+        raise ConfigError(source, key, f"cannot load {path}: {mitsuba_message(e, True)}") from None
+    v = np.array(mesh.vertex_positions_buffer(), np.float64).reshape(-1, 3)
+    f = np.array(mesh.faces_buffer(), np.int64).reshape(-1, 3)
+    if len(f) == 0 or len(v) == 0 or not np.isfinite(v).all():
+        raise ConfigError(source, key, f"{path}: has no faces or a vertex that is not finite")
+    if not float(np.ptp(v, axis=0).max()) > 0.0:
+        raise ConfigError(source, key, f"{path}: has no extent (every vertex at one point)")
+    return v, f
 
 
 def load_xml(spec, camera_resolution, camera=None):

@@ -85,6 +85,33 @@ class TerrainParams(Placement):
 
 
 @dataclass(frozen=True)
+class OccluderParams(Placement):
+    """One occluder of side ``size`` whose lowest point is at ``height`` over a square ground: dsm grad's test bed."""
+    size: float = field(default=0.5, metadata={"min": 1e-30, "doc": "the occluder's side (a mesh: its largest extent), world units"})
+    height: float = field(default=0.5, metadata={"min": 0.0, "doc": "the occluder's lowest point over the ground, world units"})
+    ground_half: float = field(default=4.0, metadata={"min": 1e-30, "doc": "the ground's half side, world units"})
+
+
+@dataclass(frozen=True)
+class OccluderPlateParams(OccluderParams):
+    """A square plate of side ``size`` at ``height`` over the ground (dsm grad's plate: its shadow's closed forms)."""
+
+
+@dataclass(frozen=True)
+class OccluderBoxParams(OccluderParams):
+    """A closed box, ``size`` x ``size`` x ``box_height``, its bottom at ``height`` over the ground."""
+    box_height: float = field(default=0.5, metadata={"min": 1e-30, "doc": "the box's height, world units"})
+
+
+@dataclass(frozen=True)
+class OccluderMeshParams(OccluderParams):
+    """A PLY or OBJ mesh (z up) scaled so its largest extent is ``size``, centred over the origin in x and y,
+    its lowest point at ``height`` over the ground."""
+    mesh: str = field(default="", metadata={"path": (".ply", ".obj"), "doc": "the mesh file, relative to the "
+                                            "config file; empty: the kit's Stanford bunny (data/meshes/mitsuba_bunny.ply)"})
+
+
+@dataclass(frozen=True)
 class FileParams(Placement):
     """A scene file. Meshes (OBJ/PLY) get a ground under them, a default camera and light."""
     up: str = field(default="y", metadata={"choices": ("x", "y", "z"), "doc": "a mesh file's up axis"})
@@ -102,6 +129,9 @@ BUILTINS = {
     "double_torus": DoubleTorusParams,
     "long_ground": LongGroundParams,
     "terrain": TerrainParams,
+    "occluder_plate": OccluderPlateParams,
+    "occluder_box": OccluderBoxParams,
+    "occluder_mesh": OccluderMeshParams,
 }
 
 

@@ -9,6 +9,7 @@ import numpy as np
 from ..core.types import ConfigError, SceneSpec, sweep_params
 from .builtins import builtin_geometry, scale_range
 from .checks import check_held
+from .files import mesh_arrays
 from .models import MODEL_KEYS, MODELS, absent_message, locate, version_of
 from .params import BUILTINS, FILE_SUFFIXES, FileParams, GrazingParams, PlaneParams
 
@@ -27,7 +28,9 @@ def parse_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]
         name = t["builtin"]
         if not isinstance(name, str) or name not in BUILTINS:
             raise ConfigError(source, f"{where}.builtin", f"unknown scene {name!r}", list(BUILTINS), got=name)
-        specs = sweep_params(BUILTINS[name], t, source, where, skip=("builtin", "closed"))
+        raw = sweep_params(BUILTINS[name], t, source, where, skip=("builtin", "closed"))
+        labels = [_label(name, p) for p in raw]          # a file as the config names it
+        specs = [_with_paths(p, source, where, base) for p in raw]
         for p in specs:
             _check_builtin(name, p, source, where)
         closed = _closed_override(t, source, where)
@@ -35,8 +38,8 @@ def parse_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]
         for shape, _ in closed:
             if shape not in shape_names:
                 raise ConfigError(source, f"{where}.closed.{shape}", f"no shape named {shape!r} in {name}", shape_names)
-        return [SceneSpec(builtin=name, params=p, label=_label(name, p), closed=closed, source=source, where=where)
-                for p in specs]
+        return [SceneSpec(builtin=name, params=p, label=label, closed=closed, source=source, where=where)
+                for p, label in zip(specs, labels)]
     raw = t["file"]
     if not isinstance(raw, str):
         raise ConfigError(source, f"{where}.file", f"expected a path string, got {raw!r}")
@@ -72,6 +75,25 @@ def parse_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]
                           "units; translate: elsewhere)", ("file", "closed", "optional") + XML_KEYS)
     return [SceneSpec(file=path, params=p, label=_label(path.stem, p, FileParams()), closed=closed, source=source,
                       where=where) for p in specs]
+
+
+def _with_paths(p, source: str, where: str, base: Path):
+    """A built-in's parameters with each file it names (a field whose metadata has ``path``: its suffixes)
+    resolved against the config's folder and checked as the kit's mesh loading reads it (dsm.scenes.files)."""
+    given = {}
+    for f in fields(p):
+        suffixes, raw = f.metadata.get("path"), getattr(p, f.name)
+        if suffixes is None or not raw:
+            continue
+        key, path = f"{where}.{f.name}", Path(raw).expanduser()
+        path = path if path.is_absolute() else (Path(base or ".") / path).resolve()
+        if path.suffix.lower() not in suffixes:
+            raise ConfigError(source, key, f"unsupported file type {path.suffix!r}", suffixes)
+        if not path.is_file():
+            raise ConfigError(source, key, f"no such file: {path}")
+        mesh_arrays(path, source, key)
+        given[f.name] = str(path)
+    return replace(p, **given)
 
 
 def _model_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]:
