@@ -17,11 +17,14 @@ Whatever dsm grad would ignore is refused in one line, before any work.
 from __future__ import annotations
 
 import math
+from dataclasses import fields
 from pathlib import Path
 
 from .. import lights, schemes
 from ..config.read import parse_scheme
 from ..core.types import ConfigError, as_list, check_keys, choice, number
+from ..scenes.params import OccluderMeshParams
+from ..scenes.spec import resolve_path
 from . import support
 from .technique import MOMENT_TECHNIQUES, Technique
 
@@ -29,7 +32,7 @@ from .technique import MOMENT_TECHNIQUES, Technique
 SCENES = {"occluder_plate": "plate", "occluder_box": "box", "occluder_mesh": "mesh"}
 SCENE_KEYS = {"plate": ("builtin", "size", "height"), "box": ("builtin", "size", "height", "box_height"),
               "mesh": ("builtin", "size", "height", "mesh")}
-MESH_SUFFIXES = (".ply", ".obj")
+MESH_SUFFIXES = next(f.metadata["path"] for f in fields(OccluderMeshParams) if f.name == "mesh")
 MAP_KEYS = ("resolution", "kind", "filter", "blur", "antialias")
 KINDS = ("depth",) + MOMENT_TECHNIQUES
 SCHEMES = ("constant",)          # the depth techniques' bias dsm grad differentiates through
@@ -86,13 +89,7 @@ def mesh_path(t: dict, source: str) -> str:
     raw = t.get("mesh")
     if not isinstance(raw, str) or not raw:
         raise ConfigError(source, "scene[0].mesh", f"occluder_mesh needs a PLY or OBJ file, got {raw!r}")
-    path = Path(raw) if Path(raw).is_absolute() else Path(source).parent / raw
-    if path.suffix.lower() not in MESH_SUFFIXES:
-        raise ConfigError(source, "scene[0].mesh", f"unknown file type {path.suffix!r}", MESH_SUFFIXES,
-                          got=path.suffix)
-    if not path.is_file():
-        raise ConfigError(source, "scene[0].mesh", f"no such file {str(path)!r}")
-    return str(path.resolve())
+    return str(resolve_path(raw, MESH_SUFFIXES, source, "scene[0].mesh", Path(source).parent).resolve())
 
 
 def read_light(raw: dict, source: str) -> dict:

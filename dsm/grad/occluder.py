@@ -25,10 +25,11 @@ from ..scenes.builtins import builtin_geometry
 from ..scenes.geometry import make_mesh
 from ..scenes.spec import parse_scene
 from . import light as lightmod
+from .kit_tables import SCENES
 
 GROUND_HALF = 8.0          # the ground's half side, in units of the image window
-# GradSpec.scene -> the kit's built-in
-BUILTINS = {"plate": "occluder_plate", "box": "occluder_box", "mesh": "occluder_mesh"}
+# GradSpec.scene -> the kit's built-in (kit_tables.SCENES turned round: the names live there alone)
+BUILTINS = {scene: builtin for builtin, scene in SCENES.items()}
 
 
 def scene_table(spec) -> dict:

@@ -32,7 +32,7 @@ PARAMS = {
     "light_x": ("world", ("point", "area")),        # the point light's x (the area light's centre's)
     "light_angle": ("degree", ("directional",)),    # the directional light's tilt from the vertical toward +x
 }
-SCENES = ("plate", "box", "mesh")           # GradSpec.scene ([[scene]] builtin: kit_tables.SCENES)
+SCENES = tuple(kit_tables.SCENES.values())  # GradSpec.scene (each a [[scene]] builtin's: kit_tables.SCENES)
 LIGHTS = tuple(support.LIGHTS.values())     # GradSpec.light: the kit light types dsm grad differentiates
 LOSSES = ("shadow_area", "shadow_moment_x", "l2")
 # the unit of each loss, given the world unit of length

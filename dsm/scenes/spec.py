@@ -77,6 +77,18 @@ def parse_scene(t: dict, source: str, where: str, base: Path) -> list[SceneSpec]
                       where=where) for p in specs]
 
 
+def resolve_path(raw: str, suffixes: tuple, source: str, key: str, base) -> Path:
+    """File name ``raw`` resolved against the config's folder ``base``; a ConfigError at ``key`` for a type
+    not among ``suffixes`` or a file that is not there."""
+    path = Path(raw).expanduser()
+    path = path if path.is_absolute() else (Path(base or ".") / path).resolve()
+    if path.suffix.lower() not in suffixes:
+        raise ConfigError(source, key, f"unsupported file type {path.suffix!r}", suffixes)
+    if not path.is_file():
+        raise ConfigError(source, key, f"no such file: {path}")
+    return path
+
+
 def _with_paths(p, source: str, where: str, base: Path):
     """A built-in's parameters with each file it names (a field whose metadata has ``path``: its suffixes)
     resolved against the config's folder and checked as the kit's mesh loading reads it (dsm.scenes.files)."""
@@ -85,12 +97,8 @@ def _with_paths(p, source: str, where: str, base: Path):
         suffixes, raw = f.metadata.get("path"), getattr(p, f.name)
         if suffixes is None or not raw:
             continue
-        key, path = f"{where}.{f.name}", Path(raw).expanduser()
-        path = path if path.is_absolute() else (Path(base or ".") / path).resolve()
-        if path.suffix.lower() not in suffixes:
-            raise ConfigError(source, key, f"unsupported file type {path.suffix!r}", suffixes)
-        if not path.is_file():
-            raise ConfigError(source, key, f"no such file: {path}")
+        key = f"{where}.{f.name}"
+        path = resolve_path(raw, suffixes, source, key, base)
         mesh_arrays(path, source, key)
         given[f.name] = str(path)
     return replace(p, **given)
