@@ -104,8 +104,9 @@ def read_light(raw: dict, source: str) -> dict:
     for key, why in LIGHT_IGNORED.items():
         if key in t:
             raise ConfigError(source, f"light[0].{key}", f"dsm grad would ignore it: {why}; remove it")
-    light = lights.get(kind).parse(t, source, "light[0]")
-    if kind == "directional":
+    module = lights.get(kind)
+    light = module.parse(t, source, "light[0]")
+    if not module.POSITIONAL:                 # a direction, no place: its tilt is the parameter
         return {"light": support.LIGHTS[kind], "light_angle": tilt(light.direction, source)}
     height = above_origin(light.position, source)
     kw = {"light": support.LIGHTS[kind], "light_height": height}
@@ -115,7 +116,7 @@ def read_light(raw: dict, source: str) -> dict:
     if light.direction is not None and tuple(light.direction) != DOWN:
         raise ConfigError(source, "light[0].direction", f"dsm grad's {kind} light faces straight down "
                           f"(valid: [0, 0, -1]); got {list(light.direction)}")
-    if kind == "area":
+    if module.SOFT:                           # a surface: its square's side
         kw["light_size"] = square_side(light, source)
     return kw
 
