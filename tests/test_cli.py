@@ -33,7 +33,7 @@ def test_default_experiment_writes_the_report(tmp_path, capsys):
         assert run["versions"][k]
     assert run["variant"] == "llvm_ad_rgb" and run["threads"] >= 1
     assert run["rays"]["map_texel"] > 0 and run["rays"]["reference"] > 0
-    assert run["n_failed"] == 0 and run["n_cases_ok"] == len(rows)
+    assert run["n_failed"] == 0 and run["n_skipped"] == 0 and run["n_cases_ok"] == len(rows)
     table = (out / "table.md").read_text()
     assert "acne" in table and "peter-panning: rgb" in table and table.count("\n|") >= len(rows) + 1
     for r in rows:      # one folder per scene and light

@@ -5,7 +5,7 @@ import pytest
 
 import dsm
 from conftest import MESHES, ROOT, base_config
-from dsm.scenes.closedness import closedness
+from dsm.scenes.closedness import closedness, weld_ids
 from dsm.scenes.geometry import box, prism, quad
 from test_hard_cases import Scene64, assert_matches_truth, truth
 
@@ -77,6 +77,30 @@ def test_closedness_detection():
     assert not closed and "non-manifold" in why
     closed, why = closedness(v, f[:, ::-1])               # closed, wound inward (a room's walls)
     assert closed and "inward" in why
+
+
+def test_welded_ids_and_edge_counts_match_numpy_unique_by_rows():
+    """closedness welds vertices and counts edges by sorting 1-D keys; numpy's row-wise unique
+    (np.unique(axis=0)) is the second computation: the same ids (signed zeros welded) and, on random
+    meshes with shared, repeated and degenerate triangles, the same edge counts."""
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        v = rng.integers(-2, 3, (int(rng.integers(3, 30)), 3)).astype(np.float64) * 0.5
+        v[rng.random(v.shape) < 0.2] = -0.0
+        f = rng.integers(0, len(v), (int(rng.integers(1, 50)), 3))
+        _, weld = np.unique(v, axis=0, return_inverse=True)
+        assert (weld_ids(v) == weld.ravel()).all()
+        g = weld.ravel()[f]
+        g = g[(g[:, 0] != g[:, 1]) & (g[:, 1] != g[:, 2]) & (g[:, 0] != g[:, 2])]
+        if not len(g):
+            continue
+        directed = np.concatenate([g[:, [0, 1]], g[:, [1, 2]], g[:, [2, 0]]])
+        _, counts = np.unique(np.sort(directed, axis=1), axis=0, return_counts=True)
+        _, dcounts = np.unique(directed, axis=0, return_counts=True)
+        closed, why = closedness(v, f)
+        assert closed == (bool((counts == 2).all()) and not (dcounts > 1).any())
+        assert (f"{int((counts == 1).sum())} boundary edges" in why) == bool((counts == 1).sum())
+        assert (f"{int((counts > 2).sum())} non-manifold edges" in why) == bool((counts > 2).sum())
 
 
 @pytest.mark.slow

@@ -22,15 +22,18 @@ def closedness(verts: np.ndarray, faces: np.ndarray) -> tuple[bool, str]:
     faces = np.asarray(faces, np.int64).reshape(-1, 3)
     if len(faces) == 0:
         return False, "no triangles"
-    _, weld = np.unique(verts, axis=0, return_inverse=True)
-    f = weld.ravel()[faces]
+    weld = weld_ids(verts)
+    f = weld[faces]
     degenerate = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2])
     f = f[~degenerate]
     directed = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    # an edge (a, b) of welded ids as one integer a * n + b: a 1-D sort, where unique(axis=0) sorts rows
+    # as opaque records (10 times slower on the real meshes); the counts are the same
+    n = np.int64(weld.max() + 1)
     undirected = np.sort(directed, axis=1)
-    _, counts = np.unique(undirected, axis=0, return_counts=True)
+    _, counts = np.unique(undirected[:, 0] * n + undirected[:, 1], return_counts=True)
     boundary, nonmanifold = int((counts == 1).sum()), int((counts > 2).sum())
-    _, dcounts = np.unique(directed, axis=0, return_counts=True)
+    _, dcounts = np.unique(directed[:, 0] * n + directed[:, 1], return_counts=True)
     same_direction = int((dcounts > 1).sum())
     problems = []
     if boundary:
@@ -48,6 +51,17 @@ def closedness(verts: np.ndarray, faces: np.ndarray) -> tuple[bool, str]:
         volume = float(np.einsum("ij,ij->i", p[f[:, 0]], np.cross(p[f[:, 1]], p[f[:, 2]])).sum() / 6.0)
         return closed, "closed" if volume >= 0 else "closed, wound inward (negative volume: its solid is outside it)"
     return closed, "; ".join(problems) or "closed"
+
+
+def weld_ids(verts: np.ndarray) -> np.ndarray:
+    """Per vertex, one id shared by every vertex at the same position (positions compared as numbers,
+    as ``np.unique(verts, axis=0)`` compares them: -0.0 equals 0.0); ids count up in that order."""
+    order = np.lexsort(verts.T[::-1])
+    sorted_v = verts[order]
+    starts = np.concatenate([[True], np.any(sorted_v[1:] != sorted_v[:-1], axis=1)])
+    ids = np.empty(len(verts), np.int64)
+    ids[order] = np.cumsum(starts) - 1
+    return ids
 
 
 def shape_closedness(shape) -> tuple[bool, str]:
