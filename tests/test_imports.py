@@ -50,8 +50,12 @@ def _graph():
         is_pkg = path.name == "__init__.py"
         deps = set()
         aliases = {}                     # local name -> kit module it stands for
-        for node in ast.walk(tree):
-            if isinstance(node, ast.Import):
+        reaches = []                     # (alias, attribute): checked once every import of the module is known
+        for node in ast.walk(tree):      # one walk of the tree (it is most of the check's time)
+            if isinstance(node, ast.Attribute):
+                if node.attr.startswith("_") and not node.attr.startswith("__") and isinstance(node.value, ast.Name):
+                    reaches.append((node.value.id, node.attr))
+            elif isinstance(node, ast.Import):
                 for a in node.names:
                     if a.name.split(".")[0] in PACKAGES:
                         deps.add(a.name)
@@ -69,11 +73,8 @@ def _graph():
                         deps.add(target)
                         if a.name.startswith("_") and target != mod:
                             private_imports.append(f"{mod}: from {target} import {a.name}")
-        for node in ast.walk(tree):
-            if (isinstance(node, ast.Attribute) and node.attr.startswith("_") and not node.attr.startswith("__")
-                    and isinstance(node.value, ast.Name) and node.value.id in aliases
-                    and aliases[node.value.id] != mod):
-                private_attrs.append(f"{mod}: {node.value.id}.{node.attr}")
+        private_attrs += [f"{mod}: {name}.{attr}" for name, attr in reaches
+                          if name in aliases and aliases[name] != mod]
         # a package's own submodules are not dependencies of importing it
         edges[mod] = {d if d in mods else _owner(d, mods) for d in deps} - {mod, None}
     return edges, private_imports, private_attrs
