@@ -339,7 +339,7 @@ def test_far_numbers_come_back_in_camera_relative_precision(test_run):
     _, doc = test_run
     case = _by(suite.cases(suite.load_suite(), "test"), "grazing", "m", "1e4")
     case.config["scene"][0]["precision"] = "camera_relative"
-    res = dsm.run(case.config)
+    res = dsm.run(case.config, report=False)
     origin = {(r["contender"]): r for r in doc["cases"] if r["scene"] == "grazing" and r["unit"] == "m"
               and r["offset"] == "0"}
     for row in res.rows:
@@ -441,7 +441,7 @@ def test_the_renders_are_the_run_s_shadow_image_and_its_exact_twin(tmp_path, whi
     from dsm.truth import metrics
     case = _by(suite.cases(suite.load_suite(), "test"), "bunny", "m", "1e4") if which == "bunny_far" \
         else _plane_box_spot_at_1e5()
-    res = dsm.run(case.config, out=tmp_path / "run")
+    res = dsm.run(case.config, out=tmp_path / "run", report=False)
     if which == "plane_box_spot_far":      # the view's subset is there: fewer case receivers than the light has
         setups = render.light_setups(case.config)
         assert res.rows[0]["n_receivers"] < len(setups[(res.rows[0]["scene"], res.rows[0]["light"])][1].pixels)
@@ -516,7 +516,7 @@ def test_the_cornell_box_counts_alike_in_cm_and_m_for_scale_free_contenders():
         kinds_off = ("evsm", "msm", "vsm")          # vsm at its defaults: its presets' tables left out too
         pre_map = {k: v for k, v in c.prefiltered["map"].items() if k not in kinds_off}
         pre = {**c.prefiltered, **small, "map": {**pre_map, "resolution": 256, "kind": ["vsm"]}}
-        rows = dsm.run(cfg).rows + dsm.run(pre).rows
+        rows = dsm.run(cfg, report=False).rows + dsm.run(pre, report=False).rows
         counts[unit] = {(r["light"], results.contender_of(r)): (r["n_receivers"], r["n_acne"], r["n_peterpan"])
                         for r in rows}
     assert len(counts["m"]) == 2 * (len(free) + 3 + 1)
