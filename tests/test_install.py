@@ -161,7 +161,7 @@ def test_pip_install_into_a_fresh_venv_then_a_first_run_counts_as_here(tmp_path,
     first_run_s = time.perf_counter() - t0
     from dsm import pipeline
     from dsm.experiment.runner import Runner
-    Runner(pipeline.prepare(tomllib.loads(FIRST_RUN)), tmp_path / "here", progress=False).run()
+    Runner(pipeline.prepare(tomllib.loads(FIRST_RUN)), tmp_path / "here", progress=False, report=False).run()
     fresh, here = _rows(tmp_path / "fresh" / "metrics.csv"), _rows(tmp_path / "here" / "metrics.csv")
     same_engine = all(version(n) == subprocess.run(
         [str(py), "-c", f"from importlib.metadata import version; print(version('{n}'))"], capture_output=True,
