@@ -215,8 +215,9 @@ def run_case(case, ppd, variant: str | None = None, tuned=None, out: Path | None
     flicker = []
     for motion in (m for m in (case.motion, case.prefiltered_motion) if m is not None):
         folder = f"flicker/{motion['experiment']['name']}"
-        # force: the folder is the benchmark's, which holds its lock and refused an earlier run's results
-        mo = dsm.run(motion, variant=variant, out=Path(out) / folder, force=True)
+        # force: the folder is the benchmark's, which holds its lock and refused an earlier run's results;
+        # no report: the records are frames.csv's (`dsm report` draws a motion run's figures from its folder)
+        mo = dsm.run(motion, variant=variant, out=Path(out) / folder, force=True, report=False)
         flicker += flicker_records(case, mo, folder, tuned)
     return records, flicker, res.run.get("variant")
 
