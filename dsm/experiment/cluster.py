@@ -88,14 +88,14 @@ def local_resources(cpus: int | None = None) -> dict | None:
     """The CPUs and GPUs of a Ray instance started here with ``cpus`` CPUs (None: Ray's count), resolved as
     ray.init resolves them but without starting it; None where this Ray release resolves them elsewhere
     (Ray's own class for it is internal: then the check waits for the started instance), or where Ray
-    already runs in this process (the instance ``local`` joins then is that one)."""
-    if _ray().is_initialized():
+    already runs in this process or RAY_ADDRESS names a cluster (ray.init joins that one instead)."""
+    if _ray().is_initialized() or os.environ.get("RAY_ADDRESS"):
         return None
     try:
-        from ray._private.resource_and_label_spec import ResourceAndLabelSpec as Spec      # Ray 2.49 on
+        from ray._private.resource_and_label_spec import ResourceAndLabelSpec as Spec      # recent Ray (2.60 here)
     except ImportError:
         try:
-            from ray._private.resource_spec import ResourceSpec as Spec                     # Ray 2.9 to 2.48
+            from ray._private.resource_spec import ResourceSpec as Spec                     # older Ray releases
         except ImportError:
             return None
     try:
