@@ -617,11 +617,17 @@ def _run(cfg, args, out: Path, derived=None) -> int:
     if clustered:                       # reach the cluster before the folder is touched
         try:
             from .experiment import cluster
+            variant = args.variant or cfg.variant
+            if (args.cluster or cfg.execution.address or "local") == "local":
+                # a task bigger than the instance to be started here is refused before Ray starts (seconds)
+                have = cluster.local_resources()
+                if have is not None:
+                    cluster.check_resources(cfg.execution, variant, cfg.source, have)
             if args.cluster:
                 cluster.connect(args.cluster)
             else:
                 cluster.connect(cfg.execution.address or "local", source=cfg.source, key="execution.address")
-            cluster.check_resources(cfg.execution, args.variant or cfg.variant, cfg.source)
+            cluster.check_resources(cfg.execution, variant, cfg.source)
         except SetupError as e:
             _err(f"setup error: {e}")
             return 3

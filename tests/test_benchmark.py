@@ -339,7 +339,7 @@ def test_far_numbers_come_back_in_camera_relative_precision(test_run):
     _, doc = test_run
     case = _by(suite.cases(suite.load_suite(), "test"), "grazing", "m", "1e4")
     case.config["scene"][0]["precision"] = "camera_relative"
-    res = dsm.run(case.config)
+    res = dsm.run(case.config, report=False)
     origin = {(r["contender"]): r for r in doc["cases"] if r["scene"] == "grazing" and r["unit"] == "m"
               and r["offset"] == "0"}
     for row in res.rows:
@@ -441,7 +441,7 @@ def test_the_renders_are_the_run_s_shadow_image_and_its_exact_twin(tmp_path, whi
     from dsm.truth import metrics
     case = _by(suite.cases(suite.load_suite(), "test"), "bunny", "m", "1e4") if which == "bunny_far" \
         else _plane_box_spot_at_1e5()
-    res = dsm.run(case.config, out=tmp_path / "run")
+    res = dsm.run(case.config, out=tmp_path / "run", report=False)
     if which == "plane_box_spot_far":      # the view's subset is there: fewer case receivers than the light has
         setups = render.light_setups(case.config)
         assert res.rows[0]["n_receivers"] < len(setups[(res.rows[0]["scene"], res.rows[0]["light"])][1].pixels)
@@ -516,7 +516,7 @@ def test_the_cornell_box_counts_alike_in_cm_and_m_for_scale_free_contenders():
         kinds_off = ("evsm", "msm", "vsm")          # vsm at its defaults: its presets' tables left out too
         pre_map = {k: v for k, v in c.prefiltered["map"].items() if k not in kinds_off}
         pre = {**c.prefiltered, **small, "map": {**pre_map, "resolution": 256, "kind": ["vsm"]}}
-        rows = dsm.run(cfg).rows + dsm.run(pre).rows
+        rows = dsm.run(cfg, report=False).rows + dsm.run(pre, report=False).rows
         counts[unit] = {(r["light"], results.contender_of(r)): (r["n_receivers"], r["n_acne"], r["n_peterpan"])
                         for r in rows}
     assert len(counts["m"]) == 2 * (len(free) + 3 + 1)
@@ -658,12 +658,14 @@ def _counts(doc, keys) -> dict:
 
 
 @pytest.mark.slow
-def test_ctrl_c_and_kill_keep_finished_cases_and_resume_counts_as_uninterrupted(test_run, tmp_path):
+def test_ctrl_c_and_kill_keep_finished_cases_and_resume_counts_as_uninterrupted(test_run, tmp_path, monkeypatch,
+                                                                                capsys):
     """Ctrl-C once the first case is kept: exit 130, a line saying what is kept and how to go on.
     --resume, killed (SIGKILL) once another case is kept, then --resume to the end: every count,
     FLIP and flicker rate that of the uninterrupted run, the kept cases not run again, and every
     case's class image and FLIP map the same bytes as the uninterrupted run's. Three of the test
-    size's cases (RESUME_CASES), one kept by each process."""
+    size's cases (RESUME_CASES), one kept by each run. The two runs a signal stops are processes of
+    their own (a real SIGINT, a real SIGKILL); the last resume, which no signal stops, runs in this one."""
     import signal
     whole_out, whole = test_run
     out, n = tmp_path / "bm", len(RESUME_CASES)
@@ -679,9 +681,11 @@ def test_ctrl_c_and_kill_keep_finished_cases_and_resume_counts_as_uninterrupted(
     assert proc.returncode == -signal.SIGKILL
     assert len(list((out / "cases").glob("[0-9]*.json"))) == kept + 1
     kept += 1
-    proc = _suite_process(out, "--resume")
-    stdout, err = proc.communicate(timeout=1800)
-    assert proc.returncode == 0, err
+    monkeypatch.setattr(results, "cases", only_cases(RESUME_CASES))
+    capsys.readouterr()
+    rc = cli.main(["benchmark", "--out", str(out), "--size", "test", "--resume"])
+    stdout, err = capsys.readouterr()
+    assert rc == 0, err
     ran = [line for line in err.splitlines() if line.startswith("dsm benchmark: ") and f"/{n} " in line]
     assert len(ran) == n - kept == 1                               # the kept cases are not run again
     doc = json.loads((out / "results.json").read_text())

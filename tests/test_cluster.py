@@ -33,10 +33,13 @@ def test_a_local_two_worker_cluster_writes_the_rows_of_a_local_run(tmp_path):
     from dsm.experiment.runner import Runner
     cfg = pipeline.prepare(_cfg())
     local = Runner(cfg, tmp_path / "local", progress=False).run()
+    expected = cluster.local_resources(2)         # read before Ray starts (dsm run's early refusal)
     try:
         cluster.run(cfg, tmp_path / "ray", "local", progress=False, local_cpus=2)
+        started = ray.cluster_resources()
     finally:
         ray.shutdown()
+    assert expected == {"CPU": started.get("CPU", 0.0), "GPU": started.get("GPU", 0.0)} and expected["CPU"] == 2
     assert len(local.rows) == 16
     assert _rows(tmp_path / "ray" / "metrics.csv") == _rows(tmp_path / "local" / "metrics.csv")
     run = json.loads((tmp_path / "ray" / "run.json").read_text())
@@ -96,13 +99,18 @@ def test_a_cluster_nobody_answers_at_is_refused_before_the_folder_is_touched(tmp
 
 @pytest.mark.slow
 @pytest.mark.parametrize("table,key", [({"gpus_per_task": 1}, "gpus_per_task"), ({"cpus_per_task": 64}, "cpus_per_task")])
-def test_a_task_bigger_than_the_cluster_is_refused_and_leaves_no_ray(tmp_path, capsys, table, key):
+def test_a_task_bigger_than_the_cluster_is_refused_and_leaves_no_ray(tmp_path, capsys, monkeypatch, table, key):
     """gpus_per_task on a machine without a GPU, or more CPUs per task than it has: one line,
-    exit 3 (a set-up the cluster lacks), before any work, Ray shut down (it hung for minutes)."""
+    exit 3 (a set-up the cluster lacks), before any work, Ray shut down (it hung for minutes); the local
+    instance's size is read before it starts (dsm.experiment.cluster.local_resources), so Ray never starts."""
     import drjit as dr
     from dsm import cli
     if key == "gpus_per_task" and dr.has_backend(dr.JitBackend.CUDA):
         pytest.skip("this machine has a GPU")
+
+    def no_start(*args, **kwargs):
+        raise AssertionError("Ray was started for a task the local instance cannot hold")
+    monkeypatch.setattr(ray, "init", no_start)
     cfg = tmp_path / "c.toml"
     cfg.write_text('[experiment]\nname = "c"\n[camera]\nresolution = [32, 32]\n[[scene]]\nbuiltin = "plane"\n'
                    '[map]\nresolution = 16\n[[scheme]]\nname = "none"\n[execution]\nbackend = "ray"\n'

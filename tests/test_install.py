@@ -100,8 +100,17 @@ def fresh_venv(path: Path) -> Path:
 
 
 def pip_into(python: Path) -> list:
-    """The command line of this environment's pip acting on ``python``'s environment (pip --python)."""
-    return [sys.executable, "-m", "pip", "--python", str(python)]
+    """The command line of this environment's pip installing into ``python``'s environment (pip --python),
+    without byte-compiling: compiling every installed module (numpy, matplotlib, fontTools...) took about
+    8 CPU seconds, and no test here is about .pyc files (Python writes those of the modules it imports)."""
+    return [sys.executable, "-m", "pip", "--python", str(python), "install", "--no-compile"]
+
+
+def no_compile_env() -> dict:
+    """This environment's variables without this checkout on the path, pip told not to byte-compile (the
+    pips an isolated build runs for its build environment read PIP_NO_COMPILE, not our arguments)."""
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+    return {**env, "PIP_NO_COMPILE": "1"}
 
 
 @pytest.fixture(scope="session")
@@ -111,7 +120,7 @@ def built_wheel(tmp_path_factory) -> tuple:
     worktree: (its path, "") or (None, pip's last lines) where it cannot be built here."""
     tmp = tmp_path_factory.mktemp("wheel")
     src = _copy_project(tmp / "src")
-    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+    env = no_compile_env()
     built = subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--disable-pip-version-check",
                             "-w", str(tmp / "dist"), str(src)], capture_output=True, text=True, timeout=600, env=env)
     if built.returncode != 0:
@@ -137,7 +146,7 @@ def test_pip_install_into_a_fresh_venv_then_a_first_run_counts_as_here(tmp_path,
     py = venv / "bin" / "python"
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
     t0 = time.perf_counter()
-    pip = subprocess.run([*pip_into(py), "install", "-q", "--disable-pip-version-check", str(wheel)],
+    pip = subprocess.run([*pip_into(py), "-q", "--disable-pip-version-check", str(wheel)],
                          capture_output=True, text=True, timeout=1500, env=env, cwd=tmp_path)
     assert pip.returncode == 0, pip.stderr[-3000:]
     install_s = time.perf_counter() - t0
@@ -152,7 +161,7 @@ def test_pip_install_into_a_fresh_venv_then_a_first_run_counts_as_here(tmp_path,
     first_run_s = time.perf_counter() - t0
     from dsm import pipeline
     from dsm.experiment.runner import Runner
-    Runner(pipeline.prepare(tomllib.loads(FIRST_RUN)), tmp_path / "here", progress=False).run()
+    Runner(pipeline.prepare(tomllib.loads(FIRST_RUN)), tmp_path / "here", progress=False, report=False).run()
     fresh, here = _rows(tmp_path / "fresh" / "metrics.csv"), _rows(tmp_path / "here" / "metrics.csv")
     same_engine = all(version(n) == subprocess.run(
         [str(py), "-c", f"from importlib.metadata import version; print(version('{n}'))"], capture_output=True,
@@ -165,6 +174,15 @@ def test_pip_install_into_a_fresh_venv_then_a_first_run_counts_as_here(tmp_path,
 
 
 WHEEL_CASE = ("bunny", "m", "0")
+# in the installed kit's Python: where its meshes are (two lines), then tests/helpers_benchmark_cases.py
+# (argv[1]) with the arguments after it, as `python helpers_benchmark_cases.py ARGS` runs it
+WHERE_THEN_RUN = """import runpy, sys
+import dsm.perf.bench as b, dsm.benchmark.suite as s
+print(b.MESHES)
+print(s.MESHES == b.MESHES, (b.MESHES / 'mitsuba_bunny.ply').is_file(), flush=True)
+sys.argv = sys.argv[1:]
+runpy.run_path(sys.argv[0], run_name="__main__")
+"""
 
 
 @pytest.mark.slow
@@ -184,19 +202,17 @@ def test_the_wheel_ships_the_meshes_and_runs_the_benchmark_from_another_folder(t
                           capture_output=True, text=True, check=True).stdout.strip()
     here = [p for p in sys.path if p.endswith("site-packages")]
     Path(site, "here.pth").write_text("\n".join(here) + "\n")     # mitsuba, drjit, numpy: not this checkout
-    pip = subprocess.run([*pip_into(py), "install", "-q", "--no-deps", "--no-index",
+    pip = subprocess.run([*pip_into(py), "-q", "--no-deps", "--no-index",
                           "--disable-pip-version-check", str(wheel)], capture_output=True, text=True, timeout=600, env=env)
     assert pip.returncode == 0, pip.stderr[-2000:]
-    where = subprocess.run([str(py), "-c", "import dsm.perf.bench as b, dsm.benchmark.suite as s; "
-                            "print(b.MESHES); print(s.MESHES == b.MESHES, (b.MESHES / 'mitsuba_bunny.ply').is_file())"],
-                           capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
-    meshes, same = where.stdout.split("\n")[:2]
-    assert meshes.startswith(site) and same == "True True", where.stdout + where.stderr
-    # the installed kit's dsm benchmark on one case of the test size, the bunny's (its mesh read from the
-    # wheel's meshes): the other cases add time, not another file (the venv's dsm command: the plain route's test)
-    run = subprocess.run([str(py), str(ROOT / "tests" / "helpers_benchmark_cases.py"), "0", "none",
-                          json.dumps([WHEEL_CASE]), "benchmark", "--out", "b", "--size", "test"], capture_output=True,
-                         text=True, timeout=900, env=env, cwd=tmp_path)
+    # one process of the venv's Python: where the installed kit finds its meshes, then the installed kit's
+    # dsm benchmark on one case of the test size, the bunny's (its mesh read from the wheel's meshes): the
+    # other cases add time, not another file (the venv's dsm command: the plain route's test)
+    run = subprocess.run([str(py), "-c", WHERE_THEN_RUN, str(ROOT / "tests" / "helpers_benchmark_cases.py"), "0",
+                          "none", json.dumps([WHEEL_CASE]), "benchmark", "--out", "b", "--size", "test"],
+                         capture_output=True, text=True, timeout=900, env=env, cwd=tmp_path)
+    meshes, same = (run.stdout.split("\n") + ["", ""])[:2]
+    assert meshes.startswith(site) and same == "True True", run.stdout[-3000:] + run.stderr[-3000:]
     assert run.returncode == 0, run.stderr[-3000:]
     cases = json.loads((tmp_path / "b" / "results.json").read_text())["cases"]
     assert {(r["scene"], r["unit"], r["offset"]) for r in cases} == {WHEEL_CASE} and len(cases) == 13

@@ -167,21 +167,31 @@ def test_the_tests_sharing_a_module_fixture_run_in_one_worker_which_builds_it_on
     """-n 2 --dist loadgroup with the suite's scheduler: the module fixture is built once; with xdist's own
     loadgroup scheduler each test is its own unit, dealt out in turn, and both workers build it."""
     pytest.importorskip("xdist", reason="pytest-xdist is part of the test extra (pip install -e .[test])")
-    suite = tmp_path / "t"
-    suite.mkdir()
-    (suite / "test_builds.py").write_text(BUILDS_TEST.replace("test_other", "test_zz_other"))
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), str(ROOT / "plugins"), os.environ.get("PYTHONPATH", "")])}
     for name in ("PYTEST_XDIST_WORKER", "PYTEST_XDIST_WORKER_COUNT", "PYTEST_ADDOPTS"):
         env.pop(name, None)
-    builds = {}
+    runs = {}
+    # the two suites run side by side (a folder, a conftest and a builds file each): neither reads the other's
     for label, conftest in (("ours", SCHEDULER_CONFTEST.format(conftest=str(ROOT / "tests" / "conftest.py"))),
                             ("xdist's", "")):
+        suite = tmp_path / ("t-ours" if label == "ours" else "t-xdist")
+        suite.mkdir()
+        (suite / "test_builds.py").write_text(BUILDS_TEST.replace("test_other", "test_zz_other"))
         (suite / "conftest.py").write_text(conftest)
-        env["BUILDS_FILE"] = str(tmp_path / f"builds-{label}.txt")
-        p = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-n", "2", "--dist",
-                            "loadgroup", "-p", "no:dsm", str(suite)], capture_output=True, text=True, env=env,
-                           cwd=suite, timeout=300)
-        assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
-        builds[label] = (tmp_path / f"builds-{label}.txt").read_text().split()
+        runs[label] = subprocess.Popen([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-n", "2",
+                                        "--dist", "loadgroup", "-p", "no:dsm", str(suite)], stdout=subprocess.PIPE,
+                                       stderr=subprocess.PIPE, text=True, cwd=suite,
+                                       env={**env, "BUILDS_FILE": str(tmp_path / f"builds-{label}.txt")})
+    builds = {}
+    try:
+        for label, proc in runs.items():
+            out, err = proc.communicate(timeout=300)
+            assert proc.returncode == 0, out[-3000:] + err[-3000:]
+            builds[label] = (tmp_path / f"builds-{label}.txt").read_text().split()
+    finally:                          # a failed or timed-out one leaves no pytest behind
+        for proc in runs.values():
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
     assert len(builds["ours"]) == 1, builds
     assert sorted(builds["xdist's"]) == ["gw0", "gw1"], builds     # the check above can fail

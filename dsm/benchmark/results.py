@@ -147,7 +147,8 @@ def flicker_records(case, res, folder: str, tuned=None) -> list:
 def measured(config, variant: str | None = None, cluster: str | None = None):
     """The Results of one of a case's configs: run here in a temporary folder, removed after, with no
     file but metrics.csv and run.json (the classes stay in memory for FLIP), or with ``cluster`` (a Ray
-    address, already connected by the command) its map groups as Ray tasks (dsm.experiment.cluster)."""
+    address, already connected by the command) its map groups as Ray tasks (dsm.experiment.cluster), in
+    a temporary folder too, without the report (the records read the rows and the cases' error PNGs)."""
     import tempfile
     from .. import pipeline
     cfg = pipeline.prepare(config, variant)
@@ -156,10 +157,10 @@ def measured(config, variant: str | None = None, cluster: str | None = None):
         with tempfile.TemporaryDirectory(prefix=f"dsm-{cfg.name}-") as tmp:
             return Runner(cfg, Path(tmp), variant, progress=False, files=False).run()
     from ..experiment import cluster as ray_run
-    out = Path(tempfile.mkdtemp(prefix=f"dsm-{cfg.name}-"))
-    res = ray_run.run(cfg, out, cluster, variant, progress=False)
-    for row in res.rows:          # the tasks keep no class image in memory: read back from its PNG (FLIP's V)
-        res.images.setdefault(row["case"], class_image(out / figures.image_paths(row)[0]))
+    with tempfile.TemporaryDirectory(prefix=f"dsm-{cfg.name}-") as tmp:
+        res = ray_run.run(cfg, Path(tmp), cluster, variant, progress=False, report=False)
+        for row in res.rows:      # the tasks keep no class image in memory: read back from its PNG (FLIP's V)
+            res.images.setdefault(row["case"], class_image(Path(tmp) / figures.image_paths(row)[0]))
     return res
 
 
@@ -214,8 +215,9 @@ def run_case(case, ppd, variant: str | None = None, tuned=None, out: Path | None
     flicker = []
     for motion in (m for m in (case.motion, case.prefiltered_motion) if m is not None):
         folder = f"flicker/{motion['experiment']['name']}"
-        # force: the folder is the benchmark's, which holds its lock and refused an earlier run's results
-        mo = dsm.run(motion, variant=variant, out=Path(out) / folder, force=True)
+        # force: the folder is the benchmark's, which holds its lock and refused an earlier run's results;
+        # no report: the records are frames.csv's (`dsm report` draws a motion run's figures from its folder)
+        mo = dsm.run(motion, variant=variant, out=Path(out) / folder, force=True, report=False)
         flicker += flicker_records(case, mo, folder, tuned)
     return records, flicker, res.run.get("variant")
 

@@ -6,6 +6,7 @@ error naming the package to install.
 """
 from __future__ import annotations
 
+import functools
 import importlib.util
 import os
 import platform
@@ -123,11 +124,18 @@ def register_plugins() -> list:
     """Register the Mitsuba plugins installed with the kit (entry-point group ``dsm.plugins``;
     ``dsm_plugins`` gives dsm_shadow and dsm_error) for the current variant; their names.
     The kit imports no plugin statically: a plugin depends on ``dsm.pipeline``, not the reverse."""
-    from importlib.metadata import entry_points
     names = []
-    for ep in entry_points(group=PLUGIN_GROUP):
-        names += list(ep.load()() or ())
+    for register in plugin_registrars():
+        names += list(register() or ())
     return names
+
+
+@functools.cache
+def plugin_registrars() -> tuple:
+    """The installed ``dsm.plugins`` entry points, loaded: found once per process, since reading every
+    installed package's metadata took about 10 ms a call and use_variant registers at each run's start."""
+    from importlib.metadata import entry_points
+    return tuple(ep.load() for ep in entry_points(group=PLUGIN_GROUP))
 
 
 def git_commit() -> str:

@@ -84,18 +84,42 @@ def connect(address: str | None, cpus: int | None = None, source: str = "argumen
                           ADDRESSES) from None
 
 
-def check_resources(execution, variant: str, source: str):
+def local_resources(cpus: int | None = None) -> dict | None:
+    """The CPUs and GPUs of a Ray instance started here with ``cpus`` CPUs (None: Ray's count), resolved as
+    ray.init resolves them but without starting it; None where this Ray release resolves them elsewhere
+    (Ray's own class for it is internal: then the check waits for the started instance), or where Ray
+    already runs in this process or RAY_ADDRESS names a cluster (ray.init joins that one instead)."""
+    if _ray().is_initialized() or os.environ.get("RAY_ADDRESS"):
+        return None
+    try:
+        from ray._private.resource_and_label_spec import ResourceAndLabelSpec as Spec      # recent Ray (2.60 here)
+    except ImportError:
+        try:
+            from ray._private.resource_spec import ResourceSpec as Spec                     # older Ray releases
+        except ImportError:
+            return None
+    try:
+        spec = Spec(num_cpus=cpus).resolve(is_head=True, node_ip_address="127.0.0.1")
+        return {"CPU": float(spec.num_cpus), "GPU": float(spec.num_gpus or 0)}
+    except Exception:                 # an internal API that moved: no early answer, the started one's instead
+        return None
+
+
+def check_resources(execution, variant: str, source: str, have: dict | None = None):
     """SetupError naming the key and what the cluster has when one task asks for more CPUs or
-    GPUs than the whole cluster holds (Ray would wait for them forever); Ray is shut down first,
-    so no process is left behind."""
+    GPUs than the whole cluster holds (Ray would wait for them forever). ``have``: the cluster's
+    resources where known before it starts (local_resources); else the connected cluster's, and Ray
+    is shut down first, so no process is left behind."""
     from ..core.env import SetupError
-    ray = _ray()
-    have = ray.cluster_resources()
+    ray = None if have is not None else _ray()
+    if ray is not None:
+        have = ray.cluster_resources()
     gpus = execution.gpus_per_task or (1.0 if (variant or "").startswith("cuda") else 0.0)
     for key, want, name in (("execution.cpus_per_task", execution.cpus_per_task, "CPU"),
                             ("execution.gpus_per_task", gpus, "GPU")):
         if want and want > have.get(name, 0.0):
-            ray.shutdown()
+            if ray is not None:
+                ray.shutdown()
             raise SetupError(f"{source}: {key} = {want:g} asks each task for more {name}s than the Ray cluster has "
                              f"({have.get(name, 0.0):g}): its tasks would wait forever")
 
