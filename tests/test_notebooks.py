@@ -27,15 +27,18 @@ def test_each_notebook_asserts_its_headline_not_finiteness(path):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
-def test_notebook_runs_to_the_end(path, monkeypatch):
+def test_notebook_runs_to_the_end(path, monkeypatch, tmp_path):
     nbformat = pytest.importorskip("nbformat", reason="nbformat is part of the test extra (pip install -e .[test])")
     from nbclient import NotebookClient
     monkeypatch.setenv("DSM_NOTEBOOK_SMALL", "1")
     monkeypatch.setenv("PYTHONPATH", str(ROOT))     # the kernel imports this checkout's dsm, not an installed one
+    monkeypatch.setenv("TMPDIR", str(tmp_path))     # dsm.run's own results folders (out=None) land under tmp_path
     book = nbformat.read(path, as_version=4)
     # no cell timeout: a wall-clock limit fails a sound notebook on a loaded machine (notebook 11 passed
-    # 600 s at load 7); a hang is CI's to stop, as for every other test
-    NotebookClient(book, timeout=None, kernel_name="python3",
+    # 600 s at load 7); a hang is CI's to stop, as for every other test. A fresh kernel per notebook (one
+    # that used a name or a state left by another passes nowhere else), stopped at once once the last cell
+    # has answered: a polite shutdown only waited (about a second a notebook) for a kernel whose work is done
+    NotebookClient(book, timeout=None, kernel_name="python3", shutdown_kernel="immediate",
                    resources={"metadata": {"path": str(path.parent)}}).execute()
     outputs = [o for c in book.cells if c.cell_type == "code" for o in c.get("outputs", [])]
     assert not [o for o in outputs if o.get("output_type") == "error"]

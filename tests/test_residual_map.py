@@ -117,3 +117,24 @@ def test_tune_residual_map_reports_the_split_against_its_base():
             (best["heldout"]["n_acne"], best["heldout"]["n_peterpan"])
     else:
         assert bm["blocks_moved"] > 0
+
+
+@pytest.mark.parametrize("lam,margin", [(1.0, 0.02), (2.5, 0.5), (0.3, 0.0)])
+def test_one_block_fit_is_fit_blocks_with_one_key(lam, margin):
+    """fit_one_block (the edge map's threshold) gives fit_blocks' best and residual bit for bit, on ties,
+    signed zeros, infinities and NaN margins alike."""
+    rng = np.random.default_rng(11)
+    for trial in range(300):
+        n = int(rng.integers(1, 120))
+        m = np.round(rng.normal(size=n), 1)                     # ties on purpose
+        m[rng.random(n) < 0.1] = -0.0
+        if trial % 3 == 1:
+            m[rng.random(n) < 0.1] = np.nan
+        if trial % 5 == 2:
+            m[rng.random(n) < 0.1] = np.inf * rng.choice([-1.0, 1.0])
+        v, unit = rng.random(n) < rng.random(), rng.uniform(0.5, 2.0, n)
+        with np.errstate(invalid="ignore"):
+            ref = rm.fit_blocks(m, v, unit, np.zeros(n, np.int64), lam, margin)
+            best, rho = rm.fit_one_block(m, v, unit, lam, margin)
+        assert np.array_equal([best, rho], [ref["best"][0], ref["rho"][0]], equal_nan=True), trial
+        assert np.signbit(rho) == np.signbit(ref["rho"][0]), trial

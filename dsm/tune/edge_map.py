@@ -40,7 +40,7 @@ import itertools
 
 import numpy as np
 
-from .residual_map import fit_blocks, residual_at
+from .residual_map import fit_blocks, fit_one_block, residual_at
 
 OFFSETS = tuple((a, b) for b in (-1, 0, 1) for a in (-1, 0, 1))   # the 3 x 3 taps, (i, j) texels; centre 4
 THRESHOLD_MARGIN = 0.02           # score units kept inside the threshold's optimal interval
@@ -70,9 +70,9 @@ def exact_threshold(x, v_star, lam: float) -> tuple:
     """(threshold, errors): the threshold ``t`` minimising acne + lambda peter-panning of "lit iff
     x >= t" exactly (the optimum nearest 0, ``THRESHOLD_MARGIN`` inside its interval)."""
     x = np.asarray(x, np.float64)
-    # fit_blocks lights a receiver where rho >= -m / unit: rho = -t, m = x, unit = 1
-    fit = fit_blocks(x, v_star, np.ones_like(x), np.zeros(x.size, np.int64), lam, THRESHOLD_MARGIN)
-    return -float(fit["rho"][0]), float(fit["best"][0])
+    # fit_blocks (one block) lights a receiver where rho >= -m / unit: rho = -t, m = x, unit = 1
+    best, rho = fit_one_block(x, v_star, np.ones_like(x), lam, THRESHOLD_MARGIN)
+    return -float(rho), float(best)
 
 
 def lit(rx: dict, model: dict) -> np.ndarray:
