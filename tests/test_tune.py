@@ -673,10 +673,11 @@ def test_resume_keeps_every_finished_scheme_when_schemes_are_added_removed_or_ch
 
 
 @pytest.mark.slow
-def test_the_python_api_keeps_dsm_tunes_folder_rules(tmp_path):
+def test_the_python_api_keeps_dsm_tunes_folder_rules(tmp_path, resume_tune):
     """dsm.tune.tuner.tune(out=...) refuses a folder holding another run as dsm tune does (it once
     wrote its table.md over a dsm run's), replaces a previous tune with force=True, goes on with
     resume=True, and refuses both at once."""
+    import json
     from dsm.tune import tuner
     from dsm.core.types import ConfigError
     cfg = tmp_path / "t.toml"
@@ -690,9 +691,10 @@ def test_the_python_api_keeps_dsm_tunes_folder_rules(tmp_path):
         tuner.tune(cfg, out=run, force=True)
     assert (run / "table.md").read_text() == "a dsm run's table" and len(list(run.iterdir())) == 1
     out = tmp_path / "o"
-    first = tuner.tune(cfg, out=out)
+    shutil.copytree(resume_tune, out)                           # RESUME_CFG tuned (by dsm tune)
+    first = json.loads((out / "tune.json").read_text())
     again = tuner.tune(cfg, out=out, resume=True)
-    assert again.resumed == 2 and [e["values"] for e in again.schemes] == [e["values"] for e in first.schemes]
+    assert again.resumed == 2 and [e["values"] for e in again.schemes] == [e["values"] for e in first["schemes"]]
     assert tuner.tune(cfg, out=out, force=True).resumed == 0
     with pytest.raises(ConfigError, match="give one"):
         tuner.tune(cfg, out=out, force=True, resume=True)
