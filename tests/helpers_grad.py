@@ -2,6 +2,8 @@
 built from short keyword arguments named as GradSpec's fields (a test states a scene in one line)."""
 import math
 
+import pytest
+
 # GradSpec field -> (the kit's table, its key there)
 SCENE = {"occluder_size": "size", "occluder_height": "height", "box_height": "box_height", "mesh": "mesh"}
 BUILTIN = {"plate": "occluder_plate", "box": "occluder_box", "mesh": "occluder_mesh"}
@@ -68,3 +70,27 @@ def toml(cfg: dict) -> str:
 def toml_config(**kw) -> str:
     """``config(**kw)`` as TOML text."""
     return toml(config(**kw))
+
+
+# dsm grad --compare --inverse on a tiny plate: the report's tables and words (test_grad_report) and the
+# report in Chromium (test_browser) read the same run
+TINY = toml_config(map_resolution=24, image_resolution=16, techniques=["pcf_bilinear", "vsm"], blur=[3],
+                   antialias=[False, True], params=["occluder_z", "light_height"], reference_samples=8,
+                   projective_spp=2, projective_integrators=["direct_projective"], projective_seeds=1,
+                   inverse_starts=[-0.05, 0.05], inverse_iterations=3)
+
+
+@pytest.fixture(scope="session")
+def tiny_grad_run(tmp_path_factory):
+    """The out folder of ``dsm grad --compare --inverse`` on TINY, run once per session and once across
+    pytest-xdist's workers (as the kit's dsm_results runs a config); tests only read it."""
+    from dsm.cli import main
+    from dsm.pytest_plugin import run_once_shared, shared_folder
+
+    def make():
+        d = tmp_path_factory.mktemp("gradtiny")
+        (d / "g.toml").write_text(TINY)
+        assert main(["grad", str(d / "g.toml"), "--compare", "--inverse", "--out", str(d / "out")]) == 0
+        return d / "out"
+    shared = shared_folder(tmp_path_factory)
+    return make() if shared is None else run_once_shared(shared, ("dsm grad", TINY), make)

@@ -8,7 +8,7 @@ import math
 import pytest
 
 from conftest import all_images_loaded, base_config, chrome
-from helpers_grad import toml_config
+from helpers_grad import tiny_grad_run  # noqa: F401  (a session fixture, shared with test_grad_report)
 
 
 @pytest.fixture(scope="module")
@@ -22,6 +22,23 @@ def page(tmp_path_factory):
     drv.get((res.out / "report.html").as_uri())
     yield res, drv
     drv.quit()
+
+
+@pytest.fixture(scope="module")
+def chromium():
+    """Headless Chromium (conftest.chrome), one start (a second or more of CPU each) for the tests that load
+    their own page: the leaderboard's, a contender's and the grad report's; ``page`` keeps its own (its tests
+    read the state the one before left)."""
+    drv = chrome()
+    yield drv
+    drv.quit()
+
+
+@pytest.fixture
+def browser(chromium):
+    """The shared Chromium at 1280 x 900, the size a fresh one starts at."""
+    chromium.set_window_size(1280, 900)
+    return chromium
 
 
 def _csv(res):
@@ -122,7 +139,7 @@ def _result(cases, suite="dsm-bench-1") -> dict:
 
 
 @pytest.mark.slow
-def test_the_benchmark_leaderboard_sorts_in_the_browser(tmp_path):
+def test_the_benchmark_leaderboard_sorts_in_the_browser(tmp_path, browser):
     """dsm benchmark's leaderboard.html from the file system: the answer first, a click on the
     error-rate header twice orders the ranking rows by hand-made error rates, largest first, and
     its scale.png shows."""
@@ -130,22 +147,19 @@ def test_the_benchmark_leaderboard_sorts_in_the_browser(tmp_path):
     rates = {"a": 0.30, "b": 0.10, "c": 0.20}          # one case each at 1000 receivers
     cases = [_record("s", c, e) for c, e in rates.items()] + [_oracle("s")]
     path = bench_page.write_page(_result(cases), tmp_path)
-    drv = chrome()
-    try:
-        drv.get(path.as_uri())
-        assert drv.find_element("css selector", "p.answer").text.startswith("Ranking")
-        table = drv.find_elements("css selector", "table.sortable")[0]
-        head = [th for th in table.find_elements("css selector", "thead th") if th.text.startswith("error rate")][0]
-        head.click()
-        head.click()
-        order = drv.execute_script("return Array.from(arguments[0].tBodies[0].rows).map(r => r.cells[1].textContent)",
-                                   table)
-        assert order == ["a", "c", "b"]
-        # the scale figure beside the page loads from the file system (a broken link has no natural width)
-        assert drv.execute_script("const i = document.querySelector('img[src=\"scale.png\"]');"
-                                  "return i !== null && i.complete && i.naturalWidth > 400")
-    finally:
-        drv.quit()
+    drv = browser
+    drv.get(path.as_uri())
+    assert drv.find_element("css selector", "p.answer").text.startswith("Ranking")
+    table = drv.find_elements("css selector", "table.sortable")[0]
+    head = [th for th in table.find_elements("css selector", "thead th") if th.text.startswith("error rate")][0]
+    head.click()
+    head.click()
+    order = drv.execute_script("return Array.from(arguments[0].tBodies[0].rows).map(r => r.cells[1].textContent)",
+                               table)
+    assert order == ["a", "c", "b"]
+    # the scale figure beside the page loads from the file system (a broken link has no natural width)
+    assert drv.execute_script("const i = document.querySelector('img[src=\"scale.png\"]');"
+                              "return i !== null && i.complete && i.naturalWidth > 400")
 
 
 LAYOUT_JS = """
@@ -208,7 +222,7 @@ def test_a_point_of_a_pareto_plot_names_its_case_and_opens_it(page):
 
 
 @pytest.mark.slow
-def test_the_leaderboard_filters_and_fits(tmp_path):
+def test_the_leaderboard_filters_and_fits(tmp_path, browser):
     """leaderboard.html at two widths: nothing runs past the page's edge, the scale figure loads at its
     pixel size; the family filter keeps the pre-filtered maps' rows alone (kind as the first word, by
     hand), the scene filter the cases of that scene, a ranking row's click its contender's cases."""
@@ -219,53 +233,38 @@ def test_the_leaderboard_filters_and_fits(tmp_path):
             cases.append(_record(scene, c, e, params="bias=5.96046e-08 range"))
         cases.append(_oracle(scene))
     path = bench_page.write_page(_result(cases), tmp_path)
-    drv = chrome()
-    try:
-        from selenium.webdriver.support.ui import Select
-        for width in (1280, 820):
-            drv.set_window_size(width, 900)
-            drv.get(path.as_uri())
-            assert all_images_loaded(drv) == []
-            layout = drv.execute_script(LAYOUT_JS)
-            assert layout["overflow"] == [] and layout["pageWidth"] <= layout["window"]
-            img = drv.execute_script("const i = document.querySelector('img[src=\"scale.png\"]');"
-                                     "return [i.clientWidth, i.naturalWidth]")
-            assert img[0] == img[1]
-        visible = lambda table: drv.execute_script(
-            f"return Array.from(document.querySelectorAll('#{table} tbody tr')).filter(r => !r.hidden)"
-            ".map(r => [r.dataset.contender, r.dataset.scene])")
-        visible_pairs = lambda table: [tuple(x) for x in visible(table)]
-        Select(drv.find_element("css selector", ".filters select[name=family]")).select_by_value("pre-filtered map")
-        assert [c for c, _ in visible("ranking")] == ["vsm box:5"]
-        Select(drv.find_element("css selector", ".filters select[name=family]")).select_by_value("")
-        Select(drv.find_element("css selector", ".filters select[name=scene]")).select_by_value("t")
-        assert sorted(visible_pairs("case-list")) == sorted((c["contender"], "t") for c in cases
-                                                      if c["scene"] == "t" and c["contender"] != "oracle")
-        assert drv.find_element("id", "case-list-shown").text == "3"
-        drv.execute_script("document.querySelector('#ranking tbody tr[data-contender=\"bevy\"]').click()")
-        assert visible_pairs("case-list") == [("bevy", "t")]
-        # the parameters read as a power of two, the exact text in results.json
-        assert "bias=2^-24 range" in drv.find_element("id", "case-list").text
-    finally:
-        drv.quit()
-
-
-GRAD_TINY = toml_config(map_resolution=24, image_resolution=16, techniques=["pcf_bilinear", "vsm"], blur=[3],
-                        antialias=[False, True], params=["occluder_z", "light_height"], reference_samples=8,
-                        projective_spp=2, projective_integrators=["direct_projective"], projective_seeds=1,
-                        inverse_starts=[-0.05, 0.05], inverse_iterations=3)
+    drv = browser
+    from selenium.webdriver.support.ui import Select
+    for width in (1280, 820):
+        drv.set_window_size(width, 900)
+        drv.get(path.as_uri())
+        assert all_images_loaded(drv) == []
+        layout = drv.execute_script(LAYOUT_JS)
+        assert layout["overflow"] == [] and layout["pageWidth"] <= layout["window"]
+        img = drv.execute_script("const i = document.querySelector('img[src=\"scale.png\"]');"
+                                 "return [i.clientWidth, i.naturalWidth]")
+        assert img[0] == img[1]
+    visible = lambda table: drv.execute_script(
+        f"return Array.from(document.querySelectorAll('#{table} tbody tr')).filter(r => !r.hidden)"
+        ".map(r => [r.dataset.contender, r.dataset.scene])")
+    visible_pairs = lambda table: [tuple(x) for x in visible(table)]
+    Select(drv.find_element("css selector", ".filters select[name=family]")).select_by_value("pre-filtered map")
+    assert [c for c, _ in visible("ranking")] == ["vsm box:5"]
+    Select(drv.find_element("css selector", ".filters select[name=family]")).select_by_value("")
+    Select(drv.find_element("css selector", ".filters select[name=scene]")).select_by_value("t")
+    assert sorted(visible_pairs("case-list")) == sorted((c["contender"], "t") for c in cases
+                                                  if c["scene"] == "t" and c["contender"] != "oracle")
+    assert drv.find_element("id", "case-list-shown").text == "3"
+    drv.execute_script("document.querySelector('#ranking tbody tr[data-contender=\"bevy\"]').click()")
+    assert visible_pairs("case-list") == [("bevy", "t")]
+    # the parameters read as a power of two, the exact text in results.json
+    assert "bias=2^-24 range" in drv.find_element("id", "case-list").text
 
 
 @pytest.fixture(scope="module")
-def grad_page(tmp_path_factory):
-    """dsm grad --compare --inverse's report.html (a tiny plate) in Chromium."""
-    from dsm.cli import main
-    d = tmp_path_factory.mktemp("gradbrowser")
-    (d / "g.toml").write_text(GRAD_TINY)
-    assert main(["grad", str(d / "g.toml"), "--compare", "--inverse", "--out", str(d / "out")]) == 0
-    drv = chrome()
-    yield d / "out", drv
-    drv.quit()
+def grad_page(tiny_grad_run, chromium):
+    """dsm grad --compare --inverse's report.html (a tiny plate, helpers_grad.TINY) in the shared Chromium."""
+    return tiny_grad_run, chromium
 
 
 @pytest.mark.slow
@@ -310,7 +309,7 @@ def test_clicking_the_grad_reports_rel_error_header_orders_its_rows(grad_page):
 
 
 @pytest.mark.slow
-def test_a_contender_page_fits_loads_its_images_and_orders_its_cases_worst_first(tmp_path):
+def test_a_contender_page_fits_loads_its_images_and_orders_its_cases_worst_first(tmp_path, browser):
     """A contender's page from a hand-made result and its case images: the leaderboard's contender name
     opens it; at two widths nothing runs past the page's edge and every image loads, shown at
     contenders.SHOWN_PX; its cards come worst error rate first, and 'worst FLIP first' orders them by
@@ -331,24 +330,21 @@ def test_a_contender_page_fits_loads_its_images_and_orders_its_cases_worst_first
     board = bench_page.write_page(_result(cases, "dsm-bench-5"), tmp_path)
     cards = lambda: drv.execute_script("return Array.from(document.querySelectorAll('#cards > figure.case'))"
                                        ".map(f => f.querySelector('figcaption').textContent.split(',')[0])")
-    drv = chrome()
-    try:
-        drv.get(board.as_uri())
-        drv.find_element("css selector", "#ranking a[href='contenders/bevy.html']").click()
-        assert drv.current_url == (tmp_path / contenders.page_path("bevy")).as_uri()
-        for width in (1280, 820):
-            drv.set_window_size(width, 900)
-            drv.get((tmp_path / contenders.page_path("bevy")).as_uri())
-            assert all_images_loaded(drv) == []
-            layout = drv.execute_script(LAYOUT_JS)
-            assert layout["overflow"] == [] and layout["pageWidth"] <= layout["window"]
-            # each image its case's sheet (two records, 24 px squares) cut to the record's square
-            shown = drv.execute_script("return Array.from(document.querySelectorAll('#cards img')).map(i => "
-                                       "[i.clientWidth, i.naturalWidth, i.naturalHeight, i.parentElement.clientHeight])")
-            assert shown == [[contenders.SHOWN_PX, 24, 48, contenders.SHOWN_PX]] * 8
-        assert cards() == ["t", "u", "s", "v"]                      # error rate 0.3, 0.2, 0.1, undefined
-        assert "undefined" in drv.find_element("css selector", "#cards > figure.case:last-child").text
-        drv.find_element("css selector", ".order button[data-key=flip]").click()
-        assert cards() == sorted(given, key=lambda s: -given[s][1]) == ["u", "v", "s", "t"]
-    finally:
-        drv.quit()
+    drv = browser
+    drv.get(board.as_uri())
+    drv.find_element("css selector", "#ranking a[href='contenders/bevy.html']").click()
+    assert drv.current_url == (tmp_path / contenders.page_path("bevy")).as_uri()
+    for width in (1280, 820):
+        drv.set_window_size(width, 900)
+        drv.get((tmp_path / contenders.page_path("bevy")).as_uri())
+        assert all_images_loaded(drv) == []
+        layout = drv.execute_script(LAYOUT_JS)
+        assert layout["overflow"] == [] and layout["pageWidth"] <= layout["window"]
+        # each image its case's sheet (two records, 24 px squares) cut to the record's square
+        shown = drv.execute_script("return Array.from(document.querySelectorAll('#cards img')).map(i => "
+                                   "[i.clientWidth, i.naturalWidth, i.naturalHeight, i.parentElement.clientHeight])")
+        assert shown == [[contenders.SHOWN_PX, 24, 48, contenders.SHOWN_PX]] * 8
+    assert cards() == ["t", "u", "s", "v"]                      # error rate 0.3, 0.2, 0.1, undefined
+    assert "undefined" in drv.find_element("css selector", "#cards > figure.case:last-child").text
+    drv.find_element("css selector", ".order button[data-key=flip]").click()
+    assert cards() == sorted(given, key=lambda s: -given[s][1]) == ["u", "v", "s", "t"]

@@ -37,7 +37,10 @@ def plate_shadow_area(h, H=2.0, half=0.25, side=0.5, W=1.0, n=1024):
     k = H / h
     ox0, ox1 = np.maximum(rx + (-half - rx) * k, -side / 2), np.minimum(rx + (half - rx) * k, side / 2)
     oy0, oy1 = np.maximum(ry + (-half - ry) * k, -side / 2), np.minimum(ry + (half - ry) * k, side / 2)
-    blocked = np.where((ox1 > ox0) & (oy1 > oy0), _rect(ox0 - rx, ox1 - rx, oy0 - ry, oy1 - ry, H), 0.0)
+    # a receiver whose overlap is empty adds 0: the kernel's integrals over the others alone (a sixth of them)
+    s = (ox1 > ox0) & (oy1 > oy0)
+    rx, ry, ox0, ox1, oy0, oy1 = rx[s], ry[s], ox0[s], ox1[s], oy0[s], oy1[s]
+    blocked = _rect(ox0 - rx, ox1 - rx, oy0 - ry, oy1 - ry, H)
     full = _rect(-side / 2 - rx, side / 2 - rx, -side / 2 - ry, side / 2 - ry, H)
     return float(np.sum(blocked / full) * (2 * W / n) ** 2)
 
@@ -97,6 +100,15 @@ def test_equal_error_crossing_on_a_power_law():
     assert ms_at(spps, ms, 30.0) == pytest.approx(50.0 * 30 ** 0.5, rel=1e-12)
 
 
+def test_a_projective_run_serves_the_curve_only_at_its_own_spp_and_seeds():
+    """--compare's projective run stands for a curve point only where its spp and seed count are the point's."""
+    from dsm.grad.equal_error import reusable
+    from dsm.grad.projective import ProjectiveResult
+    res = ProjectiveResult("direct_projective", "occluder_z", 4, (0.5, 0.49), 0.0, 1.0, np.zeros((2, 2)))
+    assert reusable(res, 4, 2)
+    assert not reusable(res, 16, 2) and not reusable(res, 4, 3) and not reusable(None, 4, 2)
+
+
 def test_spp_point_statistics_are_numpys():
     from dsm.grad.equal_error import SppPoint
     g = (0.51, 0.47, 0.5, 0.53)
@@ -128,25 +140,27 @@ def test_bad_area_light_keys_are_one_line_errors(kw, key, words):
 @pytest.mark.slow
 def test_dsm_grad_compare_under_an_area_light_measures_the_cost_at_equal_error(tmp_path):
     """direct_projective agrees with the truth over the pixels it sees; equal_error.csv holds each technique's
-    match against its curve, consistent with equal_error_curve.csv."""
+    match against its curve, consistent with equal_error_curve.csv; the curve's point at the projective run's
+    spp and seeds is that run's gradient (the same seeds' renders)."""
     from dsm.cli import main
     from dsm.grad.equal_error import crossing
     cfg = tmp_path / "a.toml"
     cfg.write_text(toml_config(light="area", light_size=0.5, map_resolution=32, image_resolution=32,
                                techniques=["vsm"], blur=[3], antialias=[True], params=["occluder_z"],
                                reference_samples=4, light_samples=6, projective_spp=2, projective_seeds=2,
-                               projective_integrators=["direct_projective"], equal_error_spp=[1, 4],
+                               projective_integrators=["direct_projective"], equal_error_spp=[1, 2],
                                equal_error_seeds=2))
     assert main(["grad", str(cfg), "--compare", "--out", str(tmp_path / "o")]) == 0
     out = tmp_path / "o"
     proj = list(csv.DictReader(open(out / "projective.csv")))
     assert [p["agrees"] for p in proj] == ["True"]
     curve = list(csv.DictReader(open(out / "equal_error_curve.csv")))
-    assert [int(c["spp"]) for c in curve] == [1, 4] and all(int(c["seeds"]) == 2 for c in curve)
+    assert [int(c["spp"]) for c in curve] == [1, 2] and all(int(c["seeds"]) == 2 for c in curve)
+    assert float(curve[1]["mean"]) == float(proj[0]["mean"])
     rows = list(csv.DictReader(open(out / "equal_error.csv")))
     assert len(rows) == 1 and rows[0]["technique"] == "vsm blur 3 aa"
     r = rows[0]
-    spp, status = crossing([1, 4], [float(c["rel_rms_error"]) for c in curve], float(r["rel_error"]))
+    spp, status = crossing([1, 2], [float(c["rel_rms_error"]) for c in curve], float(r["rel_error"]))
     assert r["status"] == status and (r["pt_spp"] == "" if spp is None else float(r["pt_spp"]) == spp)
     if r["time_ratio"]:
         assert float(r["time_ratio"]) == pytest.approx(float(r["pt_ms_per_gradient"]) / float(r["ms_per_gradient"]))

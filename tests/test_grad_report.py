@@ -10,13 +10,7 @@ import numpy as np
 import pytest
 
 from dsm.grad import findings, page
-from helpers_grad import toml_config
-
-TINY = toml_config(map_resolution=24, image_resolution=16, techniques=["pcf_bilinear", "vsm"], blur=[3],
-                   antialias=[False, True], params=["occluder_z", "light_height"], reference_samples=8,
-                   projective_spp=2, projective_integrators=["direct_projective"], projective_seeds=1,
-                   inverse_starts=[-0.05, 0.05], inverse_iterations=3)
-
+from helpers_grad import TINY, tiny_grad_run  # noqa: F401  (a session fixture, shared with test_browser)
 
 class Tables(HTMLParser):
     """Each table's body rows (by table id) as lists of the cells' data-v values; section ids; images."""
@@ -79,12 +73,9 @@ def _write(path, columns, rows):
 
 
 @pytest.fixture(scope="module")
-def run(tmp_path_factory):
-    from dsm.cli import main
-    d = tmp_path_factory.mktemp("gradreport")
-    (d / "g.toml").write_text(TINY)
-    assert main(["grad", str(d / "g.toml"), "--compare", "--inverse", "--out", str(d / "out")]) == 0
-    return d / "out"
+def run(tiny_grad_run):
+    """dsm grad --compare --inverse's out folder on TINY (shared with test_browser's report in Chromium)."""
+    return tiny_grad_run
 
 
 @pytest.mark.slow

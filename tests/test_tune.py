@@ -1,6 +1,8 @@
 """dsm tune: the AD gradient against central finite differences (a float64 numpy second
 computation of the relaxed loss from the kit's forward margins), constant bias against the
 exact oracles on the tilted plane and the floating plate, repeatability, config checks."""
+import shutil
+
 import numpy as np
 import pytest
 
@@ -418,8 +420,18 @@ RESUME_CFG = ('[experiment]\nname = "t"\n[camera]\nresolution = [32, 32]\n[[scen
               '[[scheme]]\nname = "receiver_plane"\n[tune]\nsteps = 9\n')
 
 
+@pytest.fixture(scope="module")
+def resume_tune(tmp_path_factory):
+    """The folder of an uninterrupted dsm tune of RESUME_CFG (the resume tests copy it before changing it)."""
+    from dsm import cli
+    d = tmp_path_factory.mktemp("resume")
+    (d / "t.toml").write_text(RESUME_CFG)
+    assert cli.main(["tune", str(d / "t.toml"), "--out", str(d / "o")]) == 0
+    return d / "o"
+
+
 @pytest.mark.slow
-def test_cli_tune_resume_keeps_finished_schemes_and_tunes_the_rest(tmp_path, capsys):
+def test_cli_tune_resume_keeps_finished_schemes_and_tunes_the_rest(tmp_path, capsys, resume_tune):
     """A tune stopped after its first scheme (its state holding only that one) resumes to the
     values of an uninterrupted tune, the kept scheme's rows (times included) unchanged; a changed
     start tunes that scheme again and keeps the other; --resume with --force is refused, and
@@ -428,13 +440,12 @@ def test_cli_tune_resume_keeps_finished_schemes_and_tunes_the_rest(tmp_path, cap
     from dsm import cli
     cfg = tmp_path / "t.toml"
     cfg.write_text(RESUME_CFG)
-    full, out = tmp_path / "full", tmp_path / "o"
-    assert cli.main(["tune", str(cfg), "--out", str(full)]) == 0
-    whole = json.loads((full / "tune.json").read_text())
+    out = tmp_path / "o"
+    whole = json.loads((resume_tune / "tune.json").read_text())
     from importlib.metadata import version
     assert {k: whole["versions"][k] for k in ("dsm", "mitsuba", "drjit")} == \
         {k: version(k) for k in ("dsm", "mitsuba", "drjit")}              # what the tune's numbers depend on
-    assert cli.main(["tune", str(cfg), "--out", str(out)]) == 0
+    shutil.copytree(resume_tune, out)                           # the same config tuned into another folder
     state = json.loads((out / "tune_state.json").read_text())
     assert [s["entry"]["scheme"] for s in state["schemes"]] == ["constant", "receiver_plane"]
     state["schemes"] = state["schemes"][:1]                     # as if stopped after the first scheme
@@ -631,15 +642,15 @@ def test_an_absent_optional_scene_is_left_out_with_a_note_and_alone_is_nothing_t
 
 
 @pytest.mark.slow
-def test_resume_keeps_every_finished_scheme_when_schemes_are_added_removed_or_changed(tmp_path, capsys):
+def test_resume_keeps_every_finished_scheme_when_schemes_are_added_removed_or_changed(tmp_path, capsys,
+                                                                                      resume_tune):
     """--resume after a changed first scheme: the state lists the kept second one too (it once
     listed only what was tuned, so the next resume tuned it again); a scheme added in front, or
     another removed, keeps the rest; a state entry without its values is tuned again, no traceback."""
     import json
     from dsm import cli
     cfg, out = tmp_path / "t.toml", tmp_path / "o"
-    cfg.write_text(RESUME_CFG)
-    assert cli.main(["tune", str(cfg), "--out", str(out)]) == 0
+    shutil.copytree(resume_tune, out)                           # RESUME_CFG tuned
     changed = RESUME_CFG.replace('bias = "0.5 texel"', 'bias = "0.75 texel"')
     cfg.write_text(changed)
     capsys.readouterr()
@@ -662,10 +673,11 @@ def test_resume_keeps_every_finished_scheme_when_schemes_are_added_removed_or_ch
 
 
 @pytest.mark.slow
-def test_the_python_api_keeps_dsm_tunes_folder_rules(tmp_path):
+def test_the_python_api_keeps_dsm_tunes_folder_rules(tmp_path, resume_tune):
     """dsm.tune.tuner.tune(out=...) refuses a folder holding another run as dsm tune does (it once
     wrote its table.md over a dsm run's), replaces a previous tune with force=True, goes on with
     resume=True, and refuses both at once."""
+    import json
     from dsm.tune import tuner
     from dsm.core.types import ConfigError
     cfg = tmp_path / "t.toml"
@@ -679,9 +691,10 @@ def test_the_python_api_keeps_dsm_tunes_folder_rules(tmp_path):
         tuner.tune(cfg, out=run, force=True)
     assert (run / "table.md").read_text() == "a dsm run's table" and len(list(run.iterdir())) == 1
     out = tmp_path / "o"
-    first = tuner.tune(cfg, out=out)
+    shutil.copytree(resume_tune, out)                           # RESUME_CFG tuned (by dsm tune)
+    first = json.loads((out / "tune.json").read_text())
     again = tuner.tune(cfg, out=out, resume=True)
-    assert again.resumed == 2 and [e["values"] for e in again.schemes] == [e["values"] for e in first.schemes]
+    assert again.resumed == 2 and [e["values"] for e in again.schemes] == [e["values"] for e in first["schemes"]]
     assert tuner.tune(cfg, out=out, force=True).resumed == 0
     with pytest.raises(ConfigError, match="give one"):
         tuner.tune(cfg, out=out, force=True, resume=True)

@@ -49,8 +49,30 @@ def index_topics(app, docname, source):
         source[0] = source[0].replace(f"\n{TOPICS}\n", "\n" + "\n".join(topics(source[0])) + "\n", 1)
 
 
+SNOWBALL_STEM = []        # Sphinx's own English stem, kept here once memoize_stems has replaced it
+
+
+def memoize_stems():
+    """The search index's English stemmer asked once per distinct word: Sphinx stems every word of every
+    page (about 40,000 words, a few thousand distinct, each through the pure-Python Snowball stemmer); a
+    word's stem is a function of the word alone, so the index is the same."""
+    from sphinx.search.en import SearchEnglish
+    if SNOWBALL_STEM:
+        return
+    SNOWBALL_STEM.append(SearchEnglish.stem)
+    stems = {}
+
+    def stem(self, word: str) -> str:
+        if word not in stems:
+            stems[word] = SNOWBALL_STEM[0](self, word)
+        return stems[word]
+
+    SearchEnglish.stem = stem
+
+
 def setup(app):
     """Register the hooks."""
+    memoize_stems()
     app.connect("config-inited", generate)
     app.connect("source-read", design_index)
     app.connect("source-read", index_topics)

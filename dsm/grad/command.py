@@ -227,19 +227,20 @@ def run_compare(problem, out: Path) -> dict:
     rows = comparemod.compare(problem, refs, progress=lambda r: print(
         f"  {r.technique}, {r.param}: AD {_g(r.ad)} vs {_g(r.reference)}", file=sys.stderr))
     tables.write_rows(out / "compare.csv", tables.COMPARE_COLUMNS, [tables.compare_values(r) for r in rows])
-    proj = []
+    proj, measured = [], {}
     for p in spec.params:
         if p not in projective.OCCLUDER_PARAMS:
             continue
         for name in spec.projective_integrators:
             res = projective.gradient(problem, name, p, spec.projective_spp, spec.projective_seeds)
+            measured[name, p] = res
             seen_ref = refs[p].masked(res.seen)        # the truth over the pixels the integrator measures
             proj.append((res, seen_ref, comparemod.cosine(res.image, seen_ref.image)))
     tables.write_rows(out / "projective.csv", tables.PROJECTIVE_COLUMNS,
                       [tables.projective_values(*t) for t in proj])
     text = tables.compare_text(spec, refs, rows, proj)
     if spec.light == "area":
-        text += run_equal_error(problem, refs, rows, out)
+        text += run_equal_error(problem, refs, rows, out, measured)
     write_text(out / "compare.md", text)
     t = time.perf_counter()
     figure.draw(out / "gradients.png", _panels(refs, rows, proj), spec.window)
@@ -248,10 +249,11 @@ def run_compare(problem, out: Path) -> dict:
     return {"gradients.png": drawn}
 
 
-def run_equal_error(problem, refs, rows, out: Path) -> str:
+def run_equal_error(problem, refs, rows, out: Path, measured: dict | None = None) -> str:
     """--compare under an area light: path tracing's error curve per integrator and occluder parameter,
     each technique's spp and time at equal error; equal_error.csv, equal_error_curve.csv, equal_error.png
-    and the section of compare.md it returns."""
+    and the section of compare.md it returns (``measured``: the projective runs by (integrator, parameter),
+    reused at their count of the sweep)."""
     spec = problem.spec
     curves, eq = [], []
     for p in spec.params:
@@ -259,7 +261,7 @@ def run_equal_error(problem, refs, rows, out: Path) -> str:
             continue
         seen = projective.visible_ground(problem, p)
         for name in spec.projective_integrators:
-            points = equal_error.curve(problem, name, p, refs[p])
+            points = equal_error.curve(problem, name, p, refs[p], (measured or {}).get((name, p)))
             for q in points:
                 print(f"  {name}, {p}, {q.spp} spp: rel. RMS error {_g(q.rel_rms_error)}, {q.ms:.0f} ms", file=sys.stderr)
             curves.append(points)

@@ -112,15 +112,24 @@ def ms_at(spps, ms, spp: float) -> float:
     return float(math.exp(np.interp(math.log(spp), np.log(np.asarray(spps, float)), np.log(np.asarray(ms, float)))))
 
 
-def curve(problem, integrator: str, param: str, ref) -> list:
-    """The integrator's SppPoint at each spp of the spec's sweep, against the reference masked to its seen pixels."""
+def curve(problem, integrator: str, param: str, ref, measured=None) -> list:
+    """The integrator's SppPoint at each spp of the spec's sweep, against the reference masked to its seen pixels
+    (``measured``, a ProjectiveResult of this integrator and parameter, serves the count it was measured at)."""
     spec = problem.spec
     out = []
     for spp in spec.equal_error_spp:
-        res = projective.gradient(problem, integrator, param, spp, spec.equal_error_seeds)
+        seeds = spec.equal_error_seeds
+        reuse = reusable(measured, spp, seeds)
+        res = measured if reuse else projective.gradient(problem, integrator, param, spp, seeds)
         truth = ref.masked(res.seen)
         out.append(SppPoint(integrator, param, spp, res.grads, truth.value, truth.error, res.ms, res.first_ms))
     return out
+
+
+def reusable(res, spp: int, seeds: int) -> bool:
+    """Whether a ProjectiveResult is the gradient at ``spp`` over ``seeds`` seeds: the same seeds 0..seeds-1 give
+    the same renders, so --compare's projective run at a count of the sweep is not rendered twice."""
+    return res is not None and res.spp == spp and len(res.grads) == seeds
 
 
 def agrees(points) -> bool:
