@@ -39,6 +39,40 @@ def _frozen(v):
     return tuple(v) if isinstance(v, list) else v
 
 
+def font_key(prop, dpi) -> tuple:
+    """What decides a FontProperties' font files, size in pixels and hinting (its hash: family, style,
+    weight, size, file...; the rcParams that resolve a generic family; the dpi)."""
+    import matplotlib as mpl
+    return (hash(prop), dpi) + tuple(_frozen(dict.__getitem__(mpl.rcParams, k)) for k in FONT_RC)
+
+
+# the font tables matplotlib's Text reads a line's least ascent, descent and gap from, in its order
+HEIGHT_TABLES = (("OS/2", "sTypoLineGap", "sTypoAscender", "sTypoDescender"), ("hhea", "lineGap", "ascent", "descent"))
+_HEIGHTS = {}
+
+
+def font_height_metrics(prop, dpi) -> tuple:
+    """(least ascent, least descent, line gap) in pixels of ``prop``'s font at ``dpi``, as matplotlib's
+    Text computes them from the font's tables (text.Text._get_layout) before laying out a line, once
+    per font (it looked the font and its tables up for every text it laid out); (None, None, None)
+    where the font has neither table (Text then measures "lp")."""
+    key = font_key(prop, dpi)
+    got = _HEIGHTS.get(key)
+    if got is None:
+        from matplotlib.font_manager import fontManager, get_font
+        font = get_font(fontManager._find_fonts_by_props(prop))
+        got = (None, None, None)
+        for table_name, gap_key, ascent_key, descent_key in HEIGHT_TABLES:
+            table = font.get_sfnt_table(table_name)
+            if table is None:
+                continue
+            scale = 1 / font.get_sfnt_table("head")["unitsPerEm"] * prop.get_size_in_points() * dpi / 72
+            got = (table[ascent_key] * scale, -table[descent_key] * scale, table[gap_key] * scale)
+            break
+        _put(_HEIGHTS, key, got)
+    return got
+
+
 def _put(cache: dict, key, value):
     if len(cache) > MAX_CACHED:
         cache.clear()
@@ -50,18 +84,12 @@ def _put(cache: dict, key, value):
 def _renderer_class():
     """RendererAgg with its text work cached across renderers (made on first use: matplotlib is
     imported only when a figure is drawn)."""
-    import matplotlib as mpl
     from matplotlib.backends.backend_agg import RendererAgg, get_hinting_flag
     from matplotlib.ft2font import RenderMode
     from matplotlib.mathtext import MathTextParser
 
     layouts, sizes, glyphs = {}, {}, {}
     parser = MathTextParser("path")
-    rc = dict.__getitem__               # rcParams' stored (validated) value, without its lookup's checks
-
-    def font_key(prop, dpi) -> tuple:
-        """What decides a string's font, size and hinting."""
-        return (hash(prop), dpi) + tuple(_frozen(rc(mpl.rcParams, k)) for k in FONT_RC)
 
     class GlyphCacheRenderer(RendererAgg):
         """RendererAgg whose layouts, metrics, glyph bitmaps and mathtext parses are shared by every
@@ -70,6 +98,11 @@ def _renderer_class():
         def __init__(self, width, height, dpi):
             super().__init__(width, height, dpi)
             self.mathtext_parser = parser
+
+        def _get_font_height_metrics(self, prop):
+            # matplotlib's Text asks a renderer that has this (text.Text._get_layout); the figure's dpi
+            # is the renderer's (canvas.get_renderer makes one per figure dpi)
+            return font_height_metrics(prop, self.dpi)
 
         def get_text_width_height_descent(self, s, prop, ismath):
             """Width, height and descent of ``s`` in pixels, as RendererAgg measures them."""
