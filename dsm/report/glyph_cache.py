@@ -17,6 +17,9 @@ every figure did all of that again: most of such a figure's drawing time.
   at the whole-pixel part;
 - one mathtext parser for every renderer (matplotlib's keeps its parses per parser).
 
+The layouts and glyphs are cached where matplotlib draws a text glyph by glyph (3.11 on); with an
+earlier matplotlib, the metrics and the parses only.
+
 What is drawn is what RendererAgg draws (tests/test_report_glyph_cache.py compares the figures'
 pixels with matplotlib's own canvas). Unlike dsm/report/canvas.py's whole-string bitmaps, which
 place a string on whole pixels, nothing moves.
@@ -43,7 +46,7 @@ def font_key(prop, dpi) -> tuple:
     """What decides a FontProperties' font files, size in pixels and hinting (its hash: family, style,
     weight, size, file...; the rcParams that resolve a generic family; the dpi)."""
     import matplotlib as mpl
-    return (hash(prop), dpi) + tuple(_frozen(dict.__getitem__(mpl.rcParams, k)) for k in FONT_RC)
+    return (hash(prop), dpi) + tuple(_frozen(dict.get(mpl.rcParams, k)) for k in FONT_RC)
 
 
 # the font tables matplotlib's Text reads a line's least ascent, descent and gap from, in its order
@@ -83,25 +86,24 @@ def _put(cache: dict, key, value):
 @functools.lru_cache(maxsize=1)
 def _renderer_class():
     """RendererAgg with its text work cached across renderers (made on first use: matplotlib is
-    imported only when a figure is drawn)."""
-    from matplotlib.backends.backend_agg import RendererAgg, get_hinting_flag
-    from matplotlib.ft2font import RenderMode
-    from matplotlib.mathtext import MathTextParser
+    imported only when a figure is drawn). The glyphs are cached where matplotlib draws a text glyph
+    by glyph (3.11 on); before, its strings' metrics and its mathtext parses only."""
+    from matplotlib.backends.backend_agg import RendererAgg
+    from matplotlib.ft2font import FT2Font
 
-    layouts, sizes, glyphs = {}, {}, {}
-    parser = MathTextParser("path")
+    sizes, shared = {}, {}
 
-    class GlyphCacheRenderer(RendererAgg):
-        """RendererAgg whose layouts, metrics, glyph bitmaps and mathtext parses are shared by every
-        renderer of this process."""
+    class MetricsCacheRenderer(RendererAgg):
+        """RendererAgg whose text metrics and mathtext parses are shared by every renderer of this process."""
 
         def __init__(self, width, height, dpi):
             super().__init__(width, height, dpi)
-            self.mathtext_parser = parser
+            # the first renderer's parser (its output type is the one this matplotlib's RendererAgg uses)
+            self.mathtext_parser = shared.setdefault("parser", self.mathtext_parser)
 
         def _get_font_height_metrics(self, prop):
-            # matplotlib's Text asks a renderer that has this (text.Text._get_layout); the figure's dpi
-            # is the renderer's (canvas.get_renderer makes one per figure dpi)
+            # matplotlib's Text asks a renderer that has this (text.Text._get_layout, 3.11 on); the figure's
+            # dpi is the renderer's (the canvas's get_renderer makes one per figure dpi)
             return font_height_metrics(prop, self.dpi)
 
         def get_text_width_height_descent(self, s, prop, ismath):
@@ -111,6 +113,15 @@ def _renderer_class():
             key = (s,) + font_key(prop, self.dpi)
             got = sizes.get(key)
             return got if got is not None else _put(sizes, key, super().get_text_width_height_descent(s, prop, ismath))
+
+    if not (hasattr(RendererAgg, "_draw_text_glyphs_and_boxes") and hasattr(FT2Font, "_layout")):
+        return MetricsCacheRenderer
+    from matplotlib.backends.backend_agg import get_hinting_flag
+    from matplotlib.ft2font import RenderMode
+    layouts, glyphs = {}, {}
+
+    class GlyphCacheRenderer(MetricsCacheRenderer):
+        """MetricsCacheRenderer whose string layouts and glyph bitmaps are shared too."""
 
         def draw_text(self, gc, x, y, s, prop, angle, ismath=False, mtext=None):
             """``s`` at (x, y) (pixels, y down), rotated by ``angle`` degrees, as RendererAgg draws it."""
@@ -161,12 +172,12 @@ def _renderer_class():
 
 @functools.lru_cache(maxsize=1)
 def _canvas_class():
-    """FigureCanvasAgg drawing with GlyphCacheRenderer (made once, on first use)."""
+    """FigureCanvasAgg drawing with _renderer_class()'s renderer (made once, on first use)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     renderer_class = _renderer_class()
 
     class GlyphCacheCanvas(FigureCanvasAgg):
-        """FigureCanvasAgg with GlyphCacheRenderer."""
+        """FigureCanvasAgg with the cached-text renderer."""
 
         def get_renderer(self):
             """The renderer for the figure's current size and dpi (kept while they stay)."""
