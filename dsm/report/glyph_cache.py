@@ -17,6 +17,8 @@ every figure did all of that again: most of such a figure's drawing time.
   at the whole-pixel part;
 - one mathtext parser for every renderer (matplotlib's keeps its parses per parser).
 
+The glyph loop follows matplotlib 3.11's ``RendererAgg._draw_text_glyphs_and_boxes`` and the line
+metrics its ``text.Text._get_layout`` (matplotlib's license, PSF-based), with their results kept.
 The layouts and glyphs are cached where matplotlib draws a text glyph by glyph (3.11 on); with an
 earlier matplotlib, the metrics and the parses only.
 
