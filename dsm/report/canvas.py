@@ -24,6 +24,8 @@ import math
 
 import numpy as np
 
+from . import glyph_cache
+
 MAX_CACHED = 20000        # strings kept per process (a bitmap of a label is a few hundred bytes)
 
 
@@ -34,23 +36,40 @@ def _renderer_class():
 
     bitmaps, metrics = {}, {}
 
+    def bitmap(font, antialiased: bool) -> tuple:
+        """The string ``font`` holds (set_text) drawn: (image, x offset, y offset, descent) in pixels."""
+        font.draw_glyphs_to_bitmap(antialiased=antialiased)
+        xo, yo = font.get_bitmap_offset()
+        return np.array(font.get_image(), dtype=np.uint8), xo / 64.0, yo / 64.0, font.get_descent() / 64.0
+
     class CachedTextRenderer(RendererAgg):
         """RendererAgg drawing each plain text as one cached bitmap of the whole string."""
+
+        def _get_font_height_metrics(self, prop):
+            # matplotlib's Text asks a renderer that has this (text.Text._get_layout) for a font's line
+            # metrics, which it otherwise looks up for every text; the figure's dpi is the renderer's
+            return glyph_cache.font_height_metrics(prop, self.dpi)
 
         def get_text_width_height_descent(self, s, prop, ismath):
             """Width, height and descent of ``s`` in pixels (cached per string, font and dpi)."""
             if ismath:
                 return super().get_text_width_height_descent(s, prop, ismath)
-            key = (s, hash(prop), self.dpi)
+            flags = get_hinting_flag()
+            key = (s, hash(prop), self.dpi, flags)
             got = metrics.get(key)
             if got is None:
                 font = self._prepare_font(prop)
-                font.set_text(s, 0.0, flags=get_hinting_flag())
+                font.set_text(s, 0.0, flags=flags)       # FreeType's layout: about 70 us a character
                 w, h = font.get_width_height()
                 got = (w / 64.0, h / 64.0, font.get_descent() / 64.0)
                 if len(metrics) > MAX_CACHED:
                     metrics.clear()
                 metrics[key] = got
+                # a string measured is drawn next (antialiased, as every text here): its bitmap from
+                # this layout, not from a second one
+                if len(bitmaps) > MAX_CACHED:
+                    bitmaps.clear()
+                bitmaps.setdefault(key + (True,), bitmap(font, True))
             return got
 
         def draw_text(self, gc, x, y, s, prop, angle, ismath=False, mtext=None):
@@ -58,14 +77,13 @@ def _renderer_class():
             if ismath:
                 return super().draw_text(gc, x, y, s, prop, angle, ismath, mtext)
             # hash(prop): family, style, weight, size, file: a snapshot (a FontProperties is mutable)
-            key = (s, hash(prop), self.dpi, bool(gc.get_antialiased()))
+            flags = get_hinting_flag()
+            key = (s, hash(prop), self.dpi, flags, bool(gc.get_antialiased()))
             got = bitmaps.get(key)
             if got is None:
                 font = self._prepare_font(prop)
-                font.set_text(s, 0.0, flags=get_hinting_flag())
-                font.draw_glyphs_to_bitmap(antialiased=key[3])
-                xo, yo = font.get_bitmap_offset()
-                got = (np.array(font.get_image(), dtype=np.uint8), xo / 64.0, yo / 64.0, font.get_descent() / 64.0)
+                font.set_text(s, 0.0, flags=flags)
+                got = bitmap(font, key[-1])
                 if len(bitmaps) > MAX_CACHED:
                     bitmaps.clear()
                 bitmaps[key] = got

@@ -61,7 +61,13 @@ def style(k: int) -> dict:
 
 def slug(s: str, keep: str = "-_.") -> str:
     """``s`` as a file name: every character but letters, digits and ``keep`` made ``_``."""
-    return "".join(c if c.isalnum() or c in keep else "_" for c in str(s))
+    return _slug(str(s), keep)
+
+
+@functools.lru_cache(maxsize=4096)
+def _slug(s: str, keep: str) -> str:
+    # a report names a case's image folder (its scene and light) for every case: a few strings, many times
+    return "".join(c if c.isalnum() or c in keep else "_" for c in s)
 
 
 def image_folder(row) -> str:

@@ -38,9 +38,13 @@ def encode(pixels: np.ndarray, dpi: float | None = None) -> bytes:
                          f"{px.shape}")
     h, w = px.shape[:2]
     channels = 1 if px.ndim == 2 else px.shape[2]
-    rows = np.zeros((h, w * channels + 1), np.uint8)        # each row: filter type 0 (none), its bytes
-    # copied in place, so a strided view (an RGBA canvas's RGB) needs no copy of its own
-    rows[:, 1:].reshape(px.shape)[...] = px
+    rows = np.empty((h, w * channels + 1), np.uint8)        # each row: filter type 0 (none), its bytes
+    rows[:, 0] = 0
+    # copied in place, so a strided view (an RGBA canvas's RGB) needs no copy of its own; a channel at a
+    # time (numpy copies a run of pixels per call, not 3 bytes: a seventh of the time for a figure)
+    dest = rows[:, 1:].reshape(h, w, channels)
+    for c in range(channels):
+        dest[..., c] = px if px.ndim == 2 else px[..., c]
     out = [SIGNATURE, _chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, COLOUR_TYPE[channels], 0, 0, 0))]
     if dpi:
         per_metre = int(round(dpi / 0.0254))

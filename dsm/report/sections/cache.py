@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import figures, io as report
+from .. import figures, glyph_cache, io as report
 from ..templates import Cell, Row, Table, render
 from . import md
 from ...truth import metrics
@@ -88,6 +88,7 @@ def write_plots(folder, rows: list):
     folder.mkdir(exist_ok=True)
     for (scene, light, layout), pts in sorted(groups.items()):
         fig = Figure(figsize=(6, 4))
+        glyph_cache.canvas(fig)           # matplotlib's text drawing, its work kept across figures
         ax = fig.subplots()
         for policy in sorted({p[0] for p in pts}):
             mine = [p for p in pts if p[0] == policy]

@@ -6,7 +6,7 @@ import csv
 
 import numpy as np
 
-from .. import figures, io as report
+from .. import figures, glyph_cache, io as report
 from ...truth import metrics
 
 
@@ -90,6 +90,7 @@ def write_plots(folder, curves: list):
             groups.setdefault((meta["scene"], meta["light"]), []).append((meta, curve))
     for (scene, light), items in groups.items():
         fig = Figure(figsize=(11, 4))
+        glyph_cache.canvas(fig)           # matplotlib's text drawing, its work kept across figures
         a1, a2 = fig.subplots(1, 2)
         for meta, curve in items:
             x = [c[0] for c in curve]

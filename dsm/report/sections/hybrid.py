@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import figures, io as report, summary
+from .. import figures, glyph_cache, io as report, summary
 from . import md
 from ..templates import Cell, Row, Table
 from ...truth import metrics
@@ -127,6 +127,7 @@ def draw(path: Path, title: str, series: dict):
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
     fig = Figure(figsize=(6.4, 4.2))
+    glyph_cache.canvas(fig)           # matplotlib's text drawing, its work kept across figures
     ax = fig.subplots()
     schemes = sorted({k[0] for k in series})
     colour = lambda s: f"C{schemes.index(s) % 10}"

@@ -1,7 +1,7 @@
 """A motion run's files: frames.csv (one row per case and frame) and the flicker plots drawn from it."""
 from __future__ import annotations
 
-from .. import figures, io as report
+from .. import figures, glyph_cache, io as report
 from ...truth import metrics
 
 FRAME_COLUMNS = ("case", "motion", "scene", "light", "cascade_layout", "scheme", "params", "resolution", "filter",
@@ -43,6 +43,7 @@ def write_plots(folder, frame_rows):
         groups.setdefault((meta["scene"], meta["light"], meta["motion"]), []).append((meta, c))
     for (scene, light, path_label), items in groups.items():
         fig = Figure(figsize=(10, 4))
+        glyph_cache.canvas(fig)           # matplotlib's text drawing, its work kept across figures
         ax = fig.subplots()
         for meta, c in items:
             pts = [(x, y) for x, y in c if metrics.defined(y)]

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import figures, png, tables as report, io as report_io
+from .. import figures, glyph_cache, png, tables as report, io as report_io
 
 IMAGES = (("v", "viridis"), ("vstar", "viridis"), ("abserr", "magma"))
 
@@ -49,6 +49,7 @@ def draw(path: Path, title: str, bars: list):
     """Draw into ``path`` the MAE of V against V* per region (umbra, penumbra, lit), a bar per entry of ``bars``."""
     from matplotlib.figure import Figure
     fig = Figure(figsize=(8.5, 3.6))
+    glyph_cache.canvas(fig)           # matplotlib's text drawing, its work kept across figures
     axes = fig.subplots(1, 3, sharey=True)
     filters = sorted({b[1] for b in bars})
     for k, (ax, region) in enumerate(zip(axes, ("umbra", "penumbra", "lit"))):

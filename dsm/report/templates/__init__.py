@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 import jinja2
-from markupsafe import Markup
+from markupsafe import Markup, escape
 
 from ...truth import metrics
 
@@ -62,13 +62,44 @@ def class_colours() -> list:
     return [(n, f"rgb{tuple(int(c) for c in col)}") for n, col in zip(metrics.CLASS_NAMES, metrics.CLASS_COLORS)]
 
 
+def cell_html(c: Cell) -> str:
+    """A cell's ``<td>`` (numbers class n, data-v the value a sort reads, title its hover, href a link),
+    its text and values escaped as the templates escape a value."""
+    head = "<td class=n" if c.num else "<td"
+    if c.value is not None:
+        head += f' data-v="{escape(c.value)}"'
+    if c.title is not None:
+        head += f' title="{escape(c.title)}"'
+    if c.href is not None:
+        return f'{head}><a href="{escape(c.href)}">{escape(c.text)}</a></td>'
+    return f"{head}>{escape(c.text)}</td>"
+
+
+def row_html(r: Row) -> str:
+    """A row's ``<tr>``: its id, class and data attributes, then its cells."""
+    head = "<tr"
+    if r.id:
+        head += f" id={escape(r.id)}"
+    if r.cls:
+        head += f" class={escape(r.cls)}"
+    for k, v in r.data.items():
+        head += f' data-{escape(k)}="{escape(v)}"'
+    return head + ">" + "".join(cell_html(c) for c in r.cells) + "</tr>"
+
+
+def table_rows(rows) -> Markup:
+    """A table's body rows, a line each: the pages' largest part (a report's case table has a row per case),
+    written here rather than by a macro per row and cell (Jinja's macro calls were most of a page's time)."""
+    return Markup("".join(row_html(r) + "\n" for r in rows))
+
+
 @cache
 def environment() -> jinja2.Environment:
     """The templates' environment: autoescape on, a missing variable an error, block tags on their own
     lines leave no blank lines."""
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(HERE), autoescape=jinja2.select_autoescape(["html"]),
                              undefined=jinja2.StrictUndefined, trim_blocks=True, lstrip_blocks=True)
-    env.globals.update(inline=inline, CLASSES=class_colours())
+    env.globals.update(inline=inline, CLASSES=class_colours(), table_rows=table_rows)
     env.filters["capitalize_first"] = lambda text: text[:1].upper() + text[1:]    # the rest as written (labels)
     return env
 
