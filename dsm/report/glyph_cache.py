@@ -18,7 +18,9 @@ every figure did all of that again: most of such a figure's drawing time.
 - one mathtext parser for every renderer (matplotlib's keeps its parses per parser).
 
 The glyph loop follows matplotlib 3.11's ``RendererAgg._draw_text_glyphs_and_boxes`` and the line
-metrics its ``text.Text._get_layout`` (matplotlib's license, PSF-based), with their results kept.
+metrics its ``text.Text._get_layout``, with their results kept. Those parts derive from matplotlib,
+Copyright (c) 2012- Matplotlib Development Team; All Rights Reserved, used under the Matplotlib
+License Agreement (PSF-based, https://matplotlib.org/stable/project/license.html), whose notice this keeps.
 The layouts and glyphs are cached where matplotlib draws a text glyph by glyph (3.11 on); with an
 earlier matplotlib, the metrics and the parses only.
 
