@@ -10,9 +10,13 @@ receiver needs ``b >= tau_r``; a truly shadowed one ``b < tau_r``. In texel unit
 texel_world(r)``, the product rounded to float32 as the lookup's ``resolve`` does) the
 threshold ``kappa_r`` is the smallest float32 ``k`` with ``(z1 + fl(k texel_world)) - d >= 0``.
 
-Both are found from the float64 estimate ``d - z1`` (``/ texel_world``) by a bisection over
-the ordered float32 values, then checked against the comparison itself: it holds at the
-threshold and fails at the next float32 below it (``np.nextafter``).
+Both are first tried where the comparison turns in float64 (the midpoint of ``d`` and the float32
+below it, less ``z1``; ``kappa`` from ``tau``'s midpoint ``/ texel_world``): the float32 there or one
+either side is the threshold where it holds there and fails just below. Where none does, the
+float64 estimate ``d - z1`` (``/ texel_world``) starts a bisection over the ordered float32
+values. A monotone comparison turns at one float32, so both ways give the same answer; each is
+checked against the comparison itself: it holds at the threshold and fails at the next float32
+below it (``np.nextafter``).
 
 **Oracles.** With thresholds sorted, the counts at every bias at once are cumulative counts:
 ``acne(b) = #{truly lit, tau > b}``, ``peterpan(b) = #{truly shadowed, tau <= b}``. The curve
