@@ -87,8 +87,9 @@ def test_thresholds_tried_at_a_guess_first_are_the_bisections():
     litk = lambda k: (z1 + k * tw) - d >= 0
     lit.n = litk.n = n
     with np.errstate(over="ignore", invalid="ignore"):
-        assert np.array_equal(oracle.thresholds(z1, d).view(np.int32), smallest_lit_float32(lit).view(np.int32))
-        assert np.array_equal(oracle.texel_thresholds(z1, d, tw).view(np.int32), smallest_lit_float32(litk).view(np.int32))
+        tau, kappa = oracle.thresholds(z1, d), oracle.texel_thresholds(z1, d, tw)
+        assert np.array_equal(tau.view(np.int32), smallest_lit_float32(lit).view(np.int32))
+        assert np.array_equal(kappa.view(np.int32), smallest_lit_float32(litk).view(np.int32))
 
 
 def test_per_texel_oracle_against_brute_force():
