@@ -74,6 +74,7 @@ def prepare(config, variant: str | None = None, threads: int | None = None):
 # ---------------------------------------------------------------- scenes
 
 load_scene = scenes.load                  # (SceneSpec, camera resolution or None) -> SceneData
+load_checked_scene = scenes.load_checked  # the same, taken from prepare's check where it loaded it last
 scene_from_mitsuba = scenes.from_mitsuba  # an already loaded mi.Scene (the plugins' entry)
 emitter_light = emitter_to_light           # a Mitsuba emitter as a LightSpec (None: not mapped)
 scene_magnitude = reference.scene_magnitude

@@ -2,6 +2,8 @@
 sampler's spending and early stops, PCSS's penumbra estimate against similar triangles, point
 lights' reference cost unchanged, soft metrics by hand, configs and a run end to end."""
 
+import math
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -68,6 +70,16 @@ def test_student_t_quantiles_match_the_tables():
     # a zero count certifies f <= tolerance once (1 - tol)^n <= 1 - c: n >= ln(0.01) / ln(0.99) = 458.2
     assert intervals.samples_to_certify(0.01, 0.99) == 459
     assert abs(intervals.zero_count_bound(459, 0.99) - (1 - 0.01 ** (1 / 459))) < 1e-15
+
+
+def test_student_t_quantile_is_remembered_per_p_and_dof():
+    """A remembered quantile is the fresh computation's float64 answer for its own (p, dof), whatever was
+    asked between (dof = 1 is Cauchy's: tan(pi (p - 1/2)))."""
+    asked = [(0.995, 1), (0.975, 4), (0.995, 1), (0.975, 1), (0.975, 4)]
+    for p, dof in asked:
+        assert intervals.t_quantile(p, dof) == intervals.t_quantile.__wrapped__(p, dof)
+    assert abs(intervals.t_quantile(0.995, 1) - math.tan(math.pi * 0.495)) < 1e-6 * math.tan(math.pi * 0.495)
+    assert abs(intervals.t_quantile(0.975, 1) - math.tan(math.pi * 0.475)) < 1e-6 * math.tan(math.pi * 0.475)
 
 
 def test_zero_count_bound_holds_for_stratified_samples():

@@ -54,6 +54,38 @@ def test_translations_linear_and_keyframes_by_hand():
     assert np.allclose(rotation((1, 1, 1), 120.0) @ [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
 
 
+def test_kept_spawn_tables_of_a_moved_geometry_are_a_fresh_computations():
+    """Two paths moving the box alike share each frame's spawn tables (computed once), bit for bit a fresh
+    computation on the scene as placed; a turn that differs is its own geometry; with no budget nothing is kept."""
+    from dsm import pipeline
+    from dsm.config import read as config
+    from dsm.core.types import CasterPath
+    from dsm.experiment.casters import KeptTables, Mover
+    from dsm.scenes import load as scenes
+    sd = scenes.load(config.parse(_config([]), "<test>").scenes[0], (16, 16))
+    calls = []
+
+    def counted(scene):
+        calls.append(1)
+        return pipeline.spawn_extents(scene)
+
+    def arrays(tables):
+        return [np.asarray(x) for x in (*tables, tables.tri_pos, tables.face_offset)]
+    for budget, computed in ((1 << 30, 4), (0, 6)):
+        kept, calls[:] = KeptTables(counted, budget), []
+        paths = [Mover(sd, [CasterPath("box", offset=(0.0, 1.0, 0.0), angle=a)], 3, "<test>", "motion")
+                 for a in (20.0, 20.0, 30.0)]
+        for mover in paths:
+            for t in (1, 2):
+                mover.place(t)
+                got, fresh = arrays(kept.at(mover.signature(t), sd.scene)), arrays(pipeline.spawn_extents(sd.scene))
+                assert all(np.array_equal(a, b) for a, b in zip(got, fresh))
+            mover.restore()
+        # frames 1 and 2 of the first path, then the third's (a different turn): the second path's are the first's
+        assert len(calls) == computed
+    assert paths[0].signature(1) == paths[1].signature(1) != paths[2].signature(1)
+
+
 @pytest.mark.slow
 def test_nothing_moving_every_policy_gives_the_same_numbers(run_dict):
     """A camera dolly and a moving spot, with no caster, a caster whose offset is zero, under

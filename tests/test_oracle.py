@@ -67,6 +67,31 @@ def test_thresholds_are_the_smallest_float32_bias_that_lights():
         assert litk(kappa[i]) and not litk(np.nextafter(kappa[i], np.float32(-np.inf)))
 
 
+def test_thresholds_tried_at_a_guess_first_are_the_bisections():
+    """The thresholds (tried first where the float32 comparison turns, then bisected where that misses) are,
+    bit for bit, an exhaustive bisection over every float32: near and far receivers, d = z1, d one float32
+    off z1, negative and zero depths (+0 where both are zero), depths from 1e-30 to 1e30, texels 1e-7 to 10."""
+    from dsm.truth import oracle
+    rng = np.random.default_rng(5)
+    n = 6000
+    z1 = (rng.choice([-1.0, 1.0], n) * 10.0 ** rng.uniform(-30, 30, n)).astype(np.float32)
+    d = (z1 * (1 + rng.normal(0, 1e-3, n) * 10.0 ** rng.uniform(-6, 0, n))).astype(np.float32)
+    d[:300] = z1[:300]
+    d[300:600] = np.nextafter(z1[300:600], np.float32(np.inf))
+    d[600:900] = np.nextafter(z1[600:900], np.float32(-np.inf))
+    z1[900:1000], d[1000:1100] = 0.0, 0.0
+    d[1100:1400] = rng.uniform(-5, 5, 300).astype(np.float32)          # far from z1: a large bias
+    tw = (10.0 ** rng.uniform(-7, 1, n)).astype(np.float32)
+    z1[1400:1500], d[1400:1500] = 0.0, -0.0                             # both zero: the threshold is +0
+    lit = lambda b: (z1 + b) - d >= 0                                   # float32, as the map rounds
+    litk = lambda k: (z1 + k * tw) - d >= 0
+    lit.n = litk.n = n
+    with np.errstate(over="ignore", invalid="ignore"):
+        tau, kappa = oracle.thresholds(z1, d), oracle.texel_thresholds(z1, d, tw)
+        assert np.array_equal(tau.view(np.int32), smallest_lit_float32(lit).view(np.int32))
+        assert np.array_equal(kappa.view(np.int32), smallest_lit_float32(litk).view(np.int32))
+
+
 def test_per_texel_oracle_against_brute_force():
     """Per texel, every candidate bias tried (the texel's thresholds and one below them all)."""
     from dsm.truth import oracle

@@ -25,7 +25,7 @@ def light_setups(config, variant: str | None = None) -> dict:
     cfg = pipeline.prepare(config, variant)
     out = {}
     for spec in cfg.scenes:
-        sd = pipeline.load_scene(spec, cfg.camera_resolution, cfg.camera)
+        sd = pipeline.load_checked_scene(spec, cfg.camera_resolution, cfg.camera)
         gb = pipeline.gbuffer(sd)
         for i, light in enumerate(sd.lights_for(cfg.lights)):
             label = f"{i}:{light.type}"          # dsm.config.plan.scene_lights' labels

@@ -87,6 +87,11 @@ class Mover:
         """What frame ``t``'s geometry is: the casters' translations (equal keys, equal scenes)."""
         return tuple(self.offsets[t].ravel().tolist()) + tuple(self.angles[t].tolist())
 
+    def signature(self, t: int) -> tuple:
+        """What the scene's geometry is at frame ``t`` whichever path moves it: the moved shapes, their
+        axes and frame ``t``'s translations and turns (equal signatures, equal vertex bits)."""
+        return (tuple(self.index), tuple(tuple(a.tolist()) for a in self.axes)) + self.key(t)
+
     def place(self, t: int) -> bool:
         """Move the casters to frame ``t``'s turns and translations; True if the geometry changed."""
         key = self.key(t)
@@ -138,3 +143,29 @@ class Mover:
             for b_lo, b_hi in self.bounds(t):
                 lo, hi = np.minimum(lo, b_lo), np.maximum(hi, b_hi)
         return lo, hi
+
+
+# a frame's spawn tables hold every triangle of the scene (TRI_STRIDE floats each): kept for the
+# next path or map up to this many bytes, so a long path over a large mesh recomputes them instead
+KEPT_TABLES_BYTES = 256 << 20
+
+
+class KeptTables:
+    """A scene's per-shape spawn tables (``compute(scene)``) per moved geometry (:meth:`Mover.signature`):
+    computed once for every path and map that moves the same casters alike, the same bits (they are a
+    function of the vertices), kept while their triangle tables fit ``budget`` bytes."""
+
+    def __init__(self, compute, budget: int = KEPT_TABLES_BYTES):
+        self.compute, self.budget, self.used = compute, budget, 0
+        self.kept = {}
+
+    def at(self, signature: tuple, scene):
+        """The tables of ``scene`` as it stands, whose moved geometry is ``signature``."""
+        if signature in self.kept:
+            return self.kept[signature]
+        tables = self.compute(scene)
+        size = 4 * dr.width(tables.tri_pos) if tables.tri_pos is not None else 0
+        if self.used + size <= self.budget:
+            self.kept[signature] = tables
+            self.used += size
+        return tables

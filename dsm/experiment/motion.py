@@ -53,7 +53,7 @@ from ..report.figures import frames_path
 from ..core.labels import params_label
 from ..report.sections import cache as cache_report
 from . import cache
-from .casters import Mover
+from .casters import KeptTables, Mover
 from . import page_cache, texel_recast
 from .motion_display import GifFrames, shown_frames, v_image
 
@@ -282,6 +282,7 @@ class SceneFrames:
     closed: list              # per-shape closedness (culling)
     extents: object           # per-shape error extents (map builds)
     magnitude: float          # the scene's magnitude (exact shadow rays)
+    moved: object = None      # KeptTables: the spawn tables of each moved geometry, shared by the paths
 
 
 @dataclasses.dataclass
@@ -302,7 +303,7 @@ def run_scene(runner, scene, maps, closed, extents):
     cfg, data = runner.cfg, scene.data
     fp = sample_points(data.scene, max(mo.points for mo in cfg.motion), cfg.seed, data.diagonal)
     shared = SceneFrames(data, Camera.from_sensor(data.sensor), fp, closed, extents,
-                         pipeline.scene_magnitude(data.bbox))
+                         pipeline.scene_magnitude(data.bbox), KeptTables(pipeline.spawn_extents))
     movers = [Mover(data, mo.casters, mo.frames, cfg.source, f"motion[{i}]")      # the shapes' names checked first
               for i, mo in enumerate(cfg.motion)]
     for mo, mover in zip(cfg.motion, movers):
@@ -394,7 +395,8 @@ def _run_map(runner, shared: SceneFrames, path: PathFrames, m, mover: Mover):
                        bbox=mover.swept_bbox() if mover.moving else shared.data.bbox)
     for t in range(len(path.poses)):
         if mover.place(t):           # a caster moved: the continuation rays' triangle tables follow it
-            state.extents = pipeline.spawn_extents(shared.data.scene) if any(mover.key(t)) else shared.extents
+            moved = any(mover.key(t))
+            state.extents = shared.moved.at(mover.signature(t), shared.data.scene) if moved else shared.extents
         state.geometry = mover.key(t)
         _run_frame(runner, state, t)
     for case, frames in state.cases.items():

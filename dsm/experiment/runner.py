@@ -276,7 +276,7 @@ class Runner:
     def _scene(self, spec, maps) -> SceneRun:
         def load():
             """The scene loaded, its G-buffer (timed) and its usable lights; ValueError when it has none."""
-            data = pipeline.load_scene(spec, self.cfg.camera_resolution, self.cfg.camera)
+            data = pipeline.load_checked_scene(spec, self.cfg.camera_resolution, self.cfg.camera)
             out, t = timing.measure(lambda: (pipeline.gbuffer(data),), 0)
             gbuffer = out[-1]
             gbuffer.ms = t.ms

@@ -75,19 +75,30 @@ def _load_builtin(spec: SceneSpec, camera_resolution, camera) -> SceneData:
     return data
 
 
+# check() loads every scene to refuse a bad one before any work, and a run loads each again: the
+# first scene a run loads is check's load handed on instead. One scene at most (the config's first),
+# so check holds no more than one scene beyond the one it loads; the next check replaces it and the
+# run takes it once (load_checked), so no two users share a loaded scene.
+HANDED: list = []            # [((spec, camera resolution, camera), SceneData)] or empty
+
+
 def check(cfg, keep: bool = False):
     """Load every scene of ``cfg`` (absent optional files aside) before any work starts.
 
     The first scene that cannot be used raises its ConfigError, with the other scenes' problems
     in its ``more`` list (``dsm plan`` prints them all). Returns the loaded SceneData in config
-    order (None for absent files) when ``keep``. Needs a Mitsuba variant (``env.use_variant``)."""
-    loaded, errors, seen = [], [], set()
+    order (None for absent files) when ``keep``; else hands the first on to :func:`load_checked`.
+    Needs a Mitsuba variant (``env.use_variant``)."""
+    HANDED.clear()                              # the previous check's scene released before these load
+    loaded, errors, seen, first = [], [], set(), None
     for spec in cfg.scenes:
         sd = None
         if not spec.missing:
             try:
                 sd = load(spec, cfg.camera_resolution, cfg.camera)
                 check_options(cfg, spec, sd)
+                if first is None and not keep:
+                    first = ((spec, cfg.camera_resolution, cfg.camera), sd)
             except ConfigError as e:
                 if str(e) not in seen:          # a swept file that cannot be read says so once
                     seen.add(str(e))
@@ -96,7 +107,16 @@ def check(cfg, keep: bool = False):
     if errors:
         errors[0].more = errors[1:]
         raise errors[0]
+    if first is not None:
+        HANDED.append(first)
     return loaded if keep else None
+
+
+def load_checked(spec: SceneSpec, camera_resolution=None, camera=None) -> SceneData:
+    """:func:`load`'s scene, taken from the last :func:`check` where it handed this one on (once), else loaded."""
+    if HANDED and HANDED[0][0] == (spec, camera_resolution, camera):
+        return HANDED.pop()[1]
+    return load(spec, camera_resolution, camera)
 
 
 def _camera_relative(spec, camera_resolution, camera):

@@ -10,9 +10,13 @@ receiver needs ``b >= tau_r``; a truly shadowed one ``b < tau_r``. In texel unit
 texel_world(r)``, the product rounded to float32 as the lookup's ``resolve`` does) the
 threshold ``kappa_r`` is the smallest float32 ``k`` with ``(z1 + fl(k texel_world)) - d >= 0``.
 
-Both are found from the float64 estimate ``d - z1`` (``/ texel_world``) by a bisection over
-the ordered float32 values, then checked against the comparison itself: it holds at the
-threshold and fails at the next float32 below it (``np.nextafter``).
+Both are first tried where the comparison turns in float64 (the midpoint of ``d`` and the float32
+below it, less ``z1``; ``kappa`` from ``tau``'s midpoint ``/ texel_world``): the float32 there or one
+either side is the threshold where it holds there and fails just below. Where none does, the
+float64 estimate ``d - z1`` (``/ texel_world``) starts a bisection over the ordered float32
+values. A monotone comparison turns at one float32, so both ways give the same answer; each is
+checked against the comparison itself: it holds at the threshold and fails at the next float32
+below it (``np.nextafter``).
 
 **Oracles.** With thresholds sorted, the counts at every bias at once are cumulative counts:
 ``acne(b) = #{truly lit, tau > b}``, ``peterpan(b) = #{truly shadowed, tau <= b}``. The curve
@@ -101,12 +105,46 @@ def _smallest(holds, est: np.ndarray, scale: np.ndarray) -> np.ndarray:
     return _unkey(khi)
 
 
+def _below(x: np.ndarray) -> np.ndarray:
+    return np.nextafter(x, F32(-np.inf)).astype(F32)
+
+
+def _at_guess(holds, guess: np.ndarray) -> tuple:
+    """(x, found): per element the float32 nearest the float64 ``guess`` or one either side at which
+    the monotone ``holds(x)`` turns true (it holds there and fails at the float32 below), where one does."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        c = np.asarray(guess, np.float64).astype(F32)
+    c1 = _below(c)
+    c2, c3 = _below(c1), np.nextafter(c, F32(np.inf)).astype(F32)
+    h2, h1, h, h3 = holds(c2), holds(c1), holds(c), holds(c3)
+    turn1, turn, turn3 = h1 & ~h2, h & ~h1, h3 & ~h
+    return np.where(turn1, c1, np.where(turn, c, c3)), turn1 | turn | turn3
+
+
+def _smallest_from(holds, guess, est, scale) -> np.ndarray:
+    """:func:`_smallest` of ``holds(x, idx)`` (``x`` for the elements ``idx``), first tried at ``guess``
+    (:func:`_at_guess`): monotone ``holds`` turns true at one float32 only, so the answer is the same;
+    the bisection runs on the elements the guess misses (non-finite inputs, a guess rounded off)."""
+    x, found = _at_guess(lambda v: holds(v, slice(None)), guess)
+    x[x == 0] = 0.0                     # -0 as +0: the bisection's ordered keys know one zero, +0
+    miss = np.flatnonzero(~found)
+    if miss.size:
+        x[miss] = _smallest(lambda v, m: holds(v, miss) | ~m, est[miss], scale[miss])
+    return x
+
+
+def _world_guess(z1, d) -> np.ndarray:
+    """Where ``fl(z1 + b) >= d`` starts in float64: the midpoint of ``d`` and the float32 below it, less ``z1``."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return (_below(d).astype(np.float64) + d.astype(np.float64)) / 2 - z1.astype(np.float64)
+
+
 def thresholds(z1, d) -> np.ndarray:
     """Per receiver the smallest float32 world bias ``tau`` with ``(z1 + tau) - d >= 0`` (float32)."""
     z1, d = np.asarray(z1, F32), np.asarray(d, F32)
     est = d.astype(np.float64) - z1.astype(np.float64)
     scale = np.maximum(np.abs(z1), np.abs(d)).astype(np.float64)
-    tau = _smallest(lambda x, m: lit_world(z1, d, x) | ~m, est, scale)
+    tau = _smallest_from(lambda x, i: lit_world(z1[i], d[i], x), _world_guess(z1, d), est, scale)
     check(lit_world, (z1, d), tau)
     return tau
 
@@ -117,7 +155,11 @@ def texel_thresholds(z1, d, tw) -> np.ndarray:
     twd = np.maximum(tw.astype(np.float64), 1e-300)
     est = (d.astype(np.float64) - z1.astype(np.float64)) / twd
     scale = np.maximum(np.abs(z1), np.abs(d)).astype(np.float64) / twd
-    kappa = _smallest(lambda x, m: lit_texel(z1, d, tw, x) | ~m, est, scale)
+    # fl(k tw) must reach the world threshold tau: k from the midpoint of tau and the float32 below it
+    tau = thresholds(z1, d)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        guess = (_below(tau).astype(np.float64) + tau.astype(np.float64)) / 2 / tw.astype(np.float64)
+    kappa = _smallest_from(lambda x, i: lit_texel(z1[i], d[i], tw[i], x), guess, est, scale)
     check(lambda z, dd, t, x: lit_texel(z, dd, tw, x), (z1, d, None), kappa)
     return kappa
 

@@ -77,7 +77,7 @@ def prepare_cases(tc, progress=None):
         if spec.missing:            # an absent optional file: the others are tuned, the note says which
             notes.append(f"{spec.label}: {spec.missing}")
             continue
-        sd = pl.load_scene(spec, cfg.camera_resolution, getattr(cfg, "camera", None))   # [camera] pose, if any
+        sd = pl.load_checked_scene(spec, cfg.camera_resolution, getattr(cfg, "camera", None))   # [camera] pose, if any
         lights = sd.lights_for(cfg.lights)
         closed = pl.closedness(sd)[0] if any(c != "none" for c in needs) else None
         extents = pl.spawn_extents(sd.scene)
