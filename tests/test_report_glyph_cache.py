@@ -45,23 +45,6 @@ def test_a_section_figure_is_matplotlib_s_pixel_for_pixel(dx):
         assert np.array_equal(_pixels(_figure(dx), glyph_cache.canvas), want)
 
 
-def test_a_glyph_drawn_from_the_cache_elsewhere_is_matplotlib_s():
-    """Glyphs cached at one place, drawn at others (whole pixels and fractions apart): matplotlib's pixels."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    from dsm.report import glyph_cache
-
-    def make(x, y, rotation):
-        fig = Figure(figsize=(2, 2))
-        fig.text(x, y, "acne 0.001", fontsize=7, rotation=rotation)
-        return fig
-    for rotation in (0, 90, 30):
-        for x, y in ((0.2, 0.3), (0.2 + 1 / 160, 0.3), (0.2 + 0.3 / 160, 0.3 + 2.6 / 160), (0.51, 0.47)):
-            want = _pixels(make(x, y, rotation), FigureCanvasAgg)
-            assert np.array_equal(_pixels(make(x, y, rotation), glyph_cache.canvas), want), (x, y, rotation)
-
-
 def test_the_line_metrics_are_those_matplotlib_reads_from_the_font():
     """(least ascent, least descent, gap) as text.Text computes them: the font's OS/2 table, scaled."""
     from matplotlib.font_manager import FontProperties, fontManager, get_font

@@ -1,39 +1,29 @@
-"""matplotlib's own Agg text drawing, pixel for pixel, with its work kept across figures.
+"""matplotlib's own Agg text drawing, with the text's measurements kept across figures.
 
 The report's section figures (dsm/report/sections/: soft, hybrid, motion, cascades, cache) are
-plain matplotlib figures: their tick labels, bar labels and legends are drawn by RendererAgg,
-which lays a string out (FreeType through ``FT2Font._layout``), then renders and blits each glyph
-at its sub-pixel place, and parses a ``$...$`` tick label (a symlog axis's) with pyparsing. A
-renderer is made per figure and matplotlib's caches (text metrics, parsed mathtext) live in it, so
-every figure did all of that again: most of such a figure's drawing time.
+plain matplotlib figures: their tick labels, bar labels and legends are measured and drawn by
+RendererAgg, which lays each string out with FreeType and parses a ``$...$`` tick label (a symlog
+axis's) with pyparsing. A renderer is made per figure and matplotlib's caches (text metrics, parsed
+mathtext) live in it, so every figure measured and parsed all of its text again.
 
-``canvas(fig)`` gives a figure a canvas whose renderer keeps that work in process-wide caches:
+``canvas(fig)`` gives a figure a canvas whose renderer remembers, for the whole process, what
+matplotlib answered:
 
-- a string's layout (its glyphs and their offsets) and its width, height and descent, keyed by the
-  string, the font properties, the rcParams that choose the font and its hinting, and the dpi;
-- a rendered glyph, keyed by its font, size, dpi, index, rotation, hinting, antialiasing and the
-  sub-pixel part (1/64 pixel, FreeType's unit) of where it lands: FreeType rasterizes an outline
-  moved by whole pixels into the same bitmap moved by those pixels, so the cached bitmap is blitted
-  at the whole-pixel part;
+- a string's width, height and descent, keyed by the string, the font properties, the rcParams
+  that choose the font and its hinting, and the dpi;
+- a font's line metrics (least ascent, descent, line gap), read from its tables as matplotlib 3.11's
+  ``text.Text._get_layout`` reads them (that function derives from matplotlib, Copyright (c) 2012-
+  Matplotlib Development Team; All Rights Reserved, used under the Matplotlib License Agreement,
+  PSF-based, https://matplotlib.org/stable/project/license.html, whose notice this keeps);
 - one mathtext parser for every renderer (matplotlib's keeps its parses per parser).
 
-The glyph loop follows matplotlib 3.11's ``RendererAgg._draw_text_glyphs_and_boxes`` and the line
-metrics its ``text.Text._get_layout``, with their results kept. Those parts derive from matplotlib,
-Copyright (c) 2012- Matplotlib Development Team; All Rights Reserved, used under the Matplotlib
-License Agreement (PSF-based, https://matplotlib.org/stable/project/license.html), whose notice this keeps.
-The layouts and glyphs are cached where matplotlib draws a text glyph by glyph (3.11 on); with an
-earlier matplotlib, the metrics and the parses only.
-
-What is drawn is what RendererAgg draws (tests/test_report_glyph_cache.py compares the figures'
-pixels with matplotlib's own canvas). Unlike dsm/report/canvas.py's whole-string bitmaps, which
-place a string on whole pixels, nothing moves.
+The glyphs themselves are drawn by RendererAgg (tests/test_report_glyph_cache.py compares the
+figures' pixels with matplotlib's own canvas).
 """
 from __future__ import annotations
 
 import functools
-import math
 
-import numpy as np
 
 MAX_CACHED = 50000        # entries per cache (a glyph's bitmap is a few hundred bytes)
 # the rcParams that choose a FontProperties' font files (font_manager.findfont keys on the same)
@@ -93,7 +83,6 @@ def _renderer_class():
     imported only when a figure is drawn). The glyphs are cached where matplotlib draws a text glyph
     by glyph (3.11 on); before, its strings' metrics and its mathtext parses only."""
     from matplotlib.backends.backend_agg import RendererAgg
-    from matplotlib.ft2font import FT2Font
 
     sizes, shared = {}, {}
 
@@ -118,60 +107,11 @@ def _renderer_class():
             got = sizes.get(key)
             return got if got is not None else _put(sizes, key, super().get_text_width_height_descent(s, prop, ismath))
 
-    if not (hasattr(RendererAgg, "_draw_text_glyphs_and_boxes") and hasattr(FT2Font, "_layout")):
-        return MetricsCacheRenderer
-    from matplotlib.backends.backend_agg import get_hinting_flag
-    from matplotlib.ft2font import RenderMode
-    layouts, glyphs = {}, {}
-
-    class GlyphCacheRenderer(MetricsCacheRenderer):
-        """MetricsCacheRenderer whose string layouts and glyph bitmaps are shared too."""
-
-        def draw_text(self, gc, x, y, s, prop, angle, ismath=False, mtext=None):
-            """``s`` at (x, y) (pixels, y down), rotated by ``angle`` degrees, as RendererAgg draws it."""
-            if ismath:
-                return self.draw_mathtext(gc, x, y, s, prop, angle)
-            features = mtext.get_fontfeatures() if mtext is not None else None
-            language = mtext.get_language() if mtext is not None else None
-            key = (s, _frozen(features), _frozen(language)) + font_key(prop, self.dpi)
-            items = layouts.get(key)
-            if items is None:
-                font = self._prepare_font(prop)
-                items = _put(layouts, key, [(i.ft_object, i.glyph_index, i.x, i.y) for i in font._layout(
-                    s, flags=get_hinting_flag(), features=features, language=language)])
-            size = prop.get_size_in_points()
-            self._draw_text_glyphs_and_boxes(gc, x, y, angle, ((f, size, g, 0, 1, dx, dy) for f, g, dx, dy in items), [])
-
-        def _draw_text_glyphs_and_boxes(self, gc, x, y, angle, glyph_list, boxes):
-            # RendererAgg's, each glyph's bitmap rendered once per sub-pixel place
-            cos, sin = math.cos(math.radians(angle)), math.sin(math.radians(angle))
-            flags = get_hinting_flag()
-            antialiased = bool(gc.get_antialiased())
-            height = self.height
-            for font, size, index, slant, extend, dx, dy in glyph_list:      # dy is upwards
-                x64 = round(0x40 * (x + dx * cos - dy * sin))
-                y64 = round(0x40 * (height - y + dx * sin + dy * cos))        # FreeType's y is upwards
-                key = (id(font), size, self.dpi, index, cos, sin, slant, extend, x64 & 63, y64 & 63, flags,
-                       antialiased)
-                got = glyphs.get(key)
-                if got is None or got[0] is not font:
-                    font.set_size(size, self.dpi)
-                    matrix = (0x10000 * np.array([[cos, -sin], [sin, cos]])
-                              @ [[extend, extend * slant], [0, 1]]).round().astype(int)
-                    font._set_transform(matrix, [x64 & 63, y64 & 63])
-                    bitmap = font._render_glyph(index, flags, RenderMode.NORMAL if antialiased else RenderMode.MONO)
-                    buffer = bitmap.buffer
-                    if not antialiased:
-                        buffer *= 0xff
-                    got = _put(glyphs, key, (font, buffer, bitmap.left, bitmap.top))
-                _, buffer, left, top = got
-                # draw_text_image's y is downwards and the bitmap's bottom side
-                self._renderer.draw_text_image(buffer, left + (x64 >> 6), int(height) - (top + (y64 >> 6))
-                                               + buffer.shape[0], 0, gc)
-            if boxes:
-                super()._draw_text_glyphs_and_boxes(gc, x, y, angle, (), boxes)
-
-    return GlyphCacheRenderer
+    # the glyphs themselves are drawn by RendererAgg: a process-wide cache of layouts and glyph bitmaps
+    # (drawn at each glyph's sub-pixel place) once failed a report in the full suite with FreeType's
+    # "invalid outline" on a font object matplotlib's own renderers share, not reproduced alone; the
+    # metrics and the mathtext parses, which only remember what matplotlib answered, are kept
+    return MetricsCacheRenderer
 
 
 @functools.lru_cache(maxsize=1)
