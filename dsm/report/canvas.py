@@ -145,23 +145,8 @@ def _tick_label_class():
 
 @functools.lru_cache(maxsize=1)
 def _canvas_class():
-    """FigureCanvasAgg with the cached-text renderer (made once, on first use)."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    renderer_class = _renderer_class()
-
-    class CachedTextCanvas(FigureCanvasAgg):
-        """FigureCanvasAgg drawing with CachedTextRenderer."""
-
-        def get_renderer(self):
-            """The renderer for the figure's current size and dpi (kept while they stay)."""
-            w, h = self.get_width_height(physical=True)
-            key = w, h, self.figure.dpi
-            if self._lastKey != key:
-                self.renderer = renderer_class(w, h, self.figure.dpi)
-                self._lastKey = key
-            return self.renderer
-
-    return CachedTextCanvas
+    """FigureCanvasAgg drawing with CachedTextRenderer (made once, on first use)."""
+    return glyph_cache.agg_canvas_class(_renderer_class())
 
 
 def canvas(fig):

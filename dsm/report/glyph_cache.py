@@ -114,14 +114,13 @@ def _renderer_class():
     return MetricsCacheRenderer
 
 
-@functools.lru_cache(maxsize=1)
-def _canvas_class():
-    """FigureCanvasAgg drawing with _renderer_class()'s renderer (made once, on first use)."""
+def agg_canvas_class(renderer_class):
+    """A FigureCanvasAgg class whose figures are drawn by ``renderer_class`` (a RendererAgg), one renderer
+    kept per figure while its size and dpi stay."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
-    renderer_class = _renderer_class()
 
-    class GlyphCacheCanvas(FigureCanvasAgg):
-        """FigureCanvasAgg with the cached-text renderer."""
+    class RendererCanvas(FigureCanvasAgg):
+        """FigureCanvasAgg drawing with the given renderer class."""
 
         def get_renderer(self):
             """The renderer for the figure's current size and dpi (kept while they stay)."""
@@ -132,7 +131,13 @@ def _canvas_class():
                 self._lastKey = key
             return self.renderer
 
-    return GlyphCacheCanvas
+    return RendererCanvas
+
+
+@functools.lru_cache(maxsize=1)
+def _canvas_class():
+    """The section figures' canvas class: _renderer_class()'s renderer (made once, on first use)."""
+    return agg_canvas_class(_renderer_class())
 
 
 def canvas(fig):
