@@ -61,15 +61,11 @@ def _renderer_class():
                 font = self._prepare_font(prop)
                 font.set_text(s, 0.0, flags=flags)       # FreeType's layout: about 70 us a character
                 w, h = font.get_width_height()
-                got = (w / 64.0, h / 64.0, font.get_descent() / 64.0)
-                if len(metrics) > MAX_CACHED:
-                    metrics.clear()
-                metrics[key] = got
+                got = glyph_cache.bounded_put(metrics, key, (w / 64.0, h / 64.0, font.get_descent() / 64.0), MAX_CACHED)
                 # a string measured is drawn next (antialiased, as every text here): its bitmap from
                 # this layout, not from a second one
-                if len(bitmaps) > MAX_CACHED:
-                    bitmaps.clear()
-                bitmaps.setdefault(key + (True,), bitmap(font, True))
+                if key + (True,) not in bitmaps:
+                    glyph_cache.bounded_put(bitmaps, key + (True,), bitmap(font, True), MAX_CACHED)
             return got
 
         def draw_text(self, gc, x, y, s, prop, angle, ismath=False, mtext=None):
@@ -83,10 +79,7 @@ def _renderer_class():
             if got is None:
                 font = self._prepare_font(prop)
                 font.set_text(s, 0.0, flags=flags)
-                got = bitmap(font, key[-1])
-                if len(bitmaps) > MAX_CACHED:
-                    bitmaps.clear()
-                bitmaps[key] = got
+                got = glyph_cache.bounded_put(bitmaps, key, bitmap(font, key[-1]), MAX_CACHED)
             image, xo, yo, descent = got
             if not image.size:
                 return

@@ -25,7 +25,7 @@ from __future__ import annotations
 import functools
 
 
-MAX_CACHED = 50000        # entries per cache (a glyph's bitmap is a few hundred bytes)
+MAX_CACHED = 50000        # entries per cache (a string's size or a font's metrics: a few numbers each)
 # the rcParams that choose a FontProperties' font files (font_manager.findfont keys on the same)
 FONT_RC = ("font.family", "font.style", "font.variant", "font.weight", "font.stretch", "font.size",
            "font.serif", "font.sans-serif", "font.cursive", "font.fantasy", "font.monospace",
@@ -66,12 +66,13 @@ def font_height_metrics(prop, dpi) -> tuple:
             scale = 1 / font.get_sfnt_table("head")["unitsPerEm"] * prop.get_size_in_points() * dpi / 72
             got = (table[ascent_key] * scale, -table[descent_key] * scale, table[gap_key] * scale)
             break
-        _put(_HEIGHTS, key, got)
+        bounded_put(_HEIGHTS, key, got)
     return got
 
 
-def _put(cache: dict, key, value):
-    if len(cache) > MAX_CACHED:
+def bounded_put(cache: dict, key, value, limit: int = MAX_CACHED):
+    """``cache[key] = value``, the cache emptied first once it holds more than ``limit`` entries; ``value``."""
+    if len(cache) > limit:
         cache.clear()
     cache[key] = value
     return value
@@ -79,9 +80,8 @@ def _put(cache: dict, key, value):
 
 @functools.lru_cache(maxsize=1)
 def _renderer_class():
-    """RendererAgg with its text work cached across renderers (made on first use: matplotlib is
-    imported only when a figure is drawn). The glyphs are cached where matplotlib draws a text glyph
-    by glyph (3.11 on); before, its strings' metrics and its mathtext parses only."""
+    """RendererAgg with its text measurements and mathtext parses kept across renderers (made on first
+    use: matplotlib is imported only when a figure is drawn)."""
     from matplotlib.backends.backend_agg import RendererAgg
 
     sizes, shared = {}, {}
@@ -105,7 +105,9 @@ def _renderer_class():
                 return super().get_text_width_height_descent(s, prop, ismath)
             key = (s,) + font_key(prop, self.dpi)
             got = sizes.get(key)
-            return got if got is not None else _put(sizes, key, super().get_text_width_height_descent(s, prop, ismath))
+            if got is None:
+                got = bounded_put(sizes, key, super().get_text_width_height_descent(s, prop, ismath))
+            return got
 
     # the glyphs themselves are drawn by RendererAgg: a process-wide cache of layouts and glyph bitmaps
     # (drawn at each glyph's sub-pixel place) once failed a report in the full suite with FreeType's
