@@ -463,8 +463,8 @@ def thresholds(rx: Receiver, smap) -> Thresholds:
     z1 = np.asarray(tap.z1.numpy(), np.float32)
     d = np.asarray(rx.depth.numpy(), np.float32)
     tw = np.asarray(rx.texel_world.numpy(), np.float32)
-    return Thresholds(oracle_mod.thresholds(z1, d), oracle_mod.texel_thresholds(z1, d, tw),
-                      tap.idx.numpy().astype(np.int64), z1, d, tw)
+    tau = oracle_mod.thresholds(z1, d)
+    return Thresholds(tau, oracle_mod.texel_thresholds(z1, d, tw, tau), tap.idx.numpy().astype(np.int64), z1, d, tw)
 
 
 def oracles(th: Thresholds, v_star: np.ndarray, lam: float = 1.0) -> dict:

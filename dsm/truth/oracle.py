@@ -149,14 +149,15 @@ def thresholds(z1, d) -> np.ndarray:
     return tau
 
 
-def texel_thresholds(z1, d, tw) -> np.ndarray:
-    """Per receiver the smallest float32 ``k`` with ``(z1 + fl(k texel_world)) - d >= 0``."""
+def texel_thresholds(z1, d, tw, tau=None) -> np.ndarray:
+    """Per receiver the smallest float32 ``k`` with ``(z1 + fl(k texel_world)) - d >= 0``; ``tau``: the
+    world thresholds of the same ``z1`` and ``d`` (:func:`thresholds`) where the caller has them."""
     z1, d, tw = np.asarray(z1, F32), np.asarray(d, F32), np.asarray(tw, F32)
     twd = np.maximum(tw.astype(np.float64), 1e-300)
     est = (d.astype(np.float64) - z1.astype(np.float64)) / twd
     scale = np.maximum(np.abs(z1), np.abs(d)).astype(np.float64) / twd
     # fl(k tw) must reach the world threshold tau: k from the midpoint of tau and the float32 below it
-    tau = thresholds(z1, d)
+    tau = thresholds(z1, d) if tau is None else np.asarray(tau, F32)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         guess = (_below(tau).astype(np.float64) + tau.astype(np.float64)) / 2 / tw.astype(np.float64)
     kappa = _smallest_from(lambda x, i: lit_texel(z1[i], d[i], tw[i], x), guess, est, scale)
