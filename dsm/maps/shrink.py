@@ -15,14 +15,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..scenes.closedness import weld_ids
+
 
 def welded_normals(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Per vertex (n, 3), float64: the normalized area-weighted winding normal of every triangle at
     its position (0 where they cancel)."""
     v = np.asarray(verts, np.float64)
     f = np.asarray(faces, np.int64)
-    _, weld = np.unique(v, axis=0, return_inverse=True)      # one id per distinct position
-    weld = weld.ravel()
+    weld = weld_ids(v)                                        # one id per distinct position
     area2 = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])   # twice the area times the normal
     acc = np.zeros((weld.max() + 1, 3))
     for k in range(3):
